@@ -1,0 +1,12 @@
+"""pectoral-gym: a robotic fish with two rowing pectoral fins, as models and Gymnasium environments.
+
+Importing the package registers ``PectoralFish-Full-v0`` and ``PectoralFish-Averaged-v0``.
+"""
+
+from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.models import AveragedModel, FishModel, FullModel
+from pectoral_gym.params import FinBeat, FishParams
+
+__version__ = "0.1.0"
+
+__all__ = ["AveragedModel", "FinBeat", "FishModel", "FishParams", "FullModel", "ScalingFunctions", "__version__"]
