@@ -193,14 +193,18 @@ class AveragedModel(FishModel):
             shipped coefficients file, ``None``/``"none"`` uses K = 1.
         forcing: ``"exact"`` (closed-form Bessel averages, default) or
             ``"taylor"`` (the paper's eqs. 26-28).
-        dt_max: RK4 step [s]; default 0.05 s (the averaged dynamics are smooth).
+        dt_max: Largest RK4 step [s]; default 0.25 s. The step also shrinks to
+            stay well inside RK4's stability limit of the yaw and drag damping
+            (``integrators._stable_step``): over 120 s of random fin commands the
+            position differs by ~1 cm from a 0.002 s reference, the same order
+            as the full model's own discretisation error.
     """
 
     averaged = True
 
     def __init__(self, n: int = 1, params: FishParams | Sequence[FishParams] | None = None,
                  scaling: ScalingFunctions | str | None = "identified", forcing: str = "exact",
-                 dt_max: float = 0.05):
+                 dt_max: float = 0.25):
         super().__init__(n, params, dt_max)
         if forcing not in ("exact", "taylor"):
             raise ValueError(f"forcing must be 'exact' or 'taylor', got {forcing!r}")

@@ -1,0 +1,324 @@
+"""Task logic of the fish environments as batched numba kernels.
+
+Every function here works on arrays of ``n`` environments, so the single
+environment (``n = 1``) and the native vector environment run the same code
+and cannot drift apart. Nothing here imports Gymnasium.
+
+Arrays (one row per environment):
+
+* ``cfg``  ``(N_CFG,)`` float64: the task settings, indices ``C_*``.
+* ``ep``   ``(n, N_EP)`` float64: per-episode data, indices ``E_*`` (target,
+  reference ellipse, previous distance, the fish's geometry).
+* ``obs``  ``(n, OBS_SIZE)`` float32: the observations (layout in ``fish_env``).
+* ``out``  ``(n, N_OUT)`` float64: reward, reward terms and flags, indices ``O_*``.
+* ``beats`` ``(n, 2, 4)`` float64: the commanded fin patterns (right fin first).
+
+Units: metres, seconds, radians; the tank frame has its origin at a corner.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+from pectoral_gym.averaging import mean_fin_power
+
+# Tank and task geometry [m], [rad].
+TANK_X = 2.30  # tank length along X [m]
+TANK_Y = 1.15  # tank width along Y [m]
+START_INSET = 0.3  # goal task: start this far from the walls [m]
+GOAL_INSET = 0.2  # goal task: goal this far from the walls [m]
+GOAL_MIN_DISTANCE = 0.3  # goal task: least start-goal distance [m]
+GOAL_MAX_DISTANCE = 1.0  # goal task: largest start-goal distance [m]
+GOAL_CANDIDATES = 16  # goal candidates drawn per rejection-sampling block
+GOAL_MAX_BLOCKS = 64  # bounded rejection sampling
+TRACK_A_RANGE = (0.5, 0.8)  # track task: semi-axis along X [m]
+TRACK_B_RANGE = (0.25, 0.4)  # track task: semi-axis along Y [m]
+TRACK_START_RADIUS = 0.1  # track task: start within this distance of the reference point [m]
+TRACK_HEADING_NOISE = 0.3  # track task: start heading = tangent +- this [rad]
+TRACK_SUBSTEPS = 4  # RK4 steps per control period for the reference point's phase
+
+GOAL, TRACK = 0, 1
+OBS_SIZE = 19
+ACTION_SIZE = 8
+
+# cfg indices
+C_DT, C_TASK, C_RANGES = 0, 1, 2  # C_RANGES..C_RANGES+7: (low, high) of bias, amplitude, period, ratio
+C_W_PROGRESS, C_GOAL_BONUS, C_WALL, C_W_ENERGY, C_TIME, C_W_TRACKING = 10, 11, 12, 13, 14, 15
+C_GOAL_RADIUS, C_REF_SPEED = 16, 17
+N_CFG = 18
+
+# ep indices
+E_TX, E_TY, E_TVX, E_TVY = 0, 1, 2, 3  # target position [m] and velocity [m/s], tank frame
+E_CX, E_CY, E_A, E_B, E_DIR, E_PHASE = 4, 5, 6, 7, 8, 9  # reference ellipse and its phase [rad]
+E_DPREV = 10  # distance to the target after the previous step [m]
+E_LENGTH, E_SPAN, E_KDRAG = 11, 12, 13  # body length [m], fin span [m], fin drag constant k
+N_EP = 14
+
+# out indices
+O_REWARD, O_PROGRESS, O_GOAL, O_WALL, O_ENERGY, O_TIME, O_TRACKING = 0, 1, 2, 3, 4, 5, 6
+O_DISTANCE, O_TERMINATED, O_SUCCESS = 7, 8, 9
+N_OUT = 10
+
+# Reward terms reported in ``info`` per task: (name, out index), in the order they are summed.
+TERMS = {
+    GOAL: (("reward_progress", O_PROGRESS), ("reward_goal", O_GOAL), ("reward_wall", O_WALL),
+           ("reward_energy", O_ENERGY), ("reward_time", O_TIME)),
+    TRACK: (("reward_tracking", O_TRACKING), ("reward_wall", O_WALL), ("reward_energy", O_ENERGY)),
+}
+
+PARALLEL_MIN_ENVS = 64  # below this, thread start-up costs more than it saves
+_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+
+# ---------------------------------------------------------------- actions
+@nb.njit(**_JIT)
+def _first_non_finite(actions, skip):
+    for i in range(actions.shape[0]):
+        if skip[i]:
+            continue
+        for j in range(actions.shape[1]):
+            if not math.isfinite(actions[i, j]):
+                return i
+    return -1
+
+
+@nb.njit(inline="always", **_JIT)
+def _apply_one(i, actions, cfg, beats, obs, out, ep):
+    """Map env ``i``'s action to fin patterns, store it in the observation, price its energy."""
+    energy = 0.0
+    for f in range(2):
+        for k in range(4):
+            x = min(max(float(actions[i, 4 * f + k]), -1.0), 1.0)
+            low = cfg[C_RANGES + 2 * k]
+            high = cfg[C_RANGES + 2 * k + 1]
+            beats[i, f, k] = min(low + 0.5 * (x + 1.0) * (high - low), high)
+            obs[i, 11 + 4 * f + k] = x
+        energy += mean_fin_power(beats[i, f, 1], beats[i, f, 2], beats[i, f, 3], ep[i, E_SPAN], ep[i, E_KDRAG])
+    out[i, O_ENERGY] = -cfg[C_W_ENERGY] * energy * cfg[C_DT]  # E = sum of mean fin power * control period [J]
+
+
+@nb.njit(**_JIT)
+def _apply_serial(actions, skip, cfg, beats, obs, out, ep):
+    bad = _first_non_finite(actions, skip)
+    if bad >= 0:
+        return bad
+    for i in range(actions.shape[0]):
+        if not skip[i]:
+            _apply_one(i, actions, cfg, beats, obs, out, ep)
+    return -1
+
+
+@nb.njit(parallel=True, cache=True, nogil=True, error_model="numpy")
+def _apply_parallel(actions, skip, cfg, beats, obs, out, ep):
+    bad = _first_non_finite(actions, skip)
+    if bad >= 0:
+        return bad
+    for i in nb.prange(actions.shape[0]):
+        if not skip[i]:
+            _apply_one(i, actions, cfg, beats, obs, out, ep)
+    return -1
+
+
+# ---------------------------------------------------------------- observation and reward
+@nb.njit(inline="always", **_JIT)
+def _observe_one(i, state, ep, obs):
+    """Write observation entries 0-10 of env ``i``; return the distance to the target and the wall flag."""
+    x, y, psi = state[i, 0], state[i, 1], state[i, 2]
+    c, s = math.cos(psi), math.sin(psi)
+    dx = ep[i, E_TX] - x
+    dy = ep[i, E_TY] - y
+    obs[i, 0] = x
+    obs[i, 1] = y
+    obs[i, 2] = c
+    obs[i, 3] = s
+    obs[i, 4] = state[i, 3]
+    obs[i, 5] = state[i, 4]
+    obs[i, 6] = state[i, 5]
+    obs[i, 7] = c * dx + s * dy  # target in the body frame (x forward, y left)
+    obs[i, 8] = -s * dx + c * dy
+    obs[i, 9] = c * ep[i, E_TVX] + s * ep[i, E_TVY]
+    obs[i, 10] = -s * ep[i, E_TVX] + c * ep[i, E_TVY]
+    half = 0.5 * ep[i, E_LENGTH]
+    wall = False
+    for sign in (1.0, -1.0):  # nose, tail
+        px = x + sign * half * c
+        py = y + sign * half * s
+        if not (0.0 <= px <= TANK_X and 0.0 <= py <= TANK_Y):
+            wall = True
+    return math.sqrt(dx * dx + dy * dy), wall
+
+
+@nb.njit(inline="always", **_JIT)
+def _phase_rate(phase, a, b, direction, speed):
+    """d(phase)/dt for a point moving at ``speed`` along the ellipse (a cos phase, b sin phase)."""
+    sp, cp = math.sin(phase), math.cos(phase)
+    return direction * speed / math.sqrt(a * a * sp * sp + b * b * cp * cp)
+
+
+@nb.njit(inline="always", **_JIT)
+def _set_reference(i, ep, speed):
+    """Target position and velocity from the ellipse phase of env ``i``."""
+    a, b, phase, direction = ep[i, E_A], ep[i, E_B], ep[i, E_PHASE], ep[i, E_DIR]
+    sp, cp = math.sin(phase), math.cos(phase)
+    ep[i, E_TX] = ep[i, E_CX] + a * cp
+    ep[i, E_TY] = ep[i, E_CY] + b * sp
+    tx, ty = -a * sp, b * cp  # tangent d/dphase
+    norm = math.sqrt(tx * tx + ty * ty)
+    ep[i, E_TVX] = direction * speed * tx / norm
+    ep[i, E_TVY] = direction * speed * ty / norm
+
+
+@nb.njit(inline="always", **_JIT)
+def _move_reference(i, ep, duration, speed):
+    """Advance the reference point of env ``i`` by ``duration`` along its ellipse (RK4 on the phase)."""
+    a, b, direction = ep[i, E_A], ep[i, E_B], ep[i, E_DIR]
+    h = duration / TRACK_SUBSTEPS
+    p = ep[i, E_PHASE]
+    for _ in range(TRACK_SUBSTEPS):
+        k1 = _phase_rate(p, a, b, direction, speed)
+        k2 = _phase_rate(p + 0.5 * h * k1, a, b, direction, speed)
+        k3 = _phase_rate(p + 0.5 * h * k2, a, b, direction, speed)
+        k4 = _phase_rate(p + h * k3, a, b, direction, speed)
+        p += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    ep[i, E_PHASE] = (p + math.pi) % (2.0 * math.pi) - math.pi
+    _set_reference(i, ep, speed)
+
+
+@nb.njit(inline="always", **_JIT)
+def _reward_one(i, state, cfg, ep, obs, out):
+    """Observation, reward terms and termination of env ``i`` after a control period."""
+    task = int(cfg[C_TASK])
+    if task == TRACK:
+        _move_reference(i, ep, cfg[C_DT], cfg[C_REF_SPEED])
+    d, wall = _observe_one(i, state, ep, obs)
+    r_wall = -cfg[C_WALL] if wall else 0.0
+    r_energy = out[i, O_ENERGY]
+    if task == GOAL:
+        success = d < cfg[C_GOAL_RADIUS]
+        r_progress = cfg[C_W_PROGRESS] * (ep[i, E_DPREV] - d)
+        r_goal = cfg[C_GOAL_BONUS] if success else 0.0
+        r_time = -cfg[C_TIME]
+        out[i, O_PROGRESS] = r_progress
+        out[i, O_GOAL] = r_goal
+        out[i, O_TIME] = r_time
+        out[i, O_TRACKING] = 0.0
+        out[i, O_REWARD] = r_progress + r_goal + r_wall + r_energy + r_time  # the order of TERMS[GOAL]
+    else:
+        success = False
+        r_tracking = -cfg[C_W_TRACKING] * d
+        out[i, O_PROGRESS] = 0.0
+        out[i, O_GOAL] = 0.0
+        out[i, O_TIME] = 0.0
+        out[i, O_TRACKING] = r_tracking
+        out[i, O_REWARD] = r_tracking + r_wall + r_energy  # the order of TERMS[TRACK]
+    out[i, O_WALL] = r_wall
+    out[i, O_DISTANCE] = d
+    out[i, O_TERMINATED] = 1.0 if (wall or success) else 0.0
+    out[i, O_SUCCESS] = 1.0 if success else 0.0
+    ep[i, E_DPREV] = d
+
+
+@nb.njit(**_JIT)
+def _reward_serial(state, skip, cfg, ep, obs, out):
+    for i in range(state.shape[0]):
+        if not skip[i]:
+            _reward_one(i, state, cfg, ep, obs, out)
+
+
+@nb.njit(parallel=True, cache=True, nogil=True, error_model="numpy")
+def _reward_parallel(state, skip, cfg, ep, obs, out):
+    for i in nb.prange(state.shape[0]):
+        if not skip[i]:
+            _reward_one(i, state, cfg, ep, obs, out)
+
+
+def apply_actions(actions, skip, cfg, beats, obs, out, ep) -> int:
+    """Map normalised actions ``(n, 8)`` to fin patterns ``beats`` for the envs not in ``skip``.
+
+    Also writes the clipped actions to ``obs[:, 11:19]`` and the energy term to
+    ``out[:, O_ENERGY]``. Returns -1, or the index of the first env whose
+    action is not finite (then nothing has been written).
+    """
+    kernel = _apply_parallel if actions.shape[0] >= PARALLEL_MIN_ENVS else _apply_serial
+    return kernel(actions, skip, cfg, beats, obs, out, ep)
+
+
+def observe_and_reward(state, skip, cfg, ep, obs, out) -> None:
+    """After the model advanced: move the reference, write observations, reward terms and flags."""
+    kernel = _reward_parallel if state.shape[0] >= PARALLEL_MIN_ENVS else _reward_serial
+    kernel(state, skip, cfg, ep, obs, out)
+
+
+# ---------------------------------------------------------------- reset
+def draw_episode(rng: np.random.Generator, task: int) -> np.ndarray:
+    """Draw one episode's random start from ``rng``; the same sequence of draws for single and vector envs.
+
+    Returns 8 numbers: for ``GOAL`` ``(X, Y, psi, goal X, goal Y, 0, 0, 0)``;
+    for ``TRACK`` ``(a, b, direction, phase, offset radius, offset angle, heading noise, 0)``.
+    """
+    draws = np.zeros(8)
+    if task == GOAL:
+        u = rng.random(3)
+        x0 = START_INSET + u[0] * (TANK_X - 2.0 * START_INSET)
+        y0 = START_INSET + u[1] * (TANK_Y - 2.0 * START_INSET)
+        draws[:3] = x0, y0, -math.pi + 2.0 * math.pi * u[2]
+        for _ in range(GOAL_MAX_BLOCKS):
+            c = rng.random((GOAL_CANDIDATES, 2))
+            gx = GOAL_INSET + c[:, 0] * (TANK_X - 2.0 * GOAL_INSET)
+            gy = GOAL_INSET + c[:, 1] * (TANK_Y - 2.0 * GOAL_INSET)
+            d = np.hypot(gx - x0, gy - y0)
+            ok = np.flatnonzero((d >= GOAL_MIN_DISTANCE) & (d <= GOAL_MAX_DISTANCE))
+            if ok.size:
+                draws[3:5] = gx[ok[0]], gy[ok[0]]
+                return draws
+        raise RuntimeError("could not place a goal at the required distance from the start")  # pragma: no cover
+    u = rng.random(7)
+    draws[0] = TRACK_A_RANGE[0] + u[0] * (TRACK_A_RANGE[1] - TRACK_A_RANGE[0])
+    draws[1] = TRACK_B_RANGE[0] + u[1] * (TRACK_B_RANGE[1] - TRACK_B_RANGE[0])
+    draws[2] = 1.0 if u[2] < 0.5 else -1.0
+    draws[3] = -math.pi + 2.0 * math.pi * u[3]
+    draws[4] = TRACK_START_RADIUS * math.sqrt(u[4])  # uniform in the disc
+    draws[5] = -math.pi + 2.0 * math.pi * u[5]
+    draws[6] = TRACK_HEADING_NOISE * (2.0 * u[6] - 1.0)
+    return draws
+
+
+@nb.njit(**_JIT)
+def start_states(index, draws, cfg, ep, start):
+    """Set the targets of the envs in ``index`` from ``draws`` (see :func:`draw_episode`); write start states.
+
+    ``start`` ``(len(index), 6)`` receives the fish states (at rest).
+    """
+    task = int(cfg[C_TASK])
+    for k in range(index.shape[0]):
+        i = index[k]
+        d = draws[k]
+        start[k, 3:] = 0.0
+        if task == GOAL:
+            start[k, 0], start[k, 1], start[k, 2] = d[0], d[1], d[2]
+            ep[i, E_TX], ep[i, E_TY], ep[i, E_TVX], ep[i, E_TVY] = d[3], d[4], 0.0, 0.0
+            ep[i, E_CX] = ep[i, E_CY] = ep[i, E_A] = ep[i, E_B] = ep[i, E_DIR] = ep[i, E_PHASE] = 0.0
+        else:
+            ep[i, E_CX], ep[i, E_CY] = 0.5 * TANK_X, 0.5 * TANK_Y
+            ep[i, E_A], ep[i, E_B], ep[i, E_DIR], ep[i, E_PHASE] = d[0], d[1], d[2], d[3]
+            _set_reference(i, ep, cfg[C_REF_SPEED])
+            tangent = math.atan2(d[2] * d[1] * math.cos(d[3]), -d[2] * d[0] * math.sin(d[3]))
+            start[k, 0] = ep[i, E_TX] + d[4] * math.cos(d[5])
+            start[k, 1] = ep[i, E_TY] + d[4] * math.sin(d[5])
+            start[k, 2] = tangent + d[6]
+
+
+@nb.njit(**_JIT)
+def observe_reset(index, state, ep, obs, out, action_code):
+    """Observations of freshly reset envs; the last-action entries get ``action_code``; ``out`` rows zeroed."""
+    for k in range(index.shape[0]):
+        i = index[k]
+        d, _ = _observe_one(i, state, ep, obs)
+        ep[i, E_DPREV] = d
+        for j in range(ACTION_SIZE):
+            obs[i, 11 + j] = action_code[j]
+        out[i, :] = 0.0
+        out[i, O_DISTANCE] = d
