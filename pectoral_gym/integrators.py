@@ -167,7 +167,9 @@ def _stable_step(state, i, coef, force, dt_max):
 
 
 @nb.njit(**_JIT)
-def _advance_one(i, state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs):
+def _advance_one(
+    i, state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs
+):
     """Advance fish ``i`` by ``duration`` seconds, segment by segment between stroke boundaries."""
     ci = coef[i]
     f0 = np.empty(3)
@@ -212,15 +214,23 @@ def _advance_one(i, state, fins, pending, integral, coef, duration, dt_max, min_
 
 
 @nb.njit(**_JIT)
-def _advance_serial(state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs):
+def _advance_serial(
+    state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs
+):
     for i in range(state.shape[0]):
-        _advance_one(i, state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs)
+        _advance_one(
+            i, state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs
+        )
 
 
 @nb.njit(parallel=True, cache=True, nogil=True, error_model="numpy")
-def _advance_parallel(state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs):
+def _advance_parallel(
+    state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs
+):
     for i in nb.prange(state.shape[0]):
-        _advance_one(i, state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs)
+        _advance_one(
+            i, state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs
+        )
 
 
 PARALLEL_MIN_FISH = 64  # below this, thread start-up costs more than it saves
@@ -305,7 +315,9 @@ def fin_angles(fins):
                 angle[i, f] = fins[i, f, ANGLE_TO]
                 rate[i, f] = 0.0
             else:
-                g, gd, _ = stroke_kinematics(fins[i, f, ELAPSED], fins[i, f, DURATION], fins[i, f, ANGLE_FROM], fins[i, f, ANGLE_TO])
+                g, gd, _ = stroke_kinematics(
+                    fins[i, f, ELAPSED], fins[i, f, DURATION], fins[i, f, ANGLE_FROM], fins[i, f, ANGLE_TO]
+                )
                 angle[i, f] = g
                 rate[i, f] = gd
     return angle, rate

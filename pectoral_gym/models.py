@@ -51,7 +51,9 @@ def validate_beats(beats: np.ndarray) -> None:
             where = np.argwhere(bad)[0]
             name = field or _FIELDS[int(where[-1])]
             row = beats[tuple(where[: beats.ndim - 1])] if field is None else beats[tuple(where)]
-            raise ValueError(f"invalid fin pattern {np.round(row, 6).tolist()} at index {where.tolist()}: {name} {message}")
+            raise ValueError(
+                f"invalid fin pattern {np.round(row, 6).tolist()} at index {where.tolist()}: {name} {message}"
+            )
 
 
 def _as_beat_array(beat: BeatLike, n: int) -> np.ndarray:
