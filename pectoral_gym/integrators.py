@@ -76,12 +76,20 @@ def _latch(fin, pend, side, coef, mode, k_powers, k_coefs):
 
 
 @nb.njit(**_JIT)
+def _idle(fin, pend):
+    """True for a fin that holds still and is commanded to hold still at the same angle."""
+    return fin[ANGLE_FROM] == fin[ANGLE_TO] and pend[1] == 0.0 and pend[0] == fin[ANGLE_TO]
+
+
+@nb.njit(**_JIT)
 def _fin_forcing(fins, i, offset, coef):
     """Total blade-element force and moment of both fins, ``offset`` s into the segment."""
     fx_total = 0.0
     fy_total = 0.0
     tau_total = 0.0
     for f in range(2):
+        if fins[i, f, ANGLE_FROM] == fins[i, f, ANGLE_TO]:
+            continue  # a still fin exerts no force (g' = g'' = 0)
         g, gd, gdd = stroke_kinematics(
             fins[i, f, ELAPSED] + offset, fins[i, f, DURATION], fins[i, f, ANGLE_FROM], fins[i, f, ANGLE_TO]
         )
@@ -176,13 +184,21 @@ def _advance_one(
     fm = np.empty(3)
     f1 = np.empty(3)
     t_left = duration
+    rem = np.empty(2)
+    dur = np.empty(2)
     while t_left > _EPS:
         for f in range(2):
+            if _idle(fins[i, f], pending[i, f]):
+                # A fin at rest that stays at rest: its stroke clock must not cut the
+                # other fin's integration into phase-dependent pieces.
+                rem[f] = np.inf
+                dur[f] = np.inf
+                continue
             if fins[i, f, ELAPSED] >= fins[i, f, DURATION] - _EPS:
                 _latch(fins[i, f], pending[i, f], _SIDE[f], ci, mode, k_powers, k_coefs)
-        rem0 = fins[i, 0, DURATION] - fins[i, 0, ELAPSED]
-        rem1 = fins[i, 1, DURATION] - fins[i, 1, ELAPSED]
-        seg = min(t_left, rem0, rem1)
+            rem[f] = fins[i, f, DURATION] - fins[i, f, ELAPSED]
+            dur[f] = fins[i, f, DURATION]
+        seg = min(t_left, rem[0], rem[1])
         if averaged:
             f0[0] = fins[i, 0, AVG_FX] + fins[i, 1, AVG_FX]
             f0[1] = fins[i, 0, AVG_FY] + fins[i, 1, AVG_FY]
@@ -195,7 +211,7 @@ def _advance_one(
                 _rk4(state, integral, i, h, f0, f0, f0, ci)
                 t_seg -= h
         else:
-            h_max = min(dt_max, fins[i, 0, DURATION] / min_substeps, fins[i, 1, DURATION] / min_substeps)
+            h_max = min(dt_max, dur[0] / min_substeps, dur[1] / min_substeps)
             n_sub = max(1, int(math.ceil(seg / h_max - 1e-9)))
             h = seg / n_sub
             f0[0], f0[1], f0[2] = _fin_forcing(fins, i, 0.0, ci)
@@ -205,10 +221,9 @@ def _advance_one(
                 _rk4(state, integral, i, h, f0, fm, f1, ci)
                 f0[0], f0[1], f0[2] = f1[0], f1[1], f1[2]
         for f in range(2):
-            rem = fins[i, f, DURATION] - fins[i, f, ELAPSED]
-            if rem - seg <= _EPS:
+            if rem[f] - seg <= _EPS:
                 fins[i, f, ELAPSED] = fins[i, f, DURATION]  # exactly on the boundary
-            else:
+            elif rem[f] < np.inf:
                 fins[i, f, ELAPSED] += seg
         t_left -= seg
 

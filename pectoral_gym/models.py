@@ -171,14 +171,16 @@ class FullModel(FishModel):
         n: Number of fish.
         params: Model parameters (one, or one per fish).
         dt_max: Largest RK4 substep [s]; default 0.02 s.
-        min_substeps: Least number of substeps per half-stroke; default 8, so
-            the fastest default stroke (0.083 s) still gets ~10 steps.
+        min_substeps: Least number of substeps per half-stroke; default 16, so
+            the fastest default stroke (T_p = 0.5 s, zeta = 5: 0.083 s) gets
+            steps of 5 ms. Halving both changes the cycle-averaged steady state
+            by < 0.03 % even for that stroke (fourth-order convergence).
     """
 
     averaged = False
 
     def __init__(self, n: int = 1, params: FishParams | Sequence[FishParams] | None = None,
-                 dt_max: float = 0.02, min_substeps: int = 8):
+                 dt_max: float = 0.02, min_substeps: int = 16):
         super().__init__(n, params, dt_max)
         if int(min_substeps) < 1:
             raise ValueError(f"min_substeps must be >= 1, got {min_substeps}")

@@ -72,7 +72,7 @@ def turning_quantities(vx: float, vy: float, omega: float) -> tuple[float, float
     return speed, speed / abs(omega), 2.0 * math.pi / abs(omega), drift
 
 
-def common_period(periods: Sequence[float], max_window: float = 30.0) -> float:
+def common_period(periods: Sequence[float], max_window: float = 120.0) -> float:
     """Shortest window that is a whole number of every period (within 1e-9), up to ``max_window``.
 
     Falls back to the longest period times the largest whole number that fits
@@ -102,8 +102,8 @@ def _window(beats: np.ndarray) -> float:
 def steady_state_batch(
     model: FishModel,
     beats: np.ndarray,
-    rtol: float = 1e-7,
-    atol: float = 1e-10,
+    rtol: float = 1e-6,
+    atol: float = 1e-9,
     max_time: float = 600.0,
     window: float | None = None,
 ) -> list[SteadyState]:
