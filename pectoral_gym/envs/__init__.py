@@ -1,0 +1,11 @@
+"""Gymnasium environments of the pectoral-fin fish (the only package that imports Gymnasium).
+
+``PectoralFish-Full-v0`` and ``PectoralFish-Averaged-v0`` are registered by
+:func:`pectoral_gym.registration.register_envs` when ``pectoral_gym`` is imported.
+"""
+
+from pectoral_gym.envs.core import EnvConfig, EnvCore
+from pectoral_gym.envs.fish_env import PectoralFishEnv
+from pectoral_gym.envs.vector import PectoralFishVectorEnv
+
+__all__ = ["EnvConfig", "EnvCore", "PectoralFishEnv", "PectoralFishVectorEnv"]

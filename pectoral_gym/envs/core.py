@@ -1,0 +1,255 @@
+"""Settings and the batched environment core shared by the single and the vector environment.
+
+:class:`EnvCore` holds one batched fish model of ``n`` fish and the task
+arrays of ``n`` environments. The single environment is an ``EnvCore`` with
+``n = 1``; the vector environment uses one with ``n = num_envs``. Nothing here
+imports Gymnasium.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pectoral_gym.envs import tasks as tk
+from pectoral_gym.models import REST, AveragedModel, FishModel, FullModel
+from pectoral_gym.params import FishParams
+
+__all__ = ["EnvConfig", "EnvCore", "MODELS", "TASKS"]
+
+MODELS = ("full", "averaged")
+TASKS = {"goal": tk.GOAL, "track": tk.TRACK}
+_FIELD_NAMES = tuple(f.name for f in dataclasses.fields(FishParams))
+
+
+def _check_range(name: str, value: Sequence[float], positive: bool = False, nonnegative: bool = False):
+    try:
+        low, high = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name} must be a pair (low, high) of numbers, got {value!r}") from None
+    if not (math.isfinite(low) and math.isfinite(high)):
+        raise ValueError(f"{name} must be finite, got {value!r}")
+    if low > high:
+        raise ValueError(f"{name} needs low <= high, got {value!r}")
+    if positive and low <= 0:
+        raise ValueError(f"{name} must be > 0, got {value!r}")
+    if nonnegative and low < 0:
+        raise ValueError(f"{name} must be >= 0, got {value!r}")
+    return low, high
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """Validated settings of a fish environment (see :class:`~pectoral_gym.envs.fish_env.PectoralFishEnv`).
+
+    Attributes:
+        model: ``"full"`` (blade-element) or ``"averaged"`` (cycle-averaged, scaled).
+        task: ``"goal"`` (reach a point) or ``"track"`` (follow a point moving on an ellipse).
+        control_period: Time between actions [s].
+        bias_range: ``(low, high)`` of the fin bias ``gamma_0`` [rad].
+        amplitude_range: ``(low, high)`` of the fin amplitude ``gamma_A`` [rad].
+        period_range: ``(low, high)`` of the fin-beat period ``T_p`` [s].
+        ratio_range: ``(low, high)`` of the speed ratio ``zeta`` [-].
+        params: Nominal model parameters (Table 1 defaults if ``None``).
+        randomize: FishParams field name -> relative half-width ``w``; each
+            reset multiplies the field by a factor drawn from ``U(1-w, 1+w)``.
+        scaling: Averaged model only: ``"identified"`` scaling functions or ``"none"`` (K = 1).
+        progress_weight: Goal task: reward per metre of approach [1/m].
+        goal_bonus: Goal task: reward for reaching the goal.
+        wall_penalty: Penalty when the nose or tail leaves the tank.
+        energy_weight: Penalty per joule of fin work [1/J].
+        time_penalty: Goal task: penalty per step.
+        tracking_weight: Track task: penalty per metre of distance, per step [1/m].
+        goal_radius: Goal task: success radius [m].
+        ref_speed: Track task: speed of the reference point [m/s].
+    """
+
+    model: str = "full"
+    task: str = "goal"
+    control_period: float = 0.5
+    bias_range: tuple[float, float] = (math.radians(45.0), math.radians(135.0))
+    amplitude_range: tuple[float, float] = (0.0, math.radians(30.0))
+    period_range: tuple[float, float] = (0.5, 2.0)
+    ratio_range: tuple[float, float] = (1.0, 5.0)
+    params: FishParams | None = None
+    randomize: Mapping[str, float] | None = field(default=None, hash=False)
+    scaling: str = "identified"
+    progress_weight: float = 10.0
+    goal_bonus: float = 10.0
+    wall_penalty: float = 10.0
+    energy_weight: float = 1.0
+    time_penalty: float = 0.01
+    tracking_weight: float = 1.0
+    goal_radius: float = 0.08
+    ref_speed: float = 0.03
+
+    def __post_init__(self) -> None:
+        set_ = object.__setattr__
+        if self.model not in MODELS:
+            raise ValueError(f"model must be one of {MODELS}, got {self.model!r}")
+        if self.task not in TASKS:
+            raise ValueError(f"task must be one of {tuple(TASKS)}, got {self.task!r}")
+        if self.scaling not in ("identified", "none"):
+            raise ValueError(f"scaling must be 'identified' or 'none', got {self.scaling!r}")
+        if self.model == "full" and self.scaling != "identified":
+            raise ValueError("scaling applies to the averaged model only; leave it at 'identified' for model='full'")
+        if not (math.isfinite(self.control_period) and self.control_period > 0):
+            raise ValueError(f"control_period must be a finite number > 0 s, got {self.control_period!r}")
+        set_(self, "bias_range", _check_range("bias_range", self.bias_range))
+        set_(self, "amplitude_range", _check_range("amplitude_range", self.amplitude_range, nonnegative=True))
+        set_(self, "period_range", _check_range("period_range", self.period_range, positive=True))
+        set_(self, "ratio_range", _check_range("ratio_range", self.ratio_range, positive=True))
+        amp_max = self.amplitude_range[1]
+        if self.bias_range[0] - amp_max < 0 or self.bias_range[1] + amp_max > math.pi:
+            raise ValueError(
+                f"bias_range {self.bias_range} with amplitudes up to {amp_max:.4g} rad lets the stroke leave "
+                "[0, pi] rad (the fin would pass through the body); narrow bias_range or amplitude_range"
+            )
+        for name in ("progress_weight", "goal_bonus", "wall_penalty", "energy_weight", "time_penalty",
+                     "tracking_weight", "ref_speed", "goal_radius"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+        if self.params is None:
+            set_(self, "params", FishParams())
+        elif not isinstance(self.params, FishParams):
+            raise ValueError(f"params must be a FishParams or None, got {type(self.params).__name__}")
+        if self.randomize is not None:
+            randomize = dict(self.randomize)
+            unknown = sorted(set(randomize) - set(_FIELD_NAMES))
+            if unknown:
+                raise ValueError(f"randomize: unknown FishParams fields {unknown}; valid names: {list(_FIELD_NAMES)}")
+            for name, width in randomize.items():
+                if not (isinstance(width, (int, float)) and math.isfinite(width) and 0 <= width < 1):
+                    raise ValueError(f"randomize[{name!r}] must be a relative half-width in [0, 1), got {width!r}")
+            set_(self, "randomize", randomize or None)
+
+    @property
+    def task_id(self) -> int:
+        """``tasks.GOAL`` or ``tasks.TRACK``."""
+        return TASKS[self.task]
+
+    @property
+    def ranges(self) -> np.ndarray:
+        """``(4, 2)``: (low, high) of bias [rad], amplitude [rad], period [s], ratio [-]."""
+        return np.array([self.bias_range, self.amplitude_range, self.period_range, self.ratio_range])
+
+    def cfg_array(self) -> np.ndarray:
+        """Pack the settings for the kernels of :mod:`~pectoral_gym.envs.tasks`."""
+        cfg = np.zeros(tk.N_CFG)
+        cfg[tk.C_DT] = self.control_period
+        cfg[tk.C_TASK] = self.task_id
+        cfg[tk.C_RANGES:tk.C_RANGES + 8] = self.ranges.ravel()
+        cfg[tk.C_W_PROGRESS] = self.progress_weight
+        cfg[tk.C_GOAL_BONUS] = self.goal_bonus
+        cfg[tk.C_WALL] = self.wall_penalty
+        cfg[tk.C_W_ENERGY] = self.energy_weight
+        cfg[tk.C_TIME] = self.time_penalty
+        cfg[tk.C_W_TRACKING] = self.tracking_weight
+        cfg[tk.C_GOAL_RADIUS] = self.goal_radius
+        cfg[tk.C_REF_SPEED] = self.ref_speed
+        return cfg
+
+    def encode(self, beat: np.ndarray) -> np.ndarray:
+        """Normalised action entries of one fin pattern ``(bias, amplitude, period, ratio)``, clipped to [-1, 1]."""
+        r = self.ranges
+        width = r[:, 1] - r[:, 0]
+        code = np.where(width > 0, 2.0 * (np.asarray(beat) - r[:, 0]) / np.where(width > 0, width, 1.0) - 1.0, 0.0)
+        return np.clip(code, -1.0, 1.0)
+
+
+class EnvCore:
+    """``n`` fish environments on one batched model: reset, step, and the arrays they fill.
+
+    Args:
+        n: Number of environments.
+        config: The settings.
+
+    Attributes:
+        model: The batched :class:`~pectoral_gym.models.FishModel` (``n`` fish).
+        obs: ``(n, 19)`` float32 observations after the last reset/step.
+        out: ``(n, N_OUT)`` reward, terms and flags of the last step (``tasks.O_*``).
+        ep: ``(n, N_EP)`` per-episode data (``tasks.E_*``).
+        params: The :class:`FishParams` of each env's current episode.
+    """
+
+    def __init__(self, n: int, config: EnvConfig):
+        self.n = int(n)
+        self.config = config
+        self.task = config.task_id
+        self.terms = tk.TERMS[self.task]
+        if config.model == "full":
+            self.model: FishModel = FullModel(self.n, config.params)
+        else:
+            self.model = AveragedModel(self.n, config.params, scaling=config.scaling)
+        self.cfg = config.cfg_array()
+        self.ep = np.zeros((self.n, tk.N_EP))
+        self.obs = np.zeros((self.n, tk.OBS_SIZE), dtype=np.float32)
+        self.out = np.zeros((self.n, tk.N_OUT))
+        self.beats = np.broadcast_to(REST.as_array(), (self.n, 2, 4)).copy()
+        self.all = np.ones(self.n, dtype=np.bool_)
+        self.none = np.zeros(self.n, dtype=np.bool_)
+        self.action_code = np.concatenate([config.encode(REST.as_array())] * 2)
+        self.params: list[FishParams] = [config.params] * self.n
+        self._set_geometry(np.arange(self.n))
+        if config.randomize:
+            self._rand_names = tuple(config.randomize)
+            widths = np.array([config.randomize[k] for k in self._rand_names])
+            self._rand_low, self._rand_high = 1.0 - widths, 1.0 + widths
+            self._rand_base = np.array([float(getattr(config.params, k)) for k in self._rand_names])
+
+    def _set_geometry(self, index: np.ndarray) -> None:
+        for i in index:
+            p = self.params[i]
+            self.ep[i, tk.E_LENGTH] = p.body_length
+            self.ep[i, tk.E_SPAN] = p.fin_span
+            self.ep[i, tk.E_KDRAG] = p.fin_drag_constant
+
+    def reset(self, index: np.ndarray, rngs: Sequence[np.random.Generator]) -> None:
+        """Start new episodes for the envs in ``index``; env ``i`` draws only from ``rngs[i]``.
+
+        Per env, in this order: the randomisation factors (one per field of
+        ``config.randomize``, in its order), then :func:`tasks.draw_episode`.
+        """
+        index = np.asarray(index, dtype=np.int64)
+        draws = np.empty((index.size, 8))
+        for k, i in enumerate(index):
+            rng = rngs[i]
+            if self.config.randomize:
+                factors = rng.uniform(self._rand_low, self._rand_high)
+                changes = dict(zip(self._rand_names, (self._rand_base * factors).tolist(), strict=True))
+                self.params[i] = self.config.params.replace(**changes)
+                self.model.set_params(self.params[i], i)
+            draws[k] = tk.draw_episode(rng, self.task)
+        if self.config.randomize:
+            self._set_geometry(index)
+        start = np.empty((index.size, 6))
+        tk.start_states(index, draws, self.cfg, self.ep, start)
+        self.model.reset(start, right=REST, left=REST, index=index)
+        self.beats[index] = REST.as_array()
+        tk.observe_reset(index, self.model.state, self.ep, self.obs, self.out, self.action_code)
+
+    def step(self, actions: np.ndarray, skip: np.ndarray | None = None) -> None:
+        """Apply ``actions`` ``(n, 8)`` for one control period (envs in ``skip`` are not checked or scored).
+
+        Raises:
+            ValueError: If an action of an env not in ``skip`` is not finite.
+        """
+        skip = self.none if skip is None else skip
+        bad = tk.apply_actions(actions, skip, self.cfg, self.beats, self.obs, self.out, self.ep)
+        if bad >= 0:
+            raise ValueError(
+                f"action must be finite, got {np.asarray(actions[bad]).tolist()}"
+                + (f" for env {bad}" if self.n > 1 else "")
+            )
+        self.model.command_array(self.beats, self.all, validate=False)
+        self.model.advance(self.cfg[tk.C_DT])
+        tk.observe_and_reward(self.model.state, skip, self.cfg, self.ep, self.obs, self.out)
+
+    def target(self, i: int) -> tuple[float, float]:
+        """Target position of env ``i`` in the tank frame [m]."""
+        return float(self.ep[i, tk.E_TX]), float(self.ep[i, tk.E_TY])

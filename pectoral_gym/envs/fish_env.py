@@ -1,0 +1,244 @@
+"""The single-fish Gymnasium environment ``PectoralFish-{Full,Averaged}-v0``."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from pectoral_gym.envs import tasks as tk
+from pectoral_gym.envs.core import EnvConfig, EnvCore
+from pectoral_gym.params import FishParams
+
+__all__ = ["PectoralFishEnv"]
+
+_ZERO_INDEX = np.zeros(1, dtype=np.int64)
+
+
+class PectoralFishEnv(gym.Env):
+    r"""A robotic fish rowing with two pectoral fins in a tank, seen from above.
+
+    ## Description
+
+    The fish of the reference paper (body 0.198 m, two rowing pectoral fins)
+    swims in a 2.30 m x 1.15 m tank. Every ``control_period`` the agent sets
+    the beat pattern of each fin, ``(bias, amplitude, period, ratio)`` of
+    eq. (21); a fin switches to a new pattern at the next turning point of its
+    stroke (the parameter-change rule of :mod:`pectoral_gym.integrators`). Two
+    models drive the same environment: ``PectoralFish-Full-v0`` integrates the
+    blade-element model through every fin beat, ``PectoralFish-Averaged-v0``
+    the cycle-averaged model with identified scaling functions. Spaces, tasks
+    and rewards are identical; only the model differs.
+
+    Tasks: ``"goal"`` (reach a point) and ``"track"`` (follow a point that
+    moves along an ellipse at ``ref_speed``).
+
+    ## Action Space
+
+    ``Box(-1, 1, (8,), float32)``. Entry ``x`` maps linearly to ``[low, high]``
+    of its range; finite values outside [-1, 1] are clipped; a non-finite
+    action raises ``ValueError``.
+
+    | Num | Action              | Fin   | Range (x = -1 .. 1), default | Unit |
+    |-----|---------------------|-------|------------------------------|------|
+    | 0   | bias ``gamma_0``    | right | ``bias_range``, 45 .. 135 deg | rad |
+    | 1   | amplitude ``gamma_A`` | right | ``amplitude_range``, 0 .. 30 deg | rad |
+    | 2   | period ``T_p``      | right | ``period_range``, 0.5 .. 2.0  | s    |
+    | 3   | ratio ``zeta``      | right | ``ratio_range``, 1 .. 5       | -    |
+    | 4-7 | same                | left  | same                          |      |
+
+    ## Observation Space
+
+    ``Box(-inf, inf, (19,), float32)``. Tank frame: origin at a tank corner,
+    X along the 2.30 m side. Body frame: x forward, y to the left.
+
+    | Num   | Observation                                   | Unit  |
+    |-------|-----------------------------------------------|-------|
+    | 0     | X, position in the tank                       | m     |
+    | 1     | Y, position in the tank                       | m     |
+    | 2     | cos psi (heading)                             | -     |
+    | 3     | sin psi                                       | -     |
+    | 4     | vx, surge velocity (body frame)               | m/s   |
+    | 5     | vy, sway velocity (body frame)                | m/s   |
+    | 6     | omega, yaw rate (> 0: turning left)           | rad/s |
+    | 7-8   | target position relative to the fish, body frame | m  |
+    | 9-10  | target velocity, body frame (zero for ``goal``) | m/s |
+    | 11-18 | the last action, normalised and clipped (after a reset: the encoding of the rest pattern) | - |
+
+    ## Rewards
+
+    The reward is the sum of named terms, each reported in ``info`` (terms of
+    the other task are absent). ``d`` is the distance from the fish's centre of
+    mass to the target after the step, ``E`` the fin work of the commanded
+    patterns over the control period, ``E = sum_fins mean_fin_power * control_period``
+    (:func:`pectoral_gym.averaging.mean_fin_power`).
+
+    | Term              | Task  | Value                                    |
+    |-------------------|-------|------------------------------------------|
+    | ``reward_progress`` | goal | ``progress_weight * (d_prev - d)``       |
+    | ``reward_goal``   | goal  | ``goal_bonus`` if ``d < goal_radius``, else 0 |
+    | ``reward_wall``   | both  | ``-wall_penalty`` if the fish hit a wall, else 0 |
+    | ``reward_energy`` | both  | ``-energy_weight * E``                   |
+    | ``reward_time``   | goal  | ``-time_penalty``                        |
+    | ``reward_tracking`` | track | ``-tracking_weight * d``               |
+
+    ``info`` also holds ``"distance"`` (``d`` [m]), ``"is_success"`` (goal)
+    and ``"tracking_error"`` (track, ``d`` [m]).
+
+    ## Starting State
+
+    The fish is at rest with both fins held still at 90 deg
+    (``FinBeat.rest()``). ``goal``: position uniform in the tank inset by
+    0.3 m, heading uniform in [-pi, pi); the goal uniform in the tank inset by
+    0.2 m at a distance in [0.3, 1.0] m from the start. ``track``: an ellipse
+    centred in the tank with semi-axes ``U(0.5, 0.8)`` m (X) and
+    ``U(0.25, 0.4)`` m (Y), a random direction of travel and start phase; the
+    fish starts uniformly within 0.1 m of the reference point, heading along
+    the tangent +- U(0.3) rad. With ``randomize``, each reset first draws the
+    model parameters. All randomness comes from ``self.np_random``.
+
+    ## Episode End
+
+    * Termination: the nose or the tail (``X +- L/2 cos psi``, ``Y +- L/2 sin psi``,
+      ``L = params.body_length``) leaves the tank; or, ``goal``, ``d < goal_radius``
+      (``info["is_success"] = True``).
+    * Truncation: 240 steps (2 min at the default control period), set by
+      ``max_episode_steps`` in the registry.
+
+    ## Arguments
+
+    ``gym.make("PectoralFish-Averaged-v0", task="track", randomize={"drag_coef": 0.2})``
+
+    | Argument          | Default          | Unit | Description |
+    |-------------------|------------------|------|-------------|
+    | ``model``         | ``"full"``       |      | ``"full"`` or ``"averaged"`` (set by the id) |
+    | ``task``          | ``"goal"``       |      | ``"goal"`` or ``"track"`` |
+    | ``control_period``| 0.5              | s    | time between actions |
+    | ``bias_range``    | (45, 135) deg    | rad  | bias of each fin; every stroke ``bias +- amplitude`` must stay in [0, pi] |
+    | ``amplitude_range`` | (0, 30) deg    | rad  | amplitude, >= 0 |
+    | ``period_range``  | (0.5, 2.0)       | s    | fin-beat period, > 0 |
+    | ``ratio_range``   | (1.0, 5.0)       | -    | power/recovery speed ratio, > 0 |
+    | ``params``        | ``None``         |      | nominal :class:`FishParams` (Table 1) |
+    | ``randomize``     | ``None``         |      | ``{field: w}``: each reset scales the field by ``U(1-w, 1+w)`` |
+    | ``scaling``       | ``"identified"`` |      | averaged model only: ``"identified"`` or ``"none"`` (K = 1) |
+    | ``progress_weight`` | 10.0           | 1/m  | goal: reward per metre of approach |
+    | ``goal_bonus``    | 10.0             |      | goal: reward on reaching the goal |
+    | ``wall_penalty``  | 10.0             |      | penalty for hitting a wall |
+    | ``energy_weight`` | 1.0              | 1/J  | penalty per joule of fin work |
+    | ``time_penalty``  | 0.01             |      | goal: penalty per step |
+    | ``tracking_weight`` | 1.0            | 1/m  | track: penalty per metre of distance per step |
+    | ``goal_radius``   | 0.08             | m    | goal: success radius |
+    | ``ref_speed``     | 0.03             | m/s  | track: speed of the reference point |
+    | ``render_mode``   | ``None``         |      | ``"rgb_array"`` or ``"human"`` |
+
+    Ranges must be finite with ``low <= high``; invalid settings raise ``ValueError``.
+
+    ## Version History
+
+    * v0: Initial version.
+    """
+
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 8}
+
+    def __init__(
+        self,
+        model: str = "full",
+        task: str = "goal",
+        control_period: float = 0.5,
+        bias_range: tuple[float, float] = (math.radians(45.0), math.radians(135.0)),
+        amplitude_range: tuple[float, float] = (0.0, math.radians(30.0)),
+        period_range: tuple[float, float] = (0.5, 2.0),
+        ratio_range: tuple[float, float] = (1.0, 5.0),
+        params: FishParams | None = None,
+        randomize: Mapping[str, float] | None = None,
+        scaling: str = "identified",
+        progress_weight: float = 10.0,
+        goal_bonus: float = 10.0,
+        wall_penalty: float = 10.0,
+        energy_weight: float = 1.0,
+        time_penalty: float = 0.01,
+        tracking_weight: float = 1.0,
+        goal_radius: float = 0.08,
+        ref_speed: float = 0.03,
+        render_mode: str | None = None,
+    ):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        self.config = EnvConfig(
+            model=model, task=task, control_period=control_period, bias_range=bias_range,
+            amplitude_range=amplitude_range, period_range=period_range, ratio_range=ratio_range,
+            params=params, randomize=randomize, scaling=scaling, progress_weight=progress_weight,
+            goal_bonus=goal_bonus, wall_penalty=wall_penalty, energy_weight=energy_weight,
+            time_penalty=time_penalty, tracking_weight=tracking_weight, goal_radius=goal_radius,
+            ref_speed=ref_speed,
+        )
+        self.render_mode = render_mode
+        self.core = EnvCore(1, self.config)
+        self.action_space = spaces.Box(-1.0, 1.0, (tk.ACTION_SIZE,), dtype=np.float32)
+        self.observation_space = spaces.Box(-np.inf, np.inf, (tk.OBS_SIZE,), dtype=np.float32)
+        self._action = np.zeros((1, tk.ACTION_SIZE))
+        self._info_items = self.core.terms + (("distance", tk.O_DISTANCE),)
+        self._goal = self.config.task == "goal"
+        self._renderer = None
+        self.trail: list[tuple[float, float]] = []
+
+    @property
+    def model(self):
+        """The underlying batched fish model (one fish)."""
+        return self.core.model
+
+    @property
+    def fish_params(self) -> FishParams:
+        """The model parameters of the current episode (after randomisation)."""
+        return self.core.params[0]
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Start an episode (see "Starting State"); returns ``(observation, {})``."""
+        super().reset(seed=seed)
+        self.core.reset(_ZERO_INDEX, (self.np_random,))
+        if self.render_mode is not None:
+            self.trail = [(float(self.core.obs[0, 0]), float(self.core.obs[0, 1]))]
+            if self.render_mode == "human":
+                self.render()
+        return self.core.obs[0].copy(), {}
+
+    def step(self, action):
+        """Advance one control period; returns ``(observation, reward, terminated, truncated, info)``."""
+        self._action[0] = action
+        core = self.core
+        core.step(self._action)
+        out = core.out[0].tolist()
+        info = {name: out[k] for name, k in self._info_items}
+        if self._goal:
+            info["is_success"] = out[tk.O_SUCCESS] > 0.5
+        else:
+            info["tracking_error"] = out[tk.O_DISTANCE]
+        if self.render_mode is not None:
+            self.trail.append((float(core.obs[0, 0]), float(core.obs[0, 1])))
+            if self.render_mode == "human":
+                self.render()
+        return core.obs[0].copy(), out[tk.O_REWARD], out[tk.O_TERMINATED] > 0.5, False, info
+
+    def render(self):
+        """Draw the tank from above: ``rgb_array`` returns an ``(H, W, 3)`` uint8 image; ``human`` shows a window."""
+        if self.render_mode is None:
+            gym.logger.warn(
+                "You are calling render method without specifying any render mode. You can specify the "
+                'render_mode at initialization, e.g. gym.make("PectoralFish-Averaged-v0", render_mode="rgb_array")'
+            )
+            return None
+        if self._renderer is None:
+            from pectoral_gym.envs.rendering import FishRenderer
+
+            self._renderer = FishRenderer(self.render_mode, self.metadata["render_fps"])
+        return self._renderer.render(self.core, 0, self.trail, self.config)
+
+    def close(self):
+        """Close the window and quit pygame if it was started."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None

@@ -1,0 +1,150 @@
+"""Native vector environment: ``num_envs`` fish on one batched model."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from pectoral_gym.envs import tasks as tk
+from pectoral_gym.envs.core import EnvConfig, EnvCore
+from pectoral_gym.registration import MAX_EPISODE_STEPS
+
+__all__ = ["PectoralFishVectorEnv"]
+
+
+class PectoralFishVectorEnv(VectorEnv):
+    """``num_envs`` copies of :class:`~pectoral_gym.envs.fish_env.PectoralFishEnv` stepped as one batch.
+
+    One batched model of ``num_envs`` fish and the task kernels of
+    :mod:`pectoral_gym.envs.tasks` advance all environments in a few compiled
+    calls (threads for 64 envs and more). Env ``i`` behaves exactly like
+    ``gym.make(id)`` reset with ``seed + i`` (as ``SyncVectorEnv`` seeds it)
+    and given the same actions, step for step, including the autoreset.
+
+    Autoreset: ``AutoresetMode.NEXT_STEP`` (the Gymnasium default). The step
+    after an env terminated or was truncated resets it: its action is ignored
+    (not even checked), it returns the new episode's first observation,
+    reward 0 and ``terminated = truncated = False``, and its ``info`` entries
+    are masked out (``info["_<key>"]`` is ``False``).
+
+    ``info`` holds one array per key of the single env's ``info`` (reward
+    terms, ``"distance"``, ``"is_success"`` or ``"tracking_error"``), each with
+    its boolean mask ``"_<key>"``.
+
+    Args:
+        num_envs: Number of environments.
+        model: ``"full"`` or ``"averaged"``.
+        max_episode_steps: Truncation after this many steps (240 as registered).
+        render_mode: Only ``None`` (render a single env instead).
+        **kwargs: The other arguments of :class:`~pectoral_gym.envs.fish_env.PectoralFishEnv`.
+    """
+
+    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+
+    def __init__(self, num_envs: int = 1, model: str = "full", max_episode_steps: int = MAX_EPISODE_STEPS,
+                 render_mode: str | None = None, **kwargs: Any):
+        if int(num_envs) < 1:
+            raise ValueError(f"num_envs must be >= 1, got {num_envs}")
+        if max_episode_steps is None or int(max_episode_steps) < 1:
+            raise ValueError(f"max_episode_steps must be an integer >= 1, got {max_episode_steps}")
+        if render_mode is not None:
+            raise ValueError("PectoralFishVectorEnv does not render; render a single PectoralFishEnv instead")
+        self.num_envs = int(num_envs)
+        self.max_episode_steps = int(max_episode_steps)
+        self.render_mode = None
+        self.config = EnvConfig(model=model, **kwargs)
+        self.core = EnvCore(self.num_envs, self.config)
+        self.single_action_space = spaces.Box(-1.0, 1.0, (tk.ACTION_SIZE,), dtype=np.float32)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self.single_observation_space = spaces.Box(-np.inf, np.inf, (tk.OBS_SIZE,), dtype=np.float32)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
+        self.steps = np.zeros(self.num_envs, dtype=np.int64)
+        self.prev_done = np.zeros(self.num_envs, dtype=np.bool_)
+        self._info_items = self.core.terms + (("distance", tk.O_DISTANCE),)
+        self._goal = self.config.task == "goal"
+
+    @property
+    def env_rngs(self) -> list[np.random.Generator | None]:
+        """The random generator of each env (env ``i`` draws only from its own)."""
+        return self._rngs
+
+    def reset(self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None):
+        """Reset all envs (or those in ``options["reset_mask"]``); env ``i`` is seeded with ``seed + i``.
+
+        Args:
+            seed: ``None`` (keep each env's generator, or seed it from entropy on first use),
+                an int (env ``i`` gets ``seed + i``) or one seed per env.
+            options: ``{"reset_mask": bool array}`` resets only the masked envs.
+
+        Returns:
+            ``(observations (num_envs, 19), {})``.
+        """
+        if seed is None:
+            seeds: list[int | None] = [None] * self.num_envs
+        elif isinstance(seed, (int, np.integer)):
+            seeds = [int(seed) + i for i in range(self.num_envs)]
+            super().reset(seed=int(seed))
+        else:
+            seeds = list(seed)
+            if len(seeds) != self.num_envs:
+                raise ValueError(f"got {len(seeds)} seeds for {self.num_envs} envs")
+        mask = np.ones(self.num_envs, dtype=np.bool_)
+        if options and "reset_mask" in options:
+            mask = np.asarray(options["reset_mask"], dtype=np.bool_)
+            if mask.shape != (self.num_envs,):
+                raise ValueError(f"reset_mask must have shape ({self.num_envs},), got {mask.shape}")
+        index = np.flatnonzero(mask)
+        for i in index:
+            if seeds[i] is not None or self._rngs[i] is None:
+                self._rngs[i], _ = seeding.np_random(seeds[i])
+        self.core.reset(index, self._rngs)
+        self.steps[index] = 0
+        self.prev_done[index] = False
+        return self.core.obs.copy(), {}
+
+    def step(self, actions: np.ndarray):
+        """Step every env one control period (autoresetting those done at the previous step).
+
+        Returns:
+            ``(observations, rewards, terminations, truncations, infos)`` as arrays over envs.
+
+        Raises:
+            ValueError: If ``actions`` does not have shape ``(num_envs, 8)`` or an action
+                (of an env that is not being reset) is not finite.
+        """
+        actions = np.asarray(actions)
+        if actions.shape != (self.num_envs, tk.ACTION_SIZE):
+            raise ValueError(f"actions must have shape ({self.num_envs}, {tk.ACTION_SIZE}), got {actions.shape}")
+        if actions.dtype != np.float32 and actions.dtype != np.float64:
+            actions = actions.astype(np.float64)
+        core = self.core
+        resetting = self.prev_done
+        core.step(actions, resetting)
+        self.steps += 1
+        if resetting.any():
+            index = np.flatnonzero(resetting)
+            core.reset(index, self._rngs)
+            self.steps[index] = 0
+        out = core.out
+        terminated = out[:, tk.O_TERMINATED] > 0.5
+        truncated = self.steps >= self.max_episode_steps
+        stepped = ~resetting
+        info: dict[str, Any] = {}
+        for name, k in self._info_items:
+            info[name] = out[:, k].copy()
+            info["_" + name] = stepped
+        if self._goal:
+            info["is_success"] = out[:, tk.O_SUCCESS] > 0.5
+            info["_is_success"] = stepped
+        else:
+            info["tracking_error"] = out[:, tk.O_DISTANCE].copy()
+            info["_tracking_error"] = stepped
+        self.prev_done = terminated | truncated
+        return core.obs.copy(), out[:, tk.O_REWARD].copy(), terminated, truncated, info
