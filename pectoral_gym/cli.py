@@ -120,6 +120,10 @@ def steady_result(model: str, right: FinBeat | None, left: FinBeat | None, scali
 def _cmd_steady(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     right, left = _fins(args, parser)
     res = steady_result(args.model, right, left, args.scaling, args.forcing)
+    if not all(math.isfinite(res[k]) for k in ("vx", "vy", "omega")):
+        print(f"error: the {args.model} model gave non-finite velocities for {_fin_label(right, left)}",
+              file=sys.stderr)
+        return 1
     if args.json:
         print(json.dumps(res))
         return 0
@@ -232,9 +236,10 @@ def _cmd_bench(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
             parser.error(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
     progress = None if args.json else (lambda msg: print(f"measuring {msg} ...", file=sys.stderr, flush=True))
     res = run_benchmark(args.steps, args.vector_steps, args.repeats, args.seed, args.quick, progress)
+    status = 1 if res["errors"] else 0
     if args.json:
         print(json.dumps(res))
-        return 0
+        return status
     rate = lambda v: "failed" if v is None else f"{v:>14,.0f}"  # noqa: E731
     print("single env (gymnasium.make), steps/s:")
     for env_id, value in res["single_env"].items():
@@ -251,7 +256,7 @@ def _cmd_bench(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
         print(f"error in {key}: {msg}", file=sys.stderr)
     if res["settings"]["quick"]:
         print("(--quick: smoke-test sizes, rates are not meaningful)")
-    return 0
+    return status
 
 
 # --------------------------------------------------------------------------- parser
@@ -331,8 +336,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Run ``pectoral-fish`` with ``argv`` (default: ``sys.argv[1:]``).
 
     Returns:
-        The exit status (0). Bad arguments raise ``SystemExit(2)`` after a
-        one-line reason on stderr.
+        The exit status: 0, or 1 if a computation failed (non-finite steady
+        state, a benchmark that could not run). Bad arguments raise
+        ``SystemExit(2)`` after a one-line reason on stderr.
     """
     parser = build_parser()
     args = parser.parse_args(argv)
