@@ -12,7 +12,9 @@
 
 Every measurement is warmed up first (numba compiles, or loads its cache, on
 the first call; that time is excluded) and the best of ``repeats`` timed runs
-is kept, since noise only ever slows a run down. The result is compared with
+is kept, since noise only ever slows a run down. The repeats go round robin
+over all five measurements, so a burst of load from elsewhere on the machine
+slows CartPole and the fish envs alike instead of skewing one ratio. The result is compared with
 the project's targets (:data:`TARGETS`).
 """
 
@@ -22,15 +24,20 @@ import os
 import platform
 import time
 from collections.abc import Callable
-from typing import Any
+from functools import partial
+from typing import Any, NamedTuple
 
 import numpy as np
 
-__all__ = ["AVERAGED_ID", "CARTPOLE_ID", "FULL_ID", "TARGETS", "VECTOR_ENVS", "run_benchmark"]
+__all__ = [
+    "AVERAGED_ID", "CARTPOLE_ID", "FULL_ID", "SINGLE_ENVS", "TARGETS", "VECTOR_ENVS",
+    "run_benchmark", "single_env_timer", "vector_env_timer",
+]
 
 AVERAGED_ID = "PectoralFish-Averaged-v0"
 FULL_ID = "PectoralFish-Full-v0"
 CARTPOLE_ID = "CartPole-v1"
+SINGLE_ENVS = (AVERAGED_ID, FULL_ID, CARTPOLE_ID)
 VECTOR_ENVS = {AVERAGED_ID: 4096, FULL_ID: 1024}  # env id -> num_envs
 
 # name -> (threshold, what it is compared with)
@@ -42,22 +49,26 @@ TARGETS: dict[str, tuple[float, str]] = {
 }
 
 
-def _best_rate(run: Callable[[], float], repeats: int) -> float:
-    """Best (highest) of ``repeats`` calls of ``run``, each returning a rate."""
-    return max(run() for _ in range(max(1, repeats)))
+class _Timer(NamedTuple):
+    """One warmed-up measurement: ``run()`` times one pass and returns its rate; ``close()`` frees the env."""
+
+    run: Callable[[], float]
+    close: Callable[[], None]
 
 
-def single_env_rate(env_id: str, steps: int, repeats: int = 3, seed: int = 0) -> float:
-    """Steps per second of one env made with :func:`gymnasium.make`.
+def single_env_timer(env_id: str, steps: int, seed: int = 0) -> _Timer:
+    """Warmed-up timer of ``steps`` single-env steps through :func:`gymnasium.make`.
+
+    Actions are pre-generated from the seeded action space; the env is reset
+    (seeded) before each pass and again on termination or truncation.
 
     Args:
         env_id: Registered environment id.
-        steps: Steps per timed run.
-        repeats: Timed runs; the best is returned.
-        seed: Seeds the action space (actions are pre-generated) and the first reset.
+        steps: Steps per timed pass.
+        seed: Seeds the action space and the first reset of each pass.
 
     Returns:
-        The best ``steps / elapsed`` over the repeats [steps/s].
+        A timer whose ``run()`` gives ``steps / elapsed`` [steps/s].
     """
     import gymnasium as gym
 
@@ -76,24 +87,27 @@ def single_env_rate(env_id: str, steps: int, repeats: int = 3, seed: int = 0) ->
                     env.reset()
             return n / (time.perf_counter() - start)
 
-        run(min(steps, 100))  # warm-up: compilation, caches
-        return _best_rate(run, repeats)
-    finally:
+        run(min(steps, 100))  # warm-up: numba compilation or cache load, first-call caches
+    except BaseException:
         env.close()
+        raise
+    return _Timer(run, env.close)
 
 
-def vector_env_rate(env_id: str, num_envs: int, steps: int, repeats: int = 3, seed: int = 0) -> float:
-    """Env-steps per second of a native vector env (``vectorization_mode="vector_entry_point"``).
+def vector_env_timer(env_id: str, num_envs: int, steps: int, seed: int = 0) -> _Timer:
+    """Warmed-up timer of ``steps`` batch steps of a native vector env.
+
+    The env comes from ``gymnasium.make_vec(env_id, num_envs=num_envs,
+    vectorization_mode="vector_entry_point")`` and autoresets by itself.
 
     Args:
         env_id: Registered environment id with a ``vector_entry_point``.
         num_envs: Number of sub-environments.
-        steps: Batch steps per timed run.
-        repeats: Timed runs; the best is returned.
-        seed: Seeds the action space (actions are pre-generated) and the first reset.
+        steps: Batch steps per timed pass.
+        seed: Seeds the action space and the reset before each pass.
 
     Returns:
-        The best ``steps * num_envs / elapsed`` over the repeats [env-steps/s].
+        A timer whose ``run()`` gives ``steps * num_envs / elapsed`` [env-steps/s].
     """
     import gymnasium as gym
 
@@ -102,19 +116,19 @@ def vector_env_rate(env_id: str, num_envs: int, steps: int, repeats: int = 3, se
         envs.action_space.seed(seed)
         actions = [envs.action_space.sample() for _ in range(steps)]
 
-        def run() -> float:
+        def run(n: int = steps) -> float:
+            batch = actions[:n]
             envs.reset(seed=seed)
             start = time.perf_counter()
-            for action in actions:
-                envs.step(action)  # the vector env autoresets
-            return steps * num_envs / (time.perf_counter() - start)
+            for action in batch:
+                envs.step(action)
+            return n * num_envs / (time.perf_counter() - start)
 
-        envs.reset(seed=seed)  # warm-up: compilation, thread pool start-up
-        for action in actions[:2]:
-            envs.step(action)
-        return _best_rate(run, repeats)
-    finally:
+        run(min(steps, 3))  # warm-up: compilation, thread-pool start-up
+    except BaseException:
         envs.close()
+        raise
+    return _Timer(run, envs.close)
 
 
 def _environment() -> dict[str, Any]:
@@ -136,7 +150,7 @@ def _environment() -> dict[str, Any]:
 def run_benchmark(
     steps: int = 20_000,
     vector_steps: int = 100,
-    repeats: int = 3,
+    repeats: int = 5,
     seed: int = 0,
     quick: bool = False,
     progress: Callable[[str], None] | None = None,
@@ -144,13 +158,13 @@ def run_benchmark(
     """Measure all step rates and compare them with :data:`TARGETS`.
 
     Args:
-        steps: Single-env steps per timed run.
-        vector_steps: Vector-env batch steps per timed run.
-        repeats: Timed runs per measurement (best kept).
+        steps: Single-env steps per timed pass.
+        vector_steps: Vector-env batch steps per timed pass.
+        repeats: Timed passes per measurement, round robin (best kept).
         seed: Seed of the pre-generated actions and of the resets.
         quick: Smoke-test sizes (300 single steps, 3 vector steps, 1 repeat);
             the numbers are then too noisy to judge the targets.
-        progress: Called with a short message before each measurement.
+        progress: Called with a short message before the warm-up and each repeat.
 
     Returns:
         A JSON-ready dict with keys ``single_env`` (steps/s per env id),
@@ -169,23 +183,37 @@ def run_benchmark(
     say = progress or (lambda _msg: None)
     errors: dict[str, str] = {}
 
-    def attempt(key: str, measure: Callable[[], float]) -> float | None:
+    def attempt(key: str, measure: Callable[[], Any]) -> Any:
         try:
             return measure()
         except Exception as exc:  # noqa: BLE001 - reported in the result, not fatal for the others
             errors[key] = f"{type(exc).__name__}: {exc}"
             return None
 
-    single: dict[str, float | None] = {}
-    for env_id in (AVERAGED_ID, FULL_ID, CARTPOLE_ID):
-        say(f"single env {env_id}: {repeats} x {steps} steps")
-        single[env_id] = attempt(env_id, lambda e=env_id: single_env_rate(e, steps, repeats, seed))
-    vector: dict[str, float | None] = {}
-    for env_id, num_envs in VECTOR_ENVS.items():
-        say(f"vector env {env_id} @ {num_envs}: {repeats} x {vector_steps} steps")
-        vector[env_id] = attempt(
-            f"vector:{env_id}", lambda e=env_id, n=num_envs: vector_env_rate(e, n, vector_steps, repeats, seed)
-        )
+    say("warming up (numba compilation or cache load) ...")
+    makers: dict[str, Callable[[], _Timer]] = {e: partial(single_env_timer, e, steps, seed) for e in SINGLE_ENVS}
+    makers.update({f"vector:{e}": partial(vector_env_timer, e, n, vector_steps, seed) for e, n in VECTOR_ENVS.items()})
+    timers: dict[str, _Timer] = {}
+    for key, make in makers.items():
+        timer = attempt(key, make)
+        if timer is not None:
+            timers[key] = timer
+    # Round robin: every repeat times each env once, so a burst of load elsewhere hits all of them alike.
+    best: dict[str, float] = {}
+    try:
+        for rep in range(repeats):
+            say(f"repeat {rep + 1}/{repeats}: {steps} single-env steps, {vector_steps} vector steps per env")
+            for key, timer in list(timers.items()):
+                rate = attempt(key, timer.run)
+                if rate is None:
+                    timers.pop(key).close()
+                else:
+                    best[key] = max(best.get(key, 0.0), rate)
+    finally:
+        for timer in timers.values():
+            timer.close()
+    single = {env_id: best.get(env_id) for env_id in SINGLE_ENVS}
+    vector = {env_id: best.get(f"vector:{env_id}") for env_id in VECTOR_ENVS}
 
     def ratio(a: float | None, b: float | None) -> float | None:
         return a / b if a is not None and b else None

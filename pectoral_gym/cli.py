@@ -234,7 +234,7 @@ def _cmd_bench(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
     for name in ("steps", "vector_steps", "repeats"):
         if getattr(args, name) < 1:
             parser.error(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
-    progress = None if args.json else (lambda msg: print(f"measuring {msg} ...", file=sys.stderr, flush=True))
+    progress = None if args.json else (lambda msg: print(msg, file=sys.stderr, flush=True))
     res = run_benchmark(args.steps, args.vector_steps, args.repeats, args.seed, args.quick, progress)
     status = 1 if res["errors"] else 0
     if args.json:
@@ -318,13 +318,13 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("bench", help="step rates of the fish envs against CartPole-v1",
                        description="Single-env step rates through gymnasium.make (averaged, full, CartPole-v1) and "
                                    "native vector-env rates (averaged @ 4096, full @ 1024 envs), best of --repeats "
-                                   "after a warm-up, compared with the project's targets.")
+                                   "(round robin) after a warm-up, compared with the project's targets.")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--steps", type=int, default=20_000,
                    help="single-env steps per timed run (default: %(default)s)")
     p.add_argument("--vector-steps", type=int, default=100,
                    help="vector-env batch steps per timed run (default: %(default)s)")
-    p.add_argument("--repeats", type=int, default=3,
+    p.add_argument("--repeats", type=int, default=5,
                    help="timed runs per measurement, best kept (default: %(default)s)")
     p.add_argument("--seed", type=int, default=0, help="seed of the random actions (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help="tiny step counts: a smoke test, not a measurement")
