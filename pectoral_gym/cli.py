@@ -101,11 +101,17 @@ def steady_result(model: str, right: FinBeat | None, left: FinBeat | None, scali
                   forcing: str = "exact") -> dict[str, Any]:
     """Periodic steady state as the JSON object printed by ``steady --json``.
 
-    Keys: ``vx, vy`` [m/s], ``omega`` [rad/s] (body frame, x forward, y left,
-    ``omega > 0`` a left turn), ``speed`` [m/s], ``radius`` [m] and ``period``
-    [s] (``None`` when the fish does not turn), ``drift_angle`` [rad],
-    ``converged``, ``model``, ``right``, ``left`` (``[g0 deg, gA deg, Tp s,
-    zeta]`` or ``None`` at rest).
+    Args:
+        model: ``"full"`` or ``"averaged"``.
+        right, left: Fin patterns (``None``: at rest).
+        scaling, forcing: Averaged model options (see :func:`pectoral_gym.steady.steady_state`).
+
+    Returns:
+        A dict with ``vx, vy`` [m/s], ``omega`` [rad/s] (body frame, x forward,
+        y left, ``omega > 0`` a left turn), ``speed`` [m/s], ``radius`` [m] and
+        ``period`` [s] (``None`` when the fish does not turn), ``drift_angle``
+        [rad], ``converged``, ``model``, ``right``, ``left`` (``[g0 deg, gA deg,
+        Tp s, zeta]`` or ``None`` at rest).
     """
     from pectoral_gym.steady import steady_state
 
@@ -177,13 +183,13 @@ def _cmd_simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
 
 # --------------------------------------------------------------------------- demo
 
-DEMO_DURATION = 60.0  # s per run
-# name -> (right, left, x0, y0) in the paper's units; Table 3 and Table 2 patterns. The turns start
-# about one full-model turning radius (0.44 m) from the tank's mid-line, so the circle stays inside.
-DEMO_PATTERNS: dict[str, tuple[tuple[float, ...] | None, tuple[float, ...] | None, float, float]] = {
-    "forward swim": ((100, 12, 0.8, 4), (100, 12, 0.8, 4), 0.3, 0.575),
-    "right fin: left turn": ((85, 22, 1.0, 4), None, 1.15, 0.14),
-    "left fin: right turn": (None, (85, 22, 1.0, 4), 1.15, 1.01),
+# name -> (right, left, x0 [m], y0 [m], duration [s]), fins in the paper's units (Table 3 and Table 2
+# patterns). The forward swim stops before the far wall; the turns start about one full-model turning
+# radius (0.44 m) from the tank's mid-line and run for about one full-model turn, so the circles stay inside.
+DEMO_PATTERNS: dict[str, tuple[tuple[float, ...] | None, tuple[float, ...] | None, float, float, float]] = {
+    "forward swim": ((100, 12, 0.8, 4), (100, 12, 0.8, 4), 0.25, 0.575, 35.0),
+    "right fin: left turn": ((85, 22, 1.0, 4), None, 1.15, 0.14, 60.0),
+    "left fin: right turn": (None, (85, 22, 1.0, 4), 1.15, 1.01, 60.0),
 }
 
 
@@ -193,13 +199,13 @@ def _cmd_demo(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     out = Path(args.out)
     groups: dict[str, list] = {}
     rows: list[dict[str, Any]] = []
-    for name, (r, lf, x0, y0) in DEMO_PATTERNS.items():
+    for name, (r, lf, x0, y0, duration) in DEMO_PATTERNS.items():
         right = FinBeat.from_degrees(*r) if r else None
         left = FinBeat.from_degrees(*lf) if lf else None
-        groups[name] = []
+        panel = groups.setdefault(f"{name}, {duration:g} s", [])
         for model in MODELS:
-            traj = simulate(model, right, left, DEMO_DURATION, x0, y0, 0.0, 0.05)
-            groups[name].append(traj)
+            traj = simulate(model, right, left, duration, x0, y0, 0.0, 0.05)
+            panel.append(traj)
             res = steady_result(model, right, left)
             rows.append({"pattern": name, "model": model, "right": _fin_text(right), "left": _fin_text(left),
                          "vx": res["vx"], "vy": res["vy"], "omega": res["omega"], "speed": res["speed"],
@@ -212,7 +218,7 @@ def _cmd_demo(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         writer.writeheader()
         writer.writerows({k: ("" if v is None else v) for k, v in row.items()} for row in rows)
     png = plot_panels(groups, out / "demo.png",
-                      title=f"full (solid) vs averaged (dashed) model, {DEMO_DURATION:g} s from rest")
+                      title="full (solid) vs averaged (dashed) model, from rest")
 
     print(f"{'pattern':<22} {'model':<9} {'vx m/s':>8} {'vy m/s':>8} {'omega rad/s':>11} {'radius m':>9} "
           f"{'period s':>9}")
@@ -311,7 +317,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("demo", help="illustrative swimming patterns, full vs averaged model",
                        description="Forward swim, right-fin turn and left-fin turn with both models "
-                                   f"({DEMO_DURATION:g} s each). Writes demo.png and demo.csv, prints a table.")
+                                   "from rest. Writes demo.png and demo.csv, prints a table of steady states.")
     p.add_argument("--out", default="out", help="output directory (default: %(default)s)")
     p.set_defaults(handler=_cmd_demo, parser=p)
 
