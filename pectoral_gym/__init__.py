@@ -6,7 +6,10 @@ Importing the package registers ``PectoralFish-Full-v0`` and ``PectoralFish-Aver
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.models import AveragedModel, FishModel, FullModel
 from pectoral_gym.params import FinBeat, FishParams
+from pectoral_gym.registration import register_envs
 
 __version__ = "0.1.0"
+
+register_envs()
 
 __all__ = ["AveragedModel", "FinBeat", "FishModel", "FishParams", "FullModel", "ScalingFunctions", "__version__"]

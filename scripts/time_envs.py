@@ -49,6 +49,7 @@ def vector_rate(model: str, num_envs: int, steps: int) -> float:
 
 
 def main() -> None:
+    """Print the step rates."""
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--steps", type=int, default=20000)
     parser.add_argument("--vector", action="store_true", help="also time the vector env")

@@ -187,6 +187,10 @@ class EnvCore:
         else:
             self.model = AveragedModel(self.n, config.params, scaling=config.scaling)
         self.cfg = config.cfg_array()
+        self.dt = float(config.control_period)
+        big = self.n >= tk.PARALLEL_MIN_ENVS
+        self._apply = tk._apply_parallel if big else tk._apply_serial
+        self._reward = tk._reward_parallel if big else tk._reward_serial
         self.ep = np.zeros((self.n, tk.N_EP))
         self.obs = np.zeros((self.n, tk.OBS_SIZE), dtype=np.float32)
         self.out = np.zeros((self.n, tk.N_OUT))
@@ -229,7 +233,7 @@ class EnvCore:
             self._set_geometry(index)
         start = np.empty((index.size, 6))
         tk.start_states(index, draws, self.cfg, self.ep, start)
-        self.model.reset(start, right=REST, left=REST, index=index)
+        self.model.reset(start, right=REST, left=REST, index=None if index.size == self.n else index)
         self.beats[index] = REST.as_array()
         tk.observe_reset(index, self.model.state, self.ep, self.obs, self.out, self.action_code)
 
@@ -240,15 +244,15 @@ class EnvCore:
             ValueError: If an action of an env not in ``skip`` is not finite.
         """
         skip = self.none if skip is None else skip
-        bad = tk.apply_actions(actions, skip, self.cfg, self.beats, self.obs, self.out, self.ep)
+        bad = self._apply(actions, skip, self.cfg, self.beats, self.obs, self.out, self.ep)
         if bad >= 0:
             raise ValueError(
                 f"action must be finite, got {np.asarray(actions[bad]).tolist()}"
                 + (f" for env {bad}" if self.n > 1 else "")
             )
         self.model.command_array(self.beats, self.all, validate=False)
-        self.model.advance(self.cfg[tk.C_DT])
-        tk.observe_and_reward(self.model.state, skip, self.cfg, self.ep, self.obs, self.out)
+        self.model.advance(self.dt)
+        self._reward(self.model.state, skip, self.cfg, self.ep, self.obs, self.out)
 
     def target(self, i: int) -> tuple[float, float]:
         """Target position of env ``i`` in the tank frame [m]."""

@@ -12,6 +12,18 @@ from gymnasium import spaces
 
 from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.core import EnvConfig, EnvCore
+from pectoral_gym.envs.tasks import (
+    O_DISTANCE,
+    O_ENERGY,
+    O_GOAL,
+    O_PROGRESS,
+    O_REWARD,
+    O_SUCCESS,
+    O_TERMINATED,
+    O_TIME,
+    O_TRACKING,
+    O_WALL,
+)
 from pectoral_gym.params import FishParams
 
 __all__ = ["PectoralFishEnv"]
@@ -118,7 +130,7 @@ class PectoralFishEnv(gym.Env):
     | ``model``         | ``"full"``       |      | ``"full"`` or ``"averaged"`` (set by the id) |
     | ``task``          | ``"goal"``       |      | ``"goal"`` or ``"track"`` |
     | ``control_period``| 0.5              | s    | time between actions |
-    | ``bias_range``    | (45, 135) deg    | rad  | bias of each fin; every stroke ``bias +- amplitude`` must stay in [0, pi] |
+    | ``bias_range``    | (45, 135) deg    | rad  | fin bias; ``bias +- amplitude`` must stay in [0, pi] |
     | ``amplitude_range`` | (0, 30) deg    | rad  | amplitude, >= 0 |
     | ``period_range``  | (0.5, 2.0)       | s    | fin-beat period, > 0 |
     | ``ratio_range``   | (1.0, 5.0)       | -    | power/recovery speed ratio, > 0 |
@@ -181,7 +193,6 @@ class PectoralFishEnv(gym.Env):
         self.action_space = spaces.Box(-1.0, 1.0, (tk.ACTION_SIZE,), dtype=np.float32)
         self.observation_space = spaces.Box(-np.inf, np.inf, (tk.OBS_SIZE,), dtype=np.float32)
         self._action = np.zeros((1, tk.ACTION_SIZE))
-        self._info_items = self.core.terms + (("distance", tk.O_DISTANCE),)
         self._goal = self.config.task == "goal"
         self._renderer = None
         self.trail: list[tuple[float, float]] = []
@@ -211,17 +222,19 @@ class PectoralFishEnv(gym.Env):
         self._action[0] = action
         core = self.core
         core.step(self._action)
-        out = core.out[0].tolist()
-        info = {name: out[k] for name, k in self._info_items}
+        o = core.out[0].tolist()
         if self._goal:
-            info["is_success"] = out[tk.O_SUCCESS] > 0.5
+            info = {"reward_progress": o[O_PROGRESS], "reward_goal": o[O_GOAL], "reward_wall": o[O_WALL],
+                    "reward_energy": o[O_ENERGY], "reward_time": o[O_TIME], "distance": o[O_DISTANCE],
+                    "is_success": o[O_SUCCESS] > 0.5}
         else:
-            info["tracking_error"] = out[tk.O_DISTANCE]
+            info = {"reward_tracking": o[O_TRACKING], "reward_wall": o[O_WALL], "reward_energy": o[O_ENERGY],
+                    "distance": o[O_DISTANCE], "tracking_error": o[O_DISTANCE]}
         if self.render_mode is not None:
             self.trail.append((float(core.obs[0, 0]), float(core.obs[0, 1])))
             if self.render_mode == "human":
                 self.render()
-        return core.obs[0].copy(), out[tk.O_REWARD], out[tk.O_TERMINATED] > 0.5, False, info
+        return core.obs[0].copy(), o[O_REWARD], o[O_TERMINATED] > 0.5, False, info
 
     def render(self):
         """Draw the tank from above: ``rgb_array`` returns an ``(H, W, 3)`` uint8 image; ``human`` shows a window."""

@@ -253,6 +253,20 @@ def observe_and_reward(state, skip, cfg, ep, obs, out) -> None:
 
 
 # ---------------------------------------------------------------- reset
+@nb.njit(**_JIT)
+def _pick_goal(draws, candidates):
+    """Rejection sampling: the first candidate (uniforms in pairs) that is a valid goal for the start in ``draws``."""
+    for k in range(candidates.shape[0] // 2):
+        gx = GOAL_INSET + candidates[2 * k] * (TANK_X - 2.0 * GOAL_INSET)
+        gy = GOAL_INSET + candidates[2 * k + 1] * (TANK_Y - 2.0 * GOAL_INSET)
+        d = math.hypot(gx - draws[0], gy - draws[1])
+        if GOAL_MIN_DISTANCE <= d <= GOAL_MAX_DISTANCE:
+            draws[3] = gx
+            draws[4] = gy
+            return True
+    return False
+
+
 def draw_episode(rng: np.random.Generator, task: int) -> np.ndarray:
     """Draw one episode's random start from ``rng``; the same sequence of draws for single and vector envs.
 
@@ -261,19 +275,15 @@ def draw_episode(rng: np.random.Generator, task: int) -> np.ndarray:
     """
     draws = np.zeros(8)
     if task == GOAL:
-        u = rng.random(3)
-        x0 = START_INSET + u[0] * (TANK_X - 2.0 * START_INSET)
-        y0 = START_INSET + u[1] * (TANK_Y - 2.0 * START_INSET)
-        draws[:3] = x0, y0, -math.pi + 2.0 * math.pi * u[2]
+        u = rng.random(3 + 2 * GOAL_CANDIDATES)
+        draws[0] = START_INSET + u[0] * (TANK_X - 2.0 * START_INSET)
+        draws[1] = START_INSET + u[1] * (TANK_Y - 2.0 * START_INSET)
+        draws[2] = -math.pi + 2.0 * math.pi * u[2]
+        candidates = u[3:]
         for _ in range(GOAL_MAX_BLOCKS):
-            c = rng.random((GOAL_CANDIDATES, 2))
-            gx = GOAL_INSET + c[:, 0] * (TANK_X - 2.0 * GOAL_INSET)
-            gy = GOAL_INSET + c[:, 1] * (TANK_Y - 2.0 * GOAL_INSET)
-            d = np.hypot(gx - x0, gy - y0)
-            ok = np.flatnonzero((d >= GOAL_MIN_DISTANCE) & (d <= GOAL_MAX_DISTANCE))
-            if ok.size:
-                draws[3:5] = gx[ok[0]], gy[ok[0]]
+            if _pick_goal(draws, candidates):
                 return draws
+            candidates = rng.random(2 * GOAL_CANDIDATES)
         raise RuntimeError("could not place a goal at the required distance from the start")  # pragma: no cover
     u = rng.random(7)
     draws[0] = TRACK_A_RANGE[0] + u[0] * (TRACK_A_RANGE[1] - TRACK_A_RANGE[0])
