@@ -304,13 +304,17 @@ def build_parser() -> argparse.ArgumentParser:
                                    "(t [s], X, Y [m], psi [rad], vx, vy [m/s], omega [rad/s], fin angles [deg]) and "
                                    "trajectory.png (top view in the 2.30 m x 1.15 m tank, velocities over time).")
     _add_model_options(p)
-    p.add_argument("--duration", type=float, default=60.0, help="simulated time [s] (default: %(default)s)")
-    p.add_argument("--x0", type=float, default=1.15, help="initial X in the tank [m] (default: %(default)s)")
-    p.add_argument("--y0", type=float, default=0.575, help="initial Y in the tank [m] (default: %(default)s)")
-    p.add_argument("--heading-deg", type=float, default=0.0,
+    p.add_argument("--duration", type=float, metavar="S", default=60.0,
+                   help="simulated time [s] (default: %(default)s)")
+    p.add_argument("--x0", type=float, metavar="M", default=1.15,
+                   help="initial X in the tank [m] (default: %(default)s)")
+    p.add_argument("--y0", type=float, metavar="M", default=0.575,
+                   help="initial Y in the tank [m] (default: %(default)s)")
+    p.add_argument("--heading-deg", type=float, metavar="DEG", default=0.0,
                    help="initial heading from the tank X axis [deg] (default: %(default)s)")
-    p.add_argument("--sample", type=float, default=0.05, help="output sampling interval [s] (default: %(default)s)")
-    p.add_argument("--out", default="out", help="output directory (default: %(default)s)")
+    p.add_argument("--sample", type=float, metavar="S", default=0.05,
+                   help="output sampling interval [s] (default: %(default)s)")
+    p.add_argument("--out", default="out", metavar="DIR", help="output directory (default: %(default)s)")
     p.add_argument("--compare", action="store_true",
                    help="also simulate the other model (written to trajectory_<model>.csv) and plot both")
     p.set_defaults(handler=_cmd_simulate, parser=p)
@@ -318,7 +322,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("demo", help="illustrative swimming patterns, full vs averaged model",
                        description="Forward swim, right-fin turn and left-fin turn with both models "
                                    "from rest. Writes demo.png and demo.csv, prints a table of steady states.")
-    p.add_argument("--out", default="out", help="output directory (default: %(default)s)")
+    p.add_argument("--out", default="out", metavar="DIR", help="output directory (default: %(default)s)")
     p.set_defaults(handler=_cmd_demo, parser=p)
 
     p = sub.add_parser("bench", help="step rates of the fish envs against CartPole-v1",
@@ -326,13 +330,13 @@ def build_parser() -> argparse.ArgumentParser:
                                    "native vector-env rates (averaged @ 4096, full @ 1024 envs), best of --repeats "
                                    "(round robin) after a warm-up, compared with the project's targets.")
     p.add_argument("--json", action="store_true", help="print one JSON object")
-    p.add_argument("--steps", type=int, default=20_000,
+    p.add_argument("--steps", type=int, metavar="N", default=20_000,
                    help="single-env steps per timed run (default: %(default)s)")
-    p.add_argument("--vector-steps", type=int, default=100,
+    p.add_argument("--vector-steps", type=int, metavar="N", default=100,
                    help="vector-env batch steps per timed run (default: %(default)s)")
-    p.add_argument("--repeats", type=int, default=5,
+    p.add_argument("--repeats", type=int, metavar="N", default=5,
                    help="timed runs per measurement, best kept (default: %(default)s)")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random actions (default: %(default)s)")
+    p.add_argument("--seed", type=int, metavar="N", default=0, help="seed of the random actions (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help="tiny step counts: a smoke test, not a measurement")
     p.set_defaults(handler=_cmd_bench, parser=p)
     return parser
