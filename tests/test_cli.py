@@ -1,0 +1,141 @@
+"""The ``pectoral-fish`` command line: output contracts, argument errors, files written."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import shutil
+import subprocess
+
+import pytest
+
+from pectoral_gym.cli import main
+
+STEADY_KEYS = {"vx", "vy", "omega", "speed", "radius", "period", "drift_angle", "converged", "model", "right", "left"}
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+PATTERN = "90,20,1,4"
+
+
+def run_json(capsys: pytest.CaptureFixture[str], *argv: str) -> dict:
+    assert main(list(argv)) == 0
+    out = capsys.readouterr().out
+    assert len(out.strip().splitlines()) == 1, "--json prints exactly one line"
+    return json.loads(out)
+
+
+@pytest.mark.parametrize("model", ["full", "averaged"])
+def test_steady_json_keys_and_turn_direction(capsys, model):
+    right = run_json(capsys, "steady", "--model", model, "--right", PATTERN, "--json")
+    left = run_json(capsys, "steady", "--model", model, "--left", PATTERN, "--json")
+    for res in (right, left):
+        assert set(res) == STEADY_KEYS
+        assert res["model"] == model
+        assert res["converged"] is True
+        assert res["radius"] == pytest.approx(res["speed"] / abs(res["omega"]), rel=1e-12)
+        assert res["period"] == pytest.approx(2 * math.pi / abs(res["omega"]), rel=1e-12)
+        assert res["speed"] == pytest.approx(math.hypot(res["vx"], res["vy"]), rel=1e-12)
+    assert right["omega"] > 0, "right fin alone turns the fish left"
+    assert left["omega"] < 0, "left fin alone turns the fish right"
+    assert right["right"] == [90, 20, 1, 4] and right["left"] is None
+    assert left["left"] == [90, 20, 1, 4] and left["right"] is None
+    # Mirror images.
+    assert left["omega"] == pytest.approx(-right["omega"], rel=1e-9)
+    assert left["vy"] == pytest.approx(-right["vy"], rel=1e-9)
+
+
+@pytest.mark.parametrize("argv", [
+    ["--right", PATTERN, "--left", PATTERN],  # symmetric: straight ahead
+    [],  # both fins at rest
+])
+def test_steady_json_symmetric_has_null_radius_and_period(capsys, argv):
+    res = run_json(capsys, "steady", "--json", *argv)
+    assert set(res) == STEADY_KEYS
+    assert res["radius"] is None and res["period"] is None
+    assert res["omega"] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_steady_table_has_units(capsys):
+    assert main(["steady", "--right", PATTERN]) == 0
+    out = capsys.readouterr().out
+    for unit in ("m/s", "rad/s", "left turn", "deg"):
+        assert unit in out
+
+
+@pytest.mark.parametrize(("argv", "reason"), [
+    (["steady", "--right", "90,20,1"], "--right needs 4 comma-separated numbers G0,GA,TP,ZETA"),
+    (["steady", "--left", "90,x,1,4"], "--left needs 4 comma-separated numbers G0,GA,TP,ZETA"),
+    (["steady", "--right", "90,-5,1,4"], "FinBeat.amplitude must be >= 0"),
+    (["steady", "--right", "170,20,1,4"], "leaves [0, 180] deg"),
+    (["steady", "--left", "90,20,0,4"], "FinBeat.period must be > 0"),
+    (["steady", "--right", "90,20,1,nan"], "FinBeat.ratio must be finite"),
+    (["steady", "--model", "hybrid"], "invalid choice"),
+    (["simulate", "--duration", "0", "--out", "unused"], "--duration must be a finite number > 0"),
+    (["simulate", "--sample", "-1", "--out", "unused"], "--sample must be a finite number > 0"),
+    (["bench", "--steps", "0"], "--steps must be >= 1"),
+    (["frobnicate"], "invalid choice"),
+    ([], "required"),
+])
+def test_bad_arguments_exit_2_with_one_line_reason(capsys, tmp_path, monkeypatch, argv, reason):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    errors = [line for line in err.splitlines() if "error:" in line]
+    assert len(errors) == 1, err
+    assert reason in errors[0]
+    assert not list(tmp_path.iterdir()), "nothing is written on an argument error"
+
+
+def test_simulate_writes_csv_and_png(capsys, tmp_path):
+    out = tmp_path / "run"
+    assert main(["simulate", "--right", PATTERN, "--duration", "2", "--sample", "0.1", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    csv_path, png_path = out / "trajectory.csv", out / "trajectory.png"
+    assert str(csv_path) in printed and str(png_path) in printed
+    with csv_path.open() as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == ["t", "X", "Y", "psi", "vx", "vy", "omega", "gamma_right_deg", "gamma_left_deg"]
+    data = [[float(v) for v in row] for row in rows[1:]]
+    assert len(data) == 21
+    assert data[0][:4] == [0.0, 1.15, 0.575, 0.0]  # default start: tank centre, heading 0
+    assert data[-1][0] == pytest.approx(2.0)
+    assert all(70 - 1e-9 <= r[7] <= 110 + 1e-9 for r in data), "right fin stays in its stroke"
+    assert all(r[8] == pytest.approx(90.0) for r in data), "left fin at rest at 90 deg"
+    assert png_path.read_bytes()[:8] == PNG_MAGIC
+
+
+def test_simulate_compare_writes_both_models(capsys, tmp_path):
+    argv = ["simulate", "--model", "averaged", "--compare", "--left", PATTERN, "--duration", "1"]
+    assert main([*argv, "--out", str(tmp_path)]) == 0
+    capsys.readouterr()
+    assert {p.name for p in tmp_path.iterdir()} == {"trajectory.csv", "trajectory_full.csv", "trajectory.png"}
+
+
+def test_bench_quick_json_has_the_keys(capsys):
+    res = run_json(capsys, "bench", "--quick", "--json", "--steps", "50")
+    assert {"single_env", "vector_env", "num_envs", "ratios", "targets", "all_met", "errors", "settings",
+            "environment"} <= set(res)
+    assert set(res["single_env"]) == {"PectoralFish-Averaged-v0", "PectoralFish-Full-v0", "CartPole-v1"}
+    assert res["num_envs"] == {"PectoralFish-Averaged-v0": 4096, "PectoralFish-Full-v0": 1024}
+    assert set(res["ratios"]) == {"averaged_vs_cartpole", "full_vs_cartpole"}
+    assert set(res["targets"]) == {"averaged_vs_cartpole", "full_vs_cartpole", "vector_averaged", "vector_full"}
+    for target in res["targets"].values():
+        assert {"target", "value", "met", "what"} <= set(target)
+    assert res["settings"]["quick"] is True and res["settings"]["steps"] == 50
+    assert res["single_env"]["CartPole-v1"] > 0
+    assert res["errors"] == {}, res["errors"]
+
+
+@pytest.mark.skipif(shutil.which("pectoral-fish") is None, reason="console script not installed")
+def test_console_script_steady_json():
+    proc = subprocess.run(["pectoral-fish", "steady", "--right", PATTERN, "--json"],
+                          capture_output=True, text=True, timeout=300, check=False)
+    assert proc.returncode == 0, proc.stderr
+    res = json.loads(proc.stdout)
+    assert set(res) == STEADY_KEYS and res["omega"] > 0
+    bad = subprocess.run(["pectoral-fish", "steady", "--right", "90,20,1"],
+                         capture_output=True, text=True, timeout=300, check=False)
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr
