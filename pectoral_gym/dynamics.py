@@ -21,6 +21,7 @@ __all__ = [
     "stroke_kinematics",
     "fin_force_right",
     "body_rhs",
+    "body_accel",
     "fin_angle_eq21",
 ]
 
@@ -80,26 +81,12 @@ def fin_force_right(g: float, gd: float, gdd: float, drag_constant: float, inert
 
 
 @nb.njit(**_JIT)
-def body_rhs(vx: float, vy: float, omega: float, fx: float, fy: float, tau: float, coef):
-    """Body-frame accelerations of eq. (19) with ``f_1, f_2, f_3`` of eq. (20).
+def body_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4):
+    """Body-frame accelerations of eq. (19) with ``f_1, f_2, f_3`` of eq. (20), scalar coefficients.
 
     ``alpha = arctan(v_y / v_x)`` is evaluated as the paper writes it (a value in
-    (-pi/2, pi/2], also when swimming backward) without dividing by zero.
-
-    Args:
-        vx, vy, omega: Surge [m/s], sway [m/s], yaw rate [rad/s].
-        fx, fy, tau: Total fin force [N] and moment [N m] on the body.
-        coef: Packed coefficients, see ``params.COEF_NAMES``.
-
-    Returns:
-        ``(dvx, dvy, domega)``.
+    [-pi/2, pi/2], also when swimming backward) without dividing by zero.
     """
-    m1 = coef[0]
-    m2 = coef[1]
-    j3 = coef[2]
-    c1 = coef[3]
-    c2 = coef[4]
-    c4 = coef[5]
     speed = math.sqrt(vx * vx + vy * vy)
     if vx >= 0.0:
         alpha = math.atan2(vy, vx)
@@ -109,6 +96,21 @@ def body_rhs(vx: float, vy: float, omega: float, fx: float, fy: float, tau: floa
     dvy = (-m1 * vx * omega - c1 * vy * speed - c2 * vx * speed * alpha + fy) / m2  # f2 (erratum 3)
     dom = (m1 - m2) / j3 * vx * vy - c4 * omega * abs(omega) + tau / j3  # f3
     return dvx, dvy, dom
+
+
+@nb.njit(**_JIT)
+def body_rhs(vx: float, vy: float, omega: float, fx: float, fy: float, tau: float, coef):
+    """Body-frame accelerations of eq. (19) with ``f_1, f_2, f_3`` of eq. (20).
+
+    Args:
+        vx, vy, omega: Surge [m/s], sway [m/s], yaw rate [rad/s].
+        fx, fy, tau: Total fin force [N] and moment [N m] on the body.
+        coef: Packed coefficients, see ``params.COEF_NAMES``.
+
+    Returns:
+        ``(dvx, dvy, domega)``.
+    """
+    return body_accel(vx, vy, omega, fx, fy, tau, coef[0], coef[1], coef[2], coef[3], coef[4], coef[5])
 
 
 def fin_angle_eq21(t: np.ndarray, bias: float, amplitude: float, period: float, ratio: float):

@@ -31,7 +31,7 @@ import numba as nb
 import numpy as np
 
 from pectoral_gym.averaging import averaged_fin_forcing
-from pectoral_gym.dynamics import body_rhs, fin_force_right, stroke_kinematics
+from pectoral_gym.dynamics import body_accel, fin_force_right, stroke_kinematics
 
 __all__ = [
     "FIN_FIELDS",
@@ -51,38 +51,47 @@ _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 _SIDE = (1.0, -1.0)  # right fin, left fin (mirror image)
 
 
+# The kernels index the batched arrays directly (no per-fish views or temporary
+# arrays): views and allocations touch shared reference counts, which serialises
+# the threads of the parallel kernel.
+
+
 @nb.njit(**_JIT)
-def _latch(fin, pend, side, coef, mode, k_powers, k_coefs):
-    """Start the next half-stroke of one fin with its commanded parameters."""
-    bias, amp, period, ratio = pend[0], pend[1], pend[2], pend[3]
-    power = 1.0 - fin[POWER]
-    fin[ANGLE_FROM] = fin[ANGLE_TO]
+def _latch(fins, pending, i, f, coef, mode, k_powers, k_coefs):
+    """Start the next half-stroke of fin ``f`` of fish ``i`` with its commanded parameters."""
+    bias, amp, period, ratio = pending[i, f, 0], pending[i, f, 1], pending[i, f, 2], pending[i, f, 3]
+    power = 1.0 - fins[i, f, POWER]
+    fins[i, f, ANGLE_FROM] = fins[i, f, ANGLE_TO]
     if power > 0.5:
-        fin[ANGLE_TO] = bias + amp
-        fin[DURATION] = period / (ratio + 1.0)  # eq. (21), power stroke
+        fins[i, f, ANGLE_TO] = bias + amp
+        fins[i, f, DURATION] = period / (ratio + 1.0)  # eq. (21), power stroke
     else:
-        fin[ANGLE_TO] = bias - amp
-        fin[DURATION] = ratio * period / (ratio + 1.0)  # eq. (21), recovery
-    fin[ELAPSED] = 0.0
-    fin[POWER] = power
-    fin[BIAS] = bias
-    fin[AMPLITUDE] = amp
-    fin[PERIOD] = period
-    fin[RATIO] = ratio
-    fx, fy, tau = averaged_fin_forcing(bias, amp, period, ratio, side, coef, mode, k_powers, k_coefs)
-    fin[AVG_FX] = fx
-    fin[AVG_FY] = fy
-    fin[AVG_TAU] = tau
+        fins[i, f, ANGLE_TO] = bias - amp
+        fins[i, f, DURATION] = ratio * period / (ratio + 1.0)  # eq. (21), recovery
+    fins[i, f, ELAPSED] = 0.0
+    fins[i, f, POWER] = power
+    fins[i, f, BIAS] = bias
+    fins[i, f, AMPLITUDE] = amp
+    fins[i, f, PERIOD] = period
+    fins[i, f, RATIO] = ratio
+    fx, fy, tau = averaged_fin_forcing(bias, amp, period, ratio, _SIDE[f], coef[i], mode, k_powers, k_coefs)
+    fins[i, f, AVG_FX] = fx
+    fins[i, f, AVG_FY] = fy
+    fins[i, f, AVG_TAU] = tau
 
 
 @nb.njit(**_JIT)
-def _idle(fin, pend):
+def _idle(fins, pending, i, f):
     """True for a fin that holds still and is commanded to hold still at the same angle."""
-    return fin[ANGLE_FROM] == fin[ANGLE_TO] and pend[1] == 0.0 and pend[0] == fin[ANGLE_TO]
+    return (
+        fins[i, f, ANGLE_FROM] == fins[i, f, ANGLE_TO]
+        and pending[i, f, 1] == 0.0
+        and pending[i, f, 0] == fins[i, f, ANGLE_TO]
+    )
 
 
 @nb.njit(**_JIT)
-def _fin_forcing(fins, i, offset, coef):
+def _fin_forcing(fins, i, offset, drag_constant, inertia_constant, fin_offset):
     """Total blade-element force and moment of both fins, ``offset`` s into the segment."""
     fx_total = 0.0
     fy_total = 0.0
@@ -93,11 +102,11 @@ def _fin_forcing(fins, i, offset, coef):
         g, gd, gdd = stroke_kinematics(
             fins[i, f, ELAPSED] + offset, fins[i, f, DURATION], fins[i, f, ANGLE_FROM], fins[i, f, ANGLE_TO]
         )
-        fx, fy = fin_force_right(g, gd, gdd, coef[6], coef[7])
+        fx, fy = fin_force_right(g, gd, gdd, drag_constant, inertia_constant)
         side = _SIDE[f]
         fx_total += fx
         fy_total += side * fy  # left fin mirrors y
-        tau_total += side * coef[8] * fx  # eq. (18): tau_R = +C_p f_hx, tau_L = -C_p f_hx
+        tau_total += side * fin_offset * fx  # eq. (18): tau_R = +C_p f_hx, tau_L = -C_p f_hx
     return fx_total, fy_total, tau_total
 
 
@@ -119,28 +128,28 @@ def _rotate(c0, s0, delta):
 
 
 @nb.njit(**_JIT)
-def _rk4(state, integral, i, h, f0, fm, f1, coef):
+def _rk4(state, integral, i, h, f0x, f0y, f0t, fmx, fmy, fmt, f1x, f1y, f1t, m1, m2, j3, c1, c2, c4):
     """One RK4 step of eq. (19) for fish ``i``; forcing given at t, t+h/2, t+h."""
     x0, y0, p0, u0, v0, w0 = state[i, 0], state[i, 1], state[i, 2], state[i, 3], state[i, 4], state[i, 5]
     c0, s0 = math.cos(p0), math.sin(p0)
     # stage 1
     k1x, k1y, k1p = u0 * c0 - v0 * s0, u0 * s0 + v0 * c0, w0
-    k1u, k1v, k1w = body_rhs(u0, v0, w0, f0[0], f0[1], f0[2], coef)
+    k1u, k1v, k1w = body_accel(u0, v0, w0, f0x, f0y, f0t, m1, m2, j3, c1, c2, c4)
     # stage 2
     u2, v2, w2 = u0 + 0.5 * h * k1u, v0 + 0.5 * h * k1v, w0 + 0.5 * h * k1w
     c, s = _rotate(c0, s0, 0.5 * h * k1p)
     k2x, k2y, k2p = u2 * c - v2 * s, u2 * s + v2 * c, w2
-    k2u, k2v, k2w = body_rhs(u2, v2, w2, fm[0], fm[1], fm[2], coef)
+    k2u, k2v, k2w = body_accel(u2, v2, w2, fmx, fmy, fmt, m1, m2, j3, c1, c2, c4)
     # stage 3
     u3, v3, w3 = u0 + 0.5 * h * k2u, v0 + 0.5 * h * k2v, w0 + 0.5 * h * k2w
     c, s = _rotate(c0, s0, 0.5 * h * k2p)
     k3x, k3y, k3p = u3 * c - v3 * s, u3 * s + v3 * c, w3
-    k3u, k3v, k3w = body_rhs(u3, v3, w3, fm[0], fm[1], fm[2], coef)
+    k3u, k3v, k3w = body_accel(u3, v3, w3, fmx, fmy, fmt, m1, m2, j3, c1, c2, c4)
     # stage 4
     u4, v4, w4 = u0 + h * k3u, v0 + h * k3v, w0 + h * k3w
     c, s = _rotate(c0, s0, h * k3p)
     k4x, k4y, k4p = u4 * c - v4 * s, u4 * s + v4 * c, w4
-    k4u, k4v, k4w = body_rhs(u4, v4, w4, f1[0], f1[1], f1[2], coef)
+    k4u, k4v, k4w = body_accel(u4, v4, w4, f1x, f1y, f1t, m1, m2, j3, c1, c2, c4)
     h6 = h / 6.0
     state[i, 0] = x0 + h6 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
     state[i, 1] = y0 + h6 * (k1y + 2.0 * k2y + 2.0 * k3y + k4y)
@@ -155,7 +164,7 @@ def _rk4(state, integral, i, h, f0, fm, f1, coef):
 
 
 @nb.njit(**_JIT)
-def _stable_step(state, i, coef, force, dt_max):
+def _stable_step(state, i, m1, m2, j3, c1, c4, fx, fy, tau, dt_max):
     """Averaged model: RK4 step, at most ``dt_max`` and well inside the stability limit.
 
     The stiffest mode is the yaw damping ``-c4 omega|omega|`` (rate ``2 c4 |omega|``),
@@ -165,10 +174,9 @@ def _stable_step(state, i, coef, force, dt_max):
     rest that starts turning does not overshoot. ``h * rate <= 1.5`` keeps
     RK4 (stable to 2.78) accurate on the transients.
     """
-    omega = max(abs(state[i, 5]), math.sqrt(abs(force[2]) / (coef[5] * coef[2])))
-    speed = max(math.sqrt(state[i, 3] ** 2 + state[i, 4] ** 2),
-                math.sqrt(math.hypot(force[0], force[1]) / max(coef[3], 1e-12)))
-    rate = 2.0 * coef[5] * omega + 3.0 * coef[3] * speed / min(coef[0], coef[1]) + omega
+    omega = max(abs(state[i, 5]), math.sqrt(abs(tau) / (c4 * j3)))
+    speed = max(math.sqrt(state[i, 3] ** 2 + state[i, 4] ** 2), math.sqrt(math.hypot(fx, fy) / max(c1, 1e-12)))
+    rate = 2.0 * c4 * omega + 3.0 * c1 * speed / min(m1, m2) + omega
     if rate * dt_max > 1.5:
         return 1.5 / rate
     return dt_max
@@ -179,52 +187,54 @@ def _advance_one(
     i, state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs
 ):
     """Advance fish ``i`` by ``duration`` seconds, segment by segment between stroke boundaries."""
-    ci = coef[i]
-    f0 = np.empty(3)
-    fm = np.empty(3)
-    f1 = np.empty(3)
+    m1, m2, j3, c1, c2, c4 = coef[i, 0], coef[i, 1], coef[i, 2], coef[i, 3], coef[i, 4], coef[i, 5]
+    drag_constant, inertia_constant, fin_offset = coef[i, 6], coef[i, 7], coef[i, 8]
     t_left = duration
-    rem = np.empty(2)
-    dur = np.empty(2)
     while t_left > _EPS:
-        for f in range(2):
-            if _idle(fins[i, f], pending[i, f]):
-                # A fin at rest that stays at rest: its stroke clock must not cut the
-                # other fin's integration into phase-dependent pieces.
-                rem[f] = np.inf
-                dur[f] = np.inf
-                continue
-            if fins[i, f, ELAPSED] >= fins[i, f, DURATION] - _EPS:
-                _latch(fins[i, f], pending[i, f], _SIDE[f], ci, mode, k_powers, k_coefs)
-            rem[f] = fins[i, f, DURATION] - fins[i, f, ELAPSED]
-            dur[f] = fins[i, f, DURATION]
-        seg = min(t_left, rem[0], rem[1])
+        # A fin at rest that stays at rest never ends a segment: its stroke clock must
+        # not cut the other fin's integration into phase-dependent pieces.
+        idle0 = _idle(fins, pending, i, 0)
+        idle1 = _idle(fins, pending, i, 1)
+        if not idle0 and fins[i, 0, ELAPSED] >= fins[i, 0, DURATION] - _EPS:
+            _latch(fins, pending, i, 0, coef, mode, k_powers, k_coefs)
+        if not idle1 and fins[i, 1, ELAPSED] >= fins[i, 1, DURATION] - _EPS:
+            _latch(fins, pending, i, 1, coef, mode, k_powers, k_coefs)
+        rem0 = np.inf if idle0 else fins[i, 0, DURATION] - fins[i, 0, ELAPSED]
+        rem1 = np.inf if idle1 else fins[i, 1, DURATION] - fins[i, 1, ELAPSED]
+        seg = min(t_left, rem0, rem1)
         if averaged:
-            f0[0] = fins[i, 0, AVG_FX] + fins[i, 1, AVG_FX]
-            f0[1] = fins[i, 0, AVG_FY] + fins[i, 1, AVG_FY]
-            f0[2] = fins[i, 0, AVG_TAU] + fins[i, 1, AVG_TAU]
+            fx = fins[i, 0, AVG_FX] + fins[i, 1, AVG_FX]
+            fy = fins[i, 0, AVG_FY] + fins[i, 1, AVG_FY]
+            tau = fins[i, 0, AVG_TAU] + fins[i, 1, AVG_TAU]
             t_seg = seg
             while t_seg > _EPS:
                 # equal substeps to the segment end, re-sized as the state's stiffness changes
-                n_sub = max(1, int(math.ceil(t_seg / _stable_step(state, i, ci, f0, dt_max) - 1e-9)))
-                h = t_seg / n_sub
-                _rk4(state, integral, i, h, f0, f0, f0, ci)
+                h_ok = _stable_step(state, i, m1, m2, j3, c1, c4, fx, fy, tau, dt_max)
+                h = t_seg / max(1, int(math.ceil(t_seg / h_ok - 1e-9)))
+                _rk4(state, integral, i, h, fx, fy, tau, fx, fy, tau, fx, fy, tau, m1, m2, j3, c1, c2, c4)
                 t_seg -= h
         else:
-            h_max = min(dt_max, dur[0] / min_substeps, dur[1] / min_substeps)
+            h_max = dt_max
+            if not idle0:
+                h_max = min(h_max, fins[i, 0, DURATION] / min_substeps)
+            if not idle1:
+                h_max = min(h_max, fins[i, 1, DURATION] / min_substeps)
             n_sub = max(1, int(math.ceil(seg / h_max - 1e-9)))
             h = seg / n_sub
-            f0[0], f0[1], f0[2] = _fin_forcing(fins, i, 0.0, ci)
+            f0x, f0y, f0t = _fin_forcing(fins, i, 0.0, drag_constant, inertia_constant, fin_offset)
             for k in range(n_sub):
-                fm[0], fm[1], fm[2] = _fin_forcing(fins, i, (k + 0.5) * h, ci)
-                f1[0], f1[1], f1[2] = _fin_forcing(fins, i, (k + 1.0) * h, ci)
-                _rk4(state, integral, i, h, f0, fm, f1, ci)
-                f0[0], f0[1], f0[2] = f1[0], f1[1], f1[2]
-        for f in range(2):
-            if rem[f] - seg <= _EPS:
-                fins[i, f, ELAPSED] = fins[i, f, DURATION]  # exactly on the boundary
-            elif rem[f] < np.inf:
-                fins[i, f, ELAPSED] += seg
+                fmx, fmy, fmt = _fin_forcing(fins, i, (k + 0.5) * h, drag_constant, inertia_constant, fin_offset)
+                f1x, f1y, f1t = _fin_forcing(fins, i, (k + 1.0) * h, drag_constant, inertia_constant, fin_offset)
+                _rk4(state, integral, i, h, f0x, f0y, f0t, fmx, fmy, fmt, f1x, f1y, f1t, m1, m2, j3, c1, c2, c4)
+                f0x, f0y, f0t = f1x, f1y, f1t
+        if rem0 - seg <= _EPS:
+            fins[i, 0, ELAPSED] = fins[i, 0, DURATION]  # exactly on the boundary
+        elif not idle0:
+            fins[i, 0, ELAPSED] += seg
+        if rem1 - seg <= _EPS:
+            fins[i, 1, ELAPSED] = fins[i, 1, DURATION]
+        elif not idle1:
+            fins[i, 1, ELAPSED] += seg
         t_left -= seg
 
 
