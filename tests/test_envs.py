@@ -1,0 +1,295 @@
+"""The single-fish Gymnasium environments: API, seeding, rewards, episode ends, settings."""
+
+import math
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import pectoral_gym  # noqa: F401  (registers the ids)
+from pectoral_gym import FishParams
+from pectoral_gym.envs import PectoralFishEnv
+from pectoral_gym.envs import tasks as tk
+
+IDS = ["PectoralFish-Averaged-v0", "PectoralFish-Full-v0"]
+TASKS = ["goal", "track"]
+GOAL_TERMS = ["reward_progress", "reward_goal", "reward_wall", "reward_energy", "reward_time"]
+TRACK_TERMS = ["reward_tracking", "reward_wall", "reward_energy"]
+
+
+def rollout(env, seed, steps, action_seed=0):
+    """Observations, rewards and infos of a random rollout (resets when an episode ends)."""
+    obs, _ = env.reset(seed=seed)
+    rng = np.random.default_rng(action_seed)
+    records = [(obs, None, None)]
+    for _ in range(steps):
+        obs, reward, terminated, truncated, info = env.step(rng.uniform(-1, 1, 8).astype(np.float32))
+        records.append((obs, reward, info))
+        if terminated or truncated:
+            obs, _ = env.reset()
+            records.append((obs, None, None))
+    return records
+
+
+@pytest.mark.filterwarnings("ignore:.*Box observation space (minimum|maximum) value:UserWarning")  # unbounded by design
+@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("task", TASKS)
+def test_gymnasium_env_checker(env_id, task):
+    env = gym.make(env_id, task=task)
+    check_env(env.unwrapped, skip_render_check=True)
+    env.close()
+
+
+@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("task", TASKS)
+def test_sb3_env_checker(env_id, task):
+    sb3_checker = pytest.importorskip("stable_baselines3.common.env_checker")
+    env = gym.make(env_id, task=task)
+    sb3_checker.check_env(env, warn=True)
+    env.close()
+
+
+def test_registry_and_spaces():
+    for env_id, model in zip(IDS, ["averaged", "full"], strict=True):
+        spec = gym.spec(env_id)
+        assert spec.max_episode_steps == 240
+        assert spec.kwargs == {"model": model}
+        assert spec.vector_entry_point == "pectoral_gym.envs.vector:PectoralFishVectorEnv"
+        env = gym.make(env_id)
+        assert env.action_space == gym.spaces.Box(-1, 1, (8,), np.float32)
+        assert env.observation_space == gym.spaces.Box(-np.inf, np.inf, (19,), np.float32)
+        assert env.unwrapped.config.model == model
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_seeded_reset_reproducible_and_seeds_differ(env_id):
+    env = gym.make(env_id, max_episode_steps=20)
+    first = rollout(env, 7, 30)
+    second = rollout(env, 7, 30)
+    other = rollout(env, 8, 30)
+    for (o1, r1, _), (o2, r2, _) in zip(first, second, strict=True):
+        np.testing.assert_array_equal(o1, o2)
+        assert r1 == r2
+    assert not np.array_equal(first[0][0], other[0][0])
+
+
+@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("task", TASKS)
+def test_reward_is_the_sum_of_its_terms(env_id, task):
+    env = gym.make(env_id, task=task, max_episode_steps=40)
+    names = GOAL_TERMS if task == "goal" else TRACK_TERMS
+    absent = set(GOAL_TERMS + TRACK_TERMS) - set(names)
+    n_steps = 0
+    for _, reward, info in rollout(env, 3, 120):
+        if info is None:
+            continue
+        n_steps += 1
+        assert set(names) <= set(info) and not absent & set(info)
+        assert isinstance(reward, float)
+        assert reward == sum(info[name] for name in names)  # summed in this order by the kernel
+        assert info["distance"] >= 0
+        if task == "goal":
+            assert isinstance(info["is_success"], bool)
+            assert info["reward_time"] == -0.01
+        else:
+            assert info["tracking_error"] == info["distance"]
+            assert info["reward_tracking"] == pytest.approx(-info["distance"])
+        assert info["reward_energy"] <= 0
+    assert n_steps == 120
+
+
+def test_energy_term_matches_mean_fin_power():
+    from pectoral_gym.averaging import mean_fin_power
+
+    env = gym.make("PectoralFish-Averaged-v0", energy_weight=2.0)
+    env.reset(seed=0)
+    action = np.array([0.2, 1.0, -1.0, 1.0, -0.5, 0.0, 0.5, 0.0], np.float32)
+    _, _, _, _, info = env.step(action)
+    p = FishParams()
+    power_right = mean_fin_power(math.radians(30), 0.5, 5.0, p.fin_span, p.fin_drag_constant)
+    power_left = mean_fin_power(math.radians(15), 1.625, 3.0, p.fin_span, p.fin_drag_constant)
+    assert info["reward_energy"] == pytest.approx(-2.0 * (power_right + power_left) * 0.5, rel=1e-6)
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_non_finite_action_raises_and_leaves_the_env_usable(bad):
+    env = gym.make("PectoralFish-Averaged-v0")
+    obs, _ = env.reset(seed=0)
+    action = np.zeros(8, np.float32)
+    action[3] = bad
+    with pytest.raises(ValueError, match="action must be finite"):
+        env.step(action)
+    np.testing.assert_array_equal(env.unwrapped.core.obs[0], obs)
+    env.step(np.zeros(8, np.float32))
+
+
+def test_actions_are_clipped_and_reported_in_the_observation():
+    env = gym.make("PectoralFish-Averaged-v0")
+    obs0, _ = env.reset(seed=1)
+    np.testing.assert_allclose(obs0[11:], [0, -1, -1 / 3, -1] * 2, atol=1e-7)  # rest pattern, default ranges
+    big = np.array([5, 5, -5, 5, 0.5, 2, -1, 0], np.float32)
+    obs1, r1, *_ = env.step(big)
+    np.testing.assert_allclose(obs1[11:], np.clip(big, -1, 1))
+    env.reset(seed=1)
+    obs2, r2, *_ = env.step(np.clip(big, -1, 1))
+    np.testing.assert_array_equal(obs1, obs2)
+    assert r1 == r2
+
+
+def test_action_maps_linearly_to_the_ranges():
+    env = PectoralFishEnv(model="averaged")
+    env.reset(seed=0)
+    env.step(np.array([-1, 1, 0, 0.5, 1, -1, 1, -1], np.float32))
+    right, left = env.core.beats[0]
+    np.testing.assert_allclose(right, [math.radians(45), math.radians(30), 1.25, 4.0])
+    np.testing.assert_allclose(left, [math.radians(135), 0.0, 2.0, 1.0])
+
+
+@pytest.mark.parametrize(
+    "kwargs",
+    [
+        {"bias_range": (2.0, 1.0)},
+        {"bias_range": (0.1, 1.5)},  # bias - amplitude < 0
+        {"bias_range": (1.0, 3.0)},  # bias + amplitude > pi
+        {"amplitude_range": (-0.1, 0.2)},
+        {"period_range": (0.0, 1.0)},
+        {"period_range": (1.0, math.inf)},
+        {"ratio_range": (-1.0, 2.0)},
+        {"ratio_range": (math.nan, 2.0)},
+        {"control_period": 0.0},
+        {"task": "race"},
+        {"model": "medium"},
+        {"scaling": "none"},  # with the full model
+        {"goal_radius": -1.0},
+        {"randomize": {"drag_coef": 1.5}},
+        {"render_mode": "ascii"},
+    ],
+)
+def test_invalid_settings_raise(kwargs):
+    kwargs = {"model": "full", **kwargs}
+    with pytest.raises(ValueError):
+        PectoralFishEnv(**kwargs)
+
+
+def test_unknown_randomize_field_lists_the_valid_names():
+    with pytest.raises(ValueError, match="body_mass"):
+        PectoralFishEnv(model="averaged", randomize={"fin_sapn": 0.1})
+
+
+def test_averaged_scaling_none_is_accepted():
+    env = PectoralFishEnv(model="averaged", scaling="none")
+    env.reset(seed=0)
+    env.step(env.action_space.sample())
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_wall_contact_terminates_with_the_penalty(env_id):
+    env = gym.make(env_id, wall_penalty=7.0)
+    env.reset(seed=0)
+    core = env.unwrapped.core
+    half = 0.5 * FishParams().body_length
+    core.model.state[0] = [tk.TANK_X - half - 0.005, 0.5, 0.0, 0.1, 0.0, 0.0]  # nose 5 mm from the wall, 0.1 m/s
+    _, reward, terminated, truncated, info = env.step(np.zeros(8, np.float32))
+    assert terminated and not truncated
+    assert info["reward_wall"] == -7.0
+    assert info["is_success"] is False
+    assert reward == pytest.approx(-7.0 + info["reward_progress"] + info["reward_energy"] + info["reward_time"])
+
+
+def test_goal_reached_terminates_with_success():
+    env = gym.make("PectoralFish-Full-v0", goal_bonus=3.0)
+    env.reset(seed=0)
+    core = env.unwrapped.core
+    x, y = core.model.state[0, :2]
+    core.ep[0, tk.E_TX], core.ep[0, tk.E_TY] = x + 0.02, y  # goal 2 cm ahead
+    _, reward, terminated, _, info = env.step(np.zeros(8, np.float32))
+    assert terminated and info["is_success"] is True
+    assert info["reward_goal"] == 3.0 and info["reward_wall"] == 0.0
+    assert info["distance"] < 0.08
+
+
+def test_goal_task_start_and_goal_geometry():
+    env = PectoralFishEnv(model="averaged")
+    for seed in range(40):
+        obs, _ = env.reset(seed=seed)
+        x, y = obs[0], obs[1]
+        assert 0.3 <= x <= tk.TANK_X - 0.3 and 0.3 <= y <= tk.TANK_Y - 0.3
+        assert np.all(obs[4:7] == 0) and np.all(obs[9:11] == 0)
+        gx, gy = env.core.target(0)
+        assert 0.2 <= gx <= tk.TANK_X - 0.2 and 0.2 <= gy <= tk.TANK_Y - 0.2
+        assert 0.3 <= math.hypot(gx - x, gy - y) <= 1.0
+        assert math.hypot(obs[7], obs[8]) == pytest.approx(math.hypot(gx - x, gy - y), rel=1e-5)
+        angles, _ = env.model.fin_angles()
+        np.testing.assert_allclose(angles, math.pi / 2)
+
+
+def test_track_task_reference_moves_at_ref_speed():
+    env = PectoralFishEnv(model="averaged", task="track", ref_speed=0.05)
+    for seed in range(20):
+        obs, _ = env.reset(seed=seed)
+        assert math.hypot(obs[7], obs[8]) <= 0.1 + 1e-6
+        assert math.hypot(obs[9], obs[10]) == pytest.approx(0.05, rel=1e-5)
+        ep = env.core.ep[0]
+        assert 0.5 <= ep[tk.E_A] <= 0.8 and 0.25 <= ep[tk.E_B] <= 0.4
+        tx, ty = env.core.target(0)
+        velocity = ep[tk.E_TVX], ep[tk.E_TVY]
+        phase0 = ep[tk.E_PHASE]
+        env.step(np.zeros(8, np.float32))
+        tx2, ty2 = env.core.target(0)
+        dphase = math.remainder(ep[tk.E_PHASE] - phase0, 2 * math.pi)
+        phi = np.linspace(phase0, phase0 + dphase, 2001)
+        speed = np.sqrt((ep[tk.E_A] * np.sin(phi)) ** 2 + (ep[tk.E_B] * np.cos(phi)) ** 2)
+        arc = abs(np.trapezoid(speed, phi))
+        assert arc == pytest.approx(0.05 * 0.5, rel=1e-6)  # ref_speed * control_period along the ellipse
+        assert math.hypot(tx2 - tx, ty2 - ty) == pytest.approx(0.025, rel=1e-2)
+        assert ((tx2 - tx) * velocity[0] + (ty2 - ty) * velocity[1]) > 0  # in the direction of travel
+        heading = math.atan2(obs[3], obs[2])
+        travel = math.atan2(velocity[1], velocity[0])
+        assert abs(math.remainder(heading - travel, 2 * math.pi)) <= 0.3 + 1e-6
+
+
+def test_truncation_after_max_episode_steps():
+    env = gym.make("PectoralFish-Averaged-v0", task="track", max_episode_steps=5)
+    env.reset(seed=2)
+    for _ in range(5):
+        _, _, terminated, truncated, _ = env.step(np.zeros(8, np.float32))
+        assert not terminated
+    assert truncated
+
+
+def test_domain_randomisation_per_episode_and_reproducible():
+    widths = {"drag_coef": 0.3, "body_length": 0.2, "fin_span": 0.1}
+    env = PectoralFishEnv(model="averaged", randomize=widths)
+    base = FishParams()
+    env.reset(seed=11)
+    p1 = env.fish_params
+    env.reset()
+    p2 = env.fish_params
+    assert p1 != p2
+    for p in (p1, p2):
+        for name, w in widths.items():
+            assert abs(getattr(p, name) / getattr(base, name) - 1) <= w
+        assert p.body_mass == base.body_mass
+    np.testing.assert_array_equal(env.model.coef[0], pectoral_gym.params.coefficient_vector(p2))
+    assert env.core.ep[0, tk.E_LENGTH] == p2.body_length
+    env.reset(seed=11)
+    assert env.fish_params == p1
+    plain = PectoralFishEnv(model="averaged")
+    plain.reset(seed=11)
+    assert plain.fish_params == base
+
+
+def test_custom_params_are_used():
+    params = FishParams(body_length=0.3)
+    env = PectoralFishEnv(model="full", params=params)
+    env.reset(seed=0)
+    assert env.fish_params is params
+    assert env.core.ep[0, tk.E_LENGTH] == 0.3
+
+
+def test_render_without_mode_warns():
+    env = PectoralFishEnv(model="averaged")
+    env.reset(seed=0)
+    with pytest.warns(UserWarning, match="render_mode"):
+        assert env.render() is None
