@@ -323,7 +323,10 @@ def start_states(index, draws, cfg, ep, start):
 
 @nb.njit(**_JIT)
 def observe_reset(index, state, ep, obs, out, action_code):
-    """Observations of freshly reset envs; the last-action entries get ``action_code``; ``out`` rows zeroed."""
+    """Observations of freshly reset envs; the last-action entries get ``action_code``; ``out`` rows zeroed.
+
+    (A vector env reports zeros for the masked ``info`` entries of autoreset envs, as ``SyncVectorEnv`` does.)
+    """
     for k in range(index.shape[0]):
         i = index[k]
         d, _ = _observe_one(i, state, ep, obs)
@@ -331,4 +334,3 @@ def observe_reset(index, state, ep, obs, out, action_code):
         for j in range(ACTION_SIZE):
             obs[i, 11 + j] = action_code[j]
         out[i, :] = 0.0
-        out[i, O_DISTANCE] = d
