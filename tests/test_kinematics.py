@@ -280,6 +280,27 @@ def test_stop_command_parks_fin_at_bias():
     assert rate[0, 0] == 0.0
 
 
+def test_parked_fin_latches_new_pattern_at_once():
+    # A fin parked by a rest command (stroke from == to) is at rest: a new pattern starts at once.
+    model = FullModel(1)
+    model.reset(right=FinBeat(*P1))
+    model.advance(0.3)
+    model.command(right=FinBeat.rest(math.radians(80)))
+    model.advance(2.0)  # recovery ends at 1.0 s, park move 70 -> 80 deg ends at 1.5 s
+    ang, rate = model.fin_angles()
+    assert ang[0, 0] == pytest.approx(math.radians(80), abs=1e-12) and rate[0, 0] == 0.0
+    t_cmd = model.time
+    model.command(right=FinBeat(*P2))
+    model.advance(1e-3)
+    np.testing.assert_allclose(model.active_beats()[0, 0], P2)
+    t, ang, _ = _sample_model(model, 1e-3, 1000)
+    start, top = math.radians(80), P2[0] + P2[1]
+    trans = t - t_cmd <= 0.2
+    expect = 0.5 * (start + top) - 0.5 * (top - start) * np.cos(math.pi * (t[trans] - t_cmd) / 0.2)
+    np.testing.assert_allclose(ang[trans, 0, 0], expect, atol=1e-9)
+    np.testing.assert_allclose(ang[~trans, 0, 0], eq21_vec(t[~trans] - t_cmd, *P2), atol=1e-9)
+
+
 def test_repeated_identical_command_does_not_disturb_motion():
     model = FullModel(1)
     model.reset(right=FinBeat(*P1))
