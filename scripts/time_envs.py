@@ -34,8 +34,8 @@ def single_us(env_id: str, steps: int, **kwargs) -> float:
     return min(timeit.repeat(run, number=1, repeat=3)) / steps * 1e6
 
 
-def vector_rate(model: str, num_envs: int, steps: int) -> float:
-    """Env-steps per second of the native vector env."""
+def vector_rate(model: str, num_envs: int, steps: int) -> tuple[float, float]:
+    """Env-steps per second of the native vector env, and fish-steps per second of ``model.advance`` alone."""
     env = PectoralFishVectorEnv(num_envs, model=model)
     env.reset(seed=0)
     rng = np.random.default_rng(0)
@@ -45,7 +45,12 @@ def vector_rate(model: str, num_envs: int, steps: int) -> float:
     t0 = time.perf_counter()
     for k in range(steps):
         env.step(actions[k & 7])
-    return num_envs * steps / (time.perf_counter() - t0)
+    rate = num_envs * steps / (time.perf_counter() - t0)
+    fish = env.core.model
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        fish.advance(env.config.control_period)
+    return rate, num_envs * steps / (time.perf_counter() - t0)
 
 
 def main() -> None:
@@ -63,7 +68,9 @@ def main() -> None:
             print(f"{env_id:25s} {task:5s} {us:6.2f} us/step  ({cart / us:.2f}x CartPole rate)")
     if args.vector:
         for model, n in (("averaged", 4096), ("full", 1024)):
-            print(f"vector {model:8s} {n:5d} envs: {vector_rate(model, n, 200):,.0f} env-steps/s")
+            rate, ceiling = vector_rate(model, n, 200)
+            print(f"vector {model:8s} {n:5d} envs: {rate:,.0f} env-steps/s "
+                  f"(model.advance alone: {ceiling:,.0f} fish-steps/s)")
 
 
 if __name__ == "__main__":

@@ -97,8 +97,13 @@ class EnvConfig:
             raise ValueError(f"scaling must be 'identified' or 'none', got {self.scaling!r}")
         if self.model == "full" and self.scaling != "identified":
             raise ValueError("scaling applies to the averaged model only; leave it at 'identified' for model='full'")
-        if not (math.isfinite(self.control_period) and self.control_period > 0):
+        try:
+            period = float(self.control_period)
+        except (TypeError, ValueError):
+            period = math.nan
+        if not (math.isfinite(period) and period > 0):
             raise ValueError(f"control_period must be a finite number > 0 s, got {self.control_period!r}")
+        set_(self, "control_period", period)
         set_(self, "bias_range", _check_range("bias_range", self.bias_range))
         set_(self, "amplitude_range", _check_range("amplitude_range", self.amplitude_range, nonnegative=True))
         set_(self, "period_range", _check_range("period_range", self.period_range, positive=True))
@@ -112,8 +117,13 @@ class EnvConfig:
         for name in ("progress_weight", "goal_bonus", "wall_penalty", "energy_weight", "time_penalty",
                      "tracking_weight", "ref_speed", "goal_radius"):
             value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+            try:
+                number = float(value)
+            except (TypeError, ValueError):
+                number = math.nan
+            if not (math.isfinite(number) and number >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
+            set_(self, name, number)
         if self.params is None:
             set_(self, "params", FishParams())
         elif not isinstance(self.params, FishParams):
