@@ -31,7 +31,7 @@ def single_us(env_id: str, steps: int, **kwargs) -> float:
                 env.reset()
 
     run()
-    return min(timeit.repeat(run, number=1, repeat=3)) / steps * 1e6
+    return min(timeit.repeat(run, number=1, repeat=5)) / steps * 1e6
 
 
 def vector_rate(model: str, num_envs: int, steps: int) -> tuple[float, float]:
@@ -60,12 +60,12 @@ def main() -> None:
     parser.add_argument("--vector", action="store_true", help="also time the vector env")
     args = parser.parse_args()
     register_envs()
-    cart = single_us("CartPole-v1", args.steps)
-    print(f"CartPole-v1               {cart:6.2f} us/step")
     for env_id in ("PectoralFish-Averaged-v0", "PectoralFish-Full-v0"):
         for task in ("goal", "track"):
+            cart = single_us("CartPole-v1", args.steps)  # measured next to each env: the machine may be shared
             us = single_us(env_id, args.steps, task=task)
-            print(f"{env_id:25s} {task:5s} {us:6.2f} us/step  ({cart / us:.2f}x CartPole rate)")
+            print(f"{env_id:25s} {task:5s} {us:6.2f} us/step, CartPole-v1 {cart:5.2f} us/step "
+                  f"({cart / us:.2f}x CartPole rate)")
     if args.vector:
         for model, n in (("averaged", 4096), ("full", 1024)):
             rate, ceiling = vector_rate(model, n, 200)
