@@ -286,7 +286,9 @@ def test_parked_fin_latches_new_pattern_at_once():
     model.reset(right=FinBeat(*P1))
     model.advance(0.3)
     model.command(right=FinBeat.rest(math.radians(80)))
-    model.advance(2.0)  # recovery ends at 1.0 s, park move 70 -> 80 deg ends at 1.5 s
+    # recovery ends at 1.0 s, the park move 70 -> 80 deg ends at 1.5 s; at 1.7 s the fin has been still for 0.2 s
+    # (possibly inside a zero-amplitude half-stroke of the rest pattern, which must not delay the new command)
+    model.advance(1.4)
     ang, rate = model.fin_angles()
     assert ang[0, 0] == pytest.approx(math.radians(80), abs=1e-12) and rate[0, 0] == 0.0
     t_cmd = model.time
