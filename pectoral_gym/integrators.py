@@ -312,13 +312,15 @@ def command_fins(fins, pending, new, mask):
 
 
 def init_fins(fins: np.ndarray, pending: np.ndarray, beats: np.ndarray, index: np.ndarray | None = None) -> None:
-    """Put fins at the start of a power stroke of ``beats`` ``(n, 2, 4)``.
+    """Put the fins of the fish in ``index`` (all if ``None``) at the start of a power stroke of ``beats``.
+
+    ``beats`` has one ``(2, 4)`` row per selected fish.
 
     The fin sits at ``bias - amplitude`` with zero rate; the first half-stroke
     latches the pattern when the model first advances.
     """
     idx = slice(None) if index is None else index
-    b = beats if index is None else beats[index]
+    b = beats  # one row per selected fish
     fins[idx] = 0.0
     fins[idx, :, ANGLE_TO] = b[..., 0] - b[..., 1]
     fins[idx, :, ANGLE_FROM] = fins[idx, :, ANGLE_TO]

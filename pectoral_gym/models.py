@@ -125,13 +125,23 @@ class FishModel:
             index: Reset only these fish (boolean mask or indices).
         """
         idx = slice(None) if index is None else index
-        beats = np.stack([_as_beat_array(right, self.n), _as_beat_array(left, self.n)], axis=1)
-        validate_beats(beats)
+        rows = self.n if index is None else int(np.count_nonzero(np.ones(self.n, dtype=bool)[index]))
+        beats = np.stack([self._rows(right, rows, index), self._rows(left, rows, index)], axis=1)
+        if not (isinstance(right, FinBeat | None) and isinstance(left, FinBeat | None)):
+            validate_beats(beats)  # a FinBeat validated itself
         self.state[idx] = 0.0 if state is None else state
         self.integral[idx] = 0.0
         it.init_fins(self.fins, self.pending, beats, None if index is None else index)
         if index is None:
             self.time = 0.0
+
+    def _rows(self, beat: BeatLike, rows: int, index: np.ndarray | None) -> np.ndarray:
+        """Patterns ``(rows, 4)`` for the selected fish; per-fish arrays of all ``n`` fish are indexed."""
+        if index is not None and not isinstance(beat, FinBeat) and beat is not None:
+            arr = np.asarray(beat, dtype=np.float64)
+            if arr.shape == (self.n, 4):
+                return arr[index].copy()
+        return _as_beat_array(beat, rows)
 
     def command(self, right: BeatLike = None, left: BeatLike = None, validate: bool = True) -> None:
         """Command new fin patterns (``None`` keeps a fin at rest), applied by the parameter-change rule."""
