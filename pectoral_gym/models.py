@@ -22,7 +22,7 @@ from pectoral_gym.averaging import EXACT, TAYLOR
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
 
-__all__ = ["FishModel", "FullModel", "AveragedModel", "validate_beats", "REST"]
+__all__ = ["FishModel", "FullModel", "AveragedModel", "MODELS", "make_model", "validate_beats", "REST"]
 
 REST = FinBeat.rest()
 _FIELDS = ("bias", "amplitude", "period", "ratio")
@@ -230,3 +230,35 @@ class AveragedModel(FishModel):
             scaling = ScalingFunctions.load() if scaling == "identified" else None
         self.scaling = scaling or ScalingFunctions.unit()
         self.k_powers, self.k_coefs = self.scaling.powers, self.scaling.coefs
+
+
+MODELS = ("full", "averaged")
+
+
+def make_model(
+    model: str,
+    n: int = 1,
+    params: FishParams | None = None,
+    scaling: ScalingFunctions | str | None = "identified",
+    forcing: str = "exact",
+) -> FishModel:
+    """Build a batched model by name.
+
+    Args:
+        model: ``"full"`` or ``"averaged"``.
+        n: Number of fish.
+        params: Model parameters (default: Table 1).
+        scaling: Averaged model only: ``"identified"``, ``"none"`` or a :class:`ScalingFunctions`.
+        forcing: Averaged model only: ``"exact"`` or ``"taylor"``.
+
+    Returns:
+        A :class:`FullModel` or :class:`AveragedModel`.
+
+    Raises:
+        ValueError: For an unknown model name (or bad scaling/forcing).
+    """
+    if model == "full":
+        return FullModel(n, params)
+    if model == "averaged":
+        return AveragedModel(n, params, scaling=scaling, forcing=forcing)
+    raise ValueError(f"model must be one of {MODELS}, got {model!r}")

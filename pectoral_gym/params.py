@@ -15,7 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["FishParams", "FinBeat", "COEF_NAMES", "coefficient_vector"]
+__all__ = ["FishParams", "FinBeat", "COEF_NAMES", "TANK_LENGTH", "TANK_WIDTH", "coefficient_vector"]
+
+# The paper's tank (Sec. 4.1): the fish swims in a 2.30 m x 1.15 m area.
+TANK_LENGTH = 2.30  # m, along the tank X axis
+TANK_WIDTH = 1.15  # m, along the tank Y axis
 
 
 @dataclass(frozen=True)

@@ -28,8 +28,8 @@ from pathlib import Path
 import numpy as np
 
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.models import AveragedModel, FishModel, FullModel
-from pectoral_gym.params import FinBeat, FishParams
+from pectoral_gym.models import MODELS, make_model
+from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
 
 __all__ = [
     "CSV_COLUMNS",
@@ -44,9 +44,6 @@ __all__ = [
     "write_csv",
 ]
 
-MODELS = ("full", "averaged")
-TANK_LENGTH = 2.30  # m, tank X extent (Sec. 5 of the paper: 1.15 m x 2.30 m)
-TANK_WIDTH = 1.15  # m, tank Y extent
 CSV_COLUMNS = ("t", "X", "Y", "psi", "vx", "vy", "omega", "gamma_right_deg", "gamma_left_deg")
 
 
@@ -70,35 +67,6 @@ class Trajectory:
     fin_angles: np.ndarray
     right: FinBeat
     left: FinBeat
-
-
-def make_model(
-    model: str,
-    n: int = 1,
-    params: FishParams | None = None,
-    scaling: ScalingFunctions | str | None = "identified",
-    forcing: str = "exact",
-) -> FishModel:
-    """Build a batched model by name.
-
-    Args:
-        model: ``"full"`` or ``"averaged"``.
-        n: Number of fish.
-        params: Model parameters (default: Table 1).
-        scaling: Averaged model only: ``"identified"``, ``"none"`` or a :class:`ScalingFunctions`.
-        forcing: Averaged model only: ``"exact"`` or ``"taylor"``.
-
-    Returns:
-        A :class:`FullModel` or :class:`AveragedModel`.
-
-    Raises:
-        ValueError: For an unknown model name (or bad scaling/forcing).
-    """
-    if model == "full":
-        return FullModel(n, params)
-    if model == "averaged":
-        return AveragedModel(n, params, scaling=scaling, forcing=forcing)
-    raise ValueError(f"model must be one of {MODELS}, got {model!r}")
 
 
 def simulate(

@@ -25,7 +25,7 @@ from fractions import Fraction
 import numpy as np
 
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.models import AveragedModel, FishModel, FullModel, validate_beats
+from pectoral_gym.models import FishModel, make_model, validate_beats
 from pectoral_gym.params import FinBeat, FishParams
 
 __all__ = ["SteadyState", "common_period", "steady_state", "steady_state_batch", "turning_quantities"]
@@ -201,12 +201,7 @@ def steady_state(
         >>> s.omega > 0  # the right fin turns the fish left
         True
     """
-    if model == "full":
-        fish: FishModel = FullModel(1, params)
-    elif model == "averaged":
-        fish = AveragedModel(1, params, scaling=scaling, forcing=forcing)
-    else:
-        raise ValueError(f"model must be 'full' or 'averaged', got {model!r}")
+    fish = make_model(model, 1, params, scaling, forcing)
     rest = FinBeat.rest().as_array()
     beats = np.array([[(right.as_array() if right else rest), (left.as_array() if left else rest)]])
     return steady_state_batch(fish, beats, **kwargs)[0]

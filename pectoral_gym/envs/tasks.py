@@ -24,10 +24,11 @@ import numba as nb
 import numpy as np
 
 from pectoral_gym.averaging import mean_fin_power
+from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 
 # Tank and task geometry [m], [rad].
-TANK_X = 2.30  # tank length along X [m]
-TANK_Y = 1.15  # tank width along Y [m]
+TANK_X = TANK_LENGTH  # tank length along X [m], one source: params.py
+TANK_Y = TANK_WIDTH  # tank width along Y [m]
 START_INSET = 0.3  # goal task: start this far from the walls [m]
 GOAL_INSET = 0.2  # goal task: goal this far from the walls [m]
 GOAL_MIN_DISTANCE = 0.3  # goal task: least start-goal distance [m]
