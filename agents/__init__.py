@@ -1,0 +1,1 @@
+"""Stable-Baselines3 training, evaluation, baseline controllers and the benchmark suite."""
