@@ -1,0 +1,170 @@
+"""Grids of right-fin beat patterns on which the scaling functions are identified (paper, Sec. 4.3).
+
+A grid is the Cartesian product of values of the four fin-beat parameters
+``(bias, amplitude, period, ratio)`` (radians and seconds inside; degrees in
+files and on the command line), or an explicit list of patterns.
+
+Presets:
+
+* ``paper``: the paper's 560 patterns (amplitudes 10-30 deg, biases 50-90 deg,
+  periods 0.5, 0.66, 1, 2 s, ratios 2-5).
+* ``env``: covers the environments' whole default action ranges (bias 45-135
+  deg, amplitude 0-30 deg, period 0.5-2 s, ratio 1-5), so the averaged
+  environment never extrapolates, plus the periods of the paper's forward
+  swimming sweep (Fig. 4). Patterns with no forcing (ratio 1, amplitude 0) are
+  not identifiable and are left out; the fitted K stays bounded there and its
+  forcing is zero anyway.
+
+Grid file (JSON), either axes whose product is taken::
+
+    {"bias_deg": [50, 70, 90], "amplitude_deg": [10, 20], "period_s": [1.0], "ratio": [2, 4]}
+
+or explicit patterns ``[bias_deg, amplitude_deg, period_s, ratio]``::
+
+    {"patterns": [[90, 22, 1.0, 4], [60, 20, 1.0, 3]]}
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["GRIDS", "Grid", "GridError", "load_grid"]
+
+_AXES = ("bias_deg", "amplitude_deg", "period_s", "ratio")
+
+
+class GridError(ValueError):
+    """A grid file or grid specification is invalid."""
+
+
+@dataclass(frozen=True)
+class Grid:
+    """A set of right-fin beat patterns.
+
+    Attributes:
+        name: Preset name or file path.
+        patterns: ``(n, 4)`` array of ``(bias [rad], amplitude [rad], period [s], ratio [-])``.
+    """
+
+    name: str
+    patterns: np.ndarray
+
+    @classmethod
+    def product(cls, name: str, bias_deg, amplitude_deg, period_s, ratio) -> Grid:
+        """Cartesian product of axis values given in degrees and seconds."""
+        rows = [
+            (math.radians(b), math.radians(a), float(t), float(z))
+            for b, a, t, z in itertools.product(bias_deg, amplitude_deg, period_s, ratio)
+        ]
+        return cls.from_patterns(name, np.array(rows, dtype=np.float64).reshape(-1, 4))
+
+    @classmethod
+    def from_patterns(cls, name: str, patterns: np.ndarray) -> Grid:
+        """A grid from an ``(n, 4)`` array in radians and seconds, validated."""
+        patterns = np.asarray(patterns, dtype=np.float64)
+        if patterns.ndim != 2 or patterns.shape[1] != 4 or len(patterns) == 0:
+            raise GridError(f"grid {name!r}: patterns must be a non-empty (n, 4) array, got shape {patterns.shape}")
+        if not np.all(np.isfinite(patterns)):
+            raise GridError(f"grid {name!r}: patterns must be finite")
+        bias, amp, period, ratio = patterns.T
+        bad = (amp < 0) | (period <= 0) | (ratio <= 0) | (bias - amp < 0) | (bias + amp > math.pi)
+        if np.any(bad):
+            i = int(np.argmax(bad))
+            raise GridError(
+                f"grid {name!r}: pattern {i} (bias {math.degrees(bias[i]):.4g} deg, amplitude "
+                f"{math.degrees(amp[i]):.4g} deg, period {period[i]:.4g} s, ratio {ratio[i]:.4g}) is invalid: "
+                "needs amplitude >= 0, period > 0, ratio > 0 and 0 <= bias -+ amplitude <= 180 deg"
+            )
+        patterns = patterns.copy()
+        patterns.setflags(write=False)
+        return cls(name, patterns)
+
+    def __len__(self) -> int:
+        return len(self.patterns)
+
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """Per-parameter ``(low, high)`` over the grid, each ``(4,)``."""
+        return self.patterns.min(axis=0), self.patterns.max(axis=0)
+
+    def contains(self, pattern, tol: float = 1e-9) -> bool:
+        """Whether ``pattern`` (4,) equals a grid pattern within ``tol`` in every parameter."""
+        diff = np.abs(self.patterns - np.asarray(pattern, dtype=np.float64)[None, :])
+        return bool(np.any(np.all(diff <= tol, axis=1)))
+
+    def to_dict(self) -> dict:
+        """JSON-ready description (degrees), for the coefficients file's metadata."""
+        deg = self.patterns.copy()
+        deg[:, :2] = np.degrees(deg[:, :2])
+        axes = {}
+        for key, column in zip(_AXES, deg.T, strict=True):
+            axes[key] = sorted({round(float(v), 9) for v in column})
+        product = math.prod(len(v) for v in axes.values()) == len(self)
+        return {"name": self.name, "size": len(self), **(axes if product else {"patterns": deg.round(9).tolist()})}
+
+
+def _from_dict(name: str, data) -> Grid:
+    if not isinstance(data, dict):
+        raise GridError(f"grid {name!r}: expected a JSON object, got {type(data).__name__}")
+    if "patterns" in data:
+        try:
+            deg = np.array(data["patterns"], dtype=np.float64)
+        except (TypeError, ValueError):
+            msg = f"grid {name!r}: 'patterns' must be a list of [bias_deg, amplitude_deg, period_s, ratio]"
+            raise GridError(msg) from None
+        if deg.ndim != 2 or deg.shape[1] != 4:
+            raise GridError(f"grid {name!r}: 'patterns' must be a list of 4-number lists, got shape {deg.shape}")
+        rad = deg.copy()
+        rad[:, :2] = np.radians(deg[:, :2])
+        return Grid.from_patterns(name, rad)
+    missing = [k for k in _AXES if k not in data]
+    if missing:
+        raise GridError(f"grid {name!r}: missing keys {missing}; give all of {list(_AXES)} or 'patterns'")
+    axes = []
+    for key in _AXES:
+        values = data[key]
+        if not isinstance(values, list) or not values or not all(isinstance(v, (int, float)) for v in values):
+            raise GridError(f"grid {name!r}: {key!r} must be a non-empty list of numbers, got {values!r}")
+        axes.append(values)
+    return Grid.product(name, *axes)
+
+
+def load_grid(spec: str | Path) -> Grid:
+    """A preset by name (:data:`GRIDS`) or a grid JSON file (module docstring).
+
+    Raises:
+        GridError: Unknown preset, unreadable file, or invalid content.
+    """
+    if isinstance(spec, str) and spec in GRIDS:
+        return GRIDS[spec]
+    path = Path(spec)
+    if not path.is_file():
+        raise GridError(f"unknown grid {str(spec)!r}: not a preset ({', '.join(GRIDS)}) and not a file")
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as err:
+        raise GridError(f"cannot read grid file {str(path)!r}: {err}") from None
+    return _from_dict(str(path), data)
+
+
+GRIDS: dict[str, Grid] = {
+    "paper": Grid.product(
+        "paper",
+        bias_deg=(50, 60, 70, 80, 90),
+        amplitude_deg=(10, 15, 20, 22, 25, 28, 30),
+        period_s=(0.5, 0.66, 1.0, 2.0),
+        ratio=(2, 3, 4, 5),
+    ),
+    "env": Grid.product(
+        "env",
+        bias_deg=(45, 60, 75, 90, 105, 120, 135),
+        amplitude_deg=(2.5, 5, 10, 15, 20, 25, 30),
+        period_s=(0.36, 0.5, 0.66, 0.8, 1.0, 1.4, 2.0, 3.0, 4.0),
+        ratio=(1.25, 1.5, 2, 3, 4, 5),
+    ),
+}
