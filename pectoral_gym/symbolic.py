@@ -1,0 +1,131 @@
+"""CasADi expressions of the cycle-averaged model, for optimal control (NMPC).
+
+The same equations as :class:`~pectoral_gym.models.AveragedModel` (exact
+Bessel averages, eq. 25 with scaling functions K, body dynamics eqs. 19-20),
+written with CasADi symbols so that the scaling identification (``scaling/``)
+and the NMPC baseline (``agents/``) share one model. CasADi is an optional
+dependency (``pip install pectoral-gym[nmpc]``); it is imported here only.
+
+Every function accepts CasADi ``SX``/``MX`` (or plain numbers) and returns
+expressions of the same kind.
+"""
+
+from __future__ import annotations
+
+import math
+
+try:
+    import casadi as ca
+except ImportError as err:  # pragma: no cover - exercised only without the nmpc extra
+    raise ImportError(
+        "pectoral_gym.symbolic needs CasADi: pip install 'pectoral-gym[nmpc]' (or pip install casadi)"
+    ) from err
+
+from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.params import FishParams
+
+__all__ = ["bessel_j1_sx", "scaling_sx", "averaged_forcing_sx", "body_accel_sx", "averaged_rhs_sx"]
+
+_J1_TERMS = 18  # same truncation as averaging.bessel_j1 (machine precision for |x| <= pi)
+
+
+def bessel_j1_sx(x):
+    """``J1(x)`` by its power series (as :func:`pectoral_gym.averaging.bessel_j1`)."""
+    half = 0.5 * x
+    term = half
+    total = half
+    h2 = half * half
+    for k in range(1, _J1_TERMS):
+        term = term * (-h2 / (k * (k + 1)))
+        total = total + term
+    return total
+
+
+def scaling_sx(beat, scaling: ScalingFunctions | None):
+    """``[K_fx, K_fy, K_m]`` at ``beat = (bias, amplitude, period, ratio)``; all 1 if ``scaling`` is None."""
+    if scaling is None:
+        return ca.vertcat(1.0, 1.0, 1.0)
+    bias, amplitude, period, ratio = beat[0], beat[1], beat[2], beat[3]
+    features = (bias, amplitude, period, ratio, 1.0 / period)
+    values = []
+    for which in range(3):
+        total = 0.0
+        for powers, coef in zip(scaling.powers[which], scaling.coefs[which], strict=True):
+            if coef == 0.0:
+                continue
+            term = float(coef)
+            for feature, p in zip(features, powers, strict=True):
+                if p != 0.0:
+                    term = term * feature ** (int(p) if float(p).is_integer() else float(p))
+            total = total + term
+        values.append(total)
+    return ca.vertcat(*values)
+
+
+def averaged_forcing_sx(beat, side: float, params: FishParams, scaling: ScalingFunctions | None):
+    """Scaled cycle-averaged ``[f_hx, f_hy, tau]`` of one fin on the body (eq. 25, exact averages).
+
+    Args:
+        beat: ``(bias, amplitude, period, ratio)`` (rad, rad, s, -), symbols or numbers.
+        side: +1 for the right fin, -1 for the left.
+        params: Model parameters.
+        scaling: Scaling functions, or ``None`` for K = 1.
+    """
+    bias, amplitude, period, ratio = beat[0], beat[1], beat[2], beat[3]
+    c = params.fin_drag_constant * math.pi**2 * (ratio * ratio - 1.0) / (ratio * period * period)
+    base = c * amplitude * bessel_j1_sx(amplitude)  # exact averages (paper-notes), Taylor form in eqs. (26)-(27)
+    fx = base * ca.sin(bias)
+    fy = base * ca.cos(bias)
+    tau = params.fin_offset * fx  # eq. (28): moment arm C_p
+    k = scaling_sx(beat, scaling)
+    return ca.vertcat(k[0] * fx, side * k[1] * fy, side * k[2] * tau)
+
+
+def body_accel_sx(v, forcing, params: FishParams, smoothing: float = 0.0):
+    """Body-frame accelerations ``d(vx, vy, omega)/dt`` of eqs. (19)-(20).
+
+    Args:
+        v: ``(vx, vy, omega)``.
+        forcing: Total ``(f_x, f_y, tau)`` of the fins on the body.
+        params: Model parameters.
+        smoothing: 0 (default) evaluates ``alpha = arctan(vy / vx)`` and the speed
+            exactly as :func:`pectoral_gym.dynamics.body_accel`; a positive speed
+            scale [m/s] (e.g. 1e-4) replaces them by smooth versions whose
+            derivatives exist at rest, which gradient-based solvers need when a
+            trajectory starts from rest.
+    """
+    vx, vy, omega = v[0], v[1], v[2]
+    m1, m2, j3 = params.m1, params.m2, params.J3
+    c1, c2, c4 = params.c1, params.c2, params.c4
+    if smoothing > 0.0:
+        eps2 = smoothing * smoothing
+        speed = ca.sqrt(vx * vx + vy * vy + eps2)
+        alpha = ca.atan(vx * vy / (vx * vx + eps2))  # -> arctan(vy / vx) for |vx| >> smoothing
+        yaw_damping = c4 * omega * ca.sqrt(omega * omega + eps2)
+    else:
+        speed = ca.sqrt(vx * vx + vy * vy)
+        alpha = ca.if_else(vx >= 0, ca.atan2(vy, vx), -ca.atan2(vy, -vx))  # arctan(vy / vx), also for vx < 0
+        yaw_damping = c4 * omega * ca.fabs(omega)
+    dvx = (m2 * vy * omega - c1 * vx * speed + c2 * vy * speed * alpha + forcing[0]) / m1  # eqs. (19)-(20), f1
+    dvy = (-m1 * vx * omega - c1 * vy * speed - c2 * vx * speed * alpha + forcing[1]) / m2  # f2
+    dom = (m1 - m2) / j3 * vx * vy - yaw_damping + forcing[2] / j3  # f3
+    return ca.vertcat(dvx, dvy, dom)
+
+
+def averaged_rhs_sx(state, beats, params: FishParams, scaling: ScalingFunctions | None, smoothing: float = 0.0):
+    """Time derivative of ``state = (X, Y, psi, vx, vy, omega)`` under the averaged model (eqs. 19, 25).
+
+    Args:
+        state: Pose in the tank frame and body-frame velocities.
+        beats: ``(8,)``: right fin ``(bias, amplitude, period, ratio)``, then the left fin.
+        params: Model parameters.
+        scaling: Scaling functions, or ``None`` for K = 1.
+        smoothing: See :func:`body_accel_sx`.
+    """
+    psi, vx, vy = state[2], state[3], state[4]
+    right = averaged_forcing_sx([beats[i] for i in range(4)], 1.0, params, scaling)
+    left = averaged_forcing_sx([beats[i] for i in range(4, 8)], -1.0, params, scaling)
+    accel = body_accel_sx([state[3], state[4], state[5]], right + left, params, smoothing)
+    x_dot = vx * ca.cos(psi) - vy * ca.sin(psi)  # eq. (19), kinematics
+    y_dot = vx * ca.sin(psi) + vy * ca.cos(psi)
+    return ca.vertcat(x_dot, y_dot, state[5], accel)
