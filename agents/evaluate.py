@@ -1,0 +1,398 @@
+"""Seeded evaluation of a controller (trained policy or baseline) on a fish environment.
+
+Episode ``k`` of an evaluation with ``seed`` is reset with ``seed + k``, so the
+same seed gives the same starts and targets for every controller and every
+model (averaged, full). Episodes run batched on the native vector env: a
+:class:`~agents.policy.BatchController` acts on all of them in one call; other
+controllers come from a factory, one per env slot.
+
+CLI::
+
+    python -m agents.evaluate --policy runs/PectoralFish-Averaged-v0/ppo_goal_seed0_...
+    python -m agents.evaluate --policy RUN --env PectoralFish-Full-v0 --episodes 100 --seed 0 [--randomize]
+    python -m agents.evaluate --baseline hand --env PectoralFish-Full-v0 --task goal
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from agents.metrics import METRICS, MetricSummary, Trajectory, episode_metrics, summarize
+from agents.policy import BatchController, Controller
+
+__all__ = [
+    "DEFAULT_RANDOMIZATION",
+    "EvaluationResult",
+    "evaluate",
+    "main",
+    "make_vector_env",
+    "plot_trajectories",
+    "write_json",
+]
+
+# Relative half-widths of the per-episode parameter randomisation used by ``--randomize``.
+DEFAULT_RANDOMIZATION = {"body_mass": 0.1, "body_inertia": 0.2, "drag_coef": 0.2, "lift_coef": 0.2,
+                         "moment_coef": 0.2, "fin_force_coef": 0.2}
+MAX_BATCH = 128  # vector-env slots of one evaluation
+
+ControllerLike = Controller | Callable[[], Controller]
+
+
+def make_vector_env(env_id: str, num_envs: int, env_kwargs: dict[str, Any] | None = None):
+    """The native :class:`~pectoral_gym.envs.PectoralFishVectorEnv` of a registered fish env id."""
+    from pectoral_gym.envs import PectoralFishVectorEnv
+    from pectoral_gym.registration import ENV_IDS
+
+    if env_id not in ENV_IDS:
+        raise ValueError(f"unknown env id {env_id!r}; fish envs: {sorted(ENV_IDS)}")
+    kwargs = dict(env_kwargs or {})
+    if "model" in kwargs:
+        raise ValueError("env_kwargs must not set 'model'; it is fixed by the env id")
+    return PectoralFishVectorEnv(num_envs=num_envs, model=ENV_IDS[env_id], **kwargs)
+
+
+@dataclass
+class EvaluationResult:
+    """Metrics of an evaluation (see :mod:`agents.metrics` for the definitions).
+
+    Attributes:
+        controller: Controller name.
+        env_id: Environment id.
+        task: ``"goal"`` or ``"track"``.
+        seed: Episode ``k`` was reset with ``seed + k``.
+        env_kwargs: Environment arguments (JSON-ready).
+        metrics: Metric name -> mean and confidence interval.
+        episodes: Per-episode metrics.
+        trajectories: The episodes.
+        wall_time: Seconds the evaluation took.
+    """
+
+    controller: str
+    env_id: str
+    task: str
+    seed: int
+    env_kwargs: dict[str, Any]
+    metrics: dict[str, MetricSummary]
+    episodes: list[dict[str, float]]
+    trajectories: list[Trajectory] = field(repr=False)
+    wall_time: float = 0.0
+
+    @property
+    def n_episodes(self) -> int:
+        """Number of episodes."""
+        return len(self.episodes)
+
+    def to_dict(self, per_episode: bool = True) -> dict[str, Any]:
+        """JSON-ready dict (NaN becomes ``None``)."""
+        data: dict[str, Any] = {
+            "controller": self.controller, "env_id": self.env_id, "task": self.task, "seed": self.seed,
+            "n_episodes": self.n_episodes, "env_kwargs": self.env_kwargs, "wall_time_s": self.wall_time,
+            "metrics": {k: v.as_dict() for k, v in self.metrics.items()},
+        }
+        if per_episode:
+            data["episodes"] = [{k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in e.items()}
+                                for e in self.episodes]
+        return data
+
+
+def write_json(result: EvaluationResult, path: str | Path, per_episode: bool = True) -> Path:
+    """Write ``result.to_dict()`` to ``path`` (folders created); returns the path."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(result.to_dict(per_episode), indent=2, default=_json_default) + "\n")
+    return path
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, (np.floating, np.integer)):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    return str(value)
+
+
+def _is_factory(controller: Any) -> bool:
+    return isinstance(controller, type) or (callable(controller) and not hasattr(controller, "act"))
+
+
+def evaluate(controller: ControllerLike, env_id: str, n_episodes: int = 100, seed: int = 0,
+             env_kwargs: dict[str, Any] | None = None, n_envs: int | None = None, confidence: float = 0.95,
+             progress: bool = False) -> EvaluationResult:
+    """Run ``n_episodes`` seeded episodes of a controller and compute the metrics.
+
+    Args:
+        controller: A :class:`Controller`, a :class:`BatchController` (all slots share it), or a
+            zero-argument factory of controllers (one per slot). A plain controller without
+            ``act_batch`` runs one episode at a time.
+        env_id: ``PectoralFish-Averaged-v0`` or ``PectoralFish-Full-v0``.
+        n_episodes: Number of episodes (>= 1).
+        seed: Episode ``k`` is reset with ``seed + k``.
+        env_kwargs: Environment arguments (``task``, ``randomize``, reward weights, ...).
+        n_envs: Vector-env slots (default: ``min(n_episodes, 128)``, 1 for a plain controller).
+        confidence: Confidence level of the bootstrap intervals.
+        progress: Show a tqdm progress bar over episodes.
+
+    Returns:
+        The :class:`EvaluationResult`.
+    """
+    if int(n_episodes) < 1:
+        raise ValueError(f"n_episodes must be >= 1, got {n_episodes}")
+    n_episodes = int(n_episodes)
+    env_kwargs = dict(env_kwargs or {})
+    batch = isinstance(controller, BatchController) and not _is_factory(controller)
+    if _is_factory(controller):
+        default_envs = min(n_episodes, MAX_BATCH)
+    elif batch:
+        default_envs = min(n_episodes, MAX_BATCH)
+    elif isinstance(controller, Controller):
+        default_envs = 1
+    else:
+        raise TypeError(f"expected a Controller or a factory of controllers, got {type(controller).__name__}")
+    n_envs = min(int(n_envs or default_envs), n_episodes)
+    if not batch and not _is_factory(controller) and n_envs != 1:
+        raise ValueError("a single controller with per-episode state runs one env; pass a factory for more")
+    env = make_vector_env(env_id, n_envs, env_kwargs)
+    config = env.config
+    slots = [controller() for _ in range(n_envs)] if _is_factory(controller) else [controller] * n_envs
+    name = str(getattr(slots[0], "name", type(slots[0]).__name__))
+    dt = config.control_period
+    energy_weight = config.energy_weight
+    start = time.perf_counter()
+
+    episode_of = np.full(n_envs, -1)
+    records: list[dict[str, list] | None] = [None] * n_envs
+    trajectories: list[Trajectory | None] = [None] * n_episodes
+    next_episode = 0
+
+    def assign(mask: np.ndarray) -> np.ndarray:
+        nonlocal next_episode
+        seeds: list[int | None] = [None] * n_envs
+        for i in np.flatnonzero(mask):
+            if next_episode < n_episodes:
+                episode_of[i] = next_episode
+                seeds[i] = seed + next_episode
+                slots[i].reset(seed + next_episode)
+                next_episode += 1
+            else:
+                episode_of[i] = -1
+        started = mask & (episode_of >= 0)
+        if started.any():
+            obs, _ = env.reset(seed=[s if started[i] else None for i, s in enumerate(seeds)],
+                               options={"reset_mask": started})
+            for i in np.flatnonzero(started):
+                records[i] = {"obs": [obs[i].copy()], "reward": [], "work": [], "distance": [_distance(obs[i])]}
+        return started
+
+    from tqdm.auto import tqdm
+
+    bar = tqdm(total=n_episodes, desc=f"eval {name} on {env_id}", disable=not progress, leave=False)
+    obs = np.zeros((n_envs, 19), dtype=np.float32)
+    assign(np.ones(n_envs, dtype=bool))
+    obs[:] = env.core.obs
+    actions = np.zeros((n_envs, 8), dtype=np.float32)
+    while (episode_of >= 0).any():
+        active = episode_of >= 0
+        if batch:
+            actions[active] = controller.act_batch(obs[active])
+        else:
+            for i in np.flatnonzero(active):
+                actions[i] = slots[i].act(obs[i])
+        actions[~active] = 0.0
+        obs, reward, terminated, truncated, info = env.step(actions)
+        done = (terminated | truncated) & active
+        for i in np.flatnonzero(active):
+            rec = records[i]
+            rec["obs"].append(obs[i].copy())
+            rec["reward"].append(float(reward[i]))
+            rec["distance"].append(float(info["distance"][i]))
+            rec["work"].append(_fin_work(info, i, obs[i], config, energy_weight))
+        for i in np.flatnonzero(done):
+            wall = bool(info["reward_wall"][i] < 0)
+            success = bool(info.get("is_success", np.zeros(n_envs, bool))[i])
+            trajectories[episode_of[i]] = _trajectory(records[i], dt, success, wall,
+                                                      bool(truncated[i] and not terminated[i]),
+                                                      seed + int(episode_of[i]))
+            bar.update(1)
+        if done.any():
+            assign(done)
+            obs = env.core.obs.copy()
+    bar.close()
+    env.close()
+    task = config.task
+    episodes = [episode_metrics(t, task) for t in trajectories]
+    metrics = {m: summarize([e[m] for e in episodes], confidence=confidence, seed=seed) for m in METRICS[task]}
+    return EvaluationResult(name, env_id, task, int(seed), _jsonable(env_kwargs), metrics, episodes,
+                            trajectories, time.perf_counter() - start)
+
+
+def _distance(obs: np.ndarray) -> float:
+    return float(math.hypot(obs[7], obs[8]))
+
+
+def _fin_work(info: dict, i: int, obs: np.ndarray, config, energy_weight: float) -> float:
+    """Fin work of one step [J]: from the energy term, or from the applied action if the term is switched off."""
+    if energy_weight > 0:
+        return float(-info["reward_energy"][i] / energy_weight)
+    from pectoral_gym.averaging import mean_fin_power
+
+    ranges = config.ranges
+    params = config.params
+    work = 0.0
+    for fin in range(2):
+        code = np.asarray(obs[11 + 4 * fin:15 + 4 * fin], dtype=float)
+        beat = ranges[:, 0] + 0.5 * (code + 1.0) * (ranges[:, 1] - ranges[:, 0])
+        work += mean_fin_power(beat[1], beat[2], beat[3], params.fin_span, params.fin_drag_constant)
+    return work * config.control_period
+
+
+def _trajectory(rec: dict[str, list], dt: float, success: bool, wall: bool, truncated: bool, seed: int) -> Trajectory:
+    obs = np.asarray(rec["obs"], dtype=float)
+    c, s = obs[:, 2], obs[:, 3]
+    target = np.column_stack([obs[:, 0] + c * obs[:, 7] - s * obs[:, 8], obs[:, 1] + s * obs[:, 7] + c * obs[:, 8]])
+    return Trajectory(xy=obs[:, :2].copy(), psi=np.arctan2(s, c), target=target,
+                      distance=np.asarray(rec["distance"]), reward=np.asarray(rec["reward"]),
+                      fin_work=np.asarray(rec["work"]), control_period=dt, success=success, wall=wall,
+                      truncated=truncated, seed=seed)
+
+
+def _jsonable(value: Any) -> Any:
+    return json.loads(json.dumps(value, default=_json_default))
+
+
+def plot_trajectories(results: EvaluationResult | list[EvaluationResult], path: str | Path,
+                      max_episodes: int = 12) -> Path:
+    """Top view of the tank with the first episodes of one or more evaluations (one panel each); PNG at ``path``."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
+
+    results = [results] if isinstance(results, EvaluationResult) else list(results)
+    fig, axes = plt.subplots(len(results), 1, figsize=(7.5, 4.2 * len(results)), squeeze=False)
+    for ax, result in zip(axes[:, 0], results, strict=True):
+        ax.add_patch(plt.Rectangle((0, 0), TANK_LENGTH, TANK_WIDTH, fill=False, lw=2, color="0.3"))
+        goal_radius = float(result.env_kwargs.get("goal_radius", 0.08))
+        for k, traj in enumerate(result.trajectories[:max_episodes]):
+            color = plt.cm.tab10(k % 10)
+            style = "-" if traj.success or result.task == "track" else "--"
+            ax.plot(traj.xy[:, 0], traj.xy[:, 1], style, color=color, lw=1.4)
+            ax.plot(*traj.xy[0], "o", color=color, ms=4)
+            if result.task == "goal":
+                ax.add_patch(plt.Circle(traj.target[0], goal_radius, color=color, alpha=0.25))
+                ax.plot(*traj.target[0], "x", color=color, ms=6)
+            else:
+                ax.plot(traj.target[:, 0], traj.target[:, 1], ":", color=color, lw=1)
+        title = f"{result.controller} on {result.env_id} ({result.task}"
+        title += ", randomised)" if result.env_kwargs.get("randomize") else ")"
+        metric = result.metrics.get("success") or result.metrics.get("tracking_error")
+        if metric is not None and not math.isnan(metric.mean):
+            label = "success" if result.task == "goal" else "tracking error"
+            unit = "" if result.task == "goal" else " m"
+            title += f": {label} {metric.mean:.3g}{unit} [{metric.low:.3g}, {metric.high:.3g}]"
+        ax.set_title(title, fontsize=9)
+        ax.set_xlim(-0.05, TANK_LENGTH + 0.05)
+        ax.set_ylim(-0.05, TANK_WIDTH + 0.05)
+        ax.set_aspect("equal")
+        ax.set_xlabel("X [m]")
+        ax.set_ylabel("Y [m]")
+    fig.text(0.01, 0.005, "o start, x goal (shaded: goal radius); dashed: goal not reached", fontsize=7)
+    fig.tight_layout()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def format_table(results: list[EvaluationResult]) -> str:
+    """Markdown table of the main metrics (mean [CI]) of several evaluations."""
+    columns = ("success", "time_to_goal", "tracking_error", "path_length", "fin_work", "return")
+    shown = [c for c in columns if any(c in r.metrics for r in results)]
+    lines = ["| controller | env | task | episodes | " + " | ".join(shown) + " |",
+             "|---" * (4 + len(shown)) + "|"]
+    for r in results:
+        cells = []
+        for c in shown:
+            m = r.metrics.get(c)
+            cells.append("-" if m is None or math.isnan(m.mean) else f"{m.mean:.3g} [{m.low:.3g}, {m.high:.3g}]")
+        env = r.env_id + (" (randomised)" if r.env_kwargs.get("randomize") else "")
+        lines.append(f"| {r.controller} | {env} | {r.task} | {r.n_episodes} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="python -m agents.evaluate", description=__doc__.split("\n\n")[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    who = parser.add_mutually_exclusive_group(required=True)
+    who.add_argument("--policy", metavar="RUN|ZIP", help="run folder of agents.train or an SB3 .zip")
+    who.add_argument("--baseline", metavar="NAME", help="baseline controller: random, hand or nmpc")
+    parser.add_argument("--env", default="PectoralFish-Full-v0", help="environment id")
+    parser.add_argument("--task", choices=("goal", "track"), help="task (default: the run's task, else goal)")
+    parser.add_argument("--randomize", nargs="?", const="default", metavar="JSON",
+                        help="per-episode parameter randomisation: alone for the default preset "
+                             f"{DEFAULT_RANDOMIZATION}, or a JSON dict {{field: relative half-width}}")
+    parser.add_argument("--env-kwargs", default="{}", metavar="JSON", help="more environment arguments")
+    parser.add_argument("--episodes", type=int, default=100, help="number of episodes")
+    parser.add_argument("--seed", type=int, default=0, help="episode k is reset with seed + k")
+    parser.add_argument("--n-envs", type=int, help="vector-env slots (default: up to 128)")
+    parser.add_argument("--algo", help="algorithm of a bare .zip if it cannot be read from it")
+    parser.add_argument("--out", metavar="DIR", help="output folder (default: runs/eval/<controller>_<env>_<task>...)")
+    parser.add_argument("--plot-episodes", type=int, default=12, help="episodes drawn in the trajectory plot")
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point (see the module docstring)."""
+    args = _parse_args(argv)
+    try:
+        env_kwargs = json.loads(args.env_kwargs)
+        if not isinstance(env_kwargs, dict):
+            raise ValueError("--env-kwargs must be a JSON object")
+        if args.policy:
+            from agents.policy import load_policy, read_config
+
+            run_kwargs = read_config(args.policy).get("env_kwargs", {}) if Path(args.policy).is_dir() else {}
+            env_kwargs = {**{k: v for k, v in run_kwargs.items() if k != "randomize"}, **env_kwargs}
+            controller: ControllerLike = load_policy(args.policy, algo=args.algo)
+            name = Path(args.policy).name.removesuffix(".zip")
+        else:
+            from agents.baselines import make_baseline
+            from pectoral_gym.envs.core import EnvConfig
+            from pectoral_gym.registration import ENV_IDS
+
+            baseline_kwargs = {**env_kwargs, **({"task": args.task} if args.task else {})}
+            config = EnvConfig(model=ENV_IDS.get(args.env, "full"), **baseline_kwargs)
+            controller = lambda: make_baseline(args.baseline, config)  # noqa: E731 - factory, one per slot
+            name = args.baseline
+        if args.task:
+            env_kwargs["task"] = args.task
+        if args.randomize:
+            env_kwargs["randomize"] = DEFAULT_RANDOMIZATION if args.randomize == "default" else json.loads(
+                args.randomize)
+        result = evaluate(controller, args.env, n_episodes=args.episodes, seed=args.seed, env_kwargs=env_kwargs,
+                          n_envs=args.n_envs, progress=True)
+    except (ValueError, TypeError, FileNotFoundError, json.JSONDecodeError) as error:
+        print(f"error: {error}")
+        return 2
+    tag = f"{name}_{args.env}_{result.task}" + ("_rand" if env_kwargs.get("randomize") else "") + f"_seed{args.seed}"
+    out = Path(args.out) if args.out else Path("runs") / "eval" / tag
+    json_path = write_json(result, out / "metrics.json")
+    plot_path = plot_trajectories(result, out / "trajectories.png", max_episodes=args.plot_episodes)
+    print(format_table([result]))
+    print(f"wrote {json_path} and {plot_path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
