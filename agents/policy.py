@@ -109,7 +109,7 @@ class SB3Controller:
 
 
 def algo_of_zip(path: str | Path) -> str | None:
-    """The algorithm (``"ppo"``, ``"sac"``, ...) that saved an SB3 ``.zip``, from its saved attributes; else ``None``."""
+    """The algorithm (``"ppo"``, ``"sac"``, ...) that saved an SB3 ``.zip`` (from its attributes), or ``None``."""
     try:
         with zipfile.ZipFile(path) as archive:
             data = json.loads(archive.read("data").decode())
