@@ -1,0 +1,317 @@
+"""Emulated robotic fish: speaks the radio protocol, runs the full model, obeys the firmware rules.
+
+Use it in-process (:class:`EmulatedRobot`, as ``hardware.deploy --emulate`` and the tests do) or as a
+process that listens on a pseudo-terminal or a TCP port::
+
+    python -m hardware.emulator                       # prints the pty path, e.g. /dev/pts/7
+    python -m hardware.emulator --port 5700 --camera-port 5600 --speed 2
+
+then ``python -m hardware.deploy --port socket://127.0.0.1:5700 --camera emu://127.0.0.1:5600 ...``.
+
+The emulator stands in for both XBee modules and the dsPIC: it reads the PC's Transmit Request frames
+and answers with Receive Packet frames. Its clock runs ``speed`` times faster than the wall clock;
+every time it reports (pose timestamps) is on the wall ``time.monotonic()`` base, so the PC side
+scales with the same ``speed``. Firmware times (watchdog) are emulated-robot seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import select
+import socket
+import threading
+import time
+
+import numpy as np
+
+from hardware import protocol as pr
+from hardware.firmware import Firmware, FirmwareConfig
+from pectoral_gym.models import FullModel
+from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
+
+__all__ = ["EmulatedRobot", "ROBOT_ADDRESS", "main"]
+
+ROBOT_ADDRESS = 0x0013A20000000001  # 64-bit source address the emulated XBee reports
+_CHUNK = 0.01  # physics step between firmware ticks [emulated s]
+_POLL = 0.002  # wall-clock poll period of the I/O loop [s]
+
+
+class EmulatedRobot:
+    """One emulated fish behind a byte stream.
+
+    Args:
+        port: TCP port to listen on (0 picks a free one); ``None`` with ``pty=True`` uses a pseudo-terminal.
+        pty: Listen on a pseudo-terminal instead of TCP (``url`` is the slave device path).
+        host: TCP interface.
+        speed: Emulated seconds per wall-clock second (1 = real time).
+        params: Model parameters (Table 1 defaults).
+        firmware: Robot-side rules (watchdog, servo limits).
+        start_pose: Initial ``(X, Y, psi)`` [m, m, rad]; default the tank centre, heading +X.
+        loss: Probability that an incoming message is lost (radio loss injection for tests).
+        camera_port: Serve rendered overhead frames on this TCP port (``hardware.camera.FrameServer``).
+        camera_fps: Frame rate of the served camera [wall frames/s].
+        seed: Seed of the loss injection and camera noise.
+    """
+
+    def __init__(self, port: int | None = 0, pty: bool = False, host: str = "127.0.0.1", speed: float = 1.0,
+                 params: FishParams | None = None, firmware: FirmwareConfig | None = None,
+                 start_pose: tuple[float, float, float] | None = None, loss: float = 0.0,
+                 camera_port: int | None = None, camera_fps: float = 30.0, seed: int | None = None):
+        if not (math.isfinite(speed) and speed > 0):
+            raise ValueError(f"speed must be a finite number > 0, got {speed!r}")
+        if not 0.0 <= loss < 1.0:
+            raise ValueError(f"loss must be in [0, 1), got {loss!r}")
+        self.speed = float(speed)
+        self.loss = float(loss)
+        self.model = FullModel(1, params)
+        FullModel(1, params).advance(_CHUNK)  # load the compiled kernels now, not while the PC waits for acks
+        self.firmware = Firmware(firmware)
+        self.decoder = pr.StreamDecoder()
+        self.received: list[pr.Message] = []  # every valid message, in arrival order (for tests and logs)
+        self.lost_messages = 0
+        self._rng = np.random.default_rng(seed)
+        self._seed = seed
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._origin = time.monotonic()
+        self._client: socket.socket | None = None
+        self._listener: socket.socket | None = None
+        self._master: int | None = None
+        self._slave: int | None = None
+        self._frame_server = None
+        self._camera_port, self._camera_fps = camera_port, float(camera_fps)
+        if pty:
+            self._master, self._slave = os.openpty()
+            self.url = os.ttyname(self._slave)
+        else:
+            self._listener = socket.create_server((host, 0 if port is None else int(port)))
+            self._listener.setblocking(False)
+            self.host, self.port = self._listener.getsockname()[:2]
+            self.url = f"socket://{self.host}:{self.port}"
+        self.place(*(start_pose or (0.5 * TANK_LENGTH, 0.5 * TANK_WIDTH, 0.0)))
+
+    # ------------------------------------------------------------ clock and state
+    def now(self) -> float:
+        """Emulated time since :meth:`start` [s]."""
+        return (time.monotonic() - self._origin) * self.speed
+
+    def place(self, x: float, y: float, psi: float) -> None:
+        """Put the fish at rest at ``(x, y, psi)`` with both fins still (a hand in the tank)."""
+        with self._lock:
+            time_now = self.model.time
+            self.model.reset(np.array([x, y, psi, 0.0, 0.0, 0.0]), index=np.arange(1))
+            self.model.time = time_now
+
+    def state(self) -> np.ndarray:
+        """``(6,)`` true state ``X, Y, psi, vx, vy, omega``."""
+        with self._lock:
+            return self.model.state[0].copy()
+
+    def pose(self) -> tuple[float, float, float]:
+        """True ``(X, Y, psi)`` [m, m, rad]."""
+        return self.pose_stamped()[0]
+
+    def pose_stamped(self) -> tuple[tuple[float, float, float], float]:
+        """True pose and the wall ``time.monotonic()`` instant it belongs to (``EmulatedCamera``'s ``pose_fn``)."""
+        with self._lock:
+            x, y, psi = self.model.state[0, :3].tolist()
+            stamp = self._origin + self.model.time / self.speed
+        return (x, y, psi), stamp
+
+    def fin_rates(self) -> np.ndarray:
+        """``(2,)`` fin angular rates [rad/s] (right, left); zero when the fins are still."""
+        with self._lock:
+            return self.model.fin_angles()[1][0].copy()
+
+    def camera(self, conditions=None, seed: int | None = None, camera=None):
+        """An in-process ``hardware.camera.EmulatedCamera`` looking at this fish."""
+        from hardware.camera import EmulatedCamera
+
+        return EmulatedCamera(self.pose_stamped, camera, conditions, self._seed if seed is None else seed)
+
+    # ------------------------------------------------------------ life cycle
+    def start(self) -> EmulatedRobot:
+        """Start the emulation thread (and the frame server); returns ``self``."""
+        if self._thread is not None:
+            return self
+        self._origin = time.monotonic() - self.model.time / self.speed
+        self._thread = threading.Thread(target=self._run, name="emulated-robot", daemon=True)
+        self._thread.start()
+        if self._camera_port is not None:
+            from hardware.camera import FrameServer
+
+            self._frame_server = FrameServer(self.camera(), port=self._camera_port, fps=self._camera_fps)
+        return self
+
+    @property
+    def camera_spec(self) -> str | None:
+        """``emu://host:port`` of the frame server, if one is running."""
+        return None if self._frame_server is None else self._frame_server.spec
+
+    def stop(self) -> None:
+        """Stop the emulation and close every endpoint (idempotent)."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+        if self._frame_server is not None:
+            self._frame_server.close()
+            self._frame_server = None
+        for sock in (self._client, self._listener):
+            if sock is not None:
+                sock.close()
+        self._client = self._listener = None
+        for fd in (self._master, self._slave):
+            if fd is not None:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self._master = self._slave = None
+
+    def __enter__(self) -> EmulatedRobot:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    # ------------------------------------------------------------ emulation loop
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            data = self._poll()
+            if data:
+                self._handle(data)
+            self._advance(self.now())
+
+    def _poll(self) -> bytes:
+        if self._master is not None:
+            ready, _, _ = select.select([self._master], [], [], _POLL)
+            if ready:
+                try:
+                    return os.read(self._master, 4096)
+                except OSError:
+                    return b""
+            return b""
+        fds = [self._listener] + ([self._client] if self._client is not None else [])
+        try:
+            ready, _, _ = select.select(fds, [], [], _POLL)
+        except (OSError, ValueError):
+            return b""
+        data = b""
+        for sock in ready:
+            if sock is self._listener:
+                try:
+                    client, _ = self._listener.accept()
+                except OSError:
+                    continue
+                if self._client is not None:
+                    self._client.close()  # the newest PC connection wins
+                self._client = client
+            else:
+                try:
+                    data = sock.recv(4096)
+                except OSError:
+                    data = b""
+                if not data:
+                    sock.close()
+                    self._client = None
+        return data
+
+    def _write(self, raw: bytes) -> None:
+        try:
+            if self._master is not None:
+                os.write(self._master, raw)
+            elif self._client is not None:
+                self._client.sendall(raw)
+        except OSError:
+            pass
+
+    def _handle(self, data: bytes) -> None:
+        messages = self.decoder.feed(data)
+        now = self.now()
+        with self._lock:
+            self.firmware.crc_errors = self.decoder.crc_errors + self.decoder.checksum_errors
+            replies = []
+            for msg in messages:
+                if self.loss and self._rng.random() < self.loss:
+                    self.lost_messages += 1
+                    continue
+                self.received.append(msg)
+                reply = self.firmware.receive(msg, now)
+                if reply is not None:
+                    replies.append(reply)
+            self._apply_firmware()
+        for reply in replies:
+            self._write(pr.encode_frame(pr.rx_packet(pr.encode_message(reply), ROBOT_ADDRESS)))
+
+    def _apply_firmware(self) -> None:
+        """Hand the firmware's decision to the model (call with the lock held)."""
+        fw = self.firmware
+        if fw.halt:
+            angles = self.model.fin_angles()[0][0]
+            time_now = self.model.time
+            self.model.reset(self.model.state.copy(), right=FinBeat.rest(float(angles[0])),
+                             left=FinBeat.rest(float(angles[1])), index=np.arange(1))
+            self.model.time = time_now
+            fw.halt = False
+        elif fw.running:
+            self.model.command_array(fw.setpoint.reshape(1, 2, 4))  # latched at the next turning point
+
+    def _advance(self, target: float) -> None:
+        while True:
+            with self._lock:
+                t = self.model.time
+                if t >= target:
+                    return
+                self.firmware.tick(t, self.model.fin_angles()[0][0])
+                self._apply_firmware()
+                self.model.advance(min(_CHUNK, target - t))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run an emulated robot until Ctrl-C (or ``--duration``)."""
+    parser = argparse.ArgumentParser(prog="python -m hardware.emulator", description=__doc__.split("\n\n")[0])
+    parser.add_argument("--port", type=int, default=None, metavar="TCP_PORT",
+                        help="listen on this TCP port (default: a pseudo-terminal)")
+    parser.add_argument("--host", default="127.0.0.1", help="TCP interface (default %(default)s)")
+    parser.add_argument("--speed", type=float, default=1.0, help="emulated seconds per wall second (default 1)")
+    parser.add_argument("--watchdog", type=float, default=0.5, metavar="S",
+                        help="firmware watchdog timeout, <= 1 s (default %(default)s)")
+    parser.add_argument("--camera-port", type=int, default=None, help="serve overhead camera frames on this port")
+    parser.add_argument("--camera-fps", type=float, default=30.0, help="served frame rate (default %(default)s)")
+    parser.add_argument("--start", type=float, nargs=3, metavar=("X", "Y", "PSI_DEG"), default=None,
+                        help="start pose [m, m, deg] (default: tank centre, heading +X)")
+    parser.add_argument("--loss", type=float, default=0.0, help="probability of losing an incoming message")
+    parser.add_argument("--seed", type=int, default=None, help="seed of loss injection and camera noise")
+    parser.add_argument("--duration", type=float, default=None, metavar="S", help="exit after this many wall s")
+    args = parser.parse_args(argv)
+    start = None if args.start is None else (args.start[0], args.start[1], math.radians(args.start[2]))
+    try:
+        robot = EmulatedRobot(port=args.port, pty=args.port is None, host=args.host, speed=args.speed,
+                              firmware=FirmwareConfig(watchdog_timeout=args.watchdog), start_pose=start,
+                              loss=args.loss, camera_port=args.camera_port, camera_fps=args.camera_fps,
+                              seed=args.seed)
+    except (ValueError, OSError) as err:
+        parser.error(str(err))
+    robot.start()
+    print(f"emulated robot listening on {robot.url}", flush=True)
+    if robot.camera_spec:
+        print(f"camera frames on {robot.camera_spec}", flush=True)
+    deadline = None if args.duration is None else time.monotonic() + args.duration
+    try:
+        while deadline is None or time.monotonic() < deadline:
+            time.sleep(0.2)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        robot.stop()
+        x, y, psi = robot.pose()
+        print(f"stopped at X={x:.3f} m, Y={y:.3f} m, psi={math.degrees(psi):.1f} deg; "
+              f"{robot.decoder.messages} messages, firmware state {robot.firmware.state.name}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,386 @@
+"""Wire protocol between the PC and the robotic fish: XBee API frames (mode 2) carrying our messages.
+
+Two layers (byte layouts, timing and rules in ``docs/protocol.md``):
+
+* **XBee API frame, escaped (AP = 2)**: ``0x7E``, length (2 bytes, big endian), frame data, checksum
+  ``0xFF - (sum of frame data & 0xFF)``. Every byte after the start delimiter that is ``0x7E``, ``0x7D``,
+  ``0x11`` or ``0x13`` goes out as ``0x7D, byte ^ 0x20``; length and checksum count unescaped bytes.
+  The PC sends *Transmit Request* frames (``0x10``, 64-bit destination); the robot's XBee delivers
+  them to the dsPIC as *Receive Packet* frames (``0x90``) and vice versa.
+* **Message** (the RF data inside those frames): ``version, type, session, seq (u16)``, a body, and a
+  CRC-16/CCITT-FALSE of everything before it (the XBee checksum is only 8 bits). Big endian throughout.
+
+Encoders and decoders are pure functions; :class:`StreamDecoder` turns an arbitrary byte stream into
+valid messages (it resynchronises on garbage and never yields a damaged message) and
+:class:`SequenceTracker` classifies sequence numbers as new, duplicate or stale (16-bit wrap-around).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import struct
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+
+__all__ = [
+    "START", "ESCAPE", "XON", "XOFF", "TX_REQUEST", "RX_PACKET", "BROADCAST", "PROTOCOL_VERSION",
+    "MsgType", "RobotState", "Status", "Message", "ProtocolError",
+    "crc16", "checksum", "escape", "unescape", "encode_frame", "decode_frame",
+    "tx_request", "rx_packet", "rf_data", "encode_message", "decode_message",
+    "StreamDecoder", "SequenceTracker", "Verdict",
+]
+
+START, ESCAPE, XON, XOFF = 0x7E, 0x7D, 0x11, 0x13
+_SPECIAL = frozenset((START, ESCAPE, XON, XOFF))
+TX_REQUEST = 0x10  # XBee Transmit Request (64-bit destination)
+RX_PACKET = 0x90  # XBee Receive Packet
+BROADCAST = 0x000000000000FFFF  # 64-bit broadcast address
+MAX_FRAME_DATA = 255  # longest frame data we accept; our frames are far shorter
+PROTOCOL_VERSION = 1
+
+_HEADER = struct.Struct(">BBBH")  # version, type, session, seq
+_FINS = struct.Struct(">8H")  # per fin: bias [mrad], amplitude [mrad], period [ms], ratio [1/1000]
+_STATUS = struct.Struct(">HBBBHHHI")  # ack seq, ack type, state, flags, crc errors, duplicates, stale, uptime [ms]
+_CRC = struct.Struct(">H")
+_FIN_SCALE = (1000.0, 1000.0, 1000.0, 1000.0)  # SI value * scale = wire integer
+
+
+class ProtocolError(ValueError):
+    """A frame or message that cannot be decoded; ``reason`` is a short machine-readable tag."""
+
+    def __init__(self, reason: str, detail: str):
+        super().__init__(f"{reason}: {detail}")
+        self.reason = reason
+
+
+class MsgType(enum.IntEnum):
+    """Message types (byte 1 of a message)."""
+
+    SET_FINS = 0x01  # PC -> robot: both fins' (bias, amplitude, period, ratio), absolute setpoints
+    STOP = 0x02  # PC -> robot: hold both fins still now
+    HEARTBEAT = 0x03  # PC -> robot: keep-alive, changes nothing
+    STATUS = 0x81  # robot -> PC: acknowledgement and health
+
+
+class RobotState(enum.IntEnum):
+    """The robot's state, reported in :class:`Status`."""
+
+    IDLE = 0  # powered up, no command yet; fins still
+    RUNNING = 1  # beating its fins at the commanded pattern
+    STOPPED = 2  # stopped by a STOP message; fins still
+    WATCHDOG = 3  # no valid frame for the watchdog time; fins still
+
+
+class StatusFlag(enum.IntFlag):
+    """Bits of :attr:`Status.flags`."""
+
+    CLIPPED = 0x01  # the last SET_FINS was clipped to the servo limits
+    RATE_LIMITED = 0x02  # the setpoint is still slewing towards the last SET_FINS
+
+
+@dataclass(frozen=True)
+class Status:
+    """Body of a STATUS message: which message it acknowledges and the robot's health counters."""
+
+    ack_seq: int
+    ack_type: int
+    state: int
+    flags: int = 0
+    crc_errors: int = 0
+    duplicates: int = 0
+    stale: int = 0
+    uptime_ms: int = 0
+
+
+@dataclass(frozen=True)
+class Message:
+    """One message. ``fins`` (8 floats, right fin first, SI) for SET_FINS; ``status`` for STATUS."""
+
+    type: MsgType
+    seq: int
+    session: int = 0
+    fins: tuple[float, ...] | None = None
+    status: Status | None = field(default=None)
+
+
+# ---------------------------------------------------------------- checks
+def crc16(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, no reflection, no final xor (check 0x29B1)."""
+    crc = 0xFFFF
+    for byte in data:
+        crc ^= byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
+    return crc
+
+
+def checksum(frame_data: bytes) -> int:
+    """XBee API checksum: ``0xFF`` minus the low byte of the sum of the frame data."""
+    return 0xFF - (sum(frame_data) & 0xFF)
+
+
+# ---------------------------------------------------------------- XBee frames
+def escape(data: bytes) -> bytes:
+    """API mode 2 escaping: ``0x7E 0x7D 0x11 0x13`` -> ``0x7D, byte ^ 0x20``."""
+    out = bytearray()
+    for byte in data:
+        if byte in _SPECIAL:
+            out += bytes((ESCAPE, byte ^ 0x20))
+        else:
+            out.append(byte)
+    return bytes(out)
+
+
+def unescape(data: bytes) -> bytes:
+    """Undo :func:`escape`; raises :class:`ProtocolError` on a dangling escape or a raw ``0x7E``."""
+    out = bytearray()
+    it = iter(data)
+    for byte in it:
+        if byte == START:
+            raise ProtocolError("framing", "unescaped 0x7E inside a frame")
+        if byte == ESCAPE:
+            nxt = next(it, None)
+            if nxt is None:
+                raise ProtocolError("framing", "frame ends with an escape byte")
+            byte = nxt ^ 0x20
+        out.append(byte)
+    return bytes(out)
+
+
+def encode_frame(frame_data: bytes) -> bytes:
+    """One escaped API frame around ``frame_data`` (frame type byte first)."""
+    if not 1 <= len(frame_data) <= MAX_FRAME_DATA:
+        raise ValueError(f"frame data must be 1..{MAX_FRAME_DATA} bytes, got {len(frame_data)}")
+    body = struct.pack(">H", len(frame_data)) + frame_data + bytes((checksum(frame_data),))
+    return bytes((START,)) + escape(body)
+
+
+def decode_frame(raw: bytes) -> bytes:
+    """Frame data of exactly one escaped API frame; :class:`ProtocolError` if it is not one."""
+    if not raw or raw[0] != START:
+        raise ProtocolError("framing", "a frame starts with 0x7E")
+    body = unescape(raw[1:])
+    if len(body) < 4:
+        raise ProtocolError("truncated", f"{len(body)} bytes after the delimiter")
+    length = (body[0] << 8) | body[1]
+    if len(body) != length + 3:
+        raise ProtocolError("length", f"length field {length}, got {len(body) - 3} data bytes")
+    data, cs = body[2:-1], body[-1]
+    if checksum(data) != cs:
+        raise ProtocolError("checksum", f"expected 0x{checksum(data):02X}, got 0x{cs:02X}")
+    return data
+
+
+def tx_request(payload: bytes, dest64: int = BROADCAST, frame_id: int = 0) -> bytes:
+    """Frame data of a Transmit Request (0x10); ``frame_id`` 0 asks the XBee for no Transmit Status."""
+    return struct.pack(">BBQHBB", TX_REQUEST, frame_id, dest64, 0xFFFE, 0, 0) + payload
+
+
+def rx_packet(payload: bytes, src64: int = 0, src16: int = 0xFFFE, options: int = 0x01) -> bytes:
+    """Frame data of a Receive Packet (0x90) as the receiving XBee hands it over (options 0x01 = acked)."""
+    return struct.pack(">BQHB", RX_PACKET, src64, src16, options) + payload
+
+
+def rf_data(frame_data: bytes) -> bytes | None:
+    """The RF data of a Transmit Request or Receive Packet; ``None`` for any other frame type."""
+    if frame_data[0] == TX_REQUEST and len(frame_data) >= 14:
+        return frame_data[14:]
+    if frame_data[0] == RX_PACKET and len(frame_data) >= 12:
+        return frame_data[12:]
+    return None
+
+
+# ---------------------------------------------------------------- messages
+def _fins_to_wire(fins: Sequence[float]) -> bytes:
+    values = [float(v) for v in fins]
+    if len(values) != 8:
+        raise ValueError(f"SET_FINS needs 8 values (right fin then left fin), got {len(values)}")
+    words = []
+    for i, v in enumerate(values):
+        if not math.isfinite(v):
+            raise ValueError(f"SET_FINS value {i} is not finite: {v!r}")
+        w = round(v * _FIN_SCALE[i % 4])
+        if not 0 <= w <= 0xFFFF:
+            raise ValueError(f"SET_FINS value {i} = {v!r} does not fit the wire format (0..65.535 in SI units)")
+        words.append(w)
+    return _FINS.pack(*words)
+
+
+def encode_message(msg: Message) -> bytes:
+    """RF data of ``msg``: header, body, CRC-16."""
+    if not 0 <= msg.seq <= 0xFFFF or not 0 <= msg.session <= 0xFF:
+        raise ValueError(f"seq must be 0..65535 and session 0..255, got {msg.seq}, {msg.session}")
+    if msg.type == MsgType.SET_FINS:
+        if msg.fins is None:
+            raise ValueError("SET_FINS needs fins")
+        body = _fins_to_wire(msg.fins)
+    elif msg.type == MsgType.STATUS:
+        if msg.status is None:
+            raise ValueError("STATUS needs status")
+        s = msg.status
+        body = _STATUS.pack(s.ack_seq & 0xFFFF, s.ack_type & 0xFF, s.state & 0xFF, s.flags & 0xFF,
+                            min(s.crc_errors, 0xFFFF), min(s.duplicates, 0xFFFF), min(s.stale, 0xFFFF),
+                            s.uptime_ms & 0xFFFFFFFF)
+    else:
+        body = b""
+    head = _HEADER.pack(PROTOCOL_VERSION, int(msg.type), msg.session, msg.seq) + body
+    return head + _CRC.pack(crc16(head))
+
+
+_BODY_SIZE = {MsgType.SET_FINS: _FINS.size, MsgType.STOP: 0, MsgType.HEARTBEAT: 0, MsgType.STATUS: _STATUS.size}
+
+
+def decode_message(payload: bytes) -> Message:
+    """Parse RF data into a :class:`Message`.
+
+    Raises:
+        ProtocolError: Not a valid message (``reason``: ``crc``, ``length``, ``version`` or ``type``).
+    """
+    if len(payload) < _HEADER.size + _CRC.size:
+        raise ProtocolError("length", f"message of {len(payload)} bytes is shorter than header + CRC")
+    (crc,) = _CRC.unpack_from(payload, len(payload) - 2)
+    if crc16(payload[:-2]) != crc:
+        raise ProtocolError("crc", f"CRC-16 mismatch (got 0x{crc:04X})")
+    version, kind, session, seq = _HEADER.unpack_from(payload)
+    if version != PROTOCOL_VERSION:
+        raise ProtocolError("version", f"protocol version {version}, expected {PROTOCOL_VERSION}")
+    try:
+        mtype = MsgType(kind)
+    except ValueError:
+        raise ProtocolError("type", f"unknown message type 0x{kind:02X}") from None
+    body = payload[_HEADER.size:-2]
+    if len(body) != _BODY_SIZE[mtype]:
+        raise ProtocolError("length", f"{mtype.name} body of {len(body)} bytes, expected {_BODY_SIZE[mtype]}")
+    if mtype == MsgType.SET_FINS:
+        words = _FINS.unpack(body)
+        fins = tuple(w / _FIN_SCALE[i % 4] for i, w in enumerate(words))
+        return Message(mtype, seq, session, fins=fins)
+    if mtype == MsgType.STATUS:
+        return Message(mtype, seq, session, status=Status(*_STATUS.unpack(body)))
+    return Message(mtype, seq, session)
+
+
+# ---------------------------------------------------------------- streaming
+class StreamDecoder:
+    """Resynchronising decoder: bytes in, valid messages out.
+
+    Any byte sequence is accepted. Bytes before a start delimiter are skipped; a ``0x7E`` inside a
+    frame abandons that frame and starts a new one; a length above ``MAX_FRAME_DATA``, a bad
+    escape, a bad checksum or a bad CRC drops the frame. Only messages that pass every check are
+    returned. Counters (cumulative): ``frames`` (good XBee frames), ``messages``, ``skipped_bytes``,
+    ``framing_errors``, ``truncated``, ``checksum_errors``, ``crc_errors``, ``malformed`` (other
+    message errors), ``other_frames`` (valid frames of other XBee types, e.g. Transmit Status).
+    """
+
+    def __init__(self):
+        self._buf = bytearray()
+        self._in_frame = False
+        self._escaped = False
+        self.frames = self.messages = self.skipped_bytes = self.framing_errors = 0
+        self.truncated = self.checksum_errors = self.crc_errors = self.malformed = self.other_frames = 0
+
+    def counters(self) -> dict[str, int]:
+        """All error and traffic counters."""
+        names = ("frames", "messages", "skipped_bytes", "framing_errors", "truncated", "checksum_errors",
+                 "crc_errors", "malformed", "other_frames")
+        return {name: getattr(self, name) for name in names}
+
+    def feed(self, data: bytes) -> list[Message]:
+        """Consume ``data``; return the messages completed by it (possibly none)."""
+        out: list[Message] = []
+        for byte in data:
+            if byte == START:
+                if self._in_frame and self._buf:
+                    self.truncated += 1  # a new frame began before the previous one was complete
+                self._buf.clear()
+                self._in_frame, self._escaped = True, False
+                continue
+            if not self._in_frame:
+                self.skipped_bytes += 1
+                continue
+            if self._escaped:
+                byte ^= 0x20
+                self._escaped = False
+            elif byte == ESCAPE:
+                self._escaped = True
+                continue
+            self._buf.append(byte)
+            self._check(out)
+        return out
+
+    def _check(self, out: list[Message]) -> None:
+        buf = self._buf
+        if len(buf) < 2:
+            return
+        length = (buf[0] << 8) | buf[1]
+        if length == 0 or length > MAX_FRAME_DATA:
+            self.framing_errors += 1
+            self._in_frame = False
+            return
+        if len(buf) < length + 3:
+            return
+        data, cs = bytes(buf[2:-1]), buf[-1]
+        self._in_frame = False
+        if checksum(data) != cs:
+            self.checksum_errors += 1
+            return
+        self.frames += 1
+        payload = rf_data(data)
+        if payload is None:
+            self.other_frames += 1
+            return
+        try:
+            msg = decode_message(payload)
+        except ProtocolError as err:
+            if err.reason == "crc":
+                self.crc_errors += 1
+            else:
+                self.malformed += 1
+            return
+        self.messages += 1
+        out.append(msg)
+
+
+class Verdict(enum.Enum):
+    """Classification of a received sequence number."""
+
+    NEW = "new"
+    DUPLICATE = "duplicate"
+    STALE = "stale"
+
+
+class SequenceTracker:
+    """Sequence-number bookkeeping of one direction (serial-number arithmetic, 16-bit wrap-around).
+
+    ``d = (seq - last) mod 2**16``: ``d = 0`` duplicate; ``1 <= d < 2**15`` new (``d - 1`` messages
+    lost in between); ``d >= 2**15`` stale (older than the last one: reordered or a late retry). A
+    change of ``session`` or :meth:`reset` accepts the next number as new.
+    """
+
+    def __init__(self):
+        self.last: int | None = None
+        self.session: int | None = None
+        self.new = self.duplicates = self.stale = self.lost = 0
+
+    def reset(self) -> None:
+        """Forget the last number (after a watchdog timeout or a reconnect)."""
+        self.last = None
+
+    def check(self, seq: int, session: int = 0) -> Verdict:
+        """Classify ``seq`` and update the counters; a new number becomes the last one."""
+        if self.last is None or session != self.session:
+            self.last, self.session = seq, session
+            self.new += 1
+            return Verdict.NEW
+        d = (seq - self.last) & 0xFFFF
+        if d == 0:
+            self.duplicates += 1
+            return Verdict.DUPLICATE
+        if d >= 0x8000:
+            self.stale += 1
+            return Verdict.STALE
+        self.lost += d - 1
+        self.last = seq
+        self.new += 1
+        return Verdict.NEW
