@@ -1,0 +1,165 @@
+"""Tests of the averaged-model validation (scaling.validate, scaling.plots)."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from pectoral_gym.averaging import averaged_forcing
+from pectoral_gym.dynamics import body_rhs
+from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
+from pectoral_gym.steady import steady_state
+from scaling import validate as sv
+from scaling.grids import GRIDS
+from scaling.plots import identification_points
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def constant_k(k_fx: float, k_fy: float, k_m: float, metadata: dict | None = None) -> ScalingFunctions:
+    """Scaling functions that are constants."""
+    return ScalingFunctions(np.zeros((3, 1, 5)), np.array([[k_fx], [k_fy], [k_m]]), metadata or {})
+
+
+def exact_k(beat: FinBeat, params: FishParams) -> tuple[float, float, float]:
+    """K that makes the averaged model's equilibrium the full model's steady state (paper-notes, NMPC oracle).
+
+    The averaged body dynamics are ``dv/dt = f(v) + M^-1 (K * forcing)``, so at the full model's
+    cycle-averaged velocities ``v_ref``: ``K_i = -f_i(v_ref) / (M^-1 forcing)_i``.
+    """
+    ref = steady_state("full", right=beat, params=params)
+    coef = coefficient_vector(params)
+    drift = np.array(body_rhs(ref.vx, ref.vy, ref.omega, 0.0, 0.0, 0.0, coef))
+    forcing = averaged_forcing(beat, params, side="right")
+    unit_push = [np.array(body_rhs(ref.vx, ref.vy, ref.omega, *(forcing[j] if j == i else 0.0 for j in range(3)),
+                                   coef))[i] - drift[i] for i in range(3)]
+    return tuple(float(-drift[i] / unit_push[i]) for i in range(3))
+
+
+def test_relative_error_and_summary_on_hand_made_numbers():
+    err = sv.relative_error([1.1, 0.9, 2.0, np.nan, -3.0], [1.0, 1.0, 0.0, 1.0, -2.0])
+    np.testing.assert_allclose(err[[0, 1, 4]], [0.1, 0.1, 0.5])
+    assert np.isnan(err[2]) and np.isnan(err[3])  # exact 0 and missing values are undefined
+
+    s = sv.summarize([0.01, 0.03, 0.02, np.nan, 0.10], ["a", "b", "c", "d", "e"])
+    assert s["n"] == 4
+    assert s["median"] == pytest.approx(0.025)  # mean of 0.02 and 0.03
+    assert s["p90"] == pytest.approx(0.03 + 0.7 * (0.10 - 0.03))  # linear interpolation at rank 0.9 * 3 = 2.7
+    assert s["worst"] == pytest.approx(0.10) and s["worst_pattern"] == "e"
+    assert sv.summarize([np.nan], ["x"])["n"] == 0
+
+
+def test_quick_cli_writes_report_json_and_plots(tmp_path, capsys):
+    coefficients = tmp_path / "unit.json"
+    ScalingFunctions.unit().save(coefficients)
+    out = tmp_path / "val"
+    assert sv.main(["--coefficients", str(coefficients), "--out", str(out), "--quick", "--no-progress"]) == 0
+
+    results = json.loads((out / "validation.json").read_text())  # strict JSON: no NaN/Infinity
+    for section in ("table4", "single_fin", "sweep", "two_fin", "targets", "timing_s"):
+        assert section in results
+    assert len(results["targets"]) == 7
+    assert all(isinstance(t["met"], bool) for t in results["targets"])
+    assert results["two_fin"]["position_m"]["n"] == len(results["two_fin"]["rows"]) > 0
+    report = (out / "report.md").read_text()
+    for heading in ("## Targets", "## 1. Table 4", "## 2. Random single-fin", "## 3. Forward swimming sweep",
+                    "## 4. Random two-fin", "## Figures", "## Timing"):
+        assert heading in report
+    assert "amplitude < 5 deg or ratio < 1.25" in report  # the exclusion is stated
+    assert len(results["plots"]) == 4
+    for name in results["plots"]:
+        data = (out / name).read_bytes()
+        assert data.startswith(PNG_MAGIC) and len(data) > 10_000
+        assert f"]({name})" in report
+    printed = capsys.readouterr().out
+    assert "MISSED" in printed and str(out / "report.md") in printed
+
+
+def test_cli_rejects_bad_arguments(tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text("{not json")
+    for argv in (["--coefficients", str(bad)], ["--n-single", "0"], ["--coefficients", str(tmp_path / "none.json")]):
+        with pytest.raises(SystemExit) as exc:
+            sv.main(argv + ["--out", str(tmp_path / "x"), "--quick"])
+        assert exc.value.code == 2
+    assert "not valid JSON" in capsys.readouterr().err
+
+
+def test_unit_k_is_detected_as_bad():
+    """With K = 1 the averaged model turns about twice as fast (paper-notes): Table 4 radii far off."""
+    params = FishParams()
+    table = sv.table4_section(ScalingFunctions.unit(), params, count=4)
+    for row in table["rows"]:
+        assert abs(row["averaged"]["omega"]) > 1.5 * abs(row["full"]["omega"])
+        assert row["radius_error"] > 0.2
+    assert table["radius"]["worst"] > sv.TARGETS["table4_radius_max"]
+
+
+def test_exact_k_gives_vanishing_table4_error_on_the_mirrored_fin():
+    """K from the right-fin steady state (algebraic oracle) reproduces the left-fin Table 4 pattern."""
+    params = FishParams()
+    k = exact_k(FinBeat.from_degrees(90, 22, 1.0, 4), params)
+    assert 0 < k[2] < 1  # the moment must be scaled down (paper-notes)
+    table = sv.table4_section(constant_k(*k), params, count=1)
+    assert table["rows"][0]["left"] == [90.0, 22.0, 1.0, 4.0]
+    assert table["radius"]["worst"] < 1e-3
+    assert table["period"]["worst"] < 1e-3
+    assert table["rows"][0]["full"]["omega"] < 0  # left fin turns the fish right
+
+
+def test_left_and_right_fin_mirror_in_both_models():
+    pattern = np.array([math.radians(72.5), math.radians(17.3), 0.83, 3.4])
+    beats = np.array([[pattern, sv.REST], [sv.REST, pattern]])
+    res = sv.steady_pair(beats, constant_k(0.9, 1.1, 0.6))
+    for model in ("full", "averaged"):
+        r = res[model]
+        assert r["omega"][0] > 0 > r["omega"][1]
+        assert r["omega"][1] == pytest.approx(-r["omega"][0], rel=1e-9)
+        assert r["vy"][1] == pytest.approx(-r["vy"][0], rel=1e-9)
+        assert r["radius"][1] == pytest.approx(r["radius"][0], rel=1e-9)
+    np.testing.assert_allclose(res["radius_error"][0], res["radius_error"][1], rtol=1e-9)
+
+
+def test_sampling_box_from_grid_metadata_and_draws_off_grid():
+    grid = GRIDS["paper"]
+    scaling = constant_k(1, 1, 1, {"grid": grid.to_dict()})
+    low, high, rebuilt, _ = sv.sampling_box(scaling)
+    np.testing.assert_allclose(np.degrees(low[:2]), [50, 10])
+    np.testing.assert_allclose(np.degrees(high[:2]), [90, 30])
+    np.testing.assert_allclose([low[2], high[2], low[3], high[3]], [0.5, 2.0, 2.0, 5.0])
+    assert rebuilt is not None and len(rebuilt) == len(grid)
+    draws = sv._draw(np.random.default_rng(1), 50, low, high, rebuilt)
+    assert np.all(draws >= low) and np.all(draws <= high)
+    assert not any(grid.contains(d, tol=1e-6) for d in draws)
+    # No grid: the environment ranges with the forcing floor (amplitude >= 5 deg, ratio >= 1.25).
+    low, high, rebuilt, _ = sv.sampling_box(ScalingFunctions.unit())
+    assert rebuilt is None
+    np.testing.assert_allclose(np.degrees([low[0], high[0], low[1], high[1]]), [45, 135, 5, 30])
+    np.testing.assert_allclose([low[2], high[2], low[3], high[3]], [0.5, 2.0, 1.25, 5.0])
+
+
+def test_simulate_xy_symmetric_fins_swim_straight_ahead():
+    fin = np.array([math.radians(95), math.radians(15), 1.0, 4.0])
+    model = sv._model("full", 1, FishParams(), ScalingFunctions.unit())
+    path = sv.simulate_xy(model, np.array([[fin, fin]]), 20.0, step=1.0)
+    assert path.shape == (1, 21, 2)
+    assert np.all(path[0, 0] == 0)
+    assert path[0, -1, 0] > 0.3  # about 5 cm/s once up to speed
+    assert np.max(np.abs(path[0, :, 1])) < 1e-9
+
+
+def test_identification_points_accepts_records_and_columns():
+    records = [{"bias_deg": 90, "amplitude_deg": 20, "period_s": 1.0, "ratio": 2, "K_fx": 0.9, "K_fy": None,
+                "K_m": 0.5}, {"bias_deg": 60, "amplitude_deg": 10, "period_s": 1.0, "ratio": 2, "K_fx": 1.0,
+                              "K_fy": 1.2, "K_m": 0.6}]
+    pts = identification_points({"data": records})
+    np.testing.assert_allclose(pts["bias"], np.radians([90, 60]))
+    assert np.isnan(pts["K_fy"][0]) and pts["K_m"][1] == 0.6
+    columns = {"bias": [1.0], "amplitude": [0.2], "period": [1.0], "ratio": [2.0], "K_m": [0.4]}
+    assert identification_points({"data": columns})["K_m"][0] == 0.4
+    assert identification_points({}) is None
+    assert identification_points({"data": "garbage"}) is None
