@@ -102,13 +102,16 @@ def test_unit_k_is_detected_as_bad():
 def test_exact_k_gives_vanishing_table4_error_on_the_mirrored_fin():
     """K from the right-fin steady state (algebraic oracle) reproduces the left-fin Table 4 pattern."""
     params = FishParams()
-    k = exact_k(FinBeat.from_degrees(90, 22, 1.0, 4), params)
+    k = exact_k(FinBeat.from_degrees(80, 22, 1.0, 4), params)  # not 90 deg: there the sway forcing vanishes
     assert 0 < k[2] < 1  # the moment must be scaled down (paper-notes)
-    table = sv.table4_section(constant_k(*k), params, count=1)
-    assert table["rows"][0]["left"] == [90.0, 22.0, 1.0, 4.0]
-    assert table["radius"]["worst"] < 1e-3
-    assert table["period"]["worst"] < 1e-3
-    assert table["rows"][0]["full"]["omega"] < 0  # left fin turns the fish right
+    table = sv.table4_section(constant_k(*k), params, count=5)
+    row = table["rows"][4]
+    assert row["left"] == [80.0, 22.0, 1.0, 4.0] and row["right"][1] == 0
+    assert row["radius_error"] < 1e-3
+    assert row["period_error"] < 1e-3
+    assert row["full"]["omega"] < 0  # the left fin turns the fish right
+    # A constant K fitted to one pattern is not exact elsewhere: the metric does see differences.
+    assert table["rows"][0]["radius_error"] > 1e-3
 
 
 def test_left_and_right_fin_mirror_in_both_models():
