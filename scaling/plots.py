@@ -207,7 +207,7 @@ def write_report(results: dict[str, Any], path: Path) -> None:
     lines += _summary_table({"radius": single["radius"], "period": single["period"]})
     lines += ["", "Per-pattern values: `validation.json` (`single_fin.rows`).", "",
               "## 3. Forward swimming sweep (Fig. 4: both fins, g0 = 95 deg, gA = 15 deg, zeta = 4)", "",
-              "| f [Hz] | T_p [s] | inside sampled period range | speed full [cm/s] | speed avg [cm/s] | error |",
+              "| f [Hz] | T_p [s] | inside identified period range | speed full [cm/s] | speed avg [cm/s] | error |",
               "|---|---|---|---|---|---|"]
     for r in sweep["rows"]:
         lines.append(f"| {r['frequency']:g} | {r['period']:.3g} | {'yes' if r['in_range'] else 'no'} | "

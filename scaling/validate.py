@@ -39,7 +39,7 @@ from pectoral_gym.models import AveragedModel, FishModel, FullModel
 from pectoral_gym.params import FishParams
 from pectoral_gym.steady import common_period, steady_state_batch
 from scaling import plots as rendering
-from scaling.grids import Grid, GridError
+from scaling.grids import GRIDS, Grid, GridError
 
 __all__ = [
     "MIN_AMPLITUDE",
@@ -181,7 +181,10 @@ def simulate_xy(model: FishModel, beats: np.ndarray, duration: float, step: floa
 
 
 def _grid_from_metadata(meta: dict[str, Any]) -> Grid | None:
+    """The identification grid described by ``meta["grid"]`` (``Grid.to_dict`` or a preset name), else None."""
     grid = meta.get("grid")
+    if isinstance(grid, str) and grid in GRIDS:
+        return GRIDS[grid]
     if not isinstance(grid, dict):
         return None
     try:
@@ -282,7 +285,8 @@ def sweep_section(scaling: ScalingFunctions, params: FishParams, frequencies=SWE
     g0, ga, zeta = SWEEP_PATTERN
     beats = np.array([[_fin(g0, ga, 1.0 / f, zeta)] * 2 for f in frequencies])
     res = steady_pair(beats, scaling, params)
-    low, high, _, _ = sampling_box(scaling)
+    grid = _grid_from_metadata(scaling.metadata)
+    low, high = grid.bounds() if grid is not None else (EnvConfig().ranges[:, 0], EnvConfig().ranges[:, 1])
     rows = [{"frequency": float(f), "period": 1.0 / f, "in_range": bool(low[2] - 1e-9 <= 1 / f <= high[2] + 1e-9),
              "speed_full": float(res["full"]["speed"][i]), "speed_averaged": float(res["averaged"]["speed"][i]),
              "speed_error": _num(res["speed_error"][i])} for i, f in enumerate(frequencies)]
