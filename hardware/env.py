@@ -1,0 +1,359 @@
+"""``HardwareFishEnv``: the fish tasks on the real robot (XBee radio out, overhead camera in)."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.envs.registration import EnvSpec
+
+from hardware.link import RadioLink
+from hardware.safety import CommandFilter, SafetyConfig, TrackingWatch, check_action, in_geofence
+from pectoral_gym.envs import tasks as tk
+from pectoral_gym.envs.core import EnvConfig
+from pectoral_gym.models import REST
+
+__all__ = ["HardwareFishEnv"]
+
+_IDX = np.zeros(1, dtype=np.int64)
+_NONE = np.zeros(1, dtype=np.bool_)
+
+
+class HardwareFishEnv(gym.Env):
+    r"""The robotic fish in a real tank: actions go out over the XBee radio, observations come from a camera.
+
+    ## Description
+
+    The same tasks, spaces and rewards as ``PectoralFish-{Full,Averaged}-v0``
+    (:class:`~pectoral_gym.envs.fish_env.PectoralFishEnv`), computed by the same task kernels
+    (:mod:`pectoral_gym.envs.tasks`) on the *estimated* state: an overhead camera frame is tracked
+    (:class:`hardware.tracker.MarkerTracker`: red front marker, blue back marker) and a high-gain observer
+    (:class:`hardware.observer.HighGainObserver`) estimates the body-frame velocities. Each ``step`` sends
+    the fin command through :class:`hardware.link.RadioLink` and then watches the camera for one
+    ``control_period`` of wall-clock time (real-time pacing). The fins latch a new pattern at their next
+    stroke turning point, as in simulation. With an emulated robot (:mod:`hardware.emulator`) the
+    experiment clock may run ``speed`` times faster than the wall clock.
+
+    ## Action Space
+
+    ``Box(-1, 1, (8,), float32)``, mapped exactly as in ``PectoralFishEnv``; then the PC-side safety
+    rules clip the command to the servo limits and rate-limit it (:class:`hardware.safety.CommandFilter`).
+    A non-finite action raises ``ValueError`` and nothing is sent.
+
+    | Num | Action                | Fin   | Range (x = -1 .. 1), default  | Unit |
+    |-----|-----------------------|-------|-------------------------------|------|
+    | 0   | bias ``gamma_0``      | right | ``bias_range``, 45 .. 135 deg | rad  |
+    | 1   | amplitude ``gamma_A`` | right | ``amplitude_range``, 0 .. 30 deg | rad |
+    | 2   | period ``T_p``        | right | ``period_range``, 0.5 .. 2.0  | s    |
+    | 3   | ratio ``zeta``        | right | ``ratio_range``, 1 .. 5       | -    |
+    | 4-7 | same                  | left  | same                          |      |
+
+    ## Observation Space
+
+    ``Box(-inf, inf, (19,), float32)``, as in ``PectoralFishEnv``, from the observer's estimate.
+
+    | Num   | Observation                                            | Unit  |
+    |-------|--------------------------------------------------------|-------|
+    | 0-1   | X, Y, position in the tank (estimated)                 | m     |
+    | 2-3   | cos psi, sin psi (heading, estimated)                  | -     |
+    | 4-6   | vx, vy (body frame), omega (estimated)                 | m/s, m/s, rad/s |
+    | 7-8   | target position relative to the fish, body frame       | m     |
+    | 9-10  | target velocity, body frame (zero for ``goal``)        | m/s   |
+    | 11-18 | the command actually sent, normalised (after clipping and rate limiting) | - |
+
+    ## Rewards
+
+    The terms of ``PectoralFishEnv`` (``reward_progress``, ``reward_goal``, ``reward_wall``,
+    ``reward_energy``, ``reward_time`` for ``goal``; ``reward_tracking``, ``reward_wall``,
+    ``reward_energy`` for ``track``), each in ``info``, evaluated on the estimated state.
+
+    ## Starting State
+
+    The fish is wherever it is: ``reset`` stops the fins, calls ``reset_hook(np_random)`` (e.g. "put the
+    fish back", or placing an emulated fish), waits up to ``reset_timeout`` s for a tracked pose and
+    starts the observer there. ``goal``: a goal drawn as in simulation, redrawn until it lies 0.3 to
+    1.0 m from the actual start; ``track``: the reference ellipse drawn as in simulation.
+
+    ## Episode End
+
+    * Termination: the task's own ends (nose or tail outside the tank; ``goal`` reached), or the
+      **geofence**: the nose or tail within ``safety.geofence_margin`` of a wall (``info["safety_stop"] =
+      "geofence"``).
+    * Truncation: ``max_episode_steps`` steps; tracking lost for longer than ``safety.tracking_timeout``
+      (``"tracking_lost"``, with the tracker's reason in ``info["tracking"]["reason"]``); no answer from
+      the robot for ``safety.link_timeout`` (``"link_lost"``).
+    * Every safety end sends STOP at once. ``close()`` sends STOP and may be called twice.
+
+    ``info`` also holds ``"link"`` (:meth:`RadioLink.health`), ``"tracking"`` (``ok``, ``lost_for``,
+    ``reason``, ``confidence``, ``frames``, ``lost_frames``), ``"command"`` (the ``(2, 4)`` command sent),
+    ``"pose"`` (last measured X, Y, psi), ``"estimate"`` (the state used), ``"overrun"`` (s the step came late).
+
+    ## Arguments
+
+    | Argument            | Default        | Unit | Description |
+    |---------------------|----------------|------|-------------|
+    | ``port``            |                |      | ``serial_for_url`` URL or a :class:`RadioLink` |
+    | ``camera``          |                |      | ``hardware.camera.open_source`` spec or a frame source |
+    | ``task``            | ``"goal"``     |      | ``"goal"`` or ``"track"`` |
+    | ``control_period``  | 0.5            | s    | time between actions |
+    | ``calibration``     | ``None``       |      | calibration JSON; ``None``: default camera model |
+    | ``safety``          | defaults       |      | :class:`hardware.safety.SafetyConfig` |
+    | ``speed``           | 1.0            |      | experiment seconds per wall second (emulated robots only) |
+    | ``frame_period``    | 1/30           | s    | camera polling period |
+    | ``observer_epsilon``| 0.1            | s    | high-gain observer time constant |
+    | ``max_episode_steps`` | 240          |      | truncation |
+    | ``reset_hook``      | ``None``       |      | called with ``np_random`` at each reset |
+    | ``reset_timeout``   | 5.0            | s    | wall time to wait for a tracked pose at reset |
+    | ``**kwargs``        |                |      | other ``EnvConfig`` fields (ranges, weights, ``params``) |
+    | ``render_mode``     | ``None``       |      | ``"rgb_array"``: the last camera frame |
+
+    ## Version History
+
+    * v0: Initial version.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
+
+    def __init__(self, port: str | RadioLink, camera, task: str = "goal", control_period: float = 0.5,
+                 calibration=None, safety: SafetyConfig | None = None, speed: float = 1.0,
+                 frame_period: float = 1.0 / 30.0, observer_epsilon: float = 0.1, max_episode_steps: int = 240,
+                 reset_hook: Callable[[np.random.Generator], None] | None = None, reset_timeout: float = 5.0,
+                 tracker=None, observer=None, render_mode: str | None = None, **kwargs: Any):
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
+        if not (math.isfinite(speed) and speed > 0) or not frame_period > 0 or int(max_episode_steps) < 1:
+            raise ValueError("speed and frame_period must be > 0 and max_episode_steps >= 1")
+        try:
+            self.config = EnvConfig(model="full", task=task, control_period=control_period, **kwargs)
+        except TypeError as err:
+            raise ValueError(f"unknown HardwareFishEnv argument: {err}") from None
+        self.safety = safety or SafetyConfig()
+        self.speed, self.frame_period = float(speed), float(frame_period)
+        self.max_episode_steps = int(max_episode_steps)
+        self.reset_hook, self.reset_timeout = reset_hook, float(reset_timeout)
+        self.render_mode = render_mode
+        self.action_space = spaces.Box(-1.0, 1.0, (tk.ACTION_SIZE,), dtype=np.float32)
+        self.observation_space = spaces.Box(-np.inf, np.inf, (tk.OBS_SIZE,), dtype=np.float32)
+        # A physical system: the checker must not expect equal observations for equal seeds.
+        self.spec = EnvSpec("HardwareFish-v0", entry_point="hardware.env:HardwareFishEnv", nondeterministic=True)
+        self._closed = False
+        self.link = RadioLink(port, keepalive_period=0.1 / self.speed, ack_timeout=0.05 / self.speed) \
+            if isinstance(port, str) else port
+        if isinstance(camera, (str, int)):
+            from hardware.camera import open_source
+
+            camera = open_source(camera)
+        self.camera = camera
+        if tracker is None:
+            from hardware.scene import CameraModel
+            from hardware.tracker import MarkerTracker
+
+            model = CameraModel.default() if calibration is None else CameraModel.load(calibration)
+            tracker = MarkerTracker(model)
+        self.tracker = tracker
+        if observer is None:
+            from hardware.observer import HighGainObserver
+
+            observer = HighGainObserver(epsilon=observer_epsilon)
+        self.observer = observer
+        self.filter = CommandFilter(self.safety.limits)
+        self.watch = TrackingWatch(self.safety.tracking_timeout)
+        cfg = self.config
+        self._cfg = cfg.cfg_array()
+        self._ep = np.zeros((1, tk.N_EP))
+        p = cfg.params
+        self._ep[0, tk.E_LENGTH], self._ep[0, tk.E_SPAN], self._ep[0, tk.E_KDRAG] = (
+            p.body_length, p.fin_span, p.fin_drag_constant)
+        self._obs = np.zeros((1, tk.OBS_SIZE), dtype=np.float32)
+        self._out = np.zeros((1, tk.N_OUT))
+        self._beats = np.zeros((1, 2, 4))
+        self._act = np.zeros((1, tk.ACTION_SIZE))
+        self._origin = time.monotonic()
+        self._state = np.zeros(6)
+        self._pose = (math.nan, math.nan, math.nan)
+        self._last_frame = None
+        self._last_measure = -math.inf
+        self._frames = self._lost_frames = 0
+        self._confidence = 0.0
+        self._steps = 0
+        self._halted = ""
+        self._track_ok = False
+        self._observing = False
+        self._next_tick = 0.0
+        self._last_cmd_time = 0.0
+
+    # ------------------------------------------------------------ clock
+    def now(self) -> float:
+        """Experiment time [s] (wall time since construction times ``speed``)."""
+        return (time.monotonic() - self._origin) * self.speed
+
+    def _stamp(self, monotonic: float) -> float:
+        return (monotonic - self._origin) * self.speed
+
+    def _sleep(self, duration: float) -> None:
+        if duration > 0:
+            time.sleep(duration / self.speed)
+
+    # ------------------------------------------------------------ camera
+    def _poll_camera(self) -> str:
+        """Track the newest frame (if any); feed the observer; return a safety reason or ""."""
+        frame = self.camera.read()
+        if frame is not None and (self._last_frame is None or frame.timestamp != self._last_frame.timestamp):
+            self._last_frame = frame
+            t = self._stamp(frame.timestamp)
+            result = self.tracker.track(frame)
+            self._frames += 1
+            self.watch.update(t, result.ok, result.reason)
+            self._track_ok = bool(result.ok)
+            if result.ok:
+                self._confidence = float(result.confidence)
+                self._pose = (float(result.x), float(result.y), float(result.psi))
+                if self._observing and t > self._last_measure:
+                    self._state = np.asarray(self.observer.update(t, *self._pose), dtype=float).copy()
+                    self._last_measure = t
+                if in_geofence(*self._pose, self.config.params.body_length, self.safety.geofence_margin):
+                    return "geofence"
+            else:
+                self._lost_frames += 1
+                self._confidence = 0.0
+        now = self.now()
+        if self.watch.expired(now):
+            return "tracking_lost"
+        if self.link.status_age() * self.speed > self.safety.link_timeout:
+            return "link_lost"
+        return ""
+
+    def _wait_for_fish(self) -> None:
+        deadline = time.monotonic() + self.reset_timeout
+        self.watch.last_seen = None
+        while time.monotonic() < deadline:
+            self._poll_camera()
+            if self.watch.last_seen is not None:
+                return
+            time.sleep(self.frame_period / self.speed)
+        raise RuntimeError(f"no fish seen for {self.reset_timeout:.1f} s at reset "
+                           f"(tracker: {self.watch.reason or 'no frames'}); check the camera and the markers")
+
+    # ------------------------------------------------------------ gym API
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        """Stop the fins, find the fish, draw the episode's target; returns ``(observation, info)``."""
+        super().reset(seed=seed)
+        if self._closed:
+            raise RuntimeError("the environment is closed")
+        self.link.stop()
+        if self.reset_hook is not None:
+            self.reset_hook(self.np_random)
+        self._last_frame, self._last_measure, self._observing = None, -math.inf, False
+        self._wait_for_fish()
+        t = self.watch.last_seen
+        x, y, psi = self._pose
+        self.observer.reset(x, y, psi, t)
+        self._observing = True
+        self._last_measure = t
+        self._state = np.array([x, y, psi, 0.0, 0.0, 0.0])
+        draws = tk.draw_episode(self.np_random, self.config.task_id)
+        if self.config.task_id == tk.GOAL:
+            self._place_goal(draws, x, y)
+        start = np.empty((1, 6))
+        tk.start_states(_IDX, draws[None], self._cfg, self._ep, start)
+        rest = np.stack([REST.as_array()] * 2)
+        code = np.concatenate([self.config.encode(REST.as_array())] * 2)
+        tk.observe_reset(_IDX, self._state[None], self._ep, self._obs, self._out, code)
+        self.filter.reset(rest)
+        self._steps, self._halted = 0, ""
+        self._frames = self._lost_frames = 0
+        self._next_tick = self._last_cmd_time = self.now()
+        return self._obs[0].copy(), {"pose": list(self._pose), "target": self._ep[0, :2].tolist(),
+                                     "in_geofence": in_geofence(x, y, psi, self.config.params.body_length,
+                                                                self.safety.geofence_margin)}
+
+    def _place_goal(self, draws: np.ndarray, x: float, y: float) -> None:
+        """Redraw the goal (as :func:`tasks.draw_episode` does) until it is 0.3-1.0 m from the actual start."""
+        for _ in range(tk.GOAL_MAX_BLOCKS * tk.GOAL_CANDIDATES):
+            if tk.GOAL_MIN_DISTANCE <= math.hypot(draws[3] - x, draws[4] - y) <= tk.GOAL_MAX_DISTANCE:
+                return
+            u = self.np_random.random(2)
+            draws[3] = tk.GOAL_INSET + u[0] * (tk.TANK_X - 2.0 * tk.GOAL_INSET)
+            draws[4] = tk.GOAL_INSET + u[1] * (tk.TANK_Y - 2.0 * tk.GOAL_INSET)
+
+    def step(self, action):
+        """Send the command, watch the fish for one control period; returns the Gymnasium 5-tuple."""
+        arr = check_action(action)  # raises before anything is sent
+        if self._closed:
+            raise RuntimeError("the environment is closed")
+        self._act[0] = arr
+        tk.apply_actions(self._act, _NONE, self._cfg, self._beats, self._obs, self._out, self._ep)
+        now = self.now()
+        command = self.filter(self._beats[0], now - self._last_cmd_time)
+        self._last_cmd_time = now
+        reason = self._halted or self._poll_camera()
+        if not reason:
+            self.link.set_fins(command)
+        self._obs[0, 11:] = np.concatenate([self.config.encode(command[0]), self.config.encode(command[1])])
+        period = self.config.control_period
+        self._next_tick = max(self._next_tick + period, now)  # a late step does not shorten the next one
+        overrun = max(0.0, now - (self._next_tick - period))
+        while not reason:
+            remaining = self._next_tick - self.now()
+            if remaining <= 0:
+                break
+            self._sleep(min(self.frame_period, remaining))
+            reason = self._poll_camera()
+        end = self.now()
+        if end - self._last_measure > 2 * self.frame_period and math.isfinite(self._last_measure):
+            self._state = np.asarray(self.observer.predict(end), dtype=float).copy()
+        tk.observe_and_reward(self._state[None], _NONE, self._cfg, self._ep, self._obs, self._out)
+        self._steps += 1
+        o = self._out[0]
+        terminated = bool(o[tk.O_TERMINATED] > 0.5) or reason == "geofence"
+        truncated = reason in ("tracking_lost", "link_lost") or self._steps >= self.max_episode_steps
+        if reason or terminated:
+            self._halted = reason or self._halted
+            self.link.stop()
+        info = {name: float(o[k]) for name, k in tk.TERMS[self.config.task_id]}
+        info["distance"] = float(o[tk.O_DISTANCE])
+        if self.config.task_id == tk.GOAL:
+            info["is_success"] = bool(o[tk.O_SUCCESS] > 0.5)
+        else:
+            info["tracking_error"] = float(o[tk.O_DISTANCE])
+        info.update(safety_stop=reason, command=command.tolist(), pose=list(self._pose),
+                    estimate=self._state.tolist(), overrun=overrun, link=self.link.health(),
+                    tracking={"ok": self._track_ok,
+                              "lost_for": self.watch.lost_for(end), "reason": self.watch.reason,
+                              "confidence": self._confidence, "frames": self._frames,
+                              "lost_frames": self._lost_frames})
+        return self._obs[0].copy(), float(o[tk.O_REWARD]), terminated, truncated, info
+
+    @property
+    def target(self) -> list[float]:
+        """Current target position ``[X, Y]`` in the tank [m]."""
+        return self._ep[0, :2].tolist()
+
+    def stop(self) -> None:
+        """Stop the fins now (safe to call from a signal handler or after :meth:`close`)."""
+        if not self.link.closed:
+            self.link.stop()
+
+    def render(self):
+        """``rgb_array``: the last camera frame as RGB, or ``None`` before the first."""
+        if self.render_mode is None:
+            gym.logger.warn("You are calling render method without specifying any render mode.")
+            return None
+        if self._last_frame is None:
+            return None
+        return np.ascontiguousarray(self._last_frame.image[..., ::-1])
+
+    def close(self) -> None:
+        """Send STOP, close the link and the camera (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            self.link.close()
+        finally:
+            self.camera.close()
