@@ -158,6 +158,14 @@ def _fmt(value: float | None, scale: float = 1.0, digits: int = 4) -> str:
     return "-" if value is None else f"{scale * value:.{digits}g}"
 
 
+def _params_line(differ: list[str] | None) -> str:
+    if differ is None:
+        return "The coefficients file records no model parameters."
+    if not differ:
+        return "K was identified with the model parameters validated here."
+    return f"**K was identified with different model parameters**: {', '.join(differ)}."
+
+
 def _summary_table(sections: dict[str, dict[str, Any]]) -> list[str]:
     lines = ["| Quantity | n | Median | 90th pct | Worst | Worst pattern |", "|---|---|---|---|---|---|"]
     for name, s in sections.items():
@@ -175,7 +183,8 @@ def write_report(results: dict[str, Any], path: Path) -> None:
         f"K functions: `{results['source']}` (status: {results['metadata_status'] or '-'}; "
         f"K = 1 everywhere: {results['is_unit']}). pectoral-gym {results['version']}, seed {results['seed']}"
         f"{', **quick mode** (small sizes, figures not meaningful)' if results['quick'] else ''}.",
-        "Relative error = |averaged - full| / |full| of the cycle-averaged periodic steady state (eq. 29).", "",
+        "Relative error = |averaged - full| / |full| of the cycle-averaged periodic steady state (eq. 29).",
+        _params_line(results["params_differ"]), "",
         "## Targets", "", "| Check | Measured | Target | Met |", "|---|---|---|---|",
     ]
     for t in results["targets"]:

@@ -23,6 +23,7 @@ plots (:mod:`scaling.plots`); the report reading guide is
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import time
@@ -318,6 +319,15 @@ def two_fin_section(scaling: ScalingFunctions, params: FishParams, n: int, rng: 
             "position_rel": summarize(gap / np.maximum(travelled, 1e-12), labels)}
 
 
+def _params_differ(identified: Any, params: FishParams) -> list[str] | None:
+    """Model parameters whose value in the coefficients' metadata differs from ``params`` (None: not recorded)."""
+    if not isinstance(identified, dict):
+        return None
+    ours = dataclasses.asdict(params)
+    return sorted(k for k, v in identified.items()
+                  if k in ours and not (isinstance(v, (int, float)) and math.isclose(v, ours[k], rel_tol=1e-9)))
+
+
 def _targets(results: dict[str, Any]) -> list[dict[str, Any]]:
     checks = [
         ("Table 4 radius error, worst", results["table4"]["radius"]["worst"], TARGETS["table4_radius_max"]),
@@ -377,6 +387,7 @@ def validate(
     ]
     results: dict[str, Any] = {
         "source": source, "metadata_status": scaling.metadata.get("status"), "is_unit": scaling.is_unit,
+        "params_differ": _params_differ(scaling.metadata.get("params"), params),
         "seed": seed, "quick": quick, "version": __version__, "targets": {}, "timing_s": {},
         "exclusions": {"min_amplitude_deg": math.degrees(MIN_AMPLITUDE), "min_ratio": MIN_RATIO,
                        "two_fin_min_turn_rate": MIN_TURN_RATE},
