@@ -152,7 +152,8 @@ def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) 
 
     Args:
         path: A run folder of :mod:`agents.train` (``best_model.zip`` preferred over ``model.zip``;
-            ``vecnormalize.pkl`` applied when present; the algorithm read from ``config.yaml``)
+            ``vecnormalize.pkl`` applied when present, ``vecnormalize_final.pkl`` with ``model.zip``;
+            the algorithm read from ``config.yaml``)
             or an SB3 ``.zip`` (the algorithm read from the zip, or ``algo``).
         device: Torch device.
         algo: Force the algorithm (``"ppo"``, ``"sac"``, ...).
@@ -172,13 +173,18 @@ def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) 
         zip_path = next((path / f for f in ("best_model.zip", "model.zip") if (path / f).is_file()), None)
         if zip_path is None:
             raise FileNotFoundError(f"{path} has neither best_model.zip nor model.zip; is it a run folder?")
-        if (path / "vecnormalize.pkl").is_file():
-            normalization = _load_normalization(path / "vecnormalize.pkl")
+        stats = path / "vecnormalize.pkl"
+        if zip_path.name == "model.zip" and (path / "vecnormalize_final.pkl").is_file():
+            stats = path / "vecnormalize_final.pkl"
+        if stats.is_file():
+            normalization = _load_normalization(stats)
         algo = algo or config.get("algo")
         name = str(config.get("algo", name))
     elif path.is_file() and path.suffix == ".zip":
         zip_path = path
         sibling = path.parent / "vecnormalize.pkl"
+        if path.name == "model.zip" and (path.parent / "vecnormalize_final.pkl").is_file():
+            sibling = path.parent / "vecnormalize_final.pkl"
         if sibling.is_file():
             normalization = _load_normalization(sibling)
     else:
