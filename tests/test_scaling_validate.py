@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
 
@@ -166,3 +167,10 @@ def test_identification_points_accepts_records_and_columns():
     assert identification_points({"data": columns})["K_m"][0] == 0.4
     assert identification_points({}) is None
     assert identification_points({"data": "garbage"}) is None
+
+
+def test_report_says_when_k_was_identified_with_other_parameters():
+    recorded = dataclasses.asdict(FishParams())
+    assert sv._params_differ(recorded, FishParams()) == []
+    assert sv._params_differ({**recorded, "fin_span": recorded["fin_span"] * 1.1}, FishParams()) == ["fin_span"]
+    assert sv._params_differ(None, FishParams()) is None
