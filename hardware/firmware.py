@@ -149,7 +149,8 @@ class Firmware:
         self.tracker = SequenceTracker()
         self.crc_errors = 0
         self._seq = 0
-        self._last_valid: float | None = None
+        self.last_valid: float | None = None  # time of the last valid, non-stale message [s]
+        self.tripped_at: float | None = None  # time the watchdog last fired [s]
         self._last_tick: float | None = None
         self._start: float | None = None
 
@@ -176,7 +177,7 @@ class Firmware:
         verdict = self.tracker.check(msg.seq, msg.session)
         if verdict == Verdict.STALE:
             return None
-        self._last_valid = now  # any valid, non-stale message feeds the watchdog
+        self.last_valid = now  # any valid, non-stale message feeds the watchdog
         if verdict == Verdict.NEW:
             if msg.type == MsgType.STOP:
                 self._stop(RobotState.STOPPED)
@@ -202,9 +203,10 @@ class Firmware:
         """
         dt = 0.0 if self._last_tick is None else now - self._last_tick
         self._last_tick = now
-        if (self.running and self._last_valid is not None
-                and now - self._last_valid > self.config.watchdog_timeout):
+        if (self.running and self.last_valid is not None
+                and now - self.last_valid > self.config.watchdog_timeout):
             self._stop(RobotState.WATCHDOG)
+            self.tripped_at = now
             self.tracker.reset()  # the PC may have restarted with a new sequence
         if self.running:
             slewed = rate_limit(self.setpoint, self.command, dt, self.config.limits)

@@ -1,0 +1,157 @@
+"""Firmware rules (pure state machine) and the emulated robot (watchdog, transports, CLI)."""
+
+import math
+import socket
+import time
+
+import numpy as np
+import pytest
+
+from hardware import protocol as pr
+from hardware.emulator import EmulatedRobot, main
+from hardware.firmware import Firmware, FirmwareConfig, ServoLimits, clip_beats
+from hardware.link import RadioLink
+
+BEATS = np.array([[math.pi / 2, math.radians(20), 1.0, 3.0]] * 2)
+
+
+def _set(seq, beats=BEATS, session=0):
+    return pr.Message(pr.MsgType.SET_FINS, seq, session, fins=tuple(np.ravel(beats)))
+
+
+def test_watchdog_halts_after_timeout_only():
+    fw = Firmware(FirmwareConfig(watchdog_timeout=0.5))
+    assert fw.receive(_set(1), 0.0).status.ack_seq == 1
+    fw.tick(0.0)
+    fw.tick(0.45)
+    assert fw.running and not fw.halt
+    fw.receive(pr.Message(pr.MsgType.HEARTBEAT, 2), 0.45)  # a heartbeat feeds the watchdog
+    fw.tick(0.9)
+    assert fw.running
+    fw.tick(0.96)  # 0.51 s after the last valid message
+    assert fw.state == pr.RobotState.WATCHDOG and fw.halt and fw.tripped_at == 0.96
+
+
+def test_heartbeat_does_not_restart_but_new_command_does():
+    fw = Firmware()
+    fw.receive(_set(1), 0.0)
+    fw.tick(0.0)
+    fw.tick(0.6)
+    assert fw.state == pr.RobotState.WATCHDOG
+    fw.halt = False
+    fw.receive(pr.Message(pr.MsgType.HEARTBEAT, 2), 0.7)
+    assert fw.state == pr.RobotState.WATCHDOG
+    fw.receive(_set(3), 0.8)
+    assert fw.running
+
+
+def test_watchdog_timeout_is_at_most_one_second():
+    with pytest.raises(ValueError, match="watchdog"):
+        FirmwareConfig(watchdog_timeout=1.5)
+    assert FirmwareConfig().watchdog_timeout == 0.5
+
+
+def test_stop_halts_at_once_and_acks():
+    fw = Firmware()
+    fw.receive(_set(1), 0.0)
+    reply = fw.receive(pr.Message(pr.MsgType.STOP, 2), 0.1)
+    assert fw.state == pr.RobotState.STOPPED and fw.halt
+    assert reply.status.ack_seq == 2 and reply.status.state == pr.RobotState.STOPPED
+
+
+def test_duplicates_acked_not_applied_stale_ignored():
+    fw = Firmware()
+    fw.receive(_set(5), 0.0)
+    other = BEATS.copy()
+    other[:, 0] = 1.0
+    dup = fw.receive(_set(5, other), 0.1)  # same seq: a retry whose first copy arrived
+    assert dup.status.ack_seq == 5 and np.allclose(fw.command, BEATS, atol=1e-3)
+    assert fw.receive(_set(4, other), 0.2) is None  # older: ignored, no reply
+    assert np.allclose(fw.command, BEATS, atol=1e-3)
+    assert (fw.tracker.duplicates, fw.tracker.stale) == (1, 1)
+
+
+def test_clipping_to_servo_limits_by_hand():
+    lim = ServoLimits(angle_min=math.radians(10), angle_max=math.radians(170), period_min=0.4, period_max=4.0,
+                      ratio_min=0.5, ratio_max=6.0, max_speed=13.0)
+    beats = np.array([[math.radians(5), math.radians(30), 0.4, 5.0],     # bias too low; too fast
+                      [math.radians(90), math.radians(100), 10.0, 9.0]])  # amplitude, period, ratio too big
+    out, changed = clip_beats(beats, lim)
+    assert changed
+    assert out[0, 0] == pytest.approx(math.radians(40))  # bias - amplitude = 10 deg
+    # power stroke 2 A (zeta + 1) / T = 2 * 0.5236 * 6 / 0.4 = 15.7 rad/s > 13: T = 2 * 0.5236 * 6 / 13
+    assert out[0, 2] == pytest.approx(2 * math.radians(30) * 6 / 13.0)
+    assert out[1, 1] == pytest.approx(math.radians(80)) and out[1, 0] == pytest.approx(math.radians(90))
+    assert out[1, 2] == 4.0 and out[1, 3] == 6.0
+    assert clip_beats(BEATS, lim)[1] is False  # a pattern of the default env ranges passes unchanged
+
+
+def test_rate_limiting_from_rest():
+    fw = Firmware(FirmwareConfig(limits=ServoLimits(max_rate=(math.radians(180), 1.0, 4.0, 10.0))))
+    target = np.array([[math.radians(135), math.radians(20), 1.0, 3.0]] * 2)
+    fw.receive(_set(1, target), 0.0)
+    fw.tick(0.0)
+    fw.tick(0.1)
+    # 0.1 s at 180 deg/s: bias 90 -> 108 deg; amplitude 0 -> 0.1 rad; ratio 1 -> 2 (10/s)
+    assert fw.setpoint[0, 0] == pytest.approx(math.radians(108), abs=1e-3)
+    assert fw.setpoint[0, 1] == pytest.approx(0.1, abs=1e-3)
+    assert fw.setpoint[0, 3] == pytest.approx(2.0, abs=1e-3)
+    fw.receive(pr.Message(pr.MsgType.HEARTBEAT, 2), 0.4)  # keep the watchdog fed
+    fw.tick(0.45)  # long enough for every parameter to arrive
+    assert np.allclose(fw.setpoint, fw.command)
+
+
+def _raw_send(sock, msg):
+    sock.sendall(pr.encode_frame(pr.tx_request(pr.encode_message(msg))))
+
+
+def test_emulator_watchdog_stops_fins_in_time():
+    speed = 2.0
+    with EmulatedRobot(speed=speed) as robot:
+        sock = socket.create_connection((robot.host, robot.port))
+        try:
+            for seq in range(1, 6):  # 5 commands, 0.05 s (wall) apart, then silence
+                _raw_send(sock, _set(seq))
+                time.sleep(0.05)
+            assert np.any(robot.fin_rates() != 0.0)  # beating (exactly 0 only when held)
+            deadline = time.monotonic() + 3.0
+            while robot.firmware.state != pr.RobotState.WATCHDOG and time.monotonic() < deadline:
+                time.sleep(0.01)
+            time.sleep(0.05)
+            fw = robot.firmware
+            assert fw.state == pr.RobotState.WATCHDOG
+            assert 0.5 <= fw.tripped_at - fw.last_valid <= 0.5 + 0.1  # emulated seconds
+            assert np.all(robot.fin_rates() == 0.0)  # the fins hold still at once
+            assert len(robot.received) == 5
+        finally:
+            sock.close()
+
+
+def test_emulator_swims_forward_and_reports_status_over_a_pty():
+    with EmulatedRobot(pty=True, speed=4.0, start_pose=(1.0, 0.5, 0.0)) as robot:
+        link = RadioLink(robot.url, keepalive_period=0.025, ack_timeout=0.02)
+        try:
+            seq = link.set_fins(BEATS)
+            assert link.wait_ack(seq, 2.0)
+            time.sleep(0.6)  # 2.4 emulated seconds of symmetric rowing
+            x, y, psi = robot.pose()
+            assert x > 1.01 and abs(y - 0.5) < 1e-3 and abs(psi) < 1e-3  # straight ahead, symmetric fins
+            assert link.health()["robot_state"] == "RUNNING"
+        finally:
+            link.close()
+        time.sleep(0.05)
+        assert robot.firmware.state == pr.RobotState.STOPPED
+
+
+def test_emulator_loss_injection_and_cli(capsys):
+    with EmulatedRobot(speed=1.0, loss=0.5, seed=3) as robot:
+        link = RadioLink(robot.url, keepalive_period=1.0, ack_timeout=0.03, max_retries=8)
+        try:
+            acked = [link.wait_ack(link.set_fins(BEATS), 1.0) for _ in range(6)]
+            assert all(acked)
+            assert robot.lost_messages > 0 and link.stats.retries > 0
+        finally:
+            link.close()
+    assert main(["--port", "0", "--duration", "0.2"]) == 0
+    out = capsys.readouterr().out
+    assert "listening on socket://127.0.0.1:" in out and "stopped at X=1.150 m" in out
