@@ -15,7 +15,11 @@ deterministic given the generator.
 from __future__ import annotations
 
 import functools
+import json
+import os
 from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -115,6 +119,29 @@ class CameraModel:
         du = self.tank_to_pixel(centre + (step, 0.0)) - self.tank_to_pixel(centre - (step, 0.0))
         dv = self.tank_to_pixel(centre + (0.0, step)) - self.tank_to_pixel(centre - (0.0, step))
         return float(np.sqrt(abs(du[0] * dv[1] - du[1] * dv[0])) / (2 * step))
+
+    def to_dict(self) -> dict[str, Any]:
+        """The calibration-file fields: ``homography`` (3x3 nested list), ``width``, ``height``."""
+        return {"homography": self.homography.tolist(), "width": self.width, "height": self.height}
+
+    def save(self, path: str | os.PathLike, **extra: Any) -> None:
+        """Write the calibration JSON (``homography``, ``width``, ``height`` and any ``extra`` keys)."""
+        Path(path).write_text(json.dumps({**self.to_dict(), **extra}, indent=2) + "\n")
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> CameraModel:
+        """Read a calibration JSON written by ``python -m hardware.calibrate``.
+
+        Raises:
+            ValueError: The file is not a calibration (missing or malformed keys).
+        """
+        try:
+            data = json.loads(Path(path).read_text())
+            return cls(int(data["width"]), int(data["height"]), np.asarray(data["homography"], dtype=float))
+        except (KeyError, TypeError, json.JSONDecodeError) as error:
+            raise ValueError(
+                f"{path}: not a camera calibration (need JSON keys homography 3x3, width, height): {error}"
+            ) from error
 
     @classmethod
     def from_corners(cls, width: int, height: int, corner_pixels: np.ndarray | list) -> CameraModel:

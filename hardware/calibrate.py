@@ -1,0 +1,179 @@
+"""Camera calibration: the pixel <-> tank homography from points whose tank position is known.
+
+Three ways to get the points (``python -m hardware.calibrate --help``):
+
+- ``--corners U,V U,V U,V U,V``: the pixels of the tank corners (0, 0), (L, 0), (L, W), (0, W), read off a frame
+  in any image viewer; ``--points X,Y:U,V ...`` for any other >= 4 known points.
+- ``--image FRAME.png``: green dots (or ``--dot-hue``) placed on the four tank corners are found by colour;
+  the dot lowest-left in the image is the tank origin, the one lowest-right is (L, 0).
+- ``--from-emulator``: the emulator's camera model, for dry runs.
+
+The result is the calibration JSON the tracker reads (``homography`` tank metres -> pixels, ``width``,
+``height``) plus the points used and the reprojection error, which is printed. Four points fit exactly and
+cannot reveal a mistake: give more when you can.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from hardware.scene import CameraModel
+from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
+
+__all__ = ["detect_dots", "fit_homography", "main", "reprojection_errors", "tank_corners"]
+
+
+def tank_corners() -> np.ndarray:
+    """Tank corners (4, 2) [m] in calibration order: (0, 0), (L, 0), (L, W), (0, W)."""
+    return np.array([[0.0, 0.0], [TANK_LENGTH, 0.0], [TANK_LENGTH, TANK_WIDTH], [0.0, TANK_WIDTH]])
+
+
+def fit_homography(tank_points: np.ndarray, pixel_points: np.ndarray) -> np.ndarray:
+    """Least-squares homography (3x3, tank metres -> pixels) from >= 4 point pairs.
+
+    Raises:
+        ValueError: Fewer than 4 pairs, mismatched shapes, non-finite values, or a degenerate layout
+            (three or more points on a line leave the homography undetermined).
+    """
+    tank = np.asarray(tank_points, dtype=np.float64)
+    pixels = np.asarray(pixel_points, dtype=np.float64)
+    if tank.ndim != 2 or tank.shape[1] != 2 or tank.shape != pixels.shape:
+        raise ValueError(f"need matching (n, 2) tank and pixel points, got {tank.shape} and {pixels.shape}")
+    if len(tank) < 4:
+        raise ValueError(f"a homography needs at least 4 point pairs, got {len(tank)}")
+    if not (np.all(np.isfinite(tank)) and np.all(np.isfinite(pixels))):
+        raise ValueError("calibration points must be finite")
+    matrix, _ = cv2.findHomography(tank, pixels, 0)
+    if matrix is None or not np.all(np.isfinite(matrix)) or abs(np.linalg.det(matrix)) < 1e-12:
+        raise ValueError("the points do not determine a homography (are three of them on one line?)")
+    return matrix / matrix[2, 2]
+
+
+def reprojection_errors(camera: CameraModel, tank_points: np.ndarray, pixel_points: np.ndarray) -> np.ndarray:
+    """Distance [px] between each measured pixel and the projection of its tank point."""
+    return np.linalg.norm(camera.tank_to_pixel(tank_points) - np.asarray(pixel_points, dtype=float), axis=1)
+
+
+def detect_dots(image: np.ndarray, hue: int = 60, hue_tolerance: int = 15, min_area: int = 6) -> np.ndarray:
+    """Centroids (4, 2) [px] of four saturated dots of one hue, ordered as :func:`tank_corners`.
+
+    The image is assumed to show the tank with its origin at the lower left and X to the right (the emulator's
+    view). Raises ValueError unless exactly four dots are found.
+    """
+    hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV)
+    low, high = max(hue - hue_tolerance, 0), min(hue + hue_tolerance, 179)
+    mask = cv2.inRange(hsv, (low, 100, 50), (high, 255, 255))
+    mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8))
+    count, _, stats, centroids = cv2.connectedComponentsWithStats(mask)
+    dots = centroids[1:][stats[1:, cv2.CC_STAT_AREA] >= min_area]
+    if len(dots) != 4:
+        raise ValueError(f"found {len(dots)} dots of hue {hue} +- {hue_tolerance} (OpenCV 0-179 scale), need 4")
+    u_plus_v, u_minus_v = dots.sum(axis=1), dots[:, 0] - dots[:, 1]
+    order = [np.argmin(u_minus_v), np.argmax(u_plus_v), np.argmax(u_minus_v), np.argmin(u_plus_v)]
+    if len(set(order)) != 4:
+        raise ValueError("the four dots do not form a quadrilateral with one dot per image corner")
+    return dots[order]
+
+
+def _pair(text: str) -> tuple[float, float]:
+    try:
+        a, b = (float(part) for part in text.split(","))
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(f"expected two comma-separated numbers like 12.5,340, got {text!r}") from error
+    return a, b
+
+
+def _point(text: str) -> tuple[tuple[float, float], tuple[float, float]]:
+    if text.count(":") != 1:
+        raise argparse.ArgumentTypeError(f"expected X,Y:U,V (tank metres : pixels), got {text!r}")
+    tank, pixel = text.split(":")
+    return _pair(tank), _pair(pixel)
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(part) for part in text.lower().split("x"))
+    except ValueError as error:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT in pixels like 640x360, got {text!r}") from error
+    return width, height
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="python -m hardware.calibrate",
+        description="Compute the pixel <-> tank homography of the overhead camera and write the calibration JSON.",
+    )
+    source = parser.add_mutually_exclusive_group(required=True)
+    source.add_argument("--corners", nargs=4, type=_pair, metavar="U,V",
+                        help="pixels of the tank corners (0,0), (L,0), (L,W), (0,W) in this order")
+    source.add_argument("--points", nargs="+", type=_point, metavar="X,Y:U,V",
+                        help=">= 4 known points: tank position [m] : pixel")
+    source.add_argument("--image", type=Path, metavar="FRAME",
+                        help="a frame with coloured dots on the four tank corners (origin lower left)")
+    source.add_argument("--from-emulator", action="store_true", help="the emulator's camera model (dry runs)")
+    parser.add_argument("--size", type=_size, metavar="WxH", help="image size [px] (needed with --corners/--points)")
+    parser.add_argument("--dot-hue", type=int, default=60, metavar="H",
+                        help="hue of the corner dots on OpenCV's 0-179 scale (default 60, green)")
+    parser.add_argument("-o", "--output", type=Path, default=Path("calibration.json"),
+                        help="calibration file to write (default calibration.json)")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point; returns the exit status."""
+    parser = _parser()
+    args = parser.parse_args(argv)
+    if args.from_emulator:
+        reference = CameraModel.default()
+        tank, size, source = tank_corners(), (reference.width, reference.height), "emulator"
+        pixels = reference.tank_to_pixel(tank)
+    elif args.image is not None:
+        image = cv2.imread(str(args.image), cv2.IMREAD_COLOR)
+        if image is None:
+            parser.error(f"cannot read image {args.image}")
+        try:
+            pixels = detect_dots(image, hue=args.dot_hue)
+        except ValueError as error:
+            parser.error(str(error))
+        tank, size, source = tank_corners(), (image.shape[1], image.shape[0]), f"dots in {args.image}"
+    else:
+        if args.size is None:
+            parser.error("--size WxH is required with --corners or --points")
+        if args.corners:
+            tank, pixels, source = tank_corners(), np.array(args.corners), "corners"
+        else:
+            tank = np.array([point[0] for point in args.points])
+            pixels = np.array([point[1] for point in args.points])
+            source = "points"
+        size = args.size
+    try:
+        camera = CameraModel(size[0], size[1], fit_homography(tank, pixels))
+    except ValueError as error:
+        parser.error(str(error))
+    errors = reprojection_errors(camera, tank, pixels)
+    rms, worst = float(np.sqrt(np.mean(errors**2))), float(errors.max())
+    camera.save(
+        args.output,
+        source=source,
+        tank_points=np.asarray(tank).tolist(),
+        pixel_points=np.asarray(pixels).tolist(),
+        reprojection_rms_px=rms,
+        reprojection_max_px=worst,
+    )
+    scale = camera.pixels_per_metre((TANK_LENGTH / 2, TANK_WIDTH / 2))
+    print(json.dumps({"output": str(args.output), "points": len(tank), "reprojection_rms_px": round(rms, 4),
+                      "reprojection_max_px": round(worst, 4), "pixels_per_metre_at_centre": round(scale, 2)}))
+    if len(tank) == 4:
+        print("note: 4 points fit exactly; the reprojection error cannot reveal a mistake. Use more points.",
+              file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

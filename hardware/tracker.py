@@ -1,0 +1,244 @@
+"""Fish pose from an overhead frame: colour segmentation of the red (front) and blue (back) markers.
+
+Pipeline (paper Sec. 4.1, made defensive): BGR -> HSV; red is two hue bands because OpenCV's hue wraps at 180;
+blue one band; both need enough saturation and value, which rejects the floor, walls, body and glare. Each mask
+is cleaned by a morphological opening and closing, and its blobs are kept only if their area is near the area a
+marker should have at that place in the image (from the homography) and they are round (ratio of the principal
+axes). Blob centroids go through the pixel -> tank homography; among the surviving red x blue pairs, the one whose
+separation matches the known marker spacing is the fish. A missing marker, an implausible blob or a tie between
+candidates is reported as lost with the reason: the tracker never guesses.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from typing import NamedTuple
+
+import cv2
+import numpy as np
+
+from hardware.camera import Frame
+from hardware.scene import BACK_MARKER_OFFSET, FRONT_MARKER_OFFSET, MARKER_RADIUS, CameraModel
+
+__all__ = ["Blob", "MarkerTracker", "TrackResult", "TrackerConfig"]
+
+
+@dataclass(frozen=True)
+class TrackerConfig:
+    """Segmentation and plausibility thresholds. Hues are OpenCV's 0-179 scale (degrees / 2).
+
+    Attributes:
+        red_hue_bands: Hue bands of the red marker; two because red straddles the 0/180 wrap.
+        blue_hue_bands: Hue bands of the blue marker.
+        min_saturation: Lowest saturation (0-255) of a marker pixel; the floor, walls and glare sit far below.
+        min_value: Lowest value (0-255) of a marker pixel; dark shadows are not markers.
+        kernel_size: Side of the square structuring element of the morphological cleanup [px].
+        min_area_ratio: Smallest blob area as a fraction of a marker's expected area (partly hidden -> lost).
+        max_area_ratio: Largest blob area as a multiple of the expected area (a red object -> rejected).
+        max_elongation: Largest ratio of a blob's principal axes (a disc is 1, a third hidden ~1.3).
+        front_offset: Red marker position along body x from the centre of mass [m].
+        back_offset: Blue marker position along body x [m].
+        marker_radius: Marker radius [m] (sets the expected area).
+        separation_tolerance: Largest |measured - nominal| marker distance [m].
+        ambiguity_margin: A second pair whose separation error is within this of the best one's is a tie [m].
+    """
+
+    red_hue_bands: tuple[tuple[int, int], ...] = ((0, 10), (170, 179))
+    blue_hue_bands: tuple[tuple[int, int], ...] = ((95, 130),)
+    min_saturation: int = 110
+    min_value: int = 50
+    kernel_size: int = 3
+    min_area_ratio: float = 0.8
+    max_area_ratio: float = 1.8
+    max_elongation: float = 1.35
+    front_offset: float = FRONT_MARKER_OFFSET
+    back_offset: float = BACK_MARKER_OFFSET
+    marker_radius: float = MARKER_RADIUS
+    separation_tolerance: float = 0.02
+    ambiguity_margin: float = 0.01
+
+    def __post_init__(self) -> None:
+        for bands, name in ((self.red_hue_bands, "red_hue_bands"), (self.blue_hue_bands, "blue_hue_bands")):
+            if not bands or any(not (0 <= low <= high <= 179) for low, high in bands):
+                raise ValueError(f"TrackerConfig.{name}: need bands (low, high) with 0 <= low <= high <= 179")
+        if not self.front_offset > self.back_offset:
+            raise ValueError("TrackerConfig: front_offset must be ahead of back_offset")
+        if not 0 < self.min_area_ratio < 1 < self.max_area_ratio:
+            raise ValueError("TrackerConfig: need 0 < min_area_ratio < 1 < max_area_ratio")
+        if self.kernel_size < 1 or self.marker_radius <= 0 or self.separation_tolerance <= 0:
+            raise ValueError("TrackerConfig: kernel_size, marker_radius and separation_tolerance must be > 0")
+
+    @property
+    def separation(self) -> float:
+        """Nominal distance between the marker centres [m]."""
+        return self.front_offset - self.back_offset
+
+
+class Blob(NamedTuple):
+    """A connected region of one marker colour.
+
+    Attributes:
+        pixel: Centroid (u, v) [px].
+        tank: Centroid on the tank plane (X, Y) [m].
+        area: Area [px].
+        area_ratio: Area over the expected marker area there.
+        elongation: Ratio of principal axes (>= 1).
+        reason: Why it is not a marker candidate ("" when it is).
+    """
+
+    pixel: tuple[float, float]
+    tank: tuple[float, float]
+    area: float
+    area_ratio: float
+    elongation: float
+    reason: str
+
+
+class TrackResult(NamedTuple):
+    """Outcome of tracking one frame; pose fields are NaN unless ``ok``.
+
+    Attributes:
+        ok: A pose was found.
+        x: Centre of mass X [m].
+        y: Centre of mass Y [m].
+        psi: Heading in (-pi, pi] [rad], back marker -> front marker.
+        confidence: 0..1, the smallest margin of marker size, roundness and spacing to their rejection
+            thresholds (1 nominal, 0 at a threshold); halved when a distractor of marker colour is in view.
+        timestamp: The frame's timestamp [s].
+        reason: Why not ok ("" when ok).
+    """
+
+    ok: bool
+    x: float
+    y: float
+    psi: float
+    confidence: float
+    timestamp: float
+    reason: str
+
+
+def _lost(timestamp: float, reason: str) -> TrackResult:
+    return TrackResult(False, math.nan, math.nan, math.nan, 0.0, timestamp, reason)
+
+
+class MarkerTracker:
+    """Finds the fish's pose in frames of a calibrated overhead camera.
+
+    Args:
+        camera: Camera model (pixel <-> tank homography), e.g. ``CameraModel.load("calibration.json")``.
+        config: Thresholds; ``None`` means :class:`TrackerConfig` defaults.
+    """
+
+    def __init__(self, camera: CameraModel, config: TrackerConfig | None = None) -> None:
+        self.camera = camera
+        self.config = TrackerConfig() if config is None else config
+        size = self.config.kernel_size
+        self._kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
+        self.last_blobs: dict[str, list[Blob]] = {"red": [], "blue": []}
+
+    @classmethod
+    def from_calibration(cls, path: str | os.PathLike, config: TrackerConfig | None = None) -> MarkerTracker:
+        """A tracker for the camera described by a calibration JSON file."""
+        return cls(CameraModel.load(path), config)
+
+    def _mask(self, hsv: np.ndarray, bands: tuple[tuple[int, int], ...]) -> np.ndarray:
+        cfg = self.config
+        mask = np.zeros(hsv.shape[:2], np.uint8)
+        for low, high in bands:
+            mask |= cv2.inRange(hsv, (low, cfg.min_saturation, cfg.min_value), (high, 255, 255))
+        mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._kernel)
+        return cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._kernel)
+
+    def _blobs(self, mask: np.ndarray) -> list[Blob]:
+        cfg = self.config
+        count, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+        blobs = []
+        for label in range(1, count):
+            x0, y0, w, h, area = stats[label]
+            vs, us = np.nonzero(labels[y0 : y0 + h, x0 : x0 + w] == label)
+            us, vs = us + float(x0), vs + float(y0)
+            centre = (float(us.mean()), float(vs.mean()))
+            eigen = np.linalg.eigvalsh(np.cov(np.stack([us, vs]))) if area > 2 else np.array([0.0, 1.0])
+            elongation = float(np.sqrt(eigen[1] / max(eigen[0], 1e-9)))
+            tank = self.camera.pixel_to_tank(centre)
+            expected = math.pi * (cfg.marker_radius * self.camera.pixels_per_metre(tank)) ** 2
+            ratio = float(area / expected)
+            reason = ""
+            if ratio < cfg.min_area_ratio:
+                reason = f"area {area} px < {cfg.min_area_ratio:.2f} x expected {expected:.0f} px (hidden or too small)"
+            elif ratio > cfg.max_area_ratio:
+                reason = f"area {area} px > {cfg.max_area_ratio:.2f} x expected {expected:.0f} px (too large)"
+            elif elongation > cfg.max_elongation:
+                reason = f"elongation {elongation:.2f} > {cfg.max_elongation:.2f} (not a round marker)"
+            blobs.append(Blob(centre, (float(tank[0]), float(tank[1])), float(area), ratio, elongation, reason))
+        return blobs
+
+    @staticmethod
+    def _explain(colour: str, blobs: list[Blob]) -> str:
+        if not blobs:
+            return f"{colour} marker not found"
+        if len(blobs) == 1:
+            return f"{colour} marker rejected: {blobs[0].reason}"
+        return f"{colour} marker: {len(blobs)} blobs, none plausible (first: {blobs[0].reason})"
+
+    def _margins(self, blob: Blob) -> tuple[float, float]:
+        """Normalised distances of a blob's size and shape to their rejection thresholds (1 nominal, 0 at one)."""
+        cfg = self.config
+        if blob.area_ratio < 1:
+            size = (blob.area_ratio - cfg.min_area_ratio) / (1 - cfg.min_area_ratio)
+        else:
+            size = (cfg.max_area_ratio - blob.area_ratio) / (cfg.max_area_ratio - 1)
+        shape = (cfg.max_elongation - blob.elongation) / (cfg.max_elongation - 1)
+        return size, shape
+
+    def track(self, frame: Frame) -> TrackResult:
+        """Pose of the fish in ``frame``, or a lost result saying why."""
+        image, timestamp = frame
+        if not isinstance(image, np.ndarray) or image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
+            raise ValueError(f"frame.image must be an (H, W, 3) uint8 BGR array, got {getattr(image, 'shape', image)}")
+        if image.shape[:2] != (self.camera.height, self.camera.width):
+            raise ValueError(
+                f"frame is {image.shape[1]}x{image.shape[0]} px but the calibration is for "
+                f"{self.camera.width}x{self.camera.height} px; recalibrate or set the camera resolution"
+            )
+        cfg = self.config
+        hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV)
+        blobs = {"red": self._blobs(self._mask(hsv, cfg.red_hue_bands)),
+                 "blue": self._blobs(self._mask(hsv, cfg.blue_hue_bands))}
+        self.last_blobs = blobs
+        reds = [b for b in blobs["red"] if not b.reason]
+        blues = [b for b in blobs["blue"] if not b.reason]
+        if not reds:
+            return _lost(timestamp, self._explain("red (front)", blobs["red"]))
+        if not blues:
+            return _lost(timestamp, self._explain("blue (back)", blobs["blue"]))
+        pairs = []
+        for red in reds:
+            for blue in blues:
+                error = abs(math.dist(red.tank, blue.tank) - cfg.separation)
+                if error <= cfg.separation_tolerance:
+                    pairs.append((error, red, blue))
+        if not pairs:
+            distances = ", ".join(f"{math.dist(r.tank, b.tank) * 1000:.0f}" for r in reds for b in blues)
+            return _lost(
+                timestamp,
+                f"marker separation {distances} mm, expected {cfg.separation * 1000:.0f} "
+                f"+- {cfg.separation_tolerance * 1000:.0f} mm",
+            )
+        pairs.sort(key=lambda pair: pair[0])
+        if len(pairs) > 1 and pairs[1][0] - pairs[0][0] < cfg.ambiguity_margin:
+            return _lost(timestamp, f"ambiguous: {len(pairs)} red/blue pairs at a plausible separation")
+        error, red, blue = pairs[0]
+        front, back = np.array(red.tank), np.array(blue.tank)
+        axis = (front - back) / np.linalg.norm(front - back)
+        # Each marker gives the centre as marker - offset * axis; average the two estimates.
+        centre = 0.5 * (front + back) - 0.5 * (cfg.front_offset + cfg.back_offset) * axis
+        psi = math.atan2(axis[1], axis[0])
+        # Confidence: the smallest normalised margin to any rejection threshold.
+        confidence = min(*self._margins(red), *self._margins(blue), 1.0 - error / cfg.separation_tolerance)
+        confidence = float(np.clip(confidence, 0.0, 1.0))
+        if len(reds) > 1 or len(blues) > 1:
+            confidence *= 0.5  # a distractor of marker colour and size is in view
+        return TrackResult(True, float(centre[0]), float(centre[1]), psi, float(confidence), float(timestamp), "")
