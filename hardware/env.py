@@ -185,7 +185,6 @@ class HardwareFishEnv(gym.Env):
         self._track_ok = False
         self._observing = False
         self._next_tick = 0.0
-        self._last_cmd_time = 0.0
 
     # ------------------------------------------------------------ clock
     def now(self) -> float:
@@ -267,7 +266,7 @@ class HardwareFishEnv(gym.Env):
         self.filter.reset(rest)
         self._steps, self._halted = 0, ""
         self._frames = self._lost_frames = 0
-        self._next_tick = self._last_cmd_time = self.now()
+        self._next_tick = self.now()
         return self._obs[0].copy(), {"pose": list(self._pose), "target": self._ep[0, :2].tolist(),
                                      "in_geofence": in_geofence(x, y, psi, self.config.params.body_length,
                                                                 self.safety.geofence_margin)}
@@ -289,8 +288,7 @@ class HardwareFishEnv(gym.Env):
         self._act[0] = arr
         tk.apply_actions(self._act, _NONE, self._cfg, self._beats, self._obs, self._out, self._ep)
         now = self.now()
-        command = self.filter(self._beats[0], now - self._last_cmd_time)
-        self._last_cmd_time = now
+        command = self.filter(self._beats[0], self.config.control_period)  # each command holds for a period
         reason = self._halted or self._poll_camera()
         if not reason:
             self.link.set_fins(command)

@@ -1,0 +1,170 @@
+"""HardwareFishEnv against the emulated robot and its rendered camera; PC-side safety rules."""
+
+import math
+import os
+import signal
+
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+from hardware import protocol as pr
+from hardware.emulator import EmulatedRobot
+from hardware.env import HardwareFishEnv
+from hardware.firmware import ServoLimits
+from hardware.safety import CommandFilter, SafetyConfig, TrackingWatch, in_geofence, install_stop_handlers
+from hardware.scene import SceneConditions
+
+SPEED = 2.0  # accelerated clock: a 0.5 s control period takes 0.25 s of wall time
+
+
+@pytest.fixture
+def rig():
+    """An emulated robot at the tank centre and an env on it (generous tracking timeout for a loaded machine)."""
+    robot = EmulatedRobot(speed=SPEED, seed=0, start_pose=(1.15, 0.575, 0.3)).start()
+    env = HardwareFishEnv(robot.url, robot.camera(seed=1), speed=SPEED,
+                          safety=SafetyConfig(tracking_timeout=1.5, link_timeout=2.0))
+    yield robot, env
+    env.close()
+    robot.stop()
+
+
+def _count_calls(monkeypatch, obj, name):
+    calls = []
+    original = getattr(obj, name)
+    monkeypatch.setattr(obj, name, lambda *a, **k: calls.append(a) or original(*a, **k))
+    return calls
+
+
+def test_check_env_against_the_emulator(rig):
+    robot, env = rig
+    # Render and close checks would rebuild the env from its spec, which needs a port and a camera.
+    check_env(env, skip_render_check=True, skip_close_check=True)
+    obs, info = env.reset(seed=0)
+    assert obs.shape == (19,) and obs.dtype == np.float32
+    x, y, psi = robot.pose()
+    # The tracked pose is the emulated fish's (tracker accuracy is hardware-vision's test; here: plumbing).
+    assert obs[0] == pytest.approx(x, abs=0.01) and obs[1] == pytest.approx(y, abs=0.01)
+    assert math.atan2(obs[3], obs[2]) == pytest.approx(psi, abs=math.radians(3))
+
+
+def test_step_sends_the_command_and_reports_health(rig, monkeypatch):
+    robot, env = rig
+    env.reset(seed=1)
+    sent = _count_calls(monkeypatch, env.link, "set_fins")
+    action = np.array([0.0, 1.0, -1.0, 1.0, 0.0, 1.0, -1.0, 1.0], dtype=np.float32)
+    obs, reward, terminated, truncated, info = env.step(action)
+    assert len(sent) == 1
+    # Action -> pattern as in simulation: bias 90 deg, amplitude 30 deg, period 0.5 s, ratio 5.
+    assert np.allclose(info["command"], [[math.pi / 2, math.radians(30), 0.5, 5.0]] * 2)
+    assert not (terminated or truncated) and info["safety_stop"] == ""
+    assert info["link"]["acked"] >= 1 and info["tracking"]["frames"] >= 1
+    assert reward == pytest.approx(sum(info[k] for k in ("reward_progress", "reward_goal", "reward_wall",
+                                                        "reward_energy", "reward_time")))
+    assert np.allclose(robot.firmware.command, info["command"], atol=1e-3)
+
+
+def test_nan_action_is_rejected_and_nothing_is_sent(rig, monkeypatch):
+    robot, env = rig
+    env.reset(seed=2)
+    sent = _count_calls(monkeypatch, env.link, "set_fins")
+    before = len([m for m in robot.received if m.type == pr.MsgType.SET_FINS])
+    action = np.zeros(8, dtype=np.float32)
+    action[3] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        env.step(action)
+    assert sent == [] and env.link.command is None  # still stopped since reset: no command was made
+    assert len([m for m in robot.received if m.type == pr.MsgType.SET_FINS]) == before
+
+
+def test_geofence_stops_and_ends_the_episode(rig, monkeypatch):
+    robot, env = rig
+    env.reset_hook = lambda rng: robot.place(0.12, 0.575, math.pi)  # nose 0.021 m from the wall < 0.05 m margin
+    _, info = env.reset(seed=3)
+    assert info["in_geofence"]
+    sent = _count_calls(monkeypatch, env.link, "set_fins")
+    _, _, terminated, truncated, info = env.step(np.zeros(8, dtype=np.float32))
+    assert terminated and info["safety_stop"] == "geofence" and sent == []
+    assert robot.firmware.state != pr.RobotState.RUNNING
+
+
+def test_tracking_lost_stops_and_says_why(rig, monkeypatch):
+    robot, env = rig
+    env.reset(seed=4)
+    env.step(np.zeros(8, dtype=np.float32))
+    updates = _count_calls(monkeypatch, env.observer, "update")
+    env.camera.conditions = SceneConditions(front_occlusion=1.0)  # the red marker disappears
+    for _ in range(10):
+        _, _, terminated, truncated, info = env.step(np.zeros(8, dtype=np.float32))
+        if truncated:
+            break
+    assert truncated and not terminated and info["safety_stop"] == "tracking_lost"
+    assert info["tracking"]["reason"] != "" and not info["tracking"]["ok"]
+    assert updates == []  # the observer never got a made-up pose
+    assert info["tracking"]["lost_for"] > 1.5
+    assert env.link.command is None
+
+
+def test_link_lost_stops(rig):
+    robot, env = rig
+    env.reset(seed=5)
+    env.safety = SafetyConfig(tracking_timeout=1.5, link_timeout=0.4)
+    robot._handle = lambda data: None  # the radio goes silent; the camera still sees the fish
+    for _ in range(6):
+        _, _, _, truncated, info = env.step(np.zeros(8, dtype=np.float32))
+        if truncated:
+            break
+    assert truncated and info["safety_stop"] == "link_lost"
+
+
+def test_close_twice_sends_stop(rig):
+    robot, env = rig
+    env.reset(seed=6)
+    env.step(np.full(8, 0.5, dtype=np.float32))
+    env.close()
+    env.close()
+    assert any(m.type == pr.MsgType.STOP for m in robot.received[-5:])
+    with pytest.raises(RuntimeError, match="closed"):
+        env.step(np.zeros(8, dtype=np.float32))
+
+
+def test_command_filter_clips_and_rate_limits():
+    limits = ServoLimits(max_rate=(math.radians(90), math.radians(90), 1.0, 4.0))
+    filt = CommandFilter(limits)
+    filt.reset(np.array([[math.pi / 2, 0.0, 1.0, 1.0]] * 2))
+    out = filt(np.array([[math.radians(135), math.radians(30), 2.0, 5.0]] * 2), dt=0.5)
+    # 0.5 s: bias +45 deg, amplitude +30 deg (limit 45), period +0.5 s, ratio +2
+    assert np.allclose(out[0], [math.radians(135), math.radians(30), 1.5, 3.0])
+    assert filt.rate_limited and not filt.clipped
+    out = filt(np.array([[math.radians(175), math.radians(30), 1.5, 3.0]] * 2), dt=10.0)
+    assert out[0, 0] == pytest.approx(math.radians(140)) and filt.clipped  # 140 + 30 = 170 deg servo limit
+
+
+def test_geofence_and_tracking_watch_by_hand():
+    length = 0.2
+    assert not in_geofence(1.0, 0.5, 0.0, length, 0.05)
+    assert not in_geofence(2.30 - 0.16, 0.5, 0.0, length, 0.05)  # nose at 2.24 m: 0.06 m from the wall
+    assert in_geofence(2.30 - 0.14, 0.5, 0.0, length, 0.05)  # nose at 2.26 m: 0.04 m from the wall
+    assert not in_geofence(2.30 - 0.151, 0.5, math.pi / 2, length, 0.05)  # turned: the nose points along Y
+    assert in_geofence(1.0, 0.14, -math.pi / 2, length, 0.05)  # nose at Y = 0.04
+    assert in_geofence(math.nan, 0.5, 0.0, length, 0.05)
+    watch = TrackingWatch(0.5)
+    watch.reset(0.0)
+    watch.update(0.3, False, "red marker not found")
+    assert not watch.expired(0.5) and watch.expired(0.51) and watch.reason == "red marker not found"
+
+
+def test_sigterm_handler_sends_stop():
+    calls = []
+    restore = install_stop_handlers(lambda: calls.append("stop"))
+    try:
+        with pytest.raises(SystemExit):
+            os.kill(os.getpid(), signal.SIGTERM)
+            signal.sigtimedwait([], 0.1) if hasattr(signal, "sigtimedwait") else None
+        with pytest.raises(KeyboardInterrupt):
+            os.kill(os.getpid(), signal.SIGINT)
+            signal.sigtimedwait([], 0.1) if hasattr(signal, "sigtimedwait") else None
+    finally:
+        restore()
+    assert calls == ["stop", "stop"]
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL or callable(signal.getsignal(signal.SIGTERM))
