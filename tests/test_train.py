@@ -1,0 +1,98 @@
+"""Training smoke runs through the real CLI, run folders, config resolution, repeatability, load_policy."""
+
+import shutil
+
+import numpy as np
+import pytest
+import yaml
+
+from agents.config import algo_kwargs, parse_overrides, resolve_config
+from agents.evaluate import evaluate
+from agents.policy import Controller, load_policy
+from agents.train import main
+
+ENV = "PectoralFish-Averaged-v0"
+TINY = ["n_timesteps=256", "n_envs=4", "n_steps=32", "batch_size=64", "n_epochs=1", "eval_freq=128",
+        "eval_episodes=2"]
+
+
+def run(tmp_path, name, *extra, algo="ppo", hyperparams=TINY):
+    argv = ["--env", ENV, "--algo", algo, "--seed", "3", "--log-dir", str(tmp_path), "--run-name", name,
+            "--no-progress", "--hyperparams", *hyperparams, *extra]
+    assert main(argv) == 0
+    return tmp_path / ENV / name
+
+
+def test_ppo_smoke_run_fills_the_run_folder(tmp_path):
+    run_dir = run(tmp_path, "a", "--task", "goal")
+    for name in ("model.zip", "best_model.zip", "vecnormalize.pkl", "vecnormalize_final.pkl", "config.yaml",
+                 "command.txt", "training.json"):
+        assert (run_dir / name).is_file(), name
+    assert any((run_dir / "tb").rglob("events.out.tfevents.*"))
+    config = yaml.safe_load((run_dir / "config.yaml").read_text())
+    assert config["algo"] == "ppo" and config["env_id"] == ENV and config["seed"] == 3
+    assert config["n_timesteps"] == 256 and config["algo_kwargs"]["n_steps"] == 32
+    assert config["env_kwargs"]["task"] == "goal"
+    assert "--seed 3" in (run_dir / "command.txt").read_text()
+
+    policy = load_policy(run_dir)
+    assert isinstance(policy, Controller)
+    assert policy.obs_mean is not None  # normalisation statistics applied
+    obs = np.random.default_rng(0).normal(size=(5, 19)).astype(np.float32)
+    actions = policy.act_batch(obs)
+    assert actions.shape == (5, 8) and actions.dtype == np.float32 and np.all(np.abs(actions) <= 1)
+    np.testing.assert_allclose(policy.act(obs[0]), actions[0], atol=1e-6)
+    np.testing.assert_array_equal(policy.act_batch(obs), actions)  # deterministic
+    # the zip alone loads too (algorithm read from the zip), with the statistics next to it
+    from_zip = load_policy(run_dir / "best_model.zip")
+    np.testing.assert_allclose(from_zip.act_batch(obs), actions, atol=1e-6)
+    result = evaluate(policy, ENV, n_episodes=3, seed=0)
+    assert result.n_episodes == 3
+
+
+def test_same_seed_repeats_the_run(tmp_path):
+    a = load_policy(run(tmp_path, "a") / "model.zip")
+    b = load_policy(run(tmp_path, "b") / "model.zip")
+    obs = np.random.default_rng(1).normal(size=(8, 19)).astype(np.float32)
+    for pa, pb in zip(a.model.policy.parameters(), b.model.policy.parameters(), strict=True):
+        assert np.array_equal(pa.detach().numpy(), pb.detach().numpy())
+    np.testing.assert_array_equal(a.act_batch(obs), b.act_batch(obs))
+
+
+def test_sac_smoke_run(tmp_path):
+    run_dir = run(tmp_path, "s", algo="sac",
+                  hyperparams=["n_timesteps=200", "n_envs=2", "learning_starts=50", "eval_freq=0", "normalize=false"])
+    assert (run_dir / "model.zip").is_file() and not (run_dir / "vecnormalize.pkl").exists()
+    policy = load_policy(run_dir)
+    assert policy.obs_mean is None
+    shutil.move(run_dir / "model.zip", tmp_path / "lonely.zip")
+    assert load_policy(tmp_path / "lonely.zip").name == "sac"
+
+
+def test_cli_errors(tmp_path, capsys):
+    base = ["--log-dir", str(tmp_path), "--no-progress"]
+    assert main([*base, "--algo", "dqn"]) == 2
+    assert "unknown algorithm" in capsys.readouterr().err
+    assert main([*base, "--hyperparams", "not_an_arg=1"]) == 2
+    assert "unknown PPO arguments" in capsys.readouterr().err
+    assert main([*base, "--env-kwargs", '{"goal_radius": -1}']) == 2
+    assert "goal_radius" in capsys.readouterr().err
+    assert main([*base, "--env", "PectoralFish-Nothing-v0"]) == 2
+    assert not any(tmp_path.iterdir())  # nothing written on bad input
+
+
+def test_overrides_and_resolution():
+    assert parse_overrides(["a=1", "b.c=[32, 32]", "lr=3e-4", "n=1e5", "s=tanh", "f=false"]) == {
+        "a": 1, "b": {"c": [32, 32]}, "lr": 3e-4, "n": 100000, "s": "tanh", "f": False}
+    with pytest.raises(ValueError, match="key=value"):
+        parse_overrides(["novalue"])
+    config = resolve_config("ppo", ENV, 0, task="track", hyperparams={"policy_kwargs": {"net_arch": [8]}},
+                            env_kwargs={"goal_radius": 0.1})
+    assert config["env_kwargs"] == {"task": "track", "goal_radius": 0.1}
+    # nested override replaces one key and keeps the file's others
+    assert config["algo_kwargs"]["policy_kwargs"]["net_arch"] == [8]
+    assert config["algo_kwargs"]["policy_kwargs"]["activation_fn"] == "tanh"
+    kwargs = algo_kwargs(config)
+    assert kwargs["learning_rate"](1.0) == pytest.approx(1e-3) and kwargs["learning_rate"](0.5) == pytest.approx(5e-4)
+    with pytest.raises(ValueError, match="no entry"):
+        resolve_config("ppo", "Nope-v0", 0)
