@@ -27,6 +27,7 @@ scaling issue ships identified coefficients (its ``metadata.status`` says so).
 from __future__ import annotations
 
 import json
+import re
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -39,6 +40,7 @@ __all__ = ["FEATURES", "K_NAMES", "FORMAT", "ScalingFunctions", "default_scaling
 FEATURES = ("bias", "amplitude", "period", "ratio", "inv_period")
 K_NAMES = ("K_fx", "K_fy", "K_m")
 FORMAT = "pectoral-gym-scaling/1"
+_NUMBER_LIST = re.compile(r"\[\s*((?:-?[\d.eE+-]+|null),?(?:\s*(?:-?[\d.eE+-]+|null),?)*)\s*\]")
 _UNITS = {"bias": "rad", "amplitude": "rad", "period": "s", "ratio": "-", "inv_period": "1/s"}
 
 
@@ -130,7 +132,10 @@ class ScalingFunctions:
 
     def save(self, path: str | Path) -> None:
         """Write the coefficients file."""
-        Path(path).write_text(json.dumps(self.to_dict(), indent=2) + "\n")
+        text = json.dumps(self.to_dict(), indent=2, allow_nan=False)
+        # One line per innermost list of numbers (powers, data rows): readable and compact.
+        text = _NUMBER_LIST.sub(lambda m: "[" + " ".join(m.group(1).split()) + "]", text)
+        Path(path).write_text(text + "\n")
 
     def evaluate(self, bias: float, amplitude: float, period: float, ratio: float) -> tuple[float, float, float]:
         """``(K_fx, K_fy, K_m)`` at one fin-beat pattern (rad, rad, s, -)."""

@@ -1,0 +1,5 @@
+"""``python -m scaling``: identify or validate the scaling functions."""
+
+from scaling.cli import main
+
+raise SystemExit(main())

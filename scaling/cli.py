@@ -1,0 +1,124 @@
+"""Command line: ``python -m scaling identify|validate`` (console script ``pectoral-scaling``)."""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from pectoral_gym.kfunctions import K_NAMES, default_scaling_path
+from scaling.grids import GRIDS, GridError, load_grid
+
+__all__ = ["main"]
+
+
+def _identify_parser(sub) -> None:
+    p = sub.add_parser(
+        "identify",
+        help="identify K by full-model runs, NMPC and regression",
+        description="Identify the scaling functions K_fx, K_fy, K_m (paper Sec. 4.3): full-model steady states on a "
+        "grid of right-fin patterns, one NMPC per pattern, cross-validated polynomial regression.",
+    )
+    p.add_argument("--grid", default="env", help=f"preset ({', '.join(GRIDS)}) or a grid JSON file (default: env)")
+    p.add_argument("--out", type=Path, default=Path("scaling_identification"), help="output folder")
+    p.add_argument("--install", action="store_true", help="also install the coefficients as the package default")
+    p.add_argument("--horizon", type=float, default=10.0, help="NMPC horizon T [s] (default 10)")
+    p.add_argument("--sampling", type=float, default=1.0, help="NMPC sampling interval t_s [s] (default 1)")
+    p.add_argument("--q", type=float, default=2000.0, help="stage weight Q = q I3 (default 2000)")
+    p.add_argument("--q-terminal", type=float, default=80.0, help="terminal weight Q_T = q I3 (default 80)")
+    p.add_argument("--substeps", type=int, default=0, help="RK4 steps per sampling interval (0: automatic)")
+    p.add_argument("--max-degree", type=int, default=5, help="highest polynomial degree tried (default 5)")
+    p.add_argument("--fit-target", type=float, default=2e-3,
+                   help="held-out accuracy a closed form must reach (predicted relative velocity error, default 0.002)")
+    p.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the CV folds (default 0)")
+    p.add_argument("--jobs", type=int, default=0, help="NMPC worker processes (default 0: all cores)")
+    p.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def _write_table(result, path: Path) -> None:
+    usable = result.usable
+    reasons: dict[tuple[int, str], str] = {(f["pattern"], f["K"]): f["reason"] for f in result.flags}
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(["bias_deg", "amplitude_deg", "period_s", "ratio", "vx", "vy", "omega", "radius", "turn_period",
+                    *K_NAMES, *(f"{k}_oracle" for k in K_NAMES), *(f"{k}_flag" for k in K_NAMES)])
+        for i, p in enumerate(result.grid.patterns):
+            w.writerow([
+                f"{math.degrees(p[0]):.6g}", f"{math.degrees(p[1]):.6g}", f"{p[2]:.6g}", f"{p[3]:.6g}",
+                *(f"{v:.9g}" for v in result.reference.velocities[i]),
+                f"{result.reference.radius[i]:.9g}", f"{result.reference.turn_period[i]:.9g}",
+                *(f"{v:.9g}" for v in result.k_nmpc[i]), *(f"{v:.9g}" for v in result.k_oracle[i]),
+                *("" if usable[i, j] else reasons.get((i, K_NAMES[j]), "flagged") for j in range(3)),
+            ])
+
+
+def _run_identify(args) -> int:
+    from scaling.identify import identify
+    from scaling.nmpc import NmpcSettings
+
+    try:
+        grid = load_grid(args.grid)
+        settings = NmpcSettings(args.horizon, args.sampling, args.q, args.q_terminal, args.substeps)
+    except (GridError, ValueError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    if args.max_degree < 0 or args.folds < 2 or args.jobs < 0 or not args.fit_target > 0:
+        print("error: need --max-degree >= 0, --folds >= 2, --jobs >= 0, --fit-target > 0", file=sys.stderr)
+        return 2
+    print(f"grid {grid.name!r}: {len(grid)} right-fin patterns")
+    start = time.perf_counter()
+    result = identify(grid, None, settings, args.max_degree, args.folds, args.seed, args.jobs, not args.quiet,
+                      args.fit_target)
+    total = time.perf_counter() - start
+    args.out.mkdir(parents=True, exist_ok=True)
+    coefficients = args.out / "scaling_coefficients.json"
+    result.scaling.save(coefficients)
+    _write_table(result, args.out / "patterns.csv")
+    (args.out / "flags.json").write_text(json.dumps(result.flags, indent=1) + "\n")
+    print("\nstage times: " + ", ".join(f"{k} {v:.1f} s" for k, v in result.timings.items()) + f"; total {total:.1f} s")
+    gaps = result.scaling.metadata["oracle_max_relative_gap"]
+    print("NMPC vs algebraic solution, largest relative gap: " + ", ".join(f"{k} {v:.1e}" for k, v in gaps.items()))
+    by_k = result.scaling.metadata["flags"]["by_K"]
+    flagged = ", ".join(f"{k} {v}" for k, v in by_k.items())
+    print(f"flagged (left out of the fit): {flagged}  (see {args.out / 'flags.json'})")
+    print(f"\n{'K':5} {'features':34} {'degree':>6} {'terms':>5} {'R^2':>9} {'CV rmse':>9} {'CV max':>9}")
+    for name, fit in result.fits.items():
+        print(f"{name:5} {fit.features:34} {fit.degree:6d} {len(fit.coefs):5d} {fit.r2:9.6f} {fit.cv_rmse:9.2e} "
+              f"{fit.cv_max:9.2e}")
+    print("(CV errors are predicted relative speed / yaw-rate errors; see scaling.regression)")
+    print(f"\nwrote {coefficients}, {args.out / 'patterns.csv'}, {args.out / 'flags.json'}")
+    if args.install:
+        target = default_scaling_path()
+        result.scaling.save(target)
+        print(f"installed as the package default: {target}")
+    return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``python -m scaling`` and ``pectoral-scaling``."""
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv and argv[0] == "validate":
+        from scaling.validate import main as validate_main
+
+        return validate_main(argv[1:])
+    parser = argparse.ArgumentParser(
+        prog="pectoral-scaling",
+        description="Identify (paper Sec. 4.3) and validate the scaling functions K of the averaged model.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    _identify_parser(sub)
+    sub.add_parser("validate", help="averaged (identified K) against full on held-out patterns; see validate --help")
+    args = parser.parse_args(argv)
+    np.seterr(all="ignore")
+    return _run_identify(args)
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

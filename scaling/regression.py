@@ -1,0 +1,235 @@
+"""Closed forms of the scaling functions: lowest-complexity polynomial chosen by k-fold cross-validation.
+
+Candidates are complete polynomials of total degree ``0 .. max_degree`` in a
+subset of the features of :data:`pectoral_gym.kfunctions.FEATURES` (the paper
+fits polynomials in the four fin-beat parameters; ``inv_period`` lets a
+``1 / T_p`` basis compete). Each candidate is fitted by weighted least squares
+and scored by its k-fold cross-validated weighted RMS residual. The chosen
+form is the one with the fewest terms whose CV error meets an accuracy target
+or, if none does, is within one standard error of the best candidate's (the
+one-standard-error rule): a simpler form wins unless a richer one is clearly
+better on held-out patterns.
+
+Weights: :func:`sensitivity_weights` turns an error in ``K_i`` into the
+relative error it causes in the steady-state velocity it drives (a
+linearisation of eq. 20), so the fit minimises the predicted velocity error
+rather than treating every K value alike.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+from pectoral_gym.kfunctions import FEATURES
+from pectoral_gym.params import FishParams
+
+__all__ = [
+    "Fit",
+    "FEATURE_SETS",
+    "design_matrix",
+    "feature_matrix",
+    "fit_polynomial",
+    "monomial_powers",
+    "select_model",
+    "sensitivity_weights",
+]
+
+# Candidate feature subsets (indices into FEATURES: bias, amplitude, period, ratio, inv_period).
+FEATURE_SETS: dict[str, tuple[int, ...]] = {
+    "bias, amplitude, ratio": (0, 1, 3),
+    "bias, amplitude, period, ratio": (0, 1, 2, 3),
+    "bias, amplitude, ratio, 1/period": (0, 1, 3, 4),
+}
+
+
+@dataclass(frozen=True)
+class Fit:
+    """A fitted closed form of one scaling function.
+
+    Attributes:
+        features: Name of the feature subset.
+        degree: Total polynomial degree.
+        powers: ``(n_terms, 5)`` exponents over all :data:`FEATURES`.
+        coefs: ``(n_terms,)`` coefficients.
+        r2: Weighted coefficient of determination on all data.
+        cv_rmse: k-fold cross-validated weighted RMS residual.
+        cv_se: Standard error of ``cv_rmse`` over the folds.
+        cv_max: Largest weighted held-out residual.
+        n_points: Number of data points fitted.
+    """
+
+    features: str
+    degree: int
+    powers: np.ndarray
+    coefs: np.ndarray
+    r2: float
+    cv_rmse: float
+    cv_se: float
+    cv_max: float
+    n_points: int
+
+    def predict(self, patterns: np.ndarray) -> np.ndarray:
+        """Evaluate at ``(n, 4)`` patterns."""
+        return design_matrix(feature_matrix(patterns), self.powers) @ self.coefs
+
+    def summary(self) -> dict:
+        """JSON-ready fit statistics."""
+        return {
+            "features": self.features,
+            "degree": self.degree,
+            "terms": len(self.coefs),
+            "r2": self.r2,
+            "cv_rmse": self.cv_rmse,
+            "cv_se": self.cv_se,
+            "cv_max": self.cv_max,
+            "points": self.n_points,
+        }
+
+
+def feature_matrix(patterns: np.ndarray) -> np.ndarray:
+    """``(n, 5)`` values of :data:`FEATURES` for ``(n, 4)`` patterns."""
+    patterns = np.asarray(patterns, dtype=np.float64)
+    return np.column_stack([patterns, 1.0 / patterns[:, 2]])
+
+
+def monomial_powers(feature_set: tuple[int, ...], degree: int) -> np.ndarray:
+    """Exponents ``(n_terms, 5)`` of every monomial of total degree <= ``degree`` in ``feature_set``."""
+    rows = []
+    for total in range(degree + 1):
+        for combo in itertools.combinations_with_replacement(feature_set, total):
+            row = np.zeros(len(FEATURES))
+            for k in combo:
+                row[k] += 1
+            rows.append(row)
+    return np.array(rows)
+
+
+def design_matrix(features: np.ndarray, powers: np.ndarray) -> np.ndarray:
+    """``(n, n_terms)`` monomials ``prod_k features[:, k] ** powers[j, k]``."""
+    return np.prod(features[:, None, :] ** powers[None, :, :], axis=2)
+
+
+def _weighted_lstsq(a: np.ndarray, y: np.ndarray, w: np.ndarray) -> np.ndarray:
+    aw = a * w[:, None]
+    scale = np.linalg.norm(aw, axis=0)
+    scale[scale == 0] = 1.0  # column scaling keeps high-degree monomials well conditioned
+    coefs, *_ = np.linalg.lstsq(aw / scale, y * w, rcond=None)
+    return coefs / scale
+
+
+def fit_polynomial(
+    patterns: np.ndarray,
+    values: np.ndarray,
+    weights: np.ndarray | None = None,
+    feature_set: str = "bias, amplitude, ratio",
+    degree: int = 2,
+    folds: int = 5,
+    seed: int = 0,
+) -> Fit:
+    """Weighted least-squares polynomial fit with k-fold cross-validation statistics.
+
+    Args:
+        patterns: ``(n, 4)`` fin patterns.
+        values: ``(n,)`` K values.
+        weights: ``(n,)`` positive weights (ones if ``None``).
+        feature_set: A key of :data:`FEATURE_SETS`.
+        degree: Total degree.
+        folds: Number of CV folds (``min(folds, n)``).
+        seed: Seed of the fold shuffle.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    n = len(values)
+    weights = np.ones(n) if weights is None else np.asarray(weights, dtype=np.float64)
+    if feature_set not in FEATURE_SETS:
+        raise ValueError(f"unknown feature set {feature_set!r}; choose from {list(FEATURE_SETS)}")
+    if not (np.all(np.isfinite(values)) and np.all(np.isfinite(weights)) and np.all(weights > 0)):
+        raise ValueError("values and weights must be finite, weights > 0")
+    powers = monomial_powers(FEATURE_SETS[feature_set], degree)
+    a = design_matrix(feature_matrix(patterns), powers)
+    coefs = _weighted_lstsq(a, values, weights)
+    resid = (a @ coefs - values) * weights
+    centred = (values - np.average(values, weights=weights**2)) * weights
+    r2 = 1.0 - float(resid @ resid) / max(float(centred @ centred), 1e-300)
+    order = np.random.default_rng(seed).permutation(n)
+    fold_rmse, held_out = [], []
+    for test in np.array_split(order, min(folds, n)):
+        train = np.setdiff1d(order, test)
+        c = _weighted_lstsq(a[train], values[train], weights[train])
+        e = (a[test] @ c - values[test]) * weights[test]
+        fold_rmse.append(float(np.sqrt(np.mean(e**2))))
+        held_out.append(np.abs(e))
+    held = np.concatenate(held_out)
+    return Fit(
+        features=feature_set,
+        degree=degree,
+        powers=powers,
+        coefs=coefs,
+        r2=r2,
+        cv_rmse=float(np.sqrt(np.mean(held**2))),
+        cv_se=float(np.std(fold_rmse, ddof=1) / np.sqrt(len(fold_rmse))) if len(fold_rmse) > 1 else 0.0,
+        cv_max=float(held.max()),
+        n_points=n,
+    )
+
+
+def select_model(
+    patterns: np.ndarray,
+    values: np.ndarray,
+    weights: np.ndarray | None = None,
+    max_degree: int = 5,
+    feature_sets: tuple[str, ...] | None = None,
+    folds: int = 5,
+    seed: int = 0,
+    target: float = 2e-3,
+) -> tuple[Fit, list[Fit]]:
+    """The lowest-complexity candidate that fits, and all candidates.
+
+    "Fits": CV error <= ``target`` (weighted units; with the sensitivity
+    weights, a predicted relative velocity error). The candidate with the
+    fewest terms that fits is chosen; if none does, the one with the fewest
+    terms within one standard error of the best CV error. Candidates with more
+    terms than a fifth of the data points are skipped (their CV error is
+    unreliable).
+    """
+    feature_sets = feature_sets or tuple(FEATURE_SETS)
+    n = len(values)
+    candidates = []
+    for name in feature_sets:
+        for degree in range(max_degree + 1):
+            if len(monomial_powers(FEATURE_SETS[name], degree)) > max(1, n // 5):
+                break
+            candidates.append(fit_polynomial(patterns, values, weights, name, degree, folds, seed))
+    best = min(candidates, key=lambda f: f.cv_rmse)
+    threshold = max(best.cv_rmse + best.cv_se, target)
+    chosen = min((f for f in candidates if f.cv_rmse <= threshold), key=lambda f: (len(f.coefs), f.cv_rmse))
+    return chosen, candidates
+
+
+def sensitivity_weights(
+    velocities: np.ndarray, forcing: np.ndarray, params: FishParams, floor: float = 1e-3
+) -> np.ndarray:
+    """``(n, 3)`` relative error of speed or yaw rate per unit error in ``(K_fx, K_fy, K_m)``.
+
+    Linearising eq. (20) about the steady state, the damping of component
+    ``i`` changes at rate ``d_i = 2 c1 |V| / m`` (surge, sway) or ``2 c4 |omega|``
+    (yaw), so an error ``dK`` moves the velocity by ``dK forcing_i / (m_i d_i)``:
+    a fraction ``forcing_i / (m_i d_i |V|)`` of the speed (K_fx, K_fy) or
+    ``forcing_3 / (J3 d_3 |omega|)`` of the yaw rate (K_m), the quantities the
+    turning radius and period (eq. 29) are made of. ``floor`` [m/s, rad/s]
+    keeps the weights finite near rest.
+    """
+    velocities = np.asarray(velocities, dtype=np.float64)
+    masses = np.array([params.m1, params.m2, params.J3])
+    speed = np.hypot(velocities[:, 0], velocities[:, 1])
+    rate = np.column_stack(
+        [
+            2.0 * params.c1 * speed / params.m1,
+            2.0 * params.c1 * speed / params.m2,
+            2.0 * params.c4 * np.abs(velocities[:, 2]),
+        ]
+    )
+    magnitude = np.maximum(np.column_stack([speed, speed, np.abs(velocities[:, 2])]), floor)
+    return np.abs(forcing) / (masses * np.maximum(rate, 1e-12) * magnitude)
