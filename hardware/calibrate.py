@@ -23,7 +23,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from hardware.scene import CameraModel
+from hardware.scene import CameraModel, fit_homography
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 
 __all__ = ["detect_dots", "fit_homography", "main", "reprojection_errors", "tank_corners"]
@@ -32,27 +32,6 @@ __all__ = ["detect_dots", "fit_homography", "main", "reprojection_errors", "tank
 def tank_corners() -> np.ndarray:
     """Tank corners (4, 2) [m] in calibration order: (0, 0), (L, 0), (L, W), (0, W)."""
     return np.array([[0.0, 0.0], [TANK_LENGTH, 0.0], [TANK_LENGTH, TANK_WIDTH], [0.0, TANK_WIDTH]])
-
-
-def fit_homography(tank_points: np.ndarray, pixel_points: np.ndarray) -> np.ndarray:
-    """Least-squares homography (3x3, tank metres -> pixels) from >= 4 point pairs.
-
-    Raises:
-        ValueError: Fewer than 4 pairs, mismatched shapes, non-finite values, or a degenerate layout
-            (three or more points on a line leave the homography undetermined).
-    """
-    tank = np.asarray(tank_points, dtype=np.float64)
-    pixels = np.asarray(pixel_points, dtype=np.float64)
-    if tank.ndim != 2 or tank.shape[1] != 2 or tank.shape != pixels.shape:
-        raise ValueError(f"need matching (n, 2) tank and pixel points, got {tank.shape} and {pixels.shape}")
-    if len(tank) < 4:
-        raise ValueError(f"a homography needs at least 4 point pairs, got {len(tank)}")
-    if not (np.all(np.isfinite(tank)) and np.all(np.isfinite(pixels))):
-        raise ValueError("calibration points must be finite")
-    matrix, _ = cv2.findHomography(tank, pixels, 0)
-    if matrix is None or not np.all(np.isfinite(matrix)) or abs(np.linalg.det(matrix)) < 1e-12:
-        raise ValueError("the points do not determine a homography (are three of them on one line?)")
-    return matrix / matrix[2, 2]
 
 
 def reprojection_errors(camera: CameraModel, tank_points: np.ndarray, pixel_points: np.ndarray) -> np.ndarray:

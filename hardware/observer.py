@@ -9,7 +9,8 @@ estimates the coordinate (x1) and its rate (x2). Seen from ``y`` to ``x2`` it is
 second-order low-pass filter with natural frequency ``sqrt(a2) / eps`` and damping ``a1 / (2 sqrt(a2))``: smaller
 ``eps`` tracks faster and amplifies more camera noise. Measurements arrive at irregular times; between two of them
 the measurement is interpolated linearly (first-order hold) and the linear system is integrated exactly with a
-matrix exponential, so a ramp is followed without error at any spacing. Heading is unwrapped against the
+matrix exponential (closed form for the 2x2
+system), so a ramp is followed without error at any spacing. Heading is unwrapped against the
 observer's own prediction, so a measurement jumping from +pi to -pi is a small turn, not a full one. The world rates
 are finally rotated into the body frame: vx, vy (eq. 19's kinematics, inverted) and omega = psi'.
 
@@ -22,7 +23,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import expm
 
 __all__ = ["HighGainObserver"]
 
@@ -43,11 +43,10 @@ class HighGainObserver:
             if not math.isfinite(value) or value <= 0:
                 raise ValueError(f"HighGainObserver: {name} must be a finite number > 0, got {value!r}")
         self.epsilon, self.a1, self.a2, self.max_gap = float(epsilon), float(a1), float(a2), float(max_gap)
-        # d/dt [x1, x2, u, u'] with u the first-order-hold measurement (u'' = 0).
-        self._system = np.zeros((4, 4))
-        self._system[0, :3] = (-a1 / epsilon, 1.0, a1 / epsilon)
-        self._system[1, :3] = (-a2 / epsilon**2, 0.0, a2 / epsilon**2)
-        self._system[2, 3] = 1.0
+        # z' = A z + b u for each coordinate, z = (x1, x2), u the measurement.
+        self._a = np.array([[-a1 / epsilon, 1.0], [-a2 / epsilon**2, 0.0]])
+        self._b = np.array([a1 / epsilon, a2 / epsilon**2])
+        self._a_inv = np.linalg.inv(self._a)
         self._z = np.zeros((2, 3))  # rows x1, x2; columns X, Y, psi (unwrapped)
         self._y = np.zeros(3)  # last measurement (psi unwrapped)
         self._t: float | None = None
@@ -68,6 +67,23 @@ class HighGainObserver:
     def estimate(self) -> np.ndarray:
         """Latest output (6,) = X, Y, psi (unwrapped), vx, vy, omega; NaN before the first pose."""
         return self._estimate.copy()
+
+    def transition(self, step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Exact discretisation over ``step`` with the measurement interpolated linearly from ``u0`` to ``u1``.
+
+        Returns ``(Phi, g1, gs)`` such that ``z(step) = Phi z(0) + g1 u1 - gs (u1 - u0) / step``:
+        ``Phi = exp(A h)``, ``g1 = A^-1 (Phi - I) b``, ``gs = A^-1 (h Phi - A^-1 (Phi - I)) b``.
+        """
+        a, h = self._a, float(step)
+        # exp(A h) of a 2x2 matrix: e^(m h) [cosh(q h) I + sinh(q h) / q (A - m I)], m = tr / 2, q^2 = m^2 - det.
+        m = 0.5 * np.trace(a)
+        q = np.sqrt(complex(m * m - np.linalg.det(a)))
+        x = q * h
+        sinh_over_q = h * (np.sinh(x) / x if abs(x) > 1e-6 else 1 + x * x / 6)
+        phi = (np.exp(m * h) * (np.cosh(x) * np.eye(2) + sinh_over_q * (a - m * np.eye(2)))).real
+        integral = self._a_inv @ (phi - np.eye(2))  # int_0^h exp(A s) ds
+        weighted = self._a_inv @ (h * phi - integral)  # int_0^h s exp(A s) ds
+        return phi, integral @ self._b, weighted @ self._b
 
     @staticmethod
     def _check(t: float, x: float, y: float, psi: float) -> None:
@@ -110,9 +126,8 @@ class HighGainObserver:
         predicted_psi = self._z[0, 2] + self._z[1, 2] * step
         psi_unwrapped = predicted_psi + (psi - predicted_psi + math.pi) % (2 * math.pi) - math.pi
         measured = np.array([x, y, psi_unwrapped])
-        transition = expm(self._system * step)
-        augmented = np.vstack([self._z, self._y, (measured - self._y) / step])  # (4, 3): one column per coordinate
-        self._z = (transition @ augmented)[:2]
+        phi, g1, gs = self.transition(step)
+        self._z = phi @ self._z + np.outer(g1, measured) - np.outer(gs, (measured - self._y) / step)
         self._y, self._t = measured, float(t)
         return self._output(self._z)
 

@@ -34,6 +34,7 @@ __all__ = [
     "CameraModel",
     "Occluder",
     "SceneConditions",
+    "fit_homography",
     "render_frame",
 ]
 
@@ -66,6 +67,44 @@ def _as_points(xy: np.ndarray | tuple | list, name: str) -> np.ndarray:
 def _apply_homography(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
     homogeneous = points @ matrix[:, :2].T + matrix[:, 2]
     return homogeneous[..., :2] / homogeneous[..., 2:3]
+
+
+def fit_homography(source: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """Least-squares homography (3x3) mapping ``source`` (n, 2) points to ``target`` (n, 2), n >= 4.
+
+    Normalised direct linear transform (Hartley and Zisserman, Alg. 4.2) in float64: exact for exact points.
+
+    Raises:
+        ValueError: Fewer than 4 pairs, mismatched shapes, non-finite values, or a degenerate layout
+            (three or more of four points on a line leave the homography undetermined).
+    """
+    src, dst = np.asarray(source, dtype=float), np.asarray(target, dtype=float)
+    if src.ndim != 2 or src.shape[1] != 2 or src.shape != dst.shape:
+        raise ValueError(f"need matching (n, 2) point arrays, got {src.shape} and {dst.shape}")
+    if len(src) < 4:
+        raise ValueError(f"a homography needs at least 4 point pairs, got {len(src)}")
+    if not (np.all(np.isfinite(src)) and np.all(np.isfinite(dst))):
+        raise ValueError("homography points must be finite")
+
+    def normaliser(points: np.ndarray) -> np.ndarray:
+        centre = points.mean(axis=0)
+        spread = np.sqrt(2) / max(np.linalg.norm(points - centre, axis=1).mean(), 1e-300)
+        return np.array([[spread, 0, -spread * centre[0]], [0, spread, -spread * centre[1]], [0, 0, 1]])
+
+    t_src, t_dst = normaliser(src), normaliser(dst)
+    p = _apply_homography(t_src, src)
+    q = _apply_homography(t_dst, dst)
+    rows = []
+    for (x, y), (u, v) in zip(p, q, strict=True):
+        rows.append([x, y, 1, 0, 0, 0, -u * x, -u * y, -u])
+        rows.append([0, 0, 0, x, y, 1, -v * x, -v * y, -v])
+    _, singular, vt = np.linalg.svd(np.array(rows))
+    if singular[7] < 1e-9 * singular[0]:
+        raise ValueError("the points do not determine a homography (are three of them on one line?)")
+    matrix = np.linalg.inv(t_dst) @ vt[-1].reshape(3, 3) @ t_src
+    if abs(matrix[2, 2]) < 1e-300 or abs(np.linalg.det(matrix / matrix[2, 2])) < 1e-12:
+        raise ValueError("the points do not determine a homography (are three of them on one line?)")
+    return matrix / matrix[2, 2]
 
 
 @dataclass(frozen=True, eq=False)
@@ -156,8 +195,7 @@ class CameraModel:
         if pixels.shape != (4, 2):
             raise ValueError(f"corner_pixels must have shape (4, 2), got {pixels.shape}")
         tank = np.array([[0.0, 0.0], [TANK_LENGTH, 0.0], [TANK_LENGTH, TANK_WIDTH], [0.0, TANK_WIDTH]])
-        matrix = cv2.getPerspectiveTransform(tank.astype(np.float32), pixels.astype(np.float32))
-        return cls(width, height, matrix)
+        return cls(width, height, fit_homography(tank, pixels))
 
     @classmethod
     def default(cls) -> CameraModel:
