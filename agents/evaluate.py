@@ -54,10 +54,9 @@ def make_vector_env(env_id: str, num_envs: int, env_kwargs: dict[str, Any] | Non
 
     if env_id not in ENV_IDS:
         raise ValueError(f"unknown env id {env_id!r}; fish envs: {sorted(ENV_IDS)}")
-    kwargs = dict(env_kwargs or {})
-    if "model" in kwargs:
-        raise ValueError("env_kwargs must not set 'model'; it is fixed by the env id")
-    return PectoralFishVectorEnv(num_envs=num_envs, model=ENV_IDS[env_id], **kwargs)
+    from agents.vec_adapter import env_arguments
+
+    return PectoralFishVectorEnv(num_envs=num_envs, model=ENV_IDS[env_id], **env_arguments(env_kwargs))
 
 
 @dataclass
@@ -372,7 +371,9 @@ def main(argv: list[str] | None = None) -> int:
             from pectoral_gym.registration import ENV_IDS
 
             baseline_kwargs = {**env_kwargs, **({"task": args.task} if args.task else {})}
-            config = EnvConfig(model=ENV_IDS.get(args.env, "full"), **baseline_kwargs)
+            from agents.vec_adapter import env_arguments
+
+            config = EnvConfig(model=ENV_IDS.get(args.env, "full"), **env_arguments(baseline_kwargs))
             controller = lambda: make_baseline(args.baseline, config)  # noqa: E731 - factory, one per slot
             name = args.baseline
         if args.task:

@@ -25,7 +25,7 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
-__all__ = ["FishVecEnv", "make_fish_vec_env"]
+__all__ = ["FishVecEnv", "env_arguments", "make_fish_vec_env"]
 
 
 class FishVecEnv(VecEnv):
@@ -132,6 +132,25 @@ class FishVecEnv(VecEnv):
         return [None] * self.num_envs
 
 
+def env_arguments(env_kwargs: dict[str, Any] | None) -> dict[str, Any]:
+    """Environment arguments from a JSON/YAML-ready dict: ``params`` may be a dict of ``FishParams`` fields.
+
+    Raises:
+        ValueError: If ``model`` is given (the env id fixes it) or ``params`` names unknown fields.
+    """
+    from pectoral_gym.params import FishParams
+
+    kwargs = dict(env_kwargs or {})
+    if "model" in kwargs:
+        raise ValueError("env_kwargs must not set 'model'; it is fixed by the env id")
+    if isinstance(kwargs.get("params"), dict):
+        try:
+            kwargs["params"] = FishParams(**kwargs["params"])
+        except TypeError as error:
+            raise ValueError(f"env_kwargs['params']: {error}") from None
+    return kwargs
+
+
 def make_fish_vec_env(env_id: str, n_envs: int, env_kwargs: dict[str, Any] | None = None, seed: int | None = None,
                       max_episode_steps: int | None = None) -> FishVecEnv:
     """A :class:`FishVecEnv` of ``n_envs`` fish of a registered id; env ``i`` gets seed ``seed + i`` at the first reset.
@@ -139,7 +158,7 @@ def make_fish_vec_env(env_id: str, n_envs: int, env_kwargs: dict[str, Any] | Non
     Args:
         env_id: ``PectoralFish-Averaged-v0`` or ``PectoralFish-Full-v0``.
         n_envs: Number of environments.
-        env_kwargs: Environment arguments (``task``, ``randomize``, reward weights, ...).
+        env_kwargs: Environment arguments (``task``, ``randomize``, reward weights, ``params`` as a dict, ...).
         seed: Seed of the first reset (``None``: from entropy).
         max_episode_steps: Truncation (default: as registered).
     """
@@ -148,9 +167,7 @@ def make_fish_vec_env(env_id: str, n_envs: int, env_kwargs: dict[str, Any] | Non
 
     if env_id not in ENV_IDS:
         raise ValueError(f"unknown env id {env_id!r}; fish envs: {sorted(ENV_IDS)}")
-    kwargs = dict(env_kwargs or {})
-    if "model" in kwargs:
-        raise ValueError("env_kwargs must not set 'model'; it is fixed by the env id")
+    kwargs = env_arguments(env_kwargs)
     if max_episode_steps is not None:
         kwargs["max_episode_steps"] = max_episode_steps
     venv = FishVecEnv(PectoralFishVectorEnv(num_envs=n_envs, model=ENV_IDS[env_id], **kwargs))

@@ -109,3 +109,11 @@ def test_errors():
     venv.step_async(np.full((2, 8), np.nan, dtype=np.float32))
     with pytest.raises(ValueError, match="finite"):
         venv.step_wait()
+
+
+def test_params_given_as_a_dict():
+    venv = make_fish_vec_env(ENV, 2, {"params": {"fin_offset": 0.01}})
+    assert venv.config.params.fin_offset == 0.01
+    assert venv.config.params.body_mass == pectoral_gym.params.FishParams().body_mass
+    with pytest.raises(ValueError, match="params"):
+        make_fish_vec_env(ENV, 2, {"params": {"fin_width": 1.0}})
