@@ -23,7 +23,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from hardware.scene import CameraModel, fit_homography
+from hardware.scene import CameraModel, fit_homography, render_frame
+from hardware.tracker import draw_overlay
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 
 __all__ = ["detect_dots", "fit_homography", "main", "reprojection_errors", "tank_corners"]
@@ -99,6 +100,10 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--size", type=_size, metavar="WxH", help="image size [px] (needed with --corners/--points)")
     parser.add_argument("--dot-hue", type=int, default=60, metavar="H",
                         help="hue of the corner dots on OpenCV's 0-179 scale (default 60, green)")
+    parser.add_argument("--overlay", type=Path, metavar="PNG",
+                        help="also write the frame with the calibrated tank outline and a 0.25 m grid, to check by eye")
+    parser.add_argument("--frame", type=Path, metavar="FRAME",
+                        help="background frame of --overlay with --corners/--points")
     parser.add_argument("-o", "--output", type=Path, default=Path("calibration.json"),
                         help="calibration file to write (default calibration.json)")
     return parser
@@ -108,8 +113,10 @@ def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
     parser = _parser()
     args = parser.parse_args(argv)
+    background = None
     if args.from_emulator:
         reference = CameraModel.default()
+        background = render_frame((TANK_LENGTH / 2, TANK_WIDTH / 2, 0.0), reference, np.random.default_rng(0))
         tank, size, source = tank_corners(), (reference.width, reference.height), "emulator"
         pixels = reference.tank_to_pixel(tank)
     elif args.image is not None:
@@ -121,6 +128,7 @@ def main(argv: list[str] | None = None) -> int:
         except ValueError as error:
             parser.error(str(error))
         tank, size, source = tank_corners(), (image.shape[1], image.shape[0]), f"dots in {args.image}"
+        background = image
     else:
         if args.size is None:
             parser.error("--size WxH is required with --corners or --points")
@@ -131,6 +139,10 @@ def main(argv: list[str] | None = None) -> int:
             pixels = np.array([point[1] for point in args.points])
             source = "points"
         size = args.size
+        if args.frame is not None:
+            background = cv2.imread(str(args.frame), cv2.IMREAD_COLOR)
+            if background is None:
+                parser.error(f"cannot read frame {args.frame}")
     try:
         camera = CameraModel(size[0], size[1], fit_homography(tank, pixels))
     except ValueError as error:
@@ -145,6 +157,13 @@ def main(argv: list[str] | None = None) -> int:
         reprojection_rms_px=rms,
         reprojection_max_px=worst,
     )
+    if args.overlay is not None:
+        if background is None:
+            background = np.full((camera.height, camera.width, 3), 255, np.uint8)
+        canvas = draw_overlay(background, camera)
+        for u, v in np.asarray(pixels):
+            cv2.drawMarker(canvas, (int(round(u)), int(round(v))), (255, 0, 255), cv2.MARKER_CROSS, 12, 1)
+        cv2.imwrite(str(args.overlay), canvas)
     scale = camera.pixels_per_metre((TANK_LENGTH / 2, TANK_WIDTH / 2))
     print(json.dumps({"output": str(args.output), "points": len(tank), "reprojection_rms_px": round(rms, 4),
                       "reprojection_max_px": round(worst, 4), "pixels_per_metre_at_centre": round(scale, 2)}))

@@ -168,7 +168,13 @@ class OpenCVCamera:
     ) -> None:
         self.read_timeout = float(read_timeout)
         self.stale_after = float(stale_after)
-        self._capture = cv2.VideoCapture(index_or_url)
+        if isinstance(index_or_url, str):
+            # Stream backends (FFmpeg) honour these; without them a dead stream can block for ~30 s or more.
+            timeout_ms = int(1000 * max(stale_after, 0.5))
+            params = [cv2.CAP_PROP_OPEN_TIMEOUT_MSEC, 2 * timeout_ms, cv2.CAP_PROP_READ_TIMEOUT_MSEC, timeout_ms]
+            self._capture = cv2.VideoCapture(index_or_url, cv2.CAP_ANY, params)
+        else:
+            self._capture = cv2.VideoCapture(int(index_or_url))
         if not self._capture.isOpened():
             self._capture.release()
             raise CameraLostError(f"cannot open camera {index_or_url!r} (check the index/URL and permissions)")

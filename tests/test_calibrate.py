@@ -99,3 +99,15 @@ def test_cli_errors(tmp_path):
         main(["--points", "1,2:3", "--size", "640x360"])
     with pytest.raises(SystemExit):
         main(["--image", str(tmp_path / "missing.png")])
+
+
+def test_overlay_draws_the_calibrated_outline(tmp_path):
+    overlay = tmp_path / "overlay.png"
+    assert main(["--from-emulator", "-o", str(tmp_path / "c.json"), "--overlay", str(overlay)]) == 0
+    image = cv2.imread(str(overlay))
+    camera = CameraModel.default()
+    u, v = np.rint(camera.tank_to_pixel((TANK_LENGTH / 2, 0.0))).astype(int)  # middle of the near wall
+    b, g, r = image[v, u].astype(int)
+    assert r > 200 and b < 80  # the orange outline
+    u, v = np.rint(camera.tank_to_pixel((TANK_LENGTH / 2, TANK_WIDTH / 4))).astype(int)
+    assert abs(int(image[v, u, 0]) - int(image[v, u, 2])) < 40  # no outline inside the tank
