@@ -29,7 +29,8 @@ FIG3_RATIO = 2.0
 def identification_points(metadata: dict[str, Any]) -> dict[str, np.ndarray] | None:
     """Identified K values at the grid points, if the metadata carries them (``metadata["data"]``).
 
-    Accepted: a list of records or a dict of columns, with ``bias_deg``/``bias`` (rad),
+    Accepted: a table ``{"columns": [...], "rows": [[...], ...]}`` (as ``scaling.identify`` writes it,
+    with optional ``usable_K_*`` flags), a list of records or a dict of columns, with ``bias_deg``/``bias`` (rad),
     ``amplitude_deg``/``amplitude`` (rad), ``period_s``/``period``, ``ratio`` and any of
     ``K_fx, K_fy, K_m`` (missing or ``None`` values: not identified). Anything else: ``None``.
 
@@ -38,6 +39,11 @@ def identification_points(metadata: dict[str, Any]) -> dict[str, np.ndarray] | N
     """
     data = metadata.get("data")
     try:
+        if isinstance(data, dict) and "columns" in data and "rows" in data:  # the identify pipeline's table
+            data = {k: [row[i] for row in data["rows"]] for i, k in enumerate(data["columns"])}
+            for name in K_NAMES:  # values flagged unusable (unidentifiable) are not shown
+                if name in data and f"usable_{name}" in data:
+                    data[name] = [v if ok else None for v, ok in zip(data[name], data[f"usable_{name}"], strict=True)]
         if isinstance(data, list):
             data = {k: [rec.get(k) for rec in data] for k in data[0]} if data and isinstance(data[0], dict) else None
         if not isinstance(data, dict):

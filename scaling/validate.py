@@ -387,7 +387,8 @@ def validate(
     ]
     results: dict[str, Any] = {
         "source": source, "metadata_status": scaling.metadata.get("status"), "is_unit": scaling.is_unit,
-        "params_differ": _params_differ(scaling.metadata.get("params"), params),
+        "params_differ": _params_differ(scaling.metadata.get("model_parameters", scaling.metadata.get("params")),
+                                        params),
         "seed": seed, "quick": quick, "version": __version__, "targets": {}, "timing_s": {},
         "exclusions": {"min_amplitude_deg": math.degrees(MIN_AMPLITUDE), "min_ratio": MIN_RATIO,
                        "two_fin_min_turn_rate": MIN_TURN_RATE},

@@ -165,6 +165,12 @@ def test_identification_points_accepts_records_and_columns():
     assert np.isnan(pts["K_fy"][0]) and pts["K_m"][1] == 0.6
     columns = {"bias": [1.0], "amplitude": [0.2], "period": [1.0], "ratio": [2.0], "K_m": [0.4]}
     assert identification_points({"data": columns})["K_m"][0] == 0.4
+    table = {"columns": ["bias_deg", "amplitude_deg", "period_s", "ratio", "K_fx", "K_fy", "K_m", "usable_K_fx",
+                         "usable_K_fy", "usable_K_m"],
+             "rows": [[90, 20, 1.0, 2, 0.98, 5e6, 0.2, 1.0, 0.0, 1.0], [60, 10, 1.0, 2, 1.0, 0.8, 0.3, 1.0, 1.0, 1.0]]}
+    pts = identification_points({"data": table})
+    np.testing.assert_allclose(pts["amplitude"], np.radians([20, 10]))
+    assert np.isnan(pts["K_fy"][0]) and pts["K_fy"][1] == 0.8  # the unusable value is hidden
     assert identification_points({}) is None
     assert identification_points({"data": "garbage"}) is None
 
