@@ -63,7 +63,7 @@ def bessel_j1(x: float) -> float:
 def _k_value(which: int, bias: float, amplitude: float, period: float, ratio: float, k_powers, k_coefs) -> float:
     """Evaluate scaling function ``which`` (0 K_fx, 1 K_fy, 2 K_m) as a sum of monomials.
 
-    Features, in order: bias [rad], amplitude [rad], period [s], ratio [-], 1/period [1/s].
+    Features, in order: bias [rad], amplitude [rad], period [s], ratio [-], 1/period [1/s], 1/ratio [-].
     """
     total = 0.0
     for j in range(k_coefs.shape[1]):
@@ -71,7 +71,10 @@ def _k_value(which: int, bias: float, amplitude: float, period: float, ratio: fl
         if c == 0.0:
             continue
         p = k_powers[which, j]
-        total += c * bias ** p[0] * amplitude ** p[1] * period ** p[2] * ratio ** p[3] * (1.0 / period) ** p[4]
+        total += (
+            c * bias ** p[0] * amplitude ** p[1] * period ** p[2] * ratio ** p[3]
+            * (1.0 / period) ** p[4] * (1.0 / ratio) ** p[5]
+        )
     return total
 
 
@@ -133,7 +136,7 @@ def mean_fin_power(amplitude: float, period: float, ratio: float, span: float, d
     return drag_constant * span * amplitude**3 * (w1 * w1 + w2 * w2) / period
 
 
-_UNIT_K_POWERS = np.zeros((3, 1, 5))
+_UNIT_K_POWERS = np.zeros((3, 1, 6))
 _UNIT_K_COEFS = np.ones((3, 1))
 
 

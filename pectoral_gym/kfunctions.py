@@ -9,8 +9,8 @@ File format (JSON, ``format = "pectoral-gym-scaling/1"``)::
 
     {
       "format": "pectoral-gym-scaling/1",
-      "features": ["bias", "amplitude", "period", "ratio", "inv_period"],
-      "units": {"bias": "rad", "amplitude": "rad", "period": "s", "ratio": "-", "inv_period": "1/s"},
+      "features": ["bias", "amplitude", "period", "ratio", "inv_period", "inv_ratio"],
+      "units": {"bias": "rad", "amplitude": "rad", "period": "s", "ratio": "-", "inv_period": "1/s", "inv_ratio": "-"},
       "functions": {
         "K_fx": [{"coef": 1.0, "powers": [0, 0, 0, 0, 0]}, ...],
         "K_fy": [...],
@@ -20,6 +20,8 @@ File format (JSON, ``format = "pectoral-gym-scaling/1"``)::
     }
 
 Each function is a sum of monomials ``coef * prod(feature_i ** powers_i)``.
+Files written before ``inv_ratio`` existed list the first five features and
+five powers per term; they load unchanged (the sixth power is 0).
 The shipped ``data/scaling_coefficients.json`` holds ``K = 1`` until the
 scaling issue ships identified coefficients (its ``metadata.status`` says so).
 """
@@ -37,11 +39,11 @@ import numpy as np
 
 __all__ = ["FEATURES", "K_NAMES", "FORMAT", "ScalingFunctions", "default_scaling_path"]
 
-FEATURES = ("bias", "amplitude", "period", "ratio", "inv_period")
+FEATURES = ("bias", "amplitude", "period", "ratio", "inv_period", "inv_ratio")
 K_NAMES = ("K_fx", "K_fy", "K_m")
 FORMAT = "pectoral-gym-scaling/1"
 _NUMBER_LIST = re.compile(r"\[\s*((?:-?[\d.eE+-]+|null),?(?:\s*(?:-?[\d.eE+-]+|null),?)*)\s*\]")
-_UNITS = {"bias": "rad", "amplitude": "rad", "period": "s", "ratio": "-", "inv_period": "1/s"}
+_UNITS = {"bias": "rad", "amplitude": "rad", "period": "s", "ratio": "-", "inv_period": "1/s", "inv_ratio": "-"}
 
 
 def default_scaling_path() -> Path:
@@ -54,7 +56,7 @@ class ScalingFunctions:
     """Polynomial scaling functions in packed array form.
 
     Attributes:
-        powers: ``(3, n_terms, 5)`` float exponents of :data:`FEATURES` per K.
+        powers: ``(3, n_terms, len(FEATURES))`` float exponents of :data:`FEATURES` per K.
         coefs: ``(3, n_terms)`` coefficients (zero pads unused terms).
         metadata: Free-form provenance (grid, solver, fit statistics, version).
     """
@@ -66,7 +68,7 @@ class ScalingFunctions:
     @classmethod
     def unit(cls) -> ScalingFunctions:
         """``K_fx = K_fy = K_m = 1``: plain classical averaging."""
-        return cls(np.zeros((3, 1, 5)), np.ones((3, 1)), {"status": "unit: K = 1"})
+        return cls(np.zeros((3, 1, len(FEATURES))), np.ones((3, 1)), {"status": "unit: K = 1"})
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "<dict>") -> ScalingFunctions:
@@ -77,13 +79,15 @@ class ScalingFunctions:
         """
         if data.get("format") != FORMAT:
             raise ValueError(f"{source}: 'format' must be {FORMAT!r}, got {data.get('format')!r}")
-        if tuple(data.get("features", ())) != FEATURES:
+        features = tuple(data.get("features", ()))
+        if features not in (FEATURES, FEATURES[:5]):
             raise ValueError(f"{source}: 'features' must be {list(FEATURES)}")
+        width = len(features)
         functions = data.get("functions")
         if not isinstance(functions, dict) or set(functions) != set(K_NAMES):
             raise ValueError(f"{source}: 'functions' must have exactly the keys {list(K_NAMES)}")
         n_terms = max(1, max(len(functions[name]) for name in K_NAMES))
-        powers = np.zeros((3, n_terms, 5))
+        powers = np.zeros((3, n_terms, len(FEATURES)))
         coefs = np.zeros((3, n_terms))
         for i, name in enumerate(K_NAMES):
             for j, term in enumerate(functions[name]):
@@ -92,11 +96,11 @@ class ScalingFunctions:
                     p = np.asarray(term["powers"], dtype=np.float64)
                 except (KeyError, TypeError, ValueError) as err:
                     raise ValueError(f"{source}: {name} term {j} needs 'coef' and 'powers': {err}") from None
-                if p.shape != (5,) or not np.all(np.isfinite(p)) or not np.isfinite(c):
-                    raise ValueError(f"{source}: {name} term {j}: 5 finite powers and a finite coef required")
+                if p.shape != (width,) or not np.all(np.isfinite(p)) or not np.isfinite(c):
+                    raise ValueError(f"{source}: {name} term {j}: {width} finite powers and a finite coef required")
                 if np.any(p < 0) or np.any(p != np.round(p)):
                     raise ValueError(f"{source}: {name} term {j}: powers must be non-negative integers")
-                powers[i, j] = p
+                powers[i, j, :width] = p
                 coefs[i, j] = c
         return cls(powers, coefs, dict(data.get("metadata", {})))
 
@@ -139,7 +143,7 @@ class ScalingFunctions:
 
     def evaluate(self, bias: float, amplitude: float, period: float, ratio: float) -> tuple[float, float, float]:
         """``(K_fx, K_fy, K_m)`` at one fin-beat pattern (rad, rad, s, -)."""
-        x = np.array([bias, amplitude, period, ratio, 1.0 / period])
+        x = np.array([bias, amplitude, period, ratio, 1.0 / period, 1.0 / ratio])
         values = np.sum(self.coefs * np.prod(x ** self.powers, axis=-1), axis=-1)
         return float(values[0]), float(values[1]), float(values[2])
 

@@ -46,7 +46,7 @@ def scaling_sx(beat, scaling: ScalingFunctions | None):
     if scaling is None:
         return ca.vertcat(1.0, 1.0, 1.0)
     bias, amplitude, period, ratio = beat[0], beat[1], beat[2], beat[3]
-    features = (bias, amplitude, period, ratio, 1.0 / period)
+    features = (bias, amplitude, period, ratio, 1.0 / period, 1.0 / ratio)
     values = []
     for which in range(3):
         total = 0.0

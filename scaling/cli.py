@@ -33,7 +33,7 @@ def _identify_parser(sub) -> None:
     p.add_argument("--q", type=float, default=2000.0, help="stage weight Q = q I3 (default 2000)")
     p.add_argument("--q-terminal", type=float, default=80.0, help="terminal weight Q_T = q I3 (default 80)")
     p.add_argument("--substeps", type=int, default=0, help="RK4 steps per sampling interval (0: automatic)")
-    p.add_argument("--max-degree", type=int, default=5, help="highest polynomial degree tried (default 5)")
+    p.add_argument("--max-degree", type=int, default=7, help="highest polynomial degree tried (default 7)")
     p.add_argument("--fit-target", type=float, default=2e-3,
                    help="held-out accuracy a closed form must reach (predicted relative velocity error, default 0.002)")
     p.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")

@@ -10,10 +10,12 @@ Presets:
   periods 0.5, 0.66, 1, 2 s, ratios 2-5).
 * ``env``: covers the environments' whole default action ranges (bias 45-135
   deg, amplitude 0-30 deg, period 0.5-2 s, ratio 1-5), so the averaged
-  environment never extrapolates, plus the periods of the paper's forward
-  swimming sweep (Fig. 4). Patterns with no forcing (ratio 1, amplitude 0) are
-  not identifiable and are left out; the fitted K stays bounded there and its
-  forcing is zero anyway.
+  environment never extrapolates, and the periods of the paper's forward
+  swimming sweep (Fig. 4). K does not depend on the period (the model is
+  invariant under a change of time scale, see docs/scaling.md), so three
+  periods suffice; amplitudes are denser where K changes fastest. Patterns
+  with no forcing (ratio 1, amplitude 0) are not identifiable and are left
+  out; their forcing is zero whatever K is.
 
 Grid file (JSON), either axes whose product is taken::
 
@@ -163,8 +165,8 @@ GRIDS: dict[str, Grid] = {
     "env": Grid.product(
         "env",
         bias_deg=(45, 60, 75, 90, 105, 120, 135),
-        amplitude_deg=(2.5, 5, 10, 15, 20, 25, 30),
-        period_s=(0.36, 0.5, 0.66, 0.8, 1.0, 1.4, 2.0, 3.0, 4.0),
+        amplitude_deg=(2.5, 5, 7.5, 10, 12.5, 15, 20, 25, 30),
+        period_s=(0.36, 1.0, 4.0),
         ratio=(1.25, 1.5, 2, 3, 4, 5),
     ),
 }

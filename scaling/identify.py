@@ -182,7 +182,7 @@ def identify(
     grid: Grid,
     params: FishParams | None = None,
     settings: NmpcSettings | None = None,
-    max_degree: int = 5,
+    max_degree: int = 7,
     folds: int = 5,
     seed: int = 0,
     jobs: int = 0,

@@ -36,7 +36,7 @@ from pectoral_gym.symbolic import body_accel_sx
 
 __all__ = ["NmpcSettings", "NmpcResult", "ScalingNmpc", "algebraic_scaling", "auto_substeps", "unscaled_forcing"]
 
-_NO_SCALING = (np.zeros((3, 1, 5)), np.ones((3, 1)))
+_NO_SCALING = (np.zeros((3, 1, 6)), np.ones((3, 1)))
 
 
 @dataclass(frozen=True)

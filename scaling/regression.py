@@ -2,8 +2,8 @@
 
 Candidates are complete polynomials of total degree ``0 .. max_degree`` in a
 subset of the features of :data:`pectoral_gym.kfunctions.FEATURES` (the paper
-fits polynomials in the four fin-beat parameters; ``inv_period`` lets a
-``1 / T_p`` basis compete). Each candidate is fitted by weighted least squares
+fits polynomials in the four fin-beat parameters; ``inv_ratio`` and
+``inv_period`` let ``1 / zeta`` and ``1 / T_p`` bases compete). Each candidate is fitted by weighted least squares
 and scored by its k-fold cross-validated weighted RMS residual. The chosen
 form is the one with the fewest terms whose CV error meets an accuracy target
 or, if none does, is within one standard error of the best candidate's (the
@@ -37,11 +37,12 @@ __all__ = [
     "sensitivity_weights",
 ]
 
-# Candidate feature subsets (indices into FEATURES: bias, amplitude, period, ratio, inv_period).
+# Candidate feature subsets (indices into FEATURES: bias, amplitude, period, ratio, inv_period, inv_ratio).
 FEATURE_SETS: dict[str, tuple[int, ...]] = {
     "bias, amplitude, ratio": (0, 1, 3),
-    "bias, amplitude, period, ratio": (0, 1, 2, 3),
-    "bias, amplitude, ratio, 1/period": (0, 1, 3, 4),
+    "bias, amplitude, 1/ratio": (0, 1, 5),
+    "bias, amplitude, 1/ratio, period": (0, 1, 5, 2),
+    "bias, amplitude, 1/ratio, 1/period": (0, 1, 5, 4),
 }
 
 
@@ -52,7 +53,7 @@ class Fit:
     Attributes:
         features: Name of the feature subset.
         degree: Total polynomial degree.
-        powers: ``(n_terms, 5)`` exponents over all :data:`FEATURES`.
+        powers: ``(n_terms, len(FEATURES))`` exponents over all :data:`FEATURES`.
         coefs: ``(n_terms,)`` coefficients.
         r2: Weighted coefficient of determination on all data.
         cv_rmse: k-fold cross-validated weighted RMS residual.
@@ -90,9 +91,9 @@ class Fit:
 
 
 def feature_matrix(patterns: np.ndarray) -> np.ndarray:
-    """``(n, 5)`` values of :data:`FEATURES` for ``(n, 4)`` patterns."""
+    """``(n, 6)`` values of :data:`FEATURES` for ``(n, 4)`` patterns."""
     patterns = np.asarray(patterns, dtype=np.float64)
-    return np.column_stack([patterns, 1.0 / patterns[:, 2]])
+    return np.column_stack([patterns, 1.0 / patterns[:, 2], 1.0 / patterns[:, 3]])
 
 
 def monomial_powers(feature_set: tuple[int, ...], degree: int) -> np.ndarray:
@@ -179,7 +180,7 @@ def select_model(
     patterns: np.ndarray,
     values: np.ndarray,
     weights: np.ndarray | None = None,
-    max_degree: int = 5,
+    max_degree: int = 7,
     feature_sets: tuple[str, ...] | None = None,
     folds: int = 5,
     seed: int = 0,

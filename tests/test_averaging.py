@@ -25,7 +25,7 @@ from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
 
 P = FishParams()
 K_DRAG = P.fin_force_coef * P.water_density * P.fin_chord * P.fin_span**3 / 6.0
-UNIT_POWERS = np.zeros((3, 1, 5))
+UNIT_POWERS = np.zeros((3, 1, 6))
 UNIT_COEFS = np.ones((3, 1))
 
 PATTERNS = [
@@ -169,14 +169,15 @@ def test_averaged_forcing_bad_side():
 def test_scaling_multiplies_each_component():
     s = ScalingFunctions.from_dict({
         "format": FORMAT, "features": list(FEATURES),
-        "functions": {"K_fx": [{"coef": 0.5, "powers": [0, 0, 0, 0, 0]}],
-                      "K_fy": [{"coef": 2.0, "powers": [1, 0, 0, 0, 0]}],
-                      "K_m": [{"coef": 0.3, "powers": [0, 0, 0, 1, 0]}, {"coef": 0.1, "powers": [0, 0, 0, 0, 1]}]},
+        "functions": {"K_fx": [{"coef": 0.5, "powers": [0, 0, 0, 0, 0, 0]}],
+                      "K_fy": [{"coef": 2.0, "powers": [1, 0, 0, 0, 0, 0]}],
+                      "K_m": [{"coef": 0.3, "powers": [0, 0, 0, 1, 0, 0]}, {"coef": 0.1, "powers": [0, 0, 0, 0, 1, 0]},
+                              {"coef": 0.2, "powers": [0, 0, 0, 0, 0, 2]}]},
     })
     beat = rad((100, 12, 0.8, 5.0))
     unit = np.array(averaged_forcing(beat, P, "left"))
     scaled = np.array(averaged_forcing(beat, P, "left", scaling=s))
-    k = np.array([0.5, 2.0 * beat.bias, 0.3 * 5.0 + 0.1 / 0.8])
+    k = np.array([0.5, 2.0 * beat.bias, 0.3 * 5.0 + 0.1 / 0.8 + 0.2 / 25.0])
     np.testing.assert_allclose(scaled, k * unit, rtol=1e-12)
 
 
@@ -246,9 +247,10 @@ def test_taylor_cosine_expansion_poor_near_90_deg():
 
 
 def _poly_dict():
+    # Written in the five-feature layout of files made before inv_ratio: must still load.
     return {
         "format": FORMAT,
-        "features": list(FEATURES),
+        "features": list(FEATURES[:5]),
         "functions": {
             "K_fx": [{"coef": 2.0, "powers": [0, 0, 0, 0, 0]}, {"coef": 3.0, "powers": [1, 2, 0, 0, 0]}],
             "K_fy": [{"coef": -1.5, "powers": [0, 0, 0, 1, 1]}],
@@ -362,4 +364,4 @@ def test_scaling_missing_file(tmp_path):
 
 def test_k_names_and_features_order():
     assert K_NAMES == ("K_fx", "K_fy", "K_m")
-    assert FEATURES == ("bias", "amplitude", "period", "ratio", "inv_period")
+    assert FEATURES == ("bias", "amplitude", "period", "ratio", "inv_period", "inv_ratio")

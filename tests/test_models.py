@@ -174,7 +174,7 @@ def test_averaged_model_matches_independent_ode_solution(right, left):
 
 def test_averaged_model_with_scaling_scales_forcing():
     k = {"K_fx": 0.8, "K_fy": 1.3, "K_m": 0.45}
-    s = ScalingFunctions.from_dict({"format": FORMAT, "features": list(FEATURES),
+    s = ScalingFunctions.from_dict({"format": FORMAT, "features": list(FEATURES[:5]),
                                     "functions": {n: [{"coef": v, "powers": [0] * 5}] for n, v in k.items()}})
     f = (closed_form_average(FORWARD, 1.0) * np.array([k["K_fx"], k["K_fy"], k["K_m"]]))
     ref = solve_ivp(lambda t, y: eq19(y, f), (0, 4.0), np.zeros(6), method="DOP853", rtol=1e-11, atol=1e-13).y[:, -1]

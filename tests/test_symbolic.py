@@ -16,7 +16,7 @@ PARAMS = FishParams()
 
 def _scaling():
     # K_fx = 0.9, K_fy = 1.2 + 0.5 amplitude, K_m = 0.4 + 0.1 / period: one term per feature kind
-    powers = np.zeros((3, 2, 5))
+    powers = np.zeros((3, 2, 6))
     coefs = np.zeros((3, 2))
     coefs[0, 0] = 0.9
     coefs[1] = [1.2, 0.5]
