@@ -74,9 +74,9 @@ class PectoralFishEnv(gym.Env):
     | 1     | Y, position in the tank                       | m     |
     | 2     | cos psi (heading)                             | -     |
     | 3     | sin psi                                       | -     |
-    | 4     | vx, surge velocity (body frame)               | m/s   |
-    | 5     | vy, sway velocity (body frame)                | m/s   |
-    | 6     | omega, yaw rate (> 0: turning left)           | rad/s |
+    | 4     | vx, surge velocity (body frame), mean over the last control period | m/s |
+    | 5     | vy, sway velocity (body frame), same mean     | m/s   |
+    | 6     | omega, yaw rate (> 0: turning left), same mean | rad/s |
     | 7-8   | target position relative to the fish, body frame | m  |
     | 9-10  | target velocity, body frame (zero for ``goal``) | m/s |
     | 11-18 | the last action, normalised and clipped (after a reset: the encoding of the rest pattern) | - |
