@@ -38,7 +38,7 @@ class TrackerConfig:
         kernel_size: Side of the square structuring element of the morphological cleanup [px].
         min_area_ratio: Smallest blob area as a fraction of a marker's expected area (partly hidden -> lost).
         max_area_ratio: Largest blob area as a multiple of the expected area (a red object -> rejected).
-        max_elongation: Largest ratio of a blob's principal axes (a disc is 1, a third hidden ~1.3).
+        max_elongation: Largest ratio of a blob's principal axes (a disc is 1, a quarter hidden ~1.3).
         front_offset: Red marker position along body x from the centre of mass [m].
         back_offset: Blue marker position along body x [m].
         marker_radius: Marker radius [m] (sets the expected area).
@@ -49,11 +49,11 @@ class TrackerConfig:
     red_hue_bands: tuple[tuple[int, int], ...] = ((0, 10), (170, 179))
     blue_hue_bands: tuple[tuple[int, int], ...] = ((95, 130),)
     min_saturation: int = 110
-    min_value: int = 50
+    min_value: int = 30
     kernel_size: int = 3
-    min_area_ratio: float = 0.8
+    min_area_ratio: float = 0.85
     max_area_ratio: float = 1.8
-    max_elongation: float = 1.35
+    max_elongation: float = 1.3
     front_offset: float = FRONT_MARKER_OFFSET
     back_offset: float = BACK_MARKER_OFFSET
     marker_radius: float = MARKER_RADIUS
