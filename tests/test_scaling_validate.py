@@ -11,7 +11,7 @@ import pytest
 
 from pectoral_gym.averaging import averaged_forcing
 from pectoral_gym.dynamics import body_rhs
-from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.kfunctions import FEATURES, ScalingFunctions
 from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
 from pectoral_gym.steady import steady_state
 from scaling import validate as sv
@@ -23,7 +23,7 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
 def constant_k(k_fx: float, k_fy: float, k_m: float, metadata: dict | None = None) -> ScalingFunctions:
     """Scaling functions that are constants."""
-    return ScalingFunctions(np.zeros((3, 1, 5)), np.array([[k_fx], [k_fy], [k_m]]), metadata or {})
+    return ScalingFunctions(np.zeros((3, 1, len(FEATURES))), np.array([[k_fx], [k_fy], [k_m]]), metadata or {})
 
 
 def exact_k(beat: FinBeat, params: FishParams) -> tuple[float, float, float]:
