@@ -19,7 +19,7 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-from hardware.camera import Frame
+from hardware.frames import Frame
 from hardware.scene import BACK_MARKER_OFFSET, FRONT_MARKER_OFFSET, MARKER_RADIUS, CameraModel
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 
