@@ -19,12 +19,14 @@ rather than treating every K value alike.
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
+from pectoral_gym.dynamics import body_accel
 from pectoral_gym.kfunctions import FEATURES
-from pectoral_gym.params import FishParams
+from pectoral_gym.params import FishParams, coefficient_vector
 
 __all__ = [
     "Fit",
@@ -214,23 +216,35 @@ def sensitivity_weights(
 ) -> np.ndarray:
     """``(n, 3)`` relative error of speed or yaw rate per unit error in ``(K_fx, K_fy, K_m)``.
 
-    Linearising eq. (20) about the steady state, the damping of component
-    ``i`` changes at rate ``d_i = 2 c1 |V| / m`` (surge, sway) or ``2 c4 |omega|``
-    (yaw), so an error ``dK`` moves the velocity by ``dK forcing_i / (m_i d_i)``:
-    a fraction ``forcing_i / (m_i d_i |V|)`` of the speed (K_fx, K_fy) or
-    ``forcing_3 / (J3 d_3 |omega|)`` of the yaw rate (K_m), the quantities the
+    Linearising eqs. (19)-(20) about the steady state ``v``: an error ``dK_j``
+    adds ``dK_j forcing_j / m_j`` to component ``j`` of the acceleration and
+    moves the steady state by ``dv = -A^-1 e_j dK_j forcing_j / m_j``, ``A`` the
+    Jacobian of the body dynamics (by central differences; it includes the
+    Munk moment ``(m1 - m2) vx vy / J3``, which makes the yaw rate very
+    sensitive where the fin moment is small). The weight is the larger of the
+    relative changes of the speed and of the yaw rate, the quantities the
     turning radius and period (eq. 29) are made of. ``floor`` [m/s, rad/s]
     keeps the weights finite near rest.
     """
     velocities = np.asarray(velocities, dtype=np.float64)
+    coef = coefficient_vector(params)[:6]
     masses = np.array([params.m1, params.m2, params.J3])
-    speed = np.hypot(velocities[:, 0], velocities[:, 1])
-    rate = np.column_stack(
-        [
-            2.0 * params.c1 * speed / params.m1,
-            2.0 * params.c1 * speed / params.m2,
-            2.0 * params.c4 * np.abs(velocities[:, 2]),
-        ]
-    )
-    magnitude = np.maximum(np.column_stack([speed, speed, np.abs(velocities[:, 2])]), floor)
-    return np.abs(forcing) / (masses * np.maximum(rate, 1e-12) * magnitude)
+    weights = np.empty((len(velocities), 3))
+    for i, v in enumerate(velocities):
+        jac = np.empty((3, 3))
+        for k in range(3):
+            h = 1e-7 * max(abs(v[k]), floor)
+            up, down = v.copy(), v.copy()
+            up[k] += h
+            down[k] -= h
+            plus, minus = body_accel(*up, 0.0, 0.0, 0.0, *coef), body_accel(*down, 0.0, 0.0, 0.0, *coef)
+            jac[:, k] = (np.array(plus) - np.array(minus)) / (2 * h)
+        try:
+            response = -np.linalg.solve(jac, np.diag(np.asarray(forcing[i]) / masses))  # column j: dv per unit dK_j
+        except np.linalg.LinAlgError:
+            response = np.full((3, 3), np.inf)
+        speed = max(math.hypot(v[0], v[1]), floor)
+        d_speed = (v[0] * response[0] + v[1] * response[1]) / speed**2
+        d_omega = response[2] / max(abs(v[2]), floor)
+        weights[i] = np.maximum(np.abs(d_speed), np.abs(d_omega))
+    return np.minimum(weights, 1e6)
