@@ -1,0 +1,226 @@
+"""Baseline controllers: random actions, a hand-designed feedback law and NMPC.
+
+All three implement :class:`agents.policy.Controller` and are built by
+:func:`make_baseline` from the environment's :class:`~pectoral_gym.envs.core.EnvConfig`
+(``env.unwrapped.config``), so they map physical fin patterns to normalised
+actions through the same ranges as the environment (``EnvConfig.encode``).
+
+Physics used by the hand controller (``docs/model.md``):
+
+* a fin's averaged thrust is ``k pi^2 (zeta^2 - 1) / (zeta T_p^2) gA J1(gA) sin(g0)``:
+  it grows with the amplitude ``gA``, the ratio ``zeta`` and ``1 / T_p``;
+  the controllers fix ``T_p`` at the shortest and ``zeta`` at the largest value of
+  the env's ranges (most thrust per amplitude, shortest wait until a fin latches
+  a new pattern) and steer with the amplitudes and biases;
+* the right fin pushes on the right side of the body: alone, it turns the fish
+  **left** (``omega > 0``); the left fin turns it right;
+* a bias ``g0 < 90 deg`` on the right fin (``> 90 deg`` on the left fin) adds a
+  lateral force to the left (``f_hy ~ cos g0``, eq. 25).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from pectoral_gym.averaging import averaged_forcing, bessel_j1
+from pectoral_gym.envs.core import EnvConfig
+from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.params import FinBeat
+
+__all__ = ["BASELINES", "FinMap", "HandController", "RandomController", "make_baseline"]
+
+BASELINES = ("random", "hand", "nmpc")
+_AMPLITUDE_TABLE = 201  # samples of the thrust-level -> amplitude table
+
+
+class FinMap:
+    """Physical fin commands -> normalised actions, with period and ratio fixed at their most effective values.
+
+    Args:
+        config: The environment settings (ranges, parameters).
+
+    Attributes:
+        period: Fixed fin-beat period: the shortest of ``period_range`` [s].
+        ratio: Fixed speed ratio: the largest of ``ratio_range`` [-].
+        amplitude_max: Largest amplitude of ``amplitude_range`` [rad].
+        max_thrust: Averaged thrust of one fin at ``bias = 90 deg``, ``amplitude_max``, with the
+            identified scaling functions [N] (0 if the ranges allow no thrust).
+        max_speed: Straight-swimming steady speed with both fins at ``max_thrust`` [m/s].
+    """
+
+    def __init__(self, config: EnvConfig):
+        self.config = config
+        self.period = float(config.period_range[0])
+        self.ratio = float(config.ratio_range[1])
+        self.amplitude_max = float(config.amplitude_range[1])
+        self.amplitude_min = float(config.amplitude_range[0])
+        bias_mid = float(np.clip(math.pi / 2, *config.bias_range))
+        self.bias_mid = bias_mid
+        # The identified K describe the full model too (that is what they were identified for).
+        scaling = None if config.scaling == "none" else ScalingFunctions.load()
+        self.scaling = scaling
+        fx, _, _ = averaged_forcing(FinBeat(bias_mid, self.amplitude_max, self.period, self.ratio),
+                                    config.params, scaling=scaling)
+        self.max_thrust = max(float(fx), 0.0)
+        self.max_speed = math.sqrt(2.0 * self.max_thrust / config.params.c1)  # drag balance c1 v^2 = 2 f (eq. 20)
+        amplitudes = np.linspace(self.amplitude_min, self.amplitude_max, _AMPLITUDE_TABLE)
+        shape = np.array([a * bessel_j1(a) for a in amplitudes])  # thrust ~ gA J1(gA) (eq. 25, exact average)
+        self._levels = shape / shape[-1] if shape[-1] > 0 else np.linspace(0.0, 1.0, amplitudes.size)
+        self._amplitudes = amplitudes
+
+    def amplitude(self, level: float) -> float:
+        """Amplitude [rad] whose thrust is ``level`` (0..1) of the largest thrust."""
+        return float(np.interp(float(np.clip(level, 0.0, 1.0)), self._levels, self._amplitudes))
+
+    def level_for_speed(self, speed: float) -> float:
+        """Thrust level (both fins) whose straight steady speed is ``speed`` [m/s], clipped to [0, 1]."""
+        if self.max_speed <= 0:
+            return 0.0
+        return float(np.clip(speed / self.max_speed, 0.0, 1.0) ** 2)  # drag ~ v^2
+
+    def action(self, bias_right: float, amplitude_right: float, bias_left: float, amplitude_left: float) -> np.ndarray:
+        """Normalised action ``(8,)`` float32 of the two fin patterns (period and ratio fixed)."""
+        right = self.config.encode(np.array([bias_right, amplitude_right, self.period, self.ratio]))
+        left = self.config.encode(np.array([bias_left, amplitude_left, self.period, self.ratio]))
+        return np.concatenate([right, left]).astype(np.float32)
+
+
+class RandomController:
+    """Uniform random actions in [-1, 1]^8 from a seeded generator.
+
+    Args:
+        seed: Seed of the generator; ``reset(seed)`` reseeds it.
+    """
+
+    name = "random"
+
+    def __init__(self, seed: int | None = 0):
+        self._seed = seed
+        self._rng = np.random.default_rng(seed)
+
+    def reset(self, seed: int | None = None) -> None:
+        """Reseed when ``seed`` is given (otherwise the stream continues)."""
+        if seed is not None:
+            self._rng = np.random.default_rng(seed)
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """A uniform random action (the observation is ignored)."""
+        return self._rng.uniform(-1.0, 1.0, 8).astype(np.float32)
+
+
+class HandController:
+    """Feedback from heading and distance errors to differential fin amplitude and bias.
+
+    With ``e`` the bearing of the aim point in the body frame (> 0: to the left)
+    and ``d`` its distance:
+
+    * turn command ``u = turn_level clip(heading_gain e - rate_gain omega, -1, 1)``, ``omega`` the mean yaw rate over
+      the last control period from the change of heading (the full model's instantaneous yaw rate
+      swings within each fin beat, and sampling it once per period aliases); the right fin gets
+      thrust level ``s + u``, the left ``s - u`` (right fin stronger turns left);
+    * forward thrust level ``s`` from the desired speed ``v = min(speed_gain d, max) max(cos e, 0)^p``
+      through the drag balance; ``track`` adds the reference speed (feed-forward) and aims
+      ``lookahead`` seconds ahead of the moving reference point;
+    * differential bias ``g0 = 90 deg -+ bias_gain e`` (right, left) adds a lateral force towards the aim.
+
+    Args:
+        config: The environment settings.
+        heading_gain: Turn command per radian of bearing [1/rad].
+        rate_gain: Turn command per rad/s of yaw rate (damping) [s/rad].
+        speed_gain: Desired speed per metre of distance [1/s].
+        bias_gain: Bias offset per radian of bearing [-].
+        bias_max: Largest bias offset from 90 deg [rad].
+        lookahead: ``track``: aim this far ahead of the reference point along its velocity [s].
+        turn_level: Largest differential thrust level. Small: the full model turns tightest at small
+            amplitudes (turning radius ~0.25 m at 10-15 deg, ~0.5 m at 30 deg with one fin).
+    """
+
+    name = "hand"
+
+    def __init__(self, config: EnvConfig, heading_gain: float = 1.5, rate_gain: float = 1.0,
+                 speed_gain: float = 0.6, bias_gain: float = 0.3, bias_max: float = math.radians(15.0),
+                 lookahead: float = 2.0, turn_level: float = 0.12, turn_radius: float = 0.25,
+                 alignment_power: float = 4.0):
+        self.config = config
+        self.fins = FinMap(config)
+        self.heading_gain = float(heading_gain)
+        self.rate_gain = float(rate_gain)
+        self.speed_gain = float(speed_gain)
+        self.bias_gain = float(bias_gain)
+        self.bias_max = float(bias_max)
+        self.lookahead = float(lookahead)
+        self.turn_level = float(turn_level)
+        self.turn_radius = float(turn_radius)
+        self.alignment_power = float(alignment_power)
+        self.track = config.task == "track"
+        self._heading: float | None = None
+
+    def reset(self, seed: int | None = None) -> None:
+        """Forget the previous heading (start of an episode)."""
+        self._heading = None
+
+    def act(self, obs: np.ndarray) -> np.ndarray:
+        """Action for one observation ``(19,)``."""
+        obs = np.asarray(obs, dtype=np.float64)
+        if obs.shape != (19,):
+            raise ValueError(f"obs must have shape (19,), got {obs.shape}")
+        aim_x, aim_y = obs[7], obs[8]
+        ref_speed = 0.0
+        if self.track:  # feed forward: aim ahead of the moving reference and add its speed
+            aim_x += self.lookahead * obs[9]
+            aim_y += self.lookahead * obs[10]
+            ref_speed = math.hypot(obs[9], obs[10])
+        distance = math.hypot(aim_x, aim_y)
+        bearing = math.atan2(aim_y, aim_x)
+        heading = math.atan2(obs[3], obs[2])
+        rate = 0.0 if self._heading is None else _wrap(heading - self._heading) / self.config.control_period
+        self._heading = heading
+        turn = float(np.clip(self.heading_gain * bearing - self.rate_gain * rate, -1.0, 1.0))
+        if distance < 2.0 * self.turn_radius * abs(math.sin(bearing)):
+            turn = 0.0  # the aim lies inside the turning circle: swim on until a turn can reach it
+        alignment = max(math.cos(bearing), 0.0) ** self.alignment_power
+        speed = (min(self.speed_gain * distance, self.fins.max_speed) + ref_speed) * alignment
+        level = self.fins.level_for_speed(speed)
+        offset = float(np.clip(self.bias_gain * bearing, -self.bias_max, self.bias_max))
+        low, high = self.config.bias_range
+        f = self.fins
+        return f.action(
+            float(np.clip(f.bias_mid - offset, low, high)), f.amplitude(level + self.turn_level * turn),
+            float(np.clip(f.bias_mid + offset, low, high)), f.amplitude(level - self.turn_level * turn),
+        )
+
+
+def _wrap(angle: float) -> float:
+    """Angle wrapped to [-pi, pi) [rad]."""
+    return (angle + math.pi) % (2.0 * math.pi) - math.pi
+
+
+def make_baseline(name: str, config: EnvConfig, **kwargs: Any):
+    """Build a baseline controller for an environment.
+
+    Args:
+        name: ``"random"``, ``"hand"`` or ``"nmpc"``.
+        config: ``env.unwrapped.config`` of the environment it will drive.
+        **kwargs: Passed to the controller (``RandomController(seed)``, :class:`HandController` gains,
+            :class:`agents.nmpc.NMPCController` settings).
+
+    Returns:
+        A :class:`agents.policy.Controller`.
+
+    Raises:
+        ValueError: For an unknown name or a config that is not an ``EnvConfig``.
+    """
+    if not isinstance(config, EnvConfig):
+        raise ValueError(f"config must be an EnvConfig (env.unwrapped.config), got {type(config).__name__}")
+    if name == "random":
+        return RandomController(**kwargs)
+    if name == "hand":
+        return HandController(config, **kwargs)
+    if name == "nmpc":
+        from agents.nmpc import NMPCController  # CasADi is imported only when NMPC is asked for
+
+        return NMPCController(config, **kwargs)
+    raise ValueError(f"unknown baseline {name!r}; choose one of {BASELINES}")
