@@ -61,7 +61,7 @@ class HardwareFishEnv(gym.Env):
     |-------|--------------------------------------------------------|-------|
     | 0-1   | X, Y, position in the tank (estimated)                 | m     |
     | 2-3   | cos psi, sin psi (heading, estimated)                  | -     |
-    | 4-6   | vx, vy (body frame), omega (estimated)                 | m/s, m/s, rad/s |
+    | 4-6   | vx, vy (body frame), omega: estimates averaged over the control period | m/s, m/s, rad/s |
     | 7-8   | target position relative to the fish, body frame       | m     |
     | 9-10  | target velocity, body frame (zero for ``goal``)        | m/s   |
     | 11-18 | the command actually sent, normalised (after clipping and rate limiting) | - |
@@ -161,6 +161,8 @@ class HardwareFishEnv(gym.Env):
 
             observer = HighGainObserver(epsilon=observer_epsilon)
         self.observer = observer
+        self._velocity_sum = np.zeros(3)  # observer velocities summed over the current control period
+        self._velocity_count = 0
         self.filter = CommandFilter(self.safety.limits)
         self.watch = TrackingWatch(self.safety.tracking_timeout)
         cfg = self.config
@@ -215,6 +217,8 @@ class HardwareFishEnv(gym.Env):
                 if self._observing and t > self._last_measure:
                     self._state = np.asarray(self.observer.update(t, *self._pose), dtype=float).copy()
                     self._last_measure = t
+                    self._velocity_sum += self._state[3:6]
+                    self._velocity_count += 1
                 if in_geofence(*self._pose, self.config.params.body_length, self.safety.geofence_margin):
                     return "geofence"
             else:
@@ -293,6 +297,8 @@ class HardwareFishEnv(gym.Env):
         if not reason:
             self.link.set_fins(command)
         self._obs[0, 11:] = np.concatenate([self.config.encode(command[0]), self.config.encode(command[1])])
+        self._velocity_sum = np.zeros(3)
+        self._velocity_count = 0
         period = self.config.control_period
         self._next_tick = max(self._next_tick + period, now)  # a late step does not shorten the next one
         overrun = max(0.0, now - (self._next_tick - period))
@@ -306,6 +312,10 @@ class HardwareFishEnv(gym.Env):
         if end - self._last_measure > 2 * self.frame_period and math.isfinite(self._last_measure):
             self._state = np.asarray(self.observer.predict(end), dtype=float).copy()
         tk.observe_and_reward(self._state[None], _NONE, self._cfg, self._ep, self._obs, self._out)
+        if self._velocity_count:
+            # Velocities as in the simulated envs: means over the control period, not the last estimate
+            # (the observer passes part of the fin-beat ripple).
+            self._obs[0, 4:7] = self._velocity_sum / self._velocity_count
         self._steps += 1
         o = self._out[0]
         terminated = bool(o[tk.O_TERMINATED] > 0.5) or reason == "geofence"
