@@ -68,6 +68,11 @@ class NMPCSettings:
         w_heading: Weight of ``1 - cos(bearing of the target)`` at each interval end.
         heading_scale: Distance [m] below which the heading term fades out.
         w_change: Weight of squared input changes between intervals (inputs scaled to [0, 1]).
+        w_reach: Weight of the terminal reachability term: how far the target lies inside the fish's
+            turning circle at the end of the horizon [1/m]. The horizon is far shorter than a loop
+            (tens of seconds), so without it the fish circles a target it passed closely.
+        turn_radius: Smallest turning radius assumed by the reachability term [m] (the full model
+            turns no tighter than about 0.23 m; see docs/benchmark.md).
         w_wall: Weight of the squared wall violation [1/m^2].
         wall_margin: Keep nose and tail this far from the walls [m].
         energy_weight: Weight of the fin work [1/J]; ``None``: the env's ``energy_weight``.
@@ -93,6 +98,8 @@ class NMPCSettings:
     w_heading: float = 0.3
     heading_scale: float = 0.05
     w_change: float = 0.02
+    w_reach: float = 2.0
+    turn_radius: float = 0.25
     w_wall: float = 1000.0
     wall_margin: float = 0.03
     energy_weight: float | None = None
@@ -230,6 +237,7 @@ class NMPCController:
         energy_weight = cfg.energy_weight if s.energy_weight is None else s.energy_weight
         width = np.where(self.z_high > self.z_low, self.z_high - self.z_low, 1.0)
         half = 0.5 * params.body_length
+        turn_radius = float(s.turn_radius)
 
         p_x0 = ca.SX.sym("x0", 6)
         p_ref = ca.SX.sym("ref", 2)
@@ -254,7 +262,14 @@ class NMPCController:
             pos, psi = X[0:2, k + 1], X[2, k + 1]
             error = p_ref + p_vref * (k + 1) * self.dt - pos
             dist = ca.sqrt(ca.sumsqr(error) + 1e-6)
-            cost += s.w_distance * dist + (s.w_terminal * dist if k == n - 1 else 0.0)
+            cost += s.w_distance * dist
+            if k == n - 1:
+                cost += s.w_terminal * dist
+                # A target closer than 2 R |sin e| lies inside a turning circle of radius R and cannot be
+                # reached by turning towards it (d^2 < 2 R |y_body|); end the horizon where it can.
+                lateral = -ca.sin(psi) * error[0] + ca.cos(psi) * error[1]
+                inside = 2.0 * turn_radius * ca.sqrt(lateral**2 + 1e-6) - ca.sumsqr(error)
+                cost += s.w_reach * ca.fmax(0.0, inside) / turn_radius
             # 1 - cos(bearing of the target): turns the fish towards a target behind it, which a
             # distance cost over a short horizon cannot (turning first moves the fish away)
             facing = (ca.cos(psi) * error[0] + ca.sin(psi) * error[1]) / ca.sqrt(ca.sumsqr(error) + s.heading_scale**2)
