@@ -212,7 +212,7 @@ def select_model(
 
 
 def sensitivity_weights(
-    velocities: np.ndarray, forcing: np.ndarray, params: FishParams, floor: float = 1e-3
+    velocities: np.ndarray, forcing: np.ndarray, params: FishParams, floor: float = 1e-3, coupled: bool = False
 ) -> np.ndarray:
     """``(n, 3)`` relative error of speed or yaw rate per unit error in ``(K_fx, K_fy, K_m)``.
 
@@ -225,6 +225,12 @@ def sensitivity_weights(
     relative changes of the speed and of the yaw rate, the quantities the
     turning radius and period (eq. 29) are made of. ``floor`` [m/s, rad/s]
     keeps the weights finite near rest.
+
+    With ``coupled=False`` (default) only the diagonal of ``A`` is kept (each
+    K acts on its own velocity component through that component's damping);
+    the coupled weights are very large wherever the Munk moment nearly
+    balances the yaw damping, and fits weighted by them validated worse
+    (docs/scaling.md).
     """
     velocities = np.asarray(velocities, dtype=np.float64)
     coef = coefficient_vector(params)[:6]
@@ -239,6 +245,8 @@ def sensitivity_weights(
             down[k] -= h
             plus, minus = body_accel(*up, 0.0, 0.0, 0.0, *coef), body_accel(*down, 0.0, 0.0, 0.0, *coef)
             jac[:, k] = (np.array(plus) - np.array(minus)) / (2 * h)
+        if not coupled:
+            jac = np.diag(np.diag(jac))
         try:
             response = -np.linalg.solve(jac, np.diag(np.asarray(forcing[i]) / masses))  # column j: dv per unit dK_j
         except np.linalg.LinAlgError:
