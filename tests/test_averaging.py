@@ -303,13 +303,21 @@ def test_is_unit_false_for_nontrivial():
     assert not ScalingFunctions.from_dict(_poly_dict()).is_unit
 
 
-def test_shipped_default_loads_and_is_unit_placeholder():
+def test_shipped_default_is_identified_and_brings_the_turn_rate_to_the_full_model():
+    from pectoral_gym.steady import steady_state
+
     assert default_scaling_path().is_file()
     s = ScalingFunctions.load()
-    assert s.is_unit
-    assert "placeholder" in s.metadata.get("status", "")
-    for x in ((1.5, 0.3, 1.0, 4.0), (0.5, 0.01, 2.0, 0.5)):
-        assert s.evaluate(*x) == pytest.approx((1.0, 1.0, 1.0), rel=1e-15)
+    assert not s.is_unit and s.metadata.get("status") == "identified"
+    assert s.metadata["grid"]["name"] == "env"
+    # Off the grid (bias 80 deg, amplitude 22 deg are not grid values): the full model is the reference.
+    beat = FinBeat.from_degrees(80, 22, 1.0, 4)
+    full = steady_state("full", right=beat)
+    scaled = steady_state("averaged", right=beat)
+    unit = steady_state("averaged", right=beat, scaling="none")
+    assert abs(unit.omega / full.omega - 1) > 0.5  # plain averaging turns about twice as fast
+    assert scaled.omega == pytest.approx(full.omega, rel=0.1)
+    assert scaled.speed == pytest.approx(full.speed, rel=0.05)
 
 
 def _bad(mutate):

@@ -420,12 +420,13 @@ def test_averaged_forcing_switches_at_turning_point():
     np.testing.assert_allclose(m.state[0], y, rtol=0, atol=1e-9)
 
 
-def test_averaged_default_scaling_is_shipped_unit_file():
+def test_averaged_default_scaling_is_the_shipped_file():
     m = AveragedModel(1)
-    assert m.scaling.is_unit
+    assert not m.scaling.is_unit
     a = run(m, 5.0, right=TURN)
-    b = run(AveragedModel(1, scaling="none"), 5.0, right=TURN)
+    b = run(AveragedModel(1, scaling=ScalingFunctions.load()), 5.0, right=TURN)
     np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, run(AveragedModel(1, scaling="none"), 5.0, right=TURN))
 
 
 def test_taylor_forcing_option_changes_side_force():
