@@ -50,6 +50,9 @@ from pectoral_gym.symbolic import averaged_forcing_sx, body_accel_sx
 __all__ = ["NMPCController", "NMPCSettings"]
 
 _GOOD_STATUS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
+# A solve stopped by the iteration or time limit is still used when its trajectory obeys the model to
+# within this (m, rad, m/s): a feasible if suboptimal plan, the usual real-time NMPC compromise.
+_FEASIBLE = 1e-3
 _N_U = 4  # squared amplitude right, squared amplitude left, bias right, bias left
 _AMPLITUDE_FLOOR = 1e-3  # rad: keeps sqrt(gA^2) differentiable; a 0.06 deg stroke is no stroke
 
@@ -78,16 +81,22 @@ class NMPCSettings:
         energy_weight: Weight of the fin work [1/J]; ``None``: the env's ``energy_weight``.
         smoothing: Speed scale [m/s] smoothing ``|V|``, ``alpha`` and ``|omega|`` at rest
             (:func:`pectoral_gym.symbolic.body_accel_sx`).
+        idle_amplitude: A plan whose mean amplitude is below this fraction of the largest one is
+            compared with solves from fresh guesses (straight, turn left, turn right): stopping is a
+            common local minimum when every way to the target first leads away from it.
         adapt_rate: Rate of the online correction of the thrust and yaw-moment gains from the measured
             motion (0: no adaptation). The averaged model with placeholder or imperfect K, or a
             randomised fish, turns and swims at other rates than predicted; the gains absorb that.
         gain_bounds: Bounds of the two gains.
         max_iter: IPOPT iteration limit per solve.
         max_cpu_time: IPOPT time limit per solve [s].
-        velocity: ``"obs"``: body velocities from the observation; ``"difference"``: mean velocities
-            over the last control period from the change of pose (the full model's instantaneous
-            velocities swing within each fin beat and alias when sampled once per period);
-            ``"auto"``: ``"difference"`` on the full model, ``"obs"`` on the averaged model.
+        velocity: ``"obs"``: body velocities from the observation (the envs report their means over
+            the control period); ``"difference"``: mean velocities over the last control period from
+            the change of pose, for observation sources that give instantaneous velocities (the full
+            model's swing within each fin beat and alias when sampled once per period); ``"auto"``:
+            ``"difference"`` on the full model, ``"obs"`` on the averaged model.
+        observer: Turn those period-mean velocities into current ones: the model's velocities at the
+            end of the last period plus the offset between the measured and the model's period means.
     """
 
     horizon: int = 10
@@ -104,11 +113,13 @@ class NMPCSettings:
     wall_margin: float = 0.03
     energy_weight: float | None = None
     smoothing: float = 1e-3
+    idle_amplitude: float = 0.2
     adapt_rate: float = 0.3
     gain_bounds: tuple[float, float] = (0.1, 3.0)
     max_iter: int = 60
     max_cpu_time: float = 0.35
-    velocity: str = "auto"
+    velocity: str = "obs"
+    observer: bool = True
 
     def __post_init__(self) -> None:
         if int(self.horizon) < 1 or int(self.substeps) < 1 or int(self.max_iter) < 1:
@@ -150,7 +161,8 @@ class NMPCController:
 
     Attributes:
         solve_times: Wall time of every solve [s].
-        failures: Number of solves whose result was not used.
+        failures: Number of control steps whose solves all failed (a fallback command was used).
+        statuses: IPOPT return status -> count, over all solves.
         plan: The last good plan, ``(horizon, 4)``: amplitude right/left, bias right/left [rad].
     """
 
@@ -183,6 +195,7 @@ class NMPCController:
         self._build()
         self.solve_times: list[float] = []
         self.failures = 0
+        self.statuses: dict[str, int] = {}
         self.reset()
 
     # ------------------------------------------------------------------ problem
@@ -288,6 +301,7 @@ class NMPCController:
         options = {
             "print_time": False,
             "error_on_fail": False,
+            "show_eval_warnings": False,  # NaN at rejected trial points is handled by IPOPT's line search
             "ipopt": {
                 "print_level": 0, "sb": "yes", "max_iter": int(s.max_iter), "max_cpu_time": float(s.max_cpu_time),
                 "tol": 1e-5, "acceptable_tol": 1e-3, "acceptable_iter": 5, "mu_strategy": "adaptive",
@@ -300,6 +314,14 @@ class NMPCController:
         self._lbx = np.concatenate([np.tile(self.z_low, n), -x_bound])
         self._ubx = np.concatenate([np.tile(self.z_high, n), x_bound])
         self._rollout = ca.Function("rollout", [p_x0, Z, p_zprev, p_gain], [ca.horzcat(*x_roll)])
+        # One interval from x0 under the applied command: end state and mean body velocities (trapezoid).
+        z_applied = ca.SX.sym("z_applied", _N_U)
+        xk, f_applied = p_x0, gains * forcing(z_applied)
+        v_sum = 0.5 * p_x0[3:6]
+        for j in range(m):
+            xk = step(xk, f_prev if j < n_delay else f_applied)
+            v_sum += xk[3:6] if j < m - 1 else 0.5 * xk[3:6]
+        self._interval = ca.Function("interval", [p_x0, z_applied, p_zprev, p_gain], [xk, v_sum / m])
         self.n_delay_steps = n_delay
 
     # ------------------------------------------------------------------ controller protocol
@@ -321,8 +343,15 @@ class NMPCController:
             u = self._fallback()
         else:
             state, ref, vref = self._estimate(obs)
-            if self.settings.adapt_rate > 0 and self._last is not None:
-                self._adapt(state)
+            if self._last is not None:
+                before, z_applied, z_before = self._last
+                end, v_mean = (np.asarray(v).ravel() for v in self._interval(before, z_applied, z_before, self.gains))
+                if self.settings.adapt_rate > 0:
+                    self._adapt(state)
+                if self.settings.observer and np.all(np.isfinite(end)):
+                    # the observation holds velocities averaged over the last period: they lag the
+                    # current ones; shift the model's end-of-period velocities by the measured offset
+                    state[3:6] = end[3:6] + (state[3:6] - v_mean)
             u = self._plan_step(state, ref, vref)
             self._last = (state, self._to_z(u), self._to_z(self._u_prev))
         self._prev_obs = obs.copy()
@@ -387,10 +416,11 @@ class NMPCController:
         p = np.concatenate([state, ref, vref, z_prev, self.gains])
         sol = self._solver(x0=x0, p=p, lbx=self._lbx, ubx=self._ubx, lbg=0.0, ubg=0.0)
         status = self._solver.stats().get("return_status", "")
+        self.statuses[status] = self.statuses.get(status, 0) + 1
         cost = float(sol["f"])
         z = np.asarray(sol["x"]).ravel()[: _N_U * self._n].reshape((_N_U, self._n), order="F")
         violation = float(np.max(np.abs(np.asarray(sol["g"]))))
-        usable = status in _GOOD_STATUS or (status.startswith("Maximum") and violation < 1e-4)
+        usable = status in _GOOD_STATUS or (status.startswith("Maximum") and violation < _FEASIBLE)
         if not (usable and math.isfinite(cost) and np.all(np.isfinite(z))):
             return None
         plan = np.clip(self._to_u(z).T, self.u_low, self.u_high)
@@ -404,7 +434,8 @@ class NMPCController:
             if self.plan is not None:
                 shifted = np.vstack([self.plan[self._plan_age + 1:], np.repeat(self.plan[-1:], self._plan_age + 1, 0)])
                 best = self._solve(state, ref, vref, shifted.T)
-            if best is None:
+            idle = best is not None and float(np.mean(best[1][:, :2])) < self.settings.idle_amplitude * self.u_high[0]
+            if best is None or idle:  # no plan, or a plan to stop: often a local minimum; try turning both ways
                 for guess in self._fresh_guesses():
                     result = self._solve(state, ref, vref, guess)
                     if result is not None and (best is None or result[0] < best[0]):
