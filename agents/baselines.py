@@ -131,7 +131,8 @@ class HandController:
         heading_gain: Turn command per radian of bearing [1/rad].
         rate_gain: Turn command per rad/s of yaw rate (damping) [s/rad].
         speed_gain: Desired speed per metre of distance [1/s].
-        bias_gain: Bias offset per radian of bearing [-].
+        bias_gain: Bias offset per radian of bearing [-]. Off by default: measured on the full model
+            (30 seeded goal episodes) it lowered success from 14 to 10 at 0.3; the lateral force is small.
         bias_max: Largest bias offset from 90 deg [rad].
         lookahead: ``track``: aim this far ahead of the reference point along its velocity [s].
         turn_level: Largest differential thrust level. Small: the full model turns tightest at small
@@ -141,7 +142,7 @@ class HandController:
     name = "hand"
 
     def __init__(self, config: EnvConfig, heading_gain: float = 1.5, rate_gain: float = 1.0,
-                 speed_gain: float = 0.6, bias_gain: float = 0.3, bias_max: float = math.radians(15.0),
+                 speed_gain: float = 0.6, bias_gain: float = 0.0, bias_max: float = math.radians(15.0),
                  lookahead: float = 2.0, turn_level: float = 0.12, turn_radius: float = 0.25,
                  alignment_power: float = 4.0):
         self.config = config
