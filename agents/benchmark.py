@@ -69,7 +69,7 @@ class BenchmarkSettings:
 
 
 PRESETS = {
-    "quick": BenchmarkSettings(episodes=10, nmpc_episodes={"goal": 3, "track": 1}, max_episode_steps=120,
+    "quick": BenchmarkSettings(episodes=10, nmpc_episodes={"goal": 2, "track": 1}, max_episode_steps=120,
                                env_steps=2_000, vector_steps=5, repeats=1, train_steps=16_384),
     "full": BenchmarkSettings(),
 }
