@@ -346,19 +346,13 @@ def write_outputs(report: dict[str, Any], out: str | Path, plots: bool = True) -
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     paths = [out / "benchmark.json", out / "benchmark.md"]
-    paths[0].write_text(json.dumps(report, indent=2, default=_json_default) + "\n")
+    from agents.evaluate import json_default
+
+    paths[0].write_text(json.dumps(report, indent=2, default=json_default) + "\n")
     paths[1].write_text(to_markdown(report) + "\n")
     if plots:
         paths.append(plot_report(report, out / "benchmark.png"))
     return paths
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, (np.floating, np.integer)):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    return str(value)
 
 
 def _parse_args(argv: list[str] | None) -> argparse.Namespace:

@@ -107,11 +107,12 @@ def write_json(result: EvaluationResult, path: str | Path, per_episode: bool = T
     """Write ``result.to_dict()`` to ``path`` (folders created); returns the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(result.to_dict(per_episode), indent=2, default=_json_default) + "\n")
+    path.write_text(json.dumps(result.to_dict(per_episode), indent=2, default=json_default) + "\n")
     return path
 
 
-def _json_default(value: Any) -> Any:
+def json_default(value: Any) -> Any:
+    """``json.dumps(default=...)`` hook: numpy scalars and arrays as Python values, anything else as text."""
     if isinstance(value, (np.floating, np.integer)):
         return value.item()
     if isinstance(value, np.ndarray):
@@ -264,7 +265,7 @@ def _trajectory(rec: dict[str, list], dt: float, success: bool, wall: bool, trun
 
 
 def _jsonable(value: Any) -> Any:
-    return json.loads(json.dumps(value, default=_json_default))
+    return json.loads(json.dumps(value, default=json_default))
 
 
 def plot_trajectories(results: EvaluationResult | list[EvaluationResult], path: str | Path,

@@ -24,8 +24,8 @@ from __future__ import annotations
 import math
 
 import numba as nb
-import numpy as np
 
+from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
 
 __all__ = [
@@ -136,8 +136,7 @@ def mean_fin_power(amplitude: float, period: float, ratio: float, span: float, d
     return drag_constant * span * amplitude**3 * (w1 * w1 + w2 * w2) / period
 
 
-_UNIT_K_POWERS = np.zeros((3, 1, 6))
-_UNIT_K_COEFS = np.ones((3, 1))
+_UNIT_K = ScalingFunctions.unit()
 
 
 def averaged_forcing(
@@ -159,7 +158,8 @@ def averaged_forcing(
     if side not in ("right", "left"):
         raise ValueError(f"side must be 'right' or 'left', got {side!r}")
     params = params or FishParams()
-    powers, coefs = (_UNIT_K_POWERS, _UNIT_K_COEFS) if scaling is None else (scaling.powers, scaling.coefs)
+    scaling = _UNIT_K if scaling is None else scaling
+    powers, coefs = scaling.powers, scaling.coefs
     return averaged_fin_forcing(
         beat.bias, beat.amplitude, beat.period, beat.ratio,
         1.0 if side == "right" else -1.0,

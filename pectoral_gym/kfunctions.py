@@ -65,6 +65,15 @@ class ScalingFunctions:
     coefs: np.ndarray
     metadata: dict[str, Any] = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        # The compiled kernels index powers[k, j, :len(FEATURES)] without bounds checks.
+        n_terms = np.shape(self.coefs)[1] if np.ndim(self.coefs) == 2 else -1
+        if np.shape(self.coefs) != (3, n_terms) or np.shape(self.powers) != (3, n_terms, len(FEATURES)):
+            raise ValueError(
+                f"ScalingFunctions needs coefs (3, n) and powers (3, n, {len(FEATURES)}); "
+                f"got {np.shape(self.coefs)} and {np.shape(self.powers)}"
+            )
+
     @classmethod
     def unit(cls) -> ScalingFunctions:
         """``K_fx = K_fy = K_m = 1``: plain classical averaging."""

@@ -31,12 +31,13 @@ import numpy as np
 
 from pectoral_gym.averaging import EXACT, averaged_fin_forcing
 from pectoral_gym.dynamics import body_accel
+from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import FishParams, coefficient_vector
 from pectoral_gym.symbolic import body_accel_sx
 
 __all__ = ["NmpcSettings", "NmpcResult", "ScalingNmpc", "algebraic_scaling", "auto_substeps", "unscaled_forcing"]
 
-_NO_SCALING = (np.zeros((3, 1, 6)), np.ones((3, 1)))
+_UNIT_K = ScalingFunctions.unit()
 
 
 @dataclass(frozen=True)
@@ -102,7 +103,7 @@ class NmpcResult:
 def unscaled_forcing(patterns: np.ndarray, params: FishParams) -> np.ndarray:
     """``(n, 3)`` exact cycle-averaged ``(fx, fy, tau)`` of the right fin with K = 1 (eq. 25, paper-notes)."""
     coef = coefficient_vector(params)
-    return np.array([averaged_fin_forcing(*p, 1.0, coef, EXACT, *_NO_SCALING) for p in patterns])
+    return np.array([averaged_fin_forcing(*p, 1.0, coef, EXACT, _UNIT_K.powers, _UNIT_K.coefs) for p in patterns])
 
 
 def algebraic_scaling(velocities: np.ndarray, forcing: np.ndarray, params: FishParams) -> np.ndarray:

@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.kfunctions import FEATURES, ScalingFunctions
 from pectoral_gym.models import AveragedModel
 from pectoral_gym.params import FishParams
 from pectoral_gym.steady import steady_state_batch
@@ -81,7 +81,7 @@ def test_identified_k_makes_the_averaged_model_reproduce_the_full_model(small):
     forcing = unscaled_forcing(grid.patterns, PARAMS)
     oracle = algebraic_scaling(ref.velocities, forcing, PARAMS)
     i = 0  # bias 60 deg: every forcing term is identifiable
-    k = ScalingFunctions(np.zeros((3, 1, 5)), oracle[i].reshape(3, 1), {})
+    k = ScalingFunctions(np.zeros((3, 1, len(FEATURES))), oracle[i].reshape(3, 1), {})
     beats = np.array([[grid.patterns[i], [math.pi / 2, 0.0, 1.0, 1.0]]])
     averaged = steady_state_batch(AveragedModel(1, PARAMS, scaling=k), beats)[0]
     np.testing.assert_allclose([averaged.vx, averaged.vy, averaged.omega], ref.velocities[i], rtol=1e-4)

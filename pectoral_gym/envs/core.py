@@ -203,6 +203,7 @@ class EnvCore:
         self._reward = tk._reward_parallel if big else tk._reward_serial
         self.ep = np.zeros((self.n, tk.N_EP))
         self.obs = np.zeros((self.n, tk.OBS_SIZE), dtype=np.float32)
+        self._integral_before = np.zeros((self.n, 3))  # the model's velocity integrals before a step
         self.out = np.zeros((self.n, tk.N_OUT))
         self.beats = np.broadcast_to(REST.as_array(), (self.n, 2, 4)).copy()
         self.all = np.ones(self.n, dtype=np.bool_)
@@ -261,7 +262,8 @@ class EnvCore:
                 + (f" for env {bad}" if self.n > 1 else "")
             )
         self.model.command_array(self.beats, self.all, validate=False)
-        before = self.model.integral.copy()
+        before = self._integral_before
+        np.copyto(before, self.model.integral)
         self.model.advance(self.dt)
         self._reward(self.model.state, skip, self.cfg, self.ep, self.obs, self.out)
         # Observed velocities: means over the control period. The full model's instantaneous velocities
