@@ -135,8 +135,9 @@ class NMPCSettings:
 def _identified_bias_range(bias_range: tuple[float, float], scaling: ScalingFunctions | None) -> tuple[float, float]:
     """The env's bias range, narrowed to the biases the scaling functions were identified on (if known).
 
-    The K are polynomials fitted on a grid (``metadata["grid"]["bias_deg"]``); outside it they
-    extrapolate and can be far off (e.g. a negative ``K_fy``), and the optimiser would exploit that.
+    The K are identified on a grid (``metadata["grid"]["bias_deg"]``); outside it a polynomial K
+    extrapolates and can be far off (e.g. a negative ``K_fy``), a spline K is clamped (held
+    constant), and in both cases the optimiser would exploit a model that is not identified there.
     """
     low, high = bias_range
     grid = (scaling.metadata.get("grid") or {}) if scaling is not None else {}

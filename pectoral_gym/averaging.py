@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 
 import numba as nb
+import numpy as np
 
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
@@ -35,6 +36,7 @@ __all__ = [
     "averaged_fin_forcing",
     "mean_fin_power",
     "averaged_forcing",
+    "scaling_values",
 ]
 
 EXACT = 0
@@ -61,7 +63,7 @@ def bessel_j1(x: float) -> float:
 
 @nb.njit(**_JIT)
 def _k_value(which: int, bias: float, amplitude: float, period: float, ratio: float, k_powers, k_coefs) -> float:
-    """Evaluate scaling function ``which`` (0 K_fx, 1 K_fy, 2 K_m) as a sum of monomials.
+    """Evaluate the polynomial part of scaling function ``which`` (0 K_fx, 1 K_fy, 2 K_m) as a sum of monomials.
 
     Features, in order: bias [rad], amplitude [rad], period [s], ratio [-], 1/period [1/s], 1/ratio [-].
     """
@@ -79,6 +81,69 @@ def _k_value(which: int, bias: float, amplitude: float, period: float, ratio: fl
 
 
 @nb.njit(**_JIT)
+def _bspline_basis(knots, n: int, x: float, values) -> int:
+    """Span of ``x`` (clamped to the knot range) and the four cubic basis values in ``values``.
+
+    Piegl & Tiller, *The NURBS Book*, algorithm A2.2; the same as
+    :func:`pectoral_gym.kfunctions.bspline_basis`.
+    """
+    x = min(max(x, knots[3]), knots[n])
+    span = 3
+    while span < n - 1 and knots[span + 1] <= x:
+        span += 1
+    left1, left2, left3 = x - knots[span], x - knots[span - 1], x - knots[span - 2]
+    right1, right2, right3 = knots[span + 1] - x, knots[span + 2] - x, knots[span + 3] - x
+    lefts = (0.0, left1, left2, left3)
+    rights = (0.0, right1, right2, right3)
+    values[0] = 1.0
+    for j in range(1, 4):
+        saved = 0.0
+        for r in range(j):
+            temp = values[r] / (rights[r + 1] + lefts[j - r])
+            values[r] = saved + rights[r + 1] * temp
+            saved = lefts[j - r] * temp
+        values[j] = saved
+    return span
+
+
+@nb.njit(**_JIT)
+def _spline_values(bias: float, amplitude: float, inv_ratio: float, knots, table):
+    """Spline parts of ``(K_fx, K_fy, K_m)``: tensor-product cubic B-splines over (bias, amplitude, 1/ratio)."""
+    n0, n1, n2 = table.shape[1], table.shape[2], table.shape[3]
+    if n0 == 0:
+        return 0.0, 0.0, 0.0
+    b0, b1, b2 = np.empty(4), np.empty(4), np.empty(4)
+    s0 = _bspline_basis(knots[0], n0, bias, b0) - 3
+    s1 = _bspline_basis(knots[1], n1, amplitude, b1) - 3
+    s2 = _bspline_basis(knots[2], n2, inv_ratio, b2) - 3
+    kx = ky = km = 0.0
+    for a in range(4):
+        for b in range(4):
+            w = b0[a] * b1[b]
+            for c in range(4):
+                wc = w * b2[c]
+                kx += wc * table[0, s0 + a, s1 + b, s2 + c]
+                ky += wc * table[1, s0 + a, s1 + b, s2 + c]
+                km += wc * table[2, s0 + a, s1 + b, s2 + c]
+    return kx, ky, km
+
+
+@nb.njit(**_JIT)
+def scaling_values(bias: float, amplitude: float, period: float, ratio: float, kfun):
+    """``(K_fx, K_fy, K_m)`` at one pattern: polynomial part plus spline part.
+
+    ``kfun`` is :meth:`pectoral_gym.kfunctions.ScalingFunctions.kernel_arrays`.
+    """
+    k_powers, k_coefs, knots, table = kfun[0], kfun[1], kfun[2], kfun[3]
+    sx, sy, sm = _spline_values(bias, amplitude, 1.0 / ratio, knots, table)
+    return (
+        _k_value(0, bias, amplitude, period, ratio, k_powers, k_coefs) + sx,
+        _k_value(1, bias, amplitude, period, ratio, k_powers, k_coefs) + sy,
+        _k_value(2, bias, amplitude, period, ratio, k_powers, k_coefs) + sm,
+    )
+
+
+@nb.njit(**_JIT)
 def averaged_fin_forcing(
     bias: float,
     amplitude: float,
@@ -87,8 +152,7 @@ def averaged_fin_forcing(
     side: float,
     coef,
     mode: int,
-    k_powers,
-    k_coefs,
+    kfun,
 ):
     """Scaled cycle-averaged force and moment of one fin on the body (eq. 25).
 
@@ -97,28 +161,29 @@ def averaged_fin_forcing(
         side: +1 for the right fin, -1 for the left (mirror image).
         coef: Packed coefficients (``params.COEF_NAMES``).
         mode: :data:`EXACT` or :data:`TAYLOR`.
-        k_powers, k_coefs: Scaling functions, see :class:`pectoral_gym.kfunctions.ScalingFunctions`.
+        kfun: Scaling functions, :meth:`pectoral_gym.kfunctions.ScalingFunctions.kernel_arrays`.
 
     Returns:
-        ``(K_fx f_hx_avg, K_fy f_hy_avg, K_m tau_avg)`` in N, N, N m.
+        ``(K_fx f_hx_avg, K_fy f_hy_avg, K_m tau_avg)`` in N, N, N m; with
+        ``sway = "base"`` the sway term is ``K_fy base`` (``kfunctions``).
     """
     drag_constant = coef[6]
     fin_offset = coef[8]
     c = drag_constant * math.pi**2 * (ratio * ratio - 1.0) / (ratio * period * period)
+    a2 = amplitude * amplitude
     if mode == EXACT:
         base = c * amplitude * bessel_j1(amplitude)
         fx = base * math.sin(bias)
         fy = base * math.cos(bias)
     else:
-        a2 = amplitude * amplitude
         b2 = bias * bias
+        base = c * a2 * (8.0 - a2) / 16.0  # second-order Taylor form of the exact base (as in eq. 27)
         fx = c * bias * a2 * (24.0 - 3.0 * a2 - 4.0 * b2) / 48.0  # eq. (26)
         fy = c * a2 * (8.0 - a2 - 4.0 * b2) / 16.0  # eq. (27)
     tau = fin_offset * fx  # eq. (18)/(28): right fin pivot at y = -C_p
-    kx = _k_value(0, bias, amplitude, period, ratio, k_powers, k_coefs)
-    ky = _k_value(1, bias, amplitude, period, ratio, k_powers, k_coefs)
-    km = _k_value(2, bias, amplitude, period, ratio, k_powers, k_coefs)
-    return kx * fx, side * ky * fy, side * km * tau
+    kx, ky, km = scaling_values(bias, amplitude, period, ratio, kfun)
+    sway = ky * base if kfun[4] == 1.0 else ky * fy
+    return kx * fx, side * sway, side * km * tau
 
 
 @nb.njit(**_JIT)
@@ -159,9 +224,8 @@ def averaged_forcing(
         raise ValueError(f"side must be 'right' or 'left', got {side!r}")
     params = params or FishParams()
     scaling = _UNIT_K if scaling is None else scaling
-    powers, coefs = scaling.powers, scaling.coefs
     return averaged_fin_forcing(
         beat.bias, beat.amplitude, beat.period, beat.ratio,
         1.0 if side == "right" else -1.0,
-        coefficient_vector(params), mode, powers, coefs,
+        coefficient_vector(params), mode, scaling.kernel_arrays(),
     )

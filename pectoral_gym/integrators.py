@@ -57,7 +57,7 @@ _SIDE = (1.0, -1.0)  # right fin, left fin (mirror image)
 
 
 @nb.njit(**_JIT)
-def _latch(fins, pending, i, f, coef, mode, k_powers, k_coefs):
+def _latch(fins, pending, i, f, coef, mode, kfun):
     """Start the next half-stroke of fin ``f`` of fish ``i`` with its commanded parameters."""
     bias, amp, period, ratio = pending[i, f, 0], pending[i, f, 1], pending[i, f, 2], pending[i, f, 3]
     power = 1.0 - fins[i, f, POWER]
@@ -74,7 +74,7 @@ def _latch(fins, pending, i, f, coef, mode, k_powers, k_coefs):
     fins[i, f, AMPLITUDE] = amp
     fins[i, f, PERIOD] = period
     fins[i, f, RATIO] = ratio
-    fx, fy, tau = averaged_fin_forcing(bias, amp, period, ratio, _SIDE[f], coef[i], mode, k_powers, k_coefs)
+    fx, fy, tau = averaged_fin_forcing(bias, amp, period, ratio, _SIDE[f], coef[i], mode, kfun)
     fins[i, f, AVG_FX] = fx
     fins[i, f, AVG_FY] = fy
     fins[i, f, AVG_TAU] = tau
@@ -184,7 +184,7 @@ def _stable_step(state, i, m1, m2, j3, c1, c4, fx, fy, tau, dt_max):
 
 @nb.njit(**_JIT)
 def _advance_one(
-    i, state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs
+    i, state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, kfun
 ):
     """Advance fish ``i`` by ``duration`` seconds, segment by segment between stroke boundaries."""
     m1, m2, j3, c1, c2, c4 = coef[i, 0], coef[i, 1], coef[i, 2], coef[i, 3], coef[i, 4], coef[i, 5]
@@ -196,9 +196,9 @@ def _advance_one(
         idle0 = _idle(fins, pending, i, 0)
         idle1 = _idle(fins, pending, i, 1)
         if not idle0 and fins[i, 0, ELAPSED] >= fins[i, 0, DURATION] - _EPS:
-            _latch(fins, pending, i, 0, coef, mode, k_powers, k_coefs)
+            _latch(fins, pending, i, 0, coef, mode, kfun)
         if not idle1 and fins[i, 1, ELAPSED] >= fins[i, 1, DURATION] - _EPS:
-            _latch(fins, pending, i, 1, coef, mode, k_powers, k_coefs)
+            _latch(fins, pending, i, 1, coef, mode, kfun)
         rem0 = np.inf if idle0 else fins[i, 0, DURATION] - fins[i, 0, ELAPSED]
         rem1 = np.inf if idle1 else fins[i, 1, DURATION] - fins[i, 1, ELAPSED]
         seg = min(t_left, rem0, rem1)
@@ -240,21 +240,21 @@ def _advance_one(
 
 @nb.njit(**_JIT)
 def _advance_serial(
-    state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs
+    state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, kfun
 ):
     for i in range(state.shape[0]):
         _advance_one(
-            i, state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs
+            i, state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, kfun
         )
 
 
 @nb.njit(parallel=True, cache=True, nogil=True, error_model="numpy")
 def _advance_parallel(
-    state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs
+    state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, kfun
 ):
     for i in nb.prange(state.shape[0]):
         _advance_one(
-            i, state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, k_powers, k_coefs
+            i, state, fins, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, kfun
         )
 
 
@@ -272,8 +272,7 @@ def advance(
     min_substeps: int,
     averaged: bool,
     mode: int,
-    k_powers: np.ndarray,
-    k_coefs: np.ndarray,
+    kfun: tuple,
 ) -> None:
     """Advance every fish by ``duration`` seconds in place (see module docstring).
 
@@ -285,11 +284,11 @@ def advance(
         min_substeps: Full model: least number of substeps per half-stroke.
         averaged: Integrate the averaged model (eq. 25) instead of the full one (eq. 19).
         mode: Averaged forcing form (``averaging.EXACT`` or ``averaging.TAYLOR``).
-        k_powers, k_coefs: Scaling functions (``kfunctions.ScalingFunctions``).
+        kfun: Scaling functions (``kfunctions.ScalingFunctions.kernel_arrays()``).
     """
     kernel = _advance_parallel if state.shape[0] >= PARALLEL_MIN_FISH else _advance_serial
     kernel(state, fins, pending, integral, coef, float(duration), float(dt_max), float(min_substeps),
-           bool(averaged), int(mode), k_powers, k_coefs)
+           bool(averaged), int(mode), kfun)
 
 
 @nb.njit(**_JIT)

@@ -5,25 +5,49 @@ scaling functions of the fin-beat parameters. They are identified by the
 ``scaling/`` pipeline (Sec. 4.3 of the paper) and stored as data, so this
 package never imports ``scaling``.
 
-File format (JSON, ``format = "pectoral-gym-scaling/1"``)::
+File format (JSON, ``format = "pectoral-gym-scaling/2"``)::
 
     {
-      "format": "pectoral-gym-scaling/1",
+      "format": "pectoral-gym-scaling/2",
+      "sway": "base",
       "features": ["bias", "amplitude", "period", "ratio", "inv_period", "inv_ratio"],
       "units": {"bias": "rad", "amplitude": "rad", "period": "s", "ratio": "-", "inv_period": "1/s", "inv_ratio": "-"},
       "functions": {
-        "K_fx": [{"coef": 1.0, "powers": [0, 0, 0, 0, 0]}, ...],
+        "K_fx": [{"coef": 1.0, "powers": [0, 0, 0, 0, 0, 0]}, ...],
         "K_fy": [...],
         "K_m":  [...]
+      },
+      "spline": {
+        "degree": 3,
+        "axes": ["bias", "amplitude", "inv_ratio"],
+        "knots": [[...], [...], [...]],
+        "coefficients": {"K_fx": [...], "K_fy": [...], "K_m": [...]},
+        "extrapolation": "clamp"
       },
       "metadata": {...}
     }
 
-Each function is a sum of monomials ``coef * prod(feature_i ** powers_i)``.
-Files written before ``inv_ratio`` existed list the first five features and
-five powers per term; they load unchanged (the sixth power is 0).
-The shipped ``data/scaling_coefficients.json`` holds ``K = 1`` until the
-scaling issue ships identified coefficients (its ``metadata.status`` says so).
+Each K is the sum of two optional parts:
+
+* a polynomial: monomials ``coef * prod(feature_i ** powers_i)``;
+* a tensor-product cubic B-spline over ``(bias, amplitude, 1/ratio)`` with the
+  given knot vectors (``n_i + 4`` knots for ``n_i`` coefficients per axis) and
+  coefficients in C order, shape ``(n_bias, n_amplitude, n_inv_ratio)``; inputs
+  outside the knot range are clamped to it (the spline is only identified
+  there, and a cubic extrapolates badly).
+
+``sway`` fixes what ``K_fy`` multiplies:
+
+* ``"paper"``: the averaged sway force ``f_hy_avg = base cos(bias)`` (eq. 25 as
+  printed);
+* ``"base"``: ``base = f_hx_avg / sin(bias)``, the averaged force magnitude.
+  ``K_fy`` then equals the paper's ``K_fy cos(bias)``: the effective sway
+  force per unit fin force. It stays finite at 90 deg bias, where the paper's
+  ``K_fy`` diverges (the blade-element model has a mean sway force there, the
+  plain average has none), so it can be identified through 90 deg.
+
+Format 1 files (polynomial only, ``sway`` implicitly ``"paper"``; five or six
+features) load unchanged. ``save`` always writes format 2.
 """
 
 from __future__ import annotations
@@ -37,11 +61,18 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["FEATURES", "K_NAMES", "FORMAT", "ScalingFunctions", "default_scaling_path"]
+__all__ = [
+    "FEATURES", "FORMAT", "FORMATS", "K_NAMES", "SPLINE_AXES", "SWAY_MODES", "ScalingFunctions",
+    "bspline_basis", "default_scaling_path",
+]
 
 FEATURES = ("bias", "amplitude", "period", "ratio", "inv_period", "inv_ratio")
 K_NAMES = ("K_fx", "K_fy", "K_m")
-FORMAT = "pectoral-gym-scaling/1"
+FORMAT = "pectoral-gym-scaling/2"
+FORMATS = ("pectoral-gym-scaling/1", FORMAT)
+SPLINE_AXES = ("bias", "amplitude", "inv_ratio")
+SPLINE_DEGREE = 3
+SWAY_MODES = ("paper", "base")
 _NUMBER_LIST = re.compile(r"\[\s*((?:-?[\d.eE+-]+|null),?(?:\s*(?:-?[\d.eE+-]+|null),?)*)\s*\]")
 _UNITS = {"bias": "rad", "amplitude": "rad", "period": "s", "ratio": "-", "inv_period": "1/s", "inv_ratio": "-"}
 
@@ -51,19 +82,60 @@ def default_scaling_path() -> Path:
     return Path(str(resources.files("pectoral_gym") / "data" / "scaling_coefficients.json"))
 
 
+def bspline_basis(knots: np.ndarray, n: int, x: float) -> tuple[int, np.ndarray]:
+    """Span and the four nonzero cubic B-spline basis values at ``x`` (clamped to the knot range).
+
+    The Cox-de Boor recursion in the form of Piegl & Tiller, *The NURBS Book*,
+    algorithm A2.2. Coefficient ``span - 3 + a`` multiplies ``values[a]``.
+    :mod:`pectoral_gym.averaging` compiles the same algorithm.
+    """
+    x = min(max(float(x), knots[3]), knots[n])
+    span = 3
+    while span < n - 1 and knots[span + 1] <= x:
+        span += 1
+    values = np.zeros(4)
+    left, right = np.zeros(4), np.zeros(4)
+    values[0] = 1.0
+    for j in range(1, 4):
+        left[j] = x - knots[span + 1 - j]
+        right[j] = knots[span + j] - x
+        saved = 0.0
+        for r in range(j):
+            temp = values[r] / (right[r + 1] + left[j - r])
+            values[r] = saved + right[r + 1] * temp
+            saved = left[j - r] * temp
+        values[j] = saved
+    return span, values
+
+
+def _check_knots(knots: np.ndarray, n: int, where: str) -> None:
+    if n < 4:
+        raise ValueError(f"{where}: a cubic spline needs at least 4 coefficients per axis, got {n}")
+    if knots.shape != (n + 4,) or not np.all(np.isfinite(knots)):
+        raise ValueError(f"{where}: {n + 4} finite knots required for {n} coefficients, got {knots.shape[0]}")
+    if np.any(np.diff(knots) < 0) or not knots[3] < knots[n]:
+        raise ValueError(f"{where}: knots must be non-decreasing and span a non-empty interval")
+
+
 @dataclass(frozen=True)
 class ScalingFunctions:
-    """Polynomial scaling functions in packed array form.
+    """Scaling functions: an optional polynomial plus an optional tensor-product cubic spline, per K.
 
     Attributes:
         powers: ``(3, n_terms, len(FEATURES))`` float exponents of :data:`FEATURES` per K.
-        coefs: ``(3, n_terms)`` coefficients (zero pads unused terms).
+        coefs: ``(3, n_terms)`` polynomial coefficients (zero pads unused terms).
         metadata: Free-form provenance (grid, solver, fit statistics, version).
+        knots: Three knot vectors (bias [rad], amplitude [rad], 1/ratio [-]), or ``()`` for no spline.
+        table: ``(3, n_bias, n_amplitude, n_inv_ratio)`` spline coefficients, or ``None``.
+        sway: ``"paper"`` or ``"base"``: what ``K_fy`` multiplies (module docstring).
     """
 
     powers: np.ndarray
     coefs: np.ndarray
     metadata: dict[str, Any] = field(default_factory=dict)
+    knots: tuple[np.ndarray, ...] = ()
+    table: np.ndarray | None = None
+    sway: str = "paper"
 
     def __post_init__(self) -> None:
         # The compiled kernels index powers[k, j, :len(FEATURES)] without bounds checks.
@@ -73,11 +145,48 @@ class ScalingFunctions:
                 f"ScalingFunctions needs coefs (3, n) and powers (3, n, {len(FEATURES)}); "
                 f"got {np.shape(self.coefs)} and {np.shape(self.powers)}"
             )
+        if self.sway not in SWAY_MODES:
+            raise ValueError(f"sway must be one of {SWAY_MODES}, got {self.sway!r}")
+        if (self.table is None) != (len(self.knots) == 0):
+            raise ValueError("a spline needs both knots and a table")
+        if self.table is not None:
+            table = np.asarray(self.table, dtype=np.float64)
+            if table.ndim != 4 or table.shape[0] != 3 or len(self.knots) != 3:
+                raise ValueError(f"spline table must be (3, n_bias, n_amplitude, n_inv_ratio) with 3 knot vectors, "
+                                 f"got {table.shape} and {len(self.knots)} knot vectors")
+            if not np.all(np.isfinite(table)):
+                raise ValueError("spline coefficients must be finite")
+            knots = tuple(np.asarray(k, dtype=np.float64) for k in self.knots)
+            for axis, (k, n) in enumerate(zip(knots, table.shape[1:], strict=True)):
+                _check_knots(k, n, f"spline axis {SPLINE_AXES[axis]}")
+            object.__setattr__(self, "table", table)
+            object.__setattr__(self, "knots", knots)
 
     @classmethod
     def unit(cls) -> ScalingFunctions:
         """``K_fx = K_fy = K_m = 1``: plain classical averaging."""
         return cls(np.zeros((3, 1, len(FEATURES))), np.ones((3, 1)), {"status": "unit: K = 1"})
+
+    @property
+    def has_spline(self) -> bool:
+        """True when a spline part is present."""
+        return self.table is not None
+
+    def kernel_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+        """``(powers, coefs, knots, table, sway)`` as the compiled kernels of :mod:`pectoral_gym.averaging` take them.
+
+        ``knots`` is ``(3, longest)`` (shorter vectors padded with their last
+        knot, never read); without a spline, ``table`` is ``(3, 0, 0, 0)``.
+        ``sway`` is 0.0 for ``"paper"``, 1.0 for ``"base"``.
+        """
+        if self.table is None:
+            knots, table = np.zeros((3, 1)), np.zeros((3, 0, 0, 0))
+        else:
+            longest = max(len(k) for k in self.knots)
+            knots = np.array([np.pad(k, (0, longest - len(k)), mode="edge") for k in self.knots])
+            table = np.ascontiguousarray(self.table)
+        return (np.ascontiguousarray(self.powers, dtype=np.float64), np.ascontiguousarray(self.coefs, dtype=np.float64),
+                knots, table, float(SWAY_MODES.index(self.sway)))
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "<dict>") -> ScalingFunctions:
@@ -86,11 +195,14 @@ class ScalingFunctions:
         Raises:
             ValueError: With the file and the offending entry when malformed.
         """
-        if data.get("format") != FORMAT:
-            raise ValueError(f"{source}: 'format' must be {FORMAT!r}, got {data.get('format')!r}")
+        if data.get("format") not in FORMATS:
+            raise ValueError(f"{source}: 'format' must be one of {list(FORMATS)}, got {data.get('format')!r}")
         features = tuple(data.get("features", ()))
         if features not in (FEATURES, FEATURES[:5]):
             raise ValueError(f"{source}: 'features' must be {list(FEATURES)}")
+        sway = data.get("sway", "paper")
+        if sway not in SWAY_MODES:
+            raise ValueError(f"{source}: 'sway' must be one of {list(SWAY_MODES)}, got {sway!r}")
         width = len(features)
         functions = data.get("functions")
         if not isinstance(functions, dict) or set(functions) != set(K_NAMES):
@@ -111,7 +223,32 @@ class ScalingFunctions:
                     raise ValueError(f"{source}: {name} term {j}: powers must be non-negative integers")
                 powers[i, j, :width] = p
                 coefs[i, j] = c
-        return cls(powers, coefs, dict(data.get("metadata", {})))
+        knots, table = cls._spline_from_dict(data.get("spline"), source)
+        try:
+            return cls(powers, coefs, dict(data.get("metadata", {})), knots, table, sway)
+        except ValueError as err:
+            raise ValueError(f"{source}: {err}") from None
+
+    @staticmethod
+    def _spline_from_dict(spline: Any, source: str) -> tuple[tuple[np.ndarray, ...], np.ndarray | None]:
+        if spline is None:
+            return (), None
+        if not isinstance(spline, dict):
+            raise ValueError(f"{source}: 'spline' must be an object")
+        if spline.get("degree") != SPLINE_DEGREE or tuple(spline.get("axes", ())) != SPLINE_AXES:
+            raise ValueError(f"{source}: spline must have degree {SPLINE_DEGREE} and axes {list(SPLINE_AXES)}")
+        if spline.get("extrapolation", "clamp") != "clamp":
+            raise ValueError(f"{source}: spline extrapolation must be 'clamp'")
+        try:
+            knots = tuple(np.asarray(k, dtype=np.float64) for k in spline["knots"])
+            coefficients = spline["coefficients"]
+            shape = tuple(len(k) - 4 for k in knots)
+            if len(knots) != 3 or not isinstance(coefficients, dict) or set(coefficients) != set(K_NAMES):
+                raise ValueError(f"3 knot vectors and coefficients for {list(K_NAMES)} required")
+            table = np.array([np.asarray(coefficients[name], dtype=np.float64).reshape(shape) for name in K_NAMES])
+        except (KeyError, TypeError, ValueError) as err:
+            raise ValueError(f"{source}: malformed spline: {err}") from None
+        return knots, table
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> ScalingFunctions:
@@ -135,13 +272,23 @@ class ScalingFunctions:
             ]
             for i, name in enumerate(K_NAMES)
         }
-        return {
+        out: dict[str, Any] = {
             "format": FORMAT,
+            "sway": self.sway,
             "features": list(FEATURES),
             "units": dict(_UNITS),
             "functions": functions,
-            "metadata": self.metadata,
         }
+        if self.table is not None:
+            out["spline"] = {
+                "degree": SPLINE_DEGREE,
+                "axes": list(SPLINE_AXES),
+                "knots": [k.tolist() for k in self.knots],
+                "coefficients": {name: self.table[i].ravel().tolist() for i, name in enumerate(K_NAMES)},
+                "extrapolation": "clamp",
+            }
+        out["metadata"] = self.metadata
+        return out
 
     def save(self, path: str | Path) -> None:
         """Write the coefficients file."""
@@ -151,12 +298,28 @@ class ScalingFunctions:
         Path(path).write_text(text + "\n")
 
     def evaluate(self, bias: float, amplitude: float, period: float, ratio: float) -> tuple[float, float, float]:
-        """``(K_fx, K_fy, K_m)`` at one fin-beat pattern (rad, rad, s, -)."""
+        """``(K_fx, K_fy, K_m)`` at one fin-beat pattern (rad, rad, s, -); ``K_fy`` in the file's :attr:`sway` sense."""
         x = np.array([bias, amplitude, period, ratio, 1.0 / period, 1.0 / ratio])
         values = np.sum(self.coefs * np.prod(x ** self.powers, axis=-1), axis=-1)
+        if self.table is not None:
+            spans, bases = zip(*(bspline_basis(k, n, v) for k, n, v in
+                                 zip(self.knots, self.table.shape[1:], (bias, amplitude, 1.0 / ratio), strict=True)),
+                               strict=True)
+            s0, s1, s2 = (s - 3 for s in spans)
+            local = self.table[:, s0:s0 + 4, s1:s1 + 4, s2:s2 + 4]
+            values = values + np.einsum("kabc,a,b,c->k", local, *bases)
         return float(values[0]), float(values[1]), float(values[2])
+
+    def paper_k_fy(self, bias: float, amplitude: float, period: float, ratio: float) -> float:
+        """The paper's ``K_fy`` (multiplying ``f_hy_avg``); infinite at ``cos(bias) = 0`` in ``"base"`` files."""
+        k_fy = self.evaluate(bias, amplitude, period, ratio)[1]
+        if self.sway == "paper":
+            return k_fy
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return float(np.float64(k_fy) / np.cos(bias))
 
     @property
     def is_unit(self) -> bool:
-        """True when every K is identically 1."""
-        return bool(np.all(self.powers[self.coefs != 0] == 0) and np.allclose(self.coefs.sum(axis=1), 1.0))
+        """True when every K is identically 1 (in the paper's sense: plain averaging)."""
+        return bool(self.table is None and self.sway == "paper" and np.all(self.powers[self.coefs != 0] == 0)
+                    and np.allclose(self.coefs.sum(axis=1), 1.0))

@@ -100,7 +100,7 @@ class FishModel:
         self.min_substeps = 1
         self.mode = EXACT
         unit = ScalingFunctions.unit()
-        self.k_powers, self.k_coefs = unit.powers, unit.coefs
+        self.kfun = unit.kernel_arrays()
         self.set_params(params or FishParams())
         self.reset()
 
@@ -161,7 +161,7 @@ class FishModel:
         if not duration >= 0:
             raise ValueError(f"duration must be >= 0 s, got {duration}")
         it.advance(self.state, self.fins, self.pending, self.integral, self.coef, duration, self.dt_max,
-                   self.min_substeps, self.averaged, self.mode, self.k_powers, self.k_coefs)
+                   self.min_substeps, self.averaged, self.mode, self.kfun)
         self.time += duration
         return self.state
 
@@ -229,7 +229,7 @@ class AveragedModel(FishModel):
                 raise ValueError(f"scaling must be 'identified', 'none' or a ScalingFunctions, got {scaling!r}")
             scaling = ScalingFunctions.load() if scaling == "identified" else None
         self.scaling = scaling or ScalingFunctions.unit()
-        self.k_powers, self.k_coefs = self.scaling.powers, self.scaling.coefs
+        self.kfun = self.scaling.kernel_arrays()
 
 
 MODELS = ("full", "averaged")

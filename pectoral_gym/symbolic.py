@@ -24,7 +24,7 @@ except ImportError as err:  # pragma: no cover - exercised only without the nmpc
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import FishParams
 
-__all__ = ["bessel_j1_sx", "scaling_sx", "averaged_forcing_sx", "body_accel_sx", "averaged_rhs_sx"]
+__all__ = ["bessel_j1_sx", "bspline_basis_sx", "scaling_sx", "averaged_forcing_sx", "body_accel_sx", "averaged_rhs_sx"]
 
 _J1_TERMS = 18  # same truncation as averaging.bessel_j1 (machine precision for |x| <= pi)
 
@@ -41,8 +41,41 @@ def bessel_j1_sx(x):
     return total
 
 
+def bspline_basis_sx(x, knots):
+    """The ``len(knots) - 4`` cubic B-spline basis functions at ``x`` (clamped to the knot range).
+
+    Cox-de Boor recursion written out symbolically, the same piecewise
+    polynomials as the compiled :func:`pectoral_gym.averaging.scaling_values`.
+    """
+    knots = [float(k) for k in knots]
+    n = len(knots) - 4
+    x = ca.fmin(ca.fmax(x, knots[3]), knots[n])
+    basis = []
+    for j in range(len(knots) - 1):  # degree 0: the half-open knot interval, the last non-empty one closed
+        if knots[j] == knots[j + 1]:
+            basis.append(0.0)
+        elif j == n - 1:
+            basis.append(ca.if_else(x >= knots[j], 1.0, 0.0))
+        else:
+            basis.append(ca.if_else(ca.logic_and(x >= knots[j], x < knots[j + 1]), 1.0, 0.0))
+    for degree in range(1, 4):
+        nxt = []
+        for j in range(len(knots) - 1 - degree):
+            term = 0.0
+            if knots[j + degree] != knots[j]:
+                term = term + (x - knots[j]) / (knots[j + degree] - knots[j]) * basis[j]
+            if knots[j + degree + 1] != knots[j + 1]:
+                term = term + (knots[j + degree + 1] - x) / (knots[j + degree + 1] - knots[j + 1]) * basis[j + 1]
+            nxt.append(term)
+        basis = nxt
+    return basis[:n]
+
+
 def scaling_sx(beat, scaling: ScalingFunctions | None):
-    """``[K_fx, K_fy, K_m]`` at ``beat = (bias, amplitude, period, ratio)``; all 1 if ``scaling`` is None."""
+    """``[K_fx, K_fy, K_m]`` at ``beat = (bias, amplitude, period, ratio)``; all 1 if ``scaling`` is None.
+
+    ``K_fy`` is in the sense of ``scaling.sway`` (:mod:`pectoral_gym.kfunctions`).
+    """
     if scaling is None:
         return ca.vertcat(1.0, 1.0, 1.0)
     bias, amplitude, period, ratio = beat[0], beat[1], beat[2], beat[3]
@@ -59,6 +92,15 @@ def scaling_sx(beat, scaling: ScalingFunctions | None):
                     term = term * feature ** (int(p) if float(p).is_integer() else float(p))
             total = total + term
         values.append(total)
+    if scaling.has_spline:
+        bases = [ca.vertcat(*bspline_basis_sx(x, k))
+                 for x, k in zip((bias, amplitude, 1.0 / ratio), scaling.knots, strict=True)]
+        n0, n1, n2 = scaling.table.shape[1:]
+        for which in range(3):
+            # contract one axis at a time: (n0, n1 n2) -> (n1, n2) -> (n2,) -> scalar
+            first = ca.mtimes(bases[0].T, ca.DM(scaling.table[which].reshape(n0, n1 * n2)))
+            second = ca.mtimes(bases[1].T, ca.reshape(first, n2, n1).T)
+            values[which] = values[which] + ca.mtimes(second, bases[2])
     return ca.vertcat(*values)
 
 
@@ -78,7 +120,8 @@ def averaged_forcing_sx(beat, side: float, params: FishParams, scaling: ScalingF
     fy = base * ca.cos(bias)
     tau = params.fin_offset * fx  # eq. (28): moment arm C_p
     k = scaling_sx(beat, scaling)
-    return ca.vertcat(k[0] * fx, side * k[1] * fy, side * k[2] * tau)
+    sway = k[1] * base if scaling is not None and scaling.sway == "base" else k[1] * fy
+    return ca.vertcat(k[0] * fx, side * sway, side * k[2] * tau)
 
 
 def body_accel_sx(v, forcing, params: FishParams, smoothing: float = 0.0):

@@ -23,7 +23,8 @@ def _identify_parser(sub) -> None:
         "identify",
         help="identify K by full-model runs, NMPC and regression",
         description="Identify the scaling functions K_fx, K_fy, K_m (paper Sec. 4.3): full-model steady states on a "
-        "grid of right-fin patterns, one NMPC per pattern, cross-validated polynomial regression.",
+        "grid of right-fin patterns, one NMPC per pattern, then the closed form: cross-validated polynomials "
+        "and tensor-product cubic splines compete on off-grid held-out patterns.",
     )
     p.add_argument("--grid", default="env", help=f"preset ({', '.join(GRIDS)}) or a grid JSON file (default: env)")
     p.add_argument("--out", type=Path, default=Path("scaling_identification"), help="output folder")
@@ -36,6 +37,10 @@ def _identify_parser(sub) -> None:
     p.add_argument("--max-degree", type=int, default=7, help="highest polynomial degree tried (default 7)")
     p.add_argument("--fit-target", type=float, default=2e-3,
                    help="held-out accuracy a closed form must reach (predicted relative velocity error, default 0.002)")
+    p.add_argument("--holdout", type=int, default=60,
+                   help="off-grid patterns on which polynomial and spline forms compete (default 60; 0: polynomial)")
+    p.add_argument("--turn-target", type=float, default=0.02,
+                   help="worst held-out turning radius / period error a form must reach (default 0.02)")
     p.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
     p.add_argument("--seed", type=int, default=0, help="seed of the CV folds (default 0)")
     p.add_argument("--jobs", type=int, default=0, help="NMPC worker processes (default 0: all cores)")
@@ -69,13 +74,15 @@ def _run_identify(args) -> int:
     except (GridError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
-    if args.max_degree < 0 or args.folds < 2 or args.jobs < 0 or not args.fit_target > 0:
-        print("error: need --max-degree >= 0, --folds >= 2, --jobs >= 0, --fit-target > 0", file=sys.stderr)
+    if (args.max_degree < 0 or args.folds < 2 or args.jobs < 0 or not args.fit_target > 0 or args.holdout < 0
+            or not args.turn_target > 0):
+        print("error: need --max-degree >= 0, --folds >= 2, --jobs >= 0, --fit-target > 0, --holdout >= 0, "
+              "--turn-target > 0", file=sys.stderr)
         return 2
     print(f"grid {grid.name!r}: {len(grid)} right-fin patterns")
     start = time.perf_counter()
     result = identify(grid, None, settings, args.max_degree, args.folds, args.seed, args.jobs, not args.quiet,
-                      args.fit_target)
+                      args.fit_target, args.holdout, args.turn_target)
     total = time.perf_counter() - start
     args.out.mkdir(parents=True, exist_ok=True)
     coefficients = args.out / "scaling_coefficients.json"
@@ -93,6 +100,17 @@ def _run_identify(args) -> int:
         print(f"{name:5} {fit.features:34} {fit.degree:6d} {len(fit.coefs):5d} {fit.r2:9.6f} {fit.cv_rmse:9.2e} "
               f"{fit.cv_max:9.2e}")
     print("(CV errors are predicted relative speed / yaw-rate errors; see scaling.regression)")
+    if result.splines:
+        nodes = "x".join(str(len(n)) for n in result.splines[K_NAMES[0]].nodes)
+        spread = max(f.period_spread for f in result.splines.values())
+        print(f"spline: {nodes} nodes (bias x amplitude x 1/ratio); largest K difference between periods {spread:.1e}")
+    if any("radius_worst" in c for c in result.comparison.values()):
+        print(f"\nheld-out turning errors ({args.holdout} off-grid patterns), median / worst:")
+        for form, c in result.comparison.items():
+            print(f"  {form:10} {c['coefficients']:6d} coefficients   radius {100 * c['radius_median']:.2f} % / "
+                  f"{100 * c['radius_worst']:.2f} %   period {100 * c['period_median']:.2f} % / "
+                  f"{100 * c['period_worst']:.2f} %")
+    print(f"chosen: {result.chosen}")
     print(f"\nwrote {coefficients}, {args.out / 'patterns.csv'}, {args.out / 'flags.json'}")
     if args.install:
         target = default_scaling_path()

@@ -7,7 +7,12 @@
    each solution checked against the algebraic oracle; unidentifiable K values
    (forcing near zero, failed reference or solver) are flagged with a reason
    and left out of that K's fit;
-3. the closed form of each K by cross-validated regression (:mod:`scaling.regression`);
+3. two closed forms of each K (:mod:`scaling.regression`): the lowest-degree
+   polynomial chosen by k-fold cross-validation, and the interpolating
+   tensor-product cubic spline over (bias, amplitude, 1/ratio); they compete
+   on seeded off-grid held-out patterns, where each form's predicted steady
+   turning radius and period are compared with the full model's, and the
+   smaller form that meets the turning target wins (else the more accurate);
 4. a :class:`~pectoral_gym.kfunctions.ScalingFunctions` with full provenance
    in its metadata, ready to be saved where the averaged model reads it.
 """
@@ -22,12 +27,15 @@ import platform
 import time
 from dataclasses import dataclass, field
 from importlib import metadata as importlib_metadata
+from typing import Any
 
 import numpy as np
+from scipy import optimize
 from tqdm.auto import tqdm
 
+from pectoral_gym.dynamics import body_accel
 from pectoral_gym.kfunctions import FEATURES, FORMAT, K_NAMES, ScalingFunctions
-from pectoral_gym.params import FishParams
+from pectoral_gym.params import FishParams, coefficient_vector
 from scaling.grids import Grid
 from scaling.nmpc import (
     NmpcResult,
@@ -38,11 +46,13 @@ from scaling.nmpc import (
     unscaled_forcing,
 )
 from scaling.reference import ReferenceRuns, reference_runs
-from scaling.regression import Fit, select_model, sensitivity_weights
+from scaling.regression import Fit, SplineFit, fit_spline, select_model, sensitivity_weights
 
-__all__ = ["IdentificationResult", "identify", "solve_nmpc_batch"]
+__all__ = ["IdentificationResult", "holdout_patterns", "identify", "predicted_turning", "solve_nmpc_batch"]
 
+SWAY = "base"  # K_fy multiplies the fin's force magnitude, not f_hy_avg = base cos(bias) (pectoral_gym.kfunctions)
 ORACLE_RTOL = 1e-3  # NMPC solutions must equal the algebraic steady-state solution to this relative tolerance
+MIN_TURN_RATE = 0.02  # rad/s: held-out patterns turning slower get no radius / period error (huge, meaningless radii)
 FORCING_RTOL = 0.1  # a forcing term below this fraction of its pattern's largest possible value is "near zero"
 
 
@@ -58,10 +68,13 @@ class IdentificationResult:
         k_oracle: ``(n, 3)`` algebraic solutions.
         usable: ``(n, 3)`` whether each K value entered its fit.
         flags: ``[{"pattern": i, "K": name, "reason": text}]``.
-        fits: The chosen fit per K.
-        candidates: All candidate fits per K.
-        scaling: The identified scaling functions.
+        fits: The cross-validated polynomial per K.
+        candidates: All candidate polynomials per K.
+        scaling: The identified scaling functions (the chosen form).
         timings: Seconds per stage.
+        splines: The interpolating spline per K (empty if the grid is not a tensor grid).
+        chosen: ``"polynomial"`` or ``"spline"``.
+        comparison: Size and held-out turning errors of each form.
     """
 
     grid: Grid
@@ -75,6 +88,9 @@ class IdentificationResult:
     candidates: dict[str, list[Fit]]
     scaling: ScalingFunctions
     timings: dict[str, float] = field(default_factory=dict)
+    splines: dict[str, SplineFit] = field(default_factory=dict)
+    chosen: str = "polynomial"
+    comparison: dict[str, dict] = field(default_factory=dict)
 
 
 _WORKER: ScalingNmpc | None = None
@@ -143,8 +159,8 @@ def _flag(
             flags.append({"pattern": int(i), "K": K_NAMES[which], "reason": reason})
 
     # Largest possible magnitude of each forcing term at the pattern's amplitude, period and ratio:
-    # |fx|, |fy| <= base and |tau| <= C_p base, with base = |fx| / sin(bias) = |fy| / |cos(bias)|.
-    base = np.hypot(forcing[:, 0], forcing[:, 1])
+    # |fx| <= base and |tau| <= C_p base; the sway term is base itself ("base" sway convention).
+    base = np.abs(forcing[:, 1])
     scale = np.column_stack([base, base, params.fin_offset * base])
     for i in range(n):
         if not ref.converged[i]:
@@ -178,6 +194,67 @@ def _package_version() -> str:
         return "unknown"
 
 
+def holdout_patterns(grid: Grid, n: int, seed: int) -> np.ndarray:
+    """``n`` seeded random right-fin patterns inside the grid's box and off its nodes.
+
+    Bias, amplitude and ratio are uniform in the grid's ranges (amplitude and
+    ratio above a forcing floor); the period is one of the grid's periods (K
+    does not depend on it). Drawn from the stream ``(seed, 1)``, so they differ
+    from the validator's patterns for the same seed.
+    """
+    rng = np.random.default_rng([seed, 1])
+    low, high = grid.bounds()
+    low = low.copy()
+    low[1] = max(low[1], min(high[1], math.radians(5.0)))
+    low[3] = max(low[3], min(high[3], 1.25))
+    periods = np.unique(grid.patterns[:, 2])
+    out = []
+    while len(out) < n:
+        beat = rng.uniform(low, high)
+        beat[2] = periods[int(rng.integers(len(periods)))]
+        if not grid.contains(beat, tol=1e-6) and beat[0] - beat[1] >= 0 and beat[0] + beat[1] <= math.pi:
+            out.append(beat)
+    return np.array(out).reshape(n, 4)
+
+
+def predicted_turning(velocities: np.ndarray, forcing: np.ndarray, k: np.ndarray, params: FishParams) -> np.ndarray:
+    """``(n, 2)`` turning radius and period of the averaged model's steady state under scaling values ``k``.
+
+    The equilibrium of eqs. (19)-(20) with the scaled forcing ``k * forcing``
+    is found by a root solve started at the full model's steady state
+    ``velocities`` (so on the same turning branch). NaN where it fails or the
+    fish does not turn.
+    """
+    coef = coefficient_vector(params)[:6]
+    masses = np.array([params.m1, params.m2, params.J3])
+    out = np.full((len(velocities), 2), np.nan)
+    for i, (v0, f) in enumerate(zip(velocities, k * forcing, strict=True)):
+        if not (np.all(np.isfinite(v0)) and np.all(np.isfinite(f))):
+            continue
+        sol = optimize.root(lambda v, f=f: body_accel(*v, *f, *coef), v0, method="hybr", tol=1e-12)
+        # hybr can stop with "no further improvement" at a converged point; judge by the residual instead
+        residual = np.max(np.abs(sol.fun) / (np.abs(f) / masses + 1e-300))
+        if residual < 1e-8 and abs(sol.x[2]) > 0:
+            out[i] = math.hypot(sol.x[0], sol.x[1]) / abs(sol.x[2]), 2.0 * math.pi / abs(sol.x[2])
+    return out
+
+
+def _turning_errors(pred: np.ndarray, ref: ReferenceRuns) -> dict[str, float]:
+    """Median and worst relative radius and period errors over the turning held-out patterns."""
+    turning = np.abs(ref.velocities[:, 2]) >= MIN_TURN_RATE
+    errors = np.abs(pred / np.column_stack([ref.radius, ref.turn_period]) - 1.0)[turning]
+    solved = np.all(np.isfinite(errors), axis=1)
+    errors = np.where(solved[:, None], errors, np.inf)  # no equilibrium on the full model's branch: a miss
+    return {
+        "patterns": int(turning.sum()),
+        "unsolved": int((~solved).sum()),
+        "radius_median": float(np.median(errors[:, 0])) if errors.size else math.nan,
+        "radius_worst": float(np.max(errors[:, 0], initial=0.0)),
+        "period_median": float(np.median(errors[:, 1])) if errors.size else math.nan,
+        "period_worst": float(np.max(errors[:, 1], initial=0.0)),
+    }
+
+
 def identify(
     grid: Grid,
     params: FishParams | None = None,
@@ -188,6 +265,8 @@ def identify(
     jobs: int = 0,
     progress: bool = True,
     fit_target: float = 2e-3,
+    holdout: int = 60,
+    turn_target: float = 0.02,
 ) -> IdentificationResult:
     """Run the whole pipeline on ``grid`` (module docstring).
 
@@ -197,11 +276,13 @@ def identify(
         settings: NMPC settings (the paper's defaults if ``None``).
         max_degree: Highest polynomial degree tried.
         folds: Cross-validation folds.
-        seed: Seed of the CV fold shuffle.
+        seed: Seed of the CV fold shuffle and of the held-out patterns.
         jobs: NMPC worker processes (0: all cores).
         progress: Show progress bars.
-        fit_target: Accuracy a closed form must reach on held-out patterns
+        fit_target: Accuracy a polynomial must reach in cross-validation
             (predicted relative speed / yaw-rate error), see :func:`scaling.regression.select_model`.
+        holdout: Random off-grid patterns on which the closed forms compete (0: polynomials only).
+        turn_target: Worst held-out turning radius / period error a form must reach to count as fitting.
     """
     params = params or FishParams()
     settings = settings or NmpcSettings()
@@ -209,10 +290,11 @@ def identify(
 
     t0 = time.perf_counter()
     ref = reference_runs(grid.patterns, params, progress=progress)
+    held = reference_runs(holdout_patterns(grid, holdout, seed), params, progress=False) if holdout else None
     timings["reference_runs"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    forcing = unscaled_forcing(grid.patterns, params)
+    forcing = unscaled_forcing(grid.patterns, params, sway=SWAY)
     k_oracle = algebraic_scaling(ref.velocities, forcing, params)
     results = solve_nmpc_batch(ref.velocities, forcing, params, settings, jobs, progress)
     k_nmpc = np.array([r.k for r in results])
@@ -222,7 +304,7 @@ def identify(
     t0 = time.perf_counter()
     usable, flags = _flag(ref, forcing, k_nmpc, k_oracle, results, params)
     weights = sensitivity_weights(ref.velocities, forcing, params)
-    fits, candidates = {}, {}
+    fits, candidates, splines = {}, {}, {}
     for j, name in enumerate(K_NAMES):
         rows = usable[:, j]
         if rows.sum() < 2:
@@ -231,14 +313,48 @@ def identify(
             grid.patterns[rows], k_nmpc[rows, j], weights[rows, j], max_degree, folds=folds, seed=seed,
             target=fit_target,
         )
+        try:
+            splines[name] = fit_spline(grid.patterns, k_nmpc[:, j], usable[:, j], fill=fits[name].predict)
+        except ValueError as err:  # not a tensor grid, or too few nodes: polynomials only
+            splines[name] = None
+            spline_reason = str(err)
+    forms = {"polynomial": {name: fits[name] for name in K_NAMES}}
+    if all(splines.values()):
+        forms["spline"] = splines
+    comparison: dict[str, dict] = {}
+    for form, per_k in forms.items():
+        size = sum(f.table.size if form == "spline" else len(f.coefs) for f in per_k.values())
+        entry: dict[str, Any] = {"coefficients": int(size)}
+        if held is not None:
+            k_pred = np.column_stack([per_k[name].predict(held.patterns) for name in K_NAMES])
+            held_forcing = unscaled_forcing(held.patterns, params, sway=SWAY)
+            entry.update(_turning_errors(predicted_turning(held.velocities, held_forcing, k_pred, params), held))
+        comparison[form] = entry
+
+    def fits_target(entry: dict) -> bool:
+        return max(entry.get("radius_worst", math.inf), entry.get("period_worst", math.inf)) <= turn_target
+
+    meeting = [f for f in forms if fits_target(comparison[f])]
+    if held is None:
+        chosen = "polynomial"
+    elif meeting:
+        chosen = min(meeting, key=lambda f: comparison[f]["coefficients"])
+    else:
+        chosen = min(forms, key=lambda f: max(comparison[f]["radius_worst"], comparison[f]["period_worst"]))
     timings["regression"] = time.perf_counter() - t0
 
-    n_terms = max(len(f.coefs) for f in fits.values())
-    powers = np.zeros((3, n_terms, len(FEATURES)))
-    coefs = np.zeros((3, n_terms))
-    for j, name in enumerate(K_NAMES):
-        powers[j, : len(fits[name].coefs)] = fits[name].powers
-        coefs[j, : len(fits[name].coefs)] = fits[name].coefs
+    if chosen == "spline":
+        powers, coefs = np.zeros((3, 1, len(FEATURES))), np.zeros((3, 1))
+        knots = splines[K_NAMES[0]].knots
+        table = np.array([splines[name].table for name in K_NAMES])
+    else:
+        n_terms = max(len(f.coefs) for f in fits.values())
+        powers = np.zeros((3, n_terms, len(FEATURES)))
+        coefs = np.zeros((3, n_terms))
+        for j, name in enumerate(K_NAMES):
+            powers[j, : len(fits[name].coefs)] = fits[name].powers
+            coefs[j, : len(fits[name].coefs)] = fits[name].coefs
+        knots, table = (), None
     deg = grid.patterns.copy()
     deg[:, :2] = np.degrees(deg[:, :2])
     meta = {
@@ -246,18 +362,31 @@ def identify(
         "format": FORMAT,
         "package_version": _package_version(),
         "python": platform.python_version(),
-        "method": "full-model steady states, NMPC per pattern (paper Sec. 4.3), cross-validated polynomial regression",
+        "method": "full-model steady states, NMPC per pattern (paper Sec. 4.3), closed form chosen on held-out "
+                  "patterns between cross-validated polynomials and tensor-product cubic splines",
+        "sway": f"{SWAY}: K_fy multiplies the fin's averaged force magnitude (the paper's K_fy cos(bias))",
         "grid": grid.to_dict(),
         "model_parameters": dataclasses.asdict(params),
         "nmpc": {**settings.as_dict(), "rk4_substeps": substeps, "oracle_rtol": ORACLE_RTOL},
         "regression": {
-            "max_degree": max_degree,
-            "folds": folds,
-            "seed": seed,
-            "selection": "fewest terms with CV error <= target, else within one standard error of the best",
-            "target": fit_target,
-            "weights": "relative speed / yaw-rate error per unit K error (scaling.regression.sensitivity_weights)",
-            "fits": {name: fits[name].summary() for name in K_NAMES},
+            "chosen": chosen,
+            "selection": f"the form with the fewest coefficients whose worst held-out turning radius and period "
+                         f"errors are <= {turn_target}, else the one with the smallest worst error",
+            "turn_target": turn_target,
+            "holdout": {"patterns": holdout, "seed": [seed, 1],
+                        "comparison": {form: {k: (v if math.isfinite(v) else None) for k, v in c.items()}
+                                       for form, c in comparison.items()}},
+            "polynomial": {
+                "max_degree": max_degree,
+                "folds": folds,
+                "seed": seed,
+                "selection": "fewest terms with CV error <= target, else within one standard error of the best",
+                "target": fit_target,
+                "weights": "relative speed / yaw-rate error per unit K error (scaling.regression.sensitivity_weights)",
+                "fits": {name: fits[name].summary() for name in K_NAMES},
+            },
+            "spline": ({name: splines[name].summary() for name in K_NAMES} if "spline" in forms
+                       else {"unavailable": spline_reason}),
         },
         "flags": {"count": len(flags), "by_K": {n: int((~usable[:, j]).sum()) for j, n in enumerate(K_NAMES)}},
         "oracle_max_relative_gap": {
@@ -272,5 +401,6 @@ def identify(
                      for row in np.column_stack([deg, k_nmpc, usable.astype(float)]).round(10).tolist()],
         },
     }
-    scaling = ScalingFunctions(powers, coefs, meta)
-    return IdentificationResult(grid, ref, forcing, k_nmpc, k_oracle, usable, flags, fits, candidates, scaling, timings)
+    scaling = ScalingFunctions(powers, coefs, meta, knots, table, SWAY)
+    return IdentificationResult(grid, ref, forcing, k_nmpc, k_oracle, usable, flags, fits, candidates, scaling,
+                                timings, splines if "spline" in forms else {}, chosen, comparison)

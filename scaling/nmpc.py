@@ -8,6 +8,10 @@ divided by ``m1, m2, J3``, which the paper's typesetting drops)::
     d vy / dt    = f2(v) + u2 fy_avg / m2
     d omega / dt = f3(v) + u3 tau_avg / J3
 
+(with the ``"base"`` sway convention of ``pectoral_gym.kfunctions``, ``fy_avg``
+is replaced by ``base = fx_avg / sin(bias)``: the solver is the same, only the
+forcing vector it is given differs).
+
 The NMPC drives the tracking error ``e = v - v_ref`` (eq. 33) to zero by
 minimising ``sum_k e_k' Q e_k ts + e_N' Q_T e_N`` (eqs. 34-35) over a horizon
 ``T`` sampled every ``ts``, with ``u`` piecewise constant per sample. The
@@ -38,6 +42,7 @@ from pectoral_gym.symbolic import body_accel_sx
 __all__ = ["NmpcSettings", "NmpcResult", "ScalingNmpc", "algebraic_scaling", "auto_substeps", "unscaled_forcing"]
 
 _UNIT_K = ScalingFunctions.unit()
+_UNIT_BASE_K = ScalingFunctions(_UNIT_K.powers, _UNIT_K.coefs, sway="base")
 
 
 @dataclass(frozen=True)
@@ -100,10 +105,18 @@ class NmpcResult:
     cost: float
 
 
-def unscaled_forcing(patterns: np.ndarray, params: FishParams) -> np.ndarray:
-    """``(n, 3)`` exact cycle-averaged ``(fx, fy, tau)`` of the right fin with K = 1 (eq. 25, paper-notes)."""
+def unscaled_forcing(patterns: np.ndarray, params: FishParams, sway: str = "paper") -> np.ndarray:
+    """``(n, 3)`` forcing terms the scaling values multiply, right fin (eq. 25, exact averages of paper-notes).
+
+    With ``sway="paper"``: ``(fx_avg, fy_avg, tau_avg)`` with K = 1. With
+    ``sway="base"`` the middle column is ``base = fx_avg / sin(bias)``, the
+    term ``K_fy`` multiplies in ``"base"`` coefficient files (``pectoral_gym.kfunctions``).
+    """
+    if sway not in ("paper", "base"):
+        raise ValueError(f"sway must be 'paper' or 'base', got {sway!r}")
     coef = coefficient_vector(params)
-    return np.array([averaged_fin_forcing(*p, 1.0, coef, EXACT, _UNIT_K.powers, _UNIT_K.coefs) for p in patterns])
+    arrays = (_UNIT_K if sway == "paper" else _UNIT_BASE_K).kernel_arrays()
+    return np.array([averaged_fin_forcing(*p, 1.0, coef, EXACT, arrays) for p in patterns]).reshape(-1, 3)
 
 
 def algebraic_scaling(velocities: np.ndarray, forcing: np.ndarray, params: FishParams) -> np.ndarray:

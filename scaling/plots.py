@@ -86,7 +86,8 @@ def plot_k_surfaces(scaling: ScalingFunctions, path: Path, low: np.ndarray, high
             ax.legend(loc="upper left", fontsize=8)
         ax.set_xlabel("amplitude gA [deg]")
         ax.set_ylabel("bias g0 [deg]")
-        ax.set_title(name)
+        ax.set_title(name if name != "K_fy" or scaling.sway == "paper"
+                     else "K_fy (x force magnitude; = paper's K_fy cos g0)")
     fig.suptitle(f"Scaling functions at T_p = {FIG3_PERIOD:g} s, zeta = {FIG3_RATIO:g} (paper Fig. 3)")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
@@ -207,7 +208,7 @@ def write_report(results: dict[str, Any], path: Path) -> None:
                      f"{_fmt(r['averaged']['radius'])} | {_pct(r['radius_error'])} | {_pct(r['paper_radius_error'])} | "
                      f"{_fmt(r['full']['period'])} | {_fmt(r['averaged']['period'])} | {_pct(r['period_error'])} | "
                      f"{_pct(r['paper_period_error'])} |")
-    lines += [""] + _summary_table({"radius": t4["radius"], "period": t4["period"]})
+    lines += [""] + _summary_table({"radius": t4["radius"], "period": t4["period"]}) + _flip_lines(t4)
     box = single["box"]
     lines += ["", "## 2. Random single-fin patterns (right fin, off the grid)", "",
               f"{single['radius']['n']} seeded patterns drawn uniformly from bias {box['low'][0]:.4g}-"
@@ -219,7 +220,7 @@ def write_report(results: dict[str, Any], path: Path) -> None:
               + ("Every pattern was checked to be off the identification grid."
                  if single["grid_checked"] else "No grid in the metadata: continuous draws are off-grid almost "
                  "surely."), ""]
-    lines += _summary_table({"radius": single["radius"], "period": single["period"]})
+    lines += _summary_table({"radius": single["radius"], "period": single["period"]}) + _flip_lines(single)
     lines += ["", "Per-pattern values: `validation.json` (`single_fin.rows`).", "",
               "## 3. Forward swimming sweep (Fig. 4: both fins, g0 = 95 deg, gA = 15 deg, zeta = 4)", "",
               "| f [Hz] | T_p [s] | inside identified period range | speed full [cm/s] | speed avg [cm/s] | error |",
@@ -236,7 +237,7 @@ def write_report(results: dict[str, Any], path: Path) -> None:
               f"positions after {two['duration']:g} s from rest, same start pose; relative to the full model's path "
               "length.", ""]
     lines += _summary_table({"radius": two["radius"], "period": two["period"], "speed": two["speed"],
-                             "position / path length": two["position_rel"]})
+                             "position / path length": two["position_rel"]}) + _flip_lines(two)
     pos = two["position_m"]
     lines += ["", f"Position error after {two['duration']:g} s: median {100 * pos['median']:.1f} cm, 90th pct "
               f"{100 * pos['p90']:.1f} cm, worst {100 * pos['worst']:.1f} cm ({pos['worst_pattern']}).", ""]
@@ -244,6 +245,18 @@ def write_report(results: dict[str, Any], path: Path) -> None:
         lines += ["## Figures", ""] + [f"![{name}]({name})" for name in results["plots"]] + [""]
     lines += ["## Timing", "", " | ".join(f"{k}: {v:.1f} s" for k, v in results["timing_s"].items()), ""]
     path.write_text("\n".join(lines))
+
+
+def _flip_lines(section: dict[str, Any]) -> list[str]:
+    flips = section.get("flips")
+    if not flips:
+        return []
+    if not flips["count"]:
+        return ["", f"Turn direction: the averaged model turns the same way as the full model on all {flips['n']} "
+                "patterns."]
+    return ["", f"**Turn direction: on {flips['count']} of {flips['n']} patterns the averaged model settles on a turn "
+            f"in the other direction** ({'; '.join(flips['patterns'])}). The radius and period errors above do not "
+            "see this (they have no sign); docs/scaling.md explains the cause."]
 
 
 def summary_text(results: dict[str, Any], out: Path) -> str:

@@ -23,13 +23,17 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.interpolate import make_interp_spline
 
 from pectoral_gym.dynamics import body_accel
-from pectoral_gym.kfunctions import FEATURES
+from pectoral_gym.kfunctions import FEATURES, ScalingFunctions
 from pectoral_gym.params import FishParams, coefficient_vector
 
 __all__ = [
     "Fit",
+    "SplineFit",
+    "fit_spline",
+    "spline_nodes",
     "FEATURE_SETS",
     "design_matrix",
     "feature_matrix",
@@ -256,3 +260,110 @@ def sensitivity_weights(
         d_omega = response[2] / max(abs(v[2]), floor)
         weights[i] = np.maximum(np.abs(d_speed), np.abs(d_omega))
     return np.minimum(weights, 1e6)
+
+
+# --------------------------------------------------------------------------- tensor-product cubic splines
+
+
+def spline_nodes(patterns: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Sorted distinct ``(bias, amplitude, 1/ratio)`` node values of a grid of ``(n, 4)`` patterns."""
+    patterns = np.asarray(patterns, dtype=np.float64)
+    coords = np.column_stack([patterns[:, 0], patterns[:, 1], 1.0 / patterns[:, 3]])
+    return tuple(np.unique(np.round(coords[:, k], 12)) for k in range(3))
+
+
+@dataclass(frozen=True)
+class SplineFit:
+    """An interpolating tensor-product cubic spline of one scaling function over (bias, amplitude, 1/ratio).
+
+    Attributes:
+        knots: Three not-a-knot knot vectors.
+        table: ``(n_bias, n_amplitude, n_inv_ratio)`` B-spline coefficients.
+        nodes: The grid's node values per axis.
+        filled: Nodes without a usable value, filled by ``fill`` before interpolating.
+        period_spread: Largest difference between values of the same node at different periods
+            (K does not depend on the period; this checks it on every run).
+    """
+
+    knots: tuple[np.ndarray, np.ndarray, np.ndarray]
+    table: np.ndarray
+    nodes: tuple[np.ndarray, np.ndarray, np.ndarray]
+    filled: int
+    period_spread: float
+
+    def predict(self, patterns: np.ndarray) -> np.ndarray:
+        """Evaluate at ``(n, 4)`` patterns (clamped to the node range, like the averaged model)."""
+        table = np.zeros((3, *self.table.shape))
+        table[0] = self.table
+        single = ScalingFunctions(np.zeros((3, 1, len(FEATURES))), np.zeros((3, 1)), {}, self.knots, table)
+        return np.array([single.evaluate(*p)[0] for p in np.asarray(patterns, dtype=np.float64)])
+
+    def summary(self) -> dict:
+        """JSON-ready description."""
+        return {
+            "kind": "tensor-product cubic spline (not-a-knot), interpolating",
+            "axes": ["bias", "amplitude", "inv_ratio"],
+            "nodes": [len(n) for n in self.nodes],
+            "coefficients": int(self.table.size),
+            "filled_nodes": self.filled,
+            "period_spread": self.period_spread,
+        }
+
+
+def fit_spline(patterns: np.ndarray, values: np.ndarray, usable: np.ndarray | None = None, fill=None) -> SplineFit:
+    """Interpolate ``values`` on a tensor grid of patterns with a cubic spline per axis.
+
+    The patterns must form a full tensor grid over (bias, amplitude, ratio),
+    repeated at any number of periods (values of one node at several periods
+    are averaged: K does not depend on the period). The coefficients are
+    found one axis at a time (tensor-product interpolation is separable),
+    each by :func:`scipy.interpolate.make_interp_spline` with not-a-knot ends.
+
+    Args:
+        patterns: ``(n, 4)`` grid patterns.
+        values: ``(n,)`` K values.
+        usable: ``(n,)`` mask of values to use (default: the finite ones).
+        fill: Callable ``patterns -> values`` for nodes without a usable value
+            (e.g. a polynomial fit); without it such nodes raise.
+
+    Raises:
+        ValueError: If the patterns are not a tensor grid, an axis has fewer
+            than 4 nodes, or nodes are missing and there is no ``fill``.
+    """
+    patterns = np.asarray(patterns, dtype=np.float64)
+    values = np.asarray(values, dtype=np.float64)
+    usable = np.isfinite(values) if usable is None else (np.asarray(usable, dtype=bool) & np.isfinite(values))
+    nodes = spline_nodes(patterns)
+    shape = tuple(len(n) for n in nodes)
+    if min(shape) < 4:
+        raise ValueError(f"a cubic spline needs >= 4 distinct values of bias, amplitude and ratio; grid has {shape}")
+    coords = np.column_stack([patterns[:, 0], patterns[:, 1], 1.0 / patterns[:, 3]])
+    index = tuple(np.searchsorted(nodes[k], np.round(coords[:, k], 12)) for k in range(3))
+    seen = np.zeros(shape, dtype=bool)
+    seen[index] = True
+    if not np.all(seen):
+        raise ValueError(f"the grid is not a full tensor product: {int((~seen).sum())} of {seen.size} "
+                         "(bias, amplitude, ratio) nodes have no pattern")
+    total, count = np.zeros(shape), np.zeros(shape)
+    low, high = np.full(shape, np.inf), np.full(shape, -np.inf)
+    sel = tuple(i[usable] for i in index)
+    np.add.at(total, sel, values[usable])
+    np.add.at(count, sel, 1.0)
+    np.minimum.at(low, sel, values[usable])
+    np.maximum.at(high, sel, values[usable])
+    table = np.divide(total, count, out=np.full(shape, np.nan), where=count > 0)
+    spread = float(np.max(np.where(count > 1, high - low, 0.0), initial=0.0))
+    missing = count == 0
+    if np.any(missing):
+        if fill is None:
+            raise ValueError(f"{int(missing.sum())} grid nodes have no usable value and no fill was given")
+        idx = np.argwhere(missing)
+        fill_patterns = np.column_stack([nodes[0][idx[:, 0]], nodes[1][idx[:, 1]], np.ones(len(idx)),
+                                         1.0 / nodes[2][idx[:, 2]]])
+        table[missing] = fill(fill_patterns)
+    knots = []
+    for axis in range(3):
+        spline = make_interp_spline(nodes[axis], table, k=3, axis=axis)
+        table, knots_axis = np.moveaxis(spline.c, 0, axis), spline.t
+        knots.append(knots_axis)
+    return SplineFit(tuple(knots), np.ascontiguousarray(table), nodes, int(missing.sum()), spread)

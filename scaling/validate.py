@@ -165,6 +165,8 @@ def steady_pair(beats: np.ndarray, scaling: ScalingFunctions, params: FishParams
                  "radius": full[:, 3], "period": full[:, 4]},
         "averaged": {"vx": avg[:, 0], "vy": avg[:, 1], "omega": avg[:, 2], "speed": speed_avg,
                      "radius": avg[:, 3], "period": avg[:, 4]},
+        # The turning radius has no sign: a fish circling the other way would score well on it alone.
+        "direction_flip": (np.sign(avg[:, 2]) != np.sign(full[:, 2])) & (np.abs(full[:, 2]) > 1e-9),
         "radius_error": relative_error(avg[:, 3], full[:, 3]),
         "period_error": relative_error(avg[:, 4], full[:, 4]),
         "speed_error": relative_error(speed_avg, speed_full),
@@ -243,6 +245,7 @@ def _rows(beats: np.ndarray, res: dict[str, Any], keys: tuple[str, ...]) -> list
         for model in ("full", "averaged"):
             row[model] = {k: _num(res[model][k][i]) for k in ("vx", "vy", "omega", "speed", "radius", "period")}
         row.update({f"{k}_error": _num(res[f"{k}_error"][i]) for k in keys})
+        row["turns_the_other_way"] = bool(res["direction_flip"][i])
         rows.append(row)
     return rows
 
@@ -266,7 +269,14 @@ def table4_section(scaling: ScalingFunctions, params: FishParams, count: int = l
         row["paper_radius_error"], row["paper_period_error"] = paper_r / 100, paper_t / 100
     labels = [r["pattern"] for r in rows]
     return {"rows": rows, "radius": summarize(res["radius_error"], labels),
-            "period": summarize(res["period_error"], labels)}
+            "period": summarize(res["period_error"], labels), "flips": _flips(res, labels)}
+
+
+def _flips(res: dict[str, Any], labels: list[str]) -> dict[str, Any]:
+    """Patterns where the averaged model settles on a turn in the other direction than the full model."""
+    flip = np.asarray(res["direction_flip"], dtype=bool)
+    return {"count": int(flip.sum()), "n": int(flip.size), "share": float(flip.mean()) if flip.size else 0.0,
+            "patterns": [lab for lab, f in zip(labels, flip, strict=True) if f]}
 
 
 def single_fin_section(scaling: ScalingFunctions, params: FishParams, n: int, rng: np.random.Generator) -> dict:
@@ -278,7 +288,8 @@ def single_fin_section(scaling: ScalingFunctions, params: FishParams, n: int, rn
     labels = [label(b) for b in beats]
     return {"box": {"low": _deg(low), "high": _deg(high), "source": source},
             "grid_checked": grid is not None, "rows": _rows(beats, res, ("radius", "period")),
-            "radius": summarize(res["radius_error"], labels), "period": summarize(res["period_error"], labels)}
+            "radius": summarize(res["radius_error"], labels), "period": summarize(res["period_error"], labels),
+            "flips": _flips(res, labels)}
 
 
 def sweep_section(scaling: ScalingFunctions, params: FishParams, frequencies=SWEEP_FREQUENCIES) -> dict:
@@ -316,6 +327,7 @@ def two_fin_section(scaling: ScalingFunctions, params: FishParams, n: int, rng: 
     return {"rows": rows, "duration": duration, "n_turning": int(turning.sum()), "periods": list(TWO_FIN_PERIODS),
             "radius": summarize(res["radius_error"], labels), "period": summarize(res["period_error"], labels),
             "speed": summarize(res["speed_error"], labels), "position_m": summarize(gap, labels),
+            "flips": _flips({"direction_flip": res["direction_flip"] & turning}, labels),
             "position_rel": summarize(gap / np.maximum(travelled, 1e-12), labels)}
 
 
@@ -336,6 +348,8 @@ def _targets(results: dict[str, Any]) -> list[dict[str, Any]]:
         ("Single-fin period error, median", results["single_fin"]["period"]["median"], TARGETS["single_median"]),
         ("Single-fin radius error, worst", results["single_fin"]["radius"]["worst"], TARGETS["single_worst"]),
         ("Single-fin period error, worst", results["single_fin"]["period"]["worst"], TARGETS["single_worst"]),
+        ("Table 4 patterns turning the other way (share)", results["table4"]["flips"]["share"], 0.0),
+        ("Single-fin patterns turning the other way (share)", results["single_fin"]["flips"]["share"], 0.0),
         ("Forward sweep speed error, worst", results["sweep"]["speed"]["worst"], TARGETS["sweep_speed_max"]),
     ]
     return [{"check": name, "measured": value, "target": target, "met": value is not None and value <= target}

@@ -25,8 +25,7 @@ from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
 
 P = FishParams()
 K_DRAG = P.fin_force_coef * P.water_density * P.fin_chord * P.fin_span**3 / 6.0
-UNIT_POWERS = np.zeros((3, 1, 6))
-UNIT_COEFS = np.ones((3, 1))
+UNIT_K = ScalingFunctions.unit().kernel_arrays()
 
 PATTERNS = [
     (90, 20, 1.0, 4.0),
@@ -148,7 +147,7 @@ def test_averaged_fin_forcing_direct_kernel_call():
     beat = rad((100, 12, 0.8, 5.0))
     coef = coefficient_vector(P)
     out = averaged_fin_forcing(beat.bias, beat.amplitude, beat.period, beat.ratio, -1.0, coef, EXACT,
-                               UNIT_POWERS, UNIT_COEFS)
+                               UNIT_K)
     cf = closed_form(tuple(beat.as_array()))
     np.testing.assert_allclose(out, [cf[0], -cf[1], -0.03 * cf[0]], rtol=1e-12)
 
@@ -373,3 +372,126 @@ def test_scaling_missing_file(tmp_path):
 def test_k_names_and_features_order():
     assert K_NAMES == ("K_fx", "K_fy", "K_m")
     assert FEATURES == ("bias", "amplitude", "period", "ratio", "inv_period", "inv_ratio")
+
+
+# --------------------------------------------------------------------------- spline K and the "base" sway term
+
+
+def _spline_scaling(seed=0, sway="base", polynomial=0.0):
+    from scipy.interpolate import make_interp_spline
+
+    rng = np.random.default_rng(seed)
+    nodes = (np.radians([45, 60, 75, 95, 110, 135]), np.radians([2.5, 10, 17, 24, 30]), 1 / np.array([5, 3, 2, 1.25]))
+    knots = tuple(make_interp_spline(n, np.zeros_like(n), k=3).t for n in nodes)
+    table = rng.normal(0.5, 0.3, size=(3, 6, 5, 4))
+    coefs = np.full((3, 1), polynomial)
+    return ScalingFunctions(np.zeros((3, 1, len(FEATURES))), coefs, {"status": "test"}, knots, table, sway)
+
+
+def _reference_spline(s, bias, amplitude, ratio):
+    """scipy's independent tensor-product B-spline evaluation (with the file's clamping)."""
+    from scipy.interpolate import NdBSpline
+
+    x = [min(max(v, k[3]), k[-4]) for v, k in zip((bias, amplitude, 1 / ratio), s.knots, strict=True)]
+    return np.array([float(NdBSpline(s.knots, s.table[i], 3)(x)) for i in range(3)])
+
+
+SPLINE_POINTS = [(1.0, 0.2, 0.8, 2.5), (1.5708, 0.45, 1.3, 4.4), (2.2, 0.1, 0.5, 1.3),
+                 (0.6, 0.01, 1.0, 7.0), (2.5, 0.6, 2.0, 1.1)]  # the last two clamp on every axis
+
+
+@pytest.mark.parametrize("point", SPLINE_POINTS)
+def test_spline_k_equals_scipy_in_python_and_in_the_compiled_kernel(point):
+    s = _spline_scaling(polynomial=0.25)
+    expected = _reference_spline(s, point[0], point[1], point[3]) + 0.25  # plus the constant polynomial part
+    np.testing.assert_allclose(s.evaluate(*point), expected, rtol=1e-12, atol=1e-14)
+    beat = FinBeat(*point) if point[0] - point[1] >= 0 and point[0] + point[1] <= math.pi else None
+    if beat is not None:
+        unit = np.array(averaged_forcing(beat, P, "right"))
+        base = math.hypot(unit[0], unit[1])
+        scaled = np.array(averaged_forcing(beat, P, "right", scaling=s))
+        np.testing.assert_allclose(scaled, expected * [unit[0], base, unit[2]], rtol=1e-12)
+
+
+def test_base_sway_term_is_finite_and_nonzero_at_90_deg_bias():
+    beat = rad((90, 20, 1.0, 3.0))
+    unit = np.array(averaged_forcing(beat, P, "left"))
+    assert abs(unit[1]) < 1e-12 * abs(unit[0])  # the plain average has no sway force at 90 deg
+    k = np.array([[0.9], [0.3], [0.2]])
+    paper = ScalingFunctions(np.zeros((3, 1, len(FEATURES))), k, {})
+    base = ScalingFunctions(np.zeros((3, 1, len(FEATURES))), k, {}, sway="base")
+    assert averaged_forcing(beat, P, "left", scaling=paper)[1] == pytest.approx(0.0, abs=1e-12 * unit[0])
+    # left fin: sway mirrored; the base term is the average force magnitude (= fx at 90 deg)
+    assert averaged_forcing(beat, P, "left", scaling=base)[1] == pytest.approx(-0.3 * unit[0], rel=1e-12)
+    assert base.paper_k_fy(*beat.as_array()) == math.inf or abs(base.paper_k_fy(*beat.as_array())) > 1e12
+    assert not base.is_unit
+
+
+def test_taylor_mode_base_sway_uses_the_taylor_base():
+    # Second-order Taylor form of base = c gA J1(gA): c gA^2 (8 - gA^2) / 16, consistent with eq. (27).
+    beat = rad((70, 25, 1.0, 3.0))
+    base = ScalingFunctions(np.zeros((3, 1, len(FEATURES))), np.ones((3, 1)), {}, sway="base")
+    c = P.fin_drag_constant * math.pi**2 * (3.0**2 - 1) / (3.0 * 1.0**2)
+    a = beat.amplitude
+    assert averaged_forcing(beat, P, "right", TAYLOR, base)[1] == pytest.approx(c * a * a * (8 - a * a) / 16, rel=1e-12)
+    exact = averaged_forcing(beat, P, "right", EXACT, base)[1]
+    assert exact == pytest.approx(c * a * j1(a), rel=1e-12)
+
+
+def test_spline_file_round_trip(tmp_path):
+    s = _spline_scaling(seed=2, polynomial=0.1)
+    path = tmp_path / "spline.json"
+    s.save(path)
+    data = json.loads(path.read_text())
+    assert data["format"] == FORMAT == "pectoral-gym-scaling/2" and data["sway"] == "base"
+    back = ScalingFunctions.load(path)
+    assert back.sway == "base" and back.has_spline
+    np.testing.assert_array_equal(back.table, s.table)
+    for k_back, k in zip(back.knots, s.knots, strict=True):
+        np.testing.assert_array_equal(k_back, k)
+    for point in SPLINE_POINTS:
+        assert back.evaluate(*point) == s.evaluate(*point)
+
+
+def test_format_1_files_still_load_with_paper_sway():
+    d = _poly_dict()
+    d["format"] = "pectoral-gym-scaling/1"
+    s = ScalingFunctions.from_dict(d)
+    assert s.sway == "paper" and not s.has_spline
+
+
+def _spline_dict():
+    d = _spline_scaling().to_dict()
+    return json.loads(json.dumps(d))
+
+
+SPLINE_MALFORMED = [
+    (lambda d: d.update(sway="sideways"), "sway"),
+    (lambda d: d["spline"].update(degree=2), "degree 3"),
+    (lambda d: d["spline"].update(axes=["bias", "amplitude", "ratio"]), "axes"),
+    (lambda d: d["spline"].update(extrapolation="linear"), "extrapolation"),
+    (lambda d: d["spline"]["coefficients"].pop("K_m"), "malformed spline"),
+    (lambda d: d["spline"]["coefficients"].update(K_fx=[1.0, 2.0]), "malformed spline"),
+    (lambda d: d["spline"]["knots"][0].reverse(), "non-decreasing"),
+    (lambda d: d["spline"]["knots"][1].pop(), "malformed spline"),
+    (lambda d: d["spline"]["coefficients"]["K_fy"].__setitem__(3, None), "malformed spline|finite"),
+    (lambda d: d.update(spline=[1, 2]), "'spline' must be an object"),
+]
+
+
+@pytest.mark.parametrize("mutate,message", SPLINE_MALFORMED)
+def test_spline_malformed_dict_raises(mutate, message):
+    d = _spline_dict()
+    mutate(d)
+    with pytest.raises(ValueError, match=message):
+        ScalingFunctions.from_dict(d, "k.json")
+
+
+def test_spline_constructor_checks():
+    s = _spline_scaling()
+    with pytest.raises(ValueError, match="both knots and a table"):
+        ScalingFunctions(s.powers, s.coefs, {}, s.knots, None)
+    with pytest.raises(ValueError, match="at least 4 coefficients"):
+        ScalingFunctions(s.powers, s.coefs, {}, (s.knots[0], s.knots[1], s.knots[2][:7]), s.table[..., :3])
+    with pytest.raises(ValueError, match="sway"):
+        ScalingFunctions(s.powers, s.coefs, {}, sway="cos")

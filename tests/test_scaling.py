@@ -11,10 +11,10 @@ from pectoral_gym.models import AveragedModel
 from pectoral_gym.params import FishParams
 from pectoral_gym.steady import steady_state_batch
 from scaling.grids import GRIDS, Grid, GridError, load_grid
-from scaling.identify import identify
+from scaling.identify import holdout_patterns, identify, predicted_turning
 from scaling.nmpc import NmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
 from scaling.reference import reference_runs, velocities_from_turning
-from scaling.regression import feature_matrix, fit_polynomial, select_model
+from scaling.regression import feature_matrix, fit_polynomial, fit_spline, select_model
 
 PARAMS = FishParams()
 FAST = NmpcSettings(horizon=3.0, sampling=1.0)  # the paper's weights, a shorter horizon for speed
@@ -63,30 +63,40 @@ def test_eq29_velocities_round_trip():
 
 def test_nmpc_equals_algebraic_solution(small):
     grid, ref = small
-    forcing = unscaled_forcing(grid.patterns, PARAMS)
+    forcing = unscaled_forcing(grid.patterns, PARAMS, sway="base")
     oracle = algebraic_scaling(ref.velocities, forcing, PARAMS)
     nmpc = ScalingNmpc(PARAMS, FAST, ref.velocities)
     for i in range(len(grid)):
         r = nmpc.solve(ref.velocities[i], forcing[i])
         assert r.success
-        for j in range(3):
-            if abs(forcing[i, j]) > 1e-3 * abs(forcing[i, 0]):  # the sway forcing vanishes at 90 deg bias
-                assert r.k[j] == pytest.approx(oracle[i, j], rel=1e-3)
+        # With the "base" sway term every K is identifiable, also at 90 deg bias.
+        np.testing.assert_allclose(r.k, oracle[i], rtol=1e-3)
+
+
+def test_base_sway_forcing_is_the_force_magnitude():
+    # Closed form (paper-notes): fx = base sin(bias), fy = base cos(bias); "base" replaces fy by base itself.
+    patterns = np.radians([[60.0, 20.0, 0.0, 0.0], [90.0, 25.0, 0.0, 0.0]]) + [0, 0, 1.3, 3.0]
+    paper = unscaled_forcing(patterns, PARAMS)
+    base = unscaled_forcing(patterns, PARAMS, sway="base")
+    np.testing.assert_allclose(base[:, 1], np.hypot(paper[:, 0], paper[:, 1]), rtol=1e-12)
+    np.testing.assert_allclose(base[:, [0, 2]], paper[:, [0, 2]], rtol=0)
+    with pytest.raises(ValueError, match="sway"):
+        unscaled_forcing(patterns, PARAMS, sway="cos")
 
 
 def test_identified_k_makes_the_averaged_model_reproduce_the_full_model(small):
     # The point of the identification: with a pattern's own K, the averaged model's steady state
     # is the full model's (to the steady-state tolerance), which K = 1 misses by about 2x in omega.
     grid, ref = small
-    forcing = unscaled_forcing(grid.patterns, PARAMS)
+    forcing = unscaled_forcing(grid.patterns, PARAMS, sway="base")
     oracle = algebraic_scaling(ref.velocities, forcing, PARAMS)
-    i = 0  # bias 60 deg: every forcing term is identifiable
-    k = ScalingFunctions(np.zeros((3, 1, len(FEATURES))), oracle[i].reshape(3, 1), {})
-    beats = np.array([[grid.patterns[i], [math.pi / 2, 0.0, 1.0, 1.0]]])
-    averaged = steady_state_batch(AveragedModel(1, PARAMS, scaling=k), beats)[0]
-    np.testing.assert_allclose([averaged.vx, averaged.vy, averaged.omega], ref.velocities[i], rtol=1e-4)
-    unit = steady_state_batch(AveragedModel(1, PARAMS, scaling="none"), beats)[0]
-    assert unit.omega > 1.5 * ref.velocities[i, 2]
+    for i in (0, 2):  # bias 60 deg and 90 deg (the paper's K_fy would be infinite there)
+        k = ScalingFunctions(np.zeros((3, 1, len(FEATURES))), oracle[i].reshape(3, 1), {}, sway="base")
+        beats = np.array([[grid.patterns[i], [math.pi / 2, 0.0, 1.0, 1.0]]])
+        averaged = steady_state_batch(AveragedModel(1, PARAMS, scaling=k), beats)[0]
+        np.testing.assert_allclose([averaged.vx, averaged.vy, averaged.omega], ref.velocities[i], rtol=1e-4)
+        unit = steady_state_batch(AveragedModel(1, PARAMS, scaling="none"), beats)[0]
+        assert unit.omega > 1.5 * ref.velocities[i, 2]
 
 
 def test_k_does_not_depend_on_the_period(small):
@@ -115,13 +125,17 @@ def test_regression_recovers_a_known_polynomial():
     assert feature_matrix(patterns)[:, 4] == pytest.approx(1 / patterns[:, 2])
 
 
-def test_pipeline_flags_degenerate_and_failed_patterns_and_round_trips(small, tmp_path):
-    grid, _ = small
-    result = identify(grid, PARAMS, FAST, max_degree=1, folds=2, jobs=1, progress=False)
-    at_90 = [i for i, p in enumerate(grid.patterns) if abs(p[0] - math.pi / 2) < 1e-12]
-    sway = {f["pattern"]: f["reason"] for f in result.flags if f["K"] == "K_fy"}
-    assert set(sway) == set(at_90) and all("sway forcing" in r for r in sway.values())
-    assert result.usable[:, 0].all() and result.usable[:, 2].all()
+def test_pipeline_flags_degenerate_and_failed_patterns_and_round_trips(tmp_path):
+    # Amplitude 0: no forcing at all, every K unidentifiable; the sway K is identifiable at 90 deg.
+    grid = Grid.product("degenerate", bias_deg=(60, 90), amplitude_deg=(0, 15, 25), period_s=(1.0,), ratio=(3,))
+    result = identify(grid, PARAMS, FAST, max_degree=1, folds=2, jobs=1, progress=False, holdout=0)
+    still = [i for i, p in enumerate(grid.patterns) if p[1] == 0]
+    assert len(still) == 2
+    for j, name in enumerate(("K_fx", "K_fy", "K_m")):
+        reasons = {f["pattern"]: f["reason"] for f in result.flags if f["K"] == name}
+        assert set(reasons) == set(still) and all("no forcing" in r for r in reasons.values())
+        assert result.usable[[i for i in range(len(grid)) if i not in still], j].all()
+    assert result.chosen == "polynomial" and "unavailable" in result.scaling.metadata["regression"]["spline"]
     path = tmp_path / "k.json"
     result.scaling.save(path)
     loaded = ScalingFunctions.load(path)
@@ -154,3 +168,84 @@ def test_cli_identify_small_grid(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "scaling", "identify", "--grid", "nope"], capture_output=True,
                          text=True, timeout=60)
     assert bad.returncode == 2 and "unknown grid" in bad.stderr
+
+
+# --------------------------------------------------------------------------- splines and the held-out choice
+
+
+def _tensor_patterns(bias_deg, amplitude_deg, ratios, periods=(1.0,)):
+    b, a, t, z = np.meshgrid(np.radians(bias_deg), np.radians(amplitude_deg), periods, ratios, indexing="ij")
+    return np.column_stack([b.ravel(), a.ravel(), t.ravel(), z.ravel()])
+
+
+def _cubic(p):
+    # a cubic polynomial in (bias, amplitude, 1/ratio): a not-a-knot cubic spline reproduces it exactly
+    b, a, r = p[:, 0], p[:, 1], 1.0 / p[:, 3]
+    return 0.7 + 0.2 * b**3 - 1.5 * b * a**2 + 0.8 * r**3 * a - 0.3 * b * a * r
+
+
+def test_spline_reproduces_a_cubic_off_the_nodes_and_averages_periods():
+    grid = _tensor_patterns((45, 60, 80, 100, 135), (5, 10, 20, 30), (1.25, 2, 3, 5), periods=(0.5, 2.0))
+    values = _cubic(grid)
+    values[grid[:, 2] == 2.0] += 1e-3  # the two periods disagree by 1e-3: averaged, and reported
+    fit = fit_spline(grid, values)
+    rng = np.random.default_rng(0)
+    off = np.column_stack([rng.uniform(np.radians(45), np.radians(135), 40), rng.uniform(np.radians(5),
+                           np.radians(30), 40), np.ones(40), rng.uniform(1.25, 5, 40)])
+    np.testing.assert_allclose(fit.predict(off), _cubic(off) + 5e-4, atol=1e-10)
+    assert fit.period_spread == pytest.approx(1e-3) and fit.filled == 0
+    assert fit.summary()["nodes"] == [5, 4, 4]
+
+
+def test_spline_fit_errors_and_fill():
+    grid = _tensor_patterns((45, 60, 80, 100), (5, 10, 20, 30), (1.25, 2, 3, 5))
+    with pytest.raises(ValueError, match=">= 4 distinct"):
+        fit_spline(grid[grid[:, 0] < 1.6], _cubic(grid[grid[:, 0] < 1.6]))
+    with pytest.raises(ValueError, match="not a full tensor product"):
+        fit_spline(grid[1:], _cubic(grid[1:]))
+    usable = np.ones(len(grid), dtype=bool)
+    usable[5] = False
+    with pytest.raises(ValueError, match="no usable value"):
+        fit_spline(grid, _cubic(grid), usable)
+    fit = fit_spline(grid, _cubic(grid), usable, fill=_cubic)  # the filled node takes the fill's value
+    assert fit.filled == 1
+    np.testing.assert_allclose(fit.predict(grid), _cubic(grid), atol=1e-10)
+
+
+def test_predicted_turning_with_the_exact_k_is_the_full_models_turn(small):
+    # The oracle K makes the full model's mean velocities an equilibrium of the averaged model (eq. 20),
+    # so the root solve must return the full model's radius and period (eq. 29).
+    grid, ref = small
+    forcing = unscaled_forcing(grid.patterns, PARAMS, sway="base")
+    k = algebraic_scaling(ref.velocities, forcing, PARAMS)
+    turn = predicted_turning(ref.velocities, forcing, k, PARAMS)
+    np.testing.assert_allclose(turn, np.column_stack([ref.radius, ref.turn_period]), rtol=1e-6)
+    off = predicted_turning(ref.velocities, forcing, k * [1.0, 1.0, 1.1], PARAMS)  # 10 % more yaw moment
+    assert np.all(off[:, 0] < ref.radius)
+
+
+def test_holdout_patterns_are_seeded_inside_the_box_and_off_the_grid():
+    grid = GRIDS["paper"]
+    a, b = holdout_patterns(grid, 20, seed=3), holdout_patterns(grid, 20, seed=3)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, holdout_patterns(grid, 20, seed=4))
+    low, high = grid.bounds()
+    assert np.all(a >= low - 1e-12) and np.all(a <= high + 1e-12)
+    assert not any(grid.contains(p, tol=1e-6) for p in a)
+    assert set(np.unique(a[:, 2])) <= set(np.unique(grid.patterns[:, 2]))
+
+
+def test_pipeline_chooses_the_spline_when_polynomials_miss_the_turning_target(tmp_path):
+    grid = Grid.product("tensor", bias_deg=(50, 70, 90, 110), amplitude_deg=(10, 17, 24, 30), period_s=(1.0,),
+                        ratio=(1.5, 2.5, 3.5, 5))
+    result = identify(grid, PARAMS, FAST, max_degree=1, folds=2, jobs=1, progress=False, holdout=12)
+    comparison = result.comparison
+    assert set(comparison) == {"polynomial", "spline"}
+    assert comparison["spline"]["radius_worst"] < comparison["polynomial"]["radius_worst"]
+    assert result.chosen == "spline" and result.scaling.has_spline and result.scaling.sway == "base"
+    path = tmp_path / "k.json"
+    result.scaling.save(path)
+    loaded = ScalingFunctions.load(path)
+    for p in grid.patterns[::7]:  # the spline interpolates the NMPC values at the nodes
+        i = int(np.flatnonzero(np.all(grid.patterns == p, axis=1))[0])
+        np.testing.assert_allclose(loaded.evaluate(*p), result.k_nmpc[i], rtol=1e-8, atol=1e-10)

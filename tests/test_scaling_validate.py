@@ -63,7 +63,7 @@ def test_quick_cli_writes_report_json_and_plots(tmp_path, capsys):
     results = json.loads((out / "validation.json").read_text())  # strict JSON: no NaN/Infinity
     for section in ("table4", "single_fin", "sweep", "two_fin", "targets", "timing_s"):
         assert section in results
-    assert len(results["targets"]) == 7
+    assert len(results["targets"]) == 9
     assert all(isinstance(t["met"], bool) for t in results["targets"])
     assert results["two_fin"]["position_m"]["n"] == len(results["two_fin"]["rows"]) > 0
     report = (out / "report.md").read_text()
@@ -180,3 +180,14 @@ def test_report_says_when_k_was_identified_with_other_parameters():
     assert sv._params_differ(recorded, FishParams()) == []
     assert sv._params_differ({**recorded, "fin_span": recorded["fin_span"] * 1.1}, FishParams()) == ["fin_span"]
     assert sv._params_differ(None, FishParams()) is None
+
+
+def test_a_turn_in_the_other_direction_is_caught_although_the_radius_has_no_sign():
+    # K_m = -1 reverses the right fin's averaged moment: the averaged fish circles right, the full one left.
+    beats = np.array([[sv._fin(60, 20, 1.0, 3), sv.REST]])
+    res = sv.steady_pair(beats, constant_k(1.0, 1.0, -1.0))
+    assert res["full"]["omega"][0] > 0 > res["averaged"]["omega"][0]
+    assert res["direction_flip"].tolist() == [True]
+    flips = sv._flips(res, ["p"])
+    assert flips == {"count": 1, "n": 1, "share": 1.0, "patterns": ["p"]}
+    assert not sv.steady_pair(beats, constant_k(1.0, 1.0, 0.5))["direction_flip"][0]
