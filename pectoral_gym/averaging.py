@@ -24,9 +24,8 @@ from __future__ import annotations
 import math
 
 import numba as nb
-import numpy as np
 
-from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.kfunctions import ScalingFunctions, spline_values
 from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
 
 __all__ = [
@@ -81,61 +80,13 @@ def _k_value(which: int, bias: float, amplitude: float, period: float, ratio: fl
 
 
 @nb.njit(**_JIT)
-def _bspline_basis(knots, n: int, x: float, values) -> int:
-    """Span of ``x`` (clamped to the knot range) and the four cubic basis values in ``values``.
-
-    Piegl & Tiller, *The NURBS Book*, algorithm A2.2; the same as
-    :func:`pectoral_gym.kfunctions.bspline_basis`.
-    """
-    x = min(max(x, knots[3]), knots[n])
-    span = 3
-    while span < n - 1 and knots[span + 1] <= x:
-        span += 1
-    left1, left2, left3 = x - knots[span], x - knots[span - 1], x - knots[span - 2]
-    right1, right2, right3 = knots[span + 1] - x, knots[span + 2] - x, knots[span + 3] - x
-    lefts = (0.0, left1, left2, left3)
-    rights = (0.0, right1, right2, right3)
-    values[0] = 1.0
-    for j in range(1, 4):
-        saved = 0.0
-        for r in range(j):
-            temp = values[r] / (rights[r + 1] + lefts[j - r])
-            values[r] = saved + rights[r + 1] * temp
-            saved = lefts[j - r] * temp
-        values[j] = saved
-    return span
-
-
-@nb.njit(**_JIT)
-def _spline_values(bias: float, amplitude: float, inv_ratio: float, knots, table):
-    """Spline parts of ``(K_fx, K_fy, K_m)``: tensor-product cubic B-splines over (bias, amplitude, 1/ratio)."""
-    n0, n1, n2 = table.shape[1], table.shape[2], table.shape[3]
-    if n0 == 0:
-        return 0.0, 0.0, 0.0
-    b0, b1, b2 = np.empty(4), np.empty(4), np.empty(4)
-    s0 = _bspline_basis(knots[0], n0, bias, b0) - 3
-    s1 = _bspline_basis(knots[1], n1, amplitude, b1) - 3
-    s2 = _bspline_basis(knots[2], n2, inv_ratio, b2) - 3
-    kx = ky = km = 0.0
-    for a in range(4):
-        for b in range(4):
-            w = b0[a] * b1[b]
-            for c in range(4):
-                wc = w * b2[c]
-                kx += wc * table[0, s0 + a, s1 + b, s2 + c]
-                ky += wc * table[1, s0 + a, s1 + b, s2 + c]
-                km += wc * table[2, s0 + a, s1 + b, s2 + c]
-    return kx, ky, km
-
-
-@nb.njit(**_JIT)
 def scaling_values(bias: float, amplitude: float, period: float, ratio: float, kfun):
     """``(K_fx, K_fy, K_m)`` at one pattern: polynomial part plus spline part.
 
     ``kfun`` is :meth:`pectoral_gym.kfunctions.ScalingFunctions.kernel_arrays`.
     """
     k_powers, k_coefs, knots, table = kfun[0], kfun[1], kfun[2], kfun[3]
-    sx, sy, sm = _spline_values(bias, amplitude, 1.0 / ratio, knots, table)
+    sx, sy, sm = spline_values(bias, amplitude, 1.0 / ratio, knots, table)
     return (
         _k_value(0, bias, amplitude, period, ratio, k_powers, k_coefs) + sx,
         _k_value(1, bias, amplitude, period, ratio, k_powers, k_coefs) + sy,

@@ -59,11 +59,12 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import numba as nb
 import numpy as np
 
 __all__ = [
     "FEATURES", "FORMAT", "FORMATS", "K_NAMES", "SPLINE_AXES", "SWAY_MODES", "ScalingFunctions",
-    "bspline_basis", "default_scaling_path",
+    "bspline_basis", "default_scaling_path", "spline_values",
 ]
 
 FEATURES = ("bias", "amplitude", "period", "ratio", "inv_period", "inv_ratio")
@@ -82,30 +83,63 @@ def default_scaling_path() -> Path:
     return Path(str(resources.files("pectoral_gym") / "data" / "scaling_coefficients.json"))
 
 
-def bspline_basis(knots: np.ndarray, n: int, x: float) -> tuple[int, np.ndarray]:
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def bspline_basis(knots, n: int, x: float):
     """Span and the four nonzero cubic B-spline basis values at ``x`` (clamped to the knot range).
 
-    The Cox-de Boor recursion in the form of Piegl & Tiller, *The NURBS Book*,
-    algorithm A2.2. Coefficient ``span - 3 + a`` multiplies ``values[a]``.
-    :mod:`pectoral_gym.averaging` compiles the same algorithm.
+    The Cox-de Boor recursion of Piegl & Tiller, *The NURBS Book*, algorithm
+    A2.2, unrolled for degree 3 and free of allocations (it runs inside the
+    parallel model kernels). Coefficient ``span - 3 + a`` multiplies the
+    ``a``-th value. Returns ``(span, b0, b1, b2, b3)``.
     """
-    x = min(max(float(x), knots[3]), knots[n])
+    x = min(max(x, knots[3]), knots[n])
     span = 3
     while span < n - 1 and knots[span + 1] <= x:
         span += 1
-    values = np.zeros(4)
-    left, right = np.zeros(4), np.zeros(4)
-    values[0] = 1.0
-    for j in range(1, 4):
-        left[j] = x - knots[span + 1 - j]
-        right[j] = knots[span + j] - x
-        saved = 0.0
-        for r in range(j):
-            temp = values[r] / (right[r + 1] + left[j - r])
-            values[r] = saved + right[r + 1] * temp
-            saved = left[j - r] * temp
-        values[j] = saved
-    return span, values
+    left1, left2, left3 = x - knots[span], x - knots[span - 1], x - knots[span - 2]
+    right1, right2, right3 = knots[span + 1] - x, knots[span + 2] - x, knots[span + 3] - x
+    # degree 1
+    temp = 1.0 / (right1 + left1)
+    n0, n1 = right1 * temp, left1 * temp
+    # degree 2
+    temp = n0 / (right1 + left2)
+    n0, saved = right1 * temp, left2 * temp
+    temp = n1 / (right2 + left1)
+    n1, n2 = saved + right2 * temp, left1 * temp
+    # degree 3
+    temp = n0 / (right1 + left3)
+    n0, saved = right1 * temp, left3 * temp
+    temp = n1 / (right2 + left2)
+    n1, saved = saved + right2 * temp, left2 * temp
+    temp = n2 / (right3 + left1)
+    n2, n3 = saved + right3 * temp, left1 * temp
+    return span, n0, n1, n2, n3
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def spline_values(bias: float, amplitude: float, inv_ratio: float, knots, table):
+    """Spline parts of ``(K_fx, K_fy, K_m)``; ``knots``, ``table`` as in :meth:`ScalingFunctions.kernel_arrays`.
+
+    Zero when ``table`` is empty (no spline part).
+    """
+    n0, n1, n2 = table.shape[1], table.shape[2], table.shape[3]
+    if n0 == 0:
+        return 0.0, 0.0, 0.0
+    s0, a0, a1, a2, a3 = bspline_basis(knots[0], n0, bias)
+    s1, c0, c1, c2, c3 = bspline_basis(knots[1], n1, amplitude)
+    s2, d0, d1, d2, d3 = bspline_basis(knots[2], n2, inv_ratio)
+    b0, b1, b2 = (a0, a1, a2, a3), (c0, c1, c2, c3), (d0, d1, d2, d3)
+    kx = ky = km = 0.0
+    for a in range(4):
+        for b in range(4):
+            w = b0[a] * b1[b]
+            for c in range(4):
+                wc = w * b2[c]
+                i, j, k = s0 - 3 + a, s1 - 3 + b, s2 - 3 + c
+                kx += wc * table[0, i, j, k]
+                ky += wc * table[1, i, j, k]
+                km += wc * table[2, i, j, k]
+    return kx, ky, km
 
 
 def _check_knots(knots: np.ndarray, n: int, where: str) -> None:
@@ -302,12 +336,8 @@ class ScalingFunctions:
         x = np.array([bias, amplitude, period, ratio, 1.0 / period, 1.0 / ratio])
         values = np.sum(self.coefs * np.prod(x ** self.powers, axis=-1), axis=-1)
         if self.table is not None:
-            spans, bases = zip(*(bspline_basis(k, n, v) for k, n, v in
-                                 zip(self.knots, self.table.shape[1:], (bias, amplitude, 1.0 / ratio), strict=True)),
-                               strict=True)
-            s0, s1, s2 = (s - 3 for s in spans)
-            local = self.table[:, s0:s0 + 4, s1:s1 + 4, s2:s2 + 4]
-            values = values + np.einsum("kabc,a,b,c->k", local, *bases)
+            _, _, knots, table, _ = self.kernel_arrays()
+            values = values + np.array(spline_values(float(bias), float(amplitude), 1.0 / ratio, knots, table))
         return float(values[0]), float(values[1]), float(values[2])
 
     def paper_k_fy(self, bias: float, amplitude: float, period: float, ratio: float) -> float:

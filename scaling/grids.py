@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["GRIDS", "Grid", "GridError", "load_grid"]
+__all__ = ["GRIDS", "Grid", "GridError", "draw_off_grid", "load_grid"]
 
 _AXES = ("bias_deg", "amplitude_deg", "period_s", "ratio")
 
@@ -172,3 +172,21 @@ GRIDS: dict[str, Grid] = {
         ratio=(1.25, 1.5, 2, 3, 4, 5),
     ),
 }
+
+
+def draw_off_grid(rng: np.random.Generator, n: int, low: np.ndarray, high: np.ndarray, grid: Grid | None,
+                  periods=None) -> np.ndarray:
+    """``n`` patterns uniform in the box ``[low, high]``, off ``grid``'s nodes, stroke inside [0, pi].
+
+    With ``periods``, the period is drawn from those of them inside the box instead.
+    """
+    out = []
+    allowed = [p for p in periods if low[2] <= p <= high[2]] if periods is not None else []
+    while len(out) < n:
+        beat = rng.uniform(low, high)
+        if allowed:
+            beat[2] = allowed[int(rng.integers(len(allowed)))]
+        on_grid = grid is not None and grid.contains(beat, tol=1e-6)
+        if not on_grid and beat[0] - beat[1] >= 0 and beat[0] + beat[1] <= math.pi:
+            out.append(beat)
+    return np.array(out).reshape(n, 4)

@@ -36,7 +36,7 @@ from tqdm.auto import tqdm
 from pectoral_gym.dynamics import body_accel
 from pectoral_gym.kfunctions import FEATURES, FORMAT, K_NAMES, ScalingFunctions
 from pectoral_gym.params import FishParams, coefficient_vector
-from scaling.grids import Grid
+from scaling.grids import Grid, draw_off_grid
 from scaling.nmpc import (
     NmpcResult,
     NmpcSettings,
@@ -202,19 +202,11 @@ def holdout_patterns(grid: Grid, n: int, seed: int) -> np.ndarray:
     does not depend on it). Drawn from the stream ``(seed, 1)``, so they differ
     from the validator's patterns for the same seed.
     """
-    rng = np.random.default_rng([seed, 1])
     low, high = grid.bounds()
     low = low.copy()
     low[1] = max(low[1], min(high[1], math.radians(5.0)))
     low[3] = max(low[3], min(high[3], 1.25))
-    periods = np.unique(grid.patterns[:, 2])
-    out = []
-    while len(out) < n:
-        beat = rng.uniform(low, high)
-        beat[2] = periods[int(rng.integers(len(periods)))]
-        if not grid.contains(beat, tol=1e-6) and beat[0] - beat[1] >= 0 and beat[0] + beat[1] <= math.pi:
-            out.append(beat)
-    return np.array(out).reshape(n, 4)
+    return draw_off_grid(np.random.default_rng([seed, 1]), n, low, high, grid, np.unique(grid.patterns[:, 2]))
 
 
 def predicted_turning(velocities: np.ndarray, forcing: np.ndarray, k: np.ndarray, params: FishParams) -> np.ndarray:

@@ -40,7 +40,7 @@ from pectoral_gym.models import AveragedModel, FishModel, FullModel
 from pectoral_gym.params import FishParams
 from pectoral_gym.steady import common_period, steady_state_batch
 from scaling import plots as rendering
-from scaling.grids import GRIDS, Grid, GridError
+from scaling.grids import GRIDS, Grid, GridError, draw_off_grid
 
 __all__ = [
     "MIN_AMPLITUDE",
@@ -223,21 +223,6 @@ def sampling_box(scaling: ScalingFunctions) -> tuple[np.ndarray, np.ndarray, Gri
     return low, high, grid, source
 
 
-def _draw(rng: np.random.Generator, n: int, low: np.ndarray, high: np.ndarray, grid: Grid | None,
-          periods: tuple[float, ...] | None = None) -> np.ndarray:
-    """``n`` patterns uniform in the box (period from ``periods`` if given), off ``grid``, stroke in [0, pi]."""
-    out = []
-    allowed = [p for p in periods or () if low[2] <= p <= high[2]] or None
-    while len(out) < n:
-        beat = rng.uniform(low, high)
-        if allowed is not None:
-            beat[2] = allowed[int(rng.integers(len(allowed)))]
-        on_grid = grid is not None and grid.contains(beat, tol=1e-6)
-        if not on_grid and beat[0] - beat[1] >= 0 and beat[0] + beat[1] <= math.pi:
-            out.append(beat)
-    return np.array(out).reshape(n, 4)
-
-
 def _rows(beats: np.ndarray, res: dict[str, Any], keys: tuple[str, ...]) -> list[dict[str, Any]]:
     rows = []
     for i, fins in enumerate(beats):
@@ -282,7 +267,7 @@ def _flips(res: dict[str, Any], labels: list[str]) -> dict[str, Any]:
 def single_fin_section(scaling: ScalingFunctions, params: FishParams, n: int, rng: np.random.Generator) -> dict:
     """Random right-fin patterns in :func:`sampling_box`, off the grid."""
     low, high, grid, source = sampling_box(scaling)
-    fins = _draw(rng, n, low, high, grid)
+    fins = draw_off_grid(rng, n, low, high, grid)
     beats = np.stack([fins, np.broadcast_to(REST, fins.shape)], axis=1)
     res = steady_pair(beats, scaling, params)
     labels = [label(b) for b in beats]
@@ -312,7 +297,7 @@ def two_fin_section(scaling: ScalingFunctions, params: FishParams, n: int, rng: 
                     duration: float = POSITION_TIME) -> dict:
     """Random two-fin patterns: steady errors and position error after ``duration`` s from rest."""
     low, high, grid, _ = sampling_box(scaling)
-    beats = np.stack([_draw(rng, n, low, high, grid, TWO_FIN_PERIODS) for _ in range(2)], axis=1)
+    beats = np.stack([draw_off_grid(rng, n, low, high, grid, TWO_FIN_PERIODS) for _ in range(2)], axis=1)
     res = steady_pair(beats, scaling, params)
     turning = np.abs(res["full"]["omega"]) >= MIN_TURN_RATE
     for key in ("radius_error", "period_error"):

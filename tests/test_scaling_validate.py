@@ -136,7 +136,7 @@ def test_sampling_box_from_grid_metadata_and_draws_off_grid():
     np.testing.assert_allclose(np.degrees(high[:2]), [90, 30])
     np.testing.assert_allclose([low[2], high[2], low[3], high[3]], [0.5, 2.0, 2.0, 5.0])
     assert rebuilt is not None and len(rebuilt) == len(grid)
-    draws = sv._draw(np.random.default_rng(1), 50, low, high, rebuilt)
+    draws = sv.draw_off_grid(np.random.default_rng(1), 50, low, high, rebuilt)
     assert np.all(draws >= low) and np.all(draws <= high)
     assert not any(grid.contains(d, tol=1e-6) for d in draws)
     # No grid: the environment ranges with the forcing floor (amplitude >= 5 deg, ratio >= 1.25).
