@@ -45,7 +45,7 @@ import numpy as np
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
-from pectoral_gym.symbolic import averaged_forcing_sx, body_accel_sx
+from pectoral_gym.symbolic import averaged_forcing_sx, body_accel_sx, yaw_oscillation_sx
 
 __all__ = ["NMPCController", "NMPCSettings"]
 
@@ -229,15 +229,23 @@ class NMPCController:
         amp_r, amp_l = ca.sqrt(u[0]), ca.sqrt(u[1])
         right = averaged_forcing_sx(ca.vertcat(u[2], amp_r, period, zeta), 1.0, params, self.scaling)
         left = averaged_forcing_sx(ca.vertcat(u[3], amp_l, period, zeta), -1.0, params, self.scaling)
-        forcing = ca.Function("forcing", [u], [right + left])
+        oscillating = self.scaling is not None and self.scaling.has_oscillation
+        if oscillating:
+            # both fins share period and ratio, so they beat in phase: their yaw oscillations add as phasors
+            phasor = (yaw_oscillation_sx(ca.vertcat(u[2], amp_r, period, zeta), self.scaling)
+                      - yaw_oscillation_sx(ca.vertcat(u[3], amp_l, period, zeta), self.scaling))
+            oscillation = ca.sqrt(ca.sumsqr(phasor) + 1e-18)
+        else:
+            oscillation = 0.0
+        forcing = ca.Function("forcing", [u], [ca.vertcat(right + left, oscillation)])
         x = ca.SX.sym("x", 6)
-        f = ca.SX.sym("f", 3)
+        f = ca.SX.sym("f", 4)  # fin force and moment, then the yaw-oscillation amplitude
         psi, vx, vy = x[2], x[3], x[4]
         rhs = ca.Function("rhs", [x, f], [ca.vertcat(
             vx * ca.cos(psi) - vy * ca.sin(psi),  # eq. (19), kinematics
             vx * ca.sin(psi) + vy * ca.cos(psi),
             x[5],
-            body_accel_sx(x[3:6], f, params, s.smoothing),  # eqs. (19)-(20)
+            body_accel_sx(x[3:6], f[:3], params, s.smoothing, f[3] if oscillating else None),  # eqs. (19)-(20)
         )])
         k1 = rhs(x, f)
         k2 = rhs(x + 0.5 * h * k1, f)
@@ -260,7 +268,7 @@ class NMPCController:
         Z = ca.SX.sym("Z", _N_U, n)
         X = ca.SX.sym("X", 6, n + 1)
         p_gain = ca.SX.sym("gain", 2)  # online corrections of the thrust and the yaw moment
-        gains = ca.vertcat(p_gain[0], p_gain[0], p_gain[1])
+        gains = ca.vertcat(p_gain[0], p_gain[0], p_gain[1], 1.0)  # the yaw-oscillation amplitude is not scaled
         f_prev = gains * forcing(p_zprev)
         g = [X[:, 0] - p_x0]
         x_roll = [p_x0]

@@ -15,6 +15,19 @@ over one fin-beat cycle, scaled by ``K_fx, K_fy, K_m``. Two forms are offered:
   ``m_p`` terms of (27) (dimensionally inconsistent, and zero in the exact
   average). See ``docs/model.md``, errata.
 
+**Oscillation-averaged yaw damping** (beyond the paper). Within a beat the
+yaw rate oscillates, ``omega = w + omega~(t)``, by more than its mean ``w``
+when the fish turns slowly. The cycle average of the yaw damping
+``c4 omega|omega|`` of eq. (20) is then not ``c4 w|w|``: for a sinusoidal
+``omega~ = A sin(theta)`` it is ``c4 A^2 q(w / A)`` (:func:`oscillating_square_mean`),
+linear in ``w`` near zero (slope ``4 c4 A / pi``). Without that damping the
+Munk moment ``(m1 - m2) vx vy`` of eq. (20) holds a spurious turn in the
+opposite direction for some patterns, which no scaling function can remove
+(``docs/model.md``, section 3.6). The averaged model uses it when the scaling
+file carries the fin's yaw oscillation (:mod:`pectoral_gym.kfunctions`);
+``A`` is then the sinusoid amplitude with the oscillation's mean absolute
+value, so the slope at ``w = 0`` is exact, and two fins combine as phasors.
+
 Everything here is compiled with numba and works on scalars, so the
 integrators can re-evaluate the forcing when a fin latches new parameters.
 """
@@ -25,7 +38,8 @@ import math
 
 import numba as nb
 
-from pectoral_gym.kfunctions import ScalingFunctions, spline_values
+from pectoral_gym.dynamics import body_accel
+from pectoral_gym.kfunctions import ScalingFunctions, oscillation_phasor, spline_values
 from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
 
 __all__ = [
@@ -33,7 +47,10 @@ __all__ = [
     "TAYLOR",
     "bessel_j1",
     "averaged_fin_forcing",
+    "averaged_body_accel",
     "mean_fin_power",
+    "oscillating_square_mean",
+    "yaw_oscillation_phasor",
     "averaged_forcing",
     "scaling_values",
 ]
@@ -150,6 +167,50 @@ def mean_fin_power(amplitude: float, period: float, ratio: float, span: float, d
     w1 = math.pi * (ratio + 1.0) / period
     w2 = w1 / ratio
     return drag_constant * span * amplitude**3 * (w1 * w1 + w2 * w2) / period
+
+
+@nb.njit(**_JIT)
+def oscillating_square_mean(mean: float, amplitude: float) -> float:
+    """Cycle mean of ``x|x|`` for ``x = mean + amplitude sin(theta)``, ``theta`` uniform over a cycle.
+
+    With ``u = mean / amplitude`` and ``a = arcsin(u)`` the mean is
+    ``amplitude^2 ((2 a / pi)(u^2 + 1/2) + (3 / pi) u sqrt(1 - u^2))`` for ``|u| < 1``
+    (``x`` changes sign within the cycle) and ``sign(u) amplitude^2 (u^2 + 1/2)``
+    otherwise; it is odd in ``mean``, continuously differentiable, has slope
+    ``4 amplitude / pi`` at ``mean = 0`` and is ``mean |mean|`` for zero amplitude.
+    """
+    if amplitude <= 0.0:
+        return mean * abs(mean)
+    u = mean / amplitude
+    a2 = amplitude * amplitude
+    if abs(u) >= 1.0:
+        return math.copysign(a2 * (u * u + 0.5), u)
+    return a2 * (2.0 * math.asin(u) / math.pi * (u * u + 0.5) + 3.0 / math.pi * u * math.sqrt(1.0 - u * u))
+
+
+@nb.njit(**_JIT)
+def averaged_body_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, oscillation):
+    """Eqs. (19)-(20) of the averaged model, with the oscillation-averaged yaw damping.
+
+    :func:`pectoral_gym.dynamics.body_accel` with ``c4 omega|omega|`` replaced by its mean over an
+    in-beat yaw oscillation of amplitude ``oscillation`` [rad/s],
+    ``c4 oscillating_square_mean(omega, oscillation)`` (unchanged for 0).
+    """
+    dvx, dvy, dom = body_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4)
+    if oscillation > 0.0:
+        dom += c4 * (omega * abs(omega) - oscillating_square_mean(omega, oscillation))
+    return dvx, dvy, dom
+
+
+@nb.njit(**_JIT)
+def yaw_oscillation_phasor(bias: float, amplitude: float, period: float, ratio: float, kfun):
+    """Phasor ``A (cos phi, sin phi)`` [rad/s] of the yaw-rate oscillation one right fin drives.
+
+    ``A T_p`` and ``phi`` come from the scaling file (:func:`pectoral_gym.kfunctions.oscillation_phasor`);
+    ``(0, 0)`` without yaw-oscillation data.
+    """
+    pc, ps = oscillation_phasor(bias, amplitude, 1.0 / ratio, kfun[5], kfun[6])
+    return pc / period, ps / period
 
 
 _UNIT_K = ScalingFunctions.unit()

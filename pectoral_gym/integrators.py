@@ -30,13 +30,13 @@ import math
 import numba as nb
 import numpy as np
 
-from pectoral_gym.averaging import averaged_fin_forcing
-from pectoral_gym.dynamics import body_accel, fin_force_right, stroke_kinematics
+from pectoral_gym.averaging import averaged_body_accel, averaged_fin_forcing, yaw_oscillation_phasor
+from pectoral_gym.dynamics import fin_force_right, stroke_kinematics
 
 __all__ = [
     "FIN_FIELDS",
     "ELAPSED", "DURATION", "ANGLE_FROM", "ANGLE_TO", "POWER",
-    "BIAS", "AMPLITUDE", "PERIOD", "RATIO", "AVG_FX", "AVG_FY", "AVG_TAU",
+    "BIAS", "AMPLITUDE", "PERIOD", "RATIO", "AVG_FX", "AVG_FY", "AVG_TAU", "OSC_COS", "OSC_SIN",
     "init_fins", "command_fins", "advance", "fin_angles",
 ]
 
@@ -44,7 +44,8 @@ __all__ = [
 ELAPSED, DURATION, ANGLE_FROM, ANGLE_TO, POWER = 0, 1, 2, 3, 4
 BIAS, AMPLITUDE, PERIOD, RATIO = 5, 6, 7, 8
 AVG_FX, AVG_FY, AVG_TAU = 9, 10, 11  # scaled averaged forcing of the active pattern
-FIN_FIELDS = 12
+OSC_COS, OSC_SIN = 12, 13  # phasor of the yaw-rate oscillation the active pattern drives (signed by side)
+FIN_FIELDS = 14
 
 _EPS = 1e-12
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
@@ -78,6 +79,37 @@ def _latch(fins, pending, i, f, coef, mode, kfun):
     fins[i, f, AVG_FX] = fx
     fins[i, f, AVG_FY] = fy
     fins[i, f, AVG_TAU] = tau
+    pc, ps = yaw_oscillation_phasor(bias, amp, period, ratio, kfun)
+    fins[i, f, OSC_COS] = _SIDE[f] * pc  # the left fin's yaw oscillation is the mirror image
+    fins[i, f, OSC_SIN] = _SIDE[f] * ps
+
+
+@nb.njit(**_JIT)
+def _yaw_oscillation(fins, i, offset, idle0, idle1):
+    """Amplitude [rad/s] of the yaw-rate oscillation both fins drive, ``offset`` s into the segment.
+
+    Each fin's oscillation is ``Re(P e^{i theta})`` with its phasor ``P`` and
+    its beat phase ``theta = 2 pi t / T_p`` (``t`` from the start of its power
+    stroke); the two add as phasors. Fins beating in phase with the same
+    pattern cancel (straight swimming has no yaw oscillation); fins with
+    different periods drift through all relative phases.
+    """
+    re = 0.0
+    im = 0.0
+    for f in range(2):
+        if (idle0 if f == 0 else idle1) or fins[i, f, ANGLE_FROM] == fins[i, f, ANGLE_TO]:
+            continue
+        period = fins[i, f, PERIOD]
+        t = fins[i, f, ELAPSED] + offset
+        if fins[i, f, POWER] < 0.5:
+            t += period / (fins[i, f, RATIO] + 1.0)  # recovery follows the power stroke
+        theta = 2.0 * math.pi * t / period
+        c, s = math.cos(theta), math.sin(theta)
+        re += fins[i, f, OSC_COS] * c - fins[i, f, OSC_SIN] * s
+        im += fins[i, f, OSC_COS] * s + fins[i, f, OSC_SIN] * c
+    return math.sqrt(re * re + im * im)
+
+
 
 
 @nb.njit(**_JIT)
@@ -128,28 +160,32 @@ def _rotate(c0, s0, delta):
 
 
 @nb.njit(**_JIT)
-def _rk4(state, integral, i, h, f0x, f0y, f0t, fmx, fmy, fmt, f1x, f1y, f1t, m1, m2, j3, c1, c2, c4):
-    """One RK4 step of eq. (19) for fish ``i``; forcing given at t, t+h/2, t+h."""
+def _rk4(state, integral, i, h, f0x, f0y, f0t, fmx, fmy, fmt, f1x, f1y, f1t, m1, m2, j3, c1, c2, c4, osc):
+    """One RK4 step of eq. (19) for fish ``i``; forcing given at t, t+h/2, t+h.
+
+    ``osc`` [rad/s]: the yaw oscillation of the averaged model's damping
+    (:func:`pectoral_gym.averaging.averaged_body_accel`); 0 for the full model.
+    """
     x0, y0, p0, u0, v0, w0 = state[i, 0], state[i, 1], state[i, 2], state[i, 3], state[i, 4], state[i, 5]
     c0, s0 = math.cos(p0), math.sin(p0)
     # stage 1
     k1x, k1y, k1p = u0 * c0 - v0 * s0, u0 * s0 + v0 * c0, w0
-    k1u, k1v, k1w = body_accel(u0, v0, w0, f0x, f0y, f0t, m1, m2, j3, c1, c2, c4)
+    k1u, k1v, k1w = averaged_body_accel(u0, v0, w0, f0x, f0y, f0t, m1, m2, j3, c1, c2, c4, osc)
     # stage 2
     u2, v2, w2 = u0 + 0.5 * h * k1u, v0 + 0.5 * h * k1v, w0 + 0.5 * h * k1w
     c, s = _rotate(c0, s0, 0.5 * h * k1p)
     k2x, k2y, k2p = u2 * c - v2 * s, u2 * s + v2 * c, w2
-    k2u, k2v, k2w = body_accel(u2, v2, w2, fmx, fmy, fmt, m1, m2, j3, c1, c2, c4)
+    k2u, k2v, k2w = averaged_body_accel(u2, v2, w2, fmx, fmy, fmt, m1, m2, j3, c1, c2, c4, osc)
     # stage 3
     u3, v3, w3 = u0 + 0.5 * h * k2u, v0 + 0.5 * h * k2v, w0 + 0.5 * h * k2w
     c, s = _rotate(c0, s0, 0.5 * h * k2p)
     k3x, k3y, k3p = u3 * c - v3 * s, u3 * s + v3 * c, w3
-    k3u, k3v, k3w = body_accel(u3, v3, w3, fmx, fmy, fmt, m1, m2, j3, c1, c2, c4)
+    k3u, k3v, k3w = averaged_body_accel(u3, v3, w3, fmx, fmy, fmt, m1, m2, j3, c1, c2, c4, osc)
     # stage 4
     u4, v4, w4 = u0 + h * k3u, v0 + h * k3v, w0 + h * k3w
     c, s = _rotate(c0, s0, h * k3p)
     k4x, k4y, k4p = u4 * c - v4 * s, u4 * s + v4 * c, w4
-    k4u, k4v, k4w = body_accel(u4, v4, w4, f1x, f1y, f1t, m1, m2, j3, c1, c2, c4)
+    k4u, k4v, k4w = averaged_body_accel(u4, v4, w4, f1x, f1y, f1t, m1, m2, j3, c1, c2, c4, osc)
     h6 = h / 6.0
     state[i, 0] = x0 + h6 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
     state[i, 1] = y0 + h6 * (k1y + 2.0 * k2y + 2.0 * k3y + k4y)
@@ -164,7 +200,7 @@ def _rk4(state, integral, i, h, f0x, f0y, f0t, fmx, fmy, fmt, f1x, f1y, f1t, m1,
 
 
 @nb.njit(**_JIT)
-def _stable_step(state, i, m1, m2, j3, c1, c4, fx, fy, tau, dt_max):
+def _stable_step(state, i, m1, m2, j3, c1, c4, fx, fy, tau, osc, dt_max):
     """Averaged model: RK4 step, at most ``dt_max`` and well inside the stability limit.
 
     The stiffest mode is the yaw damping ``-c4 omega|omega|`` (rate ``2 c4 |omega|``),
@@ -172,9 +208,10 @@ def _stable_step(state, i, m1, m2, j3, c1, c4, fx, fy, tau, dt_max):
     of the current value and the value the forcing drives towards
     (``omega* = sqrt(|tau| / (c4 J3))``, ``V* = sqrt(|F| / c1)``), so a fish at
     rest that starts turning does not overshoot. ``h * rate <= 1.5`` keeps
-    RK4 (stable to 2.78) accurate on the transients.
+    RK4 (stable to 2.78) accurate on the transients. The oscillation-averaged
+    damping's rate is at most ``2 c4 (|omega| + osc)``.
     """
-    omega = max(abs(state[i, 5]), math.sqrt(abs(tau) / (c4 * j3)))
+    omega = max(abs(state[i, 5]), math.sqrt(abs(tau) / (c4 * j3))) + osc
     speed = max(math.sqrt(state[i, 3] ** 2 + state[i, 4] ** 2), math.sqrt(math.hypot(fx, fy) / max(c1, 1e-12)))
     rate = 2.0 * c4 * omega + 3.0 * c1 * speed / min(m1, m2) + omega
     if rate * dt_max > 1.5:
@@ -206,12 +243,13 @@ def _advance_one(
             fx = fins[i, 0, AVG_FX] + fins[i, 1, AVG_FX]
             fy = fins[i, 0, AVG_FY] + fins[i, 1, AVG_FY]
             tau = fins[i, 0, AVG_TAU] + fins[i, 1, AVG_TAU]
+            osc = _yaw_oscillation(fins, i, 0.5 * seg, idle0, idle1)
             t_seg = seg
             while t_seg > _EPS:
                 # equal substeps to the segment end, re-sized as the state's stiffness changes
-                h_ok = _stable_step(state, i, m1, m2, j3, c1, c4, fx, fy, tau, dt_max)
+                h_ok = _stable_step(state, i, m1, m2, j3, c1, c4, fx, fy, tau, osc, dt_max)
                 h = t_seg / max(1, int(math.ceil(t_seg / h_ok - 1e-9)))
-                _rk4(state, integral, i, h, fx, fy, tau, fx, fy, tau, fx, fy, tau, m1, m2, j3, c1, c2, c4)
+                _rk4(state, integral, i, h, fx, fy, tau, fx, fy, tau, fx, fy, tau, m1, m2, j3, c1, c2, c4, osc)
                 t_seg -= h
         else:
             h_max = dt_max
@@ -225,7 +263,7 @@ def _advance_one(
             for k in range(n_sub):
                 fmx, fmy, fmt = _fin_forcing(fins, i, (k + 0.5) * h, drag_constant, inertia_constant, fin_offset)
                 f1x, f1y, f1t = _fin_forcing(fins, i, (k + 1.0) * h, drag_constant, inertia_constant, fin_offset)
-                _rk4(state, integral, i, h, f0x, f0y, f0t, fmx, fmy, fmt, f1x, f1y, f1t, m1, m2, j3, c1, c2, c4)
+                _rk4(state, integral, i, h, f0x, f0y, f0t, fmx, fmy, fmt, f1x, f1y, f1t, m1, m2, j3, c1, c2, c4, 0.0)
                 f0x, f0y, f0t = f1x, f1y, f1t
         if rem0 - seg <= _EPS:
             fins[i, 0, ELAPSED] = fins[i, 0, DURATION]  # exactly on the boundary

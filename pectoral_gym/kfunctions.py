@@ -5,10 +5,10 @@ scaling functions of the fin-beat parameters. They are identified by the
 ``scaling/`` pipeline (Sec. 4.3 of the paper) and stored as data, so this
 package never imports ``scaling``.
 
-File format (JSON, ``format = "pectoral-gym-scaling/2"``)::
+File format (JSON, ``format = "pectoral-gym-scaling/3"``)::
 
     {
-      "format": "pectoral-gym-scaling/2",
+      "format": "pectoral-gym-scaling/3",
       "sway": "base",
       "features": ["bias", "amplitude", "period", "ratio", "inv_period", "inv_ratio"],
       "units": {"bias": "rad", "amplitude": "rad", "period": "s", "ratio": "-", "inv_period": "1/s", "inv_ratio": "-"},
@@ -22,6 +22,13 @@ File format (JSON, ``format = "pectoral-gym-scaling/2"``)::
         "axes": ["bias", "amplitude", "inv_ratio"],
         "knots": [[...], [...], [...]],
         "coefficients": {"K_fx": [...], "K_fy": [...], "K_m": [...]},
+        "extrapolation": "clamp"
+      },
+      "yaw_oscillation": {
+        "degree": 3,
+        "axes": ["bias", "amplitude", "inv_ratio"],
+        "knots": [[...], [...], [...]],
+        "cos": [...], "sin": [...],
         "extrapolation": "clamp"
       },
       "metadata": {...}
@@ -46,8 +53,22 @@ Each K is the sum of two optional parts:
   ``K_fy`` diverges (the blade-element model has a mean sway force there, the
   plain average has none), so it can be identified through 90 deg.
 
-Format 1 files (polynomial only, ``sway`` implicitly ``"paper"``; five or six
-features) load unchanged. ``save`` always writes format 2.
+The optional ``yaw_oscillation`` section describes the yaw-rate oscillation a
+fin drives within its beat, which the averaged model needs for its
+oscillation-averaged yaw damping (``pectoral_gym.averaging``, beyond the
+paper). ``cos, sin`` are the two components of the phasor
+``A T_p (cos phi, sin phi)`` [rad] as cubic splines over the same three axes
+(their own knots): ``A`` [rad/s] is the amplitude of the sinusoid with the
+oscillation's mean absolute value, ``phi`` the phase of its fundamental,
+``omega~(t) ~ A cos(2 pi t / T_p + phi)`` with ``t`` from the start of the power
+stroke. ``A T_p`` is exactly period-free (the full model is invariant under
+``t -> t / T_p``). Below the lowest amplitude node (if that is above zero) the
+phasor shrinks linearly to zero at zero amplitude. Without the section the averaged model uses the
+paper's damping ``c4 omega|omega|``.
+
+Format 1 and 2 files (format 1: polynomial only, ``sway`` implicitly
+``"paper"``; five or six features) load unchanged. ``save`` always writes
+format 3.
 """
 
 from __future__ import annotations
@@ -64,13 +85,13 @@ import numpy as np
 
 __all__ = [
     "FEATURES", "FORMAT", "FORMATS", "K_NAMES", "SPLINE_AXES", "SWAY_MODES", "ScalingFunctions",
-    "bspline_basis", "default_scaling_path", "spline_values",
+    "bspline_basis", "default_scaling_path", "oscillation_phasor", "spline_values",
 ]
 
 FEATURES = ("bias", "amplitude", "period", "ratio", "inv_period", "inv_ratio")
 K_NAMES = ("K_fx", "K_fy", "K_m")
-FORMAT = "pectoral-gym-scaling/2"
-FORMATS = ("pectoral-gym-scaling/1", FORMAT)
+FORMAT = "pectoral-gym-scaling/3"
+FORMATS = ("pectoral-gym-scaling/1", "pectoral-gym-scaling/2", FORMAT)
 SPLINE_AXES = ("bias", "amplitude", "inv_ratio")
 SPLINE_DEGREE = 3
 SWAY_MODES = ("paper", "base")
@@ -142,6 +163,45 @@ def spline_values(bias: float, amplitude: float, inv_ratio: float, knots, table)
     return kx, ky, km
 
 
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def oscillation_phasor(bias: float, amplitude: float, inv_ratio: float, knots, table):
+    """Yaw-oscillation phasor ``A T_p (cos phi, sin phi)`` [rad] of one fin (module docstring).
+
+    ``knots``, ``table`` are the last two entries of :meth:`ScalingFunctions.kernel_arrays`;
+    ``(0, 0)`` when ``table`` is empty or the fin does not beat. Below the
+    lowest amplitude node the phasor shrinks linearly to zero.
+    """
+    n0, n1, n2 = table.shape[1], table.shape[2], table.shape[3]
+    if n0 == 0 or amplitude <= 0.0:
+        return 0.0, 0.0
+    s0, a0, a1, a2, a3 = bspline_basis(knots[0], n0, bias)
+    s1, c0, c1, c2, c3 = bspline_basis(knots[1], n1, amplitude)
+    s2, d0, d1, d2, d3 = bspline_basis(knots[2], n2, inv_ratio)
+    b0, b1, b2 = (a0, a1, a2, a3), (c0, c1, c2, c3), (d0, d1, d2, d3)
+    pc = ps = 0.0
+    for a in range(4):
+        for b in range(4):
+            w = b0[a] * b1[b]
+            for c in range(4):
+                wc = w * b2[c]
+                i, j, k = s0 - 3 + a, s1 - 3 + b, s2 - 3 + c
+                pc += wc * table[0, i, j, k]
+                ps += wc * table[1, i, j, k]
+    lowest = knots[1, 3]
+    if amplitude < lowest and lowest > 0.0:
+        pc *= amplitude / lowest
+        ps *= amplitude / lowest
+    return pc, ps
+
+
+def _padded(knots: tuple[np.ndarray, ...], table: np.ndarray | None, channels: int) -> tuple[np.ndarray, np.ndarray]:
+    """Knot vectors as one ``(3, longest)`` array (padded with their last knot) and the contiguous table."""
+    if table is None:
+        return np.zeros((3, 1)), np.zeros((channels, 0, 0, 0))
+    longest = max(len(k) for k in knots)
+    return np.array([np.pad(k, (0, longest - len(k)), mode="edge") for k in knots]), np.ascontiguousarray(table)
+
+
 def _check_knots(knots: np.ndarray, n: int, where: str) -> None:
     if n < 4:
         raise ValueError(f"{where}: a cubic spline needs at least 4 coefficients per axis, got {n}")
@@ -162,6 +222,9 @@ class ScalingFunctions:
         knots: Three knot vectors (bias [rad], amplitude [rad], 1/ratio [-]), or ``()`` for no spline.
         table: ``(3, n_bias, n_amplitude, n_inv_ratio)`` spline coefficients, or ``None``.
         sway: ``"paper"`` or ``"base"``: what ``K_fy`` multiplies (module docstring).
+        oscillation_knots: Three knot vectors of the yaw-oscillation splines, or ``()`` for none.
+        oscillation_table: ``(2, n_bias, n_amplitude, n_inv_ratio)`` coefficients of the
+            phasor components ``A T_p cos(phi)``, ``A T_p sin(phi)`` [rad], or ``None``.
     """
 
     powers: np.ndarray
@@ -170,6 +233,8 @@ class ScalingFunctions:
     knots: tuple[np.ndarray, ...] = ()
     table: np.ndarray | None = None
     sway: str = "paper"
+    oscillation_knots: tuple[np.ndarray, ...] = ()
+    oscillation_table: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         # The compiled kernels index powers[k, j, :len(FEATURES)] without bounds checks.
@@ -195,6 +260,20 @@ class ScalingFunctions:
                 _check_knots(k, n, f"spline axis {SPLINE_AXES[axis]}")
             object.__setattr__(self, "table", table)
             object.__setattr__(self, "knots", knots)
+        if (self.oscillation_table is None) != (len(self.oscillation_knots) == 0):
+            raise ValueError("a yaw-oscillation spline needs both knots and a table")
+        if self.oscillation_table is not None:
+            table = np.asarray(self.oscillation_table, dtype=np.float64)
+            if table.ndim != 4 or table.shape[0] != 2 or len(self.oscillation_knots) != 3:
+                raise ValueError(f"yaw-oscillation table must be (2, n_bias, n_amplitude, n_inv_ratio) with 3 knot "
+                                 f"vectors, got {table.shape} and {len(self.oscillation_knots)} knot vectors")
+            if not np.all(np.isfinite(table)):
+                raise ValueError("yaw-oscillation coefficients must be finite")
+            knots = tuple(np.asarray(k, dtype=np.float64) for k in self.oscillation_knots)
+            for axis, (k, n) in enumerate(zip(knots, table.shape[1:], strict=True)):
+                _check_knots(k, n, f"yaw-oscillation axis {SPLINE_AXES[axis]}")
+            object.__setattr__(self, "oscillation_table", table)
+            object.__setattr__(self, "oscillation_knots", knots)
 
     @classmethod
     def unit(cls) -> ScalingFunctions:
@@ -206,21 +285,24 @@ class ScalingFunctions:
         """True when a spline part is present."""
         return self.table is not None
 
-    def kernel_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-        """``(powers, coefs, knots, table, sway)`` as the compiled kernels of :mod:`pectoral_gym.averaging` take them.
+    @property
+    def has_oscillation(self) -> bool:
+        """True when the yaw-oscillation splines are present (oscillation-averaged yaw damping)."""
+        return self.oscillation_table is not None
+
+    def kernel_arrays(self) -> tuple:
+        """``(powers, coefs, knots, table, sway, osc_knots, osc_table)`` for the compiled kernels.
 
         ``knots`` is ``(3, longest)`` (shorter vectors padded with their last
         knot, never read); without a spline, ``table`` is ``(3, 0, 0, 0)``.
-        ``sway`` is 0.0 for ``"paper"``, 1.0 for ``"base"``.
+        ``sway`` is 0.0 for ``"paper"``, 1.0 for ``"base"``. ``osc_knots`` and
+        ``osc_table`` hold the yaw-oscillation splines the same way
+        (``(2, 0, 0, 0)`` without them).
         """
-        if self.table is None:
-            knots, table = np.zeros((3, 1)), np.zeros((3, 0, 0, 0))
-        else:
-            longest = max(len(k) for k in self.knots)
-            knots = np.array([np.pad(k, (0, longest - len(k)), mode="edge") for k in self.knots])
-            table = np.ascontiguousarray(self.table)
+        knots, table = _padded(self.knots, self.table, 3)
+        osc_knots, osc_table = _padded(self.oscillation_knots, self.oscillation_table, 2)
         return (np.ascontiguousarray(self.powers, dtype=np.float64), np.ascontiguousarray(self.coefs, dtype=np.float64),
-                knots, table, float(SWAY_MODES.index(self.sway)))
+                knots, table, float(SWAY_MODES.index(self.sway)), osc_knots, osc_table)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "<dict>") -> ScalingFunctions:
@@ -258,8 +340,9 @@ class ScalingFunctions:
                 powers[i, j, :width] = p
                 coefs[i, j] = c
         knots, table = cls._spline_from_dict(data.get("spline"), source)
+        osc_knots, osc_table = cls._oscillation_from_dict(data.get("yaw_oscillation"), source)
         try:
-            return cls(powers, coefs, dict(data.get("metadata", {})), knots, table, sway)
+            return cls(powers, coefs, dict(data.get("metadata", {})), knots, table, sway, osc_knots, osc_table)
         except ValueError as err:
             raise ValueError(f"{source}: {err}") from None
 
@@ -282,6 +365,26 @@ class ScalingFunctions:
             table = np.array([np.asarray(coefficients[name], dtype=np.float64).reshape(shape) for name in K_NAMES])
         except (KeyError, TypeError, ValueError) as err:
             raise ValueError(f"{source}: malformed spline: {err}") from None
+        return knots, table
+
+    @staticmethod
+    def _oscillation_from_dict(section: Any, source: str) -> tuple[tuple[np.ndarray, ...], np.ndarray | None]:
+        if section is None:
+            return (), None
+        if not isinstance(section, dict):
+            raise ValueError(f"{source}: 'yaw_oscillation' must be an object")
+        if section.get("degree") != SPLINE_DEGREE or tuple(section.get("axes", ())) != SPLINE_AXES:
+            raise ValueError(f"{source}: yaw_oscillation must have degree {SPLINE_DEGREE} and axes {list(SPLINE_AXES)}")
+        if section.get("extrapolation", "clamp") != "clamp":
+            raise ValueError(f"{source}: yaw_oscillation extrapolation must be 'clamp'")
+        try:
+            knots = tuple(np.asarray(k, dtype=np.float64) for k in section["knots"])
+            shape = tuple(len(k) - 4 for k in knots)
+            if len(knots) != 3:
+                raise ValueError("3 knot vectors required")
+            table = np.array([np.asarray(section[part], dtype=np.float64).reshape(shape) for part in ("cos", "sin")])
+        except (KeyError, TypeError, ValueError) as err:
+            raise ValueError(f"{source}: malformed yaw_oscillation: {err}") from None
         return knots, table
 
     @classmethod
@@ -321,6 +424,15 @@ class ScalingFunctions:
                 "coefficients": {name: self.table[i].ravel().tolist() for i, name in enumerate(K_NAMES)},
                 "extrapolation": "clamp",
             }
+        if self.oscillation_table is not None:
+            out["yaw_oscillation"] = {
+                "degree": SPLINE_DEGREE,
+                "axes": list(SPLINE_AXES),
+                "knots": [k.tolist() for k in self.oscillation_knots],
+                "cos": self.oscillation_table[0].ravel().tolist(),
+                "sin": self.oscillation_table[1].ravel().tolist(),
+                "extrapolation": "clamp",
+            }
         out["metadata"] = self.metadata
         return out
 
@@ -336,9 +448,18 @@ class ScalingFunctions:
         x = np.array([bias, amplitude, period, ratio, 1.0 / period, 1.0 / ratio])
         values = np.sum(self.coefs * np.prod(x ** self.powers, axis=-1), axis=-1)
         if self.table is not None:
-            _, _, knots, table, _ = self.kernel_arrays()
+            _, _, knots, table, *_ = self.kernel_arrays()
             values = values + np.array(spline_values(float(bias), float(amplitude), 1.0 / ratio, knots, table))
         return float(values[0]), float(values[1]), float(values[2])
+
+    def yaw_oscillation(self, bias: float, amplitude: float, period: float, ratio: float) -> tuple[float, float]:
+        """Amplitude ``A`` [rad/s] and phase ``phi`` [rad] of the fin's yaw-rate oscillation (module docstring).
+
+        ``(0, 0)`` without yaw-oscillation splines.
+        """
+        *_, knots, table = self.kernel_arrays()
+        pc, ps = oscillation_phasor(float(bias), float(amplitude), 1.0 / ratio, knots, table)
+        return float(np.hypot(pc, ps) / period), float(np.arctan2(ps, pc))
 
     def paper_k_fy(self, bias: float, amplitude: float, period: float, ratio: float) -> float:
         """The paper's ``K_fy`` (multiplying ``f_hy_avg``); infinite at ``cos(bias) = 0`` in ``"base"`` files."""
@@ -351,5 +472,5 @@ class ScalingFunctions:
     @property
     def is_unit(self) -> bool:
         """True when every K is identically 1 (in the paper's sense: plain averaging)."""
-        return bool(self.table is None and self.sway == "paper" and np.all(self.powers[self.coefs != 0] == 0)
-                    and np.allclose(self.coefs.sum(axis=1), 1.0))
+        return bool(self.table is None and self.oscillation_table is None and self.sway == "paper"
+                    and np.all(self.powers[self.coefs != 0] == 0) and np.allclose(self.coefs.sum(axis=1), 1.0))

@@ -24,8 +24,12 @@ except ImportError as err:  # pragma: no cover - exercised only without the nmpc
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import FishParams
 
-__all__ = ["bessel_j1_sx", "bspline_basis_sx", "scaling_sx", "averaged_forcing_sx", "body_accel_sx", "averaged_rhs_sx"]
+__all__ = [
+    "bessel_j1_sx", "bspline_basis_sx", "scaling_sx", "averaged_forcing_sx", "oscillating_square_mean_sx",
+    "yaw_oscillation_sx", "body_accel_sx", "averaged_rhs_sx",
+]
 
+_OSCILLATION_FLOOR = 1e-9  # rad/s: keeps omega / A finite when two mirrored fins cancel
 _J1_TERMS = 18  # same truncation as averaging.bessel_j1 (machine precision for |x| <= pi)
 
 
@@ -93,15 +97,51 @@ def scaling_sx(beat, scaling: ScalingFunctions | None):
             total = total + term
         values.append(total)
     if scaling.has_spline:
-        bases = [ca.vertcat(*bspline_basis_sx(x, k))
-                 for x, k in zip((bias, amplitude, 1.0 / ratio), scaling.knots, strict=True)]
-        n0, n1, n2 = scaling.table.shape[1:]
-        for which in range(3):
-            # contract one axis at a time: (n0, n1 n2) -> (n1, n2) -> (n2,) -> scalar
-            first = ca.mtimes(bases[0].T, ca.DM(scaling.table[which].reshape(n0, n1 * n2)))
-            second = ca.mtimes(bases[1].T, ca.reshape(first, n2, n1).T)
-            values[which] = values[which] + ca.mtimes(second, bases[2])
+        for which, value in enumerate(_tensor_spline_sx((bias, amplitude, 1.0 / ratio), scaling.knots, scaling.table)):
+            values[which] = values[which] + value
     return ca.vertcat(*values)
+
+
+def _tensor_spline_sx(x, knots, table):
+    """Each channel of a tensor-product cubic spline ``table (channels, n0, n1, n2)`` at ``x``."""
+    bases = [ca.vertcat(*bspline_basis_sx(xi, k)) for xi, k in zip(x, knots, strict=True)]
+    n0, n1, n2 = table.shape[1:]
+    values = []
+    for channel in table:
+        # contract one axis at a time: (n0, n1 n2) -> (n1, n2) -> (n2,) -> scalar
+        first = ca.mtimes(bases[0].T, ca.DM(channel.reshape(n0, n1 * n2)))
+        second = ca.mtimes(bases[1].T, ca.reshape(first, n2, n1).T)
+        values.append(ca.mtimes(second, bases[2]))
+    return values
+
+
+def yaw_oscillation_sx(beat, scaling: ScalingFunctions | None):
+    """Phasor ``A (cos phi, sin phi)`` [rad/s] of the right fin's yaw-rate oscillation (zero without data).
+
+    As :func:`pectoral_gym.averaging.yaw_oscillation_phasor`, including the
+    linear shrink below the lowest amplitude node.
+    """
+    if scaling is None or not scaling.has_oscillation:
+        return ca.vertcat(0.0, 0.0)
+    bias, amplitude, period, ratio = beat[0], beat[1], beat[2], beat[3]
+    pc, ps = _tensor_spline_sx((bias, amplitude, 1.0 / ratio), scaling.oscillation_knots, scaling.oscillation_table)
+    lowest = float(scaling.oscillation_knots[1][3])
+    shrink = ca.fmin(ca.fmax(amplitude, 0.0), lowest) / lowest if lowest > 0.0 else 1.0
+    return ca.vertcat(pc, ps) * shrink / period
+
+
+def oscillating_square_mean_sx(mean, amplitude):
+    """Cycle mean of ``x|x|`` for ``x = mean + amplitude sin(theta)``.
+
+    As :func:`pectoral_gym.averaging.oscillating_square_mean`; ``amplitude`` must be positive.
+    The branch not taken is evaluated on clamped arguments, so its derivatives stay finite.
+    """
+    u = mean / amplitude
+    a2 = amplitude * amplitude
+    inside = ca.fmin(ca.fmax(u, -1.0 + 1e-12), 1.0 - 1e-12)
+    crossing = a2 * (2.0 * ca.asin(inside) / math.pi * (u * u + 0.5)
+                     + 3.0 / math.pi * u * ca.sqrt(ca.fmax(1.0 - u * u, 1e-300)))
+    return ca.if_else(ca.fabs(u) >= 1.0, ca.sign(u) * a2 * (u * u + 0.5), crossing)
 
 
 def averaged_forcing_sx(beat, side: float, params: FishParams, scaling: ScalingFunctions | None):
@@ -124,7 +164,7 @@ def averaged_forcing_sx(beat, side: float, params: FishParams, scaling: ScalingF
     return ca.vertcat(k[0] * fx, side * sway, side * k[2] * tau)
 
 
-def body_accel_sx(v, forcing, params: FishParams, smoothing: float = 0.0):
+def body_accel_sx(v, forcing, params: FishParams, smoothing: float = 0.0, yaw_oscillation=None):
     """Body-frame accelerations ``d(vx, vy, omega)/dt`` of eqs. (19)-(20).
 
     Args:
@@ -136,6 +176,10 @@ def body_accel_sx(v, forcing, params: FishParams, smoothing: float = 0.0):
             scale [m/s] (e.g. 1e-4) replaces them by smooth versions whose
             derivatives exist at rest, which gradient-based solvers need when a
             trajectory starts from rest.
+        yaw_oscillation: ``None`` (default) for the paper's yaw damping
+            ``c4 omega|omega|``; else the amplitude [rad/s] of the in-beat yaw
+            oscillation (> 0), and the damping is its cycle mean
+            (:func:`oscillating_square_mean_sx`).
     """
     vx, vy, omega = v[0], v[1], v[2]
     m1, m2, j3 = params.m1, params.m2, params.J3
@@ -149,6 +193,8 @@ def body_accel_sx(v, forcing, params: FishParams, smoothing: float = 0.0):
         speed = ca.sqrt(vx * vx + vy * vy)
         alpha = ca.if_else(vx >= 0, ca.atan2(vy, vx), -ca.atan2(vy, -vx))  # arctan(vy / vx), also for vx < 0
         yaw_damping = c4 * omega * ca.fabs(omega)
+    if yaw_oscillation is not None:
+        yaw_damping = c4 * oscillating_square_mean_sx(omega, yaw_oscillation)
     dvx = (m2 * vy * omega - c1 * vx * speed + c2 * vy * speed * alpha + forcing[0]) / m1  # eqs. (19)-(20), f1
     dvy = (-m1 * vx * omega - c1 * vy * speed - c2 * vx * speed * alpha + forcing[1]) / m2  # f2
     dom = (m1 - m2) / j3 * vx * vy - yaw_damping + forcing[2] / j3  # f3
@@ -157,6 +203,11 @@ def body_accel_sx(v, forcing, params: FishParams, smoothing: float = 0.0):
 
 def averaged_rhs_sx(state, beats, params: FishParams, scaling: ScalingFunctions | None, smoothing: float = 0.0):
     """Time derivative of ``state = (X, Y, psi, vx, vy, omega)`` under the averaged model (eqs. 19, 25).
+
+    With yaw-oscillation data in ``scaling`` the yaw damping is
+    oscillation-averaged, with the two fins' oscillations added as phasors of
+    fins beating in phase (as fins with equal periods started together do;
+    :mod:`pectoral_gym.integrators` tracks the actual phases).
 
     Args:
         state: Pose in the tank frame and body-frame velocities.
@@ -168,7 +219,12 @@ def averaged_rhs_sx(state, beats, params: FishParams, scaling: ScalingFunctions 
     psi, vx, vy = state[2], state[3], state[4]
     right = averaged_forcing_sx([beats[i] for i in range(4)], 1.0, params, scaling)
     left = averaged_forcing_sx([beats[i] for i in range(4, 8)], -1.0, params, scaling)
-    accel = body_accel_sx([state[3], state[4], state[5]], right + left, params, smoothing)
+    oscillation = None
+    if scaling is not None and scaling.has_oscillation:
+        phasor = (yaw_oscillation_sx([beats[i] for i in range(4)], scaling)
+                  - yaw_oscillation_sx([beats[i] for i in range(4, 8)], scaling))  # the left fin mirrors
+        oscillation = ca.sqrt(ca.sumsqr(phasor) + _OSCILLATION_FLOOR**2)
+    accel = body_accel_sx([state[3], state[4], state[5]], right + left, params, smoothing, oscillation)
     x_dot = vx * ca.cos(psi) - vy * ca.sin(psi)  # eq. (19), kinematics
     y_dot = vx * ca.sin(psi) + vy * ca.cos(psi)
     return ca.vertcat(x_dot, y_dot, state[5], accel)

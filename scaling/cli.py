@@ -41,6 +41,9 @@ def _identify_parser(sub) -> None:
                    help="off-grid patterns on which polynomial and spline forms compete (default 60; 0: polynomial)")
     p.add_argument("--turn-target", type=float, default=0.02,
                    help="worst held-out turning radius / period error a form must reach (default 0.02)")
+    p.add_argument("--yaw-damping", choices=("oscillation", "paper"), default="oscillation",
+                   help="averaged model's yaw damping: its mean over the in-beat yaw oscillation (default; beyond "
+                        "the paper, needs a tensor grid) or the paper's c4 w|w|")
     p.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
     p.add_argument("--seed", type=int, default=0, help="seed of the CV folds (default 0)")
     p.add_argument("--jobs", type=int, default=0, help="NMPC worker processes (default 0: all cores)")
@@ -53,7 +56,8 @@ def _write_table(result, path: Path) -> None:
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(["bias_deg", "amplitude_deg", "period_s", "ratio", "vx", "vy", "omega", "radius", "turn_period",
-                    *K_NAMES, *(f"{k}_oracle" for k in K_NAMES), *(f"{k}_flag" for k in K_NAMES)])
+                    *K_NAMES, *(f"{k}_oracle" for k in K_NAMES), *(f"{k}_flag" for k in K_NAMES),
+                    "yaw_oscillation", "yaw_phase"])
         for i, p in enumerate(result.grid.patterns):
             w.writerow([
                 f"{math.degrees(p[0]):.6g}", f"{math.degrees(p[1]):.6g}", f"{p[2]:.6g}", f"{p[3]:.6g}",
@@ -61,6 +65,7 @@ def _write_table(result, path: Path) -> None:
                 f"{result.reference.radius[i]:.9g}", f"{result.reference.turn_period[i]:.9g}",
                 *(f"{v:.9g}" for v in result.k_nmpc[i]), *(f"{v:.9g}" for v in result.k_oracle[i]),
                 *("" if usable[i, j] else reasons.get((i, K_NAMES[j]), "flagged") for j in range(3)),
+                f"{result.reference.yaw_oscillation[i]:.9g}", f"{result.reference.yaw_phase[i]:.9g}",
             ])
 
 
@@ -82,7 +87,7 @@ def _run_identify(args) -> int:
     print(f"grid {grid.name!r}: {len(grid)} right-fin patterns")
     start = time.perf_counter()
     result = identify(grid, None, settings, args.max_degree, args.folds, args.seed, args.jobs, not args.quiet,
-                      args.fit_target, args.holdout, args.turn_target)
+                      args.fit_target, args.holdout, args.turn_target, args.yaw_damping)
     total = time.perf_counter() - start
     args.out.mkdir(parents=True, exist_ok=True)
     coefficients = args.out / "scaling_coefficients.json"

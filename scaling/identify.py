@@ -33,7 +33,7 @@ import numpy as np
 from scipy import optimize
 from tqdm.auto import tqdm
 
-from pectoral_gym.dynamics import body_accel
+from pectoral_gym.averaging import averaged_body_accel
 from pectoral_gym.kfunctions import FEATURES, FORMAT, K_NAMES, ScalingFunctions
 from pectoral_gym.params import FishParams, coefficient_vector
 from scaling.grids import Grid, draw_off_grid
@@ -46,10 +46,11 @@ from scaling.nmpc import (
     unscaled_forcing,
 )
 from scaling.reference import ReferenceRuns, reference_runs
-from scaling.regression import Fit, SplineFit, fit_spline, select_model, sensitivity_weights
+from scaling.regression import Fit, SplineFit, fit_oscillation, fit_spline, select_model, sensitivity_weights
 
 __all__ = ["IdentificationResult", "holdout_patterns", "identify", "predicted_turning", "solve_nmpc_batch"]
 
+YAW_DAMPING = ("oscillation", "paper")
 SWAY = "base"  # K_fy multiplies the fin's force magnitude, not f_hy_avg = base cos(bias) (pectoral_gym.kfunctions)
 ORACLE_RTOL = 1e-3  # NMPC solutions must equal the algebraic steady-state solution to this relative tolerance
 MIN_TURN_RATE = 0.02  # rad/s: held-out patterns turning slower get no radius / period error (huge, meaningless radii)
@@ -96,15 +97,16 @@ class IdentificationResult:
 _WORKER: ScalingNmpc | None = None
 
 
-def _init_worker(params: FishParams, settings: NmpcSettings, velocities: np.ndarray) -> None:
+def _init_worker(params: FishParams, settings: NmpcSettings, velocities: np.ndarray,
+                 oscillation: np.ndarray | None) -> None:
     global _WORKER
-    _WORKER = ScalingNmpc(params, settings, velocities)
+    _WORKER = ScalingNmpc(params, settings, velocities, oscillation)
 
 
-def _solve_chunk(chunk: list[tuple[int, np.ndarray, np.ndarray]]) -> list[tuple[int, NmpcResult]]:
+def _solve_chunk(chunk: list[tuple[int, np.ndarray, np.ndarray, float]]) -> list[tuple[int, NmpcResult]]:
     out, guess = [], None
-    for i, v_ref, forcing in chunk:
-        result = _WORKER.solve(v_ref, forcing, guess)  # warm start from the neighbouring pattern
+    for i, v_ref, forcing, oscillation in chunk:
+        result = _WORKER.solve(v_ref, forcing, guess, oscillation)  # warm start from the neighbouring pattern
         guess = result.k if result.success and np.all(np.isfinite(result.k)) else None
         out.append((i, result))
     return out
@@ -117,24 +119,31 @@ def solve_nmpc_batch(
     settings: NmpcSettings,
     jobs: int = 0,
     progress: bool = True,
+    oscillation: np.ndarray | None = None,
 ) -> list[NmpcResult]:
-    """One NMPC per pattern, over ``jobs`` processes (0: all cores; 1: in this process)."""
+    """One NMPC per pattern, over ``jobs`` processes (0: all cores; 1: in this process).
+
+    ``oscillation``: per-pattern yaw-oscillation amplitudes [rad/s] for the
+    oscillation-averaged yaw damping, ``None`` for the paper's damping.
+    """
     n = len(velocities)
     jobs = jobs or os.cpu_count() or 1
-    tasks = [(i, velocities[i], forcing[i]) for i in range(n) if np.all(np.isfinite(velocities[i]))]
+    amplitude = np.zeros(n) if oscillation is None else np.asarray(oscillation, dtype=np.float64)
+    tasks = [(i, velocities[i], forcing[i], float(amplitude[i]))
+             for i in range(n) if np.all(np.isfinite(velocities[i]))]
     results: list[NmpcResult | None] = [None] * n
     bar = tqdm(total=n, desc="NMPC per pattern", unit="pattern", disable=not progress)
     size = max(1, min(32, math.ceil(len(tasks) / (4 * jobs))))
     chunks = [tasks[k : k + size] for k in range(0, len(tasks), size)]
     if jobs == 1:
-        _init_worker(params, settings, velocities)
+        _init_worker(params, settings, velocities, oscillation)
         for chunk in chunks:
             for i, r in _solve_chunk(chunk):
                 results[i] = r
             bar.update(len(chunk))
     else:
         ctx = mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn")
-        with ctx.Pool(jobs, initializer=_init_worker, initargs=(params, settings, velocities)) as pool:
+        with ctx.Pool(jobs, initializer=_init_worker, initargs=(params, settings, velocities, oscillation)) as pool:
             for done in pool.imap_unordered(_solve_chunk, chunks):
                 for i, r in done:
                     results[i] = r
@@ -209,21 +218,25 @@ def holdout_patterns(grid: Grid, n: int, seed: int) -> np.ndarray:
     return draw_off_grid(np.random.default_rng([seed, 1]), n, low, high, grid, np.unique(grid.patterns[:, 2]))
 
 
-def predicted_turning(velocities: np.ndarray, forcing: np.ndarray, k: np.ndarray, params: FishParams) -> np.ndarray:
+def predicted_turning(velocities: np.ndarray, forcing: np.ndarray, k: np.ndarray, params: FishParams,
+                      oscillation: np.ndarray | None = None) -> np.ndarray:
     """``(n, 2)`` turning radius and period of the averaged model's steady state under scaling values ``k``.
 
     The equilibrium of eqs. (19)-(20) with the scaled forcing ``k * forcing``
-    is found by a root solve started at the full model's steady state
-    ``velocities`` (so on the same turning branch). NaN where it fails or the
-    fish does not turn.
+    (and the yaw-oscillation amplitudes ``oscillation`` of the
+    oscillation-averaged damping, ``None`` for the paper's) is found by a root
+    solve started at the full model's steady state ``velocities`` (so on the
+    same turning branch). NaN where it fails or the fish does not turn.
     """
     coef = coefficient_vector(params)[:6]
     masses = np.array([params.m1, params.m2, params.J3])
+    amplitude = np.zeros(len(velocities)) if oscillation is None else np.asarray(oscillation, dtype=np.float64)
     out = np.full((len(velocities), 2), np.nan)
     for i, (v0, f) in enumerate(zip(velocities, k * forcing, strict=True)):
         if not (np.all(np.isfinite(v0)) and np.all(np.isfinite(f))):
             continue
-        sol = optimize.root(lambda v, f=f: body_accel(*v, *f, *coef), v0, method="hybr", tol=1e-12)
+        sol = optimize.root(lambda v, f=f, a=amplitude[i]: averaged_body_accel(*v, *f, *coef, a), v0,
+                            method="hybr", tol=1e-12)
         # hybr can stop with "no further improvement" at a converged point; judge by the residual instead
         residual = np.max(np.abs(sol.fun) / (np.abs(f) / masses + 1e-300))
         if residual < 1e-8 and abs(sol.x[2]) > 0:
@@ -259,6 +272,7 @@ def identify(
     fit_target: float = 2e-3,
     holdout: int = 60,
     turn_target: float = 0.02,
+    yaw_damping: str = "oscillation",
 ) -> IdentificationResult:
     """Run the whole pipeline on ``grid`` (module docstring).
 
@@ -275,7 +289,16 @@ def identify(
             (predicted relative speed / yaw-rate error), see :func:`scaling.regression.select_model`.
         holdout: Random off-grid patterns on which the closed forms compete (0: polynomials only).
         turn_target: Worst held-out turning radius / period error a form must reach to count as fitting.
+        yaw_damping: ``"oscillation"`` (default): identify K for the averaged model with the
+            oscillation-averaged yaw damping, whose yaw-oscillation splines are fitted from the
+            reference runs and shipped in the file (needs a tensor grid); ``"paper"``: the paper's
+            damping ``c4 omega|omega|``.
+
+    Raises:
+        ValueError: For an unknown ``yaw_damping``, or ``"oscillation"`` on a grid that is not a tensor grid.
     """
+    if yaw_damping not in YAW_DAMPING:
+        raise ValueError(f"yaw_damping must be one of {YAW_DAMPING}, got {yaw_damping!r}")
     params = params or FishParams()
     settings = settings or NmpcSettings()
     timings: dict[str, float] = {}
@@ -285,17 +308,31 @@ def identify(
     held = reference_runs(holdout_patterns(grid, holdout, seed), params, progress=False) if holdout else None
     timings["reference_runs"] = time.perf_counter() - t0
 
+    osc_knots, osc_table, oscillation, held_oscillation = (), None, None, None
+    if yaw_damping == "oscillation":
+        try:
+            osc_knots, osc_table = fit_oscillation(grid.patterns, ref.yaw_oscillation, ref.yaw_phase, ref.converged)
+        except ValueError as err:
+            raise ValueError(f"the oscillation-averaged yaw damping needs a tensor grid ({err}); "
+                             "use yaw_damping='paper' (--yaw-damping paper)") from None
+        # The averaged model will use the spline's amplitude, so K is identified with it too.
+        oscillator = ScalingFunctions.unit()
+        oscillator = dataclasses.replace(oscillator, oscillation_knots=osc_knots, oscillation_table=osc_table)
+        oscillation = np.array([oscillator.yaw_oscillation(*p)[0] for p in grid.patterns])
+        if held is not None:
+            held_oscillation = np.array([oscillator.yaw_oscillation(*p)[0] for p in held.patterns])
+
     t0 = time.perf_counter()
     forcing = unscaled_forcing(grid.patterns, params, sway=SWAY)
-    k_oracle = algebraic_scaling(ref.velocities, forcing, params)
-    results = solve_nmpc_batch(ref.velocities, forcing, params, settings, jobs, progress)
+    k_oracle = algebraic_scaling(ref.velocities, forcing, params, oscillation)
+    results = solve_nmpc_batch(ref.velocities, forcing, params, settings, jobs, progress, oscillation)
     k_nmpc = np.array([r.k for r in results])
-    substeps = settings.substeps or auto_substeps(ref.velocities, params, settings.sampling)
+    substeps = settings.substeps or auto_substeps(ref.velocities, params, settings.sampling, oscillation)
     timings["nmpc"] = time.perf_counter() - t0
 
     t0 = time.perf_counter()
     usable, flags = _flag(ref, forcing, k_nmpc, k_oracle, results, params)
-    weights = sensitivity_weights(ref.velocities, forcing, params)
+    weights = sensitivity_weights(ref.velocities, forcing, params, oscillation=oscillation)
     fits, candidates, splines = {}, {}, {}
     for j, name in enumerate(K_NAMES):
         rows = usable[:, j]
@@ -320,7 +357,8 @@ def identify(
         if held is not None:
             k_pred = np.column_stack([per_k[name].predict(held.patterns) for name in K_NAMES])
             held_forcing = unscaled_forcing(held.patterns, params, sway=SWAY)
-            entry.update(_turning_errors(predicted_turning(held.velocities, held_forcing, k_pred, params), held))
+            entry.update(_turning_errors(
+                predicted_turning(held.velocities, held_forcing, k_pred, params, held_oscillation), held))
         comparison[form] = entry
 
     def fits_target(entry: dict) -> bool:
@@ -357,6 +395,10 @@ def identify(
         "method": "full-model steady states, NMPC per pattern (paper Sec. 4.3), closed form chosen on held-out "
                   "patterns between cross-validated polynomials and tensor-product cubic splines",
         "sway": f"{SWAY}: K_fy multiplies the fin's averaged force magnitude (the paper's K_fy cos(bias))",
+        "yaw_damping": (
+            "oscillation: the mean of c4 omega|omega| over the in-beat yaw oscillation (beyond the paper); "
+            "its phasor A T_p (cos phi, sin phi) interpolated from the reference runs"
+            if yaw_damping == "oscillation" else "paper: c4 omega|omega| (eq. 20)"),
         "grid": grid.to_dict(),
         "model_parameters": dataclasses.asdict(params),
         "nmpc": {**settings.as_dict(), "rk4_substeps": substeps, "oracle_rtol": ORACLE_RTOL},
@@ -388,11 +430,13 @@ def identify(
         },
         "timings_s": timings,
         "data": {
-            "columns": ["bias_deg", "amplitude_deg", "period_s", "ratio", *K_NAMES, *(f"usable_{n}" for n in K_NAMES)],
+            "columns": ["bias_deg", "amplitude_deg", "period_s", "ratio", *K_NAMES, *(f"usable_{n}" for n in K_NAMES),
+                        "yaw_oscillation_rad_s", "yaw_phase_rad"],
             "rows": [[None if not math.isfinite(v) else v for v in row]
-                     for row in np.column_stack([deg, k_nmpc, usable.astype(float)]).round(10).tolist()],
+                     for row in np.column_stack([deg, k_nmpc, usable.astype(float), ref.yaw_oscillation,
+                                                 ref.yaw_phase]).round(10).tolist()],
         },
     }
-    scaling = ScalingFunctions(powers, coefs, meta, knots, table, SWAY)
+    scaling = ScalingFunctions(powers, coefs, meta, knots, table, SWAY, osc_knots, osc_table)
     return IdentificationResult(grid, ref, forcing, k_nmpc, k_oracle, usable, flags, fits, candidates, scaling,
                                 timings, splines if "spline" in forms else {}, chosen, comparison)

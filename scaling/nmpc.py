@@ -12,6 +12,11 @@ divided by ``m1, m2, J3``, which the paper's typesetting drops)::
 is replaced by ``base = fx_avg / sin(bias)``: the solver is the same, only the
 forcing vector it is given differs).
 
+With the oscillation-averaged yaw damping (``pectoral_gym.averaging``, beyond
+the paper) ``f3`` uses ``c4 A^2 q(omega / A)`` instead of ``c4 omega|omega|``, with
+the pattern's yaw-oscillation amplitude ``A`` measured in its reference run;
+``A = 0`` gives the paper's ``f3``.
+
 The NMPC drives the tracking error ``e = v - v_ref`` (eq. 33) to zero by
 minimising ``sum_k e_k' Q e_k ts + e_N' Q_T e_N`` (eqs. 34-35) over a horizon
 ``T`` sampled every ``ts``, with ``u`` piecewise constant per sample. The
@@ -33,8 +38,7 @@ from dataclasses import asdict, dataclass
 import casadi as ca
 import numpy as np
 
-from pectoral_gym.averaging import EXACT, averaged_fin_forcing
-from pectoral_gym.dynamics import body_accel
+from pectoral_gym.averaging import EXACT, averaged_body_accel, averaged_fin_forcing
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import FishParams, coefficient_vector
 from pectoral_gym.symbolic import body_accel_sx
@@ -119,22 +123,34 @@ def unscaled_forcing(patterns: np.ndarray, params: FishParams, sway: str = "pape
     return np.array([averaged_fin_forcing(*p, 1.0, coef, EXACT, arrays) for p in patterns]).reshape(-1, 3)
 
 
-def algebraic_scaling(velocities: np.ndarray, forcing: np.ndarray, params: FishParams) -> np.ndarray:
-    """The oracle ``K_i = -f_i(v_ref) / forcing_i`` (per unit mass), ``(n, 3)``; NaN where the forcing is 0."""
+def algebraic_scaling(
+    velocities: np.ndarray, forcing: np.ndarray, params: FishParams, oscillation: np.ndarray | None = None
+) -> np.ndarray:
+    """The oracle ``K_i = -f_i(v_ref) / forcing_i`` (per unit mass), ``(n, 3)``; NaN where the forcing is 0.
+
+    ``oscillation``: ``(n,)`` yaw-oscillation amplitudes [rad/s] for the
+    oscillation-averaged yaw damping; ``None`` for the paper's damping.
+    """
     c = coefficient_vector(params)
     masses = np.array([params.m1, params.m2, params.J3])
-    drift = np.array([body_accel(*v, 0.0, 0.0, 0.0, *c[:6]) for v in velocities])
+    amplitude = np.zeros(len(velocities)) if oscillation is None else np.asarray(oscillation, dtype=np.float64)
+    drift = np.array([averaged_body_accel(*v, 0.0, 0.0, 0.0, *c[:6], a)
+                      for v, a in zip(velocities, amplitude, strict=True)]).reshape(-1, 3)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(forcing != 0.0, -drift * masses / forcing, np.nan)
 
 
-def auto_substeps(velocities: np.ndarray, params: FishParams, sampling: float) -> int:
+def auto_substeps(
+    velocities: np.ndarray, params: FishParams, sampling: float, oscillation: np.ndarray | None = None
+) -> int:
     """RK4 steps per sampling interval for the fastest linearised rate over the patterns' velocities."""
     # Linearised rates of eq. (20): yaw damping 2 c4 |omega|, surge/sway damping ~ 2 c1 |V| / m1,
     # Coriolis coupling ~ |omega|. RK4 is stable up to h * rate = 2.78; h * rate <= 1 keeps transients
     # accurate to a few per cent, and at the optimum (constant inputs at the reference) there are none.
     speed = np.hypot(velocities[:, 0], velocities[:, 1])
     omega = np.abs(velocities[:, 2])
+    if oscillation is not None:
+        omega = omega + 2.0 / math.pi * np.asarray(oscillation)  # slope 2 c4 mean|w + A sin| <= 2 c4 (|w| + 2A/pi)
     rate = np.max(2.0 * params.c4 * omega + 2.0 * params.c1 * speed / min(params.m1, params.m2) + omega, initial=1.0)
     return max(4, math.ceil(sampling * rate))
 
@@ -146,20 +162,26 @@ class ScalingNmpc:
         params: Model parameters.
         settings: NMPC settings.
         velocities: Reference velocities of all patterns to be solved (to pick the RK4 substeps).
+        oscillation: Their yaw-oscillation amplitudes [rad/s] (oscillation-averaged yaw
+            damping), or ``None`` for the paper's damping.
     """
 
-    def __init__(self, params: FishParams, settings: NmpcSettings, velocities: np.ndarray):
+    def __init__(self, params: FishParams, settings: NmpcSettings, velocities: np.ndarray,
+                 oscillation: np.ndarray | None = None):
         self.params = params
         self.settings = settings
         n_samples = settings.samples
-        self.substeps = settings.substeps or auto_substeps(np.asarray(velocities), params, settings.sampling)
+        self.substeps = settings.substeps or auto_substeps(
+            np.asarray(velocities), params, settings.sampling, oscillation)
         v = ca.SX.sym("v", 3)
         u = ca.SX.sym("u", 3)
         forcing = ca.SX.sym("forcing", 3)
+        amplitude = ca.SX.sym("A")
         h = settings.sampling / self.substeps
 
         def rhs(state):
-            return body_accel_sx(state, u * forcing, params)  # eqs. (30)-(32)
+            # eqs. (30)-(32); the floor keeps omega / A finite, and A = 0 is the paper's damping to ~1e-24
+            return body_accel_sx(state, u * forcing, params, yaw_oscillation=ca.fmax(amplitude, 1e-12))
 
         state = v
         for _ in range(self.substeps):  # RK4 over one sampling interval
@@ -168,15 +190,15 @@ class ScalingNmpc:
             k3 = rhs(state + h / 2 * k2)
             k4 = rhs(state + h * k3)
             state = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        step = ca.Function("step", [v, u, forcing], [state])
+        step = ca.Function("step", [v, u, forcing, amplitude], [state])
 
         inputs = ca.SX.sym("K", 3, n_samples)
-        p = ca.SX.sym("p", 9)  # v0, v_ref, forcing
+        p = ca.SX.sym("p", 10)  # v0, v_ref, forcing, yaw-oscillation amplitude
         v0, v_ref, f = p[0:3], p[3:6], p[6:9]
         cost = 0.0
         x = v0
         for k in range(n_samples):
-            x = step(x, inputs[:, k], f)
+            x = step(x, inputs[:, k], f, p[9])
             e = x - v_ref  # eq. (33)
             cost += settings.q * settings.sampling * ca.dot(e, e)  # eq. (34), stage cost at the sample
         cost += settings.q_terminal * ca.dot(x - v_ref, x - v_ref)  # eq. (35)
@@ -192,19 +214,21 @@ class ScalingNmpc:
         self._solver = ca.nlpsol("scaling_nmpc", "ipopt", nlp, opts)
         self._n_samples = n_samples
 
-    def solve(self, v_ref: np.ndarray, forcing: np.ndarray, guess: np.ndarray | None = None) -> NmpcResult:
+    def solve(self, v_ref: np.ndarray, forcing: np.ndarray, guess: np.ndarray | None = None,
+              oscillation: float = 0.0) -> NmpcResult:
         """Optimal inputs for one pattern, starting at ``v_ref``.
 
         Args:
             v_ref: ``(3,)`` reference ``(vx, vy, omega)`` from the full model.
             forcing: ``(3,)`` unscaled averaged forcing of the pattern.
             guess: Initial guess of ``K`` (3,) (e.g. the previous pattern's solution); ones if ``None``.
+            oscillation: The pattern's yaw-oscillation amplitude [rad/s]; 0 for the paper's damping.
 
         A solver failure is returned as ``success=False`` (never raised).
         """
         guess = np.ones(3) if guess is None else np.asarray(guess, dtype=np.float64)
         x0 = np.tile(np.where(np.isfinite(guess), guess, 1.0), self._n_samples)
-        p = np.concatenate([v_ref, v_ref, forcing])
+        p = np.concatenate([v_ref, v_ref, forcing, [oscillation]])
         try:
             sol = self._solver(x0=x0, p=p)
             stats = self._solver.stats()

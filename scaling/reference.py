@@ -5,7 +5,9 @@ patterns are run in batches that share one averaging window (their fin
 period), so each batch is one call into the compiled, multi-threaded model.
 From each steady state come the turning radius ``R``, turning period ``T_b``
 and drift angle ``alpha`` (eq. 29), and from those the body velocities the
-averaged model must track.
+averaged model must track. One more fin period, sampled, gives the in-beat
+yaw-rate oscillation that the averaged model's oscillation-averaged yaw
+damping needs (:mod:`pectoral_gym.averaging`).
 """
 
 from __future__ import annotations
@@ -35,6 +37,10 @@ class ReferenceRuns:
         drift_angle: ``(n,)`` ``alpha`` [rad].
         converged: ``(n,)`` whether the steady state converged.
         sim_time: ``(n,)`` simulated time to convergence [s].
+        yaw_oscillation: ``(n,)`` amplitude ``A`` [rad/s] of the sinusoid with the same mean
+            absolute value as the steady in-beat yaw-rate oscillation ``omega - mean(omega)``.
+        yaw_phase: ``(n,)`` phase ``phi`` [rad] of its fundamental, ``cos(2 pi t / T_p + phi)``
+            with ``t`` from the start of the power stroke.
     """
 
     patterns: np.ndarray
@@ -44,6 +50,8 @@ class ReferenceRuns:
     drift_angle: np.ndarray
     converged: np.ndarray
     sim_time: np.ndarray
+    yaw_oscillation: np.ndarray
+    yaw_phase: np.ndarray
 
     def __len__(self) -> int:
         return len(self.patterns)
@@ -64,6 +72,28 @@ def velocities_from_turning(
     omega = 2.0 * math.pi / turn_period
     speed = radius * omega * (-1.0 if backward else 1.0)
     return np.array([speed * math.cos(drift_angle), speed * math.sin(drift_angle), turn_sign * omega])
+
+
+OSCILLATION_SAMPLES = 64  # per fin period: mean |omega~| to ~1e-4 relative (the waveform has kinks)
+
+
+def yaw_oscillation_statistics(omega: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Amplitude and phase of the yaw-rate oscillation from samples over one fin period.
+
+    Args:
+        omega: ``(n, samples)`` yaw rates at ``t_k = (k + 1) T_p / samples`` after the start
+            of a power stroke.
+
+    Returns:
+        ``(A, phi)``: ``A = (pi / 2) mean|omega - mean(omega)|`` (the amplitude of the sinusoid
+        with that mean absolute value) and the phase of the fundamental.
+    """
+    omega = np.asarray(omega, dtype=np.float64)
+    samples = omega.shape[1]
+    wiggle = omega - omega.mean(axis=1, keepdims=True)
+    theta = 2.0 * np.pi * np.arange(1, samples + 1) / samples
+    fundamental = wiggle @ np.exp(-1j * theta)
+    return 0.5 * np.pi * np.abs(wiggle).mean(axis=1), np.angle(fundamental)
 
 
 def reference_runs(
@@ -93,6 +123,8 @@ def reference_runs(
     drift = np.full(n, np.nan)
     converged = np.zeros(n, dtype=bool)
     sim_time = np.zeros(n)
+    oscillation = np.zeros(n)
+    phase = np.zeros(n)
     periods = np.unique(patterns[:, 2])
     bar = tqdm(total=n, desc="reference runs (full model)", unit="pattern", disable=not progress)
     for period in periods:
@@ -102,6 +134,12 @@ def reference_runs(
         beats[:, 1] = rest
         model = FullModel(len(index), params)
         states = steady_state_batch(model, beats, rtol=rtol, atol=atol, max_time=max_time, window=float(period))
+        # the batch ends at a cycle boundary, in steady state: sample one more period
+        omega = np.empty((len(index), OSCILLATION_SAMPLES))
+        for k in range(OSCILLATION_SAMPLES):
+            model.advance(float(period) / OSCILLATION_SAMPLES)
+            omega[:, k] = model.state[:, 5]
+        oscillation[index], phase[index] = yaw_oscillation_statistics(omega)
         for i, s in zip(index, states, strict=True):
             converged[i] = s.converged
             sim_time[i] = s.time
@@ -115,4 +153,4 @@ def reference_runs(
                 velocities[i] = (s.vx, s.vy, s.omega)
         bar.update(len(index))
     bar.close()
-    return ReferenceRuns(patterns, velocities, radius, turn_period, drift, converged, sim_time)
+    return ReferenceRuns(patterns, velocities, radius, turn_period, drift, converged, sim_time, oscillation, phase)

@@ -25,13 +25,14 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.interpolate import make_interp_spline
 
-from pectoral_gym.dynamics import body_accel
+from pectoral_gym.averaging import averaged_body_accel
 from pectoral_gym.kfunctions import FEATURES, ScalingFunctions
 from pectoral_gym.params import FishParams, coefficient_vector
 
 __all__ = [
     "Fit",
     "SplineFit",
+    "fit_oscillation",
     "fit_spline",
     "spline_nodes",
     "FEATURE_SETS",
@@ -216,7 +217,8 @@ def select_model(
 
 
 def sensitivity_weights(
-    velocities: np.ndarray, forcing: np.ndarray, params: FishParams, floor: float = 1e-3, coupled: bool = False
+    velocities: np.ndarray, forcing: np.ndarray, params: FishParams, floor: float = 1e-3, coupled: bool = False,
+    oscillation: np.ndarray | None = None,
 ) -> np.ndarray:
     """``(n, 3)`` relative error of speed or yaw rate per unit error in ``(K_fx, K_fy, K_m)``.
 
@@ -234,12 +236,14 @@ def sensitivity_weights(
     K acts on its own velocity component through that component's damping);
     the coupled weights are very large wherever the Munk moment nearly
     balances the yaw damping, and fits weighted by them validated worse
-    (docs/scaling.md).
+    (docs/scaling.md). ``oscillation``: per-pattern yaw-oscillation amplitudes
+    [rad/s] of the oscillation-averaged yaw damping (``None``: the paper's).
     """
     velocities = np.asarray(velocities, dtype=np.float64)
     coef = coefficient_vector(params)[:6]
     masses = np.array([params.m1, params.m2, params.J3])
     weights = np.empty((len(velocities), 3))
+    amplitude = np.zeros(len(velocities)) if oscillation is None else np.asarray(oscillation, dtype=np.float64)
     for i, v in enumerate(velocities):
         jac = np.empty((3, 3))
         for k in range(3):
@@ -247,7 +251,8 @@ def sensitivity_weights(
             up, down = v.copy(), v.copy()
             up[k] += h
             down[k] -= h
-            plus, minus = body_accel(*up, 0.0, 0.0, 0.0, *coef), body_accel(*down, 0.0, 0.0, 0.0, *coef)
+            plus = averaged_body_accel(*up, 0.0, 0.0, 0.0, *coef, amplitude[i])
+            minus = averaged_body_accel(*down, 0.0, 0.0, 0.0, *coef, amplitude[i])
             jac[:, k] = (np.array(plus) - np.array(minus)) / (2 * h)
         if not coupled:
             jac = np.diag(np.diag(jac))
@@ -367,3 +372,39 @@ def fit_spline(patterns: np.ndarray, values: np.ndarray, usable: np.ndarray | No
         table, knots_axis = np.moveaxis(spline.c, 0, axis), spline.t
         knots.append(knots_axis)
     return SplineFit(tuple(knots), np.ascontiguousarray(table), nodes, int(missing.sum()), spread)
+
+
+def fit_oscillation(
+    patterns: np.ndarray, amplitude: np.ndarray, phase: np.ndarray, usable: np.ndarray | None = None
+) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
+    """Splines of the yaw-oscillation phasor ``A T_p (cos phi, sin phi)`` over (bias, amplitude, 1/ratio).
+
+    ``A T_p`` and ``phi`` do not depend on the period (the full model is
+    invariant under ``t -> t / T_p``), so nodes at several periods are
+    averaged, as for K. Nodes without a usable value are filled by a cubic
+    least-squares polynomial of the usable ones.
+
+    Args:
+        patterns: ``(n, 4)`` grid patterns (a tensor grid, see :func:`fit_spline`).
+        amplitude: ``(n,)`` oscillation amplitudes ``A`` [rad/s] (``scaling.reference``).
+        phase: ``(n,)`` phases ``phi`` [rad].
+        usable: ``(n,)`` mask (default: finite values).
+
+    Returns:
+        ``(knots, table)`` for :class:`pectoral_gym.kfunctions.ScalingFunctions`
+        (``oscillation_knots``, ``oscillation_table`` of shape ``(2, n0, n1, n2)``).
+
+    Raises:
+        ValueError: If the patterns are not a tensor grid (:func:`fit_spline`).
+    """
+    patterns = np.asarray(patterns, dtype=np.float64)
+    scaled = np.asarray(amplitude, dtype=np.float64) * patterns[:, 2]
+    parts = (scaled * np.cos(phase), scaled * np.sin(phase))
+    ok = np.isfinite(scaled) & np.isfinite(phase) & (True if usable is None else np.asarray(usable, dtype=bool))
+    powers = monomial_powers((0, 1, 5), 3)
+    fits = []
+    for values in parts:
+        coefs = np.linalg.lstsq(design_matrix(feature_matrix(patterns[ok]), powers), values[ok], rcond=None)[0]
+        fits.append(fit_spline(patterns, values, ok,
+                               fill=lambda p, c=coefs: design_matrix(feature_matrix(p), powers) @ c))
+    return fits[0].knots, np.array([fits[0].table, fits[1].table])

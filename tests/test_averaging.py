@@ -443,7 +443,7 @@ def test_spline_file_round_trip(tmp_path):
     path = tmp_path / "spline.json"
     s.save(path)
     data = json.loads(path.read_text())
-    assert data["format"] == FORMAT == "pectoral-gym-scaling/2" and data["sway"] == "base"
+    assert data["format"] == FORMAT == "pectoral-gym-scaling/3" and data["sway"] == "base"
     back = ScalingFunctions.load(path)
     assert back.sway == "base" and back.has_spline
     np.testing.assert_array_equal(back.table, s.table)

@@ -128,7 +128,9 @@ def test_regression_recovers_a_known_polynomial():
 def test_pipeline_flags_degenerate_and_failed_patterns_and_round_trips(tmp_path):
     # Amplitude 0: no forcing at all, every K unidentifiable; the sway K is identifiable at 90 deg.
     grid = Grid.product("degenerate", bias_deg=(60, 90), amplitude_deg=(0, 15, 25), period_s=(1.0,), ratio=(3,))
-    result = identify(grid, PARAMS, FAST, max_degree=1, folds=2, jobs=1, progress=False, holdout=0)
+    result = identify(grid, PARAMS, FAST, max_degree=1, folds=2, jobs=1, progress=False, holdout=0,
+                      yaw_damping="paper")  # 3 amplitudes: too few nodes for the yaw-oscillation spline
+    assert not result.scaling.has_oscillation
     still = [i for i, p in enumerate(grid.patterns) if p[1] == 0]
     assert len(still) == 2
     for j, name in enumerate(("K_fx", "K_fy", "K_m")):
@@ -159,7 +161,8 @@ def test_cli_identify_small_grid(tmp_path):
                                 "ratio": [2, 4]}))
     out = tmp_path / "out"
     run = subprocess.run([sys.executable, "-m", "scaling", "identify", "--grid", str(grid), "--out", str(out),
-                          "--horizon", "3", "--jobs", "1", "--folds", "2", "--max-degree", "1", "--quiet"],
+                          "--horizon", "3", "--jobs", "1", "--folds", "2", "--max-degree", "1", "--quiet",
+                          "--yaw-damping", "paper"],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
     assert "stage times" in run.stdout
@@ -249,3 +252,19 @@ def test_pipeline_chooses_the_spline_when_polynomials_miss_the_turning_target(tm
     for p in grid.patterns[::7]:  # the spline interpolates the NMPC values at the nodes
         i = int(np.flatnonzero(np.all(grid.patterns == p, axis=1))[0])
         np.testing.assert_allclose(loaded.evaluate(*p), result.k_nmpc[i], rtol=1e-8, atol=1e-10)
+    # The averaged model's oscillation-averaged yaw damping: the file interpolates each node's measured
+    # yaw oscillation (amplitude and phase of the full model's steady in-beat yaw rate).
+    assert loaded.has_oscillation and result.scaling.metadata["yaw_damping"].startswith("oscillation")
+    ref = result.reference
+    for i in range(0, len(grid), 5):
+        amplitude, phase = loaded.yaw_oscillation(*grid.patterns[i])
+        assert amplitude == pytest.approx(ref.yaw_oscillation[i], rel=1e-8)
+        assert phase == pytest.approx(ref.yaw_phase[i], abs=1e-8)
+
+
+def test_oscillation_damping_needs_a_tensor_grid_and_a_known_mode():
+    grid = Grid.product("tiny", bias_deg=(60, 90), amplitude_deg=(15, 25), period_s=(1.0,), ratio=(3,))
+    with pytest.raises(ValueError, match="needs a tensor grid.*--yaw-damping paper"):
+        identify(grid, PARAMS, FAST, jobs=1, progress=False, holdout=0)
+    with pytest.raises(ValueError, match="yaw_damping"):
+        identify(grid, PARAMS, FAST, jobs=1, progress=False, holdout=0, yaw_damping="linear")

@@ -43,8 +43,10 @@ class PectoralFishEnv(gym.Env):
     stroke (the parameter-change rule of :mod:`pectoral_gym.integrators`). Two
     models drive the same environment: ``PectoralFish-Full-v0`` integrates the
     blade-element model through every fin beat, ``PectoralFish-Averaged-v0``
-    the cycle-averaged model with identified scaling functions. Spaces, tasks
-    and rewards are identical; only the model differs.
+    the cycle-averaged model with identified scaling functions (and, beyond
+    the paper, its yaw damping averaged over the in-beat yaw oscillation,
+    ``docs/model.md`` section 3.6). Spaces, tasks and rewards are identical;
+    only the model differs.
 
     Tasks: ``"goal"`` (reach a point) and ``"track"`` (follow a point that
     moves along an ellipse at ``ref_speed``).
