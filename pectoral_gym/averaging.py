@@ -89,11 +89,21 @@ def _k_value(which: int, bias: float, amplitude: float, period: float, ratio: fl
         if c == 0.0:
             continue
         p = k_powers[which, j]
+        # integer exponents (the file format allows no others): multiplications instead of pow()
         total += (
-            c * bias ** p[0] * amplitude ** p[1] * period ** p[2] * ratio ** p[3]
-            * (1.0 / period) ** p[4] * (1.0 / ratio) ** p[5]
+            c * _ipow(bias, p[0]) * _ipow(amplitude, p[1]) * _ipow(period, p[2]) * _ipow(ratio, p[3])
+            * _ipow(1.0 / period, p[4]) * _ipow(1.0 / ratio, p[5])
         )
     return total
+
+
+@nb.njit(**_JIT)
+def _ipow(x: float, exponent: float) -> float:
+    """``x ** exponent`` for a small non-negative integer ``exponent``, by repeated multiplication."""
+    result = 1.0
+    for _ in range(int(exponent)):
+        result *= x
+    return result
 
 
 @nb.njit(**_JIT)

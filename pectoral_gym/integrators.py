@@ -36,7 +36,7 @@ from pectoral_gym.dynamics import fin_force_right, stroke_kinematics
 __all__ = [
     "FIN_FIELDS",
     "ELAPSED", "DURATION", "ANGLE_FROM", "ANGLE_TO", "POWER",
-    "BIAS", "AMPLITUDE", "PERIOD", "RATIO", "AVG_FX", "AVG_FY", "AVG_TAU", "OSC_COS", "OSC_SIN",
+    "BIAS", "AMPLITUDE", "PERIOD", "RATIO", "AVG_FX", "AVG_FY", "AVG_TAU", "OSC_COS", "OSC_SIN", "CACHED",
     "init_fins", "command_fins", "advance", "fin_angles",
 ]
 
@@ -45,7 +45,8 @@ ELAPSED, DURATION, ANGLE_FROM, ANGLE_TO, POWER = 0, 1, 2, 3, 4
 BIAS, AMPLITUDE, PERIOD, RATIO = 5, 6, 7, 8
 AVG_FX, AVG_FY, AVG_TAU = 9, 10, 11  # scaled averaged forcing of the active pattern
 OSC_COS, OSC_SIN = 12, 13  # phasor of the yaw-rate oscillation the active pattern drives (signed by side)
-FIN_FIELDS = 14
+CACHED = 14  # 1 when fields AVG_FX..OSC_SIN hold the values of the pattern in BIAS..RATIO
+FIN_FIELDS = 15
 
 _EPS = 1e-12
 _JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
@@ -71,6 +72,9 @@ def _latch(fins, pending, i, f, coef, mode, kfun):
         fins[i, f, DURATION] = ratio * period / (ratio + 1.0)  # eq. (21), recovery
     fins[i, f, ELAPSED] = 0.0
     fins[i, f, POWER] = power
+    if (fins[i, f, CACHED] == 1.0 and fins[i, f, BIAS] == bias and fins[i, f, AMPLITUDE] == amp
+            and fins[i, f, PERIOD] == period and fins[i, f, RATIO] == ratio):
+        return  # same pattern as the last half-stroke: its averaged forcing is still valid
     fins[i, f, BIAS] = bias
     fins[i, f, AMPLITUDE] = amp
     fins[i, f, PERIOD] = period
@@ -82,6 +86,7 @@ def _latch(fins, pending, i, f, coef, mode, kfun):
     pc, ps = yaw_oscillation_phasor(bias, amp, period, ratio, kfun)
     fins[i, f, OSC_COS] = _SIDE[f] * pc  # the left fin's yaw oscillation is the mirror image
     fins[i, f, OSC_SIN] = _SIDE[f] * ps
+    fins[i, f, CACHED] = 1.0
 
 
 @nb.njit(**_JIT)
@@ -209,9 +214,9 @@ def _stable_step(state, i, m1, m2, j3, c1, c4, fx, fy, tau, osc, dt_max):
     (``omega* = sqrt(|tau| / (c4 J3))``, ``V* = sqrt(|F| / c1)``), so a fish at
     rest that starts turning does not overshoot. ``h * rate <= 1.5`` keeps
     RK4 (stable to 2.78) accurate on the transients. The oscillation-averaged
-    damping's rate is at most ``2 c4 (|omega| + osc)``.
+    damping's rate ``2 c4 mean|omega + osc sin|`` is at most ``2 c4 (|omega| + 2 osc / pi)``.
     """
-    omega = max(abs(state[i, 5]), math.sqrt(abs(tau) / (c4 * j3))) + osc
+    omega = max(abs(state[i, 5]), math.sqrt(abs(tau) / (c4 * j3))) + 2.0 / math.pi * osc
     speed = max(math.sqrt(state[i, 3] ** 2 + state[i, 4] ** 2), math.sqrt(math.hypot(fx, fy) / max(c1, 1e-12)))
     rate = 2.0 * c4 * omega + 3.0 * c1 * speed / min(m1, m2) + omega
     if rate * dt_max > 1.5:

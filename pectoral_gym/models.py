@@ -114,6 +114,7 @@ class FishModel:
             if rows.shape[0] != target.size:
                 raise ValueError(f"got {rows.shape[0]} FishParams for {target.size} fish")
             self.coef[target] = rows
+        self.fins[slice(None) if index is None else index, :, it.CACHED] = 0.0  # the forcing depends on them
 
     def reset(self, state: np.ndarray | None = None, right: BeatLike = None, left: BeatLike = None,
               index: np.ndarray | None = None) -> None:

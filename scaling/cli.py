@@ -112,7 +112,8 @@ def _run_identify(args) -> int:
     if any("radius_worst" in c for c in result.comparison.values()):
         print(f"\nheld-out turning errors ({args.holdout} off-grid patterns), median / worst:")
         for form, c in result.comparison.items():
-            print(f"  {form:10} {c['coefficients']:6d} coefficients   radius {100 * c['radius_median']:.2f} % / "
+            print(f"  {form:10} {c['coefficients']:6d} coefficients {c['multiplications']:5d} mult/eval   "
+                  f"radius {100 * c['radius_median']:.2f} % / "
                   f"{100 * c['radius_worst']:.2f} %   period {100 * c['period_median']:.2f} % / "
                   f"{100 * c['period_worst']:.2f} %")
     print(f"chosen: {result.chosen}")

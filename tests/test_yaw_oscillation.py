@@ -211,3 +211,21 @@ def test_nmpc_with_oscillation_equals_the_algebraic_solution():
     # only the yaw moment's scaling changes, and it moves towards 1 (the missing damping was in K_m)
     np.testing.assert_array_equal(oracle[:, :2], paper[:, :2])
     assert np.all(np.abs(oracle[:, 2] - 1) < np.abs(paper[:, 2] - 1))
+
+
+def test_latch_reuses_the_forcing_of_an_unchanged_pattern_but_not_after_new_parameters():
+    from pectoral_gym import integrators as it
+    from pectoral_gym.averaging import averaged_forcing
+
+    beat = FinBeat.from_degrees(80, 25, 1.0, 3.0)
+    model = AveragedModel(1, P, scaling="none")
+    model.reset(right=beat)
+    model.advance(2.3)
+    assert model.fins[0, 0, it.CACHED] == 1.0
+    np.testing.assert_allclose(model.fins[0, 0, it.AVG_FX:it.AVG_TAU + 1], averaged_forcing(beat, P), rtol=1e-14)
+    heavier = dataclasses.replace(P, fin_force_coef=2 * P.fin_force_coef)
+    model.set_params(heavier)  # the averaged forcing depends on the parameters: the cache is invalid
+    assert model.fins[0, 0, it.CACHED] == 0.0
+    model.advance(1.0)  # at least one latch (a whole fin period)
+    np.testing.assert_allclose(model.fins[0, 0, it.AVG_FX:it.AVG_TAU + 1], averaged_forcing(beat, heavier),
+                               rtol=1e-14)
