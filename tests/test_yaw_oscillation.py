@@ -229,3 +229,29 @@ def test_latch_reuses_the_forcing_of_an_unchanged_pattern_but_not_after_new_para
     model.advance(1.0)  # at least one latch (a whole fin period)
     np.testing.assert_allclose(model.fins[0, 0, it.AVG_FX:it.AVG_TAU + 1], averaged_forcing(beat, heavier),
                                rtol=1e-14)
+
+
+@pytest.mark.parametrize("left", [None, (100, 10, 1.0, 2.0)])
+def test_symbolic_rhs_with_oscillation_tracks_the_averaged_model(left):
+    # One fin, or two fins with equal periods (their beat phases stay equal, as the symbolic model assumes).
+    ca = pytest.importorskip("casadi")
+    from pectoral_gym.symbolic import averaged_rhs_sx
+
+    table = np.random.default_rng(7).normal(0, 0.3, (2, 4, 4, 4))  # phasors differ between the two patterns
+    s = dataclasses.replace(_oscillation_scaling(), oscillation_table=table)
+    right = FinBeat.from_degrees(80, 20, 1.0, 4.0)
+    left = FinBeat.rest() if left is None else FinBeat.from_degrees(*left)
+    model = AveragedModel(1, P, scaling=s, dt_max=1e-3)  # compare equations, not step sizes
+    start = np.array([1.0, 0.5, 0.3, 0.02, -0.005, 0.1])
+    model.reset(state=start[None], right=right.as_array()[None], left=left.as_array()[None])
+    model.advance(2.0)
+    x = ca.SX.sym("x", 6)
+    f = ca.Function("f", [x], [averaged_rhs_sx(x, np.concatenate([right.as_array(), left.as_array()]), P, s)])
+    state, h = ca.DM(start), 1e-3
+    for _ in range(2000):
+        k1 = f(state)
+        k2 = f(state + h / 2 * k1)
+        k3 = f(state + h / 2 * k2)
+        k4 = f(state + h * k3)
+        state = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    np.testing.assert_allclose(np.array(state).ravel(), model.state[0], rtol=1e-6, atol=1e-9)
