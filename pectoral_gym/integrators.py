@@ -115,8 +115,6 @@ def _yaw_oscillation(fins, i, offset, idle0, idle1):
     return math.sqrt(re * re + im * im)
 
 
-
-
 @nb.njit(**_JIT)
 def _idle(fins, pending, i, f):
     """True for a fin that holds still and is commanded to hold still at the same angle."""
