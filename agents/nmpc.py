@@ -45,7 +45,7 @@ import numpy as np
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
-from pectoral_gym.symbolic import averaged_forcing_sx, body_accel_sx, yaw_oscillation_sx
+from pectoral_gym.symbolic import averaged_forcing_sx, body_accel_sx, combined_yaw_oscillation_sx
 
 __all__ = ["NMPCController", "NMPCSettings"]
 
@@ -229,14 +229,11 @@ class NMPCController:
         amp_r, amp_l = ca.sqrt(u[0]), ca.sqrt(u[1])
         right = averaged_forcing_sx(ca.vertcat(u[2], amp_r, period, zeta), 1.0, params, self.scaling)
         left = averaged_forcing_sx(ca.vertcat(u[3], amp_l, period, zeta), -1.0, params, self.scaling)
-        oscillating = self.scaling is not None and self.scaling.has_oscillation
-        if oscillating:
-            # both fins share period and ratio, so they beat in phase: their yaw oscillations add as phasors
-            phasor = (yaw_oscillation_sx(ca.vertcat(u[2], amp_r, period, zeta), self.scaling)
-                      - yaw_oscillation_sx(ca.vertcat(u[3], amp_l, period, zeta), self.scaling))
-            oscillation = ca.sqrt(ca.sumsqr(phasor) + 1e-18)
-        else:
-            oscillation = 0.0
+        # both fins share period and ratio, so they beat in phase
+        oscillation = combined_yaw_oscillation_sx(
+            ca.vertcat(u[2], amp_r, period, zeta), ca.vertcat(u[3], amp_l, period, zeta), self.scaling)
+        oscillating = oscillation is not None
+        oscillation = oscillation if oscillating else 0.0
         forcing = ca.Function("forcing", [u], [ca.vertcat(right + left, oscillation)])
         x = ca.SX.sym("x", 6)
         f = ca.SX.sym("f", 4)  # fin force and moment, then the yaw-oscillation amplitude

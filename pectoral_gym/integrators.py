@@ -104,6 +104,8 @@ def _yaw_oscillation(fins, i, offset, idle0, idle1):
     for f in range(2):
         if (idle0 if f == 0 else idle1) or fins[i, f, ANGLE_FROM] == fins[i, f, ANGLE_TO]:
             continue
+        if fins[i, f, OSC_COS] == 0.0 and fins[i, f, OSC_SIN] == 0.0:
+            continue  # no yaw-oscillation data (or no stroke): skip the trigonometry
         period = fins[i, f, PERIOD]
         t = fins[i, f, ELAPSED] + offset
         if fins[i, f, POWER] < 0.5:

@@ -138,29 +138,37 @@ def bspline_basis(knots, n: int, x: float):
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
-def spline_values(bias: float, amplitude: float, inv_ratio: float, knots, table):
-    """Spline parts of ``(K_fx, K_fy, K_m)``; ``knots``, ``table`` as in :meth:`ScalingFunctions.kernel_arrays`.
-
-    Zero when ``table`` is empty (no spline part).
-    """
-    n0, n1, n2 = table.shape[1], table.shape[2], table.shape[3]
-    if n0 == 0:
-        return 0.0, 0.0, 0.0
+def _tensor_spline(bias: float, amplitude: float, inv_ratio: float, knots, table):
+    """Up to three channels of a tensor-product cubic spline ``table (channels, n0, n1, n2)``; absent ones are 0."""
+    channels, n0, n1, n2 = table.shape[0], table.shape[1], table.shape[2], table.shape[3]
     s0, a0, a1, a2, a3 = bspline_basis(knots[0], n0, bias)
     s1, c0, c1, c2, c3 = bspline_basis(knots[1], n1, amplitude)
     s2, d0, d1, d2, d3 = bspline_basis(knots[2], n2, inv_ratio)
     b0, b1, b2 = (a0, a1, a2, a3), (c0, c1, c2, c3), (d0, d1, d2, d3)
-    kx = ky = km = 0.0
+    v0 = v1 = v2 = 0.0
     for a in range(4):
         for b in range(4):
             w = b0[a] * b1[b]
             for c in range(4):
                 wc = w * b2[c]
                 i, j, k = s0 - 3 + a, s1 - 3 + b, s2 - 3 + c
-                kx += wc * table[0, i, j, k]
-                ky += wc * table[1, i, j, k]
-                km += wc * table[2, i, j, k]
-    return kx, ky, km
+                v0 += wc * table[0, i, j, k]
+                if channels > 1:
+                    v1 += wc * table[1, i, j, k]
+                if channels > 2:
+                    v2 += wc * table[2, i, j, k]
+    return v0, v1, v2
+
+
+@nb.njit(cache=True, nogil=True, error_model="numpy")
+def spline_values(bias: float, amplitude: float, inv_ratio: float, knots, table):
+    """Spline parts of ``(K_fx, K_fy, K_m)``; ``knots``, ``table`` as in :meth:`ScalingFunctions.kernel_arrays`.
+
+    Zero when ``table`` is empty (no spline part).
+    """
+    if table.shape[1] == 0:
+        return 0.0, 0.0, 0.0
+    return _tensor_spline(bias, amplitude, inv_ratio, knots, table)
 
 
 @nb.njit(cache=True, nogil=True, error_model="numpy")
@@ -171,22 +179,9 @@ def oscillation_phasor(bias: float, amplitude: float, inv_ratio: float, knots, t
     ``(0, 0)`` when ``table`` is empty or the fin does not beat. Below the
     lowest amplitude node the phasor shrinks linearly to zero.
     """
-    n0, n1, n2 = table.shape[1], table.shape[2], table.shape[3]
-    if n0 == 0 or amplitude <= 0.0:
+    if table.shape[1] == 0 or amplitude <= 0.0:
         return 0.0, 0.0
-    s0, a0, a1, a2, a3 = bspline_basis(knots[0], n0, bias)
-    s1, c0, c1, c2, c3 = bspline_basis(knots[1], n1, amplitude)
-    s2, d0, d1, d2, d3 = bspline_basis(knots[2], n2, inv_ratio)
-    b0, b1, b2 = (a0, a1, a2, a3), (c0, c1, c2, c3), (d0, d1, d2, d3)
-    pc = ps = 0.0
-    for a in range(4):
-        for b in range(4):
-            w = b0[a] * b1[b]
-            for c in range(4):
-                wc = w * b2[c]
-                i, j, k = s0 - 3 + a, s1 - 3 + b, s2 - 3 + c
-                pc += wc * table[0, i, j, k]
-                ps += wc * table[1, i, j, k]
+    pc, ps, _ = _tensor_spline(bias, amplitude, inv_ratio, knots, table)
     lowest = knots[1, 3]
     if amplitude < lowest and lowest > 0.0:
         pc *= amplitude / lowest
@@ -200,6 +195,55 @@ def _padded(knots: tuple[np.ndarray, ...], table: np.ndarray | None, channels: i
         return np.zeros((3, 1)), np.zeros((channels, 0, 0, 0))
     longest = max(len(k) for k in knots)
     return np.array([np.pad(k, (0, longest - len(k)), mode="edge") for k in knots]), np.ascontiguousarray(table)
+
+
+def _checked_spline(
+    knots: tuple, table: np.ndarray | None, channels: int, what: str
+) -> tuple[tuple[np.ndarray, ...], np.ndarray | None]:
+    """Validated float copies of a spline's three knot vectors and ``(channels, n0, n1, n2)`` table."""
+    if (table is None) != (len(knots) == 0):
+        raise ValueError(f"a {what} needs both knots and a table")
+    if table is None:
+        return (), None
+    table = np.asarray(table, dtype=np.float64)
+    if table.ndim != 4 or table.shape[0] != channels or len(knots) != 3:
+        raise ValueError(f"{what} table must be ({channels}, n_bias, n_amplitude, n_inv_ratio) with 3 knot vectors, "
+                         f"got {table.shape} and {len(knots)} knot vectors")
+    if not np.all(np.isfinite(table)):
+        raise ValueError(f"{what} coefficients must be finite")
+    knots = tuple(np.asarray(k, dtype=np.float64) for k in knots)
+    for axis, (k, n) in enumerate(zip(knots, table.shape[1:], strict=True)):
+        _check_knots(k, n, f"{what} axis {SPLINE_AXES[axis]}")
+    return knots, table
+
+
+def _spline_dict(knots: tuple[np.ndarray, ...], data: dict[str, Any]) -> dict[str, Any]:
+    """A spline section of the file: degree, axes, knots, then ``data``, then the extrapolation rule."""
+    return {"degree": SPLINE_DEGREE, "axes": list(SPLINE_AXES), "knots": [k.tolist() for k in knots], **data,
+            "extrapolation": "clamp"}
+
+
+def _spline_section(
+    section: Any, source: str, key: str, channels
+) -> tuple[tuple[np.ndarray, ...], np.ndarray | None]:
+    """Knots and table of the spline section ``key`` of a coefficients file; ``channels(section)`` lists its data."""
+    if section is None:
+        return (), None
+    if not isinstance(section, dict):
+        raise ValueError(f"{source}: '{key}' must be an object")
+    if section.get("degree") != SPLINE_DEGREE or tuple(section.get("axes", ())) != SPLINE_AXES:
+        raise ValueError(f"{source}: {key} must have degree {SPLINE_DEGREE} and axes {list(SPLINE_AXES)}")
+    if section.get("extrapolation", "clamp") != "clamp":
+        raise ValueError(f"{source}: {key} extrapolation must be 'clamp'")
+    try:
+        knots = tuple(np.asarray(k, dtype=np.float64) for k in section["knots"])
+        if len(knots) != 3:
+            raise ValueError("3 knot vectors required")
+        shape = tuple(len(k) - 4 for k in knots)
+        table = np.array([np.asarray(values, dtype=np.float64).reshape(shape) for values in channels(section)])
+    except (KeyError, TypeError, ValueError) as err:
+        raise ValueError(f"{source}: malformed {key}: {err}") from None
+    return knots, table
 
 
 def _check_knots(knots: np.ndarray, n: int, where: str) -> None:
@@ -246,34 +290,12 @@ class ScalingFunctions:
             )
         if self.sway not in SWAY_MODES:
             raise ValueError(f"sway must be one of {SWAY_MODES}, got {self.sway!r}")
-        if (self.table is None) != (len(self.knots) == 0):
-            raise ValueError("a spline needs both knots and a table")
-        if self.table is not None:
-            table = np.asarray(self.table, dtype=np.float64)
-            if table.ndim != 4 or table.shape[0] != 3 or len(self.knots) != 3:
-                raise ValueError(f"spline table must be (3, n_bias, n_amplitude, n_inv_ratio) with 3 knot vectors, "
-                                 f"got {table.shape} and {len(self.knots)} knot vectors")
-            if not np.all(np.isfinite(table)):
-                raise ValueError("spline coefficients must be finite")
-            knots = tuple(np.asarray(k, dtype=np.float64) for k in self.knots)
-            for axis, (k, n) in enumerate(zip(knots, table.shape[1:], strict=True)):
-                _check_knots(k, n, f"spline axis {SPLINE_AXES[axis]}")
-            object.__setattr__(self, "table", table)
-            object.__setattr__(self, "knots", knots)
-        if (self.oscillation_table is None) != (len(self.oscillation_knots) == 0):
-            raise ValueError("a yaw-oscillation spline needs both knots and a table")
-        if self.oscillation_table is not None:
-            table = np.asarray(self.oscillation_table, dtype=np.float64)
-            if table.ndim != 4 or table.shape[0] != 2 or len(self.oscillation_knots) != 3:
-                raise ValueError(f"yaw-oscillation table must be (2, n_bias, n_amplitude, n_inv_ratio) with 3 knot "
-                                 f"vectors, got {table.shape} and {len(self.oscillation_knots)} knot vectors")
-            if not np.all(np.isfinite(table)):
-                raise ValueError("yaw-oscillation coefficients must be finite")
-            knots = tuple(np.asarray(k, dtype=np.float64) for k in self.oscillation_knots)
-            for axis, (k, n) in enumerate(zip(knots, table.shape[1:], strict=True)):
-                _check_knots(k, n, f"yaw-oscillation axis {SPLINE_AXES[axis]}")
-            object.__setattr__(self, "oscillation_table", table)
-            object.__setattr__(self, "oscillation_knots", knots)
+        knots, table = _checked_spline(self.knots, self.table, len(K_NAMES), "spline")
+        object.__setattr__(self, "knots", knots)
+        object.__setattr__(self, "table", table)
+        knots, table = _checked_spline(self.oscillation_knots, self.oscillation_table, 2, "yaw-oscillation spline")
+        object.__setattr__(self, "oscillation_knots", knots)
+        object.__setattr__(self, "oscillation_table", table)
 
     @classmethod
     def unit(cls) -> ScalingFunctions:
@@ -348,44 +370,17 @@ class ScalingFunctions:
 
     @staticmethod
     def _spline_from_dict(spline: Any, source: str) -> tuple[tuple[np.ndarray, ...], np.ndarray | None]:
-        if spline is None:
-            return (), None
-        if not isinstance(spline, dict):
-            raise ValueError(f"{source}: 'spline' must be an object")
-        if spline.get("degree") != SPLINE_DEGREE or tuple(spline.get("axes", ())) != SPLINE_AXES:
-            raise ValueError(f"{source}: spline must have degree {SPLINE_DEGREE} and axes {list(SPLINE_AXES)}")
-        if spline.get("extrapolation", "clamp") != "clamp":
-            raise ValueError(f"{source}: spline extrapolation must be 'clamp'")
-        try:
-            knots = tuple(np.asarray(k, dtype=np.float64) for k in spline["knots"])
-            coefficients = spline["coefficients"]
-            shape = tuple(len(k) - 4 for k in knots)
-            if len(knots) != 3 or not isinstance(coefficients, dict) or set(coefficients) != set(K_NAMES):
+        def channels(section: dict) -> list:
+            coefficients = section["coefficients"]
+            if not isinstance(coefficients, dict) or set(coefficients) != set(K_NAMES):
                 raise ValueError(f"3 knot vectors and coefficients for {list(K_NAMES)} required")
-            table = np.array([np.asarray(coefficients[name], dtype=np.float64).reshape(shape) for name in K_NAMES])
-        except (KeyError, TypeError, ValueError) as err:
-            raise ValueError(f"{source}: malformed spline: {err}") from None
-        return knots, table
+            return [coefficients[name] for name in K_NAMES]
+
+        return _spline_section(spline, source, "spline", channels)
 
     @staticmethod
     def _oscillation_from_dict(section: Any, source: str) -> tuple[tuple[np.ndarray, ...], np.ndarray | None]:
-        if section is None:
-            return (), None
-        if not isinstance(section, dict):
-            raise ValueError(f"{source}: 'yaw_oscillation' must be an object")
-        if section.get("degree") != SPLINE_DEGREE or tuple(section.get("axes", ())) != SPLINE_AXES:
-            raise ValueError(f"{source}: yaw_oscillation must have degree {SPLINE_DEGREE} and axes {list(SPLINE_AXES)}")
-        if section.get("extrapolation", "clamp") != "clamp":
-            raise ValueError(f"{source}: yaw_oscillation extrapolation must be 'clamp'")
-        try:
-            knots = tuple(np.asarray(k, dtype=np.float64) for k in section["knots"])
-            shape = tuple(len(k) - 4 for k in knots)
-            if len(knots) != 3:
-                raise ValueError("3 knot vectors required")
-            table = np.array([np.asarray(section[part], dtype=np.float64).reshape(shape) for part in ("cos", "sin")])
-        except (KeyError, TypeError, ValueError) as err:
-            raise ValueError(f"{source}: malformed yaw_oscillation: {err}") from None
-        return knots, table
+        return _spline_section(section, source, "yaw_oscillation", lambda sec: [sec["cos"], sec["sin"]])
 
     @classmethod
     def load(cls, path: str | Path | None = None) -> ScalingFunctions:
@@ -417,22 +412,11 @@ class ScalingFunctions:
             "functions": functions,
         }
         if self.table is not None:
-            out["spline"] = {
-                "degree": SPLINE_DEGREE,
-                "axes": list(SPLINE_AXES),
-                "knots": [k.tolist() for k in self.knots],
-                "coefficients": {name: self.table[i].ravel().tolist() for i, name in enumerate(K_NAMES)},
-                "extrapolation": "clamp",
-            }
+            out["spline"] = _spline_dict(self.knots, {
+                "coefficients": {name: self.table[i].ravel().tolist() for i, name in enumerate(K_NAMES)}})
         if self.oscillation_table is not None:
-            out["yaw_oscillation"] = {
-                "degree": SPLINE_DEGREE,
-                "axes": list(SPLINE_AXES),
-                "knots": [k.tolist() for k in self.oscillation_knots],
-                "cos": self.oscillation_table[0].ravel().tolist(),
-                "sin": self.oscillation_table[1].ravel().tolist(),
-                "extrapolation": "clamp",
-            }
+            out["yaw_oscillation"] = _spline_dict(self.oscillation_knots, {
+                "cos": self.oscillation_table[0].ravel().tolist(), "sin": self.oscillation_table[1].ravel().tolist()})
         out["metadata"] = self.metadata
         return out
 

@@ -26,7 +26,7 @@ from pectoral_gym.params import FishParams
 
 __all__ = [
     "bessel_j1_sx", "bspline_basis_sx", "scaling_sx", "averaged_forcing_sx", "oscillating_square_mean_sx",
-    "yaw_oscillation_sx", "body_accel_sx", "averaged_rhs_sx",
+    "yaw_oscillation_sx", "combined_yaw_oscillation_sx", "body_accel_sx", "averaged_rhs_sx",
 ]
 
 _OSCILLATION_FLOOR = 1e-9  # rad/s: keeps omega / A finite when two mirrored fins cancel
@@ -130,6 +130,19 @@ def yaw_oscillation_sx(beat, scaling: ScalingFunctions | None):
     return ca.vertcat(pc, ps) * shrink / period
 
 
+def combined_yaw_oscillation_sx(right, left, scaling: ScalingFunctions | None):
+    """Amplitude [rad/s] of the yaw oscillation of two fins beating in phase; ``None`` without yaw-oscillation data.
+
+    The left fin's oscillation is the mirror image, so the phasors subtract
+    (as in :mod:`pectoral_gym.integrators` with equal beat phases); a tiny
+    floor keeps ``omega / A`` finite when two equal fins cancel.
+    """
+    if scaling is None or not scaling.has_oscillation:
+        return None
+    phasor = yaw_oscillation_sx(right, scaling) - yaw_oscillation_sx(left, scaling)
+    return ca.sqrt(ca.sumsqr(phasor) + _OSCILLATION_FLOOR**2)
+
+
 def oscillating_square_mean_sx(mean, amplitude):
     """Cycle mean of ``x|x|`` for ``x = mean + amplitude sin(theta)``.
 
@@ -219,11 +232,7 @@ def averaged_rhs_sx(state, beats, params: FishParams, scaling: ScalingFunctions 
     psi, vx, vy = state[2], state[3], state[4]
     right = averaged_forcing_sx([beats[i] for i in range(4)], 1.0, params, scaling)
     left = averaged_forcing_sx([beats[i] for i in range(4, 8)], -1.0, params, scaling)
-    oscillation = None
-    if scaling is not None and scaling.has_oscillation:
-        phasor = (yaw_oscillation_sx([beats[i] for i in range(4)], scaling)
-                  - yaw_oscillation_sx([beats[i] for i in range(4, 8)], scaling))  # the left fin mirrors
-        oscillation = ca.sqrt(ca.sumsqr(phasor) + _OSCILLATION_FLOOR**2)
+    oscillation = combined_yaw_oscillation_sx([beats[i] for i in range(4)], [beats[i] for i in range(4, 8)], scaling)
     accel = body_accel_sx([state[3], state[4], state[5]], right + left, params, smoothing, oscillation)
     x_dot = vx * ca.cos(psi) - vy * ca.sin(psi)  # eq. (19), kinematics
     y_dot = vx * ca.sin(psi) + vy * ca.cos(psi)

@@ -232,7 +232,7 @@ def test_latch_reuses_the_forcing_of_an_unchanged_pattern_but_not_after_new_para
 
 
 @pytest.mark.parametrize("left", [None, (100, 10, 1.0, 2.0)])
-def test_symbolic_rhs_with_oscillation_tracks_the_averaged_model(left):
+def test_symbolic_rhs_with_oscillation_tracks_the_averaged_model(left, rk4_symbolic):
     # One fin, or two fins with equal periods (their beat phases stay equal, as the symbolic model assumes).
     ca = pytest.importorskip("casadi")
     from pectoral_gym.symbolic import averaged_rhs_sx
@@ -247,11 +247,5 @@ def test_symbolic_rhs_with_oscillation_tracks_the_averaged_model(left):
     model.advance(2.0)
     x = ca.SX.sym("x", 6)
     f = ca.Function("f", [x], [averaged_rhs_sx(x, np.concatenate([right.as_array(), left.as_array()]), P, s)])
-    state, h = ca.DM(start), 1e-3
-    for _ in range(2000):
-        k1 = f(state)
-        k2 = f(state + h / 2 * k1)
-        k3 = f(state + h / 2 * k2)
-        k4 = f(state + h * k3)
-        state = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-    np.testing.assert_allclose(np.array(state).ravel(), model.state[0], rtol=1e-6, atol=1e-9)
+    state = rk4_symbolic(f, start, 1e-3, 2000)
+    np.testing.assert_allclose(state, model.state[0], rtol=1e-6, atol=1e-9)
