@@ -10,12 +10,17 @@ All quantities are SI: metres, kilograms, seconds, radians.
 from __future__ import annotations
 
 import dataclasses
+import enum
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["FishParams", "FinBeat", "COEF_NAMES", "TANK_LENGTH", "TANK_WIDTH", "coefficient_vector"]
+__all__ = [
+    "FishParams", "FinBeat", "COEF_NAMES", "Coef", "BodyCoefficients", "TANK_LENGTH", "TANK_WIDTH",
+    "coefficient_vector", "body_coefficients",
+]
 
 # The paper's tank (Sec. 4.1): the fish swims in a 2.30 m x 1.15 m area.
 TANK_LENGTH = 2.30  # m, along the tank X axis
@@ -143,13 +148,35 @@ class FishParams:
         return dataclasses.replace(self, **changes)
 
 
-# Packed per-fish coefficients the compiled kernels read (one row per fish).
+# Packed per-fish coefficients the compiled kernels read (one row per fish), in this order.
 COEF_NAMES = ("m1", "m2", "J3", "c1", "c2", "c4", "fin_drag_constant", "fin_inertia_constant", "fin_offset")
+
+#: Index of each packed coefficient, generated from :data:`COEF_NAMES` (``coef[Coef.C4]``);
+#: numba reads the members as compile-time constants.
+Coef = enum.IntEnum("Coef", {name.upper(): i for i, name in enumerate(COEF_NAMES)})
+
+
+class BodyCoefficients(NamedTuple):
+    """The rigid-body coefficients of eqs. (19)-(20), the first six packed coefficients."""
+
+    m1: float  # kg, surge mass m_b - m_ax (eq. 20)
+    m2: float  # kg, sway mass m_b - m_ay
+    J3: float  # kg m^2, yaw inertia J_bz - J_az
+    c1: float  # kg/m, drag constant rho S_A C_D / 2
+    c2: float  # kg/m/rad, lift constant rho S_A C_L / 2
+    c4: float  # -, yaw damping C_M / J_3
 
 
 def coefficient_vector(params: FishParams) -> np.ndarray:
     """Pack the derived coefficients of ``params`` in the order of :data:`COEF_NAMES`."""
     return np.array([float(getattr(params, name)) for name in COEF_NAMES], dtype=np.float64)
+
+
+def body_coefficients(coef: FishParams | np.ndarray) -> BodyCoefficients:
+    """The body coefficients ``(m1, m2, J3, c1, c2, c4)`` of a :class:`FishParams` or of a packed row."""
+    if isinstance(coef, FishParams):
+        coef = coefficient_vector(coef)
+    return BodyCoefficients(*(float(coef[i]) for i in range(len(BodyCoefficients._fields))))
 
 
 @dataclass(frozen=True)

@@ -9,7 +9,7 @@ Arrays (one row per environment):
 * ``cfg``  ``(N_CFG,)`` float64: the task settings, indices ``C_*``.
 * ``ep``   ``(n, N_EP)`` float64: per-episode data, indices ``E_*`` (target,
   reference ellipse, previous distance, the fish's geometry).
-* ``obs``  ``(n, OBS_SIZE)`` float32: the observations (layout in ``fish_env``).
+* ``obs``  ``(n, OBS_SIZE)`` float32: the observations (layout in ``envs.observation``).
 * ``out``  ``(n, N_OUT)`` float64: reward, reward terms and flags, indices ``O_*``.
 * ``beats`` ``(n, 2, 4)`` float64: the commanded fin patterns (right fin first).
 
@@ -24,6 +24,7 @@ import numba as nb
 import numpy as np
 
 from pectoral_gym.averaging import mean_fin_power
+from pectoral_gym.envs.observation import OBS_SIZE  # noqa: F401 - re-exported: tk.OBS_SIZE
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 
 # Tank and task geometry [m], [rad].
@@ -42,7 +43,6 @@ TRACK_HEADING_NOISE = 0.3  # track task: start heading = tangent +- this [rad]
 TRACK_SUBSTEPS = 4  # RK4 steps per control period for the reference point's phase
 
 GOAL, TRACK = 0, 1
-OBS_SIZE = 19
 ACTION_SIZE = 8
 
 # cfg indices

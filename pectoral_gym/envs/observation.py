@@ -1,0 +1,98 @@
+"""The observation layout shared by every fish environment (full, averaged, hardware).
+
+The observation is a float32 vector of :data:`OBS_SIZE` entries. Kernels and
+controllers index it with the constants below; :func:`decode` gives the named
+view. :data:`OBSERVATION_STRUCTURE` lists the blocks in order, as Gymnasium's
+MuJoCo envs publish ``observation_structure``.
+
+| index | name | meaning | unit |
+|---|---|---|---|
+| 0-1 | ``x, y`` | position in the tank (origin at a corner) | m |
+| 2-3 | ``cos_psi, sin_psi`` | heading | - |
+| 4-6 | ``vx, vy, omega`` | body-frame velocity, mean over the last control period | m/s, m/s, rad/s |
+| 7-8 | ``target_x, target_y`` | target relative to the fish, body frame | m |
+| 9-10 | ``target_vx, target_vy`` | target velocity, body frame (zero for ``goal``) | m/s |
+| 11-18 | ``last_action`` | last action, normalised to [-1, 1] (right fin, then left) | - |
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+__all__ = [
+    "OBS_X", "OBS_Y", "OBS_COS_PSI", "OBS_SIN_PSI", "OBS_VX", "OBS_VY", "OBS_OMEGA",
+    "OBS_TARGET_X", "OBS_TARGET_Y", "OBS_TARGET_VX", "OBS_TARGET_VY", "OBS_LAST_ACTION", "OBS_SIZE",
+    "OBS_POSITION", "OBS_HEADING", "OBS_VELOCITY", "OBS_TARGET", "OBS_TARGET_VELOCITY", "OBS_ACTION",
+    "OBSERVATION_STRUCTURE", "Observation", "decode",
+]
+
+OBS_X, OBS_Y = 0, 1
+OBS_COS_PSI, OBS_SIN_PSI = 2, 3
+OBS_VX, OBS_VY, OBS_OMEGA = 4, 5, 6
+OBS_TARGET_X, OBS_TARGET_Y = 7, 8
+OBS_TARGET_VX, OBS_TARGET_VY = 9, 10
+OBS_LAST_ACTION = 11  # first of the 8 action entries (4 per fin, right fin first)
+OBS_SIZE = 19
+
+# The same blocks as slices, for numpy code.
+OBS_POSITION = slice(OBS_X, OBS_Y + 1)
+OBS_HEADING = slice(OBS_COS_PSI, OBS_SIN_PSI + 1)
+OBS_VELOCITY = slice(OBS_VX, OBS_OMEGA + 1)
+OBS_TARGET = slice(OBS_TARGET_X, OBS_TARGET_Y + 1)
+OBS_TARGET_VELOCITY = slice(OBS_TARGET_VX, OBS_TARGET_VY + 1)
+OBS_ACTION = slice(OBS_LAST_ACTION, OBS_SIZE)
+
+#: Block name -> number of entries, in order.
+OBSERVATION_STRUCTURE = {
+    "position": 2, "heading": 2, "velocity": 3, "target": 2, "target_velocity": 2, "last_action": 8,
+}
+
+
+class Observation(NamedTuple):
+    """Named view of one observation (scalars) or of a batch (arrays over the leading axes)."""
+
+    x: np.ndarray | float
+    y: np.ndarray | float
+    cos_psi: np.ndarray | float
+    sin_psi: np.ndarray | float
+    vx: np.ndarray | float
+    vy: np.ndarray | float
+    omega: np.ndarray | float
+    target_x: np.ndarray | float
+    target_y: np.ndarray | float
+    target_vx: np.ndarray | float
+    target_vy: np.ndarray | float
+    last_action: np.ndarray
+
+    @property
+    def psi(self) -> np.ndarray | float:
+        """Heading [rad], in (-pi, pi]."""
+        return np.arctan2(self.sin_psi, self.cos_psi)
+
+    @property
+    def distance(self) -> np.ndarray | float:
+        """Distance to the target [m]."""
+        return np.hypot(self.target_x, self.target_y)
+
+    def target_in_tank(self) -> tuple[np.ndarray | float, np.ndarray | float]:
+        """Target position in the tank frame [m] (the body-frame offset rotated by the heading)."""
+        c, s = self.cos_psi, self.sin_psi
+        return self.x + c * self.target_x - s * self.target_y, self.y + s * self.target_x + c * self.target_y
+
+    def target_velocity_in_tank(self) -> tuple[np.ndarray | float, np.ndarray | float]:
+        """Target velocity in the tank frame [m/s]."""
+        c, s = self.cos_psi, self.sin_psi
+        return c * self.target_vx - s * self.target_vy, s * self.target_vx + c * self.target_vy
+
+
+def decode(obs: np.ndarray) -> Observation:
+    """Named view of an observation ``(..., OBS_SIZE)``; raises ``ValueError`` for another shape."""
+    obs = np.asarray(obs)
+    if obs.shape[-1:] != (OBS_SIZE,):
+        raise ValueError(f"an observation has {OBS_SIZE} entries in its last axis, got shape {obs.shape}")
+    columns = [obs[..., j] for j in range(OBS_LAST_ACTION)]
+    if obs.ndim == 1:
+        columns = [float(v) for v in columns]
+    return Observation(*columns, last_action=obs[..., OBS_ACTION])
