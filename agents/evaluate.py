@@ -243,13 +243,11 @@ def _fin_work(info: dict, i: int, obs: np.ndarray, config, energy_weight: float)
     if energy_weight > 0:
         return float(-info["reward_energy"][i] / energy_weight)
     from pectoral_gym.averaging import mean_fin_power
+    from pectoral_gym.envs.observation import OBS_ACTION
 
-    ranges = config.ranges
     params = config.params
     work = 0.0
-    for fin in range(2):
-        code = np.asarray(obs[11 + 4 * fin:15 + 4 * fin], dtype=float)
-        beat = ranges[:, 0] + 0.5 * (code + 1.0) * (ranges[:, 1] - ranges[:, 0])
+    for beat in config.decode(np.asarray(obs[OBS_ACTION], dtype=float).reshape(2, 4)):
         work += mean_fin_power(beat[1], beat[2], beat[3], params.fin_span, params.fin_drag_constant)
     return work * config.control_period
 

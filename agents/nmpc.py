@@ -42,6 +42,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from agents.fin_map import FinMap
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
@@ -171,8 +172,6 @@ class NMPCController:
 
     def __init__(self, config: EnvConfig, settings: NMPCSettings | None = None,
                  scaling: ScalingFunctions | str | Path | None = None, **overrides):
-        from agents.baselines import FinMap
-
         self.config = config
         base = settings or NMPCSettings()
         self.settings = NMPCSettings(**{**base.__dict__, **overrides}) if overrides else base

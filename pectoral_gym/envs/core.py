@@ -171,6 +171,17 @@ class EnvConfig:
         code = np.where(width > 0, 2.0 * (np.asarray(beat) - r[:, 0]) / np.where(width > 0, width, 1.0) - 1.0, 0.0)
         return np.clip(code, -1.0, 1.0)
 
+    def decode(self, code: np.ndarray) -> np.ndarray:
+        """Fin pattern(s) ``(..., 4)`` of normalised action entries ``(..., 4)``: the env's own action mapping.
+
+        Entries are clipped to [-1, 1] and mapped linearly onto the ranges, as
+        :func:`pectoral_gym.envs.tasks.apply_actions` does; ``decode(encode(beat))``
+        returns ``beat`` for a pattern inside the ranges.
+        """
+        r = self.ranges
+        x = np.clip(np.asarray(code, dtype=np.float64), -1.0, 1.0)
+        return np.minimum(r[:, 0] + 0.5 * (x + 1.0) * (r[:, 1] - r[:, 0]), r[:, 1])
+
 
 class EnvCore:
     """``n`` fish environments on one batched model: reset, step, and the arrays they fill.
