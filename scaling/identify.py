@@ -35,7 +35,7 @@ from tqdm.auto import tqdm
 
 from pectoral_gym.averaging import averaged_body_accel
 from pectoral_gym.kfunctions import FEATURES, FORMAT, K_NAMES, ScalingFunctions
-from pectoral_gym.params import FishParams, coefficient_vector
+from pectoral_gym.params import FishParams, body_coefficients
 from scaling.grids import Grid, draw_off_grid
 from scaling.nmpc import (
     NmpcResult,
@@ -228,14 +228,14 @@ def predicted_turning(velocities: np.ndarray, forcing: np.ndarray, k: np.ndarray
     solve started at the full model's steady state ``velocities`` (so on the
     same turning branch). NaN where it fails or the fish does not turn.
     """
-    coef = coefficient_vector(params)[:6]
-    masses = np.array([params.m1, params.m2, params.J3])
+    body = body_coefficients(params)
+    masses = np.array([body.m1, body.m2, body.J3])
     amplitude = np.zeros(len(velocities)) if oscillation is None else np.asarray(oscillation, dtype=np.float64)
     out = np.full((len(velocities), 2), np.nan)
     for i, (v0, f) in enumerate(zip(velocities, k * forcing, strict=True)):
         if not (np.all(np.isfinite(v0)) and np.all(np.isfinite(f))):
             continue
-        sol = optimize.root(lambda v, f=f, a=amplitude[i]: averaged_body_accel(*v, *f, *coef, a), v0,
+        sol = optimize.root(lambda v, f=f, a=amplitude[i]: averaged_body_accel(*v, *f, *body, a), v0,
                             method="hybr", tol=1e-12)
         # hybr can stop with "no further improvement" at a converged point; judge by the residual instead
         residual = np.max(np.abs(sol.fun) / (np.abs(f) / masses + 1e-300))

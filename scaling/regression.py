@@ -27,7 +27,7 @@ from scipy.interpolate import make_interp_spline
 
 from pectoral_gym.averaging import averaged_body_accel
 from pectoral_gym.kfunctions import FEATURES, ScalingFunctions
-from pectoral_gym.params import FishParams, coefficient_vector
+from pectoral_gym.params import FishParams, body_coefficients
 
 __all__ = [
     "Fit",
@@ -240,8 +240,8 @@ def sensitivity_weights(
     [rad/s] of the oscillation-averaged yaw damping (``None``: the paper's).
     """
     velocities = np.asarray(velocities, dtype=np.float64)
-    coef = coefficient_vector(params)[:6]
-    masses = np.array([params.m1, params.m2, params.J3])
+    body = body_coefficients(params)
+    masses = np.array([body.m1, body.m2, body.J3])
     weights = np.empty((len(velocities), 3))
     amplitude = np.zeros(len(velocities)) if oscillation is None else np.asarray(oscillation, dtype=np.float64)
     for i, v in enumerate(velocities):
@@ -251,8 +251,8 @@ def sensitivity_weights(
             up, down = v.copy(), v.copy()
             up[k] += h
             down[k] -= h
-            plus = averaged_body_accel(*up, 0.0, 0.0, 0.0, *coef, amplitude[i])
-            minus = averaged_body_accel(*down, 0.0, 0.0, 0.0, *coef, amplitude[i])
+            plus = averaged_body_accel(*up, 0.0, 0.0, 0.0, *body, amplitude[i])
+            minus = averaged_body_accel(*down, 0.0, 0.0, 0.0, *body, amplitude[i])
             jac[:, k] = (np.array(plus) - np.array(minus)) / (2 * h)
         if not coupled:
             jac = np.diag(np.diag(jac))
