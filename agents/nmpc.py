@@ -147,7 +147,7 @@ class NMPCController:
             dx, dy = (o.x - p.x) / self.dt, (o.y - p.y) / self.dt
             velocity = np.array([math.cos(mid) * dx + math.sin(mid) * dy,
                                  -math.sin(mid) * dx + math.cos(mid) * dy, dpsi / self.dt])
-        state = np.array([o.x, o.y, psi, *velocity])
+        state = np.array([o.x, o.y, psi, *velocity])  # the STATE_* layout of pectoral_gym.symbolic
         ref = np.array(o.target_in_tank())
         vref = np.array(o.target_velocity_in_tank()) if self.track else np.zeros(2)
         return state, ref, vref
