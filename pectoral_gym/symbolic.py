@@ -22,12 +22,21 @@ except ImportError as err:  # pragma: no cover - exercised only without the nmpc
     ) from err
 
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.params import FishParams
+from pectoral_gym.params import FishParams, body_coefficients
 
 __all__ = [
+    "STATE_SIZE", "STATE_POSITION", "STATE_PSI", "STATE_VELOCITY",
     "bessel_j1_sx", "bspline_basis_sx", "scaling_sx", "averaged_forcing_sx", "oscillating_square_mean_sx",
-    "yaw_oscillation_sx", "combined_yaw_oscillation_sx", "body_accel_sx", "averaged_rhs_sx",
+    "yaw_oscillation_sx", "combined_yaw_oscillation_sx", "body_accel_sx", "body_rhs_sx", "averaged_rhs_sx",
+    "mean_fin_power_sx", "rk4_sx", "named_symbols",
 ]
+
+# The state of the symbolic model, ``(X, Y, psi, vx, vy, omega)``: pose in the tank frame, then the
+# body-frame velocities (eq. 19), the order of pectoral_gym.models' state rows.
+STATE_SIZE = 6
+STATE_POSITION = slice(0, 2)
+STATE_PSI = 2
+STATE_VELOCITY = slice(3, 6)
 
 _OSCILLATION_FLOOR = 1e-9  # rad/s: keeps omega / A finite when two mirrored fins cancel
 _J1_TERMS = 18  # same truncation as averaging.bessel_j1 (machine precision for |x| <= pi)
@@ -195,8 +204,7 @@ def body_accel_sx(v, forcing, params: FishParams, smoothing: float = 0.0, yaw_os
             (:func:`oscillating_square_mean_sx`).
     """
     vx, vy, omega = v[0], v[1], v[2]
-    m1, m2, j3 = params.m1, params.m2, params.J3
-    c1, c2, c4 = params.c1, params.c2, params.c4
+    m1, m2, j3, c1, c2, c4 = body_coefficients(params)
     if smoothing > 0.0:
         eps2 = smoothing * smoothing
         speed = ca.sqrt(vx * vx + vy * vy + eps2)
@@ -214,6 +222,20 @@ def body_accel_sx(v, forcing, params: FishParams, smoothing: float = 0.0, yaw_os
     return ca.vertcat(dvx, dvy, dom)
 
 
+def body_rhs_sx(state, forcing, params: FishParams, smoothing: float = 0.0, yaw_oscillation=None):
+    """Time derivative of ``state = (X, Y, psi, vx, vy, omega)`` under the fin forcing ``(f_x, f_y, tau)``.
+
+    The tank-frame kinematics of eq. (19) and the body accelerations of
+    :func:`body_accel_sx` (whose ``smoothing`` and ``yaw_oscillation`` these are).
+    """
+    psi = state[STATE_PSI]
+    vx, vy, omega = (state[i] for i in range(STATE_VELOCITY.start, STATE_VELOCITY.stop))
+    accel = body_accel_sx([vx, vy, omega], forcing, params, smoothing, yaw_oscillation)
+    x_dot = vx * ca.cos(psi) - vy * ca.sin(psi)  # eq. (19), kinematics
+    y_dot = vx * ca.sin(psi) + vy * ca.cos(psi)
+    return ca.vertcat(x_dot, y_dot, omega, accel)
+
+
 def averaged_rhs_sx(state, beats, params: FishParams, scaling: ScalingFunctions | None, smoothing: float = 0.0):
     """Time derivative of ``state = (X, Y, psi, vx, vy, omega)`` under the averaged model (eqs. 19, 25).
 
@@ -229,11 +251,50 @@ def averaged_rhs_sx(state, beats, params: FishParams, scaling: ScalingFunctions 
         scaling: Scaling functions, or ``None`` for K = 1.
         smoothing: See :func:`body_accel_sx`.
     """
-    psi, vx, vy = state[2], state[3], state[4]
     right = averaged_forcing_sx([beats[i] for i in range(4)], 1.0, params, scaling)
     left = averaged_forcing_sx([beats[i] for i in range(4, 8)], -1.0, params, scaling)
     oscillation = combined_yaw_oscillation_sx([beats[i] for i in range(4)], [beats[i] for i in range(4, 8)], scaling)
-    accel = body_accel_sx([state[3], state[4], state[5]], right + left, params, smoothing, oscillation)
-    x_dot = vx * ca.cos(psi) - vy * ca.sin(psi)  # eq. (19), kinematics
-    y_dot = vx * ca.sin(psi) + vy * ca.cos(psi)
-    return ca.vertcat(x_dot, y_dot, state[5], accel)
+    return body_rhs_sx(state, right + left, params, smoothing, oscillation)
+
+
+def mean_fin_power_sx(amplitude, period, ratio, params: FishParams):
+    """Mean hydrodynamic power one fin delivers to the water [W], as :func:`pectoral_gym.averaging.mean_fin_power`.
+
+    ``k S_p gA^3 (w1^2 + w2^2) / T_p`` from eq. (14) with the stroke rates
+    ``w1 = pi (zeta + 1) / T_p`` and ``w2 = w1 / zeta`` (docs/model.md, Sec. 3.5):
+    cubic in the amplitude, so ``mean_fin_power_sx(1.0, ...)`` is the factor of ``gA^3``.
+    """
+    w1 = math.pi * (ratio + 1.0) / period
+    w2 = w1 / ratio
+    return params.fin_drag_constant * params.fin_span * amplitude**3 * (w1 * w1 + w2 * w2) / period
+
+
+def named_symbols(sizes):
+    """One ``SX`` column symbol per field of the NamedTuple ``sizes`` (field -> length), as the same NamedTuple.
+
+    For a packed NLP vector with named parts: ``ca.vertcat(*symbols)`` is the
+    packed symbol, and the numbers go in the same order (``np.concatenate``
+    of the same NamedTuple filled with values).
+    """
+    return type(sizes)(*(ca.SX.sym(name, int(size)) for name, size in zip(sizes._fields, sizes, strict=True)))
+
+
+def rk4_sx(rhs, x, u, h, steps: int = 1):
+    """``steps`` classical Runge-Kutta steps of size ``h`` of ``dx/dt = rhs(x, u)``, ``u`` held constant.
+
+    Args:
+        rhs: Callable ``(x, u) -> dx/dt`` (a ``ca.Function`` or a Python function of expressions).
+        x: Initial state (expression or numbers).
+        u: Whatever ``rhs`` takes as its second argument, passed through unchanged.
+        h: Step size [s].
+        steps: Number of steps (>= 1).
+    """
+    if int(steps) < 1:
+        raise ValueError(f"steps must be >= 1, got {steps!r}")
+    for _ in range(int(steps)):
+        k1 = rhs(x, u)
+        k2 = rhs(x + 0.5 * h * k1, u)
+        k3 = rhs(x + 0.5 * h * k2, u)
+        k4 = rhs(x + h * k3, u)
+        x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return x

@@ -3,7 +3,8 @@
 :func:`identify` runs the stages, timing each:
 
 1. reference runs of the full model on every grid pattern (:mod:`scaling.reference`);
-2. one NMPC per pattern (:mod:`scaling.nmpc`), spread over worker processes,
+2. one NMPC per pattern (:mod:`scaling.nmpc`), spread over worker processes
+   (:mod:`scaling.nmpc_batch`),
    each solution checked against the algebraic oracle; unidentifiable K values
    (forcing near zero, failed reference or solver) are flagged with a reason
    and left out of that K's fit;
@@ -21,8 +22,6 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import multiprocessing as mp
-import os
 import platform
 import time
 from dataclasses import dataclass, field
@@ -30,25 +29,23 @@ from importlib import metadata as importlib_metadata
 from typing import Any
 
 import numpy as np
-from scipy import optimize
-from tqdm.auto import tqdm
 
-from pectoral_gym.averaging import averaged_body_accel
 from pectoral_gym.kfunctions import FEATURES, FORMAT, K_NAMES, ScalingFunctions
-from pectoral_gym.params import FishParams, coefficient_vector
+from pectoral_gym.params import FishParams
 from scaling.grids import Grid, draw_off_grid
 from scaling.nmpc import (
     NmpcResult,
     NmpcSettings,
-    ScalingNmpc,
     algebraic_scaling,
     auto_substeps,
     unscaled_forcing,
 )
+from scaling.nmpc_batch import solve_nmpc_batch
 from scaling.reference import ReferenceRuns, reference_runs
-from scaling.regression import Fit, SplineFit, fit_oscillation, fit_spline, select_model, sensitivity_weights
+from scaling.regression import Fit, SplineFit, fit_oscillation, fit_spline, select_model
+from scaling.response import predicted_turning, sensitivity_weights
 
-__all__ = ["IdentificationResult", "holdout_patterns", "identify", "predicted_turning", "solve_nmpc_batch"]
+__all__ = ["IdentificationResult", "holdout_patterns", "identify"]
 
 YAW_DAMPING = ("oscillation", "paper")
 SWAY = "base"  # K_fy multiplies the fin's force magnitude, not f_hy_avg = base cos(bias) (pectoral_gym.kfunctions)
@@ -92,66 +89,6 @@ class IdentificationResult:
     splines: dict[str, SplineFit] = field(default_factory=dict)
     chosen: str = "polynomial"
     comparison: dict[str, dict] = field(default_factory=dict)
-
-
-_WORKER: ScalingNmpc | None = None
-
-
-def _init_worker(params: FishParams, settings: NmpcSettings, velocities: np.ndarray,
-                 oscillation: np.ndarray | None) -> None:
-    global _WORKER
-    _WORKER = ScalingNmpc(params, settings, velocities, oscillation)
-
-
-def _solve_chunk(chunk: list[tuple[int, np.ndarray, np.ndarray, float]]) -> list[tuple[int, NmpcResult]]:
-    out, guess = [], None
-    for i, v_ref, forcing, oscillation in chunk:
-        result = _WORKER.solve(v_ref, forcing, guess, oscillation)  # warm start from the neighbouring pattern
-        guess = result.k if result.success and np.all(np.isfinite(result.k)) else None
-        out.append((i, result))
-    return out
-
-
-def solve_nmpc_batch(
-    velocities: np.ndarray,
-    forcing: np.ndarray,
-    params: FishParams,
-    settings: NmpcSettings,
-    jobs: int = 0,
-    progress: bool = True,
-    oscillation: np.ndarray | None = None,
-) -> list[NmpcResult]:
-    """One NMPC per pattern, over ``jobs`` processes (0: all cores; 1: in this process).
-
-    ``oscillation``: per-pattern yaw-oscillation amplitudes [rad/s] for the
-    oscillation-averaged yaw damping, ``None`` for the paper's damping.
-    """
-    n = len(velocities)
-    jobs = jobs or os.cpu_count() or 1
-    amplitude = np.zeros(n) if oscillation is None else np.asarray(oscillation, dtype=np.float64)
-    tasks = [(i, velocities[i], forcing[i], float(amplitude[i]))
-             for i in range(n) if np.all(np.isfinite(velocities[i]))]
-    results: list[NmpcResult | None] = [None] * n
-    bar = tqdm(total=n, desc="NMPC per pattern", unit="pattern", disable=not progress)
-    size = max(1, min(32, math.ceil(len(tasks) / (4 * jobs))))
-    chunks = [tasks[k : k + size] for k in range(0, len(tasks), size)]
-    if jobs == 1:
-        _init_worker(params, settings, velocities, oscillation)
-        for chunk in chunks:
-            for i, r in _solve_chunk(chunk):
-                results[i] = r
-            bar.update(len(chunk))
-    else:
-        ctx = mp.get_context("fork" if "fork" in mp.get_all_start_methods() else "spawn")
-        with ctx.Pool(jobs, initializer=_init_worker, initargs=(params, settings, velocities, oscillation)) as pool:
-            for done in pool.imap_unordered(_solve_chunk, chunks):
-                for i, r in done:
-                    results[i] = r
-                bar.update(len(done))
-    bar.update(n - bar.n)
-    bar.close()
-    failed = NmpcResult(np.full(3, np.nan), math.nan, False, "no reference (full model did not settle)", math.nan)
-    return [r if r is not None else failed for r in results]
 
 
 def _flag(
@@ -216,32 +153,6 @@ def holdout_patterns(grid: Grid, n: int, seed: int) -> np.ndarray:
     low[1] = max(low[1], min(high[1], math.radians(5.0)))
     low[3] = max(low[3], min(high[3], 1.25))
     return draw_off_grid(np.random.default_rng([seed, 1]), n, low, high, grid, np.unique(grid.patterns[:, 2]))
-
-
-def predicted_turning(velocities: np.ndarray, forcing: np.ndarray, k: np.ndarray, params: FishParams,
-                      oscillation: np.ndarray | None = None) -> np.ndarray:
-    """``(n, 2)`` turning radius and period of the averaged model's steady state under scaling values ``k``.
-
-    The equilibrium of eqs. (19)-(20) with the scaled forcing ``k * forcing``
-    (and the yaw-oscillation amplitudes ``oscillation`` of the
-    oscillation-averaged damping, ``None`` for the paper's) is found by a root
-    solve started at the full model's steady state ``velocities`` (so on the
-    same turning branch). NaN where it fails or the fish does not turn.
-    """
-    coef = coefficient_vector(params)[:6]
-    masses = np.array([params.m1, params.m2, params.J3])
-    amplitude = np.zeros(len(velocities)) if oscillation is None else np.asarray(oscillation, dtype=np.float64)
-    out = np.full((len(velocities), 2), np.nan)
-    for i, (v0, f) in enumerate(zip(velocities, k * forcing, strict=True)):
-        if not (np.all(np.isfinite(v0)) and np.all(np.isfinite(f))):
-            continue
-        sol = optimize.root(lambda v, f=f, a=amplitude[i]: averaged_body_accel(*v, *f, *coef, a), v0,
-                            method="hybr", tol=1e-12)
-        # hybr can stop with "no further improvement" at a converged point; judge by the residual instead
-        residual = np.max(np.abs(sol.fun) / (np.abs(f) / masses + 1e-300))
-        if residual < 1e-8 and abs(sol.x[2]) > 0:
-            out[i] = math.hypot(sol.x[0], sol.x[1]) / abs(sol.x[2]), 2.0 * math.pi / abs(sol.x[2])
-    return out
 
 
 _BASIS_MULTIPLICATIONS = 18  # kfunctions.bspline_basis: 6 divisions and 12 products per axis
@@ -433,7 +344,7 @@ def identify(
                 "seed": seed,
                 "selection": "fewest terms with CV error <= target, else within one standard error of the best",
                 "target": fit_target,
-                "weights": "relative speed / yaw-rate error per unit K error (scaling.regression.sensitivity_weights)",
+                "weights": "relative speed / yaw-rate error per unit K error (scaling.response.sensitivity_weights)",
                 "fits": {name: fits[name].summary() for name in K_NAMES},
             },
             "spline": ({name: splines[name].summary() for name in K_NAMES} if "spline" in forms

@@ -34,19 +34,33 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
+from typing import Any, NamedTuple
 
 import casadi as ca
 import numpy as np
 
 from pectoral_gym.averaging import EXACT, averaged_body_accel, averaged_fin_forcing
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.params import FishParams, coefficient_vector
-from pectoral_gym.symbolic import body_accel_sx
+from pectoral_gym.params import FishParams, body_coefficients, coefficient_vector
+from pectoral_gym.symbolic import body_accel_sx, named_symbols, rk4_sx
 
 __all__ = ["NmpcSettings", "NmpcResult", "ScalingNmpc", "algebraic_scaling", "auto_substeps", "unscaled_forcing"]
 
 _UNIT_K = ScalingFunctions.unit()
 _UNIT_BASE_K = ScalingFunctions(_UNIT_K.powers, _UNIT_K.coefs, sway="base")
+_OSCILLATION_FLOOR = 1e-12  # rad/s: keeps omega / A finite; A = 0 is then the paper's damping to ~1e-24
+
+
+class _Parameters(NamedTuple):
+    """The parameter vector of the NLP, packed in this order (symbols or numbers)."""
+
+    v0: Any  # (3,) initial (vx, vy, omega)
+    v_ref: Any  # (3,) reference (vx, vy, omega), eq. (33)
+    forcing: Any  # (3,) unscaled averaged forcing of the pattern
+    oscillation: Any  # (1,) yaw-oscillation amplitude [rad/s]
+
+
+_PARAMETER_SIZES = _Parameters(v0=3, v_ref=3, forcing=3, oscillation=1)
 
 
 @dataclass(frozen=True)
@@ -131,10 +145,10 @@ def algebraic_scaling(
     ``oscillation``: ``(n,)`` yaw-oscillation amplitudes [rad/s] for the
     oscillation-averaged yaw damping; ``None`` for the paper's damping.
     """
-    c = coefficient_vector(params)
-    masses = np.array([params.m1, params.m2, params.J3])
+    body = body_coefficients(params)
+    masses = np.array([body.m1, body.m2, body.J3])
     amplitude = np.zeros(len(velocities)) if oscillation is None else np.asarray(oscillation, dtype=np.float64)
-    drift = np.array([averaged_body_accel(*v, 0.0, 0.0, 0.0, *c[:6], a)
+    drift = np.array([averaged_body_accel(*v, 0.0, 0.0, 0.0, *body, a)
                       for v, a in zip(velocities, amplitude, strict=True)]).reshape(-1, 3)
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(forcing != 0.0, -drift * masses / forcing, np.nan)
@@ -177,32 +191,24 @@ class ScalingNmpc:
         u = ca.SX.sym("u", 3)
         forcing = ca.SX.sym("forcing", 3)
         amplitude = ca.SX.sym("A")
-        h = settings.sampling / self.substeps
 
-        def rhs(state):
-            # eqs. (30)-(32); the floor keeps omega / A finite, and A = 0 is the paper's damping to ~1e-24
-            return body_accel_sx(state, u * forcing, params, yaw_oscillation=ca.fmax(amplitude, 1e-12))
+        def rhs(state, inputs):
+            k, f, a = inputs  # eqs. (30)-(32): the scaling values multiply the forcing
+            return body_accel_sx(state, k * f, params, yaw_oscillation=ca.fmax(a, _OSCILLATION_FLOOR))
 
-        state = v
-        for _ in range(self.substeps):  # RK4 over one sampling interval
-            k1 = rhs(state)
-            k2 = rhs(state + h / 2 * k1)
-            k3 = rhs(state + h / 2 * k2)
-            k4 = rhs(state + h * k3)
-            state = state + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
-        step = ca.Function("step", [v, u, forcing, amplitude], [state])
+        end = rk4_sx(rhs, v, (u, forcing, amplitude), settings.sampling / self.substeps, self.substeps)
+        step = ca.Function("step", [v, u, forcing, amplitude], [end])  # one sampling interval
 
-        inputs = ca.SX.sym("K", 3, n_samples)
-        p = ca.SX.sym("p", 10)  # v0, v_ref, forcing, yaw-oscillation amplitude
-        v0, v_ref, f = p[0:3], p[3:6], p[6:9]
+        inputs = ca.SX.sym("K", 3, n_samples)  # column k: u over sample k
+        p = named_symbols(_PARAMETER_SIZES)
         cost = 0.0
-        x = v0
+        x = p.v0
         for k in range(n_samples):
-            x = step(x, inputs[:, k], f, p[9])
-            e = x - v_ref  # eq. (33)
+            x = step(x, inputs[:, k], p.forcing, p.oscillation)
+            e = x - p.v_ref  # eq. (33)
             cost += settings.q * settings.sampling * ca.dot(e, e)  # eq. (34), stage cost at the sample
-        cost += settings.q_terminal * ca.dot(x - v_ref, x - v_ref)  # eq. (35)
-        nlp = {"x": ca.vec(inputs), "p": p, "f": cost}
+        cost += settings.q_terminal * ca.dot(x - p.v_ref, x - p.v_ref)  # eq. (35)
+        nlp = {"x": ca.vec(inputs), "p": ca.vertcat(*p), "f": cost}
         opts = {
             "ipopt.print_level": 0,
             "print_time": False,
@@ -228,11 +234,11 @@ class ScalingNmpc:
         """
         guess = np.ones(3) if guess is None else np.asarray(guess, dtype=np.float64)
         x0 = np.tile(np.where(np.isfinite(guess), guess, 1.0), self._n_samples)
-        p = np.concatenate([v_ref, v_ref, forcing, [oscillation]])
+        p = np.concatenate([np.ravel(x) for x in _Parameters(v_ref, v_ref, forcing, oscillation)])
         try:
             sol = self._solver(x0=x0, p=p)
             stats = self._solver.stats()
-            inputs = np.array(sol["x"]).reshape(self._n_samples, 3)
+            inputs = np.array(sol["x"]).reshape(self._n_samples, 3)  # ca.vec stacks the columns: row k = sample k
             return NmpcResult(
                 k=inputs[0].copy(),
                 spread=float(np.max(np.ptp(inputs, axis=0))),

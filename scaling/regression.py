@@ -10,7 +10,7 @@ or, if none does, is within one standard error of the best candidate's (the
 one-standard-error rule): a simpler form wins unless a richer one is clearly
 better on held-out patterns.
 
-Weights: :func:`sensitivity_weights` turns an error in ``K_i`` into the
+Weights: :func:`scaling.response.sensitivity_weights` turns an error in ``K_i`` into the
 relative error it causes in the steady-state velocity it drives (a
 linearisation of eq. 20), so the fit minimises the predicted velocity error
 rather than treating every K value alike.
@@ -19,15 +19,12 @@ rather than treating every K value alike.
 from __future__ import annotations
 
 import itertools
-import math
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import make_interp_spline
 
-from pectoral_gym.averaging import averaged_body_accel
 from pectoral_gym.kfunctions import FEATURES, ScalingFunctions
-from pectoral_gym.params import FishParams, coefficient_vector
 
 __all__ = [
     "Fit",
@@ -41,7 +38,6 @@ __all__ = [
     "fit_polynomial",
     "monomial_powers",
     "select_model",
-    "sensitivity_weights",
 ]
 
 # Candidate feature subsets (indices into FEATURES: bias, amplitude, period, ratio, inv_period, inv_ratio).
@@ -214,57 +210,6 @@ def select_model(
     threshold = max(best.cv_rmse + best.cv_se, target)
     chosen = min((f for f in candidates if f.cv_rmse <= threshold), key=lambda f: (len(f.coefs), f.cv_rmse))
     return chosen, candidates
-
-
-def sensitivity_weights(
-    velocities: np.ndarray, forcing: np.ndarray, params: FishParams, floor: float = 1e-3, coupled: bool = False,
-    oscillation: np.ndarray | None = None,
-) -> np.ndarray:
-    """``(n, 3)`` relative error of speed or yaw rate per unit error in ``(K_fx, K_fy, K_m)``.
-
-    Linearising eqs. (19)-(20) about the steady state ``v``: an error ``dK_j``
-    adds ``dK_j forcing_j / m_j`` to component ``j`` of the acceleration and
-    moves the steady state by ``dv = -A^-1 e_j dK_j forcing_j / m_j``, ``A`` the
-    Jacobian of the body dynamics (by central differences; it includes the
-    Munk moment ``(m1 - m2) vx vy / J3``, which makes the yaw rate very
-    sensitive where the fin moment is small). The weight is the larger of the
-    relative changes of the speed and of the yaw rate, the quantities the
-    turning radius and period (eq. 29) are made of. ``floor`` [m/s, rad/s]
-    keeps the weights finite near rest.
-
-    With ``coupled=False`` (default) only the diagonal of ``A`` is kept (each
-    K acts on its own velocity component through that component's damping);
-    the coupled weights are very large wherever the Munk moment nearly
-    balances the yaw damping, and fits weighted by them validated worse
-    (docs/scaling.md). ``oscillation``: per-pattern yaw-oscillation amplitudes
-    [rad/s] of the oscillation-averaged yaw damping (``None``: the paper's).
-    """
-    velocities = np.asarray(velocities, dtype=np.float64)
-    coef = coefficient_vector(params)[:6]
-    masses = np.array([params.m1, params.m2, params.J3])
-    weights = np.empty((len(velocities), 3))
-    amplitude = np.zeros(len(velocities)) if oscillation is None else np.asarray(oscillation, dtype=np.float64)
-    for i, v in enumerate(velocities):
-        jac = np.empty((3, 3))
-        for k in range(3):
-            h = 1e-7 * max(abs(v[k]), floor)
-            up, down = v.copy(), v.copy()
-            up[k] += h
-            down[k] -= h
-            plus = averaged_body_accel(*up, 0.0, 0.0, 0.0, *coef, amplitude[i])
-            minus = averaged_body_accel(*down, 0.0, 0.0, 0.0, *coef, amplitude[i])
-            jac[:, k] = (np.array(plus) - np.array(minus)) / (2 * h)
-        if not coupled:
-            jac = np.diag(np.diag(jac))
-        try:
-            response = -np.linalg.solve(jac, np.diag(np.asarray(forcing[i]) / masses))  # column j: dv per unit dK_j
-        except np.linalg.LinAlgError:
-            response = np.full((3, 3), np.inf)
-        speed = max(math.hypot(v[0], v[1]), floor)
-        d_speed = (v[0] * response[0] + v[1] * response[1]) / speed**2
-        d_omega = response[2] / max(abs(v[2]), floor)
-        weights[i] = np.maximum(np.abs(d_speed), np.abs(d_omega))
-    return np.minimum(weights, 1e6)
 
 
 # --------------------------------------------------------------------------- tensor-product cubic splines

@@ -36,10 +36,9 @@ from tqdm import tqdm
 from pectoral_gym import __version__
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.kfunctions import ScalingFunctions, default_scaling_path
-from pectoral_gym.models import AveragedModel, FishModel, FullModel
 from pectoral_gym.params import FishParams
-from pectoral_gym.steady import common_period, steady_state_batch
 from scaling import plots as rendering
+from scaling.comparison import REST, fin_pattern, label, make_model, simulate_xy, steady_pair, summarize
 from scaling.grids import GRIDS, Grid, GridError, draw_off_grid
 
 __all__ = [
@@ -49,11 +48,7 @@ __all__ = [
     "TABLE4",
     "TARGETS",
     "main",
-    "relative_error",
     "sampling_box",
-    "simulate_xy",
-    "steady_pair",
-    "summarize",
     "validate",
 ]
 
@@ -91,96 +86,6 @@ TARGETS = {
     "sweep_speed_max": 0.02,
 }
 QUICK = {"n_single": 6, "n_two": 4, "frequencies": (0.5, 1.0, 2.0), "table4": 4}
-
-
-def relative_error(approx, exact) -> np.ndarray:
-    """``|approx - exact| / |exact|`` elementwise; NaN where either is NaN or ``exact`` is 0."""
-    approx = np.asarray(approx, dtype=np.float64)
-    exact = np.asarray(exact, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        err = np.abs(approx - exact) / np.abs(exact)
-    return np.where(exact == 0, np.nan, err)
-
-
-def summarize(errors, labels) -> dict[str, Any]:
-    """Median, 90th percentile and worst of ``errors`` (NaNs skipped), naming the worst label."""
-    errors = np.asarray(errors, dtype=np.float64)
-    ok = np.isfinite(errors)
-    if not np.any(ok):
-        return {"n": 0, "median": None, "p90": None, "worst": None, "worst_pattern": None}
-    idx = np.flatnonzero(ok)
-    worst = idx[int(np.argmax(errors[idx]))]
-    return {
-        "n": int(idx.size),
-        "median": float(np.median(errors[idx])),
-        "p90": float(np.percentile(errors[idx], 90)),
-        "worst": float(errors[worst]),
-        "worst_pattern": labels[worst],
-    }
-
-
-def label(beats: np.ndarray) -> str:
-    """``"R(90, 22, 1, 4) L(rest)"``: both fins of one fish in the paper's units."""
-    parts = []
-    for side, beat in zip("RL", beats, strict=True):
-        if beat[1] == 0:
-            parts.append(f"{side}(rest)")
-        else:
-            parts.append(f"{side}({math.degrees(beat[0]):.4g}, {math.degrees(beat[1]):.4g}, "
-                         f"{beat[2]:.4g}, {beat[3]:.4g})")
-    return " ".join(parts)
-
-
-def _fin(g0_deg: float, ga_deg: float, period: float, ratio: float) -> np.ndarray:
-    return np.array([math.radians(g0_deg), math.radians(ga_deg), period, ratio])
-
-
-REST = _fin(90.0, 0.0, 1.0, 1.0)
-
-
-def _model(kind: str, n: int, params: FishParams, scaling: ScalingFunctions) -> FishModel:
-    return FullModel(n, params) if kind == "full" else AveragedModel(n, params, scaling=scaling)
-
-
-def _steady(kind: str, beats: np.ndarray, params: FishParams, scaling: ScalingFunctions) -> np.ndarray:
-    """``(n, 5)`` vx, vy, omega, radius, period (NaN when not turning), one batch per common window."""
-    windows = np.array([common_period([b[2] for b in fins if b[1] > 0] or [1.0]) for fins in beats])
-    out = np.full((len(beats), 5), np.nan)
-    for window in np.unique(np.round(windows, 9)):
-        idx = np.flatnonzero(np.abs(windows - window) < 1e-9)
-        for i, s in zip(idx, steady_state_batch(_model(kind, idx.size, params, scaling), beats[idx]), strict=True):
-            out[i] = (s.vx, s.vy, s.omega, np.nan if s.radius is None else s.radius,
-                      np.nan if s.period is None else s.period)
-    return out
-
-
-def steady_pair(beats: np.ndarray, scaling: ScalingFunctions, params: FishParams | None = None) -> dict[str, Any]:
-    """Steady states of both models and their relative errors for fish patterns ``(n, 2, 4)``."""
-    params = params or FishParams()
-    full = _steady("full", beats, params, scaling)
-    avg = _steady("averaged", beats, params, scaling)
-    speed_full, speed_avg = np.hypot(full[:, 0], full[:, 1]), np.hypot(avg[:, 0], avg[:, 1])
-    return {
-        "full": {"vx": full[:, 0], "vy": full[:, 1], "omega": full[:, 2], "speed": speed_full,
-                 "radius": full[:, 3], "period": full[:, 4]},
-        "averaged": {"vx": avg[:, 0], "vy": avg[:, 1], "omega": avg[:, 2], "speed": speed_avg,
-                     "radius": avg[:, 3], "period": avg[:, 4]},
-        # The turning radius has no sign: a fish circling the other way would score well on it alone.
-        "direction_flip": (np.sign(avg[:, 2]) != np.sign(full[:, 2])) & (np.abs(full[:, 2]) > 1e-9),
-        "radius_error": relative_error(avg[:, 3], full[:, 3]),
-        "period_error": relative_error(avg[:, 4], full[:, 4]),
-        "speed_error": relative_error(speed_avg, speed_full),
-    }
-
-
-def simulate_xy(model: FishModel, beats: np.ndarray, duration: float, step: float = 0.5) -> np.ndarray:
-    """Positions ``(n, k + 1, 2)`` every ``step`` seconds from rest at the origin, all fish in one batch."""
-    model.reset(right=beats[:, 0], left=beats[:, 1])
-    steps = max(1, round(duration / step))
-    path = [model.state[:, :2].copy()]
-    for _ in range(steps):
-        path.append(model.advance(duration / steps)[:, :2].copy())
-    return np.stack(path, axis=1)
 
 
 def _grid_from_metadata(meta: dict[str, Any]) -> Grid | None:
@@ -247,7 +152,7 @@ def _num(value) -> float | None:
 
 def table4_section(scaling: ScalingFunctions, params: FishParams, count: int = len(TABLE4)) -> dict[str, Any]:
     """Table 4 patterns on the left fin (right fin at rest)."""
-    beats = np.array([[REST, _fin(*p)] for p, _, _ in TABLE4[:count]])
+    beats = np.array([[REST, fin_pattern(*p)] for p, _, _ in TABLE4[:count]])
     res = steady_pair(beats, scaling, params)
     rows = _rows(beats, res, ("radius", "period"))
     for row, (_, paper_r, paper_t) in zip(rows, TABLE4, strict=False):
@@ -280,7 +185,7 @@ def single_fin_section(scaling: ScalingFunctions, params: FishParams, n: int, rn
 def sweep_section(scaling: ScalingFunctions, params: FishParams, frequencies=SWEEP_FREQUENCIES) -> dict:
     """Forward swimming, both fins ``(95 deg, 15 deg, 1/f, 4)`` (Fig. 4)."""
     g0, ga, zeta = SWEEP_PATTERN
-    beats = np.array([[_fin(g0, ga, 1.0 / f, zeta)] * 2 for f in frequencies])
+    beats = np.array([[fin_pattern(g0, ga, 1.0 / f, zeta)] * 2 for f in frequencies])
     res = steady_pair(beats, scaling, params)
     grid = _grid_from_metadata(scaling.metadata)
     low, high = grid.bounds() if grid is not None else (EnvConfig().ranges[:, 0], EnvConfig().ranges[:, 1])
@@ -302,7 +207,7 @@ def two_fin_section(scaling: ScalingFunctions, params: FishParams, n: int, rng: 
     turning = np.abs(res["full"]["omega"]) >= MIN_TURN_RATE
     for key in ("radius_error", "period_error"):
         res[key] = np.where(turning, res[key], np.nan)
-    paths = {kind: simulate_xy(_model(kind, n, params, scaling), beats, duration) for kind in ("full", "averaged")}
+    paths = {kind: simulate_xy(make_model(kind, n, params, scaling), beats, duration) for kind in ("full", "averaged")}
     gap = np.linalg.norm(paths["averaged"][:, -1] - paths["full"][:, -1], axis=1)
     travelled = np.sum(np.linalg.norm(np.diff(paths["full"], axis=1), axis=2), axis=1)
     rows = _rows(beats, res, ("radius", "period", "speed"))
@@ -416,8 +321,8 @@ def validate(
 
 
 def _plots(scaling: ScalingFunctions, params: FishParams, results: dict[str, Any], out: Path) -> list[str]:
-    beats = np.array([[REST, _fin(*p)] for p in FIG5_PATTERNS])
-    paths = {kind: simulate_xy(_model(kind, len(beats), params, scaling), beats, FIG5_DURATION)
+    beats = np.array([[REST, fin_pattern(*p)] for p in FIG5_PATTERNS])
+    paths = {kind: simulate_xy(make_model(kind, len(beats), params, scaling), beats, FIG5_DURATION)
              for kind in ("full", "averaged")}
     low, high, _, _ = sampling_box(scaling)
     files = [

@@ -14,6 +14,7 @@ from pectoral_gym.dynamics import body_rhs
 from pectoral_gym.kfunctions import FEATURES, ScalingFunctions
 from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
 from pectoral_gym.steady import steady_state
+from scaling import comparison as sc
 from scaling import validate as sv
 from scaling.grids import GRIDS
 from scaling.plots import identification_points
@@ -42,16 +43,16 @@ def exact_k(beat: FinBeat, params: FishParams) -> tuple[float, float, float]:
 
 
 def test_relative_error_and_summary_on_hand_made_numbers():
-    err = sv.relative_error([1.1, 0.9, 2.0, np.nan, -3.0], [1.0, 1.0, 0.0, 1.0, -2.0])
+    err = sc.relative_error([1.1, 0.9, 2.0, np.nan, -3.0], [1.0, 1.0, 0.0, 1.0, -2.0])
     np.testing.assert_allclose(err[[0, 1, 4]], [0.1, 0.1, 0.5])
     assert np.isnan(err[2]) and np.isnan(err[3])  # exact 0 and missing values are undefined
 
-    s = sv.summarize([0.01, 0.03, 0.02, np.nan, 0.10], ["a", "b", "c", "d", "e"])
+    s = sc.summarize([0.01, 0.03, 0.02, np.nan, 0.10], ["a", "b", "c", "d", "e"])
     assert s["n"] == 4
     assert s["median"] == pytest.approx(0.025)  # mean of 0.02 and 0.03
     assert s["p90"] == pytest.approx(0.03 + 0.7 * (0.10 - 0.03))  # linear interpolation at rank 0.9 * 3 = 2.7
     assert s["worst"] == pytest.approx(0.10) and s["worst_pattern"] == "e"
-    assert sv.summarize([np.nan], ["x"])["n"] == 0
+    assert sc.summarize([np.nan], ["x"])["n"] == 0
 
 
 def test_quick_cli_writes_report_json_and_plots(tmp_path, capsys):
@@ -117,8 +118,8 @@ def test_exact_k_gives_vanishing_table4_error_on_the_mirrored_fin():
 
 def test_left_and_right_fin_mirror_in_both_models():
     pattern = np.array([math.radians(72.5), math.radians(17.3), 0.83, 3.4])
-    beats = np.array([[pattern, sv.REST], [sv.REST, pattern]])
-    res = sv.steady_pair(beats, constant_k(0.9, 1.1, 0.6))
+    beats = np.array([[pattern, sc.REST], [sc.REST, pattern]])
+    res = sc.steady_pair(beats, constant_k(0.9, 1.1, 0.6))
     for model in ("full", "averaged"):
         r = res[model]
         assert r["omega"][0] > 0 > r["omega"][1]
@@ -148,8 +149,8 @@ def test_sampling_box_from_grid_metadata_and_draws_off_grid():
 
 def test_simulate_xy_symmetric_fins_swim_straight_ahead():
     fin = np.array([math.radians(95), math.radians(15), 1.0, 4.0])
-    model = sv._model("full", 1, FishParams(), ScalingFunctions.unit())
-    path = sv.simulate_xy(model, np.array([[fin, fin]]), 20.0, step=1.0)
+    model = sc.make_model("full", 1, FishParams(), ScalingFunctions.unit())
+    path = sc.simulate_xy(model, np.array([[fin, fin]]), 20.0, step=1.0)
     assert path.shape == (1, 21, 2)
     assert np.all(path[0, 0] == 0)
     assert path[0, -1, 0] > 0.3  # about 5 cm/s once up to speed
@@ -184,10 +185,10 @@ def test_report_says_when_k_was_identified_with_other_parameters():
 
 def test_a_turn_in_the_other_direction_is_caught_although_the_radius_has_no_sign():
     # K_m = -1 reverses the right fin's averaged moment: the averaged fish circles right, the full one left.
-    beats = np.array([[sv._fin(60, 20, 1.0, 3), sv.REST]])
-    res = sv.steady_pair(beats, constant_k(1.0, 1.0, -1.0))
+    beats = np.array([[sc.fin_pattern(60, 20, 1.0, 3), sc.REST]])
+    res = sc.steady_pair(beats, constant_k(1.0, 1.0, -1.0))
     assert res["full"]["omega"][0] > 0 > res["averaged"]["omega"][0]
     assert res["direction_flip"].tolist() == [True]
     flips = sv._flips(res, ["p"])
     assert flips == {"count": 1, "n": 1, "share": 1.0, "patterns": ["p"]}
-    assert not sv.steady_pair(beats, constant_k(1.0, 1.0, 0.5))["direction_flip"][0]
+    assert not sc.steady_pair(beats, constant_k(1.0, 1.0, 0.5))["direction_flip"][0]

@@ -4,12 +4,21 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from pectoral_gym.averaging import EXACT, averaged_fin_forcing
+from pectoral_gym.averaging import EXACT, averaged_fin_forcing, mean_fin_power
 from pectoral_gym.dynamics import body_accel
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.models import AveragedModel
-from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
-from pectoral_gym.symbolic import averaged_forcing_sx, averaged_rhs_sx, bessel_j1_sx, body_accel_sx
+from pectoral_gym.params import FinBeat, FishParams, body_coefficients, coefficient_vector
+from pectoral_gym.symbolic import (
+    averaged_forcing_sx,
+    averaged_rhs_sx,
+    bessel_j1_sx,
+    body_accel_sx,
+    body_rhs_sx,
+    mean_fin_power_sx,
+    named_symbols,
+    rk4_sx,
+)
 
 PARAMS = FishParams()
 
@@ -48,8 +57,7 @@ def test_forcing_equals_numba_averaged_forcing(side):
 @pytest.mark.parametrize("v", [(0.05, 0.01, 0.3), (-0.02, 0.015, -0.2), (0.03, -0.02, 0.0)])
 def test_body_accel_equals_numba(v):
     forcing = (0.01, -0.004, 2e-4)
-    c = coefficient_vector(PARAMS)
-    ref = body_accel(*v, *forcing, *c[:6])
+    ref = body_accel(*v, *forcing, *body_coefficients(PARAMS))
     got = np.array(ca.DM(body_accel_sx(list(v), list(forcing), PARAMS))).ravel()
     np.testing.assert_allclose(got, ref, rtol=1e-12, atol=1e-15)
     smooth = np.array(ca.DM(body_accel_sx(list(v), list(forcing), PARAMS, smoothing=1e-7))).ravel()
@@ -74,6 +82,63 @@ def test_rk4_of_symbolic_rhs_tracks_averaged_model(rk4_symbolic):
     f = ca.Function("f", [x], [averaged_rhs_sx(x, beats, PARAMS, scaling)])
     state = rk4_symbolic(f, start, 1e-3, 2000)  # RK4, 2 s
     np.testing.assert_allclose(state, model.state[0], rtol=1e-6, atol=1e-9)
+
+
+def test_body_rhs_is_tank_frame_kinematics_plus_body_accelerations():
+    # heading 90 deg: surge moves the fish along +Y, sway (to the left, +vy) along -X (eq. 19)
+    state = [0.3, 0.2, math.pi / 2, 0.05, 0.01, -0.2]
+    forcing = [0.01, -0.004, 2e-4]
+    got = np.array(ca.DM(body_rhs_sx(state, forcing, PARAMS))).ravel()
+    np.testing.assert_allclose(got[:3], [-0.01, 0.05, -0.2], atol=1e-15)
+    np.testing.assert_array_equal(got[3:], np.array(ca.DM(body_accel_sx(state[3:], forcing, PARAMS))).ravel())
+
+
+@pytest.mark.parametrize("steps", [1, 7])
+def test_rk4_is_the_fourth_order_taylor_polynomial_on_a_linear_ode(steps):
+    # dx/dt = lambda x: one classical RK4 step multiplies x by 1 + z + z^2/2 + z^3/6 + z^4/24, z = lambda h
+    lam, h = -1.7, 0.13
+    z = lam * h
+    x = ca.SX.sym("x")
+    end = ca.Function("end", [x], [rk4_sx(lambda y, rate: rate * y, x, lam, h, steps)])
+    assert float(end(2.0)) == pytest.approx(2.0 * (1 + z + z**2 / 2 + z**3 / 6 + z**4 / 24) ** steps, rel=1e-14)
+    # a constant rate is integrated exactly, and the input is passed through unchanged
+    assert float(ca.DM(rk4_sx(lambda y, u: u[0] - u[1], 1.0, (0.5, 0.2), h, steps))) == pytest.approx(
+        1.0 + 0.3 * h * steps, rel=1e-15)
+    with pytest.raises(ValueError, match="steps"):
+        rk4_sx(lambda y, u: y, x, None, h, 0)
+
+
+@pytest.mark.parametrize("deg", [(90, 20, 1.0, 3), (60, 27, 0.7, 1.4), (120, 5, 2.0, 4.8)])
+def test_mean_fin_power_equals_numba_and_the_cycle_mean_of_eq_14(deg):
+    beat = FinBeat.from_degrees(*deg)
+    ref = mean_fin_power(beat.amplitude, beat.period, beat.ratio, PARAMS.fin_span, PARAMS.fin_drag_constant)
+    assert float(mean_fin_power_sx(beat.amplitude, beat.period, beat.ratio, PARAMS)) == pytest.approx(ref, rel=1e-14)
+    a = ca.SX.sym("a")
+    power = ca.Function("p", [a], [mean_fin_power_sx(a, beat.period, beat.ratio, PARAMS)])
+    assert float(power(beat.amplitude)) == pytest.approx(ref, rel=1e-14)
+    # independently: the fin moment of eq. (14) gives the power (3 k S_p / 4)|g'|^3; average it over the
+    # two strokes of eq. (21), g' = gA w sin(w t) for t in [0, pi / w], w = w1 (power) and w1 / zeta (recovery)
+    w1 = math.pi * (beat.ratio + 1) / beat.period
+    work = 0.0
+    for w in (w1, w1 / beat.ratio):
+        t = np.linspace(0.0, math.pi / w, 20001)
+        rate = beat.amplitude * w * np.sin(w * t)
+        work += np.trapezoid(0.75 * PARAMS.fin_drag_constant * PARAMS.fin_span * np.abs(rate) ** 3, t)
+    assert ref == pytest.approx(work / beat.period, rel=1e-7)
+
+
+def test_named_symbols_pack_in_field_order():
+    from typing import NamedTuple
+
+    class Layout(NamedTuple):
+        first: int
+        second: int
+
+    parts = named_symbols(Layout(first=2, second=3))
+    assert isinstance(parts, Layout) and parts.first.shape == (2, 1) and parts.second.shape == (3, 1)
+    packed = ca.vertcat(*parts)
+    picks = ca.Function("f", [packed], [parts.second[0], parts.first[1]])
+    assert [float(v) for v in picks([10, 11, 12, 13, 14])] == [12.0, 11.0]
 
 
 def _spline_scaling():

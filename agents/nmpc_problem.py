@@ -1,0 +1,340 @@
+"""The optimisation problem of the NMPC baseline (:mod:`agents.nmpc`): settings, packed layouts, CasADi NLP.
+
+Model and inputs. The prediction model is the cycle-averaged model of
+:mod:`pectoral_gym.symbolic` (eq. 25 with the identified scaling functions
+``ScalingFunctions.load()``, body dynamics eqs. 19-20). The inputs are the amplitude and the bias of
+each fin, held constant over each control interval. The period and the ratio are fixed at the
+shortest period and the largest ratio of the env's ranges: the averaged thrust,
+``k pi^2 (zeta^2 - 1) / (zeta T_p^2) gA J1(gA) sin g0``, grows monotonically as ``T_p`` falls and
+``zeta`` rises, so these values give the most control authority for a given amplitude, and the
+shortest period makes a fin latch a new pattern soonest (a fin switches only at a stroke turning
+point). The amplitude then sets the thrust (a continuous, monotone input) and the bias its
+direction, so nothing the problem needs is lost, and two fewer inputs per fin keep the solve fast.
+
+Latching delay. A new command takes effect at the fin's next turning point. The first interval
+is therefore integrated with the previous command for ``latch_delay`` seconds (default: the mean
+wait, ``(zeta^2 + 1) T_p / (2 (zeta + 1)^2)``, for a random phase of the stroke), then with the new one.
+
+Cost (per interval ``k`` of the horizon, position ``p_k`` at its end):
+``w_distance |p_k - r_k|`` (``r_k`` the goal, or the reference point extrapolated with its
+velocity for ``track``; the env's own tracking penalty), a terminal ``w_terminal |p_N - r_N|``,
+the fin work ``energy_weight sum_fins P(gA) dt`` (the env's energy term, mean fin power of
+:func:`pectoral_gym.symbolic.mean_fin_power_sx`), input changes ``w_change |du|^2`` (normalised by the
+ranges) and a soft wall constraint ``w_wall sum max(0, margin - distance of nose/tail to wall)^2``.
+
+Packed layouts. The model state is :mod:`pectoral_gym.symbolic`'s ``(X, Y, psi, vx, vy, omega)``
+(``STATE_*``); the inputs of one interval are a :class:`FinInputs`; the NLP's parameter vector is a
+:class:`ProblemParameters`; its decision vector is packed by :func:`pack_decision`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, NamedTuple
+
+import casadi as ca
+import numpy as np
+
+from agents.fin_map import FinMap
+from pectoral_gym.envs.core import EnvConfig
+from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
+from pectoral_gym.symbolic import (
+    STATE_POSITION,
+    STATE_PSI,
+    STATE_SIZE,
+    STATE_VELOCITY,
+    averaged_forcing_sx,
+    body_rhs_sx,
+    combined_yaw_oscillation_sx,
+    mean_fin_power_sx,
+    named_symbols,
+    rk4_sx,
+)
+
+__all__ = [
+    "NMPCSettings", "FinInputs", "AMPLITUDES", "ProblemParameters", "GAIN_THRUST", "GAIN_YAW", "NMPCProblem",
+    "to_z", "to_u", "pack_decision", "identified_bias_range",
+]
+
+_AMPLITUDE_FLOOR = 1e-3  # rad: keeps sqrt(gA^2) differentiable; a 0.06 deg stroke is no stroke
+# Fin forcing of one interval: force and moment on the body (f_x, f_y, tau), then the yaw-oscillation amplitude.
+_FORCE, _OSCILLATION, _FORCING_SIZE = slice(0, 3), 3, 4
+
+
+@dataclass(frozen=True)
+class NMPCSettings:
+    """Settings of the NMPC baseline (fixed once the problem is built).
+
+    Attributes:
+        horizon: Number of control intervals predicted.
+        substeps: RK4 steps per control interval (the yaw damping needs steps below ~0.1 s).
+        latch_delay: Seconds the previous command still acts in the first interval; ``None``: the
+            mean wait until a stroke turning point.
+        w_distance: Weight of the distance to the goal/reference at each interval end [1/m].
+        w_terminal: Extra weight of the distance at the end of the horizon [1/m].
+        w_heading: Weight of ``1 - cos(bearing of the target)`` at each interval end.
+        heading_scale: Distance [m] below which the heading term fades out.
+        w_change: Weight of squared input changes between intervals (inputs scaled to [0, 1]).
+        w_reach: Weight of the terminal reachability term: how far the target lies inside the fish's
+            turning circle at the end of the horizon [1/m]. The horizon is far shorter than a loop
+            (tens of seconds), so without it the fish circles a target it passed closely.
+        turn_radius: Smallest turning radius assumed by the reachability term [m] (the full model
+            turns no tighter than about 0.23 m; see docs/benchmark.md).
+        w_wall: Weight of the squared wall violation [1/m^2].
+        wall_margin: Keep nose and tail this far from the walls [m].
+        energy_weight: Weight of the fin work [1/J]; ``None``: the env's ``energy_weight``.
+        smoothing: Speed scale [m/s] smoothing ``|V|``, ``alpha`` and ``|omega|`` at rest
+            (:func:`pectoral_gym.symbolic.body_accel_sx`).
+        idle_amplitude: A plan whose mean amplitude is below this fraction of the largest one is
+            compared with solves from fresh guesses (straight, turn left, turn right): stopping is a
+            common local minimum when every way to the target first leads away from it.
+        adapt_rate: Rate of the online correction of the thrust and yaw-moment gains from the measured
+            motion (0: no adaptation). The averaged model with placeholder or imperfect K, or a
+            randomised fish, turns and swims at other rates than predicted; the gains absorb that.
+        gain_bounds: Bounds of the two gains.
+        max_iter: IPOPT iteration limit per solve.
+        max_cpu_time: IPOPT time limit per solve [s].
+        velocity: ``"obs"``: body velocities from the observation (the envs report their means over
+            the control period); ``"difference"``: mean velocities over the last control period from
+            the change of pose, for observation sources that give instantaneous velocities (the full
+            model's swing within each fin beat and alias when sampled once per period); ``"auto"``:
+            ``"difference"`` on the full model, ``"obs"`` on the averaged model.
+        observer: Turn those period-mean velocities into current ones: the model's velocities at the
+            end of the last period plus the offset between the measured and the model's period means.
+    """
+
+    horizon: int = 10
+    substeps: int = 6
+    latch_delay: float | None = None
+    w_distance: float = 1.0
+    w_terminal: float = 2.0
+    w_heading: float = 0.3
+    heading_scale: float = 0.05
+    w_change: float = 0.02
+    w_reach: float = 2.0
+    turn_radius: float = 0.25
+    w_wall: float = 1000.0
+    wall_margin: float = 0.03
+    energy_weight: float | None = None
+    smoothing: float = 1e-3
+    idle_amplitude: float = 0.2
+    adapt_rate: float = 0.3
+    gain_bounds: tuple[float, float] = (0.1, 3.0)
+    max_iter: int = 60
+    max_cpu_time: float = 0.35
+    velocity: str = "obs"
+    observer: bool = True
+
+    def __post_init__(self) -> None:
+        if int(self.horizon) < 1 or int(self.substeps) < 1 or int(self.max_iter) < 1:
+            raise ValueError("horizon, substeps and max_iter must be >= 1")
+        if self.velocity not in ("auto", "obs", "difference"):
+            raise ValueError(f"velocity must be 'auto', 'obs' or 'difference', got {self.velocity!r}")
+        if self.latch_delay is not None and not self.latch_delay >= 0:
+            raise ValueError(f"latch_delay must be >= 0 s or None, got {self.latch_delay!r}")
+        if not self.max_cpu_time > 0:
+            raise ValueError(f"max_cpu_time must be > 0 s, got {self.max_cpu_time!r}")
+
+
+class FinInputs(NamedTuple):
+    """The inputs of one control interval, in their packed order (a row of a plan, a column of ``Z``).
+
+    Physical inputs ``u`` hold amplitudes [rad]; decision variables ``z`` (:func:`to_z`) hold their
+    squares instead. Biases [rad] in both.
+    """
+
+    amplitude_right: Any
+    amplitude_left: Any
+    bias_right: Any
+    bias_left: Any
+
+
+_N_U = len(FinInputs._fields)
+AMPLITUDES = slice(0, 2)  # the amplitude entries of a packed FinInputs (both fins)
+GAIN_THRUST, GAIN_YAW = 0, 1  # entries of ProblemParameters.gain
+
+
+class ProblemParameters(NamedTuple):
+    """The NLP's parameter vector, packed in this order (symbols or numbers)."""
+
+    x0: Any  # (6,) current state (X, Y, psi, vx, vy, omega)
+    ref: Any  # (2,) goal or reference point, tank frame [m]
+    vref: Any  # (2,) its velocity [m/s] (zero for goal)
+    z_prev: Any  # (4,) command still being latched, as decision variables
+    gain: Any  # (2,) online corrections of the thrust and the yaw moment
+
+
+_PARAMETER_SIZES = ProblemParameters(x0=STATE_SIZE, ref=2, vref=2, z_prev=_N_U, gain=2)
+
+
+def to_z(u: np.ndarray) -> np.ndarray:
+    """Physical inputs (amplitudes, biases) -> decision variables (squared amplitudes, biases)."""
+    z = np.array(u, dtype=np.float64, copy=True)
+    z[AMPLITUDES] = np.maximum(z[AMPLITUDES], _AMPLITUDE_FLOOR) ** 2
+    return z
+
+
+def to_u(z: np.ndarray) -> np.ndarray:
+    """Decision variables -> physical inputs."""
+    u = np.array(z, dtype=np.float64, copy=True)
+    u[AMPLITUDES] = np.sqrt(np.maximum(u[AMPLITUDES], 0.0))
+    return u
+
+
+def pack_decision(z: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """The NLP's decision vector from inputs ``z (4, horizon)`` and states ``x (6, horizon + 1)`` (column-major)."""
+    return np.concatenate([np.ravel(z, order="F"), np.ravel(x, order="F")])
+
+
+def identified_bias_range(bias_range: tuple[float, float], scaling: ScalingFunctions | None) -> tuple[float, float]:
+    """The env's bias range, narrowed to the biases the scaling functions were identified on (if known).
+
+    The K are identified on a grid (``metadata["grid"]["bias_deg"]``); outside it a polynomial K
+    extrapolates and can be far off (e.g. a negative ``K_fy``), a spline K is clamped (held
+    constant), and in both cases the optimiser would exploit a model that is not identified there.
+    """
+    low, high = bias_range
+    grid = (scaling.metadata.get("grid") or {}) if scaling is not None else {}
+    biases = grid.get("bias_deg") if isinstance(grid, dict) else None
+    if biases:
+        g_low, g_high = math.radians(min(biases)), math.radians(max(biases))
+        if max(low, g_low) <= min(high, g_high):
+            low, high = max(low, g_low), min(high, g_high)
+    return float(low), float(high)
+
+
+class NMPCProblem:
+    """The NLP of the NMPC baseline, built once, parametric in a :class:`ProblemParameters`.
+
+    Args:
+        config: The environment settings (control period, parameters, ranges, task).
+        settings: The NMPC settings.
+        fins: The action codec (fixed period and ratio).
+        scaling: Scaling functions of the prediction model, or ``None`` for K = 1.
+        z_low: Lower bounds of the decision variables of one interval ``(4,)``.
+        z_high: Their upper bounds.
+
+    Attributes:
+        solver: The CasADi ``nlpsol`` (IPOPT).
+        rollout: ``(x0, Z, z_prev, gain) -> X (6, horizon + 1)``, the model's trajectory under ``Z``.
+        interval: ``(x0, z_applied, z_prev, gain) -> (end state, mean body velocities)`` over one
+            control period (trapezoid over the RK4 steps).
+        lbx, ubx: Bounds of the decision vector.
+        horizon: Number of control intervals.
+        n_delay_steps: RK4 steps of the first interval under the previous command.
+    """
+
+    def __init__(self, config: EnvConfig, settings: NMPCSettings, fins: FinMap, scaling: ScalingFunctions | None,
+                 z_low: np.ndarray, z_high: np.ndarray):
+        s, params = settings, config.params
+        dt = config.control_period
+        n, m = int(s.horizon), int(s.substeps)
+        h = dt / m
+        zeta, period = fins.ratio, fins.period
+        delay = s.latch_delay if s.latch_delay is not None else (zeta**2 + 1) * period / (2 * (zeta + 1) ** 2)
+        n_delay = min(m, int(round(delay / h)))
+
+        # Inputs: squared amplitudes (thrust ~ gA J1(gA) ~ gA^2 / 2 has a non-zero gradient at rest in
+        # gA^2, not in gA) and biases. The forcing is constant over an interval: computed once per interval.
+        u_sym = ca.SX.sym("u", _N_U)
+        u = FinInputs(*(u_sym[i] for i in range(_N_U)))
+        beat_r = ca.vertcat(u.bias_right, ca.sqrt(u.amplitude_right), period, zeta)
+        beat_l = ca.vertcat(u.bias_left, ca.sqrt(u.amplitude_left), period, zeta)
+        right = averaged_forcing_sx(beat_r, 1.0, params, scaling)
+        left = averaged_forcing_sx(beat_l, -1.0, params, scaling)
+        oscillation = combined_yaw_oscillation_sx(beat_r, beat_l, scaling)  # equal periods: fins beat in phase
+        oscillating = oscillation is not None
+        oscillation = oscillation if oscillating else 0.0
+        forcing = ca.Function("forcing", [u_sym], [ca.vertcat(right + left, oscillation)])
+        x = ca.SX.sym("x", STATE_SIZE)
+        f = ca.SX.sym("f", _FORCING_SIZE)
+        rhs = ca.Function("rhs", [x, f], [
+            body_rhs_sx(x, f[_FORCE], params, s.smoothing, f[_OSCILLATION] if oscillating else None)])
+        step = ca.Function("rk4", [x, f], [rk4_sx(rhs, x, f, h)])
+
+        power_per_cubed_amplitude = mean_fin_power_sx(1.0, period, zeta, params)  # P(gA) = P(1) gA^3
+        energy_weight = config.energy_weight if s.energy_weight is None else s.energy_weight
+        width = np.where(z_high > z_low, z_high - z_low, 1.0)
+        half = 0.5 * params.body_length
+        turn_radius = float(s.turn_radius)
+
+        p = named_symbols(_PARAMETER_SIZES)
+        Z = ca.SX.sym("Z", _N_U, n)
+        X = ca.SX.sym("X", STATE_SIZE, n + 1)
+        thrust, yaw = p.gain[GAIN_THRUST], p.gain[GAIN_YAW]
+        gains = ca.vertcat(thrust, thrust, yaw, 1.0)  # on (f_x, f_y, tau); the yaw-oscillation amplitude is not scaled
+        f_prev = gains * forcing(p.z_prev)
+        g = [X[:, 0] - p.x0]
+        x_roll = [p.x0]
+        cost = 0.0
+        for k in range(n):
+            f_k = gains * forcing(Z[:, k])
+            xk, rk = X[:, k], x_roll[-1]
+            for j in range(m):
+                fj = f_prev if (k == 0 and j < n_delay) else f_k
+                xk, rk = step(xk, fj), step(rk, fj)
+            g.append(X[:, k + 1] - xk)
+            x_roll.append(rk)
+            pos, psi = X[STATE_POSITION, k + 1], X[STATE_PSI, k + 1]
+            error = p.ref + p.vref * (k + 1) * dt - pos
+            dist = ca.sqrt(ca.sumsqr(error) + 1e-6)
+            cost += s.w_distance * dist
+            if k == n - 1:
+                cost += s.w_terminal * dist
+                # A target closer than 2 R |sin e| lies inside a turning circle of radius R and cannot be
+                # reached by turning towards it (d^2 < 2 R |y_body|); end the horizon where it can.
+                lateral = -ca.sin(psi) * error[0] + ca.cos(psi) * error[1]
+                inside = 2.0 * turn_radius * ca.sqrt(lateral**2 + 1e-6) - ca.sumsqr(error)
+                cost += s.w_reach * ca.fmax(0.0, inside) / turn_radius
+            # 1 - cos(bearing of the target): turns the fish towards a target behind it, which a
+            # distance cost over a short horizon cannot (turning first moves the fish away)
+            facing = (ca.cos(psi) * error[0] + ca.sin(psi) * error[1]) / ca.sqrt(ca.sumsqr(error) + s.heading_scale**2)
+            cost += s.w_heading * (1.0 - facing)
+            z_k = FinInputs(*(Z[i, k] for i in range(_N_U)))
+            cost += energy_weight * power_per_cubed_amplitude * (
+                z_k.amplitude_right ** 1.5 + z_k.amplitude_left ** 1.5) * dt  # gA^3 = (gA^2)^1.5
+            prev = p.z_prev if k == 0 else Z[:, k - 1]
+            cost += s.w_change * ca.sumsqr((Z[:, k] - prev) / width)
+            for sign in (1.0, -1.0):  # nose, tail
+                px = X[0, k + 1] + sign * half * ca.cos(psi)
+                py = X[1, k + 1] + sign * half * ca.sin(psi)
+                for gap in (px, TANK_LENGTH - px, py, TANK_WIDTH - py):
+                    cost += s.w_wall * ca.fmax(0.0, s.wall_margin - gap) ** 2
+        nlp = {"x": ca.vertcat(ca.vec(Z), ca.vec(X)), "f": cost, "g": ca.vertcat(*g), "p": ca.vertcat(*p)}
+        options = {
+            "print_time": False,
+            "error_on_fail": False,
+            "show_eval_warnings": False,  # NaN at rejected trial points is handled by IPOPT's line search
+            "ipopt": {
+                "print_level": 0, "sb": "yes", "max_iter": int(s.max_iter), "max_cpu_time": float(s.max_cpu_time),
+                "tol": 1e-5, "acceptable_tol": 1e-3, "acceptable_iter": 5, "mu_strategy": "adaptive",
+            },
+        }
+        self.solver = ca.nlpsol("nmpc", "ipopt", nlp, options)
+        self.horizon = n
+        # State bounds keep trial points of the solver where RK4 stays finite (physical values are far inside).
+        x_bound = np.tile([np.inf, np.inf, np.inf, 1.0, 1.0, 3.0], n + 1)
+        self.lbx = pack_decision(np.tile(z_low, n), -x_bound)
+        self.ubx = pack_decision(np.tile(z_high, n), x_bound)
+        self.rollout = ca.Function("rollout", [p.x0, Z, p.z_prev, p.gain], [ca.horzcat(*x_roll)])
+        # One interval from x0 under the applied command: end state and mean body velocities (trapezoid).
+        z_applied = ca.SX.sym("z_applied", _N_U)
+        xk, f_applied = p.x0, gains * forcing(z_applied)
+        v_sum = 0.5 * p.x0[STATE_VELOCITY]
+        for j in range(m):
+            xk = step(xk, f_prev if j < n_delay else f_applied)
+            v_sum += xk[STATE_VELOCITY] if j < m - 1 else 0.5 * xk[STATE_VELOCITY]
+        self.interval = ca.Function("interval", [p.x0, z_applied, p.z_prev, p.gain], [xk, v_sum / m])
+        self.n_delay_steps = n_delay
+
+    def inputs(self, decision: np.ndarray) -> np.ndarray:
+        """The inputs ``Z (4, horizon)`` of a decision vector (the inverse of :func:`pack_decision`'s first part)."""
+        return np.asarray(decision).ravel()[: _N_U * self.horizon].reshape((_N_U, self.horizon), order="F")
+
+    @staticmethod
+    def parameters(x0: np.ndarray, ref: np.ndarray, vref: np.ndarray, z_prev: np.ndarray,
+                   gain: np.ndarray) -> np.ndarray:
+        """The packed parameter vector (the order of :class:`ProblemParameters`)."""
+        return np.concatenate([np.ravel(v) for v in ProblemParameters(x0, ref, vref, z_prev, gain)])
