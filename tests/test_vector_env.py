@@ -133,7 +133,7 @@ def test_vector_reset_seeds_and_mask():
     np.testing.assert_array_equal(a, b)
     c, _ = venv.reset(seed=[None, 11, None])
     np.testing.assert_array_equal(c[1], a[1])
-    before = venv.core.obs.copy()
+    before = venv.last_observations
     d, _ = venv.reset(options={"reset_mask": np.array([False, True, False])})
     np.testing.assert_array_equal(d[[0, 2]], before[[0, 2]])
     with pytest.raises(ValueError):
