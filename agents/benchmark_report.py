@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.results import json_default
+from agents.results import json_default, save_figure
 
 __all__ = ["plot_report", "to_markdown", "write_outputs"]
 
@@ -113,12 +113,7 @@ def plot_report(report: dict[str, Any], path: str | Path) -> Path:
         ax.grid(axis="y", alpha=0.3)
     axes[0].set_ylim(0, 1.05)
     axes[0].legend(fontsize=8)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
-    return path
+    return save_figure(fig, path)
 
 
 def write_outputs(report: dict[str, Any], out: str | Path, plots: bool = True) -> list[Path]:

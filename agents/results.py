@@ -16,7 +16,8 @@ import numpy as np
 
 from agents.metrics import MetricSummary, Trajectory
 
-__all__ = ["EvaluationResult", "format_table", "json_default", "jsonable", "plot_trajectories", "write_json"]
+__all__ = ["EvaluationResult", "format_table", "json_default", "jsonable", "plot_trajectories", "save_figure",
+           "write_json"]
 
 
 @dataclass
@@ -124,6 +125,13 @@ def plot_trajectories(results: EvaluationResult | list[EvaluationResult], path: 
         ax.set_xlabel("X [m]")
         ax.set_ylabel("Y [m]")
     fig.text(0.01, 0.005, "o start, x goal (shaded: goal radius); dashed: goal not reached", fontsize=7)
+    return save_figure(fig, path)
+
+
+def save_figure(fig: Any, path: str | Path) -> Path:
+    """Lay out a matplotlib figure, write it as a PNG at ``path`` (folders created), close it; returns the path."""
+    import matplotlib.pyplot as plt
+
     fig.tight_layout()
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
