@@ -249,6 +249,16 @@ def test_goal_reached_terminates_with_success():
     assert info["distance"] < 0.08
 
 
+@pytest.mark.parametrize("state", [[1.0, 0.5, 0.0], [1.0, 0.5, 0.0, 0.1, 0.0, np.nan]])
+def test_set_fish_state_refuses_bad_states(state):
+    env = PectoralFishEnv(model="averaged")
+    env.reset(seed=0)
+    before = env.fish_state
+    with pytest.raises(ValueError, match="6 finite numbers"):
+        env.set_fish_state(state)
+    np.testing.assert_array_equal(env.fish_state, before)
+
+
 def test_goal_task_start_and_goal_geometry():
     env = PectoralFishEnv(model="averaged")
     for seed in range(40):
