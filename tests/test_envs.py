@@ -90,7 +90,7 @@ def test_signature_and_documented_defaults_are_envconfigs():
 
     fields = {f.name: f.default for f in dataclasses.fields(EnvConfig)}
     parameters = inspect.signature(PectoralFishEnv).parameters
-    assert list(parameters) == [*fields, "render_mode"]
+    assert list(parameters) == ["render_mode", *fields]
     assert all(parameters[name].default == default for name, default in fields.items())
     documented = _documented_arguments()
     assert set(documented) == set(parameters)

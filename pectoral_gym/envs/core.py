@@ -22,7 +22,7 @@ from pectoral_gym.envs.observation import OBS_SIZE, OBS_VELOCITY
 from pectoral_gym.models import MODELS, REST, AveragedModel, FishModel, FullModel
 from pectoral_gym.params import FishParams
 
-__all__ = ["EnvConfig", "EnvCore", "MODELS", "TASKS", "config_parameters"]
+__all__ = ["EnvConfig", "EnvCore", "MODELS", "TASKS", "env_signature"]
 
 TASKS = {"goal": tk.GOAL, "track": tk.TRACK}
 _FIELD_NAMES = tuple(f.name for f in dataclasses.fields(FishParams))
@@ -185,10 +185,16 @@ class EnvConfig:
         return np.minimum(r[:, 0] + 0.5 * (x + 1.0) * (r[:, 1] - r[:, 0]), r[:, 1])
 
 
-def config_parameters() -> list[inspect.Parameter]:
-    """The fields of :class:`EnvConfig` as keyword-only parameters with their defaults (for env signatures)."""
-    return [inspect.Parameter(f.name, inspect.Parameter.KEYWORD_ONLY, default=f.default, annotation=f.type)
-            for f in dataclasses.fields(EnvConfig)]
+def env_signature(*parameters: inspect.Parameter) -> inspect.Signature:
+    """``(self, *parameters, *EnvConfig's fields)``: an env's signature, the settings keyword-only with their defaults.
+
+    The envs take the settings as ``**kwargs`` and forward them to :class:`EnvConfig`, so
+    its defaults are written once; this signature shows them in ``help()`` and ``inspect``.
+    """
+    settings = [inspect.Parameter(f.name, inspect.Parameter.KEYWORD_ONLY, default=f.default, annotation=f.type)
+                for f in dataclasses.fields(EnvConfig)]
+    return inspect.Signature([inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD), *parameters,
+                              *settings])
 
 
 class EnvCore:

@@ -9,7 +9,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from pectoral_gym.envs.core import EnvConfig, EnvCore, config_parameters
+from pectoral_gym.envs.core import EnvConfig, EnvCore, env_signature
 from pectoral_gym.envs.layout import (
     ACTION_SIZE,
     O_DISTANCE,
@@ -283,8 +283,5 @@ class PectoralFishEnv(gym.Env):
             self._renderer = None
 
 
-# The settings are EnvConfig's fields (one source of their defaults); show them in help() and inspect.signature.
-PectoralFishEnv.__init__.__signature__ = inspect.Signature(
-    [inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD), *config_parameters(),
-     inspect.Parameter("render_mode", inspect.Parameter.KEYWORD_ONLY, default=None, annotation="str | None")]
-)
+PectoralFishEnv.__init__.__signature__ = env_signature(
+    inspect.Parameter("render_mode", inspect.Parameter.KEYWORD_ONLY, default=None, annotation="str | None"))

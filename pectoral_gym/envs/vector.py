@@ -12,7 +12,7 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from pectoral_gym.envs.core import EnvConfig, EnvCore, config_parameters
+from pectoral_gym.envs.core import EnvConfig, EnvCore, env_signature
 from pectoral_gym.envs.layout import ACTION_SIZE, O_DISTANCE, O_REWARD, O_SUCCESS, O_TERMINATED
 from pectoral_gym.envs.observation import OBS_SIZE, OBSERVATION_STRUCTURE
 from pectoral_gym.registration import MAX_EPISODE_STEPS
@@ -49,7 +49,7 @@ class PectoralFishVectorEnv(VectorEnv):
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
-    def __init__(self, num_envs: int = 1, max_episode_steps: int = MAX_EPISODE_STEPS,
+    def __init__(self, num_envs: int = 1, *, max_episode_steps: int = MAX_EPISODE_STEPS,
                  render_mode: str | None = None, **kwargs: Any):
         if int(num_envs) < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
@@ -163,10 +163,8 @@ class PectoralFishVectorEnv(VectorEnv):
         return core.obs.copy(), out[:, O_REWARD].copy(), terminated, truncated, info
 
 
-# The settings are EnvConfig's fields (one source of their defaults); show them in help() and inspect.signature.
 _P = inspect.Parameter
-PectoralFishVectorEnv.__init__.__signature__ = inspect.Signature([
-    _P("self", _P.POSITIONAL_OR_KEYWORD), _P("num_envs", _P.POSITIONAL_OR_KEYWORD, default=1, annotation="int"),
-    _P("max_episode_steps", _P.POSITIONAL_OR_KEYWORD, default=MAX_EPISODE_STEPS, annotation="int"),
-    _P("render_mode", _P.POSITIONAL_OR_KEYWORD, default=None, annotation="str | None"), *config_parameters(),
-])
+PectoralFishVectorEnv.__init__.__signature__ = env_signature(
+    _P("num_envs", _P.POSITIONAL_OR_KEYWORD, default=1, annotation="int"),
+    _P("max_episode_steps", _P.KEYWORD_ONLY, default=MAX_EPISODE_STEPS, annotation="int"),
+    _P("render_mode", _P.KEYWORD_ONLY, default=None, annotation="str | None"))
