@@ -343,3 +343,17 @@ def test_render_without_mode_warns():
     env.reset(seed=0)
     with pytest.warns(UserWarning, match="render_mode"):
         assert env.render() is None
+
+
+def test_packed_layouts_cover_their_arrays_once():
+    from pectoral_gym.envs import layout
+
+    for prefix, size, wide in (("C_", layout.N_CFG, {"C_RANGES": 8}), ("E_", layout.N_EP, {}),
+                               ("F_", layout.N_FISH, {}), ("O_", layout.N_OUT, {})):
+        slots = []
+        for name in layout.__all__:
+            if name.startswith(prefix):
+                start = getattr(layout, name)
+                slots += range(start, start + wide.get(name, 1))
+        assert sorted(slots) == list(range(size)), prefix
+    assert layout.ACTION_SIZE == 2 * layout.FIN_ACTIONS == 8
