@@ -13,9 +13,15 @@ from pectoral_gym.envs.core import EnvConfig, EnvCore, env_signature
 from pectoral_gym.envs.layout import (
     ACTION_SIZE,
     O_DISTANCE,
+    O_ENERGY,
+    O_GOAL,
+    O_PROGRESS,
     O_REWARD,
     O_SUCCESS,
     O_TERMINATED,
+    O_TIME,
+    O_TRACKING,
+    O_WALL,
     FishConstants,
     ReferenceEllipse,
 )
@@ -250,12 +256,14 @@ class PectoralFishEnv(gym.Env):
         core = self.core
         core.step(self._action)
         o = core.out[0].tolist()
-        info = {name: o[k] for name, k in core.terms}  # the task's reward terms, in the order they are summed
-        info["distance"] = o[O_DISTANCE]
+        # A dict literal (the terms of tasks.TERMS, in order): 0.2 us per step faster than building it from TERMS.
         if self._goal:
-            info["is_success"] = o[O_SUCCESS] > 0.5
+            info = {"reward_progress": o[O_PROGRESS], "reward_goal": o[O_GOAL], "reward_wall": o[O_WALL],
+                    "reward_energy": o[O_ENERGY], "reward_time": o[O_TIME], "distance": o[O_DISTANCE],
+                    "is_success": o[O_SUCCESS] > 0.5}
         else:
-            info["tracking_error"] = o[O_DISTANCE]
+            info = {"reward_tracking": o[O_TRACKING], "reward_wall": o[O_WALL], "reward_energy": o[O_ENERGY],
+                    "distance": o[O_DISTANCE], "tracking_error": o[O_DISTANCE]}
         if self.render_mode is not None:
             self.trail.append((float(core.obs[0, OBS_X]), float(core.obs[0, OBS_Y])))
             if self.render_mode == "human":
