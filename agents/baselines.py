@@ -27,6 +27,7 @@ import numpy as np
 
 from agents.fin_map import FinMap
 from pectoral_gym.envs.core import EnvConfig
+from pectoral_gym.envs.observation import OBS_SIZE, decode
 
 __all__ = ["BASELINES", "FinMap", "HandController", "RandomController", "make_baseline"]
 
@@ -111,17 +112,18 @@ class HandController:
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Action for one observation ``(19,)``."""
         obs = np.asarray(obs, dtype=np.float64)
-        if obs.shape != (19,):
-            raise ValueError(f"obs must have shape (19,), got {obs.shape}")
-        aim_x, aim_y = obs[7], obs[8]
+        if obs.shape != (OBS_SIZE,):
+            raise ValueError(f"obs must have shape ({OBS_SIZE},), got {obs.shape}")
+        o = decode(obs)
+        aim_x, aim_y = o.target_x, o.target_y
         ref_speed = 0.0
         if self.track:  # feed forward: aim ahead of the moving reference and add its speed
-            aim_x += self.lookahead * obs[9]
-            aim_y += self.lookahead * obs[10]
-            ref_speed = math.hypot(obs[9], obs[10])
+            aim_x += self.lookahead * o.target_vx
+            aim_y += self.lookahead * o.target_vy
+            ref_speed = math.hypot(o.target_vx, o.target_vy)
         distance = math.hypot(aim_x, aim_y)
         bearing = math.atan2(aim_y, aim_x)
-        heading = math.atan2(obs[3], obs[2])
+        heading = math.atan2(o.sin_psi, o.cos_psi)
         rate = 0.0 if self._heading is None else _wrap(heading - self._heading) / self.config.control_period
         self._heading = heading
         turn = float(np.clip(self.heading_gain * bearing - self.rate_gain * rate, -1.0, 1.0))

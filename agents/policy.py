@@ -22,10 +22,9 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["ALGOS", "BatchController", "Controller", "SB3Controller", "algo_of_zip", "load_policy", "read_config"]
+from pectoral_gym.envs.observation import OBS_SIZE
 
-OBS_SIZE = 19
-ACTION_SIZE = 8
+__all__ = ["ALGOS", "BatchController", "Controller", "SB3Controller", "algo_of_zip", "load_policy", "read_config"]
 
 
 @runtime_checkable

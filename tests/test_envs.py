@@ -10,7 +10,8 @@ from gymnasium.utils.env_checker import check_env
 import pectoral_gym  # noqa: F401  (registers the ids)
 from pectoral_gym import FishParams
 from pectoral_gym.envs import PectoralFishEnv
-from pectoral_gym.envs import tasks as tk
+from pectoral_gym.params import TANK_LENGTH as TANK_X
+from pectoral_gym.params import TANK_WIDTH as TANK_Y
 
 IDS = ["PectoralFish-Averaged-v0", "PectoralFish-Full-v0"]
 TASKS = ["goal", "track"]
@@ -60,6 +61,47 @@ def test_registry_and_spaces():
         assert env.action_space == gym.spaces.Box(-1, 1, (8,), np.float32)
         assert env.observation_space == gym.spaces.Box(-np.inf, np.inf, (19,), np.float32)
         assert env.unwrapped.config.model == model
+
+
+def test_observation_structure_covers_the_observation_in_order():
+    env = gym.make("PectoralFish-Averaged-v0")
+    structure = env.unwrapped.observation_structure
+    assert list(structure) == ["position", "heading", "velocity", "target", "target_velocity", "last_action"]
+    assert sum(structure.values()) == env.observation_space.shape[0]
+    obs, _ = env.reset(seed=3)
+    blocks = np.split(obs, np.cumsum(list(structure.values()))[:-1])
+    np.testing.assert_allclose(np.hypot(*blocks[1]), 1.0, rtol=1e-6)  # (cos psi, sin psi)
+    np.testing.assert_array_equal(blocks[2], 0.0)  # at rest after a reset
+    assert np.hypot(*blocks[3]) == pytest.approx(math.dist(obs[:2], env.unwrapped.target), rel=1e-5)
+
+
+def _documented_arguments():
+    """``{name: default text}`` of the Arguments table in the env's docstring."""
+    section = PectoralFishEnv.__doc__.split("## Arguments")[1].split("##")[0]
+    rows = [line.split("|")[1:3] for line in section.splitlines() if line.strip().startswith("| ``")]
+    return {name.strip().strip("`"): default.strip() for name, default in rows}
+
+
+def test_signature_and_documented_defaults_are_envconfigs():
+    import dataclasses
+    import inspect
+
+    from pectoral_gym.envs import EnvConfig
+
+    fields = {f.name: f.default for f in dataclasses.fields(EnvConfig)}
+    parameters = inspect.signature(PectoralFishEnv).parameters
+    assert list(parameters) == ["render_mode", *fields]
+    assert all(parameters[name].default == default for name, default in fields.items())
+    documented = _documented_arguments()
+    assert set(documented) == set(parameters)
+    for name, text in documented.items():
+        default = fields.get(name)
+        if text.startswith("``"):  # a literal: None or a string
+            assert text.strip("`").strip('"') == str(default), name
+        elif text.endswith("deg"):
+            assert np.radians([float(v) for v in text[1:-5].split(",")]).tolist() == pytest.approx(default), name
+        else:
+            assert pytest.approx(default) == eval(text), name  # noqa: S307 - a number or a tuple of numbers
 
 
 @pytest.mark.parametrize("env_id", IDS)
@@ -120,7 +162,7 @@ def test_non_finite_action_raises_and_leaves_the_env_usable(bad):
     action[3] = bad
     with pytest.raises(ValueError, match="action must be finite"):
         env.step(action)
-    np.testing.assert_array_equal(env.unwrapped.core.obs[0], obs)
+    np.testing.assert_array_equal(env.unwrapped.last_observation, obs)
     env.step(np.zeros(8, np.float32))
 
 
@@ -141,7 +183,7 @@ def test_action_maps_linearly_to_the_ranges():
     env = PectoralFishEnv(model="averaged")
     env.reset(seed=0)
     env.step(np.array([-1, 1, 0, 0.5, 1, -1, 1, -1], np.float32))
-    right, left = env.core.beats[0]
+    right, left = env.fin_patterns
     np.testing.assert_allclose(right, [math.radians(45), math.radians(30), 1.25, 4.0])
     np.testing.assert_allclose(left, [math.radians(135), 0.0, 2.0, 1.0])
 
@@ -187,9 +229,8 @@ def test_averaged_scaling_none_is_accepted():
 def test_wall_contact_terminates_with_the_penalty(env_id):
     env = gym.make(env_id, wall_penalty=7.0)
     env.reset(seed=0)
-    core = env.unwrapped.core
     half = 0.5 * FishParams().body_length
-    core.model.state[0] = [tk.TANK_X - half - 0.005, 0.5, 0.0, 0.1, 0.0, 0.0]  # nose 5 mm from the wall, 0.1 m/s
+    env.unwrapped.set_fish_state([TANK_X - half - 0.005, 0.5, 0.0, 0.1, 0.0, 0.0])  # nose 5 mm from the wall, 0.1 m/s
     _, reward, terminated, truncated, info = env.step(np.zeros(8, np.float32))
     assert terminated and not truncated
     assert info["reward_wall"] == -7.0
@@ -200,13 +241,22 @@ def test_wall_contact_terminates_with_the_penalty(env_id):
 def test_goal_reached_terminates_with_success():
     env = gym.make("PectoralFish-Full-v0", goal_bonus=3.0)
     env.reset(seed=0)
-    core = env.unwrapped.core
-    x, y = core.model.state[0, :2]
-    core.ep[0, tk.E_TX], core.ep[0, tk.E_TY] = x + 0.02, y  # goal 2 cm ahead
+    x, y = env.unwrapped.fish_state[:2]
+    env.unwrapped.set_target(x + 0.02, y)  # goal 2 cm ahead
     _, reward, terminated, _, info = env.step(np.zeros(8, np.float32))
     assert terminated and info["is_success"] is True
     assert info["reward_goal"] == 3.0 and info["reward_wall"] == 0.0
     assert info["distance"] < 0.08
+
+
+@pytest.mark.parametrize("state", [[1.0, 0.5, 0.0], [1.0, 0.5, 0.0, 0.1, 0.0, np.nan]])
+def test_set_fish_state_refuses_bad_states(state):
+    env = PectoralFishEnv(model="averaged")
+    env.reset(seed=0)
+    before = env.fish_state
+    with pytest.raises(ValueError, match="6 finite numbers"):
+        env.set_fish_state(state)
+    np.testing.assert_array_equal(env.fish_state, before)
 
 
 def test_goal_task_start_and_goal_geometry():
@@ -214,10 +264,10 @@ def test_goal_task_start_and_goal_geometry():
     for seed in range(40):
         obs, _ = env.reset(seed=seed)
         x, y = obs[0], obs[1]
-        assert 0.3 <= x <= tk.TANK_X - 0.3 and 0.3 <= y <= tk.TANK_Y - 0.3
+        assert 0.3 <= x <= TANK_X - 0.3 and 0.3 <= y <= TANK_Y - 0.3
         assert np.all(obs[4:7] == 0) and np.all(obs[9:11] == 0)
-        gx, gy = env.core.target(0)
-        assert 0.2 <= gx <= tk.TANK_X - 0.2 and 0.2 <= gy <= tk.TANK_Y - 0.2
+        gx, gy = env.target
+        assert 0.2 <= gx <= TANK_X - 0.2 and 0.2 <= gy <= TANK_Y - 0.2
         assert 0.3 <= math.hypot(gx - x, gy - y) <= 1.0
         assert math.hypot(obs[7], obs[8]) == pytest.approx(math.hypot(gx - x, gy - y), rel=1e-5)
         angles, _ = env.model.fin_angles()
@@ -230,16 +280,16 @@ def test_track_task_reference_moves_at_ref_speed():
         obs, _ = env.reset(seed=seed)
         assert math.hypot(obs[7], obs[8]) <= 0.1 + 1e-6
         assert math.hypot(obs[9], obs[10]) == pytest.approx(0.05, rel=1e-5)
-        ep = env.core.ep[0]
-        assert 0.5 <= ep[tk.E_A] <= 0.8 and 0.25 <= ep[tk.E_B] <= 0.4
-        tx, ty = env.core.target(0)
-        velocity = ep[tk.E_TVX], ep[tk.E_TVY]
-        phase0 = ep[tk.E_PHASE]
+        ellipse = env.reference
+        assert 0.5 <= ellipse.a <= 0.8 and 0.25 <= ellipse.b <= 0.4
+        tx, ty = env.target
+        velocity = env.target_velocity
+        phase0 = ellipse.phase
         env.step(np.zeros(8, np.float32))
-        tx2, ty2 = env.core.target(0)
-        dphase = math.remainder(ep[tk.E_PHASE] - phase0, 2 * math.pi)
+        tx2, ty2 = env.target
+        dphase = math.remainder(env.reference.phase - phase0, 2 * math.pi)
         phi = np.linspace(phase0, phase0 + dphase, 2001)
-        speed = np.sqrt((ep[tk.E_A] * np.sin(phi)) ** 2 + (ep[tk.E_B] * np.cos(phi)) ** 2)
+        speed = np.sqrt((ellipse.a * np.sin(phi)) ** 2 + (ellipse.b * np.cos(phi)) ** 2)
         arc = abs(np.trapezoid(speed, phi))
         assert arc == pytest.approx(0.05 * 0.5, rel=1e-6)  # ref_speed * control_period along the ellipse
         assert math.hypot(tx2 - tx, ty2 - ty) == pytest.approx(0.025, rel=1e-2)
@@ -272,7 +322,7 @@ def test_domain_randomisation_per_episode_and_reproducible():
             assert abs(getattr(p, name) / getattr(base, name) - 1) <= w
         assert p.body_mass == base.body_mass
     np.testing.assert_array_equal(env.model.coef[0], pectoral_gym.params.coefficient_vector(p2))
-    assert env.core.ep[0, tk.E_LENGTH] == p2.body_length
+    assert env.fish_constants.body_length == p2.body_length
     env.reset(seed=11)
     assert env.fish_params == p1
     plain = PectoralFishEnv(model="averaged")
@@ -285,7 +335,7 @@ def test_custom_params_are_used():
     env = PectoralFishEnv(model="full", params=params)
     env.reset(seed=0)
     assert env.fish_params is params
-    assert env.core.ep[0, tk.E_LENGTH] == 0.3
+    assert env.fish_constants.body_length == 0.3
 
 
 def test_render_without_mode_warns():
@@ -293,3 +343,17 @@ def test_render_without_mode_warns():
     env.reset(seed=0)
     with pytest.warns(UserWarning, match="render_mode"):
         assert env.render() is None
+
+
+def test_packed_layouts_cover_their_arrays_once():
+    from pectoral_gym.envs import layout
+
+    for prefix, size, wide in (("C_", layout.N_CFG, {"C_RANGES": 8}), ("E_", layout.N_EP, {}),
+                               ("F_", layout.N_FISH, {}), ("O_", layout.N_OUT, {})):
+        slots = []
+        for name in layout.__all__:
+            if name.startswith(prefix):
+                start = getattr(layout, name)
+                slots += range(start, start + wide.get(name, 1))
+        assert sorted(slots) == list(range(size)), prefix
+    assert layout.ACTION_SIZE == 2 * layout.FIN_ACTIONS == 8

@@ -41,7 +41,7 @@ def test_rgb_array_shows_the_fish_at_its_pose(env_id):
     assert near(img, *behind, BODY_COLOR)  # along the heading
     across = pixel(x + 0.3 * length * math.sin(psi), y - 0.3 * length * math.cos(psi))
     assert not near(img, *across, BODY_COLOR, radius=0)  # the body is slender
-    gx, gy = env.unwrapped.core.target(0)
+    gx, gy = env.unwrapped.target
     assert near(img, *pixel(gx, gy), TARGET_COLOR)
     assert np.sum(np.all(img == FIN_COLOR, axis=-1)) > 20  # the fins are drawn
     far = pixel(x + 0.5 if x < 1.15 else x - 0.5, y)
@@ -57,7 +57,7 @@ def test_render_track_task_and_frames_change():
     second = env.render()
     assert first.shape == second.shape == (460, 920, 3)
     assert not np.array_equal(first, second)
-    tx, ty = env.unwrapped.core.target(0)
+    tx, ty = env.unwrapped.target
     assert near(second, *pixel(tx, ty), TARGET_COLOR)
     env.close()
 

@@ -126,6 +126,20 @@ def test_vector_spaces_dtypes_and_metadata():
     venv.close()
 
 
+def test_vector_accessors_match_the_single_envs():
+    venv = PectoralFishVectorEnv(2, model="averaged")
+    assert venv.observation_structure == gym.make("PectoralFish-Averaged-v0").unwrapped.observation_structure
+    venv.reset(seed=4)
+    actions = np.array([[-1, 1, 0, 0.5, 1, -1, 1, -1], [0, 0, 0, 0, 0, 0, 0, 0]], np.float32)
+    obs, *_ = venv.step(actions)
+    np.testing.assert_array_equal(venv.last_observations, obs)
+    for i in range(2):
+        env = gym.make("PectoralFish-Averaged-v0").unwrapped
+        env.reset(seed=4 + i)
+        env.step(actions[i])
+        np.testing.assert_array_equal(venv.fin_patterns[i], env.fin_patterns)
+
+
 def test_vector_reset_seeds_and_mask():
     venv = PectoralFishVectorEnv(3, model="averaged")
     a, _ = venv.reset(seed=[10, 11, 12])
@@ -133,7 +147,7 @@ def test_vector_reset_seeds_and_mask():
     np.testing.assert_array_equal(a, b)
     c, _ = venv.reset(seed=[None, 11, None])
     np.testing.assert_array_equal(c[1], a[1])
-    before = venv.core.obs.copy()
+    before = venv.last_observations
     d, _ = venv.reset(options={"reset_mask": np.array([False, True, False])})
     np.testing.assert_array_equal(d[[0, 2]], before[[0, 2]])
     with pytest.raises(ValueError):

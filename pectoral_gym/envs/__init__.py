@@ -2,6 +2,11 @@
 
 ``PectoralFish-Full-v0`` and ``PectoralFish-Averaged-v0`` are registered by
 :func:`pectoral_gym.registration.register_envs` when ``pectoral_gym`` is imported.
+
+Modules: ``fish_env`` (the single env), ``vector`` (the native vector env),
+``core`` (settings and the batched core both share), ``tasks`` (the numba
+task kernels), ``layout`` (their packed arrays, named), ``observation`` (the
+observation layout and ``decode``), ``rendering`` (pygame top view).
 """
 
 from pectoral_gym.envs.core import EnvConfig, EnvCore

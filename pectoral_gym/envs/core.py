@@ -9,6 +9,7 @@ imports Gymnasium.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -16,12 +17,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pectoral_gym.envs import tasks as tk
-from pectoral_gym.models import REST, AveragedModel, FishModel, FullModel
+from pectoral_gym.envs.layout import FishConstants, ReferenceEllipse, fish_array
+from pectoral_gym.envs.observation import OBS_SIZE, OBS_VELOCITY
+from pectoral_gym.models import MODELS, REST, AveragedModel, FishModel, FullModel
 from pectoral_gym.params import FishParams
 
-__all__ = ["EnvConfig", "EnvCore", "MODELS", "TASKS"]
+__all__ = ["EnvConfig", "EnvCore", "MODELS", "TASKS", "env_signature"]
 
-MODELS = ("full", "averaged")
 TASKS = {"goal": tk.GOAL, "track": tk.TRACK}
 _FIELD_NAMES = tuple(f.name for f in dataclasses.fields(FishParams))
 
@@ -183,8 +185,23 @@ class EnvConfig:
         return np.minimum(r[:, 0] + 0.5 * (x + 1.0) * (r[:, 1] - r[:, 0]), r[:, 1])
 
 
+def env_signature(*parameters: inspect.Parameter) -> inspect.Signature:
+    """``(self, *parameters, *EnvConfig's fields)``: an env's signature, the settings keyword-only with their defaults.
+
+    The envs take the settings as ``**kwargs`` and forward them to :class:`EnvConfig`, so
+    its defaults are written once; this signature shows them in ``help()`` and ``inspect``.
+    """
+    settings = [inspect.Parameter(f.name, inspect.Parameter.KEYWORD_ONLY, default=f.default, annotation=f.type)
+                for f in dataclasses.fields(EnvConfig)]
+    return inspect.Signature([inspect.Parameter("self", inspect.Parameter.POSITIONAL_OR_KEYWORD), *parameters,
+                              *settings])
+
+
 class EnvCore:
     """``n`` fish environments on one batched model: reset, step, and the arrays they fill.
+
+    The packed arrays are laid out in :mod:`pectoral_gym.envs.layout`; read
+    them through the accessors (``target``, ``reference``, ``fish_state``, ...).
 
     Args:
         n: Number of environments.
@@ -192,9 +209,11 @@ class EnvCore:
 
     Attributes:
         model: The batched :class:`~pectoral_gym.models.FishModel` (``n`` fish).
-        obs: ``(n, 19)`` float32 observations after the last reset/step.
-        out: ``(n, N_OUT)`` reward, terms and flags of the last step (``tasks.O_*``).
-        ep: ``(n, N_EP)`` per-episode data (``tasks.E_*``).
+        obs: ``(n, 19)`` float32 observations after the last reset/step (``envs.observation``).
+        out: ``(n, N_OUT)`` reward, terms and flags of the last step (``layout.O_*``).
+        ep: ``(n, N_EP)`` per-episode state (``layout.E_*``).
+        fish: ``(n, N_FISH)`` values derived from each env's parameters (``layout.F_*``).
+        beats: ``(n, 2, 4)`` commanded fin patterns ``(bias, amplitude, period, ratio)``, right fin first.
         params: The :class:`FishParams` of each env's current episode.
     """
 
@@ -213,7 +232,7 @@ class EnvCore:
         self._apply = tk._apply_parallel if big else tk._apply_serial
         self._reward = tk._reward_parallel if big else tk._reward_serial
         self.ep = np.zeros((self.n, tk.N_EP))
-        self.obs = np.zeros((self.n, tk.OBS_SIZE), dtype=np.float32)
+        self.obs = np.zeros((self.n, OBS_SIZE), dtype=np.float32)
         self._integral_before = np.zeros((self.n, 3))  # the model's velocity integrals before a step
         self.out = np.zeros((self.n, tk.N_OUT))
         self.beats = np.broadcast_to(REST.as_array(), (self.n, 2, 4)).copy()
@@ -221,19 +240,12 @@ class EnvCore:
         self.none = np.zeros(self.n, dtype=np.bool_)
         self.action_code = np.concatenate([config.encode(REST.as_array())] * 2)
         self.params: list[FishParams] = [config.params] * self.n
-        self._set_geometry(np.arange(self.n))
+        self.fish = fish_array(self.params)
         if config.randomize:
             self._rand_names = tuple(config.randomize)
             widths = np.array([config.randomize[k] for k in self._rand_names])
             self._rand_low, self._rand_high = 1.0 - widths, 1.0 + widths
             self._rand_base = np.array([float(getattr(config.params, k)) for k in self._rand_names])
-
-    def _set_geometry(self, index: np.ndarray) -> None:
-        for i in index:
-            p = self.params[i]
-            self.ep[i, tk.E_LENGTH] = p.body_length
-            self.ep[i, tk.E_SPAN] = p.fin_span
-            self.ep[i, tk.E_KDRAG] = p.fin_drag_constant
 
     def reset(self, index: np.ndarray, rngs: Sequence[np.random.Generator]) -> None:
         """Start new episodes for the envs in ``index``; env ``i`` draws only from ``rngs[i]``.
@@ -252,12 +264,12 @@ class EnvCore:
                 self.model.set_params(self.params[i], i)
             draws[k] = tk.draw_episode(rng, self.task)
         if self.config.randomize:
-            self._set_geometry(index)
+            self.fish[index] = fish_array([self.params[i] for i in index])
         start = np.empty((index.size, 6))
         tk.start_states(index, draws, self.cfg, self.ep, start)
         self.model.reset(start, right=REST, left=REST, index=None if index.size == self.n else index)
         self.beats[index] = REST.as_array()
-        tk.observe_reset(index, self.model.state, self.ep, self.obs, self.out, self.action_code)
+        tk.observe_reset(index, self.model.state, self.ep, self.fish, self.obs, self.out, self.action_code)
 
     def step(self, actions: np.ndarray, skip: np.ndarray | None = None) -> None:
         """Apply ``actions`` ``(n, 8)`` for one control period (envs in ``skip`` are not checked or scored).
@@ -266,7 +278,7 @@ class EnvCore:
             ValueError: If an action of an env not in ``skip`` is not finite.
         """
         skip = self.none if skip is None else skip
-        bad = self._apply(actions, skip, self.cfg, self.beats, self.obs, self.out, self.ep)
+        bad = self._apply(actions, skip, self.cfg, self.beats, self.obs, self.out, self.fish)
         if bad >= 0:
             raise ValueError(
                 f"action must be finite, got {np.asarray(actions[bad]).tolist()}"
@@ -276,12 +288,51 @@ class EnvCore:
         before = self._integral_before
         np.copyto(before, self.model.integral)
         self.model.advance(self.dt)
-        self._reward(self.model.state, skip, self.cfg, self.ep, self.obs, self.out)
+        self._reward(self.model.state, skip, self.cfg, self.ep, self.fish, self.obs, self.out)
         # Observed velocities: means over the control period. The full model's instantaneous velocities
         # oscillate with the fin beat (a symmetric stroke reads a yaw rate of -0.45 rad/s at some phases),
         # the averaged model's do not; the means agree between the models, as an observer's estimate would.
-        self.obs[:, 4:7] = (self.model.integral - before) / self.dt
+        self.obs[:, OBS_VELOCITY] = (self.model.integral - before) / self.dt
 
+    # ------------------------------------------------------------ accessors (copies, plain floats)
     def target(self, i: int) -> tuple[float, float]:
         """Target position of env ``i`` in the tank frame [m]."""
         return float(self.ep[i, tk.E_TX]), float(self.ep[i, tk.E_TY])
+
+    def target_velocity(self, i: int) -> tuple[float, float]:
+        """Target velocity of env ``i`` in the tank frame [m/s] (zero for ``goal``)."""
+        return float(self.ep[i, tk.E_TVX]), float(self.ep[i, tk.E_TVY])
+
+    def set_target(self, i: int, x: float, y: float) -> None:
+        """Move the target of env ``i`` to ``(x, y)`` [m] (tank frame); the observation shows it after the next step.
+
+        For ``goal`` the target stays there; for ``track`` the next step moves it on along the ellipse.
+        """
+        self.ep[i, tk.E_TX], self.ep[i, tk.E_TY] = float(x), float(y)
+
+    def reference(self, i: int) -> ReferenceEllipse:
+        """The reference ellipse of env ``i`` (``track``; all zero for ``goal``)."""
+        return ReferenceEllipse(*self.ep[i, tk.E_CX:tk.E_PHASE + 1].tolist())
+
+    def fish_constants(self, i: int) -> FishConstants:
+        """The values of env ``i``'s parameters that the task kernels use (body length, fin span, drag constant)."""
+        return FishConstants(*self.fish[i].tolist())
+
+    def fish_state(self, i: int) -> np.ndarray:
+        """Model state ``(X, Y, psi, vx, vy, omega)`` of env ``i`` (a copy) [m, m, rad, m/s, m/s, rad/s]."""
+        return self.model.state[i].copy()
+
+    def set_fish_state(self, i: int, state: Sequence[float]) -> None:
+        """Overwrite the model state of env ``i`` (fins and velocity integrals are kept); takes effect at the next step.
+
+        Raises:
+            ValueError: If ``state`` is not 6 finite numbers.
+        """
+        value = np.asarray(state, dtype=np.float64)
+        if value.shape != (6,) or not np.all(np.isfinite(value)):
+            raise ValueError(f"state must be 6 finite numbers (X, Y, psi, vx, vy, omega), got {state!r}")
+        self.model.state[i] = value
+
+    def fin_patterns(self, i: int) -> np.ndarray:
+        """Commanded fin patterns ``(2, 4)`` of env ``i``: ``(bias, amplitude, period, ratio)``, right fin first."""
+        return self.beats[i].copy()

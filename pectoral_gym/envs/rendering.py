@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from gymnasium.error import DependencyNotInstalled
 
-from pectoral_gym.envs import tasks as tk
+from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 
 if TYPE_CHECKING:
     from pectoral_gym.envs.core import EnvConfig, EnvCore
@@ -51,8 +51,8 @@ class FishRenderer:
         self.pygame = _import_pygame()
         self.render_mode = render_mode
         self.fps = fps
-        self.width = int(round(tk.TANK_X * SCALE))
-        self.height = int(round(tk.TANK_Y * SCALE))
+        self.width = int(round(TANK_LENGTH * SCALE))
+        self.height = int(round(TANK_WIDTH * SCALE))
         self.window = None
         self.clock = None
         self.surface = None
@@ -68,16 +68,17 @@ class FishRenderer:
         surf = self.surface
         surf.fill(WATER_COLOR)
         pg.draw.rect(surf, WALL_COLOR, pg.Rect(0, 0, self.width, self.height), width=3)
-        ep = core.ep[i]
+        target = self._px(*core.target(i))
         if config.task == "goal":
-            center = self._px(ep[tk.E_TX], ep[tk.E_TY])
+            center = target
             pg.draw.circle(surf, TARGET_COLOR, center, max(2.0, config.goal_radius * SCALE), width=2)
             pg.draw.circle(surf, TARGET_COLOR, center, 3)
         else:
-            a, b = ep[tk.E_A] * SCALE, ep[tk.E_B] * SCALE
-            cx, cy = self._px(ep[tk.E_CX], ep[tk.E_CY])
+            ellipse = core.reference(i)
+            a, b = ellipse.a * SCALE, ellipse.b * SCALE
+            cx, cy = self._px(ellipse.cx, ellipse.cy)
             pg.draw.ellipse(surf, PATH_COLOR, pg.Rect(cx - a, cy - b, 2 * a, 2 * b), width=1)
-            pg.draw.circle(surf, TARGET_COLOR, self._px(ep[tk.E_TX], ep[tk.E_TY]), 5)
+            pg.draw.circle(surf, TARGET_COLOR, target, 5)
         if len(trail) >= 2:
             pg.draw.lines(surf, TRAIL_COLOR, False, [self._px(x, y) for x, y in trail], width=2)
         self._draw_fish(core, i)
@@ -98,7 +99,7 @@ class FishRenderer:
     def _draw_fish(self, core: EnvCore, i: int) -> None:
         pg = self.pygame
         params = core.params[i]
-        x, y, psi = core.model.state[i, :3]
+        x, y, psi = core.fish_state(i)[:3]
         c, s = math.cos(psi), math.sin(psi)
 
         def to_px(bx: float, by: float) -> tuple[float, float]:  # body frame -> screen

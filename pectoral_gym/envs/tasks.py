@@ -4,14 +4,11 @@ Every function here works on arrays of ``n`` environments, so the single
 environment (``n = 1``) and the native vector environment run the same code
 and cannot drift apart. Nothing here imports Gymnasium.
 
-Arrays (one row per environment):
-
-* ``cfg``  ``(N_CFG,)`` float64: the task settings, indices ``C_*``.
-* ``ep``   ``(n, N_EP)`` float64: per-episode data, indices ``E_*`` (target,
-  reference ellipse, previous distance, the fish's geometry).
-* ``obs``  ``(n, OBS_SIZE)`` float32: the observations (layout in ``envs.observation``).
-* ``out``  ``(n, N_OUT)`` float64: reward, reward terms and flags, indices ``O_*``.
-* ``beats`` ``(n, 2, 4)`` float64: the commanded fin patterns (right fin first).
+The kernels take the packed arrays ``cfg`` (settings), ``ep`` (episode
+state), ``fish`` (values derived from the parameters), ``out`` (reward, terms
+and flags), ``beats`` (fin patterns) and ``obs`` (observations): every field,
+with its unit, is listed in :mod:`pectoral_gym.envs.layout` (``obs`` in
+:mod:`pectoral_gym.envs.observation`), whose index constants are re-exported here.
 
 Units: metres, seconds, radians; the tank frame has its origin at a corner.
 """
@@ -24,7 +21,63 @@ import numba as nb
 import numpy as np
 
 from pectoral_gym.averaging import mean_fin_power
-from pectoral_gym.envs.observation import OBS_SIZE  # noqa: F401 - re-exported: tk.OBS_SIZE
+from pectoral_gym.envs.layout import *  # noqa: F403 - the index constants, re-exported: tk.E_TX, tk.O_REWARD, ...
+from pectoral_gym.envs.layout import (
+    ACTION_SIZE,
+    C_DT,
+    C_GOAL_BONUS,
+    C_GOAL_RADIUS,
+    C_RANGES,
+    C_REF_SPEED,
+    C_TASK,
+    C_TIME,
+    C_W_ENERGY,
+    C_W_PROGRESS,
+    C_W_TRACKING,
+    C_WALL,
+    E_A,
+    E_B,
+    E_CX,
+    E_CY,
+    E_DIR,
+    E_DPREV,
+    E_PHASE,
+    E_TVX,
+    E_TVY,
+    E_TX,
+    E_TY,
+    F_KDRAG,
+    F_LENGTH,
+    F_SPAN,
+    FIN_ACTIONS,
+    GOAL,
+    O_DISTANCE,
+    O_ENERGY,
+    O_GOAL,
+    O_PROGRESS,
+    O_REWARD,
+    O_SUCCESS,
+    O_TERMINATED,
+    O_TIME,
+    O_TRACKING,
+    O_WALL,
+    TRACK,
+)
+from pectoral_gym.envs.observation import (  # noqa: F401 - OBS_SIZE re-exported: tk.OBS_SIZE
+    OBS_COS_PSI,
+    OBS_LAST_ACTION,
+    OBS_OMEGA,
+    OBS_SIN_PSI,
+    OBS_SIZE,
+    OBS_TARGET_VX,
+    OBS_TARGET_VY,
+    OBS_TARGET_X,
+    OBS_TARGET_Y,
+    OBS_VX,
+    OBS_VY,
+    OBS_X,
+    OBS_Y,
+)
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 
 # Tank and task geometry [m], [rad].
@@ -41,27 +94,6 @@ TRACK_B_RANGE = (0.25, 0.4)  # track task: semi-axis along Y [m]
 TRACK_START_RADIUS = 0.1  # track task: start within this distance of the reference point [m]
 TRACK_HEADING_NOISE = 0.3  # track task: start heading = tangent +- this [rad]
 TRACK_SUBSTEPS = 4  # RK4 steps per control period for the reference point's phase
-
-GOAL, TRACK = 0, 1
-ACTION_SIZE = 8
-
-# cfg indices
-C_DT, C_TASK, C_RANGES = 0, 1, 2  # C_RANGES..C_RANGES+7: (low, high) of bias, amplitude, period, ratio
-C_W_PROGRESS, C_GOAL_BONUS, C_WALL, C_W_ENERGY, C_TIME, C_W_TRACKING = 10, 11, 12, 13, 14, 15
-C_GOAL_RADIUS, C_REF_SPEED = 16, 17
-N_CFG = 18
-
-# ep indices
-E_TX, E_TY, E_TVX, E_TVY = 0, 1, 2, 3  # target position [m] and velocity [m/s], tank frame
-E_CX, E_CY, E_A, E_B, E_DIR, E_PHASE = 4, 5, 6, 7, 8, 9  # reference ellipse and its phase [rad]
-E_DPREV = 10  # distance to the target after the previous step [m]
-E_LENGTH, E_SPAN, E_KDRAG = 11, 12, 13  # body length [m], fin span [m], fin drag constant k
-N_EP = 14
-
-# out indices
-O_REWARD, O_PROGRESS, O_GOAL, O_WALL, O_ENERGY, O_TIME, O_TRACKING = 0, 1, 2, 3, 4, 5, 6
-O_DISTANCE, O_TERMINATED, O_SUCCESS = 7, 8, 9
-N_OUT = 10
 
 # Reward terms reported in ``info`` per task: (name, out index), in the order they are summed.
 TERMS = {
@@ -87,62 +119,62 @@ def _first_non_finite(actions, skip):
 
 
 @nb.njit(inline="always", **_JIT)
-def _apply_one(i, actions, cfg, beats, obs, out, ep):
+def _apply_one(i, actions, cfg, beats, obs, out, fish):
     """Map env ``i``'s action to fin patterns, store it in the observation, price its energy."""
     energy = 0.0
     for f in range(2):
-        for k in range(4):
-            x = min(max(float(actions[i, 4 * f + k]), -1.0), 1.0)
+        for k in range(FIN_ACTIONS):
+            x = min(max(float(actions[i, FIN_ACTIONS * f + k]), -1.0), 1.0)
             low = cfg[C_RANGES + 2 * k]
             high = cfg[C_RANGES + 2 * k + 1]
             beats[i, f, k] = min(low + 0.5 * (x + 1.0) * (high - low), high)
-            obs[i, 11 + 4 * f + k] = x
-        energy += mean_fin_power(beats[i, f, 1], beats[i, f, 2], beats[i, f, 3], ep[i, E_SPAN], ep[i, E_KDRAG])
+            obs[i, OBS_LAST_ACTION + FIN_ACTIONS * f + k] = x
+        energy += mean_fin_power(beats[i, f, 1], beats[i, f, 2], beats[i, f, 3], fish[i, F_SPAN], fish[i, F_KDRAG])
     out[i, O_ENERGY] = -cfg[C_W_ENERGY] * energy * cfg[C_DT]  # E = sum of mean fin power * control period [J]
 
 
 @nb.njit(**_JIT)
-def _apply_serial(actions, skip, cfg, beats, obs, out, ep):
+def _apply_serial(actions, skip, cfg, beats, obs, out, fish):
     bad = _first_non_finite(actions, skip)
     if bad >= 0:
         return bad
     for i in range(actions.shape[0]):
         if not skip[i]:
-            _apply_one(i, actions, cfg, beats, obs, out, ep)
+            _apply_one(i, actions, cfg, beats, obs, out, fish)
     return -1
 
 
 @nb.njit(parallel=True, cache=True, nogil=True, error_model="numpy")
-def _apply_parallel(actions, skip, cfg, beats, obs, out, ep):
+def _apply_parallel(actions, skip, cfg, beats, obs, out, fish):
     bad = _first_non_finite(actions, skip)
     if bad >= 0:
         return bad
     for i in nb.prange(actions.shape[0]):
         if not skip[i]:
-            _apply_one(i, actions, cfg, beats, obs, out, ep)
+            _apply_one(i, actions, cfg, beats, obs, out, fish)
     return -1
 
 
 # ---------------------------------------------------------------- observation and reward
 @nb.njit(inline="always", **_JIT)
-def _observe_one(i, state, ep, obs):
-    """Write observation entries 0-10 of env ``i``; return the distance to the target and the wall flag."""
+def _observe_one(i, state, ep, fish, obs):
+    """Write the observation of env ``i`` up to the last action; return the distance to the target and the wall flag."""
     x, y, psi = state[i, 0], state[i, 1], state[i, 2]
     c, s = math.cos(psi), math.sin(psi)
     dx = ep[i, E_TX] - x
     dy = ep[i, E_TY] - y
-    obs[i, 0] = x
-    obs[i, 1] = y
-    obs[i, 2] = c
-    obs[i, 3] = s
-    obs[i, 4] = state[i, 3]
-    obs[i, 5] = state[i, 4]
-    obs[i, 6] = state[i, 5]
-    obs[i, 7] = c * dx + s * dy  # target in the body frame (x forward, y left)
-    obs[i, 8] = -s * dx + c * dy
-    obs[i, 9] = c * ep[i, E_TVX] + s * ep[i, E_TVY]
-    obs[i, 10] = -s * ep[i, E_TVX] + c * ep[i, E_TVY]
-    half = 0.5 * ep[i, E_LENGTH]
+    obs[i, OBS_X] = x
+    obs[i, OBS_Y] = y
+    obs[i, OBS_COS_PSI] = c
+    obs[i, OBS_SIN_PSI] = s
+    obs[i, OBS_VX] = state[i, 3]
+    obs[i, OBS_VY] = state[i, 4]
+    obs[i, OBS_OMEGA] = state[i, 5]
+    obs[i, OBS_TARGET_X] = c * dx + s * dy  # target in the body frame (x forward, y left)
+    obs[i, OBS_TARGET_Y] = -s * dx + c * dy
+    obs[i, OBS_TARGET_VX] = c * ep[i, E_TVX] + s * ep[i, E_TVY]
+    obs[i, OBS_TARGET_VY] = -s * ep[i, E_TVX] + c * ep[i, E_TVY]
+    half = 0.5 * fish[i, F_LENGTH]
     wall = False
     for sign in (1.0, -1.0):  # nose, tail
         px = x + sign * half * c
@@ -189,12 +221,12 @@ def _move_reference(i, ep, duration, speed):
 
 
 @nb.njit(inline="always", **_JIT)
-def _reward_one(i, state, cfg, ep, obs, out):
+def _reward_one(i, state, cfg, ep, fish, obs, out):
     """Observation, reward terms and termination of env ``i`` after a control period."""
     task = int(cfg[C_TASK])
     if task == TRACK:
         _move_reference(i, ep, cfg[C_DT], cfg[C_REF_SPEED])
-    d, wall = _observe_one(i, state, ep, obs)
+    d, wall = _observe_one(i, state, ep, fish, obs)
     r_wall = -cfg[C_WALL] if wall else 0.0
     r_energy = out[i, O_ENERGY]
     if task == GOAL:
@@ -223,34 +255,34 @@ def _reward_one(i, state, cfg, ep, obs, out):
 
 
 @nb.njit(**_JIT)
-def _reward_serial(state, skip, cfg, ep, obs, out):
+def _reward_serial(state, skip, cfg, ep, fish, obs, out):
     for i in range(state.shape[0]):
         if not skip[i]:
-            _reward_one(i, state, cfg, ep, obs, out)
+            _reward_one(i, state, cfg, ep, fish, obs, out)
 
 
 @nb.njit(parallel=True, cache=True, nogil=True, error_model="numpy")
-def _reward_parallel(state, skip, cfg, ep, obs, out):
+def _reward_parallel(state, skip, cfg, ep, fish, obs, out):
     for i in nb.prange(state.shape[0]):
         if not skip[i]:
-            _reward_one(i, state, cfg, ep, obs, out)
+            _reward_one(i, state, cfg, ep, fish, obs, out)
 
 
-def apply_actions(actions, skip, cfg, beats, obs, out, ep) -> int:
+def apply_actions(actions, skip, cfg, beats, obs, out, fish) -> int:
     """Map normalised actions ``(n, 8)`` to fin patterns ``beats`` for the envs not in ``skip``.
 
-    Also writes the clipped actions to ``obs[:, 11:19]`` and the energy term to
+    Also writes the clipped actions to ``obs[:, OBS_ACTION]`` and the energy term to
     ``out[:, O_ENERGY]``. Returns -1, or the index of the first env whose
     action is not finite (then nothing has been written).
     """
     kernel = _apply_parallel if actions.shape[0] >= PARALLEL_MIN_ENVS else _apply_serial
-    return kernel(actions, skip, cfg, beats, obs, out, ep)
+    return kernel(actions, skip, cfg, beats, obs, out, fish)
 
 
-def observe_and_reward(state, skip, cfg, ep, obs, out) -> None:
+def observe_and_reward(state, skip, cfg, ep, fish, obs, out) -> None:
     """After the model advanced: move the reference, write observations, reward terms and flags."""
     kernel = _reward_parallel if state.shape[0] >= PARALLEL_MIN_ENVS else _reward_serial
-    kernel(state, skip, cfg, ep, obs, out)
+    kernel(state, skip, cfg, ep, fish, obs, out)
 
 
 # ---------------------------------------------------------------- reset
@@ -323,15 +355,15 @@ def start_states(index, draws, cfg, ep, start):
 
 
 @nb.njit(**_JIT)
-def observe_reset(index, state, ep, obs, out, action_code):
+def observe_reset(index, state, ep, fish, obs, out, action_code):
     """Observations of freshly reset envs; the last-action entries get ``action_code``; ``out`` rows zeroed.
 
     (A vector env reports zeros for the masked ``info`` entries of autoreset envs, as ``SyncVectorEnv`` does.)
     """
     for k in range(index.shape[0]):
         i = index[k]
-        d, _ = _observe_one(i, state, ep, obs)
+        d, _ = _observe_one(i, state, ep, fish, obs)
         ep[i, E_DPREV] = d
         for j in range(ACTION_SIZE):
-            obs[i, 11 + j] = action_code[j]
+            obs[i, OBS_LAST_ACTION + j] = action_code[j]
         out[i, :] = 0.0

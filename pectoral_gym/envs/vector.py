@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 from collections.abc import Sequence
 from typing import Any
 
@@ -11,8 +12,9 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from pectoral_gym.envs import tasks as tk
-from pectoral_gym.envs.core import EnvConfig, EnvCore
+from pectoral_gym.envs.core import EnvConfig, EnvCore, env_signature
+from pectoral_gym.envs.layout import ACTION_SIZE, O_DISTANCE, O_REWARD, O_SUCCESS, O_TERMINATED
+from pectoral_gym.envs.observation import OBS_SIZE, OBSERVATION_STRUCTURE
 from pectoral_gym.registration import MAX_EPISODE_STEPS
 
 __all__ = ["PectoralFishVectorEnv"]
@@ -39,15 +41,15 @@ class PectoralFishVectorEnv(VectorEnv):
 
     Args:
         num_envs: Number of environments.
-        model: ``"full"`` or ``"averaged"``.
         max_episode_steps: Truncation after this many steps (240 as registered).
         render_mode: Only ``None`` (render a single env instead).
-        **kwargs: The other arguments of :class:`~pectoral_gym.envs.fish_env.PectoralFishEnv`.
+        **kwargs: The settings of :class:`~pectoral_gym.envs.fish_env.PectoralFishEnv`
+            (the fields of :class:`~pectoral_gym.envs.core.EnvConfig`, ``model`` among them).
     """
 
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
-    def __init__(self, num_envs: int = 1, model: str = "full", max_episode_steps: int = MAX_EPISODE_STEPS,
+    def __init__(self, num_envs: int = 1, *, max_episode_steps: int = MAX_EPISODE_STEPS,
                  render_mode: str | None = None, **kwargs: Any):
         if int(num_envs) < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
@@ -58,17 +60,28 @@ class PectoralFishVectorEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self.max_episode_steps = int(max_episode_steps)
         self.render_mode = None
-        self.config = EnvConfig(model=model, **kwargs)
+        self.config = EnvConfig(**kwargs)
         self.core = EnvCore(self.num_envs, self.config)
-        self.single_action_space = spaces.Box(-1.0, 1.0, (tk.ACTION_SIZE,), dtype=np.float32)
+        self.single_action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.single_observation_space = spaces.Box(-np.inf, np.inf, (tk.OBS_SIZE,), dtype=np.float32)
+        self.single_observation_space = spaces.Box(-np.inf, np.inf, (OBS_SIZE,), dtype=np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.observation_structure = dict(OBSERVATION_STRUCTURE)
         self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
         self.steps = np.zeros(self.num_envs, dtype=np.int64)
         self.prev_done = np.zeros(self.num_envs, dtype=np.bool_)
-        self._info_items = self.core.terms + (("distance", tk.O_DISTANCE),)
+        self._info_items = self.core.terms + (("distance", O_DISTANCE),)
         self._goal = self.config.task == "goal"
+
+    @property
+    def last_observations(self) -> np.ndarray:
+        """The observations ``(num_envs, 19)`` after the last ``reset`` or ``step`` (a copy)."""
+        return self.core.obs.copy()
+
+    @property
+    def fin_patterns(self) -> np.ndarray:
+        """Commanded fin patterns ``(num_envs, 2, 4)``: ``(bias, amplitude, period, ratio)``, right fin first."""
+        return self.core.beats.copy()
 
     @property
     def env_rngs(self) -> list[np.random.Generator | None]:
@@ -120,8 +133,8 @@ class PectoralFishVectorEnv(VectorEnv):
                 (of an env that is not being reset) is not finite.
         """
         actions = np.asarray(actions)
-        if actions.shape != (self.num_envs, tk.ACTION_SIZE):
-            raise ValueError(f"actions must have shape ({self.num_envs}, {tk.ACTION_SIZE}), got {actions.shape}")
+        if actions.shape != (self.num_envs, ACTION_SIZE):
+            raise ValueError(f"actions must have shape ({self.num_envs}, {ACTION_SIZE}), got {actions.shape}")
         if actions.dtype != np.float32 and actions.dtype != np.float64:
             actions = actions.astype(np.float64)
         core = self.core
@@ -133,7 +146,7 @@ class PectoralFishVectorEnv(VectorEnv):
             core.reset(index, self._rngs)
             self.steps[index] = 0
         out = core.out
-        terminated = out[:, tk.O_TERMINATED] > 0.5
+        terminated = out[:, O_TERMINATED] > 0.5
         truncated = self.steps >= self.max_episode_steps
         stepped = ~resetting
         info: dict[str, Any] = {}
@@ -141,10 +154,17 @@ class PectoralFishVectorEnv(VectorEnv):
             info[name] = out[:, k].copy()
             info["_" + name] = stepped
         if self._goal:
-            info["is_success"] = out[:, tk.O_SUCCESS] > 0.5
+            info["is_success"] = out[:, O_SUCCESS] > 0.5
             info["_is_success"] = stepped
         else:
-            info["tracking_error"] = out[:, tk.O_DISTANCE].copy()
+            info["tracking_error"] = out[:, O_DISTANCE].copy()
             info["_tracking_error"] = stepped
         self.prev_done = terminated | truncated
-        return core.obs.copy(), out[:, tk.O_REWARD].copy(), terminated, truncated, info
+        return core.obs.copy(), out[:, O_REWARD].copy(), terminated, truncated, info
+
+
+_P = inspect.Parameter
+PectoralFishVectorEnv.__init__.__signature__ = env_signature(
+    _P("num_envs", _P.POSITIONAL_OR_KEYWORD, default=1, annotation="int"),
+    _P("max_episode_steps", _P.KEYWORD_ONLY, default=MAX_EPISODE_STEPS, annotation="int"),
+    _P("render_mode", _P.KEYWORD_ONLY, default=None, annotation="str | None"))
