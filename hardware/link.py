@@ -194,9 +194,9 @@ class RadioLink:
     def _keepalive_loop(self) -> None:
         next_keepalive = time.monotonic() + self.keepalive_period
         while not self._stop.wait(min(self.ack_timeout, self.keepalive_period) / 4):
-            now = time.monotonic()
             retry = None
             with self._lock:
+                now = time.monotonic()  # after the lock: a stalled thread must not act on an old clock
                 if self._pending is not None and now >= self._pending[2]:
                     seq, frame, _, tries, mtype = self._pending
                     if tries < self.max_retries:
