@@ -166,15 +166,17 @@ class Geofence:
         return np.array([np.min(p[:, 0] - r), np.min(TANK_LENGTH - p[:, 0] - r),
                          np.min(p[:, 1] - r), np.min(TANK_WIDTH - p[:, 1] - r)])
 
-    def breached(self, x: float, y: float, psi: float, vx: float = 0.0, vy: float = 0.0) -> bool:
-        """Whether the fish at ``(x, y, psi)`` moving at world velocity ``(vx, vy)`` must stop now.
+    def breached(self, x: float, y: float, psi: float, vx: float = 0.0, vy: float = 0.0, age: float = 0.0) -> bool:
+        """Whether the fish seen ``age`` s ago at ``(x, y, psi)`` moving at world velocity ``(vx, vy)`` must stop now.
 
+        The fish may have moved on by ``v age`` since the pose, so that adds to the reaction distance.
         A non-finite pose or velocity counts as breached (stop rather than guess).
         """
-        if not all(math.isfinite(v) for v in (x, y, psi, vx, vy)):
+        if not all(math.isfinite(v) for v in (x, y, psi, vx, vy, age)):
             return True
         toward = (-vx, vx, -vy, vy)
-        need = [self.margin + v * self.reaction_time + self.coast(v) for v in (max(t, 0.0) for t in toward)]
+        react = self.reaction_time + max(age, 0.0)
+        need = [self.margin + v * react + self.coast(v) for v in (max(t, 0.0) for t in toward)]
         return bool(np.any(self.clearance(x, y, psi) < np.array(need)))
 
 

@@ -25,6 +25,7 @@ from hardware.safety import Geofence, SafetyConfig, TrackingWatch
 __all__ = ["Supervisor"]
 
 _VELOCITY_WINDOW = 0.2  # poses this far apart [experiment s] give the speed for the stopping distance
+_MIN_GAP, _MAX_GAP = 0.02, 1.0  # closer poses are too noisy, further ones too stale for a speed [s]
 
 
 class Supervisor:
@@ -175,14 +176,16 @@ class Supervisor:
         self.pose = (float(result.x), float(result.y), float(result.psi))
         self._measurements.append((t, *self.pose))
         self._recent.append((t, self.pose[0], self.pose[1]))
-        old = next((p for p in self._recent if t - p[0] <= _VELOCITY_WINDOW), None)
-        if old is not None and t - old[0] > 0.25 * _VELOCITY_WINDOW:
+        # The newest pose at least _VELOCITY_WINDOW older (or the oldest one, if the camera is slow).
+        old = next((p for p in reversed(self._recent) if t - p[0] >= _VELOCITY_WINDOW), self._recent[0])
+        if _MIN_GAP <= t - old[0] <= _MAX_GAP:
             self.velocity = ((self.pose[0] - old[1]) / (t - old[0]), (self.pose[1] - old[2]) / (t - old[0]))
 
     def _rules(self) -> str:
         if self.stop_requested:
             return "stop"
-        if self.watch.last_seen is not None and self.geofence.breached(*self.pose, *self.velocity):
+        seen = self.watch.last_seen
+        if seen is not None and self.geofence.breached(*self.pose, *self.velocity, age=self.now() - seen):
             return "geofence"
         if self.watch.expired(self.now()):
             if not self.watch.reason:

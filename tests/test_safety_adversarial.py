@@ -51,11 +51,11 @@ def _stopped_at(robot, after):
     return max(after, last_running) if last_running is not None else after
 
 
-def _rig(speed=2.0, start=(1.15, 0.575, 0.0), camera=None, **safety):
+def _rig(speed=2.0, start=(1.15, 0.575, 0.0), camera=None, task="goal", **safety):
     robot = EmulatedRobot(speed=speed, seed=0, start_pose=start).start()
     robot.trace = []
     safety.setdefault("link_timeout", 2.0)
-    env = HardwareFishEnv(robot.url, camera(robot) if camera else robot.camera(seed=1), speed=speed,
+    env = HardwareFishEnv(robot.url, camera(robot) if camera else robot.camera(seed=1), speed=speed, task=task,
                           safety=SafetyConfig(**safety))
     return robot, env
 
@@ -313,7 +313,8 @@ def _outline_points(state, angles):
 
 
 def _full_thrust_at(start, steps=40):
-    robot, env = _rig(speed=4.0, start=start, tracking_timeout=1.5)
+    # The track task: no goal to reach on the way; speed 2 keeps the camera rate up on a loaded machine.
+    robot, env = _rig(speed=2.0, start=start, tracking_timeout=1.5, task="track")
     angles = []
     stop = threading.Event()
 
@@ -491,12 +492,14 @@ def test_fuzz_random_streams_and_bit_flips():
             pr.encode_message(msg)  # whatever survives is well-formed
     sent = pr.Message(pr.MsgType.SET_FINS, 7, 0xDEAD, fins=tuple(BEATS.ravel()), command=3, lease=0.5)
     frame = bytearray(_frame(sent))
-    accepted_bad = 0
+    expected = pr.decode_message(pr.encode_message(sent))  # the wire rounds the fins to mrad / ms
+    accepted_bad = delivered = 0
     for _ in range(20_000):
         bad = bytearray(frame)
         bit = int(rng.integers(8, 8 * len(bad)))
         bad[bit // 8] ^= 1 << (bit % 8)
         dec = pr.StreamDecoder()
         for msg in dec.feed(bytes(bad) + bytes(frame)):
-            accepted_bad += msg != sent
-    assert accepted_bad == 0
+            accepted_bad += msg != expected
+            delivered += msg == expected
+    assert accepted_bad == 0 and delivered >= 20_000  # the good frame after the damaged one always gets through
