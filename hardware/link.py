@@ -15,6 +15,7 @@ from __future__ import annotations
 import secrets
 import threading
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,6 +80,9 @@ class RadioLink:
         if not keepalive_period > 0 or not ack_timeout > 0 or int(max_retries) < 0:
             raise ValueError("keepalive_period and ack_timeout must be > 0 s and max_retries >= 0")
         self.serial = serial.serial_for_url(port, baudrate=baudrate, timeout=0.01) if isinstance(port, str) else port
+        if isinstance(port, str) and "://" not in port and int(dest64) == pr.BROADCAST:
+            warnings.warn("RadioLink: commands are broadcast, so every robot on this radio channel obeys them; "
+                          "pass dest64=<the robot XBee's 64-bit address>", stacklevel=2)
         self.dest64 = int(dest64)
         self.keepalive_period = float(keepalive_period)
         self.ack_timeout = float(ack_timeout)

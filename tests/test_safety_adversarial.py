@@ -44,6 +44,9 @@ def _wait(cond, timeout=5.0):
 
 def _stopped_at(robot, after):
     """First emulated time >= ``after`` from which the fins never beat again (``None``: still beating)."""
+    _wait(lambda: not robot.firmware.running)  # a STOP may still be on its way
+    n = len(robot.trace)
+    _wait(lambda: len(robot.trace) > n + 1)  # and the chunk that applied it in the trace
     trace = list(robot.trace)
     last_running = max((t for t, _, rates, _, running in trace if running or np.any(rates != 0)), default=None)
     if trace and trace[-1][4]:
