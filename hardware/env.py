@@ -220,10 +220,11 @@ class HardwareFishEnv(gym.Env):
                 self._velocity_sum += self._state[3:6]
                 self._velocity_count += 1
 
-    def _wait_for_fish(self) -> None:
+    def _wait_for_fish(self, after: float) -> None:
+        """Wait for a sighting in a frame captured at or after ``after`` [experiment s] (not before the hook)."""
         deadline = time.monotonic() + self.reset_timeout
         while time.monotonic() < deadline:
-            if self.watch.last_seen is not None:
+            if self.watch.last_seen is not None and self.watch.last_seen >= after:
                 return
             time.sleep(self.frame_period / self.speed)
         raise RuntimeError(f"no fish seen for {self.reset_timeout:.1f} s at reset "
@@ -240,7 +241,7 @@ class HardwareFishEnv(gym.Env):
         if self.reset_hook is not None:
             self.reset_hook(self.np_random)
         self._last_measure, self._observing = -math.inf, False
-        self._wait_for_fish()
+        self._wait_for_fish(self.now())
         self.supervisor.drain()
         t = self.watch.last_seen
         x, y, psi = self.supervisor.pose

@@ -102,6 +102,7 @@ class Supervisor:
             self.armed = False
             self.watch.last_seen = None
             self.frame_check.reset()
+            self.velocity = (0.0, 0.0)
             self._recent.clear()
             self._measurements.clear()
 
