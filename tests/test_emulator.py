@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from hardware import protocol as pr
-from hardware.emulator import EmulatedRobot, main
+from hardware.emulator import ROBOT_ADDRESS, EmulatedRobot, main
 from hardware.firmware import Firmware, FirmwareConfig, ServoLimits, clip_beats
 from hardware.link import RadioLink
 
@@ -188,7 +188,7 @@ def test_emulator_watchdog_stops_fins_in_time():
 
 def test_emulator_swims_forward_and_reports_status_over_a_pty():
     with EmulatedRobot(pty=True, speed=4.0, start_pose=(1.0, 0.5, 0.0)) as robot:
-        link = RadioLink(robot.url, keepalive_period=0.025, ack_timeout=0.02)
+        link = RadioLink(robot.url, keepalive_period=0.025, ack_timeout=0.02, dest64=ROBOT_ADDRESS)
         try:
             link.lease_scale = 1 / 4.0
             seq = link.set_fins(BEATS)
