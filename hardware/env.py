@@ -125,7 +125,9 @@ class HardwareFishEnv(gym.Env):
 
     ## Version History
 
-    * v0: Initial version.
+    * v0: Initial version. Issue 13: leased commands (protocol v2), safety supervisor thread, frame
+      checks, peak-rate servo clipping (the fastest simulated pattern runs at a longer period), STOP at
+      exit and on signals.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
