@@ -120,7 +120,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--max-steps", type=int, default=240, help="steps per episode (default %(default)s)")
     parser.add_argument("--speed", type=float, default=1.0, help="emulated clock speed-up (--emulate only)")
     parser.add_argument("--calibration", default=None, help="camera calibration JSON (hardware.calibrate)")
-    parser.add_argument("--geofence", type=float, default=0.05, metavar="M", help="wall margin [m] (default 0.05)")
+    parser.add_argument("--geofence", type=float, default=0.05, metavar="M",
+                        help="clearance kept from the walls on top of the stopping distance [m] (default 0.05)")
+    parser.add_argument("--robot-address", default=None, metavar="HEX",
+                        help="64-bit address of the robot's XBee, e.g. 0013A20012345678 (default: broadcast)")
     parser.add_argument("--tracking-timeout", type=float, default=0.5, metavar="S", help="default %(default)s s")
     parser.add_argument("--seed", type=int, default=0, help="seed of targets and emulated starts")
     parser.add_argument("--out", default="deploy_out", help="output folder (default %(default)s)")
@@ -156,6 +159,13 @@ def main(argv: list[str] | None = None) -> int:
         hook = lambda rng: robot.place(*_random_start(rng))  # noqa: E731 - a hand that puts the fish back
     else:
         port, camera = args.port, args.camera
+        if args.robot_address is not None:
+            from hardware.link import RadioLink
+
+            try:
+                port = RadioLink(args.port, dest64=int(args.robot_address, 16))
+            except ValueError as err:
+                parser.error(f"--robot-address: {err}")
         hook = None if args.no_prompt else (lambda rng: input("Place the fish in the tank and press Enter: "))
     env = None
     restore = lambda: None  # noqa: E731

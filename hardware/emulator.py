@@ -11,7 +11,9 @@ then ``python -m hardware.deploy --port socket://127.0.0.1:5700 --camera emu://1
 The emulator stands in for both XBee modules and the dsPIC: it reads the PC's Transmit Request frames
 and answers with Receive Packet frames. Its clock runs ``speed`` times faster than the wall clock;
 every time it reports (pose timestamps) is on the wall ``time.monotonic()`` base, so the PC side
-scales with the same ``speed``. Firmware times (watchdog) are emulated-robot seconds.
+scales with the same ``speed``. Firmware times (watchdog, lease) are emulated-robot seconds. Several
+PCs may connect at once (like radios on one channel): every connection is heard and hears every reply;
+the firmware's session rule decides whom the robot obeys.
 """
 
 from __future__ import annotations
@@ -27,7 +29,8 @@ import time
 import numpy as np
 
 from hardware import protocol as pr
-from hardware.firmware import Firmware, FirmwareConfig
+from hardware.firmware import Firmware, FirmwareConfig, stretch_transition
+from pectoral_gym import integrators as it
 from pectoral_gym.models import FullModel
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
 
@@ -71,13 +74,16 @@ class EmulatedRobot:
         self.decoder = pr.StreamDecoder()
         self.received: list[pr.Message] = []  # every valid message, in arrival order (for tests and logs)
         self.lost_messages = 0
+        # With a list here, every physics chunk appends (t, state (6,), fin rates (2,), peak rates of the
+        # half-strokes in progress (2,), running): "stopped within" and servo checks on the emulated clock.
+        self.trace: list[tuple[float, np.ndarray, np.ndarray, np.ndarray, bool]] | None = None
         self._rng = np.random.default_rng(seed)
         self._seed = seed
         self._lock = threading.Lock()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._origin = time.monotonic()
-        self._client: socket.socket | None = None
+        self._clients: list[socket.socket] = []
         self._listener: socket.socket | None = None
         self._master: int | None = None
         self._slave: int | None = None
@@ -159,10 +165,10 @@ class EmulatedRobot:
         if self._frame_server is not None:
             self._frame_server.close()
             self._frame_server = None
-        for sock in (self._client, self._listener):
+        for sock in (*self._clients, self._listener):
             if sock is not None:
                 sock.close()
-        self._client = self._listener = None
+        self._clients, self._listener = [], None
         for fd in (self._master, self._slave):
             if fd is not None:
                 try:
@@ -194,7 +200,7 @@ class EmulatedRobot:
                 except OSError:
                     return b""
             return b""
-        fds = [self._listener] + ([self._client] if self._client is not None else [])
+        fds = [self._listener, *self._clients]
         try:
             ready, _, _ = select.select(fds, [], [], _POLL)
         except (OSError, ValueError):
@@ -206,25 +212,24 @@ class EmulatedRobot:
                     client, _ = self._listener.accept()
                 except OSError:
                     continue
-                if self._client is not None:
-                    self._client.close()  # the newest PC connection wins
-                self._client = client
-            else:
-                try:
-                    data = sock.recv(4096)
-                except OSError:
-                    data = b""
-                if not data:
-                    sock.close()
-                    self._client = None
+                self._clients.append(client)  # a new connection joins the channel; nobody is dropped
+                continue
+            try:
+                chunk = sock.recv(4096)
+            except OSError:
+                chunk = b""
+            if not chunk:
+                sock.close()
+                self._clients.remove(sock)
+            data += chunk  # one decoder: frames cut by interleaving are dropped and resynchronised
         return data
 
     def _write(self, raw: bytes) -> None:
         try:
             if self._master is not None:
                 os.write(self._master, raw)
-            elif self._client is not None:
-                self._client.sendall(raw)
+            for client in list(self._clients):
+                client.sendall(raw)
         except OSError:
             pass
 
@@ -257,7 +262,12 @@ class EmulatedRobot:
             self.model.time = time_now
             fw.halt = False
         elif fw.running:
-            self.model.command_array(fw.setpoint.reshape(1, 2, 4))  # latched at the next turning point
+            # Latched at the next turning point: bound the transitional half-stroke that starts there.
+            fins = self.model.fins[0]
+            still = fins[:, it.ANGLE_FROM] == fins[:, it.ANGLE_TO]
+            next_power = still | (fins[:, it.POWER] < 0.5)
+            safe = stretch_transition(fw.setpoint, fins[:, it.ANGLE_TO], next_power, fw.config.limits)
+            self.model.command_array(safe.reshape(1, 2, 4))
 
     def _advance(self, target: float) -> None:
         while True:
@@ -268,6 +278,12 @@ class EmulatedRobot:
                 self.firmware.tick(t, self.model.fin_angles()[0][0])
                 self._apply_firmware()
                 self.model.advance(min(_CHUNK, target - t))
+                if self.trace is not None:
+                    fins = self.model.fins[0]
+                    peak = math.pi * np.abs(fins[:, it.ANGLE_TO] - fins[:, it.ANGLE_FROM]) / (
+                        2.0 * np.maximum(fins[:, it.DURATION], 1e-9))  # stroke_kinematics' peak |g'|
+                    self.trace.append((self.model.time, self.model.state[0].copy(),
+                                       self.model.fin_angles()[1][0].copy(), peak, self.firmware.running))
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import atexit
 import math
 import time
 from collections.abc import Callable
@@ -13,9 +14,11 @@ from gymnasium import spaces
 from gymnasium.envs.registration import EnvSpec
 
 from hardware.link import RadioLink
-from hardware.safety import CommandFilter, SafetyConfig, TrackingWatch, check_action, in_geofence
+from hardware.safety import CommandFilter, Geofence, SafetyConfig, check_action, install_stop_handlers
+from hardware.supervisor import Supervisor
 from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.core import EnvConfig
+from pectoral_gym.envs.observation import OBS_ACTION, OBS_VELOCITY
 from pectoral_gym.models import REST
 
 __all__ = ["HardwareFishEnv"]
@@ -82,12 +85,19 @@ class HardwareFishEnv(gym.Env):
     ## Episode End
 
     * Termination: the task's own ends (nose or tail outside the tank; ``goal`` reached), or the
-      **geofence**: the nose or tail within ``safety.geofence_margin`` of a wall (``info["safety_stop"] =
-      "geofence"``).
+      **geofence** (:class:`hardware.safety.Geofence`): some part of the fish, fin tips included, closer
+      to a wall than its stopping distance at the measured speed plus ``safety.geofence_margin``
+      (``info["safety_stop"] = "geofence"``).
     * Truncation: ``max_episode_steps`` steps; tracking lost for longer than ``safety.tracking_timeout``
-      (``"tracking_lost"``, with the tracker's reason in ``info["tracking"]["reason"]``); no answer from
-      the robot for ``safety.link_timeout`` (``"link_lost"``).
-    * Every safety end sends STOP at once. ``close()`` sends STOP and may be called twice.
+      (``"tracking_lost"``, with the reason in ``info["tracking"]["reason"]``: the tracker's, or a
+      rejected frame's, e.g. ``"frozen_frame"``, ``"timestamp_future"``); no answer from the robot for
+      ``safety.link_timeout`` (``"link_lost"``); :meth:`stop` or a signal (``"stop"``).
+    * A safety supervisor (:class:`hardware.supervisor.Supervisor`) applies these rules in its own thread,
+      also while the program is outside ``step()``, and sends STOP the moment one trips; the next
+      ``step()`` reports it. Every command carries a lease (``safety.lease``, ``docs/protocol.md``): the
+      robot stops by itself unless ``step()`` is called again in time, whatever happens to this process.
+    * ``close()`` sends STOP and may be called twice; it also runs at interpreter exit, on leaving a
+      ``with`` block, and on Ctrl-C / SIGTERM (handlers installed by the env, ``handle_signals``).
 
     ``info`` also holds ``"link"`` (:meth:`RadioLink.health`), ``"tracking"`` (``ok``, ``lost_for``,
     ``reason``, ``confidence``, ``frames``, ``lost_frames``), ``"command"`` (the ``(2, 4)`` command sent),
@@ -111,10 +121,13 @@ class HardwareFishEnv(gym.Env):
     | ``reset_timeout``   | 5.0            | s    | wall time to wait for a tracked pose at reset |
     | ``**kwargs``        |                |      | other ``EnvConfig`` fields (ranges, weights, ``params``) |
     | ``render_mode``     | ``None``       |      | ``"rgb_array"``: the last camera frame |
+    | ``handle_signals``  | ``True``       |      | SIGINT/SIGTERM send STOP (main thread only; restored at close) |
 
     ## Version History
 
-    * v0: Initial version.
+    * v0: Initial version. Issue 13: leased commands (protocol v2), safety supervisor thread, frame
+      checks, peak-rate servo clipping (the fastest simulated pattern runs at a longer period), STOP at
+      exit and on signals.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
@@ -123,7 +136,8 @@ class HardwareFishEnv(gym.Env):
                  calibration=None, safety: SafetyConfig | None = None, speed: float = 1.0,
                  frame_period: float = 1.0 / 30.0, observer_epsilon: float = 0.1, max_episode_steps: int = 240,
                  reset_hook: Callable[[np.random.Generator], None] | None = None, reset_timeout: float = 5.0,
-                 tracker=None, observer=None, render_mode: str | None = None, **kwargs: Any):
+                 tracker=None, observer=None, render_mode: str | None = None, handle_signals: bool = True,
+                 **kwargs: Any):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         if not (math.isfinite(speed) and speed > 0) or not frame_period > 0 or int(max_episode_steps) < 1:
@@ -144,6 +158,7 @@ class HardwareFishEnv(gym.Env):
         self._closed = False
         self.link = RadioLink(port, keepalive_period=0.1 / self.speed, ack_timeout=0.05 / self.speed) \
             if isinstance(port, str) else port
+        self.link.lease_scale = 1.0 / self.speed  # the robot counts leases in its own (emulated) seconds
         if isinstance(camera, (str, int)):
             from hardware.camera import open_source
 
@@ -164,7 +179,6 @@ class HardwareFishEnv(gym.Env):
         self._velocity_sum = np.zeros(3)  # observer velocities summed over the current control period
         self._velocity_count = 0
         self.filter = CommandFilter(self.safety.limits)
-        self.watch = TrackingWatch(self.safety.tracking_timeout)
         cfg = self.config
         self._cfg = cfg.cfg_array()
         self._ep = np.zeros((1, tk.N_EP))
@@ -177,66 +191,42 @@ class HardwareFishEnv(gym.Env):
         self._act = np.zeros((1, tk.ACTION_SIZE))
         self._origin = time.monotonic()
         self._state = np.zeros(6)
-        self._pose = (math.nan, math.nan, math.nan)
-        self._last_frame = None
         self._last_measure = -math.inf
-        self._frames = self._lost_frames = 0
-        self._confidence = 0.0
         self._steps = 0
-        self._halted = ""
-        self._track_ok = False
         self._observing = False
         self._next_tick = 0.0
+        self._lease_end = -math.inf  # experiment time the robot's lease of the last command ends
+        self.geofence = Geofence(p, self.safety.geofence_margin, self.safety.reaction_time, self.safety.coast_horizon)
+        self.supervisor = Supervisor(self.link, self.camera, self.tracker, self.geofence, self.safety, self.speed,
+                                     self.frame_period, origin=self._origin).start()
+        self.watch = self.supervisor.watch
+        self._restore_signals = install_stop_handlers(self.stop) if handle_signals else (lambda: None)
+        atexit.register(self.close)
 
     # ------------------------------------------------------------ clock
     def now(self) -> float:
         """Experiment time [s] (wall time since construction times ``speed``)."""
         return (time.monotonic() - self._origin) * self.speed
 
-    def _stamp(self, monotonic: float) -> float:
-        return (monotonic - self._origin) * self.speed
-
     def _sleep(self, duration: float) -> None:
         if duration > 0:
             time.sleep(duration / self.speed)
 
     # ------------------------------------------------------------ camera
-    def _poll_camera(self) -> str:
-        """Track the newest frame (if any); feed the observer; return a safety reason or ""."""
-        frame = self.camera.read()
-        if frame is not None and (self._last_frame is None or frame.timestamp != self._last_frame.timestamp):
-            self._last_frame = frame
-            t = self._stamp(frame.timestamp)
-            result = self.tracker.track(frame)
-            self._frames += 1
-            self.watch.update(t, result.ok, result.reason)
-            self._track_ok = bool(result.ok)
-            if result.ok:
-                self._confidence = float(result.confidence)
-                self._pose = (float(result.x), float(result.y), float(result.psi))
-                if self._observing and t > self._last_measure:
-                    self._state = np.asarray(self.observer.update(t, *self._pose), dtype=float).copy()
-                    self._last_measure = t
-                    self._velocity_sum += self._state[3:6]
-                    self._velocity_count += 1
-                if in_geofence(*self._pose, self.config.params.body_length, self.safety.geofence_margin):
-                    return "geofence"
-            else:
-                self._lost_frames += 1
-                self._confidence = 0.0
-        now = self.now()
-        if self.watch.expired(now):
-            return "tracking_lost"
-        if self.link.status_age() * self.speed > self.safety.link_timeout:
-            return "link_lost"
-        return ""
+    def _observe(self) -> None:
+        """Feed the observer the supervisor's new measurements."""
+        for t, x, y, psi in self.supervisor.drain():
+            if self._observing and t > self._last_measure:
+                self._state = np.asarray(self.observer.update(t, x, y, psi), dtype=float).copy()
+                self._last_measure = t
+                self._velocity_sum += self._state[3:6]
+                self._velocity_count += 1
 
-    def _wait_for_fish(self) -> None:
+    def _wait_for_fish(self, after: float) -> None:
+        """Wait for a sighting in a frame captured at or after ``after`` [experiment s] (not before the hook)."""
         deadline = time.monotonic() + self.reset_timeout
-        self.watch.last_seen = None
         while time.monotonic() < deadline:
-            self._poll_camera()
-            if self.watch.last_seen is not None:
+            if self.watch.last_seen is not None and self.watch.last_seen >= after:
                 return
             time.sleep(self.frame_period / self.speed)
         raise RuntimeError(f"no fish seen for {self.reset_timeout:.1f} s at reset "
@@ -248,13 +238,15 @@ class HardwareFishEnv(gym.Env):
         super().reset(seed=seed)
         if self._closed:
             raise RuntimeError("the environment is closed")
+        self.supervisor.disarm()
         self.link.stop()
         if self.reset_hook is not None:
             self.reset_hook(self.np_random)
-        self._last_frame, self._last_measure, self._observing = None, -math.inf, False
-        self._wait_for_fish()
+        self._last_measure, self._observing = -math.inf, False
+        self._wait_for_fish(self.now())
+        self.supervisor.drain()
         t = self.watch.last_seen
-        x, y, psi = self._pose
+        x, y, psi = self.supervisor.pose
         self.observer.reset(x, y, psi, t)
         self._observing = True
         self._last_measure = t
@@ -268,12 +260,12 @@ class HardwareFishEnv(gym.Env):
         code = np.concatenate([self.config.encode(REST.as_array())] * 2)
         tk.observe_reset(_IDX, self._state[None], self._ep, self._obs, self._out, code)
         self.filter.reset(rest)
-        self._steps, self._halted = 0, ""
-        self._frames = self._lost_frames = 0
+        self._steps = 0
+        self.supervisor.frames = self.supervisor.lost_frames = 0
         self._next_tick = self.now()
-        return self._obs[0].copy(), {"pose": list(self._pose), "target": self._ep[0, :2].tolist(),
-                                     "in_geofence": in_geofence(x, y, psi, self.config.params.body_length,
-                                                                self.safety.geofence_margin)}
+        self.supervisor.arm()
+        return self._obs[0].copy(), {"pose": [x, y, psi], "target": self._ep[0, :2].tolist(),
+                                     "in_geofence": self.geofence.breached(x, y, psi)}
 
     def _place_goal(self, draws: np.ndarray, x: float, y: float) -> None:
         """Redraw the goal (as :func:`tasks.draw_episode` does) until it is 0.3-1.0 m from the actual start."""
@@ -293,21 +285,26 @@ class HardwareFishEnv(gym.Env):
         tk.apply_actions(self._act, _NONE, self._cfg, self._beats, self._obs, self._out, self._ep)
         now = self.now()
         command = self.filter(self._beats[0], self.config.control_period)  # each command holds for a period
-        reason = self._halted or self._poll_camera()
-        if not reason:
-            self.link.set_fins(command)
-        self._obs[0, 11:] = np.concatenate([self.config.encode(command[0]), self.config.encode(command[1])])
-        self._velocity_sum = np.zeros(3)
-        self._velocity_count = 0
-        period = self.config.control_period
+        sup = self.supervisor
+        period, lease = self.config.control_period, self.safety.lease
         self._next_tick = max(self._next_tick + period, now)  # a late step does not shorten the next one
         overrun = max(0.0, now - (self._next_tick - period))
-        while not reason:
-            remaining = self._next_tick - self.now()
+        if sup.send(command, lease):
+            self._lease_end = now + lease
+        self._obs[0, OBS_ACTION] = np.concatenate([self.config.encode(command[0]), self.config.encode(command[1])])
+        self._velocity_sum = np.zeros(3)
+        self._velocity_count = 0
+        while not sup.reason:
+            t = self.now()
+            remaining = self._next_tick - t
             if remaining <= 0:
                 break
+            if self._lease_end - t < remaining + self.safety.step_slack - 1e-3 and sup.send(command, lease):
+                self._lease_end = t + lease  # a long control period: renew while step() runs
             self._sleep(min(self.frame_period, remaining))
-            reason = self._poll_camera()
+            self._observe()
+        self._observe()
+        reason = sup.reason
         end = self.now()
         if end - self._last_measure > 2 * self.frame_period and math.isfinite(self._last_measure):
             self._state = np.asarray(self.observer.predict(end), dtype=float).copy()
@@ -315,26 +312,25 @@ class HardwareFishEnv(gym.Env):
         if self._velocity_count:
             # Velocities as in the simulated envs: means over the control period, not the last estimate
             # (the observer passes part of the fin-beat ripple).
-            self._obs[0, 4:7] = self._velocity_sum / self._velocity_count
+            self._obs[0, OBS_VELOCITY] = self._velocity_sum / self._velocity_count
         self._steps += 1
         o = self._out[0]
         terminated = bool(o[tk.O_TERMINATED] > 0.5) or reason == "geofence"
-        truncated = reason in ("tracking_lost", "link_lost") or self._steps >= self.max_episode_steps
-        if reason or terminated:
-            self._halted = reason or self._halted
-            self.link.stop()
+        truncated = bool(reason) and not terminated or self._steps >= self.max_episode_steps
+        if terminated or truncated:
+            sup.trip(reason or "episode_end")
+            reason = sup.reason if sup.reason != "episode_end" else reason
         info = {name: float(o[k]) for name, k in tk.TERMS[self.config.task_id]}
         info["distance"] = float(o[tk.O_DISTANCE])
         if self.config.task_id == tk.GOAL:
             info["is_success"] = bool(o[tk.O_SUCCESS] > 0.5)
         else:
             info["tracking_error"] = float(o[tk.O_DISTANCE])
-        info.update(safety_stop=reason, command=command.tolist(), pose=list(self._pose),
+        info.update(safety_stop=reason, command=command.tolist(), pose=list(sup.pose),
                     estimate=self._state.tolist(), overrun=overrun, link=self.link.health(),
-                    tracking={"ok": self._track_ok,
-                              "lost_for": self.watch.lost_for(end), "reason": self.watch.reason,
-                              "confidence": self._confidence, "frames": self._frames,
-                              "lost_frames": self._lost_frames})
+                    tracking={"ok": sup.track_ok, "lost_for": self.watch.lost_for(end), "reason": self.watch.reason,
+                              "confidence": sup.confidence, "frames": sup.frames, "lost_frames": sup.lost_frames,
+                              "rejected": dict(sup.frame_check.rejected)})
         return self._obs[0].copy(), float(o[tk.O_REWARD]), terminated, truncated, info
 
     @property
@@ -343,25 +339,34 @@ class HardwareFishEnv(gym.Env):
         return self._ep[0, :2].tolist()
 
     def stop(self) -> None:
-        """Stop the fins now (safe to call from a signal handler or after :meth:`close`)."""
+        """Stop the fins now and end the episode (``"stop"``); takes no lock, so safe in a signal handler.
+
+        Sends STOP through :meth:`RadioLink.emergency_stop` and tells the supervisor, which latches the
+        reason and refuses further commands until the next ``reset``. Harmless after :meth:`close`.
+        """
+        self.supervisor.stop_requested = True
         if not self.link.closed:
-            self.link.stop()
+            self.link.emergency_stop()
 
     def render(self):
         """``rgb_array``: the last camera frame as RGB, or ``None`` before the first."""
         if self.render_mode is None:
             gym.logger.warn("You are calling render method without specifying any render mode.")
             return None
-        if self._last_frame is None:
+        frame = self.supervisor.last_frame
+        if frame is None:
             return None
-        return np.ascontiguousarray(self._last_frame.image[..., ::-1])
+        return np.ascontiguousarray(frame.image[..., ::-1])
 
     def close(self) -> None:
         """Send STOP, close the link and the camera (idempotent)."""
         if self._closed:
             return
         self._closed = True
+        atexit.unregister(self.close)
+        self._restore_signals()
         try:
+            self.supervisor.close()
             self.link.close()
         finally:
             self.camera.close()

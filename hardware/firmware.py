@@ -9,12 +9,19 @@ point (the parameter-change rule of the core models, reused by the emulator thro
 
 Rules:
 
-* **Watchdog**: no valid message for ``watchdog_timeout`` (default 0.5 s) -> state ``WATCHDOG``, fins
-  halt. Only a new SET_FINS starts them again.
+* **Lease** (protocol version 2): a SET_FINS runs for at most its lease, counted from the receipt of the
+  *first* copy of its command identity. Copies (same identity: keep-alives, retries, replays) never
+  extend it and never restart stopped fins; only a newer identity from the controller's ``step()``
+  does. At expiry -> state ``EXPIRED``, fins halt.
+* **Session**: the robot serves one session at a time. A valid message of a new session takes over (a
+  restarted PC): running fins halt, and the old session is retired: its messages are ignored from then on.
+* **Watchdog**: no new, valid message of the current session for ``watchdog_timeout`` (default 0.5 s) ->
+  state ``WATCHDOG``, fins halt. Duplicates, stale, foreign and retired messages never feed it.
 * **STOP** -> state ``STOPPED``, fins halt at once.
 * **Clipping** to :class:`ServoLimits`: stroke ``bias +- amplitude`` inside the servo's angle range,
-  period and ratio inside theirs, and the power-stroke speed ``2 amplitude (ratio + 1) / period``
-  at most ``max_speed`` (the period is lengthened).
+  period and ratio inside theirs, and the *peak* fin rate of both half-strokes at most ``max_speed``
+  (the period is lengthened, :func:`clip_beats`); the transitional half-stroke from the fin's next
+  turning point is bounded the same way (:func:`stretch_transition`, applied where the fin latches).
 * **Rate limiting**: the setpoint slews towards the clipped command at most ``max_rate`` per second
   and parameter.
 * **Sequence numbers**: new -> act and acknowledge; duplicate -> acknowledge only (a retry whose first
@@ -30,7 +37,10 @@ import numpy as np
 
 from hardware.protocol import Message, MsgType, RobotState, SequenceTracker, Status, StatusFlag, Verdict
 
-__all__ = ["ServoLimits", "FirmwareConfig", "Firmware", "clip_beats", "rate_limit", "rest_beats"]
+__all__ = ["ServoLimits", "FirmwareConfig", "Firmware", "clip_beats", "rate_limit", "rest_beats", "peak_rates",
+           "stretch_transition"]
+
+_RETIRED = 16  # sessions remembered as retired (a restarted PC gets a fresh random 32-bit session)
 
 
 def _default_rate() -> tuple[float, float, float, float]:
@@ -50,7 +60,7 @@ class ServoLimits:
         period_max: Longest fin-beat period [s].
         ratio_min: Smallest power/recovery speed ratio [-].
         ratio_max: Largest ratio [-].
-        max_speed: Fastest fin angular speed [rad/s] (power stroke ``2 A (zeta + 1) / T_p``).
+        max_speed: Fastest fin angular rate [rad/s]: the peak ``|g'|`` of every half-stroke, eq. (21).
         max_rate: Largest change per second of (bias [rad/s], amplitude [rad/s], period [s/s], ratio [1/s]).
     """
 
@@ -75,6 +85,13 @@ class ServoLimits:
             raise ValueError("ServoLimits: need 0 < period_min <= period_max and 0 < ratio_min <= ratio_max")
         if self.max_speed <= 0 or min(self.max_rate) <= 0:
             raise ValueError("ServoLimits: max_speed and max_rate must be > 0")
+        # The slowest stroke must be slow enough for the widest swing (stretching always succeeds).
+        span = self.angle_max - self.angle_min
+        worst = math.pi * span * (self.ratio_min + 1.0) / (2.0 * self.period_max * self.ratio_min)
+        worst = max(worst, math.pi * span * (self.ratio_max + 1.0) / (2.0 * self.period_max))
+        if worst > self.max_speed:
+            raise ValueError(f"ServoLimits: a full swing at period_max peaks at {worst:.2f} rad/s > max_speed; "
+                             "raise period_max or narrow the angle or ratio range")
 
 
 def rest_beats(angles: np.ndarray | None = None) -> np.ndarray:
@@ -92,16 +109,40 @@ def clip_beats(beats: np.ndarray, limits: ServoLimits) -> tuple[np.ndarray, bool
     out[:, 0] = np.clip(out[:, 0], limits.angle_min + out[:, 1], limits.angle_max - out[:, 1])
     out[:, 2] = np.clip(out[:, 2], limits.period_min, limits.period_max)
     out[:, 3] = np.clip(out[:, 3], limits.ratio_min, limits.ratio_max)
-    speed = 2.0 * out[:, 1] * (out[:, 3] + 1.0) / out[:, 2]  # power-stroke speed, eq. (21)
-    too_fast = speed > limits.max_speed
-    if np.any(too_fast):
-        slow_period = 2.0 * out[:, 1] * (out[:, 3] + 1.0) / limits.max_speed
-        out[:, 2] = np.where(too_fast, slow_period, out[:, 2])
-        # A period beyond period_max cannot slow the stroke enough: shrink the amplitude instead.
-        over = out[:, 2] > limits.period_max
-        out[:, 2] = np.minimum(out[:, 2], limits.period_max)
-        out[:, 1] = np.where(over, limits.max_speed * out[:, 2] / (2.0 * (out[:, 3] + 1.0)), out[:, 1])
+    # Peak rate of the faster half-stroke, eq. (21): pi A (zeta + 1) / (T_p min(1, zeta)); slow the period.
+    slow_period = math.pi * out[:, 1] * (out[:, 3] + 1.0) / (limits.max_speed * np.minimum(1.0, out[:, 3]))
+    out[:, 2] = np.maximum(out[:, 2], slow_period)  # <= period_max (ServoLimits guarantees it)
     return out, bool(np.any(np.abs(out - b) > 1e-12))
+
+
+def peak_rates(beats: np.ndarray) -> np.ndarray:
+    """``(2, 2)`` peak ``|g'|`` [rad/s] of the power and recovery half-strokes of ``(2, 4)`` patterns.
+
+    Each half of eq. (21) is a half-cosine: swing ``2 A`` in ``T_p / (zeta + 1)`` (power) or
+    ``zeta T_p / (zeta + 1)`` (recovery); the peak of ``half * pi / d * sin`` is ``pi * swing / (2 d)``.
+    """
+    b = np.asarray(beats, dtype=float).reshape(2, 4)
+    a, period, ratio = b[:, 1], b[:, 2], b[:, 3]
+    power = math.pi * a * (ratio + 1.0) / period
+    return np.stack([power, power / ratio], axis=1)
+
+
+def stretch_transition(beats: np.ndarray, turn: np.ndarray, next_power: np.ndarray,
+                       limits: ServoLimits) -> np.ndarray:
+    """Lengthen the period of ``(2, 4)`` patterns so the transitional half-stroke stays within ``max_speed``.
+
+    A fin latches a new pattern at a turning point ``turn`` [rad] and then swings to ``bias + A`` in
+    ``T_p / (zeta + 1)`` (``next_power``) or to ``bias - A`` in ``zeta T_p / (zeta + 1)``
+    (``docs/model.md``, "Changing fin parameters"); its peak rate is ``pi |to - turn| / (2 d)``
+    (:func:`pectoral_gym.dynamics.stroke_kinematics`). Input: patterns already clipped by :func:`clip_beats`.
+    """
+    out = np.array(beats, dtype=float).reshape(2, 4)
+    turn, power = np.asarray(turn, dtype=float), np.asarray(next_power, dtype=bool)
+    to = np.where(power, out[:, 0] + out[:, 1], out[:, 0] - out[:, 1])
+    share = np.where(power, 1.0, out[:, 3]) / (out[:, 3] + 1.0)  # d = share * T_p
+    need = math.pi * np.abs(to - turn) / (2.0 * limits.max_speed * share)
+    out[:, 2] = np.minimum(np.maximum(out[:, 2], need), limits.period_max)
+    return out
 
 
 def rate_limit(current: np.ndarray, target: np.ndarray, dt: float, limits: ServoLimits) -> np.ndarray:
@@ -115,16 +156,20 @@ class FirmwareConfig:
     """Settings of the robot-side rules.
 
     Attributes:
-        watchdog_timeout: Halt the fins after this long without a valid message [s]; at most 1 s.
+        watchdog_timeout: Halt the fins after this long without a new valid message [s]; at most 1 s.
+        max_lease: Longest lease the robot grants a command, whatever the message asks [s]; at most 1 s.
         limits: Servo limits for clipping and rate limiting.
     """
 
     watchdog_timeout: float = 0.5
+    max_lease: float = 1.0
     limits: ServoLimits = field(default_factory=ServoLimits)
 
     def __post_init__(self) -> None:
         if not 0 < self.watchdog_timeout <= 1.0:
             raise ValueError(f"watchdog_timeout must be in (0, 1] s, got {self.watchdog_timeout!r}")
+        if not 0 < self.max_lease <= 1.0:
+            raise ValueError(f"max_lease must be in (0, 1] s, got {self.max_lease!r}")
 
 
 class Firmware:
@@ -135,7 +180,11 @@ class Firmware:
         command: ``(2, 4)`` the last accepted SET_FINS, clipped to the servo limits.
         setpoint: ``(2, 4)`` the rate-limited pattern the fins should follow (valid while running).
         halt: Set when the fins must stop at once; the caller clears it after halting them.
-        tracker: Sequence bookkeeping of the PC's messages.
+        tracker: Sequence bookkeeping of the current session's messages.
+        session: The session served (``None`` before the first message).
+        command_id: Identity of the last command run (``None`` before the first).
+        lease_end: Time the running command's lease ends [s].
+        ignored: Messages ignored for liveness: ``{"duplicate", "stale", "retired", "copy", "bad_lease"}``.
         crc_errors: Frames rejected by the caller's decoder, reported back in STATUS (set by the caller).
     """
 
@@ -148,9 +197,14 @@ class Firmware:
         self.clipped = False
         self.tracker = SequenceTracker()
         self.crc_errors = 0
+        self.session: int | None = None
+        self.retired: list[int] = []
+        self.command_id: int | None = None
+        self.lease_end = -math.inf
+        self.ignored = dict.fromkeys(("duplicate", "stale", "retired", "copy", "bad_lease"), 0)
         self._seq = 0
-        self.last_valid: float | None = None  # time of the last valid, non-stale message [s]
-        self.tripped_at: float | None = None  # time the watchdog last fired [s]
+        self.last_valid: float | None = None  # time of the last new, valid message of the session [s]
+        self.tripped_at: float | None = None  # time the watchdog or the lease last stopped the fins [s]
         self._last_tick: float | None = None
         self._start: float | None = None
 
@@ -168,26 +222,57 @@ class Firmware:
                         self.tracker.duplicates, self.tracker.stale, int(1000 * (now - start)) & 0xFFFFFFFF)
         return Message(MsgType.STATUS, self._seq, 0, status=status)
 
+    def _session(self, session: int) -> bool:
+        """Whether a message of ``session`` may be handled; a new session takes over, the old one retires."""
+        if session == self.session:
+            return True
+        if session in self.retired:
+            self.ignored["retired"] += 1
+            return False
+        if self.session is not None:
+            self.retired = [*self.retired[-(_RETIRED - 1):], self.session]
+            if self.running:
+                self._stop(RobotState.STOPPED)  # the new controller must command anew
+        self.session, self.command_id = session, None
+        self.tracker = SequenceTracker()
+        return True
+
     def receive(self, msg: Message, now: float) -> Message | None:
-        """Handle a valid message received at ``now`` [s]; return the STATUS reply, or ``None`` (stale)."""
+        """Handle a valid message received at ``now`` [s]; return the STATUS reply, or ``None`` (ignored)."""
         if msg.type == MsgType.STATUS:
             return None  # not for us
         if self._start is None:
             self._start = now
+        if not self._session(msg.session):
+            return None
         verdict = self.tracker.check(msg.seq, msg.session)
         if verdict == Verdict.STALE:
+            self.ignored["stale"] += 1
             return None
-        self.last_valid = now  # any valid, non-stale message feeds the watchdog
-        if verdict == Verdict.NEW:
-            if msg.type == MsgType.STOP:
-                self._stop(RobotState.STOPPED)
-            elif msg.type == MsgType.SET_FINS:
-                fins = np.asarray(msg.fins, dtype=float).reshape(2, 4)
-                self.command, self.clipped = clip_beats(fins, self.config.limits)
-                if not self.running:
-                    self.setpoint = self.setpoint.copy()
-                    self.state = RobotState.RUNNING
+        if verdict == Verdict.DUPLICATE:
+            self.ignored["duplicate"] += 1  # acknowledged, nothing else: no liveness from a repeat
+            return self._status(msg, now)
+        self.last_valid = now
+        if msg.type == MsgType.STOP:
+            self._stop(RobotState.STOPPED)
+        elif msg.type == MsgType.SET_FINS:
+            self._set_fins(msg, now)
         return self._status(msg, now)
+
+    def _set_fins(self, msg: Message, now: float) -> None:
+        if not 0 < msg.lease <= self.config.max_lease:
+            self.ignored["bad_lease"] += 1
+            return
+        if self.command_id is not None and not 0 < ((msg.command - self.command_id) & 0xFFFF) < 0x8000:
+            self.ignored["copy"] += 1  # a copy (or an older command): it neither extends nor restarts
+            return
+        self.command_id = msg.command
+        self.lease_end = now + msg.lease  # counted from our own receipt of the first copy
+        fins = np.asarray(msg.fins, dtype=float).reshape(2, 4)
+        self.command, self.clipped = clip_beats(fins, self.config.limits)
+        if not self.running:
+            self.setpoint = self.setpoint.copy()
+            self.state = RobotState.RUNNING
 
     def _stop(self, state: RobotState) -> None:
         if self.running:
@@ -195,7 +280,7 @@ class Firmware:
         self.state = state
 
     def tick(self, now: float, fin_angles: np.ndarray | None = None) -> None:
-        """Advance the rules to ``now`` [s]: watchdog, rate limiting.
+        """Advance the rules to ``now`` [s]: lease, watchdog, rate limiting.
 
         Args:
             now: Current time [s].
@@ -203,11 +288,13 @@ class Firmware:
         """
         dt = 0.0 if self._last_tick is None else now - self._last_tick
         self._last_tick = now
+        if self.running and now >= self.lease_end:
+            self._stop(RobotState.EXPIRED)
+            self.tripped_at = now
         if (self.running and self.last_valid is not None
                 and now - self.last_valid > self.config.watchdog_timeout):
             self._stop(RobotState.WATCHDOG)
             self.tripped_at = now
-            self.tracker.reset()  # the PC may have restarted with a new sequence
         if self.running:
             slewed = rate_limit(self.setpoint, self.command, dt, self.config.limits)
             self.setpoint = clip_beats(slewed, self.config.limits)[0]  # per-parameter slewing may leave the limits

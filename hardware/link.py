@@ -2,17 +2,20 @@
 
 ``/dev/ttyUSB0`` (the XBee on USB), ``socket://host:port`` (an emulator process) and ``loop://``
 (tests) all work. A reader thread decodes the robot's STATUS messages; a keep-alive thread re-sends
-the current fin command (or a HEARTBEAT when stopped) every ``keepalive_period`` and retries an
-unacknowledged SET_FINS/STOP after ``ack_timeout``, at most ``max_retries`` times (same frame, same
-sequence number; fin commands are absolute setpoints, so a repeat is harmless). ``close()`` sends
-STOP and is idempotent.
+a *copy* of the current fin command (same command identity, so it never extends the command's lease;
+``docs/protocol.md``) every ``keepalive_period`` until the lease ends, then STOP; HEARTBEAT when
+stopped. It retries an unacknowledged SET_FINS/STOP after ``ack_timeout``, at most ``max_retries`` times
+(same frame, same sequence number). Only :meth:`RadioLink.set_fins` starts a new lease.
+:meth:`RadioLink.emergency_stop` takes no lock (for signal handlers). ``close()`` sends STOP and is
+idempotent.
 """
 
 from __future__ import annotations
 
-import random
+import secrets
 import threading
 import time
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -67,8 +70,8 @@ class RadioLink:
             the firmware watchdog (0.5 s by default).
         ack_timeout: Retry an unacknowledged SET_FINS/STOP after this long [s].
         max_retries: Retries per command before it counts as ``unacked``.
-        session: Session byte (default random): a new session makes the firmware accept sequence numbers
-            afresh after a PC restart.
+        session: 32-bit session (default from :mod:`secrets`, never from a seeded generator): the robot
+            serves the newest session and ignores retired ones, so a restarted PC gets a fresh one.
     """
 
     def __init__(self, port: str | serial.SerialBase, baudrate: int = 57600, dest64: int = pr.BROADCAST,
@@ -77,17 +80,25 @@ class RadioLink:
         if not keepalive_period > 0 or not ack_timeout > 0 or int(max_retries) < 0:
             raise ValueError("keepalive_period and ack_timeout must be > 0 s and max_retries >= 0")
         self.serial = serial.serial_for_url(port, baudrate=baudrate, timeout=0.01) if isinstance(port, str) else port
+        if isinstance(port, str) and "://" not in port and int(dest64) == pr.BROADCAST:
+            warnings.warn("RadioLink: commands are broadcast, so every robot on this radio channel obeys them; "
+                          "pass dest64=<the robot XBee's 64-bit address>", stacklevel=2)
         self.dest64 = int(dest64)
         self.keepalive_period = float(keepalive_period)
         self.ack_timeout = float(ack_timeout)
         self.max_retries = int(max_retries)
-        self.session = random.randrange(256) if session is None else int(session) & 0xFF
+        self.lease_scale = 1.0  # wall seconds per robot second (1 / speed of an accelerated emulator)
+        self.session = secrets.randbits(32) if session is None else int(session) & 0xFFFFFFFF
         self.stats = LinkStats()
         self.decoder = pr.StreamDecoder()
         self.tracker = pr.SequenceTracker()
         self.last_status: pr.Status | None = None
         self.last_status_time: float | None = None  # time.monotonic() of the newest STATUS
         self.command: np.ndarray | None = None  # (2, 4) current fin command, None when stopped
+        self.lease_end = -float("inf")  # time.monotonic() after which the robot no longer runs the command
+        self._command_id = 0
+        self._lease = pr.DEFAULT_LEASE
+        self._emergency: int | None = None  # seq of a STOP sent by emergency_stop(), for the link thread
         self._seq = 0
         self._pending: tuple[int, bytes, float, int, pr.MsgType] | None = None  # seq, frame, deadline, tries, type
         self._acked: set[int] = set()
@@ -103,8 +114,10 @@ class RadioLink:
 
     # ------------------------------------------------------------ sending
     def _next(self, mtype: pr.MsgType, fins: tuple[float, ...] | None = None) -> tuple[int, bytes]:
+        if self._emergency is not None:  # move past the sequence number emergency_stop() used
+            self._seq, self._emergency = self._emergency, None
         self._seq = (self._seq + 1) & 0xFFFF
-        msg = pr.Message(mtype, self._seq, self.session, fins=fins)
+        msg = pr.Message(mtype, self._seq, self.session, fins=fins, command=self._command_id, lease=self._lease)
         return self._seq, pr.encode_frame(pr.tx_request(pr.encode_message(msg), self.dest64))
 
     def _write(self, frame: bytes) -> None:
@@ -119,13 +132,32 @@ class RadioLink:
         with self._lock:
             seq, frame = self._next(mtype, fins)
             self._pending = (seq, frame, time.monotonic() + self.ack_timeout, 0, mtype)
-        self._write(frame)
+            self._write(frame)  # under the lock: frames leave in sequence order
         return seq
 
-    def set_fins(self, beats: np.ndarray) -> int:
+    def emergency_stop(self) -> None:
+        """Send STOP without taking any lock (safe in a signal handler, even one that interrupted this link).
+
+        The frame jumps the sequence by 64 so the robot takes it as new whatever was in flight; the link
+        thread then moves its own counter past it. Interleaved bytes cannot corrupt it: the robot's
+        decoder resynchronises on the start delimiter and drops the interrupted frame. The lease is the
+        backstop if even this write fails.
+        """
+        self.command = None
+        seq = (self._seq + 64) & 0xFFFF
+        msg = pr.Message(pr.MsgType.STOP, seq, self.session)
+        try:
+            self.serial.write(pr.encode_frame(pr.tx_request(pr.encode_message(msg), self.dest64)))
+        except Exception:  # noqa: BLE001 - a signal handler must not raise; the lease stops the fins anyway
+            pass
+        self._emergency = seq
+
+    def set_fins(self, beats: np.ndarray, lease: float = pr.DEFAULT_LEASE) -> int:
         """Command both fins ``(2, 4)`` (right first; bias, amplitude [rad], period [s], ratio); returns the seq.
 
-        Nothing is checked here beyond finiteness and the wire range: clip with :mod:`hardware.safety` first.
+        A new command identity with a lease of ``lease`` robot seconds (``(0, MAX_LEASE]``): the robot
+        stops the fins when it runs out unless another ``set_fins`` comes first. Nothing is checked here
+        beyond finiteness and the wire range: clip with :mod:`hardware.safety` first.
         """
         if self._closed:
             raise RuntimeError("the radio link is closed")
@@ -133,15 +165,20 @@ class RadioLink:
         if not np.all(np.isfinite(b)):
             raise ValueError(f"fin command must be finite, got {b.tolist()}")
         fins = tuple(b.ravel().tolist())
-        pr.encode_message(pr.Message(pr.MsgType.SET_FINS, 0, fins=fins))  # wire-range check before any state
+        # wire-range and lease checks before any state
+        pr.encode_message(pr.Message(pr.MsgType.SET_FINS, 0, fins=fins, lease=lease))
         with self._lock:
             self.command = b.copy()
-        return self._send_tracked(pr.MsgType.SET_FINS, fins)
+            self._command_id = (self._command_id + 1) & 0xFFFF
+            self._lease = float(lease)
+            self.lease_end = time.monotonic() + self._lease * self.lease_scale  # the robot counts from receipt
+            return self._send_tracked(pr.MsgType.SET_FINS, fins)
 
     def stop(self, wait: float = 0.0) -> bool:
         """Send STOP (retried like a command); with ``wait`` > 0 block up to ``wait`` s for the ack."""
         with self._lock:
             self.command = None
+            self.lease_end = -float("inf")
         if self._closed:
             return False
         seq = self._send_tracked(pr.MsgType.STOP, None)
@@ -161,9 +198,9 @@ class RadioLink:
     def _keepalive_loop(self) -> None:
         next_keepalive = time.monotonic() + self.keepalive_period
         while not self._stop.wait(min(self.ack_timeout, self.keepalive_period) / 4):
-            now = time.monotonic()
             retry = None
             with self._lock:
+                now = time.monotonic()  # after the lock: a stalled thread must not act on an old clock
                 if self._pending is not None and now >= self._pending[2]:
                     seq, frame, _, tries, mtype = self._pending
                     if tries < self.max_retries:
@@ -173,18 +210,21 @@ class RadioLink:
                     else:
                         self._pending = None
                         self.stats.unacked += 1
+                if self.command is not None and now >= self.lease_end:
+                    self.command = None  # the lease ran out (a paused controller, or a stalled process)
+                    next_keepalive = now
                 keepalive = None
                 if now >= next_keepalive:
                     next_keepalive = now + self.keepalive_period
-                    if self.command is not None:
+                    if self.command is not None:  # a copy: same command identity, no new lease
                         _, keepalive = self._next(pr.MsgType.SET_FINS, tuple(self.command.ravel().tolist()))
                     elif self.last_status is None or self.last_status.state == pr.RobotState.RUNNING:
                         _, keepalive = self._next(pr.MsgType.STOP)  # not known to be still: repeat the stop
                     else:
                         _, keepalive = self._next(pr.MsgType.HEARTBEAT)
-            for frame in (retry, keepalive):
-                if frame is not None:
-                    self._write(frame)
+                for frame in (retry, keepalive):
+                    if frame is not None:
+                        self._write(frame)
 
     # ------------------------------------------------------------ receiving
     def _read_loop(self) -> None:
@@ -249,7 +289,7 @@ class RadioLink:
             out: dict[str, float | int | str | None] = dict(vars(self.stats))
             status = self.last_status
         out["status_age"] = self.status_age()
-        out["robot_state"] = None if status is None else pr.RobotState(status.state).name
+        out["robot_state"] = None if status is None else pr.state_name(status.state)
         return out
 
     @property

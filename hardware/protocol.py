@@ -7,8 +7,10 @@ Two layers (byte layouts, timing and rules in ``docs/protocol.md``):
   ``0x11`` or ``0x13`` goes out as ``0x7D, byte ^ 0x20``; length and checksum count unescaped bytes.
   The PC sends *Transmit Request* frames (``0x10``, 64-bit destination); the robot's XBee delivers
   them to the dsPIC as *Receive Packet* frames (``0x90``) and vice versa.
-* **Message** (the RF data inside those frames): ``version, type, session, seq (u16)``, a body, and a
+* **Message** (the RF data inside those frames): ``version, type, session (u32), seq (u16)``, a body, and a
   CRC-16/CCITT-FALSE of everything before it (the XBee checksum is only 8 bits). Big endian throughout.
+  A SET_FINS carries a command identity and a lease (version 2): the robot runs a command for at most
+  its lease, counted from its own receipt of the command's first copy; copies never extend it.
 
 Encoders and decoders are pure functions; :class:`StreamDecoder` turns an arbitrary byte stream into
 valid messages (it resynchronises on garbage and never yields a damaged message) and
@@ -24,7 +26,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 __all__ = [
-    "START", "ESCAPE", "XON", "XOFF", "TX_REQUEST", "RX_PACKET", "BROADCAST", "PROTOCOL_VERSION",
+    "START", "ESCAPE", "XON", "XOFF", "TX_REQUEST", "RX_PACKET", "BROADCAST", "PROTOCOL_VERSION", "MAX_LEASE",
+    "DEFAULT_LEASE", "state_name",
     "MsgType", "RobotState", "Status", "Message", "ProtocolError",
     "crc16", "checksum", "escape", "unescape", "encode_frame", "decode_frame",
     "tx_request", "rx_packet", "rf_data", "encode_message", "decode_message",
@@ -37,10 +40,13 @@ TX_REQUEST = 0x10  # XBee Transmit Request (64-bit destination)
 RX_PACKET = 0x90  # XBee Receive Packet
 BROADCAST = 0x000000000000FFFF  # 64-bit broadcast address
 MAX_FRAME_DATA = 255  # longest frame data we accept; our frames are far shorter
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2  # 2: 32-bit session, SET_FINS with command identity and lease
+MAX_LEASE = 1.0  # longest lease a SET_FINS may carry [s]
+DEFAULT_LEASE = 0.8  # lease of a command from step(): 0.5 s control period + 0.3 s jitter (docs/protocol.md)
 
-_HEADER = struct.Struct(">BBBH")  # version, type, session, seq
+_HEADER = struct.Struct(">BBIH")  # version, type, session, seq
 _FINS = struct.Struct(">8H")  # per fin: bias [mrad], amplitude [mrad], period [ms], ratio [1/1000]
+_LEASE = struct.Struct(">HH")  # command identity, lease [ms]
 _STATUS = struct.Struct(">HBBBHHHI")  # ack seq, ack type, state, flags, crc errors, duplicates, stale, uptime [ms]
 _CRC = struct.Struct(">H")
 _FIN_SCALE = (1000.0, 1000.0, 1000.0, 1000.0)  # SI value * scale = wire integer
@@ -70,6 +76,15 @@ class RobotState(enum.IntEnum):
     RUNNING = 1  # beating its fins at the commanded pattern
     STOPPED = 2  # stopped by a STOP message; fins still
     WATCHDOG = 3  # no valid frame for the watchdog time; fins still
+    EXPIRED = 4  # the running command's lease ran out; fins still
+
+
+def state_name(state: int) -> str:
+    """Name of a reported robot state; ``"UNKNOWN_<n>"`` for a value this PC does not know."""
+    try:
+        return RobotState(state).name
+    except ValueError:
+        return f"UNKNOWN_{int(state)}"
 
 
 class StatusFlag(enum.IntFlag):
@@ -95,13 +110,20 @@ class Status:
 
 @dataclass(frozen=True)
 class Message:
-    """One message. ``fins`` (8 floats, right fin first, SI) for SET_FINS; ``status`` for STATUS."""
+    """One message: ``fins`` (8 floats, right fin first, SI), ``command``, ``lease`` (SET_FINS); ``status`` (STATUS).
+
+    ``command`` (u16) names the command: copies (keep-alives, retries) carry the same one, a new command
+    from the controller a newer one. ``lease`` [s, ms resolution, (0, MAX_LEASE]] is how long the robot
+    may run it after receiving its first copy.
+    """
 
     type: MsgType
     seq: int
     session: int = 0
     fins: tuple[float, ...] | None = None
     status: Status | None = field(default=None)
+    command: int = 0
+    lease: float = DEFAULT_LEASE
 
 
 # ---------------------------------------------------------------- checks
@@ -209,12 +231,16 @@ def _fins_to_wire(fins: Sequence[float]) -> bytes:
 
 def encode_message(msg: Message) -> bytes:
     """RF data of ``msg``: header, body, CRC-16."""
-    if not 0 <= msg.seq <= 0xFFFF or not 0 <= msg.session <= 0xFF:
-        raise ValueError(f"seq must be 0..65535 and session 0..255, got {msg.seq}, {msg.session}")
+    if not 0 <= msg.seq <= 0xFFFF or not 0 <= msg.session <= 0xFFFFFFFF:
+        raise ValueError(f"seq must be 0..65535 and session 0..2**32-1, got {msg.seq}, {msg.session}")
     if msg.type == MsgType.SET_FINS:
         if msg.fins is None:
             raise ValueError("SET_FINS needs fins")
-        body = _fins_to_wire(msg.fins)
+        lease_ms = round(float(msg.lease) * 1000.0) if math.isfinite(msg.lease) else -1
+        if not 1 <= lease_ms <= round(MAX_LEASE * 1000) or not 0 <= msg.command <= 0xFFFF:
+            raise ValueError(f"SET_FINS needs a lease in (0, {MAX_LEASE}] s and a command 0..65535, "
+                             f"got {msg.lease!r}, {msg.command!r}")
+        body = _fins_to_wire(msg.fins) + _LEASE.pack(msg.command, lease_ms)
     elif msg.type == MsgType.STATUS:
         if msg.status is None:
             raise ValueError("STATUS needs status")
@@ -228,7 +254,8 @@ def encode_message(msg: Message) -> bytes:
     return head + _CRC.pack(crc16(head))
 
 
-_BODY_SIZE = {MsgType.SET_FINS: _FINS.size, MsgType.STOP: 0, MsgType.HEARTBEAT: 0, MsgType.STATUS: _STATUS.size}
+_BODY_SIZE = {MsgType.SET_FINS: _FINS.size + _LEASE.size, MsgType.STOP: 0, MsgType.HEARTBEAT: 0,
+              MsgType.STATUS: _STATUS.size}
 
 
 def decode_message(payload: bytes) -> Message:
@@ -253,9 +280,10 @@ def decode_message(payload: bytes) -> Message:
     if len(body) != _BODY_SIZE[mtype]:
         raise ProtocolError("length", f"{mtype.name} body of {len(body)} bytes, expected {_BODY_SIZE[mtype]}")
     if mtype == MsgType.SET_FINS:
-        words = _FINS.unpack(body)
+        words = _FINS.unpack_from(body)
         fins = tuple(w / _FIN_SCALE[i % 4] for i, w in enumerate(words))
-        return Message(mtype, seq, session, fins=fins)
+        command, lease_ms = _LEASE.unpack_from(body, _FINS.size)
+        return Message(mtype, seq, session, fins=fins, command=command, lease=lease_ms / 1000.0)
     if mtype == MsgType.STATUS:
         return Message(mtype, seq, session, status=Status(*_STATUS.unpack(body)))
     return Message(mtype, seq, session)

@@ -8,28 +8,84 @@ import numpy as np
 import pytest
 
 from hardware import protocol as pr
-from hardware.emulator import EmulatedRobot, main
+from hardware.emulator import ROBOT_ADDRESS, EmulatedRobot, main
 from hardware.firmware import Firmware, FirmwareConfig, ServoLimits, clip_beats
 from hardware.link import RadioLink
 
 BEATS = np.array([[math.pi / 2, math.radians(20), 1.0, 3.0]] * 2)
 
 
-def _set(seq, beats=BEATS, session=0):
-    return pr.Message(pr.MsgType.SET_FINS, seq, session, fins=tuple(np.ravel(beats)))
+def _set(seq, beats=BEATS, session=0, command=None, lease=1.0):
+    return pr.Message(pr.MsgType.SET_FINS, seq, session, fins=tuple(np.ravel(beats)),
+                      command=seq if command is None else command, lease=lease)
 
 
 def test_watchdog_halts_after_timeout_only():
     fw = Firmware(FirmwareConfig(watchdog_timeout=0.5))
-    assert fw.receive(_set(1), 0.0).status.ack_seq == 1
+    assert fw.receive(_set(1, lease=1.0), 0.0).status.ack_seq == 1
     fw.tick(0.0)
     fw.tick(0.45)
     assert fw.running and not fw.halt
-    fw.receive(pr.Message(pr.MsgType.HEARTBEAT, 2), 0.45)  # a heartbeat feeds the watchdog
+    fw.receive(pr.Message(pr.MsgType.HEARTBEAT, 2), 0.45)  # a new heartbeat feeds the watchdog (not the lease)
     fw.tick(0.9)
     assert fw.running
-    fw.tick(0.96)  # 0.51 s after the last valid message
+    fw.tick(0.96)  # 0.51 s after the last valid message, lease still running until 1.0
     assert fw.state == pr.RobotState.WATCHDOG and fw.halt and fw.tripped_at == 0.96
+
+
+def test_lease_runs_from_first_copy_and_copies_never_extend_or_restart():
+    fw = Firmware()
+    fw.receive(_set(1, command=7, lease=0.8), 0.0)
+    for k in range(2, 9):  # keep-alive copies every 0.1 s: new seq, same command identity
+        fw.receive(_set(k, command=7, lease=0.8), 0.1 * (k - 1))
+        fw.tick(0.1 * (k - 1))
+    assert fw.running
+    fw.tick(0.8)  # 0.8 s after the first copy, whatever the copies said
+    assert fw.state == pr.RobotState.EXPIRED and fw.halt and fw.tripped_at == 0.8
+    fw.halt = False
+    fw.receive(_set(9, command=7, lease=0.8), 0.85)  # one more copy: no restart
+    fw.receive(_set(10, command=6, lease=0.8), 0.86)  # an older command: no restart
+    assert fw.state == pr.RobotState.EXPIRED and fw.ignored["copy"] == 9
+    fw.receive(_set(11, command=8, lease=0.8), 0.9)  # a new command from step()
+    assert fw.running and fw.lease_end == pytest.approx(1.7)
+
+
+def test_lease_is_capped_and_zero_lease_ignored():
+    fw = Firmware(FirmwareConfig(max_lease=0.6))
+    fw.receive(_set(1, lease=0.9), 0.0)
+    assert fw.state == pr.RobotState.IDLE and fw.ignored["bad_lease"] == 1
+    fw.receive(_set(2, lease=0.5), 0.0)
+    assert fw.running
+
+
+def test_replays_and_duplicates_keep_nothing_alive():
+    fw = Firmware()
+    fw.receive(_set(1, session=11, lease=1.0), 0.0)
+    for k in range(1, 20):  # one captured frame replayed every 0.05 s
+        fw.receive(_set(1, session=11, lease=1.0), 0.05 * k)
+        fw.tick(0.05 * k)
+    assert fw.state == pr.RobotState.WATCHDOG and fw.tripped_at == pytest.approx(0.55)
+    assert fw.ignored["duplicate"] == 19
+
+
+def test_another_sessions_heartbeats_stop_the_fins():
+    fw = Firmware()
+    fw.receive(_set(1, session=11, lease=1.0), 0.0)
+    fw.receive(pr.Message(pr.MsgType.HEARTBEAT, 1, session=12), 0.1)  # a second client joins
+    assert fw.state == pr.RobotState.STOPPED and fw.halt  # a takeover halts: the new PC must command anew
+    fw.receive(_set(2, session=11, lease=1.0), 0.2)  # the first client is retired
+    assert fw.state == pr.RobotState.STOPPED
+
+
+def test_new_session_takes_over_and_old_session_is_retired():
+    fw = Firmware()
+    fw.receive(_set(1, session=1), 0.0)
+    fw.receive(pr.Message(pr.MsgType.STOP, 1, session=2), 0.1)  # a restarted PC stops the fish
+    assert fw.state == pr.RobotState.STOPPED and fw.session == 2
+    assert fw.receive(_set(2, session=1, command=99), 0.2) is None  # the old PC's commands: ignored
+    assert fw.state == pr.RobotState.STOPPED and fw.ignored["retired"] == 1
+    fw.receive(_set(2, session=2), 0.3)
+    assert fw.running
 
 
 def test_heartbeat_does_not_restart_but_new_command_does():
@@ -66,7 +122,7 @@ def test_duplicates_acked_not_applied_stale_ignored():
     other[:, 0] = 1.0
     dup = fw.receive(_set(5, other), 0.1)  # same seq: a retry whose first copy arrived
     assert dup.status.ack_seq == 5 and np.allclose(fw.command, BEATS, atol=1e-3)
-    assert fw.receive(_set(4, other), 0.2) is None  # older: ignored, no reply
+    assert fw.receive(_set(4, other, command=9), 0.2) is None  # older: ignored, no reply
     assert np.allclose(fw.command, BEATS, atol=1e-3)
     assert (fw.tracker.duplicates, fw.tracker.stale) == (1, 1)
 
@@ -79,11 +135,14 @@ def test_clipping_to_servo_limits_by_hand():
     out, changed = clip_beats(beats, lim)
     assert changed
     assert out[0, 0] == pytest.approx(math.radians(40))  # bias - amplitude = 10 deg
-    # power stroke 2 A (zeta + 1) / T = 2 * 0.5236 * 6 / 0.4 = 15.7 rad/s > 13: T = 2 * 0.5236 * 6 / 13
-    assert out[0, 2] == pytest.approx(2 * math.radians(30) * 6 / 13.0)
+    # peak power-stroke rate pi A (zeta + 1) / T = pi * 0.5236 * 6 / 0.4 = 24.7 rad/s > 13: T = pi * 0.5236 * 6 / 13
+    assert out[0, 2] == pytest.approx(math.pi * math.radians(30) * 6 / 13.0)
     assert out[1, 1] == pytest.approx(math.radians(80)) and out[1, 0] == pytest.approx(math.radians(90))
     assert out[1, 2] == 4.0 and out[1, 3] == 6.0
-    assert clip_beats(BEATS, lim)[1] is False  # a pattern of the default env ranges passes unchanged
+    assert clip_beats(BEATS, lim)[1] is False  # peak pi * 0.349 * 4 / 1 = 4.4 rad/s: unchanged
+    slow_recovery = np.array([[math.radians(90), math.radians(40), 0.4, 0.5]] * 2)
+    # ratio 0.5: the recovery stroke is the faster one, peak pi A (zeta + 1) / (zeta T) = 16.45 rad/s
+    assert clip_beats(slow_recovery, lim)[0][0, 2] == pytest.approx(math.pi * math.radians(40) * 1.5 / (0.5 * 13))
 
 
 def test_rate_limiting_from_rest():
@@ -96,7 +155,7 @@ def test_rate_limiting_from_rest():
     assert fw.setpoint[0, 0] == pytest.approx(math.radians(108), abs=1e-3)
     assert fw.setpoint[0, 1] == pytest.approx(0.1, abs=1e-3)
     assert fw.setpoint[0, 3] == pytest.approx(2.0, abs=1e-3)
-    fw.receive(pr.Message(pr.MsgType.HEARTBEAT, 2), 0.4)  # keep the watchdog fed
+    fw.receive(pr.Message(pr.MsgType.HEARTBEAT, 2), 0.4)  # keep the watchdog fed (lease 1 s)
     fw.tick(0.45)  # long enough for every parameter to arrive
     assert np.allclose(fw.setpoint, fw.command)
 
@@ -129,11 +188,14 @@ def test_emulator_watchdog_stops_fins_in_time():
 
 def test_emulator_swims_forward_and_reports_status_over_a_pty():
     with EmulatedRobot(pty=True, speed=4.0, start_pose=(1.0, 0.5, 0.0)) as robot:
-        link = RadioLink(robot.url, keepalive_period=0.025, ack_timeout=0.02)
+        link = RadioLink(robot.url, keepalive_period=0.025, ack_timeout=0.02, dest64=ROBOT_ADDRESS)
         try:
+            link.lease_scale = 1 / 4.0
             seq = link.set_fins(BEATS)
             assert link.wait_ack(seq, 2.0)
-            time.sleep(0.6)  # 2.4 emulated seconds of symmetric rowing
+            for _ in range(6):  # 2.4 emulated seconds of symmetric rowing, a new command every 0.4 s
+                time.sleep(0.1)
+                link.set_fins(BEATS)
             x, y, psi = robot.pose()
             assert x > 1.01 and abs(y - 0.5) < 1e-3 and abs(psi) < 1e-3  # straight ahead, symmetric fins
             assert link.health()["robot_state"] == "RUNNING"

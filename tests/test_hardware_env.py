@@ -12,8 +12,10 @@ from hardware import protocol as pr
 from hardware.emulator import EmulatedRobot
 from hardware.env import HardwareFishEnv
 from hardware.firmware import ServoLimits
-from hardware.safety import CommandFilter, SafetyConfig, TrackingWatch, in_geofence, install_stop_handlers
+from hardware.safety import CommandFilter, Geofence, SafetyConfig, TrackingWatch, in_geofence, install_stop_handlers
 from hardware.scene import SceneConditions
+from pectoral_gym.models import FullModel
+from pectoral_gym.params import FishParams, body_coefficients
 
 SPEED = 2.0  # accelerated clock: a 0.5 s control period takes 0.25 s of wall time
 
@@ -55,8 +57,9 @@ def test_step_sends_the_command_and_reports_health(rig, monkeypatch):
     action = np.array([0.0, 1.0, -1.0, 1.0, 0.0, 1.0, -1.0, 1.0], dtype=np.float32)
     obs, reward, terminated, truncated, info = env.step(action)
     assert len(sent) == 1
-    # Action -> pattern as in simulation: bias 90 deg, amplitude 30 deg, period 0.5 s, ratio 5.
-    assert np.allclose(info["command"], [[math.pi / 2, math.radians(30), 0.5, 5.0]] * 2)
+    # Action -> pattern as in simulation: bias 90 deg, amplitude 30 deg, period 0.5 s, ratio 5; its power
+    # stroke peaks at pi A (zeta + 1) / T_p = 19.7 rad/s > 13: the period is stretched to pi A 6 / 13.
+    assert np.allclose(info["command"], [[math.pi / 2, math.radians(30), math.pi * math.radians(30) * 6 / 13, 5.0]] * 2)
     assert not (terminated or truncated) and info["safety_stop"] == ""
     assert info["link"]["acked"] >= 1 and info["tracking"]["frames"] >= 1
     assert reward == pytest.approx(sum(info[k] for k in ("reward_progress", "reward_goal", "reward_wall",
@@ -94,13 +97,14 @@ def test_tracking_lost_stops_and_says_why(rig, monkeypatch):
     env.step(np.zeros(8, dtype=np.float32))
     updates = _count_calls(monkeypatch, env.observer, "update")
     env.camera.conditions = SceneConditions(front_occlusion=1.0)  # the red marker disappears
+    hidden = env.now()
     for _ in range(10):
         _, _, terminated, truncated, info = env.step(np.zeros(8, dtype=np.float32))
         if truncated:
             break
     assert truncated and not terminated and info["safety_stop"] == "tracking_lost"
     assert info["tracking"]["reason"] != "" and not info["tracking"]["ok"]
-    assert updates == []  # the observer never got a made-up pose
+    assert all(t <= hidden for t, *_ in updates)  # the observer never got a made-up pose
     assert info["tracking"]["lost_for"] > 1.5
     assert env.link.command is None
 
@@ -108,7 +112,7 @@ def test_tracking_lost_stops_and_says_why(rig, monkeypatch):
 def test_link_lost_stops(rig):
     robot, env = rig
     env.reset(seed=5)
-    env.safety = SafetyConfig(tracking_timeout=1.5, link_timeout=0.4)
+    env.safety = env.supervisor.safety = SafetyConfig(tracking_timeout=1.5, link_timeout=0.4)
     robot._handle = lambda data: None  # the radio goes silent; the camera still sees the fish
     for _ in range(6):
         _, _, _, truncated, info = env.step(np.zeros(8, dtype=np.float32))
@@ -168,3 +172,33 @@ def test_sigterm_handler_sends_stop():
         restore()
     assert calls == ["stop", "stop"]
     assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL or callable(signal.getsignal(signal.SIGTERM))
+
+
+def test_geofence_outline_clearance_by_hand():
+    p = FishParams()
+    fence = Geofence(p, margin=0.05, reaction_time=0.0, horizon=5.0)
+    half, cp, sp = 0.5 * p.body_length, p.fin_offset, p.fin_span
+    # Heading +X at (1.0, 0.5): tail capsule end to X = 0; fin discs around (1.0, 0.5 -+ C_p) to Y = 0 and Y = W.
+    assert np.allclose(fence.clearance(1.0, 0.5, 0.0),
+                       [1.0 - half - cp, 2.30 - 1.0 - half - cp, 0.5 - cp - sp, 1.15 - 0.5 - cp - sp])
+    y_tip = 0.05 + cp + sp + 0.001  # fin disc 1 mm beyond the margin: clear at rest, not when drifting to the wall
+    assert not fence.breached(1.0, y_tip, 0.0)
+    assert fence.breached(1.0, y_tip - 0.002, 0.0)
+    assert fence.breached(1.0, y_tip, 0.0, vy=-0.01) and not fence.breached(1.0, y_tip, 0.0, vy=0.01)
+    assert fence.breached(1.0, 0.5, 0.0, vx=math.nan)
+
+
+def test_coasting_distance_closed_form_matches_the_full_model():
+    # Independent check: the full model's RK4 integration of eq. (19) with the fins held still.
+    p = FishParams()
+    fence = Geofence(p, margin=0.0, reaction_time=0.0, horizon=3.0)
+    model = FullModel(1, p)
+    coef = body_coefficients(p)
+    k = coef.c1 / coef.m1
+    model.reset(np.array([0.0, 0.0, 0.0, 0.2, 0.0, 0.0]))  # surge: m1 dv/dt = -c1 v |v| exactly
+    model.advance(3.0)
+    assert model.state[0, 0] == pytest.approx(math.log1p(k * 0.2 * 3.0) / k, rel=2e-3)
+    assert fence.coast(0.2) >= model.state[0, 0]  # the fence uses the slower (sway, m2) decay
+    model.reset(np.array([0.0, 0.0, 0.0, 0.0, 0.2, 0.0]))  # sway: the lift term of (20) also drains it
+    model.advance(3.0)
+    assert 0.5 * fence.coast(0.2) < model.state[0, 1] <= fence.coast(0.2)
