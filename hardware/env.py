@@ -182,9 +182,7 @@ class HardwareFishEnv(gym.Env):
         cfg = self.config
         self._cfg = cfg.cfg_array()
         self._ep = np.zeros((1, tk.N_EP))
-        p = cfg.params
-        self._ep[0, tk.E_LENGTH], self._ep[0, tk.E_SPAN], self._ep[0, tk.E_KDRAG] = (
-            p.body_length, p.fin_span, p.fin_drag_constant)
+        self._fish = tk.fish_array([cfg.params])
         self._obs = np.zeros((1, tk.OBS_SIZE), dtype=np.float32)
         self._out = np.zeros((1, tk.N_OUT))
         self._beats = np.zeros((1, 2, 4))
@@ -196,7 +194,8 @@ class HardwareFishEnv(gym.Env):
         self._observing = False
         self._next_tick = 0.0
         self._lease_end = -math.inf  # experiment time the robot's lease of the last command ends
-        self.geofence = Geofence(p, self.safety.geofence_margin, self.safety.reaction_time, self.safety.coast_horizon)
+        self.geofence = Geofence(cfg.params, self.safety.geofence_margin, self.safety.reaction_time,
+                                 self.safety.coast_horizon)
         self.supervisor = Supervisor(self.link, self.camera, self.tracker, self.geofence, self.safety, self.speed,
                                      self.frame_period, origin=self._origin).start()
         self.watch = self.supervisor.watch
@@ -258,7 +257,7 @@ class HardwareFishEnv(gym.Env):
         tk.start_states(_IDX, draws[None], self._cfg, self._ep, start)
         rest = np.stack([REST.as_array()] * 2)
         code = np.concatenate([self.config.encode(REST.as_array())] * 2)
-        tk.observe_reset(_IDX, self._state[None], self._ep, self._obs, self._out, code)
+        tk.observe_reset(_IDX, self._state[None], self._ep, self._fish, self._obs, self._out, code)
         self.filter.reset(rest)
         self._steps = 0
         self.supervisor.frames = self.supervisor.lost_frames = 0
@@ -282,7 +281,7 @@ class HardwareFishEnv(gym.Env):
         if self._closed:
             raise RuntimeError("the environment is closed")
         self._act[0] = arr
-        tk.apply_actions(self._act, _NONE, self._cfg, self._beats, self._obs, self._out, self._ep)
+        tk.apply_actions(self._act, _NONE, self._cfg, self._beats, self._obs, self._out, self._fish)
         now = self.now()
         command = self.filter(self._beats[0], self.config.control_period)  # each command holds for a period
         sup = self.supervisor
@@ -308,7 +307,7 @@ class HardwareFishEnv(gym.Env):
         end = self.now()
         if end - self._last_measure > 2 * self.frame_period and math.isfinite(self._last_measure):
             self._state = np.asarray(self.observer.predict(end), dtype=float).copy()
-        tk.observe_and_reward(self._state[None], _NONE, self._cfg, self._ep, self._obs, self._out)
+        tk.observe_and_reward(self._state[None], _NONE, self._cfg, self._ep, self._fish, self._obs, self._out)
         if self._velocity_count:
             # Velocities as in the simulated envs: means over the control period, not the last estimate
             # (the observer passes part of the fin-beat ripple).
