@@ -14,7 +14,9 @@ import pytest
 from scipy import optimize
 from scipy.interpolate import NdBSpline, make_interp_spline
 
-from pectoral_gym.averaging import averaged_body_accel, oscillating_square_mean
+from pectoral_gym import forcing_cache as fc
+from pectoral_gym.dynamics import body_accel as averaged_body_accel
+from pectoral_gym.dynamics import oscillating_square_mean
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.models import AveragedModel
 from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
@@ -119,7 +121,7 @@ def test_averaged_steady_turn_balances_the_oscillation_averaged_damping():
     beats = np.array([[beat.as_array(), FinBeat.rest().as_array()]])
     model = AveragedModel(1, P, scaling=s)
     steady = steady_state_batch(model, beats, rtol=1e-9, atol=1e-12)[0]
-    forcing = np.array(model.fins[0, 0, 9:12])
+    forcing = np.array(model.forcing_cache[0, 0, fc.AVG_FX:fc.AVG_TAU + 1])
     m1, m2, j3, c1, c2, c4 = coefficient_vector(P)[:6]
     amplitude = 0.35 / beat.period
 
@@ -214,20 +216,20 @@ def test_nmpc_with_oscillation_equals_the_algebraic_solution():
 
 
 def test_latch_reuses_the_forcing_of_an_unchanged_pattern_but_not_after_new_parameters():
-    from pectoral_gym import integrators as it
     from pectoral_gym.averaging import averaged_forcing
 
     beat = FinBeat.from_degrees(80, 25, 1.0, 3.0)
     model = AveragedModel(1, P, scaling="none")
     model.reset(right=beat)
     model.advance(2.3)
-    assert model.fins[0, 0, it.CACHED] == 1.0
-    np.testing.assert_allclose(model.fins[0, 0, it.AVG_FX:it.AVG_TAU + 1], averaged_forcing(beat, P), rtol=1e-14)
+    assert model.forcing_cache[0, 0, fc.CACHED] == 1.0
+    np.testing.assert_allclose(model.forcing_cache[0, 0, fc.AVG_FX:fc.AVG_TAU + 1], averaged_forcing(beat, P),
+                               rtol=1e-14)
     heavier = dataclasses.replace(P, fin_force_coef=2 * P.fin_force_coef)
     model.set_params(heavier)  # the averaged forcing depends on the parameters: the cache is invalid
-    assert model.fins[0, 0, it.CACHED] == 0.0
+    assert model.forcing_cache[0, 0, fc.CACHED] == 0.0
     model.advance(1.0)  # at least one latch (a whole fin period)
-    np.testing.assert_allclose(model.fins[0, 0, it.AVG_FX:it.AVG_TAU + 1], averaged_forcing(beat, heavier),
+    np.testing.assert_allclose(model.forcing_cache[0, 0, fc.AVG_FX:fc.AVG_TAU + 1], averaged_forcing(beat, heavier),
                                rtol=1e-14)
 
 
