@@ -20,6 +20,7 @@ import numpy as np
 from pectoral_gym import forcing_cache, stepping, strokes
 from pectoral_gym.averaging import EXACT, TAYLOR
 from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.ktables import KTables
 from pectoral_gym.params import COEF_NAMES, FinBeat, FishParams, coefficient_vector
 
 __all__ = ["FishModel", "FullModel", "AveragedModel", "MODELS", "make_model", "validate_beats", "REST"]
@@ -171,9 +172,20 @@ class FishModel:
         if not duration >= 0:
             raise ValueError(f"duration must be >= 0 s, got {duration}")
         stepping.advance(self.state, self.fins, self.forcing_cache, self.pending, self.integral, self.coef, duration,
-                         self.dt_max, self.min_substeps, self.averaged, self.mode, self.tables)
+                         self.dt_max, self.min_substeps, self.averaged, self.mode, self._packed_tables)
         self.time += duration
         return self.state
+
+    @property
+    def tables(self) -> KTables:
+        """The scaling-function tables the averaged forcing uses (:class:`pectoral_gym.ktables.KTables`)."""
+        return self._tables
+
+    @tables.setter
+    def tables(self, tables: KTables) -> None:
+        self._tables = tables
+        self._packed_tables = tuple(tables)  # what the kernels take (ktables.as_tables)
+        forcing_cache.invalidate(self.forcing_cache)  # the cached forcing depends on them
 
     def fin_angles(self) -> tuple[np.ndarray, np.ndarray]:
         """Current fin angles and rates, ``(n, 2)`` each (right fin first) [rad, rad/s]."""

@@ -29,9 +29,9 @@ import numba as nb
 import numpy as np
 
 from pectoral_gym import forcing_cache as fc
-from pectoral_gym._jit import JIT, kernel_pair
+from pectoral_gym._jit import JIT, PARALLEL_MIN_ITEMS, kernel_pair
 from pectoral_gym.dynamics import Forcing, body_accel, linearised_rate
-from pectoral_gym.ktables import KTables
+from pectoral_gym.ktables import KTables, as_tables
 from pectoral_gym.params import BodyCoefficients, Coef
 from pectoral_gym.strokes import DURATION, ELAPSED, fin_forcing, idle, latch
 
@@ -123,8 +123,9 @@ def _stable_step(state, i, body: BodyCoefficients, forcing: Forcing, osc, dt_max
 
 @nb.njit(**JIT)
 def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode,
-                 tables):
+                 packed_tables):
     """Advance fish ``i`` by ``duration`` seconds, segment by segment between stroke boundaries."""
+    tables = as_tables(packed_tables)
     body = BodyCoefficients(coef[i, Coef.M1], coef[i, Coef.M2], coef[i, Coef.J3],
                             coef[i, Coef.C1], coef[i, Coef.C2], coef[i, Coef.C4])
     drag_constant = coef[i, Coef.FIN_DRAG_CONSTANT]
@@ -184,7 +185,7 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
 
 _ADVANCE = kernel_pair(
     _advance_one,
-    "state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, tables",
+    "state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, packed_tables",
 )
 
 
@@ -213,7 +214,8 @@ def advance(
         min_substeps: Full model: least number of substeps per half-stroke.
         averaged: Integrate the averaged model (eq. 25) instead of the full one (eq. 19).
         mode: Averaged forcing form (``averaging.EXACT`` or ``averaging.TAYLOR``).
-        tables: Scaling functions (``kfunctions.ScalingFunctions.kernel_arrays()``).
+        tables: Scaling functions (``kfunctions.ScalingFunctions.kernel_arrays()``), or ``tuple()`` of them.
     """
-    _ADVANCE.run(state, fins, cache, pending, integral, coef, float(duration), float(dt_max), float(min_substeps),
-                 bool(averaged), int(mode), tables)
+    kernel = _ADVANCE.parallel if state.shape[0] >= PARALLEL_MIN_ITEMS else _ADVANCE.serial
+    kernel(state, fins, cache, pending, integral, coef, float(duration), float(dt_max), float(min_substeps),
+           bool(averaged), int(mode), tuple(tables))  # a plain tuple is faster to dispatch (ktables.as_tables)

@@ -233,6 +233,27 @@ def test_latch_reuses_the_forcing_of_an_unchanged_pattern_but_not_after_new_para
                                rtol=1e-14)
 
 
+def test_reset_to_rest_drops_the_cached_forcing_of_the_last_beat():
+    # A fin reset to rest never latches again: the forcing of its earlier pattern must not stay in force.
+    model = AveragedModel(1, P, scaling="none")
+    model.reset(right=FinBeat.from_degrees(80, 25, 1.0, 3.0))
+    model.advance(2.3)
+    assert np.any(model.state[0, 3:] != 0.0)
+    model.reset()
+    model.advance(5.0)
+    np.testing.assert_array_equal(model.state[0], np.zeros(6))  # at rest, no force: stays at rest exactly
+
+
+def test_new_scaling_tables_invalidate_the_cache():
+    beat = FinBeat.from_degrees(80, 25, 1.0, 3.0)
+    model = AveragedModel(1, P, scaling="none")
+    model.reset(right=beat)
+    model.advance(2.3)
+    assert model.forcing_cache[0, 0, fc.CACHED] == 1.0
+    model.tables = _oscillation_scaling(level=0.35).kernel_arrays()
+    assert model.forcing_cache[0, 0, fc.CACHED] == 0.0
+
+
 @pytest.mark.parametrize("left", [None, (100, 10, 1.0, 2.0)])
 def test_symbolic_rhs_with_oscillation_tracks_the_averaged_model(left, rk4_symbolic):
     # One fin, or two fins with equal periods (their beat phases stay equal, as the symbolic model assumes).
