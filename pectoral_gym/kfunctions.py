@@ -55,7 +55,7 @@ Each K is the sum of two optional parts:
 
 The optional ``yaw_oscillation`` section describes the yaw-rate oscillation a
 fin drives within its beat, which the averaged model needs for its
-oscillation-averaged yaw damping (``pectoral_gym.averaging``, beyond the
+oscillation-averaged yaw damping (``pectoral_gym.dynamics.body_accel``, beyond the
 paper). ``cos, sin`` are the two components of the phasor
 ``A T_p (cos phi, sin phi)`` [rad] as cubic splines over the same three axes
 (their own knots): ``A`` [rad/s] is the amplitude of the sinusoid with the
