@@ -23,6 +23,7 @@ substeps by the body dynamics' stiffness (:func:`pectoral_gym.dynamics.linearise
 
 from __future__ import annotations
 
+import enum
 import math
 
 import numba as nb
@@ -33,9 +34,14 @@ from pectoral_gym._jit import JIT, PARALLEL_MIN_ITEMS, kernel_pair
 from pectoral_gym.dynamics import Forcing, body_accel, linearised_rate
 from pectoral_gym.ktables import KTables, as_tables
 from pectoral_gym.params import BodyCoefficients, Coef
-from pectoral_gym.strokes import DURATION, ELAPSED, fin_forcing, idle, latch
+from pectoral_gym.strokes import AMPLITUDE, BIAS, DURATION, ELAPSED, PERIOD, RATIO, fin_forcing, idle, latch
 
-__all__ = ["ACCURATE_STEP", "advance"]
+__all__ = ["ACCURATE_STEP", "STATE_NAMES", "State", "advance"]
+
+STATE_NAMES = ("X", "Y", "psi", "vx", "vy", "omega")
+#: Column of each state (``state[:, State.PSI]``), generated from :data:`STATE_NAMES`; the integrals
+#: of ``vx, vy, omega`` sit in columns 0, 1, 2 of ``integral``.
+State = enum.IntEnum("State", {name.upper(): i for i, name in enumerate(STATE_NAMES)})
 
 _EPS = 1e-12
 ACCURATE_STEP = 1.5  # averaged model: h * rate bound; RK4 is stable to 2.78, this keeps transients accurate
@@ -70,7 +76,8 @@ def _rk4(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: Bod
     ``osc`` [rad/s]: the yaw oscillation of the averaged model's damping
     (:func:`pectoral_gym.dynamics.body_accel`); 0 for the full model.
     """
-    x0, y0, p0, u0, v0, w0 = state[i, 0], state[i, 1], state[i, 2], state[i, 3], state[i, 4], state[i, 5]
+    x0, y0, p0 = state[i, State.X], state[i, State.Y], state[i, State.PSI]
+    u0, v0, w0 = state[i, State.VX], state[i, State.VY], state[i, State.OMEGA]
     c0, s0 = math.cos(p0), math.sin(p0)
     # stage 1
     k1x, k1y, k1p = u0 * c0 - v0 * s0, u0 * s0 + v0 * c0, w0
@@ -91,12 +98,12 @@ def _rk4(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: Bod
     k4x, k4y, k4p = u4 * c - v4 * s, u4 * s + v4 * c, w4
     k4u, k4v, k4w = _accel(u4, v4, w4, f1, body, osc)
     h6 = h / 6.0
-    state[i, 0] = x0 + h6 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
-    state[i, 1] = y0 + h6 * (k1y + 2.0 * k2y + 2.0 * k3y + k4y)
-    state[i, 2] = p0 + h6 * (k1p + 2.0 * k2p + 2.0 * k3p + k4p)
-    state[i, 3] = u0 + h6 * (k1u + 2.0 * k2u + 2.0 * k3u + k4u)
-    state[i, 4] = v0 + h6 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
-    state[i, 5] = w0 + h6 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)
+    state[i, State.X] = x0 + h6 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
+    state[i, State.Y] = y0 + h6 * (k1y + 2.0 * k2y + 2.0 * k3y + k4y)
+    state[i, State.PSI] = p0 + h6 * (k1p + 2.0 * k2p + 2.0 * k3p + k4p)
+    state[i, State.VX] = u0 + h6 * (k1u + 2.0 * k2u + 2.0 * k3u + k4u)
+    state[i, State.VY] = v0 + h6 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+    state[i, State.OMEGA] = w0 + h6 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)
     # the running integrals are extra RK4 states with derivative (vx, vy, omega)
     integral[i, 0] += h6 * (u0 + 2.0 * u2 + 2.0 * u3 + u4)
     integral[i, 1] += h6 * (v0 + 2.0 * v2 + 2.0 * v3 + v4)
@@ -112,8 +119,8 @@ def _stable_step(state, i, body: BodyCoefficients, forcing: Forcing, osc, dt_max
     (``omega* = sqrt(|tau| / (c4 J3))``, ``V* = sqrt(|F| / c1)``), so a fish at
     rest that starts turning does not overshoot.
     """
-    omega = max(abs(state[i, 5]), math.sqrt(abs(forcing.tau) / (body.c4 * body.J3)))
-    speed = max(math.sqrt(state[i, 3] ** 2 + state[i, 4] ** 2),
+    omega = max(abs(state[i, State.OMEGA]), math.sqrt(abs(forcing.tau) / (body.c4 * body.J3)))
+    speed = max(math.sqrt(state[i, State.VX] ** 2 + state[i, State.VY] ** 2),
                 math.sqrt(math.hypot(forcing.fx, forcing.fy) / max(body.c1, 1e-12)))
     rate = linearised_rate(speed, omega, osc, body.m1, body.m2, body.J3, body.c1, body.c2, body.c4)
     if rate * dt_max > ACCURATE_STEP:
@@ -141,8 +148,8 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
             if not (idle0 if f == 0 else idle1) and fins[i, f, ELAPSED] >= fins[i, f, DURATION] - _EPS:
                 latch(fins, pending, i, f)
                 if averaged:
-                    fc.refresh(cache, i, f, pending[i, f, 0], pending[i, f, 1], pending[i, f, 2], pending[i, f, 3],
-                               coef, mode, tables)
+                    fc.refresh(cache, i, f, fins[i, f, BIAS], fins[i, f, AMPLITUDE], fins[i, f, PERIOD],
+                               fins[i, f, RATIO], coef, mode, tables)  # the pattern just latched
         rem0 = np.inf if idle0 else fins[i, 0, DURATION] - fins[i, 0, ELAPSED]
         rem1 = np.inf if idle1 else fins[i, 1, DURATION] - fins[i, 1, ELAPSED]
         seg = min(t_left, rem0, rem1)

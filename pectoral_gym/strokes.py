@@ -4,8 +4,9 @@ Free functions compiled with numba over batched arrays (``n`` fish, fin index
 0 right, 1 left):
 
 * ``fins``    ``(n, 2, FIN_FIELDS)``: each fin's current half-stroke, fields below.
-* ``pending`` ``(n, 2, 4)``: the commanded ``(bias, amplitude, period, ratio)`` per fin
-  (rad, rad, s, -), latched at the next turning point.
+* ``pending`` ``(n, 2, 4)``: the commanded pattern per fin in ``FinBeat.as_array`` order,
+  ``BEAT_BIAS, BEAT_AMPLITUDE, BEAT_PERIOD, BEAT_RATIO`` (rad, rad, s, -), latched at the
+  next turning point.
 
 ==============  =====  ======  =====================================================================
 field           index  unit    meaning
@@ -46,12 +47,14 @@ from pectoral_gym.dynamics import fin_force_right, stroke_kinematics
 
 __all__ = [
     "FIN_FIELDS", "ELAPSED", "DURATION", "ANGLE_FROM", "ANGLE_TO", "POWER", "BIAS", "AMPLITUDE", "PERIOD", "RATIO",
-    "SIDE", "command_fins", "fin_angles", "fin_forcing", "idle", "init_fins", "latch",
+    "BEAT_BIAS", "BEAT_AMPLITUDE", "BEAT_PERIOD", "BEAT_RATIO", "SIDE",
+    "command_fins", "fin_angles", "fin_forcing", "idle", "init_fins", "latch",
 ]
 
 ELAPSED, DURATION, ANGLE_FROM, ANGLE_TO, POWER = 0, 1, 2, 3, 4
 BIAS, AMPLITUDE, PERIOD, RATIO = 5, 6, 7, 8
 FIN_FIELDS = 9
+BEAT_BIAS, BEAT_AMPLITUDE, BEAT_PERIOD, BEAT_RATIO = 0, 1, 2, 3  # a pattern row (pending, FinBeat.as_array)
 
 SIDE = (1.0, -1.0)  # right fin, left fin (mirror image): the sign of its y force and yaw moment
 
@@ -59,7 +62,8 @@ SIDE = (1.0, -1.0)  # right fin, left fin (mirror image): the sign of its y forc
 @nb.njit(**JIT)
 def latch(fins, pending, i, f):
     """Start the next half-stroke of fin ``f`` of fish ``i`` with its commanded parameters."""
-    bias, amp, period, ratio = pending[i, f, 0], pending[i, f, 1], pending[i, f, 2], pending[i, f, 3]
+    bias, amp = pending[i, f, BEAT_BIAS], pending[i, f, BEAT_AMPLITUDE]
+    period, ratio = pending[i, f, BEAT_PERIOD], pending[i, f, BEAT_RATIO]
     power = 1.0 - fins[i, f, POWER]
     fins[i, f, ANGLE_FROM] = fins[i, f, ANGLE_TO]
     if power > 0.5:
@@ -81,8 +85,8 @@ def idle(fins, pending, i, f):
     """True for a fin that holds still and is commanded to hold still at the same angle."""
     return (
         fins[i, f, ANGLE_FROM] == fins[i, f, ANGLE_TO]
-        and pending[i, f, 1] == 0.0
-        and pending[i, f, 0] == fins[i, f, ANGLE_TO]
+        and pending[i, f, BEAT_AMPLITUDE] == 0.0
+        and pending[i, f, BEAT_BIAS] == fins[i, f, ANGLE_TO]
     )
 
 
@@ -136,7 +140,7 @@ def init_fins(fins: np.ndarray, pending: np.ndarray, beats: np.ndarray, index: n
     idx = slice(None) if index is None else index
     b = beats  # one row per selected fish
     fins[idx] = 0.0
-    fins[idx, :, ANGLE_TO] = b[..., 0] - b[..., 1]
+    fins[idx, :, ANGLE_TO] = b[..., BEAT_BIAS] - b[..., BEAT_AMPLITUDE]
     fins[idx, :, ANGLE_FROM] = fins[idx, :, ANGLE_TO]
     fins[idx, :, DURATION] = 0.0  # finished: latch at the first advance
     fins[idx, :, POWER] = 0.0  # so the first stroke is a power stroke
