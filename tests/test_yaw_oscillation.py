@@ -215,13 +215,21 @@ def test_nmpc_with_oscillation_equals_the_algebraic_solution():
     assert np.all(np.abs(oracle[:, 2] - 1) < np.abs(paper[:, 2] - 1))
 
 
+CACHE_BEAT = FinBeat.from_degrees(80, 25, 1.0, 3.0)
+
+
+def _beating_model():
+    """An averaged model (K = 1) whose right fin has beaten ``CACHE_BEAT`` for 2.3 s."""
+    model = AveragedModel(1, P, scaling="none")
+    model.reset(right=CACHE_BEAT)
+    model.advance(2.3)
+    return model
+
+
 def test_latch_reuses_the_forcing_of_an_unchanged_pattern_but_not_after_new_parameters():
     from pectoral_gym.averaging import averaged_forcing
 
-    beat = FinBeat.from_degrees(80, 25, 1.0, 3.0)
-    model = AveragedModel(1, P, scaling="none")
-    model.reset(right=beat)
-    model.advance(2.3)
+    beat, model = CACHE_BEAT, _beating_model()
     assert model.forcing_cache[0, 0, fc.CACHED] == 1.0
     np.testing.assert_allclose(model.forcing_cache[0, 0, fc.AVG_FX:fc.AVG_TAU + 1], averaged_forcing(beat, P),
                                rtol=1e-14)
@@ -235,9 +243,7 @@ def test_latch_reuses_the_forcing_of_an_unchanged_pattern_but_not_after_new_para
 
 def test_reset_to_rest_drops_the_cached_forcing_of_the_last_beat():
     # A fin reset to rest never latches again: the forcing of its earlier pattern must not stay in force.
-    model = AveragedModel(1, P, scaling="none")
-    model.reset(right=FinBeat.from_degrees(80, 25, 1.0, 3.0))
-    model.advance(2.3)
+    model = _beating_model()
     assert np.any(model.state[0, 3:] != 0.0)
     model.reset()
     model.advance(5.0)
@@ -245,10 +251,7 @@ def test_reset_to_rest_drops_the_cached_forcing_of_the_last_beat():
 
 
 def test_new_scaling_tables_invalidate_the_cache():
-    beat = FinBeat.from_degrees(80, 25, 1.0, 3.0)
-    model = AveragedModel(1, P, scaling="none")
-    model.reset(right=beat)
-    model.advance(2.3)
+    model = _beating_model()
     assert model.forcing_cache[0, 0, fc.CACHED] == 1.0
     model.tables = _oscillation_scaling(level=0.35).kernel_arrays()
     assert model.forcing_cache[0, 0, fc.CACHED] == 0.0
