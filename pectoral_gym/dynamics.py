@@ -172,8 +172,9 @@ def linearised_rate(speed, omega, oscillation, m1, m2, j3, c1, c2, c4):
       ``c1 V`` across, ``2 c1 V`` along ``v``); the lift ``c2 alpha V u`` gives a
       symmetric ``(c2 / V) u u'`` (``c2 V`` across, since ``d alpha = -u . dv / V^2``)
       plus ``-c2 alpha (V J + u v'/V)``, of norm at most ``2 c2 |alpha| V <= pi c2 V``.
-      ``M^-1 S`` has real eigenvalues below ``max(2 c1, c1 + c2) V / min(m1, m2)``;
-      the Coriolis terms ``C = w [[0, m2/m1], [-m1/m2, 0]]`` have norm ``r |w|``.
+      ``S`` plus the symmetric lift has eigenvalues ``2 c1 V`` and ``(c1 + c2) V``, so with
+      ``M^-1`` its norm is at most ``max(2 c1, c1 + c2) V / min(m1, m2)``; the Coriolis
+      terms ``C = w [[0, m2/m1], [-m1/m2, 0]]`` have norm ``r |w|``.
     * the yaw damping ``-c4 w|w|`` of f3: ``2 c4 |w|``; with the
       oscillation-averaged damping (amplitude ``A``, :func:`body_accel`) the slope
       ``2 c4 mean|w + A sin|`` is at most ``2 c4 (|w| + 2 A / pi)``.
@@ -182,10 +183,11 @@ def linearised_rate(speed, omega, oscillation, m1, m2, j3, c1, c2, c4):
       after rescaling ``w`` (a similarity, eigenvalues unchanged) the pair has
       norm ``V sqrt(r |m1 - m2| / J3)``.
 
-    The spectral radius is at most the sum of the parts' norms. For Table 1 the
-    lift adds ``(pi c2 + max(0, c2 - c1)) / (2 c1) = 33 %`` to the drag bound and
-    the Munk coupling ``14 V`` [1/s], both small beside the yaw damping
-    (``2 c4 = 38`` per rad/s) that sets the step in turns.
+    The block-diagonal part (velocity block, yaw entry) has the larger of the
+    two norms, the coupling adds its own: the spectral radius is at most
+    ``max(yaw, velocity) + coupling``. For Table 1 the lift adds
+    ``pi c2 / (2 c1) = 33 %`` to the drag bound, the Munk coupling is ``14 V``
+    [1/s], and in a turn the yaw damping (``2 c4 = 38`` per rad/s) sets the step.
 
     Args:
         speed: ``V`` [m/s]; omega: ``|w|`` [rad/s]; oscillation: ``A`` [rad/s] (0: eq. 20).
@@ -196,7 +198,7 @@ def linearised_rate(speed, omega, oscillation, m1, m2, j3, c1, c2, c4):
     yaw = 2.0 * c4 * (omega + 2.0 / math.pi * oscillation)
     velocity = (max(2.0 * c1, c1 + c2) + math.pi * c2) * speed / min(m1, m2) + ratio * omega
     munk = speed * math.sqrt(ratio * abs(m1 - m2) / j3)
-    return yaw + velocity + munk
+    return max(yaw, velocity) + munk
 
 
 def fin_angle_eq21(t: np.ndarray, bias: float, amplitude: float, period: float, ratio: float):
