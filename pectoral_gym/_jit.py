@@ -12,6 +12,11 @@ accept ``*args`` holding tuples, so the two loops are generated as source with
 the argument names spelled out (and cached on disk like hand-written kernels,
 keyed on the item's module file, so editing that module recompiles them).
 
+numba's disk cache checks only the file of the function it caches, not the
+files of the functions it calls: after editing, say, ``dynamics.py``, the
+cached kernels of ``stepping.py`` keep the old code until ``stepping.py``
+changes too or the cache is cleared (``find pectoral_gym -name '*.nb[ic]' -delete``).
+
 Example (the model integrators, :mod:`pectoral_gym.stepping`)::
 
     advance_kernels = kernel_pair(_advance_one, "state, fins, cache, pending, integral, coef, duration, ...")
