@@ -20,7 +20,7 @@ from scipy.integrate import quad
 
 from pectoral_gym.averaging import mean_fin_power
 from pectoral_gym.dynamics import body_accel, body_rhs, fin_angle_eq21, fin_force_right, linearised_rate
-from pectoral_gym.params import FishParams, coefficient_vector
+from pectoral_gym.params import FishParams, body_coefficients, coefficient_vector
 
 P = FishParams()
 LAM, RHO, DP, SP, MP = P.fin_force_coef, P.water_density, P.fin_chord, P.fin_span, P.fin_effective_mass
@@ -239,14 +239,14 @@ def test_linearised_rate_bounds_the_eigenvalues_of_eq20(params):
     # The step-size rule must bound every eigenvalue modulus of the Jacobian of eqs. (19)-(20)
     # (central differences of the paper's equations as printed, eq20 above), across speeds,
     # drift angles up to nearly +-90 deg and yaw rates.
-    c = coefficient_vector(params)
+    c = body_coefficients(params)
     rng = np.random.default_rng(3)
     for _ in range(300):
         speed, drift, om = rng.uniform(0.01, 0.3), rng.uniform(-1.5, 1.5), rng.uniform(-3.0, 3.0)
         v = np.array([speed * math.cos(drift), speed * math.sin(drift), om])
         jac = _jacobian(lambda a, b, w: eq20(a, b, w, 0.0, 0.0, 0.0, p=params), v)
         largest = np.max(np.abs(np.linalg.eigvals(jac)))
-        assert largest <= linearised_rate(speed, om, 0.0, *c[:6])
+        assert largest <= linearised_rate(speed, om, 0.0, *c)
 
 
 def test_linearised_rate_is_tight_where_the_yaw_damping_sets_the_step():
@@ -255,13 +255,13 @@ def test_linearised_rate_is_tight_where_the_yaw_damping_sets_the_step():
     jac = _jacobian(lambda a, b, w: eq20(a + 1e-12, b, w, 0.0, 0.0, 0.0), np.array([0.0, 0.0, 1.5]))
     largest = np.max(np.abs(np.linalg.eigvals(jac)))
     assert largest == pytest.approx(2 * P.c4 * 1.5, rel=1e-6)
-    assert linearised_rate(0.0, 1.5, 0.0, *coefficient_vector(P)[:6]) <= 1.05 * largest
+    assert linearised_rate(0.0, 1.5, 0.0, *body_coefficients(P)) <= 1.05 * largest
 
 
 def test_linearised_rate_bounds_the_oscillation_averaged_yaw_damping():
-    c = coefficient_vector(P)
+    c = body_coefficients(P)
     for om in (-0.5, 0.0, 0.05, 0.3, 2.0):
         for amplitude in (0.1, 1.0, 3.0):
-            slope = _jacobian(lambda a, b, w, A=amplitude: body_accel(a, b, w, 0.0, 0.0, 0.0, *c[:6], A),
+            slope = _jacobian(lambda a, b, w, A=amplitude: body_accel(a, b, w, 0.0, 0.0, 0.0, *c, A),
                               np.array([0.0, 0.0, om]))[2, 2]
-            assert abs(slope) <= linearised_rate(0.0, om, amplitude, *c[:6]) * (1 + 1e-6)  # equal at om = 0
+            assert abs(slope) <= linearised_rate(0.0, om, amplitude, *c) * (1 + 1e-6)  # equal at om = 0

@@ -19,7 +19,7 @@ from pectoral_gym.dynamics import body_accel as averaged_body_accel
 from pectoral_gym.dynamics import oscillating_square_mean
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.models import AveragedModel
-from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
+from pectoral_gym.params import FinBeat, FishParams, body_coefficients
 from pectoral_gym.steady import steady_state_batch
 from scaling.reference import reference_runs, yaw_oscillation_statistics
 
@@ -122,7 +122,7 @@ def test_averaged_steady_turn_balances_the_oscillation_averaged_damping():
     model = AveragedModel(1, P, scaling=s)
     steady = steady_state_batch(model, beats, rtol=1e-9, atol=1e-12)[0]
     forcing = np.array(model.forcing_cache[0, 0, fc.AVG_FX:fc.AVG_TAU + 1])
-    m1, m2, j3, c1, c2, c4 = coefficient_vector(P)[:6]
+    m1, m2, j3, c1, c2, c4 = body_coefficients(P)
     amplitude = 0.35 / beat.period
 
     def rhs(v):
@@ -161,12 +161,12 @@ def test_mirrored_fins_in_phase_cancel_and_mirror_images_mirror():
 
 
 def test_averaged_body_accel_differs_only_in_yaw_damping():
-    coef = coefficient_vector(P)[:6]
+    coef = body_coefficients(P)
     v, f = (0.05, -0.01, 0.04), (0.01, -0.002, 1e-4)
     paper = np.array(averaged_body_accel(*v, *f, *coef, 0.0))
     osc = np.array(averaged_body_accel(*v, *f, *coef, 0.2))
     np.testing.assert_array_equal(osc[:2], paper[:2])
-    c4 = coef[5]
+    c4 = coef.c4
     assert osc[2] - paper[2] == pytest.approx(c4 * (0.04 * 0.04 - _quadrature_mean(0.04, 0.2)), rel=1e-6)
 
 
