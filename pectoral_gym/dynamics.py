@@ -28,9 +28,21 @@ __all__ = [
     "body_rhs",
     "body_accel",
     "fin_angle_eq21",
+    "RateConstants",
     "linearised_rate",
+    "rate_bound",
+    "rate_constants",
     "oscillating_square_mean",
 ]
+
+
+class RateConstants(NamedTuple):
+    """The body-coefficient factors of :func:`linearised_rate` (``r = max(m1/m2, m2/m1)``)."""
+
+    yaw: float  # 1/rad, 2 c4: yaw-damping rate [1/s] per unit yaw rate [rad/s]
+    drag: float  # 1/m, (max(2 c1, c1 + c2) + pi c2) / min(m1, m2): drag and lift rate per unit speed
+    coriolis: float  # -, r: Coriolis rate per unit yaw rate
+    munk: float  # 1/m, sqrt(r |m1 - m2| / J3): Munk-coupling rate per unit speed
 
 
 class Forcing(NamedTuple):
@@ -193,12 +205,24 @@ def linearised_rate(speed, omega, oscillation, m1, m2, j3, c1, c2, c4):
         speed: ``V`` [m/s]; omega: ``|w|`` [rad/s]; oscillation: ``A`` [rad/s] (0: eq. 20).
         m1, m2, j3, c1, c2, c4: Body coefficients (eq. 20).
     """
-    omega = abs(omega)
+    return rate_bound(speed, omega, oscillation, rate_constants(m1, m2, j3, c1, c2, c4))
+
+
+@nb.njit(**JIT)
+def rate_constants(m1, m2, j3, c1, c2, c4) -> RateConstants:
+    """The factors of :func:`linearised_rate` that depend on the body coefficients only (eq. 20)."""
     ratio = max(m1 / m2, m2 / m1)
-    yaw = 2.0 * c4 * (omega + 2.0 / math.pi * oscillation)
-    velocity = (max(2.0 * c1, c1 + c2) + math.pi * c2) * speed / min(m1, m2) + ratio * omega
-    munk = speed * math.sqrt(ratio * abs(m1 - m2) / j3)
-    return max(yaw, velocity) + munk
+    return RateConstants(2.0 * c4, (max(2.0 * c1, c1 + c2) + math.pi * c2) / min(m1, m2), ratio,
+                         math.sqrt(ratio * abs(m1 - m2) / j3))
+
+
+@nb.njit(**JIT)
+def rate_bound(speed, omega, oscillation, k: RateConstants):
+    """:func:`linearised_rate` from its precomputed :class:`RateConstants` (the integrators' inner loop)."""
+    omega = abs(omega)
+    yaw = k.yaw * (omega + 2.0 / math.pi * oscillation)
+    velocity = k.drag * speed + k.coriolis * omega
+    return max(yaw, velocity) + k.munk * speed
 
 
 def fin_angle_eq21(t: np.ndarray, bias: float, amplitude: float, period: float, ratio: float):

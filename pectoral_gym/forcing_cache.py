@@ -62,7 +62,7 @@ def clear(cache: np.ndarray, index: np.ndarray | slice | None = None) -> None:
     cache[slice(None) if index is None else index] = 0.0
 
 
-@nb.njit(**JIT)
+@nb.njit(inline="always", **JIT)
 def refresh(cache, i, f, bias, amplitude, period, ratio, coef, mode, tables):
     """Make fin ``f`` of fish ``i``'s row hold the forcing of pattern ``(bias, amplitude, period, ratio)``.
 
@@ -85,7 +85,7 @@ def refresh(cache, i, f, bias, amplitude, period, ratio, coef, mode, tables):
     cache[i, f, CACHED] = 1.0
 
 
-@nb.njit(**JIT)
+@nb.njit(inline="always", **JIT)
 def yaw_oscillation(fins, cache, i, offset, idle0, idle1):
     """Amplitude [rad/s] of the yaw-rate oscillation both fins drive, ``offset`` s into the segment.
 

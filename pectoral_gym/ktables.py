@@ -54,7 +54,7 @@ class KTables(NamedTuple):
 
 
 
-@nb.njit(**JIT)
+@nb.njit(inline="always", **JIT)
 def as_tables(packed) -> KTables:
     """The :class:`KTables` of ``tuple(tables)``, inside compiled code.
 

@@ -31,7 +31,7 @@ import numpy as np
 
 from pectoral_gym import forcing_cache as fc
 from pectoral_gym._jit import JIT, PARALLEL_MIN_ITEMS, kernel_pair
-from pectoral_gym.dynamics import Forcing, body_accel, linearised_rate
+from pectoral_gym.dynamics import Forcing, RateConstants, body_accel, rate_bound, rate_constants
 from pectoral_gym.ktables import KTables, as_tables
 from pectoral_gym.params import BodyCoefficients, Coef
 from pectoral_gym.strokes import AMPLITUDE, BIAS, DURATION, ELAPSED, PERIOD, RATIO, fin_forcing, idle, latch
@@ -111,10 +111,11 @@ def _rk4(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: Bod
 
 
 @nb.njit(**JIT)
-def _stable_step(state, i, body: BodyCoefficients, forcing: Forcing, osc, dt_max):
+def _stable_step(state, i, body: BodyCoefficients, rates: RateConstants, forcing: Forcing, osc, dt_max):
     """Averaged model: RK4 step, at most ``dt_max`` and ``h * rate <= ACCURATE_STEP``.
 
-    The rate is :func:`pectoral_gym.dynamics.linearised_rate` at the larger of
+    The rate is :func:`pectoral_gym.dynamics.linearised_rate` (from the fish's
+    precomputed ``rates``) at the larger of
     the current yaw rate and speed and those the forcing drives towards
     (``omega* = sqrt(|tau| / (c4 J3))``, ``V* = sqrt(|F| / c1)``), so a fish at
     rest that starts turning does not overshoot.
@@ -122,10 +123,19 @@ def _stable_step(state, i, body: BodyCoefficients, forcing: Forcing, osc, dt_max
     omega = max(abs(state[i, State.OMEGA]), math.sqrt(abs(forcing.tau) / (body.c4 * body.J3)))
     speed = max(math.sqrt(state[i, State.VX] ** 2 + state[i, State.VY] ** 2),
                 math.sqrt(math.hypot(forcing.fx, forcing.fy) / max(body.c1, 1e-12)))
-    rate = linearised_rate(speed, omega, osc, body.m1, body.m2, body.J3, body.c1, body.c2, body.c4)
+    rate = rate_bound(speed, omega, osc, rates)
     if rate * dt_max > ACCURATE_STEP:
         return ACCURATE_STEP / rate
     return dt_max
+
+
+@nb.njit(inline="always", **JIT)
+def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables):
+    """Latch fin ``f``'s commanded pattern; the averaged model also brings its forcing cache up to date."""
+    latch(fins, pending, i, f)
+    if averaged:
+        fc.refresh(cache, i, f, fins[i, f, BIAS], fins[i, f, AMPLITUDE], fins[i, f, PERIOD], fins[i, f, RATIO],
+                   coef, mode, tables)
 
 
 @nb.njit(**JIT)
@@ -138,18 +148,17 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
     drag_constant = coef[i, Coef.FIN_DRAG_CONSTANT]
     inertia_constant = coef[i, Coef.FIN_INERTIA_CONSTANT]
     fin_offset = coef[i, Coef.FIN_OFFSET]
+    rates = rate_constants(body.m1, body.m2, body.J3, body.c1, body.c2, body.c4)
     t_left = duration
     while t_left > _EPS:
         # A fin at rest that stays at rest never ends a segment: its stroke clock must
         # not cut the other fin's integration into phase-dependent pieces.
         idle0 = idle(fins, pending, i, 0)
         idle1 = idle(fins, pending, i, 1)
-        for f in range(2):
-            if not (idle0 if f == 0 else idle1) and fins[i, f, ELAPSED] >= fins[i, f, DURATION] - _EPS:
-                latch(fins, pending, i, f)
-                if averaged:
-                    fc.refresh(cache, i, f, fins[i, f, BIAS], fins[i, f, AMPLITUDE], fins[i, f, PERIOD],
-                               fins[i, f, RATIO], coef, mode, tables)  # the pattern just latched
+        if not idle0 and fins[i, 0, ELAPSED] >= fins[i, 0, DURATION] - _EPS:
+            _start_half_stroke(fins, cache, pending, i, 0, coef, averaged, mode, tables)
+        if not idle1 and fins[i, 1, ELAPSED] >= fins[i, 1, DURATION] - _EPS:
+            _start_half_stroke(fins, cache, pending, i, 1, coef, averaged, mode, tables)
         rem0 = np.inf if idle0 else fins[i, 0, DURATION] - fins[i, 0, ELAPSED]
         rem1 = np.inf if idle1 else fins[i, 1, DURATION] - fins[i, 1, ELAPSED]
         seg = min(t_left, rem0, rem1)
@@ -161,7 +170,7 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
             t_seg = seg
             while t_seg > _EPS:
                 # equal substeps to the segment end, re-sized as the state's stiffness changes
-                h_ok = _stable_step(state, i, body, forcing, osc, dt_max)
+                h_ok = _stable_step(state, i, body, rates, forcing, osc, dt_max)
                 h = t_seg / max(1, int(math.ceil(t_seg / h_ok - 1e-9)))
                 _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc)
                 t_seg -= h
@@ -194,6 +203,7 @@ _ADVANCE = kernel_pair(
     _advance_one,
     "state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, packed_tables",
 )
+_SERIAL, _PARALLEL = _ADVANCE.serial, _ADVANCE.parallel  # bound once: advance() runs at every env step
 
 
 def advance(
@@ -223,6 +233,6 @@ def advance(
         mode: Averaged forcing form (``averaging.EXACT`` or ``averaging.TAYLOR``).
         tables: Scaling functions (``kfunctions.ScalingFunctions.kernel_arrays()``), or ``tuple()`` of them.
     """
-    kernel = _ADVANCE.parallel if state.shape[0] >= PARALLEL_MIN_ITEMS else _ADVANCE.serial
+    kernel = _PARALLEL if state.shape[0] >= PARALLEL_MIN_ITEMS else _SERIAL
     kernel(state, fins, cache, pending, integral, coef, float(duration), float(dt_max), float(min_substeps),
            bool(averaged), int(mode), tuple(tables))  # a plain tuple is faster to dispatch (ktables.as_tables)

@@ -34,7 +34,10 @@ at the same instants (:mod:`pectoral_gym.forcing_cache`).
 
 The kernels index the batched arrays directly (no per-fish views or temporary
 arrays): views and allocations touch shared reference counts, which serialises
-the threads of the parallel kernels.
+the threads of the parallel kernels. The small ones the integrator calls at
+every segment are inlined (``inline="always"``): a compiled call that passes
+arrays costs reference-count updates too (measured: 20 % of the averaged
+model's time at one fish).
 """
 
 from __future__ import annotations
@@ -59,7 +62,7 @@ BEAT_BIAS, BEAT_AMPLITUDE, BEAT_PERIOD, BEAT_RATIO = 0, 1, 2, 3  # a pattern row
 SIDE = (1.0, -1.0)  # right fin, left fin (mirror image): the sign of its y force and yaw moment
 
 
-@nb.njit(**JIT)
+@nb.njit(inline="always", **JIT)
 def latch(fins, pending, i, f):
     """Start the next half-stroke of fin ``f`` of fish ``i`` with its commanded parameters."""
     bias, amp = pending[i, f, BEAT_BIAS], pending[i, f, BEAT_AMPLITUDE]
@@ -80,7 +83,7 @@ def latch(fins, pending, i, f):
     fins[i, f, RATIO] = ratio
 
 
-@nb.njit(**JIT)
+@nb.njit(inline="always", **JIT)
 def idle(fins, pending, i, f):
     """True for a fin that holds still and is commanded to hold still at the same angle."""
     return (
