@@ -55,7 +55,7 @@ Each K is the sum of two optional parts:
 
 The optional ``yaw_oscillation`` section describes the yaw-rate oscillation a
 fin drives within its beat, which the averaged model needs for its
-oscillation-averaged yaw damping (``pectoral_gym.averaging``, beyond the
+oscillation-averaged yaw damping (``pectoral_gym.dynamics.body_accel``, beyond the
 paper). ``cos, sin`` are the two components of the phasor
 ``A T_p (cos phi, sin phi)`` [rad] as cubic splines over the same three axes
 (their own knots): ``A`` [rad/s] is the amplitude of the sinusoid with the
@@ -76,15 +76,17 @@ from __future__ import annotations
 import json
 import re
 from dataclasses import dataclass, field
+from functools import cached_property
 from importlib import resources
 from pathlib import Path
 from typing import Any
 
-import numba as nb
 import numpy as np
 
+from pectoral_gym.ktables import KTables, bspline_basis, oscillation_phasor, scaling_values, spline_values
+
 __all__ = [
-    "FEATURES", "FORMAT", "FORMATS", "K_NAMES", "SPLINE_AXES", "SWAY_MODES", "ScalingFunctions",
+    "FEATURES", "FORMAT", "FORMATS", "K_NAMES", "SPLINE_AXES", "SWAY_MODES", "KTables", "ScalingFunctions",
     "bspline_basis", "default_scaling_path", "oscillation_phasor", "spline_values",
 ]
 
@@ -102,91 +104,6 @@ _UNITS = {"bias": "rad", "amplitude": "rad", "period": "s", "ratio": "-", "inv_p
 def default_scaling_path() -> Path:
     """Path of the coefficients file the averaged model loads by default."""
     return Path(str(resources.files("pectoral_gym") / "data" / "scaling_coefficients.json"))
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def bspline_basis(knots, n: int, x: float):
-    """Span and the four nonzero cubic B-spline basis values at ``x`` (clamped to the knot range).
-
-    The Cox-de Boor recursion of Piegl & Tiller, *The NURBS Book*, algorithm
-    A2.2, unrolled for degree 3 and free of allocations (it runs inside the
-    parallel model kernels). Coefficient ``span - 3 + a`` multiplies the
-    ``a``-th value. Returns ``(span, b0, b1, b2, b3)``.
-    """
-    x = min(max(x, knots[3]), knots[n])
-    span = 3
-    while span < n - 1 and knots[span + 1] <= x:
-        span += 1
-    left1, left2, left3 = x - knots[span], x - knots[span - 1], x - knots[span - 2]
-    right1, right2, right3 = knots[span + 1] - x, knots[span + 2] - x, knots[span + 3] - x
-    # degree 1
-    temp = 1.0 / (right1 + left1)
-    n0, n1 = right1 * temp, left1 * temp
-    # degree 2
-    temp = n0 / (right1 + left2)
-    n0, saved = right1 * temp, left2 * temp
-    temp = n1 / (right2 + left1)
-    n1, n2 = saved + right2 * temp, left1 * temp
-    # degree 3
-    temp = n0 / (right1 + left3)
-    n0, saved = right1 * temp, left3 * temp
-    temp = n1 / (right2 + left2)
-    n1, saved = saved + right2 * temp, left2 * temp
-    temp = n2 / (right3 + left1)
-    n2, n3 = saved + right3 * temp, left1 * temp
-    return span, n0, n1, n2, n3
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def _tensor_spline(bias: float, amplitude: float, inv_ratio: float, knots, table):
-    """Up to three channels of a tensor-product cubic spline ``table (channels, n0, n1, n2)``; absent ones are 0."""
-    channels, n0, n1, n2 = table.shape[0], table.shape[1], table.shape[2], table.shape[3]
-    s0, a0, a1, a2, a3 = bspline_basis(knots[0], n0, bias)
-    s1, c0, c1, c2, c3 = bspline_basis(knots[1], n1, amplitude)
-    s2, d0, d1, d2, d3 = bspline_basis(knots[2], n2, inv_ratio)
-    b0, b1, b2 = (a0, a1, a2, a3), (c0, c1, c2, c3), (d0, d1, d2, d3)
-    v0 = v1 = v2 = 0.0
-    for a in range(4):
-        for b in range(4):
-            w = b0[a] * b1[b]
-            for c in range(4):
-                wc = w * b2[c]
-                i, j, k = s0 - 3 + a, s1 - 3 + b, s2 - 3 + c
-                v0 += wc * table[0, i, j, k]
-                if channels > 1:
-                    v1 += wc * table[1, i, j, k]
-                if channels > 2:
-                    v2 += wc * table[2, i, j, k]
-    return v0, v1, v2
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def spline_values(bias: float, amplitude: float, inv_ratio: float, knots, table):
-    """Spline parts of ``(K_fx, K_fy, K_m)``; ``knots``, ``table`` as in :meth:`ScalingFunctions.kernel_arrays`.
-
-    Zero when ``table`` is empty (no spline part).
-    """
-    if table.shape[1] == 0:
-        return 0.0, 0.0, 0.0
-    return _tensor_spline(bias, amplitude, inv_ratio, knots, table)
-
-
-@nb.njit(cache=True, nogil=True, error_model="numpy")
-def oscillation_phasor(bias: float, amplitude: float, inv_ratio: float, knots, table):
-    """Yaw-oscillation phasor ``A T_p (cos phi, sin phi)`` [rad] of one fin (module docstring).
-
-    ``knots``, ``table`` are the last two entries of :meth:`ScalingFunctions.kernel_arrays`;
-    ``(0, 0)`` when ``table`` is empty or the fin does not beat. Below the
-    lowest amplitude node the phasor shrinks linearly to zero.
-    """
-    if table.shape[1] == 0 or amplitude <= 0.0:
-        return 0.0, 0.0
-    pc, ps, _ = _tensor_spline(bias, amplitude, inv_ratio, knots, table)
-    lowest = knots[1, 3]
-    if amplitude < lowest and lowest > 0.0:
-        pc *= amplitude / lowest
-        ps *= amplitude / lowest
-    return pc, ps
 
 
 def _padded(knots: tuple[np.ndarray, ...], table: np.ndarray | None, channels: int) -> tuple[np.ndarray, np.ndarray]:
@@ -312,19 +229,21 @@ class ScalingFunctions:
         """True when the yaw-oscillation splines are present (oscillation-averaged yaw damping)."""
         return self.oscillation_table is not None
 
-    def kernel_arrays(self) -> tuple:
-        """``(powers, coefs, knots, table, sway, osc_knots, osc_table)`` for the compiled kernels.
+    def kernel_arrays(self) -> KTables:
+        """The tables packed for the compiled kernels (:class:`pectoral_gym.ktables.KTables`).
 
-        ``knots`` is ``(3, longest)`` (shorter vectors padded with their last
-        knot, never read); without a spline, ``table`` is ``(3, 0, 0, 0)``.
-        ``sway`` is 0.0 for ``"paper"``, 1.0 for ``"base"``. ``osc_knots`` and
-        ``osc_table`` hold the yaw-oscillation splines the same way
-        (``(2, 0, 0, 0)`` without them).
+        Knot vectors are padded to one ``(3, longest)`` array; absent splines
+        are empty tables (``(3, 0, 0, 0)``, ``(2, 0, 0, 0)``).
         """
+        return self._tables
+
+    @cached_property
+    def _tables(self) -> KTables:
         knots, table = _padded(self.knots, self.table, 3)
         osc_knots, osc_table = _padded(self.oscillation_knots, self.oscillation_table, 2)
-        return (np.ascontiguousarray(self.powers, dtype=np.float64), np.ascontiguousarray(self.coefs, dtype=np.float64),
-                knots, table, float(SWAY_MODES.index(self.sway)), osc_knots, osc_table)
+        return KTables(np.ascontiguousarray(self.powers, dtype=np.float64),
+                       np.ascontiguousarray(self.coefs, dtype=np.float64),
+                       knots, table, self.sway == "base", osc_knots, osc_table)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "<dict>") -> ScalingFunctions:
@@ -428,21 +347,20 @@ class ScalingFunctions:
         Path(path).write_text(text + "\n")
 
     def evaluate(self, bias: float, amplitude: float, period: float, ratio: float) -> tuple[float, float, float]:
-        """``(K_fx, K_fy, K_m)`` at one fin-beat pattern (rad, rad, s, -); ``K_fy`` in the file's :attr:`sway` sense."""
-        x = np.array([bias, amplitude, period, ratio, 1.0 / period, 1.0 / ratio])
-        values = np.sum(self.coefs * np.prod(x ** self.powers, axis=-1), axis=-1)
-        if self.table is not None:
-            _, _, knots, table, *_ = self.kernel_arrays()
-            values = values + np.array(spline_values(float(bias), float(amplitude), 1.0 / ratio, knots, table))
-        return float(values[0]), float(values[1]), float(values[2])
+        """``(K_fx, K_fy, K_m)`` at one fin-beat pattern (rad, rad, s, -); ``K_fy`` in the file's :attr:`sway` sense.
+
+        The compiled :func:`pectoral_gym.ktables.scaling_values`, the kernels' own evaluation.
+        """
+        kx, ky, km = scaling_values(float(bias), float(amplitude), float(period), float(ratio), self.kernel_arrays())
+        return float(kx), float(ky), float(km)
 
     def yaw_oscillation(self, bias: float, amplitude: float, period: float, ratio: float) -> tuple[float, float]:
         """Amplitude ``A`` [rad/s] and phase ``phi`` [rad] of the fin's yaw-rate oscillation (module docstring).
 
         ``(0, 0)`` without yaw-oscillation splines.
         """
-        *_, knots, table = self.kernel_arrays()
-        pc, ps = oscillation_phasor(float(bias), float(amplitude), 1.0 / ratio, knots, table)
+        tables = self.kernel_arrays()
+        pc, ps = oscillation_phasor(float(bias), float(amplitude), 1.0 / ratio, tables.osc_knots, tables.osc_table)
         return float(np.hypot(pc, ps) / period), float(np.arctan2(ps, pc))
 
     def paper_k_fy(self, bias: float, amplitude: float, period: float, ratio: float) -> float:

@@ -17,14 +17,16 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from pectoral_gym import integrators as it
+from pectoral_gym import forcing_cache, stepping, strokes
 from pectoral_gym.averaging import EXACT, TAYLOR
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
+from pectoral_gym.ktables import KTables
+from pectoral_gym.params import COEF_NAMES, FinBeat, FishParams, coefficient_vector
 
 __all__ = ["FishModel", "FullModel", "AveragedModel", "MODELS", "make_model", "validate_beats", "REST"]
 
 REST = FinBeat.rest()
+MODELS = ("full", "averaged")
 _FIELDS = ("bias", "amplitude", "period", "ratio")
 BeatLike = FinBeat | np.ndarray | Sequence[float] | None
 
@@ -79,6 +81,12 @@ class FishModel:
 
     Attributes:
         state: ``(n, 6)`` ``X, Y, psi, vx, vy, omega`` (m, m, rad, m/s, m/s, rad/s).
+        integral: ``(n, 3)`` running integrals of ``vx, vy, omega`` since :meth:`reset` (m, m, rad).
+        coef: ``(n, 9)`` packed coefficients (``params.COEF_NAMES``, indices ``params.Coef``).
+        fins: ``(n, 2, strokes.FIN_FIELDS)`` half-strokes in progress (:mod:`pectoral_gym.strokes`).
+        pending: ``(n, 2, 4)`` commanded patterns, latched at the next turning point.
+        forcing_cache: ``(n, 2, forcing_cache.CACHE_FIELDS)`` the averaged model's per-fin forcing
+            (:mod:`pectoral_gym.forcing_cache`).
         time: Simulated time since :meth:`reset` [s].
     """
 
@@ -92,15 +100,16 @@ class FishModel:
         self.n = int(n)
         self.dt_max = float(dt_max)
         self.state = np.zeros((self.n, 6))
-        self.fins = np.zeros((self.n, 2, it.FIN_FIELDS))
+        self.fins = np.zeros((self.n, 2, strokes.FIN_FIELDS))
+        self.forcing_cache = np.zeros((self.n, 2, forcing_cache.CACHE_FIELDS))
         self.pending = np.zeros((self.n, 2, 4))
         self.integral = np.zeros((self.n, 3))
-        self.coef = np.zeros((self.n, 9))
+        self.coef = np.zeros((self.n, len(COEF_NAMES)))
         self.time = 0.0
         self.min_substeps = 1
         self.mode = EXACT
         unit = ScalingFunctions.unit()
-        self.kfun = unit.kernel_arrays()
+        self.tables = unit.kernel_arrays()
         self.set_params(params or FishParams())
         self.reset()
 
@@ -114,7 +123,7 @@ class FishModel:
             if rows.shape[0] != target.size:
                 raise ValueError(f"got {rows.shape[0]} FishParams for {target.size} fish")
             self.coef[target] = rows
-        self.fins[slice(None) if index is None else index, :, it.CACHED] = 0.0  # the forcing depends on them
+        forcing_cache.invalidate(self.forcing_cache, index)  # the forcing depends on them
 
     def reset(self, state: np.ndarray | None = None, right: BeatLike = None, left: BeatLike = None,
               index: np.ndarray | None = None) -> None:
@@ -132,7 +141,8 @@ class FishModel:
             validate_beats(beats)  # a FinBeat validated itself
         self.state[idx] = 0.0 if state is None else state
         self.integral[idx] = 0.0
-        it.init_fins(self.fins, self.pending, beats, None if index is None else index)
+        strokes.init_fins(self.fins, self.pending, beats, None if index is None else index)
+        forcing_cache.clear(self.forcing_cache, index)
         if index is None:
             self.time = 0.0
 
@@ -155,24 +165,35 @@ class FishModel:
             if beats.shape != (self.n, 2, 4):
                 raise ValueError(f"beats must have shape ({self.n}, 2, 4), got {beats.shape}")
             validate_beats(beats)
-        it.command_fins(self.fins, self.pending, beats, np.ones(self.n, dtype=np.bool_) if mask is None else mask)
+        strokes.command_fins(self.fins, self.pending, beats, np.ones(self.n, dtype=np.bool_) if mask is None else mask)
 
     def advance(self, duration: float) -> np.ndarray:
         """Integrate all fish for ``duration`` seconds; returns :attr:`state`."""
         if not duration >= 0:
             raise ValueError(f"duration must be >= 0 s, got {duration}")
-        it.advance(self.state, self.fins, self.pending, self.integral, self.coef, duration, self.dt_max,
-                   self.min_substeps, self.averaged, self.mode, self.kfun)
+        stepping.advance(self.state, self.fins, self.forcing_cache, self.pending, self.integral, self.coef, duration,
+                         self.dt_max, self.min_substeps, self.averaged, self.mode, self._packed_tables)
         self.time += duration
         return self.state
 
+    @property
+    def tables(self) -> KTables:
+        """The scaling-function tables the averaged forcing uses (:class:`pectoral_gym.ktables.KTables`)."""
+        return self._tables
+
+    @tables.setter
+    def tables(self, tables: KTables) -> None:
+        self._tables = tables
+        self._packed_tables = tuple(tables)  # what the kernels take (ktables.as_tables)
+        forcing_cache.invalidate(self.forcing_cache)  # the cached forcing depends on them
+
     def fin_angles(self) -> tuple[np.ndarray, np.ndarray]:
         """Current fin angles and rates, ``(n, 2)`` each (right fin first) [rad, rad/s]."""
-        return it.fin_angles(self.fins)
+        return strokes.fin_angles(self.fins)
 
     def active_beats(self) -> np.ndarray:
         """Patterns of the half-strokes in progress, ``(n, 2, 4)``."""
-        return self.fins[:, :, it.BIAS:it.RATIO + 1].copy()
+        return self.fins[:, :, strokes.BIAS:strokes.RATIO + 1].copy()
 
 
 class FullModel(FishModel):
@@ -211,7 +232,7 @@ class AveragedModel(FishModel):
             ``"taylor"`` (the paper's eqs. 26-28).
         dt_max: Largest RK4 step [s]; default 0.25 s. The step also shrinks to
             stay well inside RK4's stability limit of the yaw and drag damping
-            (``integrators._stable_step``): over 120 s of random fin commands the
+            (``stepping._stable_step``): over 120 s of random fin commands the
             position differs by ~1 cm from a 0.002 s reference, the same order
             as the full model's own discretisation error.
     """
@@ -230,10 +251,8 @@ class AveragedModel(FishModel):
                 raise ValueError(f"scaling must be 'identified', 'none' or a ScalingFunctions, got {scaling!r}")
             scaling = ScalingFunctions.load() if scaling == "identified" else None
         self.scaling = scaling or ScalingFunctions.unit()
-        self.kfun = self.scaling.kernel_arrays()
+        self.tables = self.scaling.kernel_arrays()
 
-
-MODELS = ("full", "averaged")
 
 
 def make_model(

@@ -171,6 +171,7 @@ def _single_like(model: FishModel, i: int) -> FishModel:
     clone.n = 1
     clone.state = np.zeros((1, 6))
     clone.fins = np.zeros((1,) + model.fins.shape[1:])
+    clone.forcing_cache = np.zeros((1,) + model.forcing_cache.shape[1:])
     clone.pending = np.zeros((1, 2, 4))
     clone.integral = np.zeros((1, 3))
     clone.coef = model.coef[i : i + 1].copy()

@@ -40,6 +40,7 @@ import casadi as ca
 import numpy as np
 
 from pectoral_gym.averaging import EXACT, averaged_body_accel, averaged_fin_forcing
+from pectoral_gym.dynamics import linearised_rate
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import FishParams, body_coefficients, coefficient_vector
 from pectoral_gym.symbolic import body_accel_sx, named_symbols, rk4_sx
@@ -157,16 +158,19 @@ def algebraic_scaling(
 def auto_substeps(
     velocities: np.ndarray, params: FishParams, sampling: float, oscillation: np.ndarray | None = None
 ) -> int:
-    """RK4 steps per sampling interval for the fastest linearised rate over the patterns' velocities."""
-    # Linearised rates of eq. (20): yaw damping 2 c4 |omega|, surge/sway damping ~ 2 c1 |V| / m1,
-    # Coriolis coupling ~ |omega|. RK4 is stable up to h * rate = 2.78; h * rate <= 1 keeps transients
-    # accurate to a few per cent, and at the optimum (constant inputs at the reference) there are none.
-    speed = np.hypot(velocities[:, 0], velocities[:, 1])
-    omega = np.abs(velocities[:, 2])
-    if oscillation is not None:
-        omega = omega + 2.0 / math.pi * np.asarray(oscillation)  # slope 2 c4 mean|w + A sin| <= 2 c4 (|w| + 2A/pi)
-    rate = np.max(2.0 * params.c4 * omega + 2.0 * params.c1 * speed / min(params.m1, params.m2) + omega, initial=1.0)
-    return max(4, math.ceil(sampling * rate))
+    """RK4 steps per sampling interval for the fastest linearised rate over the patterns' velocities.
+
+    The rate is :func:`pectoral_gym.dynamics.linearised_rate` (a bound on the Jacobian of eqs. 19-20,
+    the averaged model's step rule too). RK4 is stable up to ``h * rate = 2.78``; ``h * rate <= 1``
+    keeps transients accurate to a few per cent, and at the optimum (constant inputs at the reference)
+    there are none.
+    """
+    velocities = np.asarray(velocities, dtype=np.float64).reshape(-1, 3)
+    amplitude = np.zeros(len(velocities)) if oscillation is None else np.asarray(oscillation, dtype=np.float64)
+    b = body_coefficients(params)
+    rates = [linearised_rate(math.hypot(vx, vy), abs(w), float(a), b.m1, b.m2, b.J3, b.c1, b.c2, b.c4)
+             for (vx, vy, w), a in zip(velocities, amplitude, strict=True)]
+    return max(4, math.ceil(sampling * max([1.0, *rates])))
 
 
 class ScalingNmpc:

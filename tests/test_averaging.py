@@ -277,6 +277,19 @@ def test_scaling_kernel_matches_evaluate():
     np.testing.assert_allclose(averaged_forcing(beat, P, "right", scaling=s), k * unit, rtol=1e-12)
 
 
+def test_kernel_tables_name_the_tables_and_the_sway_convention():
+    s = _spline_scaling(sway="base")
+    tables = s.kernel_arrays()
+    assert tables.base_sway is True and ScalingFunctions.unit().kernel_arrays().base_sway is False
+    np.testing.assert_array_equal(tables.table, s.table)
+    np.testing.assert_array_equal(tables.powers, s.powers)
+    assert tables.osc_table.shape == (2, 0, 0, 0)  # no yaw-oscillation splines
+    for axis in range(3):  # padded with the last knot
+        n = len(s.knots[axis])
+        np.testing.assert_array_equal(tables.knots[axis, :n], s.knots[axis])
+        assert np.all(tables.knots[axis, n:] == s.knots[axis][-1])
+
+
 def test_scaling_json_round_trip(tmp_path):
     s = ScalingFunctions.from_dict(_poly_dict())
     path = tmp_path / "k.json"

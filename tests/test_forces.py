@@ -19,8 +19,8 @@ import pytest
 from scipy.integrate import quad
 
 from pectoral_gym.averaging import mean_fin_power
-from pectoral_gym.dynamics import body_rhs, fin_angle_eq21, fin_force_right
-from pectoral_gym.params import FishParams, coefficient_vector
+from pectoral_gym.dynamics import body_accel, body_rhs, fin_angle_eq21, fin_force_right, linearised_rate
+from pectoral_gym.params import FishParams, body_coefficients, coefficient_vector
 
 P = FishParams()
 LAM, RHO, DP, SP, MP = P.fin_force_coef, P.water_density, P.fin_chord, P.fin_span, P.fin_effective_mass
@@ -221,3 +221,47 @@ def test_body_rhs_custom_params():
     q = FishParams(body_mass=1.2, drag_coef=0.5, lift_coef=0.2, moment_coef=1e-2, wetted_area=0.05)
     args = (0.07, -0.02, 0.4, 0.01, 0.002, -1e-4)
     np.testing.assert_allclose(body_rhs(*args, coefficient_vector(q)), eq20(*args, p=q), rtol=1e-12)
+
+
+def _jacobian(f, v, h=1e-7):
+    """Central-difference Jacobian of ``f(vx, vy, om) -> 3 values`` at ``v``."""
+    cols = []
+    for k in range(3):
+        dv = np.zeros(3)
+        dv[k] = h
+        cols.append((np.array(f(*(v + dv))) - np.array(f(*(v - dv)))) / (2 * h))
+    return np.array(cols).T
+
+
+@pytest.mark.parametrize("params", [P, FishParams(lift_coef=0.6, added_mass_y=-0.6, moment_coef=2e-3)],
+                         ids=["table1", "strong-lift-and-munk"])
+def test_linearised_rate_bounds_the_eigenvalues_of_eq20(params):
+    # The step-size rule must bound every eigenvalue modulus of the Jacobian of eqs. (19)-(20)
+    # (central differences of the paper's equations as printed, eq20 above), across speeds,
+    # drift angles up to nearly +-90 deg and yaw rates.
+    c = body_coefficients(params)
+    rng = np.random.default_rng(3)
+    for _ in range(300):
+        speed, drift, om = rng.uniform(0.01, 0.3), rng.uniform(-1.5, 1.5), rng.uniform(-3.0, 3.0)
+        v = np.array([speed * math.cos(drift), speed * math.sin(drift), om])
+        jac = _jacobian(lambda a, b, w: eq20(a, b, w, 0.0, 0.0, 0.0, p=params), v)
+        largest = np.max(np.abs(np.linalg.eigvals(jac)))
+        assert largest <= linearised_rate(speed, om, 0.0, *c)
+
+
+def test_linearised_rate_is_tight_where_the_yaw_damping_sets_the_step():
+    # Table 1, turning on the spot: the largest eigenvalue is the yaw damping 2 c4 |w|; the bound
+    # adds only the Coriolis rotation (|w| m1/m2 beside 2 c4 |w| = 38 |w|)
+    jac = _jacobian(lambda a, b, w: eq20(a + 1e-12, b, w, 0.0, 0.0, 0.0), np.array([0.0, 0.0, 1.5]))
+    largest = np.max(np.abs(np.linalg.eigvals(jac)))
+    assert largest == pytest.approx(2 * P.c4 * 1.5, rel=1e-6)
+    assert linearised_rate(0.0, 1.5, 0.0, *body_coefficients(P)) <= 1.05 * largest
+
+
+def test_linearised_rate_bounds_the_oscillation_averaged_yaw_damping():
+    c = body_coefficients(P)
+    for om in (-0.5, 0.0, 0.05, 0.3, 2.0):
+        for amplitude in (0.1, 1.0, 3.0):
+            slope = _jacobian(lambda a, b, w, A=amplitude: body_accel(a, b, w, 0.0, 0.0, 0.0, *c, A),
+                              np.array([0.0, 0.0, om]))[2, 2]
+            assert abs(slope) <= linearised_rate(0.0, om, amplitude, *c) * (1 + 1e-6)  # equal at om = 0

@@ -14,10 +14,12 @@ import pytest
 from scipy import optimize
 from scipy.interpolate import NdBSpline, make_interp_spline
 
-from pectoral_gym.averaging import averaged_body_accel, oscillating_square_mean
+from pectoral_gym import forcing_cache as fc
+from pectoral_gym.dynamics import body_accel as averaged_body_accel
+from pectoral_gym.dynamics import oscillating_square_mean
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.models import AveragedModel
-from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
+from pectoral_gym.params import FinBeat, FishParams, body_coefficients
 from pectoral_gym.steady import steady_state_batch
 from scaling.reference import reference_runs, yaw_oscillation_statistics
 
@@ -119,8 +121,8 @@ def test_averaged_steady_turn_balances_the_oscillation_averaged_damping():
     beats = np.array([[beat.as_array(), FinBeat.rest().as_array()]])
     model = AveragedModel(1, P, scaling=s)
     steady = steady_state_batch(model, beats, rtol=1e-9, atol=1e-12)[0]
-    forcing = np.array(model.fins[0, 0, 9:12])
-    m1, m2, j3, c1, c2, c4 = coefficient_vector(P)[:6]
+    forcing = np.array(model.forcing_cache[0, 0, fc.AVG_FX:fc.AVG_TAU + 1])
+    m1, m2, j3, c1, c2, c4 = body_coefficients(P)
     amplitude = 0.35 / beat.period
 
     def rhs(v):
@@ -159,12 +161,12 @@ def test_mirrored_fins_in_phase_cancel_and_mirror_images_mirror():
 
 
 def test_averaged_body_accel_differs_only_in_yaw_damping():
-    coef = coefficient_vector(P)[:6]
+    coef = body_coefficients(P)
     v, f = (0.05, -0.01, 0.04), (0.01, -0.002, 1e-4)
     paper = np.array(averaged_body_accel(*v, *f, *coef, 0.0))
     osc = np.array(averaged_body_accel(*v, *f, *coef, 0.2))
     np.testing.assert_array_equal(osc[:2], paper[:2])
-    c4 = coef[5]
+    c4 = coef.c4
     assert osc[2] - paper[2] == pytest.approx(c4 * (0.04 * 0.04 - _quadrature_mean(0.04, 0.2)), rel=1e-6)
 
 
@@ -213,22 +215,46 @@ def test_nmpc_with_oscillation_equals_the_algebraic_solution():
     assert np.all(np.abs(oracle[:, 2] - 1) < np.abs(paper[:, 2] - 1))
 
 
+CACHE_BEAT = FinBeat.from_degrees(80, 25, 1.0, 3.0)
+
+
+def _beating_model():
+    """An averaged model (K = 1) whose right fin has beaten ``CACHE_BEAT`` for 2.3 s."""
+    model = AveragedModel(1, P, scaling="none")
+    model.reset(right=CACHE_BEAT)
+    model.advance(2.3)
+    return model
+
+
 def test_latch_reuses_the_forcing_of_an_unchanged_pattern_but_not_after_new_parameters():
-    from pectoral_gym import integrators as it
     from pectoral_gym.averaging import averaged_forcing
 
-    beat = FinBeat.from_degrees(80, 25, 1.0, 3.0)
-    model = AveragedModel(1, P, scaling="none")
-    model.reset(right=beat)
-    model.advance(2.3)
-    assert model.fins[0, 0, it.CACHED] == 1.0
-    np.testing.assert_allclose(model.fins[0, 0, it.AVG_FX:it.AVG_TAU + 1], averaged_forcing(beat, P), rtol=1e-14)
+    beat, model = CACHE_BEAT, _beating_model()
+    assert model.forcing_cache[0, 0, fc.CACHED] == 1.0
+    np.testing.assert_allclose(model.forcing_cache[0, 0, fc.AVG_FX:fc.AVG_TAU + 1], averaged_forcing(beat, P),
+                               rtol=1e-14)
     heavier = dataclasses.replace(P, fin_force_coef=2 * P.fin_force_coef)
     model.set_params(heavier)  # the averaged forcing depends on the parameters: the cache is invalid
-    assert model.fins[0, 0, it.CACHED] == 0.0
+    assert model.forcing_cache[0, 0, fc.CACHED] == 0.0
     model.advance(1.0)  # at least one latch (a whole fin period)
-    np.testing.assert_allclose(model.fins[0, 0, it.AVG_FX:it.AVG_TAU + 1], averaged_forcing(beat, heavier),
+    np.testing.assert_allclose(model.forcing_cache[0, 0, fc.AVG_FX:fc.AVG_TAU + 1], averaged_forcing(beat, heavier),
                                rtol=1e-14)
+
+
+def test_reset_to_rest_drops_the_cached_forcing_of_the_last_beat():
+    # A fin reset to rest never latches again: the forcing of its earlier pattern must not stay in force.
+    model = _beating_model()
+    assert np.any(model.state[0, 3:] != 0.0)
+    model.reset()
+    model.advance(5.0)
+    np.testing.assert_array_equal(model.state[0], np.zeros(6))  # at rest, no force: stays at rest exactly
+
+
+def test_new_scaling_tables_invalidate_the_cache():
+    model = _beating_model()
+    assert model.forcing_cache[0, 0, fc.CACHED] == 1.0
+    model.tables = _oscillation_scaling(level=0.35).kernel_arrays()
+    assert model.forcing_cache[0, 0, fc.CACHED] == 0.0
 
 
 @pytest.mark.parametrize("left", [None, (100, 10, 1.0, 2.0)])

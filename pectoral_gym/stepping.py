@@ -1,0 +1,238 @@
+"""Batched fixed-step integration of the full and averaged models: RK4, step size, segments, dispatch.
+
+Free functions compiled with numba. :func:`advance` moves arrays of fish in
+place (fin arrays: :mod:`pectoral_gym.strokes`; averaged forcing cache:
+:mod:`pectoral_gym.forcing_cache`):
+
+============  ===========  ======================================================================
+array         shape        fields (units)
+============  ===========  ======================================================================
+``state``     ``(n, 6)``   ``X, Y, psi`` (tank frame; m, m, rad), ``vx, vy, omega`` (body frame;
+                           m/s, m/s, rad/s), eq. (19)
+``integral``  ``(n, 3)``   running integrals of ``vx, vy, omega`` (m, m, rad), for cycle averages
+``coef``      ``(n, 9)``   packed coefficients, ``params.COEF_NAMES`` order (``params.Coef``)
+============  ===========  ======================================================================
+
+Time is cut into segments between stroke boundaries (where ``g''`` jumps and
+a fin may latch a new pattern, :func:`pectoral_gym.strokes.latch`). The full
+model resolves the fin beat with RK4 substeps that land exactly on every
+stroke boundary, so the integrator keeps its fourth order across the beat.
+The averaged model holds its forcing constant over a segment and sizes its
+substeps by the body dynamics' stiffness (:func:`pectoral_gym.dynamics.linearised_rate`).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+
+import numba as nb
+import numpy as np
+
+from pectoral_gym import forcing_cache as fc
+from pectoral_gym._jit import JIT, PARALLEL_MIN_ITEMS, kernel_pair
+from pectoral_gym.dynamics import Forcing, RateConstants, body_accel, rate_bound, rate_constants
+from pectoral_gym.ktables import KTables, as_tables
+from pectoral_gym.params import BodyCoefficients, Coef
+from pectoral_gym.strokes import AMPLITUDE, BIAS, DURATION, ELAPSED, PERIOD, RATIO, fin_forcing, idle, latch
+
+__all__ = ["ACCURATE_STEP", "STATE_NAMES", "State", "advance"]
+
+STATE_NAMES = ("X", "Y", "psi", "vx", "vy", "omega")
+#: Column of each state (``state[:, State.PSI]``), generated from :data:`STATE_NAMES`; the integrals
+#: of ``vx, vy, omega`` sit in columns 0, 1, 2 of ``integral``.
+State = enum.IntEnum("State", {name.upper(): i for i, name in enumerate(STATE_NAMES)})
+
+_EPS = 1e-12
+ACCURATE_STEP = 1.5  # averaged model: h * rate bound; RK4 is stable to 2.78, this keeps transients accurate
+
+
+@nb.njit(**JIT)
+def _rotate(c0, s0, delta):
+    """``cos, sin`` of ``psi0 + delta`` from those of ``psi0``.
+
+    RK4 stages move the heading by at most ``h |omega|``, a small angle: a
+    short series (error below 1e-12 for ``|delta| <= 0.1``) replaces three of
+    the four ``sin/cos`` pairs per step.
+    """
+    if abs(delta) > 0.1:
+        cd, sd = math.cos(delta), math.sin(delta)
+    else:
+        d2 = delta * delta
+        cd = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0 - d2 / 720.0))
+        sd = delta * (1.0 - d2 * (1.0 / 6.0 - d2 / 120.0))
+    return c0 * cd - s0 * sd, s0 * cd + c0 * sd
+
+
+@nb.njit(**JIT)
+def _accel(u, v, w, f: Forcing, b: BodyCoefficients, osc):
+    return body_accel(u, v, w, f.fx, f.fy, f.tau, b.m1, b.m2, b.J3, b.c1, b.c2, b.c4, osc)
+
+
+@nb.njit(**JIT)
+def _rk4(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: BodyCoefficients, osc):
+    """One RK4 step of eq. (19) for fish ``i``; forcing given at t, t+h/2, t+h.
+
+    ``osc`` [rad/s]: the yaw oscillation of the averaged model's damping
+    (:func:`pectoral_gym.dynamics.body_accel`); 0 for the full model.
+    """
+    x0, y0, p0 = state[i, State.X], state[i, State.Y], state[i, State.PSI]
+    u0, v0, w0 = state[i, State.VX], state[i, State.VY], state[i, State.OMEGA]
+    c0, s0 = math.cos(p0), math.sin(p0)
+    # stage 1
+    k1x, k1y, k1p = u0 * c0 - v0 * s0, u0 * s0 + v0 * c0, w0
+    k1u, k1v, k1w = _accel(u0, v0, w0, f0, body, osc)
+    # stage 2
+    u2, v2, w2 = u0 + 0.5 * h * k1u, v0 + 0.5 * h * k1v, w0 + 0.5 * h * k1w
+    c, s = _rotate(c0, s0, 0.5 * h * k1p)
+    k2x, k2y, k2p = u2 * c - v2 * s, u2 * s + v2 * c, w2
+    k2u, k2v, k2w = _accel(u2, v2, w2, fm, body, osc)
+    # stage 3
+    u3, v3, w3 = u0 + 0.5 * h * k2u, v0 + 0.5 * h * k2v, w0 + 0.5 * h * k2w
+    c, s = _rotate(c0, s0, 0.5 * h * k2p)
+    k3x, k3y, k3p = u3 * c - v3 * s, u3 * s + v3 * c, w3
+    k3u, k3v, k3w = _accel(u3, v3, w3, fm, body, osc)
+    # stage 4
+    u4, v4, w4 = u0 + h * k3u, v0 + h * k3v, w0 + h * k3w
+    c, s = _rotate(c0, s0, h * k3p)
+    k4x, k4y, k4p = u4 * c - v4 * s, u4 * s + v4 * c, w4
+    k4u, k4v, k4w = _accel(u4, v4, w4, f1, body, osc)
+    h6 = h / 6.0
+    state[i, State.X] = x0 + h6 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
+    state[i, State.Y] = y0 + h6 * (k1y + 2.0 * k2y + 2.0 * k3y + k4y)
+    state[i, State.PSI] = p0 + h6 * (k1p + 2.0 * k2p + 2.0 * k3p + k4p)
+    state[i, State.VX] = u0 + h6 * (k1u + 2.0 * k2u + 2.0 * k3u + k4u)
+    state[i, State.VY] = v0 + h6 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+    state[i, State.OMEGA] = w0 + h6 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)
+    # the running integrals are extra RK4 states with derivative (vx, vy, omega)
+    integral[i, 0] += h6 * (u0 + 2.0 * u2 + 2.0 * u3 + u4)
+    integral[i, 1] += h6 * (v0 + 2.0 * v2 + 2.0 * v3 + v4)
+    integral[i, 2] += h6 * (w0 + 2.0 * w2 + 2.0 * w3 + w4)
+
+
+@nb.njit(**JIT)
+def _stable_step(state, i, body: BodyCoefficients, rates: RateConstants, forcing: Forcing, osc, dt_max):
+    """Averaged model: RK4 step, at most ``dt_max`` and ``h * rate <= ACCURATE_STEP``.
+
+    The rate is :func:`pectoral_gym.dynamics.linearised_rate` (from the fish's
+    precomputed ``rates``) at the larger of
+    the current yaw rate and speed and those the forcing drives towards
+    (``omega* = sqrt(|tau| / (c4 J3))``, ``V* = sqrt(|F| / c1)``), so a fish at
+    rest that starts turning does not overshoot.
+    """
+    omega = max(abs(state[i, State.OMEGA]), math.sqrt(abs(forcing.tau) / (body.c4 * body.J3)))
+    speed = max(math.sqrt(state[i, State.VX] ** 2 + state[i, State.VY] ** 2),
+                math.sqrt(math.hypot(forcing.fx, forcing.fy) / max(body.c1, 1e-12)))
+    rate = rate_bound(speed, omega, osc, rates)
+    if rate * dt_max > ACCURATE_STEP:
+        return ACCURATE_STEP / rate
+    return dt_max
+
+
+@nb.njit(inline="always", **JIT)
+def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables):
+    """Latch fin ``f``'s commanded pattern; the averaged model also brings its forcing cache up to date."""
+    latch(fins, pending, i, f)
+    if averaged:
+        fc.refresh(cache, i, f, fins[i, f, BIAS], fins[i, f, AMPLITUDE], fins[i, f, PERIOD], fins[i, f, RATIO],
+                   coef, mode, tables)
+
+
+@nb.njit(**JIT)
+def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode,
+                 packed_tables):
+    """Advance fish ``i`` by ``duration`` seconds, segment by segment between stroke boundaries."""
+    tables = as_tables(packed_tables)
+    body = BodyCoefficients(coef[i, Coef.M1], coef[i, Coef.M2], coef[i, Coef.J3],
+                            coef[i, Coef.C1], coef[i, Coef.C2], coef[i, Coef.C4])
+    drag_constant = coef[i, Coef.FIN_DRAG_CONSTANT]
+    inertia_constant = coef[i, Coef.FIN_INERTIA_CONSTANT]
+    fin_offset = coef[i, Coef.FIN_OFFSET]
+    rates = rate_constants(body.m1, body.m2, body.J3, body.c1, body.c2, body.c4)
+    t_left = duration
+    while t_left > _EPS:
+        # A fin at rest that stays at rest never ends a segment: its stroke clock must
+        # not cut the other fin's integration into phase-dependent pieces.
+        idle0 = idle(fins, pending, i, 0)
+        idle1 = idle(fins, pending, i, 1)
+        if not idle0 and fins[i, 0, ELAPSED] >= fins[i, 0, DURATION] - _EPS:
+            _start_half_stroke(fins, cache, pending, i, 0, coef, averaged, mode, tables)
+        if not idle1 and fins[i, 1, ELAPSED] >= fins[i, 1, DURATION] - _EPS:
+            _start_half_stroke(fins, cache, pending, i, 1, coef, averaged, mode, tables)
+        rem0 = np.inf if idle0 else fins[i, 0, DURATION] - fins[i, 0, ELAPSED]
+        rem1 = np.inf if idle1 else fins[i, 1, DURATION] - fins[i, 1, ELAPSED]
+        seg = min(t_left, rem0, rem1)
+        if averaged:
+            forcing = Forcing(cache[i, 0, fc.AVG_FX] + cache[i, 1, fc.AVG_FX],
+                              cache[i, 0, fc.AVG_FY] + cache[i, 1, fc.AVG_FY],
+                              cache[i, 0, fc.AVG_TAU] + cache[i, 1, fc.AVG_TAU])
+            osc = fc.yaw_oscillation(fins, cache, i, 0.5 * seg, idle0, idle1)
+            t_seg = seg
+            while t_seg > _EPS:
+                # equal substeps to the segment end, re-sized as the state's stiffness changes
+                h_ok = _stable_step(state, i, body, rates, forcing, osc, dt_max)
+                h = t_seg / max(1, int(math.ceil(t_seg / h_ok - 1e-9)))
+                _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc)
+                t_seg -= h
+        else:
+            h_max = dt_max
+            if not idle0:
+                h_max = min(h_max, fins[i, 0, DURATION] / min_substeps)
+            if not idle1:
+                h_max = min(h_max, fins[i, 1, DURATION] / min_substeps)
+            n_sub = max(1, int(math.ceil(seg / h_max - 1e-9)))
+            h = seg / n_sub
+            f0 = Forcing(*fin_forcing(fins, i, 0.0, drag_constant, inertia_constant, fin_offset))
+            for k in range(n_sub):
+                fm = Forcing(*fin_forcing(fins, i, (k + 0.5) * h, drag_constant, inertia_constant, fin_offset))
+                f1 = Forcing(*fin_forcing(fins, i, (k + 1.0) * h, drag_constant, inertia_constant, fin_offset))
+                _rk4(state, integral, i, h, f0, fm, f1, body, 0.0)
+                f0 = f1
+        if rem0 - seg <= _EPS:
+            fins[i, 0, ELAPSED] = fins[i, 0, DURATION]  # exactly on the boundary
+        elif not idle0:
+            fins[i, 0, ELAPSED] += seg
+        if rem1 - seg <= _EPS:
+            fins[i, 1, ELAPSED] = fins[i, 1, DURATION]
+        elif not idle1:
+            fins[i, 1, ELAPSED] += seg
+        t_left -= seg
+
+
+_ADVANCE = kernel_pair(
+    _advance_one,
+    "state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, packed_tables",
+)
+_SERIAL, _PARALLEL = _ADVANCE.serial, _ADVANCE.parallel  # bound once: advance() runs at every env step
+
+
+def advance(
+    state: np.ndarray,
+    fins: np.ndarray,
+    cache: np.ndarray,
+    pending: np.ndarray,
+    integral: np.ndarray,
+    coef: np.ndarray,
+    duration: float,
+    dt_max: float,
+    min_substeps: int,
+    averaged: bool,
+    mode: int,
+    tables: KTables,
+) -> None:
+    """Advance every fish by ``duration`` seconds in place (see module docstring).
+
+    Args:
+        state, integral, coef: Batched arrays (module docstring).
+        fins, pending: Fin half-strokes and commanded patterns (:mod:`pectoral_gym.strokes`).
+        cache: Averaged forcing cache (:mod:`pectoral_gym.forcing_cache`); read and written only when ``averaged``.
+        duration: Time to advance [s].
+        dt_max: Largest RK4 substep [s].
+        min_substeps: Full model: least number of substeps per half-stroke.
+        averaged: Integrate the averaged model (eq. 25) instead of the full one (eq. 19).
+        mode: Averaged forcing form (``averaging.EXACT`` or ``averaging.TAYLOR``).
+        tables: Scaling functions (``kfunctions.ScalingFunctions.kernel_arrays()``), or ``tuple()`` of them.
+    """
+    kernel = _PARALLEL if state.shape[0] >= PARALLEL_MIN_ITEMS else _SERIAL
+    kernel(state, fins, cache, pending, integral, coef, float(duration), float(dt_max), float(min_substeps),
+           bool(averaged), int(mode), tuple(tables))  # a plain tuple is faster to dispatch (ktables.as_tables)
