@@ -30,7 +30,7 @@ import numpy as np
 
 from hardware import protocol as pr
 from hardware.firmware import Firmware, FirmwareConfig, stretch_transition
-from pectoral_gym import integrators as it
+from pectoral_gym import strokes
 from pectoral_gym.models import FullModel
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
 
@@ -264,9 +264,9 @@ class EmulatedRobot:
         elif fw.running:
             # Latched at the next turning point: bound the transitional half-stroke that starts there.
             fins = self.model.fins[0]
-            still = fins[:, it.ANGLE_FROM] == fins[:, it.ANGLE_TO]
-            next_power = still | (fins[:, it.POWER] < 0.5)
-            safe = stretch_transition(fw.setpoint, fins[:, it.ANGLE_TO], next_power, fw.config.limits)
+            still = fins[:, strokes.ANGLE_FROM] == fins[:, strokes.ANGLE_TO]
+            next_power = still | (fins[:, strokes.POWER] < 0.5)
+            safe = stretch_transition(fw.setpoint, fins[:, strokes.ANGLE_TO], next_power, fw.config.limits)
             self.model.command_array(safe.reshape(1, 2, 4))
 
     def _advance(self, target: float) -> None:
@@ -280,8 +280,8 @@ class EmulatedRobot:
                 self.model.advance(min(_CHUNK, target - t))
                 if self.trace is not None:
                     fins = self.model.fins[0]
-                    peak = math.pi * np.abs(fins[:, it.ANGLE_TO] - fins[:, it.ANGLE_FROM]) / (
-                        2.0 * np.maximum(fins[:, it.DURATION], 1e-9))  # stroke_kinematics' peak |g'|
+                    peak = math.pi * np.abs(fins[:, strokes.ANGLE_TO] - fins[:, strokes.ANGLE_FROM]) / (
+                        2.0 * np.maximum(fins[:, strokes.DURATION], 1e-9))  # stroke_kinematics' peak |g'|
                     self.trace.append((self.model.time, self.model.state[0].copy(),
                                        self.model.fin_angles()[1][0].copy(), peak, self.firmware.running))
 

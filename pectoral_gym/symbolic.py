@@ -143,7 +143,7 @@ def combined_yaw_oscillation_sx(right, left, scaling: ScalingFunctions | None):
     """Amplitude [rad/s] of the yaw oscillation of two fins beating in phase; ``None`` without yaw-oscillation data.
 
     The left fin's oscillation is the mirror image, so the phasors subtract
-    (as in :mod:`pectoral_gym.integrators` with equal beat phases); a tiny
+    (as in :func:`pectoral_gym.forcing_cache.yaw_oscillation` with equal beat phases); a tiny
     floor keeps ``omega / A`` finite when two equal fins cancel.
     """
     if scaling is None or not scaling.has_oscillation:
@@ -242,7 +242,7 @@ def averaged_rhs_sx(state, beats, params: FishParams, scaling: ScalingFunctions 
     With yaw-oscillation data in ``scaling`` the yaw damping is
     oscillation-averaged, with the two fins' oscillations added as phasors of
     fins beating in phase (as fins with equal periods started together do;
-    :mod:`pectoral_gym.integrators` tracks the actual phases).
+    :func:`pectoral_gym.forcing_cache.yaw_oscillation` tracks the actual phases).
 
     Args:
         state: Pose in the tank frame and body-frame velocities.

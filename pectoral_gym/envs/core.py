@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from pectoral_gym._jit import PARALLEL_MIN_ITEMS
 from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.layout import FishConstants, ReferenceEllipse, fish_array
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_VELOCITY
@@ -228,9 +229,9 @@ class EnvCore:
             self.model = AveragedModel(self.n, config.params, scaling=config.scaling)
         self.cfg = config.cfg_array()
         self.dt = float(config.control_period)
-        big = self.n >= tk.PARALLEL_MIN_ENVS
-        self._apply = tk._apply_parallel if big else tk._apply_serial
-        self._reward = tk._reward_parallel if big else tk._reward_serial
+        big = self.n >= PARALLEL_MIN_ITEMS  # chosen once: the batch size of a core never changes
+        self._apply = tk.APPLY_KERNELS.parallel if big else tk.APPLY_KERNELS.serial
+        self._reward = tk.REWARD_KERNELS.parallel if big else tk.REWARD_KERNELS.serial
         self.ep = np.zeros((self.n, tk.N_EP))
         self.obs = np.zeros((self.n, OBS_SIZE), dtype=np.float32)
         self._integral_before = np.zeros((self.n, 3))  # the model's velocity integrals before a step

@@ -42,7 +42,7 @@ class PectoralFishEnv(gym.Env):
     swims in a 2.30 m x 1.15 m tank. Every ``control_period`` the agent sets
     the beat pattern of each fin, ``(bias, amplitude, period, ratio)`` of
     eq. (21); a fin switches to a new pattern at the next turning point of its
-    stroke (the parameter-change rule of :mod:`pectoral_gym.integrators`). Two
+    stroke (the parameter-change rule of :mod:`pectoral_gym.strokes`). Two
     models drive the same environment: ``PectoralFish-Full-v0`` integrates the
     blade-element model through every fin beat, ``PectoralFish-Averaged-v0``
     the cycle-averaged model with identified scaling functions (and, beyond

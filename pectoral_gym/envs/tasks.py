@@ -20,6 +20,7 @@ import math
 import numba as nb
 import numpy as np
 
+from pectoral_gym._jit import JIT, kernel_pair
 from pectoral_gym.averaging import mean_fin_power
 from pectoral_gym.envs.layout import *  # noqa: F403 - the index constants, re-exported: tk.E_TX, tk.O_REWARD, ...
 from pectoral_gym.envs.layout import (
@@ -102,12 +103,10 @@ TERMS = {
     TRACK: (("reward_tracking", O_TRACKING), ("reward_wall", O_WALL), ("reward_energy", O_ENERGY)),
 }
 
-PARALLEL_MIN_ENVS = 64  # below this, thread start-up costs more than it saves
-_JIT = {"cache": True, "nogil": True, "error_model": "numpy"}
 
 
 # ---------------------------------------------------------------- actions
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _first_non_finite(actions, skip):
     for i in range(actions.shape[0]):
         if skip[i]:
@@ -118,7 +117,7 @@ def _first_non_finite(actions, skip):
     return -1
 
 
-@nb.njit(inline="always", **_JIT)
+@nb.njit(inline="always", **JIT)
 def _apply_one(i, actions, cfg, beats, obs, out, fish):
     """Map env ``i``'s action to fin patterns, store it in the observation, price its energy."""
     energy = 0.0
@@ -133,30 +132,15 @@ def _apply_one(i, actions, cfg, beats, obs, out, fish):
     out[i, O_ENERGY] = -cfg[C_W_ENERGY] * energy * cfg[C_DT]  # E = sum of mean fin power * control period [J]
 
 
-@nb.njit(**_JIT)
-def _apply_serial(actions, skip, cfg, beats, obs, out, fish):
-    bad = _first_non_finite(actions, skip)
-    if bad >= 0:
-        return bad
-    for i in range(actions.shape[0]):
-        if not skip[i]:
-            _apply_one(i, actions, cfg, beats, obs, out, fish)
-    return -1
-
-
-@nb.njit(parallel=True, cache=True, nogil=True, error_model="numpy")
-def _apply_parallel(actions, skip, cfg, beats, obs, out, fish):
-    bad = _first_non_finite(actions, skip)
-    if bad >= 0:
-        return bad
-    for i in nb.prange(actions.shape[0]):
-        if not skip[i]:
-            _apply_one(i, actions, cfg, beats, obs, out, fish)
-    return -1
+# Serial and prange loops over the envs (pectoral_gym._jit.kernel_pair): a non-finite action anywhere stops
+# the step before anything is written.
+APPLY_KERNELS = kernel_pair(_apply_one, "actions, skip, cfg, beats, obs, out, fish",
+                            item_args="actions, cfg, beats, obs, out, fish", skip="skip",
+                            guard=_first_non_finite, guard_args="actions, skip")
 
 
 # ---------------------------------------------------------------- observation and reward
-@nb.njit(inline="always", **_JIT)
+@nb.njit(inline="always", **JIT)
 def _observe_one(i, state, ep, fish, obs):
     """Write the observation of env ``i`` up to the last action; return the distance to the target and the wall flag."""
     x, y, psi = state[i, 0], state[i, 1], state[i, 2]
@@ -184,14 +168,14 @@ def _observe_one(i, state, ep, fish, obs):
     return math.sqrt(dx * dx + dy * dy), wall
 
 
-@nb.njit(inline="always", **_JIT)
+@nb.njit(inline="always", **JIT)
 def _phase_rate(phase, a, b, direction, speed):
     """d(phase)/dt for a point moving at ``speed`` along the ellipse (a cos phase, b sin phase)."""
     sp, cp = math.sin(phase), math.cos(phase)
     return direction * speed / math.sqrt(a * a * sp * sp + b * b * cp * cp)
 
 
-@nb.njit(inline="always", **_JIT)
+@nb.njit(inline="always", **JIT)
 def _set_reference(i, ep, speed):
     """Target position and velocity from the ellipse phase of env ``i``."""
     a, b, phase, direction = ep[i, E_A], ep[i, E_B], ep[i, E_PHASE], ep[i, E_DIR]
@@ -204,7 +188,7 @@ def _set_reference(i, ep, speed):
     ep[i, E_TVY] = direction * speed * ty / norm
 
 
-@nb.njit(inline="always", **_JIT)
+@nb.njit(inline="always", **JIT)
 def _move_reference(i, ep, duration, speed):
     """Advance the reference point of env ``i`` by ``duration`` along its ellipse (RK4 on the phase)."""
     a, b, direction = ep[i, E_A], ep[i, E_B], ep[i, E_DIR]
@@ -220,7 +204,7 @@ def _move_reference(i, ep, duration, speed):
     _set_reference(i, ep, speed)
 
 
-@nb.njit(inline="always", **_JIT)
+@nb.njit(inline="always", **JIT)
 def _reward_one(i, state, cfg, ep, fish, obs, out):
     """Observation, reward terms and termination of env ``i`` after a control period."""
     task = int(cfg[C_TASK])
@@ -254,18 +238,8 @@ def _reward_one(i, state, cfg, ep, fish, obs, out):
     ep[i, E_DPREV] = d
 
 
-@nb.njit(**_JIT)
-def _reward_serial(state, skip, cfg, ep, fish, obs, out):
-    for i in range(state.shape[0]):
-        if not skip[i]:
-            _reward_one(i, state, cfg, ep, fish, obs, out)
-
-
-@nb.njit(parallel=True, cache=True, nogil=True, error_model="numpy")
-def _reward_parallel(state, skip, cfg, ep, fish, obs, out):
-    for i in nb.prange(state.shape[0]):
-        if not skip[i]:
-            _reward_one(i, state, cfg, ep, fish, obs, out)
+REWARD_KERNELS = kernel_pair(_reward_one, "state, skip, cfg, ep, fish, obs, out",
+                             item_args="state, cfg, ep, fish, obs, out", skip="skip")
 
 
 def apply_actions(actions, skip, cfg, beats, obs, out, fish) -> int:
@@ -275,18 +249,16 @@ def apply_actions(actions, skip, cfg, beats, obs, out, fish) -> int:
     ``out[:, O_ENERGY]``. Returns -1, or the index of the first env whose
     action is not finite (then nothing has been written).
     """
-    kernel = _apply_parallel if actions.shape[0] >= PARALLEL_MIN_ENVS else _apply_serial
-    return kernel(actions, skip, cfg, beats, obs, out, fish)
+    return APPLY_KERNELS.run(actions, skip, cfg, beats, obs, out, fish)
 
 
 def observe_and_reward(state, skip, cfg, ep, fish, obs, out) -> None:
     """After the model advanced: move the reference, write observations, reward terms and flags."""
-    kernel = _reward_parallel if state.shape[0] >= PARALLEL_MIN_ENVS else _reward_serial
-    kernel(state, skip, cfg, ep, fish, obs, out)
+    REWARD_KERNELS.run(state, skip, cfg, ep, fish, obs, out)
 
 
 # ---------------------------------------------------------------- reset
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def _pick_goal(draws, candidates):
     """Rejection sampling: the first candidate (uniforms in pairs) that is a valid goal for the start in ``draws``."""
     for k in range(candidates.shape[0] // 2):
@@ -329,7 +301,7 @@ def draw_episode(rng: np.random.Generator, task: int) -> np.ndarray:
     return draws
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def start_states(index, draws, cfg, ep, start):
     """Set the targets of the envs in ``index`` from ``draws`` (see :func:`draw_episode`); write start states.
 
@@ -354,7 +326,7 @@ def start_states(index, draws, cfg, ep, start):
             start[k, 2] = tangent + d[6]
 
 
-@nb.njit(**_JIT)
+@nb.njit(**JIT)
 def observe_reset(index, state, ep, fish, obs, out, action_code):
     """Observations of freshly reset envs; the last-action entries get ``action_code``; ``out`` rows zeroed.
 
