@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import math
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -19,8 +20,9 @@ import numpy as np
 from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.layout import FishConstants, ReferenceEllipse, fish_array
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_VELOCITY
+from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.models import MODELS, REST, AveragedModel, FishModel, FullModel
-from pectoral_gym.params import FishParams
+from pectoral_gym.params import FishParams, as_params
 
 __all__ = ["EnvConfig", "EnvCore", "MODELS", "TASKS", "env_signature"]
 
@@ -56,10 +58,16 @@ class EnvConfig:
         amplitude_range: ``(low, high)`` of the fin amplitude ``gamma_A`` [rad].
         period_range: ``(low, high)`` of the fin-beat period ``T_p`` [s].
         ratio_range: ``(low, high)`` of the speed ratio ``zeta`` [-].
-        params: Nominal model parameters (Table 1 defaults if ``None``).
+        params: Nominal model parameters: a :class:`FishParams`, a dict of its fields, the path of a
+            parameters file (:func:`pectoral_gym.params.load_params`), or ``None`` (Table 1); stored
+            as a ``FishParams``.
         randomize: FishParams field name -> relative half-width ``w``; each
             reset multiplies the field by a factor drawn from ``U(1-w, 1+w)``.
-        scaling: Averaged model only: ``"identified"`` scaling functions or ``"none"`` (K = 1).
+        scaling: Averaged model only: ``"identified"`` (the shipped coefficients file), ``"none"``
+            (K = 1), or the path of a coefficients file (``python -m scaling identify``).
+        check_scaling_params: Averaged model only: raise ``ValueError`` when the coefficients file
+            records other model parameters than ``params`` (K identified for another robot).
+            ``False`` is the explicit opt-out. ``randomize`` draws around ``params`` and is not checked.
         progress_weight: Goal task: reward per metre of approach [1/m].
         goal_bonus: Goal task: reward for reaching the goal.
         wall_penalty: Penalty when the nose or tail leaves the tank.
@@ -77,9 +85,10 @@ class EnvConfig:
     amplitude_range: tuple[float, float] = (0.0, math.radians(30.0))
     period_range: tuple[float, float] = (0.5, 2.0)
     ratio_range: tuple[float, float] = (1.0, 5.0)
-    params: FishParams | None = None
+    params: FishParams | Mapping[str, float] | str | os.PathLike | None = None
     randomize: Mapping[str, float] | None = field(default=None, hash=False)
-    scaling: str = "identified"
+    scaling: str | os.PathLike = "identified"
+    check_scaling_params: bool = True
     progress_weight: float = 10.0
     goal_bonus: float = 10.0
     wall_penalty: float = 10.0
@@ -95,8 +104,14 @@ class EnvConfig:
             raise ValueError(f"model must be one of {MODELS}, got {self.model!r}")
         if self.task not in TASKS:
             raise ValueError(f"task must be one of {tuple(TASKS)}, got {self.task!r}")
-        if self.scaling not in ("identified", "none"):
-            raise ValueError(f"scaling must be 'identified' or 'none', got {self.scaling!r}")
+        if isinstance(self.scaling, os.PathLike):
+            set_(self, "scaling", os.fspath(self.scaling))
+        if not isinstance(self.scaling, str) or not self.scaling:
+            raise ValueError(f"scaling must be 'identified', 'none' or a coefficients file path, got {self.scaling!r}")
+        if self.scaling not in ("identified", "none") and not os.path.isfile(self.scaling):
+            raise ValueError(f"scaling: no coefficients file at {self.scaling!r} (or use 'identified' or 'none')")
+        if not isinstance(self.check_scaling_params, (bool, np.bool_)):
+            raise ValueError(f"check_scaling_params must be True or False, got {self.check_scaling_params!r}")
         if self.model == "full" and self.scaling != "identified":
             raise ValueError("scaling applies to the averaged model only; leave it at 'identified' for model='full'")
         try:
@@ -126,10 +141,7 @@ class EnvConfig:
             if not (math.isfinite(number) and number >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
             set_(self, name, number)
-        if self.params is None:
-            set_(self, "params", FishParams())
-        elif not isinstance(self.params, FishParams):
-            raise ValueError(f"params must be a FishParams or None, got {type(self.params).__name__}")
+        set_(self, "params", as_params(self.params))
         if self.randomize is not None:
             randomize = dict(self.randomize)
             unknown = sorted(set(randomize) - set(_FIELD_NAMES))
@@ -139,6 +151,28 @@ class EnvConfig:
                 if not (isinstance(width, (int, float)) and math.isfinite(width) and 0 <= width < 1):
                     raise ValueError(f"randomize[{name!r}] must be a relative half-width in [0, 1), got {width!r}")
             set_(self, "randomize", randomize or None)
+
+    def scaling_functions(self) -> ScalingFunctions | None:
+        """The averaged model's scaling functions (``None`` for K = 1 or the full model), checked against ``params``.
+
+        Raises:
+            ValueError: If ``check_scaling_params`` and the file records other parameters than ``params``.
+        """
+        if self.model != "averaged" or self.scaling == "none":
+            return None
+        path = None if self.scaling == "identified" else self.scaling
+        scaling = ScalingFunctions.load(path)
+        if self.check_scaling_params:
+            mismatch = scaling.params_mismatch(self.params)
+            if mismatch:
+                where = "the shipped coefficients file" if path is None else f"coefficients file {path!r}"
+                shown = ", ".join(f"{k}: identified {a!r}, given {b!r}" for k, (a, b) in sorted(mismatch.items()))
+                raise ValueError(
+                    f"{where} was identified for other model parameters ({shown}); the averaged model's K "
+                    "would not describe this robot. Identify K for it (python -m scaling identify --params FILE) "
+                    "and pass scaling=PATH, or pass check_scaling_params=False to use it anyway"
+                )
+        return scaling
 
     @property
     def task_id(self) -> int:
@@ -225,7 +259,7 @@ class EnvCore:
         if config.model == "full":
             self.model: FishModel = FullModel(self.n, config.params)
         else:
-            self.model = AveragedModel(self.n, config.params, scaling=config.scaling)
+            self.model = AveragedModel(self.n, config.params, scaling=config.scaling_functions() or "none")
         self.cfg = config.cfg_array()
         self.dt = float(config.control_period)
         big = self.n >= tk.PARALLEL_MIN_ENVS

@@ -356,9 +356,10 @@ def start_states(index, draws, cfg, ep, start):
 
 @nb.njit(**_JIT)
 def observe_reset(index, state, ep, fish, obs, out, action_code):
-    """Observations of freshly reset envs; the last-action entries get ``action_code``; ``out`` rows zeroed.
+    """Observations of freshly reset envs; the last-action entries get ``action_code``.
 
-    (A vector env reports zeros for the masked ``info`` entries of autoreset envs, as ``SyncVectorEnv`` does.)
+    ``out`` rows are zeroed except ``O_DISTANCE``, the distance to the target: the reset ``info``
+    has the step's keys (zero reward terms, the real distance, no success).
     """
     for k in range(index.shape[0]):
         i = index[k]
@@ -367,3 +368,4 @@ def observe_reset(index, state, ep, fish, obs, out, action_code):
         for j in range(ACTION_SIZE):
             obs[i, OBS_LAST_ACTION + j] = action_code[j]
         out[i, :] = 0.0
+        out[i, O_DISTANCE] = d
