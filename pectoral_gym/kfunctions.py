@@ -451,6 +451,30 @@ class ScalingFunctions:
                 out[name.name] = (None if known is None else float(known), given)
         return out
 
+    def check_params(self, params: Any, where: str = "the coefficients file") -> None:
+        """Raise ``ValueError`` naming the differing fields if the file was identified for other parameters.
+
+        The check behind ``check_scaling_params`` of the envs and ``--params`` of the command lines:
+        K identified for one robot does not describe another one.
+        """
+        mismatch = self.params_mismatch(params)
+        if mismatch:
+            shown = ", ".join(f"{k}: identified {a!r}, given {b!r}" for k, (a, b) in sorted(mismatch.items()))
+            raise ValueError(
+                f"{where} was identified for other model parameters ({shown}); its K would not describe "
+                "this robot. Identify K for it (python -m scaling identify --params FILE) and use that file, "
+                "or turn the check off (check_scaling_params=False, --no-params-check)"
+            )
+
+    @classmethod
+    def load_for(cls, params: Any, path: str | Path | None = None, check: bool = True) -> ScalingFunctions:
+        """:meth:`load` a coefficients file (``None``: the shipped one); :meth:`check_params` it unless ``check=False``."""
+        scaling = cls.load(path)
+        if check:
+            where = "the shipped coefficients file" if path is None else f"coefficients file {path}"
+            scaling.check_params(params, where)
+        return scaling
+
     def evaluate(self, bias: float, amplitude: float, period: float, ratio: float) -> tuple[float, float, float]:
         """``(K_fx, K_fy, K_m)`` at one fin-beat pattern (rad, rad, s, -); ``K_fy`` in the file's :attr:`sway` sense."""
         x = np.array([bias, amplitude, period, ratio, 1.0 / period, 1.0 / ratio])

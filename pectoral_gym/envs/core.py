@@ -161,18 +161,7 @@ class EnvConfig:
         if self.model != "averaged" or self.scaling == "none":
             return None
         path = None if self.scaling == "identified" else self.scaling
-        scaling = ScalingFunctions.load(path)
-        if self.check_scaling_params:
-            mismatch = scaling.params_mismatch(self.params)
-            if mismatch:
-                where = "the shipped coefficients file" if path is None else f"coefficients file {path!r}"
-                shown = ", ".join(f"{k}: identified {a!r}, given {b!r}" for k, (a, b) in sorted(mismatch.items()))
-                raise ValueError(
-                    f"{where} was identified for other model parameters ({shown}); the averaged model's K "
-                    "would not describe this robot. Identify K for it (python -m scaling identify --params FILE) "
-                    "and pass scaling=PATH, or pass check_scaling_params=False to use it anyway"
-                )
-        return scaling
+        return ScalingFunctions.load_for(self.params, path, check=self.check_scaling_params)
 
     @property
     def task_id(self) -> int:
