@@ -468,7 +468,7 @@ class ScalingFunctions:
 
     @classmethod
     def load_for(cls, params: Any, path: str | Path | None = None, check: bool = True) -> ScalingFunctions:
-        """:meth:`load` a coefficients file (``None``: the shipped one), then :meth:`check_params` unless told not to."""
+        """Load a coefficients file (``None``: the shipped one), then :meth:`check_params` unless ``check`` is False."""
         scaling = cls.load(path)
         if check:
             where = "the shipped coefficients file" if path is None else f"coefficients file {path}"
