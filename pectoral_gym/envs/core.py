@@ -19,7 +19,7 @@ import numpy as np
 
 from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.layout import FishConstants, ReferenceEllipse, fish_array
-from pectoral_gym.envs.observation import OBS_SIZE, OBS_VELOCITY
+from pectoral_gym.envs.observation import OBS_SIZE
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.models import MODELS, REST, AveragedModel, FishModel, FullModel
 from pectoral_gym.params import FishParams, as_params
@@ -252,8 +252,8 @@ class EnvCore:
         self.cfg = config.cfg_array()
         self.dt = float(config.control_period)
         big = self.n >= tk.PARALLEL_MIN_ENVS
-        self._apply = tk._apply_parallel if big else tk._apply_serial
-        self._reward = tk._reward_parallel if big else tk._reward_serial
+        self._apply = tk._apply_keep_parallel if big else tk._apply_keep_serial
+        self._reward = tk._reward_mean_parallel if big else tk._reward_mean_serial
         self.ep = np.zeros((self.n, tk.N_EP))
         self.obs = np.zeros((self.n, OBS_SIZE), dtype=np.float32)
         self._integral_before = np.zeros((self.n, 3))  # the model's velocity integrals before a step
@@ -301,21 +301,21 @@ class EnvCore:
             ValueError: If an action of an env not in ``skip`` is not finite.
         """
         skip = self.none if skip is None else skip
-        bad = self._apply(actions, skip, self.cfg, self.beats, self.obs, self.out, self.fish)
+        model = self.model
+        before = self._integral_before  # the model's velocity integrals before the step, kept by _apply
+        bad = self._apply(actions, skip, self.cfg, self.beats, self.obs, self.out, self.fish, model.integral, before)
         if bad >= 0:
             raise ValueError(
                 f"action must be finite, got {np.asarray(actions[bad]).tolist()}"
                 + (f" for env {bad}" if self.n > 1 else "")
             )
-        self.model.command_array(self.beats, self.all, validate=False)
-        before = self._integral_before
-        np.copyto(before, self.model.integral)
-        self.model.advance(self.dt)
-        self._reward(self.model.state, skip, self.cfg, self.ep, self.fish, self.obs, self.out)
-        # Observed velocities: means over the control period. The full model's instantaneous velocities
-        # oscillate with the fin beat (a symmetric stroke reads a yaw rate of -0.45 rad/s at some phases),
-        # the averaged model's do not; the means agree between the models, as an observer's estimate would.
-        self.obs[:, OBS_VELOCITY] = (self.model.integral - before) / self.dt
+        model.command_array(self.beats, self.all, validate=False)
+        model.advance(self.dt)
+        # Observation, reward, and the observed velocities: means over the control period (integral
+        # difference / dt). The full model's instantaneous velocities oscillate with the fin beat (a
+        # symmetric stroke reads a yaw rate of -0.45 rad/s at some phases), the averaged model's do not;
+        # the means agree between the models, as an observer's estimate would.
+        self._reward(model.state, skip, self.cfg, self.ep, self.fish, self.obs, self.out, model.integral, before)
 
     # ------------------------------------------------------------ accessors (copies, plain floats)
     def target(self, i: int) -> tuple[float, float]:

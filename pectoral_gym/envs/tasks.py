@@ -268,6 +268,44 @@ def _reward_parallel(state, skip, cfg, ep, fish, obs, out):
             _reward_one(i, state, cfg, ep, fish, obs, out)
 
 
+# ---------------------------------------------------------------- the simulated envs' step (EnvCore)
+# The same kernels plus what EnvCore did in numpy around them: keep the model's velocity integrals
+# before the step, and observe the mean velocities over the control period after it (fewer calls per step).
+@nb.njit(**_JIT)
+def _apply_keep_serial(actions, skip, cfg, beats, obs, out, fish, integral, before):
+    before[:, :] = integral
+    return _apply_serial(actions, skip, cfg, beats, obs, out, fish)
+
+
+@nb.njit(parallel=True, cache=True, nogil=True, error_model="numpy")
+def _apply_keep_parallel(actions, skip, cfg, beats, obs, out, fish, integral, before):
+    before[:, :] = integral
+    return _apply_parallel(actions, skip, cfg, beats, obs, out, fish)
+
+
+@nb.njit(inline="always", **_JIT)
+def _mean_velocity_one(i, integral, before, dt, obs):
+    obs[i, OBS_VX] = (integral[i, 0] - before[i, 0]) / dt
+    obs[i, OBS_VY] = (integral[i, 1] - before[i, 1]) / dt
+    obs[i, OBS_OMEGA] = (integral[i, 2] - before[i, 2]) / dt
+
+
+@nb.njit(**_JIT)
+def _reward_mean_serial(state, skip, cfg, ep, fish, obs, out, integral, before):
+    for i in range(state.shape[0]):
+        if not skip[i]:
+            _reward_one(i, state, cfg, ep, fish, obs, out)
+        _mean_velocity_one(i, integral, before, cfg[C_DT], obs)
+
+
+@nb.njit(parallel=True, cache=True, nogil=True, error_model="numpy")
+def _reward_mean_parallel(state, skip, cfg, ep, fish, obs, out, integral, before):
+    for i in nb.prange(state.shape[0]):
+        if not skip[i]:
+            _reward_one(i, state, cfg, ep, fish, obs, out)
+        _mean_velocity_one(i, integral, before, cfg[C_DT], obs)
+
+
 def apply_actions(actions, skip, cfg, beats, obs, out, fish) -> int:
     """Map normalised actions ``(n, 8)`` to fin patterns ``beats`` for the envs not in ``skip``.
 
