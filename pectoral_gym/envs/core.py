@@ -24,7 +24,7 @@ from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.models import MODELS, REST, AveragedModel, FishModel, FullModel
 from pectoral_gym.params import FishParams, as_params
 
-__all__ = ["EnvConfig", "EnvCore", "MODELS", "TASKS", "env_signature"]
+__all__ = ["EnvConfig", "EnvCore", "MODELS", "TASKS", "env_signature", "task_info"]
 
 TASKS = {"goal": tk.GOAL, "track": tk.TRACK}
 _FIELD_NAMES = tuple(f.name for f in dataclasses.fields(FishParams))
@@ -206,6 +206,22 @@ class EnvConfig:
         r = self.ranges
         x = np.clip(np.asarray(code, dtype=np.float64), -1.0, 1.0)
         return np.minimum(r[:, 0] + 0.5 * (x + 1.0) * (r[:, 1] - r[:, 0]), r[:, 1])
+
+
+def task_info(out: np.ndarray, task: int) -> dict:
+    """The task's ``info`` of one env from its ``out`` row (``layout.O_*``), numpy scalars.
+
+    The one place the info keys are written, for every fish env (full, averaged, hardware),
+    after a reset (zero reward terms, the real distance) as after a step: the reward terms of
+    ``tasks.TERMS[task]`` in order, ``"distance"``, then ``"is_success"`` (goal) or
+    ``"tracking_error"`` (track). A dict literal per task: faster than a loop over ``TERMS``.
+    """
+    if task == tk.GOAL:
+        return {"reward_progress": out[tk.O_PROGRESS], "reward_goal": out[tk.O_GOAL], "reward_wall": out[tk.O_WALL],
+                "reward_energy": out[tk.O_ENERGY], "reward_time": out[tk.O_TIME], "distance": out[tk.O_DISTANCE],
+                "is_success": out[tk.O_SUCCESS] > 0.5}
+    return {"reward_tracking": out[tk.O_TRACKING], "reward_wall": out[tk.O_WALL], "reward_energy": out[tk.O_ENERGY],
+            "distance": out[tk.O_DISTANCE], "tracking_error": out[tk.O_DISTANCE]}
 
 
 def env_signature(*parameters: inspect.Parameter) -> inspect.Signature:

@@ -9,19 +9,11 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from pectoral_gym.envs.core import EnvConfig, EnvCore, env_signature
+from pectoral_gym.envs.core import EnvConfig, EnvCore, env_signature, task_info
 from pectoral_gym.envs.layout import (
     ACTION_SIZE,
-    O_DISTANCE,
-    O_ENERGY,
-    O_GOAL,
-    O_PROGRESS,
     O_REWARD,
-    O_SUCCESS,
     O_TERMINATED,
-    O_TIME,
-    O_TRACKING,
-    O_WALL,
     FishConstants,
     ReferenceEllipse,
 )
@@ -195,7 +187,7 @@ class PectoralFishEnv(gym.Env):
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self.observation_structure = dict(OBSERVATION_STRUCTURE)
         self._action = np.zeros((1, ACTION_SIZE))
-        self._goal = self.config.task == "goal"
+        self._task = self.config.task_id
         self._renderer = None
         self.trail: list[tuple[float, float]] = []
 
@@ -259,14 +251,8 @@ class PectoralFishEnv(gym.Env):
         return state
 
     def _info(self) -> dict[str, Any]:
-        """The ``info`` of the last reset or step, numpy scalars (a dict literal: faster than a loop over TERMS)."""
-        o = self.core.out[0]
-        if self._goal:
-            return {"reward_progress": o[O_PROGRESS], "reward_goal": o[O_GOAL], "reward_wall": o[O_WALL],
-                    "reward_energy": o[O_ENERGY], "reward_time": o[O_TIME], "distance": o[O_DISTANCE],
-                    "is_success": o[O_SUCCESS] > 0.5}
-        return {"reward_tracking": o[O_TRACKING], "reward_wall": o[O_WALL], "reward_energy": o[O_ENERGY],
-                "distance": o[O_DISTANCE], "tracking_error": o[O_DISTANCE]}
+        """The ``info`` of the last reset or step (:func:`~pectoral_gym.envs.core.task_info`)."""
+        return task_info(self.core.out[0], self._task)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start an episode (see "Starting State"); returns ``(observation, info)``, ``info`` with the step's keys."""
