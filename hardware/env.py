@@ -18,7 +18,7 @@ from hardware.safety import CommandFilter, Geofence, SafetyConfig, check_action,
 from hardware.supervisor import Supervisor
 from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.core import EnvConfig, task_info
-from pectoral_gym.envs.observation import OBS_ACTION, OBS_VELOCITY
+from pectoral_gym.envs.observation import OBS_ACTION, OBS_VELOCITY, observation_bounds
 from pectoral_gym.models import REST
 
 __all__ = ["HardwareFishEnv"]
@@ -152,7 +152,8 @@ class HardwareFishEnv(gym.Env):
         self.reset_hook, self.reset_timeout = reset_hook, float(reset_timeout)
         self.render_mode = render_mode
         self.action_space = spaces.Box(-1.0, 1.0, (tk.ACTION_SIZE,), dtype=np.float32)
-        self.observation_space = spaces.Box(-np.inf, np.inf, (tk.OBS_SIZE,), dtype=np.float32)
+        low, high = observation_bounds(self.config.control_period, self.config.ref_speed)  # the simulated envs'
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
         # A physical system: the checker must not expect equal observations for equal seeds.
         self.spec = EnvSpec("HardwareFish-v0", entry_point="hardware.env:HardwareFishEnv", nondeterministic=True)
         self._closed = False
