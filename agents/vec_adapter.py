@@ -3,17 +3,15 @@
 SB3 steps ``n`` environments through one ``VecEnv``; :class:`FishVecEnv` feeds
 it from one batched fish model instead of ``n`` environment copies.
 
-Autoreset: the Gymnasium vector env uses ``NEXT_STEP`` autoreset (an env that
-finished is reset by the *next* ``step``, whose action it ignores). SB3
-expects the reset in the *same* step: ``done[i]`` is True, ``obs[i]`` is
-already the first observation of the new episode and
+Autoreset: SB3 expects the reset in the *same* step: ``done[i]`` is True,
+``obs[i]`` is already the first observation of the new episode and
 ``infos[i]["terminal_observation"]`` holds the last observation of the old
-one. The adapter gets there by resetting the finished envs at once with the
-vector env's ``reset_mask`` option (without a new seed, so each env keeps
-drawing from its own generator, exactly as ``DummyVecEnv`` of single envs
-seeded ``seed + i``). ``infos[i]["TimeLimit.truncated"]`` is True when the
-episode hit the step limit without terminating, as SB3 uses it for
-bootstrapping.
+one. That is the vector env's ``AutoresetMode.SAME_STEP`` (its
+``info["final_obs"]`` becomes ``terminal_observation``, its
+``info["final_info"]`` the finished env's ``info``); each env keeps drawing
+from its own generator, exactly as ``DummyVecEnv`` of single envs seeded
+``seed + i``. ``infos[i]["TimeLimit.truncated"]`` is True when the episode
+hit the step limit without terminating, as SB3 uses it for bootstrapping.
 """
 
 from __future__ import annotations
@@ -23,6 +21,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.vector import AutoresetMode
 from stable_baselines3.common.vec_env.base_vec_env import VecEnv, VecEnvIndices, VecEnvStepReturn
 
 __all__ = ["FishVecEnv", "env_arguments", "make_fish_vec_env"]
@@ -32,7 +31,7 @@ class FishVecEnv(VecEnv):
     """SB3 ``VecEnv`` adapter around a :class:`~pectoral_gym.envs.PectoralFishVectorEnv` (same-step autoreset).
 
     Args:
-        vector_env: The native vector env (its autoreset is bypassed; see the module docstring).
+        vector_env: The native vector env, made with ``autoreset_mode=AutoresetMode.SAME_STEP``.
 
     Attributes:
         vector_env: The wrapped native vector env.
@@ -43,6 +42,10 @@ class FishVecEnv(VecEnv):
 
         if not isinstance(vector_env, PectoralFishVectorEnv):
             raise TypeError(f"FishVecEnv wraps a PectoralFishVectorEnv, got {type(vector_env).__name__}")
+        if vector_env.autoreset_mode is not AutoresetMode.SAME_STEP:
+            raise ValueError("FishVecEnv needs a PectoralFishVectorEnv made with "
+                             f"autoreset_mode=AutoresetMode.SAME_STEP (SB3 resets in the same step), "
+                             f"got {vector_env.autoreset_mode}")
         self.vector_env = vector_env
         super().__init__(vector_env.num_envs, vector_env.single_observation_space, vector_env.single_action_space)
         self._actions: np.ndarray | None = None
@@ -82,16 +85,14 @@ class FishVecEnv(VecEnv):
         self._actions = None
         dones = terminated | truncated
         time_limit = truncated & ~terminated
-        keys = [k for k in info if not k.startswith("_")]
-        columns = [info[k].tolist() for k in keys]
-        infos: list[dict[str, Any]] = [
-            {**dict(zip(keys, row, strict=True)), "TimeLimit.truncated": bool(time_limit[i])}
-            for i, row in enumerate(zip(*columns, strict=True))
-        ] if keys else [{"TimeLimit.truncated": bool(t)} for t in time_limit]
-        if dones.any():
+        infos = _rows(info, self.num_envs)
+        if dones.any():  # the finished envs' own info, and their last observation
+            final = _rows(info["final_info"], self.num_envs)
             for i in np.flatnonzero(dones):
-                infos[i]["terminal_observation"] = obs[i].copy()
-            obs, _ = self.vector_env.reset(seed=None, options={"reset_mask": dones})
+                infos[i] = final[i]
+                infos[i]["terminal_observation"] = info["final_obs"][i]
+        for i in range(self.num_envs):
+            infos[i]["TimeLimit.truncated"] = bool(time_limit[i])
         return obs, rewards.astype(np.float32), dones, infos
 
     def close(self) -> None:
@@ -132,6 +133,13 @@ class FishVecEnv(VecEnv):
         return [None] * self.num_envs
 
 
+def _rows(info: dict[str, Any], n: int) -> list[dict[str, Any]]:
+    """One dict per env of the array entries of a vector ``info`` (masks and nested entries dropped)."""
+    keys = [k for k, v in info.items() if not k.startswith("_") and isinstance(v, np.ndarray) and v.dtype != object]
+    columns = [info[k].tolist() for k in keys]
+    return [dict(zip(keys, row, strict=True)) for row in zip(*columns, strict=True)] if keys else [{} for _ in range(n)]
+
+
 def env_arguments(env_kwargs: dict[str, Any] | None) -> dict[str, Any]:
     """Environment arguments from a JSON/YAML-ready dict: ``params`` may be a dict of ``FishParams`` fields.
 
@@ -170,7 +178,8 @@ def make_fish_vec_env(env_id: str, n_envs: int, env_kwargs: dict[str, Any] | Non
     kwargs = env_arguments(env_kwargs)
     if max_episode_steps is not None:
         kwargs["max_episode_steps"] = max_episode_steps
-    venv = FishVecEnv(PectoralFishVectorEnv(num_envs=n_envs, model=ENV_IDS[env_id], **kwargs))
+    venv = FishVecEnv(PectoralFishVectorEnv(num_envs=n_envs, model=ENV_IDS[env_id],
+                                            autoreset_mode=AutoresetMode.SAME_STEP, **kwargs))
     if seed is not None:
         venv.seed(seed)
     return venv

@@ -17,8 +17,8 @@ from hardware.link import RadioLink
 from hardware.safety import CommandFilter, Geofence, SafetyConfig, check_action, install_stop_handlers
 from hardware.supervisor import Supervisor
 from pectoral_gym.envs import tasks as tk
-from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.envs.observation import OBS_ACTION, OBS_VELOCITY
+from pectoral_gym.envs.core import EnvConfig, task_info
+from pectoral_gym.envs.observation import OBS_ACTION, OBS_VELOCITY, observation_bounds
 from pectoral_gym.models import REST
 
 __all__ = ["HardwareFishEnv"]
@@ -152,7 +152,8 @@ class HardwareFishEnv(gym.Env):
         self.reset_hook, self.reset_timeout = reset_hook, float(reset_timeout)
         self.render_mode = render_mode
         self.action_space = spaces.Box(-1.0, 1.0, (tk.ACTION_SIZE,), dtype=np.float32)
-        self.observation_space = spaces.Box(-np.inf, np.inf, (tk.OBS_SIZE,), dtype=np.float32)
+        low, high = observation_bounds(self.config.control_period, self.config.ref_speed)  # the simulated envs'
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
         # A physical system: the checker must not expect equal observations for equal seeds.
         self.spec = EnvSpec("HardwareFish-v0", entry_point="hardware.env:HardwareFishEnv", nondeterministic=True)
         self._closed = False
@@ -263,8 +264,9 @@ class HardwareFishEnv(gym.Env):
         self.supervisor.frames = self.supervisor.lost_frames = 0
         self._next_tick = self.now()
         self.supervisor.arm()
-        return self._obs[0].copy(), {"pose": [x, y, psi], "target": self._ep[0, :2].tolist(),
-                                     "in_geofence": self.geofence.breached(x, y, psi)}
+        info = task_info(self._out[0], self.config.task_id)  # zero reward terms, the distance, as the simulated envs
+        info.update(pose=[x, y, psi], target=self._ep[0, :2].tolist(), in_geofence=self.geofence.breached(x, y, psi))
+        return self._obs[0].copy(), info
 
     def _place_goal(self, draws: np.ndarray, x: float, y: float) -> None:
         """Redraw the goal (as :func:`tasks.draw_episode` does) until it is 0.3-1.0 m from the actual start."""
@@ -319,12 +321,7 @@ class HardwareFishEnv(gym.Env):
         if terminated or truncated:
             sup.trip(reason or "episode_end")
             reason = sup.reason if sup.reason != "episode_end" else reason
-        info = {name: float(o[k]) for name, k in tk.TERMS[self.config.task_id]}
-        info["distance"] = float(o[tk.O_DISTANCE])
-        if self.config.task_id == tk.GOAL:
-            info["is_success"] = bool(o[tk.O_SUCCESS] > 0.5)
-        else:
-            info["tracking_error"] = float(o[tk.O_DISTANCE])
+        info = task_info(o, self.config.task_id)  # the simulated envs' keys and values
         info.update(safety_stop=reason, command=command.tolist(), pose=list(sup.pose),
                     estimate=self._state.tolist(), overrun=overrun, link=self.link.health(),
                     tracking={"ok": sup.track_ok, "lost_for": self.watch.lost_for(end), "reason": self.watch.reason,

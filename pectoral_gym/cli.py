@@ -97,14 +97,37 @@ def _fin_label(right: FinBeat | None, left: FinBeat | None) -> str:
 # --------------------------------------------------------------------------- steady
 
 
-def steady_result(model: str, right: FinBeat | None, left: FinBeat | None, scaling: str = "identified",
-                  forcing: str = "exact") -> dict[str, Any]:
+def model_inputs(model: str, params_file: str | None, scaling: str, check: bool = True):
+    """``(params, scaling)`` for the models from the command line's ``--params``, ``--scaling``, ``--no-params-check``.
+
+    Args:
+        model: ``"full"`` or ``"averaged"``.
+        params_file: A parameters file (:func:`pectoral_gym.params.load_params`) or ``None`` (Table 1).
+        scaling: ``"identified"`` (the shipped file), ``"none"`` (K = 1) or a coefficients file path.
+        check: Refuse a coefficients file identified for other parameters (averaged model).
+
+    Raises:
+        ValueError: For an unreadable file or (``check``) K identified for other parameters.
+        FileNotFoundError: If a file does not exist.
+    """
+    from pectoral_gym.kfunctions import ScalingFunctions
+    from pectoral_gym.params import FishParams, load_params
+
+    params = load_params(params_file) if params_file else FishParams()
+    if model != "averaged" or scaling == "none":
+        return params, scaling
+    return params, ScalingFunctions.load_for(params, None if scaling == "identified" else scaling, check)
+
+
+def steady_result(model: str, right: FinBeat | None, left: FinBeat | None, scaling: Any = "identified",
+                  forcing: str = "exact", params: Any = None) -> dict[str, Any]:
     """Periodic steady state as the JSON object printed by ``steady --json``.
 
     Args:
         model: ``"full"`` or ``"averaged"``.
         right, left: Fin patterns (``None``: at rest).
         scaling, forcing: Averaged model options (see :func:`pectoral_gym.steady.steady_state`).
+        params: Model parameters (``None``: Table 1).
 
     Returns:
         A dict with ``vx, vy`` [m/s], ``omega`` [rad/s] (body frame, x forward,
@@ -115,7 +138,7 @@ def steady_result(model: str, right: FinBeat | None, left: FinBeat | None, scali
     """
     from pectoral_gym.steady import steady_state
 
-    s = steady_state(model, right=right, left=left, scaling=scaling, forcing=forcing)
+    s = steady_state(model, right=right, left=left, params=params, scaling=scaling, forcing=forcing)
     return {
         "vx": s.vx, "vy": s.vy, "omega": s.omega, "speed": s.speed, "radius": s.radius, "period": s.period,
         "drift_angle": s.drift_angle, "converged": s.converged, "model": model,
@@ -123,9 +146,17 @@ def steady_result(model: str, right: FinBeat | None, left: FinBeat | None, scali
     }
 
 
+def _model_inputs(args: argparse.Namespace, parser: argparse.ArgumentParser):
+    try:
+        return model_inputs(args.model, args.params, args.scaling, not args.no_params_check)
+    except (ValueError, FileNotFoundError) as error:
+        parser.error(str(error))
+
+
 def _cmd_steady(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     right, left = _fins(args, parser)
-    res = steady_result(args.model, right, left, args.scaling, args.forcing)
+    params, scaling = _model_inputs(args, parser)
+    res = steady_result(args.model, right, left, scaling, args.forcing, params)
     if not all(math.isfinite(res[k]) for k in ("vx", "vy", "omega")):
         print(f"error: the {args.model} model gave non-finite velocities for {_fin_label(right, left)}",
               file=sys.stderr)
@@ -171,8 +202,9 @@ def _cmd_simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
     out = Path(args.out)
     trajectories = []
     for model in models:
+        params, scaling = _model_inputs(argparse.Namespace(**{**vars(args), "model": model}), parser)
         traj = simulate(model, right, left, args.duration, args.x0, args.y0, math.radians(args.heading_deg),
-                        args.sample, scaling=args.scaling, forcing=args.forcing, progress=True)
+                        args.sample, params=params, scaling=scaling, forcing=args.forcing, progress=True)
         name = "trajectory.csv" if model == args.model else f"trajectory_{model}.csv"
         print(f"wrote {write_csv(traj, out / name)}")
         trajectories.append(traj)
@@ -273,8 +305,13 @@ def _add_model_options(p: argparse.ArgumentParser) -> None:
                    help="full blade-element model or averaged model (default: %(default)s)")
     p.add_argument("--right", metavar="G0,GA,TP,ZETA", help=f"right {FIN_HELP}")
     p.add_argument("--left", metavar="G0,GA,TP,ZETA", help=f"left {FIN_HELP}")
-    p.add_argument("--scaling", choices=("identified", "none"), default="identified",
-                   help="averaged model: scaling functions K (default: %(default)s; 'none' is K = 1)")
+    p.add_argument("--scaling", default="identified", metavar="identified|none|FILE",
+                   help="averaged model: scaling functions K: the shipped file, 'none' (K = 1) or a coefficients "
+                        "file from `python -m scaling identify` (default: %(default)s)")
+    p.add_argument("--params", metavar="FILE",
+                   help="model parameters: a JSON or YAML file of FishParams fields (others keep Table 1)")
+    p.add_argument("--no-params-check", action="store_true",
+                   help="averaged model: use K even if its file was identified for other parameters")
     p.add_argument("--forcing", choices=("exact", "taylor"), default="exact",
                    help="averaged model: closed-form or Taylor (eqs. 26-28) averaged forcing (default: %(default)s)")
 

@@ -73,7 +73,9 @@ format 3.
 
 from __future__ import annotations
 
+import dataclasses
 import json
+import math
 import re
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -345,6 +347,52 @@ class ScalingFunctions:
         # One line per innermost list of numbers (powers, data rows): readable and compact.
         text = _NUMBER_LIST.sub(lambda m: "[" + " ".join(m.group(1).split()) + "]", text)
         Path(path).write_text(text + "\n")
+
+    @property
+    def identified_params(self) -> dict[str, float] | None:
+        """The model parameters the file was identified for (``metadata["model_parameters"]``), or ``None``."""
+        recorded = self.metadata.get("model_parameters")
+        return dict(recorded) if isinstance(recorded, dict) else None
+
+    def params_mismatch(self, params: Any, rtol: float = 1e-9) -> dict[str, tuple[float | None, float]]:
+        """Fields of ``params`` (a ``FishParams``) that differ from :attr:`identified_params`: name -> (file, given).
+
+        Empty when they agree to ``rtol``, or when the file records no parameters (unit K or an old file).
+        """
+        recorded = self.identified_params
+        if recorded is None:
+            return {}
+        out: dict[str, tuple[float | None, float]] = {}
+        for name in dataclasses.fields(params):
+            given = float(getattr(params, name.name))
+            known = recorded.get(name.name)
+            if known is None or not math.isclose(float(known), given, rel_tol=rtol, abs_tol=0.0):
+                out[name.name] = (None if known is None else float(known), given)
+        return out
+
+    def check_params(self, params: Any, where: str = "the coefficients file") -> None:
+        """Raise ``ValueError`` naming the differing fields if the file was identified for other parameters.
+
+        The check behind ``check_scaling_params`` of the envs and ``--params`` of the command lines:
+        K identified for one robot does not describe another one.
+        """
+        mismatch = self.params_mismatch(params)
+        if mismatch:
+            shown = ", ".join(f"{k}: identified {a!r}, given {b!r}" for k, (a, b) in sorted(mismatch.items()))
+            raise ValueError(
+                f"{where} was identified for other model parameters ({shown}); its K would not describe "
+                "this robot. Identify K for it (python -m scaling identify --params FILE) and use that file, "
+                "or turn the check off (check_scaling_params=False, --no-params-check)"
+            )
+
+    @classmethod
+    def load_for(cls, params: Any, path: str | Path | None = None, check: bool = True) -> ScalingFunctions:
+        """Load a coefficients file (``None``: the shipped one), then :meth:`check_params` unless ``check`` is False."""
+        scaling = cls.load(path)
+        if check:
+            where = "the shipped coefficients file" if path is None else f"coefficients file {path}"
+            scaling.check_params(params, where)
+        return scaling
 
     def evaluate(self, bias: float, amplitude: float, period: float, ratio: float) -> tuple[float, float, float]:
         """``(K_fx, K_fy, K_m)`` at one fin-beat pattern (rad, rad, s, -); ``K_fy`` in the file's :attr:`sway` sense.

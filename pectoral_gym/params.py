@@ -11,15 +11,20 @@ from __future__ import annotations
 
 import dataclasses
 import enum
+import json
 import math
+import os
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import NamedTuple
+from pathlib import Path
+from typing import Any, NamedTuple
 
 import numpy as np
 
 __all__ = [
     "FishParams", "FinBeat", "COEF_NAMES", "Coef", "BodyCoefficients", "TANK_LENGTH", "TANK_WIDTH",
-    "coefficient_vector", "body_coefficients",
+    "coefficient_vector", "body_coefficients", "params_from_dict", "load_params", "save_params", "as_params",
+    "params_dict", "PARAMS_FIELDS",
 ]
 
 # The paper's tank (Sec. 4.1): the fish swims in a 2.30 m x 1.15 m area.
@@ -239,3 +244,85 @@ class FinBeat:
     def degrees(self) -> tuple[float, float, float, float]:
         """The paper's tuple ``(g0 [deg], gA [deg], T_p [s], zeta)``."""
         return (math.degrees(self.bias), math.degrees(self.amplitude), self.period, self.ratio)
+
+
+# ---------------------------------------------------------------- parameters files
+PARAMS_FIELDS = tuple(f.name for f in dataclasses.fields(FishParams))
+
+
+def params_dict(params: FishParams) -> dict[str, float]:
+    """The fields of ``params`` as a JSON-ready dict (the format of a parameters file)."""
+    return {name: float(getattr(params, name)) for name in PARAMS_FIELDS}
+
+
+def params_from_dict(data: Mapping[str, Any], source: str = "params") -> FishParams:
+    """A :class:`FishParams` from a mapping of its fields; fields not given keep their Table 1 defaults.
+
+    Raises:
+        ValueError: If ``data`` is not a mapping, names unknown fields, or a value is invalid.
+    """
+    if not isinstance(data, Mapping):
+        raise ValueError(f"{source}: expected a mapping of FishParams fields, got {type(data).__name__}")
+    unknown = sorted(set(data) - set(PARAMS_FIELDS))
+    if unknown:
+        raise ValueError(f"{source}: unknown FishParams fields {unknown}; valid names: {list(PARAMS_FIELDS)}")
+    for name, value in data.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"{source}: {name} must be a number, got {value!r}")
+    try:
+        return FishParams(**{name: float(value) for name, value in data.items()})
+    except ValueError as error:
+        raise ValueError(f"{source}: {error}") from None
+
+
+def load_params(path: str | os.PathLike) -> FishParams:
+    """Read a parameters file: a JSON object (``.json``) or YAML mapping (``.yaml``/``.yml``) of FishParams fields.
+
+    Fields not in the file keep their Table 1 defaults, so a file may hold only what
+    differs from the paper's robot, e.g. ``{"fin_span": 0.05}``.
+
+    Raises:
+        FileNotFoundError: If the file does not exist.
+        ValueError: If the file cannot be parsed or its content is not valid parameters.
+    """
+    path = Path(path)
+    text = path.read_text()
+    if path.suffix.lower() in (".yaml", ".yml"):
+        try:
+            import yaml
+        except ImportError as error:  # pragma: no cover - pyyaml is in the rl extra
+            raise ValueError(f"{path}: reading YAML needs pyyaml (pip install pyyaml), or use JSON") from error
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as error:
+            raise ValueError(f"{path}: not valid YAML: {error}") from None
+    else:
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as error:
+            raise ValueError(f"{path}: not valid JSON: {error}") from None
+    return params_from_dict(data if data is not None else {}, source=str(path))
+
+
+def save_params(params: FishParams, path: str | os.PathLike) -> None:
+    """Write ``params`` as a JSON parameters file (every field), readable by :func:`load_params`."""
+    Path(path).write_text(json.dumps(params_dict(params), indent=2) + "\n")
+
+
+def as_params(value: FishParams | Mapping[str, Any] | str | os.PathLike | None) -> FishParams:
+    """Parameters from ``None`` (Table 1), a :class:`FishParams`, a mapping of its fields, or a parameters file path.
+
+    Raises:
+        ValueError: For any other type or invalid content.
+    """
+    if value is None:
+        return FishParams()
+    if isinstance(value, FishParams):
+        return value
+    if isinstance(value, Mapping):
+        return params_from_dict(value)
+    if isinstance(value, (str, os.PathLike)):
+        return load_params(value)
+    raise ValueError(
+        f"params must be a FishParams, a dict of its fields, a parameters file path or None, got {type(value).__name__}"
+    )

@@ -28,6 +28,9 @@ def _identify_parser(sub) -> None:
     )
     p.add_argument("--grid", default="env", help=f"preset ({', '.join(GRIDS)}) or a grid JSON file (default: env)")
     p.add_argument("--out", type=Path, default=Path("scaling_identification"), help="output folder")
+    p.add_argument("--params", metavar="FILE", default=None,
+                   help="model parameters of the robot: a JSON or YAML file of FishParams fields (others keep "
+                        "Table 1); recorded in the coefficients file's metadata (default: Table 1)")
     p.add_argument("--install", action="store_true", help="also install the coefficients as the package default")
     p.add_argument("--horizon", type=float, default=10.0, help="NMPC horizon T [s] (default 10)")
     p.add_argument("--sampling", type=float, default=1.0, help="NMPC sampling interval t_s [s] (default 1)")
@@ -70,13 +73,15 @@ def _write_table(result, path: Path) -> None:
 
 
 def _run_identify(args) -> int:
+    from pectoral_gym.params import FishParams, load_params
     from scaling.identify import identify
     from scaling.nmpc import NmpcSettings
 
     try:
         grid = load_grid(args.grid)
         settings = NmpcSettings(args.horizon, args.sampling, args.q, args.q_terminal, args.substeps)
-    except (GridError, ValueError) as err:
+        params = load_params(args.params) if args.params else FishParams()
+    except (GridError, ValueError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
     if (args.max_degree < 0 or args.folds < 2 or args.jobs < 0 or not args.fit_target > 0 or args.holdout < 0
@@ -86,7 +91,7 @@ def _run_identify(args) -> int:
         return 2
     print(f"grid {grid.name!r}: {len(grid)} right-fin patterns")
     start = time.perf_counter()
-    result = identify(grid, None, settings, args.max_degree, args.folds, args.seed, args.jobs, not args.quiet,
+    result = identify(grid, params, settings, args.max_degree, args.folds, args.seed, args.jobs, not args.quiet,
                       args.fit_target, args.holdout, args.turn_target, args.yaw_damping)
     total = time.perf_counter() - start
     args.out.mkdir(parents=True, exist_ok=True)
@@ -125,13 +130,39 @@ def _run_identify(args) -> int:
     return 0
 
 
+def _run_validate(argv: list[str]) -> int:
+    """``validate``: :func:`scaling.validate.main`'s options plus ``--params FILE`` (the models' parameters)."""
+    from pectoral_gym.kfunctions import ScalingFunctions
+    from pectoral_gym.params import load_params
+    from scaling import validate as v
+
+    parser = v.build_parser()
+    parser.add_argument("--params", metavar="FILE", default=None,
+                        help="model parameters of both models: a JSON or YAML file of FishParams fields "
+                             "(default: Table 1); the report flags a difference from the coefficients' own")
+    args = parser.parse_args(argv)
+    if args.params is None:
+        return v.main(argv)
+    if args.n_single < 1 or args.n_two < 1:
+        parser.error(f"--n-single and --n-two must be >= 1, got {args.n_single} and {args.n_two}")
+    path = Path(args.coefficients) if args.coefficients else default_scaling_path()
+    try:
+        params = load_params(args.params)
+        scaling = ScalingFunctions.load(path)
+    except (OSError, ValueError) as err:
+        parser.error(str(err))
+    results = v.validate(scaling, params=params, out_dir=args.out, n_single=args.n_single, n_two=args.n_two,
+                         seed=args.seed, quick=args.quick, plots=not args.no_plots, source=str(path),
+                         progress=not args.no_progress)
+    print(v.rendering.summary_text(results, Path(args.out)))
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m scaling`` and ``pectoral-scaling``."""
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv and argv[0] == "validate":
-        from scaling.validate import main as validate_main
-
-        return validate_main(argv[1:])
+        return _run_validate(argv[1:])
     parser = argparse.ArgumentParser(
         prog="pectoral-scaling",
         description="Identify (paper Sec. 4.3) and validate the scaling functions K of the averaged model.",

@@ -1,6 +1,7 @@
 """The single-fish Gymnasium environments: API, seeding, rewards, episode ends, settings."""
 
 import math
+import warnings
 
 import gymnasium as gym
 import numpy as np
@@ -33,7 +34,7 @@ def rollout(env, seed, steps, action_seed=0):
     return records
 
 
-@pytest.mark.filterwarnings("ignore:.*Box observation space (minimum|maximum) value:UserWarning")  # unbounded by design
+@pytest.mark.filterwarnings("error")
 @pytest.mark.parametrize("env_id", IDS)
 @pytest.mark.parametrize("task", TASKS)
 def test_gymnasium_env_checker(env_id, task):
@@ -47,7 +48,9 @@ def test_gymnasium_env_checker(env_id, task):
 def test_sb3_env_checker(env_id, task):
     sb3_checker = pytest.importorskip("stable_baselines3.common.env_checker")
     env = gym.make(env_id, task=task)
-    sb3_checker.check_env(env, warn=True)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        sb3_checker.check_env(env, warn=True)
     env.close()
 
 
@@ -59,7 +62,14 @@ def test_registry_and_spaces():
         assert spec.vector_entry_point == "pectoral_gym.envs.vector:PectoralFishVectorEnv"
         env = gym.make(env_id)
         assert env.action_space == gym.spaces.Box(-1, 1, (8,), np.float32)
-        assert env.observation_space == gym.spaces.Box(-np.inf, np.inf, (19,), np.float32)
+        space = env.observation_space
+        assert space.shape == (19,) and space.dtype == np.float32 and space.is_bounded("both")
+        # hand values at the defaults (control period 0.5 s, ref_speed 0.03 m/s): margin 2 m/s * 0.5 s = 1 m
+        np.testing.assert_allclose(space.low[:4], [-1.0, -1.0, -1, -1]) and np.testing.assert_allclose(
+            space.high[:4], [3.30, 2.15, 1, 1], rtol=1e-6)
+        np.testing.assert_allclose(space.high[7:11], [math.hypot(4.30, 3.15)] * 2 + [0.0303] * 2, rtol=1e-6)
+        np.testing.assert_array_equal(space.low[11:], -1.0)
+        np.testing.assert_array_equal(space.high[11:], 1.0)
         assert env.unwrapped.config.model == model
 
 
@@ -132,7 +142,7 @@ def test_reward_is_the_sum_of_its_terms(env_id, task):
         assert reward == sum(info[name] for name in names)  # summed in this order by the kernel
         assert info["distance"] >= 0
         if task == "goal":
-            assert isinstance(info["is_success"], bool)
+            assert isinstance(info["is_success"], np.bool_)
             assert info["reward_time"] == -0.01
         else:
             assert info["tracking_error"] == info["distance"]
@@ -234,7 +244,7 @@ def test_wall_contact_terminates_with_the_penalty(env_id):
     _, reward, terminated, truncated, info = env.step(np.zeros(8, np.float32))
     assert terminated and not truncated
     assert info["reward_wall"] == -7.0
-    assert info["is_success"] is False
+    assert isinstance(info["is_success"], np.bool_) and not info["is_success"]
     assert reward == pytest.approx(-7.0 + info["reward_progress"] + info["reward_energy"] + info["reward_time"])
 
 
@@ -244,7 +254,7 @@ def test_goal_reached_terminates_with_success():
     x, y = env.unwrapped.fish_state[:2]
     env.unwrapped.set_target(x + 0.02, y)  # goal 2 cm ahead
     _, reward, terminated, _, info = env.step(np.zeros(8, np.float32))
-    assert terminated and info["is_success"] is True
+    assert terminated and isinstance(info["is_success"], np.bool_) and info["is_success"]
     assert info["reward_goal"] == 3.0 and info["reward_wall"] == 0.0
     assert info["distance"] < 0.08
 

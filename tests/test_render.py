@@ -62,12 +62,14 @@ def test_render_track_task_and_frames_change():
     env.close()
 
 
-def test_human_mode_runs_headless_and_close_quits_pygame():
+def test_human_mode_runs_headless_starts_the_display_only_and_close_quits_it():
     import pygame
 
     env = gym.make("PectoralFish-Averaged-v0", render_mode="human")
     env.reset(seed=0)
     env.step(np.zeros(8, np.float32))
     assert env.render() is None
+    assert pygame.display.get_init()
+    assert not pygame.mixer.get_init()  # pygame.init() would open the audio device (ALSA errors headless)
     env.close()
-    assert not pygame.get_init()
+    assert not pygame.display.get_init()

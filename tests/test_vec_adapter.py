@@ -50,7 +50,8 @@ def test_same_as_dummy_vec_env_of_single_envs(task):
 def test_terminal_observation_is_the_last_observation_of_the_episode():
     n, seed = 4, 0
     native = PectoralFishVectorEnv(num_envs=n, model="averaged", max_episode_steps=6)
-    ours = FishVecEnv(PectoralFishVectorEnv(num_envs=n, model="averaged", max_episode_steps=6))
+    ours = FishVecEnv(PectoralFishVectorEnv(num_envs=n, model="averaged", max_episode_steps=6,
+                                             autoreset_mode="SameStep"))
     native.reset(seed=seed)
     ours.seed(seed)
     ours.reset()
@@ -112,7 +113,7 @@ def test_errors():
 
 
 def test_params_given_as_a_dict():
-    venv = make_fish_vec_env(ENV, 2, {"params": {"fin_offset": 0.01}})
+    venv = make_fish_vec_env(ENV, 2, {"params": {"fin_offset": 0.01}, "check_scaling_params": False})
     assert venv.config.params.fin_offset == 0.01
     assert venv.config.params.body_mass == pectoral_gym.params.FishParams().body_mass
     with pytest.raises(ValueError, match="params"):

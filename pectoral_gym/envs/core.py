@@ -11,6 +11,7 @@ from __future__ import annotations
 import dataclasses
 import inspect
 import math
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
@@ -19,11 +20,12 @@ import numpy as np
 from pectoral_gym._jit import PARALLEL_MIN_ITEMS
 from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.layout import FishConstants, ReferenceEllipse, fish_array
-from pectoral_gym.envs.observation import OBS_SIZE, OBS_VELOCITY
+from pectoral_gym.envs.observation import OBS_SIZE
+from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.models import MODELS, REST, AveragedModel, FishModel, FullModel
-from pectoral_gym.params import FishParams
+from pectoral_gym.params import FishParams, as_params
 
-__all__ = ["EnvConfig", "EnvCore", "MODELS", "TASKS", "env_signature"]
+__all__ = ["EnvConfig", "EnvCore", "MODELS", "TASKS", "env_signature", "task_info"]
 
 TASKS = {"goal": tk.GOAL, "track": tk.TRACK}
 _FIELD_NAMES = tuple(f.name for f in dataclasses.fields(FishParams))
@@ -57,10 +59,16 @@ class EnvConfig:
         amplitude_range: ``(low, high)`` of the fin amplitude ``gamma_A`` [rad].
         period_range: ``(low, high)`` of the fin-beat period ``T_p`` [s].
         ratio_range: ``(low, high)`` of the speed ratio ``zeta`` [-].
-        params: Nominal model parameters (Table 1 defaults if ``None``).
+        params: Nominal model parameters: a :class:`FishParams`, a dict of its fields, the path of a
+            parameters file (:func:`pectoral_gym.params.load_params`), or ``None`` (Table 1); stored
+            as a ``FishParams``.
         randomize: FishParams field name -> relative half-width ``w``; each
             reset multiplies the field by a factor drawn from ``U(1-w, 1+w)``.
-        scaling: Averaged model only: ``"identified"`` scaling functions or ``"none"`` (K = 1).
+        scaling: Averaged model only: ``"identified"`` (the shipped coefficients file), ``"none"``
+            (K = 1), or the path of a coefficients file (``python -m scaling identify``).
+        check_scaling_params: Averaged model only: raise ``ValueError`` when the coefficients file
+            records other model parameters than ``params`` (K identified for another robot).
+            ``False`` is the explicit opt-out. ``randomize`` draws around ``params`` and is not checked.
         progress_weight: Goal task: reward per metre of approach [1/m].
         goal_bonus: Goal task: reward for reaching the goal.
         wall_penalty: Penalty when the nose or tail leaves the tank.
@@ -78,9 +86,10 @@ class EnvConfig:
     amplitude_range: tuple[float, float] = (0.0, math.radians(30.0))
     period_range: tuple[float, float] = (0.5, 2.0)
     ratio_range: tuple[float, float] = (1.0, 5.0)
-    params: FishParams | None = None
+    params: FishParams | Mapping[str, float] | str | os.PathLike | None = None
     randomize: Mapping[str, float] | None = field(default=None, hash=False)
-    scaling: str = "identified"
+    scaling: str | os.PathLike = "identified"
+    check_scaling_params: bool = True
     progress_weight: float = 10.0
     goal_bonus: float = 10.0
     wall_penalty: float = 10.0
@@ -96,8 +105,14 @@ class EnvConfig:
             raise ValueError(f"model must be one of {MODELS}, got {self.model!r}")
         if self.task not in TASKS:
             raise ValueError(f"task must be one of {tuple(TASKS)}, got {self.task!r}")
-        if self.scaling not in ("identified", "none"):
-            raise ValueError(f"scaling must be 'identified' or 'none', got {self.scaling!r}")
+        if isinstance(self.scaling, os.PathLike):
+            set_(self, "scaling", os.fspath(self.scaling))
+        if not isinstance(self.scaling, str) or not self.scaling:
+            raise ValueError(f"scaling must be 'identified', 'none' or a coefficients file path, got {self.scaling!r}")
+        if self.scaling not in ("identified", "none") and not os.path.isfile(self.scaling):
+            raise ValueError(f"scaling: no coefficients file at {self.scaling!r} (or use 'identified' or 'none')")
+        if not isinstance(self.check_scaling_params, (bool, np.bool_)):
+            raise ValueError(f"check_scaling_params must be True or False, got {self.check_scaling_params!r}")
         if self.model == "full" and self.scaling != "identified":
             raise ValueError("scaling applies to the averaged model only; leave it at 'identified' for model='full'")
         try:
@@ -127,10 +142,7 @@ class EnvConfig:
             if not (math.isfinite(number) and number >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
             set_(self, name, number)
-        if self.params is None:
-            set_(self, "params", FishParams())
-        elif not isinstance(self.params, FishParams):
-            raise ValueError(f"params must be a FishParams or None, got {type(self.params).__name__}")
+        set_(self, "params", as_params(self.params))
         if self.randomize is not None:
             randomize = dict(self.randomize)
             unknown = sorted(set(randomize) - set(_FIELD_NAMES))
@@ -140,6 +152,17 @@ class EnvConfig:
                 if not (isinstance(width, (int, float)) and math.isfinite(width) and 0 <= width < 1):
                     raise ValueError(f"randomize[{name!r}] must be a relative half-width in [0, 1), got {width!r}")
             set_(self, "randomize", randomize or None)
+
+    def scaling_functions(self) -> ScalingFunctions | None:
+        """The averaged model's scaling functions (``None`` for K = 1 or the full model), checked against ``params``.
+
+        Raises:
+            ValueError: If ``check_scaling_params`` and the file records other parameters than ``params``.
+        """
+        if self.model != "averaged" or self.scaling == "none":
+            return None
+        path = None if self.scaling == "identified" else self.scaling
+        return ScalingFunctions.load_for(self.params, path, check=self.check_scaling_params)
 
     @property
     def task_id(self) -> int:
@@ -186,6 +209,22 @@ class EnvConfig:
         return np.minimum(r[:, 0] + 0.5 * (x + 1.0) * (r[:, 1] - r[:, 0]), r[:, 1])
 
 
+def task_info(out: np.ndarray, task: int) -> dict:
+    """The task's ``info`` of one env from its ``out`` row (``layout.O_*``), numpy scalars.
+
+    The one place the info keys are written, for every fish env (full, averaged, hardware),
+    after a reset (zero reward terms, the real distance) as after a step: the reward terms of
+    ``tasks.TERMS[task]`` in order, ``"distance"``, then ``"is_success"`` (goal) or
+    ``"tracking_error"`` (track). A dict literal per task: faster than a loop over ``TERMS``.
+    """
+    if task == tk.GOAL:
+        return {"reward_progress": out[tk.O_PROGRESS], "reward_goal": out[tk.O_GOAL], "reward_wall": out[tk.O_WALL],
+                "reward_energy": out[tk.O_ENERGY], "reward_time": out[tk.O_TIME], "distance": out[tk.O_DISTANCE],
+                "is_success": out[tk.O_SUCCESS] > 0.5}
+    return {"reward_tracking": out[tk.O_TRACKING], "reward_wall": out[tk.O_WALL], "reward_energy": out[tk.O_ENERGY],
+            "distance": out[tk.O_DISTANCE], "tracking_error": out[tk.O_DISTANCE]}
+
+
 def env_signature(*parameters: inspect.Parameter) -> inspect.Signature:
     """``(self, *parameters, *EnvConfig's fields)``: an env's signature, the settings keyword-only with their defaults.
 
@@ -226,12 +265,12 @@ class EnvCore:
         if config.model == "full":
             self.model: FishModel = FullModel(self.n, config.params)
         else:
-            self.model = AveragedModel(self.n, config.params, scaling=config.scaling)
+            self.model = AveragedModel(self.n, config.params, scaling=config.scaling_functions() or "none")
         self.cfg = config.cfg_array()
         self.dt = float(config.control_period)
         big = self.n >= PARALLEL_MIN_ITEMS  # chosen once: the batch size of a core never changes
-        self._apply = tk.APPLY_KERNELS.parallel if big else tk.APPLY_KERNELS.serial
-        self._reward = tk.REWARD_KERNELS.parallel if big else tk.REWARD_KERNELS.serial
+        self._apply = tk.APPLY_KEEP_KERNELS.parallel if big else tk.APPLY_KEEP_KERNELS.serial
+        self._reward = tk.REWARD_MEAN_KERNELS.parallel if big else tk.REWARD_MEAN_KERNELS.serial
         self.ep = np.zeros((self.n, tk.N_EP))
         self.obs = np.zeros((self.n, OBS_SIZE), dtype=np.float32)
         self._integral_before = np.zeros((self.n, 3))  # the model's velocity integrals before a step
@@ -279,21 +318,21 @@ class EnvCore:
             ValueError: If an action of an env not in ``skip`` is not finite.
         """
         skip = self.none if skip is None else skip
-        bad = self._apply(actions, skip, self.cfg, self.beats, self.obs, self.out, self.fish)
+        model = self.model
+        before = self._integral_before  # the model's velocity integrals before the step, kept by _apply
+        bad = self._apply(actions, skip, self.cfg, self.beats, self.obs, self.out, self.fish, model.integral, before)
         if bad >= 0:
             raise ValueError(
                 f"action must be finite, got {np.asarray(actions[bad]).tolist()}"
                 + (f" for env {bad}" if self.n > 1 else "")
             )
-        self.model.command_array(self.beats, self.all, validate=False)
-        before = self._integral_before
-        np.copyto(before, self.model.integral)
-        self.model.advance(self.dt)
-        self._reward(self.model.state, skip, self.cfg, self.ep, self.fish, self.obs, self.out)
-        # Observed velocities: means over the control period. The full model's instantaneous velocities
-        # oscillate with the fin beat (a symmetric stroke reads a yaw rate of -0.45 rad/s at some phases),
-        # the averaged model's do not; the means agree between the models, as an observer's estimate would.
-        self.obs[:, OBS_VELOCITY] = (self.model.integral - before) / self.dt
+        model.command_array(self.beats, self.all, validate=False)
+        model.advance(self.dt)
+        # Observation, reward, and the observed velocities: means over the control period (integral
+        # difference / dt). The full model's instantaneous velocities oscillate with the fin beat (a
+        # symmetric stroke reads a yaw rate of -0.45 rad/s at some phases), the averaged model's do not;
+        # the means agree between the models, as an observer's estimate would.
+        self._reward(model.state, skip, self.cfg, self.ep, self.fish, self.obs, self.out, model.integral, before)
 
     # ------------------------------------------------------------ accessors (copies, plain floats)
     def target(self, i: int) -> tuple[float, float]:

@@ -9,23 +9,15 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from pectoral_gym.envs.core import EnvConfig, EnvCore, env_signature
+from pectoral_gym.envs.core import EnvConfig, EnvCore, env_signature, task_info
 from pectoral_gym.envs.layout import (
     ACTION_SIZE,
-    O_DISTANCE,
-    O_ENERGY,
-    O_GOAL,
-    O_PROGRESS,
     O_REWARD,
-    O_SUCCESS,
     O_TERMINATED,
-    O_TIME,
-    O_TRACKING,
-    O_WALL,
     FishConstants,
     ReferenceEllipse,
 )
-from pectoral_gym.envs.observation import OBS_SIZE, OBS_X, OBS_Y, OBSERVATION_STRUCTURE
+from pectoral_gym.envs.observation import OBS_X, OBS_Y, OBSERVATION_STRUCTURE, observation_bounds
 from pectoral_gym.params import FishParams
 
 __all__ = ["PectoralFishEnv"]
@@ -69,7 +61,11 @@ class PectoralFishEnv(gym.Env):
 
     ## Observation Space
 
-    ``Box(-inf, inf, (19,), float32)``. Tank frame: origin at a tank corner,
+    ``Box(low, high, (19,), float32)`` with finite, physical bounds
+    (:func:`pectoral_gym.envs.observation.observation_bounds`): the tank grown by
+    ``MAX_SPEED * control_period`` for the position, +-1 for heading and last
+    action, +-2 m/s and +-10 rad/s for the velocities, +-``ref_speed`` for the
+    target velocity. Tank frame: origin at a tank corner,
     X along the 2.30 m side. Body frame: x forward, y to the left.
 
     | Num   | Observation                                   | Unit  |
@@ -108,7 +104,9 @@ class PectoralFishEnv(gym.Env):
     | ``reward_tracking`` | track | ``-tracking_weight * d``               |
 
     ``info`` also holds ``"distance"`` (``d`` [m]), ``"is_success"`` (goal)
-    and ``"tracking_error"`` (track, ``d`` [m]).
+    and ``"tracking_error"`` (track, ``d`` [m]). Every value is a numpy scalar
+    (``np.float64``, ``np.bool_``). ``reset()`` returns the same keys: zero
+    reward terms, the real distance, ``is_success = False``.
 
     ## Starting State
 
@@ -143,9 +141,10 @@ class PectoralFishEnv(gym.Env):
     | ``amplitude_range`` | (0, 30) deg    | rad  | amplitude, >= 0 |
     | ``period_range``  | (0.5, 2.0)       | s    | fin-beat period, > 0 |
     | ``ratio_range``   | (1.0, 5.0)       | -    | power/recovery speed ratio, > 0 |
-    | ``params``        | ``None``         |      | nominal :class:`FishParams` (Table 1) |
+    | ``params``        | ``None``         |      | :class:`FishParams`, dict of fields or parameters file (Table 1) |
     | ``randomize``     | ``None``         |      | ``{field: w}``: each reset scales the field by ``U(1-w, 1+w)`` |
-    | ``scaling``       | ``"identified"`` |      | averaged model only: ``"identified"`` or ``"none"`` (K = 1) |
+    | ``scaling``       | ``"identified"`` |      | averaged only: ``"identified"``, ``"none"`` (K = 1), or a K file |
+    | ``check_scaling_params`` | ``True`` |   | averaged only: raise if the K file is for other ``params`` |
     | ``progress_weight`` | 10.0           | 1/m  | goal: reward per metre of approach |
     | ``goal_bonus``    | 10.0             |      | goal: reward on reaching the goal |
     | ``wall_penalty``  | 10.0             |      | penalty for hitting a wall |
@@ -168,22 +167,27 @@ class PectoralFishEnv(gym.Env):
 
     ## Version History
 
-    * v0: Initial version.
+    * v0: Initial version. Issue 14 (same id, same dynamics): ``reset()`` returns the step's
+      ``info`` keys, ``info`` values are numpy scalars, finite observation bounds,
+      ``params`` as a dict or file, ``scaling`` as a file, ``render_fps = 1 / control_period``.
     """
 
-    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 8}
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 2}  # per instance: 1 / control_period
 
     def __init__(self, *, render_mode: str | None = None, **kwargs: Any):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         self.config = EnvConfig(**kwargs)  # the defaults and checks of every setting live there
+        # One frame per control period, so a recorded video plays in real time.
+        self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.config.control_period}
         self.render_mode = render_mode
         self.core = EnvCore(1, self.config)
         self.action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), dtype=np.float32)
-        self.observation_space = spaces.Box(-np.inf, np.inf, (OBS_SIZE,), dtype=np.float32)
+        low, high = observation_bounds(self.config.control_period, self.config.ref_speed)
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self.observation_structure = dict(OBSERVATION_STRUCTURE)
         self._action = np.zeros((1, ACTION_SIZE))
-        self._goal = self.config.task == "goal"
+        self._task = self.config.task_id
         self._renderer = None
         self.trail: list[tuple[float, float]] = []
 
@@ -240,35 +244,38 @@ class PectoralFishEnv(gym.Env):
         """Commanded fin patterns ``(2, 4)``: ``(bias, amplitude, period, ratio)``, right fin first (a copy)."""
         return self.core.fin_patterns(0)
 
+    def __getstate__(self) -> dict[str, Any]:
+        """Pickle and deepcopy without the renderer (it holds pygame); a copy draws with its own."""
+        state = self.__dict__.copy()
+        state["_renderer"] = None
+        return state
+
+    def _info(self) -> dict[str, Any]:
+        """The ``info`` of the last reset or step (:func:`~pectoral_gym.envs.core.task_info`)."""
+        return task_info(self.core.out[0], self._task)
+
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        """Start an episode (see "Starting State"); returns ``(observation, {})``."""
+        """Start an episode (see "Starting State"); returns ``(observation, info)``, ``info`` with the step's keys."""
         super().reset(seed=seed)
         self.core.reset(_ZERO_INDEX, (self.np_random,))
         if self.render_mode is not None:
             self.trail = [(float(self.core.obs[0, OBS_X]), float(self.core.obs[0, OBS_Y]))]
             if self.render_mode == "human":
                 self.render()
-        return self.core.obs[0].copy(), {}
+        return self.core.obs[0].copy(), self._info()
 
     def step(self, action):
         """Advance one control period; returns ``(observation, reward, terminated, truncated, info)``."""
         self._action[0] = action
         core = self.core
         core.step(self._action)
-        o = core.out[0].tolist()
-        # A dict literal (the terms of tasks.TERMS, in order): 0.2 us per step faster than building it from TERMS.
-        if self._goal:
-            info = {"reward_progress": o[O_PROGRESS], "reward_goal": o[O_GOAL], "reward_wall": o[O_WALL],
-                    "reward_energy": o[O_ENERGY], "reward_time": o[O_TIME], "distance": o[O_DISTANCE],
-                    "is_success": o[O_SUCCESS] > 0.5}
-        else:
-            info = {"reward_tracking": o[O_TRACKING], "reward_wall": o[O_WALL], "reward_energy": o[O_ENERGY],
-                    "distance": o[O_DISTANCE], "tracking_error": o[O_DISTANCE]}
+        info = self._info()
+        o = core.out[0]
         if self.render_mode is not None:
             self.trail.append((float(core.obs[0, OBS_X]), float(core.obs[0, OBS_Y])))
             if self.render_mode == "human":
                 self.render()
-        return core.obs[0].copy(), o[O_REWARD], o[O_TERMINATED] > 0.5, False, info
+        return core.obs[0].copy(), float(o[O_REWARD]), bool(o[O_TERMINATED] > 0.5), False, info
 
     def render(self):
         """Draw the tank from above: ``rgb_array`` returns an ``(H, W, 3)`` uint8 image; ``human`` shows a window."""

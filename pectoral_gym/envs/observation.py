@@ -17,15 +17,18 @@ MuJoCo envs publish ``observation_structure``.
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numpy as np
+
+from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 
 __all__ = [
     "OBS_X", "OBS_Y", "OBS_COS_PSI", "OBS_SIN_PSI", "OBS_VX", "OBS_VY", "OBS_OMEGA",
     "OBS_TARGET_X", "OBS_TARGET_Y", "OBS_TARGET_VX", "OBS_TARGET_VY", "OBS_LAST_ACTION", "OBS_SIZE",
     "OBS_POSITION", "OBS_HEADING", "OBS_VELOCITY", "OBS_TARGET", "OBS_TARGET_VELOCITY", "OBS_ACTION",
-    "OBSERVATION_STRUCTURE", "Observation", "decode",
+    "OBSERVATION_STRUCTURE", "Observation", "decode", "MAX_SPEED", "MAX_YAW_RATE", "observation_bounds",
 ]
 
 OBS_X, OBS_Y = 0, 1
@@ -48,6 +51,37 @@ OBS_ACTION = slice(OBS_LAST_ACTION, OBS_SIZE)
 OBSERVATION_STRUCTURE = {
     "position": 2, "heading": 2, "velocity": 3, "target": 2, "target_velocity": 2, "last_action": 8,
 }
+
+
+# Bounds of the observation space. The fish's mean velocities over a control period stay far below these:
+# the most measured with extreme actions (every entry -1 or +1, 64 fish x 240 steps, full model) are
+# |vx| 0.44 m/s, |vy| 0.15 m/s, |omega| 1.5 rad/s (``docs/agents.md``, "Observation bounds").
+MAX_SPEED = 2.0  # bound of |vx| and |vy| [m/s]
+MAX_YAW_RATE = 10.0  # bound of |omega| [rad/s]
+
+
+def observation_bounds(control_period: float, ref_speed: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(low, high)`` float32 bounds of the observation of an env with these settings.
+
+    Every step starts with the nose and the tail inside the tank (else the episode has
+    ended), so the centre of mass leaves the tank by at most ``MAX_SPEED * control_period``
+    during the step that ends the episode; the target (goal or reference point) lies in the
+    tank, so its offset from the fish is at most the diagonal of the tank grown by that
+    margin; the target moves at ``ref_speed`` (zero for ``goal``); heading and last action
+    lie in [-1, 1].
+    """
+    margin = MAX_SPEED * float(control_period)
+    reach = math.hypot(TANK_LENGTH + 2.0 * margin, TANK_WIDTH + 2.0 * margin)
+    speed = 1.01 * float(ref_speed)  # 1 % over: float32 rounding of the rotated velocity
+    low = np.full(OBS_SIZE, -1.0)
+    high = np.full(OBS_SIZE, 1.0)
+    low[OBS_X], high[OBS_X] = -margin, TANK_LENGTH + margin
+    low[OBS_Y], high[OBS_Y] = -margin, TANK_WIDTH + margin
+    low[OBS_VX:OBS_VY + 1], high[OBS_VX:OBS_VY + 1] = -MAX_SPEED, MAX_SPEED
+    low[OBS_OMEGA], high[OBS_OMEGA] = -MAX_YAW_RATE, MAX_YAW_RATE
+    low[OBS_TARGET], high[OBS_TARGET] = -reach, reach
+    low[OBS_TARGET_VELOCITY], high[OBS_TARGET_VELOCITY] = -speed, speed
+    return low.astype(np.float32), high.astype(np.float32)
 
 
 class Observation(NamedTuple):

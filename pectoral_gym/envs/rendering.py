@@ -30,6 +30,9 @@ PATH_COLOR = (160, 160, 160)
 
 
 def _import_pygame():
+    import os
+
+    os.environ.setdefault("PYGAME_HIDE_SUPPORT_PROMPT", "1")  # no banner on stdout
     try:
         import pygame
     except ImportError as e:
@@ -84,8 +87,7 @@ class FishRenderer:
         self._draw_fish(core, i)
         if self.render_mode == "human":
             if self.window is None:
-                pg.init()
-                pg.display.init()
+                pg.display.init()  # the display only: pg.init() would open the audio device (ALSA errors headless)
                 self.window = pg.display.set_mode((self.width, self.height))
                 pg.display.set_caption("pectoral-gym")
                 self.clock = pg.time.Clock()
@@ -118,8 +120,7 @@ class FishRenderer:
             pg.draw.line(surf, FIN_COLOR, to_px(*pivot), to_px(*tip), width=3)
 
     def close(self) -> None:
-        """Close the window and quit pygame."""
+        """Close the window (the display module is the only one started)."""
         if self.window is not None:
             self.pygame.display.quit()
             self.window = None
-        self.pygame.quit()

@@ -242,6 +242,31 @@ REWARD_KERNELS = kernel_pair(_reward_one, "state, skip, cfg, ep, fish, obs, out"
                              item_args="state, cfg, ep, fish, obs, out", skip="skip")
 
 
+# ---------------------------------------------------------------- the simulated envs' step (EnvCore)
+# The same kernels plus what EnvCore did in numpy around them: keep the model's velocity integrals
+# before the step, and observe the mean velocities over the control period after it (fewer calls per step).
+@nb.njit(inline="always", **JIT)
+def _apply_keep_one(i, actions, skip, cfg, beats, obs, out, fish, integral, before):
+    before[i, 0], before[i, 1], before[i, 2] = integral[i, 0], integral[i, 1], integral[i, 2]
+    if not skip[i]:
+        _apply_one(i, actions, cfg, beats, obs, out, fish)
+
+
+@nb.njit(inline="always", **JIT)
+def _reward_mean_one(i, state, skip, cfg, ep, fish, obs, out, integral, before):
+    if not skip[i]:
+        _reward_one(i, state, cfg, ep, fish, obs, out)
+    dt = cfg[C_DT]
+    obs[i, OBS_VX] = (integral[i, 0] - before[i, 0]) / dt
+    obs[i, OBS_VY] = (integral[i, 1] - before[i, 1]) / dt
+    obs[i, OBS_OMEGA] = (integral[i, 2] - before[i, 2]) / dt
+
+
+APPLY_KEEP_KERNELS = kernel_pair(_apply_keep_one, "actions, skip, cfg, beats, obs, out, fish, integral, before",
+                                 guard=_first_non_finite, guard_args="actions, skip")
+REWARD_MEAN_KERNELS = kernel_pair(_reward_mean_one, "state, skip, cfg, ep, fish, obs, out, integral, before")
+
+
 def apply_actions(actions, skip, cfg, beats, obs, out, fish) -> int:
     """Map normalised actions ``(n, 8)`` to fin patterns ``beats`` for the envs not in ``skip``.
 
@@ -328,9 +353,10 @@ def start_states(index, draws, cfg, ep, start):
 
 @nb.njit(**JIT)
 def observe_reset(index, state, ep, fish, obs, out, action_code):
-    """Observations of freshly reset envs; the last-action entries get ``action_code``; ``out`` rows zeroed.
+    """Observations of freshly reset envs; the last-action entries get ``action_code``.
 
-    (A vector env reports zeros for the masked ``info`` entries of autoreset envs, as ``SyncVectorEnv`` does.)
+    ``out`` rows are zeroed except ``O_DISTANCE``, the distance to the target: the reset ``info``
+    has the step's keys (zero reward terms, the real distance, no success).
     """
     for k in range(index.shape[0]):
         i = index[k]
@@ -339,3 +365,4 @@ def observe_reset(index, state, ep, fish, obs, out, action_code):
         for j in range(ACTION_SIZE):
             obs[i, OBS_LAST_ACTION + j] = action_code[j]
         out[i, :] = 0.0
+        out[i, O_DISTANCE] = d

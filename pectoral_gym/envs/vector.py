@@ -14,7 +14,7 @@ from gymnasium.vector.utils import batch_space
 
 from pectoral_gym.envs.core import EnvConfig, EnvCore, env_signature
 from pectoral_gym.envs.layout import ACTION_SIZE, O_DISTANCE, O_REWARD, O_SUCCESS, O_TERMINATED
-from pectoral_gym.envs.observation import OBS_SIZE, OBSERVATION_STRUCTURE
+from pectoral_gym.envs.observation import OBSERVATION_STRUCTURE, observation_bounds
 from pectoral_gym.registration import MAX_EPISODE_STEPS
 
 __all__ = ["PectoralFishVectorEnv"]
@@ -29,20 +29,32 @@ class PectoralFishVectorEnv(VectorEnv):
     ``gym.make(id)`` reset with ``seed + i`` (as ``SyncVectorEnv`` seeds it)
     and given the same actions, step for step, including the autoreset.
 
-    Autoreset: ``AutoresetMode.NEXT_STEP`` (the Gymnasium default). The step
-    after an env terminated or was truncated resets it: its action is ignored
-    (not even checked), it returns the new episode's first observation,
-    reward 0 and ``terminated = truncated = False``, and its ``info`` entries
-    are masked out (``info["_<key>"]`` is ``False``).
+    Autoreset (``autoreset_mode``, published in ``metadata["autoreset_mode"]`` as
+    Gymnasium 1.x vector envs do; see https://farama.org/Vector-Autoreset-Mode):
+
+    * ``NEXT_STEP`` (default): the step after an env terminated or was truncated
+      resets it: its action is ignored (not even checked), it returns the new
+      episode's first observation, reward 0, ``terminated = truncated = False``
+      and the reset's ``info`` values.
+    * ``SAME_STEP``: an env that ends is reset in the same step: its observation
+      is the new episode's first one, ``info["final_obs"]`` (object array) and
+      ``info["final_info"]`` (dict of arrays) hold the last observation and
+      ``info`` of the old one, masked by ``info["_final_obs"]``,
+      ``info["_final_info"]``; the top-level ``info`` values are the reset's.
+    * ``DISABLED``: no autoreset; reset finished envs with
+      ``reset(options={"reset_mask": mask})`` before the next step (stepping a
+      finished env raises ``ValueError``).
 
     ``info`` holds one array per key of the single env's ``info`` (reward
     terms, ``"distance"``, ``"is_success"`` or ``"tracking_error"``), each with
-    its boolean mask ``"_<key>"``.
+    its boolean mask ``"_<key>"``, from ``reset()`` as from ``step()``: the
+    same as ``SyncVectorEnv`` of single envs gives.
 
     Args:
         num_envs: Number of environments.
         max_episode_steps: Truncation after this many steps (240 as registered).
         render_mode: Only ``None`` (render a single env instead).
+        autoreset_mode: ``AutoresetMode`` or its value (``"NextStep"``, ``"SameStep"``, ``"Disabled"``).
         **kwargs: The settings of :class:`~pectoral_gym.envs.fish_env.PectoralFishEnv`
             (the fields of :class:`~pectoral_gym.envs.core.EnvConfig`, ``model`` among them).
     """
@@ -50,13 +62,20 @@ class PectoralFishVectorEnv(VectorEnv):
     metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, num_envs: int = 1, *, max_episode_steps: int = MAX_EPISODE_STEPS,
-                 render_mode: str | None = None, **kwargs: Any):
+                 render_mode: str | None = None, autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+                 **kwargs: Any):
         if int(num_envs) < 1:
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         if max_episode_steps is None or int(max_episode_steps) < 1:
             raise ValueError(f"max_episode_steps must be an integer >= 1, got {max_episode_steps}")
         if render_mode is not None:
             raise ValueError("PectoralFishVectorEnv does not render; render a single PectoralFishEnv instead")
+        try:
+            self.autoreset_mode = AutoresetMode(autoreset_mode)
+        except ValueError:
+            raise ValueError(f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, "
+                             f"got {autoreset_mode!r}") from None
+        self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
         self.num_envs = int(num_envs)
         self.max_episode_steps = int(max_episode_steps)
         self.render_mode = None
@@ -64,7 +83,8 @@ class PectoralFishVectorEnv(VectorEnv):
         self.core = EnvCore(self.num_envs, self.config)
         self.single_action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self.single_observation_space = spaces.Box(-np.inf, np.inf, (OBS_SIZE,), dtype=np.float32)
+        low, high = observation_bounds(self.config.control_period, self.config.ref_speed)
+        self.single_observation_space = spaces.Box(low, high, dtype=np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.observation_structure = dict(OBSERVATION_STRUCTURE)
         self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
@@ -72,6 +92,23 @@ class PectoralFishVectorEnv(VectorEnv):
         self.prev_done = np.zeros(self.num_envs, dtype=np.bool_)
         self._info_items = self.core.terms + (("distance", O_DISTANCE),)
         self._goal = self.config.task == "goal"
+        self._all = np.ones(self.num_envs, dtype=np.bool_)
+
+    def _infos(self, mask: np.ndarray) -> dict[str, Any]:
+        """``info`` of the envs in ``mask`` from ``core.out`` (zero for the others, as ``SyncVectorEnv``)."""
+        out = self.core.out
+        everyone = bool(mask.all())
+        info: dict[str, Any] = {}
+        for name, k in self._info_items:
+            info[name] = out[:, k].copy() if everyone else np.where(mask, out[:, k], 0.0)
+            info["_" + name] = mask.copy()
+        if self._goal:
+            info["is_success"] = (out[:, O_SUCCESS] > 0.5) & mask
+            info["_is_success"] = mask.copy()
+        else:
+            info["tracking_error"] = info["distance"].copy()
+            info["_tracking_error"] = mask.copy()
+        return info
 
     @property
     def last_observations(self) -> np.ndarray:
@@ -97,7 +134,8 @@ class PectoralFishVectorEnv(VectorEnv):
             options: ``{"reset_mask": bool array}`` resets only the masked envs.
 
         Returns:
-            ``(observations (num_envs, 19), {})``.
+            ``(observations (num_envs, 19), info)``, ``info`` with the step's keys (zero reward
+            terms, the real distance), masked by the reset envs.
         """
         if seed is None:
             seeds: list[int | None] = [None] * self.num_envs
@@ -120,17 +158,17 @@ class PectoralFishVectorEnv(VectorEnv):
         self.core.reset(index, self._rngs)
         self.steps[index] = 0
         self.prev_done[index] = False
-        return self.core.obs.copy(), {}
+        return self.core.obs.copy(), self._infos(mask)
 
     def step(self, actions: np.ndarray):
-        """Step every env one control period (autoresetting those done at the previous step).
+        """Step every env one control period, with the autoreset of ``autoreset_mode`` (class docstring).
 
         Returns:
             ``(observations, rewards, terminations, truncations, infos)`` as arrays over envs.
 
         Raises:
-            ValueError: If ``actions`` does not have shape ``(num_envs, 8)`` or an action
-                (of an env that is not being reset) is not finite.
+            ValueError: If ``actions`` does not have shape ``(num_envs, 8)``, an action (of an env
+                that is not being reset) is not finite, or (``DISABLED``) a finished env was not reset.
         """
         actions = np.asarray(actions)
         if actions.shape != (self.num_envs, ACTION_SIZE):
@@ -138,33 +176,48 @@ class PectoralFishVectorEnv(VectorEnv):
         if actions.dtype != np.float32 and actions.dtype != np.float64:
             actions = actions.astype(np.float64)
         core = self.core
+        mode = self.autoreset_mode
         resetting = self.prev_done
-        core.step(actions, resetting)
+        if mode is AutoresetMode.DISABLED and resetting.any():
+            raise ValueError(f"envs {np.flatnonzero(resetting).tolist()} have ended; with autoreset_mode DISABLED "
+                             "reset them (reset(options={'reset_mask': mask})) before the next step")
+        if mode is AutoresetMode.NEXT_STEP:
+            core.step(actions, resetting)
+        else:
+            core.step(actions)
         self.steps += 1
-        if resetting.any():
+        if mode is AutoresetMode.NEXT_STEP and resetting.any():
             index = np.flatnonzero(resetting)
             core.reset(index, self._rngs)
             self.steps[index] = 0
         out = core.out
         terminated = out[:, O_TERMINATED] > 0.5
         truncated = self.steps >= self.max_episode_steps
-        stepped = ~resetting
-        info: dict[str, Any] = {}
-        for name, k in self._info_items:
-            info[name] = out[:, k].copy()
-            info["_" + name] = stepped
-        if self._goal:
-            info["is_success"] = out[:, O_SUCCESS] > 0.5
-            info["_is_success"] = stepped
+        rewards = out[:, O_REWARD].copy()
+        done = terminated | truncated
+        if mode is AutoresetMode.SAME_STEP:
+            if done.any():
+                final_info = self._infos(done)
+                final_obs = np.full(self.num_envs, None, dtype=object)
+                index = np.flatnonzero(done)
+                for i in index:
+                    final_obs[i] = core.obs[i].copy()
+                core.reset(index, self._rngs)
+                self.steps[index] = 0
+                info = self._infos(self._all)
+                info.update(final_obs=final_obs, _final_obs=done.copy(), final_info=final_info,
+                            _final_info=done.copy())
+            else:
+                info = self._infos(self._all)
         else:
-            info["tracking_error"] = out[:, O_DISTANCE].copy()
-            info["_tracking_error"] = stepped
-        self.prev_done = terminated | truncated
-        return core.obs.copy(), out[:, O_REWARD].copy(), terminated, truncated, info
+            info = self._infos(self._all)
+            self.prev_done = done
+        return core.obs.copy(), rewards, terminated, truncated, info
 
 
 _P = inspect.Parameter
 PectoralFishVectorEnv.__init__.__signature__ = env_signature(
     _P("num_envs", _P.POSITIONAL_OR_KEYWORD, default=1, annotation="int"),
     _P("max_episode_steps", _P.KEYWORD_ONLY, default=MAX_EPISODE_STEPS, annotation="int"),
-    _P("render_mode", _P.KEYWORD_ONLY, default=None, annotation="str | None"))
+    _P("render_mode", _P.KEYWORD_ONLY, default=None, annotation="str | None"),
+    _P("autoreset_mode", _P.KEYWORD_ONLY, default=AutoresetMode.NEXT_STEP, annotation="AutoresetMode | str"))
