@@ -319,7 +319,9 @@ def _outline_points(state, angles):
 
 def _full_thrust_at(start, steps=40):
     # The track task: no goal to reach on the way; speed 2 keeps the camera rate up on a loaded machine.
-    robot, env = _rig(speed=2.0, start=start, tracking_timeout=1.5, task="track")
+    # The geofence is under test: a tracking timeout of 3 experiment s keeps a slow camera on a loaded
+    # machine from stopping the fish first (a fresh-clone CI run once stopped on "tracking_lost" at 1.5 s).
+    robot, env = _rig(speed=2.0, start=start, tracking_timeout=3.0, task="track")
     angles = []
     stop = threading.Event()
 
