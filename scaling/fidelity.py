@@ -176,7 +176,8 @@ def _targets(results: dict[str, Any]) -> list[dict[str, Any]]:
     med, worst = TARGETS["steady"]
     for key in ("speed", "radius", "period"):
         s = results["steady"][key]
-        rows += [(f"two-fin steady {key}, median", s["median"], med), (f"two-fin steady {key}, worst", s["worst"], worst)]
+        rows += [(f"two-fin steady {key}, median", s["median"], med),
+                 (f"two-fin steady {key}, worst", s["worst"], worst)]
     for key in ("radius", "period"):
         rows.append((f"single-fin held-out {key}, worst", results["single_fin"][key]["worst"],
                      TARGETS["single_fin_worst"]))
