@@ -58,6 +58,7 @@ __all__ = [
     "yaw_oscillation_phasor",
     "averaged_forcing",
     "scaling_values",
+    "half_stroke_mean_force",
 ]
 
 EXACT = 0
@@ -82,6 +83,26 @@ def bessel_j1(x: float) -> float:
         term *= -h2 / (k * (k + 1))
         total += term
     return total
+
+
+@nb.njit(**JIT)
+def half_stroke_mean_force(angle_from: float, angle_to: float, duration: float, drag_constant: float):
+    """Exact mean blade-element force of one half-cosine half-stroke of the right fin (``docs/model.md`` 3.7).
+
+    The half-stroke ``g = mid - half cos(pi s / d)`` (:func:`pectoral_gym.dynamics.stroke_kinematics`)
+    from ``angle_from`` to ``angle_to`` in ``duration`` s. The inertial terms of
+    eqs. (16)-(17) are the time derivatives of ``m_p S_p/2 g' sin g`` and
+    ``m_p S_p/2 g' cos g`` and average to zero (``g' = 0`` at both ends); the drag term gives::
+
+        mean f_hx = k pi^2 |half| J1(half) sin(mid) / d^2,   mean f_hy = (same) cos(mid)
+
+    Returns:
+        ``(f_hx, f_hy)`` [N]; the moment is ``C_p f_hx`` (eq. 18).
+    """
+    half = 0.5 * (angle_to - angle_from)
+    mid = 0.5 * (angle_to + angle_from)
+    base = drag_constant * math.pi * math.pi * abs(half) * bessel_j1(half) / (duration * duration)
+    return base * math.sin(mid), base * math.cos(mid)
 
 
 @nb.njit(**JIT)

@@ -20,7 +20,7 @@ it there, open loop, with the public :mod:`pectoral_gym.models` API:
 
 Two seed sets (:data:`SEED_SETS`): ``dev`` to look at while working on the model,
 ``report`` (other seeds, other two-fin periods) run only for the published figures.
-Output: ``fidelity.md``, ``fidelity.json`` and PNG plots (:mod:`scaling.fidelity_report`).
+Output: ``fidelity_<set>[_transitions].md``, ``.json`` and PNG plots (:mod:`scaling.fidelity_report`).
 """
 
 from __future__ import annotations
@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -90,7 +91,8 @@ def draw_patterns(rng: np.random.Generator, n: int, segments: int, ranges: np.nd
 
 
 def open_loop(kind: str, schedule: np.ndarray, change_every: float | None, duration: float,
-              params: FishParams, scaling: ScalingFunctions, on_pattern: bool = False) -> np.ndarray:
+              params: FishParams, scaling: ScalingFunctions, on_pattern: bool = False,
+              transitions: bool = False) -> np.ndarray:
     """Poses ``(n, k + 1, 3)`` (X, Y, psi) every :data:`SAMPLE` s of one model under a command schedule.
 
     Args:
@@ -100,9 +102,10 @@ def open_loop(kind: str, schedule: np.ndarray, change_every: float | None, durat
         duration: Simulated time [s], a multiple of :data:`SAMPLE`.
         params, scaling: Both models' parameters; the averaged model's K.
         on_pattern: Start with the fins on the first pattern (no transitional half-stroke) instead of at rest.
+        transitions: The averaged model's transitional-stroke forcing (:class:`pectoral_gym.AveragedModel`).
     """
     n = schedule.shape[0]
-    model = make_model(kind, n, params, scaling)
+    model = make_model(kind, n, params, scaling, transitions)
     if on_pattern:
         model.reset(right=schedule[:, 0, 0], left=schedule[:, 0, 1])
     else:
@@ -128,8 +131,9 @@ def open_loop_errors(full: np.ndarray, averaged: np.ndarray) -> dict[str, np.nda
             "gap_m": gap, "path_m": path}
 
 
-def _scenario(schedule, change_every, duration, params, scaling, on_pattern=False, keep_paths=0) -> dict[str, Any]:
-    poses = {kind: open_loop(kind, schedule, change_every, duration, params, scaling, on_pattern)
+def _scenario(schedule, change_every, duration, params, scaling, on_pattern=False, keep_paths=0,
+              transitions=False) -> dict[str, Any]:
+    poses = {kind: open_loop(kind, schedule, change_every, duration, params, scaling, on_pattern, transitions)
              for kind in ("full", "averaged")}
     err = open_loop_errors(poses["full"], poses["averaged"])
     labels = [label(s[0]) for s in schedule]
@@ -187,8 +191,8 @@ def _targets(results: dict[str, Any]) -> list[dict[str, Any]]:
 
 def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Path = "fidelity",
              params: FishParams | None = None, quick: bool = False, plots: bool = True, progress: bool = True,
-             source: str = "<ScalingFunctions>") -> dict[str, Any]:
-    """Run the benchmark on one seed set; write ``fidelity.md``, ``fidelity.json`` and plots into ``out_dir``.
+             source: str = "<ScalingFunctions>", transitions: bool = False) -> dict[str, Any]:
+    """Run the benchmark on one seed set; write ``fidelity_<set>[_transitions].md``, ``.json``, plots to ``out_dir``.
 
     Args:
         scaling: The averaged model's K.
@@ -199,9 +203,11 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         plots: Write the PNG plots.
         progress: Show a progress bar over the stages.
         source: Where ``scaling`` came from, for the report.
+        transitions: Run the averaged model with its transitional-stroke forcing (open-loop runs; the
+            steady states and the single-fin figures do not depend on it).
 
     Returns:
-        The results (the content of ``fidelity.json``).
+        The results (the content of the JSON file).
     """
     from scaling import fidelity_report
 
@@ -219,18 +225,20 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
     base = schedules["constant"]
     one_fin = base.copy()
     one_fin[:, :, 1] = REST
-    stages: list[tuple[str, Any]] = [
-        *((("scenarios", name), lambda name=name, every=every: _scenario(
-            schedules[name], every, duration, params, scaling, keep_paths=4)) for name, every in SCENARIOS.items()),
-        *((("decomposition", name), lambda fins=fins, on=on: _scenario(
-            base if fins == 2 else one_fin, None, duration, params, scaling, on)) for name, (fins, on)
-          in DECOMPOSITION.items() if name != "two_fins_from_rest"),
+    def run(schedule, every=None, on=False, keep=0):
+        return lambda: _scenario(schedule, every, duration, params, scaling, on, keep, transitions)
+
+    stages: list[tuple[tuple[str, ...], Any]] = [
+        *((("scenarios", name), run(schedules[name], every, keep=4)) for name, every in SCENARIOS.items()),
+        *((("decomposition", name), run(base if fins == 2 else one_fin, on=on))
+          for name, (fins, on) in DECOMPOSITION.items() if name != "two_fins_from_rest"),
         (("steady",), lambda: steady_section(scaling, params, sizes["n_steady"], rng, seeds.steady_periods)),
         (("single_fin",), lambda: single_fin_section(scaling, params, sizes["n_single"], rng)),
         (("table4",), lambda: table4_section(scaling, params, sizes["table4"])),
     ]
     results: dict[str, Any] = {"seed_set": seeds.name, "seed": seeds.seed, "quick": quick, "version": __version__,
-                               "source": source, "scenarios": {}, "decomposition": {}, "timing_s": {}}
+                               "source": source, "transitions": transitions, "scenarios": {}, "decomposition": {},
+                               "timing_s": {}}
     start = time.perf_counter()
     bar = tqdm(total=len(stages) + 1, desc=f"fidelity ({seed_set})", unit="stage", disable=not progress)
     for key, run in stages:
@@ -247,10 +255,11 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         k: v for k, v in results["scenarios"]["constant"].items() if k != "paths"}
     results["targets"] = _targets(results)
     bar.set_postfix_str("report")
-    results["plots"] = fidelity_report.plots(results, out) if plots else []
+    stem = f"fidelity_{seeds.name}" + ("_transitions" if transitions else "")
+    results["plots"] = fidelity_report.plots(results, out, stem) if plots else []
     results["timing_s"]["total"] = time.perf_counter() - start
-    (out / "fidelity.json").write_text(json.dumps(results, indent=1, allow_nan=False) + "\n")
-    fidelity_report.write_markdown(results, out / "fidelity.md")
+    (out / f"{stem}.json").write_text(json.dumps(results, indent=1, allow_nan=False) + "\n")
+    fidelity_report.write_markdown(results, out / f"{stem}.md")
     bar.update()
     bar.close()
     return results
@@ -261,13 +270,16 @@ def add_parser(sub) -> None:
     p = sub.add_parser("fidelity", help="averaged vs full model with two fins and changing commands (issue 12)",
                        description="Fidelity benchmark: open-loop runs with constant and changing two-fin patterns, "
                        "their decomposition (one fin / two, from rest / on the pattern), two-fin steady states, the "
-                       "single-fin held-out set and Table 4. Writes fidelity.md, fidelity.json and PNG plots.")
+                       "single-fin held-out set and Table 4. Writes fidelity_<set>[_transitions].md, .json and PNG "
+                       "plots.")
     p.add_argument("--set", dest="seed_set", choices=sorted(SEED_SETS), default="dev",
                    help="seed set: dev (look at it while working) or report (for the published figures only)")
     p.add_argument("--coefficients", metavar="PATH", default=None,
                    help=f"scaling coefficients JSON (default: the installed {default_scaling_path().name})")
     p.add_argument("--out", metavar="DIR", default="fidelity", help="output folder (default: fidelity)")
     p.add_argument("--quick", action="store_true", help="test-sized run (figures not meaningful)")
+    p.add_argument("--transitions", action="store_true",
+                   help="averaged model with its transitional-stroke forcing (AveragedModel(transitions=True))")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -277,8 +289,12 @@ def main(args: argparse.Namespace) -> int:
     from scaling import fidelity_report
 
     path = Path(args.coefficients) if args.coefficients else default_scaling_path()
-    scaling = ScalingFunctions.load(path)
+    try:
+        scaling = ScalingFunctions.load(path)
+    except (OSError, ValueError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
     results = fidelity(scaling, args.seed_set, args.out, quick=args.quick, plots=not args.no_plots,
-                       progress=not args.no_progress, source=str(path))
+                       progress=not args.no_progress, source=str(path), transitions=args.transitions)
     print(fidelity_report.summary_text(results))
     return 0

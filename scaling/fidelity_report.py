@@ -27,7 +27,8 @@ def _deg(value: float | None) -> str:
 
 def summary_text(results: dict[str, Any]) -> str:
     """A few lines for stdout: the targets table."""
-    lines = [f"fidelity benchmark, seed set {results['seed_set']!r}" + (" (quick: not meaningful)"
+    lines = [f"fidelity benchmark, seed set {results['seed_set']!r}, transitions "
+             f"{'on' if results.get('transitions') else 'off'}" + (" (quick: not meaningful)"
                                                                          if results["quick"] else "")]
     for t in results["targets"]:
         mark = "ok  " if t["met"] else "MISS"
@@ -36,12 +37,13 @@ def summary_text(results: dict[str, Any]) -> str:
 
 
 def write_markdown(results: dict[str, Any], path: Path) -> Path:
-    """The benchmark report ``fidelity.md``."""
+    """The benchmark report (markdown)."""
     sc, dec, st = results["scenarios"], results["decomposition"], results["steady"]
     first = next(iter(sc.values()))
     lines = [
         f"# Averaged-model fidelity benchmark: seed set `{results['seed_set']}`", "",
-        f"Seed {results['seed']}, pectoral-gym {results['version']}, K from `{results['source']}`"
+        f"Seed {results['seed']}, pectoral-gym {results['version']}, K from `{results['source']}`, averaged model "
+        + ("with" if results.get("transitions") else "without") + " transitional-stroke forcing"
         + (" — **quick run: figures not meaningful**" if results["quick"] else "") + ".", "",
         f"Open loop: {first['n']} fish from rest, {first['duration_s']:g} s, two-fin patterns uniform in the envs' "
         "default action ranges. Position error = end-position distance / max(full-model path, 0.25 m); heading "
@@ -80,10 +82,9 @@ def write_markdown(results: dict[str, Any], path: Path) -> Path:
     return path
 
 
-def plots(results: dict[str, Any], out: Path) -> list[str]:
-    """Error distributions and overlaid trajectories; returns the file names."""
-    files = [_errors(results, out / f"fidelity_errors_{results['seed_set']}.png"),
-             _trajectories(results, out / f"fidelity_trajectories_{results['seed_set']}.png")]
+def plots(results: dict[str, Any], out: Path, stem: str) -> list[str]:
+    """Error distributions and overlaid trajectories, ``<stem>_errors.png``, ``<stem>_paths.png``; the file names."""
+    files = [_errors(results, out / f"{stem}_errors.png"), _trajectories(results, out / f"{stem}_paths.png")]
     return [f.name for f in files]
 
 
