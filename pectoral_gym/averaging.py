@@ -59,6 +59,7 @@ __all__ = [
     "averaged_forcing",
     "scaling_values",
     "half_stroke_mean_force",
+    "power_stroke_excess",
 ]
 
 EXACT = 0
@@ -103,6 +104,26 @@ def half_stroke_mean_force(angle_from: float, angle_to: float, duration: float, 
     mid = 0.5 * (angle_to + angle_from)
     base = drag_constant * math.pi * math.pi * abs(half) * bessel_j1(half) / (duration * duration)
     return base * math.sin(mid), base * math.cos(mid)
+
+
+@nb.njit(**JIT)
+def power_stroke_excess(bias: float, amplitude: float, period: float, ratio: float, drag_constant: float):
+    """Impulse [N s] a regular power stroke delivers beyond the cycle mean over its duration (right fin, K = 1).
+
+    ``X = d1 (mean_power - mean_cycle)`` with ``d1 = T_p / (zeta + 1)`` (eq. 21); the recovery stroke
+    delivers ``-X``, so ``X`` is the running impulse offset between the blade-element and the averaged
+    forcing after a power stroke (``docs/model.md`` section 3.7).
+
+    Returns:
+        ``(X_fx, X_fy)``; the moment's is ``C_p X_fx`` (eq. 18).
+    """
+    if amplitude == 0.0:
+        return 0.0, 0.0
+    d1 = period / (ratio + 1.0)
+    d2 = ratio * d1
+    px, py = half_stroke_mean_force(bias - amplitude, bias + amplitude, d1, drag_constant)
+    rx, ry = half_stroke_mean_force(bias + amplitude, bias - amplitude, d2, drag_constant)
+    return d1 * px - d1 * (d1 * px + d2 * rx) / period, d1 * py - d1 * (d1 * py + d2 * ry) / period
 
 
 @nb.njit(**JIT)

@@ -32,7 +32,7 @@ import numpy as np
 from pectoral_gym import forcing_cache as fc
 from pectoral_gym import strokes as st
 from pectoral_gym._jit import JIT, PARALLEL_MIN_ITEMS, kernel_pair
-from pectoral_gym.averaging import half_stroke_mean_force
+from pectoral_gym.averaging import half_stroke_mean_force, power_stroke_excess
 from pectoral_gym.dynamics import Forcing, RateConstants, body_accel, rate_bound, rate_constants
 from pectoral_gym.ktables import KTables, as_tables
 from pectoral_gym.params import BodyCoefficients, Coef
@@ -134,6 +134,11 @@ def _stable_step(state, i, body: BodyCoefficients, rates: RateConstants, forcing
 @nb.njit(inline="always", **JIT)
 def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables):
     """Latch fin ``f``'s commanded pattern; the averaged model also brings its forcing cache up to date."""
+    if averaged and fins[i, f, st.POWER] > 0.5:  # a power stroke ends: keep its pattern (_transition)
+        cache[i, f, fc.PREV_BIAS] = fins[i, f, BIAS]
+        cache[i, f, fc.PREV_AMPLITUDE] = fins[i, f, AMPLITUDE]
+        cache[i, f, fc.PREV_PERIOD] = fins[i, f, PERIOD]
+        cache[i, f, fc.PREV_RATIO] = fins[i, f, RATIO]
     latch(fins, pending, i, f)
     if averaged:
         fc.refresh(cache, i, f, fins[i, f, BIAS], fins[i, f, AMPLITUDE], fins[i, f, PERIOD], fins[i, f, RATIO],
@@ -141,24 +146,41 @@ def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables)
 
 
 @nb.njit(inline="always", **JIT)
-def _transition(fins, i, f, drag_constant, fin_offset):
-    """Averaged model: forcing of fin ``f``'s half-stroke in progress beyond its pattern's regular half-stroke.
+def _transition(fins, cache, i, f, drag_constant, fin_offset):
+    """Averaged model: forcing of fin ``f``'s half-stroke in progress beyond its pattern's regular one.
 
-    The exact mean of the half-stroke actually swept (from ``ANGLE_FROM``) minus that
-    of the latched pattern's regular half-stroke (from its other turning point), both
-    ending at ``ANGLE_TO`` in ``DURATION`` s (``docs/model.md`` section 3.7). Zero on
-    every regular half-stroke, so the periodic steady state is untouched.
+    Two parts (``docs/model.md`` section 3.7), both zero at periodic steady state:
+
+    * the exact mean of the half-stroke actually swept (from ``ANGLE_FROM``) minus that of
+      the latched pattern's regular half-stroke (from its other turning point), both ending
+      at ``ANGLE_TO`` in ``DURATION`` s;
+    * on a recovery stroke after a power stroke of another pattern: the impulse offset that
+      power stroke left, ``X(previous) - X(latched)`` (:func:`power_stroke_excess`), spread
+      over the recovery stroke.
     """
-    power = fins[i, f, st.POWER] > 0.5
-    start = fins[i, f, BIAS] - fins[i, f, AMPLITUDE] if power else fins[i, f, BIAS] + fins[i, f, AMPLITUDE]
-    angle_from = fins[i, f, st.ANGLE_FROM]
     duration = fins[i, f, DURATION]
-    if angle_from == start or duration <= 0.0:
+    if duration <= 0.0:
         return 0.0, 0.0, 0.0
-    ax, ay = half_stroke_mean_force(angle_from, fins[i, f, st.ANGLE_TO], duration, drag_constant)
-    rx, ry = half_stroke_mean_force(start, fins[i, f, st.ANGLE_TO], duration, drag_constant)
+    power = fins[i, f, st.POWER] > 0.5
+    bias, amp = fins[i, f, BIAS], fins[i, f, AMPLITUDE]
+    start = bias - amp if power else bias + amp
+    angle_from = fins[i, f, st.ANGLE_FROM]
+    dx = 0.0
+    dy = 0.0
+    if angle_from != start:
+        ax, ay = half_stroke_mean_force(angle_from, fins[i, f, st.ANGLE_TO], duration, drag_constant)
+        rx, ry = half_stroke_mean_force(start, fins[i, f, st.ANGLE_TO], duration, drag_constant)
+        dx, dy = ax - rx, ay - ry
+    if not power and (cache[i, f, fc.PREV_BIAS] != bias or cache[i, f, fc.PREV_AMPLITUDE] != amp
+                      or cache[i, f, fc.PREV_PERIOD] != fins[i, f, PERIOD]
+                      or cache[i, f, fc.PREV_RATIO] != fins[i, f, RATIO]):
+        px, py = power_stroke_excess(cache[i, f, fc.PREV_BIAS], cache[i, f, fc.PREV_AMPLITUDE],
+                                     cache[i, f, fc.PREV_PERIOD], cache[i, f, fc.PREV_RATIO], drag_constant)
+        qx, qy = power_stroke_excess(bias, amp, fins[i, f, PERIOD], fins[i, f, RATIO], drag_constant)
+        dx += (px - qx) / duration
+        dy += (py - qy) / duration
     side = st.SIDE[f]
-    return ax - rx, side * (ay - ry), side * fin_offset * (ax - rx)  # eq. (18), left fin mirrored
+    return dx, side * dy, side * fin_offset * dx  # eq. (18), left fin mirrored
 
 
 @nb.njit(**JIT)
@@ -191,7 +213,7 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
             tau = cache[i, 0, fc.AVG_TAU] + cache[i, 1, fc.AVG_TAU]
             if transitions:
                 for f in range(2):
-                    dfx, dfy, dtau = _transition(fins, i, f, drag_constant, fin_offset)
+                    dfx, dfy, dtau = _transition(fins, cache, i, f, drag_constant, fin_offset)
                     fx, fy, tau = fx + dfx, fy + dfy, tau + dtau
             forcing = Forcing(fx, fy, tau)
             osc = fc.yaw_oscillation(fins, cache, i, 0.5 * seg, idle0, idle1)
