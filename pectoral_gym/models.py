@@ -240,16 +240,19 @@ class AveragedModel(FishModel):
         transitions: Add, during every transitional half-stroke (the first from rest, the
             first after each pattern change), the exact mean blade-element forcing of the
             half-stroke actually swept minus that of the latched pattern's regular
-            half-stroke (``docs/model.md`` section 3.7). Zero at periodic steady state, so
-            K and the steady-state figures are unchanged. Default off (the CasADi model
-            of :mod:`pectoral_gym.symbolic` does not have it).
+            half-stroke, and on a recovery stroke after a power stroke of another pattern
+            the impulse offset that power stroke left (``docs/model.md`` section 3.7).
+            Zero at periodic steady state, so K and the steady-state figures are
+            unchanged. Default on; ``False`` gives the model before issue 12. The CasADi
+            model of :mod:`pectoral_gym.symbolic` does not have it (its NMPCs hold
+            patterns over the horizon).
     """
 
     averaged = True
 
     def __init__(self, n: int = 1, params: FishParams | Sequence[FishParams] | None = None,
                  scaling: ScalingFunctions | str | None = "identified", forcing: str = "exact",
-                 dt_max: float = 0.25, transitions: bool = False):
+                 dt_max: float = 0.25, transitions: bool = True):
         super().__init__(n, params, dt_max)
         self.transitions = bool(transitions)
         if forcing not in ("exact", "taylor"):

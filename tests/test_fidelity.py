@@ -128,15 +128,41 @@ def test_draw_patterns_inside_the_env_ranges():
 
 
 def test_quick_cli_end_to_end(tmp_path, capsys):
-    assert scaling_main(["fidelity", "--quick", "--out", str(tmp_path), "--no-progress", "--transitions"]) == 0
-    data = json.loads((tmp_path / "fidelity_dev_transitions.json").read_text())
+    assert scaling_main(["fidelity", "--quick", "--out", str(tmp_path), "--no-progress"]) == 0
+    data = json.loads((tmp_path / "fidelity_dev.json").read_text())
     assert data["transitions"] and data["quick"] and data["seed_set"] == "dev"
     assert set(data["scenarios"]) == set(fd.SCENARIOS) and set(data["decomposition"]) == set(fd.DECOMPOSITION)
     assert len(data["targets"]) == 16
     for name in data["plots"]:
         assert (tmp_path / name).read_bytes()[:8] == PNG_MAGIC
-    report = (tmp_path / "fidelity_dev_transitions.md").read_text()
+    report = (tmp_path / "fidelity_dev.md").read_text()
     assert "## Decomposition" in report and "changed every 0.5 s" in report
     assert "transitions on" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         scaling_main(["fidelity", "--set", "tuning"])
+
+
+def test_transitions_make_the_impulse_exact_with_k_1():
+    """Without body drag, lift and yaw damping, and with both fins beating the same patterns (no yaw),
+    the surge velocity is the surge impulse / m1. Patterns changing every 0.3 s, then parked: once the fins
+    rest, the averaged model (K = 1) with transitional forcing has received the full model's impulse."""
+    params = FishParams().replace(drag_coef=1e-9, lift_coef=1e-9, moment_coef=1e-9)
+    rng = np.random.default_rng(5)
+    patterns = fd.draw_patterns(rng, 4, 10)
+    patterns[..., 1, :] = patterns[..., 0, :]  # the left fin mirrors the right: no sway, no yaw
+    from pectoral_gym.models import FullModel
+
+    speeds = {}
+    models = (("full", FullModel(4, params)), ("off", AveragedModel(4, params, scaling="none", transitions=False)),
+              ("on", AveragedModel(4, params, scaling="none")))
+    for name, model in models:
+        model.reset()
+        for j in range(10):
+            model.command_array(np.ascontiguousarray(patterns[:, j]))
+            model.advance(0.3)
+        model.command_array(np.broadcast_to(FinBeat.rest().as_array(), (4, 2, 4)).copy())
+        model.advance(4.0)  # the last half-stroke and the parking stroke end
+        assert np.all(model.fin_angles()[1] == 0.0)
+        speeds[name] = model.state[:, 3].copy()
+    np.testing.assert_allclose(speeds["on"], speeds["full"], rtol=1e-4, atol=1e-9)
+    assert np.max(np.abs(speeds["off"] - speeds["full"])) > 100 * np.max(np.abs(speeds["on"] - speeds["full"]))
