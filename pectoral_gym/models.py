@@ -243,16 +243,17 @@ class AveragedModel(FishModel):
             half-stroke, and on a recovery stroke after a power stroke of another pattern
             the impulse offset that power stroke left (``docs/model.md`` section 3.7).
             Zero at periodic steady state, so K and the steady-state figures are
-            unchanged. Default on; ``False`` gives the model before issue 12. The CasADi
-            model of :mod:`pectoral_gym.symbolic` does not have it (its NMPCs hold
-            patterns over the horizon).
+            unchanged. Default off (the model before issue 12): the CasADi model of
+            :mod:`pectoral_gym.symbolic` does not have it, and the NMPC baseline
+            planning with that model misses a near goal on an env with it on
+            (``tests/test_baselines.py``); measured in ``docs/validation/fidelity/``.
     """
 
     averaged = True
 
     def __init__(self, n: int = 1, params: FishParams | Sequence[FishParams] | None = None,
                  scaling: ScalingFunctions | str | None = "identified", forcing: str = "exact",
-                 dt_max: float = 0.25, transitions: bool = True):
+                 dt_max: float = 0.25, transitions: bool = False):
         super().__init__(n, params, dt_max)
         self.transitions = bool(transitions)
         if forcing not in ("exact", "taylor"):

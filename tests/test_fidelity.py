@@ -128,14 +128,14 @@ def test_draw_patterns_inside_the_env_ranges():
 
 
 def test_quick_cli_end_to_end(tmp_path, capsys):
-    assert scaling_main(["fidelity", "--quick", "--out", str(tmp_path), "--no-progress"]) == 0
-    data = json.loads((tmp_path / "fidelity_dev.json").read_text())
+    assert scaling_main(["fidelity", "--quick", "--out", str(tmp_path), "--no-progress", "--transitions"]) == 0
+    data = json.loads((tmp_path / "fidelity_dev_transitions.json").read_text())
     assert data["transitions"] and data["quick"] and data["seed_set"] == "dev"
     assert set(data["scenarios"]) == set(fd.SCENARIOS) and set(data["decomposition"]) == set(fd.DECOMPOSITION)
     assert len(data["targets"]) == 16
     for name in data["plots"]:
         assert (tmp_path / name).read_bytes()[:8] == PNG_MAGIC
-    report = (tmp_path / "fidelity_dev.md").read_text()
+    report = (tmp_path / "fidelity_dev_transitions.md").read_text()
     assert "## Decomposition" in report and "changed every 0.5 s" in report
     assert "transitions on" in capsys.readouterr().out
     with pytest.raises(SystemExit):
@@ -154,7 +154,7 @@ def test_transitions_make_the_impulse_exact_with_k_1():
 
     speeds = {}
     models = (("full", FullModel(4, params)), ("off", AveragedModel(4, params, scaling="none", transitions=False)),
-              ("on", AveragedModel(4, params, scaling="none")))
+              ("on", AveragedModel(4, params, scaling="none", transitions=True)))
     for name, model in models:
         model.reset()
         for j in range(10):
