@@ -58,6 +58,8 @@ __all__ = [
     "yaw_oscillation_phasor",
     "averaged_forcing",
     "scaling_values",
+    "half_stroke_mean_force",
+    "power_stroke_excess",
 ]
 
 EXACT = 0
@@ -82,6 +84,46 @@ def bessel_j1(x: float) -> float:
         term *= -h2 / (k * (k + 1))
         total += term
     return total
+
+
+@nb.njit(**JIT)
+def half_stroke_mean_force(angle_from: float, angle_to: float, duration: float, drag_constant: float):
+    """Exact mean blade-element force of one half-cosine half-stroke of the right fin (``docs/model.md`` 3.7).
+
+    The half-stroke ``g = mid - half cos(pi s / d)`` (:func:`pectoral_gym.dynamics.stroke_kinematics`)
+    from ``angle_from`` to ``angle_to`` in ``duration`` s. The inertial terms of
+    eqs. (16)-(17) are the time derivatives of ``m_p S_p/2 g' sin g`` and
+    ``m_p S_p/2 g' cos g`` and average to zero (``g' = 0`` at both ends); the drag term gives::
+
+        mean f_hx = k pi^2 |half| J1(half) sin(mid) / d^2,   mean f_hy = (same) cos(mid)
+
+    Returns:
+        ``(f_hx, f_hy)`` [N]; the moment is ``C_p f_hx`` (eq. 18).
+    """
+    half = 0.5 * (angle_to - angle_from)
+    mid = 0.5 * (angle_to + angle_from)
+    base = drag_constant * math.pi * math.pi * abs(half) * bessel_j1(half) / (duration * duration)
+    return base * math.sin(mid), base * math.cos(mid)
+
+
+@nb.njit(**JIT)
+def power_stroke_excess(bias: float, amplitude: float, period: float, ratio: float, drag_constant: float):
+    """Impulse [N s] a regular power stroke delivers beyond the cycle mean over its duration (right fin, K = 1).
+
+    ``X = d1 (mean_power - mean_cycle)`` with ``d1 = T_p / (zeta + 1)`` (eq. 21); the recovery stroke
+    delivers ``-X``, so ``X`` is the running impulse offset between the blade-element and the averaged
+    forcing after a power stroke (``docs/model.md`` section 3.7).
+
+    Returns:
+        ``(X_fx, X_fy)``; the moment's is ``C_p X_fx`` (eq. 18).
+    """
+    if amplitude == 0.0:
+        return 0.0, 0.0
+    d1 = period / (ratio + 1.0)
+    d2 = ratio * d1
+    px, py = half_stroke_mean_force(bias - amplitude, bias + amplitude, d1, drag_constant)
+    rx, ry = half_stroke_mean_force(bias + amplitude, bias - amplitude, d2, drag_constant)
+    return d1 * px - d1 * (d1 * px + d2 * rx) / period, d1 * py - d1 * (d1 * py + d2 * ry) / period
 
 
 @nb.njit(**JIT)

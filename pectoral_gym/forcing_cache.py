@@ -20,6 +20,10 @@ field              index  unit    meaning
 ``OSC_COS``        7      rad/s   phasor ``A cos(phi)`` of the yaw-rate oscillation, signed by side
 ``OSC_SIN``        8      rad/s   ``A sin(phi)``
 ``CACHED``         9      -       1.0 when the row is valid for the key (0: recompute at the next latch)
+``PREV_BIAS``      10     rad     pattern of the fin's last finished power stroke (``transitions``,
+``PREV_AMPLITUDE`` 11     rad     ``docs/model.md`` section 3.7): bias, amplitude, period, ratio;
+``PREV_PERIOD``    12     s       zero after :func:`clear`
+``PREV_RATIO``     13     -
 =================  =====  ======  ==================================================================
 
 The row depends on the fish's coefficients too: :func:`invalidate` after
@@ -42,6 +46,7 @@ from pectoral_gym.strokes import ANGLE_FROM, ANGLE_TO, ELAPSED, PERIOD, POWER, R
 __all__ = [
     "CACHE_FIELDS", "KEY_BIAS", "KEY_AMPLITUDE", "KEY_PERIOD", "KEY_RATIO",
     "AVG_FX", "AVG_FY", "AVG_TAU", "OSC_COS", "OSC_SIN", "CACHED",
+    "PREV_BIAS", "PREV_AMPLITUDE", "PREV_PERIOD", "PREV_RATIO",
     "clear", "invalidate", "refresh", "yaw_oscillation",
 ]
 
@@ -49,7 +54,8 @@ KEY_BIAS, KEY_AMPLITUDE, KEY_PERIOD, KEY_RATIO = 0, 1, 2, 3
 AVG_FX, AVG_FY, AVG_TAU = 4, 5, 6
 OSC_COS, OSC_SIN = 7, 8
 CACHED = 9
-CACHE_FIELDS = 10
+PREV_BIAS, PREV_AMPLITUDE, PREV_PERIOD, PREV_RATIO = 10, 11, 12, 13
+CACHE_FIELDS = 14
 
 
 def invalidate(cache: np.ndarray, index: np.ndarray | slice | None = None) -> None:

@@ -108,6 +108,7 @@ class FishModel:
         self.time = 0.0
         self.min_substeps = 1
         self.mode = EXACT
+        self.transitions = False
         unit = ScalingFunctions.unit()
         self.tables = unit.kernel_arrays()
         self.set_params(params or FishParams())
@@ -172,7 +173,8 @@ class FishModel:
         if not duration >= 0:
             raise ValueError(f"duration must be >= 0 s, got {duration}")
         stepping.advance(self.state, self.fins, self.forcing_cache, self.pending, self.integral, self.coef, duration,
-                         self.dt_max, self.min_substeps, self.averaged, self.mode, self._packed_tables)
+                         self.dt_max, self.min_substeps, self.averaged, self.mode, self._packed_tables,
+                         self.transitions)
         self.time += duration
         return self.state
 
@@ -235,14 +237,25 @@ class AveragedModel(FishModel):
             (``stepping._stable_step``): over 120 s of random fin commands the
             position differs by ~1 cm from a 0.002 s reference, the same order
             as the full model's own discretisation error.
+        transitions: Add, during every transitional half-stroke (the first from rest, the
+            first after each pattern change), the exact mean blade-element forcing of the
+            half-stroke actually swept minus that of the latched pattern's regular
+            half-stroke, and on a recovery stroke after a power stroke of another pattern
+            the impulse offset that power stroke left (``docs/model.md`` section 3.7).
+            Zero at periodic steady state, so K and the steady-state figures are
+            unchanged. Default off (the model before issue 12): the CasADi model of
+            :mod:`pectoral_gym.symbolic` does not have it, and the NMPC baseline
+            planning with that model misses a near goal on an env with it on
+            (``tests/test_baselines.py``); measured in ``docs/validation/fidelity/``.
     """
 
     averaged = True
 
     def __init__(self, n: int = 1, params: FishParams | Sequence[FishParams] | None = None,
                  scaling: ScalingFunctions | str | None = "identified", forcing: str = "exact",
-                 dt_max: float = 0.25):
+                 dt_max: float = 0.25, transitions: bool = False):
         super().__init__(n, params, dt_max)
+        self.transitions = bool(transitions)
         if forcing not in ("exact", "taylor"):
             raise ValueError(f"forcing must be 'exact' or 'taylor', got {forcing!r}")
         self.mode = EXACT if forcing == "exact" else TAYLOR

@@ -30,7 +30,9 @@ import numba as nb
 import numpy as np
 
 from pectoral_gym import forcing_cache as fc
+from pectoral_gym import strokes as st
 from pectoral_gym._jit import JIT, PARALLEL_MIN_ITEMS, kernel_pair
+from pectoral_gym.averaging import half_stroke_mean_force, power_stroke_excess
 from pectoral_gym.dynamics import Forcing, RateConstants, body_accel, rate_bound, rate_constants
 from pectoral_gym.ktables import KTables, as_tables
 from pectoral_gym.params import BodyCoefficients, Coef
@@ -132,15 +134,58 @@ def _stable_step(state, i, body: BodyCoefficients, rates: RateConstants, forcing
 @nb.njit(inline="always", **JIT)
 def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables):
     """Latch fin ``f``'s commanded pattern; the averaged model also brings its forcing cache up to date."""
+    if averaged and fins[i, f, st.POWER] > 0.5:  # a power stroke ends: keep its pattern (_transition)
+        cache[i, f, fc.PREV_BIAS] = fins[i, f, BIAS]
+        cache[i, f, fc.PREV_AMPLITUDE] = fins[i, f, AMPLITUDE]
+        cache[i, f, fc.PREV_PERIOD] = fins[i, f, PERIOD]
+        cache[i, f, fc.PREV_RATIO] = fins[i, f, RATIO]
     latch(fins, pending, i, f)
     if averaged:
         fc.refresh(cache, i, f, fins[i, f, BIAS], fins[i, f, AMPLITUDE], fins[i, f, PERIOD], fins[i, f, RATIO],
                    coef, mode, tables)
 
 
+@nb.njit(inline="always", **JIT)
+def _transition(fins, cache, i, f, drag_constant, fin_offset):
+    """Averaged model: forcing of fin ``f``'s half-stroke in progress beyond its pattern's regular one.
+
+    Two parts (``docs/model.md`` section 3.7), both zero at periodic steady state:
+
+    * the exact mean of the half-stroke actually swept (from ``ANGLE_FROM``) minus that of
+      the latched pattern's regular half-stroke (from its other turning point), both ending
+      at ``ANGLE_TO`` in ``DURATION`` s;
+    * on a recovery stroke after a power stroke of another pattern: the impulse offset that
+      power stroke left, ``X(previous) - X(latched)`` (:func:`power_stroke_excess`), spread
+      over the recovery stroke.
+    """
+    duration = fins[i, f, DURATION]
+    if duration <= 0.0:
+        return 0.0, 0.0, 0.0
+    power = fins[i, f, st.POWER] > 0.5
+    bias, amp = fins[i, f, BIAS], fins[i, f, AMPLITUDE]
+    start = bias - amp if power else bias + amp
+    angle_from = fins[i, f, st.ANGLE_FROM]
+    dx = 0.0
+    dy = 0.0
+    if angle_from != start:
+        ax, ay = half_stroke_mean_force(angle_from, fins[i, f, st.ANGLE_TO], duration, drag_constant)
+        rx, ry = half_stroke_mean_force(start, fins[i, f, st.ANGLE_TO], duration, drag_constant)
+        dx, dy = ax - rx, ay - ry
+    if not power and (cache[i, f, fc.PREV_BIAS] != bias or cache[i, f, fc.PREV_AMPLITUDE] != amp
+                      or cache[i, f, fc.PREV_PERIOD] != fins[i, f, PERIOD]
+                      or cache[i, f, fc.PREV_RATIO] != fins[i, f, RATIO]):
+        px, py = power_stroke_excess(cache[i, f, fc.PREV_BIAS], cache[i, f, fc.PREV_AMPLITUDE],
+                                     cache[i, f, fc.PREV_PERIOD], cache[i, f, fc.PREV_RATIO], drag_constant)
+        qx, qy = power_stroke_excess(bias, amp, fins[i, f, PERIOD], fins[i, f, RATIO], drag_constant)
+        dx += (px - qx) / duration
+        dy += (py - qy) / duration
+    side = st.SIDE[f]
+    return dx, side * dy, side * fin_offset * dx  # eq. (18), left fin mirrored
+
+
 @nb.njit(**JIT)
 def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode,
-                 packed_tables):
+                 transitions, packed_tables):
     """Advance fish ``i`` by ``duration`` seconds, segment by segment between stroke boundaries."""
     tables = as_tables(packed_tables)
     body = BodyCoefficients(coef[i, Coef.M1], coef[i, Coef.M2], coef[i, Coef.J3],
@@ -163,9 +208,14 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
         rem1 = np.inf if idle1 else fins[i, 1, DURATION] - fins[i, 1, ELAPSED]
         seg = min(t_left, rem0, rem1)
         if averaged:
-            forcing = Forcing(cache[i, 0, fc.AVG_FX] + cache[i, 1, fc.AVG_FX],
-                              cache[i, 0, fc.AVG_FY] + cache[i, 1, fc.AVG_FY],
-                              cache[i, 0, fc.AVG_TAU] + cache[i, 1, fc.AVG_TAU])
+            fx = cache[i, 0, fc.AVG_FX] + cache[i, 1, fc.AVG_FX]
+            fy = cache[i, 0, fc.AVG_FY] + cache[i, 1, fc.AVG_FY]
+            tau = cache[i, 0, fc.AVG_TAU] + cache[i, 1, fc.AVG_TAU]
+            if transitions:
+                for f in range(2):
+                    dfx, dfy, dtau = _transition(fins, cache, i, f, drag_constant, fin_offset)
+                    fx, fy, tau = fx + dfx, fy + dfy, tau + dtau
+            forcing = Forcing(fx, fy, tau)
             osc = fc.yaw_oscillation(fins, cache, i, 0.5 * seg, idle0, idle1)
             t_seg = seg
             while t_seg > _EPS:
@@ -201,7 +251,8 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
 
 _ADVANCE = kernel_pair(
     _advance_one,
-    "state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, packed_tables",
+    "state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, transitions, "
+    "packed_tables",
 )
 _SERIAL, _PARALLEL = _ADVANCE.serial, _ADVANCE.parallel  # bound once: advance() runs at every env step
 
@@ -219,6 +270,7 @@ def advance(
     averaged: bool,
     mode: int,
     tables: KTables,
+    transitions: bool = False,
 ) -> None:
     """Advance every fish by ``duration`` seconds in place (see module docstring).
 
@@ -232,7 +284,10 @@ def advance(
         averaged: Integrate the averaged model (eq. 25) instead of the full one (eq. 19).
         mode: Averaged forcing form (``averaging.EXACT`` or ``averaging.TAYLOR``).
         tables: Scaling functions (``kfunctions.ScalingFunctions.kernel_arrays()``), or ``tuple()`` of them.
+        transitions: Averaged model: add each transitional half-stroke's forcing beyond the regular
+            half-stroke (:func:`_transition`, ``docs/model.md`` section 3.7).
     """
     kernel = _PARALLEL if state.shape[0] >= PARALLEL_MIN_ITEMS else _SERIAL
     kernel(state, fins, cache, pending, integral, coef, float(duration), float(dt_max), float(min_substeps),
-           bool(averaged), int(mode), tuple(tables))  # a plain tuple is faster to dispatch (ktables.as_tables)
+           bool(averaged), int(mode), bool(transitions),
+           tuple(tables))  # a plain tuple is faster to dispatch (ktables.as_tables)

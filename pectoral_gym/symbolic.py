@@ -8,6 +8,13 @@ dependency (``pip install pectoral-gym[nmpc]``); it is imported here only.
 
 Every function accepts CasADi ``SX``/``MX`` (or plain numbers) and returns
 expressions of the same kind.
+
+Not here: the averaged model's optional transitional-stroke forcing
+(``AveragedModel(transitions=True)``, ``docs/model.md`` section 3.7). The
+NMPCs hold each fin's pattern over the horizon with the fins on it, where that
+forcing is zero; it would act only on the first half-stroke after a change of
+plan. Parity with the numba model therefore holds for fish started on their
+patterns (``tests/test_symbolic.py``).
 """
 
 from __future__ import annotations

@@ -68,9 +68,12 @@ def fin_pattern(g0_deg: float, ga_deg: float, period: float, ratio: float) -> np
 REST = fin_pattern(90.0, 0.0, 1.0, 1.0)
 
 
-def make_model(kind: str, n: int, params: FishParams, scaling: ScalingFunctions) -> FishModel:
-    """``n`` fish of the ``"full"`` or the ``"averaged"`` model."""
-    return FullModel(n, params) if kind == "full" else AveragedModel(n, params, scaling=scaling)
+def make_model(kind: str, n: int, params: FishParams, scaling: ScalingFunctions,
+               transitions: bool = False) -> FishModel:
+    """``n`` fish of the ``"full"`` or the ``"averaged"`` model (``transitions``: :class:`AveragedModel`'s option)."""
+    if kind == "full":
+        return FullModel(n, params)
+    return AveragedModel(n, params, scaling=scaling, transitions=transitions)
 
 
 def _steady(kind: str, beats: np.ndarray, params: FishParams, scaling: ScalingFunctions) -> np.ndarray:

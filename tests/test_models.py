@@ -408,8 +408,9 @@ def test_averaged_and_full_share_parameter_change_schedule():
 def test_averaged_forcing_switches_at_turning_point():
     # Averaged model from rest: until the right fin's turning point at 0.2 s it is driven by P1's average,
     # then by P2's. Compare with the reference ODE driven by piecewise-constant closed-form forcing.
+    # (Without the transitional-stroke forcing, which tests/test_fidelity.py checks against the full model.)
     p1, p2 = TURN, FORWARD
-    m = AveragedModel(1, scaling=None, dt_max=0.002)
+    m = AveragedModel(1, scaling=None, dt_max=0.002, transitions=False)
     m.reset(right=p1)
     m.advance(0.1)
     m.command(right=p2)
