@@ -35,13 +35,13 @@ from agents.nmpc_problem import (
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_VELOCITY, decode
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.symbolic import STATE_POSITION, STATE_PSI, STATE_VELOCITY
+from pectoral_gym.symbolic import STATE_POSITION, STATE_PSI, STATE_SIZE, STATE_VELOCITY
 
 __all__ = ["NMPCController", "NMPCSettings"]
 
 _GOOD_STATUS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
-# A solve stopped by the iteration or time limit is still used when its trajectory obeys the model to
-# within this (m, rad, m/s): a feasible if suboptimal plan, the usual real-time NMPC compromise.
+# A solve stopped early (iteration or time limit, a short step) is still used when its trajectory obeys
+# the model to within this (m, rad, m/s): a feasible if suboptimal plan, the usual real-time NMPC compromise.
 _FEASIBLE = 1e-3
 
 
@@ -58,8 +58,10 @@ class NMPCController:
 
     Attributes:
         solve_times: Wall time of every solve [s].
-        failures: Number of control steps whose solves all failed (a fallback command was used).
-        statuses: IPOPT return status -> count, over all solves.
+        failures: Number of control steps whose solves all failed or ended after
+            :attr:`NMPCSettings.step_budget` (a fallback command was used).
+        late: Number of those steps whose solves ended after the step budget.
+        statuses: Solver return status -> count, over all solves.
         plan: The last good plan, ``(horizon, 4)``: amplitude right/left, bias right/left [rad].
     """
 
@@ -93,6 +95,7 @@ class NMPCController:
         self.n_delay_steps = self.problem.n_delay_steps
         self.solve_times: list[float] = []
         self.failures = 0
+        self.late = 0
         self.statuses: dict[str, int] = {}
         self.reset()
 
@@ -104,6 +107,8 @@ class NMPCController:
         self._u_prev = self.u_rest.copy()
         self._prev_obs: np.ndarray | None = None
         self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._duals: tuple[np.ndarray, np.ndarray] | None = None  # lam_x, lam_g of the last good solve
+        self._next_guess = 0  # the fresh guess to try next
         self.gains = np.ones(2)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
@@ -182,50 +187,77 @@ class NMPCController:
         pairs = ((strong, strong), (strong, weak), (weak, strong))  # the right fin stronger turns left
         return [np.tile(np.array(FinInputs(ar, al, mid, mid))[:, None], (1, self._n)) for ar, al in pairs]
 
-    def _solve(self, state: np.ndarray, ref: np.ndarray, vref: np.ndarray, u_guess: np.ndarray):
-        """One IPOPT solve from ``u_guess`` ``(4, horizon)``; ``(cost, plan (horizon, 4))`` or ``None`` if unusable."""
+    def _solve(self, state: np.ndarray, ref: np.ndarray, vref: np.ndarray, u_guess: np.ndarray,
+               duals: tuple[np.ndarray, np.ndarray] | None = None):
+        """One solve from ``u_guess`` ``(4, horizon)`` (and multipliers ``duals``).
+
+        Returns ``(cost, plan (horizon, 4), (lam_x, lam_g))``, or ``None`` if the solve is unusable.
+        The state guess is the model's rollout under the guess, so every solve starts feasible.
+        """
         problem = self.problem
         z_prev = to_z(self._u_prev)
-        z_guess = np.clip(to_z(u_guess), self.z_low[:, None], self.z_high[:, None])
-        x_guess = np.asarray(problem.rollout(state, z_guess, z_prev, self.gains))
+        z_guess = problem.blocked(np.clip(to_z(u_guess), self.z_low[:, None], self.z_high[:, None]))
+        x_guess = np.asarray(problem.rollout(state, z_guess[:, problem.block_of], z_prev, self.gains))
         x0 = np.nan_to_num(pack_decision(z_guess, x_guess))
         p = problem.parameters(state, ref, vref, z_prev, self.gains)
-        sol = self._solver(x0=x0, p=p, lbx=problem.lbx, ubx=problem.ubx, lbg=0.0, ubg=0.0)
+        warm = {} if duals is None else {"lam_x0": duals[0], "lam_g0": duals[1]}
+        sol = self._solver(x0=x0, p=p, lbx=problem.lbx, ubx=problem.ubx, lbg=0.0, ubg=0.0, **warm)
         status = self._solver.stats().get("return_status", "")
         self.statuses[status] = self.statuses.get(status, 0) + 1
         cost = float(sol["f"])
         z = problem.inputs(sol["x"])
         violation = float(np.max(np.abs(np.asarray(sol["g"]))))
-        usable = status in _GOOD_STATUS or (status.startswith("Maximum") and violation < _FEASIBLE)
+        usable = status in _GOOD_STATUS or violation < _FEASIBLE  # a stopped solve whose plan obeys the model
         if not (usable and math.isfinite(cost) and np.all(np.isfinite(z))):
             return None
         plan = np.clip(to_u(z).T, self.u_low, self.u_high)
-        return cost, plan
+        return cost, plan, (np.asarray(sol["lam_x"]).ravel(), np.asarray(sol["lam_g"]).ravel())
 
     def _plan_step(self, state: np.ndarray, ref: np.ndarray, vref: np.ndarray) -> np.ndarray:
         """Solve from the shifted last plan (or fresh guesses if there is none or it fails); the first input."""
         start = time.perf_counter()
-        best = None
+        budget = self.settings.step_budget
+        best, solves = None, 0
+        a_max = FinInputs(*self.u_high).amplitude_right
         try:
             if self.plan is not None:
-                shifted = np.vstack([self.plan[self._plan_age + 1:], np.repeat(self.plan[-1:], self._plan_age + 1, 0)])
-                best = self._solve(state, ref, vref, shifted.T)
-            a_max = FinInputs(*self.u_high).amplitude_right
-            idle = best is not None and float(np.mean(best[1][:, AMPLITUDES])) < self.settings.idle_amplitude * a_max
-            if best is None or idle:  # no plan, or a plan to stop: often a local minimum; try turning both ways
-                for guess in self._fresh_guesses():
-                    result = self._solve(state, ref, vref, guess)
-                    if result is not None and (best is None or result[0] < best[0]):
-                        best = result
+                age = self._plan_age + 1
+                shifted = np.vstack([self.plan[age:], np.repeat(self.plan[-1:], age, 0)])
+                best = self._solve(state, ref, vref, shifted.T, self._shifted_duals(age))
+                solves = 1
+            guesses = self._fresh_guesses()
+            # No plan, or a plan to stop (often a local minimum when every way to the target first
+            # leads away from it): also solve from fresh guesses (straight, turn left, turn right),
+            # taken in turn over the control steps, at most max_solves solves per step.
+            while solves < self.settings.max_solves and time.perf_counter() - start < budget and (
+                    best is None or float(np.mean(best[1][:, AMPLITUDES])) < self.settings.idle_amplitude * a_max):
+                result = self._solve(state, ref, vref, guesses[self._next_guess % len(guesses)])
+                self._next_guess += 1
+                solves += 1
+                if result is not None and (best is None or result[0] < best[0]):
+                    best = result
         except Exception:  # noqa: BLE001 - a failed solve must never stop the fish controller
             best = None
-        self.solve_times.append(time.perf_counter() - start)
+        elapsed = time.perf_counter() - start
+        self.solve_times.append(elapsed)
+        if elapsed > budget:  # too late for this control period: the command must not wait for it
+            self.late += 1
+            best = None
         if best is None:
             self.failures += 1
             return self._fallback()
-        self.plan = best[1]
+        self.plan, self._duals = best[1], best[2]
         self._plan_age = 0
         return self.plan[0].copy()
+
+    def _shifted_duals(self, age: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The last good solve's multipliers, the state constraints' shifted by ``age`` intervals."""
+        if self._duals is None:
+            return None
+        lam_x, lam_g = self._duals
+        shift = STATE_SIZE * age
+        lam_g = np.concatenate([lam_g[shift:], np.tile(lam_g[-STATE_SIZE:], age)]) if shift < lam_g.size else lam_g
+        return lam_x, lam_g
 
     def _fallback(self) -> np.ndarray:
         """Next step of the last good plan, or the rest command once it is used up."""

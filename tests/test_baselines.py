@@ -6,6 +6,7 @@ import pytest
 
 import pectoral_gym  # noqa: F401  (registers the env ids)
 from agents.baselines import FinMap, HandController, RandomController, make_baseline
+from agents.nmpc_problem import to_z
 from agents.policy import Controller
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.models import FullModel
@@ -162,3 +163,63 @@ def test_nmpc_rejects_bad_settings():
         make_baseline("nmpc", CONFIG, velocity="guess")
     with pytest.raises(ValueError, match="horizon"):
         make_baseline("nmpc", CONFIG, horizon=0)
+    with pytest.raises(ValueError, match="blocks"):
+        make_baseline("nmpc", CONFIG, horizon=10, blocks=(1, 2, 3))
+    with pytest.raises(ValueError, match="solver"):
+        make_baseline("nmpc", CONFIG, solver="simplex")
+    with pytest.raises(ValueError, match="step_budget"):
+        make_baseline("nmpc", CONFIG, step_budget=0.0)
+
+
+def test_nmpc_plan_holds_each_block_and_obeys_the_model(nmpc, monkeypatch):
+    """A solve's plan is constant within each move block, and its states are the model's rollout of it."""
+    env = gym.make("PectoralFish-Averaged-v0")
+    obs = _episode_with_goal_ahead(env)
+    nmpc.reset()
+    recorded, solver = [], nmpc._solver
+
+    def recording(**kwargs):
+        recorded.append(solver(**kwargs))
+        return recorded[-1]
+
+    recording.stats = solver.stats
+    monkeypatch.setattr(nmpc, "_solver", recording)
+    state, ref, vref = nmpc._estimate(np.asarray(obs, dtype=np.float64))
+    result = nmpc._solve(state, ref, vref, nmpc._fresh_guesses()[0])
+    assert result is not None
+    _, plan, _ = result
+    problem = nmpc.problem
+    assert plan.shape == (problem.horizon, 4) and problem.n_blocks < problem.horizon
+    for b in range(problem.n_blocks):
+        rows = plan[problem.block_of == b]
+        np.testing.assert_allclose(rows, np.repeat(rows[:1], len(rows), 0))
+    # the planned states obey the model: they are its rollout under the plan (multiple-shooting gaps closed)
+    x_plan = np.asarray(recorded[-1]["x"]).ravel()[4 * problem.n_blocks:].reshape((6, problem.horizon + 1), order="F")
+    x_roll = np.asarray(problem.rollout(state, to_z(plan.T), to_z(nmpc._u_prev), nmpc.gains))
+    np.testing.assert_allclose(x_plan, x_roll, atol=1e-3)
+    assert np.hypot(*(x_roll[:2, -1] - state[:2])) > 0.05  # the plan swims towards the goal ahead
+
+
+def test_nmpc_uses_the_fallback_when_the_step_runs_late():
+    """A step whose solves end after the step budget is not applied: the safe fallback is."""
+    late = make_baseline("nmpc", CONFIG, step_budget=1e-9)  # every solve takes longer than 1 ns
+    env = gym.make("PectoralFish-Averaged-v0")
+    obs = _episode_with_goal_ahead(env)
+    late.reset()
+    action = late.act(obs)
+    assert late.late == 1 and late.failures == 1 and late.plan is None
+    beats = _decode(CONFIG, action)
+    np.testing.assert_allclose(beats[:, 1], CONFIG.amplitude_range[0])  # no plan yet: both fins at rest
+
+
+@pytest.mark.slow  # IPOPT solves to convergence: ~0.3 s per step
+def test_nmpc_with_ipopt_reaches_a_near_goal_on_the_averaged_env():
+    controller = make_baseline("nmpc", CONFIG, solver="ipopt", max_iter=60, blocks=None, step_budget=5.0)
+    env = gym.make("PectoralFish-Averaged-v0")
+    obs = _episode_with_goal_ahead(env)
+    controller.reset()
+    for _ in range(30):
+        obs, _, terminated, truncated, info = env.step(controller.act(obs))
+        if terminated or truncated:
+            break
+    assert info["is_success"]
