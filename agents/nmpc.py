@@ -21,7 +21,6 @@ import numpy as np
 
 from agents.fin_map import FinMap
 from agents.nmpc_problem import (
-    AMPLITUDES,
     GAIN_THRUST,
     GAIN_YAW,
     FinInputs,
@@ -108,7 +107,6 @@ class NMPCController:
         self._prev_obs: np.ndarray | None = None
         self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._duals: tuple[np.ndarray, np.ndarray] | None = None  # lam_x, lam_g of the last good solve
-        self._next_guess = 0  # the fresh guess to try next
         self.gains = np.ones(2)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
@@ -181,11 +179,32 @@ class NMPCController:
             self.gains[GAIN_THRUST] = float(np.clip(self.gains[GAIN_THRUST] * ratio ** (2 * s.adapt_rate), low, high))
 
     def _fresh_guesses(self) -> list[np.ndarray]:
-        """Input sequences ``(4, horizon)`` to start from without a plan: straight, turn left, turn right."""
+        """Input sequences ``(4, horizon)`` to screen: straight; turn left/right (held, or for 2 s then straight)."""
         a_high, mid = FinInputs(*self.u_high).amplitude_right, self.bias_mid
-        strong, weak = 0.6 * a_high, 0.15 * a_high
-        pairs = ((strong, strong), (strong, weak), (weak, strong))  # the right fin stronger turns left
-        return [np.tile(np.array(FinInputs(ar, al, mid, mid))[:, None], (1, self._n)) for ar, al in pairs]
+        strong, weak, tight, least = 0.6 * a_high, 0.15 * a_high, 0.4 * a_high, 0.05 * a_high
+        turn_steps = min(self._n, max(1, int(round(2.0 / self.dt))))
+        straight = np.array(FinInputs(strong, strong, mid, mid))
+        guesses = [np.tile(straight[:, None], (1, self._n))]
+        for pair in ((strong, weak), (weak, strong), (tight, least), (least, tight)):  # right fin stronger: left
+            turn = np.array(FinInputs(*pair, mid, mid))
+            guesses.append(np.tile(turn[:, None], (1, self._n)))
+            then = np.tile(straight[:, None], (1, self._n))
+            then[:, :turn_steps] = turn[:, None]
+            guesses.append(then)
+        return guesses
+
+    def _screen(self, state: np.ndarray, ref: np.ndarray, vref: np.ndarray,
+                guesses: list[np.ndarray]) -> list[int]:
+        """Indices of ``guesses`` ``(4, horizon)`` by increasing cost of their model rollouts (no solve)."""
+        problem, z_prev = self.problem, to_z(self._u_prev)
+        p = problem.parameters(state, ref, vref, z_prev, self.gains)
+        costs = []
+        for u in guesses:
+            z = problem.blocked(np.clip(to_z(u), self.z_low[:, None], self.z_high[:, None]))
+            x = np.asarray(problem.rollout(state, z[:, problem.block_of], z_prev, self.gains))
+            c = float(problem.cost(pack_decision(z, x), p))
+            costs.append(c if math.isfinite(c) else math.inf)
+        return sorted(range(len(guesses)), key=costs.__getitem__)
 
     def _solve(self, state: np.ndarray, ref: np.ndarray, vref: np.ndarray, u_guess: np.ndarray,
                duals: tuple[np.ndarray, np.ndarray] | None = None):
@@ -217,23 +236,19 @@ class NMPCController:
         """Solve from the shifted last plan (or fresh guesses if there is none or it fails); the first input."""
         start = time.perf_counter()
         budget = self.settings.step_budget
-        best, solves = None, 0
-        a_max = FinInputs(*self.u_high).amplitude_right
+        best = None
         try:
-            if self.plan is not None:
+            guesses, duals = self._fresh_guesses(), [None] * len(self._fresh_guesses())
+            if self.plan is not None:  # the shifted last plan, warm-started with its multipliers
                 age = self._plan_age + 1
-                shifted = np.vstack([self.plan[age:], np.repeat(self.plan[-1:], age, 0)])
-                best = self._solve(state, ref, vref, shifted.T, self._shifted_duals(age))
-                solves = 1
-            guesses = self._fresh_guesses()
-            # No plan, or a plan to stop (often a local minimum when every way to the target first
-            # leads away from it): also solve from fresh guesses (straight, turn left, turn right),
-            # taken in turn over the control steps, at most max_solves solves per step.
-            while solves < self.settings.max_solves and time.perf_counter() - start < budget and (
-                    best is None or float(np.mean(best[1][:, AMPLITUDES])) < self.settings.idle_amplitude * a_max):
-                result = self._solve(state, ref, vref, guesses[self._next_guess % len(guesses)])
-                self._next_guess += 1
+                guesses.insert(0, np.vstack([self.plan[age:], np.repeat(self.plan[-1:], age, 0)]).T)
+                duals.insert(0, self._shifted_duals(age))
+            solves = 0
+            for k in self._screen(state, ref, vref, guesses):  # the next candidate only if a solve failed
+                if solves >= self.settings.max_solves + (best is None) or time.perf_counter() - start > budget:
+                    break
                 solves += 1
+                result = self._solve(state, ref, vref, guesses[k], duals[k])
                 if result is not None and (best is None or result[0] < best[0]):
                     best = result
         except Exception:  # noqa: BLE001 - a failed solve must never stop the fish controller

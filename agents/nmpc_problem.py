@@ -88,11 +88,10 @@ class NMPCSettings:
         energy_weight: Weight of the fin work [1/J]; ``None``: the env's ``energy_weight``.
         smoothing: Speed scale [m/s] smoothing ``|V|``, ``alpha`` and ``|omega|`` at rest
             (:func:`pectoral_gym.symbolic.body_accel_sx`).
-        idle_amplitude: A plan whose mean amplitude is below this fraction of the largest one is
-            compared with solves from fresh guesses (straight, turn left, turn right): stopping is a
-            common local minimum when every way to the target first leads away from it.
-        max_solves: Solves per control step at most (the warm-started one and fresh guesses, which
-            are taken in turn over the steps): bounds the step's solve time.
+        max_solves: Solves per control step at most. Each step first screens candidate plans (the
+            shifted last plan; swim straight; turn left or right, held or for 2 s then straight) by
+            the cost of their model rollouts, then solves from the cheapest ``max_solves`` of them: a
+            discrete choice of the turn direction that a few SQP iterations from one guess cannot make.
         adapt_rate: Rate of the online correction of the thrust and yaw-moment gains from the measured
             motion (0: no adaptation). The averaged model with placeholder or imperfect K, or a
             randomised fish, turns and swims at other rates than predicted; the gains absorb that.
@@ -132,10 +131,9 @@ class NMPCSettings:
     wall_margin: float = 0.03
     energy_weight: float | None = None
     smoothing: float = 1e-3
-    idle_amplitude: float = 0.2
     adapt_rate: float = 0.3
     gain_bounds: tuple[float, float] = (0.1, 3.0)
-    max_solves: int = 2
+    max_solves: int = 1
     blocks: tuple[int, ...] | None = (1, 1, 2, 2, 4)
     solver: str = "sqp"
     max_iter: int = 8
@@ -258,6 +256,7 @@ class NMPCProblem:
         solver: The CasADi ``nlpsol`` (IPOPT or SQP, :attr:`NMPCSettings.solver`).
         rollout: ``(x0, Z, z_prev, gain) -> X (6, horizon + 1)``, the model's trajectory under the
             per-interval inputs ``Z (4, horizon)``.
+        cost: ``(decision, parameters) -> cost``, the NLP's objective (screens candidate plans).
         interval: ``(x0, z_applied, z_prev, gain) -> (end state, mean body velocities)`` over one
             control period (trapezoid over the RK4 steps).
         lbx, ubx: Bounds of the decision vector.
@@ -361,6 +360,7 @@ class NMPCProblem:
         self.lbx = pack_decision(np.tile(z_low, nb), -x_bound)
         self.ubx = pack_decision(np.tile(z_high, nb), x_bound)
         self.rollout = ca.Function("rollout", [p.x0, Z_roll, p.z_prev, p.gain], [ca.horzcat(*x_roll)])
+        self.cost = ca.Function("cost", [nlp["x"], nlp["p"]], [cost])
         # One interval from x0 under the applied command: end state and mean body velocities (trapezoid).
         z_applied = ca.SX.sym("z_applied", _N_U)
         xk, f_applied = p.x0, gains * forcing(z_applied)
