@@ -105,6 +105,8 @@ class NMPCSettings:
             to be convex, warm-started with the shifted primal and dual solution: with a small
             ``max_iter`` this is the real-time-iteration scheme).
         max_iter: Iteration limit per solve (IPOPT or SQP iterations).
+        hessian: SQP only: ``"exact"`` (Hessian of the Lagrangian) or ``"cost"`` (of the objective
+            alone, without the model's curvature: far cheaper, slower to converge).
         max_cpu_time: IPOPT time limit per solve [s].
         step_budget: Wall time allowed for the whole control step [s]: no further solve starts after
             it, and a step whose solves end later than it uses the fallback (a late plan is not applied).
@@ -137,6 +139,7 @@ class NMPCSettings:
     blocks: tuple[int, ...] | None = (1, 1, 2, 2, 4)
     solver: str = "sqp"
     max_iter: int = 8
+    hessian: str = "cost"
     max_cpu_time: float = 0.35
     step_budget: float = 0.25
     velocity: str = "obs"
@@ -153,6 +156,8 @@ class NMPCSettings:
             raise ValueError(f"max_cpu_time must be > 0 s, got {self.max_cpu_time!r}")
         if not self.step_budget > 0:
             raise ValueError(f"step_budget must be > 0 s, got {self.step_budget!r}")
+        if self.hessian not in ("exact", "cost"):
+            raise ValueError(f"hessian must be 'exact' or 'cost', got {self.hessian!r}")
         if self.solver not in _SOLVERS:
             raise ValueError(f"solver must be one of {_SOLVERS}, got {self.solver!r}")
         if self.blocks is not None and (min(self.blocks, default=0) < 1 or sum(self.blocks) != int(self.horizon)):
@@ -215,10 +220,16 @@ def _nlp_solver(nlp: dict[str, Any], s: NMPCSettings) -> ca.Function:
     common = {"print_time": False, "error_on_fail": False, "show_eval_warnings": False}  # NaN at rejected trial
     if s.solver == "sqp":  # points is handled by the line search
         quiet = {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False}
+        extra = {}
+        if s.hessian == "cost":  # the objective's Hessian only: no curvature of the model (Gauss-Newton-like)
+            x, lam_f, lam_g = nlp["x"], ca.SX.sym("lam_f"), ca.SX.sym("lam_g", nlp["g"].shape[0])
+            hess, _ = ca.hessian(nlp["f"], x)
+            extra["hess_lag"] = ca.Function("nlp_hess_l", [x, nlp["p"], lam_f, lam_g], [lam_f * hess],
+                                            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
         return ca.nlpsol("nmpc", "sqpmethod", nlp, {
             **common, "qpsol": "qrqp", "qpsol_options": quiet, "max_iter": int(s.max_iter),
             "convexify_strategy": "regularize", "print_header": False, "print_iteration": False,
-            "print_status": False, "tol_pr": 1e-6, "tol_du": 1e-4})
+            "print_status": False, "tol_pr": 1e-6, "tol_du": 1e-4, **extra})
     return ca.nlpsol("nmpc", "ipopt", nlp, {**common, "ipopt": {
         "print_level": 0, "sb": "yes", "max_iter": int(s.max_iter), "max_cpu_time": float(s.max_cpu_time),
         "tol": 1e-5, "acceptable_tol": 1e-3, "acceptable_iter": 5, "mu_strategy": "adaptive"}})
