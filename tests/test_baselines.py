@@ -228,3 +228,16 @@ def test_nmpc_with_ipopt_reaches_a_near_goal_on_the_averaged_env():
         if terminated or truncated:
             break
     assert info["is_success"]
+
+
+def test_nmpc_compare_runs_variants_on_the_same_episodes():
+    from agents.nmpc_compare import _seeds, compare
+
+    assert _seeds("3-5") == [3, 4, 5] and _seeds("7,9") == [7, 9]
+    results = compare({"short": {"horizon": 2, "blocks": None}, "blocked": {"horizon": 3, "blocks": (1, 2)}},
+                      [0], env="averaged", max_steps=2)
+    assert set(results) == {"short", "blocked"}
+    for r in results.values():
+        assert r["episodes"] == 1 and 0.0 <= r["success"] <= 1.0 and r["p50_ms"] <= r["p95_ms"] <= r["max_ms"]
+    with pytest.raises(ValueError, match="env"):
+        compare({"a": {}}, [0], env="moon")
