@@ -1,14 +1,22 @@
-"""NMPC baseline: plans fin-beat parameters on the averaged model with CasADi and IPOPT.
+"""NMPC baseline: plans fin-beat parameters on the averaged model with CasADi, in real time.
 
-The problem (:class:`agents.nmpc_problem.NMPCProblem`: model, inputs, latching delay, cost) is built
-once per controller (:class:`NMPCController`), parametric in the current state, the target and its
-velocity, and the fin command still being latched; each control period it is solved again,
-warm-started from the previous plan shifted by one interval.
+The problem (:class:`agents.nmpc_problem.NMPCProblem`: model, inputs, move blocks, latching delay,
+cost) is built once per controller (:class:`NMPCController`), parametric in the current state, the
+target and its velocity, and the fin command still being latched. Each control period:
 
-Robustness. A solve that fails (IPOPT status, exception, non-finite numbers) is not used: the
-controller falls back to the rest of the last good plan, and when that is used up to a safe
-command (both fins at rest: the fish glides to a stop). :attr:`NMPCController.solve_times` and
-:attr:`NMPCController.failures` record what happened.
+1. screening: candidate plans (the last plan shifted by one interval; swim straight; turn left or
+   right, held or for 2 s then straight) are rolled out on the model and ranked by the NLP's cost:
+   a discrete choice of the turn direction, which a few iterations from one guess cannot make;
+2. a solve from the best candidate (default: 8 SQP iterations, the real-time iteration; the shifted
+   plan is warm-started with its shifted multipliers);
+3. the solution's inputs are rolled out again and kept only if they cost no more than the candidate
+   (an iteration budget may leave the multiple-shooting gaps open; the rollout always obeys the model).
+
+Robustness. A step whose solves fail (exception, non-finite numbers) or end after
+:attr:`NMPCSettings.step_budget` is not applied: the controller falls back to the rest of the last
+good plan, and when that is used up to a safe command (both fins at rest: the fish glides to a
+stop). :attr:`NMPCController.solve_times`, :attr:`NMPCController.failures` and
+:attr:`NMPCController.late` record what happened.
 """
 
 from __future__ import annotations
@@ -225,7 +233,7 @@ class NMPCController:
         return guess_cost, np.clip(to_u(problem.inputs(x0)).T, self.u_low, self.u_high), None
 
     def _plan_step(self, state: np.ndarray, ref: np.ndarray, vref: np.ndarray) -> np.ndarray:
-        """Solve from the shifted last plan (or fresh guesses if there is none or it fails); the first input."""
+        """Screen the candidates, solve from the best (the next one if that fails); the plan's first input."""
         start = time.perf_counter()
         budget = self.settings.step_budget
         best = None
