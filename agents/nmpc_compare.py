@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 from typing import Any
 
 import numpy as np
@@ -37,7 +38,9 @@ def compare(variants: dict[str, dict[str, Any]], seeds: list[int], env: str = "f
         max_steps: Episode truncation.
 
     Returns:
-        Name -> ``{"success", "time_to_goal_s", "p50_ms", "p95_ms", "max_ms", "failures", "late"}``.
+        Name -> ``{"success", "time_to_goal_s", "mean_distance_cm", "p50_ms", "p95_ms", "max_ms", "failures",
+        "late"}``; ``mean_distance_cm``: the distance to the target averaged over each episode's steps
+        (``track``: the tracking error), then over episodes.
     """
     import gymnasium as gym
 
@@ -54,25 +57,27 @@ def compare(variants: dict[str, dict[str, Any]], seeds: list[int], env: str = "f
     environment = gym.make(env_id, max_episode_steps=int(max_steps), **kwargs)
     config = environment.unwrapped.config
     controllers = {name: make_baseline("nmpc", config, **settings) for name, settings in variants.items()}
-    outcomes: dict[str, list[tuple[bool, int]]] = {name: [] for name in controllers}
+    outcomes: dict[str, list[tuple[bool, int, float]]] = {name: [] for name in controllers}
     for seed in seeds:
         for name, controller in controllers.items():
             obs, _ = environment.reset(seed=int(seed))
             controller.reset()
-            steps, done, info = 0, False, {}
+            steps, done, info, distance = 0, False, {}, 0.0
             while not done:
                 obs, _, terminated, truncated, info = environment.step(controller.act(obs))
                 steps += 1
+                distance += float(info.get("distance", math.nan))
                 done = terminated or truncated
-            outcomes[name].append((bool(info.get("is_success", False)), steps))
+            outcomes[name].append((bool(info.get("is_success", False)), steps, distance / steps))
     environment.close()
     results = {}
     for name, controller in controllers.items():
         times = np.asarray(controller.solve_times) * 1e3
-        reached = [steps for ok, steps in outcomes[name] if ok]
+        reached = [steps for ok, steps, _ in outcomes[name] if ok]
         results[name] = {
             "episodes": len(seeds), "success": len(reached) / len(seeds),
             "time_to_goal_s": float(np.mean(reached) * config.control_period) if reached else None,
+            "mean_distance_cm": float(np.mean([d for *_, d in outcomes[name]]) * 100.0),
             "p50_ms": float(np.percentile(times, 50)), "p95_ms": float(np.percentile(times, 95)),
             "max_ms": float(times.max()), "failures": int(controller.failures), "late": int(controller.late),
         }
@@ -97,11 +102,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--max-steps", type=int, default=240)
     args = parser.parse_args(argv)
     results = compare(json.loads(args.variants), _seeds(args.seeds), args.env, args.task, args.max_steps)
-    print("| variant | episodes | success | time to goal [s] | p50 [ms] | p95 [ms] | max [ms] | failures | late |")
-    print("|---|---|---|---|---|---|---|---|---|")
+    print("| variant | episodes | success | time to goal [s] | mean distance [cm] | p50 [ms] | p95 [ms] | max [ms] "
+          "| failures | late |")
+    print("|---|---|---|---|---|---|---|---|---|---|")
     for name, r in results.items():
         ttg = "-" if r["time_to_goal_s"] is None else f"{r['time_to_goal_s']:.1f}"
-        print(f"| {name} | {r['episodes']} | {r['success']:.2f} | {ttg} | {r['p50_ms']:.0f} | {r['p95_ms']:.0f} | "
+        print(f"| {name} | {r['episodes']} | {r['success']:.2f} | {ttg} | {r['mean_distance_cm']:.1f} | "
+              f"{r['p50_ms']:.0f} | {r['p95_ms']:.0f} | "
               f"{r['max_ms']:.0f} | {r['failures']} | {r['late']} |")
     return 0
 
