@@ -88,9 +88,9 @@ class HandController:
     name = "hand"
 
     def __init__(self, config: EnvConfig, heading_gain: float = 1.5, rate_gain: float = 1.0,
-                 speed_gain: float = 0.6, bias_gain: float = 0.0, bias_max: float = math.radians(15.0),
+                 speed_gain: float = 0.3, bias_gain: float = 0.0, bias_max: float = math.radians(15.0),
                  lookahead: float = 2.0, turn_level: float = 0.12, turn_radius: float = 0.25,
-                 alignment_power: float = 4.0):
+                 alignment_power: float = 8.0):
         self.config = config
         self.fins = FinMap(config)
         self.heading_gain = float(heading_gain)

@@ -97,13 +97,14 @@ def _baseline_factory(name: str, env_id: str, env_kwargs: dict[str, Any], settin
     return lambda: make_baseline(name, config)
 
 
-def _nmpc_stats(times: list[float], failures: int) -> dict[str, Any] | None:
+def _nmpc_stats(times: list[float], failures: int, late: int = 0) -> dict[str, Any] | None:
+    """Wall time per control step (all solves of the step): mean, p50, p95, max [ms]; failed and late steps."""
     times = np.asarray(times, dtype=float)
     if times.size == 0:
         return None
     return {"solves": int(times.size), "mean_ms": float(times.mean() * 1e3),
-            "p95_ms": float(np.percentile(times, 95) * 1e3), "max_ms": float(times.max() * 1e3),
-            "failures": int(failures)}
+            "p50_ms": float(np.percentile(times, 50) * 1e3), "p95_ms": float(np.percentile(times, 95) * 1e3),
+            "max_ms": float(times.max() * 1e3), "failures": int(failures), "late": int(late)}
 
 
 def _cell(result: Any, label: str, solver: dict[str, Any] | None) -> dict[str, Any]:
@@ -203,6 +204,7 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
                     controller = policy if policy is not None else _baseline_factory(name, env_id, env_kwargs,
                                                                                     settings, built)
                     solves, failures = len(getattr(controller, "solve_times", [])), getattr(controller, "failures", 0)
+                    late = getattr(controller, "late", 0)
                     result = evaluate(controller, env_id, n_episodes=n, seed=settings.seed, env_kwargs=eval_kwargs)
                 except Exception as error:  # noqa: BLE001 - one failing cell must not lose the others
                     errors[f"{name}/{label}/{task}"] = f"{type(error).__name__}: {error}"
@@ -210,7 +212,8 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
                 result.controller = name
                 solver = None
                 if name == "nmpc":
-                    solver = _nmpc_stats(controller.solve_times[solves:], controller.failures - failures)
+                    solver = _nmpc_stats(controller.solve_times[solves:], controller.failures - failures,
+                                         controller.late - late)
                 cells.append(_cell(result, label, solver))
     env_rates = training = None
     if throughput:

@@ -49,12 +49,13 @@ def to_markdown(report: dict[str, Any]) -> str:
         lines.append("")
     solver = [c for c in report["cells"] if c.get("solver")]
     if solver:
-        lines += ["## NMPC solve times", "", "| env | task | solves | mean [ms] | p95 [ms] | max [ms] | failures |",
-                  "|---|---|---|---|---|---|---|"]
+        lines += ["## NMPC solve times", "", "| env | task | solves | mean [ms] | p50 [ms] | p95 [ms] | max [ms] "
+                  "| failures | late |", "|---|---|---|---|---|---|---|---|---|"]
         for c in solver:
             t = c["solver"]
-            lines.append(f"| {c['env']} | {c['task']} | {t['solves']} | {t['mean_ms']:.0f} | {t['p95_ms']:.0f} | "
-                         f"{t['max_ms']:.0f} | {t['failures']} |")
+            p50 = f"{t['p50_ms']:.0f}" if "p50_ms" in t else "-"  # reports written before p50 was recorded
+            lines.append(f"| {c['env']} | {c['task']} | {t['solves']} | {t['mean_ms']:.0f} | {p50} | "
+                         f"{t['p95_ms']:.0f} | {t['max_ms']:.0f} | {t['failures']} | {t.get('late', '-')} |")
         lines.append("")
     rates = report.get("env_throughput")
     training = report.get("training_throughput")

@@ -1,14 +1,22 @@
-"""NMPC baseline: plans fin-beat parameters on the averaged model with CasADi and IPOPT.
+"""NMPC baseline: plans fin-beat parameters on the averaged model with CasADi, in real time.
 
-The problem (:class:`agents.nmpc_problem.NMPCProblem`: model, inputs, latching delay, cost) is built
-once per controller (:class:`NMPCController`), parametric in the current state, the target and its
-velocity, and the fin command still being latched; each control period it is solved again,
-warm-started from the previous plan shifted by one interval.
+The problem (:class:`agents.nmpc_problem.NMPCProblem`: model, inputs, move blocks, latching delay,
+cost) is built once per controller (:class:`NMPCController`), parametric in the current state, the
+target and its velocity, and the fin command still being latched. Each control period:
 
-Robustness. A solve that fails (IPOPT status, exception, non-finite numbers) is not used: the
-controller falls back to the rest of the last good plan, and when that is used up to a safe
-command (both fins at rest: the fish glides to a stop). :attr:`NMPCController.solve_times` and
-:attr:`NMPCController.failures` record what happened.
+1. screening: candidate plans (the last plan shifted by one interval; swim straight; turn left or
+   right, held or for 2 s then straight) are rolled out on the model and ranked by the NLP's cost:
+   a discrete choice of the turn direction, which a few iterations from one guess cannot make;
+2. a solve from the best candidate (default: 8 SQP iterations, the real-time iteration; the shifted
+   plan is warm-started with its shifted multipliers);
+3. the solution's inputs are rolled out again and kept only if they cost no more than the candidate
+   (an iteration budget may leave the multiple-shooting gaps open; the rollout always obeys the model).
+
+Robustness. A step whose solves fail (exception, non-finite numbers) or end after
+:attr:`NMPCSettings.step_budget` is not applied: the controller falls back to the rest of the last
+good plan, and when that is used up to a safe command (both fins at rest: the fish glides to a
+stop). :attr:`NMPCController.solve_times`, :attr:`NMPCController.failures` and
+:attr:`NMPCController.late` record what happened.
 """
 
 from __future__ import annotations
@@ -21,7 +29,6 @@ import numpy as np
 
 from agents.fin_map import FinMap
 from agents.nmpc_problem import (
-    AMPLITUDES,
     GAIN_THRUST,
     GAIN_YAW,
     FinInputs,
@@ -35,14 +42,10 @@ from agents.nmpc_problem import (
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_VELOCITY, decode
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.symbolic import STATE_POSITION, STATE_PSI, STATE_VELOCITY
+from pectoral_gym.symbolic import STATE_POSITION, STATE_PSI, STATE_SIZE, STATE_VELOCITY
 
 __all__ = ["NMPCController", "NMPCSettings"]
 
-_GOOD_STATUS = ("Solve_Succeeded", "Solved_To_Acceptable_Level")
-# A solve stopped by the iteration or time limit is still used when its trajectory obeys the model to
-# within this (m, rad, m/s): a feasible if suboptimal plan, the usual real-time NMPC compromise.
-_FEASIBLE = 1e-3
 
 
 class NMPCController:
@@ -58,8 +61,10 @@ class NMPCController:
 
     Attributes:
         solve_times: Wall time of every solve [s].
-        failures: Number of control steps whose solves all failed (a fallback command was used).
-        statuses: IPOPT return status -> count, over all solves.
+        failures: Number of control steps whose solves all failed or ended after
+            :attr:`NMPCSettings.step_budget` (a fallback command was used).
+        late: Number of those steps whose solves ended after the step budget.
+        statuses: Solver return status -> count, over all solves.
         plan: The last good plan, ``(horizon, 4)``: amplitude right/left, bias right/left [rad].
     """
 
@@ -93,6 +98,7 @@ class NMPCController:
         self.n_delay_steps = self.problem.n_delay_steps
         self.solve_times: list[float] = []
         self.failures = 0
+        self.late = 0
         self.statuses: dict[str, int] = {}
         self.reset()
 
@@ -104,6 +110,7 @@ class NMPCController:
         self._u_prev = self.u_rest.copy()
         self._prev_obs: np.ndarray | None = None
         self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self._duals: tuple[np.ndarray, np.ndarray] | None = None  # lam_x, lam_g of the last good solve
         self.gains = np.ones(2)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
@@ -176,56 +183,98 @@ class NMPCController:
             self.gains[GAIN_THRUST] = float(np.clip(self.gains[GAIN_THRUST] * ratio ** (2 * s.adapt_rate), low, high))
 
     def _fresh_guesses(self) -> list[np.ndarray]:
-        """Input sequences ``(4, horizon)`` to start from without a plan: straight, turn left, turn right."""
+        """Input sequences ``(4, horizon)`` to screen: straight; turn left/right (held, or for 2 s then straight)."""
         a_high, mid = FinInputs(*self.u_high).amplitude_right, self.bias_mid
-        strong, weak = 0.6 * a_high, 0.15 * a_high
-        pairs = ((strong, strong), (strong, weak), (weak, strong))  # the right fin stronger turns left
-        return [np.tile(np.array(FinInputs(ar, al, mid, mid))[:, None], (1, self._n)) for ar, al in pairs]
+        strong, weak, tight, least = 0.6 * a_high, 0.15 * a_high, 0.4 * a_high, 0.05 * a_high
+        turn_steps = min(self._n, max(1, int(round(2.0 / self.dt))))
+        straight = np.array(FinInputs(strong, strong, mid, mid))
+        guesses = [np.tile(straight[:, None], (1, self._n))]
+        for pair in ((strong, weak), (weak, strong), (tight, least), (least, tight)):  # right fin stronger: left
+            turn = np.array(FinInputs(*pair, mid, mid))
+            guesses.append(np.tile(turn[:, None], (1, self._n)))
+            then = np.tile(straight[:, None], (1, self._n))
+            then[:, :turn_steps] = turn[:, None]
+            guesses.append(then)
+        return guesses
 
-    def _solve(self, state: np.ndarray, ref: np.ndarray, vref: np.ndarray, u_guess: np.ndarray):
-        """One IPOPT solve from ``u_guess`` ``(4, horizon)``; ``(cost, plan (horizon, 4))`` or ``None`` if unusable."""
+    def _rollout_cost(self, state: np.ndarray, p: np.ndarray, u: np.ndarray) -> tuple[float, np.ndarray]:
+        """Cost of the model's rollout under the inputs ``u (4, horizon)`` (clipped, blocked), and those ``z``."""
         problem = self.problem
-        z_prev = to_z(self._u_prev)
-        z_guess = np.clip(to_z(u_guess), self.z_low[:, None], self.z_high[:, None])
-        x_guess = np.asarray(problem.rollout(state, z_guess, z_prev, self.gains))
-        x0 = np.nan_to_num(pack_decision(z_guess, x_guess))
-        p = problem.parameters(state, ref, vref, z_prev, self.gains)
-        sol = self._solver(x0=x0, p=p, lbx=problem.lbx, ubx=problem.ubx, lbg=0.0, ubg=0.0)
+        z = problem.blocked(np.clip(to_z(u), self.z_low[:, None], self.z_high[:, None]))
+        x = np.asarray(problem.rollout(state, z[:, problem.block_of], to_z(self._u_prev), self.gains))
+        cost = float(problem.cost(np.nan_to_num(pack_decision(z, x)), p)) if np.all(np.isfinite(x)) else math.inf
+        return (cost if math.isfinite(cost) else math.inf), np.nan_to_num(pack_decision(z, x))
+
+    def _solve(self, state: np.ndarray, p: np.ndarray, u_guess: np.ndarray,
+               duals: tuple[np.ndarray, np.ndarray] | None = None):
+        """One solve from ``u_guess`` ``(4, horizon)`` (and multipliers ``duals``).
+
+        The solve starts feasible (its state guess is the model's rollout under the guess). Its inputs
+        are simulated again on the model, and the rollout's cost decides: the solution is used if it
+        costs no more than the guess, else the guess itself (also a plan that obeys the model). With a
+        fixed iteration budget the solver's own states need not close the shooting gaps exactly.
+
+        Returns ``(cost, plan (horizon, 4), (lam_x, lam_g) or None)``, or ``None`` if neither is usable.
+        """
+        problem = self.problem
+        guess_cost, x0 = self._rollout_cost(state, p, u_guess)
+        warm = {} if duals is None else {"lam_x0": duals[0], "lam_g0": duals[1]}
+        sol = self._solver(x0=x0, p=p, lbx=problem.lbx, ubx=problem.ubx, lbg=0.0, ubg=0.0, **warm)
         status = self._solver.stats().get("return_status", "")
         self.statuses[status] = self.statuses.get(status, 0) + 1
-        cost = float(sol["f"])
         z = problem.inputs(sol["x"])
-        violation = float(np.max(np.abs(np.asarray(sol["g"]))))
-        usable = status in _GOOD_STATUS or (status.startswith("Maximum") and violation < _FEASIBLE)
-        if not (usable and math.isfinite(cost) and np.all(np.isfinite(z))):
+        if np.all(np.isfinite(z)):
+            plan = np.clip(to_u(z).T, self.u_low, self.u_high)
+            cost, _ = self._rollout_cost(state, p, plan.T)
+            if cost <= guess_cost:
+                return cost, plan, (np.asarray(sol["lam_x"]).ravel(), np.asarray(sol["lam_g"]).ravel())
+        if not math.isfinite(guess_cost):
             return None
-        plan = np.clip(to_u(z).T, self.u_low, self.u_high)
-        return cost, plan
+        return guess_cost, np.clip(to_u(problem.inputs(x0)).T, self.u_low, self.u_high), None
 
     def _plan_step(self, state: np.ndarray, ref: np.ndarray, vref: np.ndarray) -> np.ndarray:
-        """Solve from the shifted last plan (or fresh guesses if there is none or it fails); the first input."""
+        """Screen the candidates, solve from the best (the next one if that fails); the plan's first input."""
         start = time.perf_counter()
+        budget = self.settings.step_budget
         best = None
         try:
-            if self.plan is not None:
-                shifted = np.vstack([self.plan[self._plan_age + 1:], np.repeat(self.plan[-1:], self._plan_age + 1, 0)])
-                best = self._solve(state, ref, vref, shifted.T)
-            a_max = FinInputs(*self.u_high).amplitude_right
-            idle = best is not None and float(np.mean(best[1][:, AMPLITUDES])) < self.settings.idle_amplitude * a_max
-            if best is None or idle:  # no plan, or a plan to stop: often a local minimum; try turning both ways
-                for guess in self._fresh_guesses():
-                    result = self._solve(state, ref, vref, guess)
-                    if result is not None and (best is None or result[0] < best[0]):
-                        best = result
+            guesses, duals = self._fresh_guesses(), [None] * len(self._fresh_guesses())
+            if self.plan is not None:  # the shifted last plan, warm-started with its multipliers
+                age = self._plan_age + 1
+                guesses.insert(0, np.vstack([self.plan[age:], np.repeat(self.plan[-1:], age, 0)]).T)
+                duals.insert(0, self._shifted_duals(age))
+            p = self.problem.parameters(state, ref, vref, to_z(self._u_prev), self.gains)
+            costs = [self._rollout_cost(state, p, u)[0] for u in guesses]  # screening: rollouts, no solve
+            solves = 0
+            for k in sorted(range(len(guesses)), key=costs.__getitem__):  # the next one only if a solve failed
+                if solves >= self.settings.max_solves + (best is None) or time.perf_counter() - start > budget:
+                    break
+                solves += 1
+                result = self._solve(state, p, guesses[k], duals[k])
+                if result is not None and (best is None or result[0] < best[0]):
+                    best = result
         except Exception:  # noqa: BLE001 - a failed solve must never stop the fish controller
             best = None
-        self.solve_times.append(time.perf_counter() - start)
+        elapsed = time.perf_counter() - start
+        self.solve_times.append(elapsed)
+        if elapsed > budget:  # too late for this control period: the command must not wait for it
+            self.late += 1
+            best = None
         if best is None:
             self.failures += 1
             return self._fallback()
-        self.plan = best[1]
+        self.plan, self._duals = best[1], best[2]
         self._plan_age = 0
         return self.plan[0].copy()
+
+    def _shifted_duals(self, age: int) -> tuple[np.ndarray, np.ndarray] | None:
+        """The last good solve's multipliers, the state constraints' shifted by ``age`` intervals."""
+        if self._duals is None:
+            return None
+        lam_x, lam_g = self._duals
+        shift = STATE_SIZE * age
+        lam_g = np.concatenate([lam_g[shift:], np.tile(lam_g[-STATE_SIZE:], age)]) if shift < lam_g.size else lam_g
+        return lam_x, lam_g
 
     def _fallback(self) -> np.ndarray:
         """Next step of the last good plan, or the rest command once it is used up."""

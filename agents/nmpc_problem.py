@@ -61,6 +61,7 @@ __all__ = [
 _AMPLITUDE_FLOOR = 1e-3  # rad: keeps sqrt(gA^2) differentiable; a 0.06 deg stroke is no stroke
 # Fin forcing of one interval: force and moment on the body (f_x, f_y, tau), then the yaw-oscillation amplitude.
 _FORCE, _OSCILLATION, _FORCING_SIZE = slice(0, 3), 3, 4
+_SOLVERS = ("ipopt", "sqp")
 
 
 @dataclass(frozen=True)
@@ -87,15 +88,28 @@ class NMPCSettings:
         energy_weight: Weight of the fin work [1/J]; ``None``: the env's ``energy_weight``.
         smoothing: Speed scale [m/s] smoothing ``|V|``, ``alpha`` and ``|omega|`` at rest
             (:func:`pectoral_gym.symbolic.body_accel_sx`).
-        idle_amplitude: A plan whose mean amplitude is below this fraction of the largest one is
-            compared with solves from fresh guesses (straight, turn left, turn right): stopping is a
-            common local minimum when every way to the target first leads away from it.
+        max_solves: Solves per control step at most. Each step first screens candidate plans (the
+            shifted last plan; swim straight; turn left or right, held or for 2 s then straight) by
+            the cost of their model rollouts, then solves from the cheapest ``max_solves`` of them: a
+            discrete choice of the turn direction that a few SQP iterations from one guess cannot make.
         adapt_rate: Rate of the online correction of the thrust and yaw-moment gains from the measured
             motion (0: no adaptation). The averaged model with placeholder or imperfect K, or a
             randomised fish, turns and swims at other rates than predicted; the gains absorb that.
         gain_bounds: Bounds of the two gains.
-        max_iter: IPOPT iteration limit per solve.
+        blocks: Move blocking: the number of control intervals each planned input is held for
+            (``None``: one input per interval). ``sum(blocks)`` must equal ``horizon``. Fewer distinct
+            inputs make fewer evaluations of the forcing (the identified K's splines, most of the
+            NLP's cost) and let a long horizon stay cheap with coarse late intervals.
+        solver: ``"ipopt"`` (interior point, solved to convergence or the limits below) or ``"sqp"``
+            (CasADi's ``sqpmethod`` with the ``qrqp`` active-set QP solver, exact Hessian regularised
+            to be convex, warm-started with the shifted primal and dual solution: with a small
+            ``max_iter`` this is the real-time-iteration scheme).
+        max_iter: Iteration limit per solve (IPOPT or SQP iterations).
+        hessian: SQP only: ``"exact"`` (Hessian of the Lagrangian) or ``"cost"`` (of the objective
+            alone, without the model's curvature: far cheaper, slower to converge).
         max_cpu_time: IPOPT time limit per solve [s].
+        step_budget: Wall time allowed for the whole control step [s]: no further solve starts after
+            it, and a step whose solves end later than it uses the fallback (a late plan is not applied).
         velocity: ``"obs"``: body velocities from the observation (the envs report their means over
             the control period); ``"difference"``: mean velocities over the last control period from
             the change of pose, for observation sources that give instantaneous velocities (the full
@@ -119,23 +133,36 @@ class NMPCSettings:
     wall_margin: float = 0.03
     energy_weight: float | None = None
     smoothing: float = 1e-3
-    idle_amplitude: float = 0.2
     adapt_rate: float = 0.3
     gain_bounds: tuple[float, float] = (0.1, 3.0)
-    max_iter: int = 60
+    max_solves: int = 1
+    blocks: tuple[int, ...] | None = (1, 1, 2, 2, 4)
+    solver: str = "sqp"
+    max_iter: int = 8
+    hessian: str = "cost"
     max_cpu_time: float = 0.35
+    step_budget: float = 0.25
     velocity: str = "obs"
     observer: bool = True
 
     def __post_init__(self) -> None:
-        if int(self.horizon) < 1 or int(self.substeps) < 1 or int(self.max_iter) < 1:
-            raise ValueError("horizon, substeps and max_iter must be >= 1")
+        if min(int(self.horizon), int(self.substeps), int(self.max_iter), int(self.max_solves)) < 1:
+            raise ValueError("horizon, substeps, max_iter and max_solves must be >= 1")
         if self.velocity not in ("auto", "obs", "difference"):
             raise ValueError(f"velocity must be 'auto', 'obs' or 'difference', got {self.velocity!r}")
         if self.latch_delay is not None and not self.latch_delay >= 0:
             raise ValueError(f"latch_delay must be >= 0 s or None, got {self.latch_delay!r}")
         if not self.max_cpu_time > 0:
             raise ValueError(f"max_cpu_time must be > 0 s, got {self.max_cpu_time!r}")
+        if not self.step_budget > 0:
+            raise ValueError(f"step_budget must be > 0 s, got {self.step_budget!r}")
+        if self.hessian not in ("exact", "cost"):
+            raise ValueError(f"hessian must be 'exact' or 'cost', got {self.hessian!r}")
+        if self.solver not in _SOLVERS:
+            raise ValueError(f"solver must be one of {_SOLVERS}, got {self.solver!r}")
+        if self.blocks is not None and (min(self.blocks, default=0) < 1 or sum(self.blocks) != int(self.horizon)):
+            raise ValueError(f"blocks must be positive interval counts summing to horizon={self.horizon}, "
+                             f"got {self.blocks!r}")
 
 
 class FinInputs(NamedTuple):
@@ -188,6 +215,26 @@ def pack_decision(z: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.concatenate([np.ravel(z, order="F"), np.ravel(x, order="F")])
 
 
+def _nlp_solver(nlp: dict[str, Any], s: NMPCSettings) -> ca.Function:
+    """The CasADi ``nlpsol`` of :attr:`NMPCSettings.solver` for an SX NLP (SX functions: ``expand`` adds nothing)."""
+    common = {"print_time": False, "error_on_fail": False, "show_eval_warnings": False}  # NaN at rejected trial
+    if s.solver == "sqp":  # points is handled by the line search
+        quiet = {"print_iter": False, "print_header": False, "print_info": False, "error_on_fail": False}
+        extra = {}
+        if s.hessian == "cost":  # the objective's Hessian only: no curvature of the model (Gauss-Newton-like)
+            x, lam_f, lam_g = nlp["x"], ca.SX.sym("lam_f"), ca.SX.sym("lam_g", nlp["g"].shape[0])
+            hess, _ = ca.hessian(nlp["f"], x)
+            extra["hess_lag"] = ca.Function("nlp_hess_l", [x, nlp["p"], lam_f, lam_g], [lam_f * hess],
+                                            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"])
+        return ca.nlpsol("nmpc", "sqpmethod", nlp, {
+            **common, "qpsol": "qrqp", "qpsol_options": quiet, "max_iter": int(s.max_iter),
+            "convexify_strategy": "regularize", "print_header": False, "print_iteration": False,
+            "print_status": False, "tol_pr": 1e-6, "tol_du": 1e-4, **extra})
+    return ca.nlpsol("nmpc", "ipopt", nlp, {**common, "ipopt": {
+        "print_level": 0, "sb": "yes", "max_iter": int(s.max_iter), "max_cpu_time": float(s.max_cpu_time),
+        "tol": 1e-5, "acceptable_tol": 1e-3, "acceptable_iter": 5, "mu_strategy": "adaptive"}})
+
+
 def identified_bias_range(bias_range: tuple[float, float], scaling: ScalingFunctions | None) -> tuple[float, float]:
     """The env's bias range, narrowed to the biases the scaling functions were identified on (if known).
 
@@ -217,12 +264,16 @@ class NMPCProblem:
         z_high: Their upper bounds.
 
     Attributes:
-        solver: The CasADi ``nlpsol`` (IPOPT).
-        rollout: ``(x0, Z, z_prev, gain) -> X (6, horizon + 1)``, the model's trajectory under ``Z``.
+        solver: The CasADi ``nlpsol`` (IPOPT or SQP, :attr:`NMPCSettings.solver`).
+        rollout: ``(x0, Z, z_prev, gain) -> X (6, horizon + 1)``, the model's trajectory under the
+            per-interval inputs ``Z (4, horizon)``.
+        cost: ``(decision, parameters) -> cost``, the NLP's objective (screens candidate plans).
         interval: ``(x0, z_applied, z_prev, gain) -> (end state, mean body velocities)`` over one
             control period (trapezoid over the RK4 steps).
         lbx, ubx: Bounds of the decision vector.
         horizon: Number of control intervals.
+        block_of: ``(horizon,)`` index of the planned input (block) acting in each interval.
+        n_blocks: Number of planned inputs (columns of the decision's input part).
         n_delay_steps: RK4 steps of the first interval under the previous command.
     """
 
@@ -235,6 +286,9 @@ class NMPCProblem:
         zeta, period = fins.ratio, fins.period
         delay = s.latch_delay if s.latch_delay is not None else (zeta**2 + 1) * period / (2 * (zeta + 1) ** 2)
         n_delay = min(m, int(round(delay / h)))
+        blocks = tuple(int(b) for b in s.blocks) if s.blocks is not None else (1,) * n
+        block_of = np.repeat(np.arange(len(blocks)), blocks)
+        nb = len(blocks)
 
         # Inputs: squared amplitudes (thrust ~ gA J1(gA) ~ gA^2 / 2 has a non-zero gradient at rest in
         # gA^2, not in gA) and biases. The forcing is constant over an interval: computed once per interval.
@@ -261,20 +315,23 @@ class NMPCProblem:
         turn_radius = float(s.turn_radius)
 
         p = named_symbols(_PARAMETER_SIZES)
-        Z = ca.SX.sym("Z", _N_U, n)
+        Z = ca.SX.sym("Z", _N_U, nb)
         X = ca.SX.sym("X", STATE_SIZE, n + 1)
+        Z_roll = ca.SX.sym("Z_roll", _N_U, n)
         thrust, yaw = p.gain[GAIN_THRUST], p.gain[GAIN_YAW]
         gains = ca.vertcat(thrust, thrust, yaw, 1.0)  # on (f_x, f_y, tau); the yaw-oscillation amplitude is not scaled
         f_prev = gains * forcing(p.z_prev)
         g = [X[:, 0] - p.x0]
         x_roll = [p.x0]
         cost = 0.0
+        f_blocks = [gains * forcing(Z[:, b]) for b in range(nb)]  # once per block: the costly part
         for k in range(n):
-            f_k = gains * forcing(Z[:, k])
+            f_k, f_roll = f_blocks[block_of[k]], gains * forcing(Z_roll[:, k])
             xk, rk = X[:, k], x_roll[-1]
             for j in range(m):
-                fj = f_prev if (k == 0 and j < n_delay) else f_k
-                xk, rk = step(xk, fj), step(rk, fj)
+                delayed = k == 0 and j < n_delay
+                xk = step(xk, f_prev if delayed else f_k)
+                rk = step(rk, f_prev if delayed else f_roll)
             g.append(X[:, k + 1] - xk)
             x_roll.append(rk)
             pos, psi = X[STATE_POSITION, k + 1], X[STATE_PSI, k + 1]
@@ -292,33 +349,29 @@ class NMPCProblem:
             # distance cost over a short horizon cannot (turning first moves the fish away)
             facing = (ca.cos(psi) * error[0] + ca.sin(psi) * error[1]) / ca.sqrt(ca.sumsqr(error) + s.heading_scale**2)
             cost += s.w_heading * (1.0 - facing)
-            z_k = FinInputs(*(Z[i, k] for i in range(_N_U)))
+            b = int(block_of[k])
+            z_k = FinInputs(*(Z[i, b] for i in range(_N_U)))
             cost += energy_weight * power_per_cubed_amplitude * (
                 z_k.amplitude_right ** 1.5 + z_k.amplitude_left ** 1.5) * dt  # gA^3 = (gA^2)^1.5
-            prev = p.z_prev if k == 0 else Z[:, k - 1]
-            cost += s.w_change * ca.sumsqr((Z[:, k] - prev) / width)
+            if k == 0 or block_of[k - 1] != b:  # an input change at the start of a block
+                prev = p.z_prev if b == 0 else Z[:, b - 1]
+                cost += s.w_change * ca.sumsqr((Z[:, b] - prev) / width)
             for sign in (1.0, -1.0):  # nose, tail
                 px = X[0, k + 1] + sign * half * ca.cos(psi)
                 py = X[1, k + 1] + sign * half * ca.sin(psi)
                 for gap in (px, TANK_LENGTH - px, py, TANK_WIDTH - py):
                     cost += s.w_wall * ca.fmax(0.0, s.wall_margin - gap) ** 2
         nlp = {"x": ca.vertcat(ca.vec(Z), ca.vec(X)), "f": cost, "g": ca.vertcat(*g), "p": ca.vertcat(*p)}
-        options = {
-            "print_time": False,
-            "error_on_fail": False,
-            "show_eval_warnings": False,  # NaN at rejected trial points is handled by IPOPT's line search
-            "ipopt": {
-                "print_level": 0, "sb": "yes", "max_iter": int(s.max_iter), "max_cpu_time": float(s.max_cpu_time),
-                "tol": 1e-5, "acceptable_tol": 1e-3, "acceptable_iter": 5, "mu_strategy": "adaptive",
-            },
-        }
-        self.solver = ca.nlpsol("nmpc", "ipopt", nlp, options)
+        self.solver = _nlp_solver(nlp, s)
         self.horizon = n
+        self.block_of = block_of
+        self.n_blocks = nb
         # State bounds keep trial points of the solver where RK4 stays finite (physical values are far inside).
         x_bound = np.tile([np.inf, np.inf, np.inf, 1.0, 1.0, 3.0], n + 1)
-        self.lbx = pack_decision(np.tile(z_low, n), -x_bound)
-        self.ubx = pack_decision(np.tile(z_high, n), x_bound)
-        self.rollout = ca.Function("rollout", [p.x0, Z, p.z_prev, p.gain], [ca.horzcat(*x_roll)])
+        self.lbx = pack_decision(np.tile(z_low, nb), -x_bound)
+        self.ubx = pack_decision(np.tile(z_high, nb), x_bound)
+        self.rollout = ca.Function("rollout", [p.x0, Z_roll, p.z_prev, p.gain], [ca.horzcat(*x_roll)])
+        self.cost = ca.Function("cost", [nlp["x"], nlp["p"]], [cost])
         # One interval from x0 under the applied command: end state and mean body velocities (trapezoid).
         z_applied = ca.SX.sym("z_applied", _N_U)
         xk, f_applied = p.x0, gains * forcing(z_applied)
@@ -330,8 +383,14 @@ class NMPCProblem:
         self.n_delay_steps = n_delay
 
     def inputs(self, decision: np.ndarray) -> np.ndarray:
-        """The inputs ``Z (4, horizon)`` of a decision vector (the inverse of :func:`pack_decision`'s first part)."""
-        return np.asarray(decision).ravel()[: _N_U * self.horizon].reshape((_N_U, self.horizon), order="F")
+        """The per-interval inputs ``Z (4, horizon)`` of a decision vector (its blocks repeated)."""
+        z = np.asarray(decision).ravel()[: _N_U * self.n_blocks].reshape((_N_U, self.n_blocks), order="F")
+        return z[:, self.block_of]
+
+    def blocked(self, z: np.ndarray) -> np.ndarray:
+        """Per-interval inputs ``(4, horizon)`` -> planned inputs ``(4, n_blocks)`` (each block's first interval)."""
+        starts = np.flatnonzero(np.r_[True, np.diff(self.block_of) != 0])
+        return np.asarray(z)[:, starts]
 
     @staticmethod
     def parameters(x0: np.ndarray, ref: np.ndarray, vref: np.ndarray, z_prev: np.ndarray,

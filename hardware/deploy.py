@@ -1,9 +1,15 @@
-"""Run a trained policy on the robotic fish (or on the emulated one) and log every step.
+"""Run a controller (a trained policy, the NMPC or the hand baseline) on the robotic fish (or the emulated one).
 
 Examples::
 
     python -m hardware.deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 --episodes 3
     python -m hardware.deploy --policy runs/ppo-goal/model.zip --emulate --speed 2 --episodes 1
+    python -m hardware.deploy --controller nmpc --emulate --episodes 1
+
+``--controller nmpc`` plans on the averaged model (:class:`agents.nmpc.NMPCController`, the same
+controller as in simulation) with its step budget set to ``--solve-fraction`` of the control period
+(wall time, so divided by ``--speed`` when emulated): a solve that fails or ends later than that is not
+applied, and the rest of the last plan (then both fins at rest) is sent instead.
 
 Writes ``steps.jsonl`` (one JSON object per step: action, command sent, measured pose, estimate,
 reward, ends, link and tracking health, and the true pose when emulated), ``summary.json`` and
@@ -23,7 +29,7 @@ import numpy as np
 from hardware.safety import SafetyConfig, install_stop_handlers
 from pectoral_gym.envs import tasks as tk
 
-__all__ = ["main", "run_episodes", "plot_trajectories"]
+__all__ = ["main", "make_controller", "run_episodes", "plot_trajectories", "solver_summary"]
 
 
 def _random_start(rng: np.random.Generator) -> tuple[float, float, float]:
@@ -107,10 +113,33 @@ def plot_trajectories(log_path: Path, png_path: Path) -> None:
     plt.close(fig)
 
 
+def make_controller(name: str, config, step_budget: float):
+    """The ``nmpc`` or ``hand`` baseline for the robot's env config; NMPC steps end within ``step_budget`` [s]."""
+    from agents.baselines import make_baseline
+
+    if name == "nmpc":
+        return make_baseline("nmpc", config, step_budget=step_budget)
+    return make_baseline(name, config)
+
+
+def solver_summary(controller) -> dict:
+    """Solve times (p50/p95/max [ms]), failed and late steps of an NMPC controller."""
+    times = np.asarray(controller.solve_times, dtype=float) * 1e3
+    if times.size == 0:
+        return {"solves": 0, "failures": int(controller.failures), "late": int(controller.late)}
+    return {"solves": int(times.size), "p50_ms": float(np.percentile(times, 50)),
+            "p95_ms": float(np.percentile(times, 95)), "max_ms": float(times.max()),
+            "failures": int(controller.failures), "late": int(controller.late)}
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit code."""
     parser = argparse.ArgumentParser(prog="python -m hardware.deploy", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--policy", required=True, help="run folder or SB3 .zip (agents.policy.load_policy)")
+    parser.add_argument("--controller", choices=("policy", "nmpc", "hand"), default="policy",
+                        help="what drives the fish (default %(default)s: --policy)")
+    parser.add_argument("--policy", default=None, help="run folder or SB3 .zip (agents.policy.load_policy)")
+    parser.add_argument("--solve-fraction", type=float, default=0.5, metavar="F",
+                        help="nmpc: share of the control period a step's solves may take (default %(default)s)")
     parser.add_argument("--port", default=None, help="serial URL: /dev/ttyUSB0, socket://HOST:PORT, ...")
     parser.add_argument("--camera", default=None, help="camera index, video file or emu://HOST:PORT")
     parser.add_argument("--emulate", action="store_true", help="start an emulated robot and camera in-process")
@@ -136,12 +165,18 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--episodes and --max-steps must be >= 1")
     if args.speed <= 0 or (args.speed != 1.0 and not args.emulate):
         parser.error("--speed must be > 0 and only applies with --emulate")
-    from agents.policy import load_policy  # lazy: agents/ pulls in torch
+    if (args.controller == "policy") != (args.policy is not None):
+        parser.error("--policy is needed with --controller policy, and only then")
+    if not 0 < args.solve_fraction <= 1:
+        parser.error("--solve-fraction must be in (0, 1]")
+    controller = None
+    if args.controller == "policy":
+        from agents.policy import load_policy  # lazy: agents/ pulls in torch
 
-    try:
-        controller = load_policy(args.policy)
-    except (FileNotFoundError, ValueError) as err:
-        parser.error(f"cannot load policy {args.policy!r}: {err}")
+        try:
+            controller = load_policy(args.policy)
+        except (FileNotFoundError, ValueError) as err:
+            parser.error(f"cannot load policy {args.policy!r}: {err}")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     robot = None
@@ -174,6 +209,9 @@ def main(argv: list[str] | None = None) -> int:
                               calibration=args.calibration, safety=safety, speed=args.speed,
                               max_episode_steps=args.max_steps, reset_hook=hook)
         restore = install_stop_handlers(env.stop)
+        if controller is None:
+            controller = make_controller(args.controller, env.config, args.solve_fraction * args.control_period
+                                         / args.speed)
         summaries = run_episodes(env, controller, args.episodes, out / "steps.jsonl", args.seed, robot,
                                  progress=not args.quiet)
     finally:
@@ -183,8 +221,11 @@ def main(argv: list[str] | None = None) -> int:
         if robot is not None:
             robot.stop()
     link = env.link.health()
-    (out / "summary.json").write_text(json.dumps({"policy": str(args.policy), "episodes": summaries, "link": link},
-                                                 indent=2), encoding="utf-8")
+    report = {"controller": args.controller, "policy": None if args.policy is None else str(args.policy),
+              "episodes": summaries, "link": link}
+    if hasattr(controller, "solve_times"):
+        report["solver"] = solver_summary(controller)
+    (out / "summary.json").write_text(json.dumps(report, indent=2), encoding="utf-8")
     plot_trajectories(out / "steps.jsonl", out / "trajectory.png")
     for s in summaries:
         print(f"episode {s['episode']}: return {s['return']:.3f}, {s['steps']} steps, "

@@ -6,6 +6,7 @@ import pytest
 
 import pectoral_gym  # noqa: F401  (registers the env ids)
 from agents.baselines import FinMap, HandController, RandomController, make_baseline
+from agents.nmpc_problem import to_z
 from agents.policy import Controller
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.models import FullModel
@@ -162,3 +163,82 @@ def test_nmpc_rejects_bad_settings():
         make_baseline("nmpc", CONFIG, velocity="guess")
     with pytest.raises(ValueError, match="horizon"):
         make_baseline("nmpc", CONFIG, horizon=0)
+    with pytest.raises(ValueError, match="blocks"):
+        make_baseline("nmpc", CONFIG, horizon=10, blocks=(1, 2, 3))
+    with pytest.raises(ValueError, match="solver"):
+        make_baseline("nmpc", CONFIG, solver="simplex")
+    with pytest.raises(ValueError, match="step_budget"):
+        make_baseline("nmpc", CONFIG, step_budget=0.0)
+
+
+def test_nmpc_plan_holds_each_block_and_obeys_the_model(monkeypatch):
+    """A converged solve's plan is constant within each move block, and its states are the model's rollout of it."""
+    nmpc = make_baseline("nmpc", CONFIG, solver="ipopt", max_iter=300, max_cpu_time=30.0)  # to convergence
+    env = gym.make("PectoralFish-Averaged-v0")
+    obs = _episode_with_goal_ahead(env)
+    nmpc.reset()
+    recorded, solver = [], nmpc._solver
+
+    def recording(**kwargs):
+        recorded.append(solver(**kwargs))
+        return recorded[-1]
+
+    recording.stats = solver.stats
+    monkeypatch.setattr(nmpc, "_solver", recording)
+    state, ref, vref = nmpc._estimate(np.asarray(obs, dtype=np.float64))
+    p = nmpc.problem.parameters(state, ref, vref, to_z(nmpc._u_prev), nmpc.gains)
+    result = nmpc._solve(state, p, nmpc._fresh_guesses()[0])
+    assert result is not None
+    problem = nmpc.problem
+    plan = result[1]
+    assert plan.shape == (problem.horizon, 4) and problem.n_blocks < problem.horizon
+    for b in range(problem.n_blocks):
+        rows = plan[problem.block_of == b]
+        np.testing.assert_allclose(rows, np.repeat(rows[:1], len(rows), 0))
+    cost, plan, duals = result
+    guess_cost, _ = nmpc._rollout_cost(state, p, nmpc._fresh_guesses()[0])
+    assert cost <= guess_cost  # the solve improved on (or kept) the guess it started from
+    assert duals is not None and nmpc._solver.stats()["success"]  # converged: its states must obey the model
+    x_plan = np.asarray(recorded[-1]["x"]).ravel()[4 * problem.n_blocks:].reshape((6, problem.horizon + 1), order="F")
+    x_roll = np.asarray(problem.rollout(state, to_z(plan.T), to_z(nmpc._u_prev), nmpc.gains))
+    np.testing.assert_allclose(x_plan, x_roll, atol=1e-4)  # multiple-shooting gaps closed
+    assert np.hypot(*(x_roll[:2, -1] - state[:2])) > 0.05  # the plan swims towards the goal ahead
+
+
+def test_nmpc_uses_the_fallback_when_the_step_runs_late():
+    """A step whose solves end after the step budget is not applied: the safe fallback is."""
+    late = make_baseline("nmpc", CONFIG, step_budget=1e-9)  # every solve takes longer than 1 ns
+    env = gym.make("PectoralFish-Averaged-v0")
+    obs = _episode_with_goal_ahead(env)
+    late.reset()
+    action = late.act(obs)
+    assert late.late == 1 and late.failures == 1 and late.plan is None
+    beats = _decode(CONFIG, action)
+    np.testing.assert_allclose(beats[:, 1], CONFIG.amplitude_range[0])  # no plan yet: both fins at rest
+
+
+@pytest.mark.slow  # IPOPT solves to convergence: ~0.3 s per step
+def test_nmpc_with_ipopt_reaches_a_near_goal_on_the_averaged_env():
+    controller = make_baseline("nmpc", CONFIG, solver="ipopt", max_iter=60, blocks=None, step_budget=5.0)
+    env = gym.make("PectoralFish-Averaged-v0")
+    obs = _episode_with_goal_ahead(env)
+    controller.reset()
+    for _ in range(30):
+        obs, _, terminated, truncated, info = env.step(controller.act(obs))
+        if terminated or truncated:
+            break
+    assert info["is_success"]
+
+
+def test_nmpc_compare_runs_variants_on_the_same_episodes():
+    from agents.nmpc_compare import _seeds, compare
+
+    assert _seeds("3-5") == [3, 4, 5] and _seeds("7,9") == [7, 9]
+    results = compare({"short": {"horizon": 2, "blocks": None}, "blocked": {"horizon": 3, "blocks": (1, 2)}},
+                      [0], env="averaged", max_steps=2)
+    assert set(results) == {"short", "blocked"}
+    for r in results.values():
+        assert r["episodes"] == 1 and 0.0 <= r["success"] <= 1.0 and r["p50_ms"] <= r["p95_ms"] <= r["max_ms"]
+        assert 0.0 < r["mean_distance_cm"] < 300.0  # a distance inside the 2.3 m tank
+    with pytest.raises(ValueError, match="env"):
+        compare({"a": {}}, [0], env="moon")

@@ -11,6 +11,7 @@ from hardware.deploy import main, plot_trajectories, run_episodes
 from hardware.emulator import EmulatedRobot
 from hardware.env import HardwareFishEnv
 from hardware.safety import SafetyConfig
+from pectoral_gym.envs.core import EnvConfig
 
 
 @pytest.fixture(scope="module")
@@ -74,3 +75,37 @@ def test_run_episodes_and_plot_on_the_emulator_fast(tmp_path):
     assert len(lines) == 4 and lines[-1]["true_pose"][0] > 1.0  # rowed forward along +X
     plot_trajectories(tmp_path / "steps.jsonl", tmp_path / "trajectory.png")
     assert (tmp_path / "trajectory.png").stat().st_size > 10_000
+
+
+def _deploy(tmp_path, *extra):
+    out = tmp_path / "run"
+    code = main(["--emulate", "--speed", "2", "--episodes", "1", "--max-steps", "4", "--out", str(out), "--quiet",
+                 "--tracking-timeout", "1.5", *extra])
+    assert code == 0
+    steps = [json.loads(line) for line in (out / "steps.jsonl").read_text().splitlines()]
+    return [r for r in steps if r.get("event") != "reset"], json.loads((out / "summary.json").read_text())
+
+
+def test_deploy_nmpc_on_the_emulator(tmp_path):
+    """``--controller nmpc`` drives the emulated robot: one solve per step, recorded in the summary."""
+    steps, summary = _deploy(tmp_path, "--controller", "nmpc")
+    assert summary["controller"] == "nmpc" and summary["policy"] is None
+    solver = summary["solver"]
+    assert solver["solves"] == len(steps) >= 1 and solver["failures"] >= solver["late"] >= 0
+    assert all(len(r["command"]) == 2 for r in steps)
+
+
+def test_deploy_nmpc_sends_the_safe_fallback_when_every_solve_is_late(tmp_path):
+    """A solve that ends after its share of the control period is not applied: the fins rest (no plan yet)."""
+    steps, summary = _deploy(tmp_path, "--controller", "nmpc", "--solve-fraction", "1e-9")
+    assert summary["solver"]["late"] == summary["solver"]["solves"] == len(steps) >= 1
+    lowest = EnvConfig(model="full").amplitude_range[0]
+    amplitudes = [beat[1] for r in steps for beat in r["command"]]  # command rows: bias, amplitude, period, ratio
+    np.testing.assert_allclose(amplitudes, lowest, atol=1e-9)
+
+
+def test_deploy_controller_and_policy_arguments_must_agree(tmp_path):
+    with pytest.raises(SystemExit):
+        main(["--controller", "nmpc", "--policy", str(tmp_path / "p.zip"), "--emulate", "--out", str(tmp_path)])
+    with pytest.raises(SystemExit):
+        main(["--emulate", "--out", str(tmp_path)])  # --controller policy needs --policy
