@@ -243,7 +243,8 @@ class HardwareFishEnv(gym.Env):
         if self.reset_hook is not None:
             self.reset_hook(self.np_random)
         self._last_measure, self._observing = -math.inf, False
-        self._wait_for_fish(self.now())
+        placed = self.now()
+        self._wait_for_fish(placed)
         self.supervisor.drain()
         t = self.watch.last_seen
         x, y, psi = self.supervisor.pose
@@ -263,7 +264,7 @@ class HardwareFishEnv(gym.Env):
         self._steps = 0
         self.supervisor.frames = self.supervisor.lost_frames = 0
         self._next_tick = self.now()
-        self.supervisor.arm()
+        self.supervisor.arm(since=placed)
         info = task_info(self._out[0], self.config.task_id)  # zero reward terms, the distance, as the simulated envs
         info.update(pose=[x, y, psi], target=self._ep[0, :2].tolist(), in_geofence=self.geofence.breached(x, y, psi))
         return self._obs[0].copy(), info

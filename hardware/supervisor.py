@@ -91,9 +91,18 @@ class Supervisor:
         if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout=2.0)
 
-    def arm(self) -> None:
-        """Start applying the rules (after the fish was found), with no reason latched."""
+    def arm(self, since: float = -math.inf) -> None:
+        """Start applying the rules (after the fish was found), with no reason latched.
+
+        Poses captured before ``since`` [experiment s] (the reset: the fish may have been moved by hand
+        or by the emulator's reset hook) are forgotten, so the jump to where the fish is now never
+        reads as a speed towards a wall.
+        """
         with self._lock:
+            recent = [p for p in self._recent if p[0] >= since]
+            self._recent.clear()
+            self._recent.extend(recent)
+            self.velocity = (0.0, 0.0)  # measured again from the next frame on
             self.reason, self.armed, self.stop_requested = "", True, False
 
     def disarm(self) -> None:

@@ -6,6 +6,7 @@ rule is the robot's (leases); rules of the PC's supervisor thread get generous b
 (every wall and corner, 100 signal trials, big fuzz) are marked slow.
 """
 
+import json
 import math
 import os
 import random
@@ -510,3 +511,16 @@ def test_fuzz_random_streams_and_bit_flips():
             accepted_bad += msg != expected
             delivered += msg == expected
     assert accepted_bad == 0 and delivered >= 20_000  # the good frame after the damaged one always gets through
+
+
+
+def test_fish_moved_by_the_reset_hook_is_not_read_as_a_speed_towards_a_wall(tmp_path):
+    # hardware.deploy --emulate puts the fish at a random start in its reset hook: the poses from before the
+    # move, still in the supervisor's velocity window, made the jump read as ~1 m/s and tripped the geofence
+    # on the first step of every episode, far from any wall (fins at rest, 0.36 m of clearance).
+    from hardware.deploy import main as deploy
+
+    assert deploy(["--controller", "hand", "--emulate", "--episodes", "2", "--max-steps", "2", "--speed", "2",
+                   "--no-prompt", "--quiet", "--out", str(tmp_path)]) == 0
+    episodes = json.loads((tmp_path / "summary.json").read_text())["episodes"]
+    assert [e["safety_stop"] for e in episodes] == ["", ""] and [e["steps"] for e in episodes] == [2, 2]
