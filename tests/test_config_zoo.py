@@ -147,3 +147,8 @@ def test_zoo_trains_from_the_shipped_file(tmp_path):
     saved = yaml.unsafe_load((run_dir / ENV / "config.yml").read_text())
     assert dict(saved)["policy_kwargs"] == load_hyperparams("ppo", ENV)["policy_kwargs"]
     stats.close()
+    enjoy = [sys.executable, "-m", "rl_zoo3.enjoy", "--algo", "ppo", "--env", ENV, "--gym-packages", "pectoral_gym",
+             "-f", str(tmp_path), "--exp-id", "1", "--no-render", "--deterministic", "-n", "50"]
+    done = subprocess.run(enjoy, cwd=tmp_path, env=env, capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert "Loading running average" in done.stdout  # zoo found the statistics next to the model
