@@ -2,12 +2,12 @@
 section, the demo's hyperparameters reaching SB3 unchanged, and zoo's own train on the shipped file."""
 
 import importlib.util
+import json
 import os
 import subprocess
 import sys
 from pathlib import Path
 
-import numpy as np
 import pytest
 import torch
 import yaml
@@ -113,13 +113,37 @@ def test_project_section_and_old_format(tmp_path):
         resolve_config("ppo", ENV, 0, hyperparams={"env_wrapper": "gymnasium.wrappers.TimeAwareObservation"})
 
 
+# Loading a zoo model unpickles rl_zoo3's schedule objects, and importing rl_zoo3 patches gymnasium's TimeLimit
+# (an extra "TimeLimit.truncated" info key) for the whole process: the loading runs in a child process.
+_LOAD = """
+import json, sys
+import gymnasium as gym
+import numpy as np
+import torch
+from stable_baselines3 import PPO
+from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+import pectoral_gym
+
+env_id, zip_path, stats_path = sys.argv[1:]
+model = PPO.load(zip_path, device="cpu")
+stats = VecNormalize.load(stats_path, DummyVecEnv([lambda: gym.make(env_id)]))
+action, _ = model.predict(stats.normalize_obs(np.zeros((1, 19), dtype=np.float32)), deterministic=True)
+extractor = model.policy.mlp_extractor
+print(json.dumps({
+    "num_timesteps": model.num_timesteps, "n_envs": model.n_envs, "n_steps": model.n_steps,
+    "batch_size": model.batch_size, "gamma": model.gamma, "gae_lambda": model.gae_lambda,
+    "ent_coef": model.ent_coef, "lr": [model.lr_schedule(1.0), model.lr_schedule(0.5)],
+    "clip_range": model.clip_range(1.0), "activation": model.policy.activation_fn.__name__,
+    "pi": [m.out_features for m in extractor.policy_net if isinstance(m, torch.nn.Linear)],
+    "vf": [m.out_features for m in extractor.value_net if isinstance(m, torch.nn.Linear)],
+    "norm_obs": stats.norm_obs, "norm_reward": stats.norm_reward, "clip_obs": stats.clip_obs,
+    "stats_gamma": stats.gamma, "action_shape": list(action.shape), "action_max": float(np.abs(action).max()),
+}))
+"""
+
+
 @pytest.mark.skipif(importlib.util.find_spec("rl_zoo3") is None, reason="rl_zoo3 not installed (dev extra)")
 def test_zoo_trains_from_the_shipped_file(tmp_path):
-    from stable_baselines3 import PPO
-    from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
-
-    import pectoral_gym  # noqa: F401  (registers the envs)
-
     command = [sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo", "--env", ENV, "--gym-packages",
                "pectoral_gym", "--conf-file", str(HYPERPARAMS_DIR / "ppo.yml"), "-n", "512", "-f", str(tmp_path),
                "--seed", "0", "--eval-freq", "256", "--eval-episodes", "2", "--hyperparams", "n_envs:2",
@@ -129,26 +153,24 @@ def test_zoo_trains_from_the_shipped_file(tmp_path):
     assert done.returncode == 0, done.stderr[-3000:]
     run_dir = tmp_path / "ppo" / f"{ENV}_1"
     assert (run_dir / "best_model.zip").is_file()  # zoo's evaluation, from its command line
-    model = PPO.load(run_dir / f"{ENV}.zip", device="cpu")
+    done = subprocess.run([sys.executable, "-c", _LOAD, ENV, str(run_dir / f"{ENV}.zip"),
+                           str(run_dir / ENV / "vecnormalize.pkl")], cwd=tmp_path, env=env, capture_output=True,
+                          text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    model = json.loads(done.stdout.strip().splitlines()[-1])
     # the file's values reached SB3 (the four overridden ones from zoo's --hyperparams)
-    assert model.num_timesteps == 512 and model.n_envs == 2 and model.n_steps == 64 and model.batch_size == 64
-    assert model.gamma == 0.995 and model.gae_lambda == 0.95 and model.ent_coef == 0.005
-    assert model.lr_schedule(1.0) == pytest.approx(1e-3) and model.lr_schedule(0.5) == pytest.approx(5e-4)
-    assert model.policy.activation_fn is torch.nn.Tanh
-    extractor = model.policy.mlp_extractor
-    assert [m.out_features for m in extractor.policy_net if isinstance(m, torch.nn.Linear)] == [64, 64]
-    assert [m.out_features for m in extractor.value_net if isinstance(m, torch.nn.Linear)] == [64, 64]
-    stats = VecNormalize.load(str(run_dir / ENV / "vecnormalize.pkl"),
-                              DummyVecEnv([lambda: __import__("gymnasium").make(ENV)]))
-    assert stats.norm_obs and not stats.norm_reward and stats.clip_obs == 10.0 and stats.gamma == 0.995
-    obs = stats.normalize_obs(np.zeros((1, 19), dtype=np.float32))
-    action, _ = model.predict(obs, deterministic=True)
-    assert action.shape == (1, 8) and np.all(np.abs(action) <= 1)
+    assert (model["num_timesteps"], model["n_envs"], model["n_steps"], model["batch_size"]) == (512, 2, 64, 64)
+    assert (model["gamma"], model["gae_lambda"], model["ent_coef"], model["clip_range"]) == (0.995, 0.95, 0.005, 0.2)
+    assert model["lr"] == pytest.approx([1e-3, 5e-4])
+    assert model["activation"] == "Tanh" and model["pi"] == [64, 64] and model["vf"] == [64, 64]
+    assert model["norm_obs"] and not model["norm_reward"] and model["clip_obs"] == 10.0
+    assert model["stats_gamma"] == 0.995
+    assert model["action_shape"] == [1, 8] and model["action_max"] <= 1.0
     saved = yaml.unsafe_load((run_dir / ENV / "config.yml").read_text())
     assert dict(saved)["policy_kwargs"] == load_hyperparams("ppo", ENV)["policy_kwargs"]
-    stats.close()
     enjoy = [sys.executable, "-m", "rl_zoo3.enjoy", "--algo", "ppo", "--env", ENV, "--gym-packages", "pectoral_gym",
              "-f", str(tmp_path), "--exp-id", "1", "--no-render", "--deterministic", "-n", "50"]
     done = subprocess.run(enjoy, cwd=tmp_path, env=env, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "Loading running average" in done.stdout  # zoo found the statistics next to the model
+    assert "rl_zoo3" not in sys.modules  # this process stays unpatched
