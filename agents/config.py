@@ -1,23 +1,33 @@
 """Training configuration: hyperparameter YAML files keyed by env id, command-line overrides, the resolved config.
 
-``agents/hyperparams/<algo>.yml`` maps each env id to a dict of SB3 algorithm
-arguments plus a few keys of our own (as rl-baselines3-zoo):
+``agents/hyperparams/<algo>.yml`` is in rl-baselines3-zoo's format, so one file
+serves ``python -m agents.train`` and ``python -m rl_zoo3.train --conf-file``.
+An env id maps to a dict of SB3 algorithm arguments plus zoo's own keys:
 
 * ``n_envs``: environments in the batched vector env;
 * ``n_timesteps``: total environment steps;
-* ``normalize``: ``false``, ``true`` or ``VecNormalize`` keyword arguments;
+* ``normalize``: ``false``, ``true``, ``VecNormalize`` keyword arguments, or their Python text;
 * ``policy``: SB3 policy name (``MlpPolicy``);
-* ``env_kwargs``: environment arguments (``task``, ``randomize``, reward weights, ...);
-* ``eval_freq``: environment steps between periodic evaluations (0: none);
-* ``eval_episodes``: episodes per periodic evaluation.
+* ``env_kwargs``: environment arguments (``task``, ``randomize``, reward weights, ...).
 
-Everything else is passed to the algorithm's constructor. ``learning_rate``
-may be ``"lin_<x>"`` (linear decay from ``x`` to 0); ``policy_kwargs.activation_fn``
-is a name (``tanh``, ``relu``, ``elu``, ``leaky_relu``).
+Everything else is passed to the algorithm's constructor. ``policy_kwargs`` (and
+``replay_buffer_kwargs``) may be Python text as zoo evaluates it,
+``"dict(net_arch=[64, 64], activation_fn=nn.Tanh)"``; this module parses that text
+without evaluating it (literals, ``dict(...)``, classes named ``nn.<Name>``,
+``th.nn.<Name>``, ``th.optim.<Name>``). ``learning_rate`` may be ``"lin_<x>"``
+(linear decay from ``x`` to 0).
+
+The project's extras, which zoo would pass to the algorithm and which it takes from
+its command line instead, live in the file's top-level ``agents.train`` section,
+keyed by env id (zoo reads only the entry of ``--env``):
+
+* ``eval_freq``: environment steps in all between periodic evaluations (0: none);
+* ``eval_episodes``: episodes per periodic evaluation.
 """
 
 from __future__ import annotations
 
+import ast
 import copy
 import inspect
 from collections.abc import Callable, Sequence
@@ -29,18 +39,29 @@ import yaml
 __all__ = [
     "HYPERPARAMS_DIR",
     "OWN_KEYS",
+    "PROJECT_SECTION",
     "algo_class",
     "algo_kwargs",
     "load_hyperparams",
+    "load_project_settings",
     "parse_overrides",
+    "parse_python_kwargs",
     "resolve_config",
+    "zoo_problems",
 ]
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
+PROJECT_SECTION = "agents.train"
 OWN_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs", "eval_freq", "eval_episodes")
+PROJECT_KEYS = ("eval_freq", "eval_episodes")
+ZOO_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs", "frame_stack", "env_wrapper",
+            "vec_env_wrapper", "callback", "monitor_kwargs")
+_UNSUPPORTED = ("frame_stack", "env_wrapper", "vec_env_wrapper", "callback", "monitor_kwargs", "replay_buffer_class")
 _DEFAULTS = {"n_envs": 8, "normalize": False, "policy": "MlpPolicy", "env_kwargs": {}, "eval_freq": 0,
              "eval_episodes": 20}
-_ACTIVATIONS = ("tanh", "relu", "elu", "leaky_relu")
+_ACTIVATIONS = {"tanh": "nn.Tanh", "relu": "nn.ReLU", "elu": "nn.ELU", "leaky_relu": "nn.LeakyReLU"}
+_CLASS_KEYS = ("activation_fn", "optimizer_class")
+_SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")
 
 
 def algo_class(algo: str) -> type:
@@ -53,21 +74,95 @@ def algo_class(algo: str) -> type:
     return classes[algo.lower()]
 
 
-def load_hyperparams(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:
-    """The hyperparameters of ``env_id`` from ``path`` (default ``agents/hyperparams/<algo>.yml``).
-
-    Raises:
-        FileNotFoundError: If the file does not exist.
-        ValueError: If the file has no entry for ``env_id``.
-    """
+def _read_table(algo: str, path: str | Path | None) -> tuple[Path, dict[str, Any]]:
     path = Path(path) if path is not None else HYPERPARAMS_DIR / f"{algo.lower()}.yml"
     if not path.is_file():
         raise FileNotFoundError(f"no hyperparameter file {path}; write one keyed by env id (see {HYPERPARAMS_DIR})")
     with open(path) as f:
         table = yaml.safe_load(f) or {}
-    if env_id not in table:
-        raise ValueError(f"{path} has no entry for {env_id!r}; entries: {sorted(table)}")
+    if not isinstance(table, dict):
+        raise ValueError(f"{path} must map env ids to hyperparameters, got {type(table).__name__}")
+    return path, table
+
+
+def load_hyperparams(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:
+    """The zoo entry of ``env_id`` from ``path`` (default ``agents/hyperparams/<algo>.yml``).
+
+    Raises:
+        FileNotFoundError: If the file does not exist.
+        ValueError: If the file has no entry for ``env_id``.
+    """
+    path, table = _read_table(algo, path)
+    entries = sorted(key for key in table if key != PROJECT_SECTION)
+    if env_id == PROJECT_SECTION or env_id not in table:
+        raise ValueError(f"{path} has no entry for {env_id!r}; entries: {entries}")
     return copy.deepcopy(dict(table[env_id]))
+
+
+def load_project_settings(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:
+    """The ``agents.train`` settings of ``env_id`` (``eval_freq``, ``eval_episodes``); ``{}`` if there are none.
+
+    Raises:
+        FileNotFoundError: If the file does not exist.
+        ValueError: If the section holds other keys.
+    """
+    path, table = _read_table(algo, path)
+    settings = dict((table.get(PROJECT_SECTION) or {}).get(env_id) or {})
+    unknown = sorted(set(settings) - set(PROJECT_KEYS))
+    if unknown:
+        raise ValueError(f"{path}: {PROJECT_SECTION}.{env_id} has unknown keys {unknown}; accepted: {PROJECT_KEYS}")
+    return copy.deepcopy(settings)
+
+
+_NAMESPACES = {"nn": ("torch", "nn"), "th": ("torch",), "torch": ("torch",)}
+
+
+def _literal(node: ast.AST, text: str) -> Any:
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float, str, bool, type(None))):
+        return node.value
+    if isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.USub, ast.UAdd)):
+        value = _literal(node.operand, text)
+        if isinstance(value, (int, float)) and not isinstance(value, bool):
+            return -value if isinstance(node.op, ast.USub) else value
+    if isinstance(node, (ast.List, ast.Tuple)):
+        return [_literal(item, text) for item in node.elts]
+    if isinstance(node, ast.Dict) and None not in node.keys:
+        return {_literal(k, text): _literal(v, text) for k, v in zip(node.keys, node.values, strict=True)}
+    if (isinstance(node, ast.Call) and isinstance(node.func, ast.Name) and node.func.id == "dict" and not node.args
+            and all(kw.arg is not None for kw in node.keywords)):
+        return {kw.arg: _literal(kw.value, text) for kw in node.keywords}
+    name = _dotted(node)
+    if name is not None and name.split(".")[0] in _NAMESPACES and "." in name:
+        return name
+    raise ValueError(f"{text!r}: cannot read {ast.unparse(node)!r} (literals, dict(...) and nn./th. class names only)")
+
+
+def _dotted(node: ast.AST) -> str | None:
+    if isinstance(node, ast.Name):
+        return node.id
+    if isinstance(node, ast.Attribute):
+        base = _dotted(node.value)
+        return None if base is None else f"{base}.{node.attr}"
+    return None
+
+
+def parse_python_kwargs(text: str) -> dict[str, Any]:
+    """Zoo's Python text for keyword arguments (``"dict(net_arch=[64], activation_fn=nn.Tanh)"``) as a dict.
+
+    Nothing is evaluated: literals, ``dict(...)``, ``{...}`` and class names rooted at ``nn``, ``th`` or ``torch``
+    are read; a class name is kept as its dotted text (``"nn.Tanh"``), resolved by :func:`algo_kwargs`.
+
+    Raises:
+        ValueError: On anything else, or if the text is not a dict.
+    """
+    try:
+        tree = ast.parse(text.strip(), mode="eval")
+    except SyntaxError as error:
+        raise ValueError(f"{text!r} is not Python text ({error.msg})") from None
+    value = _literal(tree.body, text)
+    if not isinstance(value, dict):
+        raise ValueError(f"{text!r} must give a dict, got {type(value).__name__}")
+    return value
 
 
 def parse_overrides(items: Sequence[str] | None) -> dict[str, Any]:
@@ -113,20 +208,38 @@ def _deep_update(base: dict[str, Any], update: dict[str, Any]) -> dict[str, Any]
     return base
 
 
+def _as_dicts(params: dict[str, Any]) -> dict[str, Any]:
+    """Zoo's Python-text values (``policy_kwargs``, ``replay_buffer_kwargs``, ``normalize``) as dicts."""
+    for key in ("policy_kwargs", "replay_buffer_kwargs", "normalize"):
+        if isinstance(params.get(key), str):
+            params[key] = parse_python_kwargs(params[key])
+    return params
+
+
 def resolve_config(algo: str, env_id: str, seed: int, task: str | None = None,
                    hyperparams: dict[str, Any] | None = None, env_kwargs: dict[str, Any] | None = None,
                    hyperparams_file: str | Path | None = None) -> dict[str, Any]:
-    """The full, YAML-ready training config: file entry, then ``hyperparams`` overrides, then ``env_kwargs``, ``task``.
+    """The full, YAML-ready training config: file entry, then ``hyperparams``, ``env_kwargs``, ``task``.
+
+    The entry's ``agents.train`` settings (``eval_freq``, ``eval_episodes``) come first, the entry over them.
 
     Returns:
         A dict with ``algo``, ``env_id``, ``seed``, the keys of :data:`OWN_KEYS` (``env_kwargs`` always
-        holding ``task``) and ``algo_kwargs`` (everything passed to the algorithm's constructor).
+        holding ``task``) and ``algo_kwargs`` (everything passed to the algorithm's constructor, Python text
+        read into dicts, class names as text).
 
     Raises:
-        ValueError: On an unknown algorithm or algorithm argument, or invalid ``n_envs``/``n_timesteps``.
+        ValueError: On an unknown algorithm or algorithm argument, a zoo key agents.train does not support,
+            or invalid ``n_envs``/``n_timesteps``.
     """
     cls = algo_class(algo)
-    params = _deep_update(load_hyperparams(algo, env_id, hyperparams_file), copy.deepcopy(hyperparams or {}))
+    params = load_project_settings(algo, env_id, hyperparams_file)
+    params.update(_as_dicts(load_hyperparams(algo, env_id, hyperparams_file)))
+    params = _as_dicts(_deep_update(params, copy.deepcopy(hyperparams or {})))
+    unsupported = sorted(set(params) & set(_UNSUPPORTED))
+    if unsupported:
+        raise ValueError(f"rl-baselines3-zoo keys {unsupported} are not supported by agents.train "
+                         "(train with python -m rl_zoo3.train instead)")
     own = {key: params.pop(key, copy.deepcopy(_DEFAULTS.get(key))) for key in OWN_KEYS}
     own["env_kwargs"] = dict(own["env_kwargs"] or {})
     own["env_kwargs"].update(env_kwargs or {})
@@ -147,26 +260,90 @@ def resolve_config(algo: str, env_id: str, seed: int, task: str | None = None,
     return {"algo": algo.lower(), "env_id": env_id, "seed": int(seed), **own, "algo_kwargs": params}
 
 
-def _schedule(value: Any) -> float | Callable[[float], float]:
+def _schedule(value: Any) -> float | Callable[[float], float] | None:
+    if value is None:
+        return None
     if isinstance(value, str) and value.startswith("lin_"):
         start = float(value[4:])
         return lambda progress_remaining: progress_remaining * start
     return float(value)
 
 
-def algo_kwargs(config: dict[str, Any]) -> dict[str, Any]:
-    """Constructor arguments of the algorithm from a resolved config (schedules and activation names converted)."""
+def _class(name: Any, key: str) -> type:
+    """``"nn.Tanh"``, ``"th.optim.Adam"`` (or a legacy activation name, ``"tanh"``) -> the torch class."""
     import torch
 
+    text = _ACTIVATIONS.get(str(name).lower(), str(name)) if key == "activation_fn" else str(name)
+    root, *attrs = text.split(".")
+    if root not in _NAMESPACES or not attrs:
+        raise ValueError(f"{key} must name a torch class (nn.Tanh, th.optim.Adam, ...), got {name!r}")
+    obj: Any = torch
+    for attr in (*_NAMESPACES[root][1:], *attrs):
+        obj = getattr(obj, attr, None)
+    if not isinstance(obj, type):
+        raise ValueError(f"{key}: {name!r} is not a torch class")
+    return obj
+
+
+def algo_kwargs(config: dict[str, Any]) -> dict[str, Any]:
+    """Constructor arguments of the algorithm from a resolved config (schedules and class names converted)."""
     kwargs = copy.deepcopy(config["algo_kwargs"])
-    for key in ("learning_rate", "clip_range"):
+    for key in _SCHEDULES:
         if key in kwargs:
             kwargs[key] = _schedule(kwargs[key])
+    if isinstance(kwargs.get("train_freq"), list):
+        kwargs["train_freq"] = tuple(kwargs["train_freq"])  # as zoo
     policy_kwargs = kwargs.get("policy_kwargs")
-    if policy_kwargs and "activation_fn" in policy_kwargs:
-        name = str(policy_kwargs["activation_fn"]).lower()
-        if name not in _ACTIVATIONS:
-            raise ValueError(f"activation_fn must be one of {_ACTIVATIONS}, got {name!r}")
-        policy_kwargs["activation_fn"] = {"tanh": torch.nn.Tanh, "relu": torch.nn.ReLU, "elu": torch.nn.ELU,
-                                          "leaky_relu": torch.nn.LeakyReLU}[name]
+    for key in _CLASS_KEYS:
+        if policy_kwargs and key in policy_kwargs and not isinstance(policy_kwargs[key], type):
+            policy_kwargs[key] = _class(policy_kwargs[key], key)
     return kwargs
+
+
+def zoo_problems(algo: str, path: str | Path | None = None) -> list[str]:
+    """What rl-baselines3-zoo 2.9.2 would refuse in a hyperparameter file (``[]``: nothing).
+
+    Zoo's rules (``rl_zoo3/exp_manager.py``, ``_preprocess_hyperparams``): an entry needs ``n_timesteps``; it
+    removes its own keys (:data:`ZOO_KEYS`), evaluates ``policy_kwargs``/``normalize`` given as text, turns a
+    schedule text ``"<name>_<x>"`` into a linear schedule, and passes every other key, unchanged, to the
+    algorithm's constructor (with ``env``, ``seed``, ``verbose``, ``device``, ``tensorboard_log`` of its own).
+    """
+    path, table = _read_table(algo, path)
+    accepted = set(inspect.signature(algo_class(algo).__init__).parameters) - {
+        "self", "env", "seed", "device", "verbose", "tensorboard_log"}
+    problems = []
+    for env_id, entry in table.items():
+        if env_id == PROJECT_SECTION:
+            continue
+        where = f"{path.name}: {env_id}"
+        if not isinstance(entry, dict):
+            problems.append(f"{where}: not a mapping")
+            continue
+        if "n_timesteps" not in entry:
+            problems.append(f"{where}: no n_timesteps")
+        for key in sorted(set(entry) - set(ZOO_KEYS) - accepted):
+            problems.append(f"{where}: {key!r} is not a {algo.upper()} argument (zoo passes it to the constructor)")
+        for key in ("policy_kwargs", "replay_buffer_kwargs", "normalize"):
+            value = entry.get(key)
+            if isinstance(value, str):
+                try:
+                    parse_python_kwargs(value)
+                except ValueError as error:
+                    problems.append(f"{where}: {key}: {error}")
+            elif isinstance(value, dict) and key == "policy_kwargs":
+                problems.extend(f"{where}: policy_kwargs.{name} is text in a dict (SB3 gets the text); write "
+                                "policy_kwargs as Python text, activation_fn=nn.Tanh"
+                                for name in _CLASS_KEYS if isinstance(value.get(name), str))
+        for key in _SCHEDULES:
+            value = entry.get(key)
+            if isinstance(value, str) and (value.count("_") != 1 or not _is_float(value.split("_")[1])):
+                problems.append(f"{where}: {key} {value!r} is not a zoo schedule (lin_<x>)")
+    return problems
+
+
+def _is_float(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True

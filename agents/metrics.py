@@ -14,15 +14,17 @@ Definitions (per episode; ``dt`` is the control period, ``T`` the number of step
 * ``wall``: 1 if the episode ended at a wall, else 0.
 
 Aggregates are means over episodes (NaN values left out), each with a seeded
-percentile-bootstrap confidence interval.
+percentile-bootstrap confidence interval (``scipy.stats.bootstrap``).
 """
 
 from __future__ import annotations
 
+import inspect
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
+import scipy.stats
 
 __all__ = [
     "METRICS",
@@ -35,6 +37,9 @@ __all__ = [
     "time_to_goal",
     "tracking_error",
 ]
+
+# scipy >= 1.15 takes the generator as ``rng``, older versions as ``random_state``
+_RNG_ARG = "rng" if "rng" in inspect.signature(scipy.stats.bootstrap).parameters else "random_state"
 
 METRICS = {
     "goal": ("success", "time_to_goal", "path_length", "final_distance", "fin_work", "mean_fin_power", "return",
@@ -131,7 +136,10 @@ def episode_metrics(trajectory: Trajectory, task: str) -> dict[str, float]:
 
 def bootstrap_ci(values: np.ndarray, confidence: float = 0.95, n_resamples: int = 2000,
                  seed: int = 0) -> tuple[float, float]:
-    """Percentile-bootstrap confidence interval of the mean (NaN values left out).
+    """Percentile-bootstrap confidence interval of the mean (NaN values left out), ``scipy.stats.bootstrap``.
+
+    The resamples are ``n_resamples`` draws of ``len(values)`` indices from ``np.random.default_rng(seed)``;
+    the interval is the ``(1 - confidence) / 2`` and ``(1 + confidence) / 2`` quantiles of their means.
 
     Args:
         values: Sample.
@@ -152,11 +160,10 @@ def bootstrap_ci(values: np.ndarray, confidence: float = 0.95, n_resamples: int 
         return math.nan, math.nan
     if x.size == 1:
         return float(x[0]), float(x[0])
-    rng = np.random.default_rng(seed)
-    means = x[rng.integers(0, x.size, size=(n_resamples, x.size))].mean(axis=1)
-    alpha = 0.5 * (1.0 - confidence)
-    low, high = np.quantile(means, [alpha, 1.0 - alpha])
-    return float(low), float(high)
+    generator = {_RNG_ARG: np.random.default_rng(seed)}
+    result = scipy.stats.bootstrap((x,), np.mean, n_resamples=n_resamples, confidence_level=confidence,
+                                   method="percentile", vectorized=True, **generator)
+    return float(result.confidence_interval.low), float(result.confidence_interval.high)
 
 
 @dataclass(frozen=True)

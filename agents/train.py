@@ -5,6 +5,11 @@ CLI::
     python -m agents.train --env PectoralFish-Averaged-v0 --algo ppo --task goal --seed 0
     python -m agents.train --algo sac --hyperparams n_timesteps=5e4 learning_rate=3e-4 --env-kwargs '{"task": "track"}'
 
+The hyperparameter files are rl-baselines3-zoo's (``agents.config``): ``python -m rl_zoo3.train --conf-file
+agents/hyperparams/ppo.yml --gym-packages pectoral_gym ...`` trains from the same file. The periodic
+evaluation settings come from the file's ``agents.train`` section, ``--eval-freq``/``--eval-episodes`` or
+``--hyperparams``.
+
 Each run writes ``runs/<env>/<algo>_<task>_seed<seed>_<stamp>/``: ``model.zip``
 (final), ``best_model.zip`` and ``vecnormalize.pkl`` (best on the periodic
 evaluation, its observation statistics), ``vecnormalize_final.pkl`` (statistics
@@ -176,6 +181,8 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--env-kwargs", default="{}", metavar="JSON", help="environment arguments (JSON object)")
     parser.add_argument("--hyperparams-file", metavar="YAML", help="hyperparameter file (default: agents/hyperparams)")
     parser.add_argument("--n-timesteps", type=float, help="shortcut for --hyperparams n_timesteps=N")
+    parser.add_argument("--eval-freq", type=float, help="steps in all between evaluations, 0: none (default: file)")
+    parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation (default: from the file)")
     parser.add_argument("--log-dir", default="runs", help="parent folder of the run folders")
     parser.add_argument("--run-name", help="run folder name (default: <algo>_<task>_seed<seed>_<stamp>)")
     parser.add_argument("--torch-threads", type=int, default=1, help="torch CPU threads")
@@ -192,6 +199,10 @@ def main(argv: list[str] | None = None) -> int:
         overrides = parse_overrides(args.hyperparams)
         if args.n_timesteps is not None:
             overrides["n_timesteps"] = int(args.n_timesteps)
+        if args.eval_freq is not None:
+            overrides["eval_freq"] = int(args.eval_freq)
+        if args.eval_episodes is not None:
+            overrides["eval_episodes"] = int(args.eval_episodes)
         env_kwargs = json.loads(args.env_kwargs)
         if not isinstance(env_kwargs, dict):
             raise ValueError("--env-kwargs must be a JSON object")

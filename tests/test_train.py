@@ -4,6 +4,7 @@ import shutil
 
 import numpy as np
 import pytest
+import torch
 import yaml
 
 from agents.config import algo_kwargs, parse_overrides, resolve_config
@@ -60,9 +61,11 @@ def test_same_seed_repeats_the_run(tmp_path):
 
 
 def test_sac_smoke_run(tmp_path):
-    run_dir = run(tmp_path, "s", algo="sac",
-                  hyperparams=["n_timesteps=200", "n_envs=2", "learning_starts=50", "eval_freq=0", "normalize=false"])
+    run_dir = run(tmp_path, "s", "--eval-freq", "0", algo="sac",
+                  hyperparams=["n_timesteps=200", "n_envs=2", "learning_starts=50", "normalize=false"])
     assert (run_dir / "model.zip").is_file() and not (run_dir / "vecnormalize.pkl").exists()
+    assert not (run_dir / "best_model.zip").exists()  # --eval-freq 0 overrides the file's agents.train section
+    assert yaml.safe_load((run_dir / "config.yaml").read_text())["eval_freq"] == 0
     policy = load_policy(run_dir)
     assert policy.obs_mean is None
     shutil.move(run_dir / "model.zip", tmp_path / "lonely.zip")
@@ -91,8 +94,9 @@ def test_overrides_and_resolution():
     assert config["env_kwargs"] == {"task": "track", "goal_radius": 0.1}
     # nested override replaces one key and keeps the file's others
     assert config["algo_kwargs"]["policy_kwargs"]["net_arch"] == [8]
-    assert config["algo_kwargs"]["policy_kwargs"]["activation_fn"] == "tanh"
+    assert config["algo_kwargs"]["policy_kwargs"]["activation_fn"] == "nn.Tanh"
     kwargs = algo_kwargs(config)
+    assert kwargs["policy_kwargs"]["activation_fn"] is torch.nn.Tanh
     assert kwargs["learning_rate"](1.0) == pytest.approx(1e-3) and kwargs["learning_rate"](0.5) == pytest.approx(5e-4)
     with pytest.raises(ValueError, match="no entry"):
         resolve_config("ppo", "Nope-v0", 0)
