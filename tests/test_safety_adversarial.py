@@ -6,6 +6,7 @@ rule is the robot's (leases); rules of the PC's supervisor thread get generous b
 (every wall and corner, 100 signal trials, big fuzz) are marked slow.
 """
 
+import contextlib
 import json
 import math
 import os
@@ -55,7 +56,7 @@ def _stopped_at(robot, after):
     return max(after, last_running) if last_running is not None else after
 
 
-def _rig(speed=2.0, start=(1.15, 0.575, 0.0), camera=None, task="goal", **safety):
+def _make_rig(speed=2.0, start=(1.15, 0.575, 0.0), camera=None, task="goal", **safety):
     robot = EmulatedRobot(speed=speed, seed=0, start_pose=start).start()
     robot.trace = []
     safety.setdefault("link_timeout", 2.0)
@@ -64,11 +65,21 @@ def _rig(speed=2.0, start=(1.15, 0.575, 0.0), camera=None, task="goal", **safety
     return robot, env
 
 
+@contextlib.contextmanager
+def _rig(**kwargs):
+    """An emulated robot and a HardwareFishEnv driving it, both closed at the end."""
+    robot, env = _make_rig(**kwargs)
+    try:
+        yield robot, env
+    finally:
+        env.close()
+        robot.stop()
+
+
 # ---------------------------------------------------------------- 1, 9: controller away, stalled, raising
 @pytest.mark.parametrize("pause", [2.0, 8.0])
 def test_pause_outside_step_stops_within_the_lease(pause):
-    robot, env = _rig(speed=4.0, start=(1.85 - 0.099, 0.575, 0.0), tracking_timeout=1.5)
-    try:
+    with _rig(speed=4.0, start=(1.85 - 0.099, 0.575, 0.0), tracking_timeout=1.5) as (robot, env):
         env.reset(seed=0)
         t_call = robot.now()
         env.step(FULL)
@@ -81,14 +92,10 @@ def test_pause_outside_step_stops_within_the_lease(pause):
         assert stopped - t_call <= 1.0
         nose = max(s[0] + 0.5 * P.body_length * math.cos(s[2]) for _, s, *_ in robot.trace)
         assert nose < TANK_LENGTH  # issue: 1.85 -> 3.45 m through the wall line at 2.30 m
-    finally:
-        env.close()
-        robot.stop()
 
 
 def test_exception_out_of_step_stops_the_fins():
-    robot, env = _rig(speed=4.0, tracking_timeout=1.5)
-    try:
+    with _rig(speed=4.0, tracking_timeout=1.5) as (robot, env):
         env.reset(seed=0)
         env.step(FULL)
         # A bug after the command went out: _observe runs at least once in every step, whatever the
@@ -101,9 +108,6 @@ def test_exception_out_of_step_stops_the_fins():
         assert _wait(lambda: not fw.running)
         time.sleep(0.1)
         assert _stopped_at(robot, received) - received <= pr.DEFAULT_LEASE + 0.011
-    finally:
-        env.close()
-        robot.stop()
 
 
 def test_hung_process_with_a_live_keepalive_thread_stops_at_the_lease():
@@ -170,8 +174,7 @@ class _LyingCamera:
                                               ("inf", "bad_timestamp"), ("backwards", "timestamp_backwards"),
                                               ("frozen", "frozen_frame"), ("dead", "no frames from the camera")])
 def test_camera_lies_stop_the_fish_with_the_reason(mode, reason):
-    robot, env = _rig(speed=1.0, camera=_LyingCamera)
-    try:
+    with _rig(speed=1.0, camera=_LyingCamera) as (robot, env):
         env.reset(seed=0)
         env.step(np.zeros(8, dtype=np.float32))
         t_bad = robot.now()
@@ -184,9 +187,6 @@ def test_camera_lies_stop_the_fish_with_the_reason(mode, reason):
         assert info["tracking"]["reason"] == reason
         stopped = _stopped_at(robot, t_bad)
         assert stopped is not None and stopped - t_bad <= 1.0  # timeout 0.5 s + polling + radio
-    finally:
-        env.close()
-        robot.stop()
 
 
 # ---------------------------------------------------------------- 4: replays, duplicates, other sessions
@@ -322,7 +322,7 @@ def _full_thrust_at(start, steps=40):
     # The track task: no goal to reach on the way; speed 2 keeps the camera rate up on a loaded machine.
     # The geofence is under test: a tracking timeout of 3 experiment s keeps a slow camera on a loaded
     # machine from stopping the fish first (a fresh-clone CI run once stopped on "tracking_lost" at 1.5 s).
-    robot, env = _rig(speed=2.0, start=start, tracking_timeout=3.0, task="track")
+    robot, env = _make_rig(speed=2.0, start=start, tracking_timeout=3.0, task="track")
     angles = []
     stop = threading.Event()
 
@@ -373,21 +373,16 @@ def test_full_thrust_at_every_wall_and_corner(heading_deg):
 
 
 def test_fish_parallel_to_a_wall_is_stopped_by_its_fin_tips():
-    robot, env = _rig(speed=2.0, start=(1.15, 0.03 + P.fin_offset + P.fin_span * 0.8, 0.0))
-    try:
+    with _rig(speed=2.0, start=(1.15, 0.03 + P.fin_offset + P.fin_span * 0.8, 0.0)) as (robot, env):
         _, info = env.reset(seed=0)  # nose and tail 0.1 m from the wall, a fin tip within the margin
         assert info["in_geofence"]
         _, _, terminated, _, info = env.step(FULL)
         assert terminated and info["safety_stop"] == "geofence"
-    finally:
-        env.close()
-        robot.stop()
 
 
 # ---------------------------------------------------------------- 7, 8, 10: signals, sessions, small ones
 def test_signal_while_the_link_lock_is_held_still_sends_stop():
-    robot, env = _rig(speed=2.0, tracking_timeout=1.5)
-    try:
+    with _rig(speed=2.0, tracking_timeout=1.5) as (robot, env):
         env.reset(seed=0)
         env.step(FULL)
         with pytest.raises(KeyboardInterrupt):
@@ -396,9 +391,6 @@ def test_signal_while_the_link_lock_is_held_still_sends_stop():
                 time.sleep(0.5)  # the handler runs here; with a lock in it this would hang forever
         assert _wait(lambda: robot.firmware.state == pr.RobotState.STOPPED)
         assert env.supervisor.reason == "stop" or _wait(lambda: env.supervisor.reason == "stop")
-    finally:
-        env.close()
-        robot.stop()
 
 
 def test_session_does_not_come_from_the_seeded_generator():
