@@ -25,6 +25,7 @@ import json
 import shlex
 import sys
 import time
+from collections.abc import Callable
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -47,7 +48,8 @@ def make_run_dir(config: dict[str, Any], log_dir: str | Path = "runs", name: str
     return run_dir
 
 
-def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool):
+def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool,
+               on_evaluation: Callable[[dict[str, Any]], bool | None] | None = None):
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm.auto import tqdm
 
@@ -63,8 +65,11 @@ def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool):
             self.next_eval = config["eval_freq"] or None
             self.best: tuple[float, float] | None = None
             self.evaluations: list[dict[str, Any]] = []
+            self.start = time.perf_counter()
+            self.stop_requested = False
 
         def _on_training_start(self) -> None:
+            self.start = time.perf_counter()
             self.bar = tqdm(total=config["n_timesteps"], desc=f"train {config['algo']}", unit="step",
                             disable=not progress, smoothing=0.1)
 
@@ -73,7 +78,7 @@ def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool):
             if self.next_eval is not None and self.num_timesteps >= self.next_eval:
                 self.next_eval += config["eval_freq"]
                 self.run_evaluation()
-            return True
+            return not self.stop_requested
 
         def controller(self) -> SB3Controller:
             venv = self.model.get_env()
@@ -95,8 +100,11 @@ def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool):
                 self.logger.record("eval/tracking_error", result.metrics["tracking_error"].mean)
             score = (success, mean_return)
             improved = self.best is None or score > self.best
-            self.evaluations.append({"timesteps": int(self.num_timesteps), "success": success,
-                                     "mean_return": mean_return, "best": improved})
+            record = {"timesteps": int(self.num_timesteps), "elapsed_s": time.perf_counter() - self.start,
+                      "success": success, "mean_return": mean_return, "best": improved}
+            if "tracking_error" in result.metrics:
+                record["tracking_error"] = result.metrics["tracking_error"].mean
+            self.evaluations.append(record)
             if improved:
                 self.best = score
                 self.model.save(run_dir / "best_model.zip")
@@ -104,6 +112,8 @@ def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool):
                 if hasattr(venv, "obs_rms"):
                     venv.save(str(run_dir / "vecnormalize.pkl"))
             self.bar.set_postfix(eval_success=f"{success:.2f}", eval_return=f"{mean_return:.1f}")
+            if on_evaluation is not None and on_evaluation(dict(record)) is False:
+                self.stop_requested = True  # the caller (e.g. a Tune scheduler) prunes this run
 
         def _on_training_end(self) -> None:
             self.bar.close()
@@ -112,7 +122,8 @@ def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool):
 
 
 def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, verbose: int = 0,
-          torch_threads: int = 1, device: str = "cpu", command: str | None = None) -> Path:
+          torch_threads: int = 1, device: str = "cpu", command: str | None = None,
+          on_evaluation: Callable[[dict[str, Any]], bool | None] | None = None) -> Path:
     """Train with a resolved config (:func:`agents.config.resolve_config`) and fill ``run_dir``.
 
     Args:
@@ -123,6 +134,10 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
         torch_threads: Torch CPU threads (fixed, so a seeded run repeats on the same machine).
         device: Torch device.
         command: The command line to store in ``command.txt``.
+        on_evaluation: Called after every periodic evaluation with its record (``timesteps``,
+            ``elapsed_s`` since training started, ``success``, ``mean_return``, ``best`` and, on
+            ``track``, ``tracking_error``); returning ``False`` stops training there (the final
+            model is still saved). Ray Tune's ``tune.report`` and the benchmark's time to solve use it.
 
     Returns:
         The run folder.
@@ -149,12 +164,13 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
     cls = algo_class(config["algo"])
     model = cls(config["policy"], venv, seed=seed, device=device, verbose=verbose,
                 tensorboard_log=str(run_dir / "tb"), **algo_kwargs(config))
-    callback = _callbacks(config, run_dir, progress)
+    callback = _callbacks(config, run_dir, progress, on_evaluation)
     start = time.perf_counter()
     model.learn(total_timesteps=config["n_timesteps"], callback=callback, tb_log_name=config["algo"])
     train_time = time.perf_counter() - start
     evaluations = callback.evaluations
-    if config["eval_freq"] and (not evaluations or evaluations[-1]["timesteps"] < model.num_timesteps):
+    if (config["eval_freq"] and not callback.stop_requested
+            and (not evaluations or evaluations[-1]["timesteps"] < model.num_timesteps)):
         callback.run_evaluation()  # the final model competes for best too
     model.save(run_dir / "model.zip")
     if normalize:

@@ -100,3 +100,25 @@ def test_overrides_and_resolution():
     assert kwargs["learning_rate"](1.0) == pytest.approx(1e-3) and kwargs["learning_rate"](0.5) == pytest.approx(5e-4)
     with pytest.raises(ValueError, match="no entry"):
         resolve_config("ppo", "Nope-v0", 0)
+
+
+def test_on_evaluation_sees_every_evaluation_and_can_stop_the_run(tmp_path):
+    from agents.config import resolve_config as resolve
+    from agents.train import train
+
+    config = resolve("ppo", ENV, seed=3, hyperparams=parse_overrides(TINY + ["n_timesteps=1024"]))
+    seen = []
+
+    def stop_after_two(record):
+        seen.append(record)
+        return len(seen) < 2
+
+    run_dir = train(config, tmp_path / "run", progress=False, on_evaluation=stop_after_two)
+    assert len(seen) == 2  # the second report stopped training: no further evaluation
+    assert [r["timesteps"] for r in seen] == sorted(r["timesteps"] for r in seen)
+    assert seen[-1]["timesteps"] < 1024
+    assert all(r["elapsed_s"] > 0 and 0.0 <= r["success"] <= 1.0 for r in seen)
+    import json
+    stats = json.loads((run_dir / "training.json").read_text())
+    assert stats["timesteps"] < 1024 and len(stats["evaluations"]) == 2
+    assert (run_dir / "model.zip").is_file()
