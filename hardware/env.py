@@ -16,15 +16,12 @@ from gymnasium.envs.registration import EnvSpec
 from hardware.link import RadioLink
 from hardware.safety import CommandFilter, Geofence, SafetyConfig, check_action, install_stop_handlers
 from hardware.supervisor import Supervisor
-from pectoral_gym.envs import tasks as tk
-from pectoral_gym.envs.core import EnvConfig, task_info
-from pectoral_gym.envs.observation import OBS_ACTION, OBS_VELOCITY, observation_bounds
-from pectoral_gym.models import REST
+from pectoral_gym.envs.core import EnvConfig
+from pectoral_gym.envs.layout import ACTION_SIZE, E_TX, E_TY
+from pectoral_gym.envs.observation import observation_bounds
+from pectoral_gym.envs.task_core import TaskState
 
 __all__ = ["HardwareFishEnv"]
-
-_IDX = np.zeros(1, dtype=np.int64)
-_NONE = np.zeros(1, dtype=np.bool_)
 
 
 class HardwareFishEnv(gym.Env):
@@ -33,8 +30,10 @@ class HardwareFishEnv(gym.Env):
     ## Description
 
     The same tasks, spaces and rewards as ``PectoralFish-{Full,Averaged}-v0``
-    (:class:`~pectoral_gym.envs.fish_env.PectoralFishEnv`), computed by the same task kernels
-    (:mod:`pectoral_gym.envs.tasks`) on the *estimated* state: an overhead camera frame is tracked
+    (:class:`~pectoral_gym.envs.fish_env.PectoralFishEnv`), computed by the same task core
+    (:class:`pectoral_gym.envs.task_core.TaskState`, the task table's row for ``task``) on the
+    *estimated* state: for the same states and commands both give the same observations, rewards and
+    ``info`` (``tests/test_task_core.py``). An overhead camera frame is tracked
     (:class:`hardware.tracker.MarkerTracker`: red front marker, blue back marker) and a high-gain observer
     (:class:`hardware.observer.HighGainObserver`) estimates the body-frame velocities. Each ``step`` sends
     the fin command through :class:`hardware.link.RadioLink` and then watches the camera for one
@@ -46,7 +45,8 @@ class HardwareFishEnv(gym.Env):
 
     ``Box(-1, 1, (8,), float32)``, mapped exactly as in ``PectoralFishEnv``; then the PC-side safety
     rules clip the command to the servo limits and rate-limit it (:class:`hardware.safety.CommandFilter`).
-    A non-finite action raises ``ValueError`` and nothing is sent.
+    The task core is given the command actually sent, normalised: the observation's last action and
+    the energy term are those of that command. A non-finite action raises ``ValueError`` and nothing is sent.
 
     | Num | Action                | Fin   | Range (x = -1 .. 1), default  | Unit |
     |-----|-----------------------|-------|-------------------------------|------|
@@ -73,14 +73,16 @@ class HardwareFishEnv(gym.Env):
 
     The terms of ``PectoralFishEnv`` (``reward_progress``, ``reward_goal``, ``reward_wall``,
     ``reward_energy``, ``reward_time`` for ``goal``; ``reward_tracking``, ``reward_wall``,
-    ``reward_energy`` for ``track``), each in ``info``, evaluated on the estimated state.
+    ``reward_energy`` for ``track``; a registered task's own), each in ``info``, evaluated on the
+    estimated state and the command sent.
 
     ## Starting State
 
     The fish is wherever it is: ``reset`` stops the fins, calls ``reset_hook(np_random)`` (e.g. "put the
     fish back", or placing an emulated fish), waits up to ``reset_timeout`` s for a tracked pose and
-    starts the observer there. ``goal``: a goal drawn as in simulation, redrawn until it lies 0.3 to
-    1.0 m from the actual start; ``track``: the reference ellipse drawn as in simulation.
+    starts the observer there; the task draws its episode as in simulation and adapts it to the actual
+    start (``TaskState.reset_at``). ``goal``: the goal redrawn until it lies 0.3 to 1.0 m from the
+    actual start; ``track``: the reference ellipse drawn as in simulation.
 
     ## Episode End
 
@@ -109,7 +111,7 @@ class HardwareFishEnv(gym.Env):
     |---------------------|----------------|------|-------------|
     | ``port``            |                |      | ``serial_for_url`` URL or a :class:`RadioLink` |
     | ``camera``          |                |      | ``hardware.camera.open_source`` spec or a frame source |
-    | ``task``            | ``"goal"``     |      | ``"goal"`` or ``"track"`` |
+    | ``task``            | ``"goal"``     |      | ``"goal"``, ``"track"`` or a registered task (``envs.task_core``) |
     | ``control_period``  | 0.5            | s    | time between actions |
     | ``calibration``     | ``None``       |      | calibration JSON; ``None``: default camera model |
     | ``safety``          | defaults       |      | :class:`hardware.safety.SafetyConfig` |
@@ -127,7 +129,8 @@ class HardwareFishEnv(gym.Env):
 
     * v0: Initial version. Issue 13: leased commands (protocol v2), safety supervisor thread, frame
       checks, peak-rate servo clipping (the fastest simulated pattern runs at a longer period), STOP at
-      exit and on signals.
+      exit and on signals. Issue 14: the task core of the simulated envs (``TaskState``), any task of
+      the task table; the energy term prices the command sent (before: the action's pattern).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
@@ -151,7 +154,7 @@ class HardwareFishEnv(gym.Env):
         self.max_episode_steps = int(max_episode_steps)
         self.reset_hook, self.reset_timeout = reset_hook, float(reset_timeout)
         self.render_mode = render_mode
-        self.action_space = spaces.Box(-1.0, 1.0, (tk.ACTION_SIZE,), dtype=np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), dtype=np.float32)
         low, high = observation_bounds(self.config.control_period, self.config.ref_speed)  # the simulated envs'
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         # A physical system: the checker must not expect equal observations for equal seeds.
@@ -181,13 +184,8 @@ class HardwareFishEnv(gym.Env):
         self._velocity_count = 0
         self.filter = CommandFilter(self.safety.limits)
         cfg = self.config
-        self._cfg = cfg.cfg_array()
-        self._ep = np.zeros((1, tk.N_EP))
-        self._fish = tk.fish_array([cfg.params])
-        self._obs = np.zeros((1, tk.OBS_SIZE), dtype=np.float32)
-        self._out = np.zeros((1, tk.N_OUT))
-        self._beats = np.zeros((1, 2, 4))
-        self._act = np.zeros((1, tk.ACTION_SIZE))
+        self.task_state = TaskState(1, cfg)  # the simulated envs' task core, fed the observer's estimate
+        self._act = np.zeros((1, ACTION_SIZE))
         self._origin = time.monotonic()
         self._state = np.zeros(6)
         self._last_measure = -math.inf
@@ -252,48 +250,35 @@ class HardwareFishEnv(gym.Env):
         self._observing = True
         self._last_measure = t
         self._state = np.array([x, y, psi, 0.0, 0.0, 0.0])
-        draws = tk.draw_episode(self.np_random, self.config.task_id)
-        if self.config.task_id == tk.GOAL:
-            self._place_goal(draws, x, y)
-        start = np.empty((1, 6))
-        tk.start_states(_IDX, draws[None], self._cfg, self._ep, start)
-        rest = np.stack([REST.as_array()] * 2)
-        code = np.concatenate([self.config.encode(REST.as_array())] * 2)
-        tk.observe_reset(_IDX, self._state[None], self._ep, self._fish, self._obs, self._out, code)
-        self.filter.reset(rest)
+        task = self.task_state
+        task.reset_at(0, self.np_random, (x, y, psi))  # draw the target, observe at rest
+        self.filter.reset(task.beats[0].copy())  # the rest pattern
         self._steps = 0
         self.supervisor.frames = self.supervisor.lost_frames = 0
         self._next_tick = self.now()
         self.supervisor.arm(since=placed)
-        info = task_info(self._out[0], self.config.task_id)  # zero reward terms, the distance, as the simulated envs
-        info.update(pose=[x, y, psi], target=self._ep[0, :2].tolist(), in_geofence=self.geofence.breached(x, y, psi))
-        return self._obs[0].copy(), info
-
-    def _place_goal(self, draws: np.ndarray, x: float, y: float) -> None:
-        """Redraw the goal (as :func:`tasks.draw_episode` does) until it is 0.3-1.0 m from the actual start."""
-        for _ in range(tk.GOAL_MAX_BLOCKS * tk.GOAL_CANDIDATES):
-            if tk.GOAL_MIN_DISTANCE <= math.hypot(draws[3] - x, draws[4] - y) <= tk.GOAL_MAX_DISTANCE:
-                return
-            u = self.np_random.random(2)
-            draws[3] = tk.GOAL_INSET + u[0] * (tk.TANK_X - 2.0 * tk.GOAL_INSET)
-            draws[4] = tk.GOAL_INSET + u[1] * (tk.TANK_Y - 2.0 * tk.GOAL_INSET)
+        info = task.info(0)  # zero reward terms, the distance, as the simulated envs
+        info.update(pose=[x, y, psi], target=self.target, in_geofence=self.geofence.breached(x, y, psi))
+        return task.obs[0].copy(), info
 
     def step(self, action):
         """Send the command, watch the fish for one control period; returns the Gymnasium 5-tuple."""
         arr = check_action(action)  # raises before anything is sent
         if self._closed:
             raise RuntimeError("the environment is closed")
-        self._act[0] = arr
-        tk.apply_actions(self._act, _NONE, self._cfg, self._beats, self._obs, self._out, self._fish)
+        task, config = self.task_state, self.config
         now = self.now()
-        command = self.filter(self._beats[0], self.config.control_period)  # each command holds for a period
+        # The action's patterns (the env's mapping), then the safety rules; each command holds for a period.
+        command = self.filter(config.decode(arr.reshape(2, ACTION_SIZE // 2)), config.control_period)
+        # The task core gets the command sent: last-action observation and energy term are the sent command's.
+        self._act[0] = np.concatenate([config.encode(command[0]), config.encode(command[1])])
+        task.apply(self._act)
         sup = self.supervisor
         period, lease = self.config.control_period, self.safety.lease
         self._next_tick = max(self._next_tick + period, now)  # a late step does not shorten the next one
         overrun = max(0.0, now - (self._next_tick - period))
         if sup.send(command, lease):
             self._lease_end = now + lease
-        self._obs[0, OBS_ACTION] = np.concatenate([self.config.encode(command[0]), self.config.encode(command[1])])
         self._velocity_sum = np.zeros(3)
         self._velocity_count = 0
         while not sup.reason:
@@ -310,30 +295,29 @@ class HardwareFishEnv(gym.Env):
         end = self.now()
         if end - self._last_measure > 2 * self.frame_period and math.isfinite(self._last_measure):
             self._state = np.asarray(self.observer.predict(end), dtype=float).copy()
-        tk.observe_and_reward(self._state[None], _NONE, self._cfg, self._ep, self._fish, self._obs, self._out)
+        task.observe(self._state[None])
         if self._velocity_count:
             # Velocities as in the simulated envs: means over the control period, not the last estimate
             # (the observer passes part of the fin-beat ripple).
-            self._obs[0, OBS_VELOCITY] = self._velocity_sum / self._velocity_count
+            task.set_mean_velocity(0, self._velocity_sum / self._velocity_count)
         self._steps += 1
-        o = self._out[0]
-        terminated = bool(o[tk.O_TERMINATED] > 0.5) or reason == "geofence"
+        terminated = task.terminated(0) or reason == "geofence"
         truncated = bool(reason) and not terminated or self._steps >= self.max_episode_steps
         if terminated or truncated:
             sup.trip(reason or "episode_end")
             reason = sup.reason if sup.reason != "episode_end" else reason
-        info = task_info(o, self.config.task_id)  # the simulated envs' keys and values
+        info = task.info(0)  # the simulated envs' keys and values
         info.update(safety_stop=reason, command=command.tolist(), pose=list(sup.pose),
                     estimate=self._state.tolist(), overrun=overrun, link=self.link.health(),
                     tracking={"ok": sup.track_ok, "lost_for": self.watch.lost_for(end), "reason": self.watch.reason,
                               "confidence": sup.confidence, "frames": sup.frames, "lost_frames": sup.lost_frames,
                               "rejected": dict(sup.frame_check.rejected)})
-        return self._obs[0].copy(), float(o[tk.O_REWARD]), terminated, truncated, info
+        return task.obs[0].copy(), task.reward(0), terminated, truncated, info
 
     @property
     def target(self) -> list[float]:
         """Current target position ``[X, Y]`` in the tank [m]."""
-        return self._ep[0, :2].tolist()
+        return self.task_state.ep[0, E_TX:E_TY + 1].tolist()
 
     def stop(self) -> None:
         """Stop the fins now and end the episode (``"stop"``); takes no lock, so safe in a signal handler.

@@ -1,9 +1,10 @@
 """Settings and the batched environment core shared by the single and the vector environment.
 
 :class:`EnvCore` holds one batched fish model of ``n`` fish and the task
-arrays of ``n`` environments. The single environment is an ``EnvCore`` with
-``n = 1``; the vector environment uses one with ``n = num_envs``. Nothing here
-imports Gymnasium.
+state of ``n`` environments (:class:`~pectoral_gym.envs.task_core.TaskState`,
+the task table's arrays and functions, shared with the robot env). The single
+environment is an ``EnvCore`` with ``n = 1``; the vector environment uses one
+with ``n = num_envs``. Nothing here imports Gymnasium.
 """
 
 from __future__ import annotations
@@ -20,14 +21,15 @@ import numpy as np
 from pectoral_gym._jit import PARALLEL_MIN_ITEMS
 from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.layout import FishConstants, ReferenceEllipse, fish_array
-from pectoral_gym.envs.observation import OBS_SIZE
+from pectoral_gym.envs.task_core import TASK_IDS, TaskState, task_info
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.models import MODELS, REST, AveragedModel, FishModel, FullModel
 from pectoral_gym.params import FishParams, as_params
 
 __all__ = ["EnvConfig", "EnvCore", "MODELS", "TASKS", "env_signature", "task_info"]
 
-TASKS = {"goal": tk.GOAL, "track": tk.TRACK}
+# name -> cfg[C_TASK] id of every task in the task table (a live view: registered tasks appear here).
+TASKS = TASK_IDS
 _FIELD_NAMES = tuple(f.name for f in dataclasses.fields(FishParams))
 
 
@@ -53,7 +55,8 @@ class EnvConfig:
 
     Attributes:
         model: ``"full"`` (blade-element) or ``"averaged"`` (cycle-averaged, scaled).
-        task: ``"goal"`` (reach a point) or ``"track"`` (follow a point moving on an ellipse).
+        task: ``"goal"`` (reach a point), ``"track"`` (follow a point moving on an ellipse), or a task
+            added to the task table (:func:`pectoral_gym.envs.task_core.register_task`).
         control_period: Time between actions [s].
         bias_range: ``(low, high)`` of the fin bias ``gamma_0`` [rad].
         amplitude_range: ``(low, high)`` of the fin amplitude ``gamma_A`` [rad].
@@ -166,7 +169,7 @@ class EnvConfig:
 
     @property
     def task_id(self) -> int:
-        """``tasks.GOAL`` or ``tasks.TRACK``."""
+        """``cfg[C_TASK]``: ``tasks.GOAL``, ``tasks.TRACK`` or a registered task's id."""
         return TASKS[self.task]
 
     @property
@@ -209,22 +212,6 @@ class EnvConfig:
         return np.minimum(r[:, 0] + 0.5 * (x + 1.0) * (r[:, 1] - r[:, 0]), r[:, 1])
 
 
-def task_info(out: np.ndarray, task: int) -> dict:
-    """The task's ``info`` of one env from its ``out`` row (``layout.O_*``), numpy scalars.
-
-    The one place the info keys are written, for every fish env (full, averaged, hardware),
-    after a reset (zero reward terms, the real distance) as after a step: the reward terms of
-    ``tasks.TERMS[task]`` in order, ``"distance"``, then ``"is_success"`` (goal) or
-    ``"tracking_error"`` (track). A dict literal per task: faster than a loop over ``TERMS``.
-    """
-    if task == tk.GOAL:
-        return {"reward_progress": out[tk.O_PROGRESS], "reward_goal": out[tk.O_GOAL], "reward_wall": out[tk.O_WALL],
-                "reward_energy": out[tk.O_ENERGY], "reward_time": out[tk.O_TIME], "distance": out[tk.O_DISTANCE],
-                "is_success": out[tk.O_SUCCESS] > 0.5}
-    return {"reward_tracking": out[tk.O_TRACKING], "reward_wall": out[tk.O_WALL], "reward_energy": out[tk.O_ENERGY],
-            "distance": out[tk.O_DISTANCE], "tracking_error": out[tk.O_DISTANCE]}
-
-
 def env_signature(*parameters: inspect.Parameter) -> inspect.Signature:
     """``(self, *parameters, *EnvConfig's fields)``: an env's signature, the settings keyword-only with their defaults.
 
@@ -240,7 +227,7 @@ def env_signature(*parameters: inspect.Parameter) -> inspect.Signature:
 class EnvCore:
     """``n`` fish environments on one batched model: reset, step, and the arrays they fill.
 
-    The packed arrays are laid out in :mod:`pectoral_gym.envs.layout`; read
+    The packed arrays are those of ``task_state`` (laid out in :mod:`pectoral_gym.envs.layout`); read
     them through the accessors (``target``, ``reference``, ``fish_state``, ...).
 
     Args:
@@ -249,6 +236,7 @@ class EnvCore:
 
     Attributes:
         model: The batched :class:`~pectoral_gym.models.FishModel` (``n`` fish).
+        task_state: The :class:`~pectoral_gym.envs.task_core.TaskState` whose arrays follow (the same objects).
         obs: ``(n, 19)`` float32 observations after the last reset/step (``envs.observation``).
         out: ``(n, N_OUT)`` reward, terms and flags of the last step (``layout.O_*``).
         ep: ``(n, N_EP)`` per-episode state (``layout.E_*``).
@@ -261,26 +249,23 @@ class EnvCore:
         self.n = int(n)
         self.config = config
         self.task = config.task_id
-        self.terms = tk.TERMS[self.task]
+        # The task arrays and functions: one TaskState, shared with the robot env (envs.task_core).
+        self.task_state = ts = TaskState(self.n, config)
+        self.terms = ts.task.terms
         if config.model == "full":
             self.model: FishModel = FullModel(self.n, config.params)
         else:
             self.model = AveragedModel(self.n, config.params, scaling=config.scaling_functions() or "none")
-        self.cfg = config.cfg_array()
         self.dt = float(config.control_period)
         big = self.n >= PARALLEL_MIN_ITEMS  # chosen once: the batch size of a core never changes
         self._apply = tk.APPLY_KEEP_KERNELS.parallel if big else tk.APPLY_KEEP_KERNELS.serial
-        self._reward = tk.REWARD_MEAN_KERNELS.parallel if big else tk.REWARD_MEAN_KERNELS.serial
-        self.ep = np.zeros((self.n, tk.N_EP))
-        self.obs = np.zeros((self.n, OBS_SIZE), dtype=np.float32)
+        self._reward = ts.task.reward_mean.parallel if big else ts.task.reward_mean.serial
+        self.cfg, self.ep, self.obs, self.out, self.beats, self.fish = ts.cfg, ts.ep, ts.obs, ts.out, ts.beats, ts.fish
         self._integral_before = np.zeros((self.n, 3))  # the model's velocity integrals before a step
-        self.out = np.zeros((self.n, tk.N_OUT))
-        self.beats = np.broadcast_to(REST.as_array(), (self.n, 2, 4)).copy()
         self.all = np.ones(self.n, dtype=np.bool_)
-        self.none = np.zeros(self.n, dtype=np.bool_)
-        self.action_code = np.concatenate([config.encode(REST.as_array())] * 2)
+        self.none = ts.none
+        self.action_code = ts.action_code
         self.params: list[FishParams] = [config.params] * self.n
-        self.fish = fish_array(self.params)
         if config.randomize:
             self._rand_names = tuple(config.randomize)
             widths = np.array([config.randomize[k] for k in self._rand_names])
@@ -291,7 +276,7 @@ class EnvCore:
         """Start new episodes for the envs in ``index``; env ``i`` draws only from ``rngs[i]``.
 
         Per env, in this order: the randomisation factors (one per field of
-        ``config.randomize``, in its order), then :func:`tasks.draw_episode`.
+        ``config.randomize``, in its order), then the task's draws (``TaskState.draw``).
         """
         index = np.asarray(index, dtype=np.int64)
         draws = np.empty((index.size, 8))
@@ -302,14 +287,12 @@ class EnvCore:
                 changes = dict(zip(self._rand_names, (self._rand_base * factors).tolist(), strict=True))
                 self.params[i] = self.config.params.replace(**changes)
                 self.model.set_params(self.params[i], i)
-            draws[k] = tk.draw_episode(rng, self.task)
+            draws[k] = self.task_state.draw(rng)
         if self.config.randomize:
             self.fish[index] = fish_array([self.params[i] for i in index])
-        start = np.empty((index.size, 6))
-        tk.start_states(index, draws, self.cfg, self.ep, start)
+        start = self.task_state.start(index, draws)
         self.model.reset(start, right=REST, left=REST, index=None if index.size == self.n else index)
-        self.beats[index] = REST.as_array()
-        tk.observe_reset(index, self.model.state, self.ep, self.fish, self.obs, self.out, self.action_code)
+        self.task_state.observe_reset(index, self.model.state)
 
     def step(self, actions: np.ndarray, skip: np.ndarray | None = None) -> None:
         """Apply ``actions`` ``(n, 8)`` for one control period (envs in ``skip`` are not checked or scored).

@@ -13,7 +13,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from pectoral_gym.envs.core import EnvConfig, EnvCore, env_signature
-from pectoral_gym.envs.layout import ACTION_SIZE, O_DISTANCE, O_REWARD, O_SUCCESS, O_TERMINATED
+from pectoral_gym.envs.layout import ACTION_SIZE, O_REWARD, O_TERMINATED
 from pectoral_gym.envs.observation import OBSERVATION_STRUCTURE, observation_bounds
 from pectoral_gym.registration import MAX_EPISODE_STEPS
 
@@ -46,7 +46,8 @@ class PectoralFishVectorEnv(VectorEnv):
       finished env raises ``ValueError``).
 
     ``info`` holds one array per key of the single env's ``info`` (reward
-    terms, ``"distance"``, ``"is_success"`` or ``"tracking_error"``), each with
+    terms, ``"distance"``, ``"is_success"`` or ``"tracking_error"``: the task
+    table's ``Task.info_fields``, :mod:`pectoral_gym.envs.task_core`), each with
     its boolean mask ``"_<key>"``, from ``reset()`` as from ``step()``: the
     same as ``SyncVectorEnv`` of single envs gives.
 
@@ -90,8 +91,7 @@ class PectoralFishVectorEnv(VectorEnv):
         self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
         self.steps = np.zeros(self.num_envs, dtype=np.int64)
         self.prev_done = np.zeros(self.num_envs, dtype=np.bool_)
-        self._info_items = self.core.terms + (("distance", O_DISTANCE),)
-        self._goal = self.config.task == "goal"
+        self._info_fields = self.core.task_state.task.info_fields  # the task table's info entries, in order
         self._all = np.ones(self.num_envs, dtype=np.bool_)
 
     def _infos(self, mask: np.ndarray) -> dict[str, Any]:
@@ -99,15 +99,12 @@ class PectoralFishVectorEnv(VectorEnv):
         out = self.core.out
         everyone = bool(mask.all())
         info: dict[str, Any] = {}
-        for name, k in self._info_items:
-            info[name] = out[:, k].copy() if everyone else np.where(mask, out[:, k], 0.0)
+        for name, k, flag in self._info_fields:
+            if flag:
+                info[name] = (out[:, k] > 0.5) & mask
+            else:
+                info[name] = out[:, k].copy() if everyone else np.where(mask, out[:, k], 0.0)
             info["_" + name] = mask.copy()
-        if self._goal:
-            info["is_success"] = (out[:, O_SUCCESS] > 0.5) & mask
-            info["_is_success"] = mask.copy()
-        else:
-            info["tracking_error"] = info["distance"].copy()
-            info["_tracking_error"] = mask.copy()
         return info
 
     @property
