@@ -11,6 +11,11 @@ CLI::
     python -m agents.evaluate --policy runs/PectoralFish-Averaged-v0/ppo_goal_seed0_...
     python -m agents.evaluate --policy RUN --env PectoralFish-Full-v0 --episodes 100 --seed 0 [--randomize]
     python -m agents.evaluate --baseline hand --env PectoralFish-Full-v0 --task goal
+
+A run folder's environment arguments (``config.yaml``) are reused, ``--env-kwargs`` on top, except
+``randomize`` (``--randomize`` sets it) and, on the full model, the averaged model's own settings
+``scaling`` and ``check_scaling_params`` (a policy trained on a robot's averaged model with its K is
+evaluated on the full model of the same robot, ``params`` kept). ``--quick``: at most 2 episodes.
 """
 
 from __future__ import annotations
@@ -46,6 +51,9 @@ __all__ = [
 DEFAULT_RANDOMIZATION = {"body_mass": 0.1, "body_inertia": 0.2, "drag_coef": 0.2, "lift_coef": 0.2,
                          "moment_coef": 0.2, "fin_force_coef": 0.2}
 MAX_BATCH = 128  # vector-env slots of one evaluation
+QUICK_EPISODES = 2  # --quick: episodes of a smoke run
+# Settings of the averaged model only: a policy trained on it keeps its other env arguments on the full model.
+AVERAGED_ONLY = ("scaling", "check_scaling_params")
 
 ControllerLike = Controller | Callable[[], Controller]
 
@@ -221,21 +229,27 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--algo", help="algorithm of a bare .zip if it cannot be read from it")
     parser.add_argument("--out", metavar="DIR", help="output folder (default: runs/eval/<controller>_<env>_<task>...)")
     parser.add_argument("--plot-episodes", type=int, default=12, help="episodes drawn in the trajectory plot")
+    parser.add_argument("--quick", action="store_true",
+                        help=f"smoke run in seconds: at most {QUICK_EPISODES} episodes whatever --episodes says")
     return parser.parse_args(argv)
 
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point (see the module docstring)."""
     args = _parse_args(argv)
+    if args.quick:
+        args.episodes = min(args.episodes, QUICK_EPISODES)
     try:
         env_kwargs = json.loads(args.env_kwargs)
         if not isinstance(env_kwargs, dict):
             raise ValueError("--env-kwargs must be a JSON object")
         if args.policy:
             from agents.policy import load_policy, read_config
+            from pectoral_gym.registration import ENV_IDS
 
             run_kwargs = read_config(args.policy).get("env_kwargs", {}) if Path(args.policy).is_dir() else {}
-            env_kwargs = {**{k: v for k, v in run_kwargs.items() if k != "randomize"}, **env_kwargs}
+            dropped = ("randomize", *(AVERAGED_ONLY if ENV_IDS.get(args.env) == "full" else ()))
+            env_kwargs = {**{k: v for k, v in run_kwargs.items() if k not in dropped}, **env_kwargs}
             controller: ControllerLike = load_policy(args.policy, algo=args.algo)
             name = Path(args.policy).name.removesuffix(".zip")
         else:

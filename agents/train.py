@@ -16,6 +16,10 @@ evaluation, its observation statistics), ``vecnormalize_final.pkl`` (statistics
 of ``model.zip``), ``config.yaml`` (resolved config), ``command.txt``,
 ``training.json`` (time, steps/s, evaluations) and TensorBoard logs in ``tb/``.
 The same ``--seed`` on the same machine repeats a run.
+
+``--quick`` is a smoke run in seconds (tests, CI, trying a command): it overrides the
+size of the run (:data:`QUICK`; ``n_timesteps`` 256, 2 envs, no periodic evaluation)
+whatever ``--n-timesteps``/``--hyperparams`` say; the policy means nothing.
 """
 
 from __future__ import annotations
@@ -34,7 +38,14 @@ import yaml
 
 from agents.config import algo_class, algo_kwargs, parse_overrides, resolve_config
 
-__all__ = ["EVAL_SEED_OFFSET", "main", "make_run_dir", "train"]
+__all__ = ["EVAL_SEED_OFFSET", "QUICK", "main", "make_run_dir", "train"]
+
+#: ``--quick``: the hyperparameters it overrides, common and per algorithm family.
+QUICK: dict[str, dict[str, Any]] = {
+    "all": {"n_timesteps": 256, "n_envs": 2, "eval_freq": 0},
+    "on_policy": {"n_steps": 64, "batch_size": 64, "n_epochs": 1},  # ppo; a2c takes n_steps only
+    "off_policy": {"learning_starts": 64, "batch_size": 64, "buffer_size": 1024},  # sac, td3, ddpg
+}
 
 EVAL_SEED_OFFSET = 1_000_000  # periodic evaluations use episodes seed + this + k, apart from training resets
 
@@ -205,7 +216,18 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--device", default="cpu", help="torch device")
     parser.add_argument("--verbose", type=int, default=0, help="SB3 verbosity")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
+    parser.add_argument("--quick", action="store_true",
+                        help="smoke run in seconds: overrides the run's size (n_timesteps 256, 2 envs, no evaluation; "
+                             "see agents.train.QUICK); the policy means nothing")
     return parser.parse_args(argv)
+
+
+def quick_overrides(algo: str) -> dict[str, Any]:
+    """The hyperparameters ``--quick`` sets for ``algo`` (:data:`QUICK`)."""
+    algo = algo.lower()
+    family = {"ppo": QUICK["on_policy"], "a2c": {"n_steps": QUICK["on_policy"]["n_steps"]}}.get(
+        algo, QUICK["off_policy"])
+    return {**QUICK["all"], **family}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -219,6 +241,8 @@ def main(argv: list[str] | None = None) -> int:
             overrides["eval_freq"] = int(args.eval_freq)
         if args.eval_episodes is not None:
             overrides["eval_episodes"] = int(args.eval_episodes)
+        if args.quick:
+            overrides.update(quick_overrides(args.algo))
         env_kwargs = json.loads(args.env_kwargs)
         if not isinstance(env_kwargs, dict):
             raise ValueError("--env-kwargs must be a JSON object")

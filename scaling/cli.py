@@ -18,6 +18,12 @@ from scaling.grids import GRIDS, GridError, load_grid
 
 __all__ = ["main"]
 
+# ``identify --quick``: the settings it overrides (with ``grid="quick"``).
+QUICK_IDENTIFY = {"horizon": 3.0, "folds": 2, "max_degree": 1, "holdout": 12, "jobs": 1, "yaw_damping": "paper",
+                  "quiet": True}
+_QUICK_TEXT = " ".join(f"--{k.replace('_', '-')} {v}" if v is not True else f"--{k}"
+                       for k, v in QUICK_IDENTIFY.items())
+
 
 def _identify_parser(sub) -> None:
     p = sub.add_parser(
@@ -52,6 +58,10 @@ def _identify_parser(sub) -> None:
     p.add_argument("--seed", type=int, default=0, help="seed of the CV folds (default 0)")
     p.add_argument("--jobs", type=int, default=0, help="NMPC worker processes (default 0: all cores)")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
+    p.add_argument("--quick", action="store_true",
+                   help="smoke run in seconds (tests, CI, trying the command): overrides --grid with the 12-pattern "
+                        f"'quick' grid and sets {_QUICK_TEXT}; the file records metadata['quick'] (K not meant for "
+                        "use; refuses --install)")
 
 
 def _write_table(result, path: Path) -> None:
@@ -78,6 +88,14 @@ def _run_identify(args) -> int:
     from scaling.identify import identify
     from scaling.nmpc import NmpcSettings
 
+    if args.quick:
+        if args.install:
+            print("error: --quick identifies a K that is not meant for use; it cannot be --install'ed",
+                  file=sys.stderr)
+            return 2
+        args.grid = "quick"
+        for key, value in QUICK_IDENTIFY.items():
+            setattr(args, key, value)
     try:
         grid = load_grid(args.grid)
         settings = NmpcSettings(args.horizon, args.sampling, args.q, args.q_terminal, args.substeps)
@@ -97,6 +115,8 @@ def _run_identify(args) -> int:
     total = time.perf_counter() - start
     args.out.mkdir(parents=True, exist_ok=True)
     coefficients = args.out / "scaling_coefficients.json"
+    if args.quick:
+        result.scaling.metadata["quick"] = True  # a smoke run: its K is not meant for use
     result.scaling.save(coefficients)
     _write_table(result, args.out / "patterns.csv")
     (args.out / "flags.json").write_text(json.dumps(result.flags, indent=1) + "\n")

@@ -8,6 +8,9 @@ Presets:
 
 * ``paper``: the paper's 560 patterns (amplitudes 10-30 deg, biases 50-90 deg,
   periods 0.5, 0.66, 1, 2 s, ratios 2-5).
+* ``quick``: 12 patterns (biases 60, 75, 90 deg; amplitudes 15, 25 deg; period
+  1 s; ratios 2, 4) for smoke runs (``python -m scaling identify --quick``);
+  the K it gives is not meant for use.
 * ``env``: covers the environments' whole default action ranges (bias 45-135
   deg, amplitude 0-30 deg, period 0.5-2 s, ratio 1-5), so the averaged
   environment never extrapolates, and the periods of the paper's forward
@@ -171,6 +174,7 @@ GRIDS: dict[str, Grid] = {
         period_s=(0.36, 1.0, 4.0),
         ratio=(1.25, 1.5, 2, 3, 4, 5),
     ),
+    "quick": Grid.product("quick", bias_deg=(60, 75, 90), amplitude_deg=(15, 25), period_s=(1.0,), ratio=(2, 4)),
 }
 
 

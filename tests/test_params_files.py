@@ -131,31 +131,6 @@ def test_cli_steady_takes_params_and_checks_the_k_file(tmp_path):
     assert full[1]["speed"] > full[0]["speed"]
 
 
-def test_walk_through_your_own_robot(tmp_path):
-    """The README walk-through, with a 12-pattern grid instead of ``paper`` and a tiny training."""
-    (tmp_path / "robot.json").write_text('{"fin_span": 0.07}\n')
-    (tmp_path / "grid.json").write_text(
-        '{"bias_deg": [60, 75, 90], "amplitude_deg": [15, 25], "period_s": [1.0], "ratio": [2, 4]}\n')
-    steps = [
-        ["-m", "scaling", "identify", "--grid", "grid.json", "--params", "robot.json", "--out", "k",
-         "--horizon", "3", "--jobs", "1", "--folds", "2", "--max-degree", "1", "--quiet", "--yaw-damping", "paper"],
-        ["-m", "pectoral_gym", "steady", "--model", "averaged", "--params", "robot.json",
-         "--scaling", "k/scaling_coefficients.json", "--right", "90,20,1,3"],
-        ["-m", "agents.train", "--algo", "ppo", "--env", ENV, "--task", "goal", "--n-timesteps", "256",
-         "--hyperparams", "n_envs=2", "n_steps=64", "batch_size=64", "--env-kwargs",
-         '{"params": "robot.json", "scaling": "k/scaling_coefficients.json"}', "--log-dir", "runs",
-         "--run-name", "robot", "--no-progress"],
-        ["-m", "agents.evaluate", "--policy", f"runs/{ENV}/robot", "--env", ENV, "--episodes", "2", "--out", "eval"],
-    ]
-    for args in steps:
-        run = _run(*args, cwd=tmp_path)
-        assert run.returncode == 0, (args, run.stderr[-2000:])
-    k = ScalingFunctions.load(tmp_path / "k" / "scaling_coefficients.json")
-    assert k.identified_params["fin_span"] == 0.07  # identify recorded the robot
-    metrics = json.loads((tmp_path / "eval" / "metrics.json").read_text())
-    assert metrics["env_kwargs"]["params"] == "robot.json"  # evaluated on the robot it was trained on
-
-
 def test_cli_validate_takes_params_and_reports_a_k_file_for_another_robot(tmp_path):
     (tmp_path / "robot.json").write_text('{"fin_span": 0.07}')
     run = _run("-m", "scaling", "validate", "--params", "robot.json", "--out", "val", "--quick", "--no-plots",

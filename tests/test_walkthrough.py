@@ -1,0 +1,83 @@
+"""The README's "Your own robot, end to end" walk-through, run as written (each python command with --quick).
+
+The commands are parsed from README.md, so the test cannot drift from the text; ``--quick`` is the
+documented smoke-run flag of ``scaling identify|validate``, ``agents.train`` and ``agents.evaluate``.
+"""
+
+import json
+import os
+import re
+import shlex
+import stat
+import subprocess
+import sys
+from pathlib import Path
+
+from pectoral_gym.kfunctions import ScalingFunctions
+
+ROOT = Path(__file__).resolve().parents[1]
+QUICK = {("scaling", "identify"), ("scaling", "validate"), ("agents.train",), ("agents.evaluate",)}
+
+
+def walkthrough_commands(text: str) -> list[str]:
+    """The shell commands of the README block after the ``<!-- walkthrough ... -->`` marker."""
+    match = re.search(r"<!-- walkthrough\b.*?-->\s*```bash\n(.*?)```", text, re.S)
+    if match is None:
+        raise AssertionError("README.md has no walk-through block (<!-- walkthrough ... --> then ```bash)")
+    joined = match.group(1).replace("\\\n", " ")
+    return [line.strip() for line in joined.splitlines() if line.strip() and not line.strip().startswith("#")]
+
+
+def with_quick(command: str) -> str:
+    """``command`` with ``--quick`` appended if it is one of the CLIs that take it."""
+    tokens = shlex.split(command)
+    if tokens[:2] == ["python", "-m"] and (tuple(tokens[2:3]) in QUICK or tuple(tokens[2:4]) in QUICK):
+        return command + " --quick"
+    return command
+
+
+def test_parsing_joins_continuations_and_adds_quick_only_where_documented():
+    text = "x\n<!-- walkthrough: t -->\n```bash\n# c\necho 1 > a\npython -m agents.train --a 1 \\\n    --b 2\n" \
+           "python -m scaling validate --c\npython -m pectoral_gym steady\n```\n"
+    commands = walkthrough_commands(text)
+    assert commands == ["echo 1 > a", "python -m agents.train --a 1      --b 2", "python -m scaling validate --c",
+                        "python -m pectoral_gym steady"]
+    assert [with_quick(c).endswith("--quick") for c in commands] == [False, True, True, False]
+
+
+def test_the_readme_walk_through_runs_as_written(tmp_path):
+    commands = walkthrough_commands((ROOT / "README.md").read_text())
+    text = "\n".join(commands)
+    # What the walk-through must show (issue 14): the fin span changed, K identified for it, training on the
+    # averaged model with params= and scaling=, evaluation on the full model.
+    assert "fin_span" in commands[0]
+    assert re.search(r"python -m scaling identify .*--params robot\.json", text)
+    assert re.search(r"python -m agents\.train .*PectoralFish-Averaged-v0.*\"params\".*\"scaling\"", text)
+    assert re.search(r"python -m agents\.evaluate .*PectoralFish-Full-v0", text)
+    bin_dir = tmp_path / "bin"
+    bin_dir.mkdir()
+    python = bin_dir / "python"  # `python` in the commands is the interpreter running the tests
+    python.write_text(f'#!/bin/sh\nexec "{sys.executable}" "$@"\n')
+    python.chmod(python.stat().st_mode | stat.S_IEXEC)
+    work = tmp_path / "robot"
+    work.mkdir()
+    env = {**os.environ, "PATH": f"{bin_dir}{os.pathsep}{os.environ['PATH']}", "PYTHONPATH": str(ROOT),
+           "MPLBACKEND": "Agg"}
+    for command in commands:
+        run = subprocess.run(["bash", "-c", with_quick(command)], cwd=work, env=env, capture_output=True, text=True,
+                             timeout=900)
+        assert run.returncode == 0, (command, run.stdout[-1500:], run.stderr[-3000:])
+    k = ScalingFunctions.load(work / "k" / "scaling_coefficients.json")
+    assert k.identified_params["fin_span"] == 0.07  # identified for the robot of step 1
+    assert k.metadata["quick"] is True
+    evaluation = json.loads(next((work / "runs" / "eval").glob("*/metrics.json")).read_text())
+    assert evaluation["env_id"] == "PectoralFish-Full-v0"
+    assert evaluation["env_kwargs"]["params"] == "robot.json"  # the trained robot, on the full model
+    assert "scaling" not in evaluation["env_kwargs"]
+
+
+def test_quick_identify_refuses_install(capsys):
+    from scaling.cli import main
+
+    assert main(["identify", "--quick", "--install"]) == 2
+    assert "--install" in capsys.readouterr().err
