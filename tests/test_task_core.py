@@ -191,6 +191,10 @@ def test_a_registered_task_is_a_task_of_the_simulated_envs(hold):
             break
     copy = pickle.loads(pickle.dumps(env.unwrapped))  # the task state pickles by name
     assert copy.core.task_state.task is hold
+    drawn = gym.make("PectoralFish-Averaged-v0", task="hold", render_mode="rgb_array")
+    drawn.reset(seed=2)
+    assert drawn.render().shape[2] == 3  # a target without a reference ellipse is drawn as a goal
+    drawn.close()
     venv = PectoralFishVectorEnv(3, model="averaged", task="hold")
     _, vinfo = venv.reset(seed=2)
     assert list(vinfo) == [k for key in HOLD_KEYS for k in (key, "_" + key)]

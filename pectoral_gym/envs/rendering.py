@@ -72,12 +72,12 @@ class FishRenderer:
         surf.fill(WATER_COLOR)
         pg.draw.rect(surf, WALL_COLOR, pg.Rect(0, 0, self.width, self.height), width=3)
         target = self._px(*core.target(i))
-        if config.task == "goal":
+        ellipse = core.reference(i)  # all zero unless the task moves its target along an ellipse (track)
+        if not (ellipse.a > 0 and ellipse.b > 0):
             center = target
             pg.draw.circle(surf, TARGET_COLOR, center, max(2.0, config.goal_radius * SCALE), width=2)
             pg.draw.circle(surf, TARGET_COLOR, center, 3)
         else:
-            ellipse = core.reference(i)
             a, b = ellipse.a * SCALE, ellipse.b * SCALE
             cx, cy = self._px(ellipse.cx, ellipse.cy)
             pg.draw.ellipse(surf, PATH_COLOR, pg.Rect(cx - a, cy - b, 2 * a, 2 * b), width=1)
