@@ -326,8 +326,15 @@ class TaskState:
 
     # ------------------------------------------------------------ reset
     def draw(self, rng: np.random.Generator) -> np.ndarray:
-        """One episode's random numbers ``(8,)`` from ``rng``."""
-        return self.task.draw(rng)
+        """One episode's random numbers ``(8,)`` from ``rng``.
+
+        Raises:
+            ValueError: If the row's ``draw`` gives another shape.
+        """
+        draws = self.task.draw(rng)
+        if np.shape(draws) != (8,):
+            raise ValueError(f"task {self.task.name!r}: draw(rng) must give 8 numbers, got shape {np.shape(draws)}")
+        return draws
 
     def start(self, index: np.ndarray, draws: np.ndarray) -> np.ndarray:
         """Targets of the envs in ``index`` from ``draws`` ``(len(index), 8)``; returns the start states ``(k, 6)``."""
