@@ -4,13 +4,15 @@
 :func:`pectoral_gym.registration.register_envs` when ``pectoral_gym`` is imported.
 
 Modules: ``fish_env`` (the single env), ``vector`` (the native vector env),
-``core`` (settings and the batched core both share), ``tasks`` (the numba
+``core`` (settings and the batched core both share), ``task_core`` (the task
+table and ``TaskState``, shared with the robot env), ``tasks`` (the numba
 task kernels), ``layout`` (their packed arrays, named), ``observation`` (the
 observation layout and ``decode``), ``rendering`` (pygame top view).
 """
 
 from pectoral_gym.envs.core import EnvConfig, EnvCore
 from pectoral_gym.envs.fish_env import PectoralFishEnv
+from pectoral_gym.envs.task_core import TaskState, register_task
 from pectoral_gym.envs.vector import PectoralFishVectorEnv
 
-__all__ = ["EnvConfig", "EnvCore", "PectoralFishEnv", "PectoralFishVectorEnv"]
+__all__ = ["EnvConfig", "EnvCore", "PectoralFishEnv", "PectoralFishVectorEnv", "TaskState", "register_task"]
