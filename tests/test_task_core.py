@@ -55,9 +55,10 @@ def _replay(config, seed, pose, steps):
         yield task.obs[0].copy(), task.reward(0), task.info(0)
 
 
+@pytest.mark.parametrize("model", ["Averaged", "Full"])
 @pytest.mark.parametrize("task", ["goal", "track"])
-def test_simulated_env_equals_the_task_core_fed_its_states(task):
-    env = gym.make("PectoralFish-Averaged-v0", task=task).unwrapped
+def test_simulated_env_equals_the_task_core_fed_its_states(model, task):
+    env = gym.make(f"PectoralFish-{model}-v0", task=task).unwrapped
     obs, info = env.reset(seed=4)
     sim = [(obs, None, info)]
     steps = []
