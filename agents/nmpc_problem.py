@@ -126,6 +126,8 @@ class NMPCSettings:
             ``"difference"`` on the full model, ``"obs"`` on the averaged model.
         observer: Turn those period-mean velocities into current ones: the model's velocities at the
             end of the last period plus the offset between the measured and the model's period means.
+        transitions: Plan with the expected impulse of transitional strokes (module docstring);
+            ``None``: as the env's averaged model does (``EnvConfig.transitions``).
     """
 
     horizon: int = 10
@@ -153,6 +155,7 @@ class NMPCSettings:
     step_budget: float = 0.25
     velocity: str = "obs"
     observer: bool = True
+    transitions: bool | None = None
 
     def __post_init__(self) -> None:
         if min(int(self.horizon), int(self.substeps), int(self.max_iter), int(self.max_solves)) < 1:
@@ -318,7 +321,7 @@ class NMPCProblem:
         from_l = ca.vertcat(v.bias_left, ca.sqrt(v.amplitude_left), period, zeta)
         impulse = (expected_transition_impulse_sx(from_r, beat_r, 1.0, params)
                    + expected_transition_impulse_sx(from_l, beat_l, -1.0, params))
-        if not config.transitions:  # the planning model is the averaged model of the env's settings
+        if not (config.transitions if s.transitions is None else s.transitions):
             impulse = ca.DM.zeros(3)
         transition = ca.Function("transition", [u_from, u_sym], [ca.vertcat(impulse, 0.0)])
         x = ca.SX.sym("x", STATE_SIZE)

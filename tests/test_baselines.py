@@ -102,7 +102,9 @@ def test_hand_controller_rejects_bad_observations():
 # ---------------------------------------------------------------------- NMPC
 @pytest.fixture(scope="module")
 def nmpc():
-    return make_baseline("nmpc", CONFIG)
+    # no wall-clock budget: a loaded test machine must not turn slow solves into fallbacks (the
+    # budget's fallback has its own test below); solve times are measured by the benchmark
+    return make_baseline("nmpc", CONFIG, step_budget=1e6, max_cpu_time=1e6)
 
 
 def _episode_with_goal_ahead(env, distance: float = 0.35, bearing: float = 0.2):
@@ -127,10 +129,8 @@ def test_nmpc_reaches_a_near_goal_on_the_averaged_env(nmpc):
         if terminated or truncated:
             break
     assert info["is_success"]
-    # a solve cut short by IPOPT's CPU-time limit (a loaded machine) falls back to the last plan by
-    # design; most steps must still come from fresh solves
     assert len(nmpc.solve_times) > 0
-    assert nmpc.failures <= len(nmpc.solve_times) // 2
+    assert nmpc.failures <= len(nmpc.solve_times) // 10  # nearly every step comes from a fresh solve
 
 
 def test_nmpc_falls_back_to_the_last_plan_then_to_rest_when_the_solver_fails(nmpc, monkeypatch):
