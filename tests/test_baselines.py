@@ -242,3 +242,29 @@ def test_nmpc_compare_runs_variants_on_the_same_episodes():
         assert 0.0 < r["mean_distance_cm"] < 300.0  # a distance inside the 2.3 m tank
     with pytest.raises(ValueError, match="env"):
         compare({"a": {}}, [0], env="moon")
+
+
+def test_nmpc_with_transitions_adds_the_expected_impulse_of_a_change_only():
+    """NMPCSettings(transitions=True): a rollout whose input changes from the latched command differs from the
+    cycle-average model by the expected transitional impulse (docs/model.md 3.7); an unchanged input does not."""
+    plain = make_baseline("nmpc", CONFIG, step_budget=1e6)
+    with_t = make_baseline("nmpc", CONFIG, step_budget=1e6, transitions=True)
+    state = np.zeros(6)
+    u_prev = np.array([math.radians(10), math.radians(10), math.radians(80), math.radians(80)])
+    u_new = np.array([math.radians(25), math.radians(25), math.radians(100), math.radians(100)])
+    gains = np.ones(2)
+    n = plain.problem.horizon
+    for u, changed in ((u_prev, False), (u_new, True)):
+        z = np.tile(to_z(u)[:, None], (1, n))
+        a = np.asarray(plain.problem.rollout(state, z, to_z(u_prev), gains))
+        b = np.asarray(with_t.problem.rollout(state, z, to_z(u_prev), gains))
+        if changed:
+            assert abs(b[0, -1] - a[0, -1]) > 1e-4  # the switch's impulse moves the fish
+            np.testing.assert_allclose(b[1:3], a[1:3], atol=1e-9)  # symmetric fins: no sway, no yaw from it
+        else:
+            np.testing.assert_array_equal(b, a)
+    env = gym.make("PectoralFish-Averaged-v0")
+    obs = _episode_with_goal_ahead(env)
+    with_t.reset()
+    action = with_t.act(obs)
+    assert action.shape == (8,) and np.all(np.isfinite(action)) and np.all(np.abs(action) <= 1.0)
