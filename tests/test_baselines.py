@@ -94,6 +94,42 @@ def test_hand_controller_swims_straight_at_a_target_ahead():
     assert beats[0, 1] > math.radians(10)  # and a real stroke
 
 
+def test_hand_controller_never_stalls_on_a_target_inside_its_turning_circle():
+    """A target beside the fish closer than its turning diameter cannot be reached by turning; the old law then
+    commanded no turn and (facing away) no speed, and the fish stayed put for the whole episode. It must swim."""
+    hand = HandController(CONFIG)
+    beats = _decode(CONFIG, hand.act(_obs_with_target(-0.05, 0.3)))  # 0.3 m to the left, slightly behind
+    assert beats[0, 1] > 0 and beats[1, 1] > 0  # both fins beat: the fish swims on
+    model = FullModel(1)
+    model.reset(np.array([1.15, 0.575, 0.0, 0.0, 0.0, 0.0]))
+    model.command(right=beats[0], left=beats[1])
+    model.advance(10.0)
+    assert model.state[0, 0] - 1.15 > 0.05  # and it moves (forward)
+
+
+def _obs_at(x, y, psi, x_body, y_body):
+    obs = _obs_with_target(x_body, y_body)
+    obs[0], obs[1], obs[2], obs[3] = x, y, math.cos(psi), math.sin(psi)
+    return obs
+
+
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_hand_controller_turns_away_from_a_wall_when_the_target_is_behind(side):
+    """Near the top wall (Y = 1.15 m) heading along X, a target behind: the short way round (towards the wall
+    side) would run into the wall, so the fish turns the other way; in mid-tank it turns towards the target."""
+    from pectoral_gym.params import TANK_WIDTH
+
+    hand = HandController(CONFIG)
+    target = (-0.4, side * 0.05)  # behind, slightly to the left (side +1) or right
+    wall_side = 1.0  # the wall is on the fish's left (heading +X near Y = TANK_WIDTH)
+    near = _decode(CONFIG, hand.act(_obs_at(1.15, TANK_WIDTH - 0.2, 0.0, *target)))
+    hand.reset()
+    free = _decode(CONFIG, hand.act(_obs_at(1.15, 0.575, 0.0, *target)))
+    turns_left = lambda beats: beats[0, 1] > beats[1, 1]  # noqa: E731 - right fin stronger turns left
+    assert turns_left(free) == (side > 0)  # mid-tank: towards the target
+    assert turns_left(near) == (wall_side < 0)  # by the wall: away from it, whatever side the target is on
+
+
 def test_hand_controller_rejects_bad_observations():
     with pytest.raises(ValueError, match="shape"):
         HandController(CONFIG).act(np.zeros(5))
