@@ -28,10 +28,12 @@ import numpy as np
 from agents.fin_map import FinMap
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, decode
+from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 
 __all__ = ["BASELINES", "FinMap", "HandController", "RandomController", "make_baseline"]
 
 BASELINES = ("random", "hand", "nmpc")
+_MORE_ROOM = 0.05  # m: the hand law turns the long way round only for this much more room (no flip-flop on ties)
 
 
 class RandomController:
@@ -70,7 +72,13 @@ class HandController:
     * forward thrust level ``s`` from the desired speed ``v = min(speed_gain d, max) max(cos e, 0)^p``
       through the drag balance; ``track`` adds the reference speed (feed-forward) and aims
       ``lookahead`` seconds ahead of the moving reference point;
-    * differential bias ``g0 = 90 deg -+ bias_gain e`` (right, left) adds a lateral force towards the aim.
+    * differential bias ``g0 = 90 deg -+ bias_gain e`` (right, left) adds a lateral force towards the aim;
+    * walls: a turn of radius ``turn_radius`` towards an aim behind the fish (``|e| > 90 deg``) whose
+      turning circle leaves less than ``wall_margin`` to a wall turns the other way when that circle has
+      5 cm more room; an aim inside the turning circle (unreachable by turning) makes the fish swim straight
+      on at ``escape_speed`` (or, with a wall closer than ``turn_radius + wall_margin`` ahead, turn
+      towards the roomier side) until it is not. The fish never stalls there: with ``alignment`` ~ 0
+      and no turn it would stay put for the whole episode.
 
     Args:
         config: The environment settings.
@@ -83,6 +91,11 @@ class HandController:
         lookahead: ``track``: aim this far ahead of the reference point along its velocity [s].
         turn_level: Largest differential thrust level. Small: the full model turns tightest at small
             amplitudes (turning radius ~0.25 m at 10-15 deg, ~0.5 m at 30 deg with one fin).
+        turn_radius: Turning radius assumed by the reachability and wall rules [m].
+        alignment_power: Forward speed falls as ``max(cos e, 0)^alignment_power`` off the aim.
+        wall_margin: Room [m] a turning circle (or the path ahead) must leave to the walls, beyond half
+            the body length.
+        escape_speed: Speed [m/s] of the straight run that takes an aim out of the turning circle.
     """
 
     name = "hand"
@@ -90,7 +103,7 @@ class HandController:
     def __init__(self, config: EnvConfig, heading_gain: float = 1.5, rate_gain: float = 1.0,
                  speed_gain: float = 0.3, bias_gain: float = 0.0, bias_max: float = math.radians(15.0),
                  lookahead: float = 2.0, turn_level: float = 0.12, turn_radius: float = 0.25,
-                 alignment_power: float = 8.0):
+                 alignment_power: float = 8.0, wall_margin: float = 0.15, escape_speed: float = 0.05):
         self.config = config
         self.fins = FinMap(config)
         self.heading_gain = float(heading_gain)
@@ -102,6 +115,9 @@ class HandController:
         self.turn_level = float(turn_level)
         self.turn_radius = float(turn_radius)
         self.alignment_power = float(alignment_power)
+        self.wall_margin = float(wall_margin)
+        self.escape_speed = float(escape_speed)
+        self.half_length = 0.5 * config.params.body_length
         self.track = config.task == "track"
         self._heading: float | None = None
 
@@ -127,10 +143,19 @@ class HandController:
         rate = 0.0 if self._heading is None else _wrap(heading - self._heading) / self.config.control_period
         self._heading = heading
         turn = float(np.clip(self.heading_gain * bearing - self.rate_gain * rate, -1.0, 1.0))
-        if distance < 2.0 * self.turn_radius * abs(math.sin(bearing)):
-            turn = 0.0  # the aim lies inside the turning circle: swim on until a turn can reach it
         alignment = max(math.cos(bearing), 0.0) ** self.alignment_power
         speed = (min(self.speed_gain * distance, self.fins.max_speed) + ref_speed) * alignment
+        if distance < 2.0 * self.turn_radius * abs(math.sin(bearing)):
+            # the aim lies inside the turning circle: swim on until a turn can reach it
+            turn = 0.0
+            if not self.track:  # a moving reference comes out of the circle by itself
+                speed = max(speed, self.escape_speed)
+            if self._room_ahead(o) < self.turn_radius + self.wall_margin:
+                turn = 1.0 if self._room(o, 1.0) >= self._room(o, -1.0) else -1.0
+        elif abs(bearing) > 0.5 * math.pi:
+            side = 1.0 if bearing > 0 else -1.0  # turn left for an aim on the left
+            if self._room(o, side) < self.wall_margin and self._room(o, -side) > self._room(o, side) + _MORE_ROOM:
+                turn = -side  # the long way round: the short turn would run into a wall
         level = self.fins.level_for_speed(speed)
         offset = float(np.clip(self.bias_gain * bearing, -self.bias_max, self.bias_max))
         low, high = self.config.bias_range
@@ -139,6 +164,23 @@ class HandController:
             float(np.clip(f.bias_mid - offset, low, high)), f.amplitude(level + self.turn_level * turn),
             float(np.clip(f.bias_mid + offset, low, high)), f.amplitude(level - self.turn_level * turn),
         )
+
+
+    def _room(self, o, side: float) -> float:
+        """Least distance [m] from the turning circle (``side`` +1 left, -1 right) to a wall, beyond half a body."""
+        r = self.turn_radius
+        cx, cy = o.x - side * r * o.sin_psi, o.y + side * r * o.cos_psi
+        return min(cx - r, TANK_LENGTH - cx - r, cy - r, TANK_WIDTH - cy - r) - self.half_length
+
+    def _room_ahead(self, o) -> float:
+        """Distance [m] along the heading from the nose to the first wall."""
+        ahead = []
+        for pos, direction, size in ((o.x, o.cos_psi, TANK_LENGTH), (o.y, o.sin_psi, TANK_WIDTH)):
+            if direction > 1e-9:
+                ahead.append((size - pos) / direction)
+            elif direction < -1e-9:
+                ahead.append(-pos / direction)
+        return min(ahead, default=math.inf) - self.half_length
 
 
 def _wrap(angle: float) -> float:

@@ -243,17 +243,15 @@ class AveragedModel(FishModel):
             half-stroke, and on a recovery stroke after a power stroke of another pattern
             the impulse offset that power stroke left (``docs/model.md`` section 3.7).
             Zero at periodic steady state, so K and the steady-state figures are
-            unchanged. Default off (the model before issue 12): the CasADi model of
-            :mod:`pectoral_gym.symbolic` does not have it, and the NMPC baseline
-            planning with that model misses a near goal on an env with it on
-            (``tests/test_baselines.py``); measured in ``docs/validation/fidelity/``.
+            unchanged. Default on; ``False`` gives the model before issue 12 (the cycle
+            averages alone). Measured in ``docs/validation/fidelity/``.
     """
 
     averaged = True
 
     def __init__(self, n: int = 1, params: FishParams | Sequence[FishParams] | None = None,
                  scaling: ScalingFunctions | str | None = "identified", forcing: str = "exact",
-                 dt_max: float = 0.25, transitions: bool = False):
+                 dt_max: float = 0.25, transitions: bool = True):
         super().__init__(n, params, dt_max)
         self.transitions = bool(transitions)
         if forcing not in ("exact", "taylor"):
@@ -274,6 +272,7 @@ def make_model(
     params: FishParams | None = None,
     scaling: ScalingFunctions | str | None = "identified",
     forcing: str = "exact",
+    transitions: bool = True,
 ) -> FishModel:
     """Build a batched model by name.
 
@@ -283,6 +282,7 @@ def make_model(
         params: Model parameters (default: Table 1).
         scaling: Averaged model only: ``"identified"``, ``"none"`` or a :class:`ScalingFunctions`.
         forcing: Averaged model only: ``"exact"`` or ``"taylor"``.
+        transitions: Averaged model only: the transitional-stroke forcing (:class:`AveragedModel`).
 
     Returns:
         A :class:`FullModel` or :class:`AveragedModel`.
@@ -293,5 +293,5 @@ def make_model(
     if model == "full":
         return FullModel(n, params)
     if model == "averaged":
-        return AveragedModel(n, params, scaling=scaling, forcing=forcing)
+        return AveragedModel(n, params, scaling=scaling, forcing=forcing, transitions=transitions)
     raise ValueError(f"model must be one of {MODELS}, got {model!r}")

@@ -1,4 +1,4 @@
-"""Command line: ``python -m scaling identify|validate|fidelity`` (console script ``pectoral-scaling``)."""
+"""Command line: ``python -m scaling identify|validate|fidelity|yaw-balance`` (console script ``pectoral-scaling``)."""
 
 from __future__ import annotations
 
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from pectoral_gym.kfunctions import K_NAMES, default_scaling_path
-from scaling import fidelity
+from scaling import fidelity, yaw_balance
 from scaling.grids import GRIDS, GridError, load_grid
 
 __all__ = ["main"]
@@ -191,9 +191,12 @@ def main(argv: list[str] | None = None) -> int:
     sub = parser.add_subparsers(dest="command", required=True)
     _identify_parser(sub)
     fidelity.add_parser(sub)
+    yaw_balance.add_parser(sub)
     sub.add_parser("validate", help="averaged (identified K) against full on held-out patterns; see validate --help")
     args = parser.parse_args(argv)
     np.seterr(all="ignore")
+    if args.command == "yaw-balance":
+        return yaw_balance.main(args)
     return fidelity.main(args) if args.command == "fidelity" else _run_identify(args)
 
 

@@ -69,7 +69,7 @@ REST = fin_pattern(90.0, 0.0, 1.0, 1.0)
 
 
 def make_model(kind: str, n: int, params: FishParams, scaling: ScalingFunctions,
-               transitions: bool = False) -> FishModel:
+               transitions: bool = True) -> FishModel:
     """``n`` fish of the ``"full"`` or the ``"averaged"`` model (``transitions``: :class:`AveragedModel`'s option)."""
     if kind == "full":
         return FullModel(n, params)

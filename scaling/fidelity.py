@@ -20,7 +20,7 @@ it there, open loop, with the public :mod:`pectoral_gym.models` API:
 
 Two seed sets (:data:`SEED_SETS`): ``dev`` to look at while working on the model,
 ``report`` (other seeds, other two-fin periods) run only for the published figures.
-Output: ``fidelity_<set>[_transitions].md``, ``.json`` and PNG plots (:mod:`scaling.fidelity_report`).
+Output: ``fidelity_<set>[_no_transitions].md``, ``.json`` and PNG plots (:mod:`scaling.fidelity_report`).
 """
 
 from __future__ import annotations
@@ -92,7 +92,7 @@ def draw_patterns(rng: np.random.Generator, n: int, segments: int, ranges: np.nd
 
 def open_loop(kind: str, schedule: np.ndarray, change_every: float | None, duration: float,
               params: FishParams, scaling: ScalingFunctions, on_pattern: bool = False,
-              transitions: bool = False) -> np.ndarray:
+              transitions: bool = True) -> np.ndarray:
     """Poses ``(n, k + 1, 3)`` (X, Y, psi) every :data:`SAMPLE` s of one model under a command schedule.
 
     Args:
@@ -132,7 +132,7 @@ def open_loop_errors(full: np.ndarray, averaged: np.ndarray) -> dict[str, np.nda
 
 
 def _scenario(schedule, change_every, duration, params, scaling, on_pattern=False, keep_paths=0,
-              transitions=False) -> dict[str, Any]:
+              transitions=True) -> dict[str, Any]:
     poses = {kind: open_loop(kind, schedule, change_every, duration, params, scaling, on_pattern, transitions)
              for kind in ("full", "averaged")}
     err = open_loop_errors(poses["full"], poses["averaged"])
@@ -191,8 +191,8 @@ def _targets(results: dict[str, Any]) -> list[dict[str, Any]]:
 
 def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Path = "fidelity",
              params: FishParams | None = None, quick: bool = False, plots: bool = True, progress: bool = True,
-             source: str = "<ScalingFunctions>", transitions: bool = False) -> dict[str, Any]:
-    """Run the benchmark on one seed set; write ``fidelity_<set>[_transitions].md``, ``.json``, plots to ``out_dir``.
+             source: str = "<ScalingFunctions>", transitions: bool = True) -> dict[str, Any]:
+    """Run the benchmark on one seed set; write ``fidelity_<set>[_no_transitions].md``, ``.json``, plots to ``out_dir``.
 
     Args:
         scaling: The averaged model's K.
@@ -203,7 +203,7 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         plots: Write the PNG plots.
         progress: Show a progress bar over the stages.
         source: Where ``scaling`` came from, for the report.
-        transitions: The averaged model's transitional-stroke forcing (default off, as in
+        transitions: The averaged model's transitional-stroke forcing (default on, as in
             :class:`pectoral_gym.AveragedModel`). The steady states and the single-fin figures do not
             depend on it.
 
@@ -256,7 +256,7 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         k: v for k, v in results["scenarios"]["constant"].items() if k != "paths"}
     results["targets"] = _targets(results)
     bar.set_postfix_str("report")
-    stem = f"fidelity_{seeds.name}" + ("_transitions" if transitions else "")
+    stem = f"fidelity_{seeds.name}" + ("" if transitions else "_no_transitions")
     results["plots"] = fidelity_report.plots(results, out, stem) if plots else []
     results["timing_s"]["total"] = time.perf_counter() - start
     (out / f"{stem}.json").write_text(json.dumps(results, indent=1, allow_nan=False) + "\n")
@@ -271,7 +271,7 @@ def add_parser(sub) -> None:
     p = sub.add_parser("fidelity", help="averaged vs full model with two fins and changing commands (issue 12)",
                        description="Fidelity benchmark: open-loop runs with constant and changing two-fin patterns, "
                        "their decomposition (one fin / two, from rest / on the pattern), two-fin steady states, the "
-                       "single-fin held-out set and Table 4. Writes fidelity_<set>[_transitions].md, .json and PNG "
+                       "single-fin held-out set and Table 4. Writes fidelity_<set>[_no_transitions].md, .json and PNG "
                        "plots.")
     p.add_argument("--set", dest="seed_set", choices=sorted(SEED_SETS), default="dev",
                    help="seed set: dev (look at it while working) or report (for the published figures only)")
@@ -279,8 +279,9 @@ def add_parser(sub) -> None:
                    help=f"scaling coefficients JSON (default: the installed {default_scaling_path().name})")
     p.add_argument("--out", metavar="DIR", default="fidelity", help="output folder (default: fidelity)")
     p.add_argument("--quick", action="store_true", help="test-sized run (figures not meaningful)")
-    p.add_argument("--transitions", action="store_true",
-                   help="averaged model with its transitional-stroke forcing (AveragedModel(transitions=True))")
+    p.add_argument("--transitions", action=argparse.BooleanOptionalAction, default=True,
+                   help="averaged model with its transitional-stroke forcing (the default; --no-transitions: "
+                        "the cycle averages alone, the model before issue 12)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -295,7 +296,8 @@ def main(args: argparse.Namespace) -> int:
     except (OSError, ValueError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    source = "the shipped coefficients file" if not args.coefficients else str(path)  # no machine paths in reports
     results = fidelity(scaling, args.seed_set, args.out, quick=args.quick, plots=not args.no_plots,
-                       progress=not args.no_progress, source=str(path), transitions=args.transitions)
+                       progress=not args.no_progress, source=source, transitions=args.transitions)
     print(fidelity_report.summary_text(results))
     return 0

@@ -94,6 +94,42 @@ def test_hand_controller_swims_straight_at_a_target_ahead():
     assert beats[0, 1] > math.radians(10)  # and a real stroke
 
 
+def test_hand_controller_never_stalls_on_a_target_inside_its_turning_circle():
+    """A target beside the fish closer than its turning diameter cannot be reached by turning; the old law then
+    commanded no turn and (facing away) no speed, and the fish stayed put for the whole episode. It must swim."""
+    hand = HandController(CONFIG)
+    beats = _decode(CONFIG, hand.act(_obs_with_target(-0.05, 0.3)))  # 0.3 m to the left, slightly behind
+    assert beats[0, 1] > 0 and beats[1, 1] > 0  # both fins beat: the fish swims on
+    model = FullModel(1)
+    model.reset(np.array([1.15, 0.575, 0.0, 0.0, 0.0, 0.0]))
+    model.command(right=beats[0], left=beats[1])
+    model.advance(10.0)
+    assert model.state[0, 0] - 1.15 > 0.05  # and it moves (forward)
+
+
+def _obs_at(x, y, psi, x_body, y_body):
+    obs = _obs_with_target(x_body, y_body)
+    obs[0], obs[1], obs[2], obs[3] = x, y, math.cos(psi), math.sin(psi)
+    return obs
+
+
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_hand_controller_turns_away_from_a_wall_when_the_target_is_behind(side):
+    """Near the top wall (Y = 1.15 m) heading along X, a target behind: the short way round (towards the wall
+    side) would run into the wall, so the fish turns the other way; in mid-tank it turns towards the target."""
+    from pectoral_gym.params import TANK_WIDTH
+
+    hand = HandController(CONFIG)
+    target = (-0.4, side * 0.05)  # behind, slightly to the left (side +1) or right
+    wall_side = 1.0  # the wall is on the fish's left (heading +X near Y = TANK_WIDTH)
+    near = _decode(CONFIG, hand.act(_obs_at(1.15, TANK_WIDTH - 0.2, 0.0, *target)))
+    hand.reset()
+    free = _decode(CONFIG, hand.act(_obs_at(1.15, 0.575, 0.0, *target)))
+    turns_left = lambda beats: beats[0, 1] > beats[1, 1]  # noqa: E731 - right fin stronger turns left
+    assert turns_left(free) == (side > 0)  # mid-tank: towards the target
+    assert turns_left(near) == (wall_side < 0)  # by the wall: away from it, whatever side the target is on
+
+
 def test_hand_controller_rejects_bad_observations():
     with pytest.raises(ValueError, match="shape"):
         HandController(CONFIG).act(np.zeros(5))
@@ -102,7 +138,9 @@ def test_hand_controller_rejects_bad_observations():
 # ---------------------------------------------------------------------- NMPC
 @pytest.fixture(scope="module")
 def nmpc():
-    return make_baseline("nmpc", CONFIG)
+    # no wall-clock budget: a loaded test machine must not turn slow solves into fallbacks (the
+    # budget's fallback has its own test below); solve times are measured by the benchmark
+    return make_baseline("nmpc", CONFIG, step_budget=1e6, max_cpu_time=1e6)
 
 
 def _episode_with_goal_ahead(env, distance: float = 0.35, bearing: float = 0.2):
@@ -127,10 +165,8 @@ def test_nmpc_reaches_a_near_goal_on_the_averaged_env(nmpc):
         if terminated or truncated:
             break
     assert info["is_success"]
-    # a solve cut short by IPOPT's CPU-time limit (a loaded machine) falls back to the last plan by
-    # design; most steps must still come from fresh solves
     assert len(nmpc.solve_times) > 0
-    assert nmpc.failures <= len(nmpc.solve_times) // 2
+    assert nmpc.failures <= len(nmpc.solve_times) // 10  # nearly every step comes from a fresh solve
 
 
 def test_nmpc_falls_back_to_the_last_plan_then_to_rest_when_the_solver_fails(nmpc, monkeypatch):
@@ -242,3 +278,29 @@ def test_nmpc_compare_runs_variants_on_the_same_episodes():
         assert 0.0 < r["mean_distance_cm"] < 300.0  # a distance inside the 2.3 m tank
     with pytest.raises(ValueError, match="env"):
         compare({"a": {}}, [0], env="moon")
+
+
+def test_nmpc_with_transitions_adds_the_expected_impulse_of_a_change_only():
+    """NMPCSettings(transitions=True): a rollout whose input changes from the latched command differs from the
+    cycle-average model by the expected transitional impulse (docs/model.md 3.7); an unchanged input does not."""
+    plain = make_baseline("nmpc", CONFIG, step_budget=1e6)
+    with_t = make_baseline("nmpc", CONFIG, step_budget=1e6, transitions=True)
+    state = np.zeros(6)
+    u_prev = np.array([math.radians(10), math.radians(10), math.radians(80), math.radians(80)])
+    u_new = np.array([math.radians(25), math.radians(25), math.radians(100), math.radians(100)])
+    gains = np.ones(2)
+    n = plain.problem.horizon
+    for u, changed in ((u_prev, False), (u_new, True)):
+        z = np.tile(to_z(u)[:, None], (1, n))
+        a = np.asarray(plain.problem.rollout(state, z, to_z(u_prev), gains))
+        b = np.asarray(with_t.problem.rollout(state, z, to_z(u_prev), gains))
+        if changed:
+            assert abs(b[0, -1] - a[0, -1]) > 1e-4  # the switch's impulse moves the fish
+            np.testing.assert_allclose(b[1:3], a[1:3], atol=1e-9)  # symmetric fins: no sway, no yaw from it
+        else:
+            np.testing.assert_array_equal(b, a)
+    env = gym.make("PectoralFish-Averaged-v0")
+    obs = _episode_with_goal_ahead(env)
+    with_t.reset()
+    action = with_t.act(obs)
+    assert action.shape == (8,) and np.all(np.isfinite(action)) and np.all(np.abs(action) <= 1.0)

@@ -128,16 +128,16 @@ def test_draw_patterns_inside_the_env_ranges():
 
 
 def test_quick_cli_end_to_end(tmp_path, capsys):
-    assert scaling_main(["fidelity", "--quick", "--out", str(tmp_path), "--no-progress", "--transitions"]) == 0
-    data = json.loads((tmp_path / "fidelity_dev_transitions.json").read_text())
-    assert data["transitions"] and data["quick"] and data["seed_set"] == "dev"
+    assert scaling_main(["fidelity", "--quick", "--out", str(tmp_path), "--no-progress", "--no-transitions"]) == 0
+    data = json.loads((tmp_path / "fidelity_dev_no_transitions.json").read_text())
+    assert not data["transitions"] and data["quick"] and data["seed_set"] == "dev"
     assert set(data["scenarios"]) == set(fd.SCENARIOS) and set(data["decomposition"]) == set(fd.DECOMPOSITION)
     assert len(data["targets"]) == 16
     for name in data["plots"]:
         assert (tmp_path / name).read_bytes()[:8] == PNG_MAGIC
-    report = (tmp_path / "fidelity_dev_transitions.md").read_text()
+    report = (tmp_path / "fidelity_dev_no_transitions.md").read_text()
     assert "## Decomposition" in report and "changed every 0.5 s" in report
-    assert "transitions on" in capsys.readouterr().out
+    assert "transitions off" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         scaling_main(["fidelity", "--set", "tuning"])
 

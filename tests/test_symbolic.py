@@ -172,3 +172,72 @@ def test_spline_forcing_equals_numba_and_is_differentiable(deg, side):
               - np.array(averaged_fin_forcing(*down, side, coefficient_vector(PARAMS), EXACT,
                                               scaling.kernel_arrays()))) / (2 * h)
         np.testing.assert_allclose(jac[:, k], fd, rtol=1e-5, atol=1e-9 * np.abs(ref).max())
+
+
+# --- transitional half-strokes (docs/model.md 3.7) ---------------------------------------------------------------
+
+def _quadrature_mean_force(angle_from, angle_to, duration, n=20001):
+    """Mean blade-element force (eqs. 9-17) over one half-cosine half-stroke, by the trapezoid rule."""
+    from pectoral_gym.dynamics import fin_force_right, stroke_kinematics
+
+    s = np.linspace(0.0, duration, n)
+    f = np.array([fin_force_right(*stroke_kinematics(t, duration, angle_from, angle_to), PARAMS.fin_drag_constant,
+                                  PARAMS.fin_inertia_constant) for t in s])
+    return np.trapezoid(f, s, axis=0) / duration
+
+
+@pytest.mark.parametrize("power", [True, False])
+def test_transition_forcing_matches_quadrature_of_the_blade_element_forces(power):
+    from pectoral_gym.symbolic import transition_forcing_sx
+
+    beat = (1.3, 0.35, 0.9, 3.0)
+    previous = (1.7, 0.2, 0.9, 3.0)
+    angle_from = 1.05  # not the regular start
+    d1 = beat[2] / (beat[3] + 1)
+    bias, amp = beat[0], beat[1]
+    if power:
+        d, regular, to = d1, bias - amp, bias + amp
+    else:
+        d, regular, to = beat[3] * d1, bias + amp, bias - amp
+    expected = _quadrature_mean_force(angle_from, to, d) - _quadrature_mean_force(regular, to, d)
+    if not power:  # the power-stroke excess X = d1 (mean power stroke - cycle mean), by quadrature
+        def excess(b):
+            e1, e2 = b[2] / (b[3] + 1), b[3] * b[2] / (b[3] + 1)
+            p = _quadrature_mean_force(b[0] - b[1], b[0] + b[1], e1)
+            r = _quadrature_mean_force(b[0] + b[1], b[0] - b[1], e2)
+            return e1 * p - e1 * (e1 * p + e2 * r) / b[2]
+        expected = expected + (excess(previous) - excess(beat)) / d
+    for side in (1.0, -1.0):
+        got = np.array(ca.DM(transition_forcing_sx(angle_from, beat, previous, power, side, PARAMS))).ravel()
+        want = [expected[0], side * expected[1], side * PARAMS.fin_offset * expected[0]]
+        np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-12)
+
+
+def test_expected_transition_impulse_is_the_phase_average_of_the_compiled_model():
+    """Drag-free body, mirrored fins (no sway, no yaw): the surge velocity the transitional forcing adds
+    (transitions on minus off, K = 1) is its impulse / m1. Averaged over switch times spread uniformly over
+    one beat of the old pattern, it is the expectation the NMPC plans with."""
+    from pectoral_gym.symbolic import expected_transition_impulse_sx
+
+    params = FishParams().replace(drag_coef=1e-6, lift_coef=1e-6, moment_coef=1e-6)  # ~drag-free; steps stay ~ms
+    a = FinBeat.from_degrees(80, 20, 0.8, 4.0)
+    b = FinBeat.from_degrees(100, 28, 0.8, 4.0)
+    m1 = body_coefficients(params)[0]
+    n_phases = 200
+    models = {on: AveragedModel(1, params, scaling="none", transitions=on) for on in (False, True)}
+    gains = []
+    for k in range(n_phases):
+        speed = {}
+        for on, model in models.items():
+            model.reset(right=a, left=a)
+            model.advance((k + 0.5) / n_phases * a.period)
+            model.command(right=b, left=b)
+            model.advance(3 * a.period)  # the transitional strokes are over
+            speed[on] = model.state[0, 3]
+        gains.append(speed[True] - speed[False])
+    measured = np.mean(gains) * m1
+    impulse = ca.DM(expected_transition_impulse_sx(a.as_array(), b.as_array(), 1.0, params)).full().ravel()
+    assert abs(impulse[0]) > 1e-4  # the switch matters at all
+    np.testing.assert_allclose(measured, 2 * impulse[0], rtol=1e-3)  # two fins; the phase grid is midpoint-exact
+    same = ca.DM(expected_transition_impulse_sx(b.as_array(), b.as_array(), -1.0, params)).full().ravel()
+    np.testing.assert_allclose(same, 0.0, atol=1e-15)

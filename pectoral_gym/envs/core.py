@@ -72,6 +72,9 @@ class EnvConfig:
         check_scaling_params: Averaged model only: raise ``ValueError`` when the coefficients file
             records other model parameters than ``params`` (K identified for another robot).
             ``False`` is the explicit opt-out. ``randomize`` draws around ``params`` and is not checked.
+        transitions: Averaged model only: the forcing of transitional half-strokes (after every
+            pattern change; :class:`~pectoral_gym.models.AveragedModel`, ``docs/model.md`` 3.7).
+            ``False`` gives the cycle averages alone (the model before issue 12).
         progress_weight: Goal task: reward per metre of approach [1/m].
         goal_bonus: Goal task: reward for reaching the goal.
         wall_penalty: Penalty when the nose or tail leaves the tank.
@@ -93,6 +96,7 @@ class EnvConfig:
     randomize: Mapping[str, float] | None = field(default=None, hash=False)
     scaling: str | os.PathLike = "identified"
     check_scaling_params: bool = True
+    transitions: bool = True
     progress_weight: float = 10.0
     goal_bonus: float = 10.0
     wall_penalty: float = 10.0
@@ -116,6 +120,8 @@ class EnvConfig:
             raise ValueError(f"scaling: no coefficients file at {self.scaling!r} (or use 'identified' or 'none')")
         if not isinstance(self.check_scaling_params, (bool, np.bool_)):
             raise ValueError(f"check_scaling_params must be True or False, got {self.check_scaling_params!r}")
+        if not isinstance(self.transitions, (bool, np.bool_)):
+            raise ValueError(f"transitions must be True or False, got {self.transitions!r}")
         if self.model == "full" and self.scaling != "identified":
             raise ValueError("scaling applies to the averaged model only; leave it at 'identified' for model='full'")
         try:
@@ -255,7 +261,8 @@ class EnvCore:
         if config.model == "full":
             self.model: FishModel = FullModel(self.n, config.params)
         else:
-            self.model = AveragedModel(self.n, config.params, scaling=config.scaling_functions() or "none")
+            self.model = AveragedModel(self.n, config.params, scaling=config.scaling_functions() or "none",
+                                       transitions=bool(config.transitions))
         self.dt = float(config.control_period)
         big = self.n >= PARALLEL_MIN_ITEMS  # chosen once: the batch size of a core never changes
         self._apply = tk.APPLY_KEEP_KERNELS.parallel if big else tk.APPLY_KEEP_KERNELS.serial
