@@ -19,6 +19,7 @@ import numpy as np
 
 from pectoral_gym._jit import PARALLEL_MIN_ITEMS
 from pectoral_gym.envs import tasks as tk
+from pectoral_gym.envs.fused import step_kernel
 from pectoral_gym.envs.layout import FishConstants, ReferenceEllipse, fish_array
 from pectoral_gym.envs.observation import OBS_SIZE
 from pectoral_gym.kfunctions import ScalingFunctions
@@ -271,6 +272,7 @@ class EnvCore:
         big = self.n >= PARALLEL_MIN_ITEMS  # chosen once: the batch size of a core never changes
         self._apply = tk.APPLY_KEEP_KERNELS.parallel if big else tk.APPLY_KEEP_KERNELS.serial
         self._reward = tk.REWARD_MEAN_KERNELS.parallel if big else tk.REWARD_MEAN_KERNELS.serial
+        self._fused = None if big else step_kernel()  # small batches: one compiled call per step
         self.ep = np.zeros((self.n, tk.N_EP))
         self.obs = np.zeros((self.n, OBS_SIZE), dtype=np.float32)
         self._integral_before = np.zeros((self.n, 3))  # the model's velocity integrals before a step
@@ -320,12 +322,19 @@ class EnvCore:
         skip = self.none if skip is None else skip
         model = self.model
         before = self._integral_before  # the model's velocity integrals before the step, kept by _apply
+        if self._fused is not None:
+            # The calls below in one (envs.fused): the same kernels, the model's current settings.
+            bad = self._fused(actions, skip, self.cfg, self.beats, self.obs, self.out, self.fish, self.ep, before,
+                              self.all, model.state, model.fins, model.forcing_cache, model.pending, model.integral,
+                              model.coef, self.dt, float(model.dt_max), float(model.min_substeps),
+                              bool(model.averaged), int(model.mode), bool(model.transitions), model._packed_tables)
+            if bad >= 0:
+                self._raise_non_finite(actions, bad)
+            model.time += self.dt  # as FishModel.advance
+            return
         bad = self._apply(actions, skip, self.cfg, self.beats, self.obs, self.out, self.fish, model.integral, before)
         if bad >= 0:
-            raise ValueError(
-                f"action must be finite, got {np.asarray(actions[bad]).tolist()}"
-                + (f" for env {bad}" if self.n > 1 else "")
-            )
+            self._raise_non_finite(actions, bad)
         model.command_array(self.beats, self.all, validate=False)
         model.advance(self.dt)
         # Observation, reward, and the observed velocities: means over the control period (integral
@@ -333,6 +342,10 @@ class EnvCore:
         # symmetric stroke reads a yaw rate of -0.45 rad/s at some phases), the averaged model's do not;
         # the means agree between the models, as an observer's estimate would.
         self._reward(model.state, skip, self.cfg, self.ep, self.fish, self.obs, self.out, model.integral, before)
+
+    def _raise_non_finite(self, actions: np.ndarray, bad: int) -> None:
+        where = f" for env {bad}" if self.n > 1 else ""
+        raise ValueError(f"action must be finite, got {np.asarray(actions[bad]).tolist()}{where}")
 
     # ------------------------------------------------------------ accessors (copies, plain floats)
     def target(self, i: int) -> tuple[float, float]:
