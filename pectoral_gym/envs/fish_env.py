@@ -186,7 +186,6 @@ class PectoralFishEnv(gym.Env):
         low, high = observation_bounds(self.config.control_period, self.config.ref_speed)
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self.observation_structure = dict(OBSERVATION_STRUCTURE)
-        self._action = np.zeros((1, ACTION_SIZE))
         self._task = self.config.task_id
         self._renderer = None
         self.trail: list[tuple[float, float]] = []
@@ -266,9 +265,10 @@ class PectoralFishEnv(gym.Env):
 
     def step(self, action):
         """Advance one control period; returns ``(observation, reward, terminated, truncated, info)``."""
-        self._action[0] = action
         core = self.core
-        core.step(self._action)
+        buffer = core.action_buffer  # the core's own buffer: its one-call step (envs.fused)
+        buffer[0] = action
+        core.step(buffer)
         info = self._info()
         o = core.out[0]
         if self.render_mode is not None:

@@ -2,10 +2,10 @@
 
 :class:`~pectoral_gym.envs.core.EnvCore` used to make four compiled calls per
 step (map the actions, command the fins, advance the model, observe and score),
-each paying numba's dispatch: about 85 ns per array argument and 0.8 us for
-the scaling-table tuple, several microseconds per step at one fish, more than
-the averaged model's own integration. :func:`step_kernel` is those four in one
-compiled function, built from the same kernels, in the same order:
+each paying numba's dispatch, about 85 ns per array argument and 0.8 us for
+the scaling-table tuple: several microseconds per step at one fish, more than
+the averaged model's own integration. The step kernel here is those four in
+one compiled function, built from the same kernels, in the same order:
 
 1. ``tasks._first_non_finite``: a non-finite action of an env not in ``skip``
    stops the step before anything is written (its index is returned);
@@ -21,6 +21,13 @@ The results are bit for bit those of the separate calls (``tests/test_fused_step
 checks them against ``model.command_array`` + ``model.advance`` + the reward formula).
 Batches of ``PARALLEL_MIN_ITEMS`` envs or more keep the parallel kernels.
 
+The arrays of one core are bound once into a :class:`StepArrays` (a numba
+structref that holds them, not copies), so a step passes one object, the skip
+mask and the model's scalar settings. :func:`bind` also looks up the compiled
+entry point of that exact signature, which skips numba's argument typing
+(about 1 us a call more); it is used only with the bound arrays and a bool mask
+of the batch size, the types it was compiled for.
+
 numba's disk cache keys a kernel on its own file only (:mod:`pectoral_gym._jit`),
 and this kernel inlines code from many modules, among them ``stepping.py``:
 a cached copy would keep an old model after an edit there. The kernel is
@@ -34,16 +41,18 @@ from __future__ import annotations
 import hashlib
 import importlib
 from collections.abc import Callable
-from typing import Any
+from typing import Any, NamedTuple
 
 import numba as nb
+from numba.core import types
+from numba.experimental import structref
 
 from pectoral_gym import stepping
 from pectoral_gym._jit import JIT
 from pectoral_gym.envs import tasks as tk
 from pectoral_gym.strokes import command_fins
 
-__all__ = ["COMPILED_SOURCES", "source_digest", "step_kernel"]
+__all__ = ["COMPILED_SOURCES", "STEP_FIELDS", "BoundStep", "StepArrays", "bind", "source_digest", "step_kernel"]
 
 #: The modules whose compiled code the step kernel inlines (their sources key its disk cache).
 #: ``tests/test_fused_step.py`` checks that it holds every ``pectoral_gym`` module that
@@ -65,50 +74,108 @@ def source_digest(modules: tuple[str, ...] = COMPILED_SOURCES) -> int:
     return int(digest.hexdigest()[:15], 16)
 
 
+@structref.register
+class StepArraysType(types.StructRef):
+    """numba type of :class:`StepArrays` (its fields' array types)."""
+
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+class StepArrays(structref.StructRefProxy):
+    """The arrays one env core steps, held by reference for the compiled step (fields: :data:`STEP_FIELDS`)."""
+
+
+#: The fields of :class:`StepArrays`: the env core's arrays (``actions`` its action buffer,
+#: ``before`` its velocity integrals before the step, ``everyone`` an all-true mask), then the
+#: model's arrays and its K tables as :func:`pectoral_gym.stepping.advance` takes them.
+STEP_FIELDS = ("actions", "cfg", "beats", "obs", "out", "fish", "ep", "before", "everyone",
+               "state", "fins", "cache", "pending", "integral", "coef", "tables")
+structref.define_proxy(StepArrays, StepArraysType, list(STEP_FIELDS))
+
+
 def _build(stamp: int) -> Callable[..., Any]:
     """The step kernel, compiled in a closure over ``stamp`` (see the module docstring).
 
     Only ``stamp`` is a closure variable (numba pickles the closure into the cache key);
     the kernels it calls are module globals.
     """
+
     @nb.njit(**JIT)
-    def step_envs(actions, skip, cfg, beats, obs, out, fish, ep, before, everyone, state, fins, cache, pending,
-                  integral, coef, duration, dt_max, min_substeps, averaged, mode, transitions, packed_tables):
+    def step_bound(a, skip, duration, dt_max, min_substeps, averaged, mode, transitions):
         if stamp < 0:  # never: keys numba's disk cache on the inlined sources
             return -2
-        bad = tk._first_non_finite(actions, skip)
+        bad = tk._first_non_finite(a.actions, skip)
         if bad >= 0:
             return bad
-        n = actions.shape[0]
+        n = a.actions.shape[0]
         for i in range(n):
-            tk._apply_keep_one(i, actions, skip, cfg, beats, obs, out, fish, integral, before)
-        command_fins(fins, pending, beats, everyone)
+            tk._apply_keep_one(i, a.actions, skip, a.cfg, a.beats, a.obs, a.out, a.fish, a.integral, a.before)
+        command_fins(a.fins, a.pending, a.beats, a.everyone)
         # the loop FishModel.advance runs below PARALLEL_MIN_ITEMS fish (stepping.advance)
-        stepping._SERIAL(state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode,
-                       transitions, packed_tables)
+        stepping._SERIAL(a.state, a.fins, a.cache, a.pending, a.integral, a.coef, duration, dt_max, min_substeps,
+                         averaged, mode, transitions, a.tables)
         for i in range(n):
-            tk._reward_mean_one(i, state, skip, cfg, ep, fish, obs, out, integral, before)
+            tk._reward_mean_one(i, a.state, skip, a.cfg, a.ep, a.fish, a.obs, a.out, a.integral, a.before)
         return -1
 
-    return step_envs
+    return step_bound
 
 
 _KERNEL: Callable[..., Any] | None = None
 
 
 def step_kernel() -> Callable[..., Any]:
-    """The compiled step of a batch of envs (built on first use; module docstring).
+    """The compiled step (a numba dispatcher; built on first use, see the module docstring).
 
-    Called as ``step_kernel()(actions, skip, cfg, beats, obs, out, fish, ep, before, everyone,
-    state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode,
-    transitions, packed_tables)``: the env arrays of :class:`~pectoral_gym.envs.core.EnvCore`
-    (``before`` its velocity integrals before the step, ``everyone`` an all-true mask), then
-    the model's arrays and settings as :func:`pectoral_gym.stepping.advance` takes them
-    (``min_substeps`` a float, ``packed_tables`` the tuple of the model's K tables).
-    Returns -1, or the index of the first env not in ``skip`` whose action is not finite
-    (then nothing has been written).
+    ``step_kernel()(arrays, skip, duration, dt_max, min_substeps, averaged, mode, transitions)``
+    steps the envs of ``arrays`` (a :class:`StepArrays`) except those where ``skip``, by
+    ``duration`` seconds, with the model settings as :func:`pectoral_gym.stepping.advance`
+    takes them (``min_substeps`` a float). Returns -1, or the index of the first env not in
+    ``skip`` whose action is not finite (then nothing has been written).
     """
     global _KERNEL  # noqa: PLW0603 - built once per process, on first use
     if _KERNEL is None:
         _KERNEL = _build(source_digest())
     return _KERNEL
+
+
+class BoundStep(NamedTuple):
+    """A core's arrays bound for the compiled step, and the fastest way to call it.
+
+    Attributes:
+        arrays: The :class:`StepArrays`.
+        call: ``call(arrays, skip, duration, dt_max, min_substeps, averaged, mode, transitions)``:
+            the compiled entry point of exactly these types (``skip`` a C-contiguous bool array
+            of the batch size, the scalars ``float, float, float, bool, int, bool``), or the
+            dispatcher if numba does not expose it.
+        kernel: The dispatcher (:func:`step_kernel`), for any other ``skip``.
+        tables: The K-table tuple bound in ``arrays`` (rebind when the model's changes).
+    """
+
+    arrays: StepArrays
+    call: Callable[..., int]
+    kernel: Callable[..., int]
+    tables: tuple
+
+
+def bind(actions, cfg, beats, obs, out, fish, ep, before, everyone, state, fins, cache, pending, integral, coef,
+         tables: tuple, skip, duration: float, dt_max: float, min_substeps: float, averaged: bool, mode: int,
+         transitions: bool) -> BoundStep:
+    """Bind the arrays of :data:`STEP_FIELDS` (``actions`` a C-contiguous float64 ``(n, 8)`` buffer).
+
+    ``skip`` and the scalars are an example call's (all false, the model's settings): they fix
+    the types of the entry point (compiled, or loaded from the disk cache, here).
+    """
+    arrays = StepArrays(actions, cfg, beats, obs, out, fish, ep, before, everyone, state, fins, cache, pending,
+                        integral, coef, tables)
+    kernel = step_kernel()
+    example = (arrays, skip, float(duration), float(dt_max), float(min_substeps), bool(averaged), int(mode),
+               bool(transitions))
+    kernel.compile(tuple(nb.typeof(x) for x in example))
+    call = kernel
+    try:  # numba's compiled entry point of this signature: no argument typing per call
+        call = kernel.overloads[tuple(nb.typeof(x) for x in example)].entry_point
+    except (AttributeError, KeyError):  # pragma: no cover - other numba versions: the dispatcher
+        pass
+    return BoundStep(arrays, call, kernel, tables)
