@@ -333,12 +333,12 @@ class EnvCore:
             bound = self._bound
             if bound is None or bound.tables is not model._packed_tables:
                 bound = self._bound = self._bind()
-            settings = (self.dt, float(model.dt_max), float(model.min_substeps), bool(model.averaged),
-                        int(model.mode), bool(model.transitions))
-            if skip is None:  # the types the entry point was compiled for
-                bad = bound.call(bound.arrays, self.none, *settings)
+            if skip is None:  # the types the entry point was compiled for; it converts the scalars as float(), ...
+                bad = bound.call(bound.arrays, self.none, self.dt, model.dt_max, model.min_substeps, model.averaged,
+                                 model.mode, model.transitions)
             else:
-                bad = bound.kernel(bound.arrays, skip, *settings)
+                bad = bound.kernel(bound.arrays, skip, self.dt, float(model.dt_max), float(model.min_substeps),
+                                   bool(model.averaged), int(model.mode), bool(model.transitions))
             if bad >= 0:
                 self._raise_non_finite(actions, bad)
             model.time += self.dt  # as FishModel.advance

@@ -147,8 +147,8 @@ class BoundStep(NamedTuple):
         arrays: The :class:`StepArrays`.
         call: ``call(arrays, skip, duration, dt_max, min_substeps, averaged, mode, transitions)``:
             the compiled entry point of exactly these types (``skip`` a C-contiguous bool array
-            of the batch size, the scalars ``float, float, float, bool, int, bool``), or the
-            dispatcher if numba does not expose it.
+            of the batch size; it converts the scalars as ``float, float, float, bool, int, bool``
+            do), or the dispatcher behind those conversions if numba does not expose it.
         kernel: The dispatcher (:func:`step_kernel`), for any other ``skip``.
         tables: The K-table tuple bound in ``arrays`` (rebind when the model's changes).
     """
@@ -173,9 +173,11 @@ def bind(actions, cfg, beats, obs, out, fish, ep, before, everyone, state, fins,
     example = (arrays, skip, float(duration), float(dt_max), float(min_substeps), bool(averaged), int(mode),
                bool(transitions))
     kernel.compile(tuple(nb.typeof(x) for x in example))
-    call = kernel
     try:  # numba's compiled entry point of this signature: no argument typing per call
         call = kernel.overloads[tuple(nb.typeof(x) for x in example)].entry_point
-    except (AttributeError, KeyError):  # pragma: no cover - other numba versions: the dispatcher
-        pass
+    except (AttributeError, KeyError):  # pragma: no cover - other numba versions: the dispatcher, same types
+
+        def call(arrays, skip, duration, dt_max, min_substeps, averaged, mode, transitions):
+            return kernel(arrays, skip, float(duration), float(dt_max), float(min_substeps), bool(averaged),
+                          int(mode), bool(transitions))
     return BoundStep(arrays, call, kernel, tables)
