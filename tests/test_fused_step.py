@@ -19,11 +19,11 @@ REST = FinBeat.rest()
 
 
 def reference_model(config: EnvConfig, core: EnvCore):
-    """A model built through the public API alone, at the core's start state (fins at rest)."""
+    """A model built through the public API alone, with the episode's parameters, at the core's start state."""
     if config.model == "full":
-        model = FullModel(1, config.params)
+        model = FullModel(1, core.params[0])
     else:
-        model = AveragedModel(1, config.params, scaling=config.scaling_functions() or "none")
+        model = AveragedModel(1, core.params[0], scaling=config.scaling_functions() or "none")
     model.reset(core.fish_state(0), right=REST, left=REST)
     return model
 
@@ -57,11 +57,16 @@ def expected_step(config, ref, action, target, d_prev, length, span, k_drag):
     return obs, terms, d
 
 
-@pytest.mark.parametrize("model", ["averaged", "full"])
-def test_core_step_is_model_advance_plus_the_reward_formula(model):
-    config = EnvConfig(model=model, task="goal")
+RANDOMIZE = {"fin_span": 0.2, "body_length": 0.2, "drag_coef": 0.2}
+
+
+@pytest.mark.parametrize(("model", "randomize"), [("averaged", None), ("full", None), ("averaged", RANDOMIZE)])
+def test_core_step_is_model_advance_plus_the_reward_formula(model, randomize):
+    config = EnvConfig(model=model, task="goal", randomize=randomize)
     core = EnvCore(1, config)
+    core.step(np.zeros((1, 8)))  # binds the arrays; the reset below must not replace them
     core.reset(np.array([0]), (np.random.default_rng(4),))
+    assert (core.params[0] != config.params) == bool(randomize)
     ref = reference_model(config, core)
     target = core.target(0)
     constants = core.fish_constants(0)

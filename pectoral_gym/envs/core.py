@@ -19,7 +19,7 @@ import numpy as np
 
 from pectoral_gym._jit import PARALLEL_MIN_ITEMS
 from pectoral_gym.envs import tasks as tk
-from pectoral_gym.envs.fused import BoundStep, bind
+from pectoral_gym.envs.fused import FusedStep
 from pectoral_gym.envs.layout import ACTION_SIZE, FishConstants, ReferenceEllipse, fish_array
 from pectoral_gym.envs.observation import OBS_SIZE
 from pectoral_gym.kfunctions import ScalingFunctions
@@ -256,6 +256,9 @@ class EnvCore:
         fish: ``(n, N_FISH)`` values derived from each env's parameters (``layout.F_*``).
         beats: ``(n, 2, 4)`` commanded fin patterns ``(bias, amplitude, period, ratio)``, right fin first.
         params: The :class:`FishParams` of each env's current episode.
+        action_buffer: ``(n, 8)`` float64 actions; ``step(core.action_buffer)`` after writing into it
+            is the single env's path (no copy; below ``PARALLEL_MIN_ITEMS`` envs a step is one
+            compiled call, :class:`~pectoral_gym.envs.fused.FusedStep`).
     """
 
     def __init__(self, n: int, config: EnvConfig):
@@ -272,8 +275,6 @@ class EnvCore:
         big = self.n >= PARALLEL_MIN_ITEMS  # chosen once: the batch size of a core never changes
         self._apply = tk.APPLY_KEEP_KERNELS.parallel if big else tk.APPLY_KEEP_KERNELS.serial
         self._reward = tk.REWARD_MEAN_KERNELS.parallel if big else tk.REWARD_MEAN_KERNELS.serial
-        self._fused = not big  # small batches: one compiled call per step (envs.fused), bound on first use
-        self._bound: BoundStep | None = None
         self.action_buffer = np.zeros((self.n, ACTION_SIZE))
         self.ep = np.zeros((self.n, tk.N_EP))
         self.obs = np.zeros((self.n, OBS_SIZE), dtype=np.float32)
@@ -285,6 +286,9 @@ class EnvCore:
         self.action_code = np.concatenate([config.encode(REST.as_array())] * 2)
         self.params: list[FishParams] = [config.params] * self.n
         self.fish = fish_array(self.params)
+        # Holds the arrays above and the model's: they are updated in place, never replaced.
+        self._fused = None if big else FusedStep(self.model, self.dt, self.action_buffer, self.cfg, self.beats,
+                                                 self.obs, self.out, self.fish, self.ep, self._integral_before)
         if config.randomize:
             self._rand_names = tuple(config.randomize)
             widths = np.array([config.randomize[k] for k in self._rand_names])
@@ -321,28 +325,13 @@ class EnvCore:
         Raises:
             ValueError: If an action of an env not in ``skip`` is not finite.
         """
-        model = self.model
-        before = self._integral_before  # the model's velocity integrals before the step, kept by _apply
-        if self._fused:
-            # The calls below in one (envs.fused): the same kernels, the model's current settings.
-            buffer = self.action_buffer
-            if actions is not buffer:
-                if np.shape(actions) != buffer.shape:
-                    raise ValueError(f"actions must have shape {buffer.shape}, got {np.shape(actions)}")
-                buffer[...] = actions  # float64, as the kernels read every action entry
-            bound = self._bound
-            if bound is None or bound.tables is not model._packed_tables:
-                bound = self._bound = self._bind()
-            if skip is None:  # the types the entry point was compiled for; it converts the scalars as float(), ...
-                bad = bound.call(bound.arrays, self.none, self.dt, model.dt_max, model.min_substeps, model.averaged,
-                                 model.mode, model.transitions)
-            else:
-                bad = bound.kernel(bound.arrays, skip, self.dt, float(model.dt_max), float(model.min_substeps),
-                                   bool(model.averaged), int(model.mode), bool(model.transitions))
+        if self._fused is not None:  # the calls below in one (envs.fused)
+            bad = self._fused(actions, skip)
             if bad >= 0:
                 self._raise_non_finite(actions, bad)
-            model.time += self.dt  # as FishModel.advance
             return
+        model = self.model
+        before = self._integral_before  # the model's velocity integrals before the step, kept by _apply
         skip = self.none if skip is None else skip
         bad = self._apply(actions, skip, self.cfg, self.beats, self.obs, self.out, self.fish, model.integral, before)
         if bad >= 0:
@@ -354,20 +343,6 @@ class EnvCore:
         # symmetric stroke reads a yaw rate of -0.45 rad/s at some phases), the averaged model's do not;
         # the means agree between the models, as an observer's estimate would.
         self._reward(model.state, skip, self.cfg, self.ep, self.fish, self.obs, self.out, model.integral, before)
-
-    def _bind(self) -> BoundStep:
-        """Bind this core's and its model's arrays for the compiled step (:func:`envs.fused.bind`)."""
-        m = self.model
-        return bind(self.action_buffer, self.cfg, self.beats, self.obs, self.out, self.fish, self.ep,
-                    self._integral_before, self.all, m.state, m.fins, m.forcing_cache, m.pending, m.integral, m.coef,
-                    m._packed_tables, self.none, self.dt, m.dt_max, m.min_substeps, m.averaged, m.mode,
-                    m.transitions)
-
-    def __getstate__(self) -> dict:
-        """Pickle and deepcopy without the bound step (it holds compiled code); a copy binds its own arrays."""
-        state = self.__dict__.copy()
-        state["_bound"] = None
-        return state
 
     def _raise_non_finite(self, actions: np.ndarray, bad: int) -> None:
         where = f" for env {bad}" if self.n > 1 else ""

@@ -44,6 +44,7 @@ from collections.abc import Callable
 from typing import Any, NamedTuple
 
 import numba as nb
+import numpy as np
 from numba.core import types
 from numba.experimental import structref
 
@@ -52,7 +53,8 @@ from pectoral_gym._jit import JIT
 from pectoral_gym.envs import tasks as tk
 from pectoral_gym.strokes import command_fins
 
-__all__ = ["COMPILED_SOURCES", "STEP_FIELDS", "BoundStep", "StepArrays", "bind", "source_digest", "step_kernel"]
+__all__ = ["COMPILED_SOURCES", "STEP_FIELDS", "BoundStep", "FusedStep", "StepArrays", "bind", "source_digest",
+           "step_kernel"]
 
 #: The modules whose compiled code the step kernel inlines (their sources key its disk cache).
 #: ``tests/test_fused_step.py`` checks that it holds every ``pectoral_gym`` module that
@@ -141,7 +143,7 @@ def step_kernel() -> Callable[..., Any]:
 
 
 class BoundStep(NamedTuple):
-    """A core's arrays bound for the compiled step, and the fastest way to call it.
+    """A batch's arrays bound for the compiled step, and the fastest way to call it.
 
     Attributes:
         arrays: The :class:`StepArrays`.
@@ -159,25 +161,82 @@ class BoundStep(NamedTuple):
     tables: tuple
 
 
-def bind(actions, cfg, beats, obs, out, fish, ep, before, everyone, state, fins, cache, pending, integral, coef,
-         tables: tuple, skip, duration: float, dt_max: float, min_substeps: float, averaged: bool, mode: int,
-         transitions: bool) -> BoundStep:
-    """Bind the arrays of :data:`STEP_FIELDS` (``actions`` a C-contiguous float64 ``(n, 8)`` buffer).
+def bind(arrays: StepArrays, tables: tuple, example: tuple) -> BoundStep:
+    """Look up the entry point for ``arrays`` (holding ``tables``) and the types of ``example`` (skip, scalars).
 
-    ``skip`` and the scalars are an example call's (all false, the model's settings): they fix
-    the types of the entry point (compiled, or loaded from the disk cache, here).
+    The kernel is compiled for them, or loaded from the disk cache, here.
     """
-    arrays = StepArrays(actions, cfg, beats, obs, out, fish, ep, before, everyone, state, fins, cache, pending,
-                        integral, coef, tables)
     kernel = step_kernel()
-    example = (arrays, skip, float(duration), float(dt_max), float(min_substeps), bool(averaged), int(mode),
-               bool(transitions))
-    kernel.compile(tuple(nb.typeof(x) for x in example))
+    signature = tuple(nb.typeof(x) for x in (arrays, *example))
+    kernel.compile(signature)
     try:  # numba's compiled entry point of this signature: no argument typing per call
-        call = kernel.overloads[tuple(nb.typeof(x) for x in example)].entry_point
+        call = kernel.overloads[signature].entry_point
     except (AttributeError, KeyError):  # pragma: no cover - other numba versions: the dispatcher, same types
 
         def call(arrays, skip, duration, dt_max, min_substeps, averaged, mode, transitions):
             return kernel(arrays, skip, float(duration), float(dt_max), float(min_substeps), bool(averaged),
                           int(mode), bool(transitions))
     return BoundStep(arrays, call, kernel, tables)
+
+
+class FusedStep:
+    """The one-call step of a batch of envs on one model (what ``EnvCore.step`` runs below 64 envs).
+
+    Args:
+        model: The batched model; its arrays are bound at the first call, its settings
+            (``dt_max``, ``min_substeps``, ``mode``, ``transitions``) read at every call and
+            its K tables rebound when they change, as :meth:`FishModel.advance` reads them.
+        duration: Control period [s].
+        actions: ``(n, 8)`` C-contiguous float64 action buffer; a call with this very array
+            takes the entry point, any other array is copied into it first.
+        cfg, beats, obs, out, fish, ep, before: The env core's arrays (:data:`STEP_FIELDS`).
+
+    Pickles and deep-copies without the binding (compiled code); a copy binds its own arrays.
+    """
+
+    def __init__(self, model, duration: float, actions: np.ndarray, cfg, beats, obs, out, fish, ep, before):
+        self.model = model
+        self.duration = float(duration)
+        self.actions = actions
+        self.env_arrays = (cfg, beats, obs, out, fish, ep, before)
+        self.everyone = np.ones(actions.shape[0], dtype=np.bool_)
+        self.none = np.zeros(actions.shape[0], dtype=np.bool_)
+        self._bound: BoundStep | None = None
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = self.__dict__.copy()
+        state["_bound"] = None
+        return state
+
+    def _bind(self) -> BoundStep:
+        m = self.model
+        tables = m._packed_tables  # the tuple FishModel.advance passes (ktables.as_tables)
+        arrays = StepArrays(self.actions, *self.env_arrays, self.everyone, m.state, m.fins, m.forcing_cache,
+                            m.pending, m.integral, m.coef, tables)
+        return bind(arrays, tables, (self.none, self.duration, float(m.dt_max), float(m.min_substeps), bool(m.averaged),
+                             int(m.mode), bool(m.transitions)))
+
+    def __call__(self, actions: np.ndarray, skip: np.ndarray | None = None) -> int:
+        """Step the envs not in ``skip`` (a bool mask); returns -1, or the first env with a non-finite action.
+
+        Raises:
+            ValueError: If ``actions`` does not have the buffer's shape ``(n, 8)``.
+        """
+        buffer = self.actions
+        if actions is not buffer:
+            if np.shape(actions) != buffer.shape:
+                raise ValueError(f"actions must have shape {buffer.shape}, got {np.shape(actions)}")
+            buffer[...] = actions  # float64, as the kernels read every action entry
+        model = self.model
+        bound = self._bound
+        if bound is None or bound.tables is not model._packed_tables:
+            bound = self._bound = self._bind()
+        if skip is None:  # the types the entry point was compiled for
+            bad = bound.call(bound.arrays, self.none, self.duration, model.dt_max, model.min_substeps,
+                             model.averaged, model.mode, model.transitions)
+        else:
+            bad = bound.kernel(bound.arrays, skip, self.duration, float(model.dt_max), float(model.min_substeps),
+                               bool(model.averaged), int(model.mode), bool(model.transitions))
+        if bad < 0:
+            model.time += self.duration  # as FishModel.advance
+        return bad
