@@ -96,6 +96,14 @@ STEP_FIELDS = ("actions", "cfg", "beats", "obs", "out", "fish", "ep", "before", 
 structref.define_proxy(StepArrays, StepArraysType, list(STEP_FIELDS))
 
 
+@nb.njit(**JIT)
+def new_step_arrays(actions, cfg, beats, obs, out, fish, ep, before, everyone, state, fins, cache, pending, integral,
+                    coef, tables):
+    """A :class:`StepArrays` of these arrays; compiled and cached (``StepArrays(...)`` compiles anew per process)."""
+    return StepArrays(actions, cfg, beats, obs, out, fish, ep, before, everyone, state, fins, cache, pending,
+                      integral, coef, tables)
+
+
 def _build(stamp: int) -> Callable[..., Any]:
     """The step kernel, compiled in a closure over ``stamp`` (see the module docstring).
 
@@ -211,8 +219,8 @@ class FusedStep:
     def _bind(self) -> BoundStep:
         m = self.model
         tables = m._packed_tables  # the tuple FishModel.advance passes (ktables.as_tables)
-        arrays = StepArrays(self.actions, *self.env_arrays, self.everyone, m.state, m.fins, m.forcing_cache,
-                            m.pending, m.integral, m.coef, tables)
+        arrays = new_step_arrays(self.actions, *self.env_arrays, self.everyone, m.state, m.fins, m.forcing_cache,
+                                 m.pending, m.integral, m.coef, tables)
         return bind(arrays, tables, (self.none, self.duration, float(m.dt_max), float(m.min_substeps), bool(m.averaged),
                              int(m.mode), bool(m.transitions)))
 
