@@ -2,10 +2,11 @@
 
 :class:`~pectoral_gym.envs.core.EnvCore` used to make four compiled calls per
 step (map the actions, command the fins, advance the model, observe and score),
-each paying numba's dispatch, about 85 ns per array argument and 0.8 us for
-the scaling-table tuple: several microseconds per step at one fish, more than
-the averaged model's own integration. The step kernel here is those four in
-one compiled function, built from the same kernels, in the same order:
+each paying numba's dispatch, which types every argument (about 85 ns per array
+and 0.8 us for the K-table tuple, timed on an empty kernel with numba 0.68):
+several microseconds per step at one fish, as much as the averaged model's own
+integration. The step kernel here is those four in one compiled function, built
+from the same kernels, in the same order:
 
 1. ``tasks._first_non_finite``: a non-finite action of an env not in ``skip``
    stops the step before anything is written (its index is returned);
@@ -18,15 +19,16 @@ one compiled function, built from the same kernels, in the same order:
    terms, flags, mean velocities over the control period.
 
 The results are bit for bit those of the separate calls (``tests/test_fused_step.py``
-checks them against ``model.command_array`` + ``model.advance`` + the reward formula).
+checks them against the separate kernels, and against ``model.command`` + ``model.advance``
+and the documented reward formulas).
 Batches of ``PARALLEL_MIN_ITEMS`` envs or more keep the parallel kernels.
 
 The arrays of one core are bound once into a :class:`StepArrays` (a numba
 structref that holds them, not copies), so a step passes one object, the skip
 mask and the model's scalar settings. :func:`bind` also looks up the compiled
-entry point of that exact signature, which skips numba's argument typing
-(about 1 us a call more); it is used only with the bound arrays and a bool mask
-of the batch size, the types it was compiled for.
+entry point of that exact signature, which skips numba's argument typing (done
+in Python for a structref, about 1 us a call); it is used only with the bound
+arrays and the core's own all-false mask, the types it was compiled for.
 
 numba's disk cache keys a kernel on its own file only (:mod:`pectoral_gym._jit`),
 and this kernel inlines code from many modules, among them ``stepping.py``:
@@ -71,8 +73,11 @@ def source_digest(modules: tuple[str, ...] = COMPILED_SOURCES) -> int:
     digest = hashlib.sha256()
     for name in modules:
         path = importlib.import_module(name).__file__
-        with open(path, "rb") as f:  # noqa: PTH123 - a plain read, at import
-            digest.update(f.read())
+        try:
+            with open(path, "rb") as f:  # noqa: PTH123 - a plain read, once per process
+                digest.update(f.read())
+        except (OSError, TypeError):  # no readable source (frozen app): numba's cache cannot check it either
+            digest.update(name.encode())
     return int(digest.hexdigest()[:15], 16)
 
 
