@@ -11,6 +11,7 @@ import pytest
 
 from pectoral_gym import AveragedModel, FinBeat, FullModel
 from pectoral_gym.envs import fused
+from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.core import EnvConfig, EnvCore
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
@@ -86,10 +87,10 @@ def test_core_step_is_model_advance_plus_the_reward_formula(model, randomize):
         info = {name: core.out[0, index] for name, index in core.terms}
         for name, value in terms.items():
             assert info[name] == pytest.approx(value, rel=1e-12, abs=1e-12), (step, name)
-        assert core.out[0, fused.tk.O_REWARD] == pytest.approx(sum(terms.values()), rel=1e-12, abs=1e-12)
-        assert core.out[0, fused.tk.O_DISTANCE] == pytest.approx(d, rel=1e-12)
+        assert core.out[0, tk.O_REWARD] == pytest.approx(sum(terms.values()), rel=1e-12, abs=1e-12)
+        assert core.out[0, tk.O_DISTANCE] == pytest.approx(d, rel=1e-12)
         d_prev = d
-        if core.out[0, fused.tk.O_TERMINATED] > 0.5:
+        if core.out[0, tk.O_TERMINATED] > 0.5:
             break
 
 
