@@ -323,7 +323,8 @@ class EnvCore:
         """Apply ``actions`` ``(n, 8)`` for one control period (envs in ``skip`` are not checked or scored).
 
         Raises:
-            ValueError: If an action of an env not in ``skip`` is not finite.
+            ValueError: If an action of an env not in ``skip`` is not finite, or (below
+                ``PARALLEL_MIN_ITEMS`` envs) ``actions`` does not have shape ``(n, 8)``.
         """
         if self._fused is not None:  # the calls below in one (envs.fused)
             bad = self._fused(actions, skip)
