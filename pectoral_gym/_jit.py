@@ -16,6 +16,8 @@ numba's disk cache checks only the file of the function it caches, not the
 files of the functions it calls: after editing, say, ``dynamics.py``, the
 cached kernels of ``stepping.py`` keep the old code until ``stepping.py``
 changes too or the cache is cleared (``find pectoral_gym -name '*.nb[ic]' -delete``).
+:mod:`pectoral_gym.envs.fused`, whose step kernel inlines most of the package, closes over a
+digest of those sources instead, so its cache follows them.
 
 Example (the model integrators, :mod:`pectoral_gym.stepping`)::
 

@@ -6,8 +6,10 @@
 Modules: ``fish_env`` (the single env), ``vector`` (the native vector env),
 ``core`` (settings and the batched core both share), ``task_core`` (the task
 table and ``TaskState``, shared with the robot env), ``tasks`` (the numba
-task kernels), ``layout`` (their packed arrays, named), ``observation`` (the
-observation layout and ``decode``), ``rendering`` (pygame top view).
+task kernels), ``fused`` (those kernels and the model advance in one compiled
+call per step, for batches below 64 envs), ``layout`` (their packed arrays,
+named), ``observation`` (the observation layout and ``decode``), ``rendering``
+(pygame top view).
 """
 
 from pectoral_gym.envs.core import EnvConfig, EnvCore

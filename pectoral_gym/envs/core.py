@@ -20,7 +20,8 @@ import numpy as np
 
 from pectoral_gym._jit import PARALLEL_MIN_ITEMS
 from pectoral_gym.envs import tasks as tk
-from pectoral_gym.envs.layout import FishConstants, ReferenceEllipse, fish_array
+from pectoral_gym.envs.fused import FusedStep
+from pectoral_gym.envs.layout import ACTION_SIZE, FishConstants, ReferenceEllipse, fish_array
 from pectoral_gym.envs.task_core import TASK_IDS, TaskState, task_info
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.models import MODELS, REST, AveragedModel, FishModel, FullModel
@@ -249,6 +250,9 @@ class EnvCore:
         fish: ``(n, N_FISH)`` values derived from each env's parameters (``layout.F_*``).
         beats: ``(n, 2, 4)`` commanded fin patterns ``(bias, amplitude, period, ratio)``, right fin first.
         params: The :class:`FishParams` of each env's current episode.
+        action_buffer: ``(n, 8)`` float64 actions; ``step(core.action_buffer)`` after writing into it
+            is the single env's path (no copy; below ``PARALLEL_MIN_ITEMS`` envs a step is one
+            compiled call, :class:`~pectoral_gym.envs.fused.FusedStep`).
     """
 
     def __init__(self, n: int, config: EnvConfig):
@@ -268,11 +272,18 @@ class EnvCore:
         self._apply = tk.APPLY_KEEP_KERNELS.parallel if big else tk.APPLY_KEEP_KERNELS.serial
         self._reward = ts.task.reward_mean.parallel if big else ts.task.reward_mean.serial
         self.cfg, self.ep, self.obs, self.out, self.beats, self.fish = ts.cfg, ts.ep, ts.obs, ts.out, ts.beats, ts.fish
+        self.action_buffer = np.zeros((self.n, ACTION_SIZE))
         self._integral_before = np.zeros((self.n, 3))  # the model's velocity integrals before a step
         self.all = np.ones(self.n, dtype=np.bool_)
         self.none = ts.none
         self.action_code = ts.action_code
         self.params: list[FishParams] = [config.params] * self.n
+        # One compiled call per step for small batches of the built-in tasks (envs.fused inlines their
+        # reward kernel; a registered task keeps its own loops). Holds the arrays above and the model's:
+        # they are updated in place, never replaced.
+        fused = not big and ts.task.reward_mean is tk.REWARD_MEAN_KERNELS
+        self._fused = FusedStep(self.model, self.dt, self.action_buffer, self.cfg, self.beats, self.obs, self.out,
+                                self.fish, self.ep, self._integral_before) if fused else None
         if config.randomize:
             self._rand_names = tuple(config.randomize)
             widths = np.array([config.randomize[k] for k in self._rand_names])
@@ -305,17 +316,20 @@ class EnvCore:
         """Apply ``actions`` ``(n, 8)`` for one control period (envs in ``skip`` are not checked or scored).
 
         Raises:
-            ValueError: If an action of an env not in ``skip`` is not finite.
+            ValueError: If an action of an env not in ``skip`` is not finite, or (below
+                ``PARALLEL_MIN_ITEMS`` envs) ``actions`` does not have shape ``(n, 8)``.
         """
-        skip = self.none if skip is None else skip
+        if self._fused is not None:  # the calls below in one (envs.fused)
+            bad = self._fused(actions, skip)
+            if bad >= 0:
+                self._raise_non_finite(actions, bad)
+            return
         model = self.model
         before = self._integral_before  # the model's velocity integrals before the step, kept by _apply
+        skip = self.none if skip is None else skip
         bad = self._apply(actions, skip, self.cfg, self.beats, self.obs, self.out, self.fish, model.integral, before)
         if bad >= 0:
-            raise ValueError(
-                f"action must be finite, got {np.asarray(actions[bad]).tolist()}"
-                + (f" for env {bad}" if self.n > 1 else "")
-            )
+            self._raise_non_finite(actions, bad)
         model.command_array(self.beats, self.all, validate=False)
         model.advance(self.dt)
         # Observation, reward, and the observed velocities: means over the control period (integral
@@ -323,6 +337,10 @@ class EnvCore:
         # symmetric stroke reads a yaw rate of -0.45 rad/s at some phases), the averaged model's do not;
         # the means agree between the models, as an observer's estimate would.
         self._reward(model.state, skip, self.cfg, self.ep, self.fish, self.obs, self.out, model.integral, before)
+
+    def _raise_non_finite(self, actions: np.ndarray, bad: int) -> None:
+        where = f" for env {bad}" if self.n > 1 else ""
+        raise ValueError(f"action must be finite, got {np.asarray(actions[bad]).tolist()}{where}")
 
     # ------------------------------------------------------------ accessors (copies, plain floats)
     def target(self, i: int) -> tuple[float, float]:

@@ -187,10 +187,16 @@ class PectoralFishEnv(gym.Env):
         low, high = observation_bounds(self.config.control_period, self.config.ref_speed)
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self.observation_structure = dict(OBSERVATION_STRUCTURE)
-        self._action = np.zeros((1, ACTION_SIZE))
         self._task = self.config.task_id
         self._renderer = None
         self.trail: list[tuple[float, float]] = []
+        self._bind_rows()
+
+    def _bind_rows(self) -> None:
+        """Views of the core's rows of this env, read and written at every step (rebound after unpickling)."""
+        self._action_row = self.core.action_buffer[0]
+        self._obs_row = self.core.obs[0]
+        self._out_row = self.core.out[0]
 
     @property
     def model(self):
@@ -251,6 +257,11 @@ class PectoralFishEnv(gym.Env):
         state["_renderer"] = None
         return state
 
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        """Restore a pickled or deep-copied env; the row views are bound to its own core again."""
+        self.__dict__.update(state)
+        self._bind_rows()
+
     def _info(self) -> dict[str, Any]:
         """The ``info`` of the last reset or step (:func:`~pectoral_gym.envs.core.task_info`)."""
         return task_info(self.core.out[0], self._task)
@@ -267,16 +278,17 @@ class PectoralFishEnv(gym.Env):
 
     def step(self, action):
         """Advance one control period; returns ``(observation, reward, terminated, truncated, info)``."""
-        self._action[0] = action
+        self._action_row[...] = action  # the core's own buffer: its one-call step (envs.fused)
         core = self.core
-        core.step(self._action)
-        info = self._info()
-        o = core.out[0]
+        core.step(core.action_buffer)
+        o = self._out_row
+        info = task_info(o, self._task)
         if self.render_mode is not None:
             self.trail.append((float(core.obs[0, OBS_X]), float(core.obs[0, OBS_Y])))
             if self.render_mode == "human":
                 self.render()
-        return core.obs[0].copy(), float(o[O_REWARD]), bool(o[O_TERMINATED] > 0.5), False, info
+        # o.item: the Python float of a float64 entry, as float(o[k])
+        return self._obs_row.copy(), o.item(O_REWARD), o.item(O_TERMINATED) > 0.5, False, info
 
     def render(self):
         """Draw the tank from above: ``rgb_array`` returns an ``(H, W, 3)`` uint8 image; ``human`` shows a window."""
