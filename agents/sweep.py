@@ -105,12 +105,20 @@ def _trainable(params: dict[str, Any], base: dict[str, Any]) -> None:
     env_ready_s = warm_up(config)
     run_dir = Path(tune.get_context().get_trial_dir()) / "run"
 
+    final: list[dict[str, Any]] = []
+
     def report(record: dict[str, Any]) -> None:
-        tune.report({**{k: float(v) for k, v in record.items()}, "n_timesteps": config["n_timesteps"],
-                     "env_ready_s": env_ready_s, "pid": os.getpid()})
+        metrics = {**{k: float(v) for k, v in record.items()}, "n_timesteps": config["n_timesteps"],
+                   "env_ready_s": env_ready_s, "pid": os.getpid()}
+        if record["timesteps"] >= config["n_timesteps"]:
+            final.append(metrics)  # after train() has saved the model: a scheduler stops a trial at max_t
+        else:
+            tune.report(metrics)  # a scheduler may stop the trial here (its best model is saved already)
 
     train(config, run_dir, progress=False, torch_threads=base["cpus_per_trial"], on_evaluation=report,
           command=base["command"])
+    for metrics in final:
+        tune.report(metrics)
 
 
 def tune_space(space: dict[str, Dimension]) -> dict[str, Any]:
