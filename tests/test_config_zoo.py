@@ -142,6 +142,34 @@ print(json.dumps({
 """
 
 
+# agents.policy.load_policy on zoo's layout (<env>.zip, best_model.zip, <env>/vecnormalize.pkl), checked against
+# the zip and the statistics loaded by SB3 itself.
+_LOAD_POLICY = """
+import json, sys
+import gymnasium as gym
+import numpy as np
+from stable_baselines3 import PPO
+from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+import pectoral_gym
+from agents.policy import load_policy
+
+env_id, run_dir = sys.argv[1:]
+stats = VecNormalize.load(f"{run_dir}/{env_id}/vecnormalize.pkl", DummyVecEnv([lambda: gym.make(env_id)]))
+obs = np.random.default_rng(0).normal(size=(6, 19)).astype(np.float32) * 3
+out = {}
+for name, target, zip_name in (("dir", run_dir, f"{env_id}.zip"), ("final", f"{run_dir}/{env_id}.zip", f"{env_id}.zip"),
+                               ("best", f"{run_dir}/best_model.zip", "best_model.zip")):
+    policy = load_policy(target)
+    model = PPO.load(f"{run_dir}/{zip_name}", device="cpu")
+    expected, _ = model.predict(stats.normalize_obs(obs), deterministic=True)
+    unnormalized, _ = model.predict(obs, deterministic=True)
+    out[name] = {"mean": bool(np.allclose(policy.obs_mean, stats.obs_rms.mean)), "name": policy.name,
+                 "same": bool(np.allclose(policy.act_batch(obs), np.clip(expected, -1, 1), atol=1e-6)),
+                 "differs_unnormalized": bool(not np.allclose(np.clip(unnormalized, -1, 1), np.clip(expected, -1, 1)))}
+print(json.dumps(out))
+"""
+
+
 @pytest.mark.skipif(importlib.util.find_spec("rl_zoo3") is None, reason="rl_zoo3 not installed (dev extra)")
 def test_zoo_trains_from_the_shipped_file(tmp_path):
     command = [sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo", "--env", ENV, "--gym-packages",
@@ -166,6 +194,13 @@ def test_zoo_trains_from_the_shipped_file(tmp_path):
     assert model["norm_obs"] and not model["norm_reward"] and model["clip_obs"] == 10.0
     assert model["stats_gamma"] == 0.995
     assert model["action_shape"] == [1, 8] and model["action_max"] <= 1.0
+    done = subprocess.run([sys.executable, "-c", _LOAD_POLICY, ENV, str(run_dir)], cwd=tmp_path, env=env,
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    loaded = json.loads(done.stdout.strip().splitlines()[-1])
+    for case in ("dir", "final", "best"):  # the run folder (its final zip), the final zip, the best zip
+        assert loaded[case]["mean"] and loaded[case]["same"] and loaded[case]["name"] == "ppo", (case, loaded)
+        assert loaded[case]["differs_unnormalized"], case  # the statistics matter, so the check can fail
     saved = yaml.unsafe_load((run_dir / ENV / "config.yml").read_text())
     assert dict(saved)["policy_kwargs"] == load_hyperparams("ppo", ENV)["policy_kwargs"]
     enjoy = [sys.executable, "-m", "rl_zoo3.enjoy", "--algo", "ppo", "--env", ENV, "--gym-packages", "pectoral_gym",
