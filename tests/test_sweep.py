@@ -195,3 +195,15 @@ def test_two_tiny_trials_on_an_embedded_ray_and_asha_stops_the_worse(tmp_path, c
     assert (folder / "results.png").stat().st_size > 0
     assert "| stopped |" in (folder / "results.md").read_text()
     assert "results.md" not in capsys.readouterr().err
+
+
+def test_help_names_the_defaults(capsys):
+    from agents.sweep import main
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--help"])
+    assert exit_info.value.code == 0
+    text = capsys.readouterr().out
+    for option in ("--param-space", "--grid", "--scheduler", "--address", "--num-cpus", "--numba-cache-dir",
+                   "--metric", "mean_return"):
+        assert option in text
