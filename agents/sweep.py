@@ -15,11 +15,13 @@ Each trial is one :func:`agents.train.train` run with ``torch_threads=--cpus-per
 its ``on_evaluation`` callback sends every periodic evaluation to Tune (``ray.tune.report``:
 ``timesteps``, ``success``, ``mean_return``, ...), so ``--scheduler asha`` stops trials that
 trail at a rung (rungs in environment steps: ``--grace-period`` times powers of
-``--reduction-factor``). numba's kernels are compiled once before the trials, by a warm-up
-task on every node, into numba's cache (beside the sources, which a node's workers share, or
-``--numba-cache-dir``, set as ``NUMBA_CACHE_DIR`` of every worker: a cluster's shared disk); each
-trial reports the time it took to get its environments ready (``env_ready_s``: numba
-compiling or loading the cache) so the saving can be read from the table.
+``--reduction-factor``). ``--final-env PectoralFish-Full-v0`` evaluates each trial's best
+model at the end on held-out episodes, the same for every trial (``final_success``, ...).
+numba's kernels are compiled once before the trials, by a warm-up task on every node, into
+numba's cache (beside the sources, which a node's workers share, or ``--numba-cache-dir``,
+set as ``NUMBA_CACHE_DIR`` of every worker: a cluster's shared disk); each trial reports the
+time it took to get its environments ready (``env_ready_s``: numba compiling or loading the
+cache) so the saving can be read from the table.
 
 Output in ``<storage-path>/<name>/``: Tune's trial folders (each holds the run folder of
 :mod:`agents.train` in ``run/``), ``results.csv`` and ``results.md`` (one row per trial:
@@ -45,13 +47,15 @@ __all__ = ["DEFAULT_SPACE", "main", "run_sweep", "tune_space", "warm_up"]
 
 DEFAULT_SPACE: dict[str, Dimension] = {"seed": ("grid", [0, 1, 2])}
 METRICS = ("mean_return", "success", "tracking_error")
+FINAL_SEED = 2_000_000  # the final evaluation's episodes: apart from training (seed + i) and seed + 1_000_000 + k
 
 
-def warm_up(config: dict[str, Any]) -> float:
+def warm_up(config: dict[str, Any], final: dict[str, Any] | None = None) -> float:
     """Compile (or load from numba's cache) every kernel a training run of ``config`` uses; returns seconds.
 
     Steps the training vector env (``n_envs`` fish, through autoresets) and runs an evaluation with
-    ``eval_episodes`` slots, both on two-step episodes; the imports are timed too.
+    ``eval_episodes`` slots, both on two-step episodes; the imports are timed too. ``final``
+    (``env_id``, ``n_episodes``, ``env_kwargs``) adds the final evaluation's env.
     """
     start = time.perf_counter()
     import numpy as np
@@ -70,6 +74,9 @@ def warm_up(config: dict[str, Any]) -> float:
     if config["eval_episodes"] > 0:
         evaluate(_ZeroController(), config["env_id"], n_episodes=config["eval_episodes"], seed=0,
                  env_kwargs={**env_kwargs, "max_episode_steps": 2})
+    if final:
+        evaluate(_ZeroController(), final["env_id"], n_episodes=final["n_episodes"], seed=0,
+                 env_kwargs={**final["env_kwargs"], "max_episode_steps": 2})
     return time.perf_counter() - start
 
 
@@ -102,7 +109,7 @@ def _trainable(params: dict[str, Any], base: dict[str, Any]) -> None:
 
     config = trial_config(base["algo"], base["env_id"], params, seed=base["seed"], hyperparams=base["hyperparams"],
                           hyperparams_file=base["hyperparams_file"])
-    env_ready_s = warm_up(config)
+    env_ready_s = warm_up(config, _final_spec(config, base))
     run_dir = Path(tune.get_context().get_trial_dir()) / "run"
 
     final: list[dict[str, Any]] = []
@@ -117,8 +124,38 @@ def _trainable(params: dict[str, Any], base: dict[str, Any]) -> None:
 
     train(config, run_dir, progress=False, torch_threads=base["cpus_per_trial"], on_evaluation=report,
           command=base["command"])
+    if base["final_env"] and final:
+        final[-1].update(_final_evaluation(run_dir, config, base))
     for metrics in final:
         tune.report(metrics)
+
+
+def _final_evaluation(run_dir: Path, config: dict[str, Any], base: dict[str, Any]) -> dict[str, float]:
+    """The run's best model on ``base["final_env"]``: the same held-out episodes for every trial."""
+    from agents.evaluate import evaluate
+    from agents.policy import load_policy
+
+    final = _final_spec(config, base)
+    result = evaluate(load_policy(run_dir), final["env_id"], n_episodes=final["n_episodes"], seed=base["final_seed"],
+                      env_kwargs=final["env_kwargs"])
+    out = {"final_mean_return": float(result.metrics["return"].mean)}
+    if "success" in result.metrics:
+        out["final_success"] = float(result.metrics["success"].mean)
+    if "tracking_error" in result.metrics:
+        out["final_tracking_error"] = float(result.metrics["tracking_error"].mean)
+    return out
+
+
+def _final_spec(config: dict[str, Any], base: dict[str, Any]) -> dict[str, Any] | None:
+    """The final evaluation's env id, episodes and env arguments (the run's, randomisation as asked), or ``None``."""
+    from agents.evaluate import DEFAULT_RANDOMIZATION
+
+    if not base["final_env"]:
+        return None
+    env_kwargs = {k: v for k, v in config["env_kwargs"].items() if k != "randomize"}
+    if base["final_randomize"]:
+        env_kwargs["randomize"] = DEFAULT_RANDOMIZATION
+    return {"env_id": base["final_env"], "n_episodes": base["final_episodes"], "env_kwargs": env_kwargs}
 
 
 def tune_space(space: dict[str, Dimension]) -> dict[str, Any]:
@@ -139,15 +176,15 @@ def tune_space(space: dict[str, Dimension]) -> dict[str, Any]:
     return out
 
 
-def _warm_nodes(config: dict[str, Any]) -> list[float]:
+def _warm_nodes(config: dict[str, Any], final: dict[str, Any] | None) -> list[float]:
     """Run :func:`warm_up` once on every alive node (each writes the shared numba cache); seconds per node."""
     import ray
     from ray.util.scheduling_strategies import NodeAffinitySchedulingStrategy
 
     task = ray.remote(num_cpus=1)(warm_up)
     nodes = [node["NodeID"] for node in ray.nodes() if node.get("Alive")]
-    return ray.get([task.options(scheduling_strategy=NodeAffinitySchedulingStrategy(node, soft=False)).remote(config)
-                    for node in nodes])
+    return ray.get([task.options(scheduling_strategy=NodeAffinitySchedulingStrategy(node, soft=False)).remote(
+        config, final) for node in nodes])
 
 
 def run_sweep(args: argparse.Namespace, space: dict[str, Dimension], base: dict[str, Any]) -> Path:
@@ -177,7 +214,7 @@ def run_sweep(args: argparse.Namespace, space: dict[str, Dimension], base: dict[
         print(f"Ray ready in {time.perf_counter() - start:.1f} s")
         if args.warm_up:
             start = time.perf_counter()
-            seconds = _warm_nodes(first)
+            seconds = _warm_nodes(first, _final_spec(first, base))
             where = env_vars.get("NUMBA_CACHE_DIR", "numba's default, beside the sources")
             print(f"numba cache ({where}) warmed on {len(seconds)} node(s) in {time.perf_counter() - start:.1f} s "
                   "(warm-up task: " + ", ".join(f"{s:.1f} s" for s in seconds) + ")")
@@ -221,6 +258,14 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--n-timesteps", type=float, help="steps per trial (default: the file's)")
     parser.add_argument("--eval-freq", type=float, help="steps in all between evaluations (default: the file's)")
     parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation (default: the file's)")
+    parser.add_argument("--final-env", metavar="ID", help="evaluate each trial's best model on this env at the end "
+                                                          "(PectoralFish-Full-v0: train averaged, test full)")
+    parser.add_argument("--final-episodes", type=int, default=100, help="episodes of the final evaluation")
+    parser.add_argument("--final-seed", type=int, default=FINAL_SEED,
+                        help="final evaluation's episode k uses seed + k (the same for every trial; apart from the "
+                             "training resets and the periodic evaluations)")
+    parser.add_argument("--final-randomize", action="store_true",
+                        help="final evaluation with agents.evaluate.DEFAULT_RANDOMIZATION")
     parser.add_argument("--metric", choices=METRICS, default="mean_return",
                         help="evaluation figure the scheduler compares (tracking_error: lower is better)")
     parser.add_argument("--scheduler", choices=("fifo", "asha"), default="fifo", help="fifo: run every trial out")
@@ -249,8 +294,13 @@ def main(argv: list[str] | None = None) -> int:
 
     args = _parse_args(argv)
     try:
-        if args.num_samples < 1 or args.cpus_per_trial < 1:
-            raise ValueError("--num-samples and --cpus-per-trial must be >= 1")
+        if args.num_samples < 1 or args.cpus_per_trial < 1 or args.final_episodes < 1:
+            raise ValueError("--num-samples, --cpus-per-trial and --final-episodes must be >= 1")
+        if args.final_env:
+            from pectoral_gym.registration import ENV_IDS
+
+            if args.final_env not in ENV_IDS:
+                raise ValueError(f"--final-env {args.final_env!r} is not a fish env; choose one of {sorted(ENV_IDS)}")
         space = {**(load_param_space(args.param_space) if args.param_space else {}), **parse_grid(args.grid)}
         space = space or dict(DEFAULT_SPACE)
         hyperparams = parse_overrides(args.hyperparams)
@@ -260,7 +310,9 @@ def main(argv: list[str] | None = None) -> int:
                 hyperparams[key] = int(value)
         base = {"algo": args.algo, "env_id": args.env, "seed": args.seed, "hyperparams": hyperparams,
                 "hyperparams_file": str(Path(args.hyperparams_file).resolve()) if args.hyperparams_file else None,
-                "cpus_per_trial": args.cpus_per_trial,
+                "cpus_per_trial": args.cpus_per_trial, "final_env": args.final_env,
+                "final_episodes": args.final_episodes, "final_seed": args.final_seed,
+                "final_randomize": args.final_randomize,
                 "command": shlex.join(["python", "-m", "agents.sweep", *(sys.argv[1:] if argv is None else argv)])}
         from agents.vec_adapter import make_fish_vec_env
 

@@ -43,11 +43,18 @@ def result_rows(grid: Any, keys: list[str], metric: str) -> list[dict[str, Any]]
             "best_mean_return": max((h.get("mean_return", math.nan) for h in history), default=math.nan),
             "env_ready_s": last.get("env_ready_s", math.nan),
             "train_s": last.get("elapsed_s", math.nan),
+            **{key: last[key] for key in ("final_success", "final_mean_return", "final_tracking_error")
+               if key in last},
             "path": str(result.path),
             "curve": [(h["timesteps"], h.get(metric, math.nan)) for h in history if "timesteps" in h],
         })
         rows.append(row)
     return rows
+
+
+def _columns(rows: list[dict[str, Any]]) -> list[str]:
+    """Every row's keys in first-seen order, without ``curve`` (the plot's) and ``path``."""
+    return [c for c in dict.fromkeys(k for row in rows for k in row) if c not in ("curve", "path")]
 
 
 def _text(value: Any) -> str:
@@ -60,9 +67,9 @@ def format_markdown(rows: list[dict[str, Any]]) -> str:
     """A Markdown table of the rows (without ``curve`` and ``path``)."""
     if not rows:
         return "(no trials)\n"
-    columns = [c for c in rows[0] if c not in ("curve", "path")]
+    columns = _columns(rows)
     lines = ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
-    lines += ["| " + " | ".join(_text(row[c]) for c in columns) + " |" for row in rows]
+    lines += ["| " + " | ".join(_text(row.get(c)) for c in columns) + " |" for row in rows]
     return "\n".join(lines) + "\n"
 
 
@@ -70,7 +77,7 @@ def write_tables(rows: list[dict[str, Any]], folder: str | Path) -> None:
     """Write ``results.csv`` (every column but ``curve``) and ``results.md`` into ``folder``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    columns = [c for c in (rows[0] if rows else {"trial": None}) if c != "curve"]
+    columns = [*_columns(rows), "path"] if rows else ["trial"]
     with open(folder / "results.csv", "w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=columns, extrasaction="ignore")
         writer.writeheader()

@@ -174,7 +174,7 @@ def test_two_tiny_trials_on_an_embedded_ray_and_asha_stops_the_worse(tmp_path, c
     # rung (128 steps) is far below the first trial's, and ASHA (keep the best half) stops it there.
     argv = ["--grid", "env_kwargs.time_penalty=0.01,10", "--hyperparams", *TINY, "--scheduler", "asha",
             "--reduction-factor", "2", "--max-concurrent", "1", "--num-cpus", "2", "--storage-path", str(tmp_path),
-            "--name", "s", "--verbose", "0"]
+            "--name", "s", "--verbose", "0", "--final-env", "PectoralFish-Full-v0", "--final-episodes", "2"]
     assert main(argv) == 0
     assert not ray.is_initialized()  # the command shut its Ray down
     folder = tmp_path / "s"
@@ -191,6 +191,16 @@ def test_two_tiny_trials_on_an_embedded_ray_and_asha_stops_the_worse(tmp_path, c
         run = Path(row["path"]) / "run"
         assert (run / "config.yaml").is_file() and (run / "best_model.zip").is_file()
     assert (Path(good["path"]) / "run" / "model.zip").is_file()
+    # the trial that ran out was evaluated on the full model at the end; the stopped one was not
+    from agents.evaluate import evaluate
+    from agents.policy import load_policy
+    from agents.sweep import FINAL_SEED
+
+    again = evaluate(load_policy(Path(good["path"]) / "run"), "PectoralFish-Full-v0", n_episodes=2, seed=FINAL_SEED,
+                     env_kwargs={"task": "goal", "time_penalty": 0.01})
+    assert float(good["final_mean_return"]) == pytest.approx(again.metrics["return"].mean, rel=1e-9)
+    assert float(good["final_success"]) == pytest.approx(again.metrics["success"].mean)
+    assert bad["final_success"] == ""
     assert json.loads((Path(good["path"]) / "run" / "training.json").read_text())["timesteps"] == 512
     assert (folder / "results.png").stat().st_size > 0
     assert "| stopped |" in (folder / "results.md").read_text()
