@@ -15,8 +15,9 @@ Each trial is one :func:`agents.train.train` run with ``torch_threads=--cpus-per
 its ``on_evaluation`` callback sends every periodic evaluation to Tune (``ray.tune.report``:
 ``timesteps``, ``success``, ``mean_return``, ...), so ``--scheduler asha`` stops trials that
 trail at a rung (rungs in environment steps: ``--grace-period`` times powers of
-``--reduction-factor``). ``--final-env PectoralFish-Full-v0`` evaluates each trial's best
-model at the end on held-out episodes, the same for every trial (``final_success``, ...).
+``--reduction-factor``; ``max_t`` the largest ``n_timesteps``). ``--final-env
+PectoralFish-Full-v0`` evaluates each trial's best model at the end on held-out episodes,
+the same for every trial (``final_success``, ...).
 numba's kernels are compiled once before the trials, by a warm-up task on every node, into
 numba's cache (beside the sources, which a node's workers share, or ``--numba-cache-dir``,
 set as ``NUMBA_CACHE_DIR`` of every worker: a cluster's shared disk); each trial reports the
@@ -32,6 +33,7 @@ environment steps, one line per trial).
 from __future__ import annotations
 
 import argparse
+import csv
 import os
 import sys
 import time
@@ -192,6 +194,7 @@ def run_sweep(args: argparse.Namespace, space: dict[str, Dimension], base: dict[
     import ray
     from ray import tune
     from ray.tune.schedulers import ASHAScheduler, FIFOScheduler
+    from ray.tune.search.basic_variant import BasicVariantGenerator
 
     storage = Path(args.storage_path).resolve()
     cache_dir = args.numba_cache_dir or os.environ.get("NUMBA_CACHE_DIR")
@@ -220,7 +223,10 @@ def run_sweep(args: argparse.Namespace, space: dict[str, Dimension], base: dict[
                   "(warm-up task: " + ", ".join(f"{s:.1f} s" for s in seconds) + ")")
         if args.scheduler == "asha":
             grace = int(args.grace_period or first["eval_freq"])
-            scheduler = ASHAScheduler(time_attr="timesteps", max_t=first["n_timesteps"], grace_period=grace,
+            max_t = max(trial_config(base["algo"], base["env_id"], point, seed=base["seed"],
+                                     hyperparams=base["hyperparams"], hyperparams_file=base["hyperparams_file"]
+                                     )["n_timesteps"] for point in grid_points(space))
+            scheduler = ASHAScheduler(time_attr="timesteps", max_t=max_t, grace_period=grace,
                                       reduction_factor=args.reduction_factor)
         else:
             scheduler = FIFOScheduler()
@@ -229,6 +235,7 @@ def run_sweep(args: argparse.Namespace, space: dict[str, Dimension], base: dict[
             trainable, param_space=tune_space(space),
             tune_config=tune.TuneConfig(metric=args.metric, mode="min" if args.metric == "tracking_error" else "max",
                                         scheduler=scheduler, num_samples=args.num_samples, reuse_actors=False,
+                                        search_alg=BasicVariantGenerator(random_state=args.search_seed),
                                         max_concurrent_trials=args.max_concurrent or None),
             run_config=tune.RunConfig(name=args.name, storage_path=str(storage), verbose=args.verbose))
         grid = tuner.fit()
@@ -252,6 +259,7 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help="grid keys (over the file's); default space without either: seed=0,1,2")
     parser.add_argument("--num-samples", type=int, default=1, help="repeats of each grid point (fresh draws)")
     parser.add_argument("--seed", type=int, default=0, help="seed of trials whose space has no seed")
+    parser.add_argument("--search-seed", type=int, default=0, help="seed of the sampled keys' draws")
     parser.add_argument("--hyperparams", nargs="*", default=[], metavar="KEY=VALUE",
                         help="hyperparameters of every trial (as agents.train; the space's keys go over them)")
     parser.add_argument("--hyperparams-file", metavar="YAML", help="hyperparameter file (default: agents/hyperparams)")
@@ -334,6 +342,11 @@ def main(argv: list[str] | None = None) -> int:
     folder = run_sweep(args, space, base)
     print((folder / "results.md").read_text())
     print(f"sweep folder {folder}")
+    with open(folder / "results.csv") as f:
+        failed = [row["trial"] for row in csv.DictReader(f) if row["status"] == "error"]
+    if failed:
+        print(f"error: trials {failed} failed; their errors are in their trial folders (error.txt)", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -217,3 +217,39 @@ def test_help_names_the_defaults(capsys):
     for option in ("--param-space", "--grid", "--scheduler", "--address", "--num-cpus", "--numba-cache-dir",
                    "--metric", "mean_return"):
         assert option in text
+
+
+@needs_ray
+def test_result_rows_status_and_tables(tmp_path):
+    import math
+    from types import SimpleNamespace
+
+    import pandas as pd
+
+    from agents.sweep_results import format_markdown, plot_results, result_rows, write_tables
+
+    def result(trial, history, error=None, seed=0):
+        return SimpleNamespace(metrics={"trial_id": trial} if history else {}, config={"seed": seed},
+                               metrics_dataframe=pd.DataFrame(history), error=error, path=str(tmp_path / trial))
+
+    evals = [{"timesteps": 100, "n_timesteps": 300, "success": 0.2, "mean_return": -5.0, "elapsed_s": 1.0},
+             {"timesteps": 200, "n_timesteps": 300, "success": 0.6, "mean_return": -1.0, "elapsed_s": 2.0},
+             {"timesteps": 300, "n_timesteps": 300, "success": 0.4, "mean_return": -2.0, "elapsed_s": 3.0,
+              "final_success": 0.5}]
+    rows = result_rows([result("a", evals), result("b", evals[:1], seed=1), result("c", [], error=RuntimeError("x"))],
+                       ["seed"], "success")
+    a, b, c = rows
+    assert (a["status"], b["status"], c["status"]) == ("done", "stopped", "error")
+    assert (a["success"], a["best_success"], a["best_mean_return"], a["evaluations"]) == (0.4, 0.6, -1.0, 3)
+    assert a["final_success"] == 0.5 and "final_success" not in b
+    assert a["curve"] == [(100, 0.2), (200, 0.6), (300, 0.4)]
+    assert math.isnan(c["success"]) and c["evaluations"] == 0
+    text = format_markdown(rows)
+    assert text.splitlines()[0].split(" | ")[-1] == "final_success |"  # the union of the rows' columns
+    assert text.count("\n") == 2 + 3
+    write_tables(rows, tmp_path)
+    plot_results(rows, tmp_path / "results.png", "success")
+    with open(tmp_path / "results.csv") as f:
+        table = list(csv.DictReader(f))
+    assert [r["status"] for r in table] == ["done", "stopped", "error"] and table[0]["final_success"] == "0.5"
+    assert table[1]["final_success"] == "" and (tmp_path / "results.png").stat().st_size > 0
