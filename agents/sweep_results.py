@@ -18,7 +18,8 @@ def result_rows(grid: Any, keys: list[str], metric: str) -> list[dict[str, Any]]
 
     ``status`` is ``done`` (trained to ``n_timesteps``), ``stopped`` (the scheduler stopped it) or
     ``error``; ``success``/``mean_return`` are the last evaluation's, ``best_*`` the best over
-    its evaluations; ``curve`` holds ``(timesteps, metric)`` of every evaluation (for the plot).
+    its evaluations; ``curve`` holds ``(timesteps, metric)`` of every evaluation and ``label`` the
+    trial's values as text (for the plot).
     """
     rows = []
     for result in grid:
@@ -47,14 +48,15 @@ def result_rows(grid: Any, keys: list[str], metric: str) -> list[dict[str, Any]]
                if key in last},
             "path": str(result.path),
             "curve": [(h["timesteps"], h.get(metric, math.nan)) for h in history if "timesteps" in h],
+            "label": ", ".join(f"{key}={_text(result.config.get(key))}" for key in keys) or row["trial"],
         })
         rows.append(row)
     return rows
 
 
 def _columns(rows: list[dict[str, Any]]) -> list[str]:
-    """Every row's keys in first-seen order, without ``curve`` (the plot's) and ``path``."""
-    return [c for c in dict.fromkeys(k for row in rows for k in row) if c not in ("curve", "path")]
+    """Every row's keys in first-seen order, without the plot's ``curve`` and ``label``, and ``path``."""
+    return [c for c in dict.fromkeys(k for row in rows for k in row) if c not in ("curve", "label", "path")]
 
 
 def _text(value: Any) -> str:
@@ -64,7 +66,7 @@ def _text(value: Any) -> str:
 
 
 def format_markdown(rows: list[dict[str, Any]]) -> str:
-    """A Markdown table of the rows (without ``curve`` and ``path``)."""
+    """A Markdown table of the rows (without ``curve``, ``label`` and ``path``)."""
     if not rows:
         return "(no trials)\n"
     columns = _columns(rows)
@@ -74,7 +76,7 @@ def format_markdown(rows: list[dict[str, Any]]) -> str:
 
 
 def write_tables(rows: list[dict[str, Any]], folder: str | Path) -> None:
-    """Write ``results.csv`` (every column but ``curve``) and ``results.md`` into ``folder``."""
+    """Write ``results.csv`` (every column but ``curve`` and ``label``) and ``results.md`` into ``folder``."""
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     columns = [*_columns(rows), "path"] if rows else ["trial"]
@@ -97,7 +99,7 @@ def plot_results(rows: list[dict[str, Any]], path: str | Path, metric: str) -> N
         if not row["curve"]:
             continue
         steps, values = zip(*row["curve"], strict=True)
-        (line,) = ax.plot(steps, values, marker=".", label=str(row["trial"]))
+        (line,) = ax.plot(steps, values, marker=".", label=f"{row['trial']}: {row['label']}")
         if row["status"] == "stopped":
             ax.plot(steps[-1], values[-1], "x", color=line.get_color(), markersize=10)
     ax.set_xlabel("environment steps")
