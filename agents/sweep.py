@@ -120,16 +120,16 @@ def _trainable(params: dict[str, Any], base: dict[str, Any]) -> None:
         metrics = {**{k: float(v) for k, v in record.items()}, "n_timesteps": config["n_timesteps"],
                    "env_ready_s": env_ready_s, "pid": os.getpid()}
         if record["timesteps"] >= config["n_timesteps"]:
-            final.append(metrics)  # after train() has saved the model: a scheduler stops a trial at max_t
+            final.append(metrics)  # reported after train() has saved the model: ASHA stops a trial at max_t
         else:
             tune.report(metrics)  # a scheduler may stop the trial here (its best model is saved already)
 
     train(config, run_dir, progress=False, torch_threads=base["cpus_per_trial"], on_evaluation=report,
           command=base["command"])
-    if base["final_env"] and final:
-        final[-1].update(_final_evaluation(run_dir, config, base))
-    for metrics in final:
-        tune.report(metrics)
+    if final:  # one report: ASHA stops a trial at its first report at max_t, and later ones would be lost
+        if base["final_env"]:
+            final[-1].update(_final_evaluation(run_dir, config, base))
+        tune.report(final[-1])
 
 
 def _final_evaluation(run_dir: Path, config: dict[str, Any], base: dict[str, Any]) -> dict[str, float]:

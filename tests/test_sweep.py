@@ -16,7 +16,9 @@ from agents.sweep_space import grid_points, load_param_space, parse_grid, trial_
 
 ENV = "PectoralFish-Averaged-v0"
 ROOT = Path(__file__).resolve().parents[1]
-TINY = ["n_timesteps=512", "n_envs=4", "n_steps=32", "batch_size=64", "n_epochs=1", "eval_freq=128",
+# 4 envs x 32 steps: PPO runs to 512 steps; evaluations at 100, ..., 400, then 500 and 512 (after learning), both
+# held back to the one report after the model is saved
+TINY = ["n_timesteps=500", "n_envs=4", "n_steps=32", "batch_size=64", "n_epochs=1", "eval_freq=100",
         "eval_episodes=2"]
 needs_ray = pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="ray[tune] not installed (sweep extra)")
 
@@ -171,7 +173,7 @@ def test_two_tiny_trials_on_an_embedded_ray_and_asha_stops_the_worse(tmp_path, c
     from agents.sweep import main
 
     # Two trials, one at a time: the second pays 10 per step (time_penalty), so its mean return at the first
-    # rung (128 steps) is far below the first trial's, and ASHA (keep the best half) stops it there.
+    # rung (100 steps) is far below the first trial's, and ASHA (keep the best half) stops it there.
     argv = ["--grid", "env_kwargs.time_penalty=0.01,10", "--hyperparams", *TINY, "--scheduler", "asha",
             "--reduction-factor", "2", "--max-concurrent", "1", "--num-cpus", "2", "--storage-path", str(tmp_path),
             "--name", "s", "--verbose", "0", "--final-env", "PectoralFish-Full-v0", "--final-episodes", "2"]
@@ -182,8 +184,8 @@ def test_two_tiny_trials_on_an_embedded_ray_and_asha_stops_the_worse(tmp_path, c
         rows = {float(r["env_kwargs.time_penalty"]): r for r in csv.DictReader(f)}
     assert rows.keys() == {0.01, 10.0}
     good, bad = rows[0.01], rows[10.0]
-    assert good["status"] == "done" and int(good["timesteps"]) == 512 and int(good["evaluations"]) == 4
-    assert bad["status"] == "stopped" and int(bad["timesteps"]) == 128 and int(bad["evaluations"]) == 1
+    assert good["status"] == "done" and int(good["timesteps"]) == 512 and int(good["evaluations"]) == 5
+    assert bad["status"] == "stopped" and int(bad["timesteps"]) == 100 and int(bad["evaluations"]) == 1
     # 10 per step: two steps of it outweigh the goal bonus (10), so the gap is large whatever the policy does
     assert float(bad["mean_return"]) < float(good["mean_return"]) - 10
     for row in (good, bad):
