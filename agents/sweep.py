@@ -235,8 +235,10 @@ def run_sweep(args: argparse.Namespace, space: dict[str, Dimension], base: dict[
             trainable, param_space=tune_space(space),
             tune_config=tune.TuneConfig(metric=args.metric, mode="min" if args.metric == "tracking_error" else "max",
                                         scheduler=scheduler, num_samples=args.num_samples, reuse_actors=False,
-                                        search_alg=BasicVariantGenerator(random_state=args.search_seed),
-                                        max_concurrent_trials=args.max_concurrent or None),
+                                        # the generator limits concurrency itself: Tune ignores
+                                        # max_concurrent_trials beside a generator passed as search_alg
+                                        search_alg=BasicVariantGenerator(max_concurrent=args.max_concurrent,
+                                                                         random_state=args.search_seed)),
             run_config=tune.RunConfig(name=args.name, storage_path=str(storage), verbose=args.verbose))
         grid = tuner.fit()
         rows = result_rows(grid, list(space), args.metric)
