@@ -16,6 +16,7 @@ from __future__ import annotations
 import io
 import json
 import pickle
+import re
 import zipfile
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
@@ -146,14 +147,48 @@ def _load_normalization(path: Path) -> dict[str, Any]:
             "clip_obs": vec_normalize.clip_obs, "epsilon": vec_normalize.epsilon}
 
 
+def _zoo_params_dir(run_dir: Path) -> Path | None:
+    """The ``<env>/`` folder of an rl-baselines3-zoo run folder (it holds ``config.yml``), or ``None``."""
+    if (run_dir / "config.yaml").is_file():
+        return None  # an agents.train run folder
+    found = sorted(p.parent for p in run_dir.glob("*/config.yml"))
+    return found[0] if len(found) == 1 else None
+
+
+def _stats_beside(zip_path: Path) -> Path | None:
+    """The ``VecNormalize`` pickle that goes with an SB3 zip, in agents.train's or rl-baselines3-zoo's layout.
+
+    agents.train: ``vecnormalize_final.pkl`` with ``model.zip``, else ``vecnormalize.pkl`` beside the zip.
+    rl-baselines3-zoo (``<log>/<algo>/<env>_<n>/``): ``<env>/vecnormalize.pkl`` (saved on every new best and
+    at the end, so it holds the final statistics; zoo's ``enjoy --load-best`` uses it with ``best_model.zip``
+    too), and ``rl_model_vecnormalize_<N>_steps.pkl`` with a checkpoint ``rl_model_<N>_steps.zip``.
+    """
+    parent = zip_path.parent
+    if zip_path.name == "model.zip" and (parent / "vecnormalize_final.pkl").is_file():
+        return parent / "vecnormalize_final.pkl"
+    if (parent / "vecnormalize.pkl").is_file():
+        return parent / "vecnormalize.pkl"
+    match = re.fullmatch(r"rl_model_(\d+)_steps", zip_path.stem)
+    if match and (parent / f"rl_model_vecnormalize_{match.group(1)}_steps.pkl").is_file():
+        return parent / f"rl_model_vecnormalize_{match.group(1)}_steps.pkl"
+    params_dir = parent / zip_path.stem if (parent / zip_path.stem / "vecnormalize.pkl").is_file() else (
+        _zoo_params_dir(parent))
+    if params_dir is not None and (params_dir / "vecnormalize.pkl").is_file():
+        return params_dir / "vecnormalize.pkl"
+    return None
+
+
 def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) -> SB3Controller:
     """Load a trained policy as a deterministic :class:`Controller`.
 
     Args:
         path: A run folder of :mod:`agents.train` (``best_model.zip`` preferred over ``model.zip``;
             ``vecnormalize.pkl`` applied when present, ``vecnormalize_final.pkl`` with ``model.zip``;
-            the algorithm read from ``config.yaml``)
-            or an SB3 ``.zip`` (the algorithm read from the zip, or ``algo``).
+            the algorithm read from ``config.yaml``), a run folder of rl-baselines3-zoo
+            (``<log>/<algo>/<env>_<n>``: the final ``<env>.zip``, else ``best_model.zip``, with
+            ``<env>/vecnormalize.pkl``, which holds the final statistics), or an SB3 ``.zip`` of either
+            (the statistics found beside it as :func:`_stats_beside` says; the algorithm read from the
+            zip, or ``algo``).
         device: Torch device.
         algo: Force the algorithm (``"ppo"``, ``"sac"``, ...).
 
@@ -167,7 +202,15 @@ def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) 
     path = Path(path)
     normalization: dict[str, Any] = {}
     name = path.stem
-    if path.is_dir():
+    zoo_dir = _zoo_params_dir(path) if path.is_dir() else None
+    if zoo_dir is not None:
+        zip_path = next((z for z in (path / f"{zoo_dir.name}.zip", path / "best_model.zip") if z.is_file()), None)
+        if zip_path is None:
+            raise FileNotFoundError(f"{path} looks like an rl-baselines3-zoo run folder ({zoo_dir.name}/config.yml) "
+                                    f"but has neither {zoo_dir.name}.zip nor best_model.zip")
+        if (zoo_dir / "vecnormalize.pkl").is_file():
+            normalization = _load_normalization(zoo_dir / "vecnormalize.pkl")
+    elif path.is_dir():
         config = read_config(path)
         zip_path = next((path / f for f in ("best_model.zip", "model.zip") if (path / f).is_file()), None)
         if zip_path is None:
@@ -181,11 +224,9 @@ def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) 
         name = str(config.get("algo", name))
     elif path.is_file() and path.suffix == ".zip":
         zip_path = path
-        sibling = path.parent / "vecnormalize.pkl"
-        if path.name == "model.zip" and (path.parent / "vecnormalize_final.pkl").is_file():
-            sibling = path.parent / "vecnormalize_final.pkl"
-        if sibling.is_file():
-            normalization = _load_normalization(sibling)
+        stats_path = _stats_beside(path)
+        if stats_path is not None:
+            normalization = _load_normalization(stats_path)
     else:
         raise FileNotFoundError(f"{path} is neither a run folder nor an SB3 .zip file")
     algo = (algo or algo_of_zip(zip_path) or "").lower() or None
@@ -201,5 +242,5 @@ def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) 
         except Exception as error:  # noqa: BLE001 - try the next algorithm, report all failures below
             errors.append(f"{candidate}: {error}")
             continue
-        return SB3Controller(model, name=name if path.is_dir() else candidate, **normalization)
+        return SB3Controller(model, name=name if path.is_dir() and zoo_dir is None else candidate, **normalization)
     raise ValueError(f"could not load {zip_path} with {candidates}: " + "; ".join(errors))

@@ -4,6 +4,7 @@ section, the demo's hyperparameters reaching SB3 unchanged, and zoo's own train 
 import importlib.util
 import json
 import os
+import shlex
 import subprocess
 import sys
 from pathlib import Path
@@ -11,6 +12,7 @@ from pathlib import Path
 import pytest
 import torch
 import yaml
+from doc_snippets import commands, snippet
 
 from agents.config import (
     HYPERPARAMS_DIR,
@@ -24,6 +26,13 @@ from agents.config import (
 
 ENV = "PectoralFish-Averaged-v0"
 ROOT = Path(__file__).resolve().parents[1]
+
+
+def _doc_argv(line):
+    """A command of the docs as argv: this interpreter for ``python``, the repository's hyperparameter files."""
+    argv = shlex.split(line)
+    assert argv[0] == "python", line
+    return [sys.executable, *(str(ROOT / a) if a.startswith("agents/hyperparams/") else a for a in argv[1:])]
 
 
 def write(tmp_path, table, name="ppo.yml"):
@@ -142,16 +151,47 @@ print(json.dumps({
 """
 
 
+# agents.policy.load_policy on zoo's layout (<env>.zip, best_model.zip, <env>/vecnormalize.pkl), checked against
+# the zip and the statistics loaded by SB3 itself.
+_LOAD_POLICY = """
+import json, sys
+import gymnasium as gym
+import numpy as np
+from stable_baselines3 import PPO
+from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
+import pectoral_gym
+from agents.policy import load_policy
+
+env_id, run_dir = sys.argv[1:]
+stats = VecNormalize.load(f"{run_dir}/{env_id}/vecnormalize.pkl", DummyVecEnv([lambda: gym.make(env_id)]))
+obs = np.random.default_rng(0).normal(size=(6, 19)).astype(np.float32) * 3
+out = {}
+for name, target, zip_name in (("dir", run_dir, f"{env_id}.zip"), ("final", f"{run_dir}/{env_id}.zip", f"{env_id}.zip"),
+                               ("best", f"{run_dir}/best_model.zip", "best_model.zip")):
+    policy = load_policy(target)
+    model = PPO.load(f"{run_dir}/{zip_name}", device="cpu")
+    expected, _ = model.predict(stats.normalize_obs(obs), deterministic=True)
+    unnormalized, _ = model.predict(obs, deterministic=True)
+    out[name] = {"mean": bool(np.allclose(policy.obs_mean, stats.obs_rms.mean)), "name": policy.name,
+                 "same": bool(np.allclose(policy.act_batch(obs), np.clip(expected, -1, 1), atol=1e-6)),
+                 "differs_unnormalized": bool(not np.allclose(np.clip(unnormalized, -1, 1), np.clip(expected, -1, 1)))}
+print(json.dumps(out))
+"""
+
+
 @pytest.mark.skipif(importlib.util.find_spec("rl_zoo3") is None, reason="rl_zoo3 not installed (dev extra)")
 def test_zoo_trains_from_the_shipped_file(tmp_path):
-    command = [sys.executable, "-m", "rl_zoo3.train", "--algo", "ppo", "--env", ENV, "--gym-packages",
-               "pectoral_gym", "--conf-file", str(HYPERPARAMS_DIR / "ppo.yml"), "-n", "512", "-f", str(tmp_path),
-               "--seed", "0", "--eval-freq", "256", "--eval-episodes", "2", "--hyperparams", "n_envs:2",
+    # the commands of docs/agents.md's zoo snippet, as written, with smaller sizes appended (zoo's argparse keeps
+    # the last -n, --eval-freq, --eval-episodes and --hyperparams)
+    train_cmd, enjoy_cmd, evaluate_cmd = [_doc_argv(line) for line in commands(snippet("zoo"))]
+    assert train_cmd[:3] == [sys.executable, "-m", "rl_zoo3.train"] and "--conf-file" in train_cmd
+    command = [*train_cmd, "-n", "512", "--eval-freq", "256", "--eval-episodes", "2", "--hyperparams", "n_envs:2",
                "n_steps:64", "batch_size:64", "n_epochs:1"]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
     done = subprocess.run(command, cwd=tmp_path, env=env, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-3000:]
-    run_dir = tmp_path / "ppo" / f"{ENV}_1"
+    assert (tmp_path / "logs").is_dir()  # the snippet's -f logs
+    run_dir = tmp_path / "logs" / "ppo" / f"{ENV}_1"
     assert (run_dir / "best_model.zip").is_file()  # zoo's evaluation, from its command line
     done = subprocess.run([sys.executable, "-c", _LOAD, ENV, str(run_dir / f"{ENV}.zip"),
                            str(run_dir / ENV / "vecnormalize.pkl")], cwd=tmp_path, env=env, capture_output=True,
@@ -166,11 +206,21 @@ def test_zoo_trains_from_the_shipped_file(tmp_path):
     assert model["norm_obs"] and not model["norm_reward"] and model["clip_obs"] == 10.0
     assert model["stats_gamma"] == 0.995
     assert model["action_shape"] == [1, 8] and model["action_max"] <= 1.0
+    done = subprocess.run([sys.executable, "-c", _LOAD_POLICY, ENV, str(run_dir)], cwd=tmp_path, env=env,
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    loaded = json.loads(done.stdout.strip().splitlines()[-1])
+    for case in ("dir", "final", "best"):  # the run folder (its final zip), the final zip, the best zip
+        assert loaded[case]["mean"] and loaded[case]["same"] and loaded[case]["name"] == "ppo", (case, loaded)
+        assert loaded[case]["differs_unnormalized"], case  # the statistics matter, so the check can fail
     saved = yaml.unsafe_load((run_dir / ENV / "config.yml").read_text())
     assert dict(saved)["policy_kwargs"] == load_hyperparams("ppo", ENV)["policy_kwargs"]
-    enjoy = [sys.executable, "-m", "rl_zoo3.enjoy", "--algo", "ppo", "--env", ENV, "--gym-packages", "pectoral_gym",
-             "-f", str(tmp_path), "--exp-id", "1", "--no-render", "--deterministic", "-n", "50"]
-    done = subprocess.run(enjoy, cwd=tmp_path, env=env, capture_output=True, text=True)
+    done = subprocess.run([*enjoy_cmd, "-n", "50"], cwd=tmp_path, env=env, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "Loading running average" in done.stdout  # zoo found the statistics next to the model
+    done = subprocess.run([*evaluate_cmd, "--episodes", "2", "--out", str(tmp_path / "eval")], cwd=tmp_path, env=env,
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    metrics = json.loads((tmp_path / "eval" / "metrics.json").read_text())
+    assert metrics["env_id"] == "PectoralFish-Full-v0" and metrics["n_episodes"] == 2, metrics.keys()
     assert "rl_zoo3" not in sys.modules  # this process stays unpatched
