@@ -342,7 +342,9 @@ class NMPCProblem:
         width = np.where(z_high > z_low, z_high - z_low, 1.0)
         half = 0.5 * params.body_length
         turn_radius = float(s.turn_radius)
-        distance_scale = s.distance_scale if s.distance_scale is not None else (0.05 if config.task == "track" else 1e-3)
+        distance_scale = s.distance_scale
+        if distance_scale is None:
+            distance_scale = 0.05 if config.task == "track" else 1e-3
 
         p = named_symbols(_PARAMETER_SIZES)
         Z = ca.SX.sym("Z", _N_U, nb)
