@@ -40,7 +40,8 @@ import scipy.stats
 
 from agents.seeds_report import plot_seeds, to_markdown
 
-__all__ = ["SETTINGS", "TARGETS", "aggregate", "iqm", "main", "run_seed", "run_seeds", "summarize_seeds"]
+__all__ = ["SETTINGS", "TARGETS", "aggregate", "iqm", "main", "run_seed", "run_seeds", "summarize_seeds",
+           "train_seeds"]
 
 TRAIN_ENV = "PectoralFish-Averaged-v0"
 # label -> (env id, randomised); as agents.benchmark.ENVS
@@ -94,7 +95,7 @@ def aggregate(values: Sequence[float], confidence: float = 0.95, n_resamples: in
 
 def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None, episodes: int = 100,
              eval_seed: int | None = None, probe: dict[str, Any] | None = None, hyperparams_file: str | None = None,
-             queue: Any = None) -> dict[str, Any]:
+             queue: Any = None, settings: Sequence[str] = tuple(SETTINGS)) -> dict[str, Any]:
     """Train one seed as the demo does and evaluate it on :data:`SETTINGS` (a worker of :func:`run_seeds`).
 
     Args:
@@ -106,6 +107,7 @@ def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None
         probe: Keyword arguments of :class:`agents.solve_time.SolveProbe` (``None``: no time to solve).
         hyperparams_file: Hyperparameter file (default ``agents/hyperparams/ppo.yml``).
         queue: Anything with ``put``; receives ``(seed, stage, timesteps)`` progress messages.
+        settings: Labels of :data:`SETTINGS` to evaluate on after training (empty: none).
 
     Returns:
         ``seed, run_dir, timesteps, train_time_s, best_eval, evaluations`` (per setting, the :data:`REPORTED`
@@ -135,7 +137,8 @@ def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None
     policy = load_policy(run_dir)
     base = {k: v for k, v in config["env_kwargs"].items() if k != "randomize"}
     evaluations = {}
-    for label, (env_id, randomised) in SETTINGS.items():
+    for label in settings:
+        env_id, randomised = SETTINGS[label]
         put((seed, f"eval {label}", int(training["timesteps"])))
         kwargs = {**base, "randomize": dict(DEFAULT_RANDOMIZATION)} if randomised else dict(base)
         result = evaluate(policy, env_id, n_episodes=episodes, seed=eval_seed, env_kwargs=kwargs)
@@ -228,16 +231,7 @@ def run_seeds(seeds: Sequence[int], out: str | Path, jobs: int = 1, overrides: d
     start = time.perf_counter()
     args = {"out": str(out), "overrides": dict(overrides or {}), "episodes": int(episodes), "eval_seed": eval_seed,
             "probe": probe, "hyperparams_file": hyperparams_file}
-    bars = _Bars(seeds, config["n_timesteps"], progress)
-    results: dict[int, dict[str, Any]] = {}
-    try:
-        if jobs == 1 or len(seeds) == 1:
-            for seed in seeds:
-                results[seed] = run_seed(seed, queue=bars, **args)
-        else:
-            _run_parallel(seeds, min(jobs, len(seeds)), args, bars, results)
-    finally:
-        bars.close()
+    results = train_seeds(seeds, jobs, args, config["n_timesteps"], progress)
     per_seed = [results[s] for s in seeds]
     report = {"settings": {"seeds": seeds, "jobs": int(jobs), "train_env": TRAIN_ENV, "episodes": int(episodes),
                            "eval_seed": eval_seed, "overrides": args["overrides"], "probe": probe,
@@ -252,6 +246,34 @@ def run_seeds(seeds: Sequence[int], out: str | Path, jobs: int = 1, overrides: d
     (out / "seeds.md").write_text(to_markdown(report) + "\n")
     plot_seeds(report, out / "seeds.png")
     return report
+
+
+def train_seeds(seeds: Sequence[int], jobs: int, args: dict[str, Any], total: int,
+                progress: bool = True) -> dict[int, dict[str, Any]]:
+    """:func:`run_seed` for every seed with the keyword arguments ``args``, ``jobs`` processes at once.
+
+    Args:
+        seeds: Training seeds.
+        jobs: Worker processes (1, or a single seed: in this process).
+        args: Keyword arguments of :func:`run_seed` other than ``seed`` and ``queue``.
+        total: Training steps per seed (the progress bars' length).
+        progress: Show one progress bar per seed.
+
+    Returns:
+        ``{seed: run_seed(...)}``.
+    """
+    seeds = [int(s) for s in seeds]
+    bars = _Bars(seeds, total, progress)
+    results: dict[int, dict[str, Any]] = {}
+    try:
+        if jobs == 1 or len(seeds) == 1:
+            for seed in seeds:
+                results[seed] = run_seed(seed, queue=bars, **args)
+        else:
+            _run_parallel(seeds, min(jobs, len(seeds)), args, bars, results)
+    finally:
+        bars.close()
+    return results
 
 
 def _run_parallel(seeds: list[int], jobs: int, args: dict[str, Any], bars: _Bars,

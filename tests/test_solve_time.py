@@ -104,3 +104,45 @@ def test_a_probe_neither_changes_training_nor_counts_in_its_elapsed_time(tmp_pat
     a, b = load_policy(plain / "model.zip"), load_policy(probed / "model.zip")
     for pa, pb in zip(a.model.policy.parameters(), b.model.policy.parameters(), strict=True):
         assert np.array_equal(pa.detach().numpy(), pb.detach().numpy())  # the probe changed nothing in training
+
+
+def test_benchmark_time_to_solve_trains_probes_and_reports(tmp_path, monkeypatch):
+    import agents.solve_time
+    from agents.benchmark import BenchmarkSettings, run_benchmark, to_markdown
+
+    measure = agents.solve_time.measure_time_to_solve
+    small = {"n_envs": 4, "n_steps": 64, "batch_size": 128, "n_epochs": 1, "eval_freq": 256, "eval_episodes": 2}
+    monkeypatch.setattr(agents.solve_time, "measure_time_to_solve",
+                        lambda *args, **kwargs: measure(*args, **kwargs, hyperparams=small))  # a smaller network run
+
+    settings = BenchmarkSettings(episodes=1, max_episode_steps=2, train_steps=0, solve_seeds=(2,),
+                                 solve_timesteps=1024, solve_episodes=2)
+    report = run_benchmark(settings, controllers=("random",), envs=("averaged",), tasks=("goal",),
+                           throughput=False, solve_out=tmp_path / "solve")
+    assert report["errors"] == {}
+    solve = report["time_to_solve"]
+    assert solve["settings"]["seeds"] == [2] and solve["settings"]["probe_episodes"] == 2
+    (run,) = solve["runs"]
+    assert run["seed"] == 2 and 1 <= len(run["probes"]) <= 4  # one probe per periodic evaluation until solved
+    assert run["solved"] == (run["time_to_solve_s"] is not None)
+    assert list((tmp_path / "solve").glob("*/seed2/model.zip"))
+    assert "## Time to solve" in to_markdown(report) and "| 2 |" in to_markdown(report)
+
+
+def test_time_to_solve_markdown_by_hand():
+    from agents.benchmark_report import to_markdown
+
+    settings = {"n_timesteps": 800000, "every": 1, "eval_freq": 50000, "probe_episodes": 100, "probe_seed": 20000,
+                "threshold": 0.95, "confirm_episodes": 100, "confirm_seed": 10000, "jobs": 1}
+    runs = [{"seed": 0, "solved": True, "time_to_solve_s": 30.0, "steps_to_solve": 400000, "probe_success": 0.96,
+             "confirm_success": 0.93, "best_probe_success": 0.96},
+            {"seed": 1, "solved": False, "time_to_solve_s": None, "steps_to_solve": None, "probe_success": None,
+             "confirm_success": None, "best_probe_success": 0.9},
+            {"seed": 2, "solved": True, "time_to_solve_s": 50.0, "steps_to_solve": 650000, "probe_success": 0.95,
+             "confirm_success": 0.97, "best_probe_success": 0.95}]
+    report = {"settings": {"episodes": 1, "nmpc_episodes": {}, "max_episode_steps": None, "seed": 0}, "cells": [],
+              "time_to_solve": {"settings": settings, "runs": runs}}
+    text = to_markdown(report)
+    assert "| 0 | yes | 30 | 400000 | 0.96 | 0.93 | 0.96 |" in text
+    assert "| 1 | no | - | - | - | - | 0.90 |" in text
+    assert "Solved: 2 of 3 seeds within the budget; median time of the solved runs 40 s." in text
