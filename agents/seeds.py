@@ -142,7 +142,7 @@ def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None
         put((seed, f"eval {label}", int(training["timesteps"])))
         kwargs = {**base, "randomize": dict(DEFAULT_RANDOMIZATION)} if randomised else dict(base)
         result = evaluate(policy, env_id, n_episodes=episodes, seed=eval_seed, env_kwargs=kwargs)
-        write_json(result, run_dir / f"eval_{label}.json", per_episode=False)
+        write_json(result, run_dir / f"eval_{label}.json")  # per-episode metrics too: failure analysis
         evaluations[label] = {m: result.metrics[m].as_dict() for m in REPORTED if m in result.metrics}
     best = max(training["evaluations"], key=lambda r: (r["success"], r["mean_return"]), default=None)
     put((seed, "done", int(training["timesteps"])))
@@ -355,7 +355,7 @@ def main(argv: list[str] | None = None) -> int:
         probe = None
         if args.probe_every:
             probe = {"every": args.probe_every, "episodes": 4 if args.quick else args.probe_episodes,
-                     "confirm_episodes": episodes}
+                     "confirm_episodes": episodes, "keep_probing": True}  # the full model's learning curve
         command = shlex.join(["python", "-m", "agents.seeds", *(sys.argv[1:] if argv is None else argv)])
         report = run_seeds(args.seeds, args.out, jobs=args.jobs, overrides=overrides, episodes=episodes,
                            eval_seed=args.eval_seed, probe=probe, hyperparams_file=args.hyperparams_file,

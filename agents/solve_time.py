@@ -82,6 +82,7 @@ class SolveProbe:
         confirm_episodes: Episodes of the confirmation of the solving policy (0: none).
         confirm_seed: Confirmation episode ``k`` is reset with ``confirm_seed + k``.
         stop_on_solve: Stop training once solved (``on_evaluation`` returns ``False``).
+        keep_probing: Go on probing once solved (the history is then the learning curve on the full model).
         env_id: Environment of the probe.
         env_kwargs: Its arguments (``task`` must be ``goal``: success is defined there).
         history: One entry per probe: ``timesteps``, ``elapsed_s``, ``success``.
@@ -95,6 +96,7 @@ class SolveProbe:
     confirm_episodes: int = 100
     confirm_seed: int = REPORT_SEED
     stop_on_solve: bool = False
+    keep_probing: bool = False
     env_id: str = FULL_ID
     env_kwargs: dict[str, Any] = field(default_factory=lambda: {"task": "goal"})
     history: list[dict[str, Any]] = field(default_factory=list)
@@ -116,13 +118,13 @@ class SolveProbe:
         from agents.evaluate import evaluate
 
         self._calls += 1
-        if self.solved is not None or (self._calls - 1) % self.every:
+        if (self.solved is not None and not self.keep_probing) or (self._calls - 1) % self.every:
             return None
         result = evaluate(controller, self.env_id, n_episodes=self.episodes, seed=self.seed,
                           env_kwargs=self.env_kwargs)
         entry = {"timesteps": int(record["timesteps"]), "elapsed_s": float(record["elapsed_s"]),
                  "success": float(result.metrics["success"].mean)}
-        if entry["success"] >= self.threshold:
+        if self.solved is None and entry["success"] >= self.threshold:
             if self.confirm_episodes:
                 confirm = evaluate(controller, self.env_id, n_episodes=self.confirm_episodes,
                                    seed=self.confirm_seed, env_kwargs=self.env_kwargs)

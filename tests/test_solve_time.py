@@ -56,6 +56,17 @@ def test_first_probe_at_the_threshold_solves_and_is_confirmed_on_other_episodes(
     assert all(c["env_id"] == "PectoralFish-Full-v0" and "randomize" not in c["env_kwargs"] for c in script.calls)
 
 
+def test_keep_probing_after_the_solve_keeps_the_first_solve(monkeypatch):
+    script = _Scripted([0.96, 0.93, 0.5, 0.97])  # the 2nd is the confirmation of the 1st
+    monkeypatch.setattr(agents.evaluate, "evaluate", script)
+    probe = SolveProbe(keep_probing=True)
+    assert all(probe(object(), _record(k)) is not None for k in (1, 2, 3))
+    summary = probe.summary()
+    assert summary["steps_to_solve"] == 1000 and summary["confirm_success"] == 0.93
+    assert [p["success"] for p in summary["probes"]] == [0.96, 0.5, 0.97] and summary["best_probe_success"] == 0.97
+    assert len(script.calls) == 4  # one confirmation only
+
+
 def test_probe_every_kth_evaluation_and_never_solved(monkeypatch):
     script = _Scripted([0.5, 0.6, 0.7])
     monkeypatch.setattr(agents.evaluate, "evaluate", script)
