@@ -28,6 +28,11 @@ def _metric(run: dict[str, Any], label: str, name: str, digits: int = 2) -> str:
     return f"{m['mean']:.{digits}f} [{m['ci_low']:.{digits}f}, {m['ci_high']:.{digits}f}]"
 
 
+def _wall(run: dict[str, Any]) -> str:
+    values = [(run["evaluations"][label].get("wall") or {}).get("mean") for label in ("averaged", "full")]
+    return " / ".join(_num(v) for v in values)
+
+
 def _solve(run: dict[str, Any]) -> str:
     s = run.get("time_to_solve")
     if not s:
@@ -53,8 +58,9 @@ def to_markdown(report: dict[str, Any]) -> str:
              "over episodes].", "",
              "## Per seed", "",
              "| seed | success, averaged | success, full | success, full + randomisation | gap averaged - full "
-             "| time to goal, full [s] | best periodic evaluation | train time [s] | time to solve (full >= 0.95) |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "| wall hits, averaged / full | time to goal, full [s] | best periodic evaluation | train time [s] "
+             "| time to solve (full >= 0.95) |",
+             "|---|---|---|---|---|---|---|---|---|---|"]
     for run in report["per_seed"]:
         ev = run["evaluations"]
         gap = None
@@ -63,7 +69,7 @@ def to_markdown(report: dict[str, Any]) -> str:
         best = run.get("best_eval")
         best_text = "-" if not best else f"{best['success']:.2f} at {best['timesteps']}"
         lines.append(f"| {run['seed']} | {_metric(run, 'averaged', 'success')} | {_metric(run, 'full', 'success')} | "
-                     f"{_metric(run, 'full+rand', 'success')} | {_num(gap, 2)} | "
+                     f"{_metric(run, 'full+rand', 'success')} | {_num(gap, 2)} | {_wall(run)} | "
                      f"{_metric(run, 'full', 'time_to_goal', 1)} | {best_text} | {run['train_time_s']:.0f} | "
                      f"{_solve(run)} |")
     lines += ["", "## Across seeds", "",
@@ -94,7 +100,7 @@ def plot_seeds(report: dict[str, Any], path: str | Path) -> Path:
     per_seed = report["per_seed"]
     figures = report["summary"]["figures"]
     solving = "time to solve [s]" in figures
-    fig, axes = plt.subplots(1, 2 if solving else 1, figsize=(11 if solving else 6, 4), squeeze=False)
+    fig, axes = plt.subplots(1, 3 if solving else 2, figsize=(16 if solving else 11, 4), squeeze=False)
     ax = axes[0][0]
     offsets = np.linspace(-0.15, 0.15, len(per_seed)) if len(per_seed) > 1 else np.zeros(1)
     for j, label in enumerate(_LABELS):
@@ -113,8 +119,22 @@ def plot_seeds(report: dict[str, Any], path: str | Path) -> Path:
     ax.set_title(f"PPO, {len(per_seed)} training seeds")
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=8, loc="lower left")
+    ax = axes[0][1]
+    for k, run in enumerate(per_seed):
+        colour = f"C{k % 10}"
+        curve = run.get("training_evaluations") or []
+        ax.plot([e["timesteps"] / 1e3 for e in curve], [e["success"] for e in curve], color=colour, lw=1,
+                label=f"seed {run['seed']}: periodic eval (averaged)")
+        probes = [e for e in curve if "probe" in e]
+        ax.plot([e["timesteps"] / 1e3 for e in probes], [e["probe"]["success"] for e in probes], color=colour, lw=1,
+                ls="--", label="probe (full, held out)" if k == 0 else None)
+    ax.set_xlabel("training steps [thousands]")
+    ax.set_ylabel("success rate")
+    ax.set_title("learning curves")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="lower right")
     if solving:
-        ax = axes[0][1]
+        ax = axes[0][2]
         seeds = [str(run["seed"]) for run in per_seed]
         times = [run["time_to_solve"]["time_to_solve_s"] for run in per_seed]
         solved = [t is not None for t in times]
@@ -123,6 +143,7 @@ def plot_seeds(report: dict[str, Any], path: str | Path) -> Path:
         for i, k in enumerate(solved):
             if not k:
                 ax.text(i, 0.0, "not\nsolved", ha="center", va="bottom", fontsize=8)
+        ax.set_ylim(bottom=0.0, top=max([t for t in times if t is not None], default=1.0) * 1.1)
         ax.set_xlabel("training seed")
         ax.set_ylabel("training wall time to full >= 0.95 [s]")
         ax.set_title("time to solve")

@@ -14,7 +14,7 @@ Each run writes ``runs/<env>/<algo>_<task>_seed<seed>_<stamp>/``: ``model.zip``
 (final), ``best_model.zip`` and ``vecnormalize.pkl`` (best on the periodic
 evaluation, its observation statistics), ``vecnormalize_final.pkl`` (statistics
 of ``model.zip``), ``config.yaml`` (resolved config), ``command.txt``,
-``training.json`` (time, steps/s, evaluations) and TensorBoard logs in ``tb/``.
+``training.json`` (time, steps/s, probe time, evaluations) and TensorBoard logs in ``tb/``.
 The same ``--seed`` on the same machine repeats a run.
 """
 

@@ -95,6 +95,7 @@ def test_command_writes_per_seed_and_across_seed_results(serial_run, capsys):
     assert summary["figures"]["success full"]["iqm"] == pytest.approx(np.mean(fulls))  # two seeds: the mean
     markdown = (serial_run / "seeds.md").read_text()
     assert "| 5 |" in markdown and "| 6 |" in markdown and "IQM" in markdown and "--seeds 5 6" in markdown
+    assert "wall hits, averaged / full" in markdown
     assert (serial_run / "seeds.png").read_bytes()[:4] == b"\x89PNG"
     # the same seeds into the same folder are refused
     assert main([*TINY, "--seeds", "5", "--out", str(serial_run)]) == 2
