@@ -6,13 +6,16 @@ settings: the averaged model, the full model, and the full model with per-episod
 randomisation (:data:`agents.evaluate.DEFAULT_RANDOMIZATION`), through
 :func:`agents.evaluate.evaluate` (seeded: episode ``k`` starts from ``seed + k`` for every
 controller). Also measured: env step rates (:func:`pectoral_gym.bench.run_benchmark`) and the
-steps per second of a short Stable-Baselines3 PPO ``learn()`` on the averaged vector env.
+steps per second of a short Stable-Baselines3 PPO ``learn()`` on the averaged vector env, and the
+time to solve: per training seed, the wall time until the demo's PPO first reaches 0.95 success on
+the full model on held-out episodes (:mod:`agents.solve_time`; ``--full`` runs seeds 0-4).
 
 CLI::
 
     python -m agents.benchmark --quick                      # a few minutes on 2 cores
     python -m agents.benchmark --full --policy runs/PectoralFish-Averaged-v0/ppo_goal_seed0_...
     python -m agents.benchmark --quick --controllers hand nmpc --out bench_quick
+    python -m agents.benchmark --quick --controllers hand --solve-seeds 0 1 --solve-timesteps 4e5
 
 Writes ``benchmark.md``, ``benchmark.json`` and ``benchmark.png`` into ``--out``.
 """
@@ -57,6 +60,10 @@ class BenchmarkSettings:
         repeats: Timed passes of the env throughput (best kept).
         train_steps: Timesteps of the timed PPO ``learn()`` (0: skip).
         seed: Episode ``k`` of every cell is reset with ``seed + k``.
+        solve_seeds: Training seeds of the time to solve (:func:`agents.solve_time.measure_time_to_solve`;
+            empty: skipped).
+        solve_timesteps: Training budget per seed of the time to solve (``None``: ``agents/hyperparams/ppo.yml``).
+        solve_episodes: Episodes per probe and of the confirmation.
     """
 
     episodes: int = 100
@@ -68,12 +75,15 @@ class BenchmarkSettings:
     repeats: int = 5
     train_steps: int = 65_536
     seed: int = 0
+    solve_seeds: tuple[int, ...] = ()
+    solve_timesteps: int | None = None
+    solve_episodes: int = 100
 
 
 PRESETS = {
     "quick": BenchmarkSettings(episodes=10, nmpc_episodes={"goal": 2, "track": 1}, max_episode_steps=120,
                                env_steps=2_000, vector_steps=5, repeats=1, train_steps=16_384),
-    "full": BenchmarkSettings(),
+    "full": BenchmarkSettings(solve_seeds=(0, 1, 2, 3, 4)),
 }
 
 
@@ -150,7 +160,8 @@ def measure_training(steps: int, seed: int = 0) -> dict[str, Any]:
 
 def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BASELINE_NAMES,
                   policies: tuple[str, ...] = (), envs: tuple[str, ...] = tuple(ENVS), tasks: tuple[str, ...] = TASKS,
-                  throughput: bool = True, progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+                  throughput: bool = True, progress: Callable[[str], None] | None = None,
+                  solve_out: str | Path = "benchmark/time_to_solve", solve_jobs: int = 1) -> dict[str, Any]:
     """Run the benchmark and return a JSON-ready dict.
 
     Args:
@@ -161,9 +172,12 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
         tasks: Tasks to include.
         throughput: Measure env and training throughput.
         progress: Called with a short message before each cell.
+        solve_out: Folder of the time-to-solve training runs.
+        solve_jobs: Time-to-solve runs at once (each in its own process; the wall times compete for cores).
 
     Returns:
-        ``{"settings", "cells": [...], "env_throughput", "training_throughput", "errors", "environment"}``;
+        ``{"settings", "cells": [...], "env_throughput", "training_throughput", "time_to_solve", "errors",
+        "environment"}``;
         a cell holds ``controller, env, env_id, task, n_episodes, metrics`` (mean and CI per metric) and,
         for NMPC, ``solver`` (solve-time statistics).
 
@@ -231,9 +245,19 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
                 training = measure_training(settings.train_steps, settings.seed)
             except Exception as error:  # noqa: BLE001
                 errors["training_throughput"] = f"{type(error).__name__}: {error}"
+    solve = None
+    if settings.solve_seeds:
+        say(f"time to solve (PPO, full >= 0.95), seeds {list(settings.solve_seeds)}")
+        try:
+            from agents.solve_time import measure_time_to_solve
+
+            solve = measure_time_to_solve(list(settings.solve_seeds), solve_out, settings.solve_timesteps,
+                                          settings.solve_episodes, settings.solve_episodes, jobs=solve_jobs)
+        except Exception as error:  # noqa: BLE001
+            errors["time_to_solve"] = f"{type(error).__name__}: {error}"
     return {"settings": asdict(settings), "controllers": list(controllers) + list(loaded), "envs": list(envs),
-            "cells": cells,
-            "env_throughput": env_rates, "training_throughput": training, "errors": errors,
+            "cells": cells, "env_throughput": env_rates, "training_throughput": training, "time_to_solve": solve,
+            "errors": errors,
             "environment": {"python": platform.python_version(), "machine": platform.machine(),
                             "time": time.strftime("%Y-%m-%d %H:%M:%S")}}
 
@@ -257,6 +281,11 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--seed", type=int, help="override: episode k is reset with seed + k")
     parser.add_argument("--max-episode-steps", type=int, help="override: truncate episodes after this many steps")
     parser.add_argument("--no-throughput", action="store_true", help="skip env and training throughput")
+    parser.add_argument("--solve-seeds", type=int, nargs="*", metavar="SEED",
+                        help="override: training seeds of the time to solve (none: skip; --full: 0-4)")
+    parser.add_argument("--solve-timesteps", type=float, help="override: training budget per time-to-solve seed")
+    parser.add_argument("--solve-episodes", type=int, help="override: episodes per time-to-solve probe")
+    parser.add_argument("--solve-jobs", type=int, default=1, help="time-to-solve runs at once")
     parser.add_argument("--no-plots", action="store_true", help="skip benchmark.png")
     parser.add_argument("--out", default="benchmark", metavar="DIR", help="output folder")
     args = parser.parse_args(argv)
@@ -276,13 +305,24 @@ def main(argv: list[str] | None = None) -> int:
         settings = replace(settings, seed=args.seed)
     if args.max_episode_steps is not None:
         settings = replace(settings, max_episode_steps=args.max_episode_steps)
+    if args.solve_seeds is not None:
+        settings = replace(settings, solve_seeds=tuple(args.solve_seeds))
+    if args.solve_timesteps is not None:
+        settings = replace(settings, solve_timesteps=int(args.solve_timesteps))
+    if args.solve_episodes is not None:
+        settings = replace(settings, solve_episodes=args.solve_episodes)
     if settings.episodes < 1 or min(settings.nmpc_episodes.values()) < 0 or (settings.max_episode_steps or 1) < 1:
         print("error: --episodes and --max-episode-steps must be >= 1, --nmpc-episodes >= 0")
+        return 2
+    if settings.solve_episodes < 1 or args.solve_jobs < 1 or len(set(settings.solve_seeds)) != len(
+            settings.solve_seeds):
+        print("error: --solve-episodes and --solve-jobs must be >= 1, --solve-seeds distinct")
         return 2
     from tqdm.auto import tqdm
 
     n_cells = len(args.tasks) * len(args.envs) * (len(args.controllers) + len(args.policy))
-    bar = tqdm(total=n_cells + (0 if args.no_throughput else 2), desc=f"benchmark ({args.preset})")
+    n_items = n_cells + (0 if args.no_throughput else 2) + (1 if settings.solve_seeds else 0)
+    bar = tqdm(total=n_items, desc=f"benchmark ({args.preset})")
 
     calls = 0
 
@@ -295,7 +335,8 @@ def main(argv: list[str] | None = None) -> int:
 
     try:
         report = run_benchmark(settings, tuple(args.controllers), tuple(args.policy), tuple(args.envs),
-                               tuple(args.tasks), throughput=not args.no_throughput, progress=progress)
+                               tuple(args.tasks), throughput=not args.no_throughput, progress=progress,
+                               solve_out=Path(args.out) / "time_to_solve", solve_jobs=args.solve_jobs)
     except (ValueError, FileNotFoundError) as error:
         bar.close()
         print(f"error: {error}")

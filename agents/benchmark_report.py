@@ -71,9 +71,38 @@ def to_markdown(report: dict[str, Any]) -> str:
             lines.append(f"| SB3 PPO `learn()` on `{training['env_id']}` ({training['n_envs']} envs, "
                          f"{training['timesteps']} steps, 1 torch thread) | {_rate(training['steps_per_s'])} steps/s |")
         lines.append("")
+    lines += _solve_lines(report.get("time_to_solve"))
     if report.get("errors"):
         lines += ["## Errors", ""] + [f"- `{k}`: {v}" for k, v in report["errors"].items()] + [""]
     return "\n".join(lines)
+
+
+def _solve_lines(solve: dict[str, Any] | None) -> list[str]:
+    """The time-to-solve table (:func:`agents.solve_time.measure_time_to_solve`), or nothing."""
+    if not solve:
+        return []
+    s = solve["settings"]
+    runs = solve["runs"]
+    lines = ["## Time to solve", "",
+             f"PPO as in `pectoral-demo` (trained on the averaged model, budget {s['n_timesteps']} steps), probed "
+             f"on the full model after every {s['every']} periodic evaluation(s) (every {s['eval_freq']} steps) with "
+             f"{s['probe_episodes']} episodes (seeds {s['probe_seed']} + k); solved at the first probe with success "
+             f">= {s['threshold']}, then confirmed on {s['confirm_episodes']} other episodes (seeds "
+             f"{s['confirm_seed']} + k). Best-model selection uses neither. Time: training wall time (periodic "
+             f"evaluations included, probes left out), {s['jobs']} run(s) at once; it depends on the machine's "
+             "load.", "",
+             "| training seed | solved | time [s] | steps | probe success | confirmed success | best probe |",
+             "|---|---|---|---|---|---|---|"]
+    for r in runs:
+        def num(value: float | None, digits: int = 2) -> str:
+            return "-" if value is None else f"{value:.{digits}f}"
+
+        lines.append(f"| {r['seed']} | {'yes' if r['solved'] else 'no'} | {num(r['time_to_solve_s'], 0)} | "
+                     f"{r['steps_to_solve'] if r['steps_to_solve'] is not None else '-'} | {num(r['probe_success'])} | "
+                     f"{num(r['confirm_success'])} | {num(r['best_probe_success'])} |")
+    times = [r["time_to_solve_s"] for r in runs if r["solved"]]
+    median = f"; median time of the solved runs {float(np.median(times)):.0f} s" if times else ""
+    return lines + ["", f"Solved: {len(times)} of {len(runs)} seeds within the budget{median}.", ""]
 
 
 def _rate(value: float | None) -> str:

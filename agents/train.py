@@ -14,7 +14,7 @@ Each run writes ``runs/<env>/<algo>_<task>_seed<seed>_<stamp>/``: ``model.zip``
 (final), ``best_model.zip`` and ``vecnormalize.pkl`` (best on the periodic
 evaluation, its observation statistics), ``vecnormalize_final.pkl`` (statistics
 of ``model.zip``), ``config.yaml`` (resolved config), ``command.txt``,
-``training.json`` (time, steps/s, evaluations) and TensorBoard logs in ``tb/``.
+``training.json`` (time, steps/s, probe time, evaluations) and TensorBoard logs in ``tb/``.
 The same ``--seed`` on the same machine repeats a run.
 
 ``--quick`` is a smoke run in seconds (tests, CI, trying a command): it overrides the
@@ -60,7 +60,8 @@ def make_run_dir(config: dict[str, Any], log_dir: str | Path = "runs", name: str
 
 
 def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool,
-               on_evaluation: Callable[[dict[str, Any]], bool | None] | None = None):
+               on_evaluation: Callable[[dict[str, Any]], bool | None] | None = None,
+               probe: Callable[[Any, dict[str, Any]], dict[str, Any] | None] | None = None):
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm.auto import tqdm
 
@@ -78,6 +79,7 @@ def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool,
             self.evaluations: list[dict[str, Any]] = []
             self.start = time.perf_counter()
             self.stop_requested = False
+            self.probe_time = 0.0  # wall time spent in ``probe``, kept out of ``elapsed_s``
 
         def _on_training_start(self) -> None:
             self.start = time.perf_counter()
@@ -111,7 +113,8 @@ def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool,
                 self.logger.record("eval/tracking_error", result.metrics["tracking_error"].mean)
             score = (success, mean_return)
             improved = self.best is None or score > self.best
-            record = {"timesteps": int(self.num_timesteps), "elapsed_s": time.perf_counter() - self.start,
+            record = {"timesteps": int(self.num_timesteps),
+                      "elapsed_s": time.perf_counter() - self.start - self.probe_time,
                       "success": success, "mean_return": mean_return, "best": improved}
             if "tracking_error" in result.metrics:
                 record["tracking_error"] = result.metrics["tracking_error"].mean
@@ -123,6 +126,12 @@ def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool,
                 if hasattr(venv, "obs_rms"):
                     venv.save(str(run_dir / "vecnormalize.pkl"))
             self.bar.set_postfix(eval_success=f"{success:.2f}", eval_return=f"{mean_return:.1f}")
+            if probe is not None:
+                probe_start = time.perf_counter()
+                extra = probe(self.controller(), dict(record))
+                self.probe_time += time.perf_counter() - probe_start
+                if extra:
+                    record["probe"] = dict(extra)
             if on_evaluation is not None and on_evaluation(dict(record)) is False:
                 self.stop_requested = True  # the caller (e.g. a Tune scheduler) prunes this run
 
@@ -134,7 +143,8 @@ def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool,
 
 def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, verbose: int = 0,
           torch_threads: int = 1, device: str = "cpu", command: str | None = None,
-          on_evaluation: Callable[[dict[str, Any]], bool | None] | None = None) -> Path:
+          on_evaluation: Callable[[dict[str, Any]], bool | None] | None = None,
+          probe: Callable[[Any, dict[str, Any]], dict[str, Any] | None] | None = None) -> Path:
     """Train with a resolved config (:func:`agents.config.resolve_config`) and fill ``run_dir``.
 
     Args:
@@ -149,6 +159,11 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
             ``elapsed_s`` since training started, ``success``, ``mean_return``, ``best`` and, on
             ``track``, ``tracking_error``); returning ``False`` stops training there (the final
             model is still saved). Ray Tune's ``tune.report`` and the benchmark's time to solve use it.
+        probe: Called after every periodic evaluation (before ``on_evaluation``) with the current
+            policy as a deterministic controller (:class:`agents.policy.SB3Controller`, its observation
+            statistics copied) and the record; a dict it returns is stored in the record as ``probe``
+            (JSON values). Its wall time is left out of ``elapsed_s``, and it plays no part in the
+            best-model selection. :class:`agents.solve_time.SolveProbe` evaluates on the full model.
 
     Returns:
         The run folder.
@@ -175,7 +190,7 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
     cls = algo_class(config["algo"])
     model = cls(config["policy"], venv, seed=seed, device=device, verbose=verbose,
                 tensorboard_log=str(run_dir / "tb"), **algo_kwargs(config))
-    callback = _callbacks(config, run_dir, progress, on_evaluation)
+    callback = _callbacks(config, run_dir, progress, on_evaluation, probe)
     start = time.perf_counter()
     model.learn(total_timesteps=config["n_timesteps"], callback=callback, tb_log_name=config["algo"])
     train_time = time.perf_counter() - start
@@ -190,7 +205,7 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
             venv.save(str(run_dir / "vecnormalize.pkl"))
     stats = {"timesteps": int(model.num_timesteps), "train_time_s": train_time,
              "steps_per_s": model.num_timesteps / train_time if train_time > 0 else float("nan"),
-             "evaluations": callback.evaluations}
+             "probe_time_s": callback.probe_time, "evaluations": callback.evaluations}
     (run_dir / "training.json").write_text(json.dumps(stats, indent=2) + "\n")
     venv.close()
     return run_dir
