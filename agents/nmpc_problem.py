@@ -328,7 +328,7 @@ class NMPCProblem:
         from_l = ca.vertcat(v.bias_left, ca.sqrt(v.amplitude_left), period, zeta)
         impulse = (expected_transition_impulse_sx(from_r, beat_r, 1.0, params)
                    + expected_transition_impulse_sx(from_l, beat_l, -1.0, params))
-        if not (s.transitions and config.transitions):
+        if not s.transitions:
             impulse = ca.DM.zeros(3)
         transition = ca.Function("transition", [u_from, u_sym], [ca.vertcat(impulse, 0.0)])
         x = ca.SX.sym("x", STATE_SIZE)

@@ -24,7 +24,8 @@ def reference_model(config: EnvConfig, core: EnvCore):
     if config.model == "full":
         model = FullModel(1, core.params[0])
     else:
-        model = AveragedModel(1, core.params[0], scaling=config.scaling_functions() or "none")
+        model = AveragedModel(1, core.params[0], scaling=config.scaling_functions() or "none",
+                              transitions=config.transitions)
     model.reset(core.fish_state(0), right=REST, left=REST)
     return model
 
@@ -61,9 +62,11 @@ def expected_step(config, ref, action, target, d_prev, length, span, k_drag):
 RANDOMIZE = {"fin_span": 0.2, "body_length": 0.2, "drag_coef": 0.2}
 
 
-@pytest.mark.parametrize(("model", "randomize"), [("averaged", None), ("full", None), ("averaged", RANDOMIZE)])
-def test_core_step_is_model_advance_plus_the_reward_formula(model, randomize):
-    config = EnvConfig(model=model, task="goal", randomize=randomize)
+@pytest.mark.parametrize(("model", "randomize", "transitions"),
+                         [("averaged", None, False), ("full", None, False), ("averaged", RANDOMIZE, False),
+                          ("averaged", None, True)])
+def test_core_step_is_model_advance_plus_the_reward_formula(model, randomize, transitions):
+    config = EnvConfig(model=model, task="goal", randomize=randomize, transitions=transitions)
     core = EnvCore(1, config)
     core.step(np.zeros((1, 8)))  # binds the arrays; the reset below must not replace them
     core.reset(np.array([0]), (np.random.default_rng(4),))

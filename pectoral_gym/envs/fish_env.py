@@ -145,7 +145,7 @@ class PectoralFishEnv(gym.Env):
     | ``randomize``     | ``None``         |      | ``{field: w}``: each reset scales the field by ``U(1-w, 1+w)`` |
     | ``scaling``       | ``"identified"`` |      | averaged only: ``"identified"``, ``"none"`` (K = 1), or a K file |
     | ``check_scaling_params`` | ``True`` |   | averaged only: raise if the K file is for other ``params`` |
-    | ``transitions``   | ``True``         |      | averaged only: transitional-stroke forcing (docs/model.md 3.7) |
+    | ``transitions``   | ``False``        |      | averaged only: transitional-stroke forcing (docs/model.md 3.7) |
     | ``progress_weight`` | 10.0           | 1/m  | goal: reward per metre of approach |
     | ``goal_bonus``    | 10.0             |      | goal: reward on reaching the goal |
     | ``wall_penalty``  | 10.0             |      | penalty for hitting a wall |
