@@ -36,7 +36,7 @@ from pectoral_gym.averaging import half_stroke_mean_force, power_stroke_excess
 from pectoral_gym.dynamics import Forcing, RateConstants, body_accel, rate_bound, rate_constants
 from pectoral_gym.ktables import KTables, as_tables
 from pectoral_gym.params import BodyCoefficients, Coef
-from pectoral_gym.strokes import AMPLITUDE, BIAS, DURATION, ELAPSED, PERIOD, RATIO, fin_forcing, idle, latch
+from pectoral_gym.strokes import AMPLITUDE, BIAS, DURATION, ELAPSED, PERIOD, RATIO, idle, latch
 
 __all__ = ["ACCURATE_STEP", "STATE_NAMES", "State", "advance"]
 
@@ -232,10 +232,15 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
                 h_max = min(h_max, fins[i, 1, DURATION] / min_substeps)
             n_sub = max(1, int(math.ceil(seg / h_max - 1e-9)))
             h = seg / n_sub
-            f0 = Forcing(*fin_forcing(fins, i, 0.0, drag_constant, inertia_constant, fin_offset))
-            for k in range(n_sub):
-                fm = Forcing(*fin_forcing(fins, i, (k + 0.5) * h, drag_constant, inertia_constant, fin_offset))
-                f1 = Forcing(*fin_forcing(fins, i, (k + 1.0) * h, drag_constant, inertia_constant, fin_offset))
+            # the forces at t, t + h/2, t + h of every substep: each fin's phase rotated by h/2 each time
+            p0 = st.stroke_phase(fins, i, 0, 0.5 * h)
+            p1 = st.stroke_phase(fins, i, 1, 0.5 * h)
+            f0 = Forcing(*st.phase_forcing(p0, p1, drag_constant, inertia_constant, fin_offset))
+            for _ in range(n_sub):
+                p0, p1 = st.advance_phase(p0), st.advance_phase(p1)
+                fm = Forcing(*st.phase_forcing(p0, p1, drag_constant, inertia_constant, fin_offset))
+                p0, p1 = st.advance_phase(p0), st.advance_phase(p1)
+                f1 = Forcing(*st.phase_forcing(p0, p1, drag_constant, inertia_constant, fin_offset))
                 _rk4(state, integral, i, h, f0, fm, f1, body, 0.0)
                 f0 = f1
         if rem0 - seg <= _EPS:
