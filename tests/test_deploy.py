@@ -61,20 +61,35 @@ class _Forward:
         return np.array([0.5, 0.5, 0.0, 0.5] * 2, dtype=np.float32)
 
 
+def _one_step_on_a_throwaway_rig(tmp_path):
+    """Compile the pipeline's numba kernels first: on a cold cache (a fresh clone) compiling inside the timed
+    episode stalls the control loop, and the safety supervisor stops the fish (seen: 2 of 6 steps)."""
+    robot = EmulatedRobot(speed=2.0, seed=1).start()
+    env = HardwareFishEnv(robot.url, robot.camera(seed=1), speed=2.0, max_episode_steps=1)
+    try:
+        run_episodes(env, _Forward(), 1, tmp_path / "warmup.jsonl", seed=1, robot=robot, progress=False)
+    finally:
+        env.close()
+        robot.stop()
+
+
 def test_run_episodes_and_plot_on_the_emulator_fast(tmp_path):
+    _one_step_on_a_throwaway_rig(tmp_path)
     robot = EmulatedRobot(speed=2.0, seed=0, start_pose=(1.0, 0.575, 0.0)).start()
     # 3 s without a sighting before tracking_lost: a slow camera on a loaded machine must not stop the
     # fish before it rows (a loaded run once ended with the fish where it started).
-    env = HardwareFishEnv(robot.url, robot.camera(seed=0), speed=2.0, max_episode_steps=3,
+    # 6 steps (3 s of emulated time): a fresh clone's first steps compile numba kernels, and with 3 steps a
+    # CI run once ended before the fins had rowed (x 1.0 - 4e-7).
+    env = HardwareFishEnv(robot.url, robot.camera(seed=0), speed=2.0, max_episode_steps=6,
                           safety=SafetyConfig(tracking_timeout=3.0))
     try:
         summaries = run_episodes(env, _Forward(), 1, tmp_path / "steps.jsonl", seed=0, robot=robot, progress=False)
     finally:
         env.close()
         robot.stop()
-    assert summaries[0]["steps"] == 3 and summaries[0]["truncated"]
+    assert summaries[0]["steps"] == 6 and summaries[0]["truncated"]
     lines = [json.loads(line) for line in (tmp_path / "steps.jsonl").read_text().splitlines()]
-    assert len(lines) == 4 and lines[-1]["true_pose"][0] > 1.0  # rowed forward along +X
+    assert len(lines) == 7 and lines[-1]["true_pose"][0] > 1.0  # rowed forward along +X
     plot_trajectories(tmp_path / "steps.jsonl", tmp_path / "trajectory.png")
     assert (tmp_path / "trajectory.png").stat().st_size > 10_000
 
