@@ -99,22 +99,14 @@ def idle(fins, pending, i, f):
 
 @nb.njit(**JIT)
 def fin_forcing(fins, i, offset, drag_constant, inertia_constant, fin_offset):
-    """Total blade-element force [N] and moment [N m] of both fins, ``offset`` s into the segment (eqs. 9-18)."""
-    fx_total = 0.0
-    fy_total = 0.0
-    tau_total = 0.0
-    for f in range(2):
-        if fins[i, f, ANGLE_FROM] == fins[i, f, ANGLE_TO]:
-            continue  # a still fin exerts no force (g' = g'' = 0)
-        g, gd, gdd = stroke_kinematics(
-            fins[i, f, ELAPSED] + offset, fins[i, f, DURATION], fins[i, f, ANGLE_FROM], fins[i, f, ANGLE_TO]
-        )
-        fx, fy = fin_force_right(g, gd, gdd, drag_constant, inertia_constant)
-        side = SIDE[f]
-        fx_total += fx
-        fy_total += side * fy  # left fin mirrors y
-        tau_total += side * fin_offset * fx  # eq. (18): tau_R = +C_p f_hx, tau_L = -C_p f_hx
-    return fx_total, fy_total, tau_total
+    """Total blade-element force [N] and moment [N m] of both fins, ``offset`` s into the segment (eqs. 9-18).
+
+    Direct evaluation at one instant; the full model's integrator rotates the phases instead
+    (:class:`StrokePhase`).
+    """
+    right = stroke_phase(fins, i, 0, 0.0, offset)
+    left = stroke_phase(fins, i, 1, 0.0, offset)
+    return phase_forcing(right, left, drag_constant, inertia_constant, fin_offset)
 
 
 class StrokePhase(NamedTuple):
@@ -137,13 +129,13 @@ class StrokePhase(NamedTuple):
 
 
 @nb.njit(inline="always", **JIT)
-def stroke_phase(fins, i, f, step):
-    """Fin ``f`` of fish ``i`` at its elapsed time, rotating by ``step`` seconds per :func:`advance_phase`."""
+def stroke_phase(fins, i, f, step, offset=0.0):
+    """Fin ``f`` of fish ``i`` ``offset`` s after its elapsed time, rotating by ``step`` s per :func:`advance_phase`."""
     angle_from, angle_to = fins[i, f, ANGLE_FROM], fins[i, f, ANGLE_TO]
     if angle_from == angle_to:
         return StrokePhase(1.0, 0.0, 1.0, 0.0, angle_from, 0.0, 0.0, False)
     rate = math.pi / fins[i, f, DURATION]
-    phase = rate * fins[i, f, ELAPSED]
+    phase = rate * (fins[i, f, ELAPSED] + offset)
     return StrokePhase(math.cos(phase), math.sin(phase), math.cos(rate * step), math.sin(rate * step),
                        0.5 * (angle_from + angle_to), 0.5 * (angle_to - angle_from), rate, True)
 
@@ -171,8 +163,8 @@ def phase_forcing(right: StrokePhase, left: StrokePhase, drag_constant, inertia_
         fx, fy = fin_force_right(g, gd, gdd, drag_constant, inertia_constant)
         side = SIDE[f]
         fx_total += fx
-        fy_total += side * fy
-        tau_total += side * fin_offset * fx
+        fy_total += side * fy  # left fin mirrors y
+        tau_total += side * fin_offset * fx  # eq. (18): tau_R = +C_p f_hx, tau_L = -C_p f_hx
     return fx_total, fy_total, tau_total
 
 

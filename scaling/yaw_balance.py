@@ -160,9 +160,7 @@ def main(args: argparse.Namespace) -> int:
         return 2
     if args.single:
         alone = beats.copy()
-        alone[:, 1] = beats[:, 1]
-        alone[:, 1, 1] = 0.0  # left fin at rest
-        alone[:, 1, 0] = math.pi / 2
+        alone[:, 1] = [math.pi / 2, 0.0, 1.0, 1.0]  # left fin at rest
         beats = np.concatenate([beats, alone])
         labels = labels + [label.split(" L(")[0] + " alone" for label in labels]
     res = yaw_balance(beats, scaling, settle=args.settle, window=args.window)

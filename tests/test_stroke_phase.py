@@ -26,7 +26,7 @@ def test_rotated_phase_forces_match_direct_evaluation_over_a_long_segment():
     worst = 0.0
     for j in range(200):  # far more rotations than one segment's 2 per substep
         got = np.array(st.phase_forcing(p0, p1, k, c, off))
-        want = np.array(st.fin_forcing(fins, 0, j * step, k, c, off))  # direct trig (dynamics.stroke_kinematics)
+        want = np.array(st.fin_forcing(fins, 0, j * step, k, c, off))  # direct trig at each instant
         worst = max(worst, float(np.max(np.abs(got - want)) / np.max(np.abs(want))))
         p0, p1 = st.advance_phase(p0), st.advance_phase(p1)
     assert worst < 1e-12
