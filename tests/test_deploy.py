@@ -13,6 +13,8 @@ from hardware.env import HardwareFishEnv
 from hardware.safety import SafetyConfig
 from pectoral_gym.envs.core import EnvConfig
 
+pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
+
 
 @pytest.fixture(scope="module")
 def policy_zip(tmp_path_factory):
@@ -61,20 +63,7 @@ class _Forward:
         return np.array([0.5, 0.5, 0.0, 0.5] * 2, dtype=np.float32)
 
 
-def _one_step_on_a_throwaway_rig(tmp_path):
-    """Compile the pipeline's numba kernels first: on a cold cache (a fresh clone) compiling inside the timed
-    episode stalls the control loop, and the safety supervisor stops the fish (seen: 2 of 6 steps)."""
-    robot = EmulatedRobot(speed=2.0, seed=1).start()
-    env = HardwareFishEnv(robot.url, robot.camera(seed=1), speed=2.0, max_episode_steps=1)
-    try:
-        run_episodes(env, _Forward(), 1, tmp_path / "warmup.jsonl", seed=1, robot=robot, progress=False)
-    finally:
-        env.close()
-        robot.stop()
-
-
 def test_run_episodes_and_plot_on_the_emulator_fast(tmp_path):
-    _one_step_on_a_throwaway_rig(tmp_path)
     robot = EmulatedRobot(speed=2.0, seed=0, start_pose=(1.0, 0.575, 0.0)).start()
     # 3 s without a sighting before tracking_lost: a slow camera on a loaded machine must not stop the
     # fish before it rows (a loaded run once ended with the fish where it started).

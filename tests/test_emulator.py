@@ -12,6 +12,8 @@ from hardware.emulator import ROBOT_ADDRESS, EmulatedRobot, main
 from hardware.firmware import Firmware, FirmwareConfig, ServoLimits, clip_beats
 from hardware.link import RadioLink
 
+pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
+
 BEATS = np.array([[math.pi / 2, math.radians(20), 1.0, 3.0]] * 2)
 
 

@@ -17,6 +17,8 @@ from hardware.scene import SceneConditions
 from pectoral_gym.models import FullModel
 from pectoral_gym.params import FishParams, body_coefficients
 
+pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
+
 SPEED = 2.0  # accelerated clock: a 0.5 s control period takes 0.25 s of wall time
 
 

@@ -9,6 +9,8 @@ from hardware.emulator import EmulatedRobot
 from hardware.env import HardwareFishEnv
 from hardware.safety import SafetyConfig
 
+pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
+
 SPEED = 2.0
 
 

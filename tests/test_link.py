@@ -11,6 +11,8 @@ from hardware import protocol as pr
 from hardware.emulator import EmulatedRobot
 from hardware.link import RadioLink
 
+pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
+
 BEATS = np.array([[math.pi / 2, math.radians(20), 1.0, 3.0]] * 2)
 
 

@@ -32,6 +32,8 @@ from hardware.safety import CommandFilter, SafetyConfig, check_action
 from pectoral_gym.dynamics import stroke_kinematics
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FishParams
 
+pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
+
 BEATS = np.array([[math.pi / 2, math.radians(20), 1.0, 3.0]] * 2)
 FULL = np.array([0.0, 1.0, -1.0, 1.0] * 2, dtype=np.float32)  # bias 90 deg, largest amplitude, fastest beat
 P = FishParams()

@@ -34,6 +34,8 @@ from pectoral_gym.envs.layout import (
 from pectoral_gym.envs.task_core import TASK_TABLE, TaskState, observe_fish, register_task, unregister_task
 from pectoral_gym.envs.vector import PectoralFishVectorEnv
 
+pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
+
 SPEED = 2.0  # emulated clock: a 0.5 s control period takes 0.25 s of wall time
 
 
