@@ -40,11 +40,12 @@ from __future__ import annotations
 import math
 
 import numba as nb
+import numpy as np
 
 from pectoral_gym._jit import JIT
-from pectoral_gym.dynamics import body_accel, oscillating_square_mean
+from pectoral_gym.dynamics import body_accel, body_accel_waveform, oscillating_square_mean
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.ktables import KTables, scaling_values, yaw_oscillation_phasor
+from pectoral_gym.ktables import QUADRATURE, KTables, scaling_values, yaw_oscillation_phasor
 from pectoral_gym.params import Coef, FinBeat, FishParams, coefficient_vector
 
 __all__ = [
@@ -53,6 +54,8 @@ __all__ = [
     "bessel_j1",
     "averaged_fin_forcing",
     "averaged_body_accel",
+    "waveform_samples",
+    "equivalent_amplitude",
     "mean_fin_power",
     "oscillating_square_mean",
     "yaw_oscillation_phasor",
@@ -65,8 +68,41 @@ __all__ = [
 EXACT = 0
 TAYLOR = 1
 
-# Kept here for their callers: the homes are pectoral_gym.dynamics and pectoral_gym.ktables.
-averaged_body_accel = body_accel  # eqs. (19)-(20) with the oscillation-averaged yaw damping
+
+def averaged_body_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, oscillation=0.0):
+    """Eqs. (19)-(20) with the averaged model's yaw damping (``docs/model.md`` 3.6), for Python callers.
+
+    ``oscillation``: a float, the sinusoid amplitude [rad/s] (0: eq. 20,
+    :func:`pectoral_gym.dynamics.body_accel`), or a 1-D array of yaw-waveform samples
+    (:func:`waveform_samples`; :func:`pectoral_gym.dynamics.body_accel_waveform`).
+    """
+    if np.ndim(oscillation) == 1:
+        samples = np.ascontiguousarray(oscillation, dtype=np.float64)
+        return body_accel_waveform(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, samples)
+    return body_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, float(oscillation))
+
+
+def waveform_samples(harmonics: np.ndarray, phase: float = 0.0) -> np.ndarray:
+    """Yaw-rate oscillation ``Re sum_k c_k exp(i k (phase + 2 pi j / QUADRATURE))`` at the quadrature's phases.
+
+    Args:
+        harmonics: ``(..., H)`` complex ``c_k`` [rad/s], ``k = 1..H``
+            (:meth:`pectoral_gym.kfunctions.ScalingFunctions.yaw_waveform`).
+        phase: Beat phase [rad] of the first sample.
+
+    Returns:
+        ``(..., QUADRATURE)`` samples [rad/s], the ones the compiled model uses for a fin at that phase.
+    """
+    harmonics = np.asarray(harmonics, dtype=np.complex128)
+    k = np.arange(1, harmonics.shape[-1] + 1)
+    theta = phase + 2.0 * np.pi * np.arange(QUADRATURE) / QUADRATURE
+    return np.real(harmonics @ np.exp(1j * np.outer(k, theta)))
+
+
+def equivalent_amplitude(samples: np.ndarray) -> np.ndarray:
+    """``(pi / 2) mean|samples|`` over the last axis: the sinusoid amplitude with the same mean absolute value."""
+    return 0.5 * np.pi * np.mean(np.abs(np.asarray(samples, dtype=np.float64)), axis=-1)
+
 
 
 @nb.njit(**JIT)

@@ -24,6 +24,8 @@ field              index  unit    meaning
 ``PREV_AMPLITUDE`` 11     rad     ``docs/model.md`` section 3.7): bias, amplitude, period, ratio;
 ``PREV_PERIOD``    12     s       zero after :func:`clear`
 ``PREV_RATIO``     13     -
+``WAVE``           14-29  rad/s   ``Re, Im`` of the yaw-waveform harmonics ``c_1 .. c_8`` (``docs/model.md``
+                                  3.6), signed by side; zero beyond the file's harmonics
 =================  =====  ======  ==================================================================
 
 The row depends on the fish's coefficients too: :func:`invalidate` after
@@ -40,14 +42,14 @@ import numpy as np
 
 from pectoral_gym._jit import JIT
 from pectoral_gym.averaging import averaged_fin_forcing
-from pectoral_gym.ktables import yaw_oscillation_phasor
+from pectoral_gym.ktables import MAX_HARMONICS, QUADRATURE, waveform_harmonics_into, yaw_oscillation_phasor
 from pectoral_gym.strokes import ANGLE_FROM, ANGLE_TO, ELAPSED, PERIOD, POWER, RATIO, SIDE
 
 __all__ = [
     "CACHE_FIELDS", "KEY_BIAS", "KEY_AMPLITUDE", "KEY_PERIOD", "KEY_RATIO",
     "AVG_FX", "AVG_FY", "AVG_TAU", "OSC_COS", "OSC_SIN", "CACHED",
-    "PREV_BIAS", "PREV_AMPLITUDE", "PREV_PERIOD", "PREV_RATIO",
-    "clear", "invalidate", "refresh", "yaw_oscillation",
+    "PREV_BIAS", "PREV_AMPLITUDE", "PREV_PERIOD", "PREV_RATIO", "WAVE", "QUADRATURE", "WORKSPACE",
+    "clear", "invalidate", "refresh", "waveform_samples", "yaw_oscillation", "yaw_waveform",
 ]
 
 KEY_BIAS, KEY_AMPLITUDE, KEY_PERIOD, KEY_RATIO = 0, 1, 2, 3
@@ -55,7 +57,14 @@ AVG_FX, AVG_FY, AVG_TAU = 4, 5, 6
 OSC_COS, OSC_SIN = 7, 8
 CACHED = 9
 PREV_BIAS, PREV_AMPLITUDE, PREV_PERIOD, PREV_RATIO = 10, 11, 12, 13
-CACHE_FIELDS = 14
+WAVE = 14
+CACHE_FIELDS = WAVE + 2 * MAX_HARMONICS
+
+WORKSPACE = QUADRATURE + 2 * MAX_HARMONICS  # samples, then the combined harmonics (yaw_waveform)
+_K = np.arange(1, MAX_HARMONICS + 1)
+_PHASES = 2.0 * np.pi * np.outer(_K, np.arange(QUADRATURE)) / QUADRATURE
+_COS = np.ascontiguousarray(np.cos(_PHASES))  # (MAX_HARMONICS, QUADRATURE): cos(2 pi k j / N)
+_SIN = np.ascontiguousarray(np.sin(_PHASES))
 
 
 def invalidate(cache: np.ndarray, index: np.ndarray | slice | None = None) -> None:
@@ -88,6 +97,7 @@ def refresh(cache, i, f, bias, amplitude, period, ratio, coef, mode, tables):
     pc, ps = yaw_oscillation_phasor(bias, amplitude, period, ratio, tables)
     cache[i, f, OSC_COS] = SIDE[f] * pc  # the left fin's yaw oscillation is the mirror image
     cache[i, f, OSC_SIN] = SIDE[f] * ps
+    waveform_harmonics_into(bias, amplitude, period, ratio, tables, SIDE[f], cache[i, f], WAVE)
     cache[i, f, CACHED] = 1.0
 
 
@@ -109,12 +119,64 @@ def yaw_oscillation(fins, cache, i, offset, idle0, idle1):
             continue
         if cache[i, f, OSC_COS] == 0.0 and cache[i, f, OSC_SIN] == 0.0:
             continue  # no yaw-oscillation data (or no stroke): skip the trigonometry
-        period = fins[i, f, PERIOD]
-        t = fins[i, f, ELAPSED] + offset
-        if fins[i, f, POWER] < 0.5:
-            t += period / (fins[i, f, RATIO] + 1.0)  # recovery follows the power stroke
-        theta = 2.0 * math.pi * t / period
+        theta = _beat_phase(fins, i, f, offset)
         c, s = math.cos(theta), math.sin(theta)
         re += cache[i, f, OSC_COS] * c - cache[i, f, OSC_SIN] * s
         im += cache[i, f, OSC_COS] * s + cache[i, f, OSC_SIN] * c
     return math.sqrt(re * re + im * im)
+
+
+@nb.njit(inline="always", **JIT)
+def _beat_phase(fins, i, f, offset):
+    """Beat phase ``2 pi t / T_p`` of fin ``f``, ``t`` from the start of its power stroke, ``offset`` s ahead."""
+    period = fins[i, f, PERIOD]
+    t = fins[i, f, ELAPSED] + offset
+    if fins[i, f, POWER] < 0.5:
+        t += period / (fins[i, f, RATIO] + 1.0)  # recovery follows the power stroke
+    return 2.0 * math.pi * t / period
+
+
+@nb.njit(**JIT)
+def waveform_samples(work, harmonics):
+    """``work[j] = Re sum_k C_k exp(2 pi i (k + 1) j / QUADRATURE)``, ``j < QUADRATURE``; returns ``(pi/2) mean|.|``.
+
+    ``work`` (``WORKSPACE``,): the samples first, then ``Re C_k`` and ``Im C_k`` in
+    ``work[QUADRATURE + 2 k]``, ``work[QUADRATURE + 2 k + 1]``, ``k < harmonics``.
+
+    The returned amplitude is that of the sinusoid with the same mean absolute value, the
+    stiffness measure of the step rule (:func:`pectoral_gym.dynamics.linearised_rate`).
+    """
+    total = 0.0
+    for j in range(QUADRATURE):
+        x = 0.0
+        for k in range(harmonics):
+            x += work[QUADRATURE + 2 * k] * _COS[k, j] - work[QUADRATURE + 2 * k + 1] * _SIN[k, j]
+        work[j] = x
+        total += abs(x)
+    return 0.5 * math.pi * total / QUADRATURE
+
+
+@nb.njit(**JIT)
+def yaw_waveform(fins, cache, i, offset, idle0, idle1, harmonics, work):
+    """Both fins' yaw-rate oscillation at the ``QUADRATURE`` phases of one beat, ``offset`` s into the segment.
+
+    Each fin's waveform ``Re sum_k c_k e^{i k theta}`` (``WAVE`` fields) is taken at its own
+    beat phase ``theta_f`` plus ``2 pi j / QUADRATURE``: the relative phase of the two fins is
+    held at its present value over the quadrature (``docs/model.md`` 3.6), so each fin's own
+    waveform is covered exactly once. Writes the samples into ``work[:QUADRATURE]`` (a
+    ``WORKSPACE`` array, :func:`waveform_samples`) and returns their equivalent amplitude.
+    """
+    for c in range(QUADRATURE, WORKSPACE):
+        work[c] = 0.0
+    for f in range(2):
+        if (idle0 if f == 0 else idle1) or fins[i, f, ANGLE_FROM] == fins[i, f, ANGLE_TO]:
+            continue
+        theta = _beat_phase(fins, i, f, offset)
+        c1, s1 = math.cos(theta), math.sin(theta)
+        c, s = c1, s1
+        for k in range(harmonics):  # e^{i k theta} by rotation
+            a, b = cache[i, f, WAVE + 2 * k], cache[i, f, WAVE + 2 * k + 1]
+            work[QUADRATURE + 2 * k] += a * c - b * s
+            work[QUADRATURE + 2 * k + 1] += a * s + b * c
+            c, s = c * c1 - s * s1, s * c1 + c * s1
+    return waveform_samples(work, harmonics)

@@ -20,8 +20,13 @@ import numpy as np
 
 from pectoral_gym._jit import JIT
 
-__all__ = ["KTables", "as_tables", "bspline_basis", "oscillation_phasor", "scaling_values", "spline_values",
-           "yaw_oscillation_phasor"]
+__all__ = ["MAX_HARMONICS", "QUADRATURE", "KTables", "as_tables", "bspline_basis", "oscillation_phasor",
+           "scaling_values", "spline_values", "waveform_harmonics_into", "yaw_oscillation_phasor"]
+
+MAX_HARMONICS = 8  # most yaw-waveform harmonics a coefficients file may hold (forcing_cache has room for them)
+#: Beat phases of the waveform damping's quadrature (docs/model.md 3.6): the mean of ``x|x|`` over
+#: ``QUADRATURE`` equally spaced phases of the beat.
+QUADRATURE = 32
 
 
 class KTables(NamedTuple):
@@ -39,6 +44,9 @@ class KTables(NamedTuple):
     ``base_sway``  bool                 True: ``K_fy`` multiplies ``base``; False: ``f_hy_avg`` (paper)
     ``osc_knots``  ``(3, longest)``     knots of the yaw-oscillation splines (same axes)
     ``osc_table``  ``(2, nb, na, nr)``  phasor ``A T_p (cos phi, sin phi)`` [rad]; ``(2, 0, 0, 0)``: none
+    ``wave_knots`` ``(3, longest)``     knots of the yaw-waveform splines (same axes)
+    ``wave_table`` ``(2H, nb, na, nr)`` harmonics ``T_p c_k`` [rad] of the yaw-rate waveform, ``k = 1..H``,
+                                        channels ``Re c_1, Im c_1, Re c_2, ...``; ``(2, 0, 0, 0)``: none
     =============  ===================  ===================================================================
 
     ``nb, na, nr``: spline coefficients along bias, amplitude and 1/ratio.
@@ -51,7 +59,8 @@ class KTables(NamedTuple):
     base_sway: bool
     osc_knots: np.ndarray
     osc_table: np.ndarray
-
+    wave_knots: np.ndarray
+    wave_table: np.ndarray
 
 
 @nb.njit(inline="always", **JIT)
@@ -62,7 +71,7 @@ def as_tables(packed) -> KTables:
     more than a plain tuple), so the per-step entry points take
     ``tuple(tables)`` and name the fields again here.
     """
-    return KTables(packed[0], packed[1], packed[2], packed[3], packed[4], packed[5], packed[6])
+    return KTables(packed[0], packed[1], packed[2], packed[3], packed[4], packed[5], packed[6], packed[7], packed[8])
 
 
 @nb.njit(**JIT)
@@ -148,6 +157,42 @@ def oscillation_phasor(bias: float, amplitude: float, inv_ratio: float, knots, t
         pc *= amplitude / lowest
         ps *= amplitude / lowest
     return pc, ps
+
+
+@nb.njit(**JIT)
+def waveform_harmonics_into(bias: float, amplitude: float, period: float, ratio: float, tables: KTables, scale: float,
+                            out, offset: int) -> int:
+    """Write the right fin's yaw-waveform harmonics ``scale * c_k`` [rad/s] into ``out[offset:]``; return ``H``.
+
+    ``out[offset + 2 (k - 1)]``, ``out[offset + 2 (k - 1) + 1]`` get ``Re, Im`` of harmonic
+    ``k = 1..H`` (``H`` = the file's harmonics, 0 without a ``yaw_waveform`` section), the
+    rest up to :data:`MAX_HARMONICS` zero. ``c_k`` is the file's ``T_p c_k`` spline (over
+    bias, amplitude, 1/ratio, clamped) divided by the period; below the lowest amplitude node
+    it shrinks linearly to zero, as :func:`oscillation_phasor`. No allocation.
+    """
+    table, knots = tables.wave_table, tables.wave_knots
+    channels = table.shape[0] if table.shape[1] > 0 else 0
+    for c in range(2 * MAX_HARMONICS):
+        out[offset + c] = 0.0
+    if channels == 0 or amplitude <= 0.0:
+        return channels // 2
+    lowest = knots[1, 3]
+    if amplitude < lowest and lowest > 0.0:
+        scale *= amplitude / lowest
+    scale /= period
+    s0, a0, a1, a2, a3 = bspline_basis(knots[0], table.shape[1], bias)
+    s1, c0, c1, c2, c3 = bspline_basis(knots[1], table.shape[2], amplitude)
+    s2, d0, d1, d2, d3 = bspline_basis(knots[2], table.shape[3], 1.0 / ratio)
+    b0, b1, b2 = (a0, a1, a2, a3), (c0, c1, c2, c3), (d0, d1, d2, d3)
+    for a in range(4):
+        for b in range(4):
+            w = b0[a] * b1[b] * scale
+            for c in range(4):
+                wc = w * b2[c]
+                i, j, k = s0 - 3 + a, s1 - 3 + b, s2 - 3 + c
+                for ch in range(channels):
+                    out[offset + ch] += wc * table[ch, i, j, k]
+    return channels // 2
 
 
 @nb.njit(**JIT)
