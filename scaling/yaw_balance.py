@@ -11,8 +11,9 @@ term [rad/s^2]   full model (mean over the window)              averaged model (
 ``moment``       ``mean(tau) / J3`` (exact: K = 1 averages)     ``(K_m(R) taubar_R + K_m(L) taubar_L) / J3``
 ``munk``         ``(m1 - m2) / J3 mean(vx vy)``                 ``(m1 - m2) / J3 mean(vx) mean(vy)``
 ``damping``      ``c4 mean(omega |omega|)``                     ``c4 q(mean omega, A)``, ``A`` from the
-                                                                phasors (relative phase averaged when
-                                                                the periods differ)
+                                                                phasors, or the waveform damping with
+                                                                the file's harmonics (relative phase
+                                                                averaged when the periods differ)
 ===============  =============================================  ==========================================
 
 At a periodic steady state the full model's terms balance (``moment + munk - damping = 0``, the
@@ -36,8 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pectoral_gym.averaging import EXACT, averaged_fin_forcing
-from pectoral_gym.dynamics import oscillating_square_mean
+from pectoral_gym.averaging import EXACT, averaged_fin_forcing, waveform_samples
+from pectoral_gym.dynamics import oscillating_square_mean, waveform_square_mean
 from pectoral_gym.kfunctions import ScalingFunctions, default_scaling_path
 from pectoral_gym.models import FullModel
 from pectoral_gym.params import FishParams, body_coefficients, coefficient_vector
@@ -65,15 +66,21 @@ def parse_pattern(label: str) -> np.ndarray:
 
 def _model_damping(omega: float, right: np.ndarray, left: np.ndarray, scaling: ScalingFunctions, c4: float) -> float:
     """The averaged model's yaw damping at mean yaw rate ``omega`` (docs/model.md 3.6)."""
+    if right[1] > 0 and left[1] > 0 and right[2] != left[2]:
+        shifts = np.linspace(0.0, 2.0 * np.pi, _PHASES, endpoint=False)
+    else:  # one fin, or equal periods started together: a fixed relative phase of 0
+        shifts = np.zeros(1)
+    if scaling.harmonics > 0:
+        waves = [scaling.yaw_waveform(*beat) if beat[1] > 0 else np.zeros(scaling.harmonics, complex)
+                 for beat in (right, left)]
+        k = np.arange(1, scaling.harmonics + 1)
+        combined = waves[0] - waves[1] * np.exp(1j * np.outer(shifts, k))  # (shifts, H): left mirrored
+        return c4 * float(np.mean([waveform_square_mean(omega, o) for o in waveform_samples(combined)]))
     phasors = []
     for beat, side in ((right, 1.0), (left, -1.0)):
         amplitude, phase = scaling.yaw_oscillation(*beat) if beat[1] > 0 else (0.0, 0.0)
         phasors.append(side * amplitude * np.exp(1j * phase))
-    if right[1] > 0 and left[1] > 0 and right[2] != left[2]:
-        shifts = np.exp(1j * np.linspace(0.0, 2.0 * np.pi, _PHASES, endpoint=False))
-    else:  # one fin, or equal periods started together: a fixed relative phase of 0
-        shifts = np.ones(1)
-    amplitudes = np.abs(phasors[0] + phasors[1] * shifts)
+    amplitudes = np.abs(phasors[0] + phasors[1] * np.exp(1j * shifts))
     return c4 * float(np.mean([oscillating_square_mean(omega, a) for a in amplitudes]))
 
 
