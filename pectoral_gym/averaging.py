@@ -45,7 +45,7 @@ import numpy as np
 from pectoral_gym._jit import JIT
 from pectoral_gym.dynamics import body_accel, body_accel_waveform, oscillating_square_mean
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.ktables import QUADRATURE, KTables, scaling_values, yaw_oscillation_phasor
+from pectoral_gym.ktables import QUADRATURE, RATE_ITERATIONS, KTables, scaling_values, yaw_oscillation_phasor
 from pectoral_gym.params import Coef, FinBeat, FishParams, coefficient_vector
 
 __all__ = [
@@ -55,6 +55,7 @@ __all__ = [
     "averaged_fin_forcing",
     "averaged_body_accel",
     "waveform_samples",
+    "combined_waveform",
     "equivalent_amplitude",
     "mean_fin_power",
     "oscillating_square_mean",
@@ -97,6 +98,37 @@ def waveform_samples(harmonics: np.ndarray, phase: float = 0.0) -> np.ndarray:
     k = np.arange(1, harmonics.shape[-1] + 1)
     theta = phase + 2.0 * np.pi * np.arange(QUADRATURE) / QUADRATURE
     return np.real(harmonics @ np.exp(1j * np.outer(k, theta)))
+
+
+def combined_waveform(harmonics: np.ndarray, mean_abs: np.ndarray | None, periods: np.ndarray, omega: float,
+                      c4: float, iterations: int = RATE_ITERATIONS) -> np.ndarray:
+    """Samples of the fins' combined yaw waveform, with the yaw-rate correction (numpy; ``docs/model.md`` 3.6).
+
+    The Python form of :func:`pectoral_gym.forcing_cache.yaw_waveform` for analysis
+    (``scaling.yaw_balance``).
+
+    Args:
+        harmonics: ``(fins, H)`` complex ``c_k`` [rad/s] of each fin at its present beat phase
+            (``c_k e^{i k theta_f}``, the left fin's signed as its mirror image).
+        mean_abs: ``(fins,)`` reference mean ``|omega|`` [rad/s] per fin, or ``None``: no rate correction.
+        periods: ``(fins,)`` fin periods [s].
+        omega: Mean yaw rate [rad/s].
+        c4: Yaw damping coefficient (eq. 20).
+        iterations: Relaxed fixed-point steps.
+    """
+    harmonics = np.atleast_2d(np.asarray(harmonics, dtype=np.complex128))
+    samples = waveform_samples(harmonics.sum(axis=0))
+    if mean_abs is None:
+        return samples
+    k = np.arange(1, harmonics.shape[1] + 1)
+    freq = 1j * np.outer(2.0 * np.pi / np.asarray(periods, dtype=np.float64), k)  # (fins, H): i k Omega_f
+    drive = harmonics * (2.0 * c4 * np.asarray(mean_abs, dtype=np.float64)[:, None] + freq)
+    lam = 2.0 * c4 * np.mean(np.abs(omega + samples))
+    for it in range(iterations):
+        samples = waveform_samples(np.sum(drive / (lam + freq), axis=0))
+        if it + 1 < iterations:
+            lam = 0.5 * (lam + 2.0 * c4 * np.mean(np.abs(omega + samples)))
+    return samples
 
 
 def equivalent_amplitude(samples: np.ndarray) -> np.ndarray:

@@ -26,6 +26,7 @@ field              index  unit    meaning
 ``PREV_RATIO``     13     -
 ``WAVE``           14-29  rad/s   ``Re, Im`` of the yaw-waveform harmonics ``c_1 .. c_8`` (``docs/model.md``
                                   3.6), signed by side; zero beyond the file's harmonics
+``REF_ABS``        30     rad/s   mean ``|omega|`` of the pattern's reference run (0: none)
 =================  =====  ======  ==================================================================
 
 The row depends on the fish's coefficients too: :func:`invalidate` after
@@ -42,13 +43,20 @@ import numpy as np
 
 from pectoral_gym._jit import JIT
 from pectoral_gym.averaging import averaged_fin_forcing
-from pectoral_gym.ktables import MAX_HARMONICS, QUADRATURE, waveform_harmonics_into, yaw_oscillation_phasor
+from pectoral_gym.ktables import (
+    MAX_HARMONICS,
+    QUADRATURE,
+    RATE_ITERATIONS,
+    waveform_harmonics_into,
+    yaw_oscillation_phasor,
+)
 from pectoral_gym.strokes import ANGLE_FROM, ANGLE_TO, ELAPSED, PERIOD, POWER, RATIO, SIDE
 
 __all__ = [
     "CACHE_FIELDS", "KEY_BIAS", "KEY_AMPLITUDE", "KEY_PERIOD", "KEY_RATIO",
     "AVG_FX", "AVG_FY", "AVG_TAU", "OSC_COS", "OSC_SIN", "CACHED",
-    "PREV_BIAS", "PREV_AMPLITUDE", "PREV_PERIOD", "PREV_RATIO", "WAVE", "QUADRATURE", "WORKSPACE",
+    "PREV_BIAS", "PREV_AMPLITUDE", "PREV_PERIOD", "PREV_RATIO", "WAVE", "REF_ABS", "QUADRATURE", "WORKSPACE",
+    "RATE_ITERATIONS",
     "clear", "invalidate", "refresh", "waveform_samples", "yaw_oscillation", "yaw_waveform",
 ]
 
@@ -58,9 +66,11 @@ OSC_COS, OSC_SIN = 7, 8
 CACHED = 9
 PREV_BIAS, PREV_AMPLITUDE, PREV_PERIOD, PREV_RATIO = 10, 11, 12, 13
 WAVE = 14
-CACHE_FIELDS = WAVE + 2 * MAX_HARMONICS
+REF_ABS = WAVE + 2 * MAX_HARMONICS
+CACHE_FIELDS = REF_ABS + 1
 
-WORKSPACE = QUADRATURE + 2 * MAX_HARMONICS  # samples, then the combined harmonics (yaw_waveform)
+_DRIVE = QUADRATURE + 2 * MAX_HARMONICS
+WORKSPACE = _DRIVE + 4 * MAX_HARMONICS  # samples, combined harmonics, each fin's drive (yaw_waveform)
 _K = np.arange(1, MAX_HARMONICS + 1)
 _PHASES = 2.0 * np.pi * np.outer(_K, np.arange(QUADRATURE)) / QUADRATURE
 _COS = np.ascontiguousarray(np.cos(_PHASES))  # (MAX_HARMONICS, QUADRATURE): cos(2 pi k j / N)
@@ -157,26 +167,74 @@ def waveform_samples(work, harmonics):
 
 
 @nb.njit(**JIT)
-def yaw_waveform(fins, cache, i, offset, idle0, idle1, harmonics, work):
+def _mean_abs(work, omega):
+    total = 0.0
+    for j in range(QUADRATURE):
+        total += abs(omega + work[j])
+    return total / QUADRATURE
+
+
+@nb.njit(**JIT)
+def yaw_waveform(fins, cache, i, offset, idle0, idle1, harmonics, rate, omega, c4, work):
     """Both fins' yaw-rate oscillation at the ``QUADRATURE`` phases of one beat, ``offset`` s into the segment.
 
     Each fin's waveform ``Re sum_k c_k e^{i k theta}`` (``WAVE`` fields) is taken at its own
     beat phase ``theta_f`` plus ``2 pi j / QUADRATURE``: the relative phase of the two fins is
     held at its present value over the quadrature (``docs/model.md`` 3.6), so each fin's own
-    waveform is covered exactly once. Writes the samples into ``work[:QUADRATURE]`` (a
-    ``WORKSPACE`` array, :func:`waveform_samples`) and returns their equivalent amplitude.
+    waveform is covered exactly once. With ``rate`` (the file has the reference runs' mean
+    ``|omega|``), harmonic ``k`` of fin ``f`` is the response of the body's linearised yaw
+    damping to the drive ``c_k (lambda_f + i k Omega_f)`` the fin exerted in its reference run,
+    ``c_k (lambda_f + i k Omega_f) / (lambda + i k Omega_f)``, ``lambda_f = 2 c4 |omega|_ref``,
+    ``lambda = 2 c4 mean|omega + o|`` of the combined waveform ``o`` at the yaw rate ``omega``
+    (found by ``RATE_ITERATIONS`` relaxed fixed-point steps from the plain sum). Writes the
+    samples into ``work[:QUADRATURE]`` (a ``WORKSPACE`` array, :func:`waveform_samples`) and
+    returns their equivalent amplitude.
     """
     for c in range(QUADRATURE, WORKSPACE):
         work[c] = 0.0
+    lam0 = lam1 = freq0 = freq1 = 0.0
     for f in range(2):
         if (idle0 if f == 0 else idle1) or fins[i, f, ANGLE_FROM] == fins[i, f, ANGLE_TO]:
             continue
         theta = _beat_phase(fins, i, f, offset)
+        freq = 2.0 * math.pi / fins[i, f, PERIOD]
+        lam = 2.0 * c4 * cache[i, f, REF_ABS]
+        if f == 0:
+            lam0, freq0 = lam, freq
+        else:
+            lam1, freq1 = lam, freq
         c1, s1 = math.cos(theta), math.sin(theta)
         c, s = c1, s1
         for k in range(harmonics):  # e^{i k theta} by rotation
             a, b = cache[i, f, WAVE + 2 * k], cache[i, f, WAVE + 2 * k + 1]
-            work[QUADRATURE + 2 * k] += a * c - b * s
-            work[QUADRATURE + 2 * k + 1] += a * s + b * c
+            ar, br = a * c - b * s, a * s + b * c
+            work[QUADRATURE + 2 * k] += ar
+            work[QUADRATURE + 2 * k + 1] += br
+            kw = (k + 1) * freq
+            work[_DRIVE + 2 * MAX_HARMONICS * f + 2 * k] = ar * lam - br * kw  # c_k (lambda_f + i k Omega_f)
+            work[_DRIVE + 2 * MAX_HARMONICS * f + 2 * k + 1] = br * lam + ar * kw
             c, s = c * c1 - s * s1, s * c1 + c * s1
-    return waveform_samples(work, harmonics)
+    amplitude = waveform_samples(work, harmonics)
+    if not rate:
+        return amplitude
+    lam = 2.0 * c4 * _mean_abs(work, omega)
+    for it in range(RATE_ITERATIONS):
+        for k in range(harmonics):
+            re = im = 0.0
+            for f in range(2):
+                freq, lam_f = (freq0, lam0) if f == 0 else (freq1, lam1)
+                if freq == 0.0:
+                    continue
+                kw = (k + 1) * freq
+                dr = work[_DRIVE + 2 * MAX_HARMONICS * f + 2 * k]
+                di = work[_DRIVE + 2 * MAX_HARMONICS * f + 2 * k + 1]
+                den = lam * lam + kw * kw
+                if den > 0.0:
+                    re += (dr * lam + di * kw) / den  # drive / (lambda + i k Omega_f)
+                    im += (di * lam - dr * kw) / den
+            work[QUADRATURE + 2 * k] = re
+            work[QUADRATURE + 2 * k + 1] = im
+        amplitude = waveform_samples(work, harmonics)
+        if it + 1 < RATE_ITERATIONS:
+            lam = 0.5 * (lam + 2.0 * c4 * _mean_abs(work, omega))
+    return amplitude

@@ -68,8 +68,9 @@ paper's damping ``c4 omega|omega|``.
 
 The optional ``yaw_waveform`` section (``"harmonics": H``, ``"cos"`` and ``"sin"``: ``H`` coefficient
 lists each, same spline form) holds the first ``H`` Fourier harmonics ``T_p c_k`` [rad] of that
-oscillation, ``omega~(t) = Re sum_k c_k exp(i k 2 pi t / T_p)``; when present it replaces the
-sinusoid in the damping (``docs/model.md`` 3.6).
+oscillation, ``omega~(t) = Re sum_k c_k exp(i k 2 pi t / T_p)``, and optionally ``"mean_abs"``, one
+list: ``T_p`` times the reference run's mean ``|omega|`` [rad], for the waveform's yaw-rate correction;
+when present it replaces the sinusoid in the damping (``docs/model.md`` 3.6).
 
 Format 1 and 2 files (format 1: polynomial only, ``sway`` implicitly
 ``"paper"``; five or six features) load unchanged. ``save`` always writes
@@ -184,7 +185,8 @@ def _wave_channels(section: dict) -> list:
     if not (len(section["cos"]) == len(section["sin"]) == h):
         raise ValueError(f"'harmonics' is {h} but there are {len(section['cos'])} cos and "
                          f"{len(section['sin'])} sin lists")
-    return [values for pair in zip(section["cos"], section["sin"], strict=True) for values in pair]
+    channels = [values for pair in zip(section["cos"], section["sin"], strict=True) for values in pair]
+    return channels + ([section["mean_abs"]] if "mean_abs" in section else [])
 
 
 def _check_knots(knots: np.ndarray, n: int, where: str) -> None:
@@ -243,9 +245,9 @@ class ScalingFunctions:
         object.__setattr__(self, "oscillation_knots", knots)
         object.__setattr__(self, "oscillation_table", table)
         channels = np.shape(self.waveform_table)[0] if self.waveform_table is not None else 2
-        if channels % 2 or not 2 <= channels <= 2 * MAX_HARMONICS:
-            raise ValueError(f"the yaw waveform needs 1 to {MAX_HARMONICS} harmonics (2 channels each), "
-                             f"got {channels} channels")
+        if not 2 <= channels <= 2 * MAX_HARMONICS + 1:
+            raise ValueError(f"the yaw waveform needs 1 to {MAX_HARMONICS} harmonics (2 channels each, and "
+                             f"optionally the mean |omega|), got {channels} channels")
         knots, table = _checked_spline(self.waveform_knots, self.waveform_table, channels, "yaw-waveform spline")
         object.__setattr__(self, "waveform_knots", knots)
         object.__setattr__(self, "waveform_table", table)
@@ -269,6 +271,11 @@ class ScalingFunctions:
     def harmonics(self) -> int:
         """Number of yaw-waveform harmonics (0: no ``yaw_waveform`` section)."""
         return 0 if self.waveform_table is None else self.waveform_table.shape[0] // 2
+
+    @property
+    def has_rate_correction(self) -> bool:
+        """True when the yaw waveform carries the reference runs' mean ``|omega|`` (docs/model.md 3.6)."""
+        return self.waveform_table is not None and self.waveform_table.shape[0] % 2 == 1
 
     def kernel_arrays(self) -> KTables:
         """The tables packed for the compiled kernels (:class:`pectoral_gym.ktables.KTables`).
@@ -381,9 +388,12 @@ class ScalingFunctions:
             out["yaw_oscillation"] = _spline_dict(self.oscillation_knots, {
                 "cos": self.oscillation_table[0].ravel().tolist(), "sin": self.oscillation_table[1].ravel().tolist()})
         if self.waveform_table is not None:
-            out["yaw_waveform"] = _spline_dict(self.waveform_knots, {
-                "harmonics": self.harmonics, "cos": [c.ravel().tolist() for c in self.waveform_table[0::2]],
-                "sin": [c.ravel().tolist() for c in self.waveform_table[1::2]]})
+            h = self.harmonics
+            section = {"harmonics": h, "cos": [c.ravel().tolist() for c in self.waveform_table[0:2 * h:2]],
+                       "sin": [c.ravel().tolist() for c in self.waveform_table[1:2 * h:2]]}
+            if self.has_rate_correction:
+                section["mean_abs"] = self.waveform_table[2 * h].ravel().tolist()
+            out["yaw_waveform"] = _spline_dict(self.waveform_knots, section)
         out["metadata"] = self.metadata
         return out
 
@@ -462,10 +472,19 @@ class ScalingFunctions:
 
         Empty without a ``yaw_waveform`` section.
         """
-        out = np.zeros(2 * MAX_HARMONICS)
-        h = waveform_harmonics_into(float(bias), float(amplitude), float(period), float(ratio), self.kernel_arrays(),
-                                    1.0, out, 0)
+        out = self._waveform_data(bias, amplitude, period, ratio)
+        h = self.harmonics
         return out[0:2 * h:2] + 1j * out[1:2 * h:2]
+
+    def yaw_mean_abs(self, bias: float, amplitude: float, period: float, ratio: float) -> float:
+        """Mean ``|omega|`` [rad/s] of the fin's reference run (the waveform's rate correction); 0 without it."""
+        return float(self._waveform_data(bias, amplitude, period, ratio)[2 * MAX_HARMONICS])
+
+    def _waveform_data(self, bias: float, amplitude: float, period: float, ratio: float) -> np.ndarray:
+        out = np.zeros(2 * MAX_HARMONICS + 1)
+        waveform_harmonics_into(float(bias), float(amplitude), float(period), float(ratio), self.kernel_arrays(),
+                                1.0, out, 0)
+        return out
 
     def paper_k_fy(self, bias: float, amplitude: float, period: float, ratio: float) -> float:
         """The paper's ``K_fy`` (multiplying ``f_hy_avg``); infinite at ``cos(bias) = 0`` in ``"base"`` files."""

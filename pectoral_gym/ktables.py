@@ -20,13 +20,16 @@ import numpy as np
 
 from pectoral_gym._jit import JIT
 
-__all__ = ["MAX_HARMONICS", "QUADRATURE", "KTables", "as_tables", "bspline_basis", "oscillation_phasor",
-           "scaling_values", "spline_values", "waveform_harmonics_into", "yaw_oscillation_phasor"]
+__all__ = ["MAX_HARMONICS", "QUADRATURE", "RATE_ITERATIONS", "KTables", "as_tables", "bspline_basis",
+           "oscillation_phasor", "scaling_values", "spline_values", "waveform_harmonics_into",
+           "yaw_oscillation_phasor"]
 
 MAX_HARMONICS = 8  # most yaw-waveform harmonics a coefficients file may hold (forcing_cache has room for them)
 #: Beat phases of the waveform damping's quadrature (docs/model.md 3.6): the mean of ``x|x|`` over
 #: ``QUADRATURE`` equally spaced phases of the beat.
 QUADRATURE = 32
+#: Relaxed fixed-point iterations of the yaw waveform's yaw-rate correction (docs/model.md 3.6).
+RATE_ITERATIONS = 3
 
 
 class KTables(NamedTuple):
@@ -45,8 +48,9 @@ class KTables(NamedTuple):
     ``osc_knots``  ``(3, longest)``     knots of the yaw-oscillation splines (same axes)
     ``osc_table``  ``(2, nb, na, nr)``  phasor ``A T_p (cos phi, sin phi)`` [rad]; ``(2, 0, 0, 0)``: none
     ``wave_knots`` ``(3, longest)``     knots of the yaw-waveform splines (same axes)
-    ``wave_table`` ``(2H, nb, na, nr)`` harmonics ``T_p c_k`` [rad] of the yaw-rate waveform, ``k = 1..H``,
-                                        channels ``Re c_1, Im c_1, Re c_2, ...``; ``(2, 0, 0, 0)``: none
+    ``wave_table`` ``(2H(+1), nb, ...)`` harmonics ``T_p c_k`` [rad] of the yaw-rate waveform, ``k = 1..H``,
+                                        channels ``Re c_1, Im c_1, Re c_2, ...``, then optionally ``T_p``
+                                        times the reference's mean ``|omega|`` [rad]; ``(2, 0, 0, 0)``: none
     =============  ===================  ===================================================================
 
     ``nb, na, nr``: spline coefficients along bias, amplitude and 1/ratio.
@@ -160,39 +164,43 @@ def oscillation_phasor(bias: float, amplitude: float, inv_ratio: float, knots, t
 
 
 @nb.njit(**JIT)
-def waveform_harmonics_into(bias: float, amplitude: float, period: float, ratio: float, tables: KTables, scale: float,
+def waveform_harmonics_into(bias: float, amplitude: float, period: float, ratio: float, tables: KTables, side: float,
                             out, offset: int) -> int:
-    """Write the right fin's yaw-waveform harmonics ``scale * c_k`` [rad/s] into ``out[offset:]``; return ``H``.
+    """Write the fin's yaw-waveform data [rad/s] into ``out[offset:]``; return the number of harmonics ``H``.
 
-    ``out[offset + 2 (k - 1)]``, ``out[offset + 2 (k - 1) + 1]`` get ``Re, Im`` of harmonic
-    ``k = 1..H`` (``H`` = the file's harmonics, 0 without a ``yaw_waveform`` section), the
-    rest up to :data:`MAX_HARMONICS` zero. ``c_k`` is the file's ``T_p c_k`` spline (over
-    bias, amplitude, 1/ratio, clamped) divided by the period; below the lowest amplitude node
-    it shrinks linearly to zero, as :func:`oscillation_phasor`. No allocation.
+    ``out[offset + 2 (k - 1)]``, ``out[offset + 2 (k - 1) + 1]``: ``side`` times ``Re, Im`` of
+    harmonic ``c_k``, ``k = 1..H`` (``H`` = the file's harmonics, 0 without a ``yaw_waveform``
+    section), zero up to :data:`MAX_HARMONICS`; ``out[offset + 2 MAX_HARMONICS]``: the mean
+    ``|omega|`` of the reference run (0 when the file has none). Each is its spline (over bias,
+    amplitude, 1/ratio, clamped) divided by the period; below the lowest amplitude node they
+    shrink linearly to zero, as :func:`oscillation_phasor`. No allocation.
     """
     table, knots = tables.wave_table, tables.wave_knots
     channels = table.shape[0] if table.shape[1] > 0 else 0
-    for c in range(2 * MAX_HARMONICS):
+    for c in range(2 * MAX_HARMONICS + 1):
         out[offset + c] = 0.0
     if channels == 0 or amplitude <= 0.0:
         return channels // 2
+    scale = 1.0 / period
     lowest = knots[1, 3]
     if amplitude < lowest and lowest > 0.0:
         scale *= amplitude / lowest
-    scale /= period
     s0, a0, a1, a2, a3 = bspline_basis(knots[0], table.shape[1], bias)
     s1, c0, c1, c2, c3 = bspline_basis(knots[1], table.shape[2], amplitude)
     s2, d0, d1, d2, d3 = bspline_basis(knots[2], table.shape[3], 1.0 / ratio)
     b0, b1, b2 = (a0, a1, a2, a3), (c0, c1, c2, c3), (d0, d1, d2, d3)
+    h = channels // 2
     for a in range(4):
         for b in range(4):
             w = b0[a] * b1[b] * scale
             for c in range(4):
                 wc = w * b2[c]
                 i, j, k = s0 - 3 + a, s1 - 3 + b, s2 - 3 + c
-                for ch in range(channels):
-                    out[offset + ch] += wc * table[ch, i, j, k]
-    return channels // 2
+                for ch in range(2 * h):
+                    out[offset + ch] += side * wc * table[ch, i, j, k]
+                if channels > 2 * h:  # the reference run's mean |omega| (rate correction, docs/model.md 3.6)
+                    out[offset + 2 * MAX_HARMONICS] += wc * table[2 * h, i, j, k]
+    return h
 
 
 @nb.njit(**JIT)

@@ -199,6 +199,7 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
     fin_offset = coef[i, Coef.FIN_OFFSET]
     rates = rate_constants(body.m1, body.m2, body.J3, body.c1, body.c2, body.c4)
     harmonics = tables.wave_table.shape[0] // 2 if averaged and tables.wave_table.shape[1] > 0 else 0
+    rate_correction = tables.wave_table.shape[0] % 2 == 1
     work = np.empty(fc.WORKSPACE if harmonics > 0 else 0)  # the waveform damping's samples (docs/model.md 3.6)
     wave = work[:fc.QUADRATURE] if harmonics > 0 else work
     t_left = duration
@@ -224,7 +225,8 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
                     fx, fy, tau = fx + dfx, fy + dfy, tau + dtau
             forcing = Forcing(fx, fy, tau)
             if harmonics > 0:
-                osc = fc.yaw_waveform(fins, cache, i, 0.5 * seg, idle0, idle1, harmonics, work)
+                osc = fc.yaw_waveform(fins, cache, i, 0.5 * seg, idle0, idle1, harmonics, rate_correction,
+                                      state[i, State.OMEGA], body.c4, work)
             else:
                 osc = fc.yaw_oscillation(fins, cache, i, 0.5 * seg, idle0, idle1)
             t_seg = seg

@@ -31,7 +31,7 @@ except ImportError as err:  # pragma: no cover - exercised only without the nmpc
 import numpy as np
 
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.ktables import QUADRATURE
+from pectoral_gym.ktables import QUADRATURE, RATE_ITERATIONS
 from pectoral_gym.params import FishParams, body_coefficients
 
 __all__ = [
@@ -165,33 +165,65 @@ def combined_yaw_oscillation_sx(right, left, scaling: ScalingFunctions | None):
 
 
 def yaw_waveform_sx(beat, scaling: ScalingFunctions):
-    """``(Re c_k, Im c_k)`` [rad/s], two ``(H,)`` vectors, of the right fin's yaw waveform harmonics.
+    """``(Re c_k, Im c_k, |omega|_ref)`` [rad/s] of the right fin's yaw waveform: two ``(H,)`` vectors and a scalar.
 
-    As :meth:`pectoral_gym.kfunctions.ScalingFunctions.yaw_waveform`, including the linear
-    shrink below the lowest amplitude node.
+    As :meth:`pectoral_gym.kfunctions.ScalingFunctions.yaw_waveform` and ``yaw_mean_abs``
+    (0 without the rate correction), including the linear shrink below the lowest amplitude node.
     """
     bias, amplitude, period, ratio = beat[0], beat[1], beat[2], beat[3]
     values = _tensor_spline_sx((bias, amplitude, 1.0 / ratio), scaling.waveform_knots, scaling.waveform_table)
     lowest = float(scaling.waveform_knots[1][3])
     shrink = ca.fmin(ca.fmax(amplitude, 0.0), lowest) / lowest if lowest > 0.0 else 1.0
     scale = shrink / period
-    return ca.vertcat(*values[0::2]) * scale, ca.vertcat(*values[1::2]) * scale
+    h = scaling.harmonics
+    mean_abs = values[2 * h] * scale if scaling.has_rate_correction else 0.0
+    return ca.vertcat(*values[0:2 * h:2]) * scale, ca.vertcat(*values[1:2 * h:2]) * scale, mean_abs
 
 
-def combined_yaw_waveform_sx(right, left, scaling: ScalingFunctions | None):
+def combined_yaw_waveform_sx(right, left, scaling: ScalingFunctions | None, omega=None,
+                             params: FishParams | None = None, smoothing: float = 0.0):
     """The yaw-waveform samples (``QUADRATURE``,) of two fins beating in phase; ``None`` without waveform data.
 
     The left fin's waveform is the mirror image, so the harmonics subtract (as
     :func:`pectoral_gym.forcing_cache.yaw_waveform` with equal beat phases, the first sample
-    at phase 0).
+    at phase 0). With the file's rate correction the yaw rate ``omega`` and ``params`` are
+    needed: the same relaxed fixed-point steps as the compiled model (``smoothing`` > 0
+    replaces ``|x|`` by ``sqrt(x^2 + smoothing^2)`` in them).
     """
     if scaling is None or scaling.harmonics == 0:
         return None
-    re_r, im_r = yaw_waveform_sx(right, scaling)
-    re_l, im_l = yaw_waveform_sx(left, scaling)
     k = np.arange(1, scaling.harmonics + 1)
     theta = 2.0 * np.pi * np.outer(np.arange(QUADRATURE), k) / QUADRATURE  # (QUADRATURE, H)
-    return ca.mtimes(ca.DM(np.cos(theta)), re_r - re_l) - ca.mtimes(ca.DM(np.sin(theta)), im_r - im_l)
+    cos, sin = ca.DM(np.cos(theta)), ca.DM(np.sin(theta))
+    fins = [(yaw_waveform_sx(right, scaling), 1.0, right[2]), (yaw_waveform_sx(left, scaling), -1.0, left[2])]
+    re = sum(side * w[0] for w, side, _ in fins)
+    im = sum(side * w[1] for w, side, _ in fins)
+    samples = ca.mtimes(cos, re) - ca.mtimes(sin, im)
+    if not scaling.has_rate_correction:
+        return samples
+    if omega is None or params is None:
+        raise ValueError("the yaw waveform's rate correction needs the yaw rate and the parameters")
+    c4 = body_coefficients(params).c4
+
+    def mean_abs(x):
+        return ca.sum1(ca.sqrt(x * x + smoothing**2) if smoothing > 0.0 else ca.fabs(x)) / QUADRATURE
+
+    drives = []
+    for (a, b, ref), side, period in fins:
+        kw = ca.DM(k) * (2.0 * np.pi) / period
+        lam_f = 2.0 * c4 * ref
+        drives.append((side * (a * lam_f - b * kw), side * (b * lam_f + a * kw), kw))  # c_k (lambda_f + i k Omega_f)
+    lam = 2.0 * c4 * mean_abs(omega + samples)
+    for it in range(RATE_ITERATIONS):
+        re, im = 0.0, 0.0
+        for dr, di, kw in drives:
+            den = lam * lam + kw * kw
+            re = re + (dr * lam + di * kw) / den
+            im = im + (di * lam - dr * kw) / den
+        samples = ca.mtimes(cos, re) - ca.mtimes(sin, im)
+        if it + 1 < RATE_ITERATIONS:
+            lam = 0.5 * (lam + 2.0 * c4 * mean_abs(omega + samples))
+    return samples
 
 
 def waveform_square_mean_sx(mean, samples, smoothing: float = 0.0):
@@ -314,7 +346,7 @@ def averaged_rhs_sx(state, beats, params: FishParams, scaling: ScalingFunctions 
     right = averaged_forcing_sx([beats[i] for i in range(4)], 1.0, params, scaling)
     left = averaged_forcing_sx([beats[i] for i in range(4, 8)], -1.0, params, scaling)
     fins = [beats[i] for i in range(4)], [beats[i] for i in range(4, 8)]
-    waveform = combined_yaw_waveform_sx(*fins, scaling)
+    waveform = combined_yaw_waveform_sx(*fins, scaling, state[5], params, smoothing)
     oscillation = combined_yaw_oscillation_sx(*fins, scaling) if waveform is None else None
     return body_rhs_sx(state, right + left, params, smoothing, oscillation, waveform)
 

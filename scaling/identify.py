@@ -257,7 +257,9 @@ def identify(
         if held is not None:
             held_oscillation = np.array([oscillator.yaw_oscillation(*p)[0] for p in held.patterns])
     if yaw_damping == "waveform":
-        wave_knots, wave_table = fit_waveform(grid.patterns, ref.yaw_harmonics, harmonics, ref.converged)
+        # the rate correction's reference: mean |omega| over the quadrature of the kept harmonics
+        mean_abs = np.mean(np.abs(ref.velocities[:, 2:3] + waveform_samples(ref.yaw_harmonics[:, :harmonics])), axis=1)
+        wave_knots, wave_table = fit_waveform(grid.patterns, ref.yaw_harmonics, harmonics, ref.converged, mean_abs)
         # the averaged model will use the splines' waveform (one fin: the phase does not matter)
         oscillator = dataclasses.replace(oscillator, waveform_knots=wave_knots, waveform_table=wave_table)
         oscillation = waveform_samples(np.array([oscillator.yaw_waveform(*p) for p in grid.patterns]))

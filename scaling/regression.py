@@ -349,7 +349,8 @@ def fit_oscillation(
 
 
 def fit_waveform(
-    patterns: np.ndarray, harmonics: np.ndarray, count: int, usable: np.ndarray | None = None
+    patterns: np.ndarray, harmonics: np.ndarray, count: int, usable: np.ndarray | None = None,
+    mean_abs: np.ndarray | None = None,
 ) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
     """Splines of the first ``count`` yaw-waveform harmonics ``T_p c_k`` over (bias, amplitude, 1/ratio).
 
@@ -361,16 +362,21 @@ def fit_waveform(
         harmonics: ``(n, >= count)`` complex ``c_k`` [rad/s] (``scaling.reference.yaw_waveform_harmonics``).
         count: Harmonics to keep.
         usable: ``(n,)`` mask (default: finite values).
+        mean_abs: ``(n,)`` mean ``|omega|`` [rad/s] of the reference runs (the waveform's rate
+            correction), or ``None``.
 
     Returns:
         ``(waveform_knots, waveform_table)`` for :class:`pectoral_gym.kfunctions.ScalingFunctions`,
-        the table ``(2 count, n0, n1, n2)`` with channels ``Re c_1, Im c_1, Re c_2, ...``.
+        the table ``(2 count (+1), n0, n1, n2)`` with channels ``Re c_1, Im c_1, Re c_2, ...``
+        (then ``T_p`` times ``mean_abs``).
     """
     patterns = np.asarray(patterns, dtype=np.float64)
     scaled = np.asarray(harmonics, dtype=np.complex128)[:, :count] * patterns[:, 2:3]
     if scaled.shape[1] != count:
         raise ValueError(f"{count} harmonics requested, the runs have {scaled.shape[1]}")
     parts = [part for k in range(count) for part in (scaled[:, k].real, scaled[:, k].imag)]
+    if mean_abs is not None:
+        parts.append(np.asarray(mean_abs, dtype=np.float64) * patterns[:, 2])
     return _period_free_splines(patterns, parts, usable)
 
 

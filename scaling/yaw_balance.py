@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pectoral_gym.averaging import EXACT, averaged_fin_forcing, waveform_samples
+from pectoral_gym.averaging import EXACT, averaged_fin_forcing, combined_waveform
 from pectoral_gym.dynamics import oscillating_square_mean, waveform_square_mean
 from pectoral_gym.kfunctions import ScalingFunctions, default_scaling_path
 from pectoral_gym.models import FullModel
@@ -71,11 +71,18 @@ def _model_damping(omega: float, right: np.ndarray, left: np.ndarray, scaling: S
     else:  # one fin, or equal periods started together: a fixed relative phase of 0
         shifts = np.zeros(1)
     if scaling.harmonics > 0:
-        waves = [scaling.yaw_waveform(*beat) if beat[1] > 0 else np.zeros(scaling.harmonics, complex)
-                 for beat in (right, left)]
+        fins = [(beat, side) for beat, side in ((right, 1.0), (left, -1.0)) if beat[1] > 0]
+        waves = np.array([side * scaling.yaw_waveform(*beat) for beat, side in fins])
+        mean_abs = np.array([scaling.yaw_mean_abs(*beat) for beat, _ in fins]) if scaling.has_rate_correction else None
         k = np.arange(1, scaling.harmonics + 1)
-        combined = waves[0] - waves[1] * np.exp(1j * np.outer(shifts, k))  # (shifts, H): left mirrored
-        return c4 * float(np.mean([waveform_square_mean(omega, o) for o in waveform_samples(combined)]))
+        damping = []
+        for shift in shifts:  # the left fin's beat phase relative to the right one's
+            rotated = waves.copy()
+            if len(fins) == 2:
+                rotated[1] *= np.exp(1j * k * shift)
+            samples = combined_waveform(rotated, mean_abs, np.array([beat[2] for beat, _ in fins]), omega, c4)
+            damping.append(waveform_square_mean(omega, samples))
+        return c4 * float(np.mean(damping))
     phasors = []
     for beat, side in ((right, 1.0), (left, -1.0)):
         amplitude, phase = scaling.yaw_oscillation(*beat) if beat[1] > 0 else (0.0, 0.0)

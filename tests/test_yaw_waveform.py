@@ -252,3 +252,85 @@ def test_nmpc_with_waveform_equals_the_algebraic_solution():
         r = nmpc.solve(velocities[i], forcing[i], oscillation=samples[i])
         assert r.success
         np.testing.assert_allclose(r.k, oracle[i], rtol=1e-3)
+
+
+def _rate_scaling(harmonics, mean_abs, rng=None):
+    """As :func:`_waveform_scaling`, with the reference runs' mean |omega| (T_p |omega|_ref = mean_abs) as well."""
+    s = _waveform_scaling(harmonics, rng=rng)
+    table = np.concatenate([s.waveform_table, np.full((1, 4, 4, 4), mean_abs)])
+    return dataclasses.replace(s, waveform_table=table)
+
+
+def _compiled_samples(model, omega):
+    work = np.zeros(fc.WORKSPACE)
+    c4 = body_coefficients(P).c4
+    fc.yaw_waveform(model.fins, model.forcing_cache, 0, 0.0, False, False, 3, True, omega, c4, work)
+    return work[:QUADRATURE]
+
+
+def _phase(model, f):
+    return fc._beat_phase(model.fins, 0, f, 0.0)
+
+
+def test_rate_correction_is_exact_at_the_reference_and_the_linear_response_elsewhere(tmp_path):
+    s = _rate_scaling(WAVE, 0.3)
+    assert s.has_rate_correction and s.harmonics == 3
+    s.save(tmp_path / "k.json")
+    back = ScalingFunctions.load(tmp_path / "k.json")
+    assert back.has_rate_correction and back.yaw_mean_abs(1.2, 0.3, 2.0, 2.0) == pytest.approx(0.15, rel=1e-12)
+    beat = FinBeat.from_degrees(80, 20, 1.0, 3.0)
+    model = AveragedModel(1, P, scaling=s)
+    model.reset(right=beat, left=FinBeat.rest())
+    model.advance(0.37)
+    c4 = body_coefficients(P).c4
+    plain = waveform_samples(WAVE, _phase(model, 0))
+    # the yaw rate at which the plain waveform's mean |omega| is the reference's: a fixed point, nothing changes
+    w_ref = optimize.brentq(lambda w: np.mean(np.abs(w + plain)) - 0.3, 0.0, 1.0)
+    np.testing.assert_allclose(_compiled_samples(model, w_ref), plain, atol=1e-12)
+    # elsewhere, harmonic k is the drive c_k (lambda_ref + i k Omega) through 1 / (lambda + i k Omega), lambda the
+    # damping rate 2 c4 mean|omega + o| of the result: the self-consistent solution, found here by bisection
+    k = np.arange(1, 4)
+    drive = WAVE * np.exp(1j * k * _phase(model, 0)) * (2 * c4 * 0.3 + 1j * k * 2 * np.pi)
+    for w in (0.02, 0.6):
+        def gap(lam, w=w):
+            return 2 * c4 * np.mean(np.abs(w + waveform_samples(drive / (lam + 1j * k * 2 * np.pi)))) - lam
+        lam = optimize.brentq(gap, 1e-6, 200.0)
+        exact = waveform_samples(drive / (lam + 1j * k * 2 * np.pi))
+        got = _compiled_samples(model, w)
+        assert np.max(np.abs(got - exact)) < 0.05 * np.max(np.abs(exact))  # 3 relaxed fixed-point steps
+        assert np.max(np.abs(got - plain)) > 0.1 * np.max(np.abs(plain))  # and the correction is not small
+
+
+def test_compiled_rate_corrected_waveform_equals_the_numpy_form_for_two_fins():
+    from pectoral_gym.averaging import combined_waveform
+
+    s = _rate_scaling(WAVE, 0.3, rng=np.random.default_rng(9))
+    right, left = FinBeat.from_degrees(70, 25, 1.0, 3.0), FinBeat.from_degrees(95, 15, 1.4, 2.0)
+    model = AveragedModel(1, P, scaling=s)
+    model.reset(right=right, left=left)
+    model.advance(2.9)
+    k = np.arange(1, 4)
+    waves = np.array([s.yaw_waveform(*right.as_array()) * np.exp(1j * k * _phase(model, 0)),
+                      -s.yaw_waveform(*left.as_array()) * np.exp(1j * k * _phase(model, 1))])
+    mean_abs = np.array([s.yaw_mean_abs(*right.as_array()), s.yaw_mean_abs(*left.as_array())])
+    expected = combined_waveform(waves, mean_abs, np.array([1.0, 1.4]), 0.07, body_coefficients(P).c4)
+    np.testing.assert_allclose(_compiled_samples(model, 0.07), expected, rtol=1e-10, atol=1e-13)
+
+
+def test_symbolic_rhs_with_rate_correction_tracks_the_averaged_model(rk4_symbolic):
+    ca = pytest.importorskip("casadi")
+    from pectoral_gym.symbolic import averaged_rhs_sx
+
+    s = _rate_scaling(WAVE * 0.1, 0.05, rng=np.random.default_rng(7))
+    s = dataclasses.replace(s, waveform_table=s.waveform_table * 0.1)
+    right, left = FinBeat.from_degrees(80, 20, 1.0, 4.0), FinBeat.from_degrees(100, 10, 1.0, 2.0)
+    model = AveragedModel(1, P, scaling=s, dt_max=1e-3)
+    start = np.array([1.0, 0.5, 0.3, 0.02, -0.005, 0.3])
+    model.reset(state=start[None], right=right.as_array()[None], left=left.as_array()[None])
+    x = ca.SX.sym("x", 6)
+    f = ca.Function("f", [x], [averaged_rhs_sx(x, np.concatenate([right.as_array(), left.as_array()]), P, s)])
+    # the compiled model freezes the waveform over each segment (its yaw rate at the segment start), the
+    # symbolic one follows the state: compare one half-stroke's worth of short steps
+    model.advance(0.2)
+    state = rk4_symbolic(f, start, 1e-3, 200)
+    np.testing.assert_allclose(state, model.state[0], rtol=1e-4, atol=1e-7)
