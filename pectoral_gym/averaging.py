@@ -45,7 +45,14 @@ import numpy as np
 from pectoral_gym._jit import JIT
 from pectoral_gym.dynamics import body_accel, body_accel_waveform, oscillating_square_mean
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.ktables import QUADRATURE, RATE_ITERATIONS, KTables, scaling_values, yaw_oscillation_phasor
+from pectoral_gym.ktables import (
+    QUADRATURE,
+    RATE_ITERATIONS,
+    KTables,
+    quadrature_window,
+    scaling_values,
+    yaw_oscillation_phasor,
+)
 from pectoral_gym.params import Coef, FinBeat, FishParams, coefficient_vector
 
 __all__ = [
@@ -102,14 +109,14 @@ def waveform_samples(harmonics: np.ndarray, phase: float = 0.0) -> np.ndarray:
 
 def combined_waveform(harmonics: np.ndarray, mean_abs: np.ndarray | None, periods: np.ndarray, omega: float,
                       c4: float, iterations: int = RATE_ITERATIONS) -> np.ndarray:
-    """Samples of the fins' combined yaw waveform, with the yaw-rate correction (numpy; ``docs/model.md`` 3.6).
+    """Samples of the fins' combined yaw waveform over the damping's window, rate-corrected (``docs/model.md`` 3.6).
 
-    The Python form of :func:`pectoral_gym.forcing_cache.yaw_waveform` for analysis
-    (``scaling.yaw_balance``).
+    The numpy form of :func:`pectoral_gym.forcing_cache.yaw_waveform`, for analysis
+    (``scaling.yaw_balance``) and tests.
 
     Args:
-        harmonics: ``(fins, H)`` complex ``c_k`` [rad/s] of each fin at its present beat phase
-            (``c_k e^{i k theta_f}``, the left fin's signed as its mirror image).
+        harmonics: ``(fins, H)`` complex ``c_k`` [rad/s] of each fin at its beat phase at the
+            window's start (``c_k e^{i k theta_f}``, the left fin's signed as its mirror image).
         mean_abs: ``(fins,)`` reference mean ``|omega|`` [rad/s] per fin, or ``None``: no rate correction.
         periods: ``(fins,)`` fin periods [s].
         omega: Mean yaw rate [rad/s].
@@ -117,15 +124,23 @@ def combined_waveform(harmonics: np.ndarray, mean_abs: np.ndarray | None, period
         iterations: Relaxed fixed-point steps.
     """
     harmonics = np.atleast_2d(np.asarray(harmonics, dtype=np.complex128))
-    samples = waveform_samples(harmonics.sum(axis=0))
+    freqs = 2.0 * np.pi / np.asarray(periods, dtype=np.float64)
+    n, *cycles = quadrature_window(freqs[0], freqs[1] if len(freqs) == 2 else 0.0)
+    k = np.arange(1, harmonics.shape[1] + 1)
+    cyc = np.array(cycles[:len(freqs)], dtype=np.float64)
+    turn = np.exp(2j * np.pi * np.einsum("f,k,j->fkj", cyc, k, np.arange(n)) / n)  # e^{2 pi i k cycles_f j / n}
+
+    def samples_of(h):
+        return np.real(np.einsum("fk,fkj->j", h, turn))
+
+    samples = samples_of(harmonics)
     if mean_abs is None:
         return samples
-    k = np.arange(1, harmonics.shape[1] + 1)
-    freq = 1j * np.outer(2.0 * np.pi / np.asarray(periods, dtype=np.float64), k)  # (fins, H): i k Omega_f
+    freq = 1j * np.outer(freqs, k)  # (fins, H): i k Omega_f
     drive = harmonics * (2.0 * c4 * np.asarray(mean_abs, dtype=np.float64)[:, None] + freq)
     lam = 2.0 * c4 * np.mean(np.abs(omega + samples))
     for it in range(iterations):
-        samples = waveform_samples(np.sum(drive / (lam + freq), axis=0))
+        samples = samples_of(drive / (lam + freq))
         if it + 1 < iterations:
             lam = 0.5 * (lam + 2.0 * c4 * np.mean(np.abs(omega + samples)))
     return samples

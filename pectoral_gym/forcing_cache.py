@@ -45,8 +45,10 @@ from pectoral_gym._jit import JIT
 from pectoral_gym.averaging import averaged_fin_forcing
 from pectoral_gym.ktables import (
     MAX_HARMONICS,
+    MAX_SAMPLES,
     QUADRATURE,
     RATE_ITERATIONS,
+    quadrature_window,
     waveform_harmonics_into,
     yaw_oscillation_phasor,
 )
@@ -69,12 +71,8 @@ WAVE = 14
 REF_ABS = WAVE + 2 * MAX_HARMONICS
 CACHE_FIELDS = REF_ABS + 1
 
-_DRIVE = QUADRATURE + 2 * MAX_HARMONICS
-WORKSPACE = _DRIVE + 4 * MAX_HARMONICS  # samples, combined harmonics, each fin's drive (yaw_waveform)
-_K = np.arange(1, MAX_HARMONICS + 1)
-_PHASES = 2.0 * np.pi * np.outer(_K, np.arange(QUADRATURE)) / QUADRATURE
-_COS = np.ascontiguousarray(np.cos(_PHASES))  # (MAX_HARMONICS, QUADRATURE): cos(2 pi k j / N)
-_SIN = np.ascontiguousarray(np.sin(_PHASES))
+_FIN = MAX_SAMPLES  # per fin: Re, Im of its harmonics at the segment's phase, then its drive
+WORKSPACE = _FIN + 8 * MAX_HARMONICS
 
 
 def invalidate(cache: np.ndarray, index: np.ndarray | slice | None = None) -> None:
@@ -147,52 +145,64 @@ def _beat_phase(fins, i, f, offset):
 
 
 @nb.njit(**JIT)
-def waveform_samples(work, harmonics):
-    """``work[j] = Re sum_k C_k exp(2 pi i (k + 1) j / QUADRATURE)``, ``j < QUADRATURE``; returns ``(pi/2) mean|.|``.
+def waveform_samples(work, harmonics, n, cycles0, cycles1):
+    """The samples ``work[:n]`` of both fins' waveforms over a window; returns ``(pi/2) mean|.|``.
 
-    ``work`` (``WORKSPACE``,): the samples first, then ``Re C_k`` and ``Im C_k`` in
-    ``work[QUADRATURE + 2 k]``, ``work[QUADRATURE + 2 k + 1]``, ``k < harmonics``.
-
-    The returned amplitude is that of the sinusoid with the same mean absolute value, the
-    stiffness measure of the step rule (:func:`pectoral_gym.dynamics.linearised_rate`).
+    Fin ``f``'s harmonics ``R_{f,k}`` (``work[_FIN + 4 MAX_HARMONICS f + 2 k]``, ``+1``) turn by
+    ``2 pi k cycles_f / n`` per sample: sample ``j`` is ``Re sum_f sum_k R_{f,k} e^{2 pi i k cycles_f j / n}``
+    (a fin that does not beat has zero harmonics). The returned amplitude is that of the
+    sinusoid with the same mean absolute value, the stiffness measure of the step rule
+    (:func:`pectoral_gym.dynamics.linearised_rate`).
     """
-    total = 0.0
-    for j in range(QUADRATURE):
-        x = 0.0
+    for j in range(n):
+        work[j] = 0.0
+    for f in range(2):
+        cycles = cycles0 if f == 0 else cycles1
+        base = _FIN + 4 * MAX_HARMONICS * f
         for k in range(harmonics):
-            x += work[QUADRATURE + 2 * k] * _COS[k, j] - work[QUADRATURE + 2 * k + 1] * _SIN[k, j]
-        work[j] = x
-        total += abs(x)
-    return 0.5 * math.pi * total / QUADRATURE
+            zr, zi = work[base + 2 * k], work[base + 2 * k + 1]
+            if zr == 0.0 and zi == 0.0:
+                continue
+            step = 2.0 * math.pi * (k + 1) * cycles / n
+            cs, sn = math.cos(step), math.sin(step)
+            for j in range(n):
+                work[j] += zr
+                zr, zi = zr * cs - zi * sn, zr * sn + zi * cs
+    total = 0.0
+    for j in range(n):
+        total += abs(work[j])
+    return 0.5 * math.pi * total / n
 
 
 @nb.njit(**JIT)
-def _mean_abs(work, omega):
+def _mean_abs(work, n, omega):
     total = 0.0
-    for j in range(QUADRATURE):
+    for j in range(n):
         total += abs(omega + work[j])
-    return total / QUADRATURE
+    return total / n
 
 
 @nb.njit(**JIT)
 def yaw_waveform(fins, cache, i, offset, idle0, idle1, harmonics, rate, omega, c4, work):
-    """Both fins' yaw-rate oscillation at the ``QUADRATURE`` phases of one beat, ``offset`` s into the segment.
+    """Both fins' yaw-rate oscillation over one averaging window, ``offset`` s into the segment.
 
-    Each fin's waveform ``Re sum_k c_k e^{i k theta}`` (``WAVE`` fields) is taken at its own
-    beat phase ``theta_f`` plus ``2 pi j / QUADRATURE``: the relative phase of the two fins is
-    held at its present value over the quadrature (``docs/model.md`` 3.6), so each fin's own
-    waveform is covered exactly once. With ``rate`` (the file has the reference runs' mean
-    ``|omega|``), harmonic ``k`` of fin ``f`` is the response of the body's linearised yaw
-    damping to the drive ``c_k (lambda_f + i k Omega_f)`` the fin exerted in its reference run,
-    ``c_k (lambda_f + i k Omega_f) / (lambda + i k Omega_f)``, ``lambda_f = 2 c4 |omega|_ref``,
-    ``lambda = 2 c4 mean|omega + o|`` of the combined waveform ``o`` at the yaw rate ``omega``
-    (found by ``RATE_ITERATIONS`` relaxed fixed-point steps from the plain sum). Writes the
-    samples into ``work[:QUADRATURE]`` (a ``WORKSPACE`` array, :func:`waveform_samples`) and
-    returns their equivalent amplitude.
+    Each fin's waveform ``Re sum_k c_k e^{i k theta}`` (``WAVE`` fields) starts at its beat
+    phase ``theta_f`` (``docs/model.md`` 3.6). One fin, equal periods, or periods without a
+    common period of at most ``COMMON_BEATS`` beats of the slower fin: ``QUADRATURE`` samples
+    of one beat, both fins keeping their present relative phase (each fin's own waveform is
+    covered exactly once). Commensurate periods: the common period, ``QUADRATURE`` samples per
+    beat of the faster fin, each fin at its own rate (the exact time average). With ``rate``
+    (the file has the reference runs' mean ``|omega|``), harmonic ``k`` of fin ``f`` is the
+    response of the linearised yaw damping to the drive ``c_k (lambda_f + i k Omega_f)`` the fin
+    exerted in its reference run, ``c_k (lambda_f + i k Omega_f) / (lambda + i k Omega_f)``,
+    ``lambda_f = 2 c4 |omega|_ref``, ``lambda = 2 c4 mean|omega + o|`` of the combined waveform
+    ``o`` at the yaw rate ``omega`` (``RATE_ITERATIONS`` relaxed fixed-point steps from the
+    plain sum). Writes the samples into ``work[:n]`` (a ``WORKSPACE`` array) and returns
+    ``(n, equivalent amplitude)`` (:func:`waveform_samples`).
     """
-    for c in range(QUADRATURE, WORKSPACE):
+    for c in range(_FIN, WORKSPACE):
         work[c] = 0.0
-    lam0 = lam1 = freq0 = freq1 = 0.0
+    freq0 = freq1 = 0.0
     for f in range(2):
         if (idle0 if f == 0 else idle1) or fins[i, f, ANGLE_FROM] == fins[i, f, ANGLE_TO]:
             continue
@@ -200,41 +210,39 @@ def yaw_waveform(fins, cache, i, offset, idle0, idle1, harmonics, rate, omega, c
         freq = 2.0 * math.pi / fins[i, f, PERIOD]
         lam = 2.0 * c4 * cache[i, f, REF_ABS]
         if f == 0:
-            lam0, freq0 = lam, freq
+            freq0 = freq
         else:
-            lam1, freq1 = lam, freq
+            freq1 = freq
+        base = _FIN + 4 * MAX_HARMONICS * f
         c1, s1 = math.cos(theta), math.sin(theta)
         c, s = c1, s1
         for k in range(harmonics):  # e^{i k theta} by rotation
             a, b = cache[i, f, WAVE + 2 * k], cache[i, f, WAVE + 2 * k + 1]
             ar, br = a * c - b * s, a * s + b * c
-            work[QUADRATURE + 2 * k] += ar
-            work[QUADRATURE + 2 * k + 1] += br
+            work[base + 2 * k], work[base + 2 * k + 1] = ar, br
             kw = (k + 1) * freq
-            work[_DRIVE + 2 * MAX_HARMONICS * f + 2 * k] = ar * lam - br * kw  # c_k (lambda_f + i k Omega_f)
-            work[_DRIVE + 2 * MAX_HARMONICS * f + 2 * k + 1] = br * lam + ar * kw
+            work[base + 2 * MAX_HARMONICS + 2 * k] = ar * lam - br * kw  # drive c_k (lambda_f + i k Omega_f)
+            work[base + 2 * MAX_HARMONICS + 2 * k + 1] = br * lam + ar * kw
             c, s = c * c1 - s * s1, s * c1 + c * s1
-    amplitude = waveform_samples(work, harmonics)
+    n, cycles0, cycles1 = quadrature_window(freq0, freq1)
+    amplitude = waveform_samples(work, harmonics, n, cycles0, cycles1)
     if not rate:
-        return amplitude
-    lam = 2.0 * c4 * _mean_abs(work, omega)
+        return n, amplitude
+    lam = 2.0 * c4 * _mean_abs(work, n, omega)
     for it in range(RATE_ITERATIONS):
-        for k in range(harmonics):
-            re = im = 0.0
-            for f in range(2):
-                freq, lam_f = (freq0, lam0) if f == 0 else (freq1, lam1)
-                if freq == 0.0:
-                    continue
+        for f in range(2):
+            freq = freq0 if f == 0 else freq1
+            if freq == 0.0:
+                continue
+            base = _FIN + 4 * MAX_HARMONICS * f
+            for k in range(harmonics):
                 kw = (k + 1) * freq
-                dr = work[_DRIVE + 2 * MAX_HARMONICS * f + 2 * k]
-                di = work[_DRIVE + 2 * MAX_HARMONICS * f + 2 * k + 1]
+                dr = work[base + 2 * MAX_HARMONICS + 2 * k]
+                di = work[base + 2 * MAX_HARMONICS + 2 * k + 1]
                 den = lam * lam + kw * kw
-                if den > 0.0:
-                    re += (dr * lam + di * kw) / den  # drive / (lambda + i k Omega_f)
-                    im += (di * lam - dr * kw) / den
-            work[QUADRATURE + 2 * k] = re
-            work[QUADRATURE + 2 * k + 1] = im
-        amplitude = waveform_samples(work, harmonics)
+                work[base + 2 * k] = (dr * lam + di * kw) / den  # drive / (lambda + i k Omega_f)
+                work[base + 2 * k + 1] = (di * lam - dr * kw) / den
+        amplitude = waveform_samples(work, harmonics, n, cycles0, cycles1)
         if it + 1 < RATE_ITERATIONS:
-            lam = 0.5 * (lam + 2.0 * c4 * _mean_abs(work, omega))
-    return amplitude
+            lam = 0.5 * (lam + 2.0 * c4 * _mean_abs(work, n, omega))
+    return n, amplitude

@@ -20,7 +20,8 @@ import numpy as np
 
 from pectoral_gym._jit import JIT
 
-__all__ = ["MAX_HARMONICS", "QUADRATURE", "RATE_ITERATIONS", "KTables", "as_tables", "bspline_basis",
+__all__ = ["COMMON_BEATS", "MAX_HARMONICS", "MAX_SAMPLES", "QUADRATURE", "RATE_ITERATIONS", "quadrature_window",
+           "KTables", "as_tables", "bspline_basis",
            "oscillation_phasor", "scaling_values", "spline_values", "waveform_harmonics_into",
            "yaw_oscillation_phasor"]
 
@@ -28,6 +29,10 @@ MAX_HARMONICS = 8  # most yaw-waveform harmonics a coefficients file may hold (f
 #: Beat phases of the waveform damping's quadrature (docs/model.md 3.6): the mean of ``x|x|`` over
 #: ``QUADRATURE`` equally spaced phases of the beat.
 QUADRATURE = 32
+#: Longest common period, in beats of the slower fin, over which two fins with commensurate periods
+#: are averaged together (docs/model.md 3.6); the faster fin beats at most 4 times as often in it.
+COMMON_BEATS = 4
+MAX_SAMPLES = QUADRATURE * COMMON_BEATS * 4
 #: Relaxed fixed-point iterations of the yaw waveform's yaw-rate correction (docs/model.md 3.6).
 RATE_ITERATIONS = 3
 
@@ -201,6 +206,28 @@ def waveform_harmonics_into(bias: float, amplitude: float, period: float, ratio:
                 if channels > 2 * h:  # the reference run's mean |omega| (rate correction, docs/model.md 3.6)
                     out[offset + 2 * MAX_HARMONICS] += wc * table[2 * h, i, j, k]
     return h
+
+
+@nb.njit(**JIT)
+def quadrature_window(freq0: float, freq1: float):
+    """``(samples, cycles of fin 0, cycles of fin 1)`` of the waveform damping's window (``docs/model.md`` 3.6).
+
+    ``freq``: beat frequencies [rad/s], 0 for a fin that does not beat. One fin, equal
+    periods, or no common period within ``COMMON_BEATS`` beats of the slower fin:
+    ``QUADRATURE`` samples and one cycle each (the present relative phase). Else the common
+    period, ``QUADRATURE`` samples per beat of the faster fin.
+    """
+    if freq0 == 0.0 or freq1 == 0.0 or freq0 == freq1:
+        return QUADRATURE, 1, 1
+    slow, fast = min(freq0, freq1), max(freq0, freq1)
+    for beats in range(1, COMMON_BEATS + 1):
+        n = beats * fast / slow
+        whole = round(n)
+        if abs(n - whole) <= 1e-9 * n and QUADRATURE * whole <= MAX_SAMPLES:
+            if freq0 < freq1:
+                return QUADRATURE * whole, beats, whole
+            return QUADRATURE * whole, whole, beats
+    return QUADRATURE, 1, 1
 
 
 @nb.njit(**JIT)

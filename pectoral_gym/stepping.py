@@ -201,7 +201,7 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
     harmonics = tables.wave_table.shape[0] // 2 if averaged and tables.wave_table.shape[1] > 0 else 0
     rate_correction = tables.wave_table.shape[0] % 2 == 1
     work = np.empty(fc.WORKSPACE if harmonics > 0 else 0)  # the waveform damping's samples (docs/model.md 3.6)
-    wave = work[:fc.QUADRATURE] if harmonics > 0 else work
+    wave = work[:0]
     t_left = duration
     while t_left > _EPS:
         # A fin at rest that stays at rest never ends a segment: its stroke clock must
@@ -225,8 +225,9 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
                     fx, fy, tau = fx + dfx, fy + dfy, tau + dtau
             forcing = Forcing(fx, fy, tau)
             if harmonics > 0:
-                osc = fc.yaw_waveform(fins, cache, i, 0.5 * seg, idle0, idle1, harmonics, rate_correction,
-                                      state[i, State.OMEGA], body.c4, work)
+                n_wave, osc = fc.yaw_waveform(fins, cache, i, 0.5 * seg, idle0, idle1, harmonics, rate_correction,
+                                              state[i, State.OMEGA], body.c4, work)
+                wave = work[:n_wave]
             else:
                 osc = fc.yaw_oscillation(fins, cache, i, 0.5 * seg, idle0, idle1)
             t_seg = seg

@@ -40,6 +40,7 @@ import numpy as np
 from pectoral_gym.averaging import EXACT, averaged_fin_forcing, combined_waveform
 from pectoral_gym.dynamics import oscillating_square_mean, waveform_square_mean
 from pectoral_gym.kfunctions import ScalingFunctions, default_scaling_path
+from pectoral_gym.ktables import QUADRATURE, quadrature_window
 from pectoral_gym.models import FullModel
 from pectoral_gym.params import FishParams, body_coefficients, coefficient_vector
 
@@ -72,6 +73,8 @@ def _model_damping(omega: float, right: np.ndarray, left: np.ndarray, scaling: S
         shifts = np.zeros(1)
     if scaling.harmonics > 0:
         fins = [(beat, side) for beat, side in ((right, 1.0), (left, -1.0)) if beat[1] > 0]
+        if len(fins) == 2 and quadrature_window(2 * np.pi / right[2], 2 * np.pi / left[2])[0] > QUADRATURE:
+            shifts = np.zeros(1)  # commensurate periods started together: a fixed phase relation
         waves = np.array([side * scaling.yaw_waveform(*beat) for beat, side in fins])
         mean_abs = np.array([scaling.yaw_mean_abs(*beat) for beat, _ in fins]) if scaling.has_rate_correction else None
         k = np.arange(1, scaling.harmonics + 1)

@@ -264,8 +264,8 @@ def _rate_scaling(harmonics, mean_abs, rng=None):
 def _compiled_samples(model, omega):
     work = np.zeros(fc.WORKSPACE)
     c4 = body_coefficients(P).c4
-    fc.yaw_waveform(model.fins, model.forcing_cache, 0, 0.0, False, False, 3, True, omega, c4, work)
-    return work[:QUADRATURE]
+    n, _ = fc.yaw_waveform(model.fins, model.forcing_cache, 0, 0.0, False, False, 3, True, omega, c4, work)
+    return work[:n]
 
 
 def _phase(model, f):
@@ -315,6 +315,32 @@ def test_compiled_rate_corrected_waveform_equals_the_numpy_form_for_two_fins():
     mean_abs = np.array([s.yaw_mean_abs(*right.as_array()), s.yaw_mean_abs(*left.as_array())])
     expected = combined_waveform(waves, mean_abs, np.array([1.0, 1.4]), 0.07, body_coefficients(P).c4)
     np.testing.assert_allclose(_compiled_samples(model, 0.07), expected, rtol=1e-10, atol=1e-13)
+    assert len(expected) == QUADRATURE  # 1.0 s and 1.4 s: no common period within 4 beats
+
+
+def test_commensurate_periods_average_over_the_common_period():
+    from pectoral_gym.averaging import combined_waveform
+    from pectoral_gym.ktables import quadrature_window
+
+    assert quadrature_window(2 * np.pi / 1.8, 2 * np.pi / 0.9) == (2 * QUADRATURE, 1, 2)
+    assert quadrature_window(2 * np.pi / 0.6, 2 * np.pi / 0.9) == (3 * QUADRATURE, 3, 2)
+    assert quadrature_window(2 * np.pi / 1.0, 2 * np.pi / 1.37)[0] == QUADRATURE
+    s = _rate_scaling(WAVE, 0.3, rng=np.random.default_rng(9))
+    right, left = FinBeat.from_degrees(70, 25, 1.8, 3.0), FinBeat.from_degrees(95, 15, 0.9, 2.0)
+    model = AveragedModel(1, P, scaling=s)
+    model.reset(right=right, left=left)
+    model.advance(3.3)
+    k = np.arange(1, 4)
+    waves = np.array([s.yaw_waveform(*right.as_array()) * np.exp(1j * k * _phase(model, 0)),
+                      -s.yaw_waveform(*left.as_array()) * np.exp(1j * k * _phase(model, 1))])
+    got = _compiled_samples(model, 0.07)
+    np.testing.assert_allclose(got, combined_waveform(waves, np.array(
+        [s.yaw_mean_abs(*right.as_array()), s.yaw_mean_abs(*left.as_array())]), np.array([1.8, 0.9]), 0.07,
+        body_coefficients(P).c4), rtol=1e-10, atol=1e-13)
+    # without the rate correction: the two waveforms in time, each at its own rate, written out here
+    t = np.arange(2 * QUADRATURE) * 1.8 / (2 * QUADRATURE)
+    direct = sum(np.real(np.exp(1j * np.outer(t * 2 * np.pi / T, k)) @ w) for w, T in zip(waves, (1.8, 0.9)))
+    np.testing.assert_allclose(combined_waveform(waves, None, np.array([1.8, 0.9]), 0.07, 1.0), direct, atol=1e-13)
 
 
 def test_symbolic_rhs_with_rate_correction_tracks_the_averaged_model(rk4_symbolic):
