@@ -339,7 +339,8 @@ def test_commensurate_periods_average_over_the_common_period():
         body_coefficients(P).c4), rtol=1e-10, atol=1e-13)
     # without the rate correction: the two waveforms in time, each at its own rate, written out here
     t = np.arange(2 * QUADRATURE) * 1.8 / (2 * QUADRATURE)
-    direct = sum(np.real(np.exp(1j * np.outer(t * 2 * np.pi / T, k)) @ w) for w, T in zip(waves, (1.8, 0.9)))
+    direct = sum(np.real(np.exp(1j * np.outer(t * 2 * np.pi / period, k)) @ w)
+                 for w, period in zip(waves, (1.8, 0.9), strict=True))
     np.testing.assert_allclose(combined_waveform(waves, None, np.array([1.8, 0.9]), 0.07, 1.0), direct, atol=1e-13)
 
 
