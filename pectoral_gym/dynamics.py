@@ -145,7 +145,7 @@ def waveform_square_mean(mean: float, samples) -> float:
 
 @nb.njit(**JIT)
 def _undamped_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2):
-    """Eq. (19) with ``f_1, f_2`` of eq. (20) and ``f_3`` without its yaw damping ``-c4 omega|omega|``."""
+    """Eq. (19) with ``f_1, f_2`` of eq. (20), and the Munk and fin terms of ``f_3`` (without its yaw damping)."""
     speed = math.sqrt(vx * vx + vy * vy)
     if vx >= 0.0:
         alpha = math.atan2(vy, vx)
@@ -153,7 +153,7 @@ def _undamped_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2):
         alpha = -math.atan2(vy, -vx)  # arctan(vy/vx) for vx < 0
     dvx = (m2 * vy * omega - c1 * vx * speed + c2 * vy * speed * alpha + fx) / m1  # eqs. (19)-(20), f1
     dvy = (-m1 * vx * omega - c1 * vy * speed - c2 * vx * speed * alpha + fy) / m2  # f2 (erratum 3)
-    return dvx, dvy, (m1 - m2) / j3 * vx * vy + tau / j3  # f3 without damping
+    return dvx, dvy, (m1 - m2) / j3 * vx * vy, tau / j3  # f3 = munk - c4 damping + moment
 
 
 @nb.njit(**JIT)
@@ -162,8 +162,8 @@ def body_accel_waveform(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, samp
 
     ``c4 omega|omega|`` becomes ``c4 waveform_square_mean(omega, samples)``.
     """
-    dvx, dvy, dom = _undamped_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2)
-    return dvx, dvy, dom - c4 * waveform_square_mean(omega, samples)
+    dvx, dvy, munk, moment = _undamped_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2)
+    return dvx, dvy, munk - c4 * waveform_square_mean(omega, samples) + moment
 
 
 @nb.njit(**JIT)
@@ -178,12 +178,12 @@ def body_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, oscillation=0
     is replaced by its mean over an in-beat yaw oscillation of that amplitude,
     ``c4 oscillating_square_mean(omega, oscillation)``. The default 0 is eq. (20).
     """
-    dvx, dvy, dom = _undamped_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2)
+    dvx, dvy, munk, moment = _undamped_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2)
     if oscillation > 0.0:
         damping = oscillating_square_mean(omega, oscillation)  # docs/model.md 3.6
     else:
         damping = omega * abs(omega)
-    return dvx, dvy, dom - c4 * damping  # f3
+    return dvx, dvy, munk - c4 * damping + moment  # f3
 
 
 @nb.njit(**JIT)

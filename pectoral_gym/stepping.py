@@ -68,9 +68,9 @@ def _rotate(c0, s0, delta):
 
 @nb.njit(**JIT)
 def _accel(u, v, w, f: Forcing, b: BodyCoefficients, osc, wave):
-    if wave.shape[0] > 0:
-        return body_accel_waveform(u, v, w, f.fx, f.fy, f.tau, b.m1, b.m2, b.J3, b.c1, b.c2, b.c4, wave)
-    return body_accel(u, v, w, f.fx, f.fy, f.tau, b.m1, b.m2, b.J3, b.c1, b.c2, b.c4, osc)
+    if wave is None:  # resolved when compiling: the None specialisation is the code without the waveform
+        return body_accel(u, v, w, f.fx, f.fy, f.tau, b.m1, b.m2, b.J3, b.c1, b.c2, b.c4, osc)
+    return body_accel_waveform(u, v, w, f.fx, f.fy, f.tau, b.m1, b.m2, b.J3, b.c1, b.c2, b.c4, wave)
 
 
 @nb.njit(**JIT)
@@ -78,9 +78,9 @@ def _rk4(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: Bod
     """One RK4 step of eq. (19) for fish ``i``; forcing given at t, t+h/2, t+h.
 
     ``osc`` [rad/s]: the yaw oscillation of the averaged model's damping
-    (:func:`pectoral_gym.dynamics.body_accel`); 0 for the full model. ``wave``: the
-    sampled yaw waveform of the waveform damping (``docs/model.md`` 3.6), which
-    replaces ``osc`` when not empty.
+    (:func:`pectoral_gym.dynamics.body_accel`); 0 for the full model. ``wave``: ``None``, or
+    the sampled yaw waveform of the waveform damping (``docs/model.md`` 3.6), which then
+    replaces ``osc`` (a compile-time choice: ``None`` is its own specialisation).
     """
     x0, y0, p0 = state[i, State.X], state[i, State.Y], state[i, State.PSI]
     u0, v0, w0 = state[i, State.VX], state[i, State.VY], state[i, State.OMEGA]
@@ -235,7 +235,10 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
                 # equal substeps to the segment end, re-sized as the state's stiffness changes
                 h_ok = _stable_step(state, i, body, rates, forcing, osc, dt_max)
                 h = t_seg / max(1, int(math.ceil(t_seg / h_ok - 1e-9)))
-                _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc, wave)
+                if harmonics > 0:
+                    _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc, wave)
+                else:
+                    _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc, None)
                 t_seg -= h
         else:
             h_max = dt_max
@@ -254,7 +257,7 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
                 fm = Forcing(*st.phase_forcing(p0, p1, drag_constant, inertia_constant, fin_offset))
                 p0, p1 = st.advance_phase(p0), st.advance_phase(p1)
                 f1 = Forcing(*st.phase_forcing(p0, p1, drag_constant, inertia_constant, fin_offset))
-                _rk4(state, integral, i, h, f0, fm, f1, body, 0.0, wave)
+                _rk4(state, integral, i, h, f0, fm, f1, body, 0.0, None)
                 f0 = f1
         if rem0 - seg <= _EPS:
             fins[i, 0, ELAPSED] = fins[i, 0, DURATION]  # exactly on the boundary
