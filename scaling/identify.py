@@ -231,6 +231,8 @@ def identify(
     """
     if yaw_damping not in YAW_DAMPING:
         raise ValueError(f"yaw_damping must be one of {YAW_DAMPING}, got {yaw_damping!r}")
+    if not 1 <= harmonics <= MAX_HARMONICS:
+        raise ValueError(f"harmonics must be in [1, {MAX_HARMONICS}], got {harmonics}")
     params = params or FishParams()
     settings = settings or NmpcSettings()
     timings: dict[str, float] = {}
@@ -240,8 +242,6 @@ def identify(
     held = reference_runs(holdout_patterns(grid, holdout, seed), params, progress=False) if holdout else None
     timings["reference_runs"] = time.perf_counter() - t0
 
-    if not 1 <= harmonics <= MAX_HARMONICS:
-        raise ValueError(f"harmonics must be in [1, {MAX_HARMONICS}], got {harmonics}")
     osc_knots, osc_table, oscillation, held_oscillation = (), None, None, None
     wave_knots, wave_table = (), None
     if yaw_damping in ("oscillation", "waveform"):

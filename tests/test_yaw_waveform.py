@@ -361,3 +361,22 @@ def test_symbolic_rhs_with_rate_correction_tracks_the_averaged_model(rk4_symboli
     model.advance(0.2)
     state = rk4_symbolic(f, start, 1e-3, 200)
     np.testing.assert_allclose(state, model.state[0], rtol=1e-4, atol=1e-7)
+
+
+def test_full_model_yaw_harmonics_are_period_free():
+    # Time-scale symmetry of eqs. (9)-(20): omega ~ 1/T_p, so T_p c_k does not depend on T_p.
+    from scaling.reference import reference_runs
+
+    pattern = np.array([math.radians(70), math.radians(25), 1.0, 3.0])
+    ref = reference_runs(np.array([pattern, pattern * [1, 1, 2.5, 1]]), P, progress=False)
+    scale = abs(ref.yaw_harmonics[0, 0])
+    np.testing.assert_allclose(ref.yaw_harmonics[1] * 2.5, ref.yaw_harmonics[0], atol=1e-5 * scale)
+    assert abs(ref.yaw_harmonics[0, 1]) > 0.1 * abs(ref.yaw_harmonics[0, 0])  # a skewed waveform: not one sinusoid
+
+
+def test_identify_refuses_an_unusable_harmonics_count():
+    from scaling.grids import GRIDS
+    from scaling.identify import identify
+
+    with pytest.raises(ValueError, match="harmonics must be in"):
+        identify(GRIDS["quick"], yaw_damping="waveform", harmonics=MAX_HARMONICS + 1, progress=False)
