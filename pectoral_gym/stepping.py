@@ -188,6 +188,27 @@ def _transition(fins, cache, i, f, drag_constant, fin_offset):
 
 
 @nb.njit(**JIT)
+def _waveform_segment(state, integral, fins, cache, i, seg, idle0, idle1, harmonics, rate_correction, body, rates,
+                      forcing, dt_max):
+    """Averaged model, waveform damping (``docs/model.md`` 3.6): RK4 substeps over one segment of ``seg`` s.
+
+    The combined yaw waveform is sampled once, at the segment's middle
+    (:func:`pectoral_gym.forcing_cache.yaw_waveform`), into a workspace of its own, so the
+    default model (no ``yaw_waveform`` section) allocates nothing.
+    """
+    work = np.empty(fc.WORKSPACE)
+    n_wave, osc = fc.yaw_waveform(fins, cache, i, 0.5 * seg, idle0, idle1, harmonics, rate_correction,
+                                  state[i, State.OMEGA], body.c4, work)
+    wave = work[:n_wave]
+    t_seg = seg
+    while t_seg > _EPS:
+        h_ok = _stable_step(state, i, body, rates, forcing, osc, dt_max)
+        h = t_seg / max(1, int(math.ceil(t_seg / h_ok - 1e-9)))
+        _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc, wave)
+        t_seg -= h
+
+
+@nb.njit(**JIT)
 def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode,
                  transitions, packed_tables):
     """Advance fish ``i`` by ``duration`` seconds, segment by segment between stroke boundaries."""
@@ -200,8 +221,6 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
     rates = rate_constants(body.m1, body.m2, body.J3, body.c1, body.c2, body.c4)
     harmonics = tables.wave_table.shape[0] // 2 if averaged and tables.wave_table.shape[1] > 0 else 0
     rate_correction = tables.wave_table.shape[0] % 2 == 1
-    work = np.empty(fc.WORKSPACE if harmonics > 0 else 0)  # the waveform damping's samples (docs/model.md 3.6)
-    wave = work[:0]
     t_left = duration
     while t_left > _EPS:
         # A fin at rest that stays at rest never ends a segment: its stroke clock must
@@ -225,21 +244,17 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
                     fx, fy, tau = fx + dfx, fy + dfy, tau + dtau
             forcing = Forcing(fx, fy, tau)
             if harmonics > 0:
-                n_wave, osc = fc.yaw_waveform(fins, cache, i, 0.5 * seg, idle0, idle1, harmonics, rate_correction,
-                                              state[i, State.OMEGA], body.c4, work)
-                wave = work[:n_wave]
+                _waveform_segment(state, integral, fins, cache, i, seg, idle0, idle1, harmonics, rate_correction,
+                                  body, rates, forcing, dt_max)
             else:
                 osc = fc.yaw_oscillation(fins, cache, i, 0.5 * seg, idle0, idle1)
-            t_seg = seg
-            while t_seg > _EPS:
-                # equal substeps to the segment end, re-sized as the state's stiffness changes
-                h_ok = _stable_step(state, i, body, rates, forcing, osc, dt_max)
-                h = t_seg / max(1, int(math.ceil(t_seg / h_ok - 1e-9)))
-                if harmonics > 0:
-                    _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc, wave)
-                else:
+                t_seg = seg
+                while t_seg > _EPS:
+                    # equal substeps to the segment end, re-sized as the state's stiffness changes
+                    h_ok = _stable_step(state, i, body, rates, forcing, osc, dt_max)
+                    h = t_seg / max(1, int(math.ceil(t_seg / h_ok - 1e-9)))
                     _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc, None)
-                t_seg -= h
+                    t_seg -= h
         else:
             h_max = dt_max
             if not idle0:
