@@ -40,11 +40,19 @@ from __future__ import annotations
 import math
 
 import numba as nb
+import numpy as np
 
 from pectoral_gym._jit import JIT
-from pectoral_gym.dynamics import body_accel, oscillating_square_mean
+from pectoral_gym.dynamics import body_accel, body_accel_waveform, oscillating_square_mean
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.ktables import KTables, scaling_values, yaw_oscillation_phasor
+from pectoral_gym.ktables import (
+    QUADRATURE,
+    RATE_ITERATIONS,
+    KTables,
+    quadrature_window,
+    scaling_values,
+    yaw_oscillation_phasor,
+)
 from pectoral_gym.params import Coef, FinBeat, FishParams, coefficient_vector
 
 __all__ = [
@@ -53,6 +61,9 @@ __all__ = [
     "bessel_j1",
     "averaged_fin_forcing",
     "averaged_body_accel",
+    "waveform_samples",
+    "combined_waveform",
+    "equivalent_amplitude",
     "mean_fin_power",
     "oscillating_square_mean",
     "yaw_oscillation_phasor",
@@ -65,8 +76,80 @@ __all__ = [
 EXACT = 0
 TAYLOR = 1
 
-# Kept here for their callers: the homes are pectoral_gym.dynamics and pectoral_gym.ktables.
-averaged_body_accel = body_accel  # eqs. (19)-(20) with the oscillation-averaged yaw damping
+
+def averaged_body_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, oscillation=0.0):
+    """Eqs. (19)-(20) with the averaged model's yaw damping (``docs/model.md`` 3.6), for Python callers.
+
+    ``oscillation``: a float, the sinusoid amplitude [rad/s] (0: eq. 20,
+    :func:`pectoral_gym.dynamics.body_accel`), or a 1-D array of yaw-waveform samples
+    (:func:`waveform_samples`; :func:`pectoral_gym.dynamics.body_accel_waveform`).
+    """
+    if np.ndim(oscillation) == 1:
+        samples = np.ascontiguousarray(oscillation, dtype=np.float64)
+        return body_accel_waveform(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, samples)
+    return body_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, float(oscillation))
+
+
+def waveform_samples(harmonics: np.ndarray, phase: float = 0.0) -> np.ndarray:
+    """Yaw-rate oscillation ``Re sum_k c_k exp(i k (phase + 2 pi j / QUADRATURE))`` at the quadrature's phases.
+
+    Args:
+        harmonics: ``(..., H)`` complex ``c_k`` [rad/s], ``k = 1..H``
+            (:meth:`pectoral_gym.kfunctions.ScalingFunctions.yaw_waveform`).
+        phase: Beat phase [rad] of the first sample.
+
+    Returns:
+        ``(..., QUADRATURE)`` samples [rad/s], the ones the compiled model uses for a fin at that phase.
+    """
+    harmonics = np.asarray(harmonics, dtype=np.complex128)
+    k = np.arange(1, harmonics.shape[-1] + 1)
+    theta = phase + 2.0 * np.pi * np.arange(QUADRATURE) / QUADRATURE
+    return np.real(harmonics @ np.exp(1j * np.outer(k, theta)))
+
+
+def combined_waveform(harmonics: np.ndarray, mean_abs: np.ndarray | None, periods: np.ndarray, omega: float,
+                      c4: float, iterations: int = RATE_ITERATIONS) -> np.ndarray:
+    """Samples of the fins' combined yaw waveform over the damping's window, rate-corrected (``docs/model.md`` 3.6).
+
+    The numpy form of :func:`pectoral_gym.forcing_cache.yaw_waveform`, for analysis
+    (``scaling.yaw_balance``) and tests.
+
+    Args:
+        harmonics: ``(fins, H)`` complex ``c_k`` [rad/s] of each fin at its beat phase at the
+            window's start (``c_k e^{i k theta_f}``, the left fin's signed as its mirror image).
+        mean_abs: ``(fins,)`` reference mean ``|omega|`` [rad/s] per fin, or ``None``: no rate correction.
+        periods: ``(fins,)`` fin periods [s].
+        omega: Mean yaw rate [rad/s].
+        c4: Yaw damping coefficient (eq. 20).
+        iterations: Relaxed fixed-point steps.
+    """
+    harmonics = np.atleast_2d(np.asarray(harmonics, dtype=np.complex128))
+    freqs = 2.0 * np.pi / np.asarray(periods, dtype=np.float64)
+    n, *cycles = quadrature_window(freqs[0], freqs[1] if len(freqs) == 2 else 0.0)
+    k = np.arange(1, harmonics.shape[1] + 1)
+    cyc = np.array(cycles[:len(freqs)], dtype=np.float64)
+    turn = np.exp(2j * np.pi * np.einsum("f,k,j->fkj", cyc, k, np.arange(n)) / n)  # e^{2 pi i k cycles_f j / n}
+
+    def samples_of(h):
+        return np.real(np.einsum("fk,fkj->j", h, turn))
+
+    samples = samples_of(harmonics)
+    if mean_abs is None:
+        return samples
+    freq = 1j * np.outer(freqs, k)  # (fins, H): i k Omega_f
+    drive = harmonics * (2.0 * c4 * np.asarray(mean_abs, dtype=np.float64)[:, None] + freq)
+    lam = 2.0 * c4 * np.mean(np.abs(omega + samples))
+    for it in range(iterations):
+        samples = samples_of(drive / (lam + freq))
+        if it + 1 < iterations:
+            lam = 0.5 * (lam + 2.0 * c4 * np.mean(np.abs(omega + samples)))
+    return samples
+
+
+def equivalent_amplitude(samples: np.ndarray) -> np.ndarray:
+    """``(pi / 2) mean|samples|`` over the last axis: the sinusoid amplitude with the same mean absolute value."""
+    return 0.5 * np.pi * np.mean(np.abs(np.asarray(samples, dtype=np.float64)), axis=-1)
+
 
 
 @nb.njit(**JIT)

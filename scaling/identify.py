@@ -30,7 +30,9 @@ from typing import Any
 
 import numpy as np
 
+from pectoral_gym.averaging import waveform_samples
 from pectoral_gym.kfunctions import FEATURES, FORMAT, K_NAMES, ScalingFunctions
+from pectoral_gym.ktables import MAX_HARMONICS, QUADRATURE
 from pectoral_gym.params import FishParams
 from scaling.grids import Grid, draw_off_grid
 from scaling.nmpc import (
@@ -42,12 +44,12 @@ from scaling.nmpc import (
 )
 from scaling.nmpc_batch import solve_nmpc_batch
 from scaling.reference import ReferenceRuns, reference_runs
-from scaling.regression import Fit, SplineFit, fit_oscillation, fit_spline, select_model
+from scaling.regression import Fit, SplineFit, fit_oscillation, fit_spline, fit_waveform, select_model
 from scaling.response import predicted_turning, sensitivity_weights
 
 __all__ = ["IdentificationResult", "holdout_patterns", "identify"]
 
-YAW_DAMPING = ("oscillation", "paper")
+YAW_DAMPING = ("waveform", "oscillation", "paper")
 SWAY = "base"  # K_fy multiplies the fin's force magnitude, not f_hy_avg = base cos(bias) (pectoral_gym.kfunctions)
 ORACLE_RTOL = 1e-3  # NMPC solutions must equal the algebraic steady-state solution to this relative tolerance
 MIN_TURN_RATE = 0.02  # rad/s: held-out patterns turning slower get no radius / period error (huge, meaningless radii)
@@ -199,6 +201,7 @@ def identify(
     holdout: int = 60,
     turn_target: float = 0.02,
     yaw_damping: str = "oscillation",
+    harmonics: int = MAX_HARMONICS,
 ) -> IdentificationResult:
     """Run the whole pipeline on ``grid`` (module docstring).
 
@@ -218,13 +221,18 @@ def identify(
         yaw_damping: ``"oscillation"`` (default): identify K for the averaged model with the
             oscillation-averaged yaw damping, whose yaw-oscillation splines are fitted from the
             reference runs and shipped in the file (needs a tensor grid); ``"paper"``: the paper's
-            damping ``c4 omega|omega|``.
+            damping ``c4 omega|omega|``; ``"waveform"``: the waveform damping of ``docs/model.md``
+            3.6, whose ``harmonics`` yaw-waveform harmonics are fitted and shipped as well (the
+            sinusoid's splines too, for files read by older code).
+        harmonics: Yaw-waveform harmonics kept with ``"waveform"`` (1 to ``MAX_HARMONICS``).
 
     Raises:
         ValueError: For an unknown ``yaw_damping``, or ``"oscillation"`` on a grid that is not a tensor grid.
     """
     if yaw_damping not in YAW_DAMPING:
         raise ValueError(f"yaw_damping must be one of {YAW_DAMPING}, got {yaw_damping!r}")
+    if not 1 <= harmonics <= MAX_HARMONICS:
+        raise ValueError(f"harmonics must be in [1, {MAX_HARMONICS}], got {harmonics}")
     params = params or FishParams()
     settings = settings or NmpcSettings()
     timings: dict[str, float] = {}
@@ -235,7 +243,8 @@ def identify(
     timings["reference_runs"] = time.perf_counter() - t0
 
     osc_knots, osc_table, oscillation, held_oscillation = (), None, None, None
-    if yaw_damping == "oscillation":
+    wave_knots, wave_table = (), None
+    if yaw_damping in ("oscillation", "waveform"):
         try:
             osc_knots, osc_table = fit_oscillation(grid.patterns, ref.yaw_oscillation, ref.yaw_phase, ref.converged)
         except ValueError as err:
@@ -247,6 +256,15 @@ def identify(
         oscillation = np.array([oscillator.yaw_oscillation(*p)[0] for p in grid.patterns])
         if held is not None:
             held_oscillation = np.array([oscillator.yaw_oscillation(*p)[0] for p in held.patterns])
+    if yaw_damping == "waveform":
+        # the rate correction's reference: mean |omega| over the quadrature of the kept harmonics
+        mean_abs = np.mean(np.abs(ref.velocities[:, 2:3] + waveform_samples(ref.yaw_harmonics[:, :harmonics])), axis=1)
+        wave_knots, wave_table = fit_waveform(grid.patterns, ref.yaw_harmonics, harmonics, ref.converged, mean_abs)
+        # the averaged model will use the splines' waveform (one fin: the phase does not matter)
+        oscillator = dataclasses.replace(oscillator, waveform_knots=wave_knots, waveform_table=wave_table)
+        oscillation = waveform_samples(np.array([oscillator.yaw_waveform(*p) for p in grid.patterns]))
+        if held is not None:
+            held_oscillation = waveform_samples(np.array([oscillator.yaw_waveform(*p) for p in held.patterns]))
 
     t0 = time.perf_counter()
     forcing = unscaled_forcing(grid.patterns, params, sway=SWAY)
@@ -322,10 +340,13 @@ def identify(
         "method": "full-model steady states, NMPC per pattern (paper Sec. 4.3), closed form chosen on held-out "
                   "patterns between cross-validated polynomials and tensor-product cubic splines",
         "sway": f"{SWAY}: K_fy multiplies the fin's averaged force magnitude (the paper's K_fy cos(bias))",
-        "yaw_damping": (
-            "oscillation: the mean of c4 omega|omega| over the in-beat yaw oscillation (beyond the paper); "
-            "its phasor A T_p (cos phi, sin phi) interpolated from the reference runs"
-            if yaw_damping == "oscillation" else "paper: c4 omega|omega| (eq. 20)"),
+        "yaw_damping": {
+            "waveform": f"waveform: the mean of c4 omega|omega| over the in-beat yaw waveform, {harmonics} harmonics "
+                        f"T_p c_k interpolated from the reference runs, {QUADRATURE}-point quadrature over the beat "
+                        "(docs/model.md 3.6, beyond the paper)",
+            "oscillation": "oscillation: the mean of c4 omega|omega| over the in-beat yaw oscillation (beyond the "
+                           "paper); its phasor A T_p (cos phi, sin phi) interpolated from the reference runs",
+            "paper": "paper: c4 omega|omega| (eq. 20)"}[yaw_damping],
         "grid": grid.to_dict(),
         "model_parameters": dataclasses.asdict(params),
         "nmpc": {**settings.as_dict(), "rk4_substeps": substeps, "oracle_rtol": ORACLE_RTOL},
@@ -365,6 +386,6 @@ def identify(
                                                  ref.yaw_phase]).round(10).tolist()],
         },
     }
-    scaling = ScalingFunctions(powers, coefs, meta, knots, table, SWAY, osc_knots, osc_table)
+    scaling = ScalingFunctions(powers, coefs, meta, knots, table, SWAY, osc_knots, osc_table, wave_knots, wave_table)
     return IdentificationResult(grid, ref, forcing, k_nmpc, k_oracle, usable, flags, fits, candidates, scaling,
                                 timings, splines if "spline" in forms else {}, chosen, comparison)

@@ -15,7 +15,8 @@ forcing vector it is given differs).
 With the oscillation-averaged yaw damping (``pectoral_gym.averaging``, beyond
 the paper) ``f3`` uses ``c4 A^2 q(omega / A)`` instead of ``c4 omega|omega|``, with
 the pattern's yaw-oscillation amplitude ``A`` measured in its reference run;
-``A = 0`` gives the paper's ``f3``.
+``A = 0`` gives the paper's ``f3``. With the waveform damping (``docs/model.md`` 3.6) the
+parameter is the pattern's sampled yaw waveform and ``f3`` uses the mean of ``c4 x|x|`` over it.
 
 The NMPC drives the tracking error ``e = v - v_ref`` (eq. 33) to zero by
 minimising ``sum_k e_k' Q e_k ts + e_N' Q_T e_N`` (eqs. 34-35) over a horizon
@@ -39,7 +40,7 @@ from typing import Any, NamedTuple
 import casadi as ca
 import numpy as np
 
-from pectoral_gym.averaging import EXACT, averaged_body_accel, averaged_fin_forcing
+from pectoral_gym.averaging import EXACT, averaged_body_accel, averaged_fin_forcing, equivalent_amplitude
 from pectoral_gym.dynamics import linearised_rate
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import FishParams, body_coefficients, coefficient_vector
@@ -58,10 +59,7 @@ class _Parameters(NamedTuple):
     v0: Any  # (3,) initial (vx, vy, omega)
     v_ref: Any  # (3,) reference (vx, vy, omega), eq. (33)
     forcing: Any  # (3,) unscaled averaged forcing of the pattern
-    oscillation: Any  # (1,) yaw-oscillation amplitude [rad/s]
-
-
-_PARAMETER_SIZES = _Parameters(v0=3, v_ref=3, forcing=3, oscillation=1)
+    oscillation: Any  # (1,) yaw-oscillation amplitude [rad/s], or (QUADRATURE,) yaw-waveform samples [rad/s]
 
 
 @dataclass(frozen=True)
@@ -167,6 +165,8 @@ def auto_substeps(
     """
     velocities = np.asarray(velocities, dtype=np.float64).reshape(-1, 3)
     amplitude = np.zeros(len(velocities)) if oscillation is None else np.asarray(oscillation, dtype=np.float64)
+    if amplitude.ndim == 2:  # yaw-waveform samples: the sinusoid with their mean absolute value (step rule)
+        amplitude = equivalent_amplitude(amplitude)
     b = body_coefficients(params)
     rates = [linearised_rate(math.hypot(vx, vy), abs(w), float(a), b.m1, b.m2, b.J3, b.c1, b.c2, b.c4)
              for (vx, vy, w), a in zip(velocities, amplitude, strict=True)]
@@ -180,8 +180,9 @@ class ScalingNmpc:
         params: Model parameters.
         settings: NMPC settings.
         velocities: Reference velocities of all patterns to be solved (to pick the RK4 substeps).
-        oscillation: Their yaw-oscillation amplitudes [rad/s] (oscillation-averaged yaw
-            damping), or ``None`` for the paper's damping.
+        oscillation: Their yaw-oscillation amplitudes [rad/s] ``(n,)`` (oscillation-averaged yaw
+            damping), their yaw-waveform samples ``(n, QUADRATURE)`` (waveform damping), or ``None``
+            for the paper's damping.
     """
 
     def __init__(self, params: FishParams, settings: NmpcSettings, velocities: np.ndarray,
@@ -194,17 +195,22 @@ class ScalingNmpc:
         v = ca.SX.sym("v", 3)
         u = ca.SX.sym("u", 3)
         forcing = ca.SX.sym("forcing", 3)
-        amplitude = ca.SX.sym("A")
+        waveform = oscillation is not None and np.ndim(oscillation) == 2
+        width = np.shape(oscillation)[1] if waveform else 1
+        self._sizes = _Parameters(v0=3, v_ref=3, forcing=3, oscillation=width)
+        amplitude = ca.SX.sym("A", width)
 
         def rhs(state, inputs):
             k, f, a = inputs  # eqs. (30)-(32): the scaling values multiply the forcing
+            if waveform:
+                return body_accel_sx(state, k * f, params, yaw_waveform=a)
             return body_accel_sx(state, k * f, params, yaw_oscillation=ca.fmax(a, _OSCILLATION_FLOOR))
 
         end = rk4_sx(rhs, v, (u, forcing, amplitude), settings.sampling / self.substeps, self.substeps)
         step = ca.Function("step", [v, u, forcing, amplitude], [end])  # one sampling interval
 
         inputs = ca.SX.sym("K", 3, n_samples)  # column k: u over sample k
-        p = named_symbols(_PARAMETER_SIZES)
+        p = named_symbols(self._sizes)
         cost = 0.0
         x = p.v0
         for k in range(n_samples):
@@ -225,14 +231,15 @@ class ScalingNmpc:
         self._n_samples = n_samples
 
     def solve(self, v_ref: np.ndarray, forcing: np.ndarray, guess: np.ndarray | None = None,
-              oscillation: float = 0.0) -> NmpcResult:
+              oscillation: float | np.ndarray = 0.0) -> NmpcResult:
         """Optimal inputs for one pattern, starting at ``v_ref``.
 
         Args:
             v_ref: ``(3,)`` reference ``(vx, vy, omega)`` from the full model.
             forcing: ``(3,)`` unscaled averaged forcing of the pattern.
             guess: Initial guess of ``K`` (3,) (e.g. the previous pattern's solution); ones if ``None``.
-            oscillation: The pattern's yaw-oscillation amplitude [rad/s]; 0 for the paper's damping.
+            oscillation: The pattern's yaw-oscillation amplitude [rad/s] (0 for the paper's damping),
+                or its yaw-waveform samples when the problem was built with them.
 
         A solver failure is returned as ``success=False`` (never raised).
         """

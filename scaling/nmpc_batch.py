@@ -47,13 +47,14 @@ def solve_nmpc_batch(
 ) -> list[NmpcResult]:
     """One NMPC per pattern, over ``jobs`` processes (0: all cores; 1: in this process).
 
-    ``oscillation``: per-pattern yaw-oscillation amplitudes [rad/s] for the
-    oscillation-averaged yaw damping, ``None`` for the paper's damping.
+    ``oscillation``: per-pattern yaw-oscillation amplitudes [rad/s] ``(n,)`` for the
+    oscillation-averaged yaw damping, or yaw-waveform samples ``(n, QUADRATURE)`` for the
+    waveform damping (``pectoral_gym.averaging.waveform_samples``); ``None`` for the paper's damping.
     """
     n = len(velocities)
     jobs = jobs or os.cpu_count() or 1
     amplitude = np.zeros(n) if oscillation is None else np.asarray(oscillation, dtype=np.float64)
-    tasks = [(i, velocities[i], forcing[i], float(amplitude[i]))
+    tasks = [(i, velocities[i], forcing[i], amplitude[i])
              for i in range(n) if np.all(np.isfinite(velocities[i]))]
     results: list[NmpcResult | None] = [None] * n
     bar = tqdm(total=n, desc="NMPC per pattern", unit="pattern", disable=not progress)

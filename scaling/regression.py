@@ -30,6 +30,7 @@ __all__ = [
     "Fit",
     "SplineFit",
     "fit_oscillation",
+    "fit_waveform",
     "fit_spline",
     "spline_nodes",
     "FEATURE_SETS",
@@ -344,12 +345,48 @@ def fit_oscillation(
     """
     patterns = np.asarray(patterns, dtype=np.float64)
     scaled = np.asarray(amplitude, dtype=np.float64) * patterns[:, 2]
-    parts = (scaled * np.cos(phase), scaled * np.sin(phase))
-    ok = np.isfinite(scaled) & np.isfinite(phase) & (True if usable is None else np.asarray(usable, dtype=bool))
+    return _period_free_splines(patterns, [scaled * np.cos(phase), scaled * np.sin(phase)], usable)
+
+
+def fit_waveform(
+    patterns: np.ndarray, harmonics: np.ndarray, count: int, usable: np.ndarray | None = None,
+    mean_abs: np.ndarray | None = None,
+) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
+    """Splines of the first ``count`` yaw-waveform harmonics ``T_p c_k`` over (bias, amplitude, 1/ratio).
+
+    As :func:`fit_oscillation`, for each of ``Re, Im`` of ``T_p c_k``, ``k = 1..count``
+    (period-free for the same reason).
+
+    Args:
+        patterns: ``(n, 4)`` grid patterns (a tensor grid).
+        harmonics: ``(n, >= count)`` complex ``c_k`` [rad/s] (``scaling.reference.yaw_waveform_harmonics``).
+        count: Harmonics to keep.
+        usable: ``(n,)`` mask (default: finite values).
+        mean_abs: ``(n,)`` mean ``|omega|`` [rad/s] of the reference runs (the waveform's rate
+            correction), or ``None``.
+
+    Returns:
+        ``(waveform_knots, waveform_table)`` for :class:`pectoral_gym.kfunctions.ScalingFunctions`,
+        the table ``(2 count (+1), n0, n1, n2)`` with channels ``Re c_1, Im c_1, Re c_2, ...``
+        (then ``T_p`` times ``mean_abs``).
+    """
+    patterns = np.asarray(patterns, dtype=np.float64)
+    scaled = np.asarray(harmonics, dtype=np.complex128)[:, :count] * patterns[:, 2:3]
+    if scaled.shape[1] != count:
+        raise ValueError(f"{count} harmonics requested, the runs have {scaled.shape[1]}")
+    parts = [part for k in range(count) for part in (scaled[:, k].real, scaled[:, k].imag)]
+    if mean_abs is not None:
+        parts.append(np.asarray(mean_abs, dtype=np.float64) * patterns[:, 2])
+    return _period_free_splines(patterns, parts, usable)
+
+
+def _period_free_splines(patterns: np.ndarray, parts: list[np.ndarray], usable: np.ndarray | None):
+    """Knots and stacked tables of one interpolating spline per value list (nodes missing: cubic polynomial fill)."""
+    ok = np.all([np.isfinite(v) for v in parts], axis=0) & (True if usable is None else np.asarray(usable, dtype=bool))
     powers = monomial_powers((0, 1, 5), 3)
     fits = []
     for values in parts:
         coefs = np.linalg.lstsq(design_matrix(feature_matrix(patterns[ok]), powers), values[ok], rcond=None)[0]
         fits.append(fit_spline(patterns, values, ok,
                                fill=lambda p, c=coefs: design_matrix(feature_matrix(p), powers) @ c))
-    return fits[0].knots, np.array([fits[0].table, fits[1].table])
+    return fits[0].knots, np.array([f.table for f in fits])

@@ -11,8 +11,9 @@ term [rad/s^2]   full model (mean over the window)              averaged model (
 ``moment``       ``mean(tau) / J3`` (exact: K = 1 averages)     ``(K_m(R) taubar_R + K_m(L) taubar_L) / J3``
 ``munk``         ``(m1 - m2) / J3 mean(vx vy)``                 ``(m1 - m2) / J3 mean(vx) mean(vy)``
 ``damping``      ``c4 mean(omega |omega|)``                     ``c4 q(mean omega, A)``, ``A`` from the
-                                                                phasors (relative phase averaged when
-                                                                the periods differ)
+                                                                phasors, or the waveform damping with
+                                                                the file's harmonics (relative phase
+                                                                averaged when the periods differ)
 ===============  =============================================  ==========================================
 
 At a periodic steady state the full model's terms balance (``moment + munk - damping = 0``, the
@@ -36,9 +37,10 @@ from pathlib import Path
 
 import numpy as np
 
-from pectoral_gym.averaging import EXACT, averaged_fin_forcing
-from pectoral_gym.dynamics import oscillating_square_mean
+from pectoral_gym.averaging import EXACT, averaged_fin_forcing, combined_waveform
+from pectoral_gym.dynamics import oscillating_square_mean, waveform_square_mean
 from pectoral_gym.kfunctions import ScalingFunctions, default_scaling_path
+from pectoral_gym.ktables import QUADRATURE, quadrature_window
 from pectoral_gym.models import FullModel
 from pectoral_gym.params import FishParams, body_coefficients, coefficient_vector
 
@@ -65,15 +67,30 @@ def parse_pattern(label: str) -> np.ndarray:
 
 def _model_damping(omega: float, right: np.ndarray, left: np.ndarray, scaling: ScalingFunctions, c4: float) -> float:
     """The averaged model's yaw damping at mean yaw rate ``omega`` (docs/model.md 3.6)."""
+    if right[1] > 0 and left[1] > 0 and right[2] != left[2]:
+        shifts = np.linspace(0.0, 2.0 * np.pi, _PHASES, endpoint=False)
+    else:  # one fin, or equal periods started together: a fixed relative phase of 0
+        shifts = np.zeros(1)
+    if scaling.harmonics > 0:
+        fins = [(beat, side) for beat, side in ((right, 1.0), (left, -1.0)) if beat[1] > 0]
+        if len(fins) == 2 and quadrature_window(2 * np.pi / right[2], 2 * np.pi / left[2])[0] > QUADRATURE:
+            shifts = np.zeros(1)  # commensurate periods started together: a fixed phase relation
+        waves = np.array([side * scaling.yaw_waveform(*beat) for beat, side in fins])
+        mean_abs = np.array([scaling.yaw_mean_abs(*beat) for beat, _ in fins]) if scaling.has_rate_correction else None
+        k = np.arange(1, scaling.harmonics + 1)
+        damping = []
+        for shift in shifts:  # the left fin's beat phase relative to the right one's
+            rotated = waves.copy()
+            if len(fins) == 2:
+                rotated[1] *= np.exp(1j * k * shift)
+            samples = combined_waveform(rotated, mean_abs, np.array([beat[2] for beat, _ in fins]), omega, c4)
+            damping.append(waveform_square_mean(omega, samples))
+        return c4 * float(np.mean(damping))
     phasors = []
     for beat, side in ((right, 1.0), (left, -1.0)):
         amplitude, phase = scaling.yaw_oscillation(*beat) if beat[1] > 0 else (0.0, 0.0)
         phasors.append(side * amplitude * np.exp(1j * phase))
-    if right[1] > 0 and left[1] > 0 and right[2] != left[2]:
-        shifts = np.exp(1j * np.linspace(0.0, 2.0 * np.pi, _PHASES, endpoint=False))
-    else:  # one fin, or equal periods started together: a fixed relative phase of 0
-        shifts = np.ones(1)
-    amplitudes = np.abs(phasors[0] + phasors[1] * shifts)
+    amplitudes = np.abs(phasors[0] + phasors[1] * np.exp(1j * shifts))
     return c4 * float(np.mean([oscillating_square_mean(omega, a) for a in amplitudes]))
 
 
