@@ -36,7 +36,7 @@ from typing import Any
 
 import yaml
 
-from agents.config import algo_class, algo_kwargs, parse_overrides, resolve_config
+from agents.config import algo_class, algo_kwargs, evaluation_env, parse_overrides, resolve_config
 
 __all__ = ["EVAL_SEED_OFFSET", "QUICK", "main", "make_run_dir", "train"]
 
@@ -67,6 +67,8 @@ def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool,
 
     from agents.evaluate import evaluate
     from agents.policy import SB3Controller
+
+    eval_env, eval_kwargs = evaluation_env(config)
 
     class TrainCallback(BaseCallback):
         """Progress bar, periodic evaluation with :func:`agents.evaluate.evaluate`, best model kept."""
@@ -102,8 +104,8 @@ def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool,
                                  clip_obs=venv.clip_obs, epsilon=venv.epsilon)
 
         def run_evaluation(self) -> None:
-            result = evaluate(self.controller(), config["env_id"], n_episodes=config["eval_episodes"],
-                              seed=config["seed"] + EVAL_SEED_OFFSET, env_kwargs=config["env_kwargs"])
+            result = evaluate(self.controller(), eval_env, n_episodes=config["eval_episodes"],
+                              seed=config["seed"] + EVAL_SEED_OFFSET, env_kwargs=eval_kwargs)
             mean_return = result.metrics["return"].mean
             success = result.metrics["success"].mean if "success" in result.metrics else 0.0
             self.logger.record("eval/mean_return", mean_return)
