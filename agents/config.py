@@ -28,7 +28,9 @@ keyed by env id (zoo reads only the entry of ``--env``):
   stands in for the robot (its episodes are disjoint from the reported ones);
 * ``eval_env_kwargs``: env arguments of the periodic evaluation, over the training ``env_kwargs`` (a ``null``
   value drops a training argument: ``{randomize: null}`` validates on the nominal parameters). Arguments of
-  the averaged model only (``scaling``, ``check_scaling_params``) are dropped on the full model.
+  the averaged model only (``scaling``, ``check_scaling_params``) are dropped on the full model;
+* ``action_change_penalty``: training-only penalty per unit of mean absolute action change between steps
+  (:mod:`agents.smoothing`; 0: off).
 """
 
 from __future__ import annotations
@@ -60,13 +62,14 @@ __all__ = [
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 PROJECT_SECTION = "agents.train"
 OWN_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs", "eval_freq", "eval_episodes", "eval_env",
-            "eval_env_kwargs")
-PROJECT_KEYS = ("eval_freq", "eval_episodes", "eval_env", "eval_env_kwargs")
+            "eval_env_kwargs", "action_change_penalty")
+PROJECT_KEYS = ("eval_freq", "eval_episodes", "eval_env", "eval_env_kwargs", "action_change_penalty")
 ZOO_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs", "frame_stack", "env_wrapper",
             "vec_env_wrapper", "callback", "monitor_kwargs")
 _UNSUPPORTED = ("frame_stack", "env_wrapper", "vec_env_wrapper", "callback", "monitor_kwargs", "replay_buffer_class")
 _DEFAULTS = {"n_envs": 8, "normalize": False, "policy": "MlpPolicy", "env_kwargs": {}, "eval_freq": 0,
-             "eval_episodes": 20, "eval_env": None, "eval_env_kwargs": {}}
+             "eval_episodes": 20, "eval_env": None, "eval_env_kwargs": {},
+             "action_change_penalty": 0.0}
 _ACTIVATIONS = {"tanh": "nn.Tanh", "relu": "nn.ReLU", "elu": "nn.ELU", "leaky_relu": "nn.LeakyReLU"}
 _CLASS_KEYS = ("activation_fn", "optimizer_class")
 _SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")
@@ -262,6 +265,12 @@ def resolve_config(algo: str, env_id: str, seed: int, task: str | None = None,
     if own["n_envs"] < 1 or own["n_timesteps"] < 1:
         raise ValueError(f"n_envs and n_timesteps must be >= 1, got {own['n_envs']} and {own['n_timesteps']}")
     own["eval_env"] = env_id if own["eval_env"] is None else str(own["eval_env"])
+    try:
+        own["action_change_penalty"] = float(own["action_change_penalty"])
+    except (TypeError, ValueError):
+        raise ValueError(f"action_change_penalty must be a number, got {own['action_change_penalty']!r}") from None
+    if not (own["action_change_penalty"] >= 0 and own["action_change_penalty"] < float("inf")):
+        raise ValueError(f"action_change_penalty must be a finite number >= 0, got {own['action_change_penalty']}")
     if not isinstance(own["eval_env_kwargs"], dict):
         raise ValueError(f"eval_env_kwargs must be a mapping, got {own['eval_env_kwargs']!r}")
     accepted = set(inspect.signature(cls.__init__).parameters) - {"self", "policy", "env", "seed", "device"}

@@ -184,7 +184,12 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
     with open(run_dir / "config.yaml", "w") as f:
         yaml.safe_dump({**config, "torch_threads": int(torch_threads), "device": device}, f, sort_keys=False)
     (run_dir / "command.txt").write_text((command or shlex.join(sys.argv)) + "\n")
-    venv = VecMonitor(make_fish_vec_env(config["env_id"], config["n_envs"], config["env_kwargs"], seed=seed))
+    venv = make_fish_vec_env(config["env_id"], config["n_envs"], config["env_kwargs"], seed=seed)
+    if config.get("action_change_penalty"):
+        from agents.smoothing import ActionChangePenalty
+
+        venv = ActionChangePenalty(venv, config["action_change_penalty"])  # training only (agents.smoothing)
+    venv = VecMonitor(venv)
     normalize = config["normalize"]
     if normalize:
         venv = VecNormalize(venv, gamma=config["algo_kwargs"].get("gamma", 0.99),
