@@ -235,6 +235,7 @@ def run_seeds(seeds: Sequence[int], out: str | Path, jobs: int = 1, overrides: d
     per_seed = [results[s] for s in seeds]
     report = {"settings": {"seeds": seeds, "jobs": int(jobs), "train_env": TRAIN_ENV, "episodes": int(episodes),
                            "eval_seed": eval_seed, "overrides": args["overrides"], "probe": probe,
+                           "eval_env": config["eval_env"],
                            "hyperparams_file": hyperparams_file, "n_timesteps": config["n_timesteps"],
                            "algo_kwargs": {k: str(v) for k, v in config["algo_kwargs"].items()},
                            "command": command or shlex.join(["python", "-m", "agents.seeds", *sys.argv[1:]]),

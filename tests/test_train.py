@@ -127,10 +127,15 @@ def test_on_evaluation_sees_every_evaluation_and_can_stop_the_run(tmp_path):
 def test_evaluation_env_resolution():
     from agents.config import evaluation_env
 
+    shipped = resolve_config("ppo", ENV, 0)  # the shipped file validates on the full model, nominal parameters
+    assert evaluation_env(shipped) == ("PectoralFish-Full-v0", {"task": "goal"})
     config = resolve_config("ppo", ENV, 0, hyperparams={"env_kwargs": {"randomize": {"body_mass": 0.1},
-                                                                       "scaling": "none"}})
-    assert config["eval_env"] == ENV  # default: the training env, with the training arguments
-    assert evaluation_env(config) == (ENV, {"task": "goal", "randomize": {"body_mass": 0.1}, "scaling": "none"})
+                                                                       "scaling": "none"},
+                                                        "eval_env": None})
+    assert config["eval_env"] == ENV  # null: the training env, its arguments but the file's randomize: null
+    assert evaluation_env(config) == (ENV, {"task": "goal", "scaling": "none"})
+    config["eval_env_kwargs"] = {"randomize": {"drag_coef": 0.2}}
+    assert evaluation_env(config) == (ENV, {"task": "goal", "randomize": {"drag_coef": 0.2}, "scaling": "none"})
     config["eval_env"], config["eval_env_kwargs"] = "PectoralFish-Full-v0", {"randomize": None, "wall_penalty": 5}
     # null drops a training argument; the averaged model's own arguments do not reach the full model
     assert evaluation_env(config) == ("PectoralFish-Full-v0", {"task": "goal", "wall_penalty": 5})
