@@ -1,7 +1,8 @@
 """Results across training seeds: train the demo's PPO for N seeds, evaluate each, aggregate as rliable does.
 
 Each seed trains exactly as ``pectoral-demo --seed S`` (PPO on ``PectoralFish-Averaged-v0``, task ``goal``,
-``agents/hyperparams/ppo.yml``, best model chosen on the periodic evaluation's episodes) and is then
+``agents/hyperparams/ppo.yml``, best model chosen on the periodic evaluation's episodes, which the shipped
+file runs on the full model: ``eval_env``) and is then
 evaluated on three settings, the same held-out episodes for every seed (episode ``k`` reset with
 ``--eval-seed + k``, default the demo's): the averaged model, the full model, and the full model with
 :data:`agents.evaluate.DEFAULT_RANDOMIZATION`. A :class:`agents.solve_time.SolveProbe` (``--probe-every``)

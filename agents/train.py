@@ -12,7 +12,8 @@ evaluation settings come from the file's ``agents.train`` section, ``--eval-freq
 
 Each run writes ``runs/<env>/<algo>_<task>_seed<seed>_<stamp>/``: ``model.zip``
 (final), ``best_model.zip`` and ``vecnormalize.pkl`` (best on the periodic
-evaluation, its observation statistics), ``vecnormalize_final.pkl`` (statistics
+evaluation, its observation statistics; the evaluation runs on ``eval_env``, for
+``ppo.yml`` the full model: :func:`agents.config.evaluation_env`), ``vecnormalize_final.pkl`` (statistics
 of ``model.zip``), ``config.yaml`` (resolved config), ``command.txt``,
 ``training.json`` (time, steps/s, probe time, evaluations) and TensorBoard logs in ``tb/``.
 The same ``--seed`` on the same machine repeats a run.
