@@ -22,7 +22,15 @@ its command line instead, live in the file's top-level ``agents.train`` section,
 keyed by env id (zoo reads only the entry of ``--env``):
 
 * ``eval_freq``: environment steps in all between periodic evaluations (0: none);
-* ``eval_episodes``: episodes per periodic evaluation.
+* ``eval_episodes``: episodes per periodic evaluation;
+* ``eval_env``: env id of the periodic evaluation, which selects ``best_model.zip`` (default: the training
+  env). ``PectoralFish-Full-v0`` validates a policy trained on the averaged model on the full model, which
+  stands in for the robot (its episodes are disjoint from the reported ones);
+* ``eval_env_kwargs``: env arguments of the periodic evaluation, over the training ``env_kwargs`` (a ``null``
+  value drops a training argument: ``{randomize: null}`` validates on the nominal parameters). Arguments of
+  the averaged model only (``scaling``, ``check_scaling_params``) are dropped on the full model;
+* ``action_change_penalty``: training-only penalty per unit of mean absolute action change between steps
+  (:mod:`agents.smoothing`; 0: off).
 """
 
 from __future__ import annotations
@@ -38,6 +46,7 @@ import yaml
 
 __all__ = [
     "HYPERPARAMS_DIR",
+    "evaluation_env",
     "OWN_KEYS",
     "PROJECT_SECTION",
     "algo_class",
@@ -52,13 +61,15 @@ __all__ = [
 
 HYPERPARAMS_DIR = Path(__file__).parent / "hyperparams"
 PROJECT_SECTION = "agents.train"
-OWN_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs", "eval_freq", "eval_episodes")
-PROJECT_KEYS = ("eval_freq", "eval_episodes")
+OWN_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs", "eval_freq", "eval_episodes", "eval_env",
+            "eval_env_kwargs", "action_change_penalty")
+PROJECT_KEYS = ("eval_freq", "eval_episodes", "eval_env", "eval_env_kwargs", "action_change_penalty")
 ZOO_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs", "frame_stack", "env_wrapper",
             "vec_env_wrapper", "callback", "monitor_kwargs")
 _UNSUPPORTED = ("frame_stack", "env_wrapper", "vec_env_wrapper", "callback", "monitor_kwargs", "replay_buffer_class")
 _DEFAULTS = {"n_envs": 8, "normalize": False, "policy": "MlpPolicy", "env_kwargs": {}, "eval_freq": 0,
-             "eval_episodes": 20}
+             "eval_episodes": 20, "eval_env": None, "eval_env_kwargs": {},
+             "action_change_penalty": 0.0}
 _ACTIVATIONS = {"tanh": "nn.Tanh", "relu": "nn.ReLU", "elu": "nn.ELU", "leaky_relu": "nn.LeakyReLU"}
 _CLASS_KEYS = ("activation_fn", "optimizer_class")
 _SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")
@@ -100,7 +111,7 @@ def load_hyperparams(algo: str, env_id: str, path: str | Path | None = None) -> 
 
 
 def load_project_settings(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:
-    """The ``agents.train`` settings of ``env_id`` (``eval_freq``, ``eval_episodes``); ``{}`` if there are none.
+    """The ``agents.train`` settings of ``env_id`` (:data:`PROJECT_KEYS`); ``{}`` if there are none.
 
     Raises:
         FileNotFoundError: If the file does not exist.
@@ -253,11 +264,37 @@ def resolve_config(algo: str, env_id: str, seed: int, task: str | None = None,
             raise ValueError(f"{key} must be an integer, got {own[key]!r}") from None
     if own["n_envs"] < 1 or own["n_timesteps"] < 1:
         raise ValueError(f"n_envs and n_timesteps must be >= 1, got {own['n_envs']} and {own['n_timesteps']}")
+    own["eval_env"] = env_id if own["eval_env"] is None else str(own["eval_env"])
+    try:
+        own["action_change_penalty"] = float(own["action_change_penalty"])
+    except (TypeError, ValueError):
+        raise ValueError(f"action_change_penalty must be a number, got {own['action_change_penalty']!r}") from None
+    if not (own["action_change_penalty"] >= 0 and own["action_change_penalty"] < float("inf")):
+        raise ValueError(f"action_change_penalty must be a finite number >= 0, got {own['action_change_penalty']}")
+    if not isinstance(own["eval_env_kwargs"], dict):
+        raise ValueError(f"eval_env_kwargs must be a mapping, got {own['eval_env_kwargs']!r}")
     accepted = set(inspect.signature(cls.__init__).parameters) - {"self", "policy", "env", "seed", "device"}
     unknown = sorted(set(params) - accepted)
     if unknown:
         raise ValueError(f"unknown {algo.upper()} arguments {unknown}; accepted: {sorted(accepted)}")
     return {"algo": algo.lower(), "env_id": env_id, "seed": int(seed), **own, "algo_kwargs": params}
+
+
+def evaluation_env(config: dict[str, Any]) -> tuple[str, dict[str, Any]]:
+    """Env id and arguments of the periodic evaluation of a resolved config (see the module docstring).
+
+    Raises:
+        ValueError: If ``eval_env`` is not a registered fish env id.
+    """
+    from agents.evaluate import AVERAGED_ONLY
+    from pectoral_gym.registration import ENV_IDS
+
+    env_id = config.get("eval_env") or config["env_id"]
+    if env_id not in ENV_IDS:
+        raise ValueError(f"eval_env must be one of {sorted(ENV_IDS)}, got {env_id!r}")
+    kwargs = {**config["env_kwargs"], **dict(config.get("eval_env_kwargs") or {})}
+    dropped = AVERAGED_ONLY if ENV_IDS[env_id] == "full" else ()
+    return env_id, {k: v for k, v in kwargs.items() if v is not None and k not in dropped}
 
 
 def _schedule(value: Any) -> float | Callable[[float], float] | None:

@@ -1,7 +1,8 @@
 """Results across training seeds: train the demo's PPO for N seeds, evaluate each, aggregate as rliable does.
 
 Each seed trains exactly as ``pectoral-demo --seed S`` (PPO on ``PectoralFish-Averaged-v0``, task ``goal``,
-``agents/hyperparams/ppo.yml``, best model chosen on the periodic evaluation's episodes) and is then
+``agents/hyperparams/ppo.yml``, best model chosen on the periodic evaluation's episodes, which the shipped
+file runs on the full model: ``eval_env``) and is then
 evaluated on three settings, the same held-out episodes for every seed (episode ``k`` reset with
 ``--eval-seed + k``, default the demo's): the averaged model, the full model, and the full model with
 :data:`agents.evaluate.DEFAULT_RANDOMIZATION`. A :class:`agents.solve_time.SolveProbe` (``--probe-every``)
@@ -235,6 +236,7 @@ def run_seeds(seeds: Sequence[int], out: str | Path, jobs: int = 1, overrides: d
     per_seed = [results[s] for s in seeds]
     report = {"settings": {"seeds": seeds, "jobs": int(jobs), "train_env": TRAIN_ENV, "episodes": int(episodes),
                            "eval_seed": eval_seed, "overrides": args["overrides"], "probe": probe,
+                           "eval_env": config["eval_env"],
                            "hyperparams_file": hyperparams_file, "n_timesteps": config["n_timesteps"],
                            "algo_kwargs": {k: str(v) for k, v in config["algo_kwargs"].items()},
                            "command": command or shlex.join(["python", "-m", "agents.seeds", *sys.argv[1:]]),

@@ -52,7 +52,8 @@ def to_markdown(report: dict[str, Any]) -> str:
              f"`{s['command']}`", "",
              f"PPO trained on `{s['train_env']}` (task `goal`, {s['n_timesteps']} steps, overrides "
              f"`{s['overrides']}`) for seeds {s['seeds']}, {s['jobs']} at a time on {s['cpu_count']} cores; "
-             f"{s['wall_time_s']:.0f} s in all. Each policy (best on its periodic evaluation) is evaluated on "
+             f"{s['wall_time_s']:.0f} s in all. Each policy (best on its periodic evaluation, on "
+             f"`{s.get('eval_env') or s['train_env']}`, episodes seed + 1000000 + k) is evaluated on "
              f"{s['episodes']} held-out episodes per setting (episode k reset with seed {s['eval_seed']} + k, the "
              "same for every training seed; deterministic policy). Success per seed: mean [95 % bootstrap interval "
              "over episodes].", "",
@@ -100,6 +101,8 @@ def plot_seeds(report: dict[str, Any], path: str | Path) -> Path:
     per_seed = report["per_seed"]
     figures = report["summary"]["figures"]
     solving = "time to solve [s]" in figures
+    eval_env = report["settings"].get("eval_env") or report["settings"]["train_env"]
+    model = "full" if "Full" in eval_env else "averaged"
     fig, axes = plt.subplots(1, 3 if solving else 2, figsize=(16 if solving else 11, 4), squeeze=False)
     ax = axes[0][0]
     offsets = np.linspace(-0.15, 0.15, len(per_seed)) if len(per_seed) > 1 else np.zeros(1)
@@ -124,7 +127,7 @@ def plot_seeds(report: dict[str, Any], path: str | Path) -> Path:
         colour = f"C{k % 10}"
         curve = run.get("training_evaluations") or []
         ax.plot([e["timesteps"] / 1e3 for e in curve], [e["success"] for e in curve], color=colour, lw=1,
-                label=f"seed {run['seed']}: periodic eval (averaged)")
+                label=f"seed {run['seed']}: periodic eval ({model})")
         probes = [e for e in curve if "probe" in e]
         ax.plot([e["timesteps"] / 1e3 for e in probes], [e["probe"]["success"] for e in probes], color=colour, lw=1,
                 ls="--", label="probe (full, held out)" if k == 0 else None)

@@ -12,7 +12,8 @@ evaluation settings come from the file's ``agents.train`` section, ``--eval-freq
 
 Each run writes ``runs/<env>/<algo>_<task>_seed<seed>_<stamp>/``: ``model.zip``
 (final), ``best_model.zip`` and ``vecnormalize.pkl`` (best on the periodic
-evaluation, its observation statistics), ``vecnormalize_final.pkl`` (statistics
+evaluation, its observation statistics; the evaluation runs on ``eval_env``, for
+``ppo.yml`` the full model: :func:`agents.config.evaluation_env`), ``vecnormalize_final.pkl`` (statistics
 of ``model.zip``), ``config.yaml`` (resolved config), ``command.txt``,
 ``training.json`` (time, steps/s, probe time, evaluations) and TensorBoard logs in ``tb/``.
 The same ``--seed`` on the same machine repeats a run.
@@ -36,7 +37,7 @@ from typing import Any
 
 import yaml
 
-from agents.config import algo_class, algo_kwargs, parse_overrides, resolve_config
+from agents.config import algo_class, algo_kwargs, evaluation_env, parse_overrides, resolve_config
 
 __all__ = ["EVAL_SEED_OFFSET", "QUICK", "main", "make_run_dir", "train"]
 
@@ -67,6 +68,8 @@ def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool,
 
     from agents.evaluate import evaluate
     from agents.policy import SB3Controller
+
+    eval_env, eval_kwargs = evaluation_env(config)
 
     class TrainCallback(BaseCallback):
         """Progress bar, periodic evaluation with :func:`agents.evaluate.evaluate`, best model kept."""
@@ -102,8 +105,8 @@ def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool,
                                  clip_obs=venv.clip_obs, epsilon=venv.epsilon)
 
         def run_evaluation(self) -> None:
-            result = evaluate(self.controller(), config["env_id"], n_episodes=config["eval_episodes"],
-                              seed=config["seed"] + EVAL_SEED_OFFSET, env_kwargs=config["env_kwargs"])
+            result = evaluate(self.controller(), eval_env, n_episodes=config["eval_episodes"],
+                              seed=config["seed"] + EVAL_SEED_OFFSET, env_kwargs=eval_kwargs)
             mean_return = result.metrics["return"].mean
             success = result.metrics["success"].mean if "success" in result.metrics else 0.0
             self.logger.record("eval/mean_return", mean_return)
@@ -182,7 +185,12 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
     with open(run_dir / "config.yaml", "w") as f:
         yaml.safe_dump({**config, "torch_threads": int(torch_threads), "device": device}, f, sort_keys=False)
     (run_dir / "command.txt").write_text((command or shlex.join(sys.argv)) + "\n")
-    venv = VecMonitor(make_fish_vec_env(config["env_id"], config["n_envs"], config["env_kwargs"], seed=seed))
+    venv = make_fish_vec_env(config["env_id"], config["n_envs"], config["env_kwargs"], seed=seed)
+    if config.get("action_change_penalty"):
+        from agents.smoothing import ActionChangePenalty
+
+        venv = ActionChangePenalty(venv, config["action_change_penalty"])  # training only (agents.smoothing)
+    venv = VecMonitor(venv)
     normalize = config["normalize"]
     if normalize:
         venv = VecNormalize(venv, gamma=config["algo_kwargs"].get("gamma", 0.99),

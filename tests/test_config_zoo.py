@@ -99,7 +99,10 @@ def test_demo_hyperparameters_reach_sb3_unchanged():
 
 
 def test_project_section_and_old_format(tmp_path):
-    assert load_project_settings("ppo", ENV) == {"eval_freq": 50000, "eval_episodes": 50}
+    assert load_project_settings("ppo", ENV) == {"eval_freq": 50000, "eval_episodes": 50,
+                                                 "eval_env": "PectoralFish-Full-v0",
+                                                 "eval_env_kwargs": {"randomize": None}}
+    assert load_project_settings("ppo", "PectoralFish-Full-v0") == {"eval_freq": 50000, "eval_episodes": 50}
     assert "agents.train" not in str(load_hyperparams("ppo", ENV))
     with pytest.raises(ValueError, match="no entry"):
         load_hyperparams("ppo", "agents.train")

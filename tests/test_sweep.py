@@ -4,6 +4,7 @@ import csv
 import importlib.util
 import json
 import os
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -21,6 +22,16 @@ ROOT = Path(__file__).resolve().parents[1]
 TINY = ["n_timesteps=500", "n_envs=4", "n_steps=32", "batch_size=64", "n_epochs=1", "eval_freq=100",
         "eval_episodes=2"]
 needs_ray = pytest.mark.skipif(importlib.util.find_spec("ray") is None, reason="ray[tune] not installed (sweep extra)")
+
+
+@pytest.fixture(autouse=True)
+def _restore_signal_handlers():
+    """Ray and Tune install SIGINT/SIGTERM handlers in the calling process and leave them: restore them, so the
+    hardware tests' signal checks that later run in the same pytest worker see the default handlers."""
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    yield
+    for sig, handler in saved.items():
+        signal.signal(sig, handler)
 
 
 def test_grid_values_split_outside_brackets_and_read_as_yaml():

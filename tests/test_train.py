@@ -122,3 +122,46 @@ def test_on_evaluation_sees_every_evaluation_and_can_stop_the_run(tmp_path):
     stats = json.loads((run_dir / "training.json").read_text())
     assert stats["timesteps"] < 1024 and len(stats["evaluations"]) == 2
     assert (run_dir / "model.zip").is_file()
+
+
+def test_evaluation_env_resolution():
+    from agents.config import evaluation_env
+
+    shipped = resolve_config("ppo", ENV, 0)  # the shipped file validates on the full model, nominal parameters
+    assert evaluation_env(shipped) == ("PectoralFish-Full-v0", {"task": "goal"})
+    config = resolve_config("ppo", ENV, 0, hyperparams={"env_kwargs": {"randomize": {"body_mass": 0.1},
+                                                                       "scaling": "none"},
+                                                        "eval_env": None})
+    assert config["eval_env"] == ENV  # null: the training env, its arguments but the file's randomize: null
+    assert evaluation_env(config) == (ENV, {"task": "goal", "scaling": "none"})
+    config["eval_env_kwargs"] = {"randomize": {"drag_coef": 0.2}}
+    assert evaluation_env(config) == (ENV, {"task": "goal", "randomize": {"drag_coef": 0.2}, "scaling": "none"})
+    config["eval_env"], config["eval_env_kwargs"] = "PectoralFish-Full-v0", {"randomize": None, "wall_penalty": 5}
+    # null drops a training argument; the averaged model's own arguments do not reach the full model
+    assert evaluation_env(config) == ("PectoralFish-Full-v0", {"task": "goal", "wall_penalty": 5})
+    config["eval_env"] = "CartPole-v1"
+    with pytest.raises(ValueError, match="eval_env must be one of"):
+        evaluation_env(config)
+    with pytest.raises(ValueError, match="eval_env_kwargs must be a mapping"):
+        resolve_config("ppo", ENV, 0, hyperparams={"eval_env_kwargs": "full"})
+
+
+def test_best_model_is_selected_on_the_evaluation_env(tmp_path):
+    """The kept model's record is what evaluate() gives on the full model (the validation env), episodes seed + 1e6."""
+    import json
+
+    from agents.train import EVAL_SEED_OFFSET, train
+
+    full = "PectoralFish-Full-v0"
+    config = resolve_config("ppo", ENV, seed=3, hyperparams=parse_overrides(
+        TINY + ["eval_episodes=3", f"eval_env={full}", "eval_env_kwargs={randomize: null}",
+                "env_kwargs.randomize={body_mass: 0.1}"]))
+    run_dir = train(config, tmp_path / "run", progress=False)
+    records = json.loads((run_dir / "training.json").read_text())["evaluations"]
+    best = [r for r in records if r["best"]][-1]
+    policy = load_policy(run_dir)  # best_model.zip with its statistics
+    kwargs = {"task": "goal"}
+    on_full = evaluate(policy, full, n_episodes=3, seed=3 + EVAL_SEED_OFFSET, env_kwargs=kwargs)
+    assert on_full.metrics["return"].mean == pytest.approx(best["mean_return"], rel=1e-9)
+    on_averaged = evaluate(policy, ENV, n_episodes=3, seed=3 + EVAL_SEED_OFFSET, env_kwargs=kwargs)
+    assert on_averaged.metrics["return"].mean != pytest.approx(best["mean_return"], rel=1e-6)
