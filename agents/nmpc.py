@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.baselines import HandController
 from agents.fin_map import FinMap
 from agents.nmpc_problem import (
     GAIN_THRUST,
@@ -39,8 +40,9 @@ from agents.nmpc_problem import (
     to_u,
     to_z,
 )
+from agents.turning import turn_path_length
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.envs.observation import OBS_SIZE, OBS_VELOCITY, decode
+from pectoral_gym.envs.observation import OBS_SIZE, OBS_VELOCITY, Observation, decode
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.symbolic import STATE_POSITION, STATE_PSI, STATE_SIZE, STATE_VELOCITY
 
@@ -92,6 +94,9 @@ class NMPCController:
         self.bias_mid = float(np.clip(self.fins.bias_mid, b_low, b_high))
         self.u_rest = np.array(FinInputs(a_low, a_low, self.bias_mid, self.bias_mid))
         self.z_low, self.z_high = to_z(self.u_low), to_z(self.u_high)
+        self.hand = HandController(config) if s.hand_candidate else None
+        self.w_togo = s.w_togo if s.w_togo is not None else (0.0 if self.track else 3.0)
+        self._target_end = (0.0, 0.0)
         self.problem = NMPCProblem(config, s, self.fins, self.scaling, self.z_low, self.z_high)
         self._solver = self.problem.solver  # the controller calls it through this attribute (tests replace it)
         self._n = self.problem.horizon
@@ -111,7 +116,7 @@ class NMPCController:
         self._prev_obs: np.ndarray | None = None
         self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._duals: tuple[np.ndarray, np.ndarray] | None = None  # lam_x, lam_g of the last good solve
-        self.gains = np.ones(2)
+        self.gains = np.array(self.settings.initial_gains, dtype=np.float64)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Solve the NMPC problem for one observation ``(19,)``; returns the normalised action ``(8,)``."""
@@ -197,12 +202,43 @@ class NMPCController:
             guesses.append(then)
         return guesses
 
+    def _hand_guess(self, state: np.ndarray, ref: np.ndarray, vref: np.ndarray) -> np.ndarray:
+        """Inputs ``(4, horizon)`` of :class:`agents.baselines.HandController` in closed loop on the planning model.
+
+        Each interval, the law sees the model's predicted pose and the target (moved with its velocity),
+        and its yaw rate is the model's mean over the interval before (at first: the estimated one).
+        """
+        dt, n = self.dt, self._n
+        u = np.empty((len(FinInputs._fields), n))
+        x, z_prev, rate = state, to_z(self._u_prev), float(state[STATE_VELOCITY][2])  # omega
+        for k in range(n):
+            r = ref + vref * k * dt
+            c, s_ = math.cos(x[STATE_PSI]), math.sin(x[STATE_PSI])
+            ex, ey = r[0] - x[0], r[1] - x[1]
+            o = Observation(float(x[0]), float(x[1]), c, s_, float(x[3]), float(x[4]), float(x[5]),
+                            c * ex + s_ * ey, -s_ * ex + c * ey, c * vref[0] + s_ * vref[1],
+                            -s_ * vref[0] + c * vref[1], np.zeros(8))
+            b_r, a_r, b_l, a_l = self.hand.command(o, rate)
+            u[:, k] = np.clip(FinInputs(a_r, a_l, b_r, b_l), self.u_low, self.u_high)
+            z_k = to_z(u[:, k])
+            end = np.asarray(self.problem.interval(x, z_k, z_prev, self.gains)[0]).ravel()
+            if not np.all(np.isfinite(end)):
+                u[:, k + 1:] = u[:, k:k + 1]
+                break
+            rate = ((end[STATE_PSI] - x[STATE_PSI] + math.pi) % (2 * math.pi) - math.pi) / dt
+            x, z_prev = end, z_k
+        return u
+
     def _rollout_cost(self, state: np.ndarray, p: np.ndarray, u: np.ndarray) -> tuple[float, np.ndarray]:
         """Cost of the model's rollout under the inputs ``u (4, horizon)`` (clipped, blocked), and those ``z``."""
         problem = self.problem
         z = problem.blocked(np.clip(to_z(u), self.z_low[:, None], self.z_high[:, None]))
         x = np.asarray(problem.rollout(state, z[:, problem.block_of], to_z(self._u_prev), self.gains))
         cost = float(problem.cost(np.nan_to_num(pack_decision(z, x)), p)) if np.all(np.isfinite(x)) else math.inf
+        if self.w_togo > 0 and math.isfinite(cost):  # beyond the horizon: the turn still to make
+            (gx, gy), end = self._target_end, x[:, -1]
+            path = turn_path_length(end[0], end[1], end[STATE_PSI], gx, gy, self.settings.turn_radius)
+            cost += self.w_togo * (path - math.hypot(gx - end[0], gy - end[1]))
         return (cost if math.isfinite(cost) else math.inf), np.nan_to_num(pack_decision(z, x))
 
     def _solve(self, state: np.ndarray, p: np.ndarray, u_guess: np.ndarray,
@@ -243,7 +279,11 @@ class NMPCController:
                 age = self._plan_age + 1
                 guesses.insert(0, np.vstack([self.plan[age:], np.repeat(self.plan[-1:], age, 0)]).T)
                 duals.insert(0, self._shifted_duals(age))
+            if self.hand is not None:  # the hand law's closed loop on the model: its turn rules in one plan
+                guesses.append(self._hand_guess(state, ref, vref))
+                duals.append(None)
             p = self.problem.parameters(state, ref, vref, to_z(self._u_prev), self.gains)
+            self._target_end = tuple(ref + vref * self._n * self.dt)
             costs = [self._rollout_cost(state, p, u)[0] for u in guesses]  # screening: rollouts, no solve
             solves = 0
             for k in sorted(range(len(guesses)), key=costs.__getitem__):  # the next one only if a solve failed
