@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from agents.fin_map import FinMap
+from agents.turning import circle_room
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, Observation, decode
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
@@ -179,9 +180,7 @@ class HandController:
 
     def _room(self, o, side: float) -> float:
         """Least distance [m] from the turning circle (``side`` +1 left, -1 right) to a wall, beyond half a body."""
-        r = self.turn_radius
-        cx, cy = o.x - side * r * o.sin_psi, o.y + side * r * o.cos_psi
-        return min(cx - r, TANK_LENGTH - cx - r, cy - r, TANK_WIDTH - cy - r) - self.half_length
+        return circle_room(o.x, o.y, math.atan2(o.sin_psi, o.cos_psi), side, self.turn_radius) - self.half_length
 
     def _room_ahead(self, o) -> float:
         """Distance [m] along the heading from the nose to the first wall."""

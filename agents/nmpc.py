@@ -40,7 +40,7 @@ from agents.nmpc_problem import (
     to_u,
     to_z,
 )
-from agents.turning import turn_path_length
+from agents.turning import circle_room, turn_paths
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_VELOCITY, Observation, decode
 from pectoral_gym.kfunctions import ScalingFunctions
@@ -97,6 +97,7 @@ class NMPCController:
         self.hand = HandController(config) if s.hand_candidate else None
         self.w_togo = s.w_togo if s.w_togo is not None else (0.0 if self.track else 3.0)
         self._target_end = (0.0, 0.0)
+        self._half_length = 0.5 * config.params.body_length
         self.problem = NMPCProblem(config, s, self.fins, self.scaling, self.z_low, self.z_high)
         self._solver = self.problem.solver  # the controller calls it through this attribute (tests replace it)
         self._n = self.problem.horizon
@@ -229,6 +230,25 @@ class NMPCController:
             x, z_prev = end, z_k
         return u
 
+    def _togo(self, end: np.ndarray) -> float:
+        """Turn-then-straight path [m] from the state ``end`` to the target, minus the straight distance.
+
+        The arc of a turn whose circle leaves less than :attr:`NMPCSettings.togo_wall_margin` to a wall
+        (beyond half a body) counts longer, by the missing room over the margin: a turn along a wall is
+        charged, a path that needs no turn is not.
+        """
+        (gx, gy), s = self._target_end, self.settings
+        x, y, psi = float(end[0]), float(end[1]), float(end[STATE_PSI])
+        radius, margin = s.turn_radius, s.togo_wall_margin
+        best = math.inf
+        for side, (arc, straight) in zip((1.0, -1.0), turn_paths(x, y, psi, gx, gy, radius), strict=True):
+            factor = 1.0
+            if margin > 0:
+                room = circle_room(x, y, psi, side, radius) - self._half_length
+                factor += max((margin - room) / margin, 0.0)
+            best = min(best, radius * arc * factor + straight)
+        return best - math.hypot(gx - x, gy - y)
+
     def _rollout_cost(self, state: np.ndarray, p: np.ndarray, u: np.ndarray) -> tuple[float, np.ndarray]:
         """Cost of the model's rollout under the inputs ``u (4, horizon)`` (clipped, blocked), and those ``z``."""
         problem = self.problem
@@ -236,9 +256,7 @@ class NMPCController:
         x = np.asarray(problem.rollout(state, z[:, problem.block_of], to_z(self._u_prev), self.gains))
         cost = float(problem.cost(np.nan_to_num(pack_decision(z, x)), p)) if np.all(np.isfinite(x)) else math.inf
         if self.w_togo > 0 and math.isfinite(cost):  # beyond the horizon: the turn still to make
-            (gx, gy), end = self._target_end, x[:, -1]
-            path = turn_path_length(end[0], end[1], end[STATE_PSI], gx, gy, self.settings.turn_radius)
-            cost += self.w_togo * (path - math.hypot(gx - end[0], gy - end[1]))
+            cost += self.w_togo * self._togo(x[:, -1])
         return (cost if math.isfinite(cost) else math.inf), np.nan_to_num(pack_decision(z, x))
 
     def _solve(self, state: np.ndarray, p: np.ndarray, u_guess: np.ndarray,

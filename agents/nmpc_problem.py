@@ -142,6 +142,9 @@ class NMPCSettings:
             the target (radius ``turn_radius``, :func:`agents.turning.turn_path_length`) minus the
             straight distance (already in the NLP's terminal cost). ``None``: 3 for ``goal``
             (``w_distance + w_terminal``), 0 for ``track`` (a moving reference).
+        togo_wall_margin: Room [m] a turning circle of the cost-to-go must leave to the walls (beyond
+            half a body; the hand law's ``wall_margin``); a turn with less is charged up to a full
+            extra circle (0: walls ignored).
     """
 
     horizon: int = 10
@@ -174,6 +177,7 @@ class NMPCSettings:
     transitions: bool = False
     hand_candidate: bool = True
     w_togo: float | None = None
+    togo_wall_margin: float = 0.15
 
     def __post_init__(self) -> None:
         if min(int(self.horizon), int(self.substeps), int(self.max_iter), int(self.max_solves)) < 1:

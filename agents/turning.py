@@ -16,18 +16,48 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["turn_path_length"]
+from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
+
+__all__ = ["circle_room", "turn_path_length", "turn_paths"]
 
 
-def _left_turn_path(gx: float, gy: float, radius: float) -> float:
-    """Length of the left-turn-then-straight path to the body-frame point ``(gx, gy)``; ``inf`` if inside the circle."""
+def _left_turn_path(gx: float, gy: float, radius: float) -> tuple[float, float]:
+    """Arc angle [rad] and straight length [m] of the left-turn path to the body-frame point ``(gx, gy)``.
+
+    ``(inf, inf)`` if the point is inside the circle.
+    """
     dx, dy = gx, gy - radius
     d = math.hypot(dx, dy)
     if d < radius:
-        return math.inf
+        return math.inf, math.inf
     tangent = math.atan2(dy, dx) - math.acos(min(1.0, radius / d))
     arc = (tangent + 0.5 * math.pi) % (2.0 * math.pi)
-    return radius * arc + math.sqrt(max(d * d - radius * radius, 0.0))
+    if arc > 2.0 * math.pi - 1e-9:  # straight ahead: rounding must not make it a full circle
+        arc = 0.0
+    return arc, math.sqrt(max(d * d - radius * radius, 0.0))
+
+
+def turn_paths(x: float, y: float, psi: float, gx: float, gy: float,
+               radius: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Arc angle [rad] and straight length [m] of the left-turn and of the right-turn path.
+
+    Arguments as :func:`turn_path_length`; ``(inf, inf)`` for a turn whose circle holds the target.
+    """
+    if not radius > 0:
+        raise ValueError(f"radius must be > 0 m, got {radius!r}")
+    c, s = math.cos(psi), math.sin(psi)
+    ex, ey = gx - x, gy - y
+    bx, by = c * ex + s * ey, -s * ex + c * ey
+    return _left_turn_path(bx, by, radius), _left_turn_path(bx, -by, radius)
+
+
+def circle_room(x: float, y: float, psi: float, side: float, radius: float) -> float:
+    """Least distance [m] from the turning circle (``side`` +1 left, -1 right) to a tank wall (< 0: it crosses one).
+
+    The circle of radius ``radius`` touches the pose ``(x, y, psi)``; its centre lies ``radius`` to that side.
+    """
+    cx, cy = x - side * radius * math.sin(psi), y + side * radius * math.cos(psi)
+    return min(cx - radius, TANK_LENGTH - cx - radius, cy - radius, TANK_WIDTH - cy - radius)
 
 
 def turn_path_length(x: float, y: float, psi: float, gx: float, gy: float, radius: float) -> float:
@@ -47,9 +77,4 @@ def turn_path_length(x: float, y: float, psi: float, gx: float, gy: float, radiu
     Raises:
         ValueError: If ``radius`` is not positive.
     """
-    if not radius > 0:
-        raise ValueError(f"radius must be > 0 m, got {radius!r}")
-    c, s = math.cos(psi), math.sin(psi)
-    ex, ey = gx - x, gy - y
-    bx, by = c * ex + s * ey, -s * ex + c * ey
-    return min(_left_turn_path(bx, by, radius), _left_turn_path(bx, -by, radius))
+    return min(radius * arc + straight for arc, straight in turn_paths(x, y, psi, gx, gy, radius))
