@@ -44,6 +44,7 @@ from agents.turning import circle_room, turn_paths
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_VELOCITY, Observation, decode
 from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 from pectoral_gym.symbolic import STATE_POSITION, STATE_PSI, STATE_SIZE, STATE_VELOCITY
 
 __all__ = ["NMPCController", "NMPCSettings"]
@@ -203,32 +204,73 @@ class NMPCController:
             guesses.append(then)
         return guesses
 
+    def _hand_input(self, x: np.ndarray, ref: np.ndarray, vref: np.ndarray, rate: float) -> np.ndarray:
+        """The hand law's inputs (a :class:`FinInputs` row, clipped to the planner's bounds) at the model state."""
+        c, s_ = math.cos(x[STATE_PSI]), math.sin(x[STATE_PSI])
+        ex, ey = ref[0] - x[0], ref[1] - x[1]
+        o = Observation(float(x[0]), float(x[1]), c, s_, float(x[3]), float(x[4]), float(x[5]),
+                        c * ex + s_ * ey, -s_ * ex + c * ey, c * vref[0] + s_ * vref[1],
+                        -s_ * vref[0] + c * vref[1], np.zeros(8))
+        b_r, a_r, b_l, a_l = self.hand.command(o, rate)
+        return np.clip(FinInputs(a_r, a_l, b_r, b_l), self.u_low, self.u_high)
+
+    def _hand_loop(self, x: np.ndarray, z_prev: np.ndarray, rate: float, ref: np.ndarray, vref: np.ndarray,
+                   steps: int):
+        """The hand law in closed loop on the planning model for ``steps`` intervals from ``x``.
+
+        Yields ``(inputs, end state)`` per interval; the law's yaw rate is the model's mean over the
+        interval before. Stops early at a non-finite state.
+        """
+        dt = self.dt
+        for k in range(steps):
+            u = self._hand_input(x, ref + vref * k * dt, vref, rate)
+            z = to_z(u)
+            end = np.asarray(self.problem.interval(x, z, z_prev, self.gains)[0]).ravel()
+            if not np.all(np.isfinite(end)):
+                return
+            yield u, end
+            rate = ((end[STATE_PSI] - x[STATE_PSI] + math.pi) % (2 * math.pi) - math.pi) / dt
+            x, z_prev = end, z
+
     def _hand_guess(self, state: np.ndarray, ref: np.ndarray, vref: np.ndarray) -> np.ndarray:
         """Inputs ``(4, horizon)`` of :class:`agents.baselines.HandController` in closed loop on the planning model.
 
-        Each interval, the law sees the model's predicted pose and the target (moved with its velocity),
-        and its yaw rate is the model's mean over the interval before (at first: the estimated one).
+        Each interval, the law sees the model's predicted pose and the target (moved with its velocity).
         """
-        dt, n = self.dt, self._n
-        u = np.empty((len(FinInputs._fields), n))
-        x, z_prev, rate = state, to_z(self._u_prev), float(state[STATE_VELOCITY][2])  # omega
-        for k in range(n):
-            r = ref + vref * k * dt
-            c, s_ = math.cos(x[STATE_PSI]), math.sin(x[STATE_PSI])
-            ex, ey = r[0] - x[0], r[1] - x[1]
-            o = Observation(float(x[0]), float(x[1]), c, s_, float(x[3]), float(x[4]), float(x[5]),
-                            c * ex + s_ * ey, -s_ * ex + c * ey, c * vref[0] + s_ * vref[1],
-                            -s_ * vref[0] + c * vref[1], np.zeros(8))
-            b_r, a_r, b_l, a_l = self.hand.command(o, rate)
-            u[:, k] = np.clip(FinInputs(a_r, a_l, b_r, b_l), self.u_low, self.u_high)
-            z_k = to_z(u[:, k])
-            end = np.asarray(self.problem.interval(x, z_k, z_prev, self.gains)[0]).ravel()
-            if not np.all(np.isfinite(end)):
-                u[:, k + 1:] = u[:, k:k + 1]
-                break
-            rate = ((end[STATE_PSI] - x[STATE_PSI] + math.pi) % (2 * math.pi) - math.pi) / dt
-            x, z_prev = end, z_k
+        u = np.tile(self._u_prev[:, None], (1, self._n))
+        k = -1
+        for k, (u_k, _) in enumerate(self._hand_loop(state, to_z(self._u_prev), float(state[STATE_VELOCITY][2]),
+                                                     ref, vref, self._n)):
+            u[:, k] = u_k
+        if 0 <= k < self._n - 1:
+            u[:, k + 1:] = u[:, k:k + 1]
         return u
+
+    def _continuation(self, x: np.ndarray, z_last: np.ndarray) -> float:
+        """Cost beyond the horizon: the hand law continued on the model for ``togo_steps`` intervals.
+
+        Per interval the NLP's distance and wall terms (wall margin ``togo_wall_margin``), until the
+        goal radius is reached; then the turn-then-straight cost-to-go from where it ends.
+        """
+        s = self.settings
+        goal = np.asarray(self._target_end)
+        cost, end = 0.0, x
+        for _, end in self._hand_loop(x, z_last, 0.0, goal, np.zeros(2), s.togo_steps):
+            d = math.hypot(goal[0] - end[0], goal[1] - end[1])
+            cost += s.w_distance * d + s.w_wall * self._wall_violation(end, s.togo_wall_margin)
+            if d < self.config.goal_radius:
+                return cost
+        return cost + self.w_togo * self._togo(end)
+
+    def _wall_violation(self, x: np.ndarray, margin: float) -> float:
+        """Sum of the squared shortfalls [m^2] of nose and tail below ``margin`` from each wall (the NLP's term)."""
+        total = 0.0
+        c, s_ = math.cos(x[STATE_PSI]), math.sin(x[STATE_PSI])
+        for sign in (1.0, -1.0):
+            px, py = x[0] + sign * self._half_length * c, x[1] + sign * self._half_length * s_
+            for gap in (px, TANK_LENGTH - px, py, TANK_WIDTH - py):
+                total += max(0.0, margin - gap) ** 2
+        return total
 
     def _togo(self, end: np.ndarray) -> float:
         """Turn-then-straight path [m] from the state ``end`` to the target, minus the straight distance.
@@ -249,19 +291,27 @@ class NMPCController:
             best = min(best, radius * arc * factor + straight)
         return best - math.hypot(gx - x, gy - y)
 
-    def _rollout_cost(self, state: np.ndarray, p: np.ndarray, u: np.ndarray) -> tuple[float, np.ndarray]:
-        """Cost of the model's rollout under the inputs ``u (4, horizon)`` (clipped, blocked), and those ``z``."""
+    def _rollout_cost(self, state: np.ndarray, p: np.ndarray, u: np.ndarray,
+                      deep: bool = True) -> tuple[float, np.ndarray]:
+        """Cost of the model's rollout under the inputs ``u (4, horizon)`` (clipped, blocked), and those ``z``.
+
+        Beyond the horizon: with ``deep`` and :attr:`NMPCSettings.togo_steps`, the hand law's continuation
+        (:meth:`_continuation`), else the turn-then-straight cost-to-go (:meth:`_togo`).
+        """
         problem = self.problem
         z = problem.blocked(np.clip(to_z(u), self.z_low[:, None], self.z_high[:, None]))
         x = np.asarray(problem.rollout(state, z[:, problem.block_of], to_z(self._u_prev), self.gains))
         cost = float(problem.cost(np.nan_to_num(pack_decision(z, x)), p)) if np.all(np.isfinite(x)) else math.inf
-        if self.w_togo > 0 and math.isfinite(cost):  # beyond the horizon: the turn still to make
-            cost += self.w_togo * self._togo(x[:, -1])
+        if math.isfinite(cost):
+            if deep and self.settings.togo_steps > 0 and not self.track:
+                cost += self._continuation(x[:, -1], z[:, -1])
+            elif self.w_togo > 0:  # beyond the horizon: the turn still to make
+                cost += self.w_togo * self._togo(x[:, -1])
         return (cost if math.isfinite(cost) else math.inf), np.nan_to_num(pack_decision(z, x))
 
     def _solve(self, state: np.ndarray, p: np.ndarray, u_guess: np.ndarray,
-               duals: tuple[np.ndarray, np.ndarray] | None = None):
-        """One solve from ``u_guess`` ``(4, horizon)`` (and multipliers ``duals``).
+               duals: tuple[np.ndarray, np.ndarray] | None = None, guess_cost: float | None = None):
+        """One solve from ``u_guess`` ``(4, horizon)`` (and multipliers ``duals``; ``guess_cost``: its cost if known).
 
         The solve starts feasible (its state guess is the model's rollout under the guess). Its inputs
         are simulated again on the model, and the rollout's cost decides: the solution is used if it
@@ -271,7 +321,10 @@ class NMPCController:
         Returns ``(cost, plan (horizon, 4), (lam_x, lam_g) or None)``, or ``None`` if neither is usable.
         """
         problem = self.problem
-        guess_cost, x0 = self._rollout_cost(state, p, u_guess)
+        if guess_cost is None:
+            guess_cost, x0 = self._rollout_cost(state, p, u_guess)
+        else:  # priced by the screening already: only the rollout is needed
+            x0 = self._rollout_cost(state, p, u_guess, deep=False)[1]
         warm = {} if duals is None else {"lam_x0": duals[0], "lam_g0": duals[1]}
         sol = self._solver(x0=x0, p=p, lbx=problem.lbx, ubx=problem.ubx, lbg=0.0, ubg=0.0, **warm)
         status = self._solver.stats().get("return_status", "")
@@ -302,13 +355,19 @@ class NMPCController:
                 duals.append(None)
             p = self.problem.parameters(state, ref, vref, to_z(self._u_prev), self.gains)
             self._target_end = tuple(ref + vref * self._n * self.dt)
-            costs = [self._rollout_cost(state, p, u)[0] for u in guesses]  # screening: rollouts, no solve
+            # screening: rollouts, no solve; the cheapest few (and the hand law's) again with the continuation
+            costs = [self._rollout_cost(state, p, u, deep=False)[0] for u in guesses]
+            if self.settings.togo_steps > 0 and not self.track:
+                deep = set(sorted(range(len(guesses)), key=costs.__getitem__)[: self.settings.deep_candidates])
+                deep |= {len(guesses) - 1} if self.hand is not None else set()
+                costs = [self._rollout_cost(state, p, guesses[k])[0] if k in deep else math.inf
+                         for k in range(len(guesses))]
             solves = 0
             for k in sorted(range(len(guesses)), key=costs.__getitem__):  # the next one only if a solve failed
                 if solves >= self.settings.max_solves + (best is None) or time.perf_counter() - start > budget:
                     break
                 solves += 1
-                result = self._solve(state, p, guesses[k], duals[k])
+                result = self._solve(state, p, guesses[k], duals[k], costs[k])
                 if result is not None and (best is None or result[0] < best[0]):
                     best = result
         except Exception:  # noqa: BLE001 - a failed solve must never stop the fish controller

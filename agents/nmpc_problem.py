@@ -145,6 +145,11 @@ class NMPCSettings:
         togo_wall_margin: Room [m] a turning circle of the cost-to-go must leave to the walls (beyond
             half a body; the hand law's ``wall_margin``); a turn with less is charged up to a full
             extra circle (0: walls ignored).
+        togo_steps: ``goal``: intervals the hand law is continued on the model after the horizon to
+            price a candidate (the NLP's distance and wall terms; :meth:`agents.nmpc.NMPCController._continuation`);
+            0: the turn-then-straight cost-to-go alone.
+        deep_candidates: With ``togo_steps``: how many of the cheapest screened candidates (plus the hand
+            law's) are priced with the continuation.
     """
 
     horizon: int = 10
@@ -178,6 +183,8 @@ class NMPCSettings:
     hand_candidate: bool = True
     w_togo: float | None = None
     togo_wall_margin: float = 0.15
+    togo_steps: int = 0
+    deep_candidates: int = 3
 
     def __post_init__(self) -> None:
         if min(int(self.horizon), int(self.substeps), int(self.max_iter), int(self.max_solves)) < 1:

@@ -81,3 +81,22 @@ def test_circle_room_against_hand_values():
     assert circle_room(1.15, 0.5, 0.0, -1.0, r) == pytest.approx(0.5 - r - r)
     # heading +Y near the right end wall: the right circle's centre is r towards +X
     assert circle_room(TANK_LENGTH - 0.3, 0.575, math.pi / 2, -1.0, r) == pytest.approx(0.3 - 2 * r)
+
+
+def test_continuation_prices_the_hand_law_beyond_the_horizon():
+    """The hand law continued on the model: a goal reached at once costs one interval's distance; a goal
+    behind costs more than the same goal ahead; a wall on the way costs more again."""
+    nmpc = make_baseline("nmpc", CONFIG, step_budget=1e6, togo_steps=10)
+    z_rest = np.array(nmpc._u_prev)
+    from agents.nmpc_problem import to_z
+
+    at_goal = np.array([1.15, 0.575, 0.0, 0, 0, 0])
+    nmpc._target_end = (1.15, 0.575)
+    assert nmpc._continuation(at_goal, to_z(z_rest)) < nmpc.settings.w_distance * CONFIG.goal_radius
+    nmpc._target_end = (1.45, 0.575)
+    ahead = nmpc._continuation(at_goal, to_z(z_rest))
+    nmpc._target_end = (0.85, 0.575)
+    behind = nmpc._continuation(at_goal, to_z(z_rest))
+    assert behind > ahead > 0
+    nose_at_wall = np.array([0.099, 0.575, math.pi, 0, 0, 0])  # nose on the x = 0 wall (half body 0.099 m)
+    assert nmpc._wall_violation(nose_at_wall, 0.05) == pytest.approx(0.05**2, rel=1e-6)
