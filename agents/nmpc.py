@@ -250,7 +250,8 @@ class NMPCController:
         """Cost beyond the horizon: the hand law continued on the model for ``togo_steps`` intervals.
 
         Per interval the NLP's distance and wall terms (wall margin ``togo_wall_margin``), until the
-        goal radius is reached; then the turn-then-straight cost-to-go from where it ends.
+        goal radius is reached; else the whole turn-then-straight path from where it ends, weighted by
+        ``w_togo`` (the distance left must count here: a plan that waits would otherwise cost no more).
         """
         s = self.settings
         goal = np.asarray(self._target_end)
@@ -260,7 +261,7 @@ class NMPCController:
             cost += s.w_distance * d + s.w_wall * self._wall_violation(end, s.togo_wall_margin)
             if d < self.config.goal_radius:
                 return cost
-        return cost + self.w_togo * self._togo(end)
+        return cost + self.w_togo * (self._togo(end) + math.hypot(goal[0] - end[0], goal[1] - end[1]))
 
     def _wall_violation(self, x: np.ndarray, margin: float) -> float:
         """Sum of the squared shortfalls [m^2] of nose and tail below ``margin`` from each wall (the NLP's term)."""
