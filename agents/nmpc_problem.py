@@ -183,7 +183,7 @@ class NMPCSettings:
     hand_candidate: bool = True
     w_togo: float | None = None
     togo_wall_margin: float = 0.15
-    togo_steps: int = 0
+    togo_steps: int = 10
     deep_candidates: int = 3
 
     def __post_init__(self) -> None:
