@@ -95,7 +95,8 @@ class NMPCController:
         self.bias_mid = float(np.clip(self.fins.bias_mid, b_low, b_high))
         self.u_rest = np.array(FinInputs(a_low, a_low, self.bias_mid, self.bias_mid))
         self.z_low, self.z_high = to_z(self.u_low), to_z(self.u_high)
-        self.hand = HandController(config) if s.hand_candidate else None
+        use_hand = s.hand_candidate if s.hand_candidate is not None else config.task != "track"
+        self.hand = HandController(config) if use_hand else None
         self.w_togo = s.w_togo if s.w_togo is not None else (0.0 if self.track else 3.0)
         self._target_end = (0.0, 0.0)
         self._half_length = 0.5 * config.params.body_length
