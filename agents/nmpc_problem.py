@@ -201,6 +201,9 @@ class NMPCSettings:
             raise ValueError(f"step_budget must be > 0 s, got {self.step_budget!r}")
         if self.hessian not in ("exact", "cost"):
             raise ValueError(f"hessian must be 'exact' or 'cost', got {self.hessian!r}")
+        if int(self.togo_steps) < 0 or int(self.deep_candidates) < 1 or not self.togo_wall_margin >= 0:
+            raise ValueError(f"togo_steps must be >= 0, deep_candidates >= 1 and togo_wall_margin >= 0 m, got "
+                             f"{self.togo_steps!r}, {self.deep_candidates!r}, {self.togo_wall_margin!r}")
         if self.solver not in _SOLVERS:
             raise ValueError(f"solver must be one of {_SOLVERS}, got {self.solver!r}")
         if self.blocks is not None and (min(self.blocks, default=0) < 1 or sum(self.blocks) != int(self.horizon)):

@@ -205,6 +205,9 @@ def test_nmpc_rejects_bad_settings():
         make_baseline("nmpc", CONFIG, solver="simplex")
     with pytest.raises(ValueError, match="step_budget"):
         make_baseline("nmpc", CONFIG, step_budget=0.0)
+    for bad in ({"togo_steps": -1}, {"deep_candidates": 0}, {"togo_wall_margin": -0.1}):
+        with pytest.raises(ValueError, match="togo_steps"):
+            make_baseline("nmpc", CONFIG, **bad)
 
 
 def test_nmpc_plan_holds_each_block_and_obeys_the_model(monkeypatch):
