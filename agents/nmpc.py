@@ -96,7 +96,8 @@ class NMPCController:
         self.u_rest = np.array(FinInputs(a_low, a_low, self.bias_mid, self.bias_mid))
         self.z_low, self.z_high = to_z(self.u_low), to_z(self.u_high)
         use_hand = s.hand_candidate if s.hand_candidate is not None else config.task != "track"
-        self.hand = HandController(config) if use_hand else None
+        self.hand = HandController(config)  # the base policy of the candidate and of the continuation
+        self.hand_candidate = bool(use_hand)
         self.w_togo = s.w_togo if s.w_togo is not None else (0.0 if self.track else 3.0)
         self._target_end = (0.0, 0.0)
         self._half_length = 0.5 * config.params.body_length
@@ -352,7 +353,7 @@ class NMPCController:
                 age = self._plan_age + 1
                 guesses.insert(0, np.vstack([self.plan[age:], np.repeat(self.plan[-1:], age, 0)]).T)
                 duals.insert(0, self._shifted_duals(age))
-            if self.hand is not None:  # the hand law's closed loop on the model: its turn rules in one plan
+            if self.hand_candidate:  # the hand law's closed loop on the model: its turn rules in one plan
                 guesses.append(self._hand_guess(state, ref, vref))
                 duals.append(None)
             p = self.problem.parameters(state, ref, vref, to_z(self._u_prev), self.gains)
@@ -361,7 +362,7 @@ class NMPCController:
             costs = [self._rollout_cost(state, p, u, deep=False)[0] for u in guesses]
             if self.settings.togo_steps > 0 and not self.track:
                 deep = set(sorted(range(len(guesses)), key=costs.__getitem__)[: self.settings.deep_candidates])
-                deep |= {len(guesses) - 1} if self.hand is not None else set()
+                deep |= {len(guesses) - 1} if self.hand_candidate else set()
                 costs = [self._rollout_cost(state, p, guesses[k])[0] if k in deep else math.inf
                          for k in range(len(guesses))]
             solves = 0

@@ -100,3 +100,16 @@ def test_continuation_prices_the_hand_law_beyond_the_horizon():
     assert behind > ahead > 0
     nose_at_wall = np.array([0.099, 0.575, math.pi, 0, 0, 0])  # nose on the x = 0 wall (half body 0.099 m)
     assert nmpc._wall_violation(nose_at_wall, 0.05) == pytest.approx(0.05**2, rel=1e-6)
+
+
+def test_continuation_without_the_hand_candidate_still_plans():
+    """hand_candidate=False with the continuation on: the hand law still prices the candidates (no fallback)."""
+    from pectoral_gym.envs.observation import OBS_SIZE
+
+    nmpc = make_baseline("nmpc", CONFIG, step_budget=1e6, hand_candidate=False, togo_steps=3)
+    obs = np.zeros(OBS_SIZE)
+    obs[:4] = 1.15, 0.575, 1.0, 0.0
+    obs[7], obs[8] = 0.3, 0.1
+    nmpc.reset()
+    nmpc.act(obs)
+    assert nmpc.failures == 0 and nmpc.plan is not None
