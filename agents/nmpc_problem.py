@@ -186,7 +186,7 @@ class NMPCSettings:
     w_togo: float | None = None
     togo_wall_margin: float = 0.15
     togo_steps: int = 10
-    deep_candidates: int = 3
+    deep_candidates: int = 1
 
     def __post_init__(self) -> None:
         if min(int(self.horizon), int(self.substeps), int(self.max_iter), int(self.max_solves)) < 1:
