@@ -26,8 +26,9 @@ from typing import Any
 import numpy as np
 
 from agents.fin_map import FinMap
+from agents.turning import circle_room
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.envs.observation import OBS_SIZE, decode
+from pectoral_gym.envs.observation import OBS_SIZE, Observation, decode
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 
 __all__ = ["BASELINES", "FinMap", "HandController", "RandomController", "make_baseline"]
@@ -131,6 +132,22 @@ class HandController:
         if obs.shape != (OBS_SIZE,):
             raise ValueError(f"obs must have shape ({OBS_SIZE},), got {obs.shape}")
         o = decode(obs)
+        heading = math.atan2(o.sin_psi, o.cos_psi)
+        rate = 0.0 if self._heading is None else _wrap(heading - self._heading) / self.config.control_period
+        self._heading = heading
+        return self.fins.action(*self.command(o, rate))
+
+    def command(self, o: Observation, rate: float) -> tuple[float, float, float, float]:
+        """The law's fin patterns for one observation and yaw rate (no state is kept).
+
+        Args:
+            o: The observation (:func:`pectoral_gym.envs.observation.decode`), or one built from a
+                predicted state (the NMPC screens the law's closed-loop rollout on its model).
+            rate: Yaw rate [rad/s] (``act`` passes the mean over the last control period).
+
+        Returns:
+            ``(bias_right, amplitude_right, bias_left, amplitude_left)`` [rad] (period and ratio: :class:`FinMap`'s).
+        """
         aim_x, aim_y = o.target_x, o.target_y
         ref_speed = 0.0
         if self.track:  # feed forward: aim ahead of the moving reference and add its speed
@@ -139,9 +156,6 @@ class HandController:
             ref_speed = math.hypot(o.target_vx, o.target_vy)
         distance = math.hypot(aim_x, aim_y)
         bearing = math.atan2(aim_y, aim_x)
-        heading = math.atan2(o.sin_psi, o.cos_psi)
-        rate = 0.0 if self._heading is None else _wrap(heading - self._heading) / self.config.control_period
-        self._heading = heading
         turn = float(np.clip(self.heading_gain * bearing - self.rate_gain * rate, -1.0, 1.0))
         alignment = max(math.cos(bearing), 0.0) ** self.alignment_power
         speed = (min(self.speed_gain * distance, self.fins.max_speed) + ref_speed) * alignment
@@ -160,17 +174,13 @@ class HandController:
         offset = float(np.clip(self.bias_gain * bearing, -self.bias_max, self.bias_max))
         low, high = self.config.bias_range
         f = self.fins
-        return f.action(
-            float(np.clip(f.bias_mid - offset, low, high)), f.amplitude(level + self.turn_level * turn),
-            float(np.clip(f.bias_mid + offset, low, high)), f.amplitude(level - self.turn_level * turn),
-        )
+        return (float(np.clip(f.bias_mid - offset, low, high)), f.amplitude(level + self.turn_level * turn),
+                float(np.clip(f.bias_mid + offset, low, high)), f.amplitude(level - self.turn_level * turn))
 
 
     def _room(self, o, side: float) -> float:
         """Least distance [m] from the turning circle (``side`` +1 left, -1 right) to a wall, beyond half a body."""
-        r = self.turn_radius
-        cx, cy = o.x - side * r * o.sin_psi, o.y + side * r * o.cos_psi
-        return min(cx - r, TANK_LENGTH - cx - r, cy - r, TANK_WIDTH - cy - r) - self.half_length
+        return circle_room(o.x, o.y, math.atan2(o.sin_psi, o.cos_psi), side, self.turn_radius) - self.half_length
 
     def _room_ahead(self, o) -> float:
         """Distance [m] along the heading from the nose to the first wall."""

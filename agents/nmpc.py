@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from agents.baselines import HandController
 from agents.fin_map import FinMap
 from agents.nmpc_problem import (
     GAIN_THRUST,
@@ -39,9 +40,11 @@ from agents.nmpc_problem import (
     to_u,
     to_z,
 )
+from agents.turning import circle_room, turn_paths
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.envs.observation import OBS_SIZE, OBS_VELOCITY, decode
+from pectoral_gym.envs.observation import OBS_SIZE, OBS_VELOCITY, Observation, decode
 from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 from pectoral_gym.symbolic import STATE_POSITION, STATE_PSI, STATE_SIZE, STATE_VELOCITY
 
 __all__ = ["NMPCController", "NMPCSettings"]
@@ -92,6 +95,12 @@ class NMPCController:
         self.bias_mid = float(np.clip(self.fins.bias_mid, b_low, b_high))
         self.u_rest = np.array(FinInputs(a_low, a_low, self.bias_mid, self.bias_mid))
         self.z_low, self.z_high = to_z(self.u_low), to_z(self.u_high)
+        use_hand = s.hand_candidate if s.hand_candidate is not None else config.task != "track"
+        self.hand = HandController(config)  # the base policy of the candidate and of the continuation
+        self.hand_candidate = bool(use_hand)
+        self.w_togo = s.w_togo if s.w_togo is not None else (0.0 if self.track else 3.0)
+        self._target_end = (0.0, 0.0)
+        self._half_length = 0.5 * config.params.body_length
         self.problem = NMPCProblem(config, s, self.fins, self.scaling, self.z_low, self.z_high)
         self._solver = self.problem.solver  # the controller calls it through this attribute (tests replace it)
         self._n = self.problem.horizon
@@ -111,7 +120,7 @@ class NMPCController:
         self._prev_obs: np.ndarray | None = None
         self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._duals: tuple[np.ndarray, np.ndarray] | None = None  # lam_x, lam_g of the last good solve
-        self.gains = np.ones(2)
+        self.gains = np.array(self.settings.initial_gains, dtype=np.float64)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Solve the NMPC problem for one observation ``(19,)``; returns the normalised action ``(8,)``."""
@@ -197,17 +206,115 @@ class NMPCController:
             guesses.append(then)
         return guesses
 
-    def _rollout_cost(self, state: np.ndarray, p: np.ndarray, u: np.ndarray) -> tuple[float, np.ndarray]:
-        """Cost of the model's rollout under the inputs ``u (4, horizon)`` (clipped, blocked), and those ``z``."""
+    def _hand_input(self, x: np.ndarray, ref: np.ndarray, vref: np.ndarray, rate: float) -> np.ndarray:
+        """The hand law's inputs (a :class:`FinInputs` row, clipped to the planner's bounds) at the model state."""
+        c, s_ = math.cos(x[STATE_PSI]), math.sin(x[STATE_PSI])
+        ex, ey = ref[0] - x[0], ref[1] - x[1]
+        o = Observation(float(x[0]), float(x[1]), c, s_, float(x[3]), float(x[4]), float(x[5]),
+                        c * ex + s_ * ey, -s_ * ex + c * ey, c * vref[0] + s_ * vref[1],
+                        -s_ * vref[0] + c * vref[1], np.zeros(8))
+        b_r, a_r, b_l, a_l = self.hand.command(o, rate)
+        return np.clip(FinInputs(a_r, a_l, b_r, b_l), self.u_low, self.u_high)
+
+    def _hand_loop(self, x: np.ndarray, z_prev: np.ndarray, rate: float, ref: np.ndarray, vref: np.ndarray,
+                   steps: int):
+        """The hand law in closed loop on the planning model for ``steps`` intervals from ``x``.
+
+        Yields ``(inputs, end state)`` per interval; the law's yaw rate is the model's mean over the
+        interval before. Stops early at a non-finite state.
+        """
+        dt = self.dt
+        for k in range(steps):
+            u = self._hand_input(x, ref + vref * k * dt, vref, rate)
+            z = to_z(u)
+            end = np.asarray(self.problem.interval(x, z, z_prev, self.gains)[0]).ravel()
+            if not np.all(np.isfinite(end)):
+                return
+            yield u, end
+            rate = ((end[STATE_PSI] - x[STATE_PSI] + math.pi) % (2 * math.pi) - math.pi) / dt
+            x, z_prev = end, z
+
+    def _hand_guess(self, state: np.ndarray, ref: np.ndarray, vref: np.ndarray) -> np.ndarray:
+        """Inputs ``(4, horizon)`` of :class:`agents.baselines.HandController` in closed loop on the planning model.
+
+        Each interval, the law sees the model's predicted pose and the target (moved with its velocity).
+        """
+        u = np.tile(self._u_prev[:, None], (1, self._n))
+        k = -1
+        for k, (u_k, _) in enumerate(self._hand_loop(state, to_z(self._u_prev), float(state[STATE_VELOCITY][2]),
+                                                     ref, vref, self._n)):
+            u[:, k] = u_k
+        if 0 <= k < self._n - 1:
+            u[:, k + 1:] = u[:, k:k + 1]
+        return u
+
+    def _continuation(self, x: np.ndarray, z_last: np.ndarray) -> float:
+        """Cost beyond the horizon: the hand law continued on the model for ``togo_steps`` intervals.
+
+        Per interval the NLP's distance and wall terms (wall margin ``togo_wall_margin``), until the
+        goal radius is reached; else the whole turn-then-straight path from where it ends, weighted by
+        ``w_togo`` (the distance left must count here: a plan that waits would otherwise cost no more).
+        """
+        s = self.settings
+        goal = np.asarray(self._target_end)
+        cost, end = 0.0, x
+        for _, end in self._hand_loop(x, z_last, 0.0, goal, np.zeros(2), s.togo_steps):
+            d = math.hypot(goal[0] - end[0], goal[1] - end[1])
+            cost += s.w_distance * d + s.w_wall * self._wall_violation(end, s.togo_wall_margin)
+            if d < self.config.goal_radius:
+                return cost
+        return cost + self.w_togo * (self._togo(end) + math.hypot(goal[0] - end[0], goal[1] - end[1]))
+
+    def _wall_violation(self, x: np.ndarray, margin: float) -> float:
+        """Sum of the squared shortfalls [m^2] of nose and tail below ``margin`` from each wall (the NLP's term)."""
+        total = 0.0
+        c, s_ = math.cos(x[STATE_PSI]), math.sin(x[STATE_PSI])
+        for sign in (1.0, -1.0):
+            px, py = x[0] + sign * self._half_length * c, x[1] + sign * self._half_length * s_
+            for gap in (px, TANK_LENGTH - px, py, TANK_WIDTH - py):
+                total += max(0.0, margin - gap) ** 2
+        return total
+
+    def _togo(self, end: np.ndarray) -> float:
+        """Turn-then-straight path [m] from the state ``end`` to the target, minus the straight distance.
+
+        The arc of a turn whose circle leaves less than :attr:`NMPCSettings.togo_wall_margin` to a wall
+        (beyond half a body) counts longer, by the missing room over the margin: a turn along a wall is
+        charged, a path that needs no turn is not.
+        """
+        (gx, gy), s = self._target_end, self.settings
+        x, y, psi = float(end[0]), float(end[1]), float(end[STATE_PSI])
+        radius, margin = s.turn_radius, s.togo_wall_margin
+        best = math.inf
+        for side, (arc, straight) in zip((1.0, -1.0), turn_paths(x, y, psi, gx, gy, radius), strict=True):
+            factor = 1.0
+            if margin > 0:
+                room = circle_room(x, y, psi, side, radius) - self._half_length
+                factor += max((margin - room) / margin, 0.0)
+            best = min(best, radius * arc * factor + straight)
+        return best - math.hypot(gx - x, gy - y)
+
+    def _rollout_cost(self, state: np.ndarray, p: np.ndarray, u: np.ndarray,
+                      deep: bool = True) -> tuple[float, np.ndarray]:
+        """Cost of the model's rollout under the inputs ``u (4, horizon)`` (clipped, blocked), and those ``z``.
+
+        Beyond the horizon: with ``deep`` and :attr:`NMPCSettings.togo_steps`, the hand law's continuation
+        (:meth:`_continuation`), else the turn-then-straight cost-to-go (:meth:`_togo`).
+        """
         problem = self.problem
         z = problem.blocked(np.clip(to_z(u), self.z_low[:, None], self.z_high[:, None]))
         x = np.asarray(problem.rollout(state, z[:, problem.block_of], to_z(self._u_prev), self.gains))
         cost = float(problem.cost(np.nan_to_num(pack_decision(z, x)), p)) if np.all(np.isfinite(x)) else math.inf
+        if math.isfinite(cost):
+            if deep and self.settings.togo_steps > 0 and not self.track:
+                cost += self._continuation(x[:, -1], z[:, -1])
+            elif self.w_togo > 0:  # beyond the horizon: the turn still to make
+                cost += self.w_togo * self._togo(x[:, -1])
         return (cost if math.isfinite(cost) else math.inf), np.nan_to_num(pack_decision(z, x))
 
     def _solve(self, state: np.ndarray, p: np.ndarray, u_guess: np.ndarray,
-               duals: tuple[np.ndarray, np.ndarray] | None = None):
-        """One solve from ``u_guess`` ``(4, horizon)`` (and multipliers ``duals``).
+               duals: tuple[np.ndarray, np.ndarray] | None = None, guess_cost: float | None = None):
+        """One solve from ``u_guess`` ``(4, horizon)`` (and multipliers ``duals``; ``guess_cost``: its cost if known).
 
         The solve starts feasible (its state guess is the model's rollout under the guess). Its inputs
         are simulated again on the model, and the rollout's cost decides: the solution is used if it
@@ -217,7 +324,10 @@ class NMPCController:
         Returns ``(cost, plan (horizon, 4), (lam_x, lam_g) or None)``, or ``None`` if neither is usable.
         """
         problem = self.problem
-        guess_cost, x0 = self._rollout_cost(state, p, u_guess)
+        if guess_cost is None:
+            guess_cost, x0 = self._rollout_cost(state, p, u_guess)
+        else:  # priced by the screening already: only the rollout is needed
+            x0 = self._rollout_cost(state, p, u_guess, deep=False)[1]
         warm = {} if duals is None else {"lam_x0": duals[0], "lam_g0": duals[1]}
         sol = self._solver(x0=x0, p=p, lbx=problem.lbx, ubx=problem.ubx, lbg=0.0, ubg=0.0, **warm)
         status = self._solver.stats().get("return_status", "")
@@ -243,14 +353,24 @@ class NMPCController:
                 age = self._plan_age + 1
                 guesses.insert(0, np.vstack([self.plan[age:], np.repeat(self.plan[-1:], age, 0)]).T)
                 duals.insert(0, self._shifted_duals(age))
+            if self.hand_candidate:  # the hand law's closed loop on the model: its turn rules in one plan
+                guesses.append(self._hand_guess(state, ref, vref))
+                duals.append(None)
             p = self.problem.parameters(state, ref, vref, to_z(self._u_prev), self.gains)
-            costs = [self._rollout_cost(state, p, u)[0] for u in guesses]  # screening: rollouts, no solve
+            self._target_end = tuple(ref + vref * self._n * self.dt)
+            # screening: rollouts, no solve; the cheapest few (and the hand law's) again with the continuation
+            costs = [self._rollout_cost(state, p, u, deep=False)[0] for u in guesses]
+            if self.settings.togo_steps > 0 and not self.track:
+                deep = set(sorted(range(len(guesses)), key=costs.__getitem__)[: self.settings.deep_candidates])
+                deep |= {len(guesses) - 1} if self.hand_candidate else set()
+                costs = [self._rollout_cost(state, p, guesses[k])[0] if k in deep else math.inf
+                         for k in range(len(guesses))]
             solves = 0
             for k in sorted(range(len(guesses)), key=costs.__getitem__):  # the next one only if a solve failed
                 if solves >= self.settings.max_solves + (best is None) or time.perf_counter() - start > budget:
                     break
                 solves += 1
-                result = self._solve(state, p, guesses[k], duals[k])
+                result = self._solve(state, p, guesses[k], duals[k], costs[k])
                 if result is not None and (best is None or result[0] < best[0]):
                     best = result
         except Exception:  # noqa: BLE001 - a failed solve must never stop the fish controller

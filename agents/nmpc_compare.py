@@ -39,8 +39,9 @@ def compare(variants: dict[str, dict[str, Any]], seeds: list[int], env: str = "f
 
     Returns:
         Name -> ``{"success", "time_to_goal_s", "mean_distance_cm", "p50_ms", "p95_ms", "max_ms", "failures",
-        "late"}``; ``mean_distance_cm``: the distance to the target averaged over each episode's steps
-        (``track``: the tracking error), then over episodes.
+        "late", "failed"}``; ``mean_distance_cm``: the distance to the target averaged over each episode's steps
+        (``track``: the tracking error), then over episodes; ``failed``: ``(seed, steps, "wall" or
+        "time-out")`` of each unsuccessful episode (``track``: episodes are unsuccessful by definition).
     """
     import gymnasium as gym
 
@@ -57,29 +58,32 @@ def compare(variants: dict[str, dict[str, Any]], seeds: list[int], env: str = "f
     environment = gym.make(env_id, max_episode_steps=int(max_steps), **kwargs)
     config = environment.unwrapped.config
     controllers = {name: make_baseline("nmpc", config, **settings) for name, settings in variants.items()}
-    outcomes: dict[str, list[tuple[bool, int, float]]] = {name: [] for name in controllers}
+    outcomes: dict[str, list[tuple[bool, int, float, bool]]] = {name: [] for name in controllers}
     for seed in seeds:
         for name, controller in controllers.items():
             obs, _ = environment.reset(seed=int(seed))
             controller.reset()
-            steps, done, info, distance = 0, False, {}, 0.0
+            steps, done, info, distance, wall = 0, False, {}, 0.0, False
             while not done:
                 obs, _, terminated, truncated, info = environment.step(controller.act(obs))
                 steps += 1
                 distance += float(info.get("distance", math.nan))
+                wall |= float(info.get("reward_wall", 0.0)) != 0.0
                 done = terminated or truncated
-            outcomes[name].append((bool(info.get("is_success", False)), steps, distance / steps))
+            outcomes[name].append((bool(info.get("is_success", False)), steps, distance / steps, wall))
     environment.close()
     results = {}
     for name, controller in controllers.items():
         times = np.asarray(controller.solve_times) * 1e3
-        reached = [steps for ok, steps, _ in outcomes[name] if ok]
+        reached = [steps for ok, steps, *_ in outcomes[name] if ok]
         results[name] = {
             "episodes": len(seeds), "success": len(reached) / len(seeds),
             "time_to_goal_s": float(np.mean(reached) * config.control_period) if reached else None,
-            "mean_distance_cm": float(np.mean([d for *_, d in outcomes[name]]) * 100.0),
+            "mean_distance_cm": float(np.mean([o[2] for o in outcomes[name]]) * 100.0),
             "p50_ms": float(np.percentile(times, 50)), "p95_ms": float(np.percentile(times, 95)),
             "max_ms": float(times.max()), "failures": int(controller.failures), "late": int(controller.late),
+            "failed": [(int(seed), steps, "wall" if wall else "time-out")
+                       for seed, (ok, steps, _, wall) in zip(seeds, outcomes[name], strict=True) if not ok],
         }
     return results
 
@@ -100,6 +104,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--env", default="full", choices=list(_ENVS))
     parser.add_argument("--task", default="goal", choices=("goal", "track"))
     parser.add_argument("--max-steps", type=int, default=240)
+    parser.add_argument("--failed", action="store_true", help="list the unsuccessful episodes of each variant")
     args = parser.parse_args(argv)
     results = compare(json.loads(args.variants), _seeds(args.seeds), args.env, args.task, args.max_steps)
     print("| variant | episodes | success | time to goal [s] | mean distance [cm] | p50 [ms] | p95 [ms] | max [ms] "
@@ -110,6 +115,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"| {name} | {r['episodes']} | {r['success']:.2f} | {ttg} | {r['mean_distance_cm']:.1f} | "
               f"{r['p50_ms']:.0f} | {r['p95_ms']:.0f} | "
               f"{r['max_ms']:.0f} | {r['failures']} | {r['late']} |")
+    if args.failed:
+        for name, r in results.items():
+            print(f"{name} failed: " + (", ".join(f"{seed} ({steps} steps, {why})" for seed, steps, why in r["failed"])
+                                        or "none"))
     return 0
 
 

@@ -109,6 +109,7 @@ class NMPCSettings:
             motion (0: no adaptation). The averaged model with placeholder or imperfect K, or a
             randomised fish, turns and swims at other rates than predicted; the gains absorb that.
         gain_bounds: Bounds of the two gains.
+        initial_gains: The thrust and yaw-moment gains at the start of an episode.
         blocks: Move blocking: the number of control intervals each planned input is held for
             (``None``: one input per interval). ``sum(blocks)`` must equal ``horizon``. Fewer distinct
             inputs make fewer evaluations of the forcing (the identified K's splines, most of the
@@ -134,6 +135,23 @@ class NMPCSettings:
             Off by default: on seeds 100-109 (``agents.nmpc_compare``, no step budget) it reached 6 of
             10 goals on the full model against 10 of 10 without, and 8 of 10 on the averaged env either
             way: the optimiser leans on an impulse whose real value depends on the unobserved phase.
+        hand_candidate: Also screen the plan of :class:`agents.baselines.HandController` in closed loop
+            on the planning model (its deadlock escape and long way round near walls). ``None``: for
+            ``goal`` only (``agents.nmpc_compare --task track --seeds 100-101``: 14.7 cm with it, 8.1 cm
+            without).
+        w_togo: Weight [1/m] of the cost-to-go beyond the horizon in the screening and in the choice
+            between a solution and its guess: the turn-then-straight path from the horizon's end to
+            the target (radius ``turn_radius``, :func:`agents.turning.turn_path_length`) minus the
+            straight distance (already in the NLP's terminal cost). ``None``: 3 for ``goal``
+            (``w_distance + w_terminal``), 0 for ``track`` (a moving reference).
+        togo_wall_margin: Room [m] a turning circle of the cost-to-go must leave to the walls (beyond
+            half a body; the hand law's ``wall_margin``); a turn with less is charged up to a full
+            extra circle (0: walls ignored).
+        togo_steps: ``goal``: intervals the hand law is continued on the model after the horizon to
+            price a candidate (the NLP's distance and wall terms; :meth:`agents.nmpc.NMPCController._continuation`);
+            0: the turn-then-straight cost-to-go alone.
+        deep_candidates: With ``togo_steps``: how many of the cheapest screened candidates (plus the hand
+            law's) are priced with the continuation.
     """
 
     horizon: int = 10
@@ -153,6 +171,7 @@ class NMPCSettings:
     smoothing: float = 1e-3
     adapt_rate: float = 0.3
     gain_bounds: tuple[float, float] = (0.1, 3.0)
+    initial_gains: tuple[float, float] = (1.0, 1.0)
     max_solves: int = 1
     blocks: tuple[int, ...] | None = (1, 1, 2, 2, 4)
     solver: str = "sqp"
@@ -163,6 +182,11 @@ class NMPCSettings:
     velocity: str = "obs"
     observer: bool = True
     transitions: bool = False
+    hand_candidate: bool | None = None
+    w_togo: float | None = None
+    togo_wall_margin: float = 0.15
+    togo_steps: int = 10
+    deep_candidates: int = 1
 
     def __post_init__(self) -> None:
         if min(int(self.horizon), int(self.substeps), int(self.max_iter), int(self.max_solves)) < 1:
@@ -177,6 +201,9 @@ class NMPCSettings:
             raise ValueError(f"step_budget must be > 0 s, got {self.step_budget!r}")
         if self.hessian not in ("exact", "cost"):
             raise ValueError(f"hessian must be 'exact' or 'cost', got {self.hessian!r}")
+        if int(self.togo_steps) < 0 or int(self.deep_candidates) < 1 or not self.togo_wall_margin >= 0:
+            raise ValueError(f"togo_steps must be >= 0, deep_candidates >= 1 and togo_wall_margin >= 0 m, got "
+                             f"{self.togo_steps!r}, {self.deep_candidates!r}, {self.togo_wall_margin!r}")
         if self.solver not in _SOLVERS:
             raise ValueError(f"solver must be one of {_SOLVERS}, got {self.solver!r}")
         if self.blocks is not None and (min(self.blocks, default=0) < 1 or sum(self.blocks) != int(self.horizon)):

@@ -205,6 +205,9 @@ def test_nmpc_rejects_bad_settings():
         make_baseline("nmpc", CONFIG, solver="simplex")
     with pytest.raises(ValueError, match="step_budget"):
         make_baseline("nmpc", CONFIG, step_budget=0.0)
+    for bad in ({"togo_steps": -1}, {"deep_candidates": 0}, {"togo_wall_margin": -0.1}):
+        with pytest.raises(ValueError, match="togo_steps"):
+            make_baseline("nmpc", CONFIG, **bad)
 
 
 def test_nmpc_plan_holds_each_block_and_obeys_the_model(monkeypatch):
@@ -276,6 +279,7 @@ def test_nmpc_compare_runs_variants_on_the_same_episodes():
     for r in results.values():
         assert r["episodes"] == 1 and 0.0 <= r["success"] <= 1.0 and r["p50_ms"] <= r["p95_ms"] <= r["max_ms"]
         assert 0.0 < r["mean_distance_cm"] < 300.0  # a distance inside the 2.3 m tank
+        assert r["failed"] == [] if r["success"] == 1.0 else r["failed"] == [(0, 2, "time-out")]  # 2 steps: 1 s
     with pytest.raises(ValueError, match="env"):
         compare({"a": {}}, [0], env="moon")
 
