@@ -28,7 +28,7 @@ import numpy as np
 from agents.fin_map import FinMap
 from agents.turning import circle_room
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.envs.observation import OBS_SIZE, Observation, decode
+from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, Observation, decode
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 
 __all__ = ["BASELINES", "FinMap", "HandController", "RandomController", "make_baseline"]
@@ -129,8 +129,8 @@ class HandController:
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Action for one observation ``(19,)``."""
         obs = np.asarray(obs, dtype=np.float64)
-        if obs.shape != (OBS_SIZE,):
-            raise ValueError(f"obs must have shape ({OBS_SIZE},), got {obs.shape}")
+        if obs.ndim != 1 or obs.shape[0] not in OBS_SIZES:  # the fin block (observe_fins) is not used
+            raise ValueError(f"obs must have shape ({OBS_SIZE},) or ({OBS_SIZES[1]},), got {obs.shape}")
         o = decode(obs)
         heading = math.atan2(o.sin_psi, o.cos_psi)
         rate = 0.0 if self._heading is None else _wrap(heading - self._heading) / self.config.control_period

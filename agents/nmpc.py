@@ -42,7 +42,7 @@ from agents.nmpc_problem import (
 )
 from agents.turning import circle_room, turn_paths
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.envs.observation import OBS_SIZE, OBS_VELOCITY, Observation, decode
+from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, OBS_VELOCITY, Observation, decode
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 from pectoral_gym.symbolic import STATE_POSITION, STATE_PSI, STATE_SIZE, STATE_VELOCITY
@@ -125,8 +125,8 @@ class NMPCController:
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Solve the NMPC problem for one observation ``(19,)``; returns the normalised action ``(8,)``."""
         obs = np.asarray(obs, dtype=np.float64)
-        if obs.shape != (OBS_SIZE,):
-            raise ValueError(f"obs must have shape ({OBS_SIZE},), got {obs.shape}")
+        if obs.ndim != 1 or obs.shape[0] not in OBS_SIZES:  # the fin block (observe_fins) is not used
+            raise ValueError(f"obs must have shape ({OBS_SIZE},) or ({OBS_SIZES[1]},), got {obs.shape}")
         if not np.all(np.isfinite(obs)):
             u = self._fallback()
         else:

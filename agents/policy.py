@@ -81,6 +81,9 @@ class SB3Controller:
         self.obs_mean = None if obs_mean is None else np.asarray(obs_mean, dtype=np.float64)
         self.obs_std = None if obs_var is None else np.sqrt(np.asarray(obs_var, dtype=np.float64) + epsilon)
         self.clip_obs = float(clip_obs)
+        # 19 entries, or 27 for a policy trained with observe_fins=True (envs.observation)
+        space = getattr(model, "observation_space", None)
+        self.obs_size = int(space.shape[0]) if getattr(space, "shape", None) else OBS_SIZE
 
     def reset(self, seed: int | None = None) -> None:
         """Nothing to reset: the policy is deterministic and has no memory."""
@@ -93,18 +96,20 @@ class SB3Controller:
         return np.clip((obs - self.obs_mean) / self.obs_std, -self.clip_obs, self.clip_obs).astype(np.float32)
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
-        """Observations ``(n, 19)`` -> deterministic actions ``(n, 8)`` float32 in [-1, 1]."""
+        """Observations ``(n, obs_size)`` -> deterministic actions ``(n, 8)`` float32 in [-1, 1]."""
         obs = np.asarray(obs)
-        if obs.ndim != 2 or obs.shape[1] != OBS_SIZE:
-            raise ValueError(f"observations must have shape (n, {OBS_SIZE}), got {obs.shape}")
+        if obs.ndim != 2 or obs.shape[1] != self.obs_size:
+            hint = " (a policy trained with observe_fins=True needs that env setting)" if self.obs_size > OBS_SIZE \
+                else ""
+            raise ValueError(f"observations must have shape (n, {self.obs_size}), got {obs.shape}{hint}")
         action, _ = self.model.predict(self.normalize(obs), deterministic=True)
         return np.clip(np.asarray(action, dtype=np.float32), -1.0, 1.0)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        """Observation ``(19,)`` -> deterministic action ``(8,)`` float32 in [-1, 1]."""
+        """Observation ``(obs_size,)`` -> deterministic action ``(8,)`` float32 in [-1, 1]."""
         obs = np.asarray(obs)
-        if obs.shape != (OBS_SIZE,):
-            raise ValueError(f"observation must have shape ({OBS_SIZE},), got {obs.shape}")
+        if obs.shape != (self.obs_size,):
+            raise ValueError(f"observation must have shape ({self.obs_size},), got {obs.shape}")
         return self.act_batch(obs[None])[0]
 
 

@@ -149,6 +149,8 @@ class HardwareFishEnv(gym.Env):
             self.config = EnvConfig(model="full", task=task, control_period=control_period, **kwargs)
         except TypeError as err:
             raise ValueError(f"unknown HardwareFishEnv argument: {err}") from None
+        if self.config.observe_fins:  # the robot reports no fin angles; the PC does not replay its stroke schedule
+            raise ValueError("observe_fins is not available on the robot env: it observes the fish, not its fins")
         self.safety = safety or SafetyConfig()
         self.speed, self.frame_period = float(speed), float(frame_period)
         self.max_episode_steps = int(max_episode_steps)

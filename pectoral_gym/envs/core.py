@@ -78,6 +78,10 @@ class EnvConfig:
             default in the envs, unlike the model: it depends on the fins' stroke phase, which the
             observation does not show, and PPO trained with it did far worse on the full model (demo
             PPO, seeds 0-4: full-model success 0.36-0.68 against 0.86-0.91 without; README).
+        observe_fins: Append each fin's half-stroke in progress to the observation (angle now, the next
+            turning point, power or recovery, time left; :mod:`pectoral_gym.envs.observation`): the
+            stroke phase on which a new command's effect depends. Off by default (the 19-entry
+            observation); not available on the robot env.
         progress_weight: Goal task: reward per metre of approach [1/m].
         goal_bonus: Goal task: reward for reaching the goal.
         wall_penalty: Penalty when the nose or tail leaves the tank.
@@ -100,6 +104,7 @@ class EnvConfig:
     scaling: str | os.PathLike = "identified"
     check_scaling_params: bool = True
     transitions: bool = False
+    observe_fins: bool = False
     progress_weight: float = 10.0
     goal_bonus: float = 10.0
     wall_penalty: float = 10.0
@@ -125,6 +130,8 @@ class EnvConfig:
             raise ValueError(f"check_scaling_params must be True or False, got {self.check_scaling_params!r}")
         if not isinstance(self.transitions, (bool, np.bool_)):
             raise ValueError(f"transitions must be True or False, got {self.transitions!r}")
+        if not isinstance(self.observe_fins, (bool, np.bool_)):
+            raise ValueError(f"observe_fins must be True or False, got {self.observe_fins!r}")
         if self.model == "full" and self.scaling != "identified":
             raise ValueError("scaling applies to the averaged model only; leave it at 'identified' for model='full'")
         try:
@@ -246,7 +253,8 @@ class EnvCore:
     Attributes:
         model: The batched :class:`~pectoral_gym.models.FishModel` (``n`` fish).
         task_state: The :class:`~pectoral_gym.envs.task_core.TaskState` whose arrays follow (the same objects).
-        obs: ``(n, 19)`` float32 observations after the last reset/step (``envs.observation``).
+        obs: ``(n, 19)`` float32 observations after the last reset/step, ``(n, 27)`` with ``observe_fins``
+            (``envs.observation``).
         out: ``(n, N_OUT)`` reward, terms and flags of the last step (``layout.O_*``).
         ep: ``(n, N_EP)`` per-episode state (``layout.E_*``).
         fish: ``(n, N_FISH)`` values derived from each env's parameters (``layout.F_*``).
@@ -270,6 +278,8 @@ class EnvCore:
             self.model = AveragedModel(self.n, config.params, scaling=config.scaling_functions() or "none",
                                        transitions=bool(config.transitions))
         self.dt = float(config.control_period)
+        self._observe_fins = bool(config.observe_fins)
+        self._period_max = float(config.period_range[1])
         big = self.n >= PARALLEL_MIN_ITEMS  # chosen once: the batch size of a core never changes
         self._apply = tk.APPLY_KEEP_KERNELS.parallel if big else tk.APPLY_KEEP_KERNELS.serial
         self._reward = ts.task.reward_mean.parallel if big else ts.task.reward_mean.serial
@@ -313,6 +323,8 @@ class EnvCore:
         start = self.task_state.start(index, draws)
         self.model.reset(start, right=REST, left=REST, index=None if index.size == self.n else index)
         self.task_state.observe_reset(index, self.model.state)
+        if self._observe_fins:
+            tk.observe_fins(self.model.fins, self.obs, self._period_max)
 
     def step(self, actions: np.ndarray, skip: np.ndarray | None = None) -> None:
         """Apply ``actions`` ``(n, 8)`` for one control period (envs in ``skip`` are not checked or scored).
@@ -325,6 +337,8 @@ class EnvCore:
             bad = self._fused(actions, skip)
             if bad >= 0:
                 self._raise_non_finite(actions, bad)
+            if self._observe_fins:
+                tk.observe_fins(self.model.fins, self.obs, self._period_max)
             return
         model = self.model
         before = self._integral_before  # the model's velocity integrals before the step, kept by _apply
@@ -339,6 +353,8 @@ class EnvCore:
         # symmetric stroke reads a yaw rate of -0.45 rad/s at some phases), the averaged model's do not;
         # the means agree between the models, as an observer's estimate would.
         self._reward(model.state, skip, self.cfg, self.ep, self.fish, self.obs, self.out, model.integral, before)
+        if self._observe_fins:
+            tk.observe_fins(model.fins, self.obs, self._period_max)
 
     def _raise_non_finite(self, actions: np.ndarray, bad: int) -> None:
         where = f" for env {bad}" if self.n > 1 else ""

@@ -17,7 +17,7 @@ from pectoral_gym.envs.layout import (
     FishConstants,
     ReferenceEllipse,
 )
-from pectoral_gym.envs.observation import OBS_X, OBS_Y, OBSERVATION_STRUCTURE, observation_bounds
+from pectoral_gym.envs.observation import OBS_X, OBS_Y, observation_bounds, observation_structure
 from pectoral_gym.params import FishParams
 
 __all__ = ["PectoralFishEnv"]
@@ -146,6 +146,7 @@ class PectoralFishEnv(gym.Env):
     | ``scaling``       | ``"identified"`` |      | averaged only: ``"identified"``, ``"none"`` (K = 1), or a K file |
     | ``check_scaling_params`` | ``True`` |   | averaged only: raise if the K file is for other ``params`` |
     | ``transitions``   | ``False``        |      | averaged only: transitional-stroke forcing (docs/model.md 3.7) |
+    | ``observe_fins``  | ``False``        |      | observe each fin's half-stroke in progress (8 more entries) |
     | ``progress_weight`` | 10.0           | 1/m  | goal: reward per metre of approach |
     | ``goal_bonus``    | 10.0             |      | goal: reward on reaching the goal |
     | ``wall_penalty``  | 10.0             |      | penalty for hitting a wall |
@@ -184,9 +185,10 @@ class PectoralFishEnv(gym.Env):
         self.render_mode = render_mode
         self.core = EnvCore(1, self.config)
         self.action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), dtype=np.float32)
-        low, high = observation_bounds(self.config.control_period, self.config.ref_speed)
+        low, high = observation_bounds(self.config.control_period, self.config.ref_speed,
+                                       self.config.observe_fins)
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
-        self.observation_structure = dict(OBSERVATION_STRUCTURE)
+        self.observation_structure = observation_structure(self.config.observe_fins)
         self._task = self.config.task_id
         self._renderer = None
         self.trail: list[tuple[float, float]] = []

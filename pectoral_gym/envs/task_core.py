@@ -69,7 +69,7 @@ from pectoral_gym.envs.layout import (
     TRACK,
     fish_array,
 )
-from pectoral_gym.envs.observation import OBS_OMEGA, OBS_SIZE, OBS_VELOCITY, OBS_VX, OBS_VY
+from pectoral_gym.envs.observation import OBS_OMEGA, OBS_VELOCITY, OBS_VX, OBS_VY, observation_size
 from pectoral_gym.models import REST
 
 if TYPE_CHECKING:
@@ -295,7 +295,8 @@ class TaskState:
         task: The :class:`Task` row.
         cfg: ``(N_CFG,)`` packed settings; ``ep`` ``(n, N_EP)``, ``fish`` ``(n, N_FISH)``,
             ``out`` ``(n, N_OUT)``, ``beats`` ``(n, 2, 4)``: :mod:`pectoral_gym.envs.layout`.
-        obs: ``(n, OBS_SIZE)`` float32 observations (:mod:`pectoral_gym.envs.observation`).
+        obs: ``(n, OBS_SIZE)`` float32 observations (:mod:`pectoral_gym.envs.observation`; wider with
+            ``config.observe_fins``, whose block :class:`~pectoral_gym.envs.core.EnvCore` writes).
         action_code: The normalised action of the rest pattern, the last action after a reset.
     """
 
@@ -305,7 +306,7 @@ class TaskState:
         self.task = TASK_TABLE[config.task]
         self.cfg = config.cfg_array()
         self.ep = np.zeros((self.n, N_EP))
-        self.obs = np.zeros((self.n, OBS_SIZE), dtype=np.float32)
+        self.obs = np.zeros((self.n, observation_size(config.observe_fins)), dtype=np.float32)
         self.out = np.zeros((self.n, N_OUT))
         self.beats = np.broadcast_to(REST.as_array(), (self.n, 2, 4)).copy()
         self.fish = fish_array([config.params] * self.n)

@@ -65,7 +65,12 @@ from pectoral_gym.envs.layout import (
     TRACK,
 )
 from pectoral_gym.envs.observation import (  # noqa: F401 - OBS_SIZE re-exported: tk.OBS_SIZE
+    FIN_OBS_FIELDS,
     OBS_COS_PSI,
+    OBS_FIN_ANGLE,
+    OBS_FIN_ANGLE_TO,
+    OBS_FIN_POWER,
+    OBS_FIN_TIME_LEFT,
     OBS_LAST_ACTION,
     OBS_OMEGA,
     OBS_SIN_PSI,
@@ -80,6 +85,7 @@ from pectoral_gym.envs.observation import (  # noqa: F401 - OBS_SIZE re-exported
     OBS_Y,
 )
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
+from pectoral_gym.strokes import ANGLE_FROM, ANGLE_TO, DURATION, ELAPSED, POWER
 
 # Tank and task geometry [m], [rad].
 TANK_X = TANK_LENGTH  # tank length along X [m], one source: params.py
@@ -280,6 +286,30 @@ def apply_actions(actions, skip, cfg, beats, obs, out, fish) -> int:
 def observe_and_reward(state, skip, cfg, ep, fish, obs, out) -> None:
     """After the model advanced: move the reference, write observations, reward terms and flags."""
     REWARD_KERNELS.run(state, skip, cfg, ep, fish, obs, out)
+
+
+@nb.njit(**JIT)
+def observe_fins(fins, obs, period_max):
+    """Write the fin block of the observation (``observe_fins=True``) from the models' half-strokes ``fins``.
+
+    Per fin, at the block of :mod:`pectoral_gym.envs.observation`: the angle now on the half-cosine
+    of its half-stroke (``docs/model.md`` 3.2), the half-stroke's end angle, its kind, and the time
+    left to that turning point over ``period_max``; angles as ``(gamma - pi/2) / (pi/2)``.
+    """
+    half_pi = 0.5 * math.pi
+    for i in range(fins.shape[0]):
+        for f in range(2):
+            g_from, g_to = fins[i, f, ANGLE_FROM], fins[i, f, ANGLE_TO]
+            duration, elapsed = fins[i, f, DURATION], fins[i, f, ELAPSED]
+            left = max(duration - elapsed, 0.0)
+            g = g_to
+            if left > 0.0:  # g = mid - half cos(pi s / d) on the half-stroke in progress
+                g = 0.5 * (g_from + g_to) - 0.5 * (g_to - g_from) * math.cos(math.pi * elapsed / duration)
+            base = OBS_SIZE + FIN_OBS_FIELDS * f
+            obs[i, base + OBS_FIN_ANGLE] = (g - half_pi) / half_pi
+            obs[i, base + OBS_FIN_ANGLE_TO] = (g_to - half_pi) / half_pi
+            obs[i, base + OBS_FIN_POWER] = 1.0 if fins[i, f, POWER] > 0.5 else -1.0
+            obs[i, base + OBS_FIN_TIME_LEFT] = min(left / period_max, 1.0)
 
 
 # ---------------------------------------------------------------- reset

@@ -14,7 +14,7 @@ from gymnasium.vector.utils import batch_space
 
 from pectoral_gym.envs.core import EnvConfig, EnvCore, env_signature
 from pectoral_gym.envs.layout import ACTION_SIZE, O_REWARD, O_TERMINATED
-from pectoral_gym.envs.observation import OBSERVATION_STRUCTURE, observation_bounds
+from pectoral_gym.envs.observation import observation_bounds, observation_structure
 from pectoral_gym.registration import MAX_EPISODE_STEPS
 
 __all__ = ["PectoralFishVectorEnv"]
@@ -84,10 +84,11 @@ class PectoralFishVectorEnv(VectorEnv):
         self.core = EnvCore(self.num_envs, self.config)
         self.single_action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        low, high = observation_bounds(self.config.control_period, self.config.ref_speed)
+        low, high = observation_bounds(self.config.control_period, self.config.ref_speed,
+                                       self.config.observe_fins)
         self.single_observation_space = spaces.Box(low, high, dtype=np.float32)
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
-        self.observation_structure = dict(OBSERVATION_STRUCTURE)
+        self.observation_structure = observation_structure(self.config.observe_fins)
         self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
         self.steps = np.zeros(self.num_envs, dtype=np.int64)
         self.prev_done = np.zeros(self.num_envs, dtype=np.bool_)
