@@ -28,6 +28,7 @@ import numpy as np
 
 from hardware.safety import SafetyConfig, install_stop_handlers
 from pectoral_gym.envs import tasks as tk
+from pectoral_gym.envs.observation import OBS_SIZE
 
 __all__ = ["main", "make_controller", "run_episodes", "plot_trajectories", "solver_summary"]
 
@@ -177,6 +178,10 @@ def main(argv: list[str] | None = None) -> int:
             controller = load_policy(args.policy)
         except (FileNotFoundError, ValueError) as err:
             parser.error(f"cannot load policy {args.policy!r}: {err}")
+        if getattr(controller, "obs_size", OBS_SIZE) != OBS_SIZE:
+            parser.error(f"policy {args.policy!r} observes the fins' stroke phase (observe_fins=True, "
+                         f"{controller.obs_size} entries), which the robot does not report; for the robot, train "
+                         "with env_kwargs observe_fins: false (and transitions: false)")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     robot = None

@@ -46,6 +46,17 @@ def test_deploy_emulate_end_to_end(policy_zip, tmp_path, capsys):
     assert "episode 1:" in capsys.readouterr().out
 
 
+def test_deploy_refuses_a_policy_that_observes_the_fins(tmp_path, capsys):
+    from stable_baselines3 import PPO
+
+    env = gym.make("PectoralFish-Averaged-v0", observe_fins=True)  # 27 entries: the robot reports 19
+    path = tmp_path / "fins.zip"
+    PPO("MlpPolicy", env, n_steps=32, batch_size=32, n_epochs=1, seed=0, device="cpu").save(path)
+    with pytest.raises(SystemExit):
+        main(["--policy", str(path), "--emulate", "--out", str(tmp_path / "run")])
+    assert "observe_fins=True" in capsys.readouterr().err
+
+
 def test_deploy_needs_port_and_camera_without_emulate(tmp_path):
     with pytest.raises(SystemExit):
         main(["--policy", str(tmp_path / "none.zip"), "--out", str(tmp_path)])
