@@ -34,7 +34,7 @@ from agents.metrics import METRICS, Trajectory, episode_metrics, summarize
 from agents.policy import BatchController, Controller
 from agents.results import EvaluationResult, format_table, jsonable, plot_trajectories, write_json
 from pectoral_gym.envs.layout import ACTION_SIZE
-from pectoral_gym.envs.observation import OBS_POSITION, decode
+from pectoral_gym.envs.observation import OBS_POSITION, OBS_SIZE, decode
 
 __all__ = [
     "DEFAULT_RANDOMIZATION",
@@ -53,7 +53,7 @@ DEFAULT_RANDOMIZATION = {"body_mass": 0.1, "body_inertia": 0.2, "drag_coef": 0.2
 MAX_BATCH = 128  # vector-env slots of one evaluation
 QUICK_EPISODES = 2  # --quick: episodes of a smoke run
 # Settings of the averaged model only: a policy trained on it keeps its other env arguments on the full model.
-AVERAGED_ONLY = ("scaling", "check_scaling_params")
+AVERAGED_ONLY = ("scaling", "check_scaling_params", "transitions")
 
 ControllerLike = Controller | Callable[[], Controller]
 
@@ -86,7 +86,9 @@ def evaluate(controller: ControllerLike, env_id: str, n_episodes: int = 100, see
         env_id: ``PectoralFish-Averaged-v0`` or ``PectoralFish-Full-v0``.
         n_episodes: Number of episodes (>= 1).
         seed: Episode ``k`` is reset with ``seed + k``.
-        env_kwargs: Environment arguments (``task``, ``randomize``, reward weights, ...).
+        env_kwargs: Environment arguments (``task``, ``randomize``, reward weights, ...). A policy trained
+            with the fin block (an ``obs_size`` of 27, :class:`agents.policy.SB3Controller`) gets
+            ``observe_fins=True`` unless ``env_kwargs`` sets it.
         n_envs: Vector-env slots (default: ``min(n_episodes, 128)``, 1 for a plain controller).
         confidence: Confidence level of the bootstrap intervals.
         progress: Show a tqdm progress bar over episodes.
@@ -110,6 +112,8 @@ def evaluate(controller: ControllerLike, env_id: str, n_episodes: int = 100, see
     n_envs = min(int(n_envs or default_envs), n_episodes)
     if not batch and not _is_factory(controller) and n_envs != 1:
         raise ValueError("a single controller with per-episode state runs one env; pass a factory for more")
+    if getattr(controller, "obs_size", OBS_SIZE) > OBS_SIZE:  # the policy observes the fins: so must its env
+        env_kwargs.setdefault("observe_fins", True)
     env = make_vector_env(env_id, n_envs, env_kwargs)
     config = env.config
     slots = [controller() for _ in range(n_envs)] if _is_factory(controller) else [controller] * n_envs

@@ -80,12 +80,13 @@ def test_parse_python_kwargs_reads_without_evaluating():
 
 
 def test_demo_hyperparameters_reach_sb3_unchanged():
-    # the values of agents/hyperparams/ppo.yml before the zoo format (the demo's PPO, seed 0)
+    # the demo's PPO (seed 0): the values of agents/hyperparams/ppo.yml, as SB3 must receive them
     config = resolve_config("ppo", ENV, 0, task="goal")
     assert {k: config[k] for k in ("n_envs", "n_timesteps", "policy", "normalize", "env_kwargs", "eval_freq",
                                    "eval_episodes")} == {
-        "n_envs": 32, "n_timesteps": 800000, "policy": "MlpPolicy",
-        "normalize": {"norm_obs": True, "norm_reward": False, "clip_obs": 10.0}, "env_kwargs": {"task": "goal"},
+        "n_envs": 32, "n_timesteps": 1600000, "policy": "MlpPolicy",
+        "normalize": {"norm_obs": True, "norm_reward": False, "clip_obs": 10.0},
+        "env_kwargs": {"task": "goal", "transitions": True, "observe_fins": True},
         "eval_freq": 50000, "eval_episodes": 50}
     kwargs = algo_kwargs(config)
     schedule = kwargs.pop("learning_rate")
@@ -138,8 +139,8 @@ import pectoral_gym
 
 env_id, zip_path, stats_path = sys.argv[1:]
 model = PPO.load(zip_path, device="cpu")
-stats = VecNormalize.load(stats_path, DummyVecEnv([lambda: gym.make(env_id)]))
-action, _ = model.predict(stats.normalize_obs(np.zeros((1, 19), dtype=np.float32)), deterministic=True)
+stats = VecNormalize.load(stats_path, DummyVecEnv([lambda: gym.make(env_id, observe_fins=True)]))
+action, _ = model.predict(stats.normalize_obs(np.zeros((1, 27), dtype=np.float32)), deterministic=True)
 extractor = model.policy.mlp_extractor
 print(json.dumps({
     "num_timesteps": model.num_timesteps, "n_envs": model.n_envs, "n_steps": model.n_steps,
@@ -166,8 +167,9 @@ import pectoral_gym
 from agents.policy import load_policy
 
 env_id, run_dir = sys.argv[1:]
-stats = VecNormalize.load(f"{run_dir}/{env_id}/vecnormalize.pkl", DummyVecEnv([lambda: gym.make(env_id)]))
-obs = np.random.default_rng(0).normal(size=(6, 19)).astype(np.float32) * 3
+stats = VecNormalize.load(f"{run_dir}/{env_id}/vecnormalize.pkl",
+                          DummyVecEnv([lambda: gym.make(env_id, observe_fins=True)]))
+obs = np.random.default_rng(0).normal(size=(6, 27)).astype(np.float32) * 3  # the shipped file observes the fins
 out = {}
 for name, target, zip_name in (("dir", run_dir, f"{env_id}.zip"), ("final", f"{run_dir}/{env_id}.zip", f"{env_id}.zip"),
                                ("best", f"{run_dir}/best_model.zip", "best_model.zip")):

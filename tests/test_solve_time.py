@@ -102,7 +102,7 @@ def test_a_probe_neither_changes_training_nor_counts_in_its_elapsed_time(tmp_pat
 
     def probe(controller, record):
         clock["t"] += 1e6  # the probe "takes" a million clock units
-        actions = controller.act_batch(np.zeros((2, 19), dtype=np.float32))
+        actions = controller.act_batch(np.zeros((2, controller.obs_size), dtype=np.float32))
         seen.append(actions.shape)
         return {"k": len(seen)}
 

@@ -91,7 +91,8 @@ def test_trial_config_reaches_the_resolved_config():
     # the file's policy_kwargs text is read into a dict, and the trial's net_arch replaces its net_arch only
     assert config["algo_kwargs"]["policy_kwargs"]["net_arch"] == [16]
     assert config["algo_kwargs"]["policy_kwargs"]["activation_fn"] == "nn.Tanh"
-    assert config["env_kwargs"] == {"task": "track", "randomize": {"drag_coef": 0.3}, "time_penalty": 0.5}
+    assert config["env_kwargs"] == {"task": "track", "randomize": {"drag_coef": 0.3}, "time_penalty": 0.5,
+                                    "transitions": True, "observe_fins": True}  # the last two: the file's
     plain = resolve_config("ppo", ENV, 0)
     assert trial_config("ppo", ENV, {}) == plain  # an empty point is the file's config
 

@@ -39,7 +39,8 @@ def test_ppo_smoke_run_fills_the_run_folder(tmp_path):
     policy = load_policy(run_dir)
     assert isinstance(policy, Controller)
     assert policy.obs_mean is not None  # normalisation statistics applied
-    obs = np.random.default_rng(0).normal(size=(5, 19)).astype(np.float32)
+    assert policy.obs_size == 27  # the shipped file observes the fins (observe_fins: true)
+    obs = np.random.default_rng(0).normal(size=(5, policy.obs_size)).astype(np.float32)
     actions = policy.act_batch(obs)
     assert actions.shape == (5, 8) and actions.dtype == np.float32 and np.all(np.abs(actions) <= 1)
     np.testing.assert_allclose(policy.act(obs[0]), actions[0], atol=1e-6)
@@ -54,7 +55,7 @@ def test_ppo_smoke_run_fills_the_run_folder(tmp_path):
 def test_same_seed_repeats_the_run(tmp_path):
     a = load_policy(run(tmp_path, "a") / "model.zip")
     b = load_policy(run(tmp_path, "b") / "model.zip")
-    obs = np.random.default_rng(1).normal(size=(8, 19)).astype(np.float32)
+    obs = np.random.default_rng(1).normal(size=(8, a.obs_size)).astype(np.float32)
     for pa, pb in zip(a.model.policy.parameters(), b.model.policy.parameters(), strict=True):
         assert np.array_equal(pa.detach().numpy(), pb.detach().numpy())
     np.testing.assert_array_equal(a.act_batch(obs), b.act_batch(obs))
@@ -91,7 +92,7 @@ def test_overrides_and_resolution():
         parse_overrides(["novalue"])
     config = resolve_config("ppo", ENV, 0, task="track", hyperparams={"policy_kwargs": {"net_arch": [8]}},
                             env_kwargs={"goal_radius": 0.1})
-    assert config["env_kwargs"] == {"task": "track", "goal_radius": 0.1}
+    assert config["env_kwargs"] == {"task": "track", "transitions": True, "observe_fins": True, "goal_radius": 0.1}
     # nested override replaces one key and keeps the file's others
     assert config["algo_kwargs"]["policy_kwargs"]["net_arch"] == [8]
     assert config["algo_kwargs"]["policy_kwargs"]["activation_fn"] == "nn.Tanh"
@@ -128,17 +129,19 @@ def test_evaluation_env_resolution():
     from agents.config import evaluation_env
 
     shipped = resolve_config("ppo", ENV, 0)  # the shipped file validates on the full model, nominal parameters
-    assert evaluation_env(shipped) == ("PectoralFish-Full-v0", {"task": "goal"})
+    assert evaluation_env(shipped) == ("PectoralFish-Full-v0", {"task": "goal", "observe_fins": True})
     config = resolve_config("ppo", ENV, 0, hyperparams={"env_kwargs": {"randomize": {"body_mass": 0.1},
                                                                        "scaling": "none"},
                                                         "eval_env": None})
     assert config["eval_env"] == ENV  # null: the training env, its arguments but the file's randomize: null
-    assert evaluation_env(config) == (ENV, {"task": "goal", "scaling": "none"})
+    assert evaluation_env(config) == (ENV, {"task": "goal", "transitions": True, "observe_fins": True,
+                                            "scaling": "none"})
     config["eval_env_kwargs"] = {"randomize": {"drag_coef": 0.2}}
-    assert evaluation_env(config) == (ENV, {"task": "goal", "randomize": {"drag_coef": 0.2}, "scaling": "none"})
+    assert evaluation_env(config) == (ENV, {"task": "goal", "randomize": {"drag_coef": 0.2}, "scaling": "none",
+                                            "transitions": True, "observe_fins": True})
     config["eval_env"], config["eval_env_kwargs"] = "PectoralFish-Full-v0", {"randomize": None, "wall_penalty": 5}
     # null drops a training argument; the averaged model's own arguments do not reach the full model
-    assert evaluation_env(config) == ("PectoralFish-Full-v0", {"task": "goal", "wall_penalty": 5})
+    assert evaluation_env(config) == ("PectoralFish-Full-v0", {"task": "goal", "observe_fins": True, "wall_penalty": 5})
     config["eval_env"] = "CartPole-v1"
     with pytest.raises(ValueError, match="eval_env must be one of"):
         evaluation_env(config)
