@@ -75,9 +75,9 @@ class EnvConfig:
             ``False`` is the explicit opt-out. ``randomize`` draws around ``params`` and is not checked.
         transitions: Averaged model only: add the forcing of transitional half-strokes (after every
             pattern change; :class:`~pectoral_gym.models.AveragedModel`, ``docs/model.md`` 3.7). Off by
-            default in the envs, unlike the model: it depends on the fins' stroke phase, which the
-            observation does not show, and PPO trained with it did far worse on the full model (demo
-            PPO, seeds 0-4: full-model success 0.36-0.68 against 0.86-0.91 without; README).
+            default in the envs, unlike the model: it depends on the fins' stroke phase, which the default
+            observation does not show; use it with ``observe_fins=True``, as the shipped PPO file does
+            (alone it did far worse: full-model success 0.36-0.68; with both 0.98-1.00; docs/agents.md).
         observe_fins: Append each fin's half-stroke in progress to the observation (angle now, the next
             turning point, power or recovery, time left; :mod:`pectoral_gym.envs.observation`): the
             stroke phase on which a new command's effect depends. Off by default (the 19-entry
