@@ -29,7 +29,9 @@ import time
 import numpy as np
 
 from hardware import protocol as pr
-from hardware.firmware import Firmware, FirmwareConfig, stretch_transition
+from hardware.finreplay import CHUNK as _CHUNK
+from hardware.finreplay import apply_firmware
+from hardware.firmware import Firmware, FirmwareConfig
 from pectoral_gym import strokes
 from pectoral_gym.models import FullModel
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
@@ -37,7 +39,6 @@ from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
 __all__ = ["EmulatedRobot", "ROBOT_ADDRESS", "main"]
 
 ROBOT_ADDRESS = 0x0013A20000000001  # 64-bit source address the emulated XBee reports
-_CHUNK = 0.01  # physics step between firmware ticks [emulated s]
 _POLL = 0.002  # wall-clock poll period of the I/O loop [s]
 
 
@@ -105,10 +106,12 @@ class EmulatedRobot:
         return (time.monotonic() - self._origin) * self.speed
 
     def place(self, x: float, y: float, psi: float) -> None:
-        """Put the fish at rest at ``(x, y, psi)`` with both fins still (a hand in the tank)."""
+        """Put the fish at rest at ``(x, y, psi)`` with both fins still where they are (a hand in the tank)."""
         with self._lock:
             time_now = self.model.time
-            self.model.reset(np.array([x, y, psi, 0.0, 0.0, 0.0]), index=np.arange(1))
+            angles = self.model.fin_angles()[0][0]  # a hand moves the fish, not the servos
+            self.model.reset(np.array([x, y, psi, 0.0, 0.0, 0.0]), right=FinBeat.rest(float(angles[0])),
+                             left=FinBeat.rest(float(angles[1])), index=np.arange(1))
             self.model.time = time_now
 
     def state(self) -> np.ndarray:
@@ -252,22 +255,8 @@ class EmulatedRobot:
             self._write(pr.encode_frame(pr.rx_packet(pr.encode_message(reply), ROBOT_ADDRESS)))
 
     def _apply_firmware(self) -> None:
-        """Hand the firmware's decision to the model (call with the lock held)."""
-        fw = self.firmware
-        if fw.halt:
-            angles = self.model.fin_angles()[0][0]
-            time_now = self.model.time
-            self.model.reset(self.model.state.copy(), right=FinBeat.rest(float(angles[0])),
-                             left=FinBeat.rest(float(angles[1])), index=np.arange(1))
-            self.model.time = time_now
-            fw.halt = False
-        elif fw.running:
-            # Latched at the next turning point: bound the transitional half-stroke that starts there.
-            fins = self.model.fins[0]
-            still = fins[:, strokes.ANGLE_FROM] == fins[:, strokes.ANGLE_TO]
-            next_power = still | (fins[:, strokes.POWER] < 0.5)
-            safe = stretch_transition(fw.setpoint, fins[:, strokes.ANGLE_TO], next_power, fw.config.limits)
-            self.model.command_array(safe.reshape(1, 2, 4))
+        """Hand the firmware's decision to the model (call with the lock held; the PC's replay does the same)."""
+        apply_firmware(self.firmware, self.model)
 
     def _advance(self, target: float) -> None:
         while True:

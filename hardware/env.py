@@ -13,9 +13,12 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.envs.registration import EnvSpec
 
+from hardware.finreplay import FinReplay
+from hardware.firmware import FirmwareConfig
 from hardware.link import RadioLink
 from hardware.safety import CommandFilter, Geofence, SafetyConfig, check_action, install_stop_handlers
 from hardware.supervisor import Supervisor
+from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.layout import ACTION_SIZE, E_TX, E_TY
 from pectoral_gym.envs.observation import observation_bounds
@@ -149,15 +152,14 @@ class HardwareFishEnv(gym.Env):
             self.config = EnvConfig(model="full", task=task, control_period=control_period, **kwargs)
         except TypeError as err:
             raise ValueError(f"unknown HardwareFishEnv argument: {err}") from None
-        if self.config.observe_fins:  # the robot reports no fin angles; the PC does not replay its stroke schedule
-            raise ValueError("observe_fins is not available on the robot env: it observes the fish, not its fins")
         self.safety = safety or SafetyConfig()
         self.speed, self.frame_period = float(speed), float(frame_period)
         self.max_episode_steps = int(max_episode_steps)
         self.reset_hook, self.reset_timeout = reset_hook, float(reset_timeout)
         self.render_mode = render_mode
         self.action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), dtype=np.float32)
-        low, high = observation_bounds(self.config.control_period, self.config.ref_speed)  # the simulated envs'
+        low, high = observation_bounds(self.config.control_period, self.config.ref_speed,  # the simulated envs'
+                                       self.config.observe_fins)
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         # A physical system: the checker must not expect equal observations for equal seeds.
         self.spec = EnvSpec("HardwareFish-v0", entry_point="hardware.env:HardwareFishEnv", nondeterministic=True)
@@ -187,6 +189,9 @@ class HardwareFishEnv(gym.Env):
         self.filter = CommandFilter(self.safety.limits)
         cfg = self.config
         self.task_state = TaskState(1, cfg)  # the simulated envs' task core, fed the observer's estimate
+        # observe_fins: the robot reports no fin angles, so the PC replays its fins from the commands it sends
+        self.fin_replay = FinReplay(cfg.params, FirmwareConfig(limits=self.safety.limits)) \
+            if cfg.observe_fins else None
         self._act = np.zeros((1, ACTION_SIZE))
         self._origin = time.monotonic()
         self._state = np.zeros(6)
@@ -255,6 +260,9 @@ class HardwareFishEnv(gym.Env):
         task = self.task_state
         task.reset_at(0, self.np_random, (x, y, psi))  # draw the target, observe at rest
         self.filter.reset(task.beats[0].copy())  # the rest pattern
+        if self.fin_replay is not None:  # stopped above: the fins halt where they are (a hand moves only the fish)
+            self.fin_replay.stop(self.now())
+            self._observe_fins()
         self._steps = 0
         self.supervisor.frames = self.supervisor.lost_frames = 0
         self._next_tick = self.now()
@@ -279,8 +287,12 @@ class HardwareFishEnv(gym.Env):
         period, lease = self.config.control_period, self.safety.lease
         self._next_tick = max(self._next_tick + period, now)  # a late step does not shorten the next one
         overrun = max(0.0, now - (self._next_tick - period))
+        if self.fin_replay is not None and now > self._lease_end:  # a late step: the robot's lease ran out
+            self.fin_replay.stop(self._lease_end)
         if sup.send(command, lease):
             self._lease_end = now + lease
+            if self.fin_replay is not None:
+                self.fin_replay.command(now, command)
         self._velocity_sum = np.zeros(3)
         self._velocity_count = 0
         while not sup.reason:
@@ -302,6 +314,10 @@ class HardwareFishEnv(gym.Env):
             # Velocities as in the simulated envs: means over the control period, not the last estimate
             # (the observer passes part of the fin-beat ripple).
             task.set_mean_velocity(0, self._velocity_sum / self._velocity_count)
+        if self.fin_replay is not None:
+            if reason:  # the fins were stopped (at the latest now)
+                self.fin_replay.stop(end)
+            self._observe_fins(end)
         self._steps += 1
         terminated = task.terminated(0) or reason == "geofence"
         truncated = bool(reason) and not terminated or self._steps >= self.max_episode_steps
@@ -315,6 +331,12 @@ class HardwareFishEnv(gym.Env):
                               "confidence": sup.confidence, "frames": sup.frames, "lost_frames": sup.lost_frames,
                               "rejected": dict(sup.frame_check.rejected)})
         return task.obs[0].copy(), task.reward(0), terminated, truncated, info
+
+    def _observe_fins(self, t: float | None = None) -> None:
+        """The observation's fin block from the replayed fins at time ``t`` (default: where the replay is)."""
+        if t is not None:
+            self.fin_replay.advance(t)
+        tk.observe_fins(self.fin_replay.fins, self.task_state.obs, float(self.config.period_range[1]))
 
     @property
     def target(self) -> list[float]:

@@ -46,15 +46,18 @@ def test_deploy_emulate_end_to_end(policy_zip, tmp_path, capsys):
     assert "episode 1:" in capsys.readouterr().out
 
 
-def test_deploy_refuses_a_policy_that_observes_the_fins(tmp_path, capsys):
+def test_deploy_runs_a_policy_that_observes_the_fins_on_the_fin_replay(tmp_path):
     from stable_baselines3 import PPO
 
-    env = gym.make("PectoralFish-Averaged-v0", observe_fins=True)  # 27 entries: the robot reports 19
+    env = gym.make("PectoralFish-Averaged-v0", observe_fins=True)  # 27 entries: the robot env replays the fins
     path = tmp_path / "fins.zip"
     PPO("MlpPolicy", env, n_steps=32, batch_size=32, n_epochs=1, seed=0, device="cpu").save(path)
-    with pytest.raises(SystemExit):
-        main(["--policy", str(path), "--emulate", "--out", str(tmp_path / "run")])
-    assert "observe_fins=True" in capsys.readouterr().err
+    out = tmp_path / "run"
+    code = main(["--policy", str(path), "--emulate", "--speed", "2", "--episodes", "1", "--max-steps", "3",
+                 "--out", str(out), "--quiet", "--tracking-timeout", "1.5"])
+    assert code == 0
+    steps = [json.loads(line) for line in (out / "steps.jsonl").read_text().splitlines()]
+    assert len([r for r in steps if r.get("event") != "reset"]) >= 1
 
 
 def test_deploy_needs_port_and_camera_without_emulate(tmp_path):

@@ -112,10 +112,6 @@ def test_vector_env_fin_block_matches_the_single_env():
     np.testing.assert_allclose(vec_obs[1], obs, atol=1e-6)
 
 
-def test_bad_setting_and_the_robot_env_raise():
+def test_a_bad_setting_raises():
     with pytest.raises(ValueError, match="observe_fins must be True or False"):
         PectoralFishEnv(observe_fins="yes")
-    from hardware.env import HardwareFishEnv
-
-    with pytest.raises(ValueError, match="observe_fins is not available on the robot env"):
-        HardwareFishEnv(port=None, camera=None, observe_fins=True)

@@ -1,0 +1,128 @@
+"""The robot's fins replayed on the PC: the stroke phase a fin-observing policy needs, which the robot does not report.
+
+The robot's STATUS message carries no fin angles, but its fins move by known rules: the firmware
+(:class:`hardware.firmware.Firmware`: leases, rate limiting, halts) hands its setpoint to fins that
+follow the parameter-change rule of ``docs/model.md`` section 5, the transitional half-stroke
+bounded by :func:`hardware.firmware.stretch_transition`. :class:`FinReplay` runs those same rules on
+the PC, fed the commands the PC sends (as they go on the wire, quantised) at the times it sends them,
+so :class:`hardware.env.HardwareFishEnv` can give the observation's fin block
+(``observe_fins=True``, :mod:`pectoral_gym.envs.observation`). The emulator drives its own fins with
+the same two functions, :func:`apply_firmware` and :func:`advance_with_firmware`.
+
+What the replay cannot see: the radio latency (the robot latches a command a few milliseconds after
+the PC sent it) and the firmware's tick (10 ms); a latch may therefore fall one tick apart, and
+after a safety stop the fins are taken as halted when the PC learns of it. The fins' angles at
+power-up are taken as 90 deg (the firmware's rest).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from hardware import protocol as pr
+from hardware.firmware import Firmware, FirmwareConfig, stretch_transition
+from pectoral_gym import strokes
+from pectoral_gym.models import FishModel, FullModel
+from pectoral_gym.params import FinBeat, FishParams
+
+__all__ = ["CHUNK", "FinReplay", "advance_with_firmware", "apply_firmware"]
+
+CHUNK = 0.01  # fin-model step between firmware ticks [robot s]
+
+
+def apply_firmware(firmware: Firmware, model: FishModel) -> None:
+    """Hand the firmware's decision to fish 0 of ``model``: halt the fins where they are, or command the setpoint.
+
+    A running command is latched at the next turning point; its transitional half-stroke from there is
+    bounded by :func:`~hardware.firmware.stretch_transition`.
+    """
+    if firmware.halt:
+        angles = model.fin_angles()[0][0]
+        time_now = model.time
+        model.reset(model.state.copy(), right=FinBeat.rest(float(angles[0])), left=FinBeat.rest(float(angles[1])),
+                    index=np.arange(1))
+        model.time = time_now
+        firmware.halt = False
+    elif firmware.running:
+        fins = model.fins[0]
+        still = fins[:, strokes.ANGLE_FROM] == fins[:, strokes.ANGLE_TO]
+        next_power = still | (fins[:, strokes.POWER] < 0.5)
+        safe = stretch_transition(firmware.setpoint, fins[:, strokes.ANGLE_TO], next_power, firmware.config.limits)
+        model.command_array(safe.reshape(1, 2, 4))
+
+
+def advance_with_firmware(firmware: Firmware, model: FishModel, target: float,
+                          after_chunk: Callable[[], None] | None = None) -> None:
+    """Advance ``model`` (fish 0) to time ``target`` [s] in :data:`CHUNK` steps, ticking the firmware before each."""
+    while model.time < target:
+        firmware.tick(model.time, model.fin_angles()[0][0])
+        apply_firmware(firmware, model)
+        model.advance(min(CHUNK, target - model.time))
+        if after_chunk is not None:
+            after_chunk()
+
+
+class FinReplay:
+    """The robot's fins, replayed from the commands the PC sends.
+
+    Times are the PC's experiment clock [robot s] (``HardwareFishEnv.now()``).
+
+    Args:
+        params: Model parameters (only the fin kinematics matter).
+        firmware: The robot's firmware settings (servo limits, lease).
+    """
+
+    _SESSION = 1
+
+    def __init__(self, params: FishParams | None = None, firmware: FirmwareConfig | None = None):
+        self.firmware_config = firmware
+        self.model = FullModel(1, params)
+        self.reset(0.0)
+
+    def reset(self, t: float) -> None:
+        """Fins at rest at 90 deg at time ``t`` (power-up, or a new replay)."""
+        self.firmware = Firmware(self.firmware_config)
+        self.model.reset()
+        self.model.time = float(t)
+        self._seq = self._command = 0
+
+    def _message(self, msg: pr.Message) -> None:
+        # Through the wire format: the robot runs the quantised command.
+        self.firmware.receive(pr.decode_message(pr.encode_message(msg)), self.model.time)
+
+    def _next_seq(self) -> int:
+        self._seq = (self._seq + 1) & 0xFFFF
+        return self._seq
+
+    def command(self, t: float, beats: np.ndarray) -> None:
+        """The PC sent a new command ``beats`` ``(2, 4)`` at time ``t``.
+
+        The replay keeps it running until :meth:`stop` or the next command: the PC's keep-alives and
+        lease renewals keep the robot running, and when a lease or the watchdog stops the robot the
+        PC's supervisor stops the episode, which calls :meth:`stop`.
+        """
+        self.advance(t)
+        self._command = (self._command + 1) & 0xFFFF
+        fins = tuple(float(v) for v in np.asarray(beats, dtype=float).reshape(8))
+        self._message(pr.Message(pr.MsgType.SET_FINS, self._next_seq(), self._SESSION, fins=fins,
+                                 command=self._command, lease=self.firmware.config.max_lease))
+        self.firmware.lease_end = math.inf
+        self.firmware.last_valid = math.inf  # no watchdog in the replay (see above)
+
+    def stop(self, t: float) -> None:
+        """The fins were stopped at time ``t`` (STOP, a safety trip): they halt where they are."""
+        self.advance(t)
+        self._message(pr.Message(pr.MsgType.STOP, self._next_seq(), self._SESSION))
+        advance_with_firmware(self.firmware, self.model, self.model.time + 1e-9)  # apply the halt now
+
+    def advance(self, t: float) -> None:
+        """Run the fins to time ``t`` (earlier times are ignored)."""
+        advance_with_firmware(self.firmware, self.model, float(t))
+
+    @property
+    def fins(self) -> np.ndarray:
+        """``(1, 2, strokes.FIN_FIELDS)`` the replayed half-strokes in progress (:mod:`pectoral_gym.strokes`)."""
+        return self.model.fins
