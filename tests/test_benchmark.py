@@ -21,7 +21,7 @@ def test_small_benchmark_writes_a_row_per_cell(tmp_path):
 @pytest.mark.slow
 def test_tiny_benchmark_has_every_row(tmp_path):
     settings = BenchmarkSettings(episodes=2, nmpc_episodes={"goal": 1, "track": 1}, max_episode_steps=3,
-                                 nmpc={"horizon": 3, "substeps": 4}, train_steps=0)
+                                 nmpc={"horizon": 3, "blocks": (1, 1, 1), "substeps": 4}, train_steps=0)
     report = run_benchmark(settings, throughput=False)
     assert report["errors"] == {}
     rows = {(c["controller"], c["env"], c["task"]) for c in report["cells"]}
