@@ -152,6 +152,8 @@ class NMPCSettings:
             0: the turn-then-straight cost-to-go alone.
         deep_candidates: With ``togo_steps``: how many of the cheapest screened candidates (plus the hand
             law's) are priced with the continuation.
+        reach_fraction: ``goal``: a rollout whose interval end comes within this fraction of the goal
+            radius is priced up to there only (:meth:`agents.nmpc_pricing.PlanPricing._reach_cost`); 0: off.
     """
 
     horizon: int = 10
@@ -187,6 +189,7 @@ class NMPCSettings:
     togo_wall_margin: float = 0.15
     togo_steps: int = 10
     deep_candidates: int = 1
+    reach_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         if min(int(self.horizon), int(self.substeps), int(self.max_iter), int(self.max_solves)) < 1:
@@ -201,6 +204,8 @@ class NMPCSettings:
             raise ValueError(f"step_budget must be > 0 s, got {self.step_budget!r}")
         if self.hessian not in ("exact", "cost"):
             raise ValueError(f"hessian must be 'exact' or 'cost', got {self.hessian!r}")
+        if not 0.0 <= self.reach_fraction <= 1.0:
+            raise ValueError(f"reach_fraction must be in [0, 1], got {self.reach_fraction!r}")
         if int(self.togo_steps) < 0 or int(self.deep_candidates) < 1 or not self.togo_wall_margin >= 0:
             raise ValueError(f"togo_steps must be >= 0, deep_candidates >= 1 and togo_wall_margin >= 0 m, got "
                              f"{self.togo_steps!r}, {self.deep_candidates!r}, {self.togo_wall_margin!r}")
