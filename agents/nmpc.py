@@ -5,8 +5,10 @@ cost) is built once per controller (:class:`NMPCController`), parametric in the 
 target and its velocity, and the fin command still being latched. Each control period:
 
 1. screening: candidate plans (the last plan shifted by one interval; swim straight; turn left or
-   right, held or for 2 s then straight) are rolled out on the model and ranked by the NLP's cost:
-   a discrete choice of the turn direction, which a few iterations from one guess cannot make;
+   right, held or for 2 s then straight; the hand law in closed loop on the model) are rolled out on
+   the model and ranked by the NLP's cost plus the cost beyond the horizon, or, for a rollout that
+   enters the goal, by its cost up to there (:mod:`agents.nmpc_pricing`): a discrete choice of the
+   turn direction, which a few iterations from one guess cannot make;
 2. a solve from the best candidate (default: 8 SQP iterations, the real-time iteration; the shifted
    plan is warm-started with its shifted multipliers);
 3. the solution's inputs are rolled out again and kept only if they cost no more than the candidate
