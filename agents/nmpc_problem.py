@@ -154,6 +154,8 @@ class NMPCSettings:
             law's) are priced with the continuation.
         reach_fraction: ``goal``: a rollout whose interval end comes within this fraction of the goal
             radius is priced up to there only (:meth:`agents.nmpc_pricing.PlanPricing._reach_cost`); 0: off.
+        bias_span: Largest planned bias offset from the middle of the bias range [rad] (0: the biases
+            are held at 90 deg, as the hand law holds them); ``None``: the whole identified range.
     """
 
     horizon: int = 10
@@ -190,6 +192,7 @@ class NMPCSettings:
     togo_steps: int = 10
     deep_candidates: int = 1
     reach_fraction: float = 0.0
+    bias_span: float | None = None
 
     def __post_init__(self) -> None:
         if min(int(self.horizon), int(self.substeps), int(self.max_iter), int(self.max_solves)) < 1:
@@ -204,6 +207,8 @@ class NMPCSettings:
             raise ValueError(f"step_budget must be > 0 s, got {self.step_budget!r}")
         if self.hessian not in ("exact", "cost"):
             raise ValueError(f"hessian must be 'exact' or 'cost', got {self.hessian!r}")
+        if self.bias_span is not None and not self.bias_span >= 0:
+            raise ValueError(f"bias_span must be >= 0 rad or None, got {self.bias_span!r}")
         if not 0.0 <= self.reach_fraction <= 1.0:
             raise ValueError(f"reach_fraction must be in [0, 1], got {self.reach_fraction!r}")
         if int(self.togo_steps) < 0 or int(self.deep_candidates) < 1 or not self.togo_wall_margin >= 0:
