@@ -1,4 +1,4 @@
-"""The NMPC's goal-reach pricing: a plan that enters the goal costs only the intervals up to there."""
+"""The NMPC's goal-reach pricing (a plan that enters the goal costs only the intervals up to there) and bias span."""
 
 import numpy as np
 import pytest
@@ -70,3 +70,24 @@ def test_rollout_cost_of_a_plan_into_the_goal_is_its_reach_cost(nmpc):
     reach = nmpc._reach_cost(x)
     assert reach is not None and cost == pytest.approx(reach)
     assert cost < nmpc.settings.w_distance * 0.05 * problem.horizon
+
+
+def test_bias_span_zero_holds_both_biases_at_ninety_degrees():
+    """bias_span=0: the planner's bias bounds collapse to 90 deg, so every planned input has both biases there."""
+    held = make_baseline("nmpc", CONFIG, step_budget=1e6, bias_span=0.0)
+    for bounds in (held.u_low, held.u_high):
+        assert bounds[2] == pytest.approx(np.pi / 2) and bounds[3] == pytest.approx(np.pi / 2)
+    obs = np.zeros(19)
+    obs[:4] = 1.15, 0.575, 1.0, 0.0
+    obs[7], obs[8] = 0.3, 0.2  # goal ahead-left: the unrestricted planner would tilt the biases
+    held.reset()
+    held.act(obs)
+    assert held.failures == 0
+    np.testing.assert_allclose(held.plan[:, 2:], np.pi / 2, atol=1e-9)
+    span = np.radians(10.0)
+    narrow = make_baseline("nmpc", CONFIG, step_budget=1e6, bias_span=span)
+    # the env's range (45-135 deg) holds 80-100 deg, so the bounds are those
+    np.testing.assert_allclose(narrow.u_low[2:], np.radians(80.0))
+    np.testing.assert_allclose(narrow.u_high[2:], np.radians(100.0))
+    with pytest.raises(ValueError, match="bias_span"):
+        NMPCSettings(bias_span=-0.1)
