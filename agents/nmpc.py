@@ -91,9 +91,10 @@ class NMPCController(PlanPricing):
         self.velocity = s.velocity if s.velocity != "auto" else ("difference" if config.model == "full" else "obs")
         a_low, a_high = config.amplitude_range
         b_low, b_high = identified_bias_range(config.bias_range, self.scaling)
-        if s.bias_span is not None:  # the biases the full model follows as planned: near the middle
+        span = s.bias_span if s.bias_span != "auto" else (None if self.track else 0.0)
+        if span is not None:  # the biases the full model follows as planned: near the middle
             mid = float(np.clip(self.fins.bias_mid, b_low, b_high))
-            b_low, b_high = max(b_low, mid - s.bias_span), min(b_high, mid + s.bias_span)
+            b_low, b_high = max(b_low, mid - span), min(b_high, mid + span)
         self.u_low = np.array(FinInputs(a_low, a_low, b_low, b_low))
         self.u_high = np.array(FinInputs(a_high, a_high, b_high, b_high))
         self.bias_mid = float(np.clip(self.fins.bias_mid, b_low, b_high))

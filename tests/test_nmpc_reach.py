@@ -46,7 +46,7 @@ def test_reach_cost_adds_the_wall_term_of_the_intervals_before(nmpc):
 
 
 def test_reach_cost_is_off_by_setting_and_for_track():
-    off = make_baseline("nmpc", CONFIG, step_budget=1e6)
+    off = make_baseline("nmpc", CONFIG, step_budget=1e6, reach_fraction=0.0)
     off._target_end = GOAL
     assert off._reach_cost(_rollout([0.3, 0.0])) is None
     track = make_baseline("nmpc", EnvConfig(model="averaged", task="track"), step_budget=1e6, reach_fraction=0.75)
@@ -89,5 +89,14 @@ def test_bias_span_zero_holds_both_biases_at_ninety_degrees():
     # the env's range (45-135 deg) holds 80-100 deg, so the bounds are those
     np.testing.assert_allclose(narrow.u_low[2:], np.radians(80.0))
     np.testing.assert_allclose(narrow.u_high[2:], np.radians(100.0))
-    with pytest.raises(ValueError, match="bias_span"):
-        NMPCSettings(bias_span=-0.1)
+    for bad in (-0.1, "wide"):
+        with pytest.raises(ValueError, match="bias_span"):
+            NMPCSettings(bias_span=bad)
+
+
+def test_bias_span_auto_holds_the_biases_for_goal_only():
+    """The default ("auto"): goal plans hold 90 deg; track plans keep the whole identified range (45-135 deg)."""
+    goal = make_baseline("nmpc", CONFIG, step_budget=1e6)
+    np.testing.assert_allclose([goal.u_low[2], goal.u_high[2]], np.pi / 2)
+    track = make_baseline("nmpc", EnvConfig(model="averaged", task="track"), step_budget=1e6)
+    np.testing.assert_allclose([track.u_low[2], track.u_high[2]], np.radians([45.0, 135.0]))
