@@ -5,8 +5,10 @@ cost) is built once per controller (:class:`NMPCController`), parametric in the 
 target and its velocity, and the fin command still being latched. Each control period:
 
 1. screening: candidate plans (the last plan shifted by one interval; swim straight; turn left or
-   right, held or for 2 s then straight) are rolled out on the model and ranked by the NLP's cost:
-   a discrete choice of the turn direction, which a few iterations from one guess cannot make;
+   right, held or for 2 s then straight; the hand law in closed loop on the model) are rolled out on
+   the model and ranked by the NLP's cost plus the cost beyond the horizon, or, for a rollout that
+   enters the goal, by its cost up to there (:mod:`agents.nmpc_pricing`): a discrete choice of the
+   turn direction, which a few iterations from one guess cannot make;
 2. a solve from the best candidate (default: 8 SQP iterations, the real-time iteration; the shifted
    plan is warm-started with its shifted multipliers);
 3. the solution's inputs are rolled out again and kept only if they cost no more than the candidate
@@ -29,6 +31,7 @@ import numpy as np
 
 from agents.baselines import HandController
 from agents.fin_map import FinMap
+from agents.nmpc_pricing import PlanPricing
 from agents.nmpc_problem import (
     GAIN_THRUST,
     GAIN_YAW,
@@ -40,18 +43,16 @@ from agents.nmpc_problem import (
     to_u,
     to_z,
 )
-from agents.turning import circle_room, turn_paths
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, OBS_VELOCITY, Observation, decode
+from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, OBS_VELOCITY, decode
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 from pectoral_gym.symbolic import STATE_POSITION, STATE_PSI, STATE_SIZE, STATE_VELOCITY
 
 __all__ = ["NMPCController", "NMPCSettings"]
 
 
 
-class NMPCController:
+class NMPCController(PlanPricing):
     """Nonlinear model-predictive control of the fin patterns on the averaged model.
 
     Args:
@@ -90,6 +91,10 @@ class NMPCController:
         self.velocity = s.velocity if s.velocity != "auto" else ("difference" if config.model == "full" else "obs")
         a_low, a_high = config.amplitude_range
         b_low, b_high = identified_bias_range(config.bias_range, self.scaling)
+        span = s.bias_span if s.bias_span != "auto" else (None if self.track else 0.0)
+        if span is not None:  # the biases the full model follows as planned: near the middle
+            mid = float(np.clip(self.fins.bias_mid, b_low, b_high))
+            b_low, b_high = max(b_low, mid - span), min(b_high, mid + span)
         self.u_low = np.array(FinInputs(a_low, a_low, b_low, b_low))
         self.u_high = np.array(FinInputs(a_high, a_high, b_high, b_high))
         self.bias_mid = float(np.clip(self.fins.bias_mid, b_low, b_high))
@@ -206,106 +211,22 @@ class NMPCController:
             guesses.append(then)
         return guesses
 
-    def _hand_input(self, x: np.ndarray, ref: np.ndarray, vref: np.ndarray, rate: float) -> np.ndarray:
-        """The hand law's inputs (a :class:`FinInputs` row, clipped to the planner's bounds) at the model state."""
-        c, s_ = math.cos(x[STATE_PSI]), math.sin(x[STATE_PSI])
-        ex, ey = ref[0] - x[0], ref[1] - x[1]
-        o = Observation(float(x[0]), float(x[1]), c, s_, float(x[3]), float(x[4]), float(x[5]),
-                        c * ex + s_ * ey, -s_ * ex + c * ey, c * vref[0] + s_ * vref[1],
-                        -s_ * vref[0] + c * vref[1], np.zeros(8))
-        b_r, a_r, b_l, a_l = self.hand.command(o, rate)
-        return np.clip(FinInputs(a_r, a_l, b_r, b_l), self.u_low, self.u_high)
-
-    def _hand_loop(self, x: np.ndarray, z_prev: np.ndarray, rate: float, ref: np.ndarray, vref: np.ndarray,
-                   steps: int):
-        """The hand law in closed loop on the planning model for ``steps`` intervals from ``x``.
-
-        Yields ``(inputs, end state)`` per interval; the law's yaw rate is the model's mean over the
-        interval before. Stops early at a non-finite state.
-        """
-        dt = self.dt
-        for k in range(steps):
-            u = self._hand_input(x, ref + vref * k * dt, vref, rate)
-            z = to_z(u)
-            end = np.asarray(self.problem.interval(x, z, z_prev, self.gains)[0]).ravel()
-            if not np.all(np.isfinite(end)):
-                return
-            yield u, end
-            rate = ((end[STATE_PSI] - x[STATE_PSI] + math.pi) % (2 * math.pi) - math.pi) / dt
-            x, z_prev = end, z
-
-    def _hand_guess(self, state: np.ndarray, ref: np.ndarray, vref: np.ndarray) -> np.ndarray:
-        """Inputs ``(4, horizon)`` of :class:`agents.baselines.HandController` in closed loop on the planning model.
-
-        Each interval, the law sees the model's predicted pose and the target (moved with its velocity).
-        """
-        u = np.tile(self._u_prev[:, None], (1, self._n))
-        k = -1
-        for k, (u_k, _) in enumerate(self._hand_loop(state, to_z(self._u_prev), float(state[STATE_VELOCITY][2]),
-                                                     ref, vref, self._n)):
-            u[:, k] = u_k
-        if 0 <= k < self._n - 1:
-            u[:, k + 1:] = u[:, k:k + 1]
-        return u
-
-    def _continuation(self, x: np.ndarray, z_last: np.ndarray) -> float:
-        """Cost beyond the horizon: the hand law continued on the model for ``togo_steps`` intervals.
-
-        Per interval the NLP's distance and wall terms (wall margin ``togo_wall_margin``), until the
-        goal radius is reached; else the whole turn-then-straight path from where it ends, weighted by
-        ``w_togo`` (the distance left must count here: a plan that waits would otherwise cost no more).
-        """
-        s = self.settings
-        goal = np.asarray(self._target_end)
-        cost, end = 0.0, x
-        for _, end in self._hand_loop(x, z_last, 0.0, goal, np.zeros(2), s.togo_steps):
-            d = math.hypot(goal[0] - end[0], goal[1] - end[1])
-            cost += s.w_distance * d + s.w_wall * self._wall_violation(end, s.togo_wall_margin)
-            if d < self.config.goal_radius:
-                return cost
-        return cost + self.w_togo * (self._togo(end) + math.hypot(goal[0] - end[0], goal[1] - end[1]))
-
-    def _wall_violation(self, x: np.ndarray, margin: float) -> float:
-        """Sum of the squared shortfalls [m^2] of nose and tail below ``margin`` from each wall (the NLP's term)."""
-        total = 0.0
-        c, s_ = math.cos(x[STATE_PSI]), math.sin(x[STATE_PSI])
-        for sign in (1.0, -1.0):
-            px, py = x[0] + sign * self._half_length * c, x[1] + sign * self._half_length * s_
-            for gap in (px, TANK_LENGTH - px, py, TANK_WIDTH - py):
-                total += max(0.0, margin - gap) ** 2
-        return total
-
-    def _togo(self, end: np.ndarray) -> float:
-        """Turn-then-straight path [m] from the state ``end`` to the target, minus the straight distance.
-
-        The arc of a turn whose circle leaves less than :attr:`NMPCSettings.togo_wall_margin` to a wall
-        (beyond half a body) counts longer, by the missing room over the margin: a turn along a wall is
-        charged, a path that needs no turn is not.
-        """
-        (gx, gy), s = self._target_end, self.settings
-        x, y, psi = float(end[0]), float(end[1]), float(end[STATE_PSI])
-        radius, margin = s.turn_radius, s.togo_wall_margin
-        best = math.inf
-        for side, (arc, straight) in zip((1.0, -1.0), turn_paths(x, y, psi, gx, gy, radius), strict=True):
-            factor = 1.0
-            if margin > 0:
-                room = circle_room(x, y, psi, side, radius) - self._half_length
-                factor += max((margin - room) / margin, 0.0)
-            best = min(best, radius * arc * factor + straight)
-        return best - math.hypot(gx - x, gy - y)
-
     def _rollout_cost(self, state: np.ndarray, p: np.ndarray, u: np.ndarray,
                       deep: bool = True) -> tuple[float, np.ndarray]:
         """Cost of the model's rollout under the inputs ``u (4, horizon)`` (clipped, blocked), and those ``z``.
 
-        Beyond the horizon: with ``deep`` and :attr:`NMPCSettings.togo_steps`, the hand law's continuation
+        A rollout that enters the goal costs its distance and wall terms up to there (:meth:`_reach_cost`).
+        Else, beyond the horizon: with ``deep`` and :attr:`NMPCSettings.togo_steps`, the hand law's continuation
         (:meth:`_continuation`), else the turn-then-straight cost-to-go (:meth:`_togo`).
         """
         problem = self.problem
         z = problem.blocked(np.clip(to_z(u), self.z_low[:, None], self.z_high[:, None]))
         x = np.asarray(problem.rollout(state, z[:, problem.block_of], to_z(self._u_prev), self.gains))
         cost = float(problem.cost(np.nan_to_num(pack_decision(z, x)), p)) if np.all(np.isfinite(x)) else math.inf
-        if math.isfinite(cost):
+        reach = self._reach_cost(x) if math.isfinite(cost) else None
+        if reach is not None:  # the plan enters the goal: nothing beyond that interval counts
+            cost = reach
+        elif math.isfinite(cost):
             if deep and self.settings.togo_steps > 0 and not self.track:
                 cost += self._continuation(x[:, -1], z[:, -1])
             elif self.w_togo > 0:  # beyond the horizon: the turn still to make
