@@ -76,3 +76,30 @@ def test_training_throughput_measures_a_short_ppo_run():
     # PPO collects at least one full rollout (n_steps x n_envs) before it can stop
     assert result["timesteps"] >= result["n_envs"]
     assert result["steps_per_s"] > 0
+
+
+def test_a_policy_is_benchmarked_on_the_model_settings_it_trained_with(tmp_path, monkeypatch):
+    # A run folder trained with transitions and the fin block: its averaged cell keeps both, its full cells drop
+    # the averaged-only transitions; the cell still decides task and randomisation.
+    import agents.evaluate
+    import agents.policy
+
+    run = tmp_path / "run"
+    run.mkdir()
+    monkeypatch.setattr(agents.policy, "load_policy", lambda path: object())
+    monkeypatch.setattr(agents.policy, "read_config", lambda path: {"env_kwargs": {
+        "task": "track", "transitions": True, "observe_fins": True, "randomize": {"drag_coef": 0.3}}})
+    seen = {}
+
+    def fake_evaluate(controller, env_id, n_episodes, seed, env_kwargs):
+        seen[(env_id, bool(env_kwargs.get("randomize")))] = dict(env_kwargs)
+        raise RuntimeError("recorded")  # the benchmark keeps the error per cell and goes on
+
+    monkeypatch.setattr(agents.evaluate, "evaluate", fake_evaluate)
+    report = run_benchmark(BenchmarkSettings(episodes=1, train_steps=0), controllers=(), tasks=("goal",),
+                           policies=[str(run)], throughput=False)
+    assert len(report["errors"]) == 3
+    assert seen[("PectoralFish-Averaged-v0", False)] == {"task": "goal", "transitions": True, "observe_fins": True}
+    assert seen[("PectoralFish-Full-v0", False)] == {"task": "goal", "observe_fins": True}
+    full_rand = seen[("PectoralFish-Full-v0", True)]
+    assert full_rand["observe_fins"] and "transitions" not in full_rand and full_rand["task"] == "goal"
