@@ -184,8 +184,7 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
     Raises:
         ValueError: For an unknown controller, env label or task.
     """
-    from agents.evaluate import AVERAGED_ONLY, DEFAULT_RANDOMIZATION, evaluate
-    from pectoral_gym.registration import ENV_IDS
+    from agents.evaluate import DEFAULT_RANDOMIZATION, evaluate, trained_env_kwargs
 
     unknown = [c for c in controllers if c not in BASELINE_NAMES] + [e for e in envs if e not in ENVS]
     unknown += [t for t in tasks if t not in TASKS]
@@ -193,16 +192,12 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
         raise ValueError(f"unknown controllers/envs/tasks {unknown}; choose from {BASELINE_NAMES}, {tuple(ENVS)}, "
                          f"{TASKS}")
     say = progress or (lambda _msg: None)
-    loaded, trained_kwargs = {}, {}
+    loaded, paths = {}, {}
     for path in policies:
-        from agents.policy import load_policy, read_config
+        from agents.policy import load_policy
 
         name = Path(path).name.removesuffix(".zip")
-        loaded[name] = load_policy(path)
-        # The model settings the policy trained with (e.g. transitions, observe_fins) hold in its cells too;
-        # the cell decides task and randomisation.
-        run_kwargs = read_config(path).get("env_kwargs", {}) if Path(path).is_dir() else {}
-        trained_kwargs[name] = {k: v for k, v in (run_kwargs or {}).items() if k not in ("task", "randomize")}
+        loaded[name], paths[name] = load_policy(path), path
     cells, errors = [], {}
     built: dict[tuple[str, str], Any] = {}
     for task in tasks:
@@ -225,10 +220,10 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
                                                                                     settings, built)
                     solves, failures = len(getattr(controller, "solve_times", [])), getattr(controller, "failures", 0)
                     late = getattr(controller, "late", 0)
-                    kwargs = eval_kwargs
-                    if policy is not None:
-                        dropped = AVERAGED_ONLY if ENV_IDS[env_id] == "full" else ()
-                        kwargs = {**{k: v for k, v in trained_kwargs[name].items() if k not in dropped}, **eval_kwargs}
+                    # A policy keeps the model settings it trained with (transitions, observe_fins); the cell
+                    # decides task and randomisation.
+                    kwargs = eval_kwargs if policy is None else {**trained_env_kwargs(paths[name], env_id),
+                                                                 **eval_kwargs}
                     result = evaluate(controller, env_id, n_episodes=n, seed=settings.seed, env_kwargs=kwargs)
                 except Exception as error:  # noqa: BLE001 - one failing cell must not lose the others
                     errors[f"{name}/{label}/{task}"] = f"{type(error).__name__}: {error}"

@@ -286,15 +286,14 @@ def evaluation_env(config: dict[str, Any]) -> tuple[str, dict[str, Any]]:
     Raises:
         ValueError: If ``eval_env`` is not a registered fish env id.
     """
-    from agents.evaluate import AVERAGED_ONLY
+    from agents.evaluate import model_kwargs
     from pectoral_gym.registration import ENV_IDS
 
     env_id = config.get("eval_env") or config["env_id"]
     if env_id not in ENV_IDS:
         raise ValueError(f"eval_env must be one of {sorted(ENV_IDS)}, got {env_id!r}")
     kwargs = {**config["env_kwargs"], **dict(config.get("eval_env_kwargs") or {})}
-    dropped = AVERAGED_ONLY if ENV_IDS[env_id] == "full" else ()
-    return env_id, {k: v for k, v in kwargs.items() if v is not None and k not in dropped}
+    return env_id, model_kwargs(env_id, {k: v for k, v in kwargs.items() if v is not None})
 
 
 def _schedule(value: Any) -> float | Callable[[float], float] | None:

@@ -55,6 +55,25 @@ QUICK_EPISODES = 2  # --quick: episodes of a smoke run
 # Settings of the averaged model only: a policy trained on it keeps its other env arguments on the full model.
 AVERAGED_ONLY = ("scaling", "check_scaling_params", "transitions")
 
+
+def model_kwargs(env_id: str, kwargs: dict[str, Any]) -> dict[str, Any]:
+    """``kwargs`` without the averaged model's own arguments (:data:`AVERAGED_ONLY`) for a full-model ``env_id``."""
+    from pectoral_gym.registration import ENV_IDS
+
+    dropped = AVERAGED_ONLY if ENV_IDS.get(env_id) == "full" else ()
+    return {k: v for k, v in kwargs.items() if k not in dropped}
+
+
+def trained_env_kwargs(path: str | Path, env_id: str) -> dict[str, Any]:
+    """The env arguments a run folder trained with, for an evaluation on ``env_id``, its randomisation left out.
+
+    ``{}`` for a ``.zip`` (no run config next to it).
+    """
+    from agents.policy import read_config
+
+    run = read_config(path).get("env_kwargs", {}) if Path(path).is_dir() else {}
+    return model_kwargs(env_id, {k: v for k, v in (run or {}).items() if k != "randomize"})
+
 ControllerLike = Controller | Callable[[], Controller]
 
 
@@ -248,12 +267,9 @@ def main(argv: list[str] | None = None) -> int:
         if not isinstance(env_kwargs, dict):
             raise ValueError("--env-kwargs must be a JSON object")
         if args.policy:
-            from agents.policy import load_policy, read_config
-            from pectoral_gym.registration import ENV_IDS
+            from agents.policy import load_policy
 
-            run_kwargs = read_config(args.policy).get("env_kwargs", {}) if Path(args.policy).is_dir() else {}
-            dropped = ("randomize", *(AVERAGED_ONLY if ENV_IDS.get(args.env) == "full" else ()))
-            env_kwargs = {**{k: v for k, v in run_kwargs.items() if k not in dropped}, **env_kwargs}
+            env_kwargs = {**trained_env_kwargs(args.policy, args.env), **env_kwargs}
             controller: ControllerLike = load_policy(args.policy, algo=args.algo)
             name = Path(args.policy).name.removesuffix(".zip")
         else:

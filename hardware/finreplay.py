@@ -116,7 +116,7 @@ class FinReplay:
         """The fins were stopped at time ``t`` (STOP, a safety trip): they halt where they are."""
         self.advance(t)
         self._message(pr.Message(pr.MsgType.STOP, self._next_seq(), self._SESSION))
-        advance_with_firmware(self.firmware, self.model, self.model.time + 1e-9)  # apply the halt now
+        apply_firmware(self.firmware, self.model)  # the halt, now
 
     def advance(self, t: float) -> None:
         """Run the fins to time ``t`` (earlier times are ignored)."""

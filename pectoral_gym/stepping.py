@@ -199,7 +199,15 @@ def _waveform_segment(state, integral, fins, cache, i, seg, idle0, idle1, harmon
     work = np.empty(fc.WORKSPACE)
     n_wave, osc = fc.yaw_waveform(fins, cache, i, 0.5 * seg, idle0, idle1, harmonics, rate_correction,
                                   state[i, State.OMEGA], body.c4, work)
-    wave = work[:n_wave]
+    _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, work[:n_wave], dt_max)
+
+
+@nb.njit(inline="always", **JIT)
+def _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, wave, dt_max):
+    """Integrate fish ``i`` over a segment of constant forcing.
+
+    Equal RK4 substeps to the segment's end, re-sized as the state's stiffness changes (:func:`_stable_step`).
+    """
     t_seg = seg
     while t_seg > _EPS:
         h_ok = _stable_step(state, i, body, rates, forcing, osc, dt_max)
@@ -248,13 +256,7 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
                                   body, rates, forcing, dt_max)
             else:
                 osc = fc.yaw_oscillation(fins, cache, i, 0.5 * seg, idle0, idle1)
-                t_seg = seg
-                while t_seg > _EPS:
-                    # equal substeps to the segment end, re-sized as the state's stiffness changes
-                    h_ok = _stable_step(state, i, body, rates, forcing, osc, dt_max)
-                    h = t_seg / max(1, int(math.ceil(t_seg / h_ok - 1e-9)))
-                    _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc, None)
-                    t_seg -= h
+                _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, None, dt_max)
         else:
             h_max = dt_max
             if not idle0:

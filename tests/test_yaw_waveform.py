@@ -301,17 +301,23 @@ def test_rate_correction_is_exact_at_the_reference_and_the_linear_response_elsew
         assert np.max(np.abs(got - plain)) > 0.1 * np.max(np.abs(plain))  # and the correction is not small
 
 
-def test_compiled_rate_corrected_waveform_equals_the_numpy_form_for_two_fins():
-    from pectoral_gym.averaging import combined_waveform
-
+def _two_fin_waves(right, left, duration):
+    """A rate-corrected scaling, a model advanced ``duration`` s with two fins, and each fin's waveform at its phase."""
     s = _rate_scaling(WAVE, 0.3, rng=np.random.default_rng(9))
-    right, left = FinBeat.from_degrees(70, 25, 1.0, 3.0), FinBeat.from_degrees(95, 15, 1.4, 2.0)
     model = AveragedModel(1, P, scaling=s)
     model.reset(right=right, left=left)
-    model.advance(2.9)
+    model.advance(duration)
     k = np.arange(1, 4)
     waves = np.array([s.yaw_waveform(*right.as_array()) * np.exp(1j * k * _phase(model, 0)),
                       -s.yaw_waveform(*left.as_array()) * np.exp(1j * k * _phase(model, 1))])
+    return s, model, waves
+
+
+def test_compiled_rate_corrected_waveform_equals_the_numpy_form_for_two_fins():
+    from pectoral_gym.averaging import combined_waveform
+
+    right, left = FinBeat.from_degrees(70, 25, 1.0, 3.0), FinBeat.from_degrees(95, 15, 1.4, 2.0)
+    s, model, waves = _two_fin_waves(right, left, 2.9)
     mean_abs = np.array([s.yaw_mean_abs(*right.as_array()), s.yaw_mean_abs(*left.as_array())])
     expected = combined_waveform(waves, mean_abs, np.array([1.0, 1.4]), 0.07, body_coefficients(P).c4)
     np.testing.assert_allclose(_compiled_samples(model, 0.07), expected, rtol=1e-10, atol=1e-13)
@@ -325,21 +331,15 @@ def test_commensurate_periods_average_over_the_common_period():
     assert quadrature_window(2 * np.pi / 1.8, 2 * np.pi / 0.9) == (2 * QUADRATURE, 1, 2)
     assert quadrature_window(2 * np.pi / 0.6, 2 * np.pi / 0.9) == (3 * QUADRATURE, 3, 2)
     assert quadrature_window(2 * np.pi / 1.0, 2 * np.pi / 1.37)[0] == QUADRATURE
-    s = _rate_scaling(WAVE, 0.3, rng=np.random.default_rng(9))
     right, left = FinBeat.from_degrees(70, 25, 1.8, 3.0), FinBeat.from_degrees(95, 15, 0.9, 2.0)
-    model = AveragedModel(1, P, scaling=s)
-    model.reset(right=right, left=left)
-    model.advance(3.3)
-    k = np.arange(1, 4)
-    waves = np.array([s.yaw_waveform(*right.as_array()) * np.exp(1j * k * _phase(model, 0)),
-                      -s.yaw_waveform(*left.as_array()) * np.exp(1j * k * _phase(model, 1))])
+    s, model, waves = _two_fin_waves(right, left, 3.3)
     got = _compiled_samples(model, 0.07)
     np.testing.assert_allclose(got, combined_waveform(waves, np.array(
         [s.yaw_mean_abs(*right.as_array()), s.yaw_mean_abs(*left.as_array())]), np.array([1.8, 0.9]), 0.07,
         body_coefficients(P).c4), rtol=1e-10, atol=1e-13)
     # without the rate correction: the two waveforms in time, each at its own rate, written out here
     t = np.arange(2 * QUADRATURE) * 1.8 / (2 * QUADRATURE)
-    direct = sum(np.real(np.exp(1j * np.outer(t * 2 * np.pi / period, k)) @ w)
+    direct = sum(np.real(np.exp(1j * np.outer(t * 2 * np.pi / period, np.arange(1, 4))) @ w)
                  for w, period in zip(waves, (1.8, 0.9), strict=True))
     np.testing.assert_allclose(combined_waveform(waves, None, np.array([1.8, 0.9]), 0.07, 1.0), direct, atol=1e-13)
 

@@ -323,8 +323,7 @@ class EnvCore:
         start = self.task_state.start(index, draws)
         self.model.reset(start, right=REST, left=REST, index=None if index.size == self.n else index)
         self.task_state.observe_reset(index, self.model.state)
-        if self._observe_fins:
-            tk.observe_fins(self.model.fins, self.obs, self._period_max)
+        self._observe_fin_block()
 
     def step(self, actions: np.ndarray, skip: np.ndarray | None = None) -> None:
         """Apply ``actions`` ``(n, 8)`` for one control period (envs in ``skip`` are not checked or scored).
@@ -337,8 +336,7 @@ class EnvCore:
             bad = self._fused(actions, skip)
             if bad >= 0:
                 self._raise_non_finite(actions, bad)
-            if self._observe_fins:
-                tk.observe_fins(self.model.fins, self.obs, self._period_max)
+            self._observe_fin_block()
             return
         model = self.model
         before = self._integral_before  # the model's velocity integrals before the step, kept by _apply
@@ -353,8 +351,12 @@ class EnvCore:
         # symmetric stroke reads a yaw rate of -0.45 rad/s at some phases), the averaged model's do not;
         # the means agree between the models, as an observer's estimate would.
         self._reward(model.state, skip, self.cfg, self.ep, self.fish, self.obs, self.out, model.integral, before)
+        self._observe_fin_block()
+
+    def _observe_fin_block(self) -> None:
+        """With ``observe_fins``: the observation's fin block from the model's half-strokes."""
         if self._observe_fins:
-            tk.observe_fins(model.fins, self.obs, self._period_max)
+            tk.observe_fins(self.model.fins, self.obs, self._period_max)
 
     def _raise_non_finite(self, actions: np.ndarray, bad: int) -> None:
         where = f" for env {bad}" if self.n > 1 else ""
