@@ -69,6 +69,7 @@ __all__ = [
     "yaw_oscillation_phasor",
     "averaged_forcing",
     "scaling_values",
+    "scaled_forcing",
     "half_stroke_mean_force",
     "power_stroke_excess",
 ]
@@ -233,6 +234,17 @@ def averaged_fin_forcing(
         ``(K_fx f_hx_avg, K_fy f_hy_avg, K_m tau_avg)`` in N, N, N m; with
         ``sway = "base"`` the sway term is ``K_fy base`` (``kfunctions``).
     """
+    kx, ky, km = scaling_values(bias, amplitude, period, ratio, tables)
+    return scaled_forcing(bias, amplitude, period, ratio, side, coef, mode, kx, ky, km, tables.base_sway)
+
+
+@nb.njit(**JIT)
+def scaled_forcing(bias, amplitude, period, ratio, side, coef, mode, kx, ky, km, base_sway):
+    """:func:`averaged_fin_forcing` with the scaling values ``K_fx, K_fy, K_m`` given (eq. 25).
+
+    ``base_sway``: :attr:`pectoral_gym.ktables.KTables.base_sway`. The averaged model's latch
+    evaluates K together with the yaw-oscillation phasor (:func:`pectoral_gym.ktables.pattern_values`).
+    """
     drag_constant = coef[Coef.FIN_DRAG_CONSTANT]
     fin_offset = coef[Coef.FIN_OFFSET]
     c = drag_constant * math.pi**2 * (ratio * ratio - 1.0) / (ratio * period * period)
@@ -247,8 +259,7 @@ def averaged_fin_forcing(
         fx = c * bias * a2 * (24.0 - 3.0 * a2 - 4.0 * b2) / 48.0  # eq. (26)
         fy = c * a2 * (8.0 - a2 - 4.0 * b2) / 16.0  # eq. (27)
     tau = fin_offset * fx  # eq. (18)/(28): right fin pivot at y = -C_p
-    kx, ky, km = scaling_values(bias, amplitude, period, ratio, tables)
-    sway = ky * base if tables.base_sway else ky * fy
+    sway = ky * base if base_sway else ky * fy
     return kx * fx, side * sway, side * km * tau
 
 

@@ -27,6 +27,9 @@ field              index  unit    meaning
 ``WAVE``           14-29  rad/s   ``Re, Im`` of the yaw-waveform harmonics ``c_1 .. c_8`` (``docs/model.md``
                                   3.6), signed by side; zero beyond the file's harmonics
 ``REF_ABS``        30     rad/s   mean ``|omega|`` of the pattern's reference run (0: none)
+``TR_FX``          31     N       the half-stroke in progress's transitional forcing (``transitions``,
+``TR_FY``          32     N       ``docs/model.md`` section 3.7; ``stepping._transition``), signed by
+``TR_TAU``         33     N m     side; set when the fin latches, zero after :func:`clear`
 =================  =====  ======  ==================================================================
 
 The row depends on the fish's coefficients too: :func:`invalidate` after
@@ -42,22 +45,23 @@ import numba as nb
 import numpy as np
 
 from pectoral_gym._jit import JIT
-from pectoral_gym.averaging import averaged_fin_forcing
+from pectoral_gym.averaging import scaled_forcing
 from pectoral_gym.ktables import (
     MAX_HARMONICS,
     MAX_SAMPLES,
     QUADRATURE,
     RATE_ITERATIONS,
+    pattern_values,
     quadrature_window,
     waveform_harmonics_into,
-    yaw_oscillation_phasor,
 )
 from pectoral_gym.strokes import ANGLE_FROM, ANGLE_TO, ELAPSED, PERIOD, POWER, RATIO, SIDE
 
 __all__ = [
     "CACHE_FIELDS", "KEY_BIAS", "KEY_AMPLITUDE", "KEY_PERIOD", "KEY_RATIO",
     "AVG_FX", "AVG_FY", "AVG_TAU", "OSC_COS", "OSC_SIN", "CACHED",
-    "PREV_BIAS", "PREV_AMPLITUDE", "PREV_PERIOD", "PREV_RATIO", "WAVE", "REF_ABS", "QUADRATURE", "WORKSPACE",
+    "PREV_BIAS", "PREV_AMPLITUDE", "PREV_PERIOD", "PREV_RATIO", "WAVE", "REF_ABS", "TR_FX", "TR_FY", "TR_TAU",
+    "QUADRATURE", "WORKSPACE",
     "RATE_ITERATIONS",
     "clear", "invalidate", "refresh", "waveform_samples", "yaw_oscillation", "yaw_waveform",
 ]
@@ -69,7 +73,8 @@ CACHED = 9
 PREV_BIAS, PREV_AMPLITUDE, PREV_PERIOD, PREV_RATIO = 10, 11, 12, 13
 WAVE = 14
 REF_ABS = WAVE + 2 * MAX_HARMONICS
-CACHE_FIELDS = REF_ABS + 1
+TR_FX, TR_FY, TR_TAU = REF_ABS + 1, REF_ABS + 2, REF_ABS + 3
+CACHE_FIELDS = TR_TAU + 1
 
 _FIN = MAX_SAMPLES  # per fin: Re, Im of its harmonics at the segment's phase, then its drive
 WORKSPACE = _FIN + 8 * MAX_HARMONICS
@@ -98,14 +103,15 @@ def refresh(cache, i, f, bias, amplitude, period, ratio, coef, mode, tables):
     cache[i, f, KEY_AMPLITUDE] = amplitude
     cache[i, f, KEY_PERIOD] = period
     cache[i, f, KEY_RATIO] = ratio
-    fx, fy, tau = averaged_fin_forcing(bias, amplitude, period, ratio, SIDE[f], coef[i], mode, tables)
+    kx, ky, km, pc, ps = pattern_values(bias, amplitude, period, ratio, tables)
+    fx, fy, tau = scaled_forcing(bias, amplitude, period, ratio, SIDE[f], coef[i], mode, kx, ky, km, tables.base_sway)
     cache[i, f, AVG_FX] = fx
     cache[i, f, AVG_FY] = fy
     cache[i, f, AVG_TAU] = tau
-    pc, ps = yaw_oscillation_phasor(bias, amplitude, period, ratio, tables)
     cache[i, f, OSC_COS] = SIDE[f] * pc  # the left fin's yaw oscillation is the mirror image
     cache[i, f, OSC_SIN] = SIDE[f] * ps
-    waveform_harmonics_into(bias, amplitude, period, ratio, tables, SIDE[f], cache[i, f], WAVE)
+    if tables.wave_table.shape[1] > 0:  # read only with a yaw_waveform section (stepping._advance_one)
+        waveform_harmonics_into(bias, amplitude, period, ratio, tables, SIDE[f], cache[i, f], WAVE)
     cache[i, f, CACHED] = 1.0
 
 

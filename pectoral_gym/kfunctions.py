@@ -35,6 +35,7 @@ from pectoral_gym.ktables import (
     MAX_HARMONICS,
     KTables,
     bspline_basis,
+    interleave,
     oscillation_phasor,
     scaling_values,
     spline_values,
@@ -154,7 +155,8 @@ class ScalingFunctions:
         wave_knots, wave_table = padded(self.waveform_knots, self.waveform_table, 2)
         return KTables(np.ascontiguousarray(self.powers, dtype=np.float64),
                        np.ascontiguousarray(self.coefs, dtype=np.float64),
-                       knots, table, self.sway == "base", osc_knots, osc_table, wave_knots, wave_table)
+                       knots, table, self.sway == "base", osc_knots, osc_table, wave_knots, wave_table,
+                       interleave(knots, table, osc_knots, osc_table))
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], source: str = "<dict>") -> ScalingFunctions:

@@ -21,8 +21,8 @@ import numpy as np
 from pectoral_gym._jit import JIT
 
 __all__ = ["COMMON_BEATS", "MAX_HARMONICS", "MAX_SAMPLES", "QUADRATURE", "RATE_ITERATIONS", "quadrature_window",
-           "KTables", "as_tables", "bspline_basis",
-           "oscillation_phasor", "scaling_values", "spline_values", "waveform_harmonics_into",
+           "KTables", "as_tables", "bspline_basis", "interleave",
+           "oscillation_phasor", "pattern_values", "scaling_values", "spline_values", "waveform_harmonics_into",
            "yaw_oscillation_phasor"]
 
 MAX_HARMONICS = 8  # most yaw-waveform harmonics a coefficients file may hold (forcing_cache has room for them)
@@ -56,6 +56,9 @@ class KTables(NamedTuple):
     ``wave_table`` ``(2H(+1), nb, ...)`` harmonics ``T_p c_k`` [rad] of the yaw-rate waveform, ``k = 1..H``,
                                         channels ``Re c_1, Im c_1, Re c_2, ...``, then optionally ``T_p``
                                         times the reference's mean ``|omega|`` [rad]; ``(2, 0, 0, 0)``: none
+    ``shared``     ``(nb, na, nr, 5)``  when ``osc_table`` has ``table``'s knots and shape (the shipped
+                                        file): both tables interleaved, ``K_fx, K_fy, K_m, cos, sin`` last,
+                                        for :func:`pattern_values`; ``(0, 0, 0, 5)``: not shared
     =============  ===================  ===================================================================
 
     ``nb, na, nr``: spline coefficients along bias, amplitude and 1/ratio.
@@ -70,6 +73,7 @@ class KTables(NamedTuple):
     osc_table: np.ndarray
     wave_knots: np.ndarray
     wave_table: np.ndarray
+    shared: np.ndarray
 
 
 @nb.njit(inline="always", **JIT)
@@ -80,7 +84,8 @@ def as_tables(packed) -> KTables:
     more than a plain tuple), so the per-step entry points take
     ``tuple(tables)`` and name the fields again here.
     """
-    return KTables(packed[0], packed[1], packed[2], packed[3], packed[4], packed[5], packed[6], packed[7], packed[8])
+    return KTables(packed[0], packed[1], packed[2], packed[3], packed[4], packed[5], packed[6], packed[7], packed[8],
+                   packed[9])
 
 
 @nb.njit(**JIT)
@@ -267,6 +272,68 @@ def scaling_values(bias: float, amplitude: float, period: float, ratio: float, t
         _k_value(0, bias, amplitude, period, ratio, tables.powers, tables.coefs) + sx,
         _k_value(1, bias, amplitude, period, ratio, tables.powers, tables.coefs) + sy,
         _k_value(2, bias, amplitude, period, ratio, tables.powers, tables.coefs) + sm,
+    )
+
+
+def interleave(knots: np.ndarray, table: np.ndarray, osc_knots: np.ndarray, osc_table: np.ndarray) -> np.ndarray:
+    """:attr:`KTables.shared`: the K and phasor tables interleaved when they share knots and shape."""
+    if (table.shape[0] == 3 and table.shape[1] > 0 and osc_table.shape[1:] == table.shape[1:]
+            and np.array_equal(osc_knots, knots)):
+        return np.ascontiguousarray(np.concatenate([table, osc_table], axis=0).transpose(1, 2, 3, 0))
+    return np.zeros((0, 0, 0, 5))
+
+
+@nb.njit(**JIT)
+def _shared_splines(bias: float, amplitude: float, inv_ratio: float, knots, shared):
+    """The three K spline channels and the two phasor channels of :attr:`KTables.shared`, in one pass.
+
+    The basis is evaluated once and the five channels are read side by side; each is summed in
+    the order of :func:`_tensor_spline`, so the values are bit for bit those of
+    :func:`spline_values` and :func:`oscillation_phasor` (before its low-amplitude taper).
+    """
+    s0, a0, a1, a2, a3 = bspline_basis(knots[0], shared.shape[0], bias)
+    s1, c0, c1, c2, c3 = bspline_basis(knots[1], shared.shape[1], amplitude)
+    s2, d0, d1, d2, d3 = bspline_basis(knots[2], shared.shape[2], inv_ratio)
+    b0, b1, b2 = (a0, a1, a2, a3), (c0, c1, c2, c3), (d0, d1, d2, d3)
+    v0 = v1 = v2 = p0 = p1 = 0.0
+    for a in range(4):
+        for b in range(4):
+            w = b0[a] * b1[b]
+            row = shared[s0 - 3 + a, s1 - 3 + b]
+            for c in range(4):
+                wc = w * b2[c]
+                k = s2 - 3 + c
+                v0 += wc * row[k, 0]
+                v1 += wc * row[k, 1]
+                v2 += wc * row[k, 2]
+                p0 += wc * row[k, 3]
+                p1 += wc * row[k, 4]
+    return v0, v1, v2, p0, p1
+
+
+@nb.njit(**JIT)
+def pattern_values(bias: float, amplitude: float, period: float, ratio: float, tables: KTables):
+    """``(K_fx, K_fy, K_m)`` and the yaw-oscillation phasor [rad/s] of one right fin, at one latch.
+
+    The values of :func:`scaling_values` and :func:`yaw_oscillation_phasor`, bit for bit; when
+    the two splines share their knots (:attr:`KTables.shared`, the shipped file) one pass over
+    the basis serves both, which more than halves the cost of a latch.
+    """
+    if tables.shared.shape[0] == 0 or amplitude <= 0.0:
+        kx, ky, km = scaling_values(bias, amplitude, period, ratio, tables)
+        pc, ps = yaw_oscillation_phasor(bias, amplitude, period, ratio, tables)
+        return kx, ky, km, pc, ps
+    sx, sy, sm, pc, ps = _shared_splines(bias, amplitude, 1.0 / ratio, tables.knots, tables.shared)
+    lowest = tables.osc_knots[1, 3]
+    if amplitude < lowest and lowest > 0.0:  # as oscillation_phasor
+        pc *= amplitude / lowest
+        ps *= amplitude / lowest
+    return (
+        _k_value(0, bias, amplitude, period, ratio, tables.powers, tables.coefs) + sx,
+        _k_value(1, bias, amplitude, period, ratio, tables.powers, tables.coefs) + sy,
+        _k_value(2, bias, amplitude, period, ratio, tables.powers, tables.coefs) + sm,
+        pc / period,
+        ps / period,
     )
 
 

@@ -116,19 +116,24 @@ def _rk4(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: Bod
     integral[i, 2] += h6 * (w0 + 2.0 * w2 + 2.0 * w3 + w4)
 
 
+@nb.njit(inline="always", **JIT)
+def _driven(body: BodyCoefficients, forcing: Forcing):
+    """Yaw rate and speed a constant forcing drives towards: ``sqrt(|tau| / (c4 J3))``, ``sqrt(|F| / c1)``."""
+    return (math.sqrt(abs(forcing.tau) / (body.c4 * body.J3)),
+            math.sqrt(math.hypot(forcing.fx, forcing.fy) / max(body.c1, 1e-12)))
+
+
 @nb.njit(**JIT)
-def _stable_step(state, i, body: BodyCoefficients, rates: RateConstants, forcing: Forcing, osc, dt_max):
+def _stable_step(state, i, rates: RateConstants, driven_omega, driven_speed, osc, dt_max):
     """Averaged model: RK4 step, at most ``dt_max`` and ``h * rate <= ACCURATE_STEP``.
 
     The rate is :func:`pectoral_gym.dynamics.linearised_rate` (from the fish's
-    precomputed ``rates``) at the larger of
-    the current yaw rate and speed and those the forcing drives towards
-    (``omega* = sqrt(|tau| / (c4 J3))``, ``V* = sqrt(|F| / c1)``), so a fish at
+    precomputed ``rates``) at the larger of the current yaw rate and speed and those
+    the forcing drives towards (:func:`_driven`, once per segment), so a fish at
     rest that starts turning does not overshoot.
     """
-    omega = max(abs(state[i, State.OMEGA]), math.sqrt(abs(forcing.tau) / (body.c4 * body.J3)))
-    speed = max(math.sqrt(state[i, State.VX] ** 2 + state[i, State.VY] ** 2),
-                math.sqrt(math.hypot(forcing.fx, forcing.fy) / max(body.c1, 1e-12)))
+    omega = max(abs(state[i, State.OMEGA]), driven_omega)
+    speed = max(math.sqrt(state[i, State.VX] ** 2 + state[i, State.VY] ** 2), driven_speed)
     rate = rate_bound(speed, omega, osc, rates)
     if rate * dt_max > ACCURATE_STEP:
         return ACCURATE_STEP / rate
@@ -136,8 +141,12 @@ def _stable_step(state, i, body: BodyCoefficients, rates: RateConstants, forcing
 
 
 @nb.njit(inline="always", **JIT)
-def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables):
-    """Latch fin ``f``'s commanded pattern; the averaged model also brings its forcing cache up to date."""
+def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables, transitions):
+    """Latch fin ``f``'s commanded pattern; the averaged model also brings its forcing cache up to date.
+
+    The transitional forcing (:func:`_transition`) is constant over the half-stroke, so it is
+    evaluated here, once, and kept in the cache (``TR_*``).
+    """
     if averaged and fins[i, f, st.POWER] > 0.5:  # a power stroke ends: keep its pattern (_transition)
         cache[i, f, fc.PREV_BIAS] = fins[i, f, BIAS]
         cache[i, f, fc.PREV_AMPLITUDE] = fins[i, f, AMPLITUDE]
@@ -147,6 +156,11 @@ def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables)
     if averaged:
         fc.refresh(cache, i, f, fins[i, f, BIAS], fins[i, f, AMPLITUDE], fins[i, f, PERIOD], fins[i, f, RATIO],
                    coef, mode, tables)
+        if transitions:
+            dfx, dfy, dtau = _transition(fins, cache, i, f, coef[i, Coef.FIN_DRAG_CONSTANT], coef[i, Coef.FIN_OFFSET])
+            cache[i, f, fc.TR_FX] = dfx
+            cache[i, f, fc.TR_FY] = dfy
+            cache[i, f, fc.TR_TAU] = dtau
 
 
 @nb.njit(inline="always", **JIT)
@@ -209,8 +223,9 @@ def _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc
     Equal RK4 substeps to the segment's end, re-sized as the state's stiffness changes (:func:`_stable_step`).
     """
     t_seg = seg
+    driven_omega, driven_speed = _driven(body, forcing)
     while t_seg > _EPS:
-        h_ok = _stable_step(state, i, body, rates, forcing, osc, dt_max)
+        h_ok = _stable_step(state, i, rates, driven_omega, driven_speed, osc, dt_max)
         h = t_seg / max(1, int(math.ceil(t_seg / h_ok - 1e-9)))
         _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc, wave)
         t_seg -= h
@@ -236,9 +251,9 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
         idle0 = idle(fins, pending, i, 0)
         idle1 = idle(fins, pending, i, 1)
         if not idle0 and fins[i, 0, ELAPSED] >= fins[i, 0, DURATION] - _EPS:
-            _start_half_stroke(fins, cache, pending, i, 0, coef, averaged, mode, tables)
+            _start_half_stroke(fins, cache, pending, i, 0, coef, averaged, mode, tables, transitions)
         if not idle1 and fins[i, 1, ELAPSED] >= fins[i, 1, DURATION] - _EPS:
-            _start_half_stroke(fins, cache, pending, i, 1, coef, averaged, mode, tables)
+            _start_half_stroke(fins, cache, pending, i, 1, coef, averaged, mode, tables, transitions)
         rem0 = np.inf if idle0 else fins[i, 0, DURATION] - fins[i, 0, ELAPSED]
         rem1 = np.inf if idle1 else fins[i, 1, DURATION] - fins[i, 1, ELAPSED]
         seg = min(t_left, rem0, rem1)
@@ -246,10 +261,9 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
             fx = cache[i, 0, fc.AVG_FX] + cache[i, 1, fc.AVG_FX]
             fy = cache[i, 0, fc.AVG_FY] + cache[i, 1, fc.AVG_FY]
             tau = cache[i, 0, fc.AVG_TAU] + cache[i, 1, fc.AVG_TAU]
-            if transitions:
+            if transitions:  # each fin's, evaluated when it latched (_start_half_stroke)
                 for f in range(2):
-                    dfx, dfy, dtau = _transition(fins, cache, i, f, drag_constant, fin_offset)
-                    fx, fy, tau = fx + dfx, fy + dfy, tau + dtau
+                    fx, fy, tau = fx + cache[i, f, fc.TR_FX], fy + cache[i, f, fc.TR_FY], tau + cache[i, f, fc.TR_TAU]
             forcing = Forcing(fx, fy, tau)
             if harmonics > 0:
                 _waveform_segment(state, integral, fins, cache, i, seg, idle0, idle1, harmonics, rate_correction,
