@@ -53,7 +53,7 @@ DEFAULT_RANDOMIZATION = {"body_mass": 0.1, "body_inertia": 0.2, "drag_coef": 0.2
 MAX_BATCH = 128  # vector-env slots of one evaluation
 QUICK_EPISODES = 2  # --quick: episodes of a smoke run
 # Settings of the averaged model only: a policy trained on it keeps its other env arguments on the full model.
-AVERAGED_ONLY = ("scaling", "check_scaling_params", "transitions")
+AVERAGED_ONLY = ("scaling", "check_scaling_params", "transitions", "ripple_offsets")
 
 
 def model_kwargs(env_id: str, kwargs: dict[str, Any]) -> dict[str, Any]:

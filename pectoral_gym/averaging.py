@@ -72,6 +72,9 @@ __all__ = [
     "scaled_forcing",
     "half_stroke_mean_force",
     "power_stroke_excess",
+    "ODD_MOMENT_SERIES",
+    "odd_moment",
+    "ripple_offset",
 ]
 
 EXACT = 0
@@ -188,6 +191,62 @@ def half_stroke_mean_force(angle_from: float, angle_to: float, duration: float, 
     mid = 0.5 * (angle_to + angle_from)
     base = drag_constant * math.pi * math.pi * abs(half) * bessel_j1(half) / (duration * duration)
     return base * math.sin(mid), base * math.cos(mid)
+
+
+def _odd_moment_coefficients(terms: int = 14) -> tuple[float, ...]:
+    """``q_n = int_0^pi (phi - pi/2) sin^2(phi) cos^(2n+1)(phi) dphi`` (Gauss-Legendre, exact to rounding).
+
+    The integrands are polynomials in ``cos`` and ``sin`` times ``phi``; 64 nodes integrate
+    them to machine precision (``q_0 = -4/9``).
+    """
+    x, w = np.polynomial.legendre.leggauss(64)
+    phi, w = (x + 1.0) * math.pi / 2.0, w * math.pi / 2.0
+    return tuple(float(np.sum(w * (phi - math.pi / 2.0) * np.sin(phi) ** 2 * np.cos(phi) ** (2 * n + 1)))
+                 for n in range(terms))
+
+
+#: Series coefficients of :func:`odd_moment` (14 terms reach rounding for ``|h| <= pi/2``); also symbolic's.
+ODD_MOMENT_SERIES = _odd_moment_coefficients()
+
+
+@nb.njit(**JIT)
+def odd_moment(h: float) -> float:
+    """``Q(h) = int_0^pi (phi - pi/2) sin^2(phi) sin(h cos phi) dphi``, by its power series (``|h| <= pi/2``).
+
+    ``sin(h cos phi) = sum_n (-1)^n (h cos phi)^(2n+1) / (2n+1)!``, integrated term by term
+    (:func:`_odd_moment_coefficients`). Odd in ``h``, ``Q(h) ~ -4h/9`` for small ``h``.
+    """
+    h2 = h * h
+    term = h  # (-1)^n h^(2n+1) / (2n+1)!
+    total = 0.0
+    for n in range(len(ODD_MOMENT_SERIES)):
+        total += ODD_MOMENT_SERIES[n] * term
+        term *= -h2 / ((2 * n + 2) * (2 * n + 3))
+    return total
+
+
+@nb.njit(**JIT)
+def ripple_offset(bias: float, amplitude: float, period: float, ratio: float, drag_constant: float):
+    """Beat-mean impulse offset [N s] of the right fin's regular beat over its cycle average (``docs/model.md`` 3.8).
+
+    ``M = (1/T) int_0^T E(t) dt`` with ``E(t) = int_0^t (f - fbar) ds`` the blade-element
+    force's impulse beyond the cycle average since the start of a power stroke: a fish whose
+    fin starts a power stroke at velocity ``v`` has a beat-mean velocity ``v + M / m`` (without
+    damping). In closed form (the inertial terms of eqs. 16-17 contribute nothing)::
+
+        M_x = k pi^2 gA J1(gA) sin(g0) (zeta + 1/zeta) / (2 T) + 2 k gA^2 cos(g0) Q(gA) / T
+        M_y = k pi^2 gA J1(gA) cos(g0) (zeta + 1/zeta) / (2 T) - 2 k gA^2 sin(g0) Q(gA) / T
+
+    with :func:`odd_moment` ``Q``. Zero for a fin at rest.
+
+    Returns:
+        ``(M_x, M_y)``; the moment's is ``C_p M_x`` (eq. 18).
+    """
+    if amplitude == 0.0:
+        return 0.0, 0.0
+    a = drag_constant * math.pi * math.pi * amplitude * bessel_j1(amplitude) * (ratio + 1.0 / ratio) / (2.0 * period)
+    b = 2.0 * drag_constant * amplitude * amplitude * odd_moment(amplitude) / period
+    return a * math.sin(bias) + b * math.cos(bias), a * math.cos(bias) - b * math.sin(bias)
 
 
 @nb.njit(**JIT)

@@ -109,6 +109,7 @@ class FishModel:
         self.min_substeps = 1
         self.mode = EXACT
         self.transitions = False
+        self.ripple_offsets = False
         unit = ScalingFunctions.unit()
         self.tables = unit.kernel_arrays()
         self.set_params(params or FishParams())
@@ -174,9 +175,14 @@ class FishModel:
             raise ValueError(f"duration must be >= 0 s, got {duration}")
         stepping.advance(self.state, self.fins, self.forcing_cache, self.pending, self.integral, self.coef, duration,
                          self.dt_max, self.min_substeps, self.averaged, self.mode, self._packed_tables,
-                         self.transitions)
+                         self.corrections)
         self.time += duration
         return self.state
+
+    @property
+    def corrections(self) -> int:
+        """The averaged model's corrections as the kernels take them (:func:`pectoral_gym.stepping.corrections`)."""
+        return stepping.corrections(self.transitions, self.ripple_offsets) if self.averaged else 0
 
     @property
     def tables(self) -> KTables:
@@ -245,15 +251,21 @@ class AveragedModel(FishModel):
             Zero at periodic steady state, so K and the steady-state figures are
             unchanged. Default on; ``False`` gives the model before issue 12 (the cycle
             averages alone). Measured in ``docs/validation/fidelity/``.
+        ripple_offsets: Keep the model's state at the beat mean of the full model's: when a fin
+            starts a pattern (from rest, after a reset, at a change) or parks, spread over that
+            half-stroke the change of its beat's mean impulse offset
+            (:func:`pectoral_gym.averaging.ripple_offset`, ``docs/model.md`` section 3.8). Zero
+            while a pattern is kept, so K and the steady states are unchanged. Default on.
     """
 
     averaged = True
 
     def __init__(self, n: int = 1, params: FishParams | Sequence[FishParams] | None = None,
                  scaling: ScalingFunctions | str | None = "identified", forcing: str = "exact",
-                 dt_max: float = 0.25, transitions: bool = True):
+                 dt_max: float = 0.25, transitions: bool = True, ripple_offsets: bool = True):
         super().__init__(n, params, dt_max)
         self.transitions = bool(transitions)
+        self.ripple_offsets = bool(ripple_offsets)
         if forcing not in ("exact", "taylor"):
             raise ValueError(f"forcing must be 'exact' or 'taylor', got {forcing!r}")
         self.mode = EXACT if forcing == "exact" else TAYLOR
@@ -273,6 +285,7 @@ def make_model(
     scaling: ScalingFunctions | str | None = "identified",
     forcing: str = "exact",
     transitions: bool = True,
+    ripple_offsets: bool = True,
 ) -> FishModel:
     """Build a batched model by name.
 
@@ -283,6 +296,7 @@ def make_model(
         scaling: Averaged model only: ``"identified"``, ``"none"`` or a :class:`ScalingFunctions`.
         forcing: Averaged model only: ``"exact"`` or ``"taylor"``.
         transitions: Averaged model only: the transitional-stroke forcing (:class:`AveragedModel`).
+        ripple_offsets: Averaged model only: the beat-mean ripple offset (:class:`AveragedModel`).
 
     Returns:
         A :class:`FullModel` or :class:`AveragedModel`.
@@ -293,5 +307,6 @@ def make_model(
     if model == "full":
         return FullModel(n, params)
     if model == "averaged":
-        return AveragedModel(n, params, scaling=scaling, forcing=forcing, transitions=transitions)
+        return AveragedModel(n, params, scaling=scaling, forcing=forcing, transitions=transitions,
+                             ripple_offsets=ripple_offsets)
     raise ValueError(f"model must be one of {MODELS}, got {model!r}")

@@ -38,7 +38,7 @@ from pectoral_gym.ktables import KTables, as_tables
 from pectoral_gym.params import BodyCoefficients, Coef
 from pectoral_gym.strokes import AMPLITUDE, BIAS, DURATION, ELAPSED, PERIOD, RATIO, idle, latch
 
-__all__ = ["ACCURATE_STEP", "STATE_NAMES", "State", "advance"]
+__all__ = ["ACCURATE_STEP", "RIPPLE_OFFSETS", "STATE_NAMES", "TRANSITIONS", "State", "advance", "corrections"]
 
 STATE_NAMES = ("X", "Y", "psi", "vx", "vy", "omega")
 #: Column of each state (``state[:, State.PSI]``), generated from :data:`STATE_NAMES`; the integrals
@@ -46,6 +46,9 @@ STATE_NAMES = ("X", "Y", "psi", "vx", "vy", "omega")
 State = enum.IntEnum("State", {name.upper(): i for i, name in enumerate(STATE_NAMES)})
 
 _EPS = 1e-12
+#: Bits of the averaged model's ``corrections`` (:func:`corrections`): the transitional half-strokes
+#: (``docs/model.md`` 3.7) and the beat-mean ripple offset (3.8).
+TRANSITIONS, RIPPLE_OFFSETS = 1, 2
 ACCURATE_STEP = 1.5  # averaged model: h * rate bound; RK4 is stable to 2.78, this keeps transients accurate
 
 
@@ -141,11 +144,12 @@ def _stable_step(state, i, rates: RateConstants, driven_omega, driven_speed, osc
 
 
 @nb.njit(inline="always", **JIT)
-def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables, transitions):
+def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables, corrections):
     """Latch fin ``f``'s commanded pattern; the averaged model also brings its forcing cache up to date.
 
-    The transitional forcing (:func:`_transition`) is constant over the half-stroke, so it is
-    evaluated here, once, and kept in the cache (``TR_*``).
+    The corrections (:data:`TRANSITIONS`: :func:`_transition`; :data:`RIPPLE_OFFSETS`: the change
+    of the beat-mean ripple offset, spread over the half-stroke) are constant over the
+    half-stroke, so they are evaluated here, once, and kept in the cache (``TR_*``).
     """
     if averaged and fins[i, f, st.POWER] > 0.5:  # a power stroke ends: keep its pattern (_transition)
         cache[i, f, fc.PREV_BIAS] = fins[i, f, BIAS]
@@ -156,11 +160,37 @@ def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables,
     if averaged:
         fc.refresh(cache, i, f, fins[i, f, BIAS], fins[i, f, AMPLITUDE], fins[i, f, PERIOD], fins[i, f, RATIO],
                    coef, mode, tables)
-        if transitions:
-            dfx, dfy, dtau = _transition(fins, cache, i, f, coef[i, Coef.FIN_DRAG_CONSTANT], coef[i, Coef.FIN_OFFSET])
+        if corrections:
+            dfx = dfy = dtau = 0.0
+            if corrections & TRANSITIONS:
+                dfx, dfy, dtau = _transition(fins, cache, i, f, coef[i, Coef.FIN_DRAG_CONSTANT],
+                                             coef[i, Coef.FIN_OFFSET])
+            if corrections & RIPPLE_OFFSETS:
+                ox, oy, ot = _ripple_offset_change(cache, i, f)
+                duration = fins[i, f, DURATION]
+                dfx, dfy, dtau = dfx + ox / duration, dfy + oy / duration, dtau + ot / duration
             cache[i, f, fc.TR_FX] = dfx
             cache[i, f, fc.TR_FY] = dfy
             cache[i, f, fc.TR_TAU] = dtau
+
+
+@nb.njit(inline="always", **JIT)
+def _ripple_offset_change(cache, i, f):
+    """Impulse [N s, N s, N m s] that moves fin ``f``'s delivered ripple offset to its latched pattern's.
+
+    ``docs/model.md`` section 3.8: the averaged state is the beat mean of the full model's,
+    which runs ahead of its cycle-start value by ``M / m``
+    (:func:`pectoral_gym.averaging.ripple_offset`); a fin that starts a pattern, changes it or
+    parks moves that offset from the old pattern's ``M`` to the new one's. Zero while the pattern
+    is kept.
+    """
+    ox = cache[i, f, fc.M_FX] - cache[i, f, fc.OFF_FX]
+    oy = cache[i, f, fc.M_FY] - cache[i, f, fc.OFF_FY]
+    ot = cache[i, f, fc.M_TAU] - cache[i, f, fc.OFF_TAU]
+    cache[i, f, fc.OFF_FX] = cache[i, f, fc.M_FX]
+    cache[i, f, fc.OFF_FY] = cache[i, f, fc.M_FY]
+    cache[i, f, fc.OFF_TAU] = cache[i, f, fc.M_TAU]
+    return ox, oy, ot
 
 
 @nb.njit(inline="always", **JIT)
@@ -233,7 +263,7 @@ def _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc
 
 @nb.njit(**JIT)
 def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode,
-                 transitions, packed_tables):
+                 corrections, packed_tables):
     """Advance fish ``i`` by ``duration`` seconds, segment by segment between stroke boundaries."""
     tables = as_tables(packed_tables)
     body = BodyCoefficients(coef[i, Coef.M1], coef[i, Coef.M2], coef[i, Coef.J3],
@@ -251,9 +281,9 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
         idle0 = idle(fins, pending, i, 0)
         idle1 = idle(fins, pending, i, 1)
         if not idle0 and fins[i, 0, ELAPSED] >= fins[i, 0, DURATION] - _EPS:
-            _start_half_stroke(fins, cache, pending, i, 0, coef, averaged, mode, tables, transitions)
+            _start_half_stroke(fins, cache, pending, i, 0, coef, averaged, mode, tables, corrections)
         if not idle1 and fins[i, 1, ELAPSED] >= fins[i, 1, DURATION] - _EPS:
-            _start_half_stroke(fins, cache, pending, i, 1, coef, averaged, mode, tables, transitions)
+            _start_half_stroke(fins, cache, pending, i, 1, coef, averaged, mode, tables, corrections)
         rem0 = np.inf if idle0 else fins[i, 0, DURATION] - fins[i, 0, ELAPSED]
         rem1 = np.inf if idle1 else fins[i, 1, DURATION] - fins[i, 1, ELAPSED]
         seg = min(t_left, rem0, rem1)
@@ -261,7 +291,7 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
             fx = cache[i, 0, fc.AVG_FX] + cache[i, 1, fc.AVG_FX]
             fy = cache[i, 0, fc.AVG_FY] + cache[i, 1, fc.AVG_FY]
             tau = cache[i, 0, fc.AVG_TAU] + cache[i, 1, fc.AVG_TAU]
-            if transitions:  # each fin's, evaluated when it latched (_start_half_stroke)
+            if corrections:  # each fin's, evaluated when it latched (_start_half_stroke)
                 for f in range(2):
                     fx, fy, tau = fx + cache[i, f, fc.TR_FX], fy + cache[i, f, fc.TR_FY], tau + cache[i, f, fc.TR_TAU]
             forcing = Forcing(fx, fy, tau)
@@ -303,7 +333,7 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
 
 _ADVANCE = kernel_pair(
     _advance_one,
-    "state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, transitions, "
+    "state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, corrections, "
     "packed_tables",
 )
 _SERIAL, _PARALLEL = _ADVANCE.serial, _ADVANCE.parallel  # bound once: advance() runs at every env step
@@ -322,7 +352,7 @@ def advance(
     averaged: bool,
     mode: int,
     tables: KTables,
-    transitions: bool = False,
+    corrections: int = 0,
 ) -> None:
     """Advance every fish by ``duration`` seconds in place (see module docstring).
 
@@ -336,10 +366,16 @@ def advance(
         averaged: Integrate the averaged model (eq. 25) instead of the full one (eq. 19).
         mode: Averaged forcing form (``averaging.EXACT`` or ``averaging.TAYLOR``).
         tables: Scaling functions (``kfunctions.ScalingFunctions.kernel_arrays()``), or ``tuple()`` of them.
-        transitions: Averaged model: add each transitional half-stroke's forcing beyond the regular
-            half-stroke (:func:`_transition`, ``docs/model.md`` section 3.7).
+        corrections: Averaged model: a sum of :data:`TRANSITIONS` (each transitional half-stroke's
+            forcing beyond the regular half-stroke, :func:`_transition`, ``docs/model.md`` 3.7) and
+            :data:`RIPPLE_OFFSETS` (the beat-mean ripple offset, 3.8); see :func:`corrections`.
     """
     kernel = _PARALLEL if state.shape[0] >= PARALLEL_MIN_ITEMS else _SERIAL
     kernel(state, fins, cache, pending, integral, coef, float(duration), float(dt_max), float(min_substeps),
-           bool(averaged), int(mode), bool(transitions),
+           bool(averaged), int(mode), int(corrections),
            tuple(tables))  # a plain tuple is faster to dispatch (ktables.as_tables)
+
+
+def corrections(transitions: bool, ripple_offsets: bool) -> int:
+    """The ``corrections`` argument of :func:`advance` from the averaged model's two options."""
+    return (TRANSITIONS if transitions else 0) | (RIPPLE_OFFSETS if ripple_offsets else 0)

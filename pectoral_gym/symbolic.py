@@ -30,6 +30,7 @@ except ImportError as err:  # pragma: no cover - exercised only without the nmpc
 
 import numpy as np
 
+from pectoral_gym.averaging import ODD_MOMENT_SERIES
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.ktables import QUADRATURE, RATE_ITERATIONS
 from pectoral_gym.params import FishParams, body_coefficients
@@ -40,7 +41,7 @@ __all__ = [
     "yaw_oscillation_sx", "combined_yaw_oscillation_sx", "yaw_waveform_sx", "combined_yaw_waveform_sx",
     "waveform_square_mean_sx", "body_accel_sx", "body_rhs_sx", "averaged_rhs_sx",
     "mean_fin_power_sx", "rk4_sx", "named_symbols", "half_stroke_mean_force_sx", "power_stroke_excess_sx",
-    "transition_forcing_sx", "expected_transition_impulse_sx",
+    "transition_forcing_sx", "expected_transition_impulse_sx", "ripple_offset_sx",
 ]
 
 # The state of the symbolic model, ``(X, Y, psi, vx, vy, omega)``: pose in the tank frame, then the
@@ -415,6 +416,27 @@ def transition_forcing_sx(angle_from, beat, previous_power, power: bool, side: f
     if not power:
         delta = delta + (power_stroke_excess_sx(previous_power, k) - power_stroke_excess_sx(beat, k)) / duration
     return ca.vertcat(delta[0], side * delta[1], side * params.fin_offset * delta[0])
+
+
+def ripple_offset_sx(beat, side: float, params: FishParams):
+    """Beat-mean impulse offset ``(M_x, M_y, M_tau)`` of one fin's pattern (``docs/model.md`` 3.8).
+
+    As :func:`pectoral_gym.averaging.ripple_offset` (the same closed form and series), with the
+    left fin's sway and moment mirrored (``side = -1``). The averaged model adds its change,
+    spread over the half-stroke, where a fin starts, changes or parks a pattern.
+    """
+    bias, amplitude, period, ratio = beat[0], beat[1], beat[2], beat[3]
+    k = params.fin_drag_constant
+    h2 = amplitude * amplitude
+    term, odd = amplitude, 0.0
+    for n, coefficient in enumerate(ODD_MOMENT_SERIES):
+        odd = odd + coefficient * term
+        term = term * (-h2) / ((2 * n + 2) * (2 * n + 3))
+    a = k * math.pi**2 * amplitude * bessel_j1_sx(amplitude) * (ratio + 1.0 / ratio) / (2.0 * period)
+    b = 2.0 * k * h2 * odd / period
+    mx = a * ca.sin(bias) + b * ca.cos(bias)
+    my = a * ca.cos(bias) - b * ca.sin(bias)
+    return ca.vertcat(mx, side * my, side * params.fin_offset * mx)
 
 
 def expected_transition_impulse_sx(previous, beat, side: float, params: FishParams):

@@ -69,11 +69,11 @@ REST = fin_pattern(90.0, 0.0, 1.0, 1.0)
 
 
 def make_model(kind: str, n: int, params: FishParams, scaling: ScalingFunctions,
-               transitions: bool = True) -> FishModel:
-    """``n`` fish of the ``"full"`` or the ``"averaged"`` model (``transitions``: :class:`AveragedModel`'s option)."""
+               transitions: bool = True, ripple_offsets: bool = True) -> FishModel:
+    """``n`` fish of the ``"full"`` or the ``"averaged"`` model (``transitions``, ``ripple_offsets``: its options)."""
     if kind == "full":
         return FullModel(n, params)
-    return AveragedModel(n, params, scaling=scaling, transitions=transitions)
+    return AveragedModel(n, params, scaling=scaling, transitions=transitions, ripple_offsets=ripple_offsets)
 
 
 def _steady(kind: str, beats: np.ndarray, params: FishParams, scaling: ScalingFunctions) -> np.ndarray:

@@ -20,7 +20,8 @@ it there, open loop, with the public :mod:`pectoral_gym.models` API:
 
 Two seed sets (:data:`SEED_SETS`): ``dev`` to look at while working on the model,
 ``report`` (other seeds, other two-fin periods) run only for the published figures.
-Output: ``fidelity_<set>[_no_transitions].md``, ``.json`` and PNG plots (:mod:`scaling.fidelity_report`).
+Output: ``fidelity_<set>[_no_transitions][_no_offsets].md``, ``.json`` and PNG plots
+(:mod:`scaling.fidelity_report`).
 """
 
 from __future__ import annotations
@@ -92,7 +93,7 @@ def draw_patterns(rng: np.random.Generator, n: int, segments: int, ranges: np.nd
 
 def open_loop(kind: str, schedule: np.ndarray, change_every: float | None, duration: float,
               params: FishParams, scaling: ScalingFunctions, on_pattern: bool = False,
-              transitions: bool = True) -> np.ndarray:
+              transitions: bool = True, ripple_offsets: bool = True) -> np.ndarray:
     """Poses ``(n, k + 1, 3)`` (X, Y, psi) every :data:`SAMPLE` s of one model under a command schedule.
 
     Args:
@@ -103,9 +104,10 @@ def open_loop(kind: str, schedule: np.ndarray, change_every: float | None, durat
         params, scaling: Both models' parameters; the averaged model's K.
         on_pattern: Start with the fins on the first pattern (no transitional half-stroke) instead of at rest.
         transitions: The averaged model's transitional-stroke forcing (:class:`pectoral_gym.AveragedModel`).
+        ripple_offsets: The averaged model's beat-mean ripple offset (:class:`pectoral_gym.AveragedModel`).
     """
     n = schedule.shape[0]
-    model = make_model(kind, n, params, scaling, transitions)
+    model = make_model(kind, n, params, scaling, transitions, ripple_offsets)
     if on_pattern:
         model.reset(right=schedule[:, 0, 0], left=schedule[:, 0, 1])
     else:
@@ -132,8 +134,9 @@ def open_loop_errors(full: np.ndarray, averaged: np.ndarray) -> dict[str, np.nda
 
 
 def _scenario(schedule, change_every, duration, params, scaling, on_pattern=False, keep_paths=0,
-              transitions=True) -> dict[str, Any]:
-    poses = {kind: open_loop(kind, schedule, change_every, duration, params, scaling, on_pattern, transitions)
+              transitions=True, ripple_offsets=True) -> dict[str, Any]:
+    poses = {kind: open_loop(kind, schedule, change_every, duration, params, scaling, on_pattern, transitions,
+                             ripple_offsets)
              for kind in ("full", "averaged")}
     err = open_loop_errors(poses["full"], poses["averaged"])
     labels = [label(s[0]) for s in schedule]
@@ -191,8 +194,9 @@ def _targets(results: dict[str, Any]) -> list[dict[str, Any]]:
 
 def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Path = "fidelity",
              params: FishParams | None = None, quick: bool = False, plots: bool = True, progress: bool = True,
-             source: str = "<ScalingFunctions>", transitions: bool = True) -> dict[str, Any]:
-    """Run the benchmark on one seed set; write ``fidelity_<set>[_no_transitions].md``, ``.json``, plots to ``out_dir``.
+             source: str = "<ScalingFunctions>", transitions: bool = True,
+             ripple_offsets: bool = True) -> dict[str, Any]:
+    """Run the benchmark on one seed set; write ``fidelity_<set>[...].md``, ``.json``, plots to ``out_dir``.
 
     Args:
         scaling: The averaged model's K.
@@ -206,6 +210,8 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         transitions: The averaged model's transitional-stroke forcing (default on, as in
             :class:`pectoral_gym.AveragedModel`). The steady states and the single-fin figures do not
             depend on it.
+        ripple_offsets: The averaged model's beat-mean ripple offset (default on, as in the model);
+            the steady states do not depend on it either.
 
     Returns:
         The results (the content of the JSON file).
@@ -227,7 +233,7 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
     one_fin = base.copy()
     one_fin[:, :, 1] = REST
     def run(schedule, every=None, on=False, keep=0):
-        return lambda: _scenario(schedule, every, duration, params, scaling, on, keep, transitions)
+        return lambda: _scenario(schedule, every, duration, params, scaling, on, keep, transitions, ripple_offsets)
 
     stages: list[tuple[tuple[str, ...], Any]] = [
         *((("scenarios", name), run(schedules[name], every, keep=4)) for name, every in SCENARIOS.items()),
@@ -238,7 +244,8 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         (("table4",), lambda: table4_section(scaling, params, sizes["table4"])),
     ]
     results: dict[str, Any] = {"seed_set": seeds.name, "seed": seeds.seed, "quick": quick, "version": __version__,
-                               "source": source, "transitions": transitions, "scenarios": {}, "decomposition": {},
+                               "source": source, "transitions": transitions, "ripple_offsets": ripple_offsets,
+                               "scenarios": {}, "decomposition": {},
                                "timing_s": {}}
     start = time.perf_counter()
     bar = tqdm(total=len(stages) + 1, desc=f"fidelity ({seed_set})", unit="stage", disable=not progress)
@@ -256,7 +263,8 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         k: v for k, v in results["scenarios"]["constant"].items() if k != "paths"}
     results["targets"] = _targets(results)
     bar.set_postfix_str("report")
-    stem = f"fidelity_{seeds.name}" + ("" if transitions else "_no_transitions")
+    stem = (f"fidelity_{seeds.name}" + ("" if transitions else "_no_transitions")
+            + ("" if ripple_offsets else "_no_offsets"))
     results["plots"] = fidelity_report.plots(results, out, stem) if plots else []
     results["timing_s"]["total"] = time.perf_counter() - start
     (out / f"{stem}.json").write_text(json.dumps(results, indent=1, allow_nan=False) + "\n")
@@ -271,8 +279,8 @@ def add_parser(sub) -> None:
     p = sub.add_parser("fidelity", help="averaged vs full model with two fins and changing commands (issue 12)",
                        description="Fidelity benchmark: open-loop runs with constant and changing two-fin patterns, "
                        "their decomposition (one fin / two, from rest / on the pattern), two-fin steady states, the "
-                       "single-fin held-out set and Table 4. Writes fidelity_<set>[_no_transitions].md, .json and PNG "
-                       "plots.")
+                       "single-fin held-out set and Table 4. Writes fidelity_<set>[_no_transitions][_no_offsets].md, "
+                       ".json and PNG plots.")
     p.add_argument("--set", dest="seed_set", choices=sorted(SEED_SETS), default="dev",
                    help="seed set: dev (look at it while working) or report (for the published figures only)")
     p.add_argument("--coefficients", metavar="PATH", default=None,
@@ -280,8 +288,10 @@ def add_parser(sub) -> None:
     p.add_argument("--out", metavar="DIR", default="fidelity", help="output folder (default: fidelity)")
     p.add_argument("--quick", action="store_true", help="test-sized run (figures not meaningful)")
     p.add_argument("--transitions", action=argparse.BooleanOptionalAction, default=True,
-                   help="averaged model with its transitional-stroke forcing (the default; --no-transitions: "
-                        "the cycle averages alone, the model before issue 12)")
+                   help="averaged model with its transitional-stroke forcing (the default; --no-transitions "
+                        "--no-ripple-offsets: the cycle averages alone, the model before issue 12)")
+    p.add_argument("--ripple-offsets", action=argparse.BooleanOptionalAction, default=True,
+                   help="averaged model with its beat-mean ripple offset (the default; docs/model.md 3.8)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -298,6 +308,7 @@ def main(args: argparse.Namespace) -> int:
         return 2
     source = "the shipped coefficients file" if not args.coefficients else str(path)  # no machine paths in reports
     results = fidelity(scaling, args.seed_set, args.out, quick=args.quick, plots=not args.no_plots,
-                       progress=not args.no_progress, source=source, transitions=args.transitions)
+                       progress=not args.no_progress, source=source, transitions=args.transitions,
+                       ripple_offsets=args.ripple_offsets)
     print(fidelity_report.summary_text(results))
     return 0

@@ -28,8 +28,9 @@ def _deg(value: float | None) -> str:
 def summary_text(results: dict[str, Any]) -> str:
     """A few lines for stdout: the targets table."""
     lines = [f"fidelity benchmark, seed set {results['seed_set']!r}, transitions "
-             f"{'on' if results.get('transitions') else 'off'}" + (" (quick: not meaningful)"
-                                                                         if results["quick"] else "")]
+             f"{'on' if results.get('transitions') else 'off'}, ripple offsets "
+             f"{'on' if results.get('ripple_offsets') else 'off'}" + (" (quick: not meaningful)"
+                                                                      if results["quick"] else "")]
     for t in results["targets"]:
         mark = "ok  " if t["met"] else "MISS"
         lines.append(f"  {mark} {t['check']:42} {_pct(t['measured'], 2):>10}  (target <= {_pct(t['target'], 0)})")
@@ -43,7 +44,8 @@ def write_markdown(results: dict[str, Any], path: Path) -> Path:
     lines = [
         f"# Averaged-model fidelity benchmark: seed set `{results['seed_set']}`", "",
         f"Seed {results['seed']}, pectoral-gym {results['version']}, K from `{results['source']}`, averaged model "
-        + ("with" if results.get("transitions") else "without") + " transitional-stroke forcing"
+        + ("with" if results.get("transitions") else "without") + " transitional-stroke forcing and "
+        + ("with" if results.get("ripple_offsets") else "without") + " the ripple offset (docs/model.md 3.7, 3.8)"
         + (" — **quick run: figures not meaningful**" if results["quick"] else "") + ".", "",
         f"Open loop: {first['n']} fish from rest, {first['duration_s']:g} s, two-fin patterns uniform in the envs' "
         "default action ranges. Position error = end-position distance / max(full-model path, 0.25 m); heading "

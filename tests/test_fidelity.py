@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from pectoral_gym.averaging import averaged_forcing, half_stroke_mean_force
+from pectoral_gym.averaging import averaged_forcing, half_stroke_mean_force, ripple_offset
 from pectoral_gym.dynamics import fin_force_right, stroke_kinematics
 from pectoral_gym.models import AveragedModel
 from pectoral_gym.params import FinBeat, FishParams
@@ -67,11 +67,13 @@ def test_transitions_change_nothing_on_regular_strokes():
     np.testing.assert_array_equal(runs[0], runs[1])
 
 
+@pytest.mark.parametrize("offsets", [False, True])
 @pytest.mark.parametrize("transitions", [False, True])
-def test_first_stroke_from_rest_applies_the_sweep_forcing(transitions):
+def test_first_stroke_from_rest_applies_the_sweep_forcing(transitions, offsets):
     """From rest the right fin sweeps 90 -> 105 deg (pattern 80 +- 25 deg): the force the averaged model
     (K = 1) applies is the cycle mean plus, with transitions, the sweep's mean minus the regular stroke's
-    (from 55 deg). Read off the body's initial acceleration, where drag and Munk terms are still negligible."""
+    (from 55 deg), plus, with ripple offsets, the pattern's offset M spread over the stroke (docs/model.md 3.8).
+    Read off the body's initial acceleration, where drag and Munk terms are still negligible."""
     params = FishParams()
     beat = FinBeat.from_degrees(80, 25, 1.2, 3.0)
     d = beat.period / (beat.ratio + 1.0)  # power stroke, eq. (21)
@@ -80,7 +82,10 @@ def test_first_stroke_from_rest_applies_the_sweep_forcing(transitions):
         swept = half_stroke_mean_force(math.radians(90), math.radians(105), d, params.fin_drag_constant)
         regular = half_stroke_mean_force(math.radians(55), math.radians(105), d, params.fin_drag_constant)
         fx, fy = fx + swept[0] - regular[0], fy + swept[1] - regular[1]
-    model = AveragedModel(1, params, scaling="none", transitions=transitions)
+    if offsets:
+        mx, my = ripple_offset(beat.bias, beat.amplitude, beat.period, beat.ratio, params.fin_drag_constant)
+        fx, fy = fx + mx / d, fy + my / d
+    model = AveragedModel(1, params, scaling="none", transitions=transitions, ripple_offsets=offsets)
     model.reset()
     model.command(right=beat)
     dt = 1e-4
@@ -128,16 +133,17 @@ def test_draw_patterns_inside_the_env_ranges():
 
 
 def test_quick_cli_end_to_end(tmp_path, capsys):
-    assert scaling_main(["fidelity", "--quick", "--out", str(tmp_path), "--no-progress", "--no-transitions"]) == 0
-    data = json.loads((tmp_path / "fidelity_dev_no_transitions.json").read_text())
-    assert not data["transitions"] and data["quick"] and data["seed_set"] == "dev"
+    assert scaling_main(["fidelity", "--quick", "--out", str(tmp_path), "--no-progress", "--no-transitions",
+                         "--no-ripple-offsets"]) == 0
+    data = json.loads((tmp_path / "fidelity_dev_no_transitions_no_offsets.json").read_text())
+    assert not data["transitions"] and not data["ripple_offsets"] and data["quick"] and data["seed_set"] == "dev"
     assert set(data["scenarios"]) == set(fd.SCENARIOS) and set(data["decomposition"]) == set(fd.DECOMPOSITION)
     assert len(data["targets"]) == 16
     for name in data["plots"]:
         assert (tmp_path / name).read_bytes()[:8] == PNG_MAGIC
-    report = (tmp_path / "fidelity_dev_no_transitions.md").read_text()
+    report = (tmp_path / "fidelity_dev_no_transitions_no_offsets.md").read_text()
     assert "## Decomposition" in report and "changed every 0.5 s" in report
-    assert "transitions off" in capsys.readouterr().out
+    assert "transitions off, ripple offsets off" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         scaling_main(["fidelity", "--set", "tuning"])
 

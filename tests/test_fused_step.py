@@ -25,7 +25,7 @@ def reference_model(config: EnvConfig, core: EnvCore):
         model = FullModel(1, core.params[0])
     else:
         model = AveragedModel(1, core.params[0], scaling=config.scaling_functions() or "none",
-                              transitions=config.transitions)
+                              transitions=config.transitions, ripple_offsets=config.ripple_offsets)
     model.reset(core.fish_state(0), right=REST, left=REST)
     return model
 
@@ -154,7 +154,7 @@ def test_model_settings_changed_after_the_first_step_are_used():
     core.model.dt_max = 0.05
     start = core.fish_state(0)
     core.model.reset(start, right=REST, left=REST)
-    ref = AveragedModel(1, config.params, scaling="none", transitions=True, dt_max=0.05)
+    ref = AveragedModel(1, config.params, scaling="none", transitions=True, ripple_offsets=False, dt_max=0.05)
     ref.reset(start, right=REST, left=REST)
     rng = np.random.default_rng(3)
     for _ in range(10):

@@ -168,7 +168,7 @@ def test_full_model_from_moving_initial_state_matches_ode():
 @pytest.mark.parametrize("right,left", [(TURN, FinBeat.rest()), (FORWARD, FinBeat.from_degrees(70, 25, 0.7, 2.0))])
 def test_averaged_model_matches_independent_ode_solution(right, left):
     ref = reference_averaged(right, left, 5.0)
-    got = run(AveragedModel(1, scaling=None, dt_max=0.005), 5.0, right=right, left=left)[0]
+    got = run(AveragedModel(1, scaling=None, dt_max=0.005, ripple_offsets=False), 5.0, right=right, left=left)[0]
     np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9)
 
 
@@ -178,7 +178,7 @@ def test_averaged_model_with_scaling_scales_forcing():
                                     "functions": {n: [{"coef": v, "powers": [0] * 5}] for n, v in k.items()}})
     f = (closed_form_average(FORWARD, 1.0) * np.array([k["K_fx"], k["K_fy"], k["K_m"]]))
     ref = solve_ivp(lambda t, y: eq19(y, f), (0, 4.0), np.zeros(6), method="DOP853", rtol=1e-11, atol=1e-13).y[:, -1]
-    got = run(AveragedModel(1, scaling=s, dt_max=0.005), 4.0, right=FORWARD)[0]
+    got = run(AveragedModel(1, scaling=s, dt_max=0.005, ripple_offsets=False), 4.0, right=FORWARD)[0]
     np.testing.assert_allclose(got, ref, rtol=0, atol=1e-9)
 
 
@@ -408,9 +408,10 @@ def test_averaged_and_full_share_parameter_change_schedule():
 def test_averaged_forcing_switches_at_turning_point():
     # Averaged model from rest: until the right fin's turning point at 0.2 s it is driven by P1's average,
     # then by P2's. Compare with the reference ODE driven by piecewise-constant closed-form forcing.
-    # (Without the transitional-stroke forcing, which tests/test_fidelity.py checks against the full model.)
+    # (Without the transitional-stroke forcing and the ripple offset, which tests/test_fidelity.py and
+    # tests/test_ripple_offset.py check against the full model.)
     p1, p2 = TURN, FORWARD
-    m = AveragedModel(1, scaling=None, dt_max=0.002, transitions=False)
+    m = AveragedModel(1, scaling=None, dt_max=0.002, transitions=False, ripple_offsets=False)
     m.reset(right=p1)
     m.advance(0.1)
     m.command(right=p2)

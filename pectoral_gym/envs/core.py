@@ -78,6 +78,10 @@ class EnvConfig:
             default in the envs, unlike the model: it depends on the fins' stroke phase, which the default
             observation does not show; use it with ``observe_fins=True``, as the shipped PPO file does
             (alone it did far worse: full-model success 0.36-0.68; with both 0.98-1.00; docs/agents.md).
+        ripple_offsets: Averaged model only: the beat-mean ripple offset of a fin that starts,
+            changes or parks a pattern (:class:`~pectoral_gym.models.AveragedModel`, ``docs/model.md``
+            3.8; on by default in the model). Off by default in the envs until the shipped PPO file's
+            figures are re-measured with it.
         observe_fins: Append each fin's half-stroke in progress to the observation (angle now, the next
             turning point, power or recovery, time left; :mod:`pectoral_gym.envs.observation`): the
             stroke phase on which a new command's effect depends. Off by default (the 19-entry
@@ -104,6 +108,7 @@ class EnvConfig:
     scaling: str | os.PathLike = "identified"
     check_scaling_params: bool = True
     transitions: bool = False
+    ripple_offsets: bool = False
     observe_fins: bool = False
     progress_weight: float = 10.0
     goal_bonus: float = 10.0
@@ -130,6 +135,8 @@ class EnvConfig:
             raise ValueError(f"check_scaling_params must be True or False, got {self.check_scaling_params!r}")
         if not isinstance(self.transitions, (bool, np.bool_)):
             raise ValueError(f"transitions must be True or False, got {self.transitions!r}")
+        if not isinstance(self.ripple_offsets, (bool, np.bool_)):
+            raise ValueError(f"ripple_offsets must be True or False, got {self.ripple_offsets!r}")
         if not isinstance(self.observe_fins, (bool, np.bool_)):
             raise ValueError(f"observe_fins must be True or False, got {self.observe_fins!r}")
         if self.model == "full" and self.scaling != "identified":
@@ -276,7 +283,8 @@ class EnvCore:
             self.model: FishModel = FullModel(self.n, config.params)
         else:
             self.model = AveragedModel(self.n, config.params, scaling=config.scaling_functions() or "none",
-                                       transitions=bool(config.transitions))
+                                       transitions=bool(config.transitions),
+                                       ripple_offsets=bool(config.ripple_offsets))
         self.dt = float(config.control_period)
         self._observe_fins = bool(config.observe_fins)
         self._period_max = float(config.period_range[1])

@@ -118,7 +118,7 @@ def _build(stamp: int) -> Callable[..., Any]:
     """
 
     @nb.njit(**JIT)
-    def step_bound(a, skip, duration, dt_max, min_substeps, averaged, mode, transitions):
+    def step_bound(a, skip, duration, dt_max, min_substeps, averaged, mode, corrections):
         if stamp < 0:  # never: keys numba's disk cache on the inlined sources
             return -2
         bad = tk._first_non_finite(a.actions, skip)
@@ -130,7 +130,7 @@ def _build(stamp: int) -> Callable[..., Any]:
         command_fins(a.fins, a.pending, a.beats, a.everyone)
         # the loop FishModel.advance runs below PARALLEL_MIN_ITEMS fish (stepping.advance)
         stepping._SERIAL(a.state, a.fins, a.cache, a.pending, a.integral, a.coef, duration, dt_max, min_substeps,
-                         averaged, mode, transitions, a.tables)
+                         averaged, mode, corrections, a.tables)
         for i in range(n):
             tk._reward_mean_one(i, a.state, skip, a.cfg, a.ep, a.fish, a.obs, a.out, a.integral, a.before)
         return -1
@@ -144,7 +144,7 @@ _KERNEL: Callable[..., Any] | None = None
 def step_kernel() -> Callable[..., Any]:
     """The compiled step (a numba dispatcher; built on first use, see the module docstring).
 
-    ``step_kernel()(arrays, skip, duration, dt_max, min_substeps, averaged, mode, transitions)``
+    ``step_kernel()(arrays, skip, duration, dt_max, min_substeps, averaged, mode, corrections)``
     steps the envs of ``arrays`` (a :class:`StepArrays`) except those where ``skip``, by
     ``duration`` seconds, with the model settings as :func:`pectoral_gym.stepping.advance`
     takes them (``min_substeps`` a float). Returns -1, or the index of the first env not in
@@ -161,7 +161,7 @@ class BoundStep(NamedTuple):
 
     Attributes:
         arrays: The :class:`StepArrays`.
-        call: ``call(arrays, skip, duration, dt_max, min_substeps, averaged, mode, transitions)``:
+        call: ``call(arrays, skip, duration, dt_max, min_substeps, averaged, mode, corrections)``:
             the compiled entry point of exactly these types (``skip`` a C-contiguous bool array
             of the batch size; it converts the scalars as ``float, float, float, bool, int, bool``
             do), or the dispatcher behind those conversions if numba does not expose it.
@@ -187,9 +187,9 @@ def bind(arrays: StepArrays, tables: tuple, example: tuple) -> BoundStep:
         call = kernel.overloads[signature].entry_point
     except (AttributeError, KeyError):  # pragma: no cover - other numba versions: the dispatcher, same types
 
-        def call(arrays, skip, duration, dt_max, min_substeps, averaged, mode, transitions):
+        def call(arrays, skip, duration, dt_max, min_substeps, averaged, mode, corrections):
             return kernel(arrays, skip, float(duration), float(dt_max), float(min_substeps), bool(averaged),
-                          int(mode), bool(transitions))
+                          int(mode), int(corrections))
     return BoundStep(arrays, call, kernel, tables)
 
 
@@ -198,7 +198,7 @@ class FusedStep:
 
     Args:
         model: The batched model; its arrays are bound at the first call, its settings
-            (``dt_max``, ``min_substeps``, ``mode``, ``transitions``) read at every call and
+            (``dt_max``, ``min_substeps``, ``mode``, ``corrections``) read at every call and
             its K tables rebound when they change, as :meth:`FishModel.advance` reads them.
         duration: Control period [s].
         actions: ``(n, 8)`` C-contiguous float64 action buffer; a call with this very array
@@ -228,7 +228,7 @@ class FusedStep:
         arrays = new_step_arrays(self.actions, *self.env_arrays, self.everyone, m.state, m.fins, m.forcing_cache,
                                  m.pending, m.integral, m.coef, tables)
         return bind(arrays, tables, (self.none, self.duration, float(m.dt_max), float(m.min_substeps), bool(m.averaged),
-                             int(m.mode), bool(m.transitions)))
+                             int(m.mode), int(m.corrections)))
 
     def __call__(self, actions: np.ndarray, skip: np.ndarray | None = None) -> int:
         """Step the envs not in ``skip`` (a bool mask); returns -1, or the first env with a non-finite action.
@@ -247,10 +247,10 @@ class FusedStep:
             bound = self._bound = self._bind()
         if skip is None:  # the types the entry point was compiled for
             bad = bound.call(bound.arrays, self.none, self.duration, model.dt_max, model.min_substeps,
-                             model.averaged, model.mode, model.transitions)
+                             model.averaged, model.mode, model.corrections)
         else:
             bad = bound.kernel(bound.arrays, skip, self.duration, float(model.dt_max), float(model.min_substeps),
-                               bool(model.averaged), int(model.mode), bool(model.transitions))
+                               bool(model.averaged), int(model.mode), int(model.corrections))
         if bad < 0:
             model.time += self.duration  # as FishModel.advance
         return bad
