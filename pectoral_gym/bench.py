@@ -8,7 +8,12 @@
   ``reset`` on termination or truncation;
 * native vector-env rates through ``gymnasium.make_vec(...,
   vectorization_mode="vector_entry_point")`` (averaged at 4096 envs, full at
-  1024 envs), in env-steps per second (batch steps x ``num_envs``).
+  1024 envs, and the averaged env with the shipped PPO file's settings,
+  :data:`TRAINING_SETTINGS`), in env-steps per second (batch steps x ``num_envs``).
+
+Every action is drawn afresh, so the fins change pattern at every step, as under
+a learning agent. ``pectoral-fish bench --against DIR`` runs the same benchmark
+in another checkout, alternating with this one (:mod:`pectoral_gym.bench_compare`).
 
 Every measurement is warmed up first (numba compiles, or loads its cache, on
 the first call; that time is excluded) and the best of ``repeats`` timed runs
@@ -30,7 +35,7 @@ from typing import Any, NamedTuple
 import numpy as np
 
 __all__ = [
-    "AVERAGED_ID", "CARTPOLE_ID", "FULL_ID", "SINGLE_ENVS", "TARGETS", "VECTOR_ENVS",
+    "AVERAGED_ID", "CARTPOLE_ID", "FULL_ID", "SINGLE_ENVS", "TARGETS", "TRAINING_SETTINGS", "VECTOR_ENVS",
     "run_benchmark", "single_env_timer", "vector_env_timer",
 ]
 
@@ -39,6 +44,9 @@ FULL_ID = "PectoralFish-Full-v0"
 CARTPOLE_ID = "CartPole-v1"
 SINGLE_ENVS = (AVERAGED_ID, FULL_ID, CARTPOLE_ID)
 VECTOR_ENVS = {AVERAGED_ID: 4096, FULL_ID: 1024}  # env id -> num_envs
+#: The averaged env as agents/hyperparams/ppo.yml trains on it (its ``env_kwargs``), measured at 4096 envs too.
+TRAINING_SETTINGS = {"transitions": True, "observe_fins": True}
+TRAINING_KEY = f"{AVERAGED_ID} (PPO settings)"
 
 # name -> (threshold, what it is compared with)
 TARGETS: dict[str, tuple[float, str]] = {
@@ -94,7 +102,8 @@ def single_env_timer(env_id: str, steps: int, seed: int = 0) -> _Timer:
     return _Timer(run, env.close)
 
 
-def vector_env_timer(env_id: str, num_envs: int, steps: int, seed: int = 0) -> _Timer:
+def vector_env_timer(env_id: str, num_envs: int, steps: int, seed: int = 0,
+                     env_kwargs: dict[str, Any] | None = None) -> _Timer:
     """Warmed-up timer of ``steps`` batch steps of a native vector env.
 
     The env comes from ``gymnasium.make_vec(env_id, num_envs=num_envs,
@@ -105,13 +114,14 @@ def vector_env_timer(env_id: str, num_envs: int, steps: int, seed: int = 0) -> _
         num_envs: Number of sub-environments.
         steps: Batch steps per timed pass.
         seed: Seeds the action space and the reset before each pass.
+        env_kwargs: Passed to the env (e.g. :data:`TRAINING_SETTINGS`).
 
     Returns:
         A timer whose ``run()`` gives ``steps * num_envs / elapsed`` [env-steps/s].
     """
     import gymnasium as gym
 
-    envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point")
+    envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **(env_kwargs or {}))
     try:
         envs.action_space.seed(seed)
         actions = [envs.action_space.sample() for _ in range(steps)]
@@ -193,6 +203,8 @@ def run_benchmark(
     say("warming up (numba compilation or cache load) ...")
     makers: dict[str, Callable[[], _Timer]] = {e: partial(single_env_timer, e, steps, seed) for e in SINGLE_ENVS}
     makers.update({f"vector:{e}": partial(vector_env_timer, e, n, vector_steps, seed) for e, n in VECTOR_ENVS.items()})
+    makers[f"vector:{TRAINING_KEY}"] = partial(vector_env_timer, AVERAGED_ID, VECTOR_ENVS[AVERAGED_ID], vector_steps,
+                                               seed, TRAINING_SETTINGS)
     timers: dict[str, _Timer] = {}
     for key, make in makers.items():
         timer = attempt(key, make)
@@ -213,7 +225,7 @@ def run_benchmark(
         for timer in timers.values():
             timer.close()
     single = {env_id: best.get(env_id) for env_id in SINGLE_ENVS}
-    vector = {env_id: best.get(f"vector:{env_id}") for env_id in VECTOR_ENVS}
+    vector = {env_id: best.get(f"vector:{env_id}") for env_id in (*VECTOR_ENVS, TRAINING_KEY)}
 
     def ratio(a: float | None, b: float | None) -> float | None:
         return a / b if a is not None and b else None
@@ -231,7 +243,7 @@ def run_benchmark(
     return {
         "single_env": single,
         "vector_env": vector,
-        "num_envs": dict(VECTOR_ENVS),
+        "num_envs": {**VECTOR_ENVS, TRAINING_KEY: VECTOR_ENVS[AVERAGED_ID]},
         "ratios": ratios,
         "targets": targets,
         "all_met": all(t["met"] for t in targets.values()),

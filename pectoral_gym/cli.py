@@ -5,7 +5,7 @@ Subcommands::
     pectoral-fish steady   --model full --right 90,20,1,4 [--json]
     pectoral-fish simulate --model full --right 90,20,1,4 --duration 60 --out out [--compare]
     pectoral-fish demo     --out out
-    pectoral-fish bench    [--json] [--quick]
+    pectoral-fish bench    [--json] [--quick] [--against DIR]
 
 Fin patterns are ``G0,GA,TP,ZETA``: bias and amplitude in degrees, period in
 seconds, power/recovery ratio; an omitted fin is held at rest. Bad arguments
@@ -269,10 +269,12 @@ def _cmd_demo(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
 def _cmd_bench(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from pectoral_gym.bench import run_benchmark
 
-    for name in ("steps", "vector_steps", "repeats"):
+    for name in ("steps", "vector_steps", "repeats", "rounds"):
         if getattr(args, name) < 1:
             parser.error(f"--{name.replace('_', '-')} must be >= 1, got {getattr(args, name)}")
     progress = None if args.json else (lambda msg: print(msg, file=sys.stderr, flush=True))
+    if args.against is not None:
+        return _bench_against(args, parser, progress)
     res = run_benchmark(args.steps, args.vector_steps, args.repeats, args.seed, args.quick, progress)
     status = 1 if res["errors"] else 0
     if args.json:
@@ -295,6 +297,19 @@ def _cmd_bench(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
     if res["settings"]["quick"]:
         print("(--quick: smoke-test sizes, rates are not meaningful)")
     return status
+
+
+def _bench_against(args: argparse.Namespace, parser: argparse.ArgumentParser, progress) -> int:
+    from pectoral_gym.bench_compare import compare, format_comparison
+
+    bench_args = ["--steps", str(args.steps), "--vector-steps", str(args.vector_steps), "--repeats",
+                  str(args.repeats), "--seed", str(args.seed)] + (["--quick"] if args.quick else [])
+    try:
+        res = compare(args.against, args.rounds, bench_args, progress)
+    except (ValueError, RuntimeError) as err:
+        parser.error(str(err))
+    print(json.dumps(res) if args.json else format_comparison(res))
+    return 0
 
 
 # --------------------------------------------------------------------------- parser
@@ -364,8 +379,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = sub.add_parser("bench", help="step rates of the fish envs against CartPole-v1",
                        description="Single-env step rates through gymnasium.make (averaged, full, CartPole-v1) and "
-                                   "native vector-env rates (averaged @ 4096, full @ 1024 envs), best of --repeats "
-                                   "(round robin) after a warm-up, compared with the project's targets.")
+                                   "native vector-env rates (averaged @ 4096, full @ 1024 envs, averaged with the PPO "
+                                   "file's settings), new random actions every step, best of --repeats (round robin) "
+                                   "after a warm-up, compared with the project's targets. --against DIR: side by side "
+                                   "with another checkout.")
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--steps", type=int, metavar="N", default=20_000,
                    help="single-env steps per timed run (default: %(default)s)")
@@ -375,6 +392,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="timed runs per measurement, best kept (default: %(default)s)")
     p.add_argument("--seed", type=int, metavar="N", default=0, help="seed of the random actions (default: %(default)s)")
     p.add_argument("--quick", action="store_true", help="tiny step counts: a smoke test, not a measurement")
+    p.add_argument("--against", metavar="DIR", default=None,
+                   help="also run the benchmark in the checkout at DIR (e.g. a worktree of main), alternating, "
+                        "and print both rates and their ratio")
+    p.add_argument("--rounds", type=int, metavar="N", default=3,
+                   help="with --against: alternating runs per checkout, best kept (default: %(default)s)")
     p.set_defaults(handler=_cmd_bench, parser=p)
     return parser
 

@@ -119,7 +119,9 @@ def test_bench_quick_json_has_the_keys(capsys):
     assert {"single_env", "vector_env", "num_envs", "ratios", "targets", "all_met", "errors", "settings",
             "environment"} <= set(res)
     assert set(res["single_env"]) == {"PectoralFish-Averaged-v0", "PectoralFish-Full-v0", "CartPole-v1"}
-    assert res["num_envs"] == {"PectoralFish-Averaged-v0": 4096, "PectoralFish-Full-v0": 1024}
+    assert res["num_envs"] == {"PectoralFish-Averaged-v0": 4096, "PectoralFish-Full-v0": 1024,
+                               "PectoralFish-Averaged-v0 (PPO settings)": 4096}
+    assert res["vector_env"]["PectoralFish-Averaged-v0 (PPO settings)"] > 0
     assert set(res["ratios"]) == {"averaged_vs_cartpole", "full_vs_cartpole"}
     assert set(res["targets"]) == {"averaged_vs_cartpole", "full_vs_cartpole", "vector_averaged", "vector_full"}
     for target in res["targets"].values():
@@ -127,6 +129,40 @@ def test_bench_quick_json_has_the_keys(capsys):
     assert res["settings"]["quick"] is True and res["settings"]["steps"] == 50
     assert res["single_env"]["CartPole-v1"] > 0
     assert res["errors"] == {}, res["errors"]
+
+
+def test_bench_against_keeps_each_rate_best_and_alternates(monkeypatch, tmp_path):
+    from pectoral_gym import bench_compare
+
+    other = tmp_path / "other"
+    (other / "pectoral_gym").mkdir(parents=True)
+    (other / "pectoral_gym" / "__init__.py").write_text("")
+    calls = []
+    rates = {"this": iter([100.0, 300.0]), "other": iter([200.0, 150.0])}
+
+    def fake_run(root, args):
+        name = "other" if root == other.resolve() else "this"
+        calls.append(name)
+        value = next(rates[name])
+        return {"single_env": {"A": value}, "vector_env": {"B": value * 10, "C": None if name == "other" else 1.0},
+                "num_envs": {"B": 4, "C": 4}}
+
+    monkeypatch.setattr(bench_compare, "_run", fake_run)
+    res = bench_compare.compare(other, rounds=2)
+    assert calls == ["this", "other", "this", "other"]
+    rows = {r["rate"]: r for r in res["rows"]}
+    assert rows["single: A"]["this"] == 300.0 and rows["single: A"]["other"] == 200.0
+    assert rows["single: A"]["ratio"] == pytest.approx(1.5)
+    assert rows["vector: B @ 4"]["ratio"] == pytest.approx(1.5)
+    assert rows["vector: C @ 4"]["other"] is None and rows["vector: C @ 4"]["ratio"] is None
+    assert "missing" in bench_compare.format_comparison(res)
+
+
+def test_bench_against_a_folder_without_the_package_is_a_usage_error(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["bench", "--against", str(tmp_path)])
+    assert exc.value.code == 2
+    assert "holds no pectoral_gym package" in capsys.readouterr().err
 
 
 @pytest.mark.skipif(shutil.which("pectoral-fish") is None, reason="console script not installed")
@@ -139,3 +175,13 @@ def test_console_script_steady_json():
     bad = subprocess.run(["pectoral-fish", "steady", "--right", "90,20,1"],
                          capture_output=True, text=True, timeout=300, check=False)
     assert bad.returncode == 2 and "Traceback" not in bad.stderr
+
+
+@pytest.mark.slow
+def test_bench_against_runs_both_checkouts(capsys):
+    from pectoral_gym.bench_compare import checkout_root
+
+    res = run_json(capsys, "bench", "--against", str(checkout_root()), "--rounds", "1", "--quick", "--json")
+    rows = {r["rate"]: r for r in res["rows"]}
+    assert rows["single: CartPole-v1"]["this"] > 0 and rows["single: CartPole-v1"]["other"] > 0
+    assert rows["vector: PectoralFish-Averaged-v0 @ 4096"]["ratio"] > 0
