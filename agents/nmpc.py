@@ -5,7 +5,7 @@ cost) is built once per controller (:class:`NMPCController`), parametric in the 
 target and its velocity, and the fin command still being latched. Each control period:
 
 1. screening: candidate plans (the last plan shifted by one interval; swim straight; turn left or
-   right, held or for 2 s then straight; the hand law in closed loop on the model) are rolled out on
+   right, held or (``goal``) for 2 s then straight; the hand law in closed loop on the model) are rolled out on
    the model and ranked by the NLP's cost plus the cost beyond the horizon, or, for a rollout that
    enters the goal, by its cost up to there (:mod:`agents.nmpc_pricing`): a discrete choice of the
    turn direction, which a few iterations from one guess cannot make;
@@ -43,6 +43,7 @@ from agents.nmpc_problem import (
     to_u,
     to_z,
 )
+from agents.nmpc_reference import ReferencePredictor
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, OBS_VELOCITY, decode
 from pectoral_gym.kfunctions import ScalingFunctions
@@ -91,7 +92,7 @@ class NMPCController(PlanPricing):
         self.velocity = s.velocity if s.velocity != "auto" else ("difference" if config.model == "full" else "obs")
         a_low, a_high = config.amplitude_range
         b_low, b_high = identified_bias_range(config.bias_range, self.scaling)
-        span = s.bias_span if s.bias_span != "auto" else (None if self.track else 0.0)
+        span = s.bias_span if s.bias_span != "auto" else 0.0
         if span is not None:  # the biases the full model follows as planned: near the middle
             mid = float(np.clip(self.fins.bias_mid, b_low, b_high))
             b_low, b_high = max(b_low, mid - span), min(b_high, mid + span)
@@ -104,6 +105,8 @@ class NMPCController(PlanPricing):
         self.hand = HandController(config)  # the base policy of the candidate and of the continuation
         self.hand_candidate = bool(use_hand)
         self.w_togo = s.w_togo if s.w_togo is not None else (0.0 if self.track else 3.0)
+        self.turn_then_straight = bool(s.turn_then_straight if s.turn_then_straight is not None else not self.track)
+        self.reference = ReferencePredictor(self.dt, s.horizon, s.reference or ("conic" if self.track else "line"))
         self._target_end = (0.0, 0.0)
         self._half_length = 0.5 * config.params.body_length
         self.problem = NMPCProblem(config, s, self.fins, self.scaling, self.z_low, self.z_high)
@@ -125,6 +128,7 @@ class NMPCController(PlanPricing):
         self._prev_obs: np.ndarray | None = None
         self._last: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         self._duals: tuple[np.ndarray, np.ndarray] | None = None  # lam_x, lam_g of the last good solve
+        self.reference.reset()
         self.gains = np.array(self.settings.initial_gains, dtype=np.float64)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
@@ -171,6 +175,8 @@ class NMPCController(PlanPricing):
         state = np.array([o.x, o.y, psi, *velocity])  # the STATE_* layout of pectoral_gym.symbolic
         ref = np.array(o.target_in_tank())
         vref = np.array(o.target_velocity_in_tank()) if self.track else np.zeros(2)
+        if self.track:
+            self.reference.observe(ref, vref)
         return state, ref, vref
 
     def _adapt(self, state: np.ndarray) -> None:
@@ -197,7 +203,10 @@ class NMPCController(PlanPricing):
             self.gains[GAIN_THRUST] = float(np.clip(self.gains[GAIN_THRUST] * ratio ** (2 * s.adapt_rate), low, high))
 
     def _fresh_guesses(self) -> list[np.ndarray]:
-        """Input sequences ``(4, horizon)`` to screen: straight; turn left/right (held, or for 2 s then straight)."""
+        """Input sequences ``(4, horizon)`` to screen: straight; turn left/right (held, or for 2 s then straight).
+
+        The turns for 2 s then straight only with :attr:`NMPCSettings.turn_then_straight` (default: ``goal``).
+        """
         a_high, mid = FinInputs(*self.u_high).amplitude_right, self.bias_mid
         strong, weak, tight, least = 0.6 * a_high, 0.15 * a_high, 0.4 * a_high, 0.05 * a_high
         turn_steps = min(self._n, max(1, int(round(2.0 / self.dt))))
@@ -206,9 +215,10 @@ class NMPCController(PlanPricing):
         for pair in ((strong, weak), (weak, strong), (tight, least), (least, tight)):  # right fin stronger: left
             turn = np.array(FinInputs(*pair, mid, mid))
             guesses.append(np.tile(turn[:, None], (1, self._n)))
-            then = np.tile(straight[:, None], (1, self._n))
-            then[:, :turn_steps] = turn[:, None]
-            guesses.append(then)
+            if self.turn_then_straight:
+                then = np.tile(straight[:, None], (1, self._n))
+                then[:, :turn_steps] = turn[:, None]
+                guesses.append(then)
         return guesses
 
     def _rollout_cost(self, state: np.ndarray, p: np.ndarray, u: np.ndarray,
@@ -269,7 +279,8 @@ class NMPCController(PlanPricing):
         budget = self.settings.step_budget
         best = None
         try:
-            guesses, duals = self._fresh_guesses(), [None] * len(self._fresh_guesses())
+            guesses = self._fresh_guesses()
+            duals = [None] * len(guesses)
             if self.plan is not None:  # the shifted last plan, warm-started with its multipliers
                 age = self._plan_age + 1
                 guesses.insert(0, np.vstack([self.plan[age:], np.repeat(self.plan[-1:], age, 0)]).T)
@@ -277,8 +288,9 @@ class NMPCController(PlanPricing):
             if self.hand_candidate:  # the hand law's closed loop on the model: its turn rules in one plan
                 guesses.append(self._hand_guess(state, ref, vref))
                 duals.append(None)
-            p = self.problem.parameters(state, ref, vref, to_z(self._u_prev), self.gains)
-            self._target_end = tuple(ref + vref * self._n * self.dt)
+            path = self.reference.predict(ref, vref) if self.track else None
+            p = self.problem.parameters(state, ref, vref, to_z(self._u_prev), self.gains, path)
+            self._target_end = tuple(p[STATE_SIZE + 2 * self._n - 2: STATE_SIZE + 2 * self._n])  # the last ref
             # screening: rollouts, no solve; the cheapest few (and the hand law's) again with the continuation
             costs = [self._rollout_cost(state, p, u, deep=False)[0] for u in guesses]
             if self.settings.togo_steps > 0 and not self.track:

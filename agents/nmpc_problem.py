@@ -23,8 +23,9 @@ the expectation of that impulse over a uniform stroke phase
 change (after the latching delay in the first one). Exactly zero when the input does not change.
 
 Cost (per interval ``k`` of the horizon, position ``p_k`` at its end):
-``w_distance |p_k - r_k|`` (``r_k`` the goal, or the reference point extrapolated with its
-velocity for ``track``; the env's own tracking penalty), a terminal ``w_terminal |p_N - r_N|``,
+``w_distance |p_k - r_k|`` (``r_k`` the goal, or for ``track`` the reference point's predicted position,
+:mod:`agents.nmpc_reference`; the env's own tracking penalty), a terminal ``w_terminal |p_N - r_N|``,
+a heading term ``w_heading (1 - cos(bearing of the aim point))`` (the goal, or the reference a few seconds further on),
 the fin work ``energy_weight sum_fins P(gA) dt`` (the env's energy term, mean fin power of
 :func:`pectoral_gym.symbolic.mean_fin_power_sx`), input changes ``w_change |du|^2`` (normalised by the
 ranges) and a soft wall constraint ``w_wall sum max(0, margin - distance of nose/tail to wall)^2``.
@@ -44,6 +45,7 @@ import casadi as ca
 import numpy as np
 
 from agents.fin_map import FinMap
+from agents.nmpc_reference import PREDICTIONS, reference_path
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
@@ -88,8 +90,23 @@ class NMPCSettings:
             which a few SQP iterations must handle). ``None``: 1 mm for ``goal``, 5 cm for ``track``
             (``agents.nmpc_compare`` on the full model: ``track`` seeds 100-101, 17.7 cm at 1 mm, 12.5 cm
             at 2 cm, 8.1 cm at 5 cm; ``goal`` seeds 100-109, 10 of 10 at 1 mm, 9 of 10 at 5 cm).
-        w_heading: Weight of ``1 - cos(bearing of the target)`` at each interval end.
-        heading_scale: Distance [m] below which the heading term fades out.
+        w_heading: Weight of ``1 - cos(bearing of the aim point)`` at each interval end; the aim point is
+            the target, for ``track`` its predicted position ``heading_lookahead`` seconds further on.
+        heading_scale: Distance [m] below which the heading term fades out (towards ``w_heading``, the cost
+            of a target abeam). ``None``: 5 cm for ``goal``, 1 mm for ``track``.
+        heading_lookahead: Seconds [s] the aim point of the heading term lies ahead of the reference along
+            its predicted velocity (``track``); ``None``: 0 for ``goal``, 5 s for ``track``. Aimed at the
+            reference point itself, with the 5 cm fade, the heading term paid the fish to hang back: 8 cm behind
+            the reference cost less than on it, and the fish lagged 7-9 cm on straight stretches
+            (docs/benchmark.md, ``track`` fifth round; development seeds 106-119: 6.7 cm at 2.5 s, 5.0 at 5 s
+            and 10 s).
+        reference: How the moving target is predicted over the horizon
+            (:class:`agents.nmpc_reference.ReferencePredictor`): ``"line"`` (straight on with its velocity),
+            ``"arc"`` (its velocity turning at the observed rate) or ``"conic"`` (along the ellipse fitted to
+            its observed path, the arc before); ``None``: ``"conic"`` for ``track``, ``"line"`` for ``goal``.
+        turn_then_straight: Also screen the turns held for 2 s then straight; ``None``: for ``goal`` only
+            (for ``track`` the held turns and straight won 99 % of the steps they were screened in; four
+            rollouts fewer per step).
         w_change: Weight of squared input changes between intervals (inputs scaled to [0, 1]).
         w_reach: Weight of the terminal reachability term: how far the target lies inside the fish's
             turning circle at the end of the horizon [1/m]. The horizon is far shorter than a loop
@@ -158,9 +175,10 @@ class NMPCSettings:
             0.90 without (0.93 at 1.0: one wall hit more).
         bias_span: Largest planned bias offset from the middle of the bias range [rad] (0: both biases
             held at 90 deg, as the hand law holds them); ``None``: the whole identified range; ``"auto"``:
-            0 for ``goal``, ``None`` for ``track``. Tilted biases planned on the averaged model did not act
-            on the full model as planned (seed 149: 112/45 deg just before a wall hit); held at 90 deg, with
-            the reach pricing, the time to goal on seeds 100-199 fell from 23.7 to 20.2 s (full model).
+            0 (both tasks; before the ``track`` fifth round ``None`` for ``track``). Tilted biases planned on
+            the averaged model did not act on the full model as planned (seed 149: 112/45 deg just before a
+            wall hit); held at 90 deg, with the reach pricing, the time to goal on seeds 100-199 fell from
+            23.7 to 20.2 s (full model); ``track`` on seeds 106-119: 2.4 cm against 4.4 cm with the range.
             With ``solver="ipopt"``, biases fixed by equal bounds kept one solve in the tests from
             converging in 300 iterations (it converges in 27 with them free); pass ``None`` there.
     """
@@ -172,7 +190,10 @@ class NMPCSettings:
     w_terminal: float = 2.0
     distance_scale: float | None = None
     w_heading: float = 0.3
-    heading_scale: float = 0.05
+    heading_scale: float | None = None
+    heading_lookahead: float | None = None
+    reference: str | None = None
+    turn_then_straight: bool | None = None
     w_change: float = 0.02
     w_reach: float = 2.0
     turn_radius: float = 0.25
@@ -222,6 +243,10 @@ class NMPCSettings:
         if int(self.togo_steps) < 0 or int(self.deep_candidates) < 1 or not self.togo_wall_margin >= 0:
             raise ValueError(f"togo_steps must be >= 0, deep_candidates >= 1 and togo_wall_margin >= 0 m, got "
                              f"{self.togo_steps!r}, {self.deep_candidates!r}, {self.togo_wall_margin!r}")
+        if self.reference not in (None, *PREDICTIONS):
+            raise ValueError(f"reference must be None or one of {PREDICTIONS}, got {self.reference!r}")
+        if self.heading_lookahead is not None and not self.heading_lookahead >= 0:
+            raise ValueError(f"heading_lookahead must be >= 0 s or None, got {self.heading_lookahead!r}")
         if self.solver not in _SOLVERS:
             raise ValueError(f"solver must be one of {_SOLVERS}, got {self.solver!r}")
         if self.blocks is not None and (min(self.blocks, default=0) < 1 or sum(self.blocks) != int(self.horizon)):
@@ -251,13 +276,14 @@ class ProblemParameters(NamedTuple):
     """The NLP's parameter vector, packed in this order (symbols or numbers)."""
 
     x0: Any  # (6,) current state (X, Y, psi, vx, vy, omega)
-    ref: Any  # (2,) goal or reference point, tank frame [m]
-    vref: Any  # (2,) its velocity [m/s] (zero for goal)
+    ref: Any  # (2 horizon,) goal or reference point at each interval end, tank frame [m] (column-major (2, horizon))
+    vref: Any  # (2 horizon,) its velocity there [m/s] (zero for goal)
     z_prev: Any  # (4,) command still being latched, as decision variables
     gain: Any  # (2,) online corrections of the thrust and the yaw moment
 
 
-_PARAMETER_SIZES = ProblemParameters(x0=STATE_SIZE, ref=2, vref=2, z_prev=_N_U, gain=2)
+def _parameter_sizes(horizon: int) -> ProblemParameters:
+    return ProblemParameters(x0=STATE_SIZE, ref=2 * horizon, vref=2 * horizon, z_prev=_N_U, gain=2)
 
 
 def to_z(u: np.ndarray) -> np.ndarray:
@@ -277,6 +303,17 @@ def to_u(z: np.ndarray) -> np.ndarray:
 def pack_decision(z: np.ndarray, x: np.ndarray) -> np.ndarray:
     """The NLP's decision vector from inputs ``z (4, horizon)`` and states ``x (6, horizon + 1)`` (column-major)."""
     return np.concatenate([np.ravel(z, order="F"), np.ravel(x, order="F")])
+
+
+_TRACK_HEADING_LOOKAHEAD = 5.0  # s
+_TRACK_HEADING_SCALE = 0.001  # m
+
+
+def _auto(value: float | None, task: str, goal: float, track: float) -> float:
+    """A setting's value: ``value``, or when it is ``None`` the task's default."""
+    if value is not None:
+        return float(value)
+    return track if task == "track" else goal
 
 
 def _nlp_solver(nlp: dict[str, Any], s: NMPCSettings) -> ca.Function:
@@ -391,7 +428,10 @@ class NMPCProblem:
         if distance_scale is None:
             distance_scale = 0.05 if config.task == "track" else 1e-3
 
-        p = named_symbols(_PARAMETER_SIZES)
+        p = named_symbols(_parameter_sizes(n))
+        ref_k, vref_k = ca.reshape(p.ref, 2, n), ca.reshape(p.vref, 2, n)
+        lookahead = _auto(s.heading_lookahead, config.task, goal=0.0, track=_TRACK_HEADING_LOOKAHEAD)
+        heading_scale = _auto(s.heading_scale, config.task, goal=0.05, track=_TRACK_HEADING_SCALE)
         Z = ca.SX.sym("Z", _N_U, nb)
         X = ca.SX.sym("X", STATE_SIZE, n + 1)
         Z_roll = ca.SX.sym("Z_roll", _N_U, n)
@@ -419,7 +459,7 @@ class NMPCProblem:
             g.append(X[:, k + 1] - xk)
             x_roll.append(rk)
             pos, psi = X[STATE_POSITION, k + 1], X[STATE_PSI, k + 1]
-            error = p.ref + p.vref * (k + 1) * dt - pos
+            error = ref_k[:, k] - pos
             dist = ca.sqrt(ca.sumsqr(error) + distance_scale**2)
             cost += s.w_distance * dist
             if k == n - 1:
@@ -431,7 +471,9 @@ class NMPCProblem:
                 cost += s.w_reach * ca.fmax(0.0, inside) / turn_radius
             # 1 - cos(bearing of the target): turns the fish towards a target behind it, which a
             # distance cost over a short horizon cannot (turning first moves the fish away)
-            facing = (ca.cos(psi) * error[0] + ca.sin(psi) * error[1]) / ca.sqrt(ca.sumsqr(error) + s.heading_scale**2)
+            # (track: towards the reference point ``heading_lookahead`` seconds further along its path)
+            aim = error + lookahead * vref_k[:, k] if lookahead > 0 else error
+            facing = (ca.cos(psi) * aim[0] + ca.sin(psi) * aim[1]) / ca.sqrt(ca.sumsqr(aim) + heading_scale**2)
             cost += s.w_heading * (1.0 - facing)
             b = int(block_of[k])
             z_k = FinInputs(*(Z[i, b] for i in range(_N_U)))
@@ -448,6 +490,7 @@ class NMPCProblem:
         nlp = {"x": ca.vertcat(ca.vec(Z), ca.vec(X)), "f": cost, "g": ca.vertcat(*g), "p": ca.vertcat(*p)}
         self.solver = _nlp_solver(nlp, s)
         self.horizon = n
+        self.dt = dt
         self.block_of = block_of
         self.n_blocks = nb
         # State bounds keep trial points of the solver where RK4 stays finite (physical values are far inside).
@@ -477,8 +520,13 @@ class NMPCProblem:
         starts = np.flatnonzero(np.r_[True, np.diff(self.block_of) != 0])
         return np.asarray(z)[:, starts]
 
-    @staticmethod
-    def parameters(x0: np.ndarray, ref: np.ndarray, vref: np.ndarray, z_prev: np.ndarray,
-                   gain: np.ndarray) -> np.ndarray:
-        """The packed parameter vector (the order of :class:`ProblemParameters`)."""
-        return np.concatenate([np.ravel(v) for v in ProblemParameters(x0, ref, vref, z_prev, gain)])
+    def parameters(self, x0: np.ndarray, ref: np.ndarray, vref: np.ndarray, z_prev: np.ndarray,
+                   gain: np.ndarray, path: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+        """The packed parameter vector (the order of :class:`ProblemParameters`).
+
+        ``ref``, ``vref``: the target's position and velocity now. ``path``: its predicted positions and
+        velocities ``(2, horizon)`` at the interval ends (:class:`agents.nmpc_reference.ReferencePredictor`);
+        ``None``: straight on with ``vref`` (a goal, ``vref = 0``, stays put).
+        """
+        path, velocity = path if path is not None else reference_path(ref, vref, 0.0, self.dt, self.horizon)
+        return np.concatenate([np.ravel(v, order="F") for v in ProblemParameters(x0, path, velocity, z_prev, gain)])

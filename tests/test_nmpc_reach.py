@@ -94,9 +94,12 @@ def test_bias_span_zero_holds_both_biases_at_ninety_degrees():
             NMPCSettings(bias_span=bad)
 
 
-def test_bias_span_auto_holds_the_biases_for_goal_only():
-    """The default ("auto"): goal plans hold 90 deg; track plans keep the whole identified range (45-135 deg)."""
+def test_bias_span_auto_holds_the_biases_for_both_tasks():
+    """The default ("auto"): goal and (since the fifth round) track plans hold 90 deg; ``None`` keeps the whole
+    identified range (45-135 deg)."""
     goal = make_baseline("nmpc", CONFIG, step_budget=1e6)
     np.testing.assert_allclose([goal.u_low[2], goal.u_high[2]], np.pi / 2)
     track = make_baseline("nmpc", EnvConfig(model="averaged", task="track"), step_budget=1e6)
-    np.testing.assert_allclose([track.u_low[2], track.u_high[2]], np.radians([45.0, 135.0]))
+    np.testing.assert_allclose([track.u_low[2], track.u_high[2]], np.pi / 2)
+    free = make_baseline("nmpc", EnvConfig(model="averaged", task="track"), step_budget=1e6, bias_span=None)
+    np.testing.assert_allclose([free.u_low[2], free.u_high[2]], np.radians([45.0, 135.0]))
