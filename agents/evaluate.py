@@ -142,6 +142,7 @@ def evaluate(controller: ControllerLike, env_id: str, n_episodes: int = 100, see
     start = time.perf_counter()
 
     episode_of = np.full(n_envs, -1)
+    swept = np.zeros(n_envs)  # each env's swept fin work at its last step [J]
     records: list[dict[str, list] | None] = [None] * n_envs
     trajectories: list[Trajectory | None] = [None] * n_episodes
     next_episode = 0
@@ -161,8 +162,10 @@ def evaluate(controller: ControllerLike, env_id: str, n_episodes: int = 100, see
         if started.any():
             obs, _ = env.reset(seed=[s if started[i] else None for i, s in enumerate(seeds)],
                                options={"reset_mask": started})
+            swept[started] = _swept(env)[started]
             for i in np.flatnonzero(started):
-                records[i] = {"obs": [obs[i].copy()], "reward": [], "work": [], "distance": [_distance(obs[i])]}
+                records[i] = {"obs": [obs[i].copy()], "reward": [], "work": [], "distance": [_distance(obs[i])],
+                              "swept": []}
         return started
 
     from tqdm.auto import tqdm
@@ -181,12 +184,15 @@ def evaluate(controller: ControllerLike, env_id: str, n_episodes: int = 100, see
         actions[~active] = 0.0
         obs, reward, terminated, truncated, info = env.step(actions)
         done = (terminated | truncated) & active
+        now = _swept(env)
         for i in np.flatnonzero(active):
             rec = records[i]
             rec["obs"].append(obs[i].copy())
             rec["reward"].append(float(reward[i]))
             rec["distance"].append(float(info["distance"][i]))
             rec["work"].append(_fin_work(info, i, obs[i], config, energy_weight))
+            rec["swept"].append(float(now[i] - swept[i]))
+        swept = now
         for i in np.flatnonzero(done):
             wall = bool(info["reward_wall"][i] < 0)
             success = bool(info.get("is_success", np.zeros(n_envs, bool))[i])
@@ -211,6 +217,11 @@ def _distance(obs: np.ndarray) -> float:
     return float(math.hypot(o.target_x, o.target_y))
 
 
+def _swept(env) -> np.ndarray:
+    """Each env's fin work since its reset over the strokes actually swept [J] (``FishModel.fin_work``)."""
+    return env.core.model.fin_work().sum(axis=1)
+
+
 def _fin_work(info: dict, i: int, obs: np.ndarray, config, energy_weight: float) -> float:
     """Fin work of one step [J]: from the energy term, or from the applied action if the term is switched off."""
     if energy_weight > 0:
@@ -231,7 +242,7 @@ def _trajectory(rec: dict[str, list], dt: float, success: bool, wall: bool, trun
     return Trajectory(xy=obs[:, OBS_POSITION].copy(), psi=o.psi, target=target,
                       distance=np.asarray(rec["distance"]), reward=np.asarray(rec["reward"]),
                       fin_work=np.asarray(rec["work"]), control_period=dt, success=success, wall=wall,
-                      truncated=truncated, seed=seed)
+                      truncated=truncated, seed=seed, swept_work=np.asarray(rec["swept"]))
 
 
 def _parse_args(argv: list[str] | None) -> argparse.Namespace:

@@ -10,6 +10,9 @@ Definitions (per episode; ``dt`` is the control period, ``T`` the number of step
 * ``fin_work`` [J]: fin work, ``sum over steps of sum over fins of mean_fin_power * dt``
   (the environment's ``reward_energy`` term divided by ``-energy_weight``).
 * ``mean_fin_power`` [W]: ``fin_work / (T * dt)``.
+* ``swept_work`` [J]: the fins' hydrodynamic work over the strokes they actually swept
+  (:meth:`pectoral_gym.models.FishModel.fin_work`): transitional strokes included, which
+  ``fin_work`` (the price of the commanded patterns' regular beats) leaves out; NaN if not recorded.
 * ``return``: sum of the rewards.
 * ``wall``: 1 if the episode ended at a wall, else 0.
 
@@ -42,10 +45,10 @@ __all__ = [
 _RNG_ARG = "rng" if "rng" in inspect.signature(scipy.stats.bootstrap).parameters else "random_state"
 
 METRICS = {
-    "goal": ("success", "time_to_goal", "path_length", "final_distance", "fin_work", "mean_fin_power", "return",
-             "wall", "length"),
-    "track": ("tracking_error", "path_length", "final_distance", "fin_work", "mean_fin_power", "return", "wall",
-              "length"),
+    "goal": ("success", "time_to_goal", "path_length", "final_distance", "fin_work", "mean_fin_power", "swept_work",
+             "return", "wall", "length"),
+    "track": ("tracking_error", "path_length", "final_distance", "fin_work", "mean_fin_power", "swept_work", "return",
+              "wall", "length"),
 }
 
 
@@ -65,6 +68,7 @@ class Trajectory:
         wall: The episode ended at a wall.
         truncated: The episode hit the step limit.
         seed: The reset seed of the episode.
+        swept_work: ``(T,)`` the fins' work over the strokes swept in each step [J], or ``None``.
     """
 
     xy: np.ndarray
@@ -79,6 +83,7 @@ class Trajectory:
     truncated: bool = False
     seed: int | None = None
     extra: dict = field(default_factory=dict)
+    swept_work: np.ndarray | None = None
 
     @property
     def steps(self) -> int:
@@ -122,6 +127,7 @@ def episode_metrics(trajectory: Trajectory, task: str) -> dict[str, float]:
         "final_distance": float(trajectory.distance[-1]),
         "fin_work": work,
         "mean_fin_power": work / trajectory.duration if trajectory.steps else math.nan,
+        "swept_work": math.nan if trajectory.swept_work is None else float(np.sum(trajectory.swept_work)),
         "return": float(np.sum(trajectory.reward)),
         "wall": float(trajectory.wall),
         "length": float(trajectory.steps),

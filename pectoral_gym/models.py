@@ -58,6 +58,11 @@ def validate_beats(beats: np.ndarray) -> None:
             )
 
 
+def _fin_power_coef(params: FishParams) -> float:
+    """``3 k S_p / 4``: the fin power of eq. (14) per ``|g'|^3`` (``docs/model.md`` 3.5)."""
+    return 0.75 * params.fin_drag_constant * params.fin_span
+
+
 def _as_beat_array(beat: BeatLike, n: int) -> np.ndarray:
     if beat is None:
         return np.broadcast_to(REST.as_array(), (n, 4)).copy()
@@ -105,6 +110,7 @@ class FishModel:
         self.pending = np.zeros((self.n, 2, 4))
         self.integral = np.zeros((self.n, 3))
         self.coef = np.zeros((self.n, len(COEF_NAMES)))
+        self.fin_power_coef = np.zeros(self.n)  # 3 k S_p / 4 [kg m^2 = W s^3/rad^3] of eq. (14)'s fin power
         self.time = 0.0
         self.min_substeps = 1
         self.mode = EXACT
@@ -119,12 +125,14 @@ class FishModel:
         """Set model parameters for all fish, or for the fish in ``index``."""
         if isinstance(params, FishParams):
             self.coef[slice(None) if index is None else index] = coefficient_vector(params)
+            self.fin_power_coef[slice(None) if index is None else index] = _fin_power_coef(params)
         else:
             rows = np.array([coefficient_vector(p) for p in params])
             target = np.arange(self.n) if index is None else np.asarray(index)
             if rows.shape[0] != target.size:
                 raise ValueError(f"got {rows.shape[0]} FishParams for {target.size} fish")
             self.coef[target] = rows
+            self.fin_power_coef[target] = [_fin_power_coef(p) for p in params]
         forcing_cache.invalidate(self.forcing_cache, index)  # the forcing depends on them
 
     def reset(self, state: np.ndarray | None = None, right: BeatLike = None, left: BeatLike = None,
@@ -194,6 +202,16 @@ class FishModel:
         self._tables = tables
         self._packed_tables = tuple(tables)  # what the kernels take (ktables.as_tables)
         forcing_cache.invalidate(self.forcing_cache)  # the cached forcing depends on them
+
+    def fin_work(self) -> np.ndarray:
+        """Hydrodynamic work of each fin since :meth:`reset` [J], ``(n, 2)`` (right fin first).
+
+        The power of eq. (14), ``(3 k S_p / 4) |g'|^3``, integrated over the strokes the fins
+        actually swept (transitional and parking strokes included), in closed form per
+        half-stroke (``strokes.swept_cube``). The same in both models, which follow the same
+        strokes; the envs' energy term prices the commanded patterns' regular beat instead.
+        """
+        return self.fins[:, :, strokes.SWEPT] * self.fin_power_coef[:, None]
 
     def fin_angles(self) -> tuple[np.ndarray, np.ndarray]:
         """Current fin angles and rates, ``(n, 2)`` each (right fin first) [rad, rad/s]."""

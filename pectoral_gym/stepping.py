@@ -320,6 +320,10 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
                 f1 = Forcing(*st.phase_forcing(p0, p1, drag_constant, inertia_constant, fin_offset))
                 _rk4(state, integral, i, h, f0, fm, f1, body, 0.0, None)
                 f0 = f1
+        if not idle0:  # the strokes actually swept, for the fin work (both models)
+            fins[i, 0, st.SWEPT] += st.swept_cube(fins, i, 0, seg)
+        if not idle1:
+            fins[i, 1, st.SWEPT] += st.swept_cube(fins, i, 1, seg)
         if rem0 - seg <= _EPS:
             fins[i, 0, ELAPSED] = fins[i, 0, DURATION]  # exactly on the boundary
         elif not idle0:

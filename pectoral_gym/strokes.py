@@ -20,6 +20,9 @@ field           index  unit    meaning
 ``AMPLITUDE``   6      rad     half the stroke angle ``gamma_A``
 ``PERIOD``      7      s       beat period ``T_p``
 ``RATIO``       8      -       power/recovery speed ratio ``zeta``
+``SWEPT``       9      rad^3/s^2  ``int |g'|^3 dt`` over every stroke swept since the reset (both models; the
+                               fin's hydrodynamic work is ``(3 k S_p / 4)`` times it, eq. 14,
+                               :meth:`pectoral_gym.models.FishModel.fin_work`)
 ==============  =====  ======  =====================================================================
 
 **Parameter-change rule.** A fin latches its commanded parameters only at a
@@ -53,6 +56,7 @@ from pectoral_gym.dynamics import fin_force_right, stroke_kinematics
 
 __all__ = [
     "FIN_FIELDS", "ELAPSED", "DURATION", "ANGLE_FROM", "ANGLE_TO", "POWER", "BIAS", "AMPLITUDE", "PERIOD", "RATIO",
+    "SWEPT", "swept_cube",
     "BEAT_BIAS", "BEAT_AMPLITUDE", "BEAT_PERIOD", "BEAT_RATIO", "SIDE",
     "command_fins", "fin_angles", "fin_forcing", "idle", "init_fins", "latch",
     "StrokePhase", "stroke_phase", "advance_phase", "phase_forcing",
@@ -60,7 +64,8 @@ __all__ = [
 
 ELAPSED, DURATION, ANGLE_FROM, ANGLE_TO, POWER = 0, 1, 2, 3, 4
 BIAS, AMPLITUDE, PERIOD, RATIO = 5, 6, 7, 8
-FIN_FIELDS = 9
+SWEPT = 9
+FIN_FIELDS = 10
 BEAT_BIAS, BEAT_AMPLITUDE, BEAT_PERIOD, BEAT_RATIO = 0, 1, 2, 3  # a pattern row (pending, FinBeat.as_array)
 
 SIDE = (1.0, -1.0)  # right fin, left fin (mirror image): the sign of its y force and yaw moment
@@ -85,6 +90,23 @@ def latch(fins, pending, i, f):
     fins[i, f, AMPLITUDE] = amp
     fins[i, f, PERIOD] = period
     fins[i, f, RATIO] = ratio
+
+
+@nb.njit(inline="always", **JIT)
+def swept_cube(fins, i, f, seg):
+    """``int |g'|^3 dt`` [rad^3/s^2] of fin ``f``'s half-stroke in progress over the next ``seg`` s.
+
+    With ``g' = half (pi/d) sin(phi)``, ``phi = pi s / d``: ``|half|^3 (pi/d)^2 [G(phi)]``,
+    ``G = -cos + cos^3 / 3`` (``G(pi) - G(0) = 4/3``). Zero for a still fin.
+    """
+    duration = fins[i, f, DURATION]
+    half = 0.5 * (fins[i, f, ANGLE_TO] - fins[i, f, ANGLE_FROM])
+    if half == 0.0 or duration <= 0.0:
+        return 0.0
+    rate = math.pi / duration
+    c0 = math.cos(rate * fins[i, f, ELAPSED])
+    c1 = math.cos(rate * min(fins[i, f, ELAPSED] + seg, duration))
+    return abs(half) ** 3 * rate * rate * ((c0 - c0**3 / 3.0) - (c1 - c1**3 / 3.0))
 
 
 @nb.njit(inline="always", **JIT)

@@ -191,3 +191,32 @@ def test_cli_rejects_bad_arguments(capsys, tmp_path):
     assert "neither" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         main(["--env", ENV])  # needs --policy or --baseline
+
+
+class FastBeatController(StraightController):
+    """Both fins at full amplitude, the shortest period (one beat per 0.5 s step) and the largest ratio."""
+
+    def act(self, obs):
+        action = np.zeros(8, dtype=np.float32)
+        action[[1, 5]] = 1.0
+        action[[2, 6]] = -1.0
+        action[[3, 7]] = 1.0
+        return action
+
+
+def test_swept_work_prices_the_first_stroke_from_rest_by_what_it_sweeps():
+    """From rest at 90 deg, the first power stroke sweeps 90 -> 120 deg (half 15 deg) where a regular one
+    sweeps 60 -> 120 deg (half 30 deg); after it every 0.5 s step holds one regular beat, priced alike."""
+    from pectoral_gym.envs.core import EnvConfig
+    from pectoral_gym.params import FishParams
+
+    result = evaluate(FastBeatController(), ENV, n_episodes=1, seed=2)
+    traj = result.trajectories[0]
+    config, params = EnvConfig(), FishParams()
+    assert config.period_range[0] == config.control_period == 0.5
+    np.testing.assert_allclose(traj.swept_work[1:], traj.fin_work[1:], rtol=1e-9)
+    d1 = 0.5 / (config.ratio_range[1] + 1.0)
+    power = 0.75 * params.fin_drag_constant * params.fin_span * 4.0 / 3.0 * (math.pi / d1) ** 2  # per |half|^3
+    missing = 2 * power * (math.radians(30) ** 3 - math.radians(15) ** 3)  # both fins
+    assert traj.swept_work[0] == pytest.approx(traj.fin_work[0] - missing, rel=1e-9)
+    assert result.metrics["swept_work"].mean == pytest.approx(float(np.sum(traj.swept_work)))

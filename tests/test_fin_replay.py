@@ -39,8 +39,9 @@ def test_replay_follows_the_parameter_change_rule_when_the_firmware_passes_comma
         replay.advance(t + 0.5)
         model.advance(t + 0.5 - model.time)
         # the wire's mrad and ms; the firmware applies a command at its next 10 ms tick, so the stroke clock
-        # runs one tick behind the model's
-        np.testing.assert_allclose(replay.fins, model.fins, atol=2e-3, err_msg=f"step {k}")
+        # runs one tick behind the model's (the model's swept-work accumulator is not the replay's business)
+        np.testing.assert_allclose(replay.fins[..., :strokes.SWEPT], model.fins[..., :strokes.SWEPT], atol=2e-3,
+                                   err_msg=f"step {k}")
 
 
 def test_replay_halts_the_fins_where_they_are():
