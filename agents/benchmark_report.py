@@ -14,10 +14,11 @@ from agents.results import json_default, save_figure
 __all__ = ["plot_report", "to_markdown", "write_outputs"]
 
 _GOAL_COLUMNS = (("success", "success", 1.0), ("time_to_goal", "time to goal [s]", 1.0),
-                 ("path_length", "path [m]", 1.0), ("fin_work", "fin work [J]", 1.0), ("wall", "wall hits", 1.0),
-                 ("return", "return", 1.0))
+                 ("path_length", "path [m]", 1.0), ("fin_work", "fin work [J]", 1.0),
+                 ("swept_work", "swept work [J]", 1.0), ("wall", "wall hits", 1.0), ("return", "return", 1.0))
 _TRACK_COLUMNS = (("tracking_error", "tracking error [cm]", 100.0), ("path_length", "path [m]", 1.0),
-                  ("fin_work", "fin work [J]", 1.0), ("wall", "wall hits", 1.0), ("return", "return", 1.0))
+                  ("fin_work", "fin work [J]", 1.0), ("swept_work", "swept work [J]", 1.0), ("wall", "wall hits", 1.0),
+                  ("return", "return", 1.0))
 
 
 def _fmt(metric: dict[str, Any] | None, scale: float) -> str:

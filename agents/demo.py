@@ -90,7 +90,9 @@ def _report(summary: dict[str, Any], table: str, config: dict[str, Any]) -> str:
         "![trajectories](trajectories.png)",
         "",
         "Metrics: `success` fraction of episodes that reached the goal radius; `time_to_goal` [s] over the "
-        "successful ones; `path_length` [m]; `fin_work` [J] hydrodynamic fin work per episode; `return` sum of "
+        "successful ones; `path_length` [m]; `fin_work` [J] hydrodynamic fin work per episode as the env prices "
+        "it (the commanded patterns' regular beats); `swept_work` [J] over the strokes actually swept "
+        "(transitional ones too); `return` sum of "
         "rewards. Definitions in `agents/metrics.py`; per-env JSON next to this report.",
         "",
         "Going further: `python -m agents.train --env PectoralFish-Averaged-v0 --algo ppo --task goal "

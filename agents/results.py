@@ -142,7 +142,7 @@ def save_figure(fig: Any, path: str | Path) -> Path:
 
 def format_table(results: list[EvaluationResult]) -> str:
     """Markdown table of the main metrics (mean [CI]) of several evaluations."""
-    columns = ("success", "time_to_goal", "tracking_error", "path_length", "fin_work", "return")
+    columns = ("success", "time_to_goal", "tracking_error", "path_length", "fin_work", "swept_work", "return")
     shown = [c for c in columns if any(c in r.metrics for r in results)]
     lines = ["| controller | env | task | episodes | " + " | ".join(shown) + " |",
              "|---" * (4 + len(shown)) + "|"]
