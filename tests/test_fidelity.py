@@ -172,3 +172,26 @@ def test_transitions_make_the_impulse_exact_with_k_1():
         speeds[name] = model.state[:, 3].copy()
     np.testing.assert_allclose(speeds["on"], speeds["full"], rtol=1e-4, atol=1e-9)
     assert np.max(np.abs(speeds["off"] - speeds["full"])) > 100 * np.max(np.abs(speeds["on"] - speeds["full"]))
+
+
+def test_re_commanding_a_still_fins_pattern_changes_nothing():
+    """A fin that came to rest on a zero-amplitude pattern and is commanded the same pattern again stays
+    idle and exerts no force. (Before the transitional forcing was evaluated once per half-stroke, the
+    command's reset of the stroke kind made the idle fin's finished stroke read as a recovery stroke after
+    another pattern's power stroke: a constant phantom force X(previous) / d2 for as long as it stayed idle.)"""
+    beat = FinBeat.from_degrees(120, 30, 1.2, 1.0)
+    still = FinBeat.from_degrees(135, 0, 0.6, 1.0)
+    states = []
+    for again in (False, True):
+        model = AveragedModel(1, scaling="none", transitions=True, ripple_offsets=False)
+        model.reset()
+        model.command(right=beat)
+        model.advance(1.5)  # in a power stroke: the still pattern is reached by a recovery stroke
+        model.command(right=still)
+        model.advance(2.0)  # the fin has reached 135 deg and rests there
+        assert model.fin_angles()[1][0, 0] == 0.0
+        if again:
+            model.command(right=still)
+        model.advance(2.0)
+        states.append(model.state.copy())
+    np.testing.assert_array_equal(states[1], states[0])  # f9b1c08: yaw rate 0.41 against 0.025 rad/s
