@@ -30,12 +30,10 @@ field              index  unit    meaning
 ``TR_FX``          31     N       the half-stroke in progress's transitional forcing (``transitions``,
 ``TR_FY``          32     N       ``docs/model.md`` section 3.7; ``stepping._transition``), signed by
 ``TR_TAU``         33     N m     side; set when the fin latches, zero after :func:`clear`
-``M_FX``           34     N s     the pattern's beat-mean impulse offset ``M`` (``ripple_offsets``,
-``M_FY``           35     N s     ``docs/model.md`` section 3.8; :func:`pectoral_gym.averaging.ripple_offset`),
-``M_TAU``          36     N m s   signed by side
-``OFF_FX``         37     N s     the offset delivered so far (``M`` of the fin's pattern at its last
-``OFF_FY``         38     N s     change); zero after :func:`clear`
-``OFF_TAU``        39     N m s
+``OFF_FX``         34     N s     the beat-mean ripple offset delivered so far (``ripple_offsets``,
+``OFF_FY``         35     N s     ``docs/model.md`` 3.8: ``M`` of the fin's latched pattern,
+``OFF_TAU``        36     N m s   :func:`pectoral_gym.averaging.ripple_offset`), signed by side; zero
+                                  after :func:`clear`
 =================  =====  ======  ==================================================================
 
 The row depends on the fish's coefficients too: :func:`invalidate` after
@@ -51,7 +49,7 @@ import numba as nb
 import numpy as np
 
 from pectoral_gym._jit import JIT
-from pectoral_gym.averaging import ripple_offset, scaled_forcing
+from pectoral_gym.averaging import scaled_forcing
 from pectoral_gym.ktables import (
     MAX_HARMONICS,
     MAX_SAMPLES,
@@ -61,14 +59,13 @@ from pectoral_gym.ktables import (
     quadrature_window,
     waveform_harmonics_into,
 )
-from pectoral_gym.params import Coef
 from pectoral_gym.strokes import ANGLE_FROM, ANGLE_TO, ELAPSED, PERIOD, POWER, RATIO, SIDE
 
 __all__ = [
     "CACHE_FIELDS", "KEY_BIAS", "KEY_AMPLITUDE", "KEY_PERIOD", "KEY_RATIO",
     "AVG_FX", "AVG_FY", "AVG_TAU", "OSC_COS", "OSC_SIN", "CACHED",
     "PREV_BIAS", "PREV_AMPLITUDE", "PREV_PERIOD", "PREV_RATIO", "WAVE", "REF_ABS", "TR_FX", "TR_FY", "TR_TAU",
-    "M_FX", "M_FY", "M_TAU", "OFF_FX", "OFF_FY", "OFF_TAU",
+    "OFF_FX", "OFF_FY", "OFF_TAU",
     "QUADRATURE", "WORKSPACE",
     "RATE_ITERATIONS",
     "clear", "invalidate", "refresh", "waveform_samples", "yaw_oscillation", "yaw_waveform",
@@ -82,8 +79,7 @@ PREV_BIAS, PREV_AMPLITUDE, PREV_PERIOD, PREV_RATIO = 10, 11, 12, 13
 WAVE = 14
 REF_ABS = WAVE + 2 * MAX_HARMONICS
 TR_FX, TR_FY, TR_TAU = REF_ABS + 1, REF_ABS + 2, REF_ABS + 3
-M_FX, M_FY, M_TAU = TR_TAU + 1, TR_TAU + 2, TR_TAU + 3
-OFF_FX, OFF_FY, OFF_TAU = M_TAU + 1, M_TAU + 2, M_TAU + 3
+OFF_FX, OFF_FY, OFF_TAU = TR_TAU + 1, TR_TAU + 2, TR_TAU + 3
 CACHE_FIELDS = OFF_TAU + 1
 
 _FIN = MAX_SAMPLES  # per fin: Re, Im of its harmonics at the segment's phase, then its drive
@@ -118,10 +114,6 @@ def refresh(cache, i, f, bias, amplitude, period, ratio, coef, mode, tables):
     cache[i, f, AVG_FX] = fx
     cache[i, f, AVG_FY] = fy
     cache[i, f, AVG_TAU] = tau
-    mx, my = ripple_offset(bias, amplitude, period, ratio, coef[i, Coef.FIN_DRAG_CONSTANT])
-    cache[i, f, M_FX] = mx
-    cache[i, f, M_FY] = SIDE[f] * my  # the left fin mirrors y and the moment
-    cache[i, f, M_TAU] = SIDE[f] * coef[i, Coef.FIN_OFFSET] * mx
     cache[i, f, OSC_COS] = SIDE[f] * pc  # the left fin's yaw oscillation is the mirror image
     cache[i, f, OSC_SIN] = SIDE[f] * ps
     if tables.wave_table.shape[1] > 0:  # read only with a yaw_waveform section (stepping._advance_one)

@@ -155,6 +155,13 @@ def spline_values(bias: float, amplitude: float, inv_ratio: float, knots, table)
     return _tensor_spline(bias, amplitude, inv_ratio, knots, table)
 
 
+@nb.njit(inline="always", **JIT)
+def _taper(amplitude: float, knots) -> float:
+    """Below the lowest amplitude node (``knots[1, 3]``) the phasor and waveform splines shrink linearly to zero."""
+    lowest = knots[1, 3]
+    return amplitude / lowest if amplitude < lowest and lowest > 0.0 else 1.0
+
+
 @nb.njit(**JIT)
 def oscillation_phasor(bias: float, amplitude: float, inv_ratio: float, knots, table):
     """Yaw-oscillation phasor ``A T_p (cos phi, sin phi)`` [rad] of one fin (module docstring).
@@ -166,10 +173,10 @@ def oscillation_phasor(bias: float, amplitude: float, inv_ratio: float, knots, t
     if table.shape[1] == 0 or amplitude <= 0.0:
         return 0.0, 0.0
     pc, ps, _ = _tensor_spline(bias, amplitude, inv_ratio, knots, table)
-    lowest = knots[1, 3]
-    if amplitude < lowest and lowest > 0.0:
-        pc *= amplitude / lowest
-        ps *= amplitude / lowest
+    taper = _taper(amplitude, knots)
+    if taper != 1.0:
+        pc *= taper
+        ps *= taper
     return pc, ps
 
 
@@ -192,9 +199,9 @@ def waveform_harmonics_into(bias: float, amplitude: float, period: float, ratio:
     if channels == 0 or amplitude <= 0.0:
         return channels // 2
     scale = 1.0 / period
-    lowest = knots[1, 3]
-    if amplitude < lowest and lowest > 0.0:
-        scale *= amplitude / lowest
+    taper = _taper(amplitude, knots)
+    if taper != 1.0:
+        scale *= taper
     s0, a0, a1, a2, a3 = bspline_basis(knots[0], table.shape[1], bias)
     s1, c0, c1, c2, c3 = bspline_basis(knots[1], table.shape[2], amplitude)
     s2, d0, d1, d2, d3 = bspline_basis(knots[2], table.shape[3], 1.0 / ratio)
@@ -268,11 +275,16 @@ def _k_value(which: int, bias: float, amplitude: float, period: float, ratio: fl
 def scaling_values(bias: float, amplitude: float, period: float, ratio: float, tables: KTables):
     """``(K_fx, K_fy, K_m)`` at one pattern (rad, rad, s, -): polynomial part plus spline part."""
     sx, sy, sm = spline_values(bias, amplitude, 1.0 / ratio, tables.knots, tables.table)
-    return (
-        _k_value(0, bias, amplitude, period, ratio, tables.powers, tables.coefs) + sx,
-        _k_value(1, bias, amplitude, period, ratio, tables.powers, tables.coefs) + sy,
-        _k_value(2, bias, amplitude, period, ratio, tables.powers, tables.coefs) + sm,
-    )
+    kx, ky, km = _polynomial_parts(bias, amplitude, period, ratio, tables)
+    return kx + sx, ky + sy, km + sm
+
+
+@nb.njit(inline="always", **JIT)
+def _polynomial_parts(bias: float, amplitude: float, period: float, ratio: float, tables: KTables):
+    """The polynomial parts of ``(K_fx, K_fy, K_m)`` (:func:`_k_value` of each)."""
+    return (_k_value(0, bias, amplitude, period, ratio, tables.powers, tables.coefs),
+            _k_value(1, bias, amplitude, period, ratio, tables.powers, tables.coefs),
+            _k_value(2, bias, amplitude, period, ratio, tables.powers, tables.coefs))
 
 
 def interleave(knots: np.ndarray, table: np.ndarray, osc_knots: np.ndarray, osc_table: np.ndarray) -> np.ndarray:
@@ -324,17 +336,12 @@ def pattern_values(bias: float, amplitude: float, period: float, ratio: float, t
         pc, ps = yaw_oscillation_phasor(bias, amplitude, period, ratio, tables)
         return kx, ky, km, pc, ps
     sx, sy, sm, pc, ps = _shared_splines(bias, amplitude, 1.0 / ratio, tables.knots, tables.shared)
-    lowest = tables.osc_knots[1, 3]
-    if amplitude < lowest and lowest > 0.0:  # as oscillation_phasor
-        pc *= amplitude / lowest
-        ps *= amplitude / lowest
-    return (
-        _k_value(0, bias, amplitude, period, ratio, tables.powers, tables.coefs) + sx,
-        _k_value(1, bias, amplitude, period, ratio, tables.powers, tables.coefs) + sy,
-        _k_value(2, bias, amplitude, period, ratio, tables.powers, tables.coefs) + sm,
-        pc / period,
-        ps / period,
-    )
+    taper = _taper(amplitude, tables.osc_knots)
+    if taper != 1.0:  # as oscillation_phasor
+        pc *= taper
+        ps *= taper
+    kx, ky, km = _polynomial_parts(bias, amplitude, period, ratio, tables)
+    return kx + sx, ky + sy, km + sm, pc / period, ps / period
 
 
 @nb.njit(**JIT)

@@ -32,7 +32,7 @@ import numpy as np
 from pectoral_gym import forcing_cache as fc
 from pectoral_gym import strokes as st
 from pectoral_gym._jit import JIT, PARALLEL_MIN_ITEMS, kernel_pair
-from pectoral_gym.averaging import half_stroke_mean_force, power_stroke_excess
+from pectoral_gym.averaging import half_stroke_mean_force, power_stroke_excess, ripple_offset
 from pectoral_gym.dynamics import Forcing, RateConstants, body_accel, body_accel_waveform, rate_bound, rate_constants
 from pectoral_gym.ktables import KTables, as_tables
 from pectoral_gym.params import BodyCoefficients, Coef
@@ -166,7 +166,8 @@ def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables,
                 dfx, dfy, dtau = _transition(fins, cache, i, f, coef[i, Coef.FIN_DRAG_CONSTANT],
                                              coef[i, Coef.FIN_OFFSET])
             if corrections & RIPPLE_OFFSETS:
-                ox, oy, ot = _ripple_offset_change(cache, i, f)
+                ox, oy, ot = _ripple_offset_change(fins, cache, i, f, coef[i, Coef.FIN_DRAG_CONSTANT],
+                                                   coef[i, Coef.FIN_OFFSET])
                 duration = fins[i, f, DURATION]
                 dfx, dfy, dtau = dfx + ox / duration, dfy + oy / duration, dtau + ot / duration
             cache[i, f, fc.TR_FX] = dfx
@@ -175,21 +176,22 @@ def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables,
 
 
 @nb.njit(inline="always", **JIT)
-def _ripple_offset_change(cache, i, f):
+def _ripple_offset_change(fins, cache, i, f, drag_constant, fin_offset):
     """Impulse [N s, N s, N m s] that moves fin ``f``'s delivered ripple offset to its latched pattern's.
 
     ``docs/model.md`` section 3.8: the averaged state is the beat mean of the full model's,
-    which runs ahead of its cycle-start value by ``M / m``
-    (:func:`pectoral_gym.averaging.ripple_offset`); a fin that starts a pattern, changes it or
-    parks moves that offset from the old pattern's ``M`` to the new one's. Zero while the pattern
-    is kept.
+    which runs ahead of its cycle-start value by ``M / m`` (:func:`ripple_offset`); a fin that
+    starts a pattern, changes it or parks moves that offset from the old pattern's ``M`` to the
+    new one's. Zero while the pattern is kept.
     """
-    ox = cache[i, f, fc.M_FX] - cache[i, f, fc.OFF_FX]
-    oy = cache[i, f, fc.M_FY] - cache[i, f, fc.OFF_FY]
-    ot = cache[i, f, fc.M_TAU] - cache[i, f, fc.OFF_TAU]
-    cache[i, f, fc.OFF_FX] = cache[i, f, fc.M_FX]
-    cache[i, f, fc.OFF_FY] = cache[i, f, fc.M_FY]
-    cache[i, f, fc.OFF_TAU] = cache[i, f, fc.M_TAU]
+    mx, my = ripple_offset(fins[i, f, BIAS], fins[i, f, AMPLITUDE], fins[i, f, PERIOD], fins[i, f, RATIO],
+                           drag_constant)
+    side = st.SIDE[f]
+    mx, my, mt = mx, side * my, side * fin_offset * mx  # eq. (18), left fin mirrored
+    ox, oy, ot = mx - cache[i, f, fc.OFF_FX], my - cache[i, f, fc.OFF_FY], mt - cache[i, f, fc.OFF_TAU]
+    cache[i, f, fc.OFF_FX] = mx
+    cache[i, f, fc.OFF_FY] = my
+    cache[i, f, fc.OFF_TAU] = mt
     return ox, oy, ot
 
 

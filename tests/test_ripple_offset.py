@@ -69,8 +69,8 @@ def test_the_left_fin_mirrors_sway_and_moment_in_the_cache():
     model.advance(0.01)  # both fins latch
     right, left = model.forcing_cache[0, 0], model.forcing_cache[0, 1]
     mx, my = ripple_offset(beat.bias, beat.amplitude, beat.period, beat.ratio, params.fin_drag_constant)
-    assert (right[fc.M_FX], right[fc.M_FY], right[fc.M_TAU]) == pytest.approx((mx, my, params.fin_offset * mx))
-    assert (left[fc.M_FX], left[fc.M_FY], left[fc.M_TAU]) == pytest.approx((mx, -my, -params.fin_offset * mx))
+    assert (right[fc.OFF_FX], right[fc.OFF_FY], right[fc.OFF_TAU]) == pytest.approx((mx, my, params.fin_offset * mx))
+    assert (left[fc.OFF_FX], left[fc.OFF_FY], left[fc.OFF_TAU]) == pytest.approx((mx, -my, -params.fin_offset * mx))
 
 
 def test_averaged_surge_is_the_full_models_beat_mean_without_damping():
