@@ -34,6 +34,10 @@ field              index  unit    meaning
 ``OFF_FY``         35     N s     ``docs/model.md`` 3.8: ``M`` of the fin's latched pattern,
 ``OFF_TAU``        36     N m s   :func:`pectoral_gym.averaging.ripple_offset`), signed by side; zero
                                   after :func:`clear`
+``OSC_EXCESS``     37     -       the half-stroke in progress's yaw-oscillation gain minus one
+                                  (``transitions``, ``docs/model.md`` 3.9,
+                                  :func:`pectoral_gym.stroke_ripple.transitional_oscillation_gain`);
+                                  set when the fin latches, zero on regular half-strokes
 =================  =====  ======  ==================================================================
 
 The row depends on the fish's coefficients too: :func:`invalidate` after
@@ -65,7 +69,7 @@ __all__ = [
     "CACHE_FIELDS", "KEY_BIAS", "KEY_AMPLITUDE", "KEY_PERIOD", "KEY_RATIO",
     "AVG_FX", "AVG_FY", "AVG_TAU", "OSC_COS", "OSC_SIN", "CACHED",
     "PREV_BIAS", "PREV_AMPLITUDE", "PREV_PERIOD", "PREV_RATIO", "WAVE", "REF_ABS", "TR_FX", "TR_FY", "TR_TAU",
-    "OFF_FX", "OFF_FY", "OFF_TAU",
+    "OFF_FX", "OFF_FY", "OFF_TAU", "OSC_EXCESS",
     "QUADRATURE", "WORKSPACE",
     "RATE_ITERATIONS",
     "clear", "invalidate", "refresh", "waveform_samples", "yaw_oscillation", "yaw_waveform",
@@ -80,7 +84,8 @@ WAVE = 14
 REF_ABS = WAVE + 2 * MAX_HARMONICS
 TR_FX, TR_FY, TR_TAU = REF_ABS + 1, REF_ABS + 2, REF_ABS + 3
 OFF_FX, OFF_FY, OFF_TAU = TR_TAU + 1, TR_TAU + 2, TR_TAU + 3
-CACHE_FIELDS = OFF_TAU + 1
+OSC_EXCESS = OFF_TAU + 1
+CACHE_FIELDS = OSC_EXCESS + 1
 
 _FIN = MAX_SAMPLES  # per fin: Re, Im of its harmonics at the segment's phase, then its drive
 WORKSPACE = _FIN + 8 * MAX_HARMONICS
@@ -125,8 +130,8 @@ def refresh(cache, i, f, bias, amplitude, period, ratio, coef, mode, tables):
 def yaw_oscillation(fins, cache, i, offset, idle0, idle1):
     """Amplitude [rad/s] of the yaw-rate oscillation both fins drive, ``offset`` s into the segment.
 
-    Each fin's oscillation is ``Re(P e^{i theta})`` with its phasor ``P`` and
-    its beat phase ``theta = 2 pi t / T_p`` (``t`` from the start of its power
+    Each fin's oscillation is ``Re(G P e^{i theta})`` with its phasor ``P``, the gain ``G`` of
+    its half-stroke in progress (``OSC_EXCESS``, 1 on regular half-strokes) and its beat phase ``theta = 2 pi t / T_p`` (``t`` from the start of its power
     stroke, read from the fin state of :mod:`pectoral_gym.strokes`); the two add
     as phasors. Fins beating in phase with the same pattern cancel (straight
     swimming has no yaw oscillation); fins with different periods drift
@@ -140,7 +145,8 @@ def yaw_oscillation(fins, cache, i, offset, idle0, idle1):
         if cache[i, f, OSC_COS] == 0.0 and cache[i, f, OSC_SIN] == 0.0:
             continue  # no yaw-oscillation data (or no stroke): skip the trigonometry
         theta = _beat_phase(fins, i, f, offset)
-        c, s = math.cos(theta), math.sin(theta)
+        gain = 1.0 + cache[i, f, OSC_EXCESS]  # a transitional half-stroke's (docs/model.md 3.9)
+        c, s = gain * math.cos(theta), gain * math.sin(theta)
         re += cache[i, f, OSC_COS] * c - cache[i, f, OSC_SIN] * s
         im += cache[i, f, OSC_COS] * s + cache[i, f, OSC_SIN] * c
     return math.sqrt(re * re + im * im)
@@ -198,8 +204,8 @@ def _mean_abs(work, n, omega):
 def yaw_waveform(fins, cache, i, offset, idle0, idle1, harmonics, rate, omega, c4, work):
     """Both fins' yaw-rate oscillation over one averaging window, ``offset`` s into the segment.
 
-    Each fin's waveform ``Re sum_k c_k e^{i k theta}`` (``WAVE`` fields) starts at its beat
-    phase ``theta_f`` (``docs/model.md`` 3.6). One fin, equal periods, or periods without a
+    Each fin's waveform ``G Re sum_k c_k e^{i k theta}`` (``WAVE`` fields, ``G`` the gain of its
+    half-stroke in progress, ``OSC_EXCESS``) starts at its beat phase ``theta_f`` (``docs/model.md`` 3.6). One fin, equal periods, or periods without a
     common period of at most ``COMMON_BEATS`` beats of the slower fin: ``QUADRATURE`` samples
     of one beat, both fins keeping their present relative phase (each fin's own waveform is
     covered exactly once). Commensurate periods: the common period, ``QUADRATURE`` samples per
@@ -227,7 +233,8 @@ def yaw_waveform(fins, cache, i, offset, idle0, idle1, harmonics, rate, omega, c
             freq1 = freq
         base = _FIN + 4 * MAX_HARMONICS * f
         c1, s1 = math.cos(theta), math.sin(theta)
-        c, s = c1, s1
+        gain = 1.0 + cache[i, f, OSC_EXCESS]  # a transitional half-stroke's (docs/model.md 3.9)
+        c, s = gain * c1, gain * s1
         for k in range(harmonics):  # e^{i k theta} by rotation
             a, b = cache[i, f, WAVE + 2 * k], cache[i, f, WAVE + 2 * k + 1]
             ar, br = a * c - b * s, a * s + b * c

@@ -36,6 +36,7 @@ from pectoral_gym.averaging import half_stroke_mean_force, power_stroke_excess, 
 from pectoral_gym.dynamics import Forcing, RateConstants, body_accel, body_accel_waveform, rate_bound, rate_constants
 from pectoral_gym.ktables import KTables, as_tables
 from pectoral_gym.params import BodyCoefficients, Coef
+from pectoral_gym.stroke_ripple import transitional_oscillation_gain
 from pectoral_gym.strokes import AMPLITUDE, BIAS, DURATION, ELAPSED, PERIOD, RATIO, idle, latch
 
 __all__ = ["ACCURATE_STEP", "RIPPLE_OFFSETS", "STATE_NAMES", "TRANSITIONS", "State", "advance", "corrections"]
@@ -47,7 +48,7 @@ State = enum.IntEnum("State", {name.upper(): i for i, name in enumerate(STATE_NA
 
 _EPS = 1e-12
 #: Bits of the averaged model's ``corrections`` (:func:`corrections`): the transitional half-strokes
-#: (``docs/model.md`` 3.7) and the beat-mean ripple offset (3.8).
+#: (``docs/model.md`` 3.7, with their yaw-oscillation gain, 3.9) and the beat-mean ripple offset (3.8).
 TRANSITIONS, RIPPLE_OFFSETS = 1, 2
 ACCURATE_STEP = 1.5  # averaged model: h * rate bound; RK4 is stable to 2.78, this keeps transients accurate
 
@@ -147,9 +148,10 @@ def _stable_step(state, i, rates: RateConstants, driven_omega, driven_speed, osc
 def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables, corrections):
     """Latch fin ``f``'s commanded pattern; the averaged model also brings its forcing cache up to date.
 
-    The corrections (:data:`TRANSITIONS`: :func:`_transition`; :data:`RIPPLE_OFFSETS`: the change
-    of the beat-mean ripple offset, spread over the half-stroke) are constant over the
-    half-stroke, so they are evaluated here, once, and kept in the cache (``TR_*``).
+    The corrections (:data:`TRANSITIONS`: :func:`_transition` and the half-stroke's yaw-oscillation
+    gain, :func:`_oscillation_gain`; :data:`RIPPLE_OFFSETS`: the change of the beat-mean ripple
+    offset, spread over the half-stroke) are constant over the half-stroke, so they are evaluated
+    here, once, and kept in the cache (``TR_*``, ``OSC_EXCESS``).
     """
     if averaged and fins[i, f, st.POWER] > 0.5:  # a power stroke ends: keep its pattern (_transition)
         cache[i, f, fc.PREV_BIAS] = fins[i, f, BIAS]
@@ -170,9 +172,20 @@ def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables,
                                                    coef[i, Coef.FIN_OFFSET])
                 duration = fins[i, f, DURATION]
                 dfx, dfy, dtau = dfx + ox / duration, dfy + oy / duration, dtau + ot / duration
+            if corrections & TRANSITIONS:
+                cache[i, f, fc.OSC_EXCESS] = _oscillation_gain(fins, i, f, coef) - 1.0
             cache[i, f, fc.TR_FX] = dfx
             cache[i, f, fc.TR_FY] = dfy
             cache[i, f, fc.TR_TAU] = dtau
+
+
+@nb.njit(inline="always", **JIT)
+def _oscillation_gain(fins, i, f, coef):
+    """Yaw-oscillation gain of fin ``f``'s latched half-stroke (``docs/model.md`` 3.9; 1 on a regular one)."""
+    return transitional_oscillation_gain(fins[i, f, st.ANGLE_FROM], fins[i, f, st.ANGLE_TO], fins[i, f, DURATION],
+                                         fins[i, f, st.POWER] > 0.5, fins[i, f, BIAS], fins[i, f, AMPLITUDE],
+                                         fins[i, f, PERIOD], fins[i, f, RATIO], coef[i, Coef.FIN_DRAG_CONSTANT],
+                                         coef[i, Coef.FIN_INERTIA_CONSTANT])
 
 
 @nb.njit(inline="always", **JIT)
