@@ -131,8 +131,9 @@ def yaw_oscillation(fins, cache, i, offset, idle0, idle1):
     """Amplitude [rad/s] of the yaw-rate oscillation both fins drive, ``offset`` s into the segment.
 
     Each fin's oscillation is ``Re(G P e^{i theta})`` with its phasor ``P``, the gain ``G`` of
-    its half-stroke in progress (``OSC_EXCESS``, 1 on regular half-strokes) and its beat phase ``theta = 2 pi t / T_p`` (``t`` from the start of its power
-    stroke, read from the fin state of :mod:`pectoral_gym.strokes`); the two add
+    its half-stroke in progress (``OSC_EXCESS``, 1 on regular half-strokes) and its beat phase
+    ``theta = 2 pi t / T_p`` (``t`` from the start of its power stroke, read from the fin state
+    of :mod:`pectoral_gym.strokes`); the two add
     as phasors. Fins beating in phase with the same pattern cancel (straight
     swimming has no yaw oscillation); fins with different periods drift
     through all relative phases.
@@ -205,8 +206,9 @@ def yaw_waveform(fins, cache, i, offset, idle0, idle1, harmonics, rate, omega, c
     """Both fins' yaw-rate oscillation over one averaging window, ``offset`` s into the segment.
 
     Each fin's waveform ``G Re sum_k c_k e^{i k theta}`` (``WAVE`` fields, ``G`` the gain of its
-    half-stroke in progress, ``OSC_EXCESS``) starts at its beat phase ``theta_f`` (``docs/model.md`` 3.6). One fin, equal periods, or periods without a
-    common period of at most ``COMMON_BEATS`` beats of the slower fin: ``QUADRATURE`` samples
+    half-stroke in progress, ``OSC_EXCESS``) starts at its beat phase ``theta_f`` (``docs/model.md``
+    3.6). One fin, equal periods, or periods without a common period of at most ``COMMON_BEATS``
+    beats of the slower fin: ``QUADRATURE`` samples
     of one beat, both fins keeping their present relative phase (each fin's own waveform is
     covered exactly once). Commensurate periods: the common period, ``QUADRATURE`` samples per
     beat of the faster fin, each fin at its own rate (the exact time average). With ``rate``
