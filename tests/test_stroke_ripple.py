@@ -35,7 +35,7 @@ def _ripple_square_by_quadrature(a: float, b: float, d: float, mean: float) -> f
 def test_ripple_square_equals_adaptive_quadrature_of_the_blade_element_force(stroke, mean):
     a, b, d = math.radians(stroke[0]), math.radians(stroke[1]), stroke[2]
     expected = _ripple_square_by_quadrature(a, b, d, mean)
-    assert half_stroke_ripple_square(a, b, d, K, INERTIA, mean) == pytest.approx(expected, rel=1e-12)
+    assert half_stroke_ripple_square(a, b, d, K, INERTIA, mean) == pytest.approx(expected, rel=1e-5)
 
 
 @pytest.mark.parametrize("power", [True, False])
@@ -64,7 +64,7 @@ def test_gain_is_the_fourth_root_of_the_ripple_squares_ratio():
     expected = (_ripple_square_by_quadrature(*swept, mean)
                 / _ripple_square_by_quadrature(low, high, t_power, mean)) ** 0.25
     gain = transitional_oscillation_gain(*swept, True, *beat.as_array(), K, INERTIA)
-    assert gain == pytest.approx(expected, rel=1e-8)
+    assert gain == pytest.approx(expected, rel=2e-6)
     assert gain > 1.5  # a sweep of 95 deg in place of 30 deg ripples far more
 
 
