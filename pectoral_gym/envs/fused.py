@@ -64,7 +64,7 @@ __all__ = ["COMPILED_SOURCES", "STEP_FIELDS", "BoundStep", "FusedStep", "StepArr
 COMPILED_SOURCES = (
     "pectoral_gym._jit", "pectoral_gym.params", "pectoral_gym.dynamics", "pectoral_gym.ktables",
     "pectoral_gym.kfunctions", "pectoral_gym.kfile", "pectoral_gym.averaging", "pectoral_gym.strokes",
-    "pectoral_gym.forcing_cache",
+    "pectoral_gym.forcing_cache", "pectoral_gym.stroke_ripple",
     "pectoral_gym.stepping", "pectoral_gym.envs.layout", "pectoral_gym.envs.observation", "pectoral_gym.envs.tasks",
 )
 
