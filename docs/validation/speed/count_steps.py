@@ -21,4 +21,5 @@ for k in range(PERIODS):
         model.forcing_cache[:, 0, fc.N_RK4:] = 0.0
     model.advance(0.5)
 counts = model.forcing_cache[:, 0, fc.N_RK4:].sum(axis=0) / (N * (PERIODS - WARM_UP - 1))
-print("per fish and 0.5 s: RK4 steps %.2f, segments %.2f, latches %.2f" % tuple(counts))
+rk4, segments, latches = counts
+print(f"per fish and 0.5 s: RK4 steps {rk4:.2f}, segments {segments:.2f}, latches {latches:.2f}")
