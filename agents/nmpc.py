@@ -37,13 +37,13 @@ from agents.nmpc_problem import (
     GAIN_YAW,
     FinInputs,
     NMPCProblem,
-    NMPCSettings,
     identified_bias_range,
     pack_decision,
     to_u,
     to_z,
 )
 from agents.nmpc_reference import ReferencePredictor
+from agents.nmpc_settings import NMPCSettings
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, OBS_VELOCITY, decode
 from pectoral_gym.kfunctions import ScalingFunctions
