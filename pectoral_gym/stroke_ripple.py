@@ -5,9 +5,10 @@ pattern's in-beat yaw oscillation (3.6), a phasor identified on regular beats.
 A transitional half-stroke (3.7) sweeps from wherever the fin was, often much
 farther or faster than the pattern's own stroke, and its force ripple is
 larger than the regular half-stroke's. The yaw damping time ``1 / (2 c4 |omega|)``
-(26 ms at 1 rad/s for Table 1) is short against a half-stroke (0.25-2 s), so the
-yaw rate follows the moment quasi-statically, ``omega ~ sqrt(|tau| / (c4 J3))``: its
-ripple grows with the square root of the moment's ripple. The gain scales the
+(Table 1: 26 ms at 1 rad/s, 88 ms at 0.3 rad/s) is short against most half-strokes
+(0.08-1.7 s in the envs' ranges), so the yaw rate follows the moment nearly
+quasi-statically, ``omega ~ sqrt(|tau| / (c4 J3))``: its ripple grows with the square
+root of the moment's ripple (the quasi-static limit; the gain takes it as exact). The gain scales the
 fin's phasor over the half-stroke by::
 
     G = (S_swept / S_regular)^(1/4),   S = mean over the half-stroke of (f_hx - F)^2
