@@ -25,6 +25,7 @@ __all__ = [
     "Forcing",
     "stroke_kinematics",
     "fin_force_right",
+    "fin_force_at",
     "body_rhs",
     "body_accel",
     "fin_angle_eq21",
@@ -97,8 +98,12 @@ def fin_force_right(g: float, gd: float, gdd: float, drag_constant: float, inert
     Returns:
         ``(f_hx, f_hy)`` [N] on the body from the right fin.
     """
-    sg = math.sin(g)
-    cg = math.cos(g)
+    return fin_force_at(math.sin(g), math.cos(g), gd, gdd, drag_constant, inertia_constant)
+
+
+@nb.njit(inline="always", **JIT)
+def fin_force_at(sg: float, cg: float, gd: float, gdd: float, drag_constant: float, inertia_constant: float):
+    """:func:`fin_force_right` from ``sin g, cos g`` (for callers that have them without calling ``sin/cos``)."""
     fn = -drag_constant * gd * abs(gd)  # eq. (13) along n
     # n = (-sin g, -cos g), m = (cos g, -sin g) in body axes (eqs. 7-8);
     # a(S_p/2) = S_p/2 (g'' n - g'^2 m) (eq. 10).

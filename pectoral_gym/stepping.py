@@ -167,13 +167,12 @@ def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables,
             if corrections & TRANSITIONS:
                 dfx, dfy, dtau = _transition(fins, cache, i, f, coef[i, Coef.FIN_DRAG_CONSTANT],
                                              coef[i, Coef.FIN_OFFSET])
+                cache[i, f, fc.OSC_EXCESS] = _oscillation_gain(fins, i, f, coef) - 1.0
             if corrections & RIPPLE_OFFSETS:
                 ox, oy, ot = _ripple_offset_change(fins, cache, i, f, coef[i, Coef.FIN_DRAG_CONSTANT],
                                                    coef[i, Coef.FIN_OFFSET])
                 duration = fins[i, f, DURATION]
                 dfx, dfy, dtau = dfx + ox / duration, dfy + oy / duration, dtau + ot / duration
-            if corrections & TRANSITIONS:
-                cache[i, f, fc.OSC_EXCESS] = _oscillation_gain(fins, i, f, coef) - 1.0
             cache[i, f, fc.TR_FX] = dfx
             cache[i, f, fc.TR_FY] = dfy
             cache[i, f, fc.TR_TAU] = dtau

@@ -28,6 +28,7 @@ import numpy as np
 
 from pectoral_gym._jit import JIT
 from pectoral_gym.averaging import half_stroke_mean_force
+from pectoral_gym.dynamics import fin_force_at
 
 __all__ = ["RIPPLE_NODES", "half_stroke_ripple_square", "transitional_oscillation_gain"]
 
@@ -48,7 +49,7 @@ def half_stroke_ripple_square(angle_from: float, angle_to: float, duration: floa
 
     ``g = mid - half cos(phi)``, ``phi = pi s / d`` (:func:`pectoral_gym.dynamics.stroke_kinematics`);
     ``f_hx`` is eq. (16) with the drag of eq. (13) and the inertial term of eq. (15)
-    (:func:`pectoral_gym.dynamics.fin_force_right`), evaluated at :data:`RIPPLE_NODES` phases.
+    (:func:`pectoral_gym.dynamics.fin_force_at`), evaluated at :data:`RIPPLE_NODES` phases.
     """
     mid = 0.5 * (angle_from + angle_to)
     half = 0.5 * (angle_to - angle_from)
@@ -62,11 +63,10 @@ def half_stroke_ripple_square(angle_from: float, angle_to: float, duration: floa
         sh, ch = math.sin(half * cp), math.cos(half * cp)
         gd = half * rate * sp
         gdd = half * rate * rate * cp
-        drag = drag_constant * gd * abs(gd)
         for sign in (1.0, -1.0):  # phi, then pi - phi
             sg = sm * ch - sign * cm * sh  # sin(mid - sign half cos(phi))
             cg = cm * ch + sign * sm * sh
-            fx = drag * sg + inertia_constant * (sign * gdd * sg + gd * gd * cg)  # eq. (16)
+            fx, _ = fin_force_at(sg, cg, gd, sign * gdd, drag_constant, inertia_constant)  # eq. (16)
             total += _WEIGHT[j] * (fx - mean_force) ** 2
     return total
 
