@@ -12,7 +12,11 @@ target and its velocity, and the fin command still being latched. Each control p
 2. a solve from the best candidate (default: 8 SQP iterations, the real-time iteration; the shifted
    plan is warm-started with its shifted multipliers);
 3. the solution's inputs are rolled out again and kept only if they cost no more than the candidate
-   (an iteration budget may leave the multiple-shooting gaps open; the rollout always obeys the model).
+   (an iteration budget may leave the multiple-shooting gaps open; the rollout always obeys the model);
+4. ``goal``: on-the-spot turns (:mod:`agents.nmpc_spin`), a fin cycle whose transitional strokes the
+   NLP's cycle-averaged model cannot represent, are rolled out on the averaged model with its
+   transitional strokes and priced the same way; the cheapest is applied as it is when it costs
+   less than the solved plan.
 
 Robustness. A step whose solves fail (exception, non-finite numbers) or end after
 :attr:`NMPCSettings.step_budget` is not applied: the controller falls back to the rest of the last
@@ -44,6 +48,7 @@ from agents.nmpc_problem import (
 )
 from agents.nmpc_reference import ReferencePredictor
 from agents.nmpc_settings import NMPCSettings
+from agents.nmpc_spin import SpinTurns
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, OBS_VELOCITY, decode
 from pectoral_gym.kfunctions import ScalingFunctions
@@ -110,6 +115,12 @@ class NMPCController(PlanPricing):
         self._target_end = (0.0, 0.0)
         self._half_length = 0.5 * config.params.body_length
         self.problem = NMPCProblem(config, s, self.fins, self.scaling, self.z_low, self.z_high)
+        self.spin = None
+        if s.spin if s.spin is not None else not self.track:
+            a_high = FinInputs(*self.u_high).amplitude_right
+            spin = SpinTurns(config, self.fins, self.scaling, s.horizon,
+                             np.array(FinInputs(0.6 * a_high, 0.6 * a_high, self.bias_mid, self.bias_mid)))
+            self.spin = spin if spin.available else None
         self._solver = self.problem.solver  # the controller calls it through this attribute (tests replace it)
         self._n = self.problem.horizon
         self.n_delay_steps = self.problem.n_delay_steps
@@ -130,6 +141,10 @@ class NMPCController(PlanPricing):
         self._duals: tuple[np.ndarray, np.ndarray] | None = None  # lam_x, lam_g of the last good solve
         self.reference.reset()
         self.gains = np.array(self.settings.initial_gains, dtype=np.float64)
+        self._plan_spins = False  # the plan is a spin candidate (not the NLP's: no multipliers, no shifted guess)
+        self._spun = (False, False)  # whether the last two commands were spin steps
+        if self.spin is not None:
+            self.spin.reset()
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Solve the NMPC problem for one observation ``(19,)``; returns the normalised action ``(8,)``."""
@@ -140,7 +155,7 @@ class NMPCController(PlanPricing):
             u = self._fallback()
         else:
             state, ref, vref = self._estimate(obs)
-            if self._last is not None:
+            if self._last is not None and not any(self._spun):  # the NLP's model has no spin to compare with
                 before, z_applied, z_before = self._last
                 end, v_mean = (np.asarray(v).ravel()
                                for v in self.problem.interval(before, z_applied, z_before, self.gains))
@@ -152,6 +167,9 @@ class NMPCController(PlanPricing):
                     state[STATE_VELOCITY] = end[STATE_VELOCITY] + (state[STATE_VELOCITY] - v_mean)
             u = self._plan_step(state, ref, vref)
             self._last = (state, to_z(u), to_z(self._u_prev))
+        self._spun = (self._spun[1], self._plan_spins and self.plan is not None)
+        if self.spin is not None:
+            self.spin.applied(u)
         self._prev_obs = obs.copy()
         self._u_prev = u
         u = FinInputs(*u)
@@ -281,7 +299,7 @@ class NMPCController(PlanPricing):
         try:
             guesses = self._fresh_guesses()
             duals = [None] * len(guesses)
-            if self.plan is not None:  # the shifted last plan, warm-started with its multipliers
+            if self.plan is not None and not self._plan_spins:  # the shifted last plan, with its multipliers
                 age = self._plan_age + 1
                 guesses.insert(0, np.vstack([self.plan[age:], np.repeat(self.plan[-1:], age, 0)]).T)
                 duals.insert(0, self._shifted_duals(age))
@@ -298,6 +316,7 @@ class NMPCController(PlanPricing):
                 deep |= {len(guesses) - 1} if self.hand_candidate else set()
                 costs = [self._rollout_cost(state, p, guesses[k])[0] if k in deep else math.inf
                          for k in range(len(guesses))]
+            spin = self._spin_plan(state, ref, p) if self.spin is not None else None
             solves = 0
             for k in sorted(range(len(guesses)), key=costs.__getitem__):  # the next one only if a solve failed
                 if solves >= self.settings.max_solves + (best is None) or time.perf_counter() - start > budget:
@@ -306,6 +325,8 @@ class NMPCController(PlanPricing):
                 result = self._solve(state, p, guesses[k], duals[k], costs[k])
                 if result is not None and (best is None or result[0] < best[0]):
                     best = result
+            if spin is not None and (best is None or spin[0] < best[0]):
+                best = spin
         except Exception:  # noqa: BLE001 - a failed solve must never stop the fish controller
             best = None
         elapsed = time.perf_counter() - start
@@ -317,8 +338,35 @@ class NMPCController(PlanPricing):
             self.failures += 1
             return self._fallback()
         self.plan, self._duals = best[1], best[2]
+        self._plan_spins = best is spin
         self._plan_age = 0
         return self.plan[0].copy()
+
+    def _spin_plan(self, state: np.ndarray, ref: np.ndarray, p: np.ndarray) -> tuple[float, np.ndarray, None] | None:
+        """The cheapest spin candidate (:mod:`agents.nmpc_spin`) as ``(cost, plan (horizon, 4), None)``, or ``None``.
+
+        Priced as the NLP's candidates are: the objective's state terms on the rollout plus its input terms,
+        or the reach cost; the shallow ranking adds the turn-then-straight cost-to-go, the cheapest one is
+        priced again with the hand law's continuation (:attr:`NMPCSettings.togo_steps`).
+        """
+        spin, problem, s = self.spin, self.problem, self.settings
+        u, x = spin.rollouts(state, ref)
+        inputs = spin.input_cost(u, self._u_prev, problem.energy_rate, problem.input_width, s.w_change)
+        costs = np.full(len(x), math.inf)
+        for i in np.flatnonzero(np.all(np.isfinite(x), axis=(1, 2))):
+            reach = self._reach_cost(x[i])
+            if reach is not None:
+                costs[i] = reach
+            else:
+                costs[i] = float(problem.state_cost(x[i], p)) + inputs[i] + self.w_togo * self._togo(x[i][:, -1])
+        i = int(np.argmin(costs))
+        if not math.isfinite(costs[i]):
+            return None
+        cost = costs[i]
+        if self._reach_cost(x[i]) is None and s.togo_steps > 0 and not self.track:
+            cost = (float(problem.state_cost(x[i], p)) + inputs[i]
+                    + self._continuation(x[i][:, -1], to_z(u[i][-1])))
+        return float(cost), u[i].copy(), None
 
     def _shifted_duals(self, age: int) -> tuple[np.ndarray, np.ndarray] | None:
         """The last good solve's multipliers, the state constraints' shifted by ``age`` intervals."""

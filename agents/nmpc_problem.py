@@ -190,6 +190,12 @@ class NMPCProblem:
         rollout: ``(x0, Z, z_prev, gain) -> X (6, horizon + 1)``, the model's trajectory under the
             per-interval inputs ``Z (4, horizon)``.
         cost: ``(decision, parameters) -> cost``, the NLP's objective (screens candidate plans).
+        state_cost: ``(X (6, horizon + 1), parameters) -> cost``, the objective's terms of the states alone
+            (distance, heading, reach, walls): prices trajectories rolled out elsewhere
+            (:mod:`agents.nmpc_spin`).
+        energy_rate: Fin-work weight x mean fin power per cubed amplitude: the objective's energy term
+            of one fin is ``energy_rate gA^3 dt``.
+        input_width: Scale of each input entry (``z``) in the input-change term ``w_change |dz / width|^2``.
         interval: ``(x0, z_applied, z_prev, gain) -> (end state, mean body velocities)`` over one
             control period (trapezoid over the RK4 steps).
         lbx, ubx: Bounds of the decision vector.
@@ -261,7 +267,7 @@ class NMPCProblem:
         f_prev = gains * forcing(p.z_prev)
         g = [X[:, 0] - p.x0]
         x_roll = [p.x0]
-        cost = 0.0
+        cost_x, cost_u = 0.0, 0.0  # the terms of the states and of the inputs (the spin candidates price them apart)
         f_blocks = [gains * forcing(Z[:, b]) for b in range(nb)]  # once per block: the costly part
         after = [j for j in range(m) if j >= n_delay] or list(range(m))  # first interval's substeps after the latch
         spread = [len(after) * h] + [m * h] * (n - 1)  # each interval's transitional impulse acts over this time
@@ -282,32 +288,33 @@ class NMPCProblem:
             pos, psi = X[STATE_POSITION, k + 1], X[STATE_PSI, k + 1]
             error = ref_k[:, k] - pos
             dist = ca.sqrt(ca.sumsqr(error) + distance_scale**2)
-            cost += s.w_distance * dist
+            cost_x += s.w_distance * dist
             if k == n - 1:
-                cost += s.w_terminal * dist
+                cost_x += s.w_terminal * dist
                 # A target closer than 2 R |sin e| lies inside a turning circle of radius R and cannot be
                 # reached by turning towards it (d^2 < 2 R |y_body|); end the horizon where it can.
                 lateral = -ca.sin(psi) * error[0] + ca.cos(psi) * error[1]
                 inside = 2.0 * turn_radius * ca.sqrt(lateral**2 + 1e-6) - ca.sumsqr(error)
-                cost += s.w_reach * ca.fmax(0.0, inside) / turn_radius
+                cost_x += s.w_reach * ca.fmax(0.0, inside) / turn_radius
             # 1 - cos(bearing of the target): turns the fish towards a target behind it, which a
             # distance cost over a short horizon cannot (turning first moves the fish away)
             # (track: towards the reference point ``heading_lookahead`` seconds further along its path)
             aim = error + lookahead * vref_k[:, k] if lookahead > 0 else error
             facing = (ca.cos(psi) * aim[0] + ca.sin(psi) * aim[1]) / ca.sqrt(ca.sumsqr(aim) + heading_scale**2)
-            cost += s.w_heading * (1.0 - facing)
+            cost_x += s.w_heading * (1.0 - facing)
             b = int(block_of[k])
             z_k = FinInputs(*(Z[i, b] for i in range(_N_U)))
-            cost += energy_weight * power_per_cubed_amplitude * (
+            cost_u += energy_weight * power_per_cubed_amplitude * (
                 z_k.amplitude_right ** 1.5 + z_k.amplitude_left ** 1.5) * dt  # gA^3 = (gA^2)^1.5
             if k == 0 or block_of[k - 1] != b:  # an input change at the start of a block
                 prev = p.z_prev if b == 0 else Z[:, b - 1]
-                cost += s.w_change * ca.sumsqr((Z[:, b] - prev) / width)
+                cost_u += s.w_change * ca.sumsqr((Z[:, b] - prev) / width)
             for sign in (1.0, -1.0):  # nose, tail
                 px = X[0, k + 1] + sign * half * ca.cos(psi)
                 py = X[1, k + 1] + sign * half * ca.sin(psi)
                 for gap in (px, TANK_LENGTH - px, py, TANK_WIDTH - py):
-                    cost += s.w_wall * ca.fmax(0.0, s.wall_margin - gap) ** 2
+                    cost_x += s.w_wall * ca.fmax(0.0, s.wall_margin - gap) ** 2
+        cost = cost_x + cost_u
         nlp = {"x": ca.vertcat(ca.vec(Z), ca.vec(X)), "f": cost, "g": ca.vertcat(*g), "p": ca.vertcat(*p)}
         self.solver = _nlp_solver(nlp, s)
         self.horizon = n
@@ -320,6 +327,9 @@ class NMPCProblem:
         self.ubx = pack_decision(np.tile(z_high, nb), x_bound)
         self.rollout = ca.Function("rollout", [p.x0, Z_roll, p.z_prev, p.gain], [ca.horzcat(*x_roll)])
         self.cost = ca.Function("cost", [nlp["x"], nlp["p"]], [cost])
+        self.state_cost = ca.Function("state_cost", [X, nlp["p"]], [cost_x])
+        self.energy_rate = float(energy_weight * power_per_cubed_amplitude)  # cost per s of (gA / rad)^3 of one fin
+        self.input_width = width  # the scale of the input-change term, per z entry
         # One interval from x0 under the applied command: end state and mean body velocities (trapezoid).
         z_applied = ca.SX.sym("z_applied", _N_U)
         xk, f_applied = p.x0, gains * forcing(z_applied)

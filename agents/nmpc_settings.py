@@ -122,6 +122,10 @@ class NMPCSettings:
             23.7 to 20.2 s (full model); ``track`` on seeds 106-119: 2.4 cm against 4.4 cm with the range.
             With ``solver="ipopt"``, biases fixed by equal bounds kept one solve in the tests from
             converging in 300 iterations (it converges in 27 with them free); pass ``None`` there.
+        spin: Also screen on-the-spot turns (:mod:`agents.nmpc_spin`: a fin cycle whose transitional strokes
+            turn the fish within ~0.1 m, rolled out on the averaged model with its transitional strokes);
+            a spin candidate that costs less than the solved plan is applied as it is. ``None``: for
+            ``goal`` only.
     """
 
     horizon: int = 10
@@ -162,6 +166,7 @@ class NMPCSettings:
     deep_candidates: int = 1
     reach_fraction: float = 0.75
     bias_span: float | str | None = "auto"
+    spin: bool | None = None
 
     def __post_init__(self) -> None:
         if min(int(self.horizon), int(self.substeps), int(self.max_iter), int(self.max_solves)) < 1:
