@@ -350,8 +350,10 @@ class NMPCController(PlanPricing):
         priced again with the hand law's continuation (:attr:`NMPCSettings.togo_steps`).
         """
         spin, problem, s = self.spin, self.problem, self.settings
-        u, x = spin.rollouts(state, ref)
-        inputs = spin.input_cost(u, self._u_prev, problem.energy_rate, problem.input_width, s.w_change)
+        u, x, work = spin.rollouts(state, ref)
+        # the fin work of the strokes swept (a spin's is mostly in its transitional strokes), as the NLP's
+        # energy term prices it for regular beats
+        inputs = problem.energy_weight * work + spin.input_cost(u, self._u_prev, problem.input_width, s.w_change)
         costs = np.full(len(x), math.inf)
         for i in np.flatnonzero(np.all(np.isfinite(x), axis=(1, 2))):
             reach = self._reach_cost(x[i])

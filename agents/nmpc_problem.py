@@ -193,7 +193,8 @@ class NMPCProblem:
         state_cost: ``(X (6, horizon + 1), parameters) -> cost``, the objective's terms of the states alone
             (distance, heading, reach, walls): prices trajectories rolled out elsewhere
             (:mod:`agents.nmpc_spin`).
-        energy_rate: Fin-work weight x mean fin power per cubed amplitude: the objective's energy term
+        energy_weight: Weight of the fin work [1/J].
+        energy_rate: ``energy_weight`` x mean fin power per cubed amplitude: the objective's energy term
             of one fin is ``energy_rate gA^3 dt``.
         input_width: Scale of each input entry (``z``) in the input-change term ``w_change |dz / width|^2``.
         interval: ``(x0, z_applied, z_prev, gain) -> (end state, mean body velocities)`` over one
@@ -328,6 +329,7 @@ class NMPCProblem:
         self.rollout = ca.Function("rollout", [p.x0, Z_roll, p.z_prev, p.gain], [ca.horzcat(*x_roll)])
         self.cost = ca.Function("cost", [nlp["x"], nlp["p"]], [cost])
         self.state_cost = ca.Function("state_cost", [X, nlp["p"]], [cost_x])
+        self.energy_weight = float(energy_weight)
         self.energy_rate = float(energy_weight * power_per_cubed_amplitude)  # cost per s of (gA / rad)^3 of one fin
         self.input_width = width  # the scale of the input-change term, per z entry
         # One interval from x0 under the applied command: end state and mean body velocities (trapezoid).

@@ -128,8 +128,11 @@ class SpinTurns:
         self._shadow.command_array(self._patterns(u)[None], validate=False)
         self._shadow.advance(self.dt)
 
-    def rollouts(self, state: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Inputs ``(candidates, horizon, 4)`` and states ``(candidates, 6, horizon + 1)`` of every candidate.
+    def rollouts(self, state: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Inputs ``(candidates, horizon, 4)``, states ``(candidates, 6, horizon + 1)`` and fin work ``(candidates,)``.
+
+        The fin work [J] is that of the strokes the fins actually sweep over the horizon, transitional ones
+        included (:meth:`pectoral_gym.models.FishModel.fin_work`).
 
         From the body state ``(6,)``, the fins where the copy's are (angle, stroke phase, latched and
         pending patterns). ``target``: the position ``(2,)`` the aiming candidates turn to.
@@ -143,6 +146,7 @@ class SpinTurns:
         x = np.empty((b.n, 6, n + 1))
         u = np.empty((b.n, n, 4))
         x[:, :, 0] = state
+        work = -b.fin_work().sum(1)
         aiming = length == 0
         side = np.where(turn == 0, 1.0, -1.0)  # the sign of the bearing a turn reduces
         for k in range(n):
@@ -155,18 +159,24 @@ class SpinTurns:
             u[:, k] = np.where(spins[:, None], cycle, self._straight)
             b.command_array(self._patterns(u[:, k]), validate=False)
             x[:, :, k + 1] = b.advance(self.dt)
-        return u, x
+        return u, x, work + b.fin_work().sum(1)
 
-    def input_cost(self, u: np.ndarray, u_prev: np.ndarray, energy_rate: float, width: np.ndarray,
-                   w_change: float) -> np.ndarray:
-        """The NLP's input terms (fin work, input changes) of inputs ``(candidates, horizon, 4)``, per interval.
+    def input_cost(self, u: np.ndarray, u_prev: np.ndarray, width: np.ndarray, w_change: float) -> np.ndarray:
+        """The NLP's input-change term ``w_change |dz / width|^2`` of inputs ``(candidates, horizon, 4)``.
 
-        Fin work ``energy_rate (gA_r^3 + gA_l^3) dt`` and changes ``w_change |dz / width|^2`` of the NLP's
-        inputs ``z`` (squared amplitudes, biases), :mod:`agents.nmpc_problem`.
+        ``z`` are the NLP's inputs (squared amplitudes, biases; :mod:`agents.nmpc_problem`), ``u_prev`` the
+        command still acting.
         """
-        amp = np.asarray(u)[..., :2]
-        work = energy_rate * self.dt * np.sum(amp**3, axis=(-1, -2))
-        z = np.concatenate([amp**2, np.asarray(u)[..., 2:]], -1)
+        u = np.asarray(u)
+        z = np.concatenate([u[..., :2] ** 2, u[..., 2:]], -1)
         z_prev = np.concatenate([np.asarray(u_prev)[:2] ** 2, np.asarray(u_prev)[2:]])
         steps = np.diff(np.concatenate([np.broadcast_to(z_prev, z[:, :1].shape), z], 1), axis=1) / width
-        return work + w_change * np.sum(steps**2, axis=(-1, -2))
+        return w_change * np.sum(steps**2, axis=(-1, -2))
+
+    def beat_work(self, u: np.ndarray) -> np.ndarray:
+        """Sum over intervals and fins of ``gA^3 dt`` [rad^3 s] of inputs ``(candidates, horizon, 4)``.
+
+        The NLP prices the fin work of the commanded regular beats as ``energy_rate`` times this; a spin's
+        real work is in its transitional strokes, which :meth:`rollouts` returns instead.
+        """
+        return self.dt * np.sum(np.asarray(u)[..., :2] ** 3, axis=(-1, -2))

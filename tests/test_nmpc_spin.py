@@ -91,13 +91,32 @@ def test_state_and_input_terms_add_up_to_the_objective():
     p = problem.parameters(x[:, 0], np.array([1.2, 0.6]), np.zeros(2), to_z(u_prev), nmpc.gains)
     total = float(problem.cost(pack_decision(to_z(u.T), x), p))
     spin = SpinTurns(CONFIG, nmpc.fins, nmpc.scaling, n, u[-1])
-    inputs = spin.input_cost(u[None], u_prev, problem.energy_rate, problem.input_width, nmpc.settings.w_change)
-    assert float(problem.state_cost(x, p)) + inputs[0] == pytest.approx(total, rel=1e-10)
+    changes = spin.input_cost(u[None], u_prev, problem.input_width, nmpc.settings.w_change)[0]
+    work = problem.energy_rate * spin.beat_work(u[None])[0]
+    assert float(problem.state_cost(x, p)) + work + changes == pytest.approx(total, rel=1e-10)
     # the input terms by hand: fin work of every interval, changes between intervals
     z = np.column_stack([u[:, :2] ** 2, u[:, 2:]])
     dz = np.diff(np.vstack([to_z(u_prev), z]), axis=0) / problem.input_width
-    work = problem.energy_rate * CONFIG.control_period * np.sum(u[:, :2] ** 3)
-    assert inputs[0] == pytest.approx(work + nmpc.settings.w_change * np.sum(dz**2), rel=1e-12)
+    assert changes == pytest.approx(nmpc.settings.w_change * np.sum(dz**2), rel=1e-12)
+    assert work == pytest.approx(problem.energy_rate * CONFIG.control_period * np.sum(u[:, :2] ** 3), rel=1e-12)
+
+
+def test_rollout_work_is_the_swept_work_of_the_model():
+    # the candidates' fin work equals that of the same commands on a fresh model (strokes actually swept)
+    nmpc = make_baseline("nmpc", CONFIG, step_budget=1e6)
+    spin = nmpc.spin
+    spin.reset()
+    state = np.array([0.6, 0.5, 0.0, 0.0, 0.0, 0.0])
+    u, x, work = spin.rollouts(state, np.array([0.3, 0.5]))
+    i = 5
+    m = AveragedModel(n=1)
+    m.reset(state[None])
+    for k in range(u.shape[1]):
+        m.command_array(spin._patterns(u[i, k])[None])
+        m.advance(CONFIG.control_period)
+    assert work[i] == pytest.approx(m.fin_work().sum(), rel=1e-9)
+    np.testing.assert_allclose(x[i][:, -1], m.state[0], atol=1e-9)
+    assert work[i] > 0
 
 
 def test_nmpc_spins_towards_a_goal_behind_it_near_a_wall():
