@@ -97,7 +97,6 @@ class SpinTurns:
             and np.all(SPIN_CYCLE[:, :2] >= a_low - tol) and np.all(SPIN_CYCLE[:, :2] <= a_high + tol)
             and np.all(SPIN_CYCLE[:, 2:] >= b_low - tol) and np.all(SPIN_CYCLE[:, 2:] <= b_high + tol))
         self._straight = np.asarray(straight, dtype=np.float64)
-        self._turns = (SPIN_CYCLE, mirror(SPIN_CYCLE))  # left, right
         rows = []  # (turn, phase, length): length 0 spins until the target is ahead
         for turn in range(2):
             for phase in range(len(SPIN_CYCLE)):

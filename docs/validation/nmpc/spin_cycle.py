@@ -18,8 +18,8 @@ phases and from swimming (0.11 m/s) the full model turns 143-152 deg in 6 s (dis
 swept) is 1.6 J; ``--work-weight`` 0.5 / 1 / 2 give cycles of 0.86 / 0.44 / 0.11 J that turn the full
 model 136 / 119 / 86 deg (the last lines print the searched cycle's turn and work; the shipped one is the
 default search's). The 1 J^-1 cycle in the NMPC (development seeds 100-199, ``agents.evaluate``): 0.98 /
-0.96 success (full / randomised), 12.8 / 13.7 s to the goal, 1.05 J swept, against 1.00 / 0.99, 8.3 /
-8.0 s, 1.52 J with the shipped cycle: not kept.
+0.96 success (full / randomised), 12.8 / 13.7 s to the goal, 1.05 / 1.06 J swept, against 1.00 / 0.99,
+8.3 / 8.4 s, 1.52 / 1.63 J with the shipped cycle: not kept.
 """
 
 from __future__ import annotations
