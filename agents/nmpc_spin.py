@@ -7,9 +7,14 @@ new pattern's turning point and exerts the forces of that sweep (docs/model.md 3
 sequence the sweeps' surge impulses cancel and their yaw impulses add. :data:`SPIN_CYCLE` is such a
 sequence of four control periods at the NMPC's fixed period (0.5 s) and ratio (5), found by a
 cross-entropy search on the averaged model from rest (``docs/validation/nmpc/spin_cycle.py``, which
-also checks it on the full model): on the averaged model 180 deg in 6 s with the centre of mass
-within 0.08 m of its start; on the full model 147 deg within 0.09 m. The turning circle needs
-0.5 m of room for the same half turn.
+also checks it on the full model), among the cycles the robot's servos execute as commanded (the
+rules of :mod:`hardware.firmware`: every stroke, transitional ones included, within the servos' peak
+rate, each parameter within its rate limit): on the averaged model 103 deg in 6 s with the centre of
+mass within 0.08 m of its start, on the full model 89-93 deg within 0.06-0.12 m from each phase. The
+turning circle needs 0.5 m of room for a half turn. Without the servo rules the search finds a cycle
+that turns 143-147 deg in 6 s on the full model, with sweeps up to 100 deg in a power stroke's
+0.08 s: the servos would stretch its strokes, and on the emulated robot it turns 24-48 deg instead
+(docs/benchmark.md, "Goal, fifth round").
 
 :class:`SpinTurns` prices such turns on the averaged model *with* its transitional strokes
 (:class:`pectoral_gym.AveragedModel`, the identified K), which the NLP's smooth model lacks. It keeps
@@ -36,13 +41,13 @@ from pectoral_gym.models import AveragedModel
 __all__ = ["SPIN_CYCLE", "SPIN_LENGTHS", "SPIN_PERIOD", "SPIN_RATIO", "SpinTurns", "mirror"]
 
 # Left turn (omega > 0), one row per control period: amplitude right/left, bias right/left [deg]
-# (the FinInputs order); docs/validation/nmpc/spin_cycle.py. The left fin nearly parks and only
-# swings its bias: its sweeps are the transitional strokes that cancel the right fin's thrust.
+# (the FinInputs order); docs/validation/nmpc/spin_cycle.py. The left fin parks and only swings its
+# bias: its sweeps are the transitional strokes that cancel the right fin's thrust.
 SPIN_CYCLE = np.radians([
-    [16.1, 0.1, 135.0, 128.9],
-    [12.2, 0.0, 60.4, 45.0],
-    [14.4, 0.3, 79.8, 64.5],
-    [19.4, 0.0, 109.9, 91.6],
+    [6.3, 0.1, 80.8, 66.3],
+    [7.8, 0.1, 92.2, 80.3],
+    [8.4, 0.0, 108.1, 93.9],
+    [6.1, 0.0, 70.9, 54.4],
 ])
 SPIN_PERIOD = 0.5  # s: the fin-beat period the cycle was found for (the NMPC's fixed period)
 SPIN_RATIO = 5.0  # the speed ratio it was found for (the NMPC's fixed ratio)

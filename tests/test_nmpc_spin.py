@@ -10,6 +10,8 @@ import pectoral_gym  # noqa: F401 - registers the ids
 from agents.baselines import make_baseline
 from agents.nmpc_problem import pack_decision, to_z
 from agents.nmpc_spin import SPIN_CYCLE, SpinTurns, mirror
+from hardware.firmware import ServoLimits
+from hardware.safety import CommandFilter
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.models import AveragedModel, FullModel
 
@@ -46,7 +48,7 @@ def test_mirrored_cycle_mirrors_the_motion(model):
 
 
 def test_the_cycle_turns_the_full_model_on_the_spot():
-    # 6 s of the cycle from rest: most of a half turn with the centre of mass within about half a body
+    # 6 s of the cycle from rest: a quarter turn with the centre of mass within about half a body
     # length (the turning circle needs 0.5 m of room for a half turn, docs/benchmark.md)
     m = FullModel(n=1)
     m.reset()
@@ -55,8 +57,20 @@ def test_the_cycle_turns_the_full_model_on_the_spot():
         m.command_array(_beats(SPIN_CYCLE[k % 4]))
         m.advance(0.5)
         reach = max(reach, float(np.hypot(*m.state[0, :2])))
-    assert math.degrees(m.state[0, 2]) > 120.0
+    assert math.degrees(m.state[0, 2]) > 80.0
     assert reach < 0.12
+
+
+@pytest.mark.parametrize("phase", range(4))
+def test_the_robot_servos_execute_the_cycle_as_commanded(phase):
+    # the robot's command filter (clipping, period stretching of transitional strokes, rate limits)
+    # lets every step of the repeated cycle through unchanged, in both directions
+    for cycle in (SPIN_CYCLE, mirror(SPIN_CYCLE)):
+        servo = CommandFilter(ServoLimits())
+        servo.reset(_beats(cycle[(phase - 1) % 4])[0])
+        for k in range(8):
+            beats = _beats(cycle[(phase + k) % 4])[0]
+            np.testing.assert_allclose(servo(beats, 0.5), beats, atol=1e-12)
 
 
 def test_the_copy_follows_the_env_fins():

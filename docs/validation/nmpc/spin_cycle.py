@@ -4,22 +4,23 @@ A cross-entropy search on the averaged model (``pectoral_gym.AveragedModel``: id
 transitional strokes, docs/model.md 3.7) over cycles of four control periods (0.5 s each) of both
 fins' bias and amplitude, at the NMPC's fixed period (0.5 s) and ratio (5). From rest, each cycle is
 repeated for 6 s; the score is the heading gained (a left turn) minus 30 per metre by which the
-centre of mass strays more than 8 cm from its start, minus ``--work-weight`` [1/J] times the fin work
-of the strokes swept (default 0). The best cycle is printed in the FinInputs order
-of ``agents.nmpc_spin`` (amplitude right/left, bias right/left, degrees), then the turn it gives on
-both models, from rest and after 5 s of straight swimming, from each phase of the cycle::
+centre of mass strays more than 8 cm from its start, minus 100 per unit by which the robot's servo
+rules would change the cycle (:func:`servo_excess`; off with ``--no-servo-limits``), minus
+``--work-weight`` [1/J] times the fin work of the strokes swept (default 0). The best cycle is printed
+in the FinInputs order of ``agents.nmpc_spin`` (amplitude right/left, bias right/left, degrees), then
+the turn the shipped cycle gives on both models, from rest and after 5 s of straight swimming, from
+each phase of the cycle, and the searched cycle's turn and fin work::
 
-    PYTHONPATH=. python docs/validation/nmpc/spin_cycle.py [--work-weight 1.0]    # a few seconds
+    PYTHONPATH=. python docs/validation/nmpc/spin_cycle.py                      # ~15 s: the shipped cycle
+    PYTHONPATH=. python docs/validation/nmpc/spin_cycle.py --no-servo-limits --population 2000 --iterations 25
 
-Output of 2026-12-02: the cycle below (``SPIN_CYCLE`` holds it rounded to 0.1 deg); from rest at
-phase 0, averaged model 180 deg within 0.08 m, full model 147 deg within 0.09 m; from the other
-phases and from swimming (0.11 m/s) the full model turns 143-152 deg in 6 s (displacement up to
-0.28 m, mostly the glide), the averaged model 18-22 % more. The fin work of those 6 s (strokes
-swept) is 1.6 J; ``--work-weight`` 0.5 / 1 / 2 give cycles of 0.86 / 0.44 / 0.11 J that turn the full
-model 136 / 119 / 86 deg (the last lines print the searched cycle's turn and work; the shipped one is the
-default search's). The 1 J^-1 cycle in the NMPC (development seeds 100-199, ``agents.evaluate``): 0.98 /
-0.96 success (full / randomised), 12.8 / 13.7 s to the goal, 1.05 / 1.06 J swept, against 1.00 / 0.99,
-8.3 / 8.4 s, 1.52 / 1.63 J with the shipped cycle: not kept.
+Output of 2026-12-02, defaults: the shipped cycle (``SPIN_CYCLE`` holds it rounded to 0.1 deg), servo
+excess 0; full model 89-93 deg in 6 s from rest within 0.06-0.12 m, 92-100 deg from swimming at
+0.11 m/s (displacement up to 0.28 m, mostly the glide); the averaged model about 10 % more; fin work
+0.16 J. The second command finds the faster cycle of docs/benchmark.md ("Goal, fifth round"): full
+model 143-152 deg, averaged 18-22 % more, fin work 1.6 J, servo excess 2.4 (the robot would stretch
+its strokes). Without servo limits, ``--work-weight`` 0.5 / 1 / 2 (30 iterations) give cycles of 0.86 /
+0.44 / 0.11 J that turn the full model 136 / 119 / 86 deg.
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ import math
 import numpy as np
 
 from agents.nmpc_spin import SPIN_CYCLE
+from hardware.firmware import ServoLimits, clip_beats, stretch_transition
 from pectoral_gym.models import AveragedModel, FullModel
 
 STEPS, DT, CYCLE = 12, 0.5, 4
@@ -58,9 +60,35 @@ def run(model: type, cycles: np.ndarray, warm: np.ndarray | None = None, with_wo
     return (np.array(out), m.fin_work().sum(1) - before) if with_work else np.array(out)
 
 
-def search(seed: int = 0, population: int = 2000, elite: int = 100, iterations: int = 25,
-           work_weight: float = 0.0) -> np.ndarray:
-    """The best cycle ``(CYCLE, 2, 4)`` of the cross-entropy search (right fin first, model units)."""
+def servo_excess(cycles: np.ndarray, limits: ServoLimits | None = None) -> np.ndarray:
+    """How far the robot's servo rules would change each cycle ``(n, CYCLE, 2, 4)`` (0: executed as commanded).
+
+    Sums what :mod:`hardware.firmware` would do to each step of the repeated cycle: clipping (peak fin rate
+    of the regular strokes), period stretching of the transitional half-stroke from either turning point
+    of the previous step into either half-stroke of the next (the robot's ``max_speed``), and the excess of
+    each parameter's change over ``max_rate`` times the control period.
+    """
+    limits = limits or ServoLimits()
+    excess = np.zeros(len(cycles))
+    for i, cycle in enumerate(cycles):
+        for k in range(CYCLE):
+            before, beats = cycle[k - 1], cycle[k]
+            clipped = clip_beats(beats, limits)[0]
+            excess[i] += np.abs(clipped - beats).sum()
+            for turn in (before[:, 0] - before[:, 1], before[:, 0] + before[:, 1]):
+                for power in (False, True):
+                    excess[i] += np.abs(stretch_transition(clipped, turn, np.full(2, power), limits) - clipped).sum()
+            excess[i] += np.maximum(np.abs(beats - before) - np.asarray(limits.max_rate) * DT, 0.0).sum()
+    return excess
+
+
+def search(seed: int = 0, population: int = 1500, elite: int = 100, iterations: int = 30,
+           work_weight: float = 0.0, servo_limits: bool = True) -> np.ndarray:
+    """The best cycle ``(CYCLE, 2, 4)`` of the cross-entropy search (right fin first, model units).
+
+    With ``servo_limits`` a cycle pays 100 per unit of :func:`servo_excess`: the search keeps to cycles the
+    robot's servos execute as commanded.
+    """
     rng = np.random.default_rng(seed)
     shape = (CYCLE, 2, 4)
     mean, spread = (LOW + HIGH) / 2 * np.ones(shape), (HIGH - LOW) / 2 * np.ones(shape)
@@ -69,6 +97,8 @@ def search(seed: int = 0, population: int = 2000, elite: int = 100, iterations: 
         states, work = run(AveragedModel, cycles, with_work=True)
         stray = np.hypot(states[:, :, 0], states[:, :, 1]).max(0)
         score = states[-1, :, 2] - 30.0 * np.maximum(stray - 0.08, 0.0) - work_weight * work
+        if servo_limits:
+            score -= 100.0 * servo_excess(cycles)
         best = cycles[np.argsort(-score)[:elite]]
         mean, spread = best.mean(0), best.std(0) + 1e-3 * (HIGH - LOW)
     return best[0]
@@ -78,9 +108,14 @@ def main() -> None:
     """Print the searched cycle and the shipped cycle's turns on both models."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--work-weight", type=float, default=0.0, help="price of the swept fin work [1/J]")
-    parser.add_argument("--iterations", type=int, default=25, help="cross-entropy iterations")
+    parser.add_argument("--iterations", type=int, default=30, help="cross-entropy iterations")
+    parser.add_argument("--population", type=int, default=1500, help="cycles drawn per iteration")
+    parser.add_argument("--no-servo-limits", action="store_true",
+                        help="search without the robot's servo rules (hardware.firmware)")
     args = parser.parse_args()
-    cycle = search(iterations=args.iterations, work_weight=args.work_weight)
+    cycle = search(population=args.population, iterations=args.iterations, work_weight=args.work_weight,
+                   servo_limits=not args.no_servo_limits)
+    print(f"servo excess of the searched cycle: {servo_excess(cycle[None])[0]:.3g}")
     print("cycle (amplitude right, amplitude left, bias right, bias left) [deg]:")
     for row in cycle:
         print("   ", np.round(np.degrees([row[0, 1], row[1, 1], row[0, 0], row[1, 0]]), 1).tolist())
