@@ -19,6 +19,7 @@ import math
 import numpy as np
 
 from agents.nmpc_problem import FinInputs, to_z
+from agents.stop_band import band_violation
 from agents.turning import circle_room, turn_paths
 from pectoral_gym.envs.observation import Observation
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
@@ -90,7 +91,14 @@ class PlanPricing:
         return cost + self.w_togo * (self._togo(end) + math.hypot(goal[0] - end[0], goal[1] - end[1]))
 
     def _wall_violation(self, x: np.ndarray, margin: float) -> float:
-        """Sum of the squared shortfalls [m^2] of nose and tail below ``margin`` from each wall (the NLP's term)."""
+        """Sum of the squared shortfalls [m^2] of nose and tail below ``margin`` from each wall (the NLP's term).
+
+        With the robot's stopping-distance band (:attr:`NMPCSettings.stop_band`), the NLP's band term instead
+        (``margin`` unused: the band has its own).
+        """
+        band = self.problem.stop_band
+        if band is not None:
+            return float(band_violation(x[0], x[1], x[STATE_PSI], x[3], x[4], band, np))
         total = 0.0
         c, s_ = math.cos(x[STATE_PSI]), math.sin(x[STATE_PSI])
         for sign in (1.0, -1.0):

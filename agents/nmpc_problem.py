@@ -48,6 +48,7 @@ import numpy as np
 from agents.fin_map import FinMap
 from agents.nmpc_reference import reference_path
 from agents.nmpc_settings import NMPCSettings
+from agents.stop_band import StopBand, band_violation
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
@@ -197,6 +198,8 @@ class NMPCProblem:
         energy_rate: ``energy_weight`` x mean fin power per cubed amplitude: the objective's energy term
             of one fin is ``energy_rate gA^3 dt``.
         input_width: Scale of each input entry (``z``) in the input-change term ``w_change |dz / width|^2``.
+        stop_band: The :class:`agents.stop_band.StopBand` of the wall terms, or ``None`` (nose and tail
+            ``wall_margin`` from the walls).
         interval: ``(x0, z_applied, z_prev, gain) -> (end state, mean body velocities)`` over one
             control period (trapezoid over the RK4 steps).
         lbx, ubx: Bounds of the decision vector.
@@ -251,6 +254,7 @@ class NMPCProblem:
         energy_weight = config.energy_weight if s.energy_weight is None else s.energy_weight
         width = np.where(z_high > z_low, z_high - z_low, 1.0)
         half = 0.5 * params.body_length
+        band = StopBand.from_params(params, *s.stop_band) if s.stop_band is not None else None
         turn_radius = float(s.turn_radius)
         distance_scale = s.distance_scale
         if distance_scale is None:
@@ -310,11 +314,14 @@ class NMPCProblem:
             if k == 0 or block_of[k - 1] != b:  # an input change at the start of a block
                 prev = p.z_prev if b == 0 else Z[:, b - 1]
                 cost_u += s.w_change * ca.sumsqr((Z[:, b] - prev) / width)
-            for sign in (1.0, -1.0):  # nose, tail
-                px = X[0, k + 1] + sign * half * ca.cos(psi)
-                py = X[1, k + 1] + sign * half * ca.sin(psi)
-                for gap in (px, TANK_LENGTH - px, py, TANK_WIDTH - py):
-                    cost_x += s.w_wall * ca.fmax(0.0, s.wall_margin - gap) ** 2
+            if band is not None:  # the robot's stopping-distance band, whole outline
+                cost_x += s.w_wall * band_violation(X[0, k + 1], X[1, k + 1], psi, X[3, k + 1], X[4, k + 1], band, ca)
+            else:
+                for sign in (1.0, -1.0):  # nose, tail
+                    px = X[0, k + 1] + sign * half * ca.cos(psi)
+                    py = X[1, k + 1] + sign * half * ca.sin(psi)
+                    for gap in (px, TANK_LENGTH - px, py, TANK_WIDTH - py):
+                        cost_x += s.w_wall * ca.fmax(0.0, s.wall_margin - gap) ** 2
         cost = cost_x + cost_u
         nlp = {"x": ca.vertcat(ca.vec(Z), ca.vec(X)), "f": cost, "g": ca.vertcat(*g), "p": ca.vertcat(*p)}
         self.solver = _nlp_solver(nlp, s)
@@ -329,6 +336,7 @@ class NMPCProblem:
         self.rollout = ca.Function("rollout", [p.x0, Z_roll, p.z_prev, p.gain], [ca.horzcat(*x_roll)])
         self.cost = ca.Function("cost", [nlp["x"], nlp["p"]], [cost])
         self.state_cost = ca.Function("state_cost", [X, nlp["p"]], [cost_x])
+        self.stop_band = band
         self.energy_weight = float(energy_weight)
         self.energy_rate = float(energy_weight * power_per_cubed_amplitude)  # cost per s of (gA / rad)^3 of one fin
         self.input_width = width  # the scale of the input-change term, per z entry

@@ -6,6 +6,7 @@ development runs behind its default (``docs/benchmark.md``).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from agents.nmpc_reference import PREDICTIONS
@@ -126,6 +127,11 @@ class NMPCSettings:
             turn the fish within ~0.1 m, rolled out on the averaged model with its transitional strokes);
             a spin candidate that costs less than the solved plan is applied as it is. ``None``: for
             ``goal`` only.
+        stop_band: ``(margin [m], reaction time [s], coasting horizon [s])`` of the robot env's
+            stopping-distance band (:mod:`agents.stop_band`, the rule of ``hardware.safety.Geofence``): the
+            wall terms then keep the fish's whole outline out of the band instead of its nose and tail
+            ``wall_margin`` (and ``togo_wall_margin``) from the walls. ``None`` (the simulated envs, which
+            have no such band): off. ``hardware.deploy`` passes its safety settings.
     """
 
     horizon: int = 10
@@ -167,6 +173,7 @@ class NMPCSettings:
     reach_fraction: float = 0.75
     bias_span: float | str | None = "auto"
     spin: bool | None = None
+    stop_band: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         if min(int(self.horizon), int(self.substeps), int(self.max_iter), int(self.max_solves)) < 1:
@@ -195,6 +202,10 @@ class NMPCSettings:
             raise ValueError(f"heading_lookahead must be >= 0 s or None, got {self.heading_lookahead!r}")
         if self.solver not in _SOLVERS:
             raise ValueError(f"solver must be one of {_SOLVERS}, got {self.solver!r}")
+        if self.stop_band is not None and (len(self.stop_band) != 3 or not all(
+                isinstance(v, float | int) and math.isfinite(v) and v >= 0 for v in self.stop_band)):
+            raise ValueError(f"stop_band must be (margin, reaction time, horizon), finite and >= 0, got "
+                             f"{self.stop_band!r}")
         if self.blocks is not None and (min(self.blocks, default=0) < 1 or sum(self.blocks) != int(self.horizon)):
             raise ValueError(f"blocks must be positive interval counts summing to horizon={self.horizon}, "
                              f"got {self.blocks!r}")

@@ -114,12 +114,18 @@ def plot_trajectories(log_path: Path, png_path: Path) -> None:
     plt.close(fig)
 
 
-def make_controller(name: str, config, step_budget: float):
-    """The ``nmpc`` or ``hand`` baseline for the robot's env config; NMPC steps end within ``step_budget`` [s]."""
+def make_controller(name: str, config, step_budget: float, safety: SafetyConfig | None = None):
+    """The ``nmpc`` or ``hand`` baseline for the robot's env config; NMPC steps end within ``step_budget`` [s].
+
+    The NMPC plans with the stopping-distance band of the env's geofence (``safety``, default
+    :class:`hardware.safety.SafetyConfig`), so it does not swim into it (``agents.stop_band``).
+    """
     from agents.baselines import make_baseline
 
     if name == "nmpc":
-        return make_baseline("nmpc", config, step_budget=step_budget)
+        safety = safety or SafetyConfig()
+        band = (safety.geofence_margin, safety.reaction_time, safety.coast_horizon)
+        return make_baseline("nmpc", config, step_budget=step_budget, stop_band=band)
     return make_baseline(name, config)
 
 
@@ -214,7 +220,7 @@ def main(argv: list[str] | None = None) -> int:
         restore = install_stop_handlers(env.stop)
         if controller is None:
             controller = make_controller(args.controller, env.config, args.solve_fraction * args.control_period
-                                         / args.speed)
+                                         / args.speed, safety)
         summaries = run_episodes(env, controller, args.episodes, out / "steps.jsonl", args.seed, robot,
                                  progress=not args.quiet)
     finally:

@@ -1,0 +1,59 @@
+"""The NMPC's stopping-distance band (agents.stop_band) against the robot env's geofence (hardware.safety)."""
+
+import math
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from agents.baselines import make_baseline
+from agents.nmpc_settings import NMPCSettings
+from agents.stop_band import StopBand, band_violation
+from hardware.deploy import make_controller
+from hardware.safety import Geofence, SafetyConfig
+from pectoral_gym.envs.core import EnvConfig
+from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FishParams
+
+SAFETY = SafetyConfig()
+BAND = StopBand.from_params(FishParams(), SAFETY.geofence_margin, SAFETY.reaction_time, SAFETY.coast_horizon)
+
+
+def test_violation_is_positive_exactly_where_the_geofence_stops_the_fish():
+    # the geofence's own implementation decides; poses and velocities drawn over the tank
+    fence = Geofence(FishParams(), SAFETY.geofence_margin, SAFETY.reaction_time, SAFETY.coast_horizon)
+    rng = np.random.default_rng(0)
+    breached = 0
+    for _ in range(2000):
+        x, y = rng.uniform(0.05, TANK_LENGTH - 0.05), rng.uniform(0.05, TANK_WIDTH - 0.05)
+        psi, vx, vy = rng.uniform(-math.pi, math.pi), rng.uniform(-0.05, 0.2), rng.uniform(-0.05, 0.05)
+        c, s = math.cos(psi), math.sin(psi)
+        stop = fence.breached(x, y, psi, c * vx - s * vy, s * vx + c * vy)
+        assert (band_violation(x, y, psi, vx, vy, BAND, np) > 0) == stop
+        breached += stop
+    assert 200 < breached < 1800  # both kinds of state were drawn
+
+
+def test_violation_by_hand_and_in_casadi():
+    # heading +Y at 0.1 m/s, centre 0.4 m from the wall Y = W: only the nose circle and the fin discs can
+    # fall short of that wall's need; nothing moves towards the other walls (need = margin there)
+    y = TANK_WIDTH - 0.4
+    need = SAFETY.geofence_margin + 0.1 * SAFETY.reaction_time + math.log(1 + BAND.k * 0.1 * 5.0) / BAND.k
+    gaps = [0.4 - BAND.half_length - BAND.width, 0.4 + BAND.half_length - BAND.width, 0.4 - BAND.span, 0.4 - BAND.span]
+    expected = sum(max(need - g, 0.0) ** 2 for g in gaps)
+    assert expected > 0
+    got = band_violation(1.0, y, math.pi / 2, 0.1, 0.0, BAND, np)
+    assert got == pytest.approx(expected, rel=1e-12)
+    sym = ca.SX.sym("s", 5)
+    f = ca.Function("f", [sym], [band_violation(sym[0], sym[1], sym[2], sym[3], sym[4], BAND, ca)])
+    assert float(f([1.0, y, math.pi / 2, 0.1, 0.0])) == pytest.approx(expected, rel=1e-12)
+
+
+def test_deploy_plans_with_the_geofence_band_and_the_sim_does_not():
+    config = EnvConfig(model="full", task="goal")
+    nmpc = make_controller("nmpc", config, step_budget=1e6, safety=SAFETY)
+    assert nmpc.problem.stop_band == BAND
+    x = np.array([1.0, TANK_WIDTH - 0.4, math.pi / 2, 0.1, 0.0, 0.0])
+    assert nmpc._wall_violation(x, 0.03) == pytest.approx(band_violation(*x[[0, 1, 2, 3, 4]], BAND, np))
+    assert make_baseline("nmpc", config, step_budget=1e6).problem.stop_band is None
+    with pytest.raises(ValueError, match="stop_band"):
+        NMPCSettings(stop_band=(0.05, -1.0, 5.0))
