@@ -295,7 +295,7 @@ class NMPCController(PlanPricing):
         """Screen the candidates, solve from the best (the next one if that fails); the plan's first input."""
         start = time.perf_counter()
         budget = self.settings.step_budget
-        best = None
+        best = spin = None
         try:
             guesses = self._fresh_guesses()
             duals = [None] * len(guesses)
