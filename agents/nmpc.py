@@ -115,11 +115,11 @@ class NMPCController(PlanPricing):
         self._target_end = (0.0, 0.0)
         self._half_length = 0.5 * config.params.body_length
         self.problem = NMPCProblem(config, s, self.fins, self.scaling, self.z_low, self.z_high)
+        strong = 0.6 * FinInputs(*self.u_high).amplitude_right
+        self._straight = np.array(FinInputs(strong, strong, self.bias_mid, self.bias_mid))  # screened, and after spins
         self.spin = None
         if s.spin if s.spin is not None else not self.track:
-            a_high = FinInputs(*self.u_high).amplitude_right
-            spin = SpinTurns(config, self.fins, self.scaling, s.horizon,
-                             np.array(FinInputs(0.6 * a_high, 0.6 * a_high, self.bias_mid, self.bias_mid)))
+            spin = SpinTurns(config, self.fins, self.scaling, s.horizon, self._straight)
             self.spin = spin if spin.available else None
         self._solver = self.problem.solver  # the controller calls it through this attribute (tests replace it)
         self._n = self.problem.horizon
@@ -228,7 +228,7 @@ class NMPCController(PlanPricing):
         a_high, mid = FinInputs(*self.u_high).amplitude_right, self.bias_mid
         strong, weak, tight, least = 0.6 * a_high, 0.15 * a_high, 0.4 * a_high, 0.05 * a_high
         turn_steps = min(self._n, max(1, int(round(2.0 / self.dt))))
-        straight = np.array(FinInputs(strong, strong, mid, mid))
+        straight = self._straight
         guesses = [np.tile(straight[:, None], (1, self._n))]
         for pair in ((strong, weak), (weak, strong), (tight, least), (least, tight)):  # right fin stronger: left
             turn = np.array(FinInputs(*pair, mid, mid))
@@ -355,19 +355,20 @@ class NMPCController(PlanPricing):
         # energy term prices it for regular beats
         inputs = problem.energy_weight * work + spin.input_cost(u, self._u_prev, problem.input_width, s.w_change)
         costs = np.full(len(x), math.inf)
+        within = np.full(len(x), math.nan)  # the objective's terms within the horizon, of rollouts that miss the goal
         for i in np.flatnonzero(np.all(np.isfinite(x), axis=(1, 2))):
             reach = self._reach_cost(x[i])
             if reach is not None:
                 costs[i] = reach
             else:
-                costs[i] = float(problem.state_cost(x[i], p)) + inputs[i] + self.w_togo * self._togo(x[i][:, -1])
+                within[i] = float(problem.state_cost(x[i], p)) + inputs[i]
+                costs[i] = within[i] + self.w_togo * self._togo(x[i][:, -1])
         i = int(np.argmin(costs))
         if not math.isfinite(costs[i]):
             return None
         cost = costs[i]
-        if self._reach_cost(x[i]) is None and s.togo_steps > 0 and not self.track:
-            cost = (float(problem.state_cost(x[i], p)) + inputs[i]
-                    + self._continuation(x[i][:, -1], to_z(u[i][-1])))
+        if not math.isnan(within[i]) and s.togo_steps > 0 and not self.track:
+            cost = within[i] + self._continuation(x[i][:, -1], to_z(u[i][-1]))
         return float(cost), u[i].copy(), None
 
     def _shifted_duals(self, age: int) -> tuple[np.ndarray, np.ndarray] | None:
