@@ -12,7 +12,10 @@ it there, open loop, with the public :mod:`pectoral_gym.models` API:
    end heading difference (deg, wrapped).
 2. **Decomposition** of the constant-pattern error (:data:`DECOMPOSITION`): one
    fin or two, started from rest (the first command makes a transitional
-   half-stroke) or on the pattern (``reset(right=, left=)``: no transitional stroke).
+   half-stroke) or on the pattern (``reset(right=, left=)``: no transitional stroke);
+   and of every scenario by fins (:data:`FIN_SPLITS`): the same schedules with the
+   left fin at rest (one fin's yaw) or copying the right fin (mirrored fins: no net
+   moment, so both models keep heading 0 and only surge and sway are left).
 3. **Two-fin periodic steady states**: speed, turning radius and turn period
    (eq. 29) of random patterns with different left and right settings.
 4. **Single-fin held-out set and Table 4**, as ``python -m scaling validate``
@@ -46,8 +49,8 @@ from scaling.comparison import REST, label, make_model, steady_pair, summarize
 from scaling.grids import draw_off_grid
 from scaling.validate import MIN_TURN_RATE, sampling_box, single_fin_section, table4_section
 
-__all__ = ["DECOMPOSITION", "DURATION", "MIN_PATH", "SCENARIOS", "SEED_SETS", "TARGETS", "SeedSet",
-           "draw_patterns", "fidelity", "main", "open_loop", "open_loop_errors"]
+__all__ = ["DECOMPOSITION", "DURATION", "FIN_SPLITS", "MIN_PATH", "SCENARIOS", "SEED_SETS", "TARGETS", "SeedSet",
+           "draw_patterns", "fidelity", "main", "open_loop", "open_loop_errors", "split_fins"]
 
 DURATION = 40.0  # s of simulated time per open-loop run
 SAMPLE = 0.5  # s between recorded positions (the path length is summed over them)
@@ -56,6 +59,8 @@ SCENARIOS = {"constant": None, "every_4s": 4.0, "every_0.5s": 0.5}  # name: seco
 # name: (fins beating, start on the pattern)
 DECOMPOSITION = {"one_fin_from_rest": (1, False), "one_fin_on_pattern": (1, True),
                  "two_fins_from_rest": (2, False), "two_fins_on_pattern": (2, True)}
+#: name: what the left fin does in the split of each scenario (the right fin keeps its schedule)
+FIN_SPLITS = {"one_fin": "at rest", "mirrored": "the right fin's pattern, mirrored"}
 TARGETS = {  # issue 12: (median, p90) of the position error; steady state (median, worst)
     "constant": (0.02, 0.05), "every_4s": (0.03, 0.08), "every_0.5s": (0.05, 0.12),
     "steady": (0.01, 0.05), "single_fin_worst": 0.01, "table4_worst": 0.01,
@@ -89,6 +94,15 @@ def draw_patterns(rng: np.random.Generator, n: int, segments: int, ranges: np.nd
     """Patterns ``(n, segments, 2, 4)`` uniform in ``ranges`` ``(4, 2)`` (default: the envs' action ranges)."""
     ranges = EnvConfig().ranges if ranges is None else np.asarray(ranges, dtype=np.float64)
     return rng.uniform(ranges[:, 0], ranges[:, 1], size=(n, segments, 2, 4))
+
+
+def split_fins(schedule: np.ndarray, split: str) -> np.ndarray:
+    """``schedule`` with the left fin at rest (``"one_fin"``) or on the right fin's patterns (``"mirrored"``)."""
+    if split not in FIN_SPLITS:
+        raise ValueError(f"split must be one of {sorted(FIN_SPLITS)}, got {split!r}")
+    out = schedule.copy()
+    out[:, :, 1] = REST if split == "one_fin" else schedule[:, :, 0]
+    return out
 
 
 def open_loop(kind: str, schedule: np.ndarray, change_every: float | None, duration: float,
@@ -230,8 +244,7 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
     schedules = {name: draw_patterns(rng, n, 1 if every is None else math.ceil(duration / every))
                  for name, every in SCENARIOS.items()}
     base = schedules["constant"]
-    one_fin = base.copy()
-    one_fin[:, :, 1] = REST
+    one_fin = split_fins(base, "one_fin")
     def run(schedule, every=None, on=False, keep=0):
         return lambda: _scenario(schedule, every, duration, params, scaling, on, keep, transitions, ripple_offsets)
 
@@ -239,24 +252,25 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         *((("scenarios", name), run(schedules[name], every, keep=4)) for name, every in SCENARIOS.items()),
         *((("decomposition", name), run(base if fins == 2 else one_fin, on=on))
           for name, (fins, on) in DECOMPOSITION.items() if name != "two_fins_from_rest"),
+        *((("by_fins", name, split), run(split_fins(schedules[name], split), every))
+          for name, every in SCENARIOS.items() for split in FIN_SPLITS),
         (("steady",), lambda: steady_section(scaling, params, sizes["n_steady"], rng, seeds.steady_periods)),
         (("single_fin",), lambda: single_fin_section(scaling, params, sizes["n_single"], rng)),
         (("table4",), lambda: table4_section(scaling, params, sizes["table4"])),
     ]
     results: dict[str, Any] = {"seed_set": seeds.name, "seed": seeds.seed, "quick": quick, "version": __version__,
                                "source": source, "transitions": transitions, "ripple_offsets": ripple_offsets,
-                               "scenarios": {}, "decomposition": {},
-                               "timing_s": {}}
+                               "scenarios": {}, "decomposition": {}, "by_fins": {}, "timing_s": {}}
     start = time.perf_counter()
     bar = tqdm(total=len(stages) + 1, desc=f"fidelity ({seed_set})", unit="stage", disable=not progress)
     for key, run in stages:
         bar.set_postfix_str("/".join(key))
         t0 = time.perf_counter()
         value = run()
-        if len(key) == 2:
-            results[key[0]][key[1]] = value
-        else:
-            results[key[0]] = value
+        section = results
+        for part in key[:-1]:
+            section = section.setdefault(part, {})
+        section[key[-1]] = value
         results["timing_s"]["/".join(key)] = time.perf_counter() - t0
         bar.update()
     results["decomposition"]["two_fins_from_rest"] = {

@@ -21,6 +21,10 @@ def _pct(value: float | None, digits: int = 1) -> str:
     return "-" if value is None else f"{100 * value:.{digits}f} %"
 
 
+def _pair(res: dict[str, Any]) -> str:
+    return f"{_pct(res['position']['median'])} / {_pct(res['position']['p90'])}"
+
+
 def _deg(value: float | None) -> str:
     return "-" if value is None else f"{value:.1f} deg"
 
@@ -65,6 +69,12 @@ def write_markdown(results: dict[str, Any], path: Path) -> Path:
         *(f"| {k.split('_')[0]} | {'on the pattern' if v['on_pattern'] else 'from rest'} | "
           f"{_pct(v['position']['median'])} | {_pct(v['position']['p90'])} | {_deg(v['heading_deg']['median'])} | "
           f"{_deg(v['heading_deg']['p90'])} |" for k, v in sorted(dec.items())),
+        "", "## Each scenario by fins", "",
+        "The same schedules with the left fin at rest (one fin) or copying the right fin, mirrored (no net "
+        "moment: both models keep heading 0, so what is left is surge and sway). Position error median / p90.", "",
+        "| scenario | two fins | one fin | mirrored fins |", "|---|---|---|---|",
+        *(f"| {_TITLES[k]} | {_pair(sc[k])} | {_pair(results['by_fins'][k]['one_fin'])} | "
+          f"{_pair(results['by_fins'][k]['mirrored'])} |" for k in sc if k in results.get("by_fins", {})),
         "", "## Two-fin periodic steady states", "",
         f"{len(st['rows'])} patterns (periods from {st['periods']} s), {st['n_turning']} turning faster than "
         f"{st['min_turn_rate']} rad/s (radius and period are compared on those); turning the other way: "

@@ -122,6 +122,27 @@ def test_repeating_the_same_pattern_is_the_constant_scenario():
     assert a.shape == (3, 9, 3)
 
 
+@pytest.mark.parametrize("kind", ["full", "averaged"])
+def test_mirrored_fins_keep_the_heading(kind):
+    """Mirrored fins have no net moment or sway force (eq. 18 mirrored): a fish from rest swims straight."""
+    from pectoral_gym.kfunctions import ScalingFunctions
+
+    schedule = fd.split_fins(fd.draw_patterns(np.random.default_rng(5), 4, 6), "mirrored")
+    np.testing.assert_array_equal(schedule[:, :, 1], schedule[:, :, 0])
+    poses = fd.open_loop(kind, schedule, 0.5, 3.0, FishParams(), ScalingFunctions.load())
+    assert np.all(np.abs(poses[:, :, 0]).max(axis=1) > 1e-3)  # they do swim
+    np.testing.assert_allclose(poses[:, :, 1:], 0.0, atol=1e-12)
+
+
+def test_one_fin_split_parks_the_left_fin():
+    schedule = fd.draw_patterns(np.random.default_rng(6), 3, 4)
+    one = fd.split_fins(schedule, "one_fin")
+    np.testing.assert_array_equal(one[:, :, 0], schedule[:, :, 0])
+    assert np.all(one[:, :, 1, 1] == 0.0)
+    with pytest.raises(ValueError, match="split must be one of"):
+        fd.split_fins(schedule, "left")
+
+
 def test_draw_patterns_inside_the_env_ranges():
     from pectoral_gym.envs.core import EnvConfig
 
@@ -138,11 +159,13 @@ def test_quick_cli_end_to_end(tmp_path, capsys):
     data = json.loads((tmp_path / "fidelity_dev_no_transitions_no_offsets.json").read_text())
     assert not data["transitions"] and not data["ripple_offsets"] and data["quick"] and data["seed_set"] == "dev"
     assert set(data["scenarios"]) == set(fd.SCENARIOS) and set(data["decomposition"]) == set(fd.DECOMPOSITION)
+    assert set(data["by_fins"]) == set(fd.SCENARIOS)
+    assert all(set(v) == set(fd.FIN_SPLITS) for v in data["by_fins"].values())
     assert len(data["targets"]) == 16
     for name in data["plots"]:
         assert (tmp_path / name).read_bytes()[:8] == PNG_MAGIC
     report = (tmp_path / "fidelity_dev_no_transitions_no_offsets.md").read_text()
-    assert "## Decomposition" in report and "changed every 0.5 s" in report
+    assert "## Decomposition" in report and "changed every 0.5 s" in report and "## Each scenario by fins" in report
     assert "transitions off, ripple offsets off" in capsys.readouterr().out
     with pytest.raises(SystemExit):
         scaling_main(["fidelity", "--set", "tuning"])
