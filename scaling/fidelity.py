@@ -163,6 +163,11 @@ def _scenario(schedule, change_every, duration, params, scaling, on_pattern=Fals
     return out
 
 
+def _summary_only(stage):
+    """``stage`` with its result cut to the summaries (no per-fish errors or labels: the JSON stays small)."""
+    return lambda: {k: v for k, v in stage().items() if k not in ("errors", "first_pattern")}
+
+
 def steady_section(scaling: ScalingFunctions, params: FishParams, n: int, rng: np.random.Generator,
                    periods: tuple[float, ...]) -> dict[str, Any]:
     """Two-fin periodic steady states: speed, radius and period errors (radius and period of turning fish)."""
@@ -252,7 +257,7 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         *((("scenarios", name), run(schedules[name], every, keep=4)) for name, every in SCENARIOS.items()),
         *((("decomposition", name), run(base if fins == 2 else one_fin, on=on))
           for name, (fins, on) in DECOMPOSITION.items() if name != "two_fins_from_rest"),
-        *((("by_fins", name, split), run(split_fins(schedules[name], split), every))
+        *((("by_fins", name, split), _summary_only(run(split_fins(schedules[name], split), every)))
           for name, every in SCENARIOS.items() for split in FIN_SPLITS),
         (("steady",), lambda: steady_section(scaling, params, sizes["n_steady"], rng, seeds.steady_periods)),
         (("single_fin",), lambda: single_fin_section(scaling, params, sizes["n_single"], rng)),

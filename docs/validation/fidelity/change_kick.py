@@ -1,0 +1,87 @@
+"""The heading kick of one pattern change: how far the averaged model's turn departs from the full model's.
+
+The measurement behind docs/validation/fidelity/README.md, "Where the error with changing commands comes
+from": ``PYTHONPATH=. python docs/validation/fidelity/change_kick.py`` (~2 min; 512 one-fin pattern pairs
+of a development seed, not the benchmark's).
+
+Each fish beats one fin (the left at rest) on a pattern ``A`` from the envs' action ranges, started on
+it (no transitional stroke), and is switched to a pattern ``B`` at a random time between 12 and 14 s
+(so at a random stroke phase). One fin's periodic steady states agree between the models to 0.2 %
+(``python -m scaling validate``), so before the switch and a few seconds after it both models turn at
+the same rate and their heading difference is constant up to the full model's in-beat ripple. The
+*kick error* is that difference (averaged minus full), averaged over one period of ``B`` 3 s after
+the switch, minus the same over one period of ``A`` just before it: the heading the averaged model
+gains or loses through one change. Rows: the default model, without the ripple offset
+(docs/model.md 3.8), without the transitional forcing either (3.7), and a control in which ``B = A``
+(the command changes nothing: the noise floor of the measurement).
+"""
+
+import math
+import sys
+
+import numpy as np
+
+from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.models import AveragedModel, FullModel
+from pectoral_gym.params import FinBeat, FishParams
+from scaling.fidelity import DURATION, SEED_SETS, draw_patterns
+
+N, DT = 512, 0.01
+START, WINDOW, AFTER = 10.0, 10.0, 3.0  # record [START, START + WINDOW); measure 3 s after the switch
+params, scaling = FishParams(), ScalingFunctions.load()
+rng = np.random.default_rng(SEED_SETS["dev"].seed + 77)
+pairs = draw_patterns(rng, N, 2)  # (N, 2 patterns, 2 fins, 4)
+pairs[:, :, 1] = FinBeat.rest().as_array()
+switch = 12.0 + rng.uniform(0.0, 2.0, N)
+
+
+def headings(model, patterns):
+    """Headings ``(N, samples)`` every DT s over the recorded window; fish ``i`` switches at ``switch[i]``."""
+    model.reset(right=patterns[:, 0, 0], left=patterns[:, 0, 1])
+    model.advance(START)
+    switched = np.zeros(N, dtype=bool)
+    out = []
+    for k in range(round(WINDOW / DT)):
+        due = ~switched & (switch <= START + k * DT + 1e-9)
+        if due.any():
+            model.command_array(np.ascontiguousarray(patterns[:, 1]), mask=due)
+            switched |= due
+        out.append(model.state[:, 2].copy())
+        model.advance(DT)
+    return np.stack(out, axis=1)
+
+
+def window_mean(x, start, period):
+    """Mean of each row of ``x`` over ``[start, start + period)`` (times in s, per fish)."""
+    t = START + DT * np.arange(x.shape[1])
+    inside = (t >= start[:, None] - 1e-9) & (t < (start + period)[:, None] - 1e-9)
+    return np.sum(x * inside, axis=1) / np.sum(inside, axis=1)
+
+
+def kick_errors(patterns, **options):
+    """Kick error [deg] per fish of ``AveragedModel(**options)`` against the full model."""
+    full = headings(FullModel(N, params), patterns)
+    averaged = headings(AveragedModel(N, params, scaling=scaling, **options), patterns)
+    gap = averaged - full
+    before = window_mean(gap, switch - patterns[:, 0, 0, 2], patterns[:, 0, 0, 2])
+    after = window_mean(gap, switch + AFTER, patterns[:, 1, 0, 2])
+    return np.degrees(after - before)
+
+
+same = pairs.copy()
+same[:, 1] = same[:, 0]
+variants = {
+    "control: B = A (no change)": (same, {}),
+    "default model": (pairs, {}),
+    "without the ripple offset": (pairs, {"ripple_offsets": False}),
+    "cycle averages alone (no transitions, no offset)": (pairs, {"transitions": False, "ripple_offsets": False}),
+}
+if "--only-default" in sys.argv[1:]:
+    variants = {"default model": variants["default model"]}
+rows = {name: kick_errors(patterns, **options) for name, (patterns, options) in variants.items()}
+print("| model | kick error median abs | p90 | rms | signed median | random walk over 80 changes, rms |")
+print("|---|---|---|---|---|---|")
+for name, e in rows.items():
+    rms = math.sqrt(np.mean(e**2))
+    print(f"| {name} | {np.median(np.abs(e)):.2f} deg | {np.percentile(np.abs(e), 90):.2f} deg | {rms:.2f} deg | "
+          f"{np.median(e):+.2f} deg | {rms * math.sqrt(DURATION / 0.5):.0f} deg |")
