@@ -14,6 +14,13 @@ the switch, minus the same over one period of ``A`` just before it: the heading 
 gains or loses through one change. Rows: the default model, without the ripple offset
 (docs/model.md 3.8), without the transitional forcing either (3.7), and a control in which ``B = A``
 (the command changes nothing: the noise floor of the measurement).
+
+``--only-default`` prints the default model's row alone: with ``change_kick_scales.patch`` applied in a
+worktree, environment variables scale each yaw term of the transitions and the ripple offset (the scans
+of the README named above; each run needs a fresh ``NUMBA_CACHE_DIR``, the scales are compile-time constants).
+``--linear-world``, with ``linear_damping.patch`` applied and ``LINEAR_YAW_DAMPING`` set: both models with a
+linear yaw damping, equal surge and sway masses (no Munk moment) and K = 1, where the transitional
+forcing and the ripple offset should leave no kick at all.
 """
 
 import math
@@ -29,6 +36,8 @@ from scaling.fidelity import DURATION, SEED_SETS, draw_patterns
 N, DT = 512, 0.01
 START, WINDOW, AFTER = 10.0, 10.0, 3.0  # record [START, START + WINDOW); measure 3 s after the switch
 params, scaling = FishParams(), ScalingFunctions.load()
+if "--linear-world" in sys.argv[1:]:  # with linear_damping.patch: no Munk moment (m1 = m2), K = 1
+    params, scaling = params.replace(added_mass_y=params.added_mass_x), ScalingFunctions.unit()
 rng = np.random.default_rng(SEED_SETS["dev"].seed + 77)
 pairs = draw_patterns(rng, N, 2)  # (N, 2 patterns, 2 fins, 4)
 pairs[:, :, 1] = FinBeat.rest().as_array()
