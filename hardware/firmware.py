@@ -51,7 +51,10 @@ def _default_rate() -> tuple[float, float, float, float]:
 class ServoLimits:
     """What the fin servos can do; commands are clipped to these (PC side and robot side alike).
 
-    Defaults admit every pattern of the simulated environments' default action ranges unchanged.
+    The defaults admit the simulated environments' default action ranges except their fastest strokes:
+    a power stroke peaks at ``pi A (zeta + 1) / T_p`` (eq. 21), above ``max_speed`` for large amplitudes
+    at short periods and high ratios, e.g. 19.7 rad/s for (90 deg, 30 deg, 0.5 s, 5), which
+    :func:`clip_beats` slows to a 0.76 s period.
 
     Attributes:
         angle_min: Smallest fin angle [rad] (stroke ``bias - amplitude``).
