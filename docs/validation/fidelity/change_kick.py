@@ -20,7 +20,7 @@ worktree, environment variables scale each yaw term of the transitions and the r
 of the README named above; each run needs a fresh ``NUMBA_CACHE_DIR``, the scales are compile-time constants).
 ``--linear-world``, with ``linear_damping.patch`` applied and ``LINEAR_YAW_DAMPING`` set: both models with a
 linear yaw damping, equal surge and sway masses (no Munk moment) and K = 1, where the transitional
-forcing and the ripple offset should leave no kick at all.
+forcing and the ripple offset should leave no kick at all. ``--coefficients PATH``: another coefficients file.
 """
 
 import math
@@ -36,6 +36,8 @@ from scaling.fidelity import DURATION, SEED_SETS, draw_patterns
 N, DT = 512, 0.01
 START, WINDOW, AFTER = 10.0, 10.0, 3.0  # record [START, START + WINDOW); measure 3 s after the switch
 params, scaling = FishParams(), ScalingFunctions.load()
+if "--coefficients" in sys.argv[1:]:  # another coefficients file, e.g. the opt-in waveform one
+    scaling = ScalingFunctions.load(sys.argv[sys.argv.index("--coefficients") + 1])
 if "--linear-world" in sys.argv[1:]:  # with linear_damping.patch: no Munk moment (m1 = m2), K = 1
     params, scaling = params.replace(added_mass_y=params.added_mass_x), ScalingFunctions.unit()
 rng = np.random.default_rng(SEED_SETS["dev"].seed + 77)
