@@ -297,7 +297,8 @@ def add_parser(sub) -> None:
     """The ``fidelity`` subcommand of ``python -m scaling``."""
     p = sub.add_parser("fidelity", help="averaged vs full model with two fins and changing commands (issue 12)",
                        description="Fidelity benchmark: open-loop runs with constant and changing two-fin patterns, "
-                       "their decomposition (one fin / two, from rest / on the pattern), two-fin steady states, the "
+                       "their decomposition (one fin / two, from rest / on the pattern), each scenario split by "
+                       "fins (left fin at rest; mirrored fins), two-fin steady states, the "
                        "single-fin held-out set and Table 4. Writes fidelity_<set>[_no_transitions][_no_offsets].md, "
                        ".json and PNG plots.")
     p.add_argument("--set", dest="seed_set", choices=sorted(SEED_SETS), default="dev",
