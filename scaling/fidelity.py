@@ -258,7 +258,8 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         *((("decomposition", name), run(base if fins == 2 else one_fin, on=on))
           for name, (fins, on) in DECOMPOSITION.items() if name != "two_fins_from_rest"),
         *((("by_fins", name, split), _summary_only(run(split_fins(schedules[name], split), every)))
-          for name, every in SCENARIOS.items() for split in FIN_SPLITS),
+          for name, every in SCENARIOS.items() for split in FIN_SPLITS
+          if (name, split) != ("constant", "one_fin")),  # that one is decomposition/one_fin_from_rest
         (("steady",), lambda: steady_section(scaling, params, sizes["n_steady"], rng, seeds.steady_periods)),
         (("single_fin",), lambda: single_fin_section(scaling, params, sizes["n_single"], rng)),
         (("table4",), lambda: table4_section(scaling, params, sizes["table4"])),
@@ -280,6 +281,8 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         bar.update()
     results["decomposition"]["two_fins_from_rest"] = {
         k: v for k, v in results["scenarios"]["constant"].items() if k != "paths"}
+    results["by_fins"]["constant"]["one_fin"] = {
+        k: v for k, v in results["decomposition"]["one_fin_from_rest"].items() if k not in ("errors", "first_pattern")}
     results["targets"] = _targets(results)
     bar.set_postfix_str("report")
     stem = (f"fidelity_{seeds.name}" + ("" if transitions else "_no_transitions")

@@ -74,7 +74,7 @@ def write_markdown(results: dict[str, Any], path: Path) -> Path:
         "moment: both models keep heading 0, so what is left is surge and sway). Position error median / p90.", "",
         "| scenario | two fins | one fin | mirrored fins |", "|---|---|---|---|",
         *(f"| {_TITLES[k]} | {_pair(sc[k])} | {_pair(results['by_fins'][k]['one_fin'])} | "
-          f"{_pair(results['by_fins'][k]['mirrored'])} |" for k in sc if k in results.get("by_fins", {})),
+          f"{_pair(results['by_fins'][k]['mirrored'])} |" for k in sc),
         "", "## Two-fin periodic steady states", "",
         f"{len(st['rows'])} patterns (periods from {st['periods']} s), {st['n_turning']} turning faster than "
         f"{st['min_turn_rate']} rad/s (radius and period are compared on those); turning the other way: "

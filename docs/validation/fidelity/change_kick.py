@@ -46,53 +46,66 @@ pairs[:, :, 1] = FinBeat.rest().as_array()
 switch = 12.0 + rng.uniform(0.0, 2.0, N)
 
 
-def headings(model, patterns):
-    """Headings ``(N, samples)`` every DT s over the recorded window; fish ``i`` switches at ``switch[i]``."""
+def record(model, patterns):
+    """States ``(N, samples, 6)`` every DT s over the recorded window and each fish's switch time on that grid.
+
+    Fish ``i`` is started on ``patterns[i, 0]`` and switched to ``patterns[i, 1]`` at ``switch[i]``.
+    """
     model.reset(right=patterns[:, 0, 0], left=patterns[:, 0, 1])
     model.advance(START)
-    switched = np.zeros(N, dtype=bool)
-    out = []
+    switched, at, out = np.zeros(N, dtype=bool), np.zeros(N), []
     for k in range(round(WINDOW / DT)):
         due = ~switched & (switch <= START + k * DT + 1e-9)
         if due.any():
             model.command_array(np.ascontiguousarray(patterns[:, 1]), mask=due)
             switched |= due
-        out.append(model.state[:, 2].copy())
+            at[due] = START + k * DT
+        out.append(model.state.copy())
         model.advance(DT)
-    return np.stack(out, axis=1)
+    return np.stack(out, axis=1), at
 
 
-def window_mean(x, start, period):
-    """Mean of each row of ``x`` over ``[start, start + period)`` (times in s, per fish)."""
-    t = START + DT * np.arange(x.shape[1])
+def window_mean(x, t, start, period):
+    """Mean of each row of ``x`` (sampled at times ``t``) over ``[start, start + period)`` (per row)."""
     inside = (t >= start[:, None] - 1e-9) & (t < (start + period)[:, None] - 1e-9)
     return np.sum(x * inside, axis=1) / np.sum(inside, axis=1)
 
 
+def kick(gap, t, patterns, index=slice(None)):
+    """The kick [rad] in a heading gap: its mean over a period of B AFTER s after the switch minus that before it."""
+    before = window_mean(gap, t, switch[index] - patterns[index, 0, 0, 2], patterns[index, 0, 0, 2])
+    after = window_mean(gap, t, switch[index] + AFTER, patterns[index, 1, 0, 2])
+    return after - before
+
+
 def kick_errors(patterns, **options):
     """Kick error [deg] per fish of ``AveragedModel(**options)`` against the full model."""
-    full = headings(FullModel(N, params), patterns)
-    averaged = headings(AveragedModel(N, params, scaling=scaling, **options), patterns)
-    gap = averaged - full
-    before = window_mean(gap, switch - patterns[:, 0, 0, 2], patterns[:, 0, 0, 2])
-    after = window_mean(gap, switch + AFTER, patterns[:, 1, 0, 2])
-    return np.degrees(after - before)
+    full, _ = record(FullModel(N, params), patterns)
+    averaged, _ = record(AveragedModel(N, params, scaling=scaling, **options), patterns)
+    grid = START + DT * np.arange(full.shape[1])
+    return np.degrees(kick(averaged[:, :, 2] - full[:, :, 2], grid, patterns))
 
 
-same = pairs.copy()
-same[:, 1] = same[:, 0]
-variants = {
-    "control: B = A (no change)": (same, {}),
-    "default model": (pairs, {}),
-    "without the ripple offset": (pairs, {"ripple_offsets": False}),
-    "cycle averages alone (no transitions, no offset)": (pairs, {"transitions": False, "ripple_offsets": False}),
-}
-if "--only-default" in sys.argv[1:]:
-    variants = {"default model": variants["default model"]}
-rows = {name: kick_errors(patterns, **options) for name, (patterns, options) in variants.items()}
-print("| model | kick error median abs | p90 | rms | signed median | random walk over 80 changes, rms |")
-print("|---|---|---|---|---|---|")
-for name, e in rows.items():
-    rms = math.sqrt(np.mean(e**2))
-    print(f"| {name} | {np.median(np.abs(e)):.2f} deg | {np.percentile(np.abs(e), 90):.2f} deg | {rms:.2f} deg | "
-          f"{np.median(e):+.2f} deg | {rms * math.sqrt(DURATION / 0.5):.0f} deg |")
+def main() -> None:
+    """Print the table of the module docstring."""
+    same = pairs.copy()
+    same[:, 1] = same[:, 0]
+    variants = {
+        "control: B = A (no change)": (same, {}),
+        "default model": (pairs, {}),
+        "without the ripple offset": (pairs, {"ripple_offsets": False}),
+        "cycle averages alone (no transitions, no offset)": (pairs, {"transitions": False, "ripple_offsets": False}),
+    }
+    if "--only-default" in sys.argv[1:]:
+        variants = {"default model": variants["default model"]}
+    rows = {name: kick_errors(patterns, **options) for name, (patterns, options) in variants.items()}
+    print("| model | kick error median abs | p90 | rms | signed median | random walk over 80 changes, rms |")
+    print("|---|---|---|---|---|---|")
+    for name, e in rows.items():
+        rms = math.sqrt(np.mean(e**2))
+        print(f"| {name} | {np.median(np.abs(e)):.2f} deg | {np.percentile(np.abs(e), 90):.2f} deg | {rms:.2f} deg | "
+              f"{np.median(e):+.2f} deg | {rms * math.sqrt(DURATION / 0.5):.0f} deg |")
+
+
+if __name__ == "__main__":
+    main()

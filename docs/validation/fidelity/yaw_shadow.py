@@ -19,58 +19,26 @@ that model's kick error, and what is left of it once the shadow's estimate is ad
 
 import math
 
+import change_kick as ck  # this folder (the script's own): change_kick.py's fish, recording and windows
 import numba as nb
 import numpy as np
 
 from pectoral_gym.averaging import EXACT, averaged_fin_forcing
-from pectoral_gym.dynamics import fin_force_right, oscillating_square_mean
-from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.dynamics import fin_force_right, oscillating_square_mean, stroke_kinematics
 from pectoral_gym.models import AveragedModel, FullModel
-from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
-from scaling.fidelity import SEED_SETS, draw_patterns
+from pectoral_gym.params import coefficient_vector
 
-N, DT, START, WINDOW, AFTER, H = 512, 0.01, 10.0, 10.0, 3.0, 0.002
-params, scaling = FishParams(), ScalingFunctions.load()
-rng = np.random.default_rng(SEED_SETS["dev"].seed + 77)  # change_kick.py's fish
-pairs = draw_patterns(rng, N, 2)
-pairs[:, :, 1] = FinBeat.rest().as_array()
-switch = 12.0 + rng.uniform(0.0, 2.0, N)
+H = 0.002  # s, the shadows' step
+params, scaling, pairs, switch = ck.params, ck.scaling, ck.pairs, ck.switch
 C4, J3, MUNK = params.c4, params.J3, (params.m1 - params.m2) / params.J3
 K_DRAG, K_INERTIA, ARM = params.fin_drag_constant, params.fin_inertia_constant, params.fin_offset
-
-
-def record(model):
-    """``(N, samples, 4)`` of psi, vx, vy, omega every DT s, and each fish's switch time on the grid."""
-    model.reset(right=pairs[:, 0, 0], left=pairs[:, 0, 1])
-    model.advance(START)
-    switched, at, out = np.zeros(N, dtype=bool), np.zeros(N), []
-    for k in range(round(WINDOW / DT)):
-        due = ~switched & (switch <= START + k * DT + 1e-9)
-        if due.any():
-            model.command_array(np.ascontiguousarray(pairs[:, 1]), mask=due)
-            switched |= due
-            at[due] = START + k * DT
-        out.append(model.state[:, 2:6].copy())
-        model.advance(DT)
-    return np.stack(out, axis=1), at
-
-
-def window_gap(t, gap, i):
-    """Mean of ``gap`` over a period of B from AFTER s after the switch, minus its mean over a period of A before."""
-    ta, tb = pairs[i, 0, 0, 2], pairs[i, 1, 0, 2]
-    before = (t >= switch[i] - ta - 1e-9) & (t < switch[i] - 1e-9)
-    after = (t >= switch[i] + AFTER - 1e-9) & (t < switch[i] + AFTER + tb - 1e-9)
-    return gap[after].mean() - gap[before].mean()
 
 
 @nb.njit
 def _moment(t, starts, durations, angle_from, angle_to):
     j = np.searchsorted(starts, t, side="right") - 1
-    mid, half = 0.5 * (angle_from[j] + angle_to[j]), 0.5 * (angle_to[j] - angle_from[j])
-    rate = math.pi / durations[j]
-    phase = rate * (t - starts[j])
-    fx, _ = fin_force_right(mid - half * math.cos(phase), half * rate * math.sin(phase),
-                            half * rate * rate * math.cos(phase), K_DRAG, K_INERTIA)  # eqs. (16), (21)
+    g, gd, gdd = stroke_kinematics(t - starts[j], durations[j], angle_from[j], angle_to[j])  # eq. (21)
+    fx, _ = fin_force_right(g, gd, gdd, K_DRAG, K_INERTIA)  # eq. (16)
     return ARM * fx / J3  # eq. (18), right fin
 
 
@@ -132,21 +100,21 @@ def closure_heading(t0, t1, omega0, latch, a, b, munk_t, munk):
     return psi
 
 
-full, at = record(FullModel(N, params))
-averaged, _ = record(AveragedModel(N, params, scaling=scaling))
-grid = START + DT * np.arange(full.shape[1])
-error = np.array([window_gap(grid, averaged[i, :, 0] - full[i, :, 0], i) for i in range(N)])
-estimate = np.empty(N)
-for i in range(N):
+full, at = ck.record(FullModel(ck.N, params), pairs)
+averaged, _ = ck.record(AveragedModel(ck.N, params, scaling=scaling), pairs)
+grid = ck.START + ck.DT * np.arange(full.shape[1])
+error = ck.kick(averaged[:, :, 2] - full[:, :, 2], grid, pairs)
+estimate = np.empty(ck.N)
+for i in range(ck.N):
     a, b = pairs[i, 0, 0], pairs[i, 1, 0]
-    t0, t1 = switch[i] - 4.0 * a[2], switch[i] + AFTER + b[2] + 0.1
+    t0, t1 = switch[i] - 4.0 * a[2], switch[i] + ck.AFTER + b[2] + 0.1
     starts, durations, angle_from, angle_to = strokes(a, b, at[i], t1 + b[2])
     latch = starts[np.searchsorted(starts, at[i] - 1e-12)]
-    munk = MUNK * averaged[i, :, 1] * averaged[i, :, 2]
-    omega0 = float(np.interp(t0, grid, averaged[i, :, 3]))
+    munk = MUNK * averaged[i, :, 3] * averaged[i, :, 4]
+    omega0 = float(np.interp(t0, grid, averaged[i, :, 5]))
     gap = (shadow_heading(t0, t1, omega0, starts, durations, angle_from, angle_to, grid, munk)
            - closure_heading(t0, t1, omega0, latch, a, b, grid, munk))
-    estimate[i] = window_gap(t0 + H * np.arange(gap.size), gap, i)
+    estimate[i] = ck.kick(gap[None, :], t0 + H * np.arange(gap.size), pairs, [i])[0]
 error, estimate = np.degrees(error), np.degrees(estimate)
 left = error + estimate
 print(f"correlation of the kick error with minus the shadow's estimate: {np.corrcoef(error, -estimate)[0, 1]:.3f}")

@@ -15,13 +15,12 @@ over the pairs turning faster than 0.02 rad/s.
 """
 
 import json
-import math
 from pathlib import Path
 
 import numba as nb
 import numpy as np
 
-from pectoral_gym.dynamics import fin_force_right
+from pectoral_gym.dynamics import fin_force_right, stroke_kinematics
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.params import FishParams
 from scaling.comparison import steady_pair
@@ -48,9 +47,8 @@ def fin_moment(t, beat, side):
         start, end, duration = bias - amplitude, bias + amplitude, power
     else:
         start, end, duration, s = bias + amplitude, bias - amplitude, period - power, s - power
-    mid, half, rate = 0.5 * (start + end), 0.5 * (end - start), math.pi / duration
-    fx, _ = fin_force_right(mid - half * math.cos(rate * s), half * rate * math.sin(rate * s),
-                            half * rate * rate * math.cos(rate * s), K_DRAG, K_INERTIA)
+    g, gd, gdd = stroke_kinematics(s, duration, start, end)  # eq. (21)
+    fx, _ = fin_force_right(g, gd, gdd, K_DRAG, K_INERTIA)  # eq. (16)
     return side * ARM * fx / J3
 
 
