@@ -8,8 +8,10 @@
   ``reset`` on termination or truncation;
 * native vector-env rates through ``gymnasium.make_vec(...,
   vectorization_mode="vector_entry_point")`` (averaged at 4096 envs, full at
-  1024 envs, and the averaged env with the shipped PPO file's settings,
-  :data:`TRAINING_SETTINGS`), in env-steps per second (batch steps x ``num_envs``).
+  1024 envs, the averaged env with the shipped PPO file's settings,
+  :data:`TRAINING_SETTINGS`, and the full env with its fast integration preset,
+  :data:`FAST_SETTINGS`, at 4096 envs beside the averaged one), in env-steps per
+  second (batch steps x ``num_envs``).
 
 Every action is drawn afresh, so the fins change pattern at every step, as under
 a learning agent. ``pectoral-fish bench --against DIR`` runs the same benchmark
@@ -18,7 +20,7 @@ in another checkout, alternating with this one (:mod:`pectoral_gym.bench_compare
 Every measurement is warmed up first (numba compiles, or loads its cache, on
 the first call; that time is excluded) and the best of ``repeats`` timed runs
 is kept, since noise only ever slows a run down. The repeats go round robin
-over all five measurements, so a burst of load from elsewhere on the machine
+over all seven measurements, so a burst of load from elsewhere on the machine
 slows CartPole and the fish envs alike instead of skewing one ratio. The result is compared with
 the project's targets (:data:`TARGETS`).
 """
@@ -35,7 +37,8 @@ from typing import Any, NamedTuple
 import numpy as np
 
 __all__ = [
-    "AVERAGED_ID", "CARTPOLE_ID", "FULL_ID", "SINGLE_ENVS", "TARGETS", "TRAINING_SETTINGS", "VECTOR_ENVS",
+    "AVERAGED_ID", "CARTPOLE_ID", "FAST_SETTINGS", "FULL_ID", "SINGLE_ENVS", "TARGETS", "TRAINING_SETTINGS",
+    "VECTOR_ENVS",
     "run_benchmark", "single_env_timer", "vector_env_timer",
 ]
 
@@ -47,6 +50,9 @@ VECTOR_ENVS = {AVERAGED_ID: 4096, FULL_ID: 1024}  # env id -> num_envs
 #: The averaged env as agents/hyperparams/ppo.yml trains on it (its ``env_kwargs``), measured at 4096 envs too.
 TRAINING_SETTINGS = {"transitions": True, "observe_fins": True}
 TRAINING_KEY = f"{AVERAGED_ID} (PPO settings)"
+#: The full env with the fast integration preset (``pectoral_gym.models.FULL_INTEGRATION``), at the averaged env's size.
+FAST_SETTINGS = {"integration": "fast"}
+FAST_KEY = f"{FULL_ID} (fast integration)"
 
 # name -> (threshold, what it is compared with)
 TARGETS: dict[str, tuple[float, str]] = {
@@ -205,6 +211,8 @@ def run_benchmark(
     makers.update({f"vector:{e}": partial(vector_env_timer, e, n, vector_steps, seed) for e, n in VECTOR_ENVS.items()})
     makers[f"vector:{TRAINING_KEY}"] = partial(vector_env_timer, AVERAGED_ID, VECTOR_ENVS[AVERAGED_ID], vector_steps,
                                                seed, TRAINING_SETTINGS)
+    makers[f"vector:{FAST_KEY}"] = partial(vector_env_timer, FULL_ID, VECTOR_ENVS[AVERAGED_ID], vector_steps, seed,
+                                           FAST_SETTINGS)
     timers: dict[str, _Timer] = {}
     for key, make in makers.items():
         timer = attempt(key, make)
@@ -225,7 +233,7 @@ def run_benchmark(
         for timer in timers.values():
             timer.close()
     single = {env_id: best.get(env_id) for env_id in SINGLE_ENVS}
-    vector = {env_id: best.get(f"vector:{env_id}") for env_id in (*VECTOR_ENVS, TRAINING_KEY)}
+    vector = {env_id: best.get(f"vector:{env_id}") for env_id in (*VECTOR_ENVS, TRAINING_KEY, FAST_KEY)}
 
     def ratio(a: float | None, b: float | None) -> float | None:
         return a / b if a is not None and b else None
@@ -243,7 +251,7 @@ def run_benchmark(
     return {
         "single_env": single,
         "vector_env": vector,
-        "num_envs": {**VECTOR_ENVS, TRAINING_KEY: VECTOR_ENVS[AVERAGED_ID]},
+        "num_envs": {**VECTOR_ENVS, TRAINING_KEY: VECTOR_ENVS[AVERAGED_ID], FAST_KEY: VECTOR_ENVS[AVERAGED_ID]},
         "ratios": ratios,
         "targets": targets,
         "all_met": all(t["met"] for t in targets.values()),

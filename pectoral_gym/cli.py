@@ -283,10 +283,10 @@ def _cmd_bench(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int
     rate = lambda v: "failed" if v is None else f"{v:>14,.0f}"  # noqa: E731
     print("single env (gymnasium.make), steps/s:")
     for env_id, value in res["single_env"].items():
-        print(f"  {env_id:<28} {rate(value)}")
+        print(f"  {env_id:<40} {rate(value)}")
     print("native vector env, env-steps/s:")
     for env_id, value in res["vector_env"].items():
-        print(f"  {env_id:<28} {rate(value)}  @ {res['num_envs'][env_id]} envs")
+        print(f"  {env_id:<40} {rate(value)}  @ {res['num_envs'][env_id]} envs")
     print("targets:")
     for t in res["targets"].values():
         value = "n/a" if t["value"] is None else (f"{t['value']:.3f}" if t["target"] < 100 else f"{t['value']:,.0f}")

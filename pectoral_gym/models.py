@@ -23,10 +23,17 @@ from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.ktables import KTables
 from pectoral_gym.params import COEF_NAMES, FinBeat, FishParams, coefficient_vector
 
-__all__ = ["FishModel", "FullModel", "AveragedModel", "MODELS", "make_model", "validate_beats", "REST"]
+__all__ = ["FishModel", "FullModel", "AveragedModel", "MODELS", "FULL_INTEGRATION", "make_model", "validate_beats",
+           "REST"]
 
 REST = FinBeat.rest()
 MODELS = ("full", "averaged")
+#: The full model's integration presets, ``name: (dt_max [s], min_substeps)``. ``"reference"`` is
+#: converged (halving both moves steady states by < 0.02 %); ``"fast"`` takes 8 RK4 substeps per
+#: half-stroke, at most 0.05 s, and runs about 3.5x faster, within 0.4 % (median 0.02-0.04 %) of the
+#: reference on the fidelity benchmark's open-loop runs and within 1 % on its steady states
+#: (``python -m scaling fidelity --candidate full-fast``; docs/model.md section 6).
+FULL_INTEGRATION = {"reference": (0.01, 16), "fast": (0.05, 8)}
 _FIELDS = ("bias", "amplitude", "period", "ratio")
 BeatLike = FinBeat | np.ndarray | Sequence[float] | None
 
@@ -228,22 +235,32 @@ class FullModel(FishModel):
     Args:
         n: Number of fish.
         params: Model parameters (one, or one per fish).
-        dt_max: Largest RK4 substep [s]; default 0.01 s.
-        min_substeps: Least number of substeps per half-stroke; default 16, so
-            the fastest default stroke (T_p = 0.5 s, zeta = 5: 0.083 s) gets
-            steps of 5 ms. Halving both changes the cycle-averaged steady state
-            by < 0.02 % for the strongest patterns of the default action range
-            (e.g. (60 deg, 30 deg, 0.5 s, 5)), fourth-order convergence.
+        dt_max: Largest RK4 substep [s]; default: the ``integration`` preset's (0.01 s for
+            ``"reference"``). Larger steps stay stable: the step also shrinks where the fin's
+            peak force would drive the body dynamics out of RK4's accurate range
+            (``stepping._full_stable_step``).
+        min_substeps: Least number of substeps per half-stroke; default: the preset's (16 for
+            ``"reference"``, so the fastest default stroke, T_p = 0.5 s, zeta = 5: 0.083 s, gets
+            steps of 5 ms). Halving both reference values changes the cycle-averaged steady state
+            by < 0.02 % for the strongest patterns of the default action range (e.g. (60 deg, 30 deg,
+            0.5 s, 5)), fourth-order convergence.
+        integration: ``"reference"`` (default) or ``"fast"`` (:data:`FULL_INTEGRATION`: 8 substeps per
+            half-stroke, at most 0.05 s; about 3.5x faster, within 0.4 % of the reference in open loop).
     """
 
     averaged = False
 
     def __init__(self, n: int = 1, params: FishParams | Sequence[FishParams] | None = None,
-                 dt_max: float = 0.01, min_substeps: int = 16):
-        super().__init__(n, params, dt_max)
+                 dt_max: float | None = None, min_substeps: int | None = None, integration: str = "reference"):
+        if integration not in FULL_INTEGRATION:
+            raise ValueError(f"integration must be one of {sorted(FULL_INTEGRATION)}, got {integration!r}")
+        preset_dt, preset_substeps = FULL_INTEGRATION[integration]
+        super().__init__(n, params, preset_dt if dt_max is None else dt_max)
+        min_substeps = preset_substeps if min_substeps is None else min_substeps
         if int(min_substeps) < 1:
             raise ValueError(f"min_substeps must be >= 1, got {min_substeps}")
         self.min_substeps = int(min_substeps)
+        self.integration = integration
 
 
 class AveragedModel(FishModel):
@@ -304,6 +321,7 @@ def make_model(
     forcing: str = "exact",
     transitions: bool = True,
     ripple_offsets: bool = True,
+    integration: str = "reference",
 ) -> FishModel:
     """Build a batched model by name.
 
@@ -315,6 +333,7 @@ def make_model(
         forcing: Averaged model only: ``"exact"`` or ``"taylor"``.
         transitions: Averaged model only: the transitional-stroke forcing (:class:`AveragedModel`).
         ripple_offsets: Averaged model only: the beat-mean ripple offset (:class:`AveragedModel`).
+        integration: Full model only: ``"reference"`` or ``"fast"`` (:data:`FULL_INTEGRATION`).
 
     Returns:
         A :class:`FullModel` or :class:`AveragedModel`.
@@ -323,7 +342,7 @@ def make_model(
         ValueError: For an unknown model name (or bad scaling/forcing).
     """
     if model == "full":
-        return FullModel(n, params)
+        return FullModel(n, params, integration=integration)
     if model == "averaged":
         return AveragedModel(n, params, scaling=scaling, forcing=forcing, transitions=transitions,
                              ripple_offsets=ripple_offsets)

@@ -145,6 +145,30 @@ def _stable_step(state, i, rates: RateConstants, driven_omega, driven_speed, osc
 
 
 @nb.njit(inline="always", **JIT)
+def _full_stable_step(state, fins, i, idle0, idle1, body, rates, drag_constant, inertia_constant, fin_offset, h_max):
+    """Full model: ``h_max``, shortened where RK4 would leave its accurate range (:func:`_stable_step`).
+
+    The in-beat forcing peaks within the segment, so the rate is taken at the yaw rate and
+    speed that each half-stroke's peak force and moment would drive: on ``g = mid - half
+    cos(pi s / d)``, ``|g'| <= |half| pi / d`` and ``|g''| <= |half| (pi / d)^2``, so eqs. (16)-(18)
+    give ``|f_hx| <= (k + m_p S_p / 2) g'_max^2 + (m_p S_p / 2) g''_max`` (and ``|tau| <= C_p`` times
+    that). It never binds at the reference steps (``dt_max`` 0.01 s); it keeps the fast
+    preset (:data:`pectoral_gym.models.FULL_INTEGRATION`) and any larger ``dt_max`` stable.
+    """
+    force = 0.0
+    for f in range(2):
+        if idle0 if f == 0 else idle1:
+            continue
+        rate = math.pi / max(fins[i, f, DURATION], _EPS)
+        half = 0.5 * abs(fins[i, f, st.ANGLE_TO] - fins[i, f, st.ANGLE_FROM])
+        speed = half * rate  # peak |g'|
+        force += (drag_constant + inertia_constant) * speed * speed + inertia_constant * speed * rate
+    driven_omega = math.sqrt(abs(fin_offset) * force / (body.c4 * body.J3))
+    driven_speed = math.sqrt(force / max(body.c1, 1e-12))
+    return _stable_step(state, i, rates, driven_omega, driven_speed, 0.0, h_max)
+
+
+@nb.njit(inline="always", **JIT)
 def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables, corrections):
     """Latch fin ``f``'s commanded pattern; the averaged model also brings its forcing cache up to date.
 
@@ -321,6 +345,8 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
                 h_max = min(h_max, fins[i, 0, DURATION] / min_substeps)
             if not idle1:
                 h_max = min(h_max, fins[i, 1, DURATION] / min_substeps)
+            h_max = _full_stable_step(state, fins, i, idle0, idle1, body, rates, drag_constant, inertia_constant,
+                                      fin_offset, h_max)
             n_sub = max(1, int(math.ceil(seg / h_max - 1e-9)))
             h = seg / n_sub
             # the forces at t, t + h/2, t + h of every substep: each fin's phase rotated by h/2 each time

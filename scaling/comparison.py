@@ -68,11 +68,23 @@ def fin_pattern(g0_deg: float, ga_deg: float, period: float, ratio: float) -> np
 REST = fin_pattern(90.0, 0.0, 1.0, 1.0)
 
 
+#: Models compared against the full model's reference integration: the averaged model, or the full
+#: model with the fast integration preset (``pectoral_gym.models.FULL_INTEGRATION``).
+CANDIDATES = ("averaged", "full-fast")
+
+
 def make_model(kind: str, n: int, params: FishParams, scaling: ScalingFunctions,
                transitions: bool = True, ripple_offsets: bool = True) -> FishModel:
-    """``n`` fish of the ``"full"`` or the ``"averaged"`` model (``transitions``, ``ripple_offsets``: its options)."""
+    """``n`` fish of the ``"full"`` model or a candidate of :data:`CANDIDATES`.
+
+    ``transitions``, ``ripple_offsets``: the averaged model's options.
+    """
     if kind == "full":
         return FullModel(n, params)
+    if kind == "full-fast":
+        return FullModel(n, params, integration="fast")
+    if kind != "averaged":
+        raise ValueError(f"model must be 'full' or one of {CANDIDATES}, got {kind!r}")
     return AveragedModel(n, params, scaling=scaling, transitions=transitions, ripple_offsets=ripple_offsets)
 
 
@@ -88,11 +100,16 @@ def _steady(kind: str, beats: np.ndarray, params: FishParams, scaling: ScalingFu
     return out
 
 
-def steady_pair(beats: np.ndarray, scaling: ScalingFunctions, params: FishParams | None = None) -> dict[str, Any]:
-    """Steady states of both models and their relative errors for fish patterns ``(n, 2, 4)``."""
+def steady_pair(beats: np.ndarray, scaling: ScalingFunctions, params: FishParams | None = None,
+                candidate: str = "averaged") -> dict[str, Any]:
+    """Steady states of both models and their relative errors for fish patterns ``(n, 2, 4)``.
+
+    ``candidate`` (:data:`CANDIDATES`) is the model compared with the full one; its results
+    are under ``"averaged"`` whichever it is.
+    """
     params = params or FishParams()
     full = _steady("full", beats, params, scaling)
-    avg = _steady("averaged", beats, params, scaling)
+    avg = _steady(candidate, beats, params, scaling)
     speed_full, speed_avg = np.hypot(full[:, 0], full[:, 1]), np.hypot(avg[:, 0], avg[:, 1])
     return {
         "full": {"vx": full[:, 0], "vy": full[:, 1], "omega": full[:, 2], "speed": speed_full,

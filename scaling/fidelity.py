@@ -24,7 +24,9 @@ it there, open loop, with the public :mod:`pectoral_gym.models` API:
 Two seed sets (:data:`SEED_SETS`): ``dev`` to look at while working on the model,
 ``report`` (other seeds, other two-fin periods) run only for the published figures.
 Output: ``fidelity_<set>[_no_transitions][_no_offsets].md``, ``.json`` and PNG plots
-(:mod:`scaling.fidelity_report`).
+(:mod:`scaling.fidelity_report`). ``candidate="full-fast"`` runs the same benchmark on the full
+model's fast integration preset instead of the averaged model (``fidelity_<set>_full_fast.*``):
+how far that preset is from the reference integration.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from pectoral_gym import __version__
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.kfunctions import ScalingFunctions, default_scaling_path
 from pectoral_gym.params import FishParams
-from scaling.comparison import REST, label, make_model, steady_pair, summarize
+from scaling.comparison import CANDIDATES, REST, label, make_model, steady_pair, summarize
 from scaling.grids import draw_off_grid
 from scaling.validate import MIN_TURN_RATE, sampling_box, single_fin_section, table4_section
 
@@ -111,7 +113,7 @@ def open_loop(kind: str, schedule: np.ndarray, change_every: float | None, durat
     """Poses ``(n, k + 1, 3)`` (X, Y, psi) every :data:`SAMPLE` s of one model under a command schedule.
 
     Args:
-        kind: ``"full"`` or ``"averaged"``.
+        kind: ``"full"`` or a candidate (:data:`scaling.comparison.CANDIDATES`).
         schedule: ``(n, segments, 2, 4)`` patterns; segment ``j`` is commanded at ``j * change_every``.
         change_every: Seconds between changes (``None``: the first segment for the whole run).
         duration: Simulated time [s], a multiple of :data:`SAMPLE`.
@@ -148,10 +150,11 @@ def open_loop_errors(full: np.ndarray, averaged: np.ndarray) -> dict[str, np.nda
 
 
 def _scenario(schedule, change_every, duration, params, scaling, on_pattern=False, keep_paths=0,
-              transitions=True, ripple_offsets=True) -> dict[str, Any]:
-    poses = {kind: open_loop(kind, schedule, change_every, duration, params, scaling, on_pattern, transitions,
+              transitions=True, ripple_offsets=True, candidate="averaged") -> dict[str, Any]:
+    # the candidate's poses are kept under "averaged" whichever model it is (steady_pair does the same)
+    poses = {slot: open_loop(kind, schedule, change_every, duration, params, scaling, on_pattern, transitions,
                              ripple_offsets)
-             for kind in ("full", "averaged")}
+             for slot, kind in (("full", "full"), ("averaged", candidate))}
     err = open_loop_errors(poses["full"], poses["averaged"])
     labels = [label(s[0]) for s in schedule]
     out = {"n": int(schedule.shape[0]), "change_every_s": change_every, "duration_s": duration,
@@ -169,11 +172,11 @@ def _summary_only(stage):
 
 
 def steady_section(scaling: ScalingFunctions, params: FishParams, n: int, rng: np.random.Generator,
-                   periods: tuple[float, ...]) -> dict[str, Any]:
-    """Two-fin periodic steady states: speed, radius and period errors (radius and period of turning fish)."""
+                   periods: tuple[float, ...], candidate: str = "averaged") -> dict[str, Any]:
+    """Two-fin periodic steady states: speed, turning radius and turn period (radius and period of turning fish)."""
     low, high, grid, _ = sampling_box(scaling)
     beats = np.stack([draw_off_grid(rng, n, low, high, grid, periods) for _ in range(2)], axis=1)
-    res = steady_pair(beats, scaling, params)
+    res = steady_pair(beats, scaling, params, candidate)
     turning = np.abs(res["full"]["omega"]) >= MIN_TURN_RATE
     labels = [label(b) for b in beats]
     rows = [{"pattern": labels[i], "turning": bool(turning[i]), "turns_the_other_way": bool(res["direction_flip"][i]),
@@ -214,7 +217,7 @@ def _targets(results: dict[str, Any]) -> list[dict[str, Any]]:
 def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Path = "fidelity",
              params: FishParams | None = None, quick: bool = False, plots: bool = True, progress: bool = True,
              source: str = "<ScalingFunctions>", transitions: bool = True,
-             ripple_offsets: bool = True) -> dict[str, Any]:
+             ripple_offsets: bool = True, candidate: str = "averaged") -> dict[str, Any]:
     """Run the benchmark on one seed set; write ``fidelity_<set>[...].md``, ``.json``, plots to ``out_dir``.
 
     Args:
@@ -231,6 +234,8 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
             depend on it.
         ripple_offsets: The averaged model's beat-mean ripple offset (default on, as in the model);
             the steady states do not depend on it either.
+        candidate: The model measured against the full model's reference integration:
+            ``"averaged"`` (default) or ``"full-fast"`` (:data:`scaling.comparison.CANDIDATES`).
 
     Returns:
         The results (the content of the JSON file).
@@ -239,6 +244,8 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
 
     if seed_set not in SEED_SETS:
         raise ValueError(f"seed_set must be one of {sorted(SEED_SETS)}, got {seed_set!r}")
+    if candidate not in CANDIDATES:
+        raise ValueError(f"candidate must be one of {CANDIDATES}, got {candidate!r}")
     params = params or FishParams()
     sizes = QUICK if quick else FULL
     seeds = SEED_SETS[seed_set]
@@ -251,7 +258,8 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
     base = schedules["constant"]
     one_fin = split_fins(base, "one_fin")
     def run(schedule, every=None, on=False, keep=0):
-        return lambda: _scenario(schedule, every, duration, params, scaling, on, keep, transitions, ripple_offsets)
+        return lambda: _scenario(schedule, every, duration, params, scaling, on, keep, transitions, ripple_offsets,
+                                 candidate)
 
     stages: list[tuple[tuple[str, ...], Any]] = [
         *((("scenarios", name), run(schedules[name], every, keep=4)) for name, every in SCENARIOS.items()),
@@ -260,12 +268,14 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         *((("by_fins", name, split), _summary_only(run(split_fins(schedules[name], split), every)))
           for name, every in SCENARIOS.items() for split in FIN_SPLITS
           if (name, split) != ("constant", "one_fin")),  # that one is decomposition/one_fin_from_rest
-        (("steady",), lambda: steady_section(scaling, params, sizes["n_steady"], rng, seeds.steady_periods)),
-        (("single_fin",), lambda: single_fin_section(scaling, params, sizes["n_single"], rng)),
-        (("table4",), lambda: table4_section(scaling, params, sizes["table4"])),
+        (("steady",), lambda: steady_section(scaling, params, sizes["n_steady"], rng, seeds.steady_periods,
+                                             candidate)),
+        (("single_fin",), lambda: single_fin_section(scaling, params, sizes["n_single"], rng, candidate)),
+        (("table4",), lambda: table4_section(scaling, params, sizes["table4"], candidate=candidate)),
     ]
     results: dict[str, Any] = {"seed_set": seeds.name, "seed": seeds.seed, "quick": quick, "version": __version__,
                                "source": source, "transitions": transitions, "ripple_offsets": ripple_offsets,
+                               "candidate": candidate,
                                "scenarios": {}, "decomposition": {}, "by_fins": {}, "timing_s": {}}
     start = time.perf_counter()
     bar = tqdm(total=len(stages) + 1, desc=f"fidelity ({seed_set})", unit="stage", disable=not progress)
@@ -285,8 +295,11 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         k: v for k, v in results["decomposition"]["one_fin_from_rest"].items() if k not in ("errors", "first_pattern")}
     results["targets"] = _targets(results)
     bar.set_postfix_str("report")
-    stem = (f"fidelity_{seeds.name}" + ("" if transitions else "_no_transitions")
-            + ("" if ripple_offsets else "_no_offsets"))
+    if candidate == "averaged":
+        stem = (f"fidelity_{seeds.name}" + ("" if transitions else "_no_transitions")
+                + ("" if ripple_offsets else "_no_offsets"))
+    else:
+        stem = f"fidelity_{seeds.name}_{candidate.replace('-', '_')}"
     results["plots"] = fidelity_report.plots(results, out, stem) if plots else []
     results["timing_s"]["total"] = time.perf_counter() - start
     (out / f"{stem}.json").write_text(json.dumps(results, indent=1, allow_nan=False) + "\n")
@@ -315,6 +328,10 @@ def add_parser(sub) -> None:
                         "--no-ripple-offsets: the cycle averages alone, the model before issue 12)")
     p.add_argument("--ripple-offsets", action=argparse.BooleanOptionalAction, default=True,
                    help="averaged model with its beat-mean ripple offset (the default; docs/model.md 3.8)")
+    p.add_argument("--candidate", choices=CANDIDATES, default="averaged",
+                   help="model measured against the full model's reference integration: the averaged model "
+                        "(default) or the full model's fast integration preset (full-fast; writes "
+                        "fidelity_<set>_full_fast.*)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -332,6 +349,6 @@ def main(args: argparse.Namespace) -> int:
     source = "the shipped coefficients file" if not args.coefficients else str(path)  # no machine paths in reports
     results = fidelity(scaling, args.seed_set, args.out, quick=args.quick, plots=not args.no_plots,
                        progress=not args.no_progress, source=source, transitions=args.transitions,
-                       ripple_offsets=args.ripple_offsets)
+                       ripple_offsets=args.ripple_offsets, candidate=args.candidate)
     print(fidelity_report.summary_text(results))
     return 0

@@ -29,12 +29,20 @@ def _deg(value: float | None) -> str:
     return "-" if value is None else f"{value:.1f} deg"
 
 
+def _candidate(results: dict[str, Any]) -> str:
+    """What the benchmark measured against the full model: ``"averaged model"`` or ``"fast full model"``."""
+    return "fast full model" if results.get("candidate") == "full-fast" else "averaged model"
+
+
 def summary_text(results: dict[str, Any]) -> str:
     """A few lines for stdout: the targets table."""
-    lines = [f"fidelity benchmark, seed set {results['seed_set']!r}, transitions "
-             f"{'on' if results.get('transitions') else 'off'}, ripple offsets "
-             f"{'on' if results.get('ripple_offsets') else 'off'}" + (" (quick: not meaningful)"
-                                                                      if results["quick"] else "")]
+    if results.get("candidate") == "full-fast":
+        model = "fast full model against the reference integration"
+    else:
+        model = (f"averaged model, transitions {'on' if results.get('transitions') else 'off'}, ripple offsets "
+                 f"{'on' if results.get('ripple_offsets') else 'off'}")
+    lines = [f"fidelity benchmark, seed set {results['seed_set']!r}, {model}"
+             + (" (quick: not meaningful)" if results["quick"] else "")]
     for t in results["targets"]:
         mark = "ok  " if t["met"] else "MISS"
         lines.append(f"  {mark} {t['check']:42} {_pct(t['measured'], 2):>10}  (target <= {_pct(t['target'], 0)})")
@@ -45,11 +53,17 @@ def write_markdown(results: dict[str, Any], path: Path) -> Path:
     """The benchmark report (markdown)."""
     sc, dec, st = results["scenarios"], results["decomposition"], results["steady"]
     first = next(iter(sc.values()))
+    fast = results.get("candidate", "averaged") == "full-fast"
+    model = ("the full model's fast integration preset (`FullModel(integration=\"fast\")`, docs/model.md 6) "
+             "against its reference integration: every \"averaged\" figure below is the fast preset's"
+             if fast else
+             f"K from `{results['source']}`, averaged model "
+             + ("with" if results.get("transitions") else "without") + " transitional-stroke forcing and "
+             + ("with" if results.get("ripple_offsets") else "without") + " the ripple offset (docs/model.md 3.7, 3.8)")
     lines = [
-        f"# Averaged-model fidelity benchmark: seed set `{results['seed_set']}`", "",
-        f"Seed {results['seed']}, pectoral-gym {results['version']}, K from `{results['source']}`, averaged model "
-        + ("with" if results.get("transitions") else "without") + " transitional-stroke forcing and "
-        + ("with" if results.get("ripple_offsets") else "without") + " the ripple offset (docs/model.md 3.7, 3.8)"
+        f"# {'Fast full-model' if fast else 'Averaged-model'} fidelity benchmark: seed set `{results['seed_set']}`",
+        "",
+        f"Seed {results['seed']}, pectoral-gym {results['version']}, {model}"
         + (" — **quick run: figures not meaningful**" if results["quick"] else "") + ".", "",
         f"Open loop: {first['n']} fish from rest, {first['duration_s']:g} s, two-fin patterns uniform in the envs' "
         "default action ranges. Position error = end-position distance / max(full-model path, 0.25 m); heading "
@@ -116,7 +130,8 @@ def _errors(results: dict[str, Any], path: Path) -> Path:
         ax.set_ylabel("share of fish")
         ax.grid(alpha=0.3, which="both")
     axes[0].legend(fontsize=7)
-    fig.suptitle(f"Averaged vs full model, open loop (seed set {results['seed_set']}): error distributions")
+    fig.suptitle(f"{_candidate(results).capitalize()} vs full model, open loop (seed set {results['seed_set']}): "
+                 "error distributions")
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)
@@ -131,7 +146,7 @@ def _trajectories(results: dict[str, Any], path: Path) -> Path:
         for i, (full, avg) in enumerate(zip(paths["full"], paths["averaged"], strict=True)):
             full, avg = np.asarray(full), np.asarray(avg)
             line, = ax.plot(full[:, 0], full[:, 1], "-", label=f"fish {i} full")
-            ax.plot(avg[:, 0], avg[:, 1], "--", color=line.get_color(), label=f"fish {i} averaged")
+            ax.plot(avg[:, 0], avg[:, 1], "--", color=line.get_color(), label=f"fish {i} {_candidate(results)}")
         ax.plot(0, 0, "ko", ms=4)
         ax.set_aspect("equal", adjustable="datalim")
         ax.set_title(_TITLES[name])
@@ -139,7 +154,7 @@ def _trajectories(results: dict[str, Any], path: Path) -> Path:
         ax.grid(alpha=0.3)
     np.atleast_1d(axes)[0].set_ylabel("Y [m]")
     np.atleast_1d(axes)[0].legend(fontsize=6)
-    fig.suptitle("Full model solid, averaged model dashed")
+    fig.suptitle(f"Full model solid, {_candidate(results)} dashed")
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)

@@ -150,10 +150,11 @@ def _num(value) -> float | None:
     return value if math.isfinite(value) else None
 
 
-def table4_section(scaling: ScalingFunctions, params: FishParams, count: int = len(TABLE4)) -> dict[str, Any]:
-    """Table 4 patterns on the left fin (right fin at rest)."""
+def table4_section(scaling: ScalingFunctions, params: FishParams, count: int = len(TABLE4),
+                   candidate: str = "averaged") -> dict[str, Any]:
+    """Table 4 patterns on the left fin (right fin at rest); ``candidate``: :data:`scaling.comparison.CANDIDATES`."""
     beats = np.array([[REST, fin_pattern(*p)] for p, _, _ in TABLE4[:count]])
-    res = steady_pair(beats, scaling, params)
+    res = steady_pair(beats, scaling, params, candidate)
     rows = _rows(beats, res, ("radius", "period"))
     for row, (_, paper_r, paper_t) in zip(rows, TABLE4, strict=False):
         row["paper_radius_error"], row["paper_period_error"] = paper_r / 100, paper_t / 100
@@ -169,12 +170,13 @@ def _flips(res: dict[str, Any], labels: list[str]) -> dict[str, Any]:
             "patterns": [lab for lab, f in zip(labels, flip, strict=True) if f]}
 
 
-def single_fin_section(scaling: ScalingFunctions, params: FishParams, n: int, rng: np.random.Generator) -> dict:
-    """Random right-fin patterns in :func:`sampling_box`, off the grid."""
+def single_fin_section(scaling: ScalingFunctions, params: FishParams, n: int, rng: np.random.Generator,
+                       candidate: str = "averaged") -> dict:
+    """Random right-fin patterns in :func:`sampling_box`, off the grid; ``candidate`` as :func:`table4_section`'s."""
     low, high, grid, source = sampling_box(scaling)
     fins = draw_off_grid(rng, n, low, high, grid)
     beats = np.stack([fins, np.broadcast_to(REST, fins.shape)], axis=1)
-    res = steady_pair(beats, scaling, params)
+    res = steady_pair(beats, scaling, params, candidate)
     labels = [label(b) for b in beats]
     return {"box": {"low": _deg(low), "high": _deg(high), "source": source},
             "grid_checked": grid is not None, "rows": _rows(beats, res, ("radius", "period")),

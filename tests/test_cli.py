@@ -120,8 +120,10 @@ def test_bench_quick_json_has_the_keys(capsys):
             "environment"} <= set(res)
     assert set(res["single_env"]) == {"PectoralFish-Averaged-v0", "PectoralFish-Full-v0", "CartPole-v1"}
     assert res["num_envs"] == {"PectoralFish-Averaged-v0": 4096, "PectoralFish-Full-v0": 1024,
-                               "PectoralFish-Averaged-v0 (PPO settings)": 4096}
+                               "PectoralFish-Averaged-v0 (PPO settings)": 4096,
+                               "PectoralFish-Full-v0 (fast integration)": 4096}
     assert res["vector_env"]["PectoralFish-Averaged-v0 (PPO settings)"] > 0
+    assert res["vector_env"]["PectoralFish-Full-v0 (fast integration)"] > 0
     assert set(res["ratios"]) == {"averaged_vs_cartpole", "full_vs_cartpole"}
     assert set(res["targets"]) == {"averaged_vs_cartpole", "full_vs_cartpole", "vector_averaged", "vector_full"}
     for target in res["targets"].values():

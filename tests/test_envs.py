@@ -367,3 +367,31 @@ def test_packed_layouts_cover_their_arrays_once():
                 slots += range(start, start + wide.get(name, 1))
         assert sorted(slots) == list(range(size)), prefix
     assert layout.ACTION_SIZE == 2 * layout.FIN_ACTIONS == 8
+
+
+def test_fast_integration_follows_the_reference_full_env():
+    """``integration="fast"`` (models.FULL_INTEGRATION) is the same env at a coarser step: same spaces, the
+    checkers pass, and 30 random actions (15 s) end within a few millimetres of the reference steps."""
+    envs = {name: gym.make("PectoralFish-Full-v0", integration=name) for name in ("reference", "fast")}
+    assert envs["fast"].unwrapped.model.min_substeps == 8 and envs["fast"].unwrapped.model.dt_max == 0.05
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        check_env(envs["fast"].unwrapped, skip_render_check=True)
+    actions = np.random.default_rng(4).uniform(-1, 1, (30, 8)).astype(np.float32)
+    end = {}
+    for name, env in envs.items():
+        env.reset(seed=11)
+        for action in actions:
+            _, _, terminated, truncated, _ = env.step(action)
+            if terminated or truncated:
+                break
+        end[name] = env.unwrapped.fish_state.copy()
+    assert not np.array_equal(end["fast"], end["reference"])
+    np.testing.assert_allclose(end["fast"][:3], end["reference"][:3], rtol=0, atol=5e-3)
+
+
+@pytest.mark.parametrize("kwargs,match", [({"integration": "rk45"}, "integration must be one of"),
+                                          ({"model": "averaged", "integration": "fast"}, "full model only")])
+def test_integration_setting_errors(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        gym.make("PectoralFish-Full-v0", **kwargs)

@@ -171,6 +171,19 @@ def test_quick_cli_end_to_end(tmp_path, capsys):
         scaling_main(["fidelity", "--set", "tuning"])
 
 
+def test_quick_cli_fast_full_candidate(tmp_path, capsys):
+    assert scaling_main(["fidelity", "--quick", "--out", str(tmp_path), "--no-progress", "--no-plots",
+                         "--candidate", "full-fast"]) == 0
+    data = json.loads((tmp_path / "fidelity_dev_full_fast.json").read_text())
+    assert data["candidate"] == "full-fast"
+    # the same model at two step sizes: far closer than the averaged model's percent-level errors
+    assert data["scenarios"]["constant"]["position"]["worst"] < 0.01
+    assert "# Fast full-model fidelity benchmark" in (tmp_path / "fidelity_dev_full_fast.md").read_text()
+    assert "fast full model against the reference integration" in capsys.readouterr().out
+    with pytest.raises(ValueError, match="candidate"):
+        fd.fidelity(None, candidate="full-slow")
+
+
 def test_transitions_make_the_impulse_exact_with_k_1():
     """Without body drag, lift and yaw damping, and with both fins beating the same patterns (no yaw),
     the surge velocity is the surge impulse / m1. Patterns changing every 0.3 s, then parked: once the fins

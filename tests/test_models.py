@@ -158,6 +158,24 @@ def test_full_model_converges_at_high_order(right, left):
     assert errors[0] / errors[1] > 100
 
 
+VIOLENT = (FinBeat.from_degrees(60, 30, 0.5, 5), FinBeat.from_degrees(120, 30, 0.5, 5))  # fastest default strokes
+
+
+@pytest.mark.parametrize("right,left", [(TURN, None), (FORWARD, FinBeat.from_degrees(70, 25, 0.7, 2.0)), VIOLENT])
+def test_full_model_fast_preset_stays_close_to_independent_ode_solution(right, left):
+    # 8 substeps per half-stroke, at most 0.05 s: about 1e-4 of the state after 3 s (the reference preset ~1e-5)
+    got = run(FullModel(1, integration="fast"), 3.0, right=right, left=left)[0]
+    np.testing.assert_allclose(got, reference_full(right, left, 3.0), rtol=0, atol=2e-3)
+
+
+@pytest.mark.parametrize("right,left", [(TURN, None), (FORWARD, FinBeat.from_degrees(70, 25, 0.7, 2.0)), VIOLENT])
+def test_full_model_huge_steps_stay_stable(right, left):
+    # One substep per half-stroke and dt_max 1 s: without the stiffness bound on the step
+    # (stepping._full_stable_step) RK4 diverges to NaN on all three; with it the error stays ~2 mm.
+    got = run(FullModel(1, dt_max=1.0, min_substeps=1), 3.0, right=right, left=left)[0]
+    np.testing.assert_allclose(got, reference_full(right, left, 3.0), rtol=0, atol=5e-3)
+
+
 def test_full_model_from_moving_initial_state_matches_ode():
     y0 = np.array([0.2, -0.1, 0.4, 0.05, -0.01, 0.3])
     ref = reference_full(TURN, FORWARD, 2.0, y0)
@@ -442,7 +460,8 @@ def test_taylor_forcing_option_changes_side_force():
 
 
 @pytest.mark.parametrize("kwargs,match", [({"n": 0}, "n"), ({"dt_max": 0.0}, "dt_max"), ({"dt_max": -1.0}, "dt_max"),
-                                          ({"min_substeps": 0}, "min_substeps")])
+                                          ({"min_substeps": 0}, "min_substeps"),
+                                          ({"integration": "rk45"}, "integration")])
 def test_full_model_bad_arguments(kwargs, match):
     with pytest.raises(ValueError, match=match):
         FullModel(**kwargs)
