@@ -30,7 +30,7 @@ REST = FinBeat.rest()
 MODELS = ("full", "averaged")
 #: The full model's integration presets, ``name: (dt_max [s], min_substeps)``. ``"reference"`` is
 #: converged (halving both moves steady states by < 0.02 %); ``"fast"`` takes 8 RK4 substeps per
-#: half-stroke, at most 0.05 s, and runs about 3.5x faster, within 0.4 % (median 0.02-0.04 %) of the
+#: half-stroke, at most 0.05 s, and runs about 3x faster, within 0.2 % (p90; median 0.02-0.04 %) of the
 #: reference on the fidelity benchmark's open-loop runs and within 1 % on its steady states
 #: (``python -m scaling fidelity --candidate full-fast``; docs/model.md section 6).
 FULL_INTEGRATION = {"reference": (0.01, 16), "fast": (0.05, 8)}
@@ -245,7 +245,7 @@ class FullModel(FishModel):
             by < 0.02 % for the strongest patterns of the default action range (e.g. (60 deg, 30 deg,
             0.5 s, 5)), fourth-order convergence.
         integration: ``"reference"`` (default) or ``"fast"`` (:data:`FULL_INTEGRATION`: 8 substeps per
-            half-stroke, at most 0.05 s; about 3.5x faster, within 0.4 % of the reference in open loop).
+            half-stroke, at most 0.05 s; about 3x faster, within 0.2 % (p90) of the reference in open loop).
     """
 
     averaged = False

@@ -83,7 +83,7 @@ class EnvConfig:
             3.8; on by default in the model). Off by default in the envs until the shipped PPO file's
             figures are re-measured with it.
         integration: Full model only: ``"reference"`` (converged steps) or ``"fast"`` (8 RK4 substeps
-            per half-stroke, at most 0.05 s: about 3.5x faster, within 0.4 % of the reference in open
+            per half-stroke, at most 0.05 s: about 3x faster, within 0.2 % (p90) of the reference in open
             loop; :data:`~pectoral_gym.models.FULL_INTEGRATION`, ``docs/model.md`` section 6).
         observe_fins: Append each fin's half-stroke in progress to the observation (angle now, the next
             turning point, power or recovery, time left; :mod:`pectoral_gym.envs.observation`): the
