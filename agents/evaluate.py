@@ -52,27 +52,30 @@ DEFAULT_RANDOMIZATION = {"body_mass": 0.1, "body_inertia": 0.2, "drag_coef": 0.2
                          "moment_coef": 0.2, "fin_force_coef": 0.2}
 MAX_BATCH = 128  # vector-env slots of one evaluation
 QUICK_EPISODES = 2  # --quick: episodes of a smoke run
-# Settings of the averaged model only: a policy trained on it keeps its other env arguments on the full model.
+# Settings of one model only: a policy trained on one model keeps its other env arguments on the other.
 AVERAGED_ONLY = ("scaling", "check_scaling_params", "transitions", "ripple_offsets")
+FULL_ONLY = ("integration",)
 
 
 def model_kwargs(env_id: str, kwargs: dict[str, Any]) -> dict[str, Any]:
-    """``kwargs`` without the averaged model's own arguments (:data:`AVERAGED_ONLY`) for a full-model ``env_id``."""
+    """``kwargs`` without the other model's own arguments (:data:`AVERAGED_ONLY`, :data:`FULL_ONLY`)."""
     from pectoral_gym.registration import ENV_IDS
 
-    dropped = AVERAGED_ONLY if ENV_IDS.get(env_id) == "full" else ()
+    dropped = AVERAGED_ONLY if ENV_IDS.get(env_id) == "full" else FULL_ONLY
     return {k: v for k, v in kwargs.items() if k not in dropped}
 
 
 def trained_env_kwargs(path: str | Path, env_id: str) -> dict[str, Any]:
-    """The env arguments a run folder trained with, for an evaluation on ``env_id``, its randomisation left out.
+    """The env arguments a run folder trained with, for an evaluation on ``env_id``.
 
+    Left out: the randomisation, and the full model's ``integration``: a policy trained on the
+    fast preset is evaluated at the reference steps unless the evaluation asks otherwise.
     ``{}`` for a ``.zip`` (no run config next to it).
     """
     from agents.policy import read_config
 
     run = read_config(path).get("env_kwargs", {}) if Path(path).is_dir() else {}
-    return model_kwargs(env_id, {k: v for k, v in (run or {}).items() if k != "randomize"})
+    return model_kwargs(env_id, {k: v for k, v in (run or {}).items() if k not in ("randomize", "integration")})
 
 ControllerLike = Controller | Callable[[], Controller]
 

@@ -19,6 +19,10 @@ CLI::
     python -m agents.seeds                              # seeds 0-4, 2 parallel jobs, writes seeds_out/
     python -m agents.seeds --seeds 100 101 102 103 --jobs 2 --out tune_base
     python -m agents.seeds --seeds 0 1 --timesteps 2e5 --episodes 50 --hyperparams ent_coef=0.01
+    python -m agents.seeds --train-env PectoralFish-Full-v0 --timesteps 1.6e6 --hyperparams env_kwargs.integration=fast
+
+``--train-env PectoralFish-Full-v0`` trains on the full model instead (its entry of the hyperparameter file);
+the evaluations run the full model at its reference steps whatever ``integration`` the training used.
 
 Writes ``<out>/seeds.md``, ``<out>/seeds.json``, ``<out>/seeds.png`` and one training run folder per
 seed, ``<out>/seed<S>/`` (with ``eval_<setting>.json``).
@@ -96,7 +100,8 @@ def aggregate(values: Sequence[float], confidence: float = 0.95, n_resamples: in
 
 def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None, episodes: int = 100,
              eval_seed: int | None = None, probe: dict[str, Any] | None = None, hyperparams_file: str | None = None,
-             queue: Any = None, settings: Sequence[str] = tuple(SETTINGS)) -> dict[str, Any]:
+             queue: Any = None, settings: Sequence[str] = tuple(SETTINGS),
+             train_env: str = TRAIN_ENV) -> dict[str, Any]:
     """Train one seed as the demo does and evaluate it on :data:`SETTINGS` (a worker of :func:`run_seeds`).
 
     Args:
@@ -109,6 +114,7 @@ def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None
         hyperparams_file: Hyperparameter file (default ``agents/hyperparams/ppo.yml``).
         queue: Anything with ``put``; receives ``(seed, stage, timesteps)`` progress messages.
         settings: Labels of :data:`SETTINGS` to evaluate on after training (empty: none).
+        train_env: The env id trained on (default :data:`TRAIN_ENV`, the demo's).
 
     Returns:
         ``seed, run_dir, timesteps, train_time_s, best_eval, evaluations`` (per setting, the :data:`REPORTED`
@@ -122,7 +128,7 @@ def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None
 
     put = queue.put if queue is not None else (lambda _message: None)
     eval_seed = REPORT_SEED if eval_seed is None else int(eval_seed)
-    config = resolve_config("ppo", TRAIN_ENV, int(seed), task="goal", hyperparams=dict(overrides or {}),
+    config = resolve_config("ppo", train_env, int(seed), task="goal", hyperparams=dict(overrides or {}),
                             hyperparams_file=hyperparams_file)
     run_dir = Path(out) / f"seed{seed}"
     solve = SolveProbe(**probe) if probe is not None else None
@@ -136,7 +142,8 @@ def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None
     training = json.loads((run_dir / "training.json").read_text())
     put((seed, "train", int(training["timesteps"])))
     policy = load_policy(run_dir)
-    base = {k: v for k, v in config["env_kwargs"].items() if k != "randomize"}
+    # the full model is evaluated at its reference steps (agents.evaluate.trained_env_kwargs)
+    base = {k: v for k, v in config["env_kwargs"].items() if k not in ("randomize", "integration")}
     evaluations = {}
     for label in settings:
         env_id, randomised = SETTINGS[label]
@@ -188,7 +195,7 @@ def summarize_seeds(per_seed: list[dict[str, Any]], confidence: float = 0.95) ->
 def run_seeds(seeds: Sequence[int], out: str | Path, jobs: int = 1, overrides: dict[str, Any] | None = None,
               episodes: int = 100, eval_seed: int | None = None, probe: dict[str, Any] | None = None,
               hyperparams_file: str | None = None, confidence: float = 0.95, progress: bool = True,
-              command: str | None = None) -> dict[str, Any]:
+              command: str | None = None, train_env: str = TRAIN_ENV) -> dict[str, Any]:
     """Train and evaluate every seed (``jobs`` processes at once), aggregate, write the outputs.
 
     Args:
@@ -199,6 +206,7 @@ def run_seeds(seeds: Sequence[int], out: str | Path, jobs: int = 1, overrides: d
         confidence: Level of the across-seed bootstrap intervals.
         progress: Show one progress bar per seed.
         command: The command line stored in the report.
+        train_env: As in :func:`run_seed`.
 
     Returns:
         The report written to ``seeds.json``: ``settings``, ``per_seed`` (seed order) and ``summary``
@@ -220,7 +228,7 @@ def run_seeds(seeds: Sequence[int], out: str | Path, jobs: int = 1, overrides: d
     for seed in seeds:
         if (out / f"seed{seed}").exists():
             raise FileExistsError(f"{out / f'seed{seed}'} exists; choose another --out or remove it")
-    config = resolve_config("ppo", TRAIN_ENV, seeds[0], task="goal", hyperparams=dict(overrides or {}),
+    config = resolve_config("ppo", train_env, seeds[0], task="goal", hyperparams=dict(overrides or {}),
                             hyperparams_file=hyperparams_file)
     eval_seed = REPORT_SEED if eval_seed is None else int(eval_seed)
     if probe is not None:
@@ -231,10 +239,10 @@ def run_seeds(seeds: Sequence[int], out: str | Path, jobs: int = 1, overrides: d
     out.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
     args = {"out": str(out), "overrides": dict(overrides or {}), "episodes": int(episodes), "eval_seed": eval_seed,
-            "probe": probe, "hyperparams_file": hyperparams_file}
+            "probe": probe, "hyperparams_file": hyperparams_file, "train_env": train_env}
     results = train_seeds(seeds, jobs, args, config["n_timesteps"], progress)
     per_seed = [results[s] for s in seeds]
-    report = {"settings": {"seeds": seeds, "jobs": int(jobs), "train_env": TRAIN_ENV, "episodes": int(episodes),
+    report = {"settings": {"seeds": seeds, "jobs": int(jobs), "train_env": train_env, "episodes": int(episodes),
                            "eval_seed": eval_seed, "overrides": args["overrides"], "probe": probe,
                            "eval_env": config["eval_env"],
                            "hyperparams_file": hyperparams_file, "n_timesteps": config["n_timesteps"],
@@ -327,6 +335,8 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
                         help="seeds trained at once, each in its own process (1 torch thread each)")
     parser.add_argument("--out", default="seeds_out", help="output folder")
+    parser.add_argument("--train-env", choices=tuple(SETTINGS[k][0] for k in ("averaged", "full")),
+                        default=TRAIN_ENV, help="env trained on (default: %(default)s, as the demo)")
     parser.add_argument("--timesteps", type=float, help="training steps (default: agents/hyperparams/ppo.yml)")
     parser.add_argument("--episodes", type=int, help="evaluation episodes per setting and seed (default 100, quick 4)")
     parser.add_argument("--eval-seed", type=int, help="evaluation episode k is reset with this + k "
@@ -361,7 +371,8 @@ def main(argv: list[str] | None = None) -> int:
         command = shlex.join(["python", "-m", "agents.seeds", *(sys.argv[1:] if argv is None else argv)])
         report = run_seeds(args.seeds, args.out, jobs=args.jobs, overrides=overrides, episodes=episodes,
                            eval_seed=args.eval_seed, probe=probe, hyperparams_file=args.hyperparams_file,
-                           confidence=args.confidence, progress=not args.no_progress, command=command)
+                           confidence=args.confidence, progress=not args.no_progress, command=command,
+                           train_env=args.train_env)
     except (ValueError, FileExistsError, FileNotFoundError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2

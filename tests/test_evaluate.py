@@ -220,3 +220,20 @@ def test_swept_work_prices_the_first_stroke_from_rest_by_what_it_sweeps():
     missing = 2 * power * (math.radians(30) ** 3 - math.radians(15) ** 3)  # both fins
     assert traj.swept_work[0] == pytest.approx(traj.fin_work[0] - missing, rel=1e-9)
     assert result.metrics["swept_work"].mean == pytest.approx(float(np.sum(traj.swept_work)))
+
+
+def test_trained_env_kwargs_drop_the_other_models_settings(tmp_path):
+    import yaml
+
+    from agents.evaluate import model_kwargs, trained_env_kwargs
+
+    run = {"task": "goal", "observe_fins": True, "integration": "fast", "randomize": {"drag_coef": 0.2}}
+    (tmp_path / "config.yaml").write_text(yaml.safe_dump({"env_kwargs": run}))
+    # a policy trained on the fast full model is evaluated at the reference steps, on either model
+    assert trained_env_kwargs(tmp_path, "PectoralFish-Full-v0") == {"task": "goal", "observe_fins": True}
+    assert trained_env_kwargs(tmp_path, "PectoralFish-Averaged-v0") == {"task": "goal", "observe_fins": True}
+    # a periodic evaluation on the averaged env drops the full model's setting, and the reverse
+    assert model_kwargs("PectoralFish-Averaged-v0", {"integration": "fast", "transitions": True}) == {
+        "transitions": True}
+    assert model_kwargs("PectoralFish-Full-v0", {"integration": "fast", "transitions": True}) == {
+        "integration": "fast"}

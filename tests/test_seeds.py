@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+import yaml
 
 from agents.seeds import aggregate, iqm, main, summarize_seeds
 from agents.solve_time import check_held_out
@@ -112,6 +113,17 @@ def test_parallel_jobs_give_the_same_results_as_one_process(serial_run, tmp_path
         assert a["seed"] == b["seed"]
         assert a["evaluations"] == b["evaluations"]  # same seed, same run, whatever process it ran in
         assert [e["success"] for e in a["training_evaluations"]] == [e["success"] for e in b["training_evaluations"]]
+
+
+def test_training_on_the_fast_full_model_is_evaluated_at_the_reference_steps(tmp_path):
+    out = tmp_path / "full"
+    assert main([*TINY, "--probe-every", "0", "--seeds", "3", "--out", str(out), "--train-env", "PectoralFish-Full-v0",
+                 "--hyperparams", "env_kwargs.integration=fast"]) == 0
+    report = json.loads((out / "seeds.json").read_text())
+    assert report["settings"]["train_env"] == "PectoralFish-Full-v0"
+    assert yaml.safe_load((out / "seed3" / "config.yaml").read_text())["env_kwargs"]["integration"] == "fast"
+    for label in ("averaged", "full", "full+rand"):
+        assert "integration" not in json.loads((out / "seed3" / f"eval_{label}.json").read_text())["env_kwargs"]
 
 
 def test_bad_arguments_fail_precisely(tmp_path, capsys):
