@@ -55,7 +55,7 @@ def write_markdown(results: dict[str, Any], path: Path) -> Path:
     first = next(iter(sc.values()))
     fast = results.get("candidate", "averaged") == "full-fast"
     model = ("the full model's fast integration preset (`FullModel(integration=\"fast\")`, docs/model.md 6) "
-             "against its reference integration: every \"averaged\" figure below is the fast preset's"
+             "against its reference integration: every error below is the fast preset's against the reference"
              if fast else
              f"K from `{results['source']}`, averaged model "
              + ("with" if results.get("transitions") else "without") + " transitional-stroke forcing and "
