@@ -55,6 +55,9 @@ QUICK_EPISODES = 2  # --quick: episodes of a smoke run
 # Settings of one model only: a policy trained on one model keeps its other env arguments on the other.
 AVERAGED_ONLY = ("scaling", "check_scaling_params", "transitions", "ripple_offsets")
 FULL_ONLY = ("integration",)
+# Settings of how a policy was trained, not of what it is evaluated on: evaluations leave them out (a policy
+# trained on the fast full model is evaluated at the reference steps unless the evaluation asks otherwise).
+TRAINING_ONLY = ("randomize", "integration")
 
 
 def model_kwargs(env_id: str, kwargs: dict[str, Any]) -> dict[str, Any]:
@@ -68,14 +71,13 @@ def model_kwargs(env_id: str, kwargs: dict[str, Any]) -> dict[str, Any]:
 def trained_env_kwargs(path: str | Path, env_id: str) -> dict[str, Any]:
     """The env arguments a run folder trained with, for an evaluation on ``env_id``.
 
-    Left out: the randomisation, and the full model's ``integration``: a policy trained on the
-    fast preset is evaluated at the reference steps unless the evaluation asks otherwise.
+    Left out: :data:`TRAINING_ONLY` (the randomisation, the full model's ``integration``).
     ``{}`` for a ``.zip`` (no run config next to it).
     """
     from agents.policy import read_config
 
     run = read_config(path).get("env_kwargs", {}) if Path(path).is_dir() else {}
-    return model_kwargs(env_id, {k: v for k, v in (run or {}).items() if k not in ("randomize", "integration")})
+    return model_kwargs(env_id, {k: v for k, v in (run or {}).items() if k not in TRAINING_ONLY})
 
 ControllerLike = Controller | Callable[[], Controller]
 

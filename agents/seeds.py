@@ -121,7 +121,7 @@ def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None
         metric summaries) and ``time_to_solve`` (:meth:`SolveProbe.summary`, or ``None``).
     """
     from agents.config import resolve_config
-    from agents.evaluate import DEFAULT_RANDOMIZATION, evaluate, write_json
+    from agents.evaluate import DEFAULT_RANDOMIZATION, TRAINING_ONLY, evaluate, write_json
     from agents.policy import load_policy
     from agents.solve_time import REPORT_SEED, SolveProbe
     from agents.train import train
@@ -142,8 +142,7 @@ def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None
     training = json.loads((run_dir / "training.json").read_text())
     put((seed, "train", int(training["timesteps"])))
     policy = load_policy(run_dir)
-    # the full model is evaluated at its reference steps (agents.evaluate.trained_env_kwargs)
-    base = {k: v for k, v in config["env_kwargs"].items() if k not in ("randomize", "integration")}
+    base = {k: v for k, v in config["env_kwargs"].items() if k not in TRAINING_ONLY}
     evaluations = {}
     for label in settings:
         env_id, randomised = SETTINGS[label]

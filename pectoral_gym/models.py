@@ -260,7 +260,6 @@ class FullModel(FishModel):
         if int(min_substeps) < 1:
             raise ValueError(f"min_substeps must be >= 1, got {min_substeps}")
         self.min_substeps = int(min_substeps)
-        self.integration = integration
 
 
 class AveragedModel(FishModel):

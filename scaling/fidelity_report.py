@@ -29,18 +29,21 @@ def _deg(value: float | None) -> str:
     return "-" if value is None else f"{value:.1f} deg"
 
 
+def _fast(results: dict[str, Any]) -> bool:
+    """Whether the benchmark measured the full model's fast preset (``--candidate full-fast``)."""
+    return results.get("candidate") == "full-fast"
+
+
 def _candidate(results: dict[str, Any]) -> str:
     """What the benchmark measured against the full model: ``"averaged model"`` or ``"fast full model"``."""
-    return "fast full model" if results.get("candidate") == "full-fast" else "averaged model"
+    return "fast full model" if _fast(results) else "averaged model"
 
 
 def summary_text(results: dict[str, Any]) -> str:
     """A few lines for stdout: the targets table."""
-    if results.get("candidate") == "full-fast":
-        model = "fast full model against the reference integration"
-    else:
-        model = (f"averaged model, transitions {'on' if results.get('transitions') else 'off'}, ripple offsets "
-                 f"{'on' if results.get('ripple_offsets') else 'off'}")
+    model = _candidate(results) + (" against the reference integration" if _fast(results) else
+                                   f", transitions {'on' if results.get('transitions') else 'off'}, ripple offsets "
+                                   f"{'on' if results.get('ripple_offsets') else 'off'}")
     lines = [f"fidelity benchmark, seed set {results['seed_set']!r}, {model}"
              + (" (quick: not meaningful)" if results["quick"] else "")]
     for t in results["targets"]:
@@ -53,7 +56,7 @@ def write_markdown(results: dict[str, Any], path: Path) -> Path:
     """The benchmark report (markdown)."""
     sc, dec, st = results["scenarios"], results["decomposition"], results["steady"]
     first = next(iter(sc.values()))
-    fast = results.get("candidate", "averaged") == "full-fast"
+    fast = _fast(results)
     model = ("the full model's fast integration preset (`FullModel(integration=\"fast\")`, docs/model.md 6) "
              "against its reference integration: every error below is the fast preset's against the reference"
              if fast else
