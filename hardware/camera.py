@@ -9,6 +9,7 @@ re-exported here.
 
 from __future__ import annotations
 
+import math
 import os
 import threading
 import time
@@ -40,12 +41,22 @@ Pose = tuple[float, float, float]
 class EmulatedCamera:
     """Renders the overhead view of an emulated fish on every ``read()``.
 
+    The frame's stamp is the instant of the pose it shows (``pose_fn``'s), taken before rendering; read
+    it through :class:`hardware.frames.FrameGrabber` to render in a thread of its own.
+
+    A perfectly noise-free renderer (``noise_std=0``) of a fish at rest repeats its image exactly, which
+    :class:`hardware.framecheck.FrameCheck` rightly cannot tell from a frozen camera; the default
+    conditions carry sensor noise (``noise_std=2``) as a real sensor does.
+
     Args:
         pose_fn: Returns ``(pose, timestamp)`` of the fish now: pose (X, Y, psi) [m, rad], timestamp on the
             monotonic clock (or the emulator's accelerated clock). Returning ``None`` emulates a lost camera.
         camera: Camera model; ``None`` means :meth:`CameraModel.default`.
         conditions: Imperfections of the image; can be replaced at any time through the ``conditions`` attribute.
-        seed: Seed of the noise generator.
+        seed: Seed of the noise generators (image noise, and pose noise from a generator of its own).
+        pose_noise: ``(metres, radians)``: standard deviations of independent Gaussian noise added to X and
+            Y, and to psi, of each rendered pose (a tracker's measurement noise seen end to end); can be
+            changed through the ``pose_noise`` attribute.
     """
 
     def __init__(
@@ -54,13 +65,31 @@ class EmulatedCamera:
         camera: CameraModel | None = None,
         conditions: SceneConditions | None = None,
         seed: int | None = None,
+        pose_noise: tuple[float, float] = (0.0, 0.0),
     ) -> None:
         self.pose_fn = pose_fn
         self.camera = CameraModel.default() if camera is None else camera
         self.conditions = SceneConditions() if conditions is None else conditions
+        self.pose_noise = pose_noise
         self._rng = np.random.default_rng(seed)
+        self._pose_rng = np.random.default_rng(None if seed is None else [int(seed), 1])
         self._last_timestamp: float | None = None
         self._closed = False
+
+    @property
+    def pose_noise(self) -> tuple[float, float]:
+        """``(metres, radians)`` standard deviations of the pose noise."""
+        return self._pose_noise
+
+    @pose_noise.setter
+    def pose_noise(self, value: tuple[float, float]) -> None:
+        try:
+            metres, radians = (float(v) for v in value)
+        except (TypeError, ValueError):
+            raise ValueError(f"pose_noise must be (metres, radians), got {value!r}") from None
+        if not (math.isfinite(metres) and math.isfinite(radians) and metres >= 0 and radians >= 0):
+            raise ValueError(f"pose_noise must be finite and >= 0 (metres, radians), got {value!r}")
+        self._pose_noise = (metres, radians)
 
     def read(self) -> Frame | None:
         """Render the fish where ``pose_fn`` says it is now (``None`` if closed, lost, or no time has passed)."""
@@ -73,11 +102,16 @@ class EmulatedCamera:
         if self._last_timestamp is not None and timestamp <= self._last_timestamp:
             return None
         self._last_timestamp = float(timestamp)
+        metres, radians = self._pose_noise
+        if metres > 0 or radians > 0:
+            dx, dy, dpsi = self._pose_rng.standard_normal(3) * (metres, metres, radians)
+            pose = (pose[0] + dx, pose[1] + dy, pose[2] + dpsi)
         return Frame(render_frame(pose, self.camera, self._rng, self.conditions), float(timestamp))
 
     def close(self) -> None:
         """Stop producing frames."""
         self._closed = True
+
 
 class OpenCVCamera:
     """A ``cv2.VideoCapture`` device or stream URL, read by a grabber thread that keeps only the newest frame.

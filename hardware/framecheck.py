@@ -2,27 +2,61 @@
 
 A frame source may hand out frames that look new but are not: stamped by another host's clock (far in
 the future or the past), with a NaN or infinite stamp, stamped earlier than the last one, or a frozen
-camera re-delivering its last image with fresh stamps. :class:`FrameCheck` rejects each with a
-reason; a rejected frame counts as "fish not seen", so the tracking timeout stops the fins.
+camera re-delivering old images with fresh stamps. :class:`FrameCheck` rejects each with a reason; a
+rejected frame counts as "fish not seen", so the tracking timeout stops the fins.
 
-A real sensor never delivers two bit-identical images of a live scene (its noise alone differs), so an
-exact repeat of the previous image is taken as frozen. The digest is BLAKE2b over the raw pixels
-(about 1 ms for a 640 x 480 image).
+Liveness rests on one physical fact: a live image sensor never delivers the same pixels twice. Its
+noise alone (photon shot noise, read noise) makes two exposures of a still scene differ in every
+region of more than a few pixels. So:
+
+* **whole image**: a bit-identical repeat of *any* of the last ``history`` images is frozen (a driver
+  cycling its last few buffers repeats an image within as many frames). The digest is BLAKE2b over the
+  raw pixels (about 1 ms for a 640 x 480 image).
+* **fish region** (``region``, a pixel box around the fish's last sighting, from the caller): a repeat
+  of that region's content among the recent frames is frozen, even when the rest of the image changes
+  (a frozen sensor under a camera's running clock overlay). "Repeat" means a mean absolute difference
+  below ``min_change`` grey levels over the overlapping part of the two boxes. Two exposures of a still
+  scene with independent Gaussian noise of standard deviation sigma differ by ``2 sigma / sqrt(pi)``
+  = 1.13 sigma on average; photon shot noise alone at mid-grey is about 1.8 grey levels for a sensor
+  of 10 000 e- full well digitised to 8 bits (sqrt(5000) e- at ~39 e-/level), more for smaller pixels.
+  The default ``min_change`` of 0.5 grey levels is a quarter of that: a live region passes with a wide
+  margin (the emulator's sigma = 2 gives 2.3), a frozen one, re-encoded losslessly or by a block codec
+  (JPEG) whose blocks did not change, gives 0. A camera with temporal noise reduction can make a still
+  scene nearly noise-free: switch that off, or set ``min_change=0`` (bit-identical repeats only).
 """
 
 from __future__ import annotations
 
+import collections
 import hashlib
 import math
 
+import cv2
 import numpy as np
 
 from hardware.frames import Frame
 
-__all__ = ["FrameCheck", "FRAME_REASONS"]
+__all__ = ["FrameCheck", "FRAME_REASONS", "Region"]
 
 FRAME_REASONS = ("bad_image", "bad_timestamp", "timestamp_backwards", "timestamp_future", "frame_too_old",
                  "frozen_frame")
+
+Region = tuple[int, int, int, int]  # (row0, row1, col0, col1) pixels, end exclusive
+
+_MIN_OVERLAP = 0.5  # a remembered region is compared when it covers at least this share of the current one
+
+
+def _region(region: Region, shape: tuple[int, ...]) -> Region | None:
+    """``region`` clipped to an image of ``shape``; ``None`` if nothing of it is inside."""
+    try:
+        row0, row1, col0, col1 = (int(v) for v in region)
+    except (TypeError, ValueError):
+        raise ValueError(f"region must be 4 integers (row0, row1, col0, col1), got {region!r}") from None
+    if row1 <= row0 or col1 <= col0:
+        raise ValueError(f"region must have row0 < row1 and col0 < col1, got {region!r}")
+    row0, row1 = max(row0, 0), min(row1, shape[0])
+    col0, col1 = max(col0, 0), min(col1, shape[1])
+    return (row0, row1, col0, col1) if row1 > row0 and col1 > col0 else None
 
 
 class FrameCheck:
@@ -31,32 +65,58 @@ class FrameCheck:
     Args:
         max_lead: A stamp more than this ahead of ``now`` is rejected (``timestamp_future``) [s].
         max_age: A stamp more than this behind ``now`` is rejected (``frame_too_old``) [s].
+        history: How many recent images (digests and fish regions) a new one is compared with [frames].
+        min_change: A fish region whose mean absolute difference from a recent one's is below this is
+            a repeat [grey levels, 0-255]; 0 keeps bit-identical repeats only.
 
     Attributes:
-        last_timestamp: Stamp of the last accepted frame.
+        last_timestamp: Stamp of the last frame that passed the clock checks.
         rejected: Count per reason.
+        last_change: Smallest mean absolute difference of the last checked fish region from the recent
+            ones [grey levels] (``nan`` when there was no region or nothing to compare).
     """
 
-    def __init__(self, max_lead: float, max_age: float):
+    def __init__(self, max_lead: float, max_age: float, history: int = 30, min_change: float = 0.5):
         if not (max_lead >= 0 and max_age > 0):
             raise ValueError(f"need max_lead >= 0 and max_age > 0, got {max_lead!r}, {max_age!r}")
+        if int(history) != history or history < 1:
+            raise ValueError(f"history must be an integer >= 1, got {history!r}")
+        if not (math.isfinite(min_change) and 0 <= min_change < 255):
+            raise ValueError(f"min_change must be in [0, 255) grey levels, got {min_change!r}")
         self.max_lead, self.max_age = float(max_lead), float(max_age)
+        self.min_change = float(min_change)
         self.last_timestamp: float | None = None
-        self._last_digest: bytes | None = None
+        self.last_change = math.nan
+        self._digests: collections.deque[bytes] = collections.deque(maxlen=int(history))
+        self._regions: collections.deque[tuple[Region, np.ndarray]] = collections.deque(maxlen=int(history))
         self.rejected = dict.fromkeys(FRAME_REASONS, 0)
 
     def reset(self) -> None:
-        """Forget the last frame (a new episode, or a camera that was re-opened)."""
-        self.last_timestamp, self._last_digest = None, None
+        """Forget the last stamp (a new episode, or a camera that was re-opened).
 
-    def check(self, frame: Frame, now: float) -> str:
-        """``""`` if ``frame`` is a new sighting at ``now`` (same clock as its stamp) [s], else the reason."""
-        reason = self._reason(frame, now)
+        The image history is kept: a live camera never repeats an image, so an image from before the
+        reset coming back after it is as frozen as any other repeat.
+        """
+        self.last_timestamp = None
+
+    def check(self, frame: Frame, now: float, region: Region | None = None) -> str:
+        """``""`` if ``frame`` is a new sighting at ``now`` (same clock as its stamp) [s], else the reason.
+
+        Args:
+            frame: The frame to classify.
+            now: Current time on the frames' clock [s].
+            region: Optional pixel box ``(row0, row1, col0, col1)``, end exclusive, around the fish's
+                last sighting (``hardware.tracker.TrackResult.box``); clipped to the image.
+
+        Raises:
+            ValueError: ``region`` is not four integers with ``row0 < row1`` and ``col0 < col1``.
+        """
+        reason = self._reason(frame, now, region)
         if reason:
             self.rejected[reason] += 1
         return reason
 
-    def _reason(self, frame: Frame, now: float) -> str:
+    def _reason(self, frame: Frame, now: float, region: Region | None) -> str:
         image = frame.image
         if not isinstance(image, np.ndarray) or image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
             return "bad_image"
@@ -72,8 +132,31 @@ class FrameCheck:
             return "timestamp_future"
         if t < now - self.max_age:
             return "frame_too_old"
-        digest = hashlib.blake2b(np.ascontiguousarray(image).data, digest_size=16).digest()
-        frozen = digest == self._last_digest
-        self._last_digest = digest
         self.last_timestamp = t  # a frozen frame still moves the clock on: its stamp was sane
+        digest = hashlib.blake2b(np.ascontiguousarray(image).data, digest_size=16).digest()
+        frozen = digest in self._digests
+        self._digests.append(digest)
+        self.last_change = math.nan
+        box = None if region is None else _region(region, image.shape)
+        if box is not None:
+            frozen = self._region_repeats(image, box) or frozen
         return "frozen_frame" if frozen else ""
+
+    def _region_repeats(self, image: np.ndarray, box: Region) -> bool:
+        """Compare the fish region with the recent ones it overlaps; remember it (a copy)."""
+        row0, row1, col0, col1 = box
+        smallest = math.inf
+        for (r0, r1, c0, c1), crop in self._regions:
+            top, bottom, left, right = max(row0, r0), min(row1, r1), max(col0, c0), min(col1, c1)
+            if bottom <= top or right <= left:
+                continue
+            if (bottom - top) * (right - left) < _MIN_OVERLAP * (row1 - row0) * (col1 - col0):
+                continue
+            new = image[top:bottom, left:right]
+            old = crop[top - r0 : bottom - r0, left - c0 : right - c0]
+            change = float(np.mean(cv2.absdiff(new, old)))
+            smallest = min(smallest, change)
+        self._regions.append((box, image[row0:row1, col0:col1].copy()))
+        if math.isfinite(smallest):
+            self.last_change = smallest
+        return smallest <= self.min_change

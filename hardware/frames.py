@@ -6,12 +6,15 @@ process, so a frame served by an emulator process on the same host keeps its cap
 
 from __future__ import annotations
 
+import collections
+import math
 import threading
+import time
 from typing import NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["CameraLostError", "Frame", "FrameSource", "NewestSlot"]
+__all__ = ["CameraLostError", "Frame", "FrameGrabber", "FrameSource", "NewestSlot"]
 
 
 class Frame(NamedTuple):
@@ -73,3 +76,113 @@ class NewestSlot:
         """Wake a waiting consumer without an item (the producer stopped)."""
         with self._condition:
             self._condition.notify_all()
+
+
+class FrameGrabber:
+    """Reads any :class:`FrameSource` in a thread of its own; :meth:`read` hands out the newest frame at once.
+
+    Whatever the source does (renders for tens of milliseconds, blocks in ``read()`` for ever, raises),
+    the caller of :meth:`read` never waits: it gets the newest frame not returned before, or ``None``.
+    Frames keep the stamps their source gave them at capture. A source that blocks, raises or goes
+    quiet shows up as no new frames, with :attr:`lost_reason` saying why. The grabber owns the source:
+    :meth:`close` closes it.
+
+    Args:
+        source: The frame source; only the grabber's thread calls its ``read()``.
+        max_rate: Most ``read()`` calls per wall second after a frame (a source that renders on demand,
+            such as the emulated camera, renders at this rate); a source that returns ``None`` is polled
+            again after a quarter of that period [1/s].
+        stale_after: No frame for this long, or one ``read()`` of the source taking this long, makes
+            :attr:`lost_reason` non-empty [s].
+        name: Name of the thread.
+
+    Attributes:
+        frames: Frames received from the source.
+        error: ``"Type: message"`` of the last exception the source raised, ``""`` once a frame arrives.
+        ages: Wall time from each recent frame's capture stamp to the moment it became available [s]
+            (for frames stamped on this machine's ``time.monotonic()``; the newest 512).
+    """
+
+    def __init__(self, source: FrameSource, max_rate: float = 30.0, stale_after: float = 1.0,
+                 name: str = "frame-grabber") -> None:
+        if not (math.isfinite(max_rate) and max_rate > 0):
+            raise ValueError(f"max_rate must be a finite number > 0 [1/s], got {max_rate!r}")
+        if not (math.isfinite(stale_after) and stale_after > 0):
+            raise ValueError(f"stale_after must be a finite number > 0 [s], got {stale_after!r}")
+        if not callable(getattr(source, "read", None)):
+            raise TypeError(f"source must be a FrameSource (with read() and close()), got {type(source).__name__}")
+        self.source = source
+        self.period, self.stale_after = 1.0 / float(max_rate), float(stale_after)
+        self.frames = 0
+        self.error = ""
+        self.ages: collections.deque[float] = collections.deque(maxlen=512)
+        self._slot = NewestSlot()
+        self._last_frame_time = time.monotonic()
+        self._reading_since: float | None = None
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        next_read = time.monotonic()
+        while not self._stop.is_set():
+            self._reading_since = time.monotonic()
+            try:
+                frame = self.source.read()
+            except Exception as error:  # noqa: BLE001 - any failure of the source is "no frame", with the reason
+                frame, self.error = None, f"{type(error).__name__}: {error}"
+            finally:
+                self._reading_since = None
+            now = time.monotonic()
+            if frame is None:
+                self._stop.wait(self.period / 4)
+                continue
+            self._last_frame_time, self.frames, self.error = now, self.frames + 1, ""
+            try:
+                self.ages.append(now - float(frame.timestamp))
+            except (TypeError, ValueError):
+                pass  # a bad stamp is FrameCheck's to reject
+            self._slot.put(frame)
+            next_read = max(next_read + self.period, now)
+            self._stop.wait(next_read - now)
+
+    def read(self) -> Frame | None:
+        """The newest frame not returned before, or ``None``; returns at once."""
+        if self._stop.is_set():
+            return None
+        return self._slot.take(0.0)
+
+    @property
+    def lost_reason(self) -> str:
+        """Why no frame is coming (``""`` while frames arrive): a blocked or raising source, or silence."""
+        now = time.monotonic()
+        if self._stop.is_set():
+            return "frame grabber closed"
+        since = self._reading_since
+        if since is not None and now - since > self.stale_after:
+            return f"camera read() blocked for {now - since:.2f} s"
+        if self.error:
+            return f"camera read() raised {self.error}"
+        if now - self._last_frame_time > self.stale_after:
+            inner = getattr(self.source, "lost_reason", "")
+            quiet = f"no frame from the camera for {now - self._last_frame_time:.2f} s"
+            return f"{quiet} ({inner})" if inner else quiet
+        return ""
+
+    @property
+    def lost(self) -> bool:
+        """True while :attr:`lost_reason` is non-empty."""
+        return bool(self.lost_reason)
+
+    def close(self, timeout: float = 1.0) -> None:
+        """Stop the thread (waiting up to ``timeout`` s for a source's ``read()`` to return) and close the source.
+
+        Safe to call twice. A thread stuck in the source's ``read()`` is a daemon and is left behind.
+        """
+        if self._stop.is_set():
+            return
+        self._stop.set()
+        self._slot.wake()
+        if self._thread is not threading.current_thread():
+            self._thread.join(timeout=timeout)
+        self.source.close()

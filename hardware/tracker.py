@@ -20,10 +20,12 @@ import cv2
 import numpy as np
 
 from hardware.frames import Frame
-from hardware.scene import BACK_MARKER_OFFSET, FRONT_MARKER_OFFSET, MARKER_RADIUS, CameraModel
+from hardware.scene import BACK_MARKER_OFFSET, BODY_LENGTH, FRONT_MARKER_OFFSET, MARKER_RADIUS, CameraModel
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 
-__all__ = ["Blob", "MarkerTracker", "TrackResult", "TrackerConfig", "draw_overlay"]
+__all__ = ["Blob", "MarkerTracker", "TrackResult", "TrackerConfig", "draw_overlay", "fish_box"]
+
+BOX_MARGIN = 0.03  # m beyond the body's half length around the centre in :attr:`TrackResult.box`
 
 
 @dataclass(frozen=True)
@@ -109,6 +111,9 @@ class TrackResult(NamedTuple):
             thresholds (1 nominal, 0 at a threshold); halved when a distractor of marker colour is in view.
         timestamp: The frame's timestamp [s].
         reason: Why not ok ("" when ok).
+        box: Pixel box ``(row0, row1, col0, col1)``, end exclusive, clipped to the image, that holds the
+            whole fish (:func:`fish_box` with :data:`BOX_MARGIN`); ``None`` unless ``ok``. The region
+            ``hardware.framecheck.FrameCheck.check`` compares between frames.
     """
 
     ok: bool
@@ -118,6 +123,39 @@ class TrackResult(NamedTuple):
     confidence: float
     timestamp: float
     reason: str
+    box: tuple[int, int, int, int] | None = None
+
+
+def fish_box(camera: CameraModel, pose: tuple[float, ...], margin: float = BOX_MARGIN) -> tuple[int, int, int, int]:
+    """Pixel box around a fish at ``pose``: the image of a tank disc of radius half a body length + ``margin``.
+
+    Args:
+        camera: The camera model.
+        pose: ``(X, Y, ...)`` of the centre of mass [m]; the heading, if given, is not used (the disc
+            holds the body at any heading).
+        margin: Extra radius beyond half the body length [m], >= 0.
+
+    Returns:
+        ``(row0, row1, col0, col1)`` pixels, end exclusive, clipped to the image (may be empty, row0 ==
+        row1, when the fish is outside the view).
+
+    Raises:
+        ValueError: A non-finite position or a negative margin.
+    """
+    if not (math.isfinite(margin) and margin >= 0):
+        raise ValueError(f"margin must be a finite number >= 0 [m], got {margin!r}")
+    x, y = float(pose[0]), float(pose[1])
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise ValueError(f"pose position must be finite, got {pose!r}")
+    radius = BODY_LENGTH / 2 + margin
+    angles = np.linspace(0.0, 2 * math.pi, 16, endpoint=False)
+    ring = np.stack([x + radius * np.cos(angles), y + radius * np.sin(angles)], axis=1)
+    pixels = camera.tank_to_pixel(ring)
+    col0, row0 = np.floor(pixels.min(axis=0)).astype(int) - 1
+    col1, row1 = np.ceil(pixels.max(axis=0)).astype(int) + 2
+    row0, row1 = min(max(int(row0), 0), camera.height), min(max(int(row1), 0), camera.height)
+    col0, col1 = min(max(int(col0), 0), camera.width), min(max(int(col1), 0), camera.width)
+    return row0, max(row1, row0), col0, max(col1, col0)
 
 
 def _lost(timestamp: float, reason: str) -> TrackResult:
@@ -195,15 +233,21 @@ class MarkerTracker:
         return size, shape
 
     def track(self, frame: Frame) -> TrackResult:
-        """Pose of the fish in ``frame``, or a lost result saying why."""
+        """Pose of the fish in ``frame``, or a lost result saying why.
+
+        A frame whose size differs from the calibration's is lost with a reason naming both sizes (a
+        homography is only valid at the resolution it was measured at).
+
+        Raises:
+            ValueError: ``frame.image`` is not an (H, W, 3) uint8 array.
+        """
         image, timestamp = frame
         if not isinstance(image, np.ndarray) or image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
             raise ValueError(f"frame.image must be an (H, W, 3) uint8 BGR array, got {getattr(image, 'shape', image)}")
         if image.shape[:2] != (self.camera.height, self.camera.width):
-            raise ValueError(
-                f"frame is {image.shape[1]}x{image.shape[0]} px but the calibration is for "
-                f"{self.camera.width}x{self.camera.height} px; recalibrate or set the camera resolution"
-            )
+            return _lost(timestamp, f"frame is {image.shape[1]}x{image.shape[0]} px but the calibration is for "
+                                    f"{self.camera.width}x{self.camera.height} px; recalibrate or set the camera "
+                                    "resolution")
         cfg = self.config
         hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV)
         blobs = {"red": self._blobs(self._mask(hsv, cfg.red_hue_bands)),
@@ -242,7 +286,8 @@ class MarkerTracker:
         confidence = float(np.clip(confidence, 0.0, 1.0))
         if len(reds) > 1 or len(blues) > 1:
             confidence *= 0.5  # a distractor of marker colour and size is in view
-        return TrackResult(True, float(centre[0]), float(centre[1]), psi, float(confidence), float(timestamp), "")
+        box = fish_box(self.camera, (float(centre[0]), float(centre[1])))
+        return TrackResult(True, float(centre[0]), float(centre[1]), psi, float(confidence), float(timestamp), "", box)
 
 
 def draw_overlay(

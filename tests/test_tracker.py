@@ -150,8 +150,8 @@ def test_empty_tank_and_bad_frames():
                          SceneConditions(front_occlusion=1.0, back_occlusion=1.0))
     result = TRACKER.track(Frame(empty, 0.0))
     assert not result.ok and "not found" in result.reason
-    with pytest.raises(ValueError, match="calibration is for"):
-        TRACKER.track(Frame(np.zeros((100, 100, 3), np.uint8), 0.0))
+    wrong_size = TRACKER.track(Frame(np.zeros((100, 120, 3), np.uint8), 0.0))  # a clear reason, not an exception
+    assert not wrong_size.ok and "frame is 120x100 px but the calibration is for 640x360 px" in wrong_size.reason
     with pytest.raises(ValueError, match="uint8"):
         TRACKER.track(Frame(np.zeros((360, 640, 3)), 0.0))
 
