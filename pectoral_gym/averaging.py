@@ -39,10 +39,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
-from pectoral_gym._jit import JIT
+from pectoral_gym._jit import njit
 from pectoral_gym.dynamics import body_accel, body_accel_waveform, oscillating_square_mean
 from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.ktables import (
@@ -156,7 +155,7 @@ def equivalent_amplitude(samples: np.ndarray) -> np.ndarray:
 
 
 
-@nb.njit(**JIT)
+@njit
 def bessel_j1(x: float) -> float:
     """Bessel function ``J1(x)`` by its power series, for ``|x| <= pi``.
 
@@ -173,7 +172,7 @@ def bessel_j1(x: float) -> float:
     return total
 
 
-@nb.njit(**JIT)
+@njit
 def half_stroke_mean_force(angle_from: float, angle_to: float, duration: float, drag_constant: float):
     """Exact mean blade-element force of one half-cosine half-stroke of the right fin (``docs/model.md`` 3.7).
 
@@ -209,7 +208,7 @@ def _odd_moment_coefficients(terms: int = 14) -> tuple[float, ...]:
 ODD_MOMENT_SERIES = _odd_moment_coefficients()
 
 
-@nb.njit(**JIT)
+@njit
 def odd_moment(h: float) -> float:
     """``Q(h) = int_0^pi (phi - pi/2) sin^2(phi) sin(h cos phi) dphi``, by its power series (``|h| <= pi/2``).
 
@@ -225,7 +224,7 @@ def odd_moment(h: float) -> float:
     return total
 
 
-@nb.njit(**JIT)
+@njit
 def ripple_offset(bias: float, amplitude: float, period: float, ratio: float, drag_constant: float):
     """Beat-mean impulse offset [N s] of the right fin's regular beat over its cycle average (``docs/model.md`` 3.8).
 
@@ -249,7 +248,7 @@ def ripple_offset(bias: float, amplitude: float, period: float, ratio: float, dr
     return a * math.sin(bias) + b * math.cos(bias), a * math.cos(bias) - b * math.sin(bias)
 
 
-@nb.njit(**JIT)
+@njit
 def power_stroke_excess(bias: float, amplitude: float, period: float, ratio: float, drag_constant: float):
     """Impulse [N s] a regular power stroke delivers beyond the cycle mean over its duration (right fin, K = 1).
 
@@ -269,7 +268,7 @@ def power_stroke_excess(bias: float, amplitude: float, period: float, ratio: flo
     return d1 * px - d1 * (d1 * px + d2 * rx) / period, d1 * py - d1 * (d1 * py + d2 * ry) / period
 
 
-@nb.njit(**JIT)
+@njit
 def averaged_fin_forcing(
     bias: float,
     amplitude: float,
@@ -297,7 +296,7 @@ def averaged_fin_forcing(
     return scaled_forcing(bias, amplitude, period, ratio, side, coef, mode, kx, ky, km, tables.base_sway)
 
 
-@nb.njit(**JIT)
+@njit
 def scaled_forcing(bias, amplitude, period, ratio, side, coef, mode, kx, ky, km, base_sway):
     """:func:`averaged_fin_forcing` with the scaling values ``K_fx, K_fy, K_m`` given (eq. 25).
 
@@ -322,7 +321,7 @@ def scaled_forcing(bias, amplitude, period, ratio, side, coef, mode, kx, ky, km,
     return kx * fx, side * sway, side * km * tau
 
 
-@nb.njit(**JIT)
+@njit
 def mean_fin_power(amplitude: float, period: float, ratio: float, span: float, drag_constant: float) -> float:
     """Mean hydrodynamic power one fin delivers to the water [W].
 

@@ -15,10 +15,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-import numba as nb
 import numpy as np
 
-from pectoral_gym._jit import JIT
+from pectoral_gym._jit import njit
 from pectoral_gym.params import Coef
 
 __all__ = [
@@ -56,7 +55,7 @@ class Forcing(NamedTuple):
     tau: float  # N m, yaw moment
 
 
-@nb.njit(**JIT)
+@njit
 def stroke_kinematics(elapsed: float, duration: float, angle_from: float, angle_to: float):
     """Fin angle and its exact derivatives within one half-stroke.
 
@@ -79,7 +78,7 @@ def stroke_kinematics(elapsed: float, duration: float, angle_from: float, angle_
     return mid - half * c, half * rate * s, half * rate * rate * c
 
 
-@nb.njit(**JIT)
+@njit
 def fin_force_right(g: float, gd: float, gdd: float, drag_constant: float, inertia_constant: float):
     """Force of the right fin on the body, body frame (eqs. 9-17).
 
@@ -101,7 +100,7 @@ def fin_force_right(g: float, gd: float, gdd: float, drag_constant: float, inert
     return fin_force_at(math.sin(g), math.cos(g), gd, gdd, drag_constant, inertia_constant)
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def fin_force_at(sg: float, cg: float, gd: float, gdd: float, drag_constant: float, inertia_constant: float):
     """:func:`fin_force_right` from ``sin g, cos g`` (for callers that have them without calling ``sin/cos``)."""
     fn = -drag_constant * gd * abs(gd)  # eq. (13) along n
@@ -112,7 +111,7 @@ def fin_force_at(sg: float, cg: float, gd: float, gdd: float, drag_constant: flo
     return fx, fy
 
 
-@nb.njit(**JIT)
+@njit
 def oscillating_square_mean(mean: float, amplitude: float) -> float:
     """Cycle mean of ``x|x|`` for ``x = mean + amplitude sin(theta)``, ``theta`` uniform over a cycle.
 
@@ -131,7 +130,7 @@ def oscillating_square_mean(mean: float, amplitude: float) -> float:
     return a2 * (2.0 * math.asin(u) / math.pi * (u * u + 0.5) + 3.0 / math.pi * u * math.sqrt(1.0 - u * u))
 
 
-@nb.njit(**JIT)
+@njit
 def waveform_square_mean(mean: float, samples) -> float:
     """Mean of ``x|x|`` over ``x = mean + samples[j]``: the quadrature of the waveform damping (``docs/model.md`` 3.6).
 
@@ -148,7 +147,7 @@ def waveform_square_mean(mean: float, samples) -> float:
     return total / n
 
 
-@nb.njit(**JIT)
+@njit
 def _undamped_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2):
     """Eq. (19) with ``f_1, f_2`` of eq. (20), and the Munk and fin terms of ``f_3`` (without its yaw damping)."""
     speed = math.sqrt(vx * vx + vy * vy)
@@ -161,7 +160,7 @@ def _undamped_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2):
     return dvx, dvy, (m1 - m2) / j3 * vx * vy, tau / j3  # f3 = munk - c4 damping + moment
 
 
-@nb.njit(**JIT)
+@njit
 def body_accel_waveform(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, samples):
     """:func:`body_accel` with the yaw damping averaged over a sampled in-beat waveform (``docs/model.md`` 3.6).
 
@@ -171,7 +170,7 @@ def body_accel_waveform(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, samp
     return dvx, dvy, munk - c4 * waveform_square_mean(omega, samples) + moment
 
 
-@nb.njit(**JIT)
+@njit
 def body_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, oscillation=0.0):
     """Body-frame accelerations of eq. (19) with ``f_1, f_2, f_3`` of eq. (20), scalar coefficients.
 
@@ -191,7 +190,7 @@ def body_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, oscillation=0
     return dvx, dvy, munk - c4 * damping + moment  # f3
 
 
-@nb.njit(**JIT)
+@njit
 def body_rhs(vx: float, vy: float, omega: float, fx: float, fy: float, tau: float, coef):
     """Body-frame accelerations of eq. (19) with ``f_1, f_2, f_3`` of eq. (20).
 
@@ -207,7 +206,7 @@ def body_rhs(vx: float, vy: float, omega: float, fx: float, fy: float, tau: floa
                       coef[Coef.C1], coef[Coef.C2], coef[Coef.C4])
 
 
-@nb.njit(**JIT)
+@njit
 def linearised_rate(speed, omega, oscillation, m1, m2, j3, c1, c2, c4):
     """Upper bound [1/s] on the eigenvalue moduli of the Jacobian of eqs. (19)-(20) in ``(vx, vy, omega)``.
 
@@ -248,7 +247,7 @@ def linearised_rate(speed, omega, oscillation, m1, m2, j3, c1, c2, c4):
     return rate_bound(speed, omega, oscillation, rate_constants(m1, m2, j3, c1, c2, c4))
 
 
-@nb.njit(**JIT)
+@njit
 def rate_constants(m1, m2, j3, c1, c2, c4) -> RateConstants:
     """The factors of :func:`linearised_rate` that depend on the body coefficients only (eq. 20)."""
     ratio = max(m1 / m2, m2 / m1)
@@ -256,7 +255,7 @@ def rate_constants(m1, m2, j3, c1, c2, c4) -> RateConstants:
                          math.sqrt(ratio * abs(m1 - m2) / j3))
 
 
-@nb.njit(**JIT)
+@njit
 def rate_bound(speed, omega, oscillation, k: RateConstants):
     """:func:`linearised_rate` from its precomputed :class:`RateConstants` (the integrators' inner loop)."""
     omega = abs(omega)

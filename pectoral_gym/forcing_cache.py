@@ -49,10 +49,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
-from pectoral_gym._jit import JIT
+from pectoral_gym._jit import njit
 from pectoral_gym.averaging import scaled_forcing
 from pectoral_gym.ktables import (
     MAX_HARMONICS,
@@ -101,7 +100,7 @@ def clear(cache: np.ndarray, index: np.ndarray | slice | None = None) -> None:
     cache[slice(None) if index is None else index] = 0.0
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def refresh(cache, i, f, bias, amplitude, period, ratio, coef, mode, tables):
     """Make fin ``f`` of fish ``i``'s row hold the forcing of pattern ``(bias, amplitude, period, ratio)``.
 
@@ -126,7 +125,7 @@ def refresh(cache, i, f, bias, amplitude, period, ratio, coef, mode, tables):
     cache[i, f, CACHED] = 1.0
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def yaw_oscillation(fins, cache, i, offset, idle0, idle1):
     """Amplitude [rad/s] of the yaw-rate oscillation both fins drive, ``offset`` s into the segment.
 
@@ -153,7 +152,7 @@ def yaw_oscillation(fins, cache, i, offset, idle0, idle1):
     return math.sqrt(re * re + im * im)
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _beat_phase(fins, i, f, offset):
     """Beat phase ``2 pi t / T_p`` of fin ``f``, ``t`` from the start of its power stroke, ``offset`` s ahead."""
     period = fins[i, f, PERIOD]
@@ -163,7 +162,7 @@ def _beat_phase(fins, i, f, offset):
     return 2.0 * math.pi * t / period
 
 
-@nb.njit(**JIT)
+@njit
 def waveform_samples(work, harmonics, n, cycles0, cycles1):
     """The samples ``work[:n]`` of both fins' waveforms over a window; returns ``(pi/2) mean|.|``.
 
@@ -193,7 +192,7 @@ def waveform_samples(work, harmonics, n, cycles0, cycles1):
     return 0.5 * math.pi * total / n
 
 
-@nb.njit(**JIT)
+@njit
 def _mean_abs(work, n, omega):
     total = 0.0
     for j in range(n):
@@ -201,7 +200,7 @@ def _mean_abs(work, n, omega):
     return total / n
 
 
-@nb.njit(**JIT)
+@njit
 def yaw_waveform(fins, cache, i, offset, idle0, idle1, harmonics, rate, omega, c4, work):
     """Both fins' yaw-rate oscillation over one averaging window, ``offset`` s into the segment.
 

@@ -15,10 +15,9 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import numba as nb
 import numpy as np
 
-from pectoral_gym._jit import JIT
+from pectoral_gym._jit import njit
 
 __all__ = ["COMMON_BEATS", "MAX_HARMONICS", "MAX_SAMPLES", "QUADRATURE", "RATE_ITERATIONS", "quadrature_window",
            "KTables", "as_tables", "bspline_basis", "interleave",
@@ -76,7 +75,7 @@ class KTables(NamedTuple):
     shared: np.ndarray
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def as_tables(packed) -> KTables:
     """The :class:`KTables` of ``tuple(tables)``, inside compiled code.
 
@@ -88,7 +87,7 @@ def as_tables(packed) -> KTables:
                    packed[9])
 
 
-@nb.njit(**JIT)
+@njit
 def bspline_basis(knots, n: int, x: float):
     """Span and the four nonzero cubic B-spline basis values at ``x`` (clamped to the knot range).
 
@@ -121,7 +120,7 @@ def bspline_basis(knots, n: int, x: float):
     return span, n0, n1, n2, n3
 
 
-@nb.njit(**JIT)
+@njit
 def _tensor_spline(bias: float, amplitude: float, inv_ratio: float, knots, table):
     """Up to three channels of a tensor-product cubic spline ``table (channels, n0, n1, n2)``; absent ones are 0."""
     channels, n0, n1, n2 = table.shape[0], table.shape[1], table.shape[2], table.shape[3]
@@ -144,7 +143,7 @@ def _tensor_spline(bias: float, amplitude: float, inv_ratio: float, knots, table
     return v0, v1, v2
 
 
-@nb.njit(**JIT)
+@njit
 def spline_values(bias: float, amplitude: float, inv_ratio: float, knots, table):
     """Spline parts of ``(K_fx, K_fy, K_m)``; ``knots``, ``table`` as in :class:`KTables`.
 
@@ -155,14 +154,14 @@ def spline_values(bias: float, amplitude: float, inv_ratio: float, knots, table)
     return _tensor_spline(bias, amplitude, inv_ratio, knots, table)
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _taper(amplitude: float, knots) -> float:
     """Below the lowest amplitude node (``knots[1, 3]``) the phasor and waveform splines shrink linearly to zero."""
     lowest = knots[1, 3]
     return amplitude / lowest if amplitude < lowest and lowest > 0.0 else 1.0
 
 
-@nb.njit(**JIT)
+@njit
 def oscillation_phasor(bias: float, amplitude: float, inv_ratio: float, knots, table):
     """Yaw-oscillation phasor ``A T_p (cos phi, sin phi)`` [rad] of one fin (module docstring).
 
@@ -180,7 +179,7 @@ def oscillation_phasor(bias: float, amplitude: float, inv_ratio: float, knots, t
     return pc, ps
 
 
-@nb.njit(**JIT)
+@njit
 def waveform_harmonics_into(bias: float, amplitude: float, period: float, ratio: float, tables: KTables, side: float,
                             out, offset: int) -> int:
     """Write the fin's yaw-waveform data [rad/s] into ``out[offset:]``; return the number of harmonics ``H``.
@@ -220,7 +219,7 @@ def waveform_harmonics_into(bias: float, amplitude: float, period: float, ratio:
     return h
 
 
-@nb.njit(**JIT)
+@njit
 def quadrature_window(freq0: float, freq1: float):
     """``(samples, cycles of fin 0, cycles of fin 1)`` of the waveform damping's window (``docs/model.md`` 3.6).
 
@@ -242,7 +241,7 @@ def quadrature_window(freq0: float, freq1: float):
     return QUADRATURE, 1, 1
 
 
-@nb.njit(**JIT)
+@njit
 def _ipow(x: float, exponent: float) -> float:
     """``x ** exponent`` for a small non-negative integer ``exponent``, by repeated multiplication."""
     result = 1.0
@@ -251,7 +250,7 @@ def _ipow(x: float, exponent: float) -> float:
     return result
 
 
-@nb.njit(**JIT)
+@njit
 def _k_value(which: int, bias: float, amplitude: float, period: float, ratio: float, k_powers, k_coefs) -> float:
     """Evaluate the polynomial part of scaling function ``which`` (0 K_fx, 1 K_fy, 2 K_m) as a sum of monomials.
 
@@ -271,7 +270,7 @@ def _k_value(which: int, bias: float, amplitude: float, period: float, ratio: fl
     return total
 
 
-@nb.njit(**JIT)
+@njit
 def scaling_values(bias: float, amplitude: float, period: float, ratio: float, tables: KTables):
     """``(K_fx, K_fy, K_m)`` at one pattern (rad, rad, s, -): polynomial part plus spline part."""
     sx, sy, sm = spline_values(bias, amplitude, 1.0 / ratio, tables.knots, tables.table)
@@ -279,7 +278,7 @@ def scaling_values(bias: float, amplitude: float, period: float, ratio: float, t
     return kx + sx, ky + sy, km + sm
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _polynomial_parts(bias: float, amplitude: float, period: float, ratio: float, tables: KTables):
     """The polynomial parts of ``(K_fx, K_fy, K_m)`` (:func:`_k_value` of each)."""
     return (_k_value(0, bias, amplitude, period, ratio, tables.powers, tables.coefs),
@@ -295,7 +294,7 @@ def interleave(knots: np.ndarray, table: np.ndarray, osc_knots: np.ndarray, osc_
     return np.zeros((0, 0, 0, 5))
 
 
-@nb.njit(**JIT)
+@njit
 def _shared_splines(bias: float, amplitude: float, inv_ratio: float, knots, shared):
     """The three K spline channels and the two phasor channels of :attr:`KTables.shared`, in one pass.
 
@@ -323,7 +322,7 @@ def _shared_splines(bias: float, amplitude: float, inv_ratio: float, knots, shar
     return v0, v1, v2, p0, p1
 
 
-@nb.njit(**JIT)
+@njit
 def pattern_values(bias: float, amplitude: float, period: float, ratio: float, tables: KTables):
     """``(K_fx, K_fy, K_m)`` and the yaw-oscillation phasor [rad/s] of one right fin, at one latch.
 
@@ -344,7 +343,7 @@ def pattern_values(bias: float, amplitude: float, period: float, ratio: float, t
     return kx + sx, ky + sy, km + sm, pc / period, ps / period
 
 
-@nb.njit(**JIT)
+@njit
 def yaw_oscillation_phasor(bias: float, amplitude: float, period: float, ratio: float, tables: KTables):
     """Phasor ``A (cos phi, sin phi)`` [rad/s] of the yaw-rate oscillation one right fin drives.
 

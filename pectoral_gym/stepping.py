@@ -26,12 +26,11 @@ from __future__ import annotations
 import enum
 import math
 
-import numba as nb
 import numpy as np
 
 from pectoral_gym import forcing_cache as fc
 from pectoral_gym import strokes as st
-from pectoral_gym._jit import JIT, PARALLEL_MIN_ITEMS, kernel_pair
+from pectoral_gym._jit import PARALLEL_MIN_ITEMS, kernel_pair, njit
 from pectoral_gym.averaging import half_stroke_mean_force, power_stroke_excess, ripple_offset
 from pectoral_gym.dynamics import Forcing, RateConstants, body_accel, body_accel_waveform, rate_bound, rate_constants
 from pectoral_gym.ktables import KTables, as_tables
@@ -53,7 +52,7 @@ TRANSITIONS, RIPPLE_OFFSETS = 1, 2
 ACCURATE_STEP = 1.5  # averaged model: h * rate bound; RK4 is stable to 2.78, this keeps transients accurate
 
 
-@nb.njit(**JIT)
+@njit
 def _rotate(c0, s0, delta):
     """``cos, sin`` of ``psi0 + delta`` from those of ``psi0``.
 
@@ -70,14 +69,14 @@ def _rotate(c0, s0, delta):
     return c0 * cd - s0 * sd, s0 * cd + c0 * sd
 
 
-@nb.njit(**JIT)
+@njit
 def _accel(u, v, w, f: Forcing, b: BodyCoefficients, osc, wave):
     if wave is None:  # resolved when compiling: the None specialisation is the code without the waveform
         return body_accel(u, v, w, f.fx, f.fy, f.tau, b.m1, b.m2, b.J3, b.c1, b.c2, b.c4, osc)
     return body_accel_waveform(u, v, w, f.fx, f.fy, f.tau, b.m1, b.m2, b.J3, b.c1, b.c2, b.c4, wave)
 
 
-@nb.njit(**JIT)
+@njit
 def _rk4(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: BodyCoefficients, osc, wave):
     """One RK4 step of eq. (19) for fish ``i``; forcing given at t, t+h/2, t+h.
 
@@ -120,14 +119,14 @@ def _rk4(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: Bod
     integral[i, 2] += h6 * (w0 + 2.0 * w2 + 2.0 * w3 + w4)
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _driven(body: BodyCoefficients, forcing: Forcing):
     """Yaw rate and speed a constant forcing drives towards: ``sqrt(|tau| / (c4 J3))``, ``sqrt(|F| / c1)``."""
     return (math.sqrt(abs(forcing.tau) / (body.c4 * body.J3)),
             math.sqrt(math.hypot(forcing.fx, forcing.fy) / max(body.c1, 1e-12)))
 
 
-@nb.njit(**JIT)
+@njit
 def _stable_step(state, i, rates: RateConstants, driven_omega, driven_speed, osc, dt_max):
     """Averaged model: RK4 step, at most ``dt_max`` and ``h * rate <= ACCURATE_STEP``.
 
@@ -144,7 +143,7 @@ def _stable_step(state, i, rates: RateConstants, driven_omega, driven_speed, osc
     return dt_max
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _full_stable_step(state, fins, i, idle0, idle1, body, rates, drag_constant, inertia_constant, fin_offset, h_max):
     """Full model: ``h_max``, shortened where RK4 would leave its accurate range (:func:`_stable_step`).
 
@@ -168,7 +167,7 @@ def _full_stable_step(state, fins, i, idle0, idle1, body, rates, drag_constant, 
     return _stable_step(state, i, rates, driven_omega, driven_speed, 0.0, h_max)
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables, corrections):
     """Latch fin ``f``'s commanded pattern; the averaged model also brings its forcing cache up to date.
 
@@ -202,7 +201,7 @@ def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables,
             cache[i, f, fc.TR_TAU] = dtau
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _oscillation_gain(fins, i, f, coef):
     """Yaw-oscillation gain of fin ``f``'s latched half-stroke (``docs/model.md`` 3.9; 1 on a regular one)."""
     return transitional_oscillation_gain(fins[i, f, st.ANGLE_FROM], fins[i, f, st.ANGLE_TO], fins[i, f, DURATION],
@@ -211,7 +210,7 @@ def _oscillation_gain(fins, i, f, coef):
                                          coef[i, Coef.FIN_INERTIA_CONSTANT])
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _ripple_offset_change(fins, cache, i, f, drag_constant, fin_offset):
     """Impulse [N s, N s, N m s] that moves fin ``f``'s delivered ripple offset to its latched pattern's.
 
@@ -231,7 +230,7 @@ def _ripple_offset_change(fins, cache, i, f, drag_constant, fin_offset):
     return ox, oy, ot
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _transition(fins, cache, i, f, drag_constant, fin_offset):
     """Averaged model: forcing of fin ``f``'s half-stroke in progress beyond its pattern's regular one.
 
@@ -269,7 +268,7 @@ def _transition(fins, cache, i, f, drag_constant, fin_offset):
     return dx, side * dy, side * fin_offset * dx  # eq. (18), left fin mirrored
 
 
-@nb.njit(**JIT)
+@njit
 def _waveform_segment(state, integral, fins, cache, i, seg, idle0, idle1, harmonics, rate_correction, body, rates,
                       forcing, dt_max):
     """Averaged model, waveform damping (``docs/model.md`` 3.6): RK4 substeps over one segment of ``seg`` s.
@@ -284,7 +283,7 @@ def _waveform_segment(state, integral, fins, cache, i, seg, idle0, idle1, harmon
     _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, work[:n_wave], dt_max)
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, wave, dt_max):
     """Integrate fish ``i`` over a segment of constant forcing.
 
@@ -299,7 +298,7 @@ def _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc
         t_seg -= h
 
 
-@nb.njit(**JIT)
+@njit
 def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode,
                  corrections, packed_tables):
     """Advance fish ``i`` by ``duration`` seconds, segment by segment between stroke boundaries."""

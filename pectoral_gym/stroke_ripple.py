@@ -23,10 +23,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
-from pectoral_gym._jit import JIT
+from pectoral_gym._jit import njit
 from pectoral_gym.averaging import half_stroke_mean_force
 from pectoral_gym.dynamics import fin_force_at
 
@@ -42,7 +41,7 @@ _SIN_PHASE, _COS_PHASE = np.sin(_PHASE), np.cos(_PHASE)
 _WEIGHT = _W * 0.5  # (pi / 2) from the change of variable, 1 / pi for the mean over [0, pi]
 
 
-@nb.njit(**JIT)
+@njit
 def half_stroke_ripple_square(angle_from: float, angle_to: float, duration: float, drag_constant: float,
                               inertia_constant: float, mean_force: float) -> float:
     """Mean [N^2] of ``(f_hx - mean_force)^2`` over one half-cosine half-stroke of the right fin.
@@ -71,7 +70,7 @@ def half_stroke_ripple_square(angle_from: float, angle_to: float, duration: floa
     return total
 
 
-@nb.njit(**JIT)
+@njit
 def transitional_oscillation_gain(angle_from: float, angle_to: float, duration: float, power: bool, bias: float,
                                   amplitude: float, period: float, ratio: float, drag_constant: float,
                                   inertia_constant: float) -> float:

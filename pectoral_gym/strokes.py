@@ -48,10 +48,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-import numba as nb
 import numpy as np
 
-from pectoral_gym._jit import JIT
+from pectoral_gym._jit import njit
 from pectoral_gym.dynamics import fin_force_right, stroke_kinematics
 
 __all__ = [
@@ -71,7 +70,7 @@ BEAT_BIAS, BEAT_AMPLITUDE, BEAT_PERIOD, BEAT_RATIO = 0, 1, 2, 3  # a pattern row
 SIDE = (1.0, -1.0)  # right fin, left fin (mirror image): the sign of its y force and yaw moment
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def latch(fins, pending, i, f):
     """Start the next half-stroke of fin ``f`` of fish ``i`` with its commanded parameters."""
     bias, amp = pending[i, f, BEAT_BIAS], pending[i, f, BEAT_AMPLITUDE]
@@ -92,7 +91,7 @@ def latch(fins, pending, i, f):
     fins[i, f, RATIO] = ratio
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def swept_cube(fins, i, f, seg):
     """``int |g'|^3 dt`` [rad^3/s^2] of fin ``f``'s half-stroke in progress over the next ``seg`` s.
 
@@ -109,7 +108,7 @@ def swept_cube(fins, i, f, seg):
     return abs(half) ** 3 * rate * rate * ((c0 - c0**3 / 3.0) - (c1 - c1**3 / 3.0))
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def idle(fins, pending, i, f):
     """True for a fin that holds still and is commanded to hold still at the same angle."""
     return (
@@ -119,7 +118,7 @@ def idle(fins, pending, i, f):
     )
 
 
-@nb.njit(**JIT)
+@njit
 def fin_forcing(fins, i, offset, drag_constant, inertia_constant, fin_offset):
     """Total blade-element force [N] and moment [N m] of both fins, ``offset`` s into the segment (eqs. 9-18).
 
@@ -150,7 +149,7 @@ class StrokePhase(NamedTuple):
     moving: bool  # False: a still fin exerts no force
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def stroke_phase(fins, i, f, step, offset=0.0):
     """Fin ``f`` of fish ``i`` ``offset`` s after its elapsed time, rotating by ``step`` s per :func:`advance_phase`."""
     angle_from, angle_to = fins[i, f, ANGLE_FROM], fins[i, f, ANGLE_TO]
@@ -162,14 +161,14 @@ def stroke_phase(fins, i, f, step, offset=0.0):
                        0.5 * (angle_from + angle_to), 0.5 * (angle_to - angle_from), rate, True)
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def advance_phase(p: StrokePhase) -> StrokePhase:
     """``p`` one step later (rotation of its phase)."""
     return StrokePhase(p.cos * p.cos_step - p.sin * p.sin_step, p.sin * p.cos_step + p.cos * p.sin_step,
                        p.cos_step, p.sin_step, p.mid, p.half, p.rate, p.moving)
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def phase_forcing(right: StrokePhase, left: StrokePhase, drag_constant, inertia_constant, fin_offset):
     """:func:`fin_forcing` from both fins' :class:`StrokePhase` (eqs. 9-18)."""
     fx_total = 0.0
@@ -190,7 +189,7 @@ def phase_forcing(right: StrokePhase, left: StrokePhase, drag_constant, inertia_
     return fx_total, fy_total, tau_total
 
 
-@nb.njit(**JIT)
+@njit
 def command_fins(fins, pending, new, mask):
     """Store new commanded patterns ``new`` ``(n, 2, 4)`` for the fish where ``mask``.
 
@@ -228,7 +227,7 @@ def init_fins(fins: np.ndarray, pending: np.ndarray, beats: np.ndarray, index: n
     pending[idx] = b
 
 
-@nb.njit(**JIT)
+@njit
 def fin_angles(fins):
     """Current fin angles ``(n, 2)`` [rad] and rates [rad/s]."""
     n = fins.shape[0]

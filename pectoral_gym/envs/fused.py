@@ -30,18 +30,13 @@ entry point of that exact signature, which skips numba's argument typing (done
 in Python for a structref, about 1 us a call); it is used only with the bound
 arrays and the core's own all-false mask, the types it was compiled for.
 
-numba's disk cache keys a kernel on its own file only (:mod:`pectoral_gym._jit`),
-and this kernel inlines code from many modules, among them ``stepping.py``:
-a cached copy would keep an old model after an edit there. The kernel is
-therefore built in a closure over a digest of the sources it inlines
-(:data:`COMPILED_SOURCES`); numba hashes closure variables into the cache key,
-so an edit of any of them compiles it afresh.
+This kernel inlines code from many modules, among them ``stepping.py``; like every kernel
+it is compiled with :func:`pectoral_gym._jit.njit`, whose disk cache is keyed on all the
+sources it compiles from, so an edit of any of them compiles it afresh.
 """
 
 from __future__ import annotations
 
-import hashlib
-import importlib
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -51,36 +46,11 @@ from numba.core import types
 from numba.experimental import structref
 
 from pectoral_gym import stepping
-from pectoral_gym._jit import JIT
+from pectoral_gym._jit import njit
 from pectoral_gym.envs import tasks as tk
 from pectoral_gym.strokes import command_fins
 
-__all__ = ["COMPILED_SOURCES", "STEP_FIELDS", "BoundStep", "FusedStep", "StepArrays", "bind", "source_digest",
-           "step_kernel"]
-
-#: The modules whose compiled code the step kernel inlines (their sources key its disk cache).
-#: ``tests/test_fused_step.py`` checks that it holds every ``pectoral_gym`` module that
-#: ``stepping`` and ``envs.tasks`` import, directly or not.
-COMPILED_SOURCES = (
-    "pectoral_gym._jit", "pectoral_gym.params", "pectoral_gym.dynamics", "pectoral_gym.ktables",
-    "pectoral_gym.kfunctions", "pectoral_gym.kfile", "pectoral_gym.averaging", "pectoral_gym.strokes",
-    "pectoral_gym.forcing_cache", "pectoral_gym.stroke_ripple",
-    "pectoral_gym.stepping", "pectoral_gym.envs.layout", "pectoral_gym.envs.observation", "pectoral_gym.envs.tasks",
-)
-
-
-def source_digest(modules: tuple[str, ...] = COMPILED_SOURCES) -> int:
-    """A 60-bit digest of the source files of ``modules`` (an int, so numba can close over it)."""
-    digest = hashlib.sha256()
-    for name in modules:
-        path = importlib.import_module(name).__file__
-        try:
-            with open(path, "rb") as f:  # noqa: PTH123 - a plain read, once per process
-                digest.update(f.read())
-        except (OSError, TypeError):  # no readable source (frozen app): numba's cache cannot check it either
-            digest.update(name.encode())
-    return int(digest.hexdigest()[:15], 16)
-
+__all__ = ["STEP_FIELDS", "BoundStep", "FusedStep", "StepArrays", "bind", "step_kernel"]
 
 @structref.register
 class StepArraysType(types.StructRef):
@@ -102,7 +72,7 @@ STEP_FIELDS = ("actions", "cfg", "beats", "obs", "out", "fish", "ep", "before", 
 structref.define_proxy(StepArrays, StepArraysType, list(STEP_FIELDS))
 
 
-@nb.njit(**JIT)
+@njit
 def new_step_arrays(actions, cfg, beats, obs, out, fish, ep, before, everyone, state, fins, cache, pending, integral,
                     coef, tables):
     """A :class:`StepArrays` of these arrays; compiled and cached (``StepArrays(...)`` compiles anew per process)."""
@@ -110,39 +80,26 @@ def new_step_arrays(actions, cfg, beats, obs, out, fish, ep, before, everyone, s
                       integral, coef, tables)
 
 
-def _build(stamp: int) -> Callable[..., Any]:
-    """The step kernel, compiled in a closure over ``stamp`` (see the module docstring).
-
-    Only ``stamp`` is a closure variable (numba pickles the closure into the cache key);
-    the kernels it calls are module globals.
-    """
-
-    @nb.njit(**JIT)
-    def step_bound(a, skip, duration, dt_max, min_substeps, averaged, mode, corrections):
-        if stamp < 0:  # never: keys numba's disk cache on the inlined sources
-            return -2
-        bad = tk._first_non_finite(a.actions, skip)
-        if bad >= 0:
-            return bad
-        n = a.actions.shape[0]
-        for i in range(n):
-            tk._apply_keep_one(i, a.actions, skip, a.cfg, a.beats, a.obs, a.out, a.fish, a.integral, a.before)
-        command_fins(a.fins, a.pending, a.beats, a.everyone)
-        # the loop FishModel.advance runs below PARALLEL_MIN_ITEMS fish (stepping.advance)
-        stepping._SERIAL(a.state, a.fins, a.cache, a.pending, a.integral, a.coef, duration, dt_max, min_substeps,
-                         averaged, mode, corrections, a.tables)
-        for i in range(n):
-            tk._reward_mean_one(i, a.state, skip, a.cfg, a.ep, a.fish, a.obs, a.out, a.integral, a.before)
-        return -1
-
-    return step_bound
-
-
-_KERNEL: Callable[..., Any] | None = None
+@njit
+def _step_bound(a, skip, duration, dt_max, min_substeps, averaged, mode, corrections):
+    """The step of :func:`step_kernel`."""
+    bad = tk._first_non_finite(a.actions, skip)
+    if bad >= 0:
+        return bad
+    n = a.actions.shape[0]
+    for i in range(n):
+        tk._apply_keep_one(i, a.actions, skip, a.cfg, a.beats, a.obs, a.out, a.fish, a.integral, a.before)
+    command_fins(a.fins, a.pending, a.beats, a.everyone)
+    # the loop FishModel.advance runs below PARALLEL_MIN_ITEMS fish (stepping.advance)
+    stepping._SERIAL(a.state, a.fins, a.cache, a.pending, a.integral, a.coef, duration, dt_max, min_substeps,
+                     averaged, mode, corrections, a.tables)
+    for i in range(n):
+        tk._reward_mean_one(i, a.state, skip, a.cfg, a.ep, a.fish, a.obs, a.out, a.integral, a.before)
+    return -1
 
 
 def step_kernel() -> Callable[..., Any]:
-    """The compiled step (a numba dispatcher; built on first use, see the module docstring).
+    """The compiled step (a numba dispatcher).
 
     ``step_kernel()(arrays, skip, duration, dt_max, min_substeps, averaged, mode, corrections)``
     steps the envs of ``arrays`` (a :class:`StepArrays`) except those where ``skip``, by
@@ -150,10 +107,7 @@ def step_kernel() -> Callable[..., Any]:
     takes them (``min_substeps`` a float). Returns -1, or the index of the first env not in
     ``skip`` whose action is not finite (then nothing has been written).
     """
-    global _KERNEL  # noqa: PLW0603 - built once per process, on first use
-    if _KERNEL is None:
-        _KERNEL = _build(source_digest())
-    return _KERNEL
+    return _step_bound
 
 
 class BoundStep(NamedTuple):

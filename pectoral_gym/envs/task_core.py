@@ -57,7 +57,7 @@ import numba as nb
 import numpy as np
 from numba.core.dispatcher import Dispatcher
 
-from pectoral_gym._jit import PARALLEL_MIN_ITEMS, KernelPair
+from pectoral_gym._jit import PARALLEL_MIN_ITEMS, KernelPair, njit
 from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.layout import (
     C_DT,
@@ -196,13 +196,10 @@ def task_info(out: np.ndarray, task: int) -> dict:
 
 
 # ---------------------------------------------------------------- registering a task
-_OPTIONS = {"nogil": True, "error_model": "numpy"}  # tasks.JIT without the disk cache
-
-
 def _loops(reward_one: Callable[..., Any]) -> tuple[KernelPair, KernelPair]:
     """The ``reward`` and ``reward_mean`` loops of a registered task's kernel (as ``tasks.REWARD*_KERNELS``)."""
 
-    @nb.njit(inline="always", **_OPTIONS)
+    @njit(inline="always", cache=False)
     def mean_velocity(i, cfg, obs, integral, before):
         dt = cfg[C_DT]
         obs[i, OBS_VX] = (integral[i, 0] - before[i, 0]) / dt
@@ -216,7 +213,7 @@ def _loops(reward_one: Callable[..., Any]) -> tuple[KernelPair, KernelPair]:
             for i in loop(state.shape[0]):
                 if not skip[i]:
                     reward_one(i, state, cfg, ep, fish, obs, out)
-        return nb.njit(parallel=parallel, **_OPTIONS)(run)
+        return njit(run, parallel=parallel, cache=False)
 
     def mean(parallel: bool):
         loop = nb.prange if parallel else range
@@ -226,7 +223,7 @@ def _loops(reward_one: Callable[..., Any]) -> tuple[KernelPair, KernelPair]:
                 if not skip[i]:
                     reward_one(i, state, cfg, ep, fish, obs, out)
                 mean_velocity(i, cfg, obs, integral, before)
-        return nb.njit(parallel=parallel, **_OPTIONS)(run)
+        return njit(run, parallel=parallel, cache=False)
 
     def pair(make):
         serial, parallel = make(False), make(True)

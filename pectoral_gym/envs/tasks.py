@@ -17,10 +17,9 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
-from pectoral_gym._jit import JIT, kernel_pair
+from pectoral_gym._jit import kernel_pair, njit
 from pectoral_gym.averaging import mean_fin_power
 from pectoral_gym.envs.layout import *  # noqa: F403 - the index constants, re-exported: tk.E_TX, tk.O_REWARD, ...
 from pectoral_gym.envs.layout import (
@@ -112,7 +111,7 @@ TERMS = {
 
 
 # ---------------------------------------------------------------- actions
-@nb.njit(**JIT)
+@njit
 def _first_non_finite(actions, skip):
     for i in range(actions.shape[0]):
         if skip[i]:
@@ -123,7 +122,7 @@ def _first_non_finite(actions, skip):
     return -1
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _apply_one(i, actions, cfg, beats, obs, out, fish):
     """Map env ``i``'s action to fin patterns, store it in the observation, price its energy."""
     energy = 0.0
@@ -146,7 +145,7 @@ APPLY_KERNELS = kernel_pair(_apply_one, "actions, skip, cfg, beats, obs, out, fi
 
 
 # ---------------------------------------------------------------- observation and reward
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _observe_one(i, state, ep, fish, obs):
     """Write the observation of env ``i`` up to the last action; return the distance to the target and the wall flag."""
     x, y, psi = state[i, 0], state[i, 1], state[i, 2]
@@ -174,14 +173,14 @@ def _observe_one(i, state, ep, fish, obs):
     return math.sqrt(dx * dx + dy * dy), wall
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _phase_rate(phase, a, b, direction, speed):
     """d(phase)/dt for a point moving at ``speed`` along the ellipse (a cos phase, b sin phase)."""
     sp, cp = math.sin(phase), math.cos(phase)
     return direction * speed / math.sqrt(a * a * sp * sp + b * b * cp * cp)
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _set_reference(i, ep, speed):
     """Target position and velocity from the ellipse phase of env ``i``."""
     a, b, phase, direction = ep[i, E_A], ep[i, E_B], ep[i, E_PHASE], ep[i, E_DIR]
@@ -194,7 +193,7 @@ def _set_reference(i, ep, speed):
     ep[i, E_TVY] = direction * speed * ty / norm
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _move_reference(i, ep, duration, speed):
     """Advance the reference point of env ``i`` by ``duration`` along its ellipse (RK4 on the phase)."""
     a, b, direction = ep[i, E_A], ep[i, E_B], ep[i, E_DIR]
@@ -210,7 +209,7 @@ def _move_reference(i, ep, duration, speed):
     _set_reference(i, ep, speed)
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _reward_one(i, state, cfg, ep, fish, obs, out):
     """Observation, reward terms and termination of env ``i`` after a control period."""
     task = int(cfg[C_TASK])
@@ -251,14 +250,14 @@ REWARD_KERNELS = kernel_pair(_reward_one, "state, skip, cfg, ep, fish, obs, out"
 # ---------------------------------------------------------------- the simulated envs' step (EnvCore)
 # The same kernels plus what EnvCore did in numpy around them: keep the model's velocity integrals
 # before the step, and observe the mean velocities over the control period after it (fewer calls per step).
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _apply_keep_one(i, actions, skip, cfg, beats, obs, out, fish, integral, before):
     before[i, 0], before[i, 1], before[i, 2] = integral[i, 0], integral[i, 1], integral[i, 2]
     if not skip[i]:
         _apply_one(i, actions, cfg, beats, obs, out, fish)
 
 
-@nb.njit(inline="always", **JIT)
+@njit(inline="always")
 def _reward_mean_one(i, state, skip, cfg, ep, fish, obs, out, integral, before):
     if not skip[i]:
         _reward_one(i, state, cfg, ep, fish, obs, out)
@@ -288,7 +287,7 @@ def observe_and_reward(state, skip, cfg, ep, fish, obs, out) -> None:
     REWARD_KERNELS.run(state, skip, cfg, ep, fish, obs, out)
 
 
-@nb.njit(**JIT)
+@njit
 def observe_fins(fins, obs, period_max):
     """Write the fin block of the observation (``observe_fins=True``) from the models' half-strokes ``fins``.
 
@@ -313,7 +312,7 @@ def observe_fins(fins, obs, period_max):
 
 
 # ---------------------------------------------------------------- reset
-@nb.njit(**JIT)
+@njit
 def _pick_goal(draws, candidates):
     """Rejection sampling: the first candidate (uniforms in pairs) that is a valid goal for the start in ``draws``."""
     for k in range(candidates.shape[0] // 2):
@@ -356,7 +355,7 @@ def draw_episode(rng: np.random.Generator, task: int) -> np.ndarray:
     return draws
 
 
-@nb.njit(**JIT)
+@njit
 def start_states(index, draws, cfg, ep, start):
     """Set the targets of the envs in ``index`` from ``draws`` (see :func:`draw_episode`); write start states.
 
@@ -381,7 +380,7 @@ def start_states(index, draws, cfg, ep, start):
             start[k, 2] = tangent + d[6]
 
 
-@nb.njit(**JIT)
+@njit
 def observe_reset(index, state, ep, fish, obs, out, action_code):
     """Observations of freshly reset envs; the last-action entries get ``action_code``.
 
