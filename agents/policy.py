@@ -25,7 +25,13 @@ import numpy as np
 
 from pectoral_gym.envs.observation import OBS_SIZE
 
-__all__ = ["ALGOS", "BatchController", "Controller", "SB3Controller", "algo_of_zip", "load_policy", "read_config"]
+__all__ = ["ALGOS", "BatchController", "Controller", "SB3Controller", "TRAINED_KEYS", "algo_of_zip", "load_policy",
+           "read_config"]
+
+# The env settings a policy's actions and observations depend on, recorded from its run folder's config.yaml
+# (``env_kwargs``; EnvConfig's default where a key is absent) in SB3Controller.trained.
+TRAINED_KEYS = ("task", "control_period", "observe_fins", "bias_range", "amplitude_range", "period_range",
+                "ratio_range", "ref_speed")
 
 
 @runtime_checkable
@@ -72,10 +78,18 @@ class SB3Controller:
         obs_var: Running variance of the observations, or ``None``.
         clip_obs: Clip normalised observations to ``[-clip_obs, clip_obs]``.
         epsilon: Added to the variance before the square root (as ``VecNormalize``).
+        trained: The env settings it was trained with (:data:`TRAINED_KEYS`), ``{}`` when unknown.
+
+    Attributes:
+        obs_size: Observation entries the model takes (19, or 27 with ``observe_fins``).
+        action_size: Action entries it returns (8 for the fish envs).
+        trained: The env settings it was trained with, where its run folder records them (``{}`` otherwise).
+        trained_from: The ``config.yaml`` they were read from, or ``None``.
     """
 
     def __init__(self, model: Any, name: str = "policy", obs_mean: np.ndarray | None = None,
-                 obs_var: np.ndarray | None = None, clip_obs: float = 10.0, epsilon: float = 1e-8):
+                 obs_var: np.ndarray | None = None, clip_obs: float = 10.0, epsilon: float = 1e-8,
+                 trained: dict[str, Any] | None = None, trained_from: str | Path | None = None):
         self.model = model
         self.name = name
         self.obs_mean = None if obs_mean is None else np.asarray(obs_mean, dtype=np.float64)
@@ -84,6 +98,10 @@ class SB3Controller:
         # 19 entries, or 27 for a policy trained with observe_fins=True (envs.observation)
         space = getattr(model, "observation_space", None)
         self.obs_size = int(space.shape[0]) if getattr(space, "shape", None) else OBS_SIZE
+        actions = getattr(model, "action_space", None)
+        self.action_size = int(np.prod(actions.shape)) if getattr(actions, "shape", None) else 8
+        self.trained = dict(trained or {})
+        self.trained_from = None if trained_from is None else Path(trained_from)
 
     def reset(self, seed: int | None = None) -> None:
         """Nothing to reset: the policy is deterministic and has no memory."""
@@ -132,24 +150,76 @@ def algo_of_zip(path: str | Path) -> str | None:
 
 
 def read_config(run_dir: str | Path) -> dict[str, Any]:
-    """The resolved ``config.yaml`` of a run folder (empty dict if absent)."""
+    """The resolved ``config.yaml`` of a run folder (empty dict if absent).
+
+    Raises:
+        ValueError: If the file is not YAML or not a mapping (naming the file).
+    """
     import yaml
 
     path = Path(run_dir) / "config.yaml"
     if not path.is_file():
         return {}
-    with open(path) as f:
-        return yaml.safe_load(f) or {}
+    try:
+        with open(path) as f:
+            config = yaml.safe_load(f) or {}
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as error:
+        raise ValueError(f"{path}: cannot read the run config: {type(error).__name__}: {error}") from None
+    if not isinstance(config, dict):
+        raise ValueError(f"{path}: the run config must be a mapping, got {type(config).__name__}")
+    return config
+
+
+def _trained_settings(config: dict[str, Any], path: Path) -> dict[str, Any]:
+    """:data:`TRAINED_KEYS` of a run config's ``env_kwargs`` (EnvConfig's defaults where absent)."""
+    from pectoral_gym.envs.core import EnvConfig
+
+    env_kwargs = config.get("env_kwargs") or {}
+    if not isinstance(env_kwargs, dict):
+        raise ValueError(f"{path}: env_kwargs must be a mapping, got {env_kwargs!r}")
+    defaults = EnvConfig()
+    return {key: env_kwargs.get(key, getattr(defaults, key)) for key in TRAINED_KEYS}
 
 
 def _load_normalization(path: Path) -> dict[str, Any]:
-    """Observation statistics (``obs_mean``, ``obs_var``, ``clip_obs``, ``epsilon``) of a pickled ``VecNormalize``."""
-    with open(path, "rb") as f:
-        vec_normalize = pickle.load(f)  # noqa: S301 - our own run folder
+    """Observation statistics (``obs_mean``, ``obs_var``, ``clip_obs``, ``epsilon``) of a pickled ``VecNormalize``.
+
+    Raises:
+        ValueError: If the file does not unpickle to observation statistics (naming the file and the fault).
+    """
+    try:
+        with open(path, "rb") as f:
+            vec_normalize = pickle.load(f)  # noqa: S301 - our own run folder
+    except Exception as error:  # noqa: BLE001 - any unpickling fault (truncated, other class, other version)
+        raise ValueError(f"{path}: not a readable VecNormalize pickle ({type(error).__name__}: {error}); it is "
+                         "corrupt or from another library version: restore it from the run's copy or retrain") from None
     if not getattr(vec_normalize, "norm_obs", True):
         return {}
-    return {"obs_mean": vec_normalize.obs_rms.mean, "obs_var": vec_normalize.obs_rms.var,
-            "clip_obs": vec_normalize.clip_obs, "epsilon": vec_normalize.epsilon}
+    try:
+        stats = {"obs_mean": np.asarray(vec_normalize.obs_rms.mean, dtype=np.float64),
+                 "obs_var": np.asarray(vec_normalize.obs_rms.var, dtype=np.float64),
+                 "clip_obs": float(vec_normalize.clip_obs), "epsilon": float(vec_normalize.epsilon)}
+    except (AttributeError, TypeError, ValueError) as error:
+        raise ValueError(f"{path}: not VecNormalize observation statistics ({type(error).__name__}: {error})") \
+            from None
+    mean, var = stats["obs_mean"], stats["obs_var"]
+    if mean.ndim != 1 or mean.shape != var.shape or not (np.all(np.isfinite(mean)) and np.all(np.isfinite(var))
+                                                           and np.all(var >= 0)):
+        raise ValueError(f"{path}: observation statistics must be finite 1-D arrays of one size with variances "
+                         f">= 0, got mean {mean.shape}, var {var.shape}")
+    stats["path"] = path
+    return stats
+
+
+def _check_normalization(normalization: dict[str, Any], model: Any, zip_path: Path) -> dict[str, Any]:
+    """``normalization`` without its path, after checking that its size is the model's observation size."""
+    stats = dict(normalization)
+    path = stats.pop("path", None)
+    space = getattr(model, "observation_space", None)
+    if stats and getattr(space, "shape", None) and stats["obs_mean"].shape != tuple(space.shape):
+        raise ValueError(f"{path}: observation statistics of size {stats['obs_mean'].shape[0]}, but {zip_path} "
+                         f"takes observations of shape {tuple(space.shape)}: the file belongs to another run")
+    return stats
 
 
 def _zoo_params_dir(run_dir: Path) -> Path | None:
@@ -202,10 +272,13 @@ def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) 
 
     Raises:
         FileNotFoundError: If ``path`` is neither a run folder with a model nor a ``.zip``.
-        ValueError: If the algorithm is unknown or cannot be determined.
+        ValueError: If the algorithm is unknown or cannot be determined, or the run's ``config.yaml`` or
+            ``vecnormalize*.pkl`` is corrupt or does not fit the model (the message names the file).
     """
     path = Path(path)
     normalization: dict[str, Any] = {}
+    trained: dict[str, Any] = {}
+    trained_from: Path | None = None
     name = path.stem
     zoo_dir = _zoo_params_dir(path) if path.is_dir() else None
     if zoo_dir is not None:
@@ -227,11 +300,16 @@ def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) 
             normalization = _load_normalization(stats)
         algo = algo or config.get("algo")
         name = str(config.get("algo", name))
+        if config:
+            trained, trained_from = _trained_settings(config, path / "config.yaml"), path / "config.yaml"
     elif path.is_file() and path.suffix == ".zip":
         zip_path = path
         stats_path = _stats_beside(path)
         if stats_path is not None:
             normalization = _load_normalization(stats_path)
+        config = read_config(path.parent)  # a model of an agents.train run folder
+        if config:
+            trained, trained_from = _trained_settings(config, path.parent / "config.yaml"), path.parent / "config.yaml"
     else:
         raise FileNotFoundError(f"{path} is neither a run folder nor an SB3 .zip file")
     algo = (algo or algo_of_zip(zip_path) or "").lower() or None
@@ -247,5 +325,7 @@ def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) 
         except Exception as error:  # noqa: BLE001 - try the next algorithm, report all failures below
             errors.append(f"{candidate}: {error}")
             continue
-        return SB3Controller(model, name=name if path.is_dir() and zoo_dir is None else candidate, **normalization)
+        return SB3Controller(model, name=name if path.is_dir() and zoo_dir is None else candidate,
+                             trained=trained, trained_from=trained_from,
+                             **_check_normalization(normalization, model, zip_path))
     raise ValueError(f"could not load {zip_path} with {candidates}: " + "; ".join(errors))

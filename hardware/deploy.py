@@ -19,16 +19,27 @@ reward, ends, link and tracking health, and the true pose when emulated), ``summ
 from __future__ import annotations
 
 import argparse
+import contextlib
+import inspect
 import json
 import math
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from hardware.deploy_checks import (
+    CONTROL_PERIOD_RANGE,
+    MIN_TRACKING_WALL,
+    SPEED_RANGE,
+    check_frame_size,
+    env_settings,
+    first_frame,
+    robot_address,
+)
 from hardware.safety import SafetyConfig, install_stop_handlers
 from pectoral_gym.envs import tasks as tk
-from pectoral_gym.envs.observation import OBS_SIZE
 
 __all__ = ["main", "make_controller", "run_episodes", "plot_trajectories", "solver_summary"]
 
@@ -139,98 +150,204 @@ def solver_summary(controller) -> dict:
             "failures": int(controller.failures), "late": int(controller.late)}
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Command-line entry point; returns the exit code."""
-    parser = argparse.ArgumentParser(prog="python -m hardware.deploy", description=__doc__.split("\n\n")[0])
+_EXAMPLES = """examples:
+  python -m hardware.deploy --policy runs/ppo-goal --emulate --speed 2 --episodes 2 --out dryrun
+  python -m hardware.deploy --controller nmpc --emulate --speed 2 --episodes 1
+  python -m hardware.deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 \
+      --calibration calibration.json --robot-address 0013A20012345678 --episodes 3 --out tank-run
+
+exit status: 0 done; 1 a device failed (no frame, no fish seen, robot not answering); 2 a bad argument."""
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="python -m hardware.deploy", description=__doc__.split("\n\n")[0],
+                                     epilog=_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    lo_speed, hi_speed = SPEED_RANGE
+    lo_period, hi_period = CONTROL_PERIOD_RANGE
     parser.add_argument("--controller", choices=("policy", "nmpc", "hand"), default="policy",
-                        help="what drives the fish (default %(default)s: --policy)")
-    parser.add_argument("--policy", default=None, help="run folder or SB3 .zip (agents.policy.load_policy)")
+                        help="what drives the fish (default %(default)s: needs --policy)")
+    parser.add_argument("--policy", default=None, metavar="RUN_OR_ZIP",
+                        help="agents.train or rl-baselines3-zoo run folder, or an SB3 .zip (agents.policy.load_policy)")
     parser.add_argument("--solve-fraction", type=float, default=0.5, metavar="F",
-                        help="nmpc: share of the control period a step's solves may take (default %(default)s)")
-    parser.add_argument("--port", default=None, help="serial URL: /dev/ttyUSB0, socket://HOST:PORT, ...")
-    parser.add_argument("--camera", default=None, help="camera index, video file or emu://HOST:PORT")
-    parser.add_argument("--emulate", action="store_true", help="start an emulated robot and camera in-process")
-    parser.add_argument("--episodes", type=int, default=1, help="number of episodes (default %(default)s)")
-    parser.add_argument("--task", choices=("goal", "track"), default="goal", help="task (default %(default)s)")
-    parser.add_argument("--control-period", type=float, default=0.5, metavar="S", help="default %(default)s s")
-    parser.add_argument("--max-steps", type=int, default=240, help="steps per episode (default %(default)s)")
-    parser.add_argument("--speed", type=float, default=1.0, help="emulated clock speed-up (--emulate only)")
-    parser.add_argument("--calibration", default=None, help="camera calibration JSON (hardware.calibrate)")
+                        help="nmpc: share of the control period a step's solves may take, in (0, 1] "
+                             "(default %(default)s)")
+    parser.add_argument("--port", default=None,
+                        help="robot radio, a serial URL: /dev/ttyUSB0, socket://HOST:PORT, ... (required without "
+                             "--emulate)")
+    parser.add_argument("--camera", default=None,
+                        help="camera index, stream URL, video file or emu://HOST:PORT (required without --emulate)")
+    parser.add_argument("--emulate", action="store_true",
+                        help="start an emulated robot and camera in this process (no --port, --camera, "
+                             "--robot-address)")
+    parser.add_argument("--episodes", type=int, default=1, help="number of episodes, >= 1 (default %(default)s)")
+    parser.add_argument("--task", choices=("goal", "track"), default=None,
+                        help="task (default: the policy's own from its run folder, else goal); a policy is refused "
+                             "under another task than it was trained on")
+    parser.add_argument("--control-period", type=float, default=None, metavar="S",
+                        help=f"seconds between actions, in [{lo_period}, {hi_period}] (default: the policy's own "
+                             "from its run folder, else 0.5); a policy is refused at another period")
+    parser.add_argument("--max-steps", type=int, default=240, help="steps per episode, >= 1 (default %(default)s)")
+    parser.add_argument("--speed", type=float, default=1.0,
+                        help=f"emulated clock speed-up, in [{lo_speed}, {hi_speed}] (--emulate only; "
+                             "default %(default)s)")
+    parser.add_argument("--calibration", default=None, metavar="JSON",
+                        help="camera calibration (python -m hardware.calibrate), made at the camera's resolution "
+                             "(default: the emulator's camera model)")
     parser.add_argument("--geofence", type=float, default=0.05, metavar="M",
-                        help="clearance kept from the walls on top of the stopping distance [m] (default 0.05)")
-    parser.add_argument("--robot-address", default=None, metavar="HEX",
-                        help="64-bit address of the robot's XBee, e.g. 0013A20012345678 (default: broadcast)")
-    parser.add_argument("--tracking-timeout", type=float, default=0.5, metavar="S", help="default %(default)s s")
-    parser.add_argument("--seed", type=int, default=0, help="seed of targets and emulated starts")
+                        help="clearance kept from the walls on top of the stopping distance [m] (default %(default)s)")
+    parser.add_argument("--robot-address", type=robot_address, default=None, metavar="HEX",
+                        help="64-bit address of the robot's XBee, 16 hex digits, e.g. 0013A20012345678 "
+                             "(default: broadcast, which every robot on the channel obeys)")
+    parser.add_argument("--take-over", action="store_true",
+                        help="take control of a robot that another live session (a second PC, a leftover script) "
+                             "is driving: the robot then obeys this program only, and the other session is told "
+                             "it lost control. Without it such a robot refuses our commands (robot_busy). Use "
+                             "only when you know nobody relies on the other session")
+    parser.add_argument("--tracking-timeout", type=float, default=0.5, metavar="S",
+                        help="stop when the fish has not been seen for this long [s]; at least "
+                             f"{MIN_TRACKING_WALL} s of wall time (timeout / speed) (default %(default)s)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of targets and emulated starts, >= 0 "
+                                                            "(default %(default)s)")
     parser.add_argument("--out", default="deploy_out", help="output folder (default %(default)s)")
-    parser.add_argument("--no-prompt", action="store_true", help="do not ask to place the fish before episodes")
+    parser.add_argument("--no-prompt", action="store_true",
+                        help="do not ask to place the fish before each episode (real robot)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    args = parser.parse_args(argv)
-    if not args.emulate and (args.port is None or args.camera is None):
+    return parser
+
+
+def _check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Every range and combination check of the arguments alone; ``parser.error`` (exit 2) on the first fault."""
+    if args.emulate:
+        extra = [flag for flag, value in (("--port", args.port), ("--camera", args.camera),
+                                          ("--robot-address", args.robot_address)) if value is not None]
+        if extra:
+            parser.error(f"{' and '.join(extra)} cannot be used with --emulate (the emulated robot brings its own "
+                         "radio and camera)")
+    elif args.port is None or args.camera is None:
         parser.error("--port and --camera are required unless --emulate is given")
-    if args.episodes < 1 or args.max_steps < 1:
-        parser.error("--episodes and --max-steps must be >= 1")
-    if args.speed <= 0 or (args.speed != 1.0 and not args.emulate):
-        parser.error("--speed must be > 0 and only applies with --emulate")
     if (args.controller == "policy") != (args.policy is not None):
         parser.error("--policy is needed with --controller policy, and only then")
+    for flag, value in (("--episodes", args.episodes), ("--max-steps", args.max_steps)):
+        if value < 1:
+            parser.error(f"{flag} must be >= 1, got {value}")
+    if args.seed < 0:
+        parser.error(f"--seed must be >= 0, got {args.seed}")
+    if not math.isfinite(args.speed) or not SPEED_RANGE[0] <= args.speed <= SPEED_RANGE[1]:
+        parser.error(f"--speed must be in [{SPEED_RANGE[0]}, {SPEED_RANGE[1]}] (what the emulator keeps up with), "
+                     f"got {args.speed}")
+    if args.speed != 1.0 and not args.emulate:
+        parser.error("--speed applies with --emulate only (a real robot runs in real time)")
     if not 0 < args.solve_fraction <= 1:
-        parser.error("--solve-fraction must be in (0, 1]")
+        parser.error(f"--solve-fraction must be in (0, 1], got {args.solve_fraction}")
+    if not (math.isfinite(args.geofence) and args.geofence >= 0):
+        parser.error(f"--geofence must be a finite number >= 0 m, got {args.geofence}")
+    if not (math.isfinite(args.tracking_timeout) and args.tracking_timeout / args.speed >= MIN_TRACKING_WALL):
+        parser.error(f"--tracking-timeout must be a finite number with timeout / speed >= {MIN_TRACKING_WALL} s of "
+                     f"wall time (3 frames at 30 fps), got {args.tracking_timeout} at speed {args.speed}")
+    if args.control_period is not None and not (
+            math.isfinite(args.control_period)
+            and CONTROL_PERIOD_RANGE[0] <= args.control_period <= CONTROL_PERIOD_RANGE[1]):
+        parser.error(f"--control-period must be in [{CONTROL_PERIOD_RANGE[0]}, {CONTROL_PERIOD_RANGE[1]}] s, "
+                     f"got {args.control_period}")
+
+
+def _accepts(function, name: str) -> bool:
+    return name in inspect.signature(function).parameters
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point; returns the exit status (0 done, 1 a device failed; 2 via SystemExit: bad argument).
+
+    Every resource (emulated robot, radio link, camera, env) is released on every path out.
+    """
+    parser = _parser()
+    args = parser.parse_args(argv)
+    _check_args(parser, args)
     controller = None
     if args.controller == "policy":
         from agents.policy import load_policy  # lazy: agents/ pulls in torch
 
         try:
             controller = load_policy(args.policy)
-        except (FileNotFoundError, ValueError) as err:
+        except (OSError, ValueError) as err:
             parser.error(f"cannot load policy {args.policy!r}: {err}")
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    robot = None
-    from hardware.env import HardwareFishEnv
-
+    try:
+        settings, notes = env_settings(controller, args.task, args.control_period)
+    except ValueError as err:
+        parser.error(f"policy {args.policy!r} does not fit: {err}")
+    period = settings["control_period"]
+    if not CONTROL_PERIOD_RANGE[0] <= period <= CONTROL_PERIOD_RANGE[1]:
+        parser.error(f"the policy's control period {period} s is outside [{CONTROL_PERIOD_RANGE[0]}, "
+                     f"{CONTROL_PERIOD_RANGE[1]}] s")
     try:
         safety = SafetyConfig(geofence_margin=args.geofence, tracking_timeout=args.tracking_timeout)
     except ValueError as err:
-        parser.error(str(err))
-    if args.emulate:
-        from hardware.emulator import EmulatedRobot
+        parser.error(f"safety settings (--geofence, --tracking-timeout): {err}")
+    from hardware.env import HardwareFishEnv
+    from hardware.link import RadioLink
+    from hardware.scene import CameraModel
+    from hardware.tracker import MarkerTracker
 
-        robot = EmulatedRobot(speed=args.speed, seed=args.seed).start()
-        port, camera = robot.url, robot.camera(seed=args.seed)
-        hook = lambda rng: robot.place(*_random_start(rng))  # noqa: E731 - a hand that puts the fish back
-    else:
-        port, camera = args.port, args.camera
-        if args.robot_address is not None:
-            from hardware.link import RadioLink
-
-            try:
-                port = RadioLink(args.port, dest64=int(args.robot_address, 16))
-            except ValueError as err:
-                parser.error(f"--robot-address: {err}")
-        hook = None if args.no_prompt else (lambda rng: input("Place the fish in the tank and press Enter: "))
-    env = None
-    restore = lambda: None  # noqa: E731
+    if args.take_over and not _accepts(HardwareFishEnv, "take_over"):
+        parser.error("--take-over: this HardwareFishEnv has no take_over option yet (issue 30); nothing was sent")
+    if args.take_over and args.robot_address is not None and not _accepts(RadioLink, "take_over"):
+        parser.error("--take-over: this RadioLink has no take_over option yet (issue 30); nothing was sent")
     try:
-        env = HardwareFishEnv(port, camera, task=args.task, control_period=args.control_period,
-                              calibration=args.calibration, safety=safety, speed=args.speed,
-                              max_episode_steps=args.max_steps, reset_hook=hook,
-                              # a policy trained with the fin block gets it from the PC's fin replay
-                              observe_fins=getattr(controller, "obs_size", OBS_SIZE) > OBS_SIZE)
-        restore = install_stop_handlers(env.stop)
-        if controller is None:
-            controller = make_controller(args.controller, env.config, args.solve_fraction * args.control_period
-                                         / args.speed, safety)
-        summaries = run_episodes(env, controller, args.episodes, out / "steps.jsonl", args.seed, robot,
-                                 progress=not args.quiet)
-    finally:
-        restore()
-        if env is not None:
-            env.close()
-        if robot is not None:
-            robot.stop()
+        model = CameraModel.default() if args.calibration is None else CameraModel.load(args.calibration)
+    except (OSError, ValueError) as err:
+        parser.error(f"--calibration: cannot load {args.calibration}: {err}")
+    out = Path(args.out)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        parser.error(f"--out: cannot create {out}: {err}")
+    for note in notes:
+        print(f"note: {note}", file=sys.stderr)
+    robot = env = None
+    with contextlib.ExitStack() as resources:  # released last in, first out, on every path
+        try:
+            if args.emulate:
+                from hardware.emulator import EmulatedRobot
+
+                robot = EmulatedRobot(speed=args.speed, seed=args.seed).start()
+                resources.callback(robot.stop)
+                port, camera = robot.url, robot.camera(seed=args.seed)
+                resources.callback(camera.close)
+                hook = lambda rng: robot.place(*_random_start(rng))  # noqa: E731 - a hand that puts the fish back
+            else:
+                from hardware.camera import open_source
+
+                camera = open_source(args.camera)
+                resources.callback(camera.close)  # idempotent: the env closes it too
+                port = args.port
+                if args.robot_address is not None:
+                    extra = {"take_over": True} if args.take_over else {}
+                    port = RadioLink(args.port, dest64=args.robot_address, **extra)
+                    resources.callback(port.close)
+                hook = None if args.no_prompt else (lambda rng: input("Place the fish in the tank and press Enter: "))
+            check_frame_size(first_frame(camera), model, args.calibration)
+            extra = {"take_over": args.take_over} if _accepts(HardwareFishEnv, "take_over") else {}
+            env = HardwareFishEnv(port, camera, safety=safety, speed=args.speed, max_episode_steps=args.max_steps,
+                                  reset_hook=hook, tracker=MarkerTracker(model), **settings, **extra)
+            resources.callback(env.close)
+            resources.callback(install_stop_handlers(env.stop))
+            if controller is None:
+                controller = make_controller(args.controller, env.config, args.solve_fraction * period / args.speed,
+                                             safety)
+        except ValueError as err:  # the settings, found wrong by the devices or the env
+            parser.error(str(err))
+        except (RuntimeError, OSError) as err:  # a device that does not answer or cannot be opened
+            print(f"{parser.prog}: error: {err}", file=sys.stderr)
+            return 1
+        try:
+            summaries = run_episodes(env, controller, args.episodes, out / "steps.jsonl", args.seed, robot,
+                                     progress=not args.quiet)
+        except (RuntimeError, OSError) as err:  # e.g. no fish seen at reset, the robot not confirming a stop
+            print(f"{parser.prog}: error: {err} (log so far: {out / 'steps.jsonl'})", file=sys.stderr)
+            return 1
     link = env.link.health()
     report = {"controller": args.controller, "policy": None if args.policy is None else str(args.policy),
+              "settings": {k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()},
               "episodes": summaries, "link": link}
     if hasattr(controller, "solve_times"):
         report["solver"] = solver_summary(controller)

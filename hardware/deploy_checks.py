@@ -1,0 +1,156 @@
+"""Checks of ``hardware.deploy``'s settings before anything moves: ranges, the policy against the env, the camera.
+
+Every check raises ``ValueError`` with a one-line message naming the setting and what is wrong (the command
+line turns it into an argparse error, exit status 2), or ``RuntimeError`` for a device that does not
+answer (exit status 1).
+
+Bounds (argued where they are defined):
+
+* :data:`SPEED_RANGE`: the emulated clock's speed-up.
+* :data:`CONTROL_PERIOD_RANGE`: seconds between actions.
+* :data:`MIN_TRACKING_WALL`: the tracking timeout in wall seconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import re
+import time
+from pathlib import Path
+from typing import Any
+
+from pectoral_gym.envs.core import EnvConfig
+from pectoral_gym.envs.layout import ACTION_SIZE
+from pectoral_gym.envs.observation import OBS_SIZE, observation_size
+
+__all__ = ["CONTROL_PERIOD_RANGE", "FIRST_FRAME_TIMEOUT", "MIN_TRACKING_WALL", "SPEED_RANGE", "check_frame_size",
+           "env_settings", "first_frame", "robot_address"]
+
+# Emulated speed-up [emulated s per wall s]. Below 0.1 a default episode (240 steps of 0.5 s) takes over 20 min
+# of wall time: a slower value is a typo (1e-9 never progresses). Above 5 the PC cannot keep up with the
+# emulator: the env's ACK timeout (0.05 s / speed) falls to 10 ms of wall time, 5 of the emulator's 2 ms I/O
+# polls, and the in-process camera renders and tracks a 640x360 frame in 10-30 ms of wall time, i.e. one
+# frame per 50-150 emulated ms at 5x: fewer than 4 frames in the default 0.5 s tracking timeout.
+SPEED_RANGE = (0.1, 5.0)
+
+# Seconds between actions [experiment s]. Below 0.1 s a step is shorter than the radio's keep-alive period
+# (0.1 s: no copy of a command is repeated before the next replaces it, so one lost message loses the step)
+# and holds fewer than 3 frames of a 30 fps camera (the step's mean velocity comes from them). The firmware
+# lease (at most protocol.MAX_LEASE = 1 s per command, 0.8 s from step()) sets no upper bound because
+# step() renews the lease while it runs; 2 s, the longest fin-beat period of the action space, is the
+# longest a controller can act on and still change a pattern within each beat (the defaults train at 0.5 s).
+CONTROL_PERIOD_RANGE = (0.1, 2.0)
+
+# The tracking timeout in wall seconds (timeout / speed) must hold 3 frames of a 30 fps camera, so one dropped
+# or late frame does not end the episode as tracking_lost. The upper bound is physical (finding 9 of issue 30:
+# the time to reach a wall from the last seen pose), checked by hardware.safety.SafetyConfig.
+MIN_TRACKING_WALL = 0.1
+
+FIRST_FRAME_TIMEOUT = 5.0  # wall seconds to wait for the camera's first frame (as the env's reset_timeout)
+
+_HEX16 = re.compile(r"(0[xX])?([0-9A-Fa-f]{16})")
+
+
+def robot_address(text: str) -> int:
+    """The argparse type of ``--robot-address``: exactly 16 hex digits (an XBee's SH+SL), optional ``0x``."""
+    match = _HEX16.fullmatch(text.strip())
+    if match is None:
+        raise argparse.ArgumentTypeError(f"expected the robot XBee's 64-bit address as 16 hex digits (SH then SL, "
+                                         f"e.g. 0013A20012345678), got {text!r}")
+    return int(match.group(2), 16)
+
+
+def _same(a: Any, b: Any) -> bool:
+    """Equal settings: numbers within 1e-9 relative, sequences element-wise (YAML gives lists, EnvConfig tuples)."""
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)) and not isinstance(a, bool):
+        return math.isclose(float(a), float(b), rel_tol=1e-9, abs_tol=1e-12)
+    return a == b
+
+
+def env_settings(controller: Any, task: str | None, control_period: float | None) -> tuple[dict[str, Any], list[str]]:
+    """The env settings to run ``controller`` with, checked against what it was trained on.
+
+    A trained policy (:class:`agents.policy.SB3Controller`) must meet the env's action size (8) and one of its
+    observation layouts (19 entries, or 27 with the replayed fin block: ``observe_fins``). Where its run
+    folder records them (``trained``), the task and the control period default to the policy's own and an
+    explicit other value is refused; the action ranges and the track reference speed are the policy's. A
+    controller without ``trained`` (the hand and NMPC baselines) runs any task.
+
+    Args:
+        controller: The controller (or ``None`` for a baseline built from the env later).
+        task: ``--task``, or ``None`` for the policy's own (``"goal"`` when unknown).
+        control_period: ``--control-period`` [s], or ``None`` for the policy's own (0.5 s when unknown).
+
+    Returns:
+        ``(kwargs, notes)``: ``HardwareFishEnv`` keyword arguments (``task``, ``control_period``,
+        ``observe_fins`` and any recorded action ranges), and notes on what could not be checked.
+
+    Raises:
+        ValueError: On a mismatch, naming the setting, both values and where the policy's comes from.
+    """
+    defaults = EnvConfig()
+    trained = dict(getattr(controller, "trained", None) or {})
+    notes: list[str] = []
+    kwargs: dict[str, Any] = {}
+    obs_size = getattr(controller, "obs_size", None)
+    if obs_size is not None:
+        action_size = int(getattr(controller, "action_size", ACTION_SIZE))
+        if action_size != ACTION_SIZE:
+            raise ValueError(f"the policy returns {action_size} actions; the fish takes {ACTION_SIZE}")
+        layouts = {observation_size(False): False, observation_size(True): True}
+        if obs_size not in layouts:
+            raise ValueError(f"the policy takes {obs_size} observation entries; the fish envs give {OBS_SIZE} "
+                             f"(or {observation_size(True)} with observe_fins)")
+        kwargs["observe_fins"] = layouts[obs_size]
+        if "observe_fins" in trained and bool(trained["observe_fins"]) != layouts[obs_size]:
+            raise ValueError(f"{controller.trained_from} says observe_fins={trained['observe_fins']} but the model "
+                             f"takes {obs_size} observation entries: the run folder is inconsistent")
+    source = getattr(controller, "trained_from", None) or "its run folder"
+    for key, flag, given, fallback in (("task", "--task", task, defaults.task),
+                                       ("control_period", "--control-period", control_period,
+                                        defaults.control_period)):
+        if key in trained:
+            if given is not None and not _same(given, trained[key]):
+                raise ValueError(f"the policy was trained with {key} {trained[key]!r} ({source}), not {given!r}: "
+                                 f"pass {flag} {trained[key]} or leave {flag} out")
+            kwargs[key] = trained[key]
+        else:
+            kwargs[key] = fallback if given is None else given
+            if obs_size is not None:
+                notes.append(f"the policy records no {key} (no agents.train config.yaml beside it): {flag} "
+                             f"{kwargs[key]} is not checked against its training; only its observation size "
+                             f"({obs_size}) and action size are")
+    for key in ("bias_range", "amplitude_range", "period_range", "ratio_range", "ref_speed"):
+        if key in trained and not _same(trained[key], getattr(defaults, key)):
+            kwargs[key] = tuple(trained[key]) if isinstance(trained[key], (list, tuple)) else trained[key]
+    return kwargs, notes
+
+
+def first_frame(camera: Any, timeout: float = FIRST_FRAME_TIMEOUT):
+    """The camera's first frame, polling ``camera.read()`` for up to ``timeout`` wall seconds.
+
+    Raises:
+        RuntimeError: If no frame comes in time.
+    """
+    deadline = time.monotonic() + timeout
+    while True:
+        frame = camera.read()
+        if frame is not None:
+            return frame
+        if time.monotonic() >= deadline:
+            raise RuntimeError(f"no frame from the camera in {timeout:.0f} s; check --camera and the cable")
+        time.sleep(0.01)
+
+
+def check_frame_size(frame: Any, model: Any, calibration: str | Path | None) -> None:
+    """``ValueError`` unless ``frame``'s image has the size the camera model (``calibration``'s) is for."""
+    height, width = frame.image.shape[:2]
+    if (width, height) != (model.width, model.height):
+        what = f"the calibration {calibration}" if calibration is not None else "the default camera model (no " \
+                                                                                 "--calibration)"
+        raise ValueError(f"the camera gives {width}x{height} px frames but {what} is for {model.width}x"
+                         f"{model.height} px: calibrate at the camera's resolution (python -m hardware.calibrate) "
+                         "or set the camera to the calibrated one")
