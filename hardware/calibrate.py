@@ -84,10 +84,32 @@ def _size(text: str) -> tuple[int, int]:
     return width, height
 
 
+_EXAMPLES = """examples:
+  python -m hardware.calibrate --image frame.png -o calibration.json --overlay check.png
+  python -m hardware.calibrate --corners 40,320 615,305 600,40 52,30 --size 640x360 -o calibration.json
+  python -m hardware.calibrate --points 0.2,0.1:90,296 2.0,0.2:540,270 2.1,1.0:565,70 0.3,1.1:115,45 1.1,0.6:315,170 \\
+      --size 640x360 --frame frame.png --overlay check.png
+  python -m hardware.calibrate --from-emulator -o emulator.json
+
+Calibrate at the resolution the camera runs at during deployment: hardware.deploy refuses a calibration made
+for another image size. Exit status: 0 written; 2 a bad argument or an unreadable/unwritable file."""
+
+
+def _hue(text: str) -> int:
+    try:
+        hue = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer hue in 0..179 (OpenCV scale), got {text!r}") from None
+    if not 0 <= hue <= 179:
+        raise argparse.ArgumentTypeError(f"the hue must be in 0..179 (OpenCV's scale: degrees / 2), got {hue}")
+    return hue
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="python -m hardware.calibrate",
         description="Compute the pixel <-> tank homography of the overhead camera and write the calibration JSON.",
+        epilog=_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("--corners", nargs=4, type=_pair, metavar="U,V",
@@ -97,13 +119,16 @@ def _parser() -> argparse.ArgumentParser:
     source.add_argument("--image", type=Path, metavar="FRAME",
                         help="a frame with coloured dots on the four tank corners (origin lower left)")
     source.add_argument("--from-emulator", action="store_true", help="the emulator's camera model (dry runs)")
-    parser.add_argument("--size", type=_size, metavar="WxH", help="image size [px] (needed with --corners/--points)")
-    parser.add_argument("--dot-hue", type=int, default=60, metavar="H",
-                        help="hue of the corner dots on OpenCV's 0-179 scale (default 60, green)")
+    parser.add_argument("--size", type=_size, metavar="WxH",
+                        help="image size [px] (needed with --corners/--points; with --image or --from-emulator it "
+                             "must match the image)")
+    parser.add_argument("--dot-hue", type=_hue, default=None, metavar="H",
+                        help="--image: hue of the corner dots on OpenCV's 0-179 scale (default 60, green)")
     parser.add_argument("--overlay", type=Path, metavar="PNG",
-                        help="also write the frame with the calibrated tank outline and a 0.25 m grid, to check by eye")
+                        help="also write the frame with the calibrated tank outline and a 0.25 m grid, to check by eye "
+                             "(default: none)")
     parser.add_argument("--frame", type=Path, metavar="FRAME",
-                        help="background frame of --overlay with --corners/--points")
+                        help="background frame of --overlay with --corners/--points (default: white)")
     parser.add_argument("-o", "--output", type=Path, default=Path("calibration.json"),
                         help="calibration file to write (default calibration.json)")
     return parser
@@ -113,6 +138,12 @@ def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
     parser = _parser()
     args = parser.parse_args(argv)
+    if args.frame is not None and (args.overlay is None or args.corners is None and args.points is None):
+        parser.error("--frame is the background of --overlay with --corners/--points; it applies only with those")
+    if args.dot_hue is not None and args.image is None:
+        parser.error("--dot-hue applies only with --image")
+    if args.overlay is not None and not (args.overlay.parent.is_dir() and cv2.haveImageWriter(str(args.overlay))):
+        parser.error(f"cannot write the overlay {args.overlay}: no such folder or no image writer for its extension")
     background = None
     if args.from_emulator:
         reference = CameraModel.default()
@@ -124,7 +155,7 @@ def main(argv: list[str] | None = None) -> int:
         if image is None:
             parser.error(f"cannot read image {args.image}")
         try:
-            pixels = detect_dots(image, hue=args.dot_hue)
+            pixels = detect_dots(image, hue=60 if args.dot_hue is None else args.dot_hue)
         except ValueError as error:
             parser.error(str(error))
         tank, size, source = tank_corners(), (image.shape[1], image.shape[0]), f"dots in {args.image}"
@@ -143,27 +174,40 @@ def main(argv: list[str] | None = None) -> int:
             background = cv2.imread(str(args.frame), cv2.IMREAD_COLOR)
             if background is None:
                 parser.error(f"cannot read frame {args.frame}")
+    if args.size is not None and tuple(args.size) != tuple(size):
+        parser.error(f"--size {args.size[0]}x{args.size[1]} does not match the {source} image, {size[0]}x{size[1]} px")
     try:
         camera = CameraModel(size[0], size[1], fit_homography(tank, pixels))
     except ValueError as error:
         parser.error(str(error))
     errors = reprojection_errors(camera, tank, pixels)
     rms, worst = float(np.sqrt(np.mean(errors**2))), float(errors.max())
-    camera.save(
-        args.output,
-        source=source,
-        tank_points=np.asarray(tank).tolist(),
-        pixel_points=np.asarray(pixels).tolist(),
-        reprojection_rms_px=rms,
-        reprojection_max_px=worst,
-    )
+    try:
+        camera.save(
+            args.output,
+            source=source,
+            tank_points=np.asarray(tank).tolist(),
+            pixel_points=np.asarray(pixels).tolist(),
+            reprojection_rms_px=rms,
+            reprojection_max_px=worst,
+        )
+    except OSError as error:
+        parser.error(f"cannot write {args.output}: {error}")
     if args.overlay is not None:
         if background is None:
             background = np.full((camera.height, camera.width, 3), 255, np.uint8)
+        elif background.shape[:2] != (camera.height, camera.width):
+            parser.error(f"--frame {args.frame} is {background.shape[1]}x{background.shape[0]} px, not the "
+                         f"calibrated {camera.width}x{camera.height}")
         canvas = draw_overlay(background, camera)
         for u, v in np.asarray(pixels):
             cv2.drawMarker(canvas, (int(round(u)), int(round(v))), (255, 0, 255), cv2.MARKER_CROSS, 12, 1)
-        cv2.imwrite(str(args.overlay), canvas)
+        try:
+            written = cv2.imwrite(str(args.overlay), canvas)
+        except cv2.error:
+            written = False
+        if not written:
+            parser.error(f"cannot write the overlay {args.overlay}")
     scale = camera.pixels_per_metre((TANK_LENGTH / 2, TANK_WIDTH / 2))
     print(json.dumps({"output": str(args.output), "points": len(tank), "reprojection_rms_px": round(rms, 4),
                       "reprojection_max_px": round(worst, 4), "pixels_per_metre_at_centre": round(scale, 2)}))

@@ -111,3 +111,35 @@ def test_overlay_draws_the_calibrated_outline(tmp_path):
     assert r > 200 and b < 80  # the orange outline
     u, v = np.rint(camera.tank_to_pixel((TANK_LENGTH / 2, TANK_WIDTH / 4))).astype(int)
     assert abs(int(image[v, u, 0]) - int(image[v, u, 2])) < 40  # no outline inside the tank
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--from-emulator", "-o", "{tmp}/missing/cal.json"], "cannot write"),
+    (["--from-emulator", "--dot-hue", "500"], "0..179"),
+    (["--from-emulator", "--dot-hue", "30"], "only with --image"),
+    (["--from-emulator", "--size", "1280x720"], "does not match"),
+    (["--from-emulator", "--frame", "{tmp}/f.png"], "--frame"),
+    (["--from-emulator", "--overlay", "{tmp}/missing/o.png"], "cannot write the overlay"),
+    (["--from-emulator", "--overlay", "{tmp}/o.unknown"], "cannot write the overlay"),
+    (["--corners", "1,2", "300,2", "300,200", "1,200", "--size", "0x0"], "width and height"),
+])
+def test_cli_bad_arguments_are_one_line_errors_with_status_2(tmp_path, capsys, args, message):
+    """Issue 30: a bad argument or an unwritable file is an argparse error naming it, never a traceback."""
+    args = [a.replace("{tmp}", str(tmp_path)) for a in args]
+    if "-o" not in args:
+        args += ["-o", str(tmp_path / "cal.json")]
+    with pytest.raises(SystemExit) as exit_info:
+        main(args)
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert message in err[-1] and err[-1].startswith("python -m hardware.calibrate: error:")
+    assert not (tmp_path / "cal.json").exists()
+
+
+def test_cli_help_shows_examples_and_defaults(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--help"])
+    assert exit_info.value.code == 0
+    text = capsys.readouterr().out
+    assert "examples:" in text and "python -m hardware.calibrate --image" in text
+    assert "default calibration.json" in text and "default 60" in text
