@@ -43,7 +43,7 @@ FRAME_REASONS = ("bad_image", "bad_timestamp", "timestamp_backwards", "timestamp
 
 Region = tuple[int, int, int, int]  # (row0, row1, col0, col1) pixels, end exclusive
 
-_MIN_OVERLAP = 0.5  # a remembered region is compared when it covers at least this share of the current one
+_MIN_OVERLAP = 0.5  # two regions are compared when they share at least this much of the smaller one
 
 
 def _region(region: Region, shape: tuple[int, ...]) -> Region | None:
@@ -111,12 +111,13 @@ class FrameCheck:
         Raises:
             ValueError: ``region`` is not four integers with ``row0 < row1`` and ``col0 < col1``.
         """
-        reason = self._reason(frame, now, region)
+        box = None if region is None or not hasattr(frame.image, "shape") else _region(region, frame.image.shape)
+        reason = self._reason(frame, now, box)
         if reason:
             self.rejected[reason] += 1
         return reason
 
-    def _reason(self, frame: Frame, now: float, region: Region | None) -> str:
+    def _reason(self, frame: Frame, now: float, box: Region | None) -> str:
         image = frame.image
         if not isinstance(image, np.ndarray) or image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
             return "bad_image"
@@ -137,7 +138,6 @@ class FrameCheck:
         frozen = digest in self._digests
         self._digests.append(digest)
         self.last_change = math.nan
-        box = None if region is None else _region(region, image.shape)
         if box is not None:
             frozen = self._region_repeats(image, box) or frozen
         return "frozen_frame" if frozen else ""
@@ -150,7 +150,8 @@ class FrameCheck:
             top, bottom, left, right = max(row0, r0), min(row1, r1), max(col0, c0), min(col1, c1)
             if bottom <= top or right <= left:
                 continue
-            if (bottom - top) * (right - left) < _MIN_OVERLAP * (row1 - row0) * (col1 - col0):
+            smaller = min((row1 - row0) * (col1 - col0), crop.shape[0] * crop.shape[1])
+            if (bottom - top) * (right - left) < _MIN_OVERLAP * smaller:
                 continue
             new = image[top:bottom, left:right]
             old = crop[top - r0 : bottom - r0, left - c0 : right - c0]

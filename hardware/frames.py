@@ -175,7 +175,7 @@ class FrameGrabber:
         return bool(self.lost_reason)
 
     def close(self, timeout: float = 1.0) -> None:
-        """Stop the thread (waiting up to ``timeout`` s for a source's ``read()`` to return) and close the source.
+        """Close the source and stop the thread (waiting up to ``timeout`` s for the source's ``read()`` to return).
 
         Safe to call twice. A thread stuck in the source's ``read()`` is a daemon and is left behind.
         """
@@ -183,6 +183,6 @@ class FrameGrabber:
             return
         self._stop.set()
         self._slot.wake()
+        self.source.close()  # first: closing a source releases a read() blocked in it
         if self._thread is not threading.current_thread():
             self._thread.join(timeout=timeout)
-        self.source.close()

@@ -395,11 +395,20 @@ def render_frame(
     for box in _patch_boxes(pose, camera, conditions):
         u0, v0, u1, v1 = box
         image[v0:v1, u0:u1] = _render_patch(box, pose, camera, conditions)
-    image = image * _lighting_gain(camera, conditions)
+    # In place: the full-frame passes below are most of a frame's cost (it runs in a camera thread, 30 times a second)
+    gain = _lighting_gain(camera, conditions)
+    if isinstance(gain, np.ndarray):
+        image = image * gain
+    elif gain != 1.0:
+        image *= gain
     if conditions.glare:
         _add_glare(image, conditions.glare, rng)
     if conditions.blur_sigma > 0:
         image = cv2.GaussianBlur(image, (0, 0), conditions.blur_sigma)
     if conditions.noise_std > 0:
-        image = image + conditions.noise_std * rng.standard_normal(image.shape, dtype=np.float32)
-    return np.clip(np.rint(image), 0, 255).astype(np.uint8)
+        noise = rng.standard_normal(image.shape, dtype=np.float32)
+        noise *= np.float32(conditions.noise_std)
+        image += noise
+    np.rint(image, out=image)
+    np.clip(image, 0, 255, out=image)
+    return image.astype(np.uint8)
