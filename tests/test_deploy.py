@@ -129,3 +129,231 @@ def test_deploy_controller_and_policy_arguments_must_agree(tmp_path):
         main(["--controller", "nmpc", "--policy", str(tmp_path / "p.zip"), "--emulate", "--out", str(tmp_path)])
     with pytest.raises(SystemExit):
         main(["--emulate", "--out", str(tmp_path)])  # --controller policy needs --policy
+
+
+# ---------------------------------------------------------------- issue 30: arguments, policy fit, resources
+def _error_line(capsys) -> str:
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    return err.strip().splitlines()[-1]
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["--tracking-timeout", "0"], "--tracking-timeout must be"),
+    (["--tracking-timeout", "-1"], "--tracking-timeout must be"),
+    (["--tracking-timeout", "nan"], "--tracking-timeout must be"),
+    (["--speed", "1e-9"], "--speed must be in [0.1, 5.0]"),
+    (["--speed", "50"], "--speed must be in [0.1, 5.0]"),
+    (["--speed", "5", "--tracking-timeout", "0.4"], "--tracking-timeout must be"),  # 0.08 s of wall time
+    (["--episodes", "0"], "--episodes must be >= 1"),
+    (["--max-steps", "0"], "--max-steps must be >= 1"),
+    (["--seed", "-1"], "--seed must be >= 0"),
+    (["--control-period", "0.01"], "--control-period must be in [0.1, 2.0]"),
+    (["--control-period", "30"], "--control-period must be in [0.1, 2.0]"),
+    (["--geofence", "-0.1"], "--geofence must be"),
+    (["--port", "socket://127.0.0.1:1"], "cannot be used with --emulate"),
+    (["--robot-address", "0013A20012345678"], "cannot be used with --emulate"),
+    (["--calibration", "{tmp}/missing.json"], "--calibration: cannot load"),
+    (["--calibration", "{tmp}/broken.json"], "not a camera calibration"),
+])
+def test_bad_arguments_are_one_line_errors_with_status_2(tmp_path, capsys, args, message):
+    (tmp_path / "broken.json").write_text("{not json")
+    argv = ["--controller", "hand", "--emulate", "--quiet", "--out", str(tmp_path / "run")]
+    with pytest.raises(SystemExit) as exit_info:
+        main(argv + [a.replace("{tmp}", str(tmp_path)) for a in args])
+    assert exit_info.value.code == 2
+    line = _error_line(capsys)
+    assert line.startswith("python -m hardware.deploy: error:") and message in line
+
+
+@pytest.mark.parametrize("address", ["-1", "12345", "1FFFFFFFFFFFFFFFF", "0013A2001234567G", "0x-13A20012345678"])
+def test_robot_address_must_be_16_hex_digits(tmp_path, capsys, address):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--controller", "hand", "--port", "/dev/null", "--camera", "0", "--robot-address", address,
+              "--out", str(tmp_path)])
+    assert exit_info.value.code == 2 and "16 hex digits" in _error_line(capsys)
+
+
+def test_help_shows_examples_and_defaults(capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--help"])
+    text = capsys.readouterr().out
+    assert exit_info.value.code == 0 and "examples:" in text and "--take-over" in text and "exit status" in text
+    assert "default 240" in text and "default 0.5" in text and "default deploy_out" in text
+
+
+def _alive() -> tuple[set, set]:
+    """Threads alive and socket descriptors open in this process."""
+    import os
+    import threading
+
+    sockets = set()
+    for fd in os.listdir("/proc/self/fd"):
+        try:
+            if os.readlink(f"/proc/self/fd/{fd}").startswith("socket:"):
+                sockets.add(fd)
+        except OSError:
+            pass
+    return {t for t in threading.enumerate() if t.is_alive()}, sockets
+
+
+def _nothing_left(before) -> None:
+    import time
+
+    deadline = time.monotonic() + 3.0
+    while True:
+        threads, sockets = _alive()
+        extra_threads, extra_sockets = threads - before[0], sockets - before[1]
+        if not extra_threads and not extra_sockets or time.monotonic() > deadline:
+            break
+        time.sleep(0.05)
+    assert not extra_threads, f"threads left behind: {[t.name for t in extra_threads]}"
+    assert not extra_sockets, f"sockets left behind: {sorted(extra_sockets)}"
+
+
+def test_calibration_for_another_image_size_is_refused_before_the_first_episode(tmp_path, capsys):
+    """The emulated camera gives 640x360 frames; a 1280x720 calibration is a one-line error, nothing left open."""
+    calibration = tmp_path / "cal720.json"
+    calibration.write_text(json.dumps({"width": 1280, "height": 720,
+                                       "homography": [[500, 0, 80], [0, -500, 640], [0, 0, 1]]}))
+    before = _alive()
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--controller", "hand", "--emulate", "--quiet", "--calibration", str(calibration),
+              "--out", str(tmp_path / "run")])
+    assert exit_info.value.code == 2
+    line = _error_line(capsys)
+    assert "640x360" in line and "1280x720" in line and str(calibration) in line
+    assert not (tmp_path / "run" / "steps.jsonl").exists()  # refused before the first episode
+    _nothing_left(before)
+
+
+def test_a_failing_env_or_reset_is_exit_1_with_everything_released(tmp_path, capsys, monkeypatch):
+    """RuntimeError while building the env (or at reset: "no fish seen") -> one line, exit 1, no thread/socket left."""
+    import hardware.env
+
+    before = _alive()
+    real = hardware.env.HardwareFishEnv
+
+    def no_fish(self, *, seed=None, options=None):
+        raise RuntimeError("no fish seen for 5.0 s at reset (tracker: no frames); check the camera and the markers")
+
+    monkeypatch.setattr(real, "reset", no_fish)
+    assert main(["--controller", "hand", "--emulate", "--quiet", "--out", str(tmp_path / "a")]) == 1
+    assert "error: no fish seen" in _error_line(capsys)
+    _nothing_left(before)
+
+    class Broken:
+        def __init__(self, *args, **kwargs):
+            raise RuntimeError("supervisor could not start")
+
+    monkeypatch.setattr(hardware.env, "HardwareFishEnv", Broken)
+    assert main(["--controller", "hand", "--emulate", "--quiet", "--out", str(tmp_path / "b")]) == 1
+    assert _error_line(capsys) == "python -m hardware.deploy: error: supervisor could not start"
+    _nothing_left(before)
+
+
+def test_take_over_is_passed_to_the_env_or_refused_clearly(tmp_path, capsys, monkeypatch):
+    import inspect
+
+    import hardware.env
+
+    if "take_over" not in inspect.signature(hardware.env.HardwareFishEnv).parameters:
+        with pytest.raises(SystemExit) as exit_info:
+            main(["--controller", "hand", "--emulate", "--quiet", "--take-over", "--out", str(tmp_path)])
+        assert exit_info.value.code == 2 and "no take_over option" in _error_line(capsys)
+    seen = {}
+
+    class Recorder:
+        def __init__(self, port, camera, take_over=False, **kwargs):
+            seen["take_over"] = take_over
+            raise RuntimeError("recorded")
+
+    monkeypatch.setattr(hardware.env, "HardwareFishEnv", Recorder)
+    assert main(["--controller", "hand", "--emulate", "--quiet", "--take-over", "--out", str(tmp_path)]) == 1
+    assert seen == {"take_over": True}
+
+
+def test_a_failed_start_exits_normally_in_a_fresh_process(tmp_path):
+    """No SIGABRT, no traceback: the process ends with status 2 and the one-line reason."""
+    import subprocess
+    import sys
+
+    calibration = tmp_path / "cal.json"
+    calibration.write_text(json.dumps({"width": 320, "height": 180, "homography": [[100, 0, 10], [0, -100, 170],
+                                                                                     [0, 0, 1]]}))
+    done = subprocess.run([sys.executable, "-m", "hardware.deploy", "--controller", "hand", "--emulate", "--quiet",
+                           "--calibration", str(calibration), "--out", str(tmp_path / "run")],
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 2, done.stderr
+    assert "Traceback" not in done.stderr and "320x180" in done.stderr.strip().splitlines()[-1]
+
+
+class _Trained:
+    """A stand-in for agents.policy.SB3Controller (no torch): what a run folder records."""
+
+    name = "ppo"
+
+    def __init__(self, obs_size=19, action_size=8, trained=None, trained_from="run/config.yaml"):
+        self.obs_size, self.action_size = obs_size, action_size
+        self.trained = trained or {}
+        self.trained_from = trained_from if trained else None
+
+
+def test_policy_settings_default_to_its_own_and_a_mismatch_is_refused():
+    from hardware.deploy_checks import env_settings
+
+    goal = _Trained(trained={"task": "goal", "control_period": 0.5, "observe_fins": False})
+    settings, notes = env_settings(goal, None, None)
+    assert settings == {"observe_fins": False, "task": "goal", "control_period": 0.5} and not notes
+    with pytest.raises(ValueError, match="trained with task 'goal'.*pass --task goal"):
+        env_settings(goal, "track", None)
+    with pytest.raises(ValueError, match="control_period 0.5"):
+        env_settings(goal, None, 1.0)
+    assert env_settings(goal, "goal", 0.5)[0]["task"] == "goal"
+    track = _Trained(trained={"task": "track", "control_period": 1.0, "observe_fins": True,
+                              "amplitude_range": [0.0, 0.4]}, obs_size=27)
+    settings, _ = env_settings(track, None, None)
+    assert settings["task"] == "track" and settings["control_period"] == 1.0 and settings["observe_fins"]
+    assert settings["amplitude_range"] == (0.0, 0.4)  # the policy's action mapping
+    with pytest.raises(ValueError, match="inconsistent"):
+        env_settings(_Trained(obs_size=19, trained={"observe_fins": True}), None, None)
+    with pytest.raises(ValueError, match="observation entries"):
+        env_settings(_Trained(obs_size=23), None, None)
+    with pytest.raises(ValueError, match="returns 4 actions"):
+        env_settings(_Trained(action_size=4), None, None)
+    # a bare .zip records nothing: the observation size is checked, the rest said not to be
+    settings, notes = env_settings(_Trained(obs_size=27), "track", None)
+    assert settings == {"observe_fins": True, "task": "track", "control_period": 0.5}
+    assert len(notes) == 2 and "not checked" in notes[0]
+    assert env_settings(None, None, None) == ({"task": "goal", "control_period": 0.5}, [])  # a baseline
+
+
+def test_a_goal_policy_is_refused_under_track_and_bad_statistics_are_named(policy_zip, tmp_path, capsys):
+    import pickle
+    import shutil
+
+    from agents.policy import load_policy
+
+    run = tmp_path / "run"
+    run.mkdir()
+    shutil.copy(policy_zip, run / "model.zip")
+    (run / "config.yaml").write_text("algo: ppo\nenv_kwargs:\n  task: goal\n")
+    assert load_policy(run).trained["task"] == "goal"
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--policy", str(run), "--emulate", "--task", "track", "--out", str(tmp_path / "out")])
+    assert exit_info.value.code == 2 and "trained with task 'goal'" in _error_line(capsys)
+    (run / "vecnormalize.pkl").write_bytes(b"\x80\x04 truncated")
+    with pytest.raises(ValueError, match="vecnormalize.pkl: not a readable VecNormalize pickle"):
+        load_policy(run)
+    with pytest.raises(SystemExit) as exit_info:
+        main(["--policy", str(run), "--emulate", "--out", str(tmp_path / "out")])
+    assert exit_info.value.code == 2 and "vecnormalize.pkl" in _error_line(capsys)
+
+    from types import SimpleNamespace
+
+    # the statistics of another run: 27 observation entries for a 19-entry model
+    other = SimpleNamespace(norm_obs=True, clip_obs=10.0, epsilon=1e-8,
+                            obs_rms=SimpleNamespace(mean=np.zeros(27), var=np.ones(27)))
+    (run / "vecnormalize.pkl").write_bytes(pickle.dumps(other))
+    with pytest.raises(ValueError, match="size 27.*another run"):
+        load_policy(run)
