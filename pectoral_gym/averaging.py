@@ -43,7 +43,7 @@ import numpy as np
 
 from pectoral_gym._jit import njit
 from pectoral_gym.dynamics import body_accel, body_accel_waveform, oscillating_square_mean
-from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.kfunctions import UNIT_K
 from pectoral_gym.ktables import (
     QUADRATURE,
     RATE_ITERATIONS,
@@ -60,6 +60,7 @@ __all__ = [
     "bessel_j1",
     "averaged_fin_forcing",
     "averaged_body_accel",
+    "add_harmonic",
     "waveform_samples",
     "combined_waveform",
     "equivalent_amplitude",
@@ -93,6 +94,28 @@ def averaged_body_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, osci
     return body_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, float(oscillation))
 
 
+@njit(inline="always")
+def add_harmonic(out, n, zr, zi, k, cycles):
+    """Add ``Re z e^{2 pi i k cycles j / n}`` to ``out[j]``, ``j < n``, ``z = zr + i zi`` (turned by rotation).
+
+    The one rule that samples a yaw-rate waveform ``Re sum_k c_k e^{i k theta}`` at evenly spaced
+    phases: :func:`waveform_samples` and the compiled model's
+    :func:`pectoral_gym.forcing_cache.window_samples` both add their harmonics with it.
+    """
+    step = 2.0 * math.pi * k * cycles / n
+    cs, sn = math.cos(step), math.sin(step)
+    for j in range(n):
+        out[j] += zr
+        zr, zi = zr * cs - zi * sn, zr * sn + zi * cs
+
+
+@njit
+def _sample_rows(out, re, im):
+    for r in range(out.shape[0]):
+        for k in range(re.shape[1]):
+            add_harmonic(out[r], out.shape[1], re[r, k], im[r, k], k + 1, 1.0)
+
+
 def waveform_samples(harmonics: np.ndarray, phase: float = 0.0) -> np.ndarray:
     """Yaw-rate oscillation ``Re sum_k c_k exp(i k (phase + 2 pi j / QUADRATURE))`` at the quadrature's phases.
 
@@ -102,12 +125,15 @@ def waveform_samples(harmonics: np.ndarray, phase: float = 0.0) -> np.ndarray:
         phase: Beat phase [rad] of the first sample.
 
     Returns:
-        ``(..., QUADRATURE)`` samples [rad/s], the ones the compiled model uses for a fin at that phase.
+        ``(..., QUADRATURE)`` samples [rad/s], the ones the compiled model uses for a fin at that phase
+        (:func:`add_harmonic`).
     """
     harmonics = np.asarray(harmonics, dtype=np.complex128)
     k = np.arange(1, harmonics.shape[-1] + 1)
-    theta = phase + 2.0 * np.pi * np.arange(QUADRATURE) / QUADRATURE
-    return np.real(harmonics @ np.exp(1j * np.outer(k, theta)))
+    rows = (harmonics * np.exp(1j * k * phase)).reshape(-1, harmonics.shape[-1])
+    out = np.zeros((rows.shape[0], QUADRATURE))
+    _sample_rows(out, np.ascontiguousarray(rows.real), np.ascontiguousarray(rows.imag))
+    return out.reshape((*harmonics.shape[:-1], QUADRATURE))
 
 
 def combined_waveform(harmonics: np.ndarray, mean_abs: np.ndarray | None, periods: np.ndarray, omega: float,
@@ -336,9 +362,6 @@ def mean_fin_power(amplitude: float, period: float, ratio: float, span: float, d
     return drag_constant * span * amplitude**3 * (w1 * w1 + w2 * w2) / period
 
 
-_UNIT_K = ScalingFunctions.unit()
-
-
 def averaged_forcing(
     beat: FinBeat,
     params: FishParams | None = None,
@@ -358,7 +381,7 @@ def averaged_forcing(
     if side not in ("right", "left"):
         raise ValueError(f"side must be 'right' or 'left', got {side!r}")
     params = params or FishParams()
-    scaling = _UNIT_K if scaling is None else scaling
+    scaling = UNIT_K if scaling is None else scaling
     return averaged_fin_forcing(
         beat.bias, beat.amplitude, beat.period, beat.ratio,
         1.0 if side == "right" else -1.0,

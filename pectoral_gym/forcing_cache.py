@@ -52,7 +52,7 @@ import math
 import numpy as np
 
 from pectoral_gym._jit import njit
-from pectoral_gym.averaging import scaled_forcing
+from pectoral_gym.averaging import add_harmonic, scaled_forcing
 from pectoral_gym.ktables import (
     MAX_HARMONICS,
     MAX_SAMPLES,
@@ -71,7 +71,7 @@ __all__ = [
     "OFF_FX", "OFF_FY", "OFF_TAU", "OSC_EXCESS",
     "QUADRATURE", "WORKSPACE",
     "RATE_ITERATIONS",
-    "clear", "invalidate", "refresh", "waveform_samples", "yaw_oscillation", "yaw_waveform",
+    "clear", "invalidate", "refresh", "window_samples", "yaw_oscillation", "yaw_waveform",
 ]
 
 KEY_BIAS, KEY_AMPLITUDE, KEY_PERIOD, KEY_RATIO = 0, 1, 2, 3
@@ -163,7 +163,7 @@ def _beat_phase(fins, i, f, offset):
 
 
 @njit
-def waveform_samples(work, harmonics, n, cycles0, cycles1):
+def window_samples(work, harmonics, n, cycles0, cycles1):
     """The samples ``work[:n]`` of both fins' waveforms over a window; returns ``(pi/2) mean|.|``.
 
     Fin ``f``'s harmonics ``R_{f,k}`` (``work[_FIN + 4 MAX_HARMONICS f + 2 k]``, ``+1``) turn by
@@ -181,11 +181,7 @@ def waveform_samples(work, harmonics, n, cycles0, cycles1):
             zr, zi = work[base + 2 * k], work[base + 2 * k + 1]
             if zr == 0.0 and zi == 0.0:
                 continue
-            step = 2.0 * math.pi * (k + 1) * cycles / n
-            cs, sn = math.cos(step), math.sin(step)
-            for j in range(n):
-                work[j] += zr
-                zr, zi = zr * cs - zi * sn, zr * sn + zi * cs
+            add_harmonic(work, n, zr, zi, k + 1, cycles)
     total = 0.0
     for j in range(n):
         total += abs(work[j])
@@ -217,7 +213,7 @@ def yaw_waveform(fins, cache, i, offset, idle0, idle1, harmonics, rate, omega, c
     ``lambda_f = 2 c4 |omega|_ref``, ``lambda = 2 c4 mean|omega + o|`` of the combined waveform
     ``o`` at the yaw rate ``omega`` (``RATE_ITERATIONS`` relaxed fixed-point steps from the
     plain sum). Writes the samples into ``work[:n]`` (a ``WORKSPACE`` array) and returns
-    ``(n, equivalent amplitude)`` (:func:`waveform_samples`).
+    ``(n, equivalent amplitude)`` (:func:`window_samples`).
     """
     for c in range(_FIN, WORKSPACE):
         work[c] = 0.0
@@ -245,7 +241,7 @@ def yaw_waveform(fins, cache, i, offset, idle0, idle1, harmonics, rate, omega, c
             work[base + 2 * MAX_HARMONICS + 2 * k + 1] = br * lam + ar * kw
             c, s = c * c1 - s * s1, s * c1 + c * s1
     n, cycles0, cycles1 = quadrature_window(freq0, freq1)
-    amplitude = waveform_samples(work, harmonics, n, cycles0, cycles1)
+    amplitude = window_samples(work, harmonics, n, cycles0, cycles1)
     if not rate:
         return n, amplitude
     lam = 2.0 * c4 * _mean_abs(work, n, omega)
@@ -262,7 +258,7 @@ def yaw_waveform(fins, cache, i, offset, idle0, idle1, harmonics, rate, omega, c
                 den = lam * lam + kw * kw
                 work[base + 2 * k] = (dr * lam + di * kw) / den  # drive / (lambda + i k Omega_f)
                 work[base + 2 * k + 1] = (di * lam - dr * kw) / den
-        amplitude = waveform_samples(work, harmonics, n, cycles0, cycles1)
+        amplitude = window_samples(work, harmonics, n, cycles0, cycles1)
         if it + 1 < RATE_ITERATIONS:
             lam = 0.5 * (lam + 2.0 * c4 * _mean_abs(work, n, omega))
     return n, amplitude

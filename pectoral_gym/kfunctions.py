@@ -43,7 +43,7 @@ from pectoral_gym.ktables import (
 )
 
 __all__ = [
-    "FEATURES", "FORMAT", "FORMATS", "K_NAMES", "SPLINE_AXES", "SWAY_MODES", "KTables", "ScalingFunctions",
+    "FEATURES", "FORMAT", "FORMATS", "K_NAMES", "SPLINE_AXES", "SWAY_MODES", "UNIT_K", "KTables", "ScalingFunctions",
     "bspline_basis", "default_scaling_path", "oscillation_phasor", "spline_values",
 ]
 
@@ -364,3 +364,6 @@ class ScalingFunctions:
         return bool(self.table is None and self.oscillation_table is None and self.waveform_table is None
                     and self.sway == "paper"
                     and np.all(self.powers[self.coefs != 0] == 0) and np.allclose(self.coefs.sum(axis=1), 1.0))
+
+
+UNIT_K = ScalingFunctions.unit()  #: ``K = 1`` everywhere (plain classical averaging), shared: build it once

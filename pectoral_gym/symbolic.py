@@ -36,7 +36,7 @@ from pectoral_gym.ktables import QUADRATURE, RATE_ITERATIONS
 from pectoral_gym.params import FishParams, body_coefficients
 
 __all__ = [
-    "STATE_SIZE", "STATE_POSITION", "STATE_PSI", "STATE_VELOCITY",
+    "OSCILLATION_FLOOR", "STATE_SIZE", "STATE_POSITION", "STATE_PSI", "STATE_VELOCITY",
     "bessel_j1_sx", "bspline_basis_sx", "scaling_sx", "averaged_forcing_sx", "oscillating_square_mean_sx",
     "yaw_oscillation_sx", "combined_yaw_oscillation_sx", "yaw_waveform_sx", "combined_yaw_waveform_sx",
     "waveform_square_mean_sx", "body_accel_sx", "body_rhs_sx", "averaged_rhs_sx",
@@ -51,7 +51,9 @@ STATE_POSITION = slice(0, 2)
 STATE_PSI = 2
 STATE_VELOCITY = slice(3, 6)
 
-_OSCILLATION_FLOOR = 1e-9  # rad/s: keeps omega / A finite when two mirrored fins cancel
+#: rad/s: the least yaw-oscillation amplitude the CasADi models use (keeps ``omega / A`` finite when two
+#: mirrored fins cancel, or with no oscillation at all: ``A**2 / 2 = 5e-19`` off the paper's ``omega |omega|``).
+OSCILLATION_FLOOR = 1e-9
 _J1_TERMS = 18  # same truncation as averaging.bessel_j1 (machine precision for |x| <= pi)
 
 
@@ -162,7 +164,7 @@ def combined_yaw_oscillation_sx(right, left, scaling: ScalingFunctions | None):
     if scaling is None or not scaling.has_oscillation:
         return None
     phasor = yaw_oscillation_sx(right, scaling) - yaw_oscillation_sx(left, scaling)
-    return ca.sqrt(ca.sumsqr(phasor) + _OSCILLATION_FLOOR**2)
+    return ca.sqrt(ca.sumsqr(phasor) + OSCILLATION_FLOOR**2)
 
 
 def yaw_waveform_sx(beat, scaling: ScalingFunctions):

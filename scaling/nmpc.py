@@ -42,15 +42,13 @@ import numpy as np
 
 from pectoral_gym.averaging import EXACT, averaged_body_accel, averaged_fin_forcing, equivalent_amplitude
 from pectoral_gym.dynamics import linearised_rate
-from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.kfunctions import UNIT_K, ScalingFunctions
 from pectoral_gym.params import FishParams, body_coefficients, coefficient_vector
-from pectoral_gym.symbolic import body_accel_sx, named_symbols, rk4_sx
+from pectoral_gym.symbolic import OSCILLATION_FLOOR, body_accel_sx, named_symbols, rk4_sx
 
 __all__ = ["NmpcSettings", "NmpcResult", "ScalingNmpc", "algebraic_scaling", "auto_substeps", "unscaled_forcing"]
 
-_UNIT_K = ScalingFunctions.unit()
-_UNIT_BASE_K = ScalingFunctions(_UNIT_K.powers, _UNIT_K.coefs, sway="base")
-_OSCILLATION_FLOOR = 1e-12  # rad/s: keeps omega / A finite; A = 0 is then the paper's damping to ~1e-24
+_UNIT_BASE_K = ScalingFunctions(UNIT_K.powers, UNIT_K.coefs, sway="base")
 
 
 class _Parameters(NamedTuple):
@@ -132,7 +130,7 @@ def unscaled_forcing(patterns: np.ndarray, params: FishParams, sway: str = "pape
     if sway not in ("paper", "base"):
         raise ValueError(f"sway must be 'paper' or 'base', got {sway!r}")
     coef = coefficient_vector(params)
-    arrays = (_UNIT_K if sway == "paper" else _UNIT_BASE_K).kernel_arrays()
+    arrays = (UNIT_K if sway == "paper" else _UNIT_BASE_K).kernel_arrays()
     return np.array([averaged_fin_forcing(*p, 1.0, coef, EXACT, arrays) for p in patterns]).reshape(-1, 3)
 
 
@@ -204,7 +202,7 @@ class ScalingNmpc:
             k, f, a = inputs  # eqs. (30)-(32): the scaling values multiply the forcing
             if waveform:
                 return body_accel_sx(state, k * f, params, yaw_waveform=a)
-            return body_accel_sx(state, k * f, params, yaw_oscillation=ca.fmax(a, _OSCILLATION_FLOOR))
+            return body_accel_sx(state, k * f, params, yaw_oscillation=ca.fmax(a, OSCILLATION_FLOOR))
 
         end = rk4_sx(rhs, v, (u, forcing, amplitude), settings.sampling / self.substeps, self.substeps)
         step = ca.Function("step", [v, u, forcing, amplitude], [end])  # one sampling interval
