@@ -33,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.baselines import HandController
 from agents.fin_map import FinMap
+from agents.hand import HandController
 from agents.nmpc_pricing import PlanPricing
 from agents.nmpc_problem import (
     GAIN_THRUST,

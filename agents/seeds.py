@@ -5,7 +5,7 @@ Each seed trains exactly as ``pectoral-demo --seed S`` (PPO on ``PectoralFish-Av
 file runs on the full model: ``eval_env``) and is then
 evaluated on three settings, the same held-out episodes for every seed (episode ``k`` reset with
 ``--eval-seed + k``, default the demo's): the averaged model, the full model, and the full model with
-:data:`agents.evaluate.DEFAULT_RANDOMIZATION`. A :class:`agents.solve_time.SolveProbe` (``--probe-every``)
+:data:`agents.evaluate.DEFAULT_RANDOMIZATION`. A :class:`agents.solve_probe.SolveProbe` (``--probe-every``)
 times each run to 0.95 success on the full model on a third set of episodes.
 
 Across seeds, per setting: the interquartile mean (``scipy.stats.trim_mean(x, 0.25)``, the mean of the
@@ -110,7 +110,7 @@ def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None
         overrides: Hyperparameter overrides (``agents.config.resolve_config``'s ``hyperparams``).
         episodes: Evaluation episodes per setting.
         eval_seed: Evaluation episode ``k`` is reset with ``eval_seed + k`` (default the demo's).
-        probe: Keyword arguments of :class:`agents.solve_time.SolveProbe` (``None``: no time to solve).
+        probe: Keyword arguments of :class:`agents.solve_probe.SolveProbe` (``None``: no time to solve).
         hyperparams_file: Hyperparameter file (default ``agents/hyperparams/ppo.yml``).
         queue: Anything with ``put``; receives ``(seed, stage, timesteps)`` progress messages.
         settings: Labels of :data:`SETTINGS` to evaluate on after training (empty: none).
@@ -123,7 +123,7 @@ def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None
     from agents.config import resolve_config
     from agents.evaluate import DEFAULT_RANDOMIZATION, TRAINING_ONLY, evaluate, write_json
     from agents.policy import load_policy
-    from agents.solve_time import REPORT_SEED, SolveProbe
+    from agents.solve_probe import REPORT_SEED, SolveProbe
     from agents.train import train
 
     put = queue.put if queue is not None else (lambda _message: None)
@@ -216,7 +216,7 @@ def run_seeds(seeds: Sequence[int], out: str | Path, jobs: int = 1, overrides: d
         FileExistsError: If a seed's run folder exists.
     """
     from agents.config import resolve_config
-    from agents.solve_time import REPORT_SEED, SolveProbe, check_held_out
+    from agents.solve_probe import REPORT_SEED, SolveProbe, check_held_out
 
     seeds = [int(s) for s in seeds]
     if not seeds or len(set(seeds)) != len(seeds):
