@@ -31,7 +31,7 @@ import numpy as np
 from hardware import protocol as pr
 from hardware.finreplay import CHUNK as _CHUNK
 from hardware.finreplay import apply_firmware
-from hardware.firmware import Firmware, FirmwareConfig
+from hardware.firmware import Firmware, FirmwareConfig, new_boot_id
 from pectoral_gym import strokes
 from pectoral_gym.models import FullModel
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
@@ -71,14 +71,16 @@ class EmulatedRobot:
         self.loss = float(loss)
         self.model = FullModel(1, params)
         FullModel(1, params).advance(_CHUNK)  # load the compiled kernels now, not while the PC waits for acks
-        self.firmware = Firmware(firmware)
+        self._rng = np.random.default_rng(seed)
+        self._firmware_config = firmware
+        self.firmware = Firmware(firmware, boot=new_boot_id(self._rng), power_up=0.0)  # emulated clock from 0
+        self.reboots = 0
         self.decoder = pr.StreamDecoder()
         self.received: list[pr.Message] = []  # every valid message, in arrival order (for tests and logs)
         self.lost_messages = 0
         # With a list here, every physics chunk appends (t, state (6,), fin rates (2,), peak rates of the
         # half-strokes in progress (2,), running): "stopped within" and servo checks on the emulated clock.
         self.trace: list[tuple[float, np.ndarray, np.ndarray, np.ndarray, bool]] | None = None
-        self._rng = np.random.default_rng(seed)
         self._seed = seed
         self._lock = threading.Lock()
         self._stop = threading.Event()
@@ -134,6 +136,22 @@ class EmulatedRobot:
         """``(2,)`` fin angular rates [rad/s] (right, left); zero when the fins are still."""
         with self._lock:
             return self.model.fin_angles()[1][0].copy()
+
+    def reboot(self) -> int:
+        """A brown-out: the robot powers up again now; returns the new boot id.
+
+        The fins halt where they are, the firmware starts from power-up (state IDLE, no session served,
+        sequence numbering afresh, uptime from 0) with a new random boot id, and a frame half received
+        is lost. The fish keeps coasting (the physics does not reboot).
+        """
+        with self._lock:
+            fresh = Firmware(self._firmware_config, boot=new_boot_id(self._rng), power_up=self.model.time)
+            fresh.halt = True  # the servos hold where the brown-out left them
+            self.firmware = fresh
+            self.decoder = pr.StreamDecoder()
+            self.reboots += 1
+            self._apply_firmware()
+            return fresh.boot
 
     def camera(self, conditions=None, seed: int | None = None, camera=None):
         """An in-process ``hardware.camera.EmulatedCamera`` looking at this fish."""

@@ -9,15 +9,21 @@ point (the parameter-change rule of the core models, reused by the emulator thro
 
 Rules:
 
-* **Lease** (protocol version 2): a SET_FINS runs for at most its lease, counted from the receipt of the
-  *first* copy of its command identity. Copies (same identity: keep-alives, retries, replays) never
-  extend it and never restart stopped fins; only a newer identity from the controller's ``step()``
-  does. At expiry -> state ``EXPIRED``, fins halt.
-* **Session**: the robot serves one session at a time. A valid message of a new session takes over (a
-  restarted PC): running fins halt, and the old session is retired: its messages are ignored from then on.
+* **Lease and deadline** (protocol version 3): a SET_FINS runs until its lease, counted from the receipt
+  of the *first* copy of its command identity, or its ``deadline`` on the robot's own clock (uptime in
+  ms, for the robot's current boot id), whichever is first. A deadline already past, or one for another
+  boot, never starts the fins. Copies (same identity: keep-alives, retries, replays) never extend it and
+  never restart stopped fins; only a newer identity from the controller's ``step()`` does. At expiry ->
+  state ``EXPIRED``, fins halt.
+* **Session**: the robot serves one session at a time. Another session takes over only when the served
+  one has been silent for ``watchdog_timeout`` (it is gone) or with a CLAIM (an operator's explicit
+  takeover): running fins halt and the old session is retired (never served again). Otherwise its
+  messages are refused, but answered: every STATUS names the session it answers and the one served.
+* **STOP** from any session (served, retired or unknown) -> state ``STOPPED``, fins halt at once: a stop
+  never needs authority. From the served session a stale STOP is still ignored (ordering).
 * **Watchdog**: no new, valid message of the current session for ``watchdog_timeout`` (default 0.5 s) ->
   state ``WATCHDOG``, fins halt. Duplicates, stale, foreign and retired messages never feed it.
-* **STOP** -> state ``STOPPED``, fins halt at once.
+* **Boot id**: random, nonzero, new at every power-up; reported in every STATUS with the uptime.
 * **Clipping** to :class:`ServoLimits`: stroke ``bias +- amplitude`` inside the servo's angle range,
   period and ratio inside theirs, and the *peak* fin rate of both half-strokes at most ``max_speed``
   (the period is lengthened, :func:`clip_beats`); the transitional half-stroke from the fin's next
@@ -31,16 +37,23 @@ Rules:
 from __future__ import annotations
 
 import math
+import secrets
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from hardware.protocol import Message, MsgType, RobotState, SequenceTracker, Status, StatusFlag, Verdict
+from hardware.protocol import Message, MsgType, RobotState, SequenceTracker, Status, StatusFlag, Verdict, serial_newer
 
 __all__ = ["ServoLimits", "FirmwareConfig", "Firmware", "clip_beats", "rate_limit", "rest_beats", "peak_rates",
-           "stretch_transition"]
+           "stretch_transition", "new_boot_id"]
 
 _RETIRED = 16  # sessions remembered as retired (a restarted PC gets a fresh random 32-bit session)
+
+
+def new_boot_id(rng=None) -> int:
+    """A random nonzero 32-bit boot id (from ``rng``, a numpy ``Generator``, if given; else the OS's source)."""
+    boot = int(rng.integers(0, 2**32)) if rng is not None else secrets.randbits(32)
+    return boot or 1
 
 
 def _default_rate() -> tuple[float, float, float, float]:
@@ -178,6 +191,11 @@ class FirmwareConfig:
 class Firmware:
     """The robot's rules, driven by :meth:`receive` (messages) and :meth:`tick` (time).
 
+    Args:
+        config: The rules' settings.
+        boot: This power-up's boot id (nonzero; default: a fresh random one, :func:`new_boot_id`).
+        power_up: The caller's clock at power-up [s]: the uptime reported in STATUS counts from it.
+
     Attributes:
         state: A :class:`RobotState`.
         command: ``(2, 4)`` the last accepted SET_FINS, clipped to the servo limits.
@@ -187,12 +205,19 @@ class Firmware:
         session: The session served (``None`` before the first message).
         command_id: Identity of the last command run (``None`` before the first).
         lease_end: Time the running command's lease ends [s].
-        ignored: Messages ignored for liveness: ``{"duplicate", "stale", "retired", "copy", "bad_lease"}``.
+        ignored: Messages not acted on: ``duplicate``, ``stale``, ``retired`` (from a retired session),
+            ``refused`` (another session while the served one is live), ``copy``, ``bad_lease``, ``late``
+            (deadline already past), ``boot`` (deadline for another boot); ``foreign_stop`` counts STOPs
+            from sessions other than the served one (they do halt the fins).
         crc_errors: Frames rejected by the caller's decoder, reported back in STATUS (set by the caller).
     """
 
-    def __init__(self, config: FirmwareConfig | None = None):
+    def __init__(self, config: FirmwareConfig | None = None, boot: int | None = None, power_up: float = 0.0):
         self.config = config or FirmwareConfig()
+        self.boot = new_boot_id() if boot is None else int(boot) & 0xFFFFFFFF
+        if self.boot == 0:
+            raise ValueError("boot id must be nonzero (0 means 'no deadline' in a SET_FINS)")
+        self.power_up = float(power_up)
         self.state = RobotState.IDLE
         self.command = rest_beats()
         self.setpoint = rest_beats()
@@ -204,12 +229,12 @@ class Firmware:
         self.retired: list[int] = []
         self.command_id: int | None = None
         self.lease_end = -math.inf
-        self.ignored = dict.fromkeys(("duplicate", "stale", "retired", "copy", "bad_lease"), 0)
+        self.ignored = dict.fromkeys(("duplicate", "stale", "retired", "refused", "copy", "bad_lease", "late", "boot",
+                                      "foreign_stop"), 0)
         self._seq = 0
         self.last_valid: float | None = None  # time of the last new, valid message of the session [s]
         self.tripped_at: float | None = None  # time the watchdog or the lease last stopped the fins [s]
         self._last_tick: float | None = None
-        self._start: float | None = None
 
     @property
     def running(self) -> bool:
@@ -220,23 +245,29 @@ class Firmware:
         self._seq = (self._seq + 1) & 0xFFFF
         flags = (StatusFlag.CLIPPED if self.clipped else 0) | (
             StatusFlag.RATE_LIMITED if self.running and not np.allclose(self.setpoint, self.command) else 0)
-        start = self._start if self._start is not None else now
         status = Status(ack.seq, int(ack.type), int(self.state), int(flags), self.crc_errors,
-                        self.tracker.duplicates, self.tracker.stale, int(1000 * (now - start)) & 0xFFFFFFFF)
-        return Message(MsgType.STATUS, self._seq, 0, status=status)
+                        self.tracker.duplicates, self.tracker.stale, self.uptime_ms(now),
+                        0 if self.session is None else self.session, self.boot)
+        return Message(MsgType.STATUS, self._seq, ack.session, status=status)  # addressed to the asker
 
-    def _session(self, session: int) -> bool:
-        """Whether a message of ``session`` may be handled; a new session takes over, the old one retires."""
-        if session == self.session:
-            return True
-        if session in self.retired:
+    def uptime_ms(self, now: float) -> int:
+        """The robot clock [ms since power-up, u32, rounded down] at ``now`` [s]."""
+        return int(math.floor(1000.0 * max(now - self.power_up, 0.0))) & 0xFFFFFFFF
+
+    def _admit(self, msg: Message, now: float) -> bool:
+        """Whether a message of a session other than the served one takes the robot over (then it does)."""
+        if msg.session in self.retired:
             self.ignored["retired"] += 1
+            return False
+        silent = self.last_valid is None or now - self.last_valid >= self.config.watchdog_timeout
+        if self.session is not None and not silent and msg.type != MsgType.CLAIM:
+            self.ignored["refused"] += 1  # the served session is live: taking over needs a CLAIM
             return False
         if self.session is not None:
             self.retired = [*self.retired[-(_RETIRED - 1):], self.session]
             if self.running:
                 self._stop(RobotState.STOPPED)  # the new controller must command anew
-        self.session, self.command_id = session, None
+        self.session, self.command_id, self.last_valid = msg.session, None, None
         self.tracker = SequenceTracker()
         return True
 
@@ -244,10 +275,11 @@ class Firmware:
         """Handle a valid message received at ``now`` [s]; return the STATUS reply, or ``None`` (ignored)."""
         if msg.type == MsgType.STATUS:
             return None  # not for us
-        if self._start is None:
-            self._start = now
-        if not self._session(msg.session):
-            return None
+        if msg.session != self.session and not self._admit(msg, now):
+            if msg.type == MsgType.STOP:  # a stop never needs authority
+                self.ignored["foreign_stop"] += 1
+                self._stop(RobotState.STOPPED)
+            return self._status(msg, now)  # refused, but answered: the sender learns whom the robot serves
         verdict = self.tracker.check(msg.seq, msg.session)
         if verdict == Verdict.STALE:
             self.ignored["stale"] += 1
@@ -266,11 +298,24 @@ class Firmware:
         if not 0 < msg.lease <= self.config.max_lease:
             self.ignored["bad_lease"] += 1
             return
-        if self.command_id is not None and not 0 < ((msg.command - self.command_id) & 0xFFFF) < 0x8000:
+        if self.command_id is not None and not serial_newer(msg.command, self.command_id):
             self.ignored["copy"] += 1  # a copy (or an older command): it neither extends nor restarts
             return
         self.command_id = msg.command
-        self.lease_end = now + msg.lease  # counted from our own receipt of the first copy
+        end = now + msg.lease  # counted from our own receipt of the first copy
+        if msg.deadline:
+            if msg.boot != self.boot:
+                self.ignored["boot"] += 1  # a deadline on another power-up's clock: meaningless here
+                return
+            ahead_ms = ((msg.deadline - self.uptime_ms(now) + 0x80000000) & 0xFFFFFFFF) - 0x80000000
+            end = min(end, self.power_up + (self.uptime_ms(now) + ahead_ms) / 1000.0)  # u32 wrap-safe
+        if end <= now:
+            self.ignored["late"] += 1  # this command's time is over: never start it, stop the previous one
+            if self.running:
+                self._stop(RobotState.EXPIRED)
+                self.tripped_at = now
+            return
+        self.lease_end = end
         fins = np.asarray(msg.fins, dtype=float).reshape(2, 4)
         self.command, self.clipped = clip_beats(fins, self.config.limits)
         if not self.running:

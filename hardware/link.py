@@ -2,10 +2,16 @@
 
 ``/dev/ttyUSB0`` (the XBee on USB), ``socket://host:port`` (an emulator process) and ``loop://``
 (tests) all work. A reader thread decodes the robot's STATUS messages; a keep-alive thread re-sends
-a *copy* of the current fin command (same command identity, so it never extends the command's lease;
-``docs/protocol.md``) every ``keepalive_period`` until the lease ends, then STOP; HEARTBEAT when
-stopped. It retries an unacknowledged SET_FINS/STOP after ``ack_timeout``, at most ``max_retries`` times
-(same frame, same sequence number). Only :meth:`RadioLink.set_fins` starts a new lease.
+a *copy* of the current fin command (same command identity and deadline, so it never extends the
+command; ``docs/protocol.md``) every ``keepalive_period`` until the lease ends, then STOP; HEARTBEAT when
+stopped. It retries an unacknowledged SET_FINS/STOP after a timeout that adapts to the measured round
+trip (:class:`hardware.linkclock.RttEstimator`), at most ``max_retries`` times (same frame, same sequence
+number). Only :meth:`RadioLink.set_fins` starts a new lease; it also carries a deadline on the robot's
+clock (:class:`hardware.linkclock.RobotClock`), so no copy runs past the lease counted from the call.
+
+Control (protocol version 3): every STATUS names the session it answers and the session the robot
+serves. :attr:`RadioLink.control_lost` latches why this PC is not (or no longer) the robot's controller:
+``"taken_over"``, ``"robot_busy"`` or ``"robot_rebooted"`` (cleared by :meth:`RadioLink.resync`).
 :meth:`RadioLink.emergency_stop` takes no lock (for signal handlers). ``close()`` sends STOP and is
 idempotent.
 """
@@ -16,12 +22,14 @@ import secrets
 import threading
 import time
 import warnings
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 import serial
 
 from hardware import protocol as pr
+from hardware.linkclock import CLOCK_TOLERANCE, RobotClock, RttEstimator
 
 __all__ = ["RadioLink", "LinkStats"]
 
@@ -43,6 +51,8 @@ class LinkStats:
         checksum_errors: Frames with a bad XBee checksum.
         framing_errors: Bad lengths and abandoned frames.
         write_errors: Failed writes to the port.
+        foreign: STATUS messages addressed to other sessions (heard, not taken as acks).
+        suppressed: Commands not sent because control is lost.
     """
 
     sent: int = 0
@@ -57,6 +67,8 @@ class LinkStats:
     checksum_errors: int = 0
     framing_errors: int = 0
     write_errors: int = 0
+    foreign: int = 0
+    suppressed: int = 0
 
 
 class RadioLink:
@@ -68,17 +80,32 @@ class RadioLink:
         dest64: 64-bit address of the robot's XBee (default broadcast; set it for unicast with MAC retries).
         keepalive_period: Re-send the current command (or a HEARTBEAT) this often [s]; must be well below
             the firmware watchdog (0.5 s by default).
-        ack_timeout: Retry an unacknowledged SET_FINS/STOP after this long [s].
+        ack_timeout: First and smallest retry timeout of an unacknowledged SET_FINS/STOP [s]; the timeout
+            then follows the measured round trip (``SRTT + 4 RTTVAR``, at most ``max_ack_timeout``).
         max_retries: Retries per command before it counts as ``unacked``.
-        session: 32-bit session (default from :mod:`secrets`, never from a seeded generator): the robot
-            serves the newest session and ignores retired ones, so a restarted PC gets a fresh one.
+        session: 32-bit session (default from :mod:`secrets`, never from a seeded generator): a restarted
+            PC gets a fresh one.
+        take_over: Take the robot over even if another live session controls it (sends CLAIM): an explicit
+            operator action. Without it, a robot serving another live session refuses this PC
+            (``control_lost == "robot_busy"``).
+        max_ack_timeout: Largest retry timeout [s].
+        clock_tolerance: Largest relative rate error of the robot's clock (:class:`RobotClock`).
+
+    Attributes:
+        lease_scale: Wall seconds per robot second (``1 / speed`` of an accelerated emulator).
+        control_lost: ``""`` while this PC may control the robot, else why not (latched).
+        served: The session the robot last said it serves (``None`` before any STATUS; 0: none).
+        boot: The robot's boot id from its STATUS (``None`` before any).
     """
 
     def __init__(self, port: str | serial.SerialBase, baudrate: int = 57600, dest64: int = pr.BROADCAST,
                  keepalive_period: float = 0.1, ack_timeout: float = 0.05, max_retries: int = 3,
-                 session: int | None = None):
+                 session: int | None = None, take_over: bool = False, max_ack_timeout: float = 1.0,
+                 clock_tolerance: float = CLOCK_TOLERANCE):
         if not keepalive_period > 0 or not ack_timeout > 0 or int(max_retries) < 0:
             raise ValueError("keepalive_period and ack_timeout must be > 0 s and max_retries >= 0")
+        if not max_ack_timeout >= ack_timeout:
+            raise ValueError(f"max_ack_timeout must be >= ack_timeout, got {max_ack_timeout!r} < {ack_timeout!r}")
         self.serial = serial.serial_for_url(port, baudrate=baudrate, timeout=0.01) if isinstance(port, str) else port
         if isinstance(port, str) and "://" not in port and int(dest64) == pr.BROADCAST:
             warnings.warn("RadioLink: commands are broadcast, so every robot on this radio channel obeys them; "
@@ -89,6 +116,18 @@ class RadioLink:
         self.max_retries = int(max_retries)
         self.lease_scale = 1.0  # wall seconds per robot second (1 / speed of an accelerated emulator)
         self.session = secrets.randbits(32) if session is None else int(session) & 0xFFFFFFFF
+        self.take_over = bool(take_over)
+        self.control_lost = ""
+        self.served: int | None = None
+        self.boot: int | None = None
+        self._served = False  # the robot answered one of our messages as our controller (this boot)
+        self.rtt_estimator = RttEstimator(self.ack_timeout, self.ack_timeout, float(max_ack_timeout))
+        self.clock = RobotClock(clock_tolerance)
+        self._sent_at: dict[int, tuple[float, bool]] = {}  # seq -> (send time, re-sent), for RTT samples
+        self._deadline = (0, 0)  # (deadline, boot) of the current command
+        self._commanded = False  # fins of ours may run: repeat STOP until the robot reports still
+        self._quiet: int | None = None  # newest seq of ours answered with the robot not RUNNING
+        self._old_boots: deque[int] = deque(maxlen=8)  # boots before a reboot: their late STATUS is stale
         self.stats = LinkStats()
         self.decoder = pr.StreamDecoder()
         self.tracker = pr.SequenceTracker()
@@ -117,7 +156,12 @@ class RadioLink:
         if self._emergency is not None:  # move past the sequence number emergency_stop() used
             self._seq, self._emergency = self._emergency, None
         self._seq = (self._seq + 1) & 0xFFFF
-        msg = pr.Message(mtype, self._seq, self.session, fins=fins, command=self._command_id, lease=self._lease)
+        deadline, boot = self._deadline
+        msg = pr.Message(mtype, self._seq, self.session, fins=fins, command=self._command_id, lease=self._lease,
+                         deadline=deadline, boot=boot)
+        self._sent_at[self._seq] = (time.monotonic(), False)
+        if len(self._sent_at) > 256:
+            self._sent_at.pop(next(iter(self._sent_at)))
         return self._seq, pr.encode_frame(pr.tx_request(pr.encode_message(msg), self.dest64))
 
     def _write(self, frame: bytes) -> None:
@@ -130,8 +174,10 @@ class RadioLink:
 
     def _send_tracked(self, mtype: pr.MsgType, fins: tuple[float, ...] | None) -> int:
         with self._lock:
+            if self.take_over and not self._served and not self.control_lost:
+                self._write(self._next(pr.MsgType.CLAIM)[1])  # the operator's takeover goes first
             seq, frame = self._next(mtype, fins)
-            self._pending = (seq, frame, time.monotonic() + self.ack_timeout, 0, mtype)
+            self._pending = (seq, frame, time.monotonic() + self.rtt_estimator.timeout(), 0, mtype)
             self._write(frame)  # under the lock: frames leave in sequence order
         return seq
 
@@ -141,7 +187,7 @@ class RadioLink:
         The frame jumps the sequence by 64 so the robot takes it as new whatever was in flight; the link
         thread then moves its own counter past it. Interleaved bytes cannot corrupt it: the robot's
         decoder resynchronises on the start delimiter and drops the interrupted frame. The lease is the
-        backstop if even this write fails.
+        backstop if even this write fails. A STOP needs no authority: the robot halts whoever it serves.
         """
         self.command = None
         seq = (self._seq + 64) & 0xFFFF
@@ -155,9 +201,13 @@ class RadioLink:
     def set_fins(self, beats: np.ndarray, lease: float = pr.DEFAULT_LEASE) -> int:
         """Command both fins ``(2, 4)`` (right first; bias, amplitude [rad], period [s], ratio); returns the seq.
 
-        A new command identity with a lease of ``lease`` robot seconds (``(0, MAX_LEASE]``): the robot
-        stops the fins when it runs out unless another ``set_fins`` comes first. Nothing is checked here
-        beyond finiteness and the wire range: clip with :mod:`hardware.safety` first.
+        A new command identity with a lease of ``lease`` robot seconds (``(0, MAX_LEASE]``) counted from
+        this call: once the link has heard the robot's clock (any STATUS), the command carries the
+        deadline on the robot's clock that corresponds to the lease's end, so no copy of it, however
+        late, runs past it; before that the robot counts the lease from its receipt. Nothing is checked
+        here beyond finiteness and the wire range: clip with :mod:`hardware.safety` first. While
+        :attr:`control_lost` is set nothing is sent (the command is counted in ``stats.suppressed``) and
+        ``-1`` is returned.
         """
         if self._closed:
             raise RuntimeError("the radio link is closed")
@@ -168,24 +218,37 @@ class RadioLink:
         # wire-range and lease checks before any state
         pr.encode_message(pr.Message(pr.MsgType.SET_FINS, 0, fins=fins, lease=lease))
         with self._lock:
+            if self.control_lost:
+                self.stats.suppressed += 1
+                self.command = None
+                return -1
+            now = time.monotonic()
             self.command = b.copy()
             self._command_id = (self._command_id + 1) & 0xFFFF
             self._lease = float(lease)
-            self.lease_end = time.monotonic() + self._lease * self.lease_scale  # the robot counts from receipt
+            self.lease_end = now + self._lease * self.lease_scale
+            deadline = self.clock.deadline_ms(self.lease_end, 1.0 / self.lease_scale)
+            self._deadline = (deadline, self.clock.boot or 0) if deadline else (0, 0)
+            self._commanded = True
             return self._send_tracked(pr.MsgType.SET_FINS, fins)
 
     def stop(self, wait: float = 0.0) -> bool:
-        """Send STOP (retried like a command); with ``wait`` > 0 block up to ``wait`` s for the ack."""
+        """Send STOP (retried like a command); with ``wait`` > 0 block up to ``wait`` s for the robot's word.
+
+        Returns True only once a STATUS addressed to this session reports the robot not RUNNING after
+        this STOP (always False with ``wait = 0``). A STOP needs no authority: it halts the fins whoever
+        the robot serves.
+        """
         with self._lock:
             self.command = None
             self.lease_end = -float("inf")
         if self._closed:
             return False
         seq = self._send_tracked(pr.MsgType.STOP, None)
-        return self.wait_ack(seq, wait) if wait > 0 else False
+        return self.wait_still(seq, wait) if wait > 0 else False
 
     def wait_ack(self, seq: int, timeout: float) -> bool:
-        """Block until message ``seq`` is acknowledged or ``timeout`` s pass; returns whether it was."""
+        """Block until message ``seq`` is acknowledged (by a STATUS addressed to us) or ``timeout`` s pass."""
         deadline = time.monotonic() + timeout
         with self._acked_event:
             while seq not in self._acked:
@@ -194,6 +257,28 @@ class RadioLink:
                     return False
                 self._acked_event.wait(remaining)
             return True
+
+    def wait_still(self, seq: int, timeout: float) -> bool:
+        """Block until a STATUS to us answering ``seq`` or a later message reports the robot not RUNNING."""
+        deadline = time.monotonic() + timeout
+        with self._acked_event:
+            while self._quiet is None or not (self._quiet == seq or pr.serial_newer(self._quiet, seq)):
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return False
+                self._acked_event.wait(remaining)
+            return True
+
+    def _keepalive_message(self) -> pr.MsgType | None:
+        """What the keep-alive sends now when no command runs (call with the lock held)."""
+        if self.control_lost in ("taken_over", "robot_busy"):
+            return None  # silent: never hold the robot for nobody, never keep another PC out
+        if self.take_over and not self._served and not self.control_lost:
+            return pr.MsgType.CLAIM
+        status = self.last_status
+        if self._commanded and (status is None or status.state == pr.RobotState.RUNNING):
+            return pr.MsgType.STOP  # our fins may still run: repeat the stop
+        return pr.MsgType.HEARTBEAT
 
     def _keepalive_loop(self) -> None:
         next_keepalive = time.monotonic() + self.keepalive_period
@@ -204,7 +289,9 @@ class RadioLink:
                 if self._pending is not None and now >= self._pending[2]:
                     seq, frame, _, tries, mtype = self._pending
                     if tries < self.max_retries:
-                        self._pending = (seq, frame, now + self.ack_timeout, tries + 1, mtype)
+                        backoff = min(self.rtt_estimator.timeout() * 2 ** (tries + 1), self.rtt_estimator.high)
+                        self._pending = (seq, frame, now + backoff, tries + 1, mtype)
+                        self._sent_at[seq] = (self._sent_at.get(seq, (now, True))[0], True)  # Karn: no sample
                         self.stats.retries += 1
                         retry = frame
                     else:
@@ -216,12 +303,11 @@ class RadioLink:
                 keepalive = None
                 if now >= next_keepalive:
                     next_keepalive = now + self.keepalive_period
-                    if self.command is not None:  # a copy: same command identity, no new lease
+                    if self.command is not None:  # a copy: same command identity and deadline, no new lease
                         _, keepalive = self._next(pr.MsgType.SET_FINS, tuple(self.command.ravel().tolist()))
-                    elif self.last_status is None or self.last_status.state == pr.RobotState.RUNNING:
-                        _, keepalive = self._next(pr.MsgType.STOP)  # not known to be still: repeat the stop
                     else:
-                        _, keepalive = self._next(pr.MsgType.HEARTBEAT)
+                        mtype = self._keepalive_message()
+                        keepalive = None if mtype is None else self._next(mtype)[1]
                 for frame in (retry, keepalive):
                     if frame is not None:
                         self._write(frame)
@@ -239,6 +325,13 @@ class RadioLink:
             if data:
                 self._receive(data)
 
+    def _lose(self, reason: str) -> None:
+        """Latch ``reason`` in :attr:`control_lost` (the first one stays); our command is void."""
+        if not self.control_lost:
+            self.control_lost = reason
+        self.command = None
+        self.lease_end = -float("inf")
+
     def _receive(self, data: bytes) -> None:
         messages = self.decoder.feed(data)
         with self._lock:
@@ -248,25 +341,62 @@ class RadioLink:
             for msg in messages:
                 if msg.type != pr.MsgType.STATUS:
                     continue  # our own frames echoed (loop://) or a confused peer
-                verdict = self.tracker.check(msg.seq, msg.session)
+                status = msg.status
+                if status.boot in self._old_boots:
+                    self.stats.stale += 1  # a late answer from before a reboot
+                    continue
+                verdict = self.tracker.check(msg.seq, status.boot)  # a rebooted robot numbers afresh
                 self.stats.duplicates, self.stats.stale = self.tracker.duplicates, self.tracker.stale
                 self.stats.dropped = self.tracker.lost
                 if verdict != pr.Verdict.NEW:
                     continue
-                self.stats.received += 1
-                self.last_status, self.last_status_time = msg.status, time.monotonic()
-                ack = msg.status.ack_seq
-                if self._pending is not None and self._satisfies(msg.status, self._pending):
-                    self._pending = None
-                    self.stats.acked += 1
-                self._acked.add(ack)
-                if len(self._acked) > 1024:
-                    self._acked = {ack}
-                self._acked_event.notify_all()
+                self._status(msg)
+            self._acked_event.notify_all()
+
+    def _status(self, msg: pr.Message) -> None:
+        """A new STATUS, addressed to us or not (call with the lock held)."""
+        status, now = msg.status, time.monotonic()
+        if self.boot is not None and status.boot != self.boot:  # a brown-out: its fins stopped, its rules reset
+            if self._served or self._commanded:
+                self._lose("robot_rebooted")
+            self._old_boots.append(self.boot)
+            self._served, self._commanded, self._pending = False, False, None
+        self.boot, self.served = status.boot, status.served
+        self.clock.add(status.boot, status.uptime_ms, now)  # any STATUS tells the robot's clock
+        if msg.session != self.session:
+            self.stats.foreign += 1  # another PC's answer: no ack, no liveness, but whom the robot serves
+            if self._served and status.served != self.session:
+                self._lose("taken_over")
+                self._served = False
+            return
+        self.stats.received += 1
+        self.last_status, self.last_status_time = status, now
+        sent = self._sent_at.get(status.ack_seq)
+        if sent is not None and not sent[1]:
+            self.rtt_estimator.update(now - sent[0])
+            self._sent_at.pop(status.ack_seq)
+        if status.served == self.session:
+            self._served = True
+        else:  # refused: another session is served (with take_over we keep claiming until we are)
+            if not (self.take_over and not self._served):
+                self._lose("taken_over" if self._served else "robot_busy")
+            self._served = False
+        ack = status.ack_seq
+        if self._pending is not None and self._satisfies(status, self._pending):
+            self._pending = None
+            self.stats.acked += 1
+        if status.state != pr.RobotState.RUNNING:
+            if self._quiet is None or pr.serial_newer(ack, self._quiet) or ack == self._quiet:
+                self._quiet = ack
+            if self.command is None:
+                self._commanded = False
+        self._acked.add(ack)
+        if len(self._acked) > 1024:
+            self._acked = {ack}
 
     @staticmethod
     def _satisfies(status: pr.Status, pending: tuple) -> bool:
-        """Whether ``status`` settles the pending command.
+        """Whether ``status`` (addressed to us) settles the pending command.
 
         Its own ack does, and so does the ack of a later keep-alive that repeats it (the keep-alive always
         carries the current command; after a STOP the robot must also report that it is not running).
@@ -274,12 +404,36 @@ class RadioLink:
         seq, mtype = pending[0], pending[4]
         if status.ack_seq == seq:
             return True
-        newer = 0 < ((status.ack_seq - seq) & 0xFFFF) < 0x8000
-        return newer and (mtype == pr.MsgType.SET_FINS or status.state != pr.RobotState.RUNNING)
+        return pr.serial_newer(status.ack_seq, seq) and (mtype == pr.MsgType.SET_FINS
+                                                         or status.state != pr.RobotState.RUNNING)
+
+    # ------------------------------------------------------------ control
+    def resync(self, wait: float = 0.0) -> bool:
+        """Clear ``control_lost == "robot_rebooted"`` (and only that) once the link is re-synchronised.
+
+        Re-synchronised: the rebooted robot answers this session as the one it serves, and its new clock
+        is known (the keep-alive's HEARTBEAT takes the robot, which serves nobody after a power-up).
+        Blocks up to ``wait`` s for it. Returns whether :attr:`control_lost` is empty afterwards.
+        """
+        deadline = time.monotonic() + wait
+        with self._acked_event:
+            while True:
+                if self.control_lost == "robot_rebooted" and self._served and self.clock.synced:
+                    self.control_lost = ""
+                if self.control_lost != "robot_rebooted":
+                    return not self.control_lost
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    return False
+                self._acked_event.wait(remaining)
+
+    def rtt(self) -> float | None:
+        """Smoothed round trip [wall s] of messages answered at the first try (``None`` before any)."""
+        return self.rtt_estimator.srtt
 
     # ------------------------------------------------------------ health and life cycle
     def status_age(self) -> float:
-        """Seconds since the last STATUS from the robot (``inf`` if none yet)."""
+        """Seconds since the last STATUS addressed to this session (``inf`` if none yet)."""
         t = self.last_status_time
         return float("inf") if t is None else time.monotonic() - t
 
@@ -290,6 +444,11 @@ class RadioLink:
             status = self.last_status
         out["status_age"] = self.status_age()
         out["robot_state"] = None if status is None else pr.state_name(status.state)
+        out["control_lost"] = self.control_lost
+        out["rtt"] = self.rtt()
+        out["ack_timeout"] = self.rtt_estimator.timeout()
+        out["served_session"] = self.served
+        out["robot_boot"] = self.boot
         return out
 
     @property

@@ -9,8 +9,10 @@ Two layers (byte layouts, timing and rules in ``docs/protocol.md``):
   them to the dsPIC as *Receive Packet* frames (``0x90``) and vice versa.
 * **Message** (the RF data inside those frames): ``version, type, session (u32), seq (u16)``, a body, and a
   CRC-16/CCITT-FALSE of everything before it (the XBee checksum is only 8 bits). Big endian throughout.
-  A SET_FINS carries a command identity and a lease (version 2): the robot runs a command for at most
-  its lease, counted from its own receipt of the command's first copy; copies never extend it.
+  Version 3: a SET_FINS carries a command identity, a lease and a deadline on the robot's clock (with the
+  robot's boot id it refers to): the robot runs a command until the lease, counted from its own receipt
+  of the command's first copy, or the deadline, whichever comes first; copies never extend it. A STATUS
+  is addressed to the session of the message it answers and tells whom the robot serves and its boot id.
 
 Encoders and decoders are pure functions; :class:`StreamDecoder` turns an arbitrary byte stream into
 valid messages (it resynchronises on garbage and never yields a damaged message) and
@@ -31,7 +33,7 @@ __all__ = [
     "MsgType", "RobotState", "Status", "Message", "ProtocolError",
     "crc16", "checksum", "escape", "unescape", "encode_frame", "decode_frame",
     "tx_request", "rx_packet", "rf_data", "encode_message", "decode_message",
-    "StreamDecoder", "SequenceTracker", "Verdict",
+    "StreamDecoder", "SequenceTracker", "Verdict", "serial_newer",
 ]
 
 START, ESCAPE, XON, XOFF = 0x7E, 0x7D, 0x11, 0x13
@@ -40,14 +42,15 @@ TX_REQUEST = 0x10  # XBee Transmit Request (64-bit destination)
 RX_PACKET = 0x90  # XBee Receive Packet
 BROADCAST = 0x000000000000FFFF  # 64-bit broadcast address
 MAX_FRAME_DATA = 255  # longest frame data we accept; our frames are far shorter
-PROTOCOL_VERSION = 2  # 2: 32-bit session, SET_FINS with command identity and lease
+PROTOCOL_VERSION = 3  # 3: STATUS with served session and boot id, SET_FINS with a deadline; CLAIM
 MAX_LEASE = 1.0  # longest lease a SET_FINS may carry [s]
 DEFAULT_LEASE = 0.8  # lease of a command from step(): 0.5 s control period + 0.3 s jitter (docs/protocol.md)
 
 _HEADER = struct.Struct(">BBIH")  # version, type, session, seq
 _FINS = struct.Struct(">8H")  # per fin: bias [mrad], amplitude [mrad], period [ms], ratio [1/1000]
-_LEASE = struct.Struct(">HH")  # command identity, lease [ms]
-_STATUS = struct.Struct(">HBBBHHHI")  # ack seq, ack type, state, flags, crc errors, duplicates, stale, uptime [ms]
+_LEASE = struct.Struct(">HHII")  # command identity, lease [ms], deadline [robot uptime ms, 0 = none], boot id
+# ack seq, ack type, state, flags, crc errors, duplicates, stale, uptime [ms], served session, boot id
+_STATUS = struct.Struct(">HBBBHHHIII")
 _CRC = struct.Struct(">H")
 _FIN_SCALE = (1000.0, 1000.0, 1000.0, 1000.0)  # SI value * scale = wire integer
 
@@ -66,6 +69,7 @@ class MsgType(enum.IntEnum):
     SET_FINS = 0x01  # PC -> robot: both fins' (bias, amplitude, period, ratio), absolute setpoints
     STOP = 0x02  # PC -> robot: hold both fins still now
     HEARTBEAT = 0x03  # PC -> robot: keep-alive, changes nothing
+    CLAIM = 0x04  # PC -> robot: take the robot over from another live session (an explicit operator action)
     STATUS = 0x81  # robot -> PC: acknowledgement and health
 
 
@@ -96,7 +100,11 @@ class StatusFlag(enum.IntFlag):
 
 @dataclass(frozen=True)
 class Status:
-    """Body of a STATUS message: which message it acknowledges and the robot's health counters."""
+    """Body of a STATUS message: which message it acknowledges, whom the robot serves, its health counters.
+
+    ``served`` is the session the robot obeys (0: none yet); ``boot`` the robot's boot id (random, nonzero,
+    new at every power-up); ``uptime_ms`` its clock since that power-up, read when the STATUS is built.
+    """
 
     ack_seq: int
     ack_type: int
@@ -106,15 +114,22 @@ class Status:
     duplicates: int = 0
     stale: int = 0
     uptime_ms: int = 0
+    served: int = 0
+    boot: int = 0
 
 
 @dataclass(frozen=True)
 class Message:
-    """One message: ``fins`` (8 floats, right fin first, SI), ``command``, ``lease`` (SET_FINS); ``status`` (STATUS).
+    """One message: its type, sequence number, session and the body fields of its type.
+
+    ``session`` is the sender's (a PC) or, in a STATUS, the session of the message it answers. SET_FINS:
+    ``fins`` (8 floats, right fin first, SI), ``command``, ``lease``, ``deadline``, ``boot``; STATUS: ``status``.
 
     ``command`` (u16) names the command: copies (keep-alives, retries) carry the same one, a new command
     from the controller a newer one. ``lease`` [s, ms resolution, (0, MAX_LEASE]] is how long the robot
-    may run it after receiving its first copy.
+    may run it after receiving its first copy. ``deadline`` (u32) is the robot uptime [ms] at which it must
+    stop whatever the lease says, valid for the robot boot ``boot`` (u32); ``deadline = 0``: no deadline
+    (the PC has not synchronised to the robot's clock yet).
     """
 
     type: MsgType
@@ -124,9 +139,17 @@ class Message:
     status: Status | None = field(default=None)
     command: int = 0
     lease: float = DEFAULT_LEASE
+    deadline: int = 0
+    boot: int = 0
 
 
 # ---------------------------------------------------------------- checks
+def serial_newer(a: int, b: int, bits: int = 16) -> bool:
+    """Whether ``a`` is after ``b`` in serial-number arithmetic: ``1 <= (a - b) mod 2**bits < 2**(bits - 1)``."""
+    d = (int(a) - int(b)) % (1 << bits)
+    return 0 < d < (1 << (bits - 1))
+
+
 def crc16(data: bytes) -> int:
     """CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, no reflection, no final xor (check 0x29B1)."""
     crc = 0xFFFF
@@ -240,14 +263,17 @@ def encode_message(msg: Message) -> bytes:
         if not 1 <= lease_ms <= round(MAX_LEASE * 1000) or not 0 <= msg.command <= 0xFFFF:
             raise ValueError(f"SET_FINS needs a lease in (0, {MAX_LEASE}] s and a command 0..65535, "
                              f"got {msg.lease!r}, {msg.command!r}")
-        body = _fins_to_wire(msg.fins) + _LEASE.pack(msg.command, lease_ms)
+        if not 0 <= msg.deadline <= 0xFFFFFFFF or not 0 <= msg.boot <= 0xFFFFFFFF:
+            raise ValueError(f"SET_FINS needs a deadline and a boot id 0..2**32-1, got {msg.deadline!r}, "
+                             f"{msg.boot!r}")
+        body = _fins_to_wire(msg.fins) + _LEASE.pack(msg.command, lease_ms, msg.deadline, msg.boot)
     elif msg.type == MsgType.STATUS:
         if msg.status is None:
             raise ValueError("STATUS needs status")
         s = msg.status
         body = _STATUS.pack(s.ack_seq & 0xFFFF, s.ack_type & 0xFF, s.state & 0xFF, s.flags & 0xFF,
                             min(s.crc_errors, 0xFFFF), min(s.duplicates, 0xFFFF), min(s.stale, 0xFFFF),
-                            s.uptime_ms & 0xFFFFFFFF)
+                            s.uptime_ms & 0xFFFFFFFF, s.served & 0xFFFFFFFF, s.boot & 0xFFFFFFFF)
     else:
         body = b""
     head = _HEADER.pack(PROTOCOL_VERSION, int(msg.type), msg.session, msg.seq) + body
@@ -255,7 +281,7 @@ def encode_message(msg: Message) -> bytes:
 
 
 _BODY_SIZE = {MsgType.SET_FINS: _FINS.size + _LEASE.size, MsgType.STOP: 0, MsgType.HEARTBEAT: 0,
-              MsgType.STATUS: _STATUS.size}
+              MsgType.CLAIM: 0, MsgType.STATUS: _STATUS.size}
 
 
 def decode_message(payload: bytes) -> Message:
@@ -282,8 +308,9 @@ def decode_message(payload: bytes) -> Message:
     if mtype == MsgType.SET_FINS:
         words = _FINS.unpack_from(body)
         fins = tuple(w / _FIN_SCALE[i % 4] for i, w in enumerate(words))
-        command, lease_ms = _LEASE.unpack_from(body, _FINS.size)
-        return Message(mtype, seq, session, fins=fins, command=command, lease=lease_ms / 1000.0)
+        command, lease_ms, deadline, boot = _LEASE.unpack_from(body, _FINS.size)
+        return Message(mtype, seq, session, fins=fins, command=command, lease=lease_ms / 1000.0, deadline=deadline,
+                       boot=boot)
     if mtype == MsgType.STATUS:
         return Message(mtype, seq, session, status=Status(*_STATUS.unpack(body)))
     return Message(mtype, seq, session)
@@ -383,7 +410,8 @@ class SequenceTracker:
 
     ``d = (seq - last) mod 2**16``: ``d = 0`` duplicate; ``1 <= d < 2**15`` new (``d - 1`` messages
     lost in between); ``d >= 2**15`` stale (older than the last one: reordered or a late retry). A
-    change of ``session`` or :meth:`reset` accepts the next number as new.
+    change of ``session`` or :meth:`reset` accepts the next number as new. The robot keys its tracker
+    by the PC's session; the PC keys its tracker by the robot's boot id (a rebooted robot numbers afresh).
     """
 
     def __init__(self):

@@ -70,24 +70,54 @@ def test_replays_and_duplicates_keep_nothing_alive():
     assert fw.ignored["duplicate"] == 19
 
 
-def test_another_sessions_heartbeats_stop_the_fins():
-    fw = Firmware()
+def test_another_live_sessions_messages_are_refused_and_answered_but_its_stop_halts():
+    fw = Firmware(boot=77)
     fw.receive(_set(1, session=11, lease=1.0), 0.0)
-    fw.receive(pr.Message(pr.MsgType.HEARTBEAT, 1, session=12), 0.1)  # a second client joins
-    assert fw.state == pr.RobotState.STOPPED and fw.halt  # a takeover halts: the new PC must command anew
-    fw.receive(_set(2, session=11, lease=1.0), 0.2)  # the first client is retired
-    assert fw.state == pr.RobotState.STOPPED
-
-
-def test_new_session_takes_over_and_old_session_is_retired():
-    fw = Firmware()
-    fw.receive(_set(1, session=1), 0.0)
-    fw.receive(pr.Message(pr.MsgType.STOP, 1, session=2), 0.1)  # a restarted PC stops the fish
-    assert fw.state == pr.RobotState.STOPPED and fw.session == 2
-    assert fw.receive(_set(2, session=1, command=99), 0.2) is None  # the old PC's commands: ignored
-    assert fw.state == pr.RobotState.STOPPED and fw.ignored["retired"] == 1
-    fw.receive(_set(2, session=2), 0.3)
+    reply = fw.receive(pr.Message(pr.MsgType.HEARTBEAT, 1, session=12), 0.1)  # a second client joins
+    assert fw.running and fw.session == 11 and fw.ignored["refused"] == 1  # no silent takeover
+    assert (reply.session, reply.status.served, reply.status.boot) == (12, 11, 77)  # it learns at once
+    assert fw.receive(_set(2, session=12, command=5), 0.2).status.served == 11
+    assert fw.running and np.allclose(fw.command, BEATS, atol=1e-3)
+    fw.receive(pr.Message(pr.MsgType.STOP, 2, session=12), 0.3)  # a stop never needs authority
+    assert fw.state == pr.RobotState.STOPPED and fw.halt and fw.session == 11
+    fw.receive(_set(2, session=11, lease=1.0), 0.35)  # the served session goes on
     assert fw.running
+
+
+def test_new_session_takes_over_only_from_a_silent_session_or_by_claim():
+    fw = Firmware(FirmwareConfig(watchdog_timeout=0.5))
+    fw.receive(_set(1, session=1), 0.0)
+    fw.receive(pr.Message(pr.MsgType.HEARTBEAT, 1, session=2), 0.49)  # session 1 still live
+    assert fw.session == 1
+    fw.tick(0.5)
+    fw.receive(pr.Message(pr.MsgType.HEARTBEAT, 2, session=2), 0.5)  # silent for the watchdog time: gone
+    assert fw.session == 2 and fw.retired == [1]
+    assert fw.receive(_set(2, session=1, command=99), 0.6).status.served == 2  # retired: answered, ignored
+    assert fw.state != pr.RobotState.RUNNING and fw.ignored["retired"] == 1
+    fw.receive(_set(3, session=2), 0.7)
+    assert fw.running
+    fw.receive(pr.Message(pr.MsgType.CLAIM, 1, session=3), 0.8)  # the operator's explicit takeover
+    assert fw.session == 3 and fw.state == pr.RobotState.STOPPED and fw.halt  # the new PC commands anew
+    assert fw.receive(pr.Message(pr.MsgType.CLAIM, 4, session=1), 0.9).status.served == 3  # never a retired one
+
+
+def test_deadline_bounds_the_run_and_a_late_or_foreign_deadline_never_starts():
+    fw = Firmware(boot=5, power_up=10.0)
+    fw.receive(pr.Message(pr.MsgType.SET_FINS, 1, 0, fins=tuple(BEATS.ravel()), command=1, lease=0.8,
+                          deadline=1300, boot=5), 11.0)  # uptime 1000 ms: the deadline is 0.3 s away
+    assert fw.running and fw.lease_end == pytest.approx(11.3)
+    fw.tick(11.3)
+    assert fw.state == pr.RobotState.EXPIRED
+    late = pr.Message(pr.MsgType.SET_FINS, 2, 0, fins=tuple(BEATS.ravel()), command=2, lease=0.8, deadline=1400,
+                      boot=5)
+    fw.receive(late, 11.45)  # a copy that arrives after its deadline: never starts
+    assert fw.state == pr.RobotState.EXPIRED and fw.ignored["late"] == 1
+    other = pr.Message(pr.MsgType.SET_FINS, 3, 0, fins=tuple(BEATS.ravel()), command=3, lease=0.8, deadline=9000,
+                       boot=6)
+    fw.receive(other, 11.5)  # a deadline on another boot's clock
+    assert fw.state == pr.RobotState.EXPIRED and fw.ignored["boot"] == 1
+    status = fw.receive(pr.Message(pr.MsgType.HEARTBEAT, 4), 11.75).status
+    assert (status.uptime_ms, status.boot) == (1750, 5)  # robot clock since power-up, rounded down
 
 
 def test_heartbeat_does_not_restart_but_new_command_does():

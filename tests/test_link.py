@@ -46,18 +46,25 @@ def test_non_finite_command_is_rejected_before_sending():
         link.close(stop_wait=0.01)
 
 
-def _status(seq, ack=0, state=pr.RobotState.RUNNING):
-    msg = pr.Message(pr.MsgType.STATUS, seq, 0, status=pr.Status(ack, 1, int(state)))
+SESSION = 0x5E55
+BOOT = 0xB007
+
+
+def _status(seq, ack=0, state=pr.RobotState.RUNNING, session=SESSION):
+    # A STATUS addressed to (and serving) the link's session (protocol v3).
+    msg = pr.Message(pr.MsgType.STATUS, seq, session,
+                     status=pr.Status(ack, 1, int(state), served=session, boot=BOOT))
     return pr.encode_frame(pr.rx_packet(pr.encode_message(msg)))
 
 
 def test_loss_duplicates_reordering_and_corruption_are_counted():
     server = socket.create_server(("127.0.0.1", 0))
     port = server.getsockname()[1]
-    link = RadioLink(f"socket://127.0.0.1:{port}", keepalive_period=60.0)
+    link = RadioLink(f"socket://127.0.0.1:{port}", keepalive_period=60.0, session=SESSION)
     conn, _ = server.accept()
     try:
-        bad_crc = bytearray(pr.encode_message(pr.Message(pr.MsgType.STATUS, 9, 0, status=pr.Status(0, 1, 1))))
+        bad_crc = bytearray(pr.encode_message(pr.Message(pr.MsgType.STATUS, 9, SESSION,
+                                                         status=pr.Status(0, 1, 1, served=SESSION, boot=BOOT))))
         bad_crc[4] ^= 0x01  # seq byte damaged; XBee checksum recomputed below
         bad_checksum = bytearray(_status(10))
         bad_checksum[-1] ^= 0x01 if bad_checksum[-1] not in (0x7F, 0x7C) else 0x02

@@ -1,0 +1,111 @@
+"""The PC's view of the radio's timing: round-trip estimate (retry timeout) and a lower bound of the robot's clock.
+
+:class:`RttEstimator` is Jacobson/Karels (RFC 6298): ``SRTT``, ``RTTVAR``, retry timeout ``SRTT + 4 RTTVAR``
+within bounds; the caller applies Karn's rule (no sample from a message that was re-sent).
+
+:class:`RobotClock` turns the robot's STATUS uptimes into a *lower bound* of the robot's clock at any PC
+time, so a SET_FINS can carry a deadline on the robot's clock that no copy, however late, can overrun
+(``docs/protocol.md``, "Deadline"): a STATUS's ``uptime`` was read before the STATUS left the robot, so
+when it arrives at PC time ``t_rx`` the robot's clock reads at least ``uptime``, and ``t - t_rx`` later at
+least ``uptime + (t - t_rx) * speed * (1 - tolerance)``, with ``tolerance`` the largest relative rate error
+of the robot's oscillator against the PC's clock. The best bound is the largest over recent samples.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import deque
+
+__all__ = ["RttEstimator", "RobotClock", "CLOCK_TOLERANCE"]
+
+# Largest relative rate error of the robot's clock against the PC's: a dsPIC on its internal FRC oscillator
+# is specified to +-2 % over temperature (a crystal: +-50 ppm). Costs at most 2 % of (lease + sample age) of
+# run time, ~20 ms at the default 0.8 s lease.
+CLOCK_TOLERANCE = 0.02
+
+
+class RttEstimator:
+    """Smoothed round trip and retry timeout (RFC 6298 constants: alpha 1/8, beta 1/4, K = 4).
+
+    Args:
+        initial: Retry timeout before the first sample [s].
+        low: Smallest retry timeout [s].
+        high: Largest retry timeout [s].
+    """
+
+    def __init__(self, initial: float, low: float, high: float):
+        if not 0 < low <= high or not math.isfinite(high) or not initial > 0:
+            raise ValueError(f"RttEstimator: need 0 < low <= high < inf and initial > 0, got {low}, {high}, {initial}")
+        self.initial, self.low, self.high = float(initial), float(low), float(high)
+        self.srtt: float | None = None
+        self.rttvar = 0.0
+        self.samples = 0
+
+    def update(self, rtt: float) -> None:
+        """Add one round-trip sample [s] (of a message sent once only)."""
+        if not (math.isfinite(rtt) and rtt >= 0):
+            return
+        if self.srtt is None:
+            self.srtt, self.rttvar = rtt, rtt / 2
+        else:
+            self.rttvar = 0.75 * self.rttvar + 0.25 * abs(self.srtt - rtt)
+            self.srtt = 0.875 * self.srtt + 0.125 * rtt
+        self.samples += 1
+
+    def timeout(self) -> float:
+        """Current retry timeout [s]: ``SRTT + 4 RTTVAR`` within ``[low, high]`` (``initial`` before any sample)."""
+        value = self.initial if self.srtt is None else self.srtt + 4.0 * self.rttvar
+        return min(max(value, self.low), self.high)
+
+
+class RobotClock:
+    """A lower bound of the robot's clock (uptime of its current boot) at PC times.
+
+    Args:
+        tolerance: Largest relative rate error of the robot's clock against the PC's.
+        window: Samples older than this [PC s] are dropped (the newest is always kept).
+        size: Most samples kept.
+    """
+
+    def __init__(self, tolerance: float = CLOCK_TOLERANCE, window: float = 5.0, size: int = 64):
+        if not 0 <= tolerance < 1:
+            raise ValueError(f"RobotClock: tolerance must be in [0, 1), got {tolerance!r}")
+        self.tolerance, self.window = float(tolerance), float(window)
+        self.boot: int | None = None
+        self._samples: deque[tuple[float, float]] = deque(maxlen=size)  # (PC time [s], uptime [robot s])
+
+    def clear(self) -> None:
+        """Forget every sample (the robot rebooted)."""
+        self.boot = None
+        self._samples.clear()
+
+    def add(self, boot: int, uptime_ms: int, t_rx: float) -> None:
+        """A STATUS of boot ``boot`` reporting ``uptime_ms`` arrived at PC time ``t_rx`` [s]."""
+        if boot != self.boot:
+            self.clear()
+            self.boot = boot
+        self._samples.append((float(t_rx), uptime_ms / 1000.0))
+        while len(self._samples) > 1 and t_rx - self._samples[0][0] > self.window:
+            self._samples.popleft()
+
+    @property
+    def synced(self) -> bool:
+        """Whether there is at least one sample."""
+        return bool(self._samples)
+
+    def lower_bound(self, t: float, speed: float = 1.0) -> float | None:
+        """Robot seconds the robot's clock reads at least at PC time ``t`` (``None`` without samples).
+
+        Args:
+            t: PC time [s], not before the samples.
+            speed: Nominal robot seconds per PC second (an accelerated emulator's ``speed``).
+        """
+        rate = speed * (1.0 - self.tolerance)
+        return max((u + max(t - t_rx, 0.0) * rate for t_rx, u in self._samples), default=None)
+
+    def deadline_ms(self, t: float, speed: float = 1.0) -> int:
+        """The SET_FINS ``deadline`` for a command that must stop by PC time ``t``: u32 ms, 0 if not synced."""
+        bound = self.lower_bound(t, speed)
+        if bound is None:
+            return 0
+        return max(1, int(math.floor(bound * 1000.0))) & 0xFFFFFFFF or 1
