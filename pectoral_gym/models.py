@@ -23,11 +23,9 @@ from pectoral_gym.kfunctions import ScalingFunctions
 from pectoral_gym.ktables import KTables
 from pectoral_gym.params import COEF_NAMES, FinBeat, FishParams, coefficient_vector
 
-__all__ = ["FishModel", "FullModel", "AveragedModel", "MODELS", "FULL_INTEGRATION", "make_model", "validate_beats",
-           "REST"]
+__all__ = ["FishModel", "FullModel", "AveragedModel", "FULL_INTEGRATION", "validate_beats", "REST"]
 
 REST = FinBeat.rest()
-MODELS = ("full", "averaged")
 #: The full model's integration presets, ``name: (dt_max [s], min_substeps)``. ``"reference"`` is
 #: converged (halving both moves steady states by < 0.02 %); ``"fast"`` takes 8 RK4 substeps per
 #: half-stroke, at most 0.05 s, and runs about 3x faster, within 0.2 % (p90; median 0.02-0.04 %) of the
@@ -306,43 +304,11 @@ class AveragedModel(FishModel):
         if isinstance(scaling, str):
             if scaling not in ("identified", "none"):
                 raise ValueError(f"scaling must be 'identified', 'none' or a ScalingFunctions, got {scaling!r}")
-            scaling = ScalingFunctions.load() if scaling == "identified" else None
+            if scaling == "identified":
+                from pectoral_gym.model_spec import load_scaling  # the one K loader (it imports this module)
+
+                scaling = load_scaling("identified")
+            else:
+                scaling = None
         self.scaling = scaling or ScalingFunctions.unit()
         self.tables = self.scaling.kernel_arrays()
-
-
-
-def make_model(
-    model: str,
-    n: int = 1,
-    params: FishParams | None = None,
-    scaling: ScalingFunctions | str | None = "identified",
-    forcing: str = "exact",
-    transitions: bool = True,
-    ripple_offsets: bool = True,
-    integration: str = "reference",
-) -> FishModel:
-    """Build a batched model by name.
-
-    Args:
-        model: ``"full"`` or ``"averaged"``.
-        n: Number of fish.
-        params: Model parameters (default: Table 1).
-        scaling: Averaged model only: ``"identified"``, ``"none"`` or a :class:`ScalingFunctions`.
-        forcing: Averaged model only: ``"exact"`` or ``"taylor"``.
-        transitions: Averaged model only: the transitional-stroke forcing (:class:`AveragedModel`).
-        ripple_offsets: Averaged model only: the beat-mean ripple offset (:class:`AveragedModel`).
-        integration: Full model only: ``"reference"`` or ``"fast"`` (:data:`FULL_INTEGRATION`).
-
-    Returns:
-        A :class:`FullModel` or :class:`AveragedModel`.
-
-    Raises:
-        ValueError: For an unknown model name (or bad scaling/forcing).
-    """
-    if model == "full":
-        return FullModel(n, params, integration=integration)
-    if model == "averaged":
-        return AveragedModel(n, params, scaling=scaling, forcing=forcing, transitions=transitions,
-                             ripple_offsets=ripple_offsets)
-    raise ValueError(f"model must be one of {MODELS}, got {model!r}")

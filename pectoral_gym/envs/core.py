@@ -24,7 +24,8 @@ from pectoral_gym.envs.fused import FusedStep
 from pectoral_gym.envs.layout import ACTION_SIZE, FishConstants, ReferenceEllipse, fish_array
 from pectoral_gym.envs.task_core import TASK_IDS, TaskState, task_info
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.models import FULL_INTEGRATION, MODELS, REST, AveragedModel, FishModel, FullModel
+from pectoral_gym.model_spec import ENV_OPTIONS, MODELS, AveragedSpec, FullSpec, env_spec
+from pectoral_gym.models import REST, FishModel
 from pectoral_gym.params import FishParams, as_params
 
 __all__ = ["EnvConfig", "EnvCore", "MODELS", "TASKS", "env_signature", "task_info"]
@@ -32,6 +33,7 @@ __all__ = ["EnvConfig", "EnvCore", "MODELS", "TASKS", "env_signature", "task_inf
 # name -> cfg[C_TASK] id of every task in the task table (a live view: registered tasks appear here).
 TASKS = TASK_IDS
 _FIELD_NAMES = tuple(f.name for f in dataclasses.fields(FishParams))
+_OTHER = {"full": "averaged", "averaged": "full"}
 
 
 def _check_range(name: str, value: Sequence[float], positive: bool = False, nonnegative: bool = False):
@@ -85,6 +87,14 @@ class EnvConfig:
         integration: Full model only: ``"reference"`` (converged steps) or ``"fast"`` (8 RK4 substeps
             per half-stroke, at most 0.05 s: about 3x faster, within 0.2 % (p90) of the reference in open
             loop; :data:`~pectoral_gym.models.FULL_INTEGRATION`, ``docs/model.md`` section 6).
+        yaw_damping: Averaged model only: ``"sinusoid"``, ``"waveform"`` or ``"none"``
+            (:data:`pectoral_gym.model_spec.YAW_DAMPINGS`, ``docs/model.md`` 3.6); ``None``: ``"none"`` for
+            ``scaling="none"``, else the richest the coefficients file holds (as before it was an option;
+            :meth:`model_spec` names the one picked).
+
+    The model settings (``model`` and the ``ENV_OPTIONS`` above) resolve to one spec,
+    :meth:`model_spec` (:func:`pectoral_gym.model_spec.env_spec`, which also refuses another model's
+    option set away from its default); the env builds its model from it and nothing else.
         observe_fins: Append each fin's half-stroke in progress to the observation (angle now, the next
             turning point, power or recovery, time left; :mod:`pectoral_gym.envs.observation`): the
             stroke phase on which a new command's effect depends. Off by default (the 19-entry
@@ -113,6 +123,7 @@ class EnvConfig:
     transitions: bool = False
     ripple_offsets: bool = False
     integration: str = "reference"
+    yaw_damping: str | None = None
     observe_fins: bool = False
     progress_weight: float = 10.0
     goal_bonus: float = 10.0
@@ -131,24 +142,12 @@ class EnvConfig:
             raise ValueError(f"task must be one of {tuple(TASKS)}, got {self.task!r}")
         if isinstance(self.scaling, os.PathLike):
             set_(self, "scaling", os.fspath(self.scaling))
-        if not isinstance(self.scaling, str) or not self.scaling:
-            raise ValueError(f"scaling must be 'identified', 'none' or a coefficients file path, got {self.scaling!r}")
-        if self.scaling not in ("identified", "none") and not os.path.isfile(self.scaling):
-            raise ValueError(f"scaling: no coefficients file at {self.scaling!r} (or use 'identified' or 'none')")
-        if not isinstance(self.check_scaling_params, (bool, np.bool_)):
-            raise ValueError(f"check_scaling_params must be True or False, got {self.check_scaling_params!r}")
-        if not isinstance(self.transitions, (bool, np.bool_)):
-            raise ValueError(f"transitions must be True or False, got {self.transitions!r}")
-        if not isinstance(self.ripple_offsets, (bool, np.bool_)):
-            raise ValueError(f"ripple_offsets must be True or False, got {self.ripple_offsets!r}")
-        if not isinstance(self.observe_fins, (bool, np.bool_)):
-            raise ValueError(f"observe_fins must be True or False, got {self.observe_fins!r}")
-        if self.integration not in FULL_INTEGRATION:
-            raise ValueError(f"integration must be one of {tuple(FULL_INTEGRATION)}, got {self.integration!r}")
-        if self.model != "full" and self.integration != "reference":
-            raise ValueError("integration applies to the full model only; leave it at 'reference' for model='averaged'")
-        if self.model == "full" and self.scaling != "identified":
-            raise ValueError("scaling applies to the averaged model only; leave it at 'identified' for model='full'")
+        for name in ("check_scaling_params", "transitions", "ripple_offsets", "observe_fins"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
+        # The one check of the model options (applicability included): the spec's.
+        set_(self, "_spec", env_spec(self.model, **{name: getattr(self, name) for name in ENV_OPTIONS[self.model]},
+                                     **{name: getattr(self, name) for name in ENV_OPTIONS[_OTHER[self.model]]}))
         try:
             period = float(self.control_period)
         except (TypeError, ValueError):
@@ -187,16 +186,17 @@ class EnvConfig:
                     raise ValueError(f"randomize[{name!r}] must be a relative half-width in [0, 1), got {width!r}")
             set_(self, "randomize", randomize or None)
 
+    def model_spec(self) -> FullSpec | AveragedSpec:
+        """The model these settings name (:mod:`pectoral_gym.model_spec`): what :class:`EnvCore` builds."""
+        return self._spec
+
     def scaling_functions(self) -> ScalingFunctions | None:
         """The averaged model's scaling functions (``None`` for K = 1 or the full model), checked against ``params``.
 
         Raises:
             ValueError: If ``check_scaling_params`` and the file records other parameters than ``params``.
         """
-        if self.model != "averaged" or self.scaling == "none":
-            return None
-        path = None if self.scaling == "identified" else self.scaling
-        return ScalingFunctions.load_for(self.params, path, check=self.check_scaling_params)
+        return self._spec.scaling_functions(self.params)
 
     @property
     def task_id(self) -> int:
@@ -287,12 +287,7 @@ class EnvCore:
         # The task arrays and functions: one TaskState, shared with the robot env (envs.task_core).
         self.task_state = ts = TaskState(self.n, config)
         self.terms = ts.task.terms
-        if config.model == "full":
-            self.model: FishModel = FullModel(self.n, config.params, integration=config.integration)
-        else:
-            self.model = AveragedModel(self.n, config.params, scaling=config.scaling_functions() or "none",
-                                       transitions=bool(config.transitions),
-                                       ripple_offsets=bool(config.ripple_offsets))
+        self.model: FishModel = config.model_spec().build(self.n, config.params)
         self.dt = float(config.control_period)
         self._observe_fins = bool(config.observe_fins)
         self._period_max = float(config.period_range[1])
