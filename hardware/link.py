@@ -31,7 +31,14 @@ import serial
 from hardware import protocol as pr
 from hardware.linkclock import CLOCK_TOLERANCE, RobotClock, RttEstimator
 
-__all__ = ["RadioLink", "LinkStats"]
+__all__ = ["RadioLink", "LinkStats", "DEADLINE_HORIZON"]
+
+# Every command's deadline: this long after set_fins() [robot s], on a lower bound of the robot's clock, so no
+# copy runs later than that after the call, on any radio. The lease (from the robot's receipt) ends it
+# earlier when the first copy arrives in time. Below the 1.0 s target by one 10 ms firmware tick and margin;
+# the lower bound runs behind the robot's clock by the STATUS's return latency, so a longer horizon than the
+# lease keeps the fins going between steps at 100-300 ms latency (docs/protocol.md, "Deadline").
+DEADLINE_HORIZON = 0.95
 
 
 @dataclass
@@ -93,6 +100,8 @@ class RadioLink:
 
     Attributes:
         lease_scale: Wall seconds per robot second (``1 / speed`` of an accelerated emulator).
+        deadline_horizon: A command's deadline, in robot seconds after :meth:`set_fins` [s]
+            (:data:`DEADLINE_HORIZON`).
         control_lost: ``""`` while this PC may control the robot, else why not (latched).
         served: The session the robot last said it serves (``None`` before any STATUS; 0: none).
         boot: The robot's boot id from its STATUS (``None`` before any).
@@ -115,6 +124,7 @@ class RadioLink:
         self.ack_timeout = float(ack_timeout)
         self.max_retries = int(max_retries)
         self.lease_scale = 1.0  # wall seconds per robot second (1 / speed of an accelerated emulator)
+        self.deadline_horizon = DEADLINE_HORIZON
         self.session = secrets.randbits(32) if session is None else int(session) & 0xFFFFFFFF
         self.take_over = bool(take_over)
         self.control_lost = ""
@@ -201,10 +211,11 @@ class RadioLink:
     def set_fins(self, beats: np.ndarray, lease: float = pr.DEFAULT_LEASE) -> int:
         """Command both fins ``(2, 4)`` (right first; bias, amplitude [rad], period [s], ratio); returns the seq.
 
-        A new command identity with a lease of ``lease`` robot seconds (``(0, MAX_LEASE]``) counted from
-        this call: once the link has heard the robot's clock (any STATUS), the command carries the
-        deadline on the robot's clock that corresponds to the lease's end, so no copy of it, however
-        late, runs past it; before that the robot counts the lease from its receipt. Nothing is checked
+        A new command identity with a lease of ``lease`` robot seconds (``(0, MAX_LEASE]``): the robot
+        runs it for at most ``lease`` after its receipt. Once the link has heard the robot's clock (any
+        STATUS), the command also carries a deadline on the robot's clock, a lower bound of the robot's
+        time ``deadline_horizon`` robot seconds after this call, so no copy of it, however late, runs
+        past that; the PC's own keep-alive copies stop ``lease`` after this call. Nothing is checked
         here beyond finiteness and the wire range: clip with :mod:`hardware.safety` first. While
         :attr:`control_lost` is set nothing is sent (the command is counted in ``stats.suppressed``) and
         ``-1`` is returned.
@@ -227,7 +238,8 @@ class RadioLink:
             self._command_id = (self._command_id + 1) & 0xFFFF
             self._lease = float(lease)
             self.lease_end = now + self._lease * self.lease_scale
-            deadline = self.clock.deadline_ms(self.lease_end, 1.0 / self.lease_scale)
+            horizon = now + self.deadline_horizon * self.lease_scale
+            deadline = self.clock.deadline_ms(horizon, 1.0 / self.lease_scale)
             self._deadline = (deadline, self.clock.boot or 0) if deadline else (0, 0)
             self._commanded = True
             return self._send_tracked(pr.MsgType.SET_FINS, fins)

@@ -1,7 +1,7 @@
 """The PC's view of the radio's timing: round-trip estimate (retry timeout) and a lower bound of the robot's clock.
 
-:class:`RttEstimator` is Jacobson/Karels (RFC 6298): ``SRTT``, ``RTTVAR``, retry timeout ``SRTT + 4 RTTVAR``
-within bounds; the caller applies Karn's rule (no sample from a message that was re-sent).
+:class:`RttEstimator` is Jacobson/Karels (RFC 6298): ``SRTT``, ``RTTVAR``, retry timeout
+``SRTT + max(G, 4 RTTVAR)`` within bounds; the caller applies Karn's rule (no sample from a message that was re-sent).
 
 :class:`RobotClock` turns the robot's STATUS uptimes into a *lower bound* of the robot's clock at any PC
 time, so a SET_FINS can carry a deadline on the robot's clock that no copy, however late, can overrun
@@ -25,7 +25,7 @@ CLOCK_TOLERANCE = 0.02
 
 
 class RttEstimator:
-    """Smoothed round trip and retry timeout (RFC 6298 constants: alpha 1/8, beta 1/4, K = 4).
+    """Smoothed round trip and retry timeout (RFC 6298: alpha 1/8, beta 1/4, K = 4, granularity ``low``).
 
     Args:
         initial: Retry timeout before the first sample [s].
@@ -54,7 +54,9 @@ class RttEstimator:
 
     def timeout(self) -> float:
         """Current retry timeout [s]: ``SRTT + 4 RTTVAR`` within ``[low, high]`` (``initial`` before any sample)."""
-        value = self.initial if self.srtt is None else self.srtt + 4.0 * self.rttvar
+        # RFC 6298's SRTT + max(G, K RTTVAR), with ``low`` as the granularity G: a steady link (RTTVAR -> 0)
+        # must not time out half of its answers.
+        value = self.initial if self.srtt is None else self.srtt + max(self.low, 4.0 * self.rttvar)
         return min(max(value, self.low), self.high)
 
 

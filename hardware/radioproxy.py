@@ -31,6 +31,7 @@ import select
 import socket
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -131,6 +132,8 @@ class RadioProxy:
         url: ``socket://host:port`` for :class:`hardware.link.RadioLink`.
         stats: A :class:`ProxyStats`.
         log: ``None``, or a list to which every frame appends ``(wall time, "up"/"down", lost)``.
+        drop_if: ``None``, or ``f(direction, raw_frame) -> bool``: frames it returns True for are lost too
+            (a scripted loss, for deterministic reproductions).
     """
 
     def __init__(self, upstream_url: str, latency: float | tuple[float, float] = 0.0, loss: float = 0.0,
@@ -149,6 +152,7 @@ class RadioProxy:
         self.loss, self.burst, self.speed, self.reorder = float(loss), burst, float(speed), bool(reorder)
         self.stats = ProxyStats()
         self.log: list[tuple[float, str, bool]] | None = None
+        self.drop_if: Callable[[str, bytes], bool] | None = None
         self._rng = np.random.default_rng(seed)
         self._fade = (math.inf, math.inf)  # (start, end) of the current or next fade [robot s since start]
         self._listener = socket.create_server((host, 0))
@@ -183,6 +187,8 @@ class RadioProxy:
         t = (now - self._origin) * self.speed
         is_frame = unit[:1] == bytes((START,))
         lost = is_frame and (self._in_fade(t) or (self.loss > 0 and self._rng.random() < self.loss))
+        if is_frame and not lost and self.drop_if is not None:
+            lost = bool(self.drop_if(direction, unit))
         delay = float(self._rng.uniform(*self.latency)) / self.speed
         if self.log is not None and is_frame:
             self.log.append((now, direction, bool(lost)))
