@@ -97,37 +97,44 @@ def _fin_label(right: FinBeat | None, left: FinBeat | None) -> str:
 # --------------------------------------------------------------------------- steady
 
 
-def model_inputs(model: str, params_file: str | None, scaling: str, check: bool = True):
-    """``(params, scaling)`` for the models from the command line's ``--params``, ``--scaling``, ``--no-params-check``.
+def model_inputs(model: str, params_file: str | None, scaling: str, check: bool = True, forcing: str = "exact"):
+    """``(params, spec)`` of the command line's ``--model, --params, --scaling, --forcing, --no-params-check``.
+
+    The full model is :data:`~pectoral_gym.model_spec.FULL_REFERENCE`; the averaged model is
+    :data:`~pectoral_gym.model_spec.AVERAGED` with the given K (its richest yaw damping) and forcing.
 
     Args:
         model: ``"full"`` or ``"averaged"``.
         params_file: A parameters file (:func:`pectoral_gym.params.load_params`) or ``None`` (Table 1).
         scaling: ``"identified"`` (the shipped file), ``"none"`` (K = 1) or a coefficients file path.
         check: Refuse a coefficients file identified for other parameters (averaged model).
+        forcing: Averaged model: ``"exact"`` or ``"taylor"``.
 
     Raises:
         ValueError: For an unreadable file or (``check``) K identified for other parameters.
         FileNotFoundError: If a file does not exist.
     """
-    from pectoral_gym.kfunctions import ScalingFunctions
+    from pectoral_gym.model_spec import AVERAGED, FULL_REFERENCE, env_spec
     from pectoral_gym.params import FishParams, load_params
 
     params = load_params(params_file) if params_file else FishParams()
-    if model != "averaged" or scaling == "none":
-        return params, scaling
-    return params, ScalingFunctions.load_for(params, None if scaling == "identified" else scaling, check)
+    if model != "averaged":
+        return params, FULL_REFERENCE
+    held = env_spec("averaged", scaling=scaling, check_scaling_params=check)
+    spec = AVERAGED.replace(scaling=held.scaling, check_params=check, yaw_damping=held.yaw_damping, forcing=forcing)
+    spec.scaling_functions(params)  # the parameter check, before any work
+    return params, spec
 
 
-def steady_result(model: str, right: FinBeat | None, left: FinBeat | None, scaling: Any = "identified",
-                  forcing: str = "exact", params: Any = None) -> dict[str, Any]:
+def steady_result(model: str, right: FinBeat | None, left: FinBeat | None, params: Any = None,
+                  spec: Any = None) -> dict[str, Any]:
     """Periodic steady state as the JSON object printed by ``steady --json``.
 
     Args:
-        model: ``"full"`` or ``"averaged"``.
+        model: ``"full"`` or ``"averaged"`` (the name in the result).
         right, left: Fin patterns (``None``: at rest).
-        scaling, forcing: Averaged model options (see :func:`pectoral_gym.steady.steady_state`).
         params: Model parameters (``None``: Table 1).
+        spec: The model's spec (:func:`model_inputs`); ``None``: the preset ``model`` names.
 
     Returns:
         A dict with ``vx, vy`` [m/s], ``omega`` [rad/s] (body frame, x forward,
@@ -138,7 +145,7 @@ def steady_result(model: str, right: FinBeat | None, left: FinBeat | None, scali
     """
     from pectoral_gym.steady import steady_state
 
-    s = steady_state(model, right=right, left=left, params=params, scaling=scaling, forcing=forcing)
+    s = steady_state(spec or model, right=right, left=left, params=params)
     return {
         "vx": s.vx, "vy": s.vy, "omega": s.omega, "speed": s.speed, "radius": s.radius, "period": s.period,
         "drift_angle": s.drift_angle, "converged": s.converged, "model": model,
@@ -148,15 +155,15 @@ def steady_result(model: str, right: FinBeat | None, left: FinBeat | None, scali
 
 def _model_inputs(args: argparse.Namespace, parser: argparse.ArgumentParser):
     try:
-        return model_inputs(args.model, args.params, args.scaling, not args.no_params_check)
+        return model_inputs(args.model, args.params, args.scaling, not args.no_params_check, args.forcing)
     except (ValueError, FileNotFoundError) as error:
         parser.error(str(error))
 
 
 def _cmd_steady(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     right, left = _fins(args, parser)
-    params, scaling = _model_inputs(args, parser)
-    res = steady_result(args.model, right, left, scaling, args.forcing, params)
+    params, spec = _model_inputs(args, parser)
+    res = steady_result(args.model, right, left, params, spec)
     if not all(math.isfinite(res[k]) for k in ("vx", "vy", "omega")):
         print(f"error: the {args.model} model gave non-finite velocities for {_fin_label(right, left)}",
               file=sys.stderr)
@@ -202,9 +209,9 @@ def _cmd_simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
     out = Path(args.out)
     trajectories = []
     for model in models:
-        params, scaling = _model_inputs(argparse.Namespace(**{**vars(args), "model": model}), parser)
-        traj = simulate(model, right, left, args.duration, args.x0, args.y0, math.radians(args.heading_deg),
-                        args.sample, params=params, scaling=scaling, forcing=args.forcing, progress=True)
+        params, spec = _model_inputs(argparse.Namespace(**{**vars(args), "model": model}), parser)
+        traj = simulate(spec, right, left, args.duration, args.x0, args.y0, math.radians(args.heading_deg),
+                        args.sample, params=params, progress=True)
         name = "trajectory.csv" if model == args.model else f"trajectory_{model}.csv"
         print(f"wrote {write_csv(traj, out / name)}")
         trajectories.append(traj)

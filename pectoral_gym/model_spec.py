@@ -277,7 +277,7 @@ def spec_from_dict(data: Mapping[str, Any] | str) -> FullSpec | AveragedSpec:
 
 
 def env_spec(model: str, **options: Any) -> FullSpec | AveragedSpec:
-    """The spec of an env's model settings (:data:`ENV_OPTIONS`, as :class:`~pectoral_gym.envs.core.EnvConfig` names them).
+    """The spec of an env's model settings (:data:`ENV_OPTIONS`, named as :class:`~pectoral_gym.envs.core.EnvConfig`'s).
 
     The env's own defaults: :data:`FULL_REFERENCE` and :data:`AVERAGED_ENV`; ``yaw_damping=None``
     picks the richest damping the coefficients file holds (the envs' behaviour from before it was an
@@ -314,10 +314,40 @@ def _held_damping(scaling: str) -> str:
     return "waveform" if k.harmonics > 0 else "sinusoid" if k.has_oscillation else "none"
 
 
-def make_model(model: str | ModelSpec = "averaged", n: int = 1, params: FishParams | None = None):
-    """Thin alias: ``spec.build(n, params)`` of a spec, a preset name (:data:`PRESETS`) or ``"full"``.
+def make_model(model: str | ModelSpec = "averaged", n: int = 1, params: FishParams | None = None,
+               scaling: ScalingFunctions | str | os.PathLike | None = "spec", forcing: str | None = None):
+    """Thin alias over the specs: ``spec.build(n, params)`` of a spec or a name, with the K or forcing replaced.
 
-    ``"full"`` is :data:`FULL_REFERENCE`; ``"averaged"`` is :data:`AVERAGED`.
+    Args:
+        model: A spec, a preset name (:data:`PRESETS`), ``"full"`` (:data:`FULL_REFERENCE`) or
+            ``"averaged"`` (:data:`AVERAGED`).
+        n: Number of fish.
+        params: Model parameters (default: Table 1).
+        scaling: Averaged model only, replacing the spec's K: ``"identified"``, ``"none"`` (K = 1), a
+            coefficients file, :class:`ScalingFunctions` in memory (its richest yaw damping), ``None``
+            (K = 1, as in :class:`~pectoral_gym.models.AveragedModel`) or ``"spec"`` (default: the spec's).
+            Ignored by the full model, as ``forcing`` is.
+        forcing: Averaged model only: ``"exact"`` or ``"taylor"``; ``None`` keeps the spec's.
+
+    Raises:
+        ValueError: For an unknown model name or option.
     """
-    spec = model if isinstance(model, ModelSpec) else (FULL_REFERENCE if model == "full" else spec_from_dict(model))
+    if isinstance(model, ModelSpec):
+        spec = model
+    elif model in MODELS:
+        spec = FULL_REFERENCE if model == "full" else AVERAGED
+    else:
+        spec = spec_from_dict(model)
+    if not isinstance(spec, AveragedSpec):
+        return spec.build(n, params)
+    if forcing is not None:
+        spec = spec.replace(forcing=forcing)
+    if isinstance(scaling, ScalingFunctions):
+        held = "waveform" if scaling.harmonics > 0 else "sinusoid" if scaling.has_oscillation else "none"
+        return spec.replace(yaw_damping=held).build(n, params, k=scaling)
+    if scaling is None:
+        spec = spec.replace(scaling="none", yaw_damping="none")
+    elif scaling != "spec":
+        path = os.fspath(scaling)
+        spec = spec.replace(scaling=path, yaw_damping=_held_damping(path))
     return spec.build(n, params)

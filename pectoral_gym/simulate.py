@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.models import MODELS, make_model
+from pectoral_gym.model_spec import MODELS, ModelSpec, make_model
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
 
 __all__ = [
@@ -70,7 +70,7 @@ class Trajectory:
 
 
 def simulate(
-    model: str = "full",
+    model: str | ModelSpec = "full",
     right: FinBeat | None = None,
     left: FinBeat | None = None,
     duration: float = 60.0,
@@ -79,8 +79,8 @@ def simulate(
     heading: float = 0.0,
     sample: float = 0.05,
     params: FishParams | None = None,
-    scaling: ScalingFunctions | str | None = "identified",
-    forcing: str = "exact",
+    scaling: ScalingFunctions | str | None = "spec",
+    forcing: str | None = None,
     progress: bool = False,
 ) -> Trajectory:
     """Simulate one fish from rest with constant fin patterns.
@@ -90,7 +90,7 @@ def simulate(
     only frames the plots.
 
     Args:
-        model: ``"full"`` or ``"averaged"``.
+        model: A model spec (:mod:`pectoral_gym.model_spec`), a preset name, ``"full"`` or ``"averaged"``.
         right, left: Fin patterns; ``None`` holds that fin at rest.
         duration: Simulated time [s], > 0.
         x0, y0: Initial position in the tank frame [m].
@@ -98,7 +98,7 @@ def simulate(
         sample: Sampling interval of the output [s], > 0; the last sample
             lands exactly on ``duration``.
         params: Model parameters (default: Table 1).
-        scaling, forcing: Averaged model options (see :func:`make_model`).
+        scaling, forcing: Replace the averaged spec's K and forcing (:func:`make_model`; the defaults keep the spec's).
         progress: Show a tqdm progress bar (on a terminal only).
 
     Returns:
@@ -132,7 +132,7 @@ def simulate(
             state[k] = fish.state[0]
             angles[k] = fish.fin_angles()[0][0]
             bar.update()
-    return Trajectory(model, t, state, angles, right, left)
+    return Trajectory(model.model if isinstance(model, ModelSpec) else model, t, state, angles, right, left)
 
 
 def write_csv(traj: Trajectory, path: str | Path) -> Path:

@@ -25,7 +25,8 @@ from fractions import Fraction
 import numpy as np
 
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.models import FishModel, make_model, validate_beats
+from pectoral_gym.model_spec import ModelSpec, make_model
+from pectoral_gym.models import FishModel, validate_beats
 from pectoral_gym.params import FinBeat, FishParams
 
 __all__ = ["SteadyState", "common_period", "steady_state", "steady_state_batch", "turning_quantities"]
@@ -179,22 +180,22 @@ def _single_like(model: FishModel, i: int) -> FishModel:
 
 
 def steady_state(
-    model: str = "full",
+    model: str | ModelSpec = "full",
     right: FinBeat | None = None,
     left: FinBeat | None = None,
     params: FishParams | None = None,
-    scaling: ScalingFunctions | str | None = "identified",
-    forcing: str = "exact",
+    scaling: ScalingFunctions | str | None = "spec",
+    forcing: str | None = None,
     **kwargs,
 ) -> SteadyState:
     """Periodic steady state of one fish; an omitted fin is at rest.
 
     Args:
-        model: ``"full"`` or ``"averaged"``.
+        model: A model spec (:mod:`pectoral_gym.model_spec`), a preset name, ``"full"`` or ``"averaged"``.
         right, left: Fin patterns (``None``: at rest).
         params: Model parameters.
-        scaling: Averaged model only: ``"identified"``, ``"none"`` or a :class:`ScalingFunctions`.
-        forcing: Averaged model only: ``"exact"`` or ``"taylor"``.
+        scaling, forcing: Replace the averaged spec's K and forcing
+            (:func:`pectoral_gym.model_spec.make_model`; the defaults keep the spec's).
         **kwargs: Passed to :func:`steady_state_batch` (tolerances, ``max_time``).
 
     Example:
