@@ -296,6 +296,28 @@ def evaluation_env(config: dict[str, Any]) -> tuple[str, dict[str, Any]]:
     return env_id, model_kwargs(env_id, {k: v for k, v in kwargs.items() if v is not None})
 
 
+def run_model_spec(config: dict[str, Any]):
+    """The model spec a run trained on (:mod:`pectoral_gym.model_spec`), from a resolved or a run folder's config.
+
+    A run folder records it as ``model_spec`` (``spec.to_dict()``); for an older folder without it, the
+    spec is derived from ``env_id`` and the model settings in ``env_kwargs``, as the env resolved them.
+
+    Raises:
+        ValueError: For an unknown env id or invalid model settings.
+    """
+    from pectoral_gym.model_spec import ENV_OPTIONS, env_spec, spec_from_dict
+    from pectoral_gym.registration import ENV_IDS
+
+    if config.get("model_spec"):
+        return spec_from_dict(config["model_spec"])
+    env_id = config.get("env_id")
+    if env_id not in ENV_IDS:
+        raise ValueError(f"unknown env id {env_id!r}; fish envs: {sorted(ENV_IDS)}")
+    kwargs = config.get("env_kwargs") or {}
+    names = {*ENV_OPTIONS["full"], *ENV_OPTIONS["averaged"]}
+    return env_spec(kwargs.get("model", ENV_IDS[env_id]), **{k: v for k, v in kwargs.items() if k in names})
+
+
 def _schedule(value: Any) -> float | Callable[[float], float] | None:
     if value is None:
         return None

@@ -35,6 +35,7 @@ from agents.policy import BatchController, Controller
 from agents.results import EvaluationResult, format_table, jsonable, plot_trajectories, write_json
 from pectoral_gym.envs.layout import ACTION_SIZE
 from pectoral_gym.envs.observation import OBS_POSITION, OBS_SIZE, decode
+from pectoral_gym.model_spec import ENV_OPTIONS
 
 __all__ = [
     "DEFAULT_RANDOMIZATION",
@@ -52,9 +53,10 @@ DEFAULT_RANDOMIZATION = {"body_mass": 0.1, "body_inertia": 0.2, "drag_coef": 0.2
                          "moment_coef": 0.2, "fin_force_coef": 0.2}
 MAX_BATCH = 128  # vector-env slots of one evaluation
 QUICK_EPISODES = 2  # --quick: episodes of a smoke run
-# Settings of one model only: a policy trained on one model keeps its other env arguments on the other.
-AVERAGED_ONLY = ("scaling", "check_scaling_params", "transitions", "ripple_offsets")
-FULL_ONLY = ("integration",)
+# Settings of one model only (pectoral_gym.model_spec.ENV_OPTIONS, the one table): a policy trained on one
+# model keeps its other env arguments on the other.
+AVERAGED_ONLY = ENV_OPTIONS["averaged"]
+FULL_ONLY = ENV_OPTIONS["full"]
 # Settings of how a policy was trained, not of what it is evaluated on: evaluations leave them out (a policy
 # trained on the fast full model is evaluated at the reference steps unless the evaluation asks otherwise).
 TRAINING_ONLY = ("randomize", "integration")
@@ -64,7 +66,7 @@ def model_kwargs(env_id: str, kwargs: dict[str, Any]) -> dict[str, Any]:
     """``kwargs`` without the other model's own arguments (:data:`AVERAGED_ONLY`, :data:`FULL_ONLY`)."""
     from pectoral_gym.registration import ENV_IDS
 
-    dropped = AVERAGED_ONLY if ENV_IDS.get(env_id) == "full" else FULL_ONLY
+    dropped = ENV_OPTIONS["averaged"] if ENV_IDS.get(env_id) == "full" else ENV_OPTIONS["full"]
     return {k: v for k, v in kwargs.items() if k not in dropped}
 
 

@@ -16,9 +16,23 @@ import numpy as np
 from pectoral_gym.averaging import averaged_forcing, bessel_j1
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.model_spec import AVERAGED, AveragedSpec
 from pectoral_gym.params import FinBeat
 
-__all__ = ["FinMap"]
+__all__ = ["FinMap", "planning_spec"]
+
+
+def planning_spec(config: EnvConfig) -> AveragedSpec:
+    """The averaged model the model-based controllers plan on for an env of ``config``.
+
+    The env's own spec (:meth:`EnvConfig.model_spec`) on the averaged model; on the full model
+    :data:`pectoral_gym.model_spec.AVERAGED` (both corrections, the shipped K, which were identified
+    against the full model), with the env's ``check_scaling_params``.
+    """
+    spec = config.model_spec()
+    if isinstance(spec, AveragedSpec):
+        return spec
+    return AVERAGED.replace(check_params=config.check_scaling_params)
 
 _AMPLITUDE_TABLE = 201  # samples of the thrust-level -> amplitude table
 
@@ -28,18 +42,20 @@ class FinMap:
 
     Args:
         config: The environment settings (ranges, parameters).
+        spec: The planning model (default: :func:`planning_spec`); its K, checked against ``config.params``.
 
     Attributes:
         period: Fixed fin-beat period: the shortest of ``period_range`` [s].
         ratio: Fixed speed ratio: the largest of ``ratio_range`` [-].
         amplitude_max: Largest amplitude of ``amplitude_range`` [rad].
         max_thrust: Averaged thrust of one fin at ``bias = 90 deg``, ``amplitude_max``, with the
-            identified scaling functions [N] (0 if the ranges allow no thrust).
+            planning model's scaling functions [N] (0 if the ranges allow no thrust).
         max_speed: Straight-swimming steady speed with both fins at ``max_thrust`` [m/s].
     """
 
-    def __init__(self, config: EnvConfig):
+    def __init__(self, config: EnvConfig, spec: AveragedSpec | None = None):
         self.config = config
+        self.spec = spec or planning_spec(config)
         self.period = float(config.period_range[0])
         self.ratio = float(config.ratio_range[1])
         self.amplitude_max = float(config.amplitude_range[1])
@@ -47,7 +63,7 @@ class FinMap:
         bias_mid = float(np.clip(math.pi / 2, *config.bias_range))
         self.bias_mid = bias_mid
         # The identified K describe the full model too (that is what they were identified for).
-        scaling = None if config.scaling == "none" else ScalingFunctions.load()
+        scaling: ScalingFunctions | None = self.spec.scaling_functions(config.params)
         self.scaling = scaling
         fx, _, _ = averaged_forcing(FinBeat(bias_mid, self.amplitude_max, self.period, self.ratio),
                                     config.params, scaling=scaling)

@@ -52,6 +52,7 @@ from agents.nmpc_spin import SpinTurns
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, OBS_VELOCITY, decode
 from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.model_spec import env_spec
 from pectoral_gym.symbolic import STATE_POSITION, STATE_PSI, STATE_SIZE, STATE_VELOCITY
 
 __all__ = ["NMPCController", "NMPCSettings"]
@@ -65,8 +66,9 @@ class NMPCController(PlanPricing):
         config: The environment settings (ranges, control period, parameters, task).
         settings: :class:`NMPCSettings`; keyword arguments override its fields.
         scaling: Scaling functions of the prediction model, or the path of a coefficients file
-            (default: ``ScalingFunctions.load()``, or K = 1 when ``config.scaling == "none"``). When
-            the file names its identification grid, planned biases stay inside the grid's range.
+            (checked against ``config.params`` unless ``config.check_scaling_params`` is off); default:
+            the K of the planning spec (:func:`agents.fin_map.planning_spec`: the env's on the averaged
+            model). When the file names its identification grid, planned biases stay inside the grid's range.
         **overrides: Fields of :class:`NMPCSettings`.
 
     Attributes:
@@ -86,10 +88,14 @@ class NMPCController(PlanPricing):
         base = settings or NMPCSettings()
         self.settings = NMPCSettings(**{**base.__dict__, **overrides}) if overrides else base
         self.fins = FinMap(config)
+        spec = self.fins.spec
         if isinstance(scaling, (str, Path)):
-            scaling = ScalingFunctions.load(scaling)
-        elif scaling is None and config.scaling != "none":
-            scaling = ScalingFunctions.load()
+            held = env_spec("averaged", scaling=str(scaling), check_scaling_params=spec.check_params)
+            spec = spec.replace(scaling=held.scaling, yaw_damping=held.yaw_damping)
+            scaling = spec.scaling_functions(config.params)
+        elif scaling is None:
+            scaling = self.fins.scaling
+        self.spec = spec  # the planning model (the spin turns' rollouts)
         self.scaling = scaling
         self.track = config.task == "track"
         self.dt = config.control_period
@@ -119,7 +125,7 @@ class NMPCController(PlanPricing):
         self._straight = np.array(FinInputs(strong, strong, self.bias_mid, self.bias_mid))  # screened, and after spins
         self.spin = None
         if s.spin if s.spin is not None else not self.track:
-            spin = SpinTurns(config, self.fins, self.scaling, s.horizon, self._straight)
+            spin = SpinTurns(config, self.fins, self.scaling, s.horizon, self._straight, spec=self.spec)
             self.spin = spin if spin.available else None
         self._solver = self.problem.solver  # the controller calls it through this attribute (tests replace it)
         self._n = self.problem.horizon

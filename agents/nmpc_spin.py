@@ -16,8 +16,9 @@ that turns 143-147 deg in 6 s on the full model, with sweeps up to 100 deg in a 
 0.08 s: the servos would stretch its strokes, and on the emulated robot it turns 24-48 deg instead
 (docs/benchmark.md, "Goal, fifth round").
 
-:class:`SpinTurns` prices such turns on the averaged model *with* its transitional strokes
-(:class:`pectoral_gym.AveragedModel`, the identified K), which the NLP's smooth model lacks. It keeps
+:class:`SpinTurns` prices such turns on the planning model (:func:`agents.fin_map.planning_spec`: the
+env's averaged model, or on a full env the averaged model with its transitional strokes and the
+identified K), whose transitional strokes the NLP's smooth model lacks. It keeps
 a copy of that model whose fins follow every command the controller sends, so it knows each fin's
 angle and stroke phase (both models latch patterns on the same schedule, docs/model.md 5); each
 control step it rolls out, in one batch from the estimated body state, the spin left or right from
@@ -36,7 +37,7 @@ from agents.fin_map import FinMap
 from agents.nmpc_problem import FinInputs
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.models import AveragedModel
+from pectoral_gym.model_spec import AveragedSpec, held_yaw_damping
 
 __all__ = ["SPIN_CYCLE", "SPIN_LENGTHS", "SPIN_PERIOD", "SPIN_RATIO", "SpinTurns", "mirror"]
 
@@ -77,18 +78,20 @@ class SpinTurns:
         fins: The controller's :class:`agents.fin_map.FinMap` (fixed period and ratio).
         scaling: Scaling functions of the planning model (``None``: K = 1).
         horizon: Control intervals per candidate.
+        spec: The planning model's spec (default: ``fins.spec``, :func:`agents.fin_map.planning_spec`);
+            its rollouts use ``scaling`` as K.
         straight: Inputs ``(4,)`` after the spin (FinInputs order).
 
     Attributes:
         available: ``False`` when the cycle does not fit the env's ranges, when the fins' fixed period and
             ratio differ from those it was found for, or when the env is the averaged model without
-            transitional strokes (``EnvConfig.transitions`` off, the registered default): there the
+            transitional strokes (the spec's ``transitions`` off, the registered env's default): there the
             cycle's patterns act through their cycle averages alone and do not turn the fish on the spot.
         candidates: Number of candidates.
     """
 
     def __init__(self, config: EnvConfig, fins: FinMap, scaling: ScalingFunctions | None, horizon: int,
-                 straight: np.ndarray):
+                 straight: np.ndarray, spec: AveragedSpec | None = None):
         self.config = config
         self.dt = float(config.control_period)
         self.horizon = int(horizon)
@@ -96,8 +99,10 @@ class SpinTurns:
         b_low, b_high = config.bias_range
         a_low, a_high = config.amplitude_range
         tol = 1e-9
+        spec = (spec or fins.spec).replace(yaw_damping=held_yaw_damping(scaling))
+        self.spec = spec if scaling is not None else spec.replace(scaling="none")
         self.available = bool(
-            (config.model == "full" or config.transitions)
+            spec.transitions
             and math.isclose(fins.period, SPIN_PERIOD) and math.isclose(fins.ratio, SPIN_RATIO)
             and np.all(SPIN_CYCLE[:, :2] >= a_low - tol) and np.all(SPIN_CYCLE[:, :2] <= a_high + tol)
             and np.all(SPIN_CYCLE[:, 2:] >= b_low - tol) and np.all(SPIN_CYCLE[:, 2:] <= b_high + tol))
@@ -108,9 +113,8 @@ class SpinTurns:
                 rows += [(turn, phase, n) for n in (0, *SPIN_LENGTHS) if n <= self.horizon]
         self._rows = np.array(rows)
         self.candidates = len(rows)
-        model_scaling = scaling if scaling is not None else "none"
-        self._shadow = AveragedModel(n=1, params=config.params, scaling=model_scaling)
-        self._batch = AveragedModel(n=len(rows), params=config.params, scaling=model_scaling)
+        self._shadow = self.spec.build(1, config.params, k=scaling)
+        self._batch = self.spec.build(len(rows), config.params, k=scaling)
         self.reset()
 
     def _patterns(self, u: np.ndarray) -> np.ndarray:

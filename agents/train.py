@@ -14,7 +14,8 @@ Each run writes ``runs/<env>/<algo>_<task>_seed<seed>_<stamp>/``: ``model.zip``
 (final), ``best_model.zip`` and ``vecnormalize.pkl`` (best on the periodic
 evaluation, its observation statistics; the evaluation runs on ``eval_env``, for
 ``ppo.yml`` the full model: :func:`agents.config.evaluation_env`), ``vecnormalize_final.pkl`` (statistics
-of ``model.zip``), ``config.yaml`` (resolved config), ``command.txt``,
+of ``model.zip``), ``config.yaml`` (resolved config, with the model trained on as ``model_spec``:
+:func:`agents.config.run_model_spec`), ``command.txt``,
 ``training.json`` (time, steps/s, probe time, evaluations) and TensorBoard logs in ``tb/``.
 The same ``--seed`` on the same machine repeats a run.
 
@@ -37,7 +38,7 @@ from typing import Any
 
 import yaml
 
-from agents.config import algo_class, algo_kwargs, evaluation_env, parse_overrides, resolve_config
+from agents.config import algo_class, algo_kwargs, evaluation_env, parse_overrides, resolve_config, run_model_spec
 
 __all__ = ["EVAL_SEED_OFFSET", "QUICK", "main", "make_run_dir", "train"]
 
@@ -182,8 +183,10 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
     seed = config["seed"]
     torch.set_num_threads(int(torch_threads))
     set_random_seed(seed)
+    spec = run_model_spec(config).to_dict()  # the model trained on, explicit (run_model_spec reads it back)
     with open(run_dir / "config.yaml", "w") as f:
-        yaml.safe_dump({**config, "torch_threads": int(torch_threads), "device": device}, f, sort_keys=False)
+        yaml.safe_dump({**config, "torch_threads": int(torch_threads), "device": device, "model_spec": spec}, f,
+                       sort_keys=False)
     (run_dir / "command.txt").write_text((command or shlex.join(sys.argv)) + "\n")
     venv = make_fish_vec_env(config["env_id"], config["n_envs"], config["env_kwargs"], seed=seed)
     if config.get("action_change_penalty"):

@@ -13,12 +13,13 @@ from typing import Any
 import numpy as np
 
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.models import AveragedModel, FishModel, FullModel
+from pectoral_gym.model_spec import AVERAGED, FULL_FAST, FULL_REFERENCE, ModelSpec, make_model
+from pectoral_gym.models import FishModel
 from pectoral_gym.params import FishParams
 from pectoral_gym.steady import common_period, steady_state_batch
 
 __all__ = [
-    "REST", "fin_pattern", "label", "make_model", "relative_error", "simulate_xy", "steady_pair", "summarize",
+    "REST", "candidate_spec", "fin_pattern", "label", "relative_error", "simulate_xy", "steady_pair", "summarize",
 ]
 
 
@@ -68,24 +69,25 @@ def fin_pattern(g0_deg: float, ga_deg: float, period: float, ratio: float) -> np
 REST = fin_pattern(90.0, 0.0, 1.0, 1.0)
 
 
-#: Models compared against the full model's reference integration: the averaged model, or the full
-#: model with the fast integration preset (``pectoral_gym.models.FULL_INTEGRATION``).
+#: Models compared against the full model's reference integration: the averaged model
+#: (:data:`pectoral_gym.model_spec.AVERAGED`), or the full model's fast integration preset
+#: (:data:`pectoral_gym.model_spec.FULL_FAST`).
 CANDIDATES = ("averaged", "full-fast")
 
 
-def make_model(kind: str, n: int, params: FishParams, scaling: ScalingFunctions,
-               transitions: bool = True, ripple_offsets: bool = True) -> FishModel:
-    """``n`` fish of the ``"full"`` model or a candidate of :data:`CANDIDATES`.
+def candidate_spec(kind: str, transitions: bool = True, ripple_offsets: bool = True) -> ModelSpec:
+    """The spec of ``"full"`` (the reference) or a candidate of :data:`CANDIDATES`.
 
-    ``transitions``, ``ripple_offsets``: the averaged model's options.
+    ``transitions``, ``ripple_offsets``: the averaged model's options. Build it with
+    ``pectoral_gym.model_spec.make_model(spec, n, params, scaling)``: the K under test, in memory.
     """
     if kind == "full":
-        return FullModel(n, params)
+        return FULL_REFERENCE
     if kind == "full-fast":
-        return FullModel(n, params, integration="fast")
+        return FULL_FAST
     if kind != "averaged":
         raise ValueError(f"model must be 'full' or one of {CANDIDATES}, got {kind!r}")
-    return AveragedModel(n, params, scaling=scaling, transitions=transitions, ripple_offsets=ripple_offsets)
+    return AVERAGED.replace(transitions=transitions, ripple_offsets=ripple_offsets)
 
 
 def _steady(kind: str, beats: np.ndarray, params: FishParams, scaling: ScalingFunctions) -> np.ndarray:
@@ -94,7 +96,8 @@ def _steady(kind: str, beats: np.ndarray, params: FishParams, scaling: ScalingFu
     out = np.full((len(beats), 5), np.nan)
     for window in np.unique(np.round(windows, 9)):
         idx = np.flatnonzero(np.abs(windows - window) < 1e-9)
-        for i, s in zip(idx, steady_state_batch(make_model(kind, idx.size, params, scaling), beats[idx]), strict=True):
+        for i, s in zip(idx, steady_state_batch(make_model(candidate_spec(kind), idx.size, params, scaling),
+                                                     beats[idx]), strict=True):
             out[i] = (s.vx, s.vy, s.omega, np.nan if s.radius is None else s.radius,
                       np.nan if s.period is None else s.period)
     return out

@@ -46,8 +46,9 @@ from tqdm import tqdm
 from pectoral_gym import __version__
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.kfunctions import ScalingFunctions, default_scaling_path
+from pectoral_gym.model_spec import make_model
 from pectoral_gym.params import FishParams
-from scaling.comparison import CANDIDATES, REST, label, make_model, steady_pair, summarize
+from scaling.comparison import CANDIDATES, REST, candidate_spec, label, steady_pair, summarize
 from scaling.grids import draw_off_grid
 from scaling.validate import MIN_TURN_RATE, sampling_box, single_fin_section, table4_section
 
@@ -123,7 +124,7 @@ def open_loop(kind: str, schedule: np.ndarray, change_every: float | None, durat
         ripple_offsets: The averaged model's beat-mean ripple offset (:class:`pectoral_gym.AveragedModel`).
     """
     n = schedule.shape[0]
-    model = make_model(kind, n, params, scaling, transitions, ripple_offsets)
+    model = make_model(candidate_spec(kind, transitions, ripple_offsets), n, params, scaling)
     if on_pattern:
         model.reset(right=schedule[:, 0, 0], left=schedule[:, 0, 1])
     else:

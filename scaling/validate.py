@@ -36,9 +36,10 @@ from tqdm import tqdm
 from pectoral_gym import __version__
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.kfunctions import ScalingFunctions, default_scaling_path
+from pectoral_gym.model_spec import make_model
 from pectoral_gym.params import FishParams
 from scaling import plots as rendering
-from scaling.comparison import REST, fin_pattern, label, make_model, simulate_xy, steady_pair, summarize
+from scaling.comparison import REST, candidate_spec, fin_pattern, label, simulate_xy, steady_pair, summarize
 from scaling.grids import GRIDS, Grid, GridError, draw_off_grid
 
 __all__ = [
@@ -209,7 +210,8 @@ def two_fin_section(scaling: ScalingFunctions, params: FishParams, n: int, rng: 
     turning = np.abs(res["full"]["omega"]) >= MIN_TURN_RATE
     for key in ("radius_error", "period_error"):
         res[key] = np.where(turning, res[key], np.nan)
-    paths = {kind: simulate_xy(make_model(kind, n, params, scaling), beats, duration) for kind in ("full", "averaged")}
+    paths = {kind: simulate_xy(make_model(candidate_spec(kind), n, params, scaling), beats, duration)
+             for kind in ("full", "averaged")}
     gap = np.linalg.norm(paths["averaged"][:, -1] - paths["full"][:, -1], axis=1)
     travelled = np.sum(np.linalg.norm(np.diff(paths["full"], axis=1), axis=2), axis=1)
     rows = _rows(beats, res, ("radius", "period", "speed"))
@@ -324,7 +326,8 @@ def validate(
 
 def _plots(scaling: ScalingFunctions, params: FishParams, results: dict[str, Any], out: Path) -> list[str]:
     beats = np.array([[REST, fin_pattern(*p)] for p in FIG5_PATTERNS])
-    paths = {kind: simulate_xy(make_model(kind, len(beats), params, scaling), beats, FIG5_DURATION)
+    paths = {kind: simulate_xy(make_model(candidate_spec(kind), len(beats), params, scaling), beats,
+                                     FIG5_DURATION)
              for kind in ("full", "averaged")}
     low, high, _, _ = sampling_box(scaling)
     files = [
