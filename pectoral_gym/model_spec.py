@@ -32,7 +32,7 @@ from pectoral_gym.params import FishParams
 __all__ = [
     "AVERAGED", "AVERAGED_ENV", "AVERAGED_PAPER", "AVERAGED_PPO", "ENV_OPTIONS", "FORCINGS", "FULL_FAST",
     "FULL_REFERENCE", "MODELS", "PRESETS", "SCALINGS", "YAW_DAMPINGS", "AveragedSpec", "FullSpec", "ModelSpec",
-    "env_spec", "load_scaling", "make_model", "select_yaw_damping", "spec_from_dict",
+    "env_spec", "held_yaw_damping", "load_scaling", "make_model", "select_yaw_damping", "spec_from_dict",
 ]
 
 MODELS = ("full", "averaged")
@@ -281,7 +281,8 @@ def env_spec(model: str, **options: Any) -> FullSpec | AveragedSpec:
 
     The env's own defaults: :data:`FULL_REFERENCE` and :data:`AVERAGED_ENV`; ``yaw_damping=None``
     picks the richest damping the coefficients file holds (the envs' behaviour from before it was an
-    option; the returned spec names it). An option of the other model is accepted at its env default only.
+    option; the returned spec names it). An option of the other model is accepted at its env default only
+    (``check_scaling_params`` always: on a full env it checks the K its model-based controllers plan with).
 
     Raises:
         ValueError: For an unknown model or option, or another model's option set away from its default.
@@ -294,7 +295,7 @@ def env_spec(model: str, **options: Any) -> FullSpec | AveragedSpec:
     if unknown:
         raise ValueError(f"unknown model options {unknown}; valid: {sorted(defaults)}")
     for name, value in options.items():
-        if name not in ENV_OPTIONS[model] and value != defaults[name]:
+        if name not in ENV_OPTIONS[model] and name != "check_scaling_params" and value != defaults[name]:
             raise ValueError(f"{name} applies to the {'full' if model == 'averaged' else 'averaged'} model only; "
                              f"leave it at {defaults[name]!r} for model={model!r}")
     values = {**defaults, **options}
@@ -306,12 +307,18 @@ def env_spec(model: str, **options: Any) -> FullSpec | AveragedSpec:
                                 transitions=values["transitions"], ripple_offsets=values["ripple_offsets"])
 
 
+def held_yaw_damping(k: ScalingFunctions | None) -> str:
+    """The richest yaw damping scaling functions hold (``"none"`` for ``None``, K = 1)."""
+    if k is None:
+        return "none"
+    return "waveform" if k.harmonics > 0 else "sinusoid" if k.has_oscillation else "none"
+
+
 def _held_damping(scaling: str) -> str:
     """The richest yaw damping a coefficients file holds (``"none"`` for K = 1 or a file with neither section)."""
     if scaling == "none" or (scaling != "identified" and not os.path.isfile(scaling)):
         return "none"  # a missing file is reported by AveragedSpec
-    k = ScalingFunctions.load(None if scaling == "identified" else scaling)
-    return "waveform" if k.harmonics > 0 else "sinusoid" if k.has_oscillation else "none"
+    return held_yaw_damping(ScalingFunctions.load(None if scaling == "identified" else scaling))
 
 
 def make_model(model: str | ModelSpec = "averaged", n: int = 1, params: FishParams | None = None,
@@ -343,8 +350,7 @@ def make_model(model: str | ModelSpec = "averaged", n: int = 1, params: FishPara
     if forcing is not None:
         spec = spec.replace(forcing=forcing)
     if isinstance(scaling, ScalingFunctions):
-        held = "waveform" if scaling.harmonics > 0 else "sinusoid" if scaling.has_oscillation else "none"
-        return spec.replace(yaw_damping=held).build(n, params, k=scaling)
+        return spec.replace(yaw_damping=held_yaw_damping(scaling)).build(n, params, k=scaling)
     if scaling is None:
         spec = spec.replace(scaling="none", yaw_damping="none")
     elif scaling != "spec":

@@ -9,7 +9,7 @@ import numpy as np
 from hardware.camera import EmulatedCamera
 from hardware.observer import HighGainObserver
 from hardware.tracker import MarkerTracker
-from pectoral_gym.models import make_model
+from pectoral_gym.model_spec import make_model
 from pectoral_gym.params import FinBeat
 
 

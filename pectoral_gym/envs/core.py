@@ -75,6 +75,8 @@ class EnvConfig:
         check_scaling_params: Averaged model only: raise ``ValueError`` when the coefficients file
             records other model parameters than ``params`` (K identified for another robot).
             ``False`` is the explicit opt-out. ``randomize`` draws around ``params`` and is not checked.
+            On the full model: the check of the K its model-based controllers plan with
+            (:func:`agents.fin_map.planning_spec`).
         transitions: Averaged model only: add the forcing of transitional half-strokes (after every
             pattern change; :class:`~pectoral_gym.models.AveragedModel`, ``docs/model.md`` 3.7). Off by
             default in the envs, unlike the model: it depends on the fins' stroke phase, which the default
