@@ -143,11 +143,13 @@ class HardwareFishEnv(gym.Env):
                  frame_period: float = 1.0 / 30.0, observer_epsilon: float = 0.1, max_episode_steps: int = 240,
                  reset_hook: Callable[[np.random.Generator], None] | None = None, reset_timeout: float = 5.0,
                  tracker=None, observer=None, render_mode: str | None = None, handle_signals: bool = True,
-                 **kwargs: Any):
+                 take_over: bool = False, stop_timeout: float = 2.0, **kwargs: Any):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         if not (math.isfinite(speed) and speed > 0) or not frame_period > 0 or int(max_episode_steps) < 1:
             raise ValueError("speed and frame_period must be > 0 and max_episode_steps >= 1")
+        if not (math.isfinite(stop_timeout) and stop_timeout > 0):
+            raise ValueError(f"stop_timeout must be a finite number > 0 s, got {stop_timeout!r}")
         try:
             self.config = EnvConfig(model="full", task=task, control_period=control_period, **kwargs)
         except TypeError as err:
@@ -164,8 +166,24 @@ class HardwareFishEnv(gym.Env):
         # A physical system: the checker must not expect equal observations for equal seeds.
         self.spec = EnvSpec("HardwareFish-v0", entry_point="hardware.env:HardwareFishEnv", nondeterministic=True)
         self._closed = False
-        self.link = RadioLink(port, keepalive_period=0.1 / self.speed, ack_timeout=0.05 / self.speed) \
-            if isinstance(port, str) else port
+        self._episode = False  # an episode is armed (a reset succeeded and no reset has started since)
+        self.stop_timeout = float(stop_timeout)
+        self.link = self.camera = self.supervisor = None
+        try:
+            self._build(port, camera, calibration, tracker, observer, observer_epsilon, take_over)
+        except BaseException:
+            self._release()
+            raise
+        self._restore_signals = install_stop_handlers(self.stop) if handle_signals else (lambda: None)
+        atexit.register(self.close)
+
+    def _build(self, port, camera, calibration, tracker, observer, observer_epsilon, take_over) -> None:
+        """Open the link and the camera, build tracker, observer and supervisor (``__init__``'s fallible part)."""
+        if isinstance(port, str):
+            extra = {"take_over": True} if take_over else {}
+            self.link = RadioLink(port, keepalive_period=0.1 / self.speed, ack_timeout=0.05 / self.speed, **extra)
+        else:
+            self.link = port
         self.link.lease_scale = 1.0 / self.speed  # the robot counts leases in its own (emulated) seconds
         if isinstance(camera, (str, int)):
             from hardware.camera import open_source
@@ -205,8 +223,16 @@ class HardwareFishEnv(gym.Env):
         self.supervisor = Supervisor(self.link, self.camera, self.tracker, self.geofence, self.safety, self.speed,
                                      self.frame_period, origin=self._origin).start()
         self.watch = self.supervisor.watch
-        self._restore_signals = install_stop_handlers(self.stop) if handle_signals else (lambda: None)
-        atexit.register(self.close)
+
+    def _release(self) -> None:
+        """Stop the supervisor, close the link (sending STOP) and the camera; each step runs whatever fails."""
+        for close in (getattr(self.supervisor, "close", None), getattr(self.link, "close", None),
+                      getattr(self.camera, "close", None)):
+            if close is not None:
+                try:
+                    close()
+                except Exception:  # noqa: BLE001 - release the rest; the first error is the one raised
+                    pass
 
     # ------------------------------------------------------------ clock
     def now(self) -> float:
@@ -228,10 +254,11 @@ class HardwareFishEnv(gym.Env):
                 self._velocity_count += 1
 
     def _wait_for_fish(self, after: float) -> None:
-        """Wait for a sighting in a frame captured at or after ``after`` [experiment s] (not before the hook)."""
+        """Wait for sightings in frames captured at or after ``after`` [experiment s] that give a velocity."""
         deadline = time.monotonic() + self.reset_timeout
         while time.monotonic() < deadline:
-            if self.watch.last_seen is not None and self.watch.last_seen >= after:
+            seen = self.watch.last_seen
+            if seen is not None and seen >= after and self.supervisor.ready(after):
                 return
             time.sleep(self.frame_period / self.speed)
         raise RuntimeError(f"no fish seen for {self.reset_timeout:.1f} s at reset "
@@ -239,20 +266,37 @@ class HardwareFishEnv(gym.Env):
 
     # ------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        """Stop the fins, find the fish, draw the episode's target; returns ``(observation, info)``."""
+        """Stop the fins and wait for the robot to confirm, call the hook, find the fish, draw the episode.
+
+        Returns ``(observation, info)``.
+
+        Raises:
+            RuntimeError: The operator's stop is latched (:meth:`stop`; :meth:`rearm` clears it), also when it
+                comes during the reset; the robot did not confirm it stopped within ``stop_timeout`` (the
+                hook is then not called); no fish was seen within ``reset_timeout``; the env is closed.
+        """
         super().reset(seed=seed)
         if self._closed:
             raise RuntimeError("the environment is closed")
-        self.supervisor.disarm()
-        self.link.stop()
+        self._episode = False
+        sup = self.supervisor
+        self._check_not_stopped()
+        sup.disarm()
+        self._confirm_stop()
+        sup.bound.stopped(self.now())
+        resync = getattr(self.link, "resync", None)
+        if callable(resync):
+            resync()
         if self.reset_hook is not None:
             self.reset_hook(self.np_random)
+            sup.bound.reset(self.now())  # the hook leaves the fish at rest, fins still
         self._last_measure, self._observing = -math.inf, False
-        placed = self.now()
+        # Only frames captured after the hook returned: a camera clock may lead by up to max_frame_lead.
+        placed = self.now() + self.safety.max_frame_lead * self.speed
         self._wait_for_fish(placed)
-        self.supervisor.drain()
+        sup.drain()
         t = self.watch.last_seen
-        x, y, psi = self.supervisor.pose
+        x, y, psi = sup.pose
         self.observer.reset(x, y, psi, t)
         self._observing = True
         self._last_measure = t
@@ -264,18 +308,47 @@ class HardwareFishEnv(gym.Env):
             self.fin_replay.stop(self.now())
             self._observe_fins()
         self._steps = 0
-        self.supervisor.frames = self.supervisor.lost_frames = 0
+        sup.frames = sup.lost_frames = 0
         self._next_tick = self.now()
-        self.supervisor.arm(since=placed)
+        sup.arm(since=placed)
+        self._check_not_stopped()  # a stop that came while this reset ran
+        self._episode = True
         info = task.info(0)  # zero reward terms, the distance, as the simulated envs
         info.update(pose=[x, y, psi], target=self.target, in_geofence=self.geofence.breached(x, y, psi))
         return task.obs[0].copy(), info
+
+    def _check_not_stopped(self) -> None:
+        if self.supervisor.stop_requested:
+            raise RuntimeError("the operator's stop is latched (HardwareFishEnv.stop() or a signal): call "
+                               "env.rearm() once it is safe, then reset()")
+
+    def _confirm_stop(self) -> None:
+        """Send STOP until the robot confirms its fins are still, at most ``stop_timeout`` s (wall)."""
+        deadline = time.monotonic() + self.stop_timeout
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0:
+                raise RuntimeError(f"the robot did not confirm it stopped within {self.stop_timeout:.1f} s "
+                                   f"(link: {self.link.health()}); the reset hook was not called; check the "
+                                   "radio and the robot")
+            if self.link.stop(wait=min(remaining, max(0.2, 4 * self.link.ack_timeout))):
+                return
+
+    def rearm(self) -> None:
+        """Clear a latched operator stop (:meth:`stop`, a signal): the operator's explicit decision to go on.
+
+        Nothing else clears it. The next :meth:`reset` starts a new episode; the fins stay stopped until then.
+        """
+        self.supervisor.rearm()
 
     def step(self, action):
         """Send the command, watch the fish for one control period; returns the Gymnasium 5-tuple."""
         arr = check_action(action)  # raises before anything is sent
         if self._closed:
             raise RuntimeError("the environment is closed")
+        if not self._episode:
+            raise RuntimeError("no episode is armed: call reset() first (before the first reset, or after a reset "
+                               "that failed); nothing was sent to the robot")
         task, config = self.task_state, self.config
         now = self.now()
         # The action's patterns (the env's mapping), then the safety rules; each command holds for a period.
@@ -319,13 +392,13 @@ class HardwareFishEnv(gym.Env):
                 self.fin_replay.stop(end)
             self._observe_fins(end)
         self._steps += 1
-        terminated = task.terminated(0) or reason == "geofence"
+        terminated = bool(task.terminated(0)) or "geofence" in sup.fired
         truncated = bool(reason) and not terminated or self._steps >= self.max_episode_steps
         if terminated or truncated:
             sup.trip(reason or "episode_end")
             reason = sup.reason if sup.reason != "episode_end" else reason
         info = task.info(0)  # the simulated envs' keys and values
-        info.update(safety_stop=reason, command=command.tolist(), pose=list(sup.pose),
+        info.update(safety_stop=reason, safety_stops=list(sup.fired), command=command.tolist(), pose=list(sup.pose),
                     estimate=self._state.tolist(), overrun=overrun, link=self.link.health(),
                     tracking={"ok": sup.track_ok, "lost_for": self.watch.lost_for(end), "reason": self.watch.reason,
                               "confidence": sup.confidence, "frames": sup.frames, "lost_frames": sup.lost_frames,
@@ -344,13 +417,16 @@ class HardwareFishEnv(gym.Env):
         return self.task_state.ep[0, E_TX:E_TY + 1].tolist()
 
     def stop(self) -> None:
-        """Stop the fins now and end the episode (``"stop"``); takes no lock, so safe in a signal handler.
+        """Operator stop: stop the fins now and latch ``"stop"`` until :meth:`rearm`; takes no lock (signal-safe).
 
-        Sends STOP through :meth:`RadioLink.emergency_stop` and tells the supervisor, which latches the
-        reason and refuses further commands until the next ``reset``. Harmless after :meth:`close`.
+        Sends STOP through :meth:`RadioLink.emergency_stop` and sets the supervisor's latch, at any moment
+        (during :meth:`reset`, between steps, inside :meth:`step`, from any thread): commands are refused,
+        the current step ends with ``"stop"``, and :meth:`reset` raises until :meth:`rearm` is called.
+        Harmless after :meth:`close`.
         """
-        self.supervisor.stop_requested = True
-        if not self.link.closed:
+        if self.supervisor is not None:
+            self.supervisor.stop_requested = True
+        if self.link is not None and not self.link.closed:
             self.link.emergency_stop()
 
     def render(self):
@@ -368,10 +444,7 @@ class HardwareFishEnv(gym.Env):
         if self._closed:
             return
         self._closed = True
+        self._episode = False
         atexit.unregister(self.close)
         self._restore_signals()
-        try:
-            self.supervisor.close()
-            self.link.close()
-        finally:
-            self.camera.close()
+        self._release()

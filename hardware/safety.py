@@ -5,6 +5,9 @@
 * :class:`Geofence`: any part of the fish (body and fin tips) closer to a wall than it needs to stop
   (reaction distance plus the coasting distance of eq. (19) with the fins still) -> stop, end the episode;
   :func:`in_geofence` is the older nose-and-tail test.
+* :class:`SpeedBound`: the fastest the fish can be moving, from what its fins can do since the reset
+  (``docs/hardware.md``, "Physical speed bound"); the geofence never uses a speed above it, and assumes it
+  grows while the fish is unseen.
 * :class:`TrackingWatch`: tracking lost for longer than ``timeout`` -> stop, end the episode.
 * :func:`install_stop_handlers`: Ctrl-C and SIGTERM send stop before the program ends.
 
@@ -26,7 +29,7 @@ from hardware.firmware import ServoLimits, clip_beats, rate_limit, stretch_trans
 from hardware.protocol import DEFAULT_LEASE, MAX_LEASE
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FishParams, body_coefficients
 
-__all__ = ["SafetyConfig", "check_action", "CommandFilter", "Geofence", "in_geofence", "TrackingWatch",
+__all__ = ["SafetyConfig", "check_action", "CommandFilter", "Geofence", "SpeedBound", "in_geofence", "TrackingWatch",
            "install_stop_handlers"]
 
 
@@ -37,7 +40,9 @@ class SafetyConfig:
     Attributes:
         limits: Servo limits (clipping and rate limiting), shared with the firmware rules.
         geofence_margin: Clearance kept from every wall on top of the stopping distance [m].
-        tracking_timeout: Stop when the fish has not been seen for this long [s].
+        tracking_timeout: Stop when the fish has not been seen for this long [s]; in ``(0, coast_horizon]``
+            (while the fish is unseen the geofence assumes the worst motion the fins allow, and its guarantee
+            lasts ``coast_horizon`` after a stop).
         link_timeout: Stop when the robot has not answered for this long [s].
         lease: Lease of each command from ``step()`` [s]: the robot stops this long after it receives a
             command unless a new one comes (``docs/protocol.md``); at most ``protocol.MAX_LEASE``.
@@ -47,6 +52,8 @@ class SafetyConfig:
         coast_horizon: The geofence keeps the fish off the walls for this long after a stop [s].
         reaction_time: Time from a pose to the fins halting (frame age, polling, radio) [s].
         max_frame_lead: Camera timestamps further ahead of this machine's clock are rejected [s].
+        pose_noise: Standard deviation of the tracked position assumed for the geofence's speed estimate [m]
+            (the fit's own scatter is used when larger).
     """
 
     limits: ServoLimits = field(default_factory=ServoLimits)
@@ -58,13 +65,20 @@ class SafetyConfig:
     coast_horizon: float = 5.0
     reaction_time: float = 0.15
     max_frame_lead: float = 0.05
+    pose_noise: float = 0.005
 
     def __post_init__(self) -> None:
         for name in ("geofence_margin", "tracking_timeout", "link_timeout", "lease", "step_slack", "coast_horizon",
-                     "reaction_time", "max_frame_lead"):
+                     "reaction_time", "max_frame_lead", "pose_noise"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"SafetyConfig.{name} must be a finite number >= 0, got {value!r}")
+        if self.tracking_timeout <= 0:
+            raise ValueError(f"SafetyConfig.tracking_timeout must be > 0 s, got {self.tracking_timeout!r}")
+        if self.tracking_timeout > self.coast_horizon:
+            raise ValueError(f"SafetyConfig.tracking_timeout = {self.tracking_timeout} s exceeds the physical bound "
+                             f"coast_horizon = {self.coast_horizon} s (the geofence keeps a blind fish clear only "
+                             "that long after a stop)")
         if not 0 < self.step_slack < self.lease <= MAX_LEASE:
             raise ValueError(f"SafetyConfig: need 0 < step_slack < lease <= {MAX_LEASE} s, got "
                              f"{self.step_slack}, {self.lease}")
@@ -144,6 +158,7 @@ class Geofence:
 
     def __init__(self, params: FishParams, margin: float, reaction_time: float, horizon: float):
         coef = body_coefficients(params)
+        self.params = params
         self.k = coef.c1 / max(coef.m1, coef.m2)  # [1/m]
         self.half_length, self.width, self.span = 0.5 * params.body_length, params.fin_offset, params.fin_span
         self.margin, self.reaction_time, self.horizon = float(margin), float(reaction_time), float(horizon)
@@ -166,18 +181,114 @@ class Geofence:
         return np.array([np.min(p[:, 0] - r), np.min(TANK_LENGTH - p[:, 0] - r),
                          np.min(p[:, 1] - r), np.min(TANK_WIDTH - p[:, 1] - r)])
 
-    def breached(self, x: float, y: float, psi: float, vx: float = 0.0, vy: float = 0.0, age: float = 0.0) -> bool:
+    def breached(self, x: float, y: float, psi: float, vx: float = 0.0, vy: float = 0.0, age: float = 0.0,
+                 spread: tuple[float, float] = (0.0, 0.0), bound: float = math.inf, gain: float = 0.0) -> bool:
         """Whether the fish seen ``age`` s ago at ``(x, y, psi)`` moving at world velocity ``(vx, vy)`` must stop now.
 
-        The fish may have moved on by ``v age`` since the pose, so that adds to the reaction distance.
-        A non-finite pose or velocity counts as breached (stop rather than guess).
+        The speed towards each wall is the measured one plus its uncertainty ``spread`` ``(sX, sY)`` [m/s],
+        plus ``gain`` [m/s] (the most it can have gained while unseen), never above ``bound`` [m/s] (the
+        physical bound, :class:`SpeedBound`) and never below 0. That speed, held from the pose until the
+        fins halt (``age + reaction_time``), adds to the coasting distance. A non-finite pose or velocity
+        counts as breached (stop rather than guess).
         """
-        if not all(math.isfinite(v) for v in (x, y, psi, vx, vy, age)):
+        values = (x, y, psi, vx, vy, age, *spread, gain)
+        if not all(math.isfinite(v) for v in values) or math.isnan(bound):
             return True
-        toward = (-vx, vx, -vy, vy)
+        sx, sy = (max(float(s), 0.0) for s in spread)
+        toward = (-vx + sx, vx + sx, -vy + sy, vy + sy)
         react = self.reaction_time + max(age, 0.0)
-        need = [self.margin + v * react + self.coast(v) for v in (max(t, 0.0) for t in toward)]
+        speeds = (min(max(t, 0.0) + max(gain, 0.0), bound) for t in toward)
+        need = [self.margin + v * react + self.coast(v) for v in speeds]
         return bool(np.any(self.clearance(x, y, psi) < np.array(need)))
+
+
+class SpeedBound:
+    """The fastest the fish can move, ``|V| <= bound(t)``, from the times its fins may have run since a reset.
+
+    Derivation (``docs/hardware.md``, "Physical speed bound"): with ``E = (m1 vx^2 + m2 vy^2 + J3 omega^2) / 2``
+    eqs. (19)-(20) give ``dE/dt = vx Fx + vy Fy + omega tau - c1 |V|^3 - C_M |omega|^3`` (the Munk and lift
+    terms exchange energy, they add none). With ``u = sqrt(2 E)``, Cauchy-Schwarz in the energy metric and
+    the smallest dissipation on an energy ellipse: ``du/dt <= G - kappa u^2`` while the fins may run,
+    ``du/dt <= -kappa u^2`` while they are still, and ``|V| <= u / sqrt(min(m1, m2))``. ``G`` bounds
+    ``sqrt(Fx^2 / m1 + Fy^2 / m2 + tau^2 / J3)`` from the largest fin force the servo limits allow (peak
+    rate ``max_speed``, shortest half-stroke ``period_min / (ratio_max + 1)``, eqs. (13)-(17)).
+
+    Args:
+        params: Fish parameters.
+        limits: Servo limits the firmware enforces.
+
+    Attributes:
+        gain: ``G`` [N / sqrt(kg)]. kappa: ``kappa`` [1 / (m sqrt(kg))]. mass: ``min(m1, m2)`` [kg].
+        top: The bound's limit with the fins running for ever [m/s]. accel: Its fastest growth ``G / sqrt(mass)``
+            [m/s^2].
+    """
+
+    def __init__(self, params: FishParams, limits: ServoLimits):
+        coef = body_coefficients(params)
+        w = limits.max_speed
+        d_min = limits.period_min * min(limits.ratio_min / (limits.ratio_min + 1.0), 1.0 / (limits.ratio_max + 1.0))
+        # One fin: |F_n| = k g'^2 (13) plus the fin's inertia m_p |a(S_p / 2)| = I_p sqrt(g''^2 + g'^4) (15),
+        # with |g''| <= pi |g'|_peak / d for a half-cosine stroke of duration d.
+        force = params.fin_drag_constant * w * w + params.fin_inertia_constant * math.hypot(w * w, math.pi * w / d_min)
+        self.mass = min(coef.m1, coef.m2)
+        self.gain = 2.0 * force * math.sqrt(1.0 / self.mass + params.fin_offset ** 2 / coef.J3)  # tau = C_p (fxR - fxL)
+        alpha = coef.c1 / max(coef.m1, coef.m2) ** 1.5  # translational dissipation per (energy speed)^3
+        beta = params.moment_coef / coef.J3 ** 1.5  # rotational
+        self.kappa = alpha * beta / math.hypot(alpha, beta)  # min of alpha c^3 + beta s^3 on the unit circle
+        self._u_top = math.sqrt(self.gain / self.kappa)
+        self.top = self._u_top / math.sqrt(self.mass)
+        self.accel = self.gain / math.sqrt(self.mass)
+        self.reset(0.0)
+
+    def reset(self, t: float) -> None:
+        """The fish is at rest at ``t`` [s] with its fins still (placed after a confirmed stop)."""
+        self._t, self._u, self.run_until = float(t), 0.0, -math.inf
+
+    def unknown(self, t: float) -> None:
+        """Nothing is known at ``t`` [s] (a fresh start): the bound's top value, fins possibly running until ``t``.
+
+        Any history that began at rest keeps ``u`` at or below its top value, so this is an upper bound.
+        """
+        self._t, self._u, self.run_until = float(t), self._u_top, float(t)
+
+    def stopped(self, t: float) -> None:
+        """The robot confirmed its fins still at ``t`` [s] (no command sent since)."""
+        self._u, self._t = self._energy(t), float(t)
+        self.run_until = min(self.run_until, float(t))
+
+    def running(self, t: float, until: float) -> None:
+        """The fins may run from ``t`` to ``until`` [s] (a command sent at ``t`` with its lease)."""
+        self._u, self._t = self._energy(t), float(t)
+        self.run_until = max(self.run_until, float(until))
+
+    def _energy(self, t: float) -> float:
+        u, t0 = self._u, self._t
+        if t <= t0:
+            return u
+        run = min(t, self.run_until) - t0
+        if run > 0:
+            r = math.sqrt(self.gain * self.kappa)
+            if u < self._u_top:  # du/dt = G - kappa u^2 from below the fixed point
+                u = self._u_top * math.tanh(r * run + math.atanh(u / self._u_top))
+            elif u > self._u_top:
+                u = self._u_top / math.tanh(r * run + 0.5 * math.log((u + self._u_top) / (u - self._u_top)))
+            t0 += run
+        if t > t0:
+            u = u / (1.0 + self.kappa * u * (t - t0))  # coasting: du/dt = -kappa u^2
+        return u
+
+    def __call__(self, t: float) -> float:
+        """The bound on ``|V|`` [m/s] at time ``t`` (not before the last :meth:`running` or :meth:`reset`)."""
+        return self._energy(t) / math.sqrt(self.mass)
+
+    def peak(self, t0: float, t1: float) -> float:
+        """The largest bound over ``[t0, t1]`` (it rises while the fins may run and falls after)."""
+        times = [t for t in (t0, t1, self.run_until) if t0 <= t <= t1]
+        return max(self(max(t, self._t)) for t in times)
+
+    def may_run(self, t: float) -> bool:
+        """Whether the fins may be running at ``t``."""
+        return t <= self.run_until
 
 
 def in_geofence(x: float, y: float, psi: float, body_length: float, margin: float) -> bool:

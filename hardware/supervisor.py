@@ -2,12 +2,17 @@
 
 The control loop (``HardwareFishEnv.step``) runs only when the program calls it; between calls (a
 slow policy, a training library between rollouts, a breakpoint, an exception) nothing in it runs. The
-supervisor does, every camera period: it reads the camera, rejects frames that are not new sightings
-(:class:`hardware.framecheck.FrameCheck`), tracks the fish, and applies the geofence with stopping
-distance (:class:`hardware.safety.Geofence`), the tracking timeout and the link timeout. The first rule
-that trips latches its reason and sends STOP; commands are refused (:meth:`Supervisor.send`) until
-the next :meth:`Supervisor.arm`. The robot's own lease (``docs/protocol.md``) stops the fins even if
-this thread and the whole PC die.
+supervisor does, every camera period: it takes the newest frame from a
+:class:`hardware.frames.FrameGrabber` (which reads the camera in a thread of its own, so a camera that
+blocks can never hold up the rules), rejects frames that are not new sightings
+(:class:`hardware.framecheck.FrameCheck`), tracks the fish, and applies the rules: the operator's stop,
+loss of control of the robot (``RadioLink.control_lost``), the link timeout, the geofence with stopping
+distance (:class:`hardware.safety.Geofence`, speeds bounded by :class:`hardware.safety.SpeedBound`) and
+the tracking timeout. Each rule that trips is latched and sends STOP; commands are refused
+(:meth:`Supervisor.send`) until the next :meth:`Supervisor.arm`, and the operator's stop until
+:meth:`Supervisor.rearm`. When several have tripped, :attr:`Supervisor.reason` is the first of
+:data:`PRIORITY` (``docs/hardware.md``, "Failsafe priority"). The robot's own lease
+(``docs/protocol.md``) stops the fins even if this thread and the whole PC die.
 """
 
 from __future__ import annotations
@@ -20,56 +25,105 @@ import time
 import numpy as np
 
 from hardware.framecheck import FrameCheck
-from hardware.safety import Geofence, SafetyConfig, TrackingWatch
+from hardware.frames import FrameGrabber
+from hardware.safety import Geofence, SafetyConfig, SpeedBound, TrackingWatch
 
-__all__ = ["Supervisor"]
+__all__ = ["Supervisor", "PRIORITY", "CONTROL_LOST"]
 
-_VELOCITY_WINDOW = 0.2  # poses this far apart [experiment s] give the speed for the stopping distance
-_MIN_GAP, _MAX_GAP = 0.02, 1.0  # closer poses are too noisy, further ones too stale for a speed [s]
+# Stop reasons, highest priority first; a RadioLink.control_lost reason ranks as "control_lost".
+PRIORITY = ("stop", "control_lost", "link_lost", "geofence", "tracking_lost", "episode_end")
+CONTROL_LOST = ("taken_over", "robot_busy", "robot_rebooted")
+_VELOCITY_WINDOW = 1.0  # poses up to this old [experiment s] give the least-squares velocity
+_MIN_POSES, _MIN_SPAN = 3, 0.1  # fewer poses, or a shorter span [s]: no estimate (the physical bound is used)
+_Z = 2.0  # standard errors added to the velocity towards each wall
+
+
+def _rank(reason: str) -> int:
+    key = "control_lost" if reason in CONTROL_LOST else reason
+    return PRIORITY.index(key) if key in PRIORITY else PRIORITY.index("control_lost")
+
+
+def ls_velocity(poses, noise: float) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    """Least-squares velocity ``(vX, vY)`` [m/s] of ``(t, X, Y)`` poses and its standard errors, or ``None``.
+
+    ``None`` with fewer than 3 poses or a span under 0.1 s. The standard error is the pose scatter over
+    ``sqrt(sum (t - mean t)^2)``; the scatter is the residuals' (with at least 4 poses) but at least
+    ``noise`` [m], the tracker's assumed position noise.
+    """
+    if len(poses) < _MIN_POSES:
+        return None
+    arr = np.asarray(poses, dtype=float)
+    t = arr[:, 0] - arr[:, 0].mean()
+    sxx = float(t @ t)
+    if arr[-1, 0] - arr[0, 0] < _MIN_SPAN or sxx <= 0:
+        return None
+    xy = arr[:, 1:3] - arr[:, 1:3].mean(axis=0)
+    slope = (t @ xy) / sxx
+    resid = xy - np.outer(t, slope)
+    scatter = np.sqrt((resid ** 2).sum(axis=0) / (len(arr) - 2)) if len(arr) > 3 else np.zeros(2)
+    scatter = np.maximum(scatter, noise)
+    err = scatter / math.sqrt(sxx)
+    return (float(slope[0]), float(slope[1])), (float(err[0]), float(err[1]))
 
 
 class Supervisor:
     """Safety rules applied at all times, in a thread of their own.
 
     Args:
-        link: A :class:`hardware.link.RadioLink` (``set_fins``, ``stop``, ``status_age``).
-        camera: A frame source (``read``); only this thread reads it.
+        link: A :class:`hardware.link.RadioLink` (``set_fins``, ``stop``, ``status_age``, ``control_lost``).
+        camera: A frame source; the supervisor reads it through a :class:`FrameGrabber` it owns (and closes).
         tracker: ``track(frame) -> TrackResult``.
         geofence: The wall rule.
-        safety: Timeouts.
+        safety: Timeouts and limits.
         speed: Experiment seconds per wall second.
-        poll_period: Camera polling period [experiment s].
+        poll_period: Rule period [experiment s].
+        origin: ``time.monotonic()`` at experiment time 0.
+        bound: The physical speed bound (default from the geofence's fish and ``safety.limits``).
 
     Attributes:
-        reason: The latched stop reason (``"geofence"``, ``"tracking_lost"``, ``"link_lost"``, ``"stop"``)
-            or ``""``.
+        reason: The latched stop reason of highest priority (:data:`PRIORITY`) or ``""``; ``fired`` holds them all.
+        stop_requested: The operator's stop, latched until :meth:`rearm` (set without a lock by signal handlers).
         watch: Tracking timeout bookkeeping; ``watch.reason`` says why the fish was last not seen.
         frame_check: Timestamp and novelty checks.
         last_frame: The newest accepted frame (for rendering).
-        pose: Last measured ``(X, Y, psi)``; ``velocity``: world velocity ``(vX, vY)`` from the poses.
+        pose: Last measured ``(X, Y, psi)``; ``velocity``: least-squares world velocity ``(vX, vY)``,
+            ``spread``: its standard errors times 2 (``inf`` when there is no estimate).
+        bound: :class:`SpeedBound`, fed every command sent.
     """
 
     def __init__(self, link, camera, tracker, geofence: Geofence, safety: SafetyConfig, speed: float = 1.0,
-                 poll_period: float = 1.0 / 30.0, origin: float | None = None):
-        self.link, self.camera, self.tracker, self.geofence = link, camera, tracker, geofence
+                 poll_period: float = 1.0 / 30.0, origin: float | None = None, bound: SpeedBound | None = None):
+        self.link, self.tracker, self.geofence = link, tracker, geofence
         self.safety, self.speed, self.poll_period = safety, float(speed), float(poll_period)
         self._origin = time.monotonic() if origin is None else float(origin)
+        self.camera = camera if isinstance(camera, FrameGrabber) else FrameGrabber(
+            camera, max_rate=self.speed / self.poll_period, stale_after=safety.tracking_timeout / self.speed)
         self.watch = TrackingWatch(safety.tracking_timeout)
         self.frame_check = FrameCheck(safety.max_frame_lead, safety.tracking_timeout / self.speed)
-        self.reason = ""
+        self.bound = bound or SpeedBound(geofence.params, safety.limits)
+        self.bound.unknown(self.now())
+        self.fired: dict[str, float] = {}
         self.armed = False
-        self.stop_requested = False  # set by a signal handler (no lock there); the thread latches it
+        self.stop_requested = False  # set by a signal handler (no lock there); latched until rearm()
         self.last_frame = None
         self.pose = (math.nan, math.nan, math.nan)
-        self.velocity = (0.0, 0.0)
+        self.velocity, self.spread = (0.0, 0.0), (math.inf, math.inf)
         self.confidence = 0.0
         self.track_ok = False
         self.frames = self.lost_frames = 0
-        self._recent: collections.deque[tuple[float, float, float]] = collections.deque(maxlen=64)
+        self._box = None
+        self._since = -math.inf
+        self._recent: collections.deque[tuple[float, float, float]] = collections.deque(maxlen=128)
         self._measurements: list[tuple[float, float, float, float]] = []
         self._lock = threading.RLock()
         self._closed = threading.Event()
         self._thread = threading.Thread(target=self._run, name="safety-supervisor", daemon=True)
+
+    @property
+    def reason(self) -> str:
+        """The latched reason of highest priority, ``""`` if none."""
+        fired = dict(self.fired)
+        return min(fired, key=_rank) if fired else ""
 
     # ------------------------------------------------------------ clock
     def now(self) -> float:
@@ -86,24 +140,27 @@ class Supervisor:
         return self
 
     def close(self) -> None:
-        """Stop the thread (idempotent); the caller stops the fins."""
+        """Stop the thread and the frame grabber, closing the camera (idempotent); the caller stops the fins."""
         self._closed.set()
         if self._thread.is_alive() and self._thread is not threading.current_thread():
             self._thread.join(timeout=2.0)
+        self.camera.close()
 
     def arm(self, since: float = -math.inf) -> None:
-        """Start applying the rules (after the fish was found), with no reason latched.
+        """Start applying the rules (after the fish was found), with no reason latched but the operator's stop.
 
         Poses captured before ``since`` [experiment s] (the reset: the fish may have been moved by hand
         or by the emulator's reset hook) are forgotten, so the jump to where the fish is now never
-        reads as a speed towards a wall.
+        reads as a speed towards a wall. An operator's stop stays latched (:meth:`rearm`).
         """
         with self._lock:
             recent = [p for p in self._recent if p[0] >= since]
             self._recent.clear()
             self._recent.extend(recent)
-            self.velocity = (0.0, 0.0)  # measured again from the next frame on
-            self.reason, self.armed, self.stop_requested = "", True, False
+            self._since = since
+            self._estimate()  # from the poses since the reset only
+            self.fired.clear()
+            self.armed = True
 
     def disarm(self) -> None:
         """Stop applying the rules (during a reset: the fish may be in a hand, out of view)."""
@@ -111,9 +168,24 @@ class Supervisor:
             self.armed = False
             self.watch.last_seen = None
             self.frame_check.reset()
-            self.velocity = (0.0, 0.0)
+            self.velocity, self.spread = (0.0, 0.0), (math.inf, math.inf)
             self._recent.clear()
             self._measurements.clear()
+            self._box = None
+            self._since = -math.inf
+
+    def ready(self, after: float, span: float = 0.3) -> bool:
+        """Whether poses captured at or after ``after`` [experiment s] span ``span`` s and give a velocity."""
+        with self._lock:
+            poses = [p for p in self._recent if p[0] >= after]
+            return bool(poses) and poses[-1][0] - poses[0][0] >= span and \
+                ls_velocity(poses, self.safety.pose_noise) is not None
+
+    def rearm(self) -> None:
+        """Clear the operator's stop (the explicit operator action; nothing else clears it)."""
+        with self._lock:
+            self.stop_requested = False
+            self.fired.pop("stop", None)
 
     # ------------------------------------------------------------ commands
     def send(self, beats: np.ndarray, lease: float) -> bool:
@@ -121,21 +193,22 @@ class Supervisor:
         with self._lock:
             if not self.armed:
                 return False
-            reason = self._rules()
-            if reason:
+            for reason in self._rules():
                 self.trip(reason)
-            if self.reason:
+            if self.fired or self.stop_requested:
                 return False
+            now = self.now()
+            # The fins may run until the lease ends, plus the reaction time (radio latency, firmware tick).
+            self.bound.running(now, now + lease + self.safety.reaction_time)
             self.link.set_fins(beats, lease)
             return True
 
     def trip(self, reason: str) -> None:
-        """Latch ``reason`` (the first one wins) and send STOP."""
+        """Latch ``reason`` (every one is kept; :attr:`reason` reports by priority) and send STOP."""
         with self._lock:
             if not self.armed:
                 return
-            if not self.reason:
-                self.reason = reason
+            self.fired.setdefault(reason, self.now())
             self.link.stop()
 
     def drain(self) -> list[tuple[float, float, float, float]]:
@@ -149,23 +222,28 @@ class Supervisor:
         while not self._closed.wait(self.poll_period / self.speed):
             try:
                 self.poll()
-            except Exception:  # noqa: BLE001 - a broken camera or tracker must stop the fish, not the thread
-                self.watch.reason = "supervisor error"
+            except Exception as error:  # noqa: BLE001 - a broken tracker must stop the fish, not the thread
+                with self._lock:
+                    self.watch.reason = f"supervisor error: {type(error).__name__}: {error}"
+                    self.watch.last_seen = None if self.watch.last_seen is None else -math.inf
+                    self.track_ok = False
                 self.trip("tracking_lost")
 
     def poll(self) -> str:
-        """One round: camera, frame checks, tracker, rules; returns the reason that tripped now, or ``""``."""
-        frame = self.camera.read()
+        """One round: newest frame, frame checks, tracker, rules; returns the first reason that holds now, or ``""``."""
+        frame = self.camera.read()  # never blocks
         with self._lock:
             if frame is not None:
                 self._frame(frame)
-            reason = self._rules()
-            if reason and self.armed:
+            elif self.camera.lost_reason and not self.track_ok:
+                self.watch.reason = self.watch.reason or self.camera.lost_reason
+            reasons = self._rules()
+            for reason in reasons if self.armed else ():
                 self.trip(reason)
-            return reason
+            return reasons[0] if reasons else ""
 
     def _frame(self, frame) -> None:
-        verdict = self.frame_check.check(frame, time.monotonic())
+        verdict = self.frame_check.check(frame, time.monotonic(), region=self._box)
         t = self.now()
         if verdict:
             self.watch.update(t, False, verdict)
@@ -183,24 +261,49 @@ class Supervisor:
             self.confidence = 0.0
             return
         self.confidence = float(result.confidence)
+        self._box = getattr(result, "box", None)
         self.pose = (float(result.x), float(result.y), float(result.psi))
         self._measurements.append((t, *self.pose))
-        self._recent.append((t, self.pose[0], self.pose[1]))
-        # The newest pose at least _VELOCITY_WINDOW older (or the oldest one, if the camera is slow).
-        old = next((p for p in reversed(self._recent) if t - p[0] >= _VELOCITY_WINDOW), self._recent[0])
-        if _MIN_GAP <= t - old[0] <= _MAX_GAP:
-            self.velocity = ((self.pose[0] - old[1]) / (t - old[0]), (self.pose[1] - old[2]) / (t - old[0]))
+        if t >= self._since:
+            self._recent.append((t, self.pose[0], self.pose[1]))
+        self._estimate()
 
-    def _rules(self) -> str:
-        if self.stop_requested:
-            return "stop"
+    def _estimate(self) -> None:
+        """Least-squares velocity over the newest poses (no estimate: ``spread`` inf, the physical bound rules)."""
+        newest = self._recent[-1][0] if self._recent else math.inf
+        estimate = ls_velocity([p for p in self._recent if p[0] >= newest - _VELOCITY_WINDOW], self.safety.pose_noise)
+        self.velocity, self.spread = estimate if estimate else ((0.0, 0.0), (math.inf, math.inf))
+
+    def _geofence(self, now: float, blind: bool) -> bool:
+        """The wall rule on the last pose; ``blind``: also the fastest speed gain the fins allow while unseen."""
         seen = self.watch.last_seen
-        if seen is not None and self.geofence.breached(*self.pose, *self.velocity, age=self.now() - seen):
-            return "geofence"
-        if self.watch.expired(self.now()):
-            if not self.watch.reason:
-                self.watch.reason = "no frames from the camera"
-            return "tracking_lost"
+        age = now - seen
+        bound = self.bound.peak(seen, now + self.geofence.reaction_time)
+        unseen = max(0.0, age - self.geofence.reaction_time)  # unseen beyond the reaction budget
+        gain = self.bound.accel * unseen if blind and self.bound.run_until >= seen else 0.0
+        spread = tuple(_Z * s for s in self.spread)
+        return self.geofence.breached(*self.pose, *self.velocity, age=age, spread=spread, bound=bound, gain=gain)
+
+    def _rules(self) -> list[str]:
+        """Every reason that holds now, highest priority first (:data:`PRIORITY`)."""
+        out = []
+        if self.stop_requested:
+            out.append("stop")
+        lost = getattr(self.link, "control_lost", "")
+        if lost:
+            out.append(str(lost))
         if self.link.status_age() * self.speed > self.safety.link_timeout:
-            return "link_lost"
-        return ""
+            out.append("link_lost")
+        now = self.now()
+        seen = self.watch.last_seen
+        if seen is not None and math.isfinite(seen) and self._geofence(now, blind=False):
+            out.append("geofence")
+        elif seen is not None and math.isfinite(seen) and self._geofence(now, blind=True):
+            # Unseen for so long that the fastest motion the fins allow could reach the stopping band.
+            self.watch.reason = self.watch.reason or self.camera.lost_reason or "no frames from the camera"
+            out.append("tracking_lost")
+        if self.watch.expired(now) and "tracking_lost" not in out:
+            if not self.watch.reason:
+                self.watch.reason = self.camera.lost_reason or "no frames from the camera"
+            out.append("tracking_lost")
+        return out
