@@ -81,9 +81,11 @@ class HardwareFishEnv(gym.Env):
 
     ## Starting State
 
-    The fish is wherever it is: ``reset`` stops the fins, calls ``reset_hook(np_random)`` (e.g. "put the
-    fish back", or placing an emulated fish), waits up to ``reset_timeout`` s for a tracked pose and
-    starts the observer there; the task draws its episode as in simulation and adapts it to the actual
+    The fish is wherever it is: ``reset`` stops the fins and waits (up to ``stop_timeout`` s) for the robot
+    to confirm they are still, calls ``reset_hook(np_random)`` (e.g. "put the fish back at rest", or
+    placing an emulated fish), waits up to ``reset_timeout`` s for tracked poses in frames captured after
+    the hook returned (plus ``safety.max_frame_lead``) and starts the observer there; the task draws its
+    episode as in simulation and adapts it to the actual
     start (``TaskState.reset_at``). ``goal``: the goal redrawn until it lies 0.3 to 1.0 m from the
     actual start; ``track``: the reference ellipse drawn as in simulation.
 
@@ -91,12 +93,16 @@ class HardwareFishEnv(gym.Env):
 
     * Termination: the task's own ends (nose or tail outside the tank; ``goal`` reached), or the
       **geofence** (:class:`hardware.safety.Geofence`): some part of the fish, fin tips included, closer
-      to a wall than its stopping distance at the measured speed plus ``safety.geofence_margin``
+      to a wall than its stopping distance at the measured speed (with its uncertainty, at most the
+      physical bound :class:`hardware.safety.SpeedBound`) plus ``safety.geofence_margin``
       (``info["safety_stop"] = "geofence"``).
     * Truncation: ``max_episode_steps`` steps; tracking lost for longer than ``safety.tracking_timeout``
       (``"tracking_lost"``, with the reason in ``info["tracking"]["reason"]``: the tracker's, or a
       rejected frame's, e.g. ``"frozen_frame"``, ``"timestamp_future"``); no answer from the robot for
-      ``safety.link_timeout`` (``"link_lost"``); :meth:`stop` or a signal (``"stop"``).
+      ``safety.link_timeout`` (``"link_lost"``); this PC no longer controls the robot (the link's
+      ``control_lost``: ``"taken_over"``, ``"robot_busy"``, ``"robot_rebooted"``); :meth:`stop` or a
+      signal (``"stop"``, latched until :meth:`rearm`). Several at once: reported by priority
+      (``hardware.supervisor.PRIORITY``, ``docs/hardware.md``), all in ``info["safety_stops"]``.
     * A safety supervisor (:class:`hardware.supervisor.Supervisor`) applies these rules in its own thread,
       also while the program is outside ``step()``, and sends STOP the moment one trips; the next
       ``step()`` reports it. Every command carries a lease (``safety.lease``, ``docs/protocol.md``): the
@@ -127,13 +133,17 @@ class HardwareFishEnv(gym.Env):
     | ``**kwargs``        |                |      | other ``EnvConfig`` fields (ranges, weights, ``params``) |
     | ``render_mode``     | ``None``       |      | ``"rgb_array"``: the last camera frame |
     | ``handle_signals``  | ``True``       |      | SIGINT/SIGTERM send STOP (main thread only; restored at close) |
+    | ``take_over``       | ``False``      |      | take the robot from another live session (``RadioLink``) |
+    | ``stop_timeout``    | 2.0            | s    | wall time ``reset`` waits for the robot to confirm STOP |
 
     ## Version History
 
     * v0: Initial version. Issue 13: leased commands (protocol v2), safety supervisor thread, frame
       checks, peak-rate servo clipping (the fastest simulated pattern runs at a longer period), STOP at
       exit and on signals. Issue 14: the task core of the simulated envs (``TaskState``), any task of
-      the task table; the energy term prices the command sent (before: the action's pattern).
+      the task table; the energy term prices the command sent (before: the action's pattern). Issue 30:
+      latched operator stop (:meth:`rearm`), reset waits for a confirmed stop, frames after the hook only,
+      noise-robust and physically bounded geofence speed, ``step()`` raises with no episode armed.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
