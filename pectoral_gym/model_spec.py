@@ -276,13 +276,19 @@ def spec_from_dict(data: Mapping[str, Any] | str) -> FullSpec | AveragedSpec:
     return cls(**fields)
 
 
+# Another model's env options refused away from their defaults. A full env ignores the averaged model's
+# transitions and ripple_offsets, as it always has (evaluations of averaged-trained policies on the full model
+# pass them on), and check_scaling_params checks the K its model-based controllers plan with.
+_STRICT = ("integration", "scaling", "yaw_damping")
+
+
 def env_spec(model: str, **options: Any) -> FullSpec | AveragedSpec:
     """The spec of an env's model settings (:data:`ENV_OPTIONS`, named as :class:`~pectoral_gym.envs.core.EnvConfig`'s).
 
     The env's own defaults: :data:`FULL_REFERENCE` and :data:`AVERAGED_ENV`; ``yaw_damping=None``
     picks the richest damping the coefficients file holds (the envs' behaviour from before it was an
-    option; the returned spec names it). An option of the other model is accepted at its env default only
-    (``check_scaling_params`` always: on a full env it checks the K its model-based controllers plan with).
+    option; the returned spec names it). ``integration``, ``scaling`` and ``yaw_damping`` are refused on the
+    other model away from their env defaults; the full model ignores the averaged model's other options.
 
     Raises:
         ValueError: For an unknown model or option, or another model's option set away from its default.
@@ -295,7 +301,7 @@ def env_spec(model: str, **options: Any) -> FullSpec | AveragedSpec:
     if unknown:
         raise ValueError(f"unknown model options {unknown}; valid: {sorted(defaults)}")
     for name, value in options.items():
-        if name not in ENV_OPTIONS[model] and name != "check_scaling_params" and value != defaults[name]:
+        if name not in ENV_OPTIONS[model] and name in _STRICT and value != defaults[name]:
             raise ValueError(f"{name} applies to the {'full' if model == 'averaged' else 'averaged'} model only; "
                              f"leave it at {defaults[name]!r} for model={model!r}")
     values = {**defaults, **options}

@@ -114,7 +114,8 @@ def test_the_yaw_damping_is_the_specs_choice_not_the_files(tmp_path):
 
 
 @pytest.mark.parametrize("kwargs,match", [
-    ({"model": "full", "transitions": True}, "averaged model only"),
+    ({"model": "full", "scaling": "none"}, "averaged model only"),
+    ({"model": "full", "yaw_damping": "none"}, "averaged model only"),
     ({"model": "averaged", "integration": "fast"}, "full model only"),
     ({"model": "averaged", "yaw_damping": "cosine"}, "yaw_damping must be one of"),
 ])
