@@ -174,7 +174,7 @@ class Supervisor:
             self._box = None
             self._since = -math.inf
 
-    def ready(self, after: float, span: float = 0.3) -> bool:
+    def ready(self, after: float, span: float = 0.9 * _VELOCITY_WINDOW) -> bool:
         """Whether poses captured at or after ``after`` [experiment s] span ``span`` s and give a velocity."""
         with self._lock:
             poses = [p for p in self._recent if p[0] >= after]
@@ -299,9 +299,12 @@ class Supervisor:
         if seen is not None and math.isfinite(seen) and self._geofence(now, blind=False):
             out.append("geofence")
         elif seen is not None and math.isfinite(seen) and self._geofence(now, blind=True):
-            # Unseen for so long that the fastest motion the fins allow could reach the stopping band.
-            self.watch.reason = self.watch.reason or self.camera.lost_reason or "no frames from the camera"
-            out.append("tracking_lost")
+            # Unseen for so long that the fastest motion the fins allow could reach the stopping band: a
+            # tracking loss if the camera or the tracker said why, else (frames merely late) the geofence.
+            lost = self.watch.reason or self.camera.lost_reason
+            out.append("tracking_lost" if lost else "geofence")
+            if lost:
+                self.watch.reason = lost
         if self.watch.expired(now) and "tracking_lost" not in out:
             if not self.watch.reason:
                 self.watch.reason = self.camera.lost_reason or "no frames from the camera"

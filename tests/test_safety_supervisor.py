@@ -220,7 +220,9 @@ def test_physical_speed_bound_holds_against_the_full_model_over_random_commands(
 def test_fish_at_rest_near_a_wall_with_pose_noise_is_not_stopped():
     # Issue: 5 mm / 2 deg of pose noise, fish at rest 0.30 m from a wall: 2 of 4 episodes stopped at step 1.
     def noisy(robot):
-        return robot.camera(seed=3, pose_noise=(0.005, math.radians(2)))
+        from hardware.camera import EmulatedCamera
+
+        return EmulatedCamera(robot.pose_stamped, seed=3, pose_noise=(0.005, math.radians(2)))
 
     stops = []
     with _rig(camera=noisy, tracking_timeout=1.0) as (robot, env):
