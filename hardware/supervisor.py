@@ -113,6 +113,7 @@ class Supervisor:
         self.frames = self.lost_frames = 0
         self._box = None
         self._since = -math.inf
+        self._reads = self._reads_at_sighting = 0  # frames read; frames read up to the last sighting
         self._recent: collections.deque[tuple[float, float, float]] = collections.deque(maxlen=128)
         self._measurements: list[tuple[float, float, float, float]] = []
         self._lock = threading.RLock()
@@ -234,6 +235,7 @@ class Supervisor:
         frame = self.camera.read()  # never blocks
         with self._lock:
             if frame is not None:
+                self._reads += 1
                 self._frame(frame)
             elif self.camera.lost_reason and not self.track_ok:
                 self.watch.reason = self.watch.reason or self.camera.lost_reason
@@ -261,6 +263,7 @@ class Supervisor:
             self.confidence = 0.0
             return
         self.confidence = float(result.confidence)
+        self._reads_at_sighting = self._reads
         self._box = getattr(result, "box", None)
         self.pose = (float(result.x), float(result.y), float(result.psi))
         self._measurements.append((t, *self.pose))
@@ -299,12 +302,11 @@ class Supervisor:
         if seen is not None and math.isfinite(seen) and self._geofence(now, blind=False):
             out.append("geofence")
         elif seen is not None and math.isfinite(seen) and self._geofence(now, blind=True):
-            # Unseen for so long that the fastest motion the fins allow could reach the stopping band: a
-            # tracking loss if the camera or the tracker said why, else (frames merely late) the geofence.
-            lost = self.watch.reason or self.camera.lost_reason
-            out.append("tracking_lost" if lost else "geofence")
-            if lost:
-                self.watch.reason = lost
+            # Unseen for so long that the fastest motion the fins allow could reach the stopping band.
+            late = "no frames from the camera" if self._reads == self._reads_at_sighting else \
+                f"unseen for {now - seen:.2f} s: the fastest motion since could reach the stopping band"
+            self.watch.reason = self.watch.reason or self.camera.lost_reason or late
+            out.append("tracking_lost")
         if self.watch.expired(now) and "tracking_lost" not in out:
             if not self.watch.reason:
                 self.watch.reason = self.camera.lost_reason or "no frames from the camera"
