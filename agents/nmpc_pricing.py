@@ -22,8 +22,8 @@ from agents.nmpc_problem import FinInputs, to_z
 from agents.stop_band import band_violation
 from agents.turning import circle_room, turn_paths
 from pectoral_gym.envs.observation import Observation
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 from pectoral_gym.symbolic import STATE_PSI, STATE_VELOCITY
+from pectoral_gym.tank import wall_shortfall
 
 __all__ = ["PlanPricing"]
 
@@ -99,13 +99,8 @@ class PlanPricing:
         band = self.problem.stop_band
         if band is not None:
             return float(band_violation(x[0], x[1], x[STATE_PSI], x[3], x[4], band, np))
-        total = 0.0
         c, s_ = math.cos(x[STATE_PSI]), math.sin(x[STATE_PSI])
-        for sign in (1.0, -1.0):
-            px, py = x[0] + sign * self._half_length * c, x[1] + sign * self._half_length * s_
-            for gap in (px, TANK_LENGTH - px, py, TANK_WIDTH - py):
-                total += max(0.0, margin - gap) ** 2
-        return total
+        return float(wall_shortfall(x[0], x[1], c, s_, self._half_length, margin))
 
     def _togo(self, end: np.ndarray) -> float:
         """Turn-then-straight path [m] from the state ``end`` to the target, minus the straight distance.

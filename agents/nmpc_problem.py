@@ -51,7 +51,6 @@ from agents.nmpc_settings import NMPCSettings
 from agents.stop_band import StopBand, band_violation
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 from pectoral_gym.symbolic import (
     STATE_POSITION,
     STATE_PSI,
@@ -65,6 +64,7 @@ from pectoral_gym.symbolic import (
     named_symbols,
     rk4_sx,
 )
+from pectoral_gym.tank import wall_shortfall
 
 __all__ = [
     "FinInputs", "AMPLITUDES", "ProblemParameters", "GAIN_THRUST", "GAIN_YAW", "NMPCProblem",
@@ -317,11 +317,8 @@ class NMPCProblem:
             if band is not None:  # the robot's stopping-distance band, whole outline
                 cost_x += s.w_wall * band_violation(X[0, k + 1], X[1, k + 1], psi, X[3, k + 1], X[4, k + 1], band, ca)
             else:
-                for sign in (1.0, -1.0):  # nose, tail
-                    px = X[0, k + 1] + sign * half * ca.cos(psi)
-                    py = X[1, k + 1] + sign * half * ca.sin(psi)
-                    for gap in (px, TANK_LENGTH - px, py, TANK_WIDTH - py):
-                        cost_x += s.w_wall * ca.fmax(0.0, s.wall_margin - gap) ** 2
+                cost_x = wall_shortfall(X[0, k + 1], X[1, k + 1], ca.cos(psi), ca.sin(psi), half, s.wall_margin, ca,
+                                        total=cost_x, weight=s.w_wall)  # nose and tail
         cost = cost_x + cost_u
         nlp = {"x": ca.vertcat(ca.vec(Z), ca.vec(X)), "f": cost, "g": ca.vertcat(*g), "p": ca.vertcat(*p)}
         self.solver = _nlp_solver(nlp, s)

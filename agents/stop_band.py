@@ -18,7 +18,8 @@ import math
 from dataclasses import dataclass
 from typing import Any
 
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FishParams, body_coefficients
+from pectoral_gym.params import FishParams
+from pectoral_gym.tank import Outline, coast_distance, coast_rate, outline_circles, wall_gaps
 
 __all__ = ["StopBand", "band_violation"]
 
@@ -48,12 +49,11 @@ class StopBand:
     @classmethod
     def from_params(cls, params: FishParams, margin: float, reaction_time: float, horizon: float) -> StopBand:
         """The band of a fish with ``params`` and the supervisor's ``margin``, reaction time and horizon."""
-        coef = body_coefficients(params)
         values = (margin, reaction_time, horizon)
         if not all(math.isfinite(v) and v >= 0 for v in values):
             raise ValueError(f"stop band margin, reaction time and horizon must be finite and >= 0, got {values}")
-        return cls(float(margin), float(reaction_time), float(horizon), coef.c1 / max(coef.m1, coef.m2),
-                   0.5 * params.body_length, params.fin_offset, params.fin_span)
+        return cls(float(margin), float(reaction_time), float(horizon), coast_rate(params),
+                   *Outline.from_params(params))
 
 
 def band_violation(x: Any, y: Any, psi: Any, vx: Any, vy: Any, band: StopBand, ops: Any) -> Any:
@@ -71,14 +71,12 @@ def band_violation(x: Any, y: Any, psi: Any, vx: Any, vy: Any, band: StopBand, o
     c, s = ops.cos(psi), ops.sin(psi)
     vx_w, vy_w = c * vx - s * vy, s * vx + c * vy
     needs = []
-    for toward in (-vx_w, vx_w, -vy_w, vy_w):  # walls X = 0, X = L, Y = 0, Y = W
+    for toward in (-vx_w, vx_w, -vy_w, vy_w):  # walls X = 0, X = L, Y = 0, Y = W (tank.wall_gaps' order)
         v = ops.fmax(toward, 0.0)
-        needs.append(band.margin + v * band.reaction_time + ops.log(1.0 + band.k * v * band.horizon) / band.k)
+        needs.append(band.margin + v * band.reaction_time + coast_distance(v, band.k, band.horizon, ops))
     total = 0.0
-    circles = ((band.half_length, 0.0, band.width), (-band.half_length, 0.0, band.width),
-               (0.0, -band.width, band.span), (0.0, band.width, band.span))  # nose, tail, right, left pivot
-    for bx, by, r in circles:
-        px, py = x + c * bx - s * by, y + s * bx + c * by
-        for need, gap in zip(needs, (px - r, TANK_LENGTH - px - r, py - r, TANK_WIDTH - py - r), strict=True):
+    outline = Outline(band.half_length, band.width, band.span)
+    for px, py, r in outline_circles(x, y, c, s, outline):  # nose, tail, right and left fin pivot
+        for need, gap in zip(needs, wall_gaps(px, py, r), strict=True):
             total = total + ops.fmax(need - gap, 0.0) ** 2
     return total

@@ -21,15 +21,13 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from pectoral_gym.tank import TANK_LENGTH, TANK_WIDTH  # re-exported: the tank's one home is pectoral_gym.tank
+
 __all__ = [
     "FishParams", "FinBeat", "COEF_NAMES", "Coef", "BodyCoefficients", "TANK_LENGTH", "TANK_WIDTH",
     "coefficient_vector", "body_coefficients", "params_from_dict", "load_params", "save_params", "as_params",
     "params_dict", "PARAMS_FIELDS",
 ]
-
-# The paper's tank (Sec. 4.1): the fish swims in a 2.30 m x 1.15 m area.
-TANK_LENGTH = 2.30  # m, along the tank X axis
-TANK_WIDTH = 1.15  # m, along the tank Y axis
 
 
 @dataclass(frozen=True)

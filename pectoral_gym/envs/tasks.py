@@ -83,11 +83,11 @@ from pectoral_gym.envs.observation import (  # noqa: F401 - OBS_SIZE re-exported
     OBS_X,
     OBS_Y,
 )
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
 from pectoral_gym.strokes import ANGLE_FROM, ANGLE_TO, DURATION, ELAPSED, POWER
+from pectoral_gym.tank import TANK_LENGTH, TANK_WIDTH, nose_tail_contact
 
 # Tank and task geometry [m], [rad].
-TANK_X = TANK_LENGTH  # tank length along X [m], one source: params.py
+TANK_X = TANK_LENGTH  # tank length along X [m], one source: pectoral_gym.tank
 TANK_Y = TANK_WIDTH  # tank width along Y [m]
 START_INSET = 0.3  # goal task: start this far from the walls [m]
 GOAL_INSET = 0.2  # goal task: goal this far from the walls [m]
@@ -163,13 +163,7 @@ def _observe_one(i, state, ep, fish, obs):
     obs[i, OBS_TARGET_Y] = -s * dx + c * dy
     obs[i, OBS_TARGET_VX] = c * ep[i, E_TVX] + s * ep[i, E_TVY]
     obs[i, OBS_TARGET_VY] = -s * ep[i, E_TVX] + c * ep[i, E_TVY]
-    half = 0.5 * fish[i, F_LENGTH]
-    wall = False
-    for sign in (1.0, -1.0):  # nose, tail
-        px = x + sign * half * c
-        py = y + sign * half * s
-        if not (0.0 <= px <= TANK_X and 0.0 <= py <= TANK_Y):
-            wall = True
+    wall = nose_tail_contact(x, y, c, s, 0.5 * fish[i, F_LENGTH])
     return math.sqrt(dx * dx + dy * dy), wall
 
 
