@@ -216,7 +216,11 @@ def test_replays_and_other_sessions_never_keep_or_restart_motion():
             assert fw.tripped_at - fw.last_valid <= 0.5 + 0.011
             a.sendall(_set(2, 0xA, command=2))  # the PC commands again ...
             assert _wait(lambda: fw.running)
-            b.sendall(_frame(pr.Message(pr.MsgType.HEARTBEAT, 1, 0xB)))  # ... and another session speaks up
+            # ... another live session speaks up: refused (issue 30, finding 2), the fins keep their controller
+            b.sendall(_frame(pr.Message(pr.MsgType.HEARTBEAT, 1, 0xB)))
+            assert _wait(lambda: fw.ignored["refused"] >= 1)
+            assert fw.running and fw.session == 0xA
+            b.sendall(_frame(pr.Message(pr.MsgType.CLAIM, 2, 0xB)))  # ... and takes over explicitly
             assert _wait(lambda: fw.state == pr.RobotState.STOPPED and fw.session == 0xB)
             for seq in range(3, 8):  # the old session's commands, new or replayed: all ignored
                 a.sendall(_set(seq, 0xA, command=seq))
@@ -414,7 +418,7 @@ def test_unknown_robot_state_and_complex_actions():
     link = RadioLink(f"socket://127.0.0.1:{server.getsockname()[1]}", keepalive_period=60.0)
     conn, _ = server.accept()
     try:
-        status = pr.Message(pr.MsgType.STATUS, 1, 0, status=pr.Status(0, 1, 7))
+        status = pr.Message(pr.MsgType.STATUS, 1, link.session, status=pr.Status(0, 1, 7, served=link.session, boot=1))
         conn.sendall(pr.encode_frame(pr.rx_packet(pr.encode_message(status))))
         assert _wait(lambda: link.stats.received == 1)
         assert link.health()["robot_state"] == "UNKNOWN_7"
