@@ -29,7 +29,7 @@ Every kernel of the package is decorated with :func:`njit` (``@njit`` or
 
 Example (the model integrators, :mod:`pectoral_gym.stepping`)::
 
-    advance_kernels = kernel_pair(_advance_one, "state, fins, cache, pending, integral, coef, duration, ...")
+    advance_kernels = kernel_pair(advance_one, "state, fins, cache, pending, integral, coef, duration, ...")
     advance_kernels.run(state, fins, ...)   # serial below 64 fish, parallel from 64
 
 Example with a mask, a guard and a result (``envs.tasks._apply_serial/_apply_parallel``)::
@@ -54,6 +54,7 @@ import functools
 import hashlib
 import inspect
 import os
+import types
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any, NamedTuple
@@ -62,8 +63,8 @@ import numba as nb
 from numba.core.caching import CompileResultCacheImpl, FunctionCache, _CacheLocator
 from numba.core.dispatcher import Dispatcher
 
-__all__ = ["JIT", "PARALLEL_MIN_ITEMS", "KernelPair", "SourceTreeCache", "kernel_pair", "njit",
-           "source_tree", "source_tree_digest"]
+__all__ = ["JIT", "PARALLEL_MIN_ITEMS", "KernelPair", "SourceTreeCache", "entry_point", "kernel_builds",
+           "kernel_pair", "njit", "source_tree", "source_tree_digest"]
 
 JIT: dict[str, Any] = {"cache": True, "nogil": True, "error_model": "numpy"}
 
@@ -346,3 +347,59 @@ def kernel_pair(
 
     run.__doc__ = f"Run ``{base}`` over all items: serial below {PARALLEL_MIN_ITEMS} items, parallel from there."
     return KernelPair(serial, parallel, run)
+
+
+def kernel_builds(
+    function: Callable[..., Any],
+    *,
+    name: str | None = None,
+    bindings: dict[str, Any] | None = None,
+    cache: bool = True,
+) -> KernelPair:
+    """Serial and parallel builds of one kernel body written with ``numba.prange``, and their dispatcher.
+
+    The body is compiled twice, as it is: with ``parallel=False`` (``prange`` is ``range``) and with
+    ``parallel=True``; no source is generated. Each build is a copy of ``function`` under its own name
+    (``<name>_serial``, ``<name>_parallel``), so their disk caches do not collide.
+
+    Args:
+        function: The Python function (module level) whose first argument's ``shape[0]`` is the batch size.
+        name: Base name of the builds (default: the function's name).
+        bindings: Globals of ``function`` to replace in the builds (e.g. the per-item kernel of a task
+            registered at run time); such builds are not cached on disk unless ``cache``.
+        cache: Keep the builds in numba's disk cache (keyed on the source tree, :func:`njit`).
+
+    Returns:
+        A :class:`KernelPair` (``run`` picks the parallel build from :data:`PARALLEL_MIN_ITEMS` items).
+    """
+    base = name or function.__name__
+    scope = function.__globals__ if not bindings else {**function.__globals__, **bindings}
+    builds = []
+    for kind, parallel in (("serial", False), ("parallel", True)):
+        copy = types.FunctionType(function.__code__, scope, f"{base}_{kind}", function.__defaults__,
+                                  function.__closure__)
+        copy.__qualname__ = f"{base}_{kind}"
+        copy.__module__ = function.__module__
+        copy.__doc__ = function.__doc__
+        builds.append(njit(copy, parallel=parallel, cache=cache))
+    serial, parallel = builds
+
+    def run(first: Any, *rest: Any) -> Any:
+        return (parallel if first.shape[0] >= PARALLEL_MIN_ITEMS else serial)(first, *rest)
+
+    return KernelPair(serial, parallel, run)
+
+
+def entry_point(kernel: Callable[..., Any], example: tuple) -> Callable[..., Any]:
+    """The compiled entry point of ``kernel`` for the numba types of ``example`` (compiled or loaded here).
+
+    Calling it skips numba's typing of the arguments (about 1 us for a structref argument), so it
+    must be called with arguments of exactly those types. Where numba does not expose entry points
+    (another version, ``NUMBA_DISABLE_JIT``), the dispatcher itself.
+    """
+    signature = tuple(nb.typeof(x) for x in example)
+    try:
+        kernel.compile(signature)
+        return kernel.overloads[signature].entry_point
+    except (AttributeError, KeyError):  # pragma: no cover - other numba versions: the dispatcher, same types
+        return kernel

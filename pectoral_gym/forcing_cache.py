@@ -120,7 +120,7 @@ def refresh(cache, i, f, bias, amplitude, period, ratio, coef, mode, tables):
     cache[i, f, AVG_TAU] = tau
     cache[i, f, OSC_COS] = SIDE[f] * pc  # the left fin's yaw oscillation is the mirror image
     cache[i, f, OSC_SIN] = SIDE[f] * ps
-    if tables.wave_table.shape[1] > 0:  # read only with a yaw_waveform section (stepping._advance_one)
+    if tables.wave_table.shape[1] > 0:  # read only with a yaw_waveform section (stepping.advance_one)
         waveform_harmonics_into(bias, amplitude, period, ratio, tables, SIDE[f], cache[i, f], WAVE)
     cache[i, f, CACHED] = 1.0
 

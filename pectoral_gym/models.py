@@ -202,6 +202,11 @@ class FishModel:
         """The scaling-function tables the averaged forcing uses (:class:`pectoral_gym.ktables.KTables`)."""
         return self._tables
 
+    @property
+    def packed_tables(self) -> tuple:
+        """:attr:`tables` as the plain tuple the compiled kernels take (the same object until ``tables`` is set)."""
+        return self._packed_tables
+
     @tables.setter
     def tables(self, tables: KTables) -> None:
         self._tables = tables

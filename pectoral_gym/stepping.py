@@ -299,7 +299,7 @@ def _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc
 
 
 @njit
-def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode,
+def advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode,
                  corrections, packed_tables):
     """Advance fish ``i`` by ``duration`` seconds, segment by segment between stroke boundaries."""
     tables = as_tables(packed_tables)
@@ -375,7 +375,7 @@ def _advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_ma
 
 
 _ADVANCE = kernel_pair(
-    _advance_one,
+    advance_one,
     "state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, corrections, "
     "packed_tables",
 )

@@ -99,10 +99,10 @@ def test_core_step_is_model_advance_plus_the_reward_formula(model, randomize, tr
 
 
 def _pair(n_small: int, model: str, task: str):
-    """A fused core of ``n_small`` envs and a 64-env core (the separate parallel kernels), same first envs."""
+    """A core of ``n_small`` envs (the step's serial build) and a 64-env core (its parallel build), same first envs."""
     config = EnvConfig(model=model, task=task)
     small, big = EnvCore(n_small, config), EnvCore(64, config)
-    assert small._fused and not big._fused
+    assert not small._step.parallel and big._step.parallel
     small.reset(np.arange(n_small), [np.random.default_rng(i) for i in range(n_small)])
     big.reset(np.arange(64), [np.random.default_rng(i) for i in range(64)])
     return small, big

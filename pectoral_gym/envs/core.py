@@ -18,7 +18,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pectoral_gym._jit import PARALLEL_MIN_ITEMS
 from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.fused import FusedStep
 from pectoral_gym.envs.layout import ACTION_SIZE, FishConstants, ReferenceEllipse, fish_array
@@ -278,8 +277,8 @@ class EnvCore:
         beats: ``(n, 2, 4)`` commanded fin patterns ``(bias, amplitude, period, ratio)``, right fin first.
         params: The :class:`FishParams` of each env's current episode.
         action_buffer: ``(n, 8)`` float64 actions; ``step(core.action_buffer)`` after writing into it
-            is the single env's path (no copy; below ``PARALLEL_MIN_ITEMS`` envs a step is one
-            compiled call, :class:`~pectoral_gym.envs.fused.FusedStep`).
+            is the single env's path (no copy; a step is one compiled call,
+            :class:`~pectoral_gym.envs.fused.FusedStep`).
     """
 
     def __init__(self, n: int, config: EnvConfig):
@@ -293,9 +292,6 @@ class EnvCore:
         self.dt = float(config.control_period)
         self._observe_fins = bool(config.observe_fins)
         self._period_max = float(config.period_range[1])
-        big = self.n >= PARALLEL_MIN_ITEMS  # chosen once: the batch size of a core never changes
-        self._apply = tk.APPLY_KEEP_KERNELS.parallel if big else tk.APPLY_KEEP_KERNELS.serial
-        self._reward = ts.task.reward_mean.parallel if big else ts.task.reward_mean.serial
         self.cfg, self.ep, self.obs, self.out, self.beats, self.fish = ts.cfg, ts.ep, ts.obs, ts.out, ts.beats, ts.fish
         self.action_buffer = np.zeros((self.n, ACTION_SIZE))
         self._integral_before = np.zeros((self.n, 3))  # the model's velocity integrals before a step
@@ -303,12 +299,10 @@ class EnvCore:
         self.none = ts.none
         self.action_code = ts.action_code
         self.params: list[FishParams] = [config.params] * self.n
-        # One compiled call per step for small batches of the built-in tasks (envs.fused inlines their
-        # reward kernel; a registered task keeps its own loops). Holds the arrays above and the model's:
-        # they are updated in place, never replaced.
-        fused = not big and ts.task.reward_mean is tk.REWARD_MEAN_KERNELS
-        self._fused = FusedStep(self.model, self.dt, self.action_buffer, self.cfg, self.beats, self.obs, self.out,
-                                self.fish, self.ep, self._integral_before) if fused else None
+        # The step: one compiled call (envs.fused), serial or parallel by batch size, with the task row's
+        # kernel. Holds the arrays above and the model's: they are updated in place, never replaced.
+        self._step = FusedStep(self.model, self.dt, self.action_buffer, self.cfg, self.beats, self.obs, self.out,
+                               self.fish, self.ep, self._integral_before, ts.task.reward_one)
         if config.randomize:
             self._rand_names = tuple(config.randomize)
             widths = np.array([config.randomize[k] for k in self._rand_names])
@@ -342,28 +336,12 @@ class EnvCore:
         """Apply ``actions`` ``(n, 8)`` for one control period (envs in ``skip`` are not checked or scored).
 
         Raises:
-            ValueError: If an action of an env not in ``skip`` is not finite, or (below
-                ``PARALLEL_MIN_ITEMS`` envs) ``actions`` does not have shape ``(n, 8)``.
+            ValueError: If an action of an env not in ``skip`` is not finite, or ``actions`` does not
+                have shape ``(n, 8)``.
         """
-        if self._fused is not None:  # the calls below in one (envs.fused)
-            bad = self._fused(actions, skip)
-            if bad >= 0:
-                self._raise_non_finite(actions, bad)
-            self._observe_fin_block()
-            return
-        model = self.model
-        before = self._integral_before  # the model's velocity integrals before the step, kept by _apply
-        skip = self.none if skip is None else skip
-        bad = self._apply(actions, skip, self.cfg, self.beats, self.obs, self.out, self.fish, model.integral, before)
+        bad = self._step(actions, skip)
         if bad >= 0:
             self._raise_non_finite(actions, bad)
-        model.command_array(self.beats, self.all, validate=False)
-        model.advance(self.dt)
-        # Observation, reward, and the observed velocities: means over the control period (integral
-        # difference / dt). The full model's instantaneous velocities oscillate with the fin beat (a
-        # symmetric stroke reads a yaw rate of -0.45 rad/s at some phases), the averaged model's do not;
-        # the means agree between the models, as an observer's estimate would.
-        self._reward(model.state, skip, self.cfg, self.ep, self.fish, self.obs, self.out, model.integral, before)
         self._observe_fin_block()
 
     def _observe_fin_block(self) -> None:

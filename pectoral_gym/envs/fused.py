@@ -1,38 +1,31 @@
-"""One compiled call per step of a small batch of fish envs: action check and mapping, model advance, reward.
+"""The env step: one compiled body, in a serial and a parallel build chosen by batch size.
 
-:class:`~pectoral_gym.envs.core.EnvCore` used to make four compiled calls per
-step (map the actions, command the fins, advance the model, observe and score),
-each paying numba's dispatch, which types every argument (about 85 ns per array
-and 0.8 us for the K-table tuple, timed on an empty kernel with numba 0.68):
-several microseconds per step at one fish, as much as the averaged model's own
-integration. The step kernel here is those four in one compiled function, built
-from the same kernels, in the same order:
+:class:`~pectoral_gym.envs.core.EnvCore` steps its envs with one compiled call, :func:`step_body`,
+which runs, in this order:
 
-1. ``tasks._first_non_finite``: a non-finite action of an env not in ``skip``
-   stops the step before anything is written (its index is returned);
-2. ``tasks._apply_keep_one`` per env: keep the velocity integrals, map the
-   action to fin patterns, write the last action and the energy term;
+1. ``tasks.first_non_finite``: a non-finite action of an env not in ``skip`` stops the step
+   before anything is written (its index is returned);
+2. ``tasks.apply_keep_one`` per env: keep the velocity integrals, map the action to fin
+   patterns, write the last action and the energy term;
 3. ``strokes.command_fins`` for every fish (``FishModel.command_array``);
-4. ``stepping``'s serial advance loop (``FishModel.advance`` for fewer than
-   ``PARALLEL_MIN_ITEMS`` fish);
-5. ``tasks._reward_mean_one`` per env: move the reference, observation, reward
-   terms, flags, mean velocities over the control period.
+4. ``stepping.advance_one`` per fish (``FishModel.advance``);
+5. the task's ``reward_one`` per env not in ``skip`` (the task table's row; the built-in tasks
+   share ``tasks.reward_one``), then ``tasks.observe_mean_velocity``: the observed velocities are
+   the means over the control period.
 
-The results are bit for bit those of the separate calls (``tests/test_fused_step.py``
-checks them against the separate kernels, and against ``model.command`` + ``model.advance``
-and the documented reward formulas).
-Batches of ``PARALLEL_MIN_ITEMS`` envs or more keep the parallel kernels.
+The body's loops are ``numba.prange`` loops: :func:`pectoral_gym._jit.kernel_builds` compiles it
+serially (below ``PARALLEL_MIN_ITEMS`` envs, where threads cost more than they save) and in
+parallel; every env's arithmetic is the same in both, so the two give the same bits
+(``tests/test_fused_step.py``). A task registered at run time gets builds of the same body with its
+kernel bound in place of ``reward_one`` (:func:`step_builds`).
 
-The arrays of one core are bound once into a :class:`StepArrays` (a numba
-structref that holds them, not copies), so a step passes one object, the skip
-mask and the model's scalar settings. :func:`bind` also looks up the compiled
-entry point of that exact signature, which skips numba's argument typing (done
-in Python for a structref, about 1 us a call); it is used only with the bound
-arrays and the core's own all-false mask, the types it was compiled for.
+The arrays of one core are bound once into a :class:`StepArrays` (a numba structref that holds
+them, not copies), so a step passes one object, the skip mask and the model's settings
+(:class:`StepSettings`); the compiled entry point of that exact signature
+(:func:`pectoral_gym._jit.entry_point`) skips numba's argument typing (about 1 us for a structref).
 
-This kernel inlines code from many modules, among them ``stepping.py``; like every kernel
-it is compiled with :func:`pectoral_gym._jit.njit`, whose disk cache is keyed on all the
-sources it compiles from, so an edit of any of them compiles it afresh.
+This body inlines code from many modules; like every kernel it is compiled with
+:func:`pectoral_gym._jit.njit`, whose disk cache is keyed on all the sources it compiles from.
 """
 
 from __future__ import annotations
@@ -46,11 +39,11 @@ from numba.core import types
 from numba.experimental import structref
 
 from pectoral_gym import stepping
-from pectoral_gym._jit import njit
+from pectoral_gym._jit import PARALLEL_MIN_ITEMS, KernelPair, entry_point, kernel_builds, njit
 from pectoral_gym.envs import tasks as tk
 from pectoral_gym.strokes import command_fins
 
-__all__ = ["STEP_FIELDS", "BoundStep", "FusedStep", "StepArrays", "bind", "step_kernel"]
+__all__ = ["STEP", "STEP_FIELDS", "FusedStep", "StepArrays", "StepSettings", "step_body", "step_builds"]
 
 @structref.register
 class StepArraysType(types.StructRef):
@@ -80,75 +73,80 @@ def new_step_arrays(actions, cfg, beats, obs, out, fish, ep, before, everyone, s
                       integral, coef, tables)
 
 
-@njit
-def _step_bound(a, skip, duration, dt_max, min_substeps, averaged, mode, corrections):
-    """The step of :func:`step_kernel`."""
-    bad = tk._first_non_finite(a.actions, skip)
+class StepSettings(NamedTuple):
+    """The model's settings of one step, as :func:`pectoral_gym.stepping.advance` takes them.
+
+    Attributes:
+        duration: Control period [s].
+        dt_max: Largest RK4 substep [s].
+        min_substeps: Full model: least number of substeps per half-stroke (a float).
+        averaged: Integrate the averaged model (eq. 25) instead of the full one (eq. 19).
+        mode: Averaged forcing form (``averaging.EXACT`` or ``averaging.TAYLOR``).
+        corrections: Averaged model's corrections (``stepping.corrections``).
+    """
+
+    duration: float
+    dt_max: float
+    min_substeps: float
+    averaged: bool
+    mode: int
+    corrections: int
+
+
+reward_one = tk.reward_one  # the task kernel the body calls (the built-in tasks'; step_builds rebinds it)
+
+
+def step_body(a, skip, s):
+    """Step the envs of ``a`` (a :class:`StepArrays`) except those where ``skip``, with settings ``s``.
+
+    Returns -1, or the index of the first env not in ``skip`` whose action is not finite (then
+    nothing has been written). The steps are listed in the module docstring.
+    """
+    bad = tk.first_non_finite(a.actions, skip)
     if bad >= 0:
         return bad
     n = a.actions.shape[0]
-    for i in range(n):
-        tk._apply_keep_one(i, a.actions, skip, a.cfg, a.beats, a.obs, a.out, a.fish, a.integral, a.before)
+    for i in nb.prange(n):
+        tk.apply_keep_one(i, a.actions, skip, a.cfg, a.beats, a.obs, a.out, a.fish, a.integral, a.before)
     command_fins(a.fins, a.pending, a.beats, a.everyone)
-    # the loop FishModel.advance runs below PARALLEL_MIN_ITEMS fish (stepping.advance)
-    stepping._SERIAL(a.state, a.fins, a.cache, a.pending, a.integral, a.coef, duration, dt_max, min_substeps,
-                     averaged, mode, corrections, a.tables)
-    for i in range(n):
-        tk._reward_mean_one(i, a.state, skip, a.cfg, a.ep, a.fish, a.obs, a.out, a.integral, a.before)
+    for i in nb.prange(n):
+        stepping.advance_one(i, a.state, a.fins, a.cache, a.pending, a.integral, a.coef, s.duration, s.dt_max,
+                             s.min_substeps, s.averaged, s.mode, s.corrections, a.tables)
+    for i in nb.prange(n):
+        if not skip[i]:
+            reward_one(i, a.state, a.cfg, a.ep, a.fish, a.obs, a.out)
+        tk.observe_mean_velocity(i, a.cfg, a.obs, a.integral, a.before)
     return -1
 
 
-def step_kernel() -> Callable[..., Any]:
-    """The compiled step (a numba dispatcher).
+#: The builds of :func:`step_body` for the built-in tasks (cached on disk).
+STEP = kernel_builds(step_body, name="_step")
+_REGISTERED: dict[Any, KernelPair] = {}
 
-    ``step_kernel()(arrays, skip, duration, dt_max, min_substeps, averaged, mode, corrections)``
-    steps the envs of ``arrays`` (a :class:`StepArrays`) except those where ``skip``, by
-    ``duration`` seconds, with the model settings as :func:`pectoral_gym.stepping.advance`
-    takes them (``min_substeps`` a float). Returns -1, or the index of the first env not in
-    ``skip`` whose action is not finite (then nothing has been written).
+
+def step_builds(task_kernel: Callable[..., Any]) -> KernelPair:
+    """The builds of :func:`step_body` calling ``task_kernel`` as the task's ``reward_one``.
+
+    :data:`STEP` for ``tasks.reward_one``; for a task registered at run time, builds of the same
+    body with its kernel bound (compiled at their first call, not cached on disk: the kernel's code
+    lives in the caller's file).
     """
-    return _step_bound
+    if task_kernel is tk.reward_one:
+        return STEP
+    if task_kernel not in _REGISTERED:
+        _REGISTERED[task_kernel] = kernel_builds(step_body, name="_step_registered",
+                                                 bindings={"reward_one": task_kernel}, cache=False)
+    return _REGISTERED[task_kernel]
 
 
-class BoundStep(NamedTuple):
-    """A batch's arrays bound for the compiled step, and the fastest way to call it.
-
-    Attributes:
-        arrays: The :class:`StepArrays`.
-        call: ``call(arrays, skip, duration, dt_max, min_substeps, averaged, mode, corrections)``:
-            the compiled entry point of exactly these types (``skip`` a C-contiguous bool array
-            of the batch size; it converts the scalars as ``float, float, float, bool, int, bool``
-            do), or the dispatcher behind those conversions if numba does not expose it.
-        kernel: The dispatcher (:func:`step_kernel`), for any other ``skip``.
-        tables: The K-table tuple bound in ``arrays`` (rebind when the model's changes).
-    """
-
+class _Bound(NamedTuple):
     arrays: StepArrays
     call: Callable[..., int]
-    kernel: Callable[..., int]
     tables: tuple
 
 
-def bind(arrays: StepArrays, tables: tuple, example: tuple) -> BoundStep:
-    """Look up the entry point for ``arrays`` (holding ``tables``) and the types of ``example`` (skip, scalars).
-
-    The kernel is compiled for them, or loaded from the disk cache, here.
-    """
-    kernel = step_kernel()
-    signature = tuple(nb.typeof(x) for x in (arrays, *example))
-    kernel.compile(signature)
-    try:  # numba's compiled entry point of this signature: no argument typing per call
-        call = kernel.overloads[signature].entry_point
-    except (AttributeError, KeyError):  # pragma: no cover - other numba versions: the dispatcher, same types
-
-        def call(arrays, skip, duration, dt_max, min_substeps, averaged, mode, corrections):
-            return kernel(arrays, skip, float(duration), float(dt_max), float(min_substeps), bool(averaged),
-                          int(mode), int(corrections))
-    return BoundStep(arrays, call, kernel, tables)
-
-
 class FusedStep:
-    """The one-call step of a batch of envs on one model (what ``EnvCore.step`` runs below 64 envs).
+    """The one-call step of a batch of envs on one model (what ``EnvCore.step`` runs).
 
     Args:
         model: The batched model; its arrays are bound at the first call, its settings
@@ -158,31 +156,49 @@ class FusedStep:
         actions: ``(n, 8)`` C-contiguous float64 action buffer; a call with this very array
             takes the entry point, any other array is copied into it first.
         cfg, beats, obs, out, fish, ep, before: The env core's arrays (:data:`STEP_FIELDS`).
+        task_kernel: The task's ``reward_one`` kernel (the task table's row).
+
+    Attributes:
+        parallel: Whether the parallel build runs (``n >= PARALLEL_MIN_ITEMS``).
 
     Pickles and deep-copies without the binding (compiled code); a copy binds its own arrays.
     """
 
-    def __init__(self, model, duration: float, actions: np.ndarray, cfg, beats, obs, out, fish, ep, before):
+    def __init__(self, model, duration: float, actions: np.ndarray, cfg, beats, obs, out, fish, ep, before,
+                 task_kernel: Callable[..., Any] = tk.reward_one):
         self.model = model
         self.duration = float(duration)
         self.actions = actions
         self.env_arrays = (cfg, beats, obs, out, fish, ep, before)
         self.everyone = np.ones(actions.shape[0], dtype=np.bool_)
         self.none = np.zeros(actions.shape[0], dtype=np.bool_)
-        self._bound: BoundStep | None = None
+        self.parallel = actions.shape[0] >= PARALLEL_MIN_ITEMS
+        self.task_kernel = task_kernel
+        self._bound: _Bound | None = None
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_bound"] = None
         return state
 
-    def _bind(self) -> BoundStep:
+    @property
+    def kernel(self) -> Callable[..., int]:
+        """The build this batch runs (a numba dispatcher)."""
+        builds = step_builds(self.task_kernel)
+        return builds.parallel if self.parallel else builds.serial
+
+    def settings(self) -> StepSettings:
+        """The model's settings now."""
         m = self.model
-        tables = m._packed_tables  # the tuple FishModel.advance passes (ktables.as_tables)
+        return StepSettings(self.duration, float(m.dt_max), float(m.min_substeps), bool(m.averaged), int(m.mode),
+                            int(m.corrections))
+
+    def _bind(self) -> _Bound:
+        m = self.model
+        tables = m.packed_tables  # the tuple FishModel.advance passes (ktables.as_tables)
         arrays = new_step_arrays(self.actions, *self.env_arrays, self.everyone, m.state, m.fins, m.forcing_cache,
                                  m.pending, m.integral, m.coef, tables)
-        return bind(arrays, tables, (self.none, self.duration, float(m.dt_max), float(m.min_substeps), bool(m.averaged),
-                             int(m.mode), int(m.corrections)))
+        return _Bound(arrays, entry_point(self.kernel, (arrays, self.none, self.settings())), tables)
 
     def __call__(self, actions: np.ndarray, skip: np.ndarray | None = None) -> int:
         """Step the envs not in ``skip`` (a bool mask); returns -1, or the first env with a non-finite action.
@@ -197,14 +213,12 @@ class FusedStep:
             buffer[...] = actions  # float64, as the kernels read every action entry
         model = self.model
         bound = self._bound
-        if bound is None or bound.tables is not model._packed_tables:
+        if bound is None or bound.tables is not model.packed_tables:
             bound = self._bound = self._bind()
         if skip is None:  # the types the entry point was compiled for
-            bad = bound.call(bound.arrays, self.none, self.duration, model.dt_max, model.min_substeps,
-                             model.averaged, model.mode, model.corrections)
+            bad = bound.call(bound.arrays, self.none, self.settings())
         else:
-            bad = bound.kernel(bound.arrays, skip, self.duration, float(model.dt_max), float(model.min_substeps),
-                               bool(model.averaged), int(model.mode), int(model.corrections))
+            bad = self.kernel(bound.arrays, np.ascontiguousarray(skip, dtype=np.bool_), self.settings())
         if bad < 0:
             model.time += self.duration  # as FishModel.advance
         return bad

@@ -40,10 +40,12 @@ Adding a task touches this table only: call :func:`register_task` with
 The task is then a valid ``task=`` of ``gym.make("PectoralFish-*-v0")``, of the
 vector env and of ``HardwareFishEnv`` (``tests/test_task_core.py`` registers one).
 New settings (weights) need an ``EnvConfig`` field and a ``cfg`` slot; reuse the
-existing ones where they fit. The built-in tasks share the compiled kernels of
-:mod:`pectoral_gym.envs.tasks` (one kernel branching on ``cfg[C_TASK]``, faster
-than one call per task); a registered task's loops are compiled from its
-``reward_one`` (not cached on disk: its code lives in the caller's file).
+existing ones where they fit. The built-in tasks share one kernel,
+``tasks.reward_one``, branching on ``cfg[C_TASK]`` (faster than one call per task).
+The loops over the envs are written once (:func:`observe_body` here, the env step
+``envs.fused.step_body``) and compiled with the row's kernel bound in
+(:func:`pectoral_gym._jit.kernel_builds`; no code is generated; a registered task's
+builds are not cached on disk: its code lives in the caller's file).
 """
 
 from __future__ import annotations
@@ -57,10 +59,9 @@ import numba as nb
 import numpy as np
 from numba.core.dispatcher import Dispatcher
 
-from pectoral_gym._jit import PARALLEL_MIN_ITEMS, KernelPair, njit
+from pectoral_gym._jit import KernelPair, kernel_builds
 from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.layout import (
-    C_DT,
     GOAL,
     N_EP,
     N_OUT,
@@ -69,18 +70,18 @@ from pectoral_gym.envs.layout import (
     TRACK,
     fish_array,
 )
-from pectoral_gym.envs.observation import OBS_OMEGA, OBS_VELOCITY, OBS_VX, OBS_VY, observation_size
+from pectoral_gym.envs.observation import OBS_VELOCITY, observation_size
 from pectoral_gym.models import REST
 
 if TYPE_CHECKING:
     from pectoral_gym.envs.core import EnvConfig
 
 __all__ = ["InfoField", "Task", "TASK_TABLE", "TASK_IDS", "TaskState", "register_task", "unregister_task",
-           "task_by_id", "task_info", "observe_fish"]
+           "task_by_id", "task_info", "observe_fish", "observe_body"]
 
 #: ``observe_fish(i, state, ep, fish, obs) -> (distance [m], wall contact)``: env ``i``'s observation up to
 #: the last action (the one observation builder, :mod:`pectoral_gym.envs.tasks`), for a task's ``reward_one``.
-observe_fish = tk._observe_one
+observe_fish = tk.observe_one
 
 _BUILTIN = (GOAL, TRACK)
 
@@ -104,9 +105,10 @@ class Task:
         extra_info: The ``info`` entries after ``"distance"``.
         draw: ``draw(rng) -> (8,)`` random numbers of one episode.
         start: ``start(index, draws, cfg, ep, start)``: targets into ``ep``, start states into ``start``.
-        reward: Serial/parallel loops ``(state, skip, cfg, ep, fish, obs, out)`` of the task's reward kernel.
-        reward_mean: The same loops ``(..., integral, before)`` that also observe the mean velocities over
-            the control period from the model's velocity integrals (the simulated envs' step).
+        reward_one: The task's kernel ``reward_one(i, state, cfg, ep, fish, obs, out)`` (module docstring);
+            the simulated envs' step calls it (``envs.fused.step_builds``).
+        observe: Serial/parallel builds of :func:`observe_body` with ``reward_one``:
+            ``observe.run(state, skip, cfg, ep, fish, obs, out)`` (the robot env's step).
         fit_start: ``fit_start(draws, x, y, rng)``: adapt the draws to a measured start pose (or ``None``).
     """
 
@@ -116,8 +118,8 @@ class Task:
     extra_info: tuple[InfoField, ...]
     draw: Callable[[np.random.Generator], np.ndarray]
     start: Callable[..., Any]
-    reward: KernelPair
-    reward_mean: KernelPair
+    reward_one: Callable[..., Any]
+    observe: KernelPair
     fit_start: Callable[[np.ndarray, float, float, np.random.Generator], None] | None = None
     info: Callable[[np.ndarray], dict] = field(init=False, repr=False, compare=False)
 
@@ -131,13 +133,41 @@ class Task:
 
 
 def _info_builder(fields: Sequence[InfoField]) -> Callable[[np.ndarray], dict]:
-    """``out_row -> info``: a dict display generated from the fields, as fast as a hand-written literal."""
+    """``out_row -> info``: the fields' values as numpy scalars (flags as ``np.bool_``)."""
     for f in fields:
         if not (isinstance(f.key, str) and f.key.isidentifier() and 0 <= int(f.index) < N_OUT):
             raise ValueError(f"info field {f!r}: the key must be an identifier and the index an out slot "
                              f"0..{N_OUT - 1}")
-    items = ", ".join(f"{f.key!r}: out[{int(f.index)}]" + (" > 0.5" if f.flag else "") for f in fields)
-    return eval(f"lambda out: {{{items}}}")  # noqa: S307 - a fixed template of identifiers and ints
+    keys = tuple(f.key for f in fields)
+    index = np.array([int(f.index) for f in fields], dtype=np.intp)
+    flags = tuple(f.flag for f in fields)
+
+    def info(out: np.ndarray) -> dict:
+        values = out[index]
+        return {key: (value > 0.5 if flag else value) for key, value, flag in zip(keys, values, flags, strict=True)}
+
+    return info
+
+
+def observe_body(state, skip, cfg, ep, fish, obs, out):
+    """Observation, reward terms and flags of every env not in ``skip``: the task's ``reward_one`` per env.
+
+    Compiled per task row with its ``reward_one`` bound (:func:`pectoral_gym._jit.kernel_builds`).
+    """
+    for i in nb.prange(state.shape[0]):
+        if not skip[i]:
+            reward_one(i, state, cfg, ep, fish, obs, out)
+
+
+reward_one = tk.reward_one  # the built-in tasks' kernel, the global observe_body calls
+_OBSERVE = kernel_builds(observe_body, name="_observe")
+
+
+def _observe_builds(task_kernel: Callable[..., Any]) -> KernelPair:
+    """:func:`observe_body`'s builds for ``task_kernel`` (the built-in ones cached on disk)."""
+    if task_kernel is tk.reward_one:
+        return _OBSERVE
+    return kernel_builds(observe_body, name="_observe_registered", bindings={"reward_one": task_kernel}, cache=False)
 
 
 # ---------------------------------------------------------------- the built-in tasks
@@ -153,11 +183,10 @@ def _fit_goal(draws: np.ndarray, x: float, y: float, rng: np.random.Generator) -
 
 TASK_TABLE: dict[str, Task] = {
     "goal": Task("goal", GOAL, tk.TERMS[GOAL], (InfoField("is_success", O_SUCCESS, flag=True),),
-                 lambda rng: tk.draw_episode(rng, GOAL), tk.start_states, tk.REWARD_KERNELS,
-                 tk.REWARD_MEAN_KERNELS, fit_start=_fit_goal),
+                 lambda rng: tk.draw_episode(rng, GOAL), tk.start_states, tk.reward_one, _OBSERVE,
+                 fit_start=_fit_goal),
     "track": Task("track", TRACK, tk.TERMS[TRACK], (InfoField("tracking_error", O_DISTANCE),),
-                  lambda rng: tk.draw_episode(rng, TRACK), tk.start_states, tk.REWARD_KERNELS,
-                  tk.REWARD_MEAN_KERNELS),
+                  lambda rng: tk.draw_episode(rng, TRACK), tk.start_states, tk.reward_one, _OBSERVE),
 }
 _BY_ID: dict[int, Task] = {t.id: t for t in TASK_TABLE.values()}
 
@@ -196,42 +225,6 @@ def task_info(out: np.ndarray, task: int) -> dict:
 
 
 # ---------------------------------------------------------------- registering a task
-def _loops(reward_one: Callable[..., Any]) -> tuple[KernelPair, KernelPair]:
-    """The ``reward`` and ``reward_mean`` loops of a registered task's kernel (as ``tasks.REWARD*_KERNELS``)."""
-
-    @njit(inline="always", cache=False)
-    def mean_velocity(i, cfg, obs, integral, before):
-        dt = cfg[C_DT]
-        obs[i, OBS_VX] = (integral[i, 0] - before[i, 0]) / dt
-        obs[i, OBS_VY] = (integral[i, 1] - before[i, 1]) / dt
-        obs[i, OBS_OMEGA] = (integral[i, 2] - before[i, 2]) / dt
-
-    def plain(parallel: bool):
-        loop = nb.prange if parallel else range
-
-        def run(state, skip, cfg, ep, fish, obs, out):
-            for i in loop(state.shape[0]):
-                if not skip[i]:
-                    reward_one(i, state, cfg, ep, fish, obs, out)
-        return njit(run, parallel=parallel, cache=False)
-
-    def mean(parallel: bool):
-        loop = nb.prange if parallel else range
-
-        def run(state, skip, cfg, ep, fish, obs, out, integral, before):
-            for i in loop(state.shape[0]):
-                if not skip[i]:
-                    reward_one(i, state, cfg, ep, fish, obs, out)
-                mean_velocity(i, cfg, obs, integral, before)
-        return njit(run, parallel=parallel, cache=False)
-
-    def pair(make):
-        serial, parallel = make(False), make(True)
-        return KernelPair(serial, parallel,
-                          lambda *a: (parallel if a[0].shape[0] >= PARALLEL_MIN_ITEMS else serial)(*a))
-    return pair(plain), pair(mean)
-
-
 def register_task(name: str, *, terms: Sequence[tuple[str, int]], draw: Callable[[np.random.Generator], np.ndarray],
                   start: Callable[..., Any], reward_one: Callable[..., Any],
                   extra_info: Sequence[InfoField | tuple] = (),
@@ -261,8 +254,7 @@ def register_task(name: str, *, terms: Sequence[tuple[str, int]], draw: Callable
     keys = [k for k, _ in terms] + ["distance"] + [f.key for f in extra]
     if len(set(keys)) != len(keys):
         raise ValueError(f"info keys repeat: {keys}")
-    reward, reward_mean = _loops(reward_one)
-    task = Task(name, max(_BY_ID) + 1, terms, extra, draw, start, reward, reward_mean, fit_start)
+    task = Task(name, max(_BY_ID) + 1, terms, extra, draw, start, reward_one, _observe_builds(reward_one), fit_start)
     TASK_TABLE[name] = task
     _BY_ID[task.id] = task
     return task
@@ -376,7 +368,7 @@ class TaskState:
         The velocity entries are ``state``'s; overwrite them with the means over the period
         (:meth:`set_mean_velocity`) as the simulated envs do.
         """
-        self.task.reward.run(state, self.none if skip is None else skip, self.cfg, self.ep, self.fish, self.obs,
+        self.task.observe.run(state, self.none if skip is None else skip, self.cfg, self.ep, self.fish, self.obs,
                              self.out)
 
     def set_mean_velocity(self, i: int, velocity: Sequence[float]) -> None:

@@ -112,7 +112,8 @@ TERMS = {
 
 # ---------------------------------------------------------------- actions
 @njit
-def _first_non_finite(actions, skip):
+def first_non_finite(actions, skip):
+    """The first env not in ``skip`` with a non-finite action entry, or -1."""
     for i in range(actions.shape[0]):
         if skip[i]:
             continue
@@ -123,7 +124,7 @@ def _first_non_finite(actions, skip):
 
 
 @njit(inline="always")
-def _apply_one(i, actions, cfg, beats, obs, out, fish):
+def apply_one(i, actions, cfg, beats, obs, out, fish):
     """Map env ``i``'s action to fin patterns, store it in the observation, price its energy."""
     energy = 0.0
     for f in range(2):
@@ -139,14 +140,14 @@ def _apply_one(i, actions, cfg, beats, obs, out, fish):
 
 # Serial and prange loops over the envs (pectoral_gym._jit.kernel_pair): a non-finite action anywhere stops
 # the step before anything is written.
-APPLY_KERNELS = kernel_pair(_apply_one, "actions, skip, cfg, beats, obs, out, fish",
+APPLY_KERNELS = kernel_pair(apply_one, "actions, skip, cfg, beats, obs, out, fish",
                             item_args="actions, cfg, beats, obs, out, fish", skip="skip",
-                            guard=_first_non_finite, guard_args="actions, skip")
+                            guard=first_non_finite, guard_args="actions, skip")
 
 
 # ---------------------------------------------------------------- observation and reward
 @njit(inline="always")
-def _observe_one(i, state, ep, fish, obs):
+def observe_one(i, state, ep, fish, obs):
     """Write the observation of env ``i`` up to the last action; return the distance to the target and the wall flag."""
     x, y, psi = state[i, 0], state[i, 1], state[i, 2]
     c, s = math.cos(psi), math.sin(psi)
@@ -204,12 +205,12 @@ def _move_reference(i, ep, duration, speed):
 
 
 @njit(inline="always")
-def _reward_one(i, state, cfg, ep, fish, obs, out):
+def reward_one(i, state, cfg, ep, fish, obs, out):
     """Observation, reward terms and termination of env ``i`` after a control period."""
     task = int(cfg[C_TASK])
     if task == TRACK:
         _move_reference(i, ep, cfg[C_DT], cfg[C_REF_SPEED])
-    d, wall = _observe_one(i, state, ep, fish, obs)
+    d, wall = observe_one(i, state, ep, fish, obs)
     r_wall = -cfg[C_WALL] if wall else 0.0
     r_energy = out[i, O_ENERGY]
     if task == GOAL:
@@ -237,33 +238,24 @@ def _reward_one(i, state, cfg, ep, fish, obs, out):
     ep[i, E_DPREV] = d
 
 
-REWARD_KERNELS = kernel_pair(_reward_one, "state, skip, cfg, ep, fish, obs, out",
-                             item_args="state, cfg, ep, fish, obs, out", skip="skip")
-
-
-# ---------------------------------------------------------------- the simulated envs' step (EnvCore)
-# The same kernels plus what EnvCore did in numpy around them: keep the model's velocity integrals
-# before the step, and observe the mean velocities over the control period after it (fewer calls per step).
+# ---------------------------------------------------------------- the simulated envs' step (envs.fused)
+# What EnvCore adds around the task's kernels: keep the model's velocity integrals before the step, and
+# observe the mean velocities over the control period after it.
 @njit(inline="always")
-def _apply_keep_one(i, actions, skip, cfg, beats, obs, out, fish, integral, before):
+def apply_keep_one(i, actions, skip, cfg, beats, obs, out, fish, integral, before):
+    """Keep env ``i``'s velocity integrals in ``before``; unless ``skip[i]``, :func:`apply_one` its action."""
     before[i, 0], before[i, 1], before[i, 2] = integral[i, 0], integral[i, 1], integral[i, 2]
     if not skip[i]:
-        _apply_one(i, actions, cfg, beats, obs, out, fish)
+        apply_one(i, actions, cfg, beats, obs, out, fish)
 
 
 @njit(inline="always")
-def _reward_mean_one(i, state, skip, cfg, ep, fish, obs, out, integral, before):
-    if not skip[i]:
-        _reward_one(i, state, cfg, ep, fish, obs, out)
+def observe_mean_velocity(i, cfg, obs, integral, before):
+    """Observe env ``i``'s mean velocities over the control period: (integral now - ``before``) / dt."""
     dt = cfg[C_DT]
     obs[i, OBS_VX] = (integral[i, 0] - before[i, 0]) / dt
     obs[i, OBS_VY] = (integral[i, 1] - before[i, 1]) / dt
     obs[i, OBS_OMEGA] = (integral[i, 2] - before[i, 2]) / dt
-
-
-APPLY_KEEP_KERNELS = kernel_pair(_apply_keep_one, "actions, skip, cfg, beats, obs, out, fish, integral, before",
-                                 guard=_first_non_finite, guard_args="actions, skip")
-REWARD_MEAN_KERNELS = kernel_pair(_reward_mean_one, "state, skip, cfg, ep, fish, obs, out, integral, before")
 
 
 def apply_actions(actions, skip, cfg, beats, obs, out, fish) -> int:
@@ -274,11 +266,6 @@ def apply_actions(actions, skip, cfg, beats, obs, out, fish) -> int:
     action is not finite (then nothing has been written).
     """
     return APPLY_KERNELS.run(actions, skip, cfg, beats, obs, out, fish)
-
-
-def observe_and_reward(state, skip, cfg, ep, fish, obs, out) -> None:
-    """After the model advanced: move the reference, write observations, reward terms and flags."""
-    REWARD_KERNELS.run(state, skip, cfg, ep, fish, obs, out)
 
 
 @njit
@@ -383,7 +370,7 @@ def observe_reset(index, state, ep, fish, obs, out, action_code):
     """
     for k in range(index.shape[0]):
         i = index[k]
-        d, _ = _observe_one(i, state, ep, fish, obs)
+        d, _ = observe_one(i, state, ep, fish, obs)
         ep[i, E_DPREV] = d
         for j in range(ACTION_SIZE):
             obs[i, OBS_LAST_ACTION + j] = action_code[j]
