@@ -188,17 +188,19 @@ class FusedStep:
         return builds.parallel if self.parallel else builds.serial
 
     def settings(self) -> StepSettings:
-        """The model's settings now."""
+        """The model's settings now, as the model holds them (the entry point converts them to its types)."""
         m = self.model
-        return StepSettings(self.duration, float(m.dt_max), float(m.min_substeps), bool(m.averaged), int(m.mode),
-                            int(m.corrections))
+        return StepSettings(self.duration, m.dt_max, m.min_substeps, m.averaged, m.mode, m.corrections)
 
     def _bind(self) -> _Bound:
         m = self.model
         tables = m.packed_tables  # the tuple FishModel.advance passes (ktables.as_tables)
         arrays = new_step_arrays(self.actions, *self.env_arrays, self.everyone, m.state, m.fins, m.forcing_cache,
                                  m.pending, m.integral, m.coef, tables)
-        return _Bound(arrays, entry_point(self.kernel, (arrays, self.none, self.settings())), tables)
+        m = self.model
+        typed = StepSettings(self.duration, float(m.dt_max), float(m.min_substeps), bool(m.averaged), int(m.mode),
+                             int(m.corrections))  # the types the entry point converts every call's settings to
+        return _Bound(arrays, entry_point(self.kernel, (arrays, self.none, typed)), tables)
 
     def __call__(self, actions: np.ndarray, skip: np.ndarray | None = None) -> int:
         """Step the envs not in ``skip`` (a bool mask); returns -1, or the first env with a non-finite action.
@@ -218,7 +220,10 @@ class FusedStep:
         if skip is None:  # the types the entry point was compiled for
             bad = bound.call(bound.arrays, self.none, self.settings())
         else:
-            bad = self.kernel(bound.arrays, np.ascontiguousarray(skip, dtype=np.bool_), self.settings())
+            m = model
+            typed = StepSettings(self.duration, float(m.dt_max), float(m.min_substeps), bool(m.averaged),
+                                 int(m.mode), int(m.corrections))
+            bad = self.kernel(bound.arrays, np.ascontiguousarray(skip, dtype=np.bool_), typed)
         if bad < 0:
             model.time += self.duration  # as FishModel.advance
         return bad

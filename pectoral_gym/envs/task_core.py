@@ -51,6 +51,7 @@ builds are not cached on disk: its code lives in the caller's file).
 from __future__ import annotations
 
 import math
+import operator
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, NamedTuple
@@ -139,12 +140,14 @@ def _info_builder(fields: Sequence[InfoField]) -> Callable[[np.ndarray], dict]:
             raise ValueError(f"info field {f!r}: the key must be an identifier and the index an out slot "
                              f"0..{N_OUT - 1}")
     keys = tuple(f.key for f in fields)
-    index = np.array([int(f.index) for f in fields], dtype=np.intp)
-    flags = tuple(f.flag for f in fields)
+    values = operator.itemgetter(*(int(f.index) for f in fields), N_OUT - 1)  # a tuple even for one field
+    flags = tuple(f.key for f in fields if f.flag)
 
     def info(out: np.ndarray) -> dict:
-        values = out[index]
-        return {key: (value > 0.5 if flag else value) for key, value, flag in zip(keys, values, flags, strict=True)}
+        entries = dict(zip(keys, values(out), strict=False))  # numpy scalars; the padding entry is left out
+        for key in flags:
+            entries[key] = entries[key] > 0.5
+        return entries
 
     return info
 
