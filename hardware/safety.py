@@ -27,7 +27,8 @@ import numpy as np
 
 from hardware.firmware import ServoLimits, clip_beats, rate_limit, stretch_transition
 from hardware.protocol import DEFAULT_LEASE, MAX_LEASE
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FishParams, body_coefficients
+from pectoral_gym import tank
+from pectoral_gym.params import FishParams, body_coefficients
 
 __all__ = ["SafetyConfig", "check_action", "CommandFilter", "Geofence", "SpeedBound", "in_geofence", "TrackingWatch",
            "install_stop_handlers"]
@@ -157,29 +158,23 @@ class Geofence:
     """
 
     def __init__(self, params: FishParams, margin: float, reaction_time: float, horizon: float):
-        coef = body_coefficients(params)
         self.params = params
-        self.k = coef.c1 / max(coef.m1, coef.m2)  # [1/m]
-        self.half_length, self.width, self.span = 0.5 * params.body_length, params.fin_offset, params.fin_span
+        self.k = tank.coast_rate(body_coefficients(params))  # [1/m]
+        self.shape = tank.Outline.from_params(params)
+        self.half_length, self.width, self.span = self.shape
         self.margin, self.reaction_time, self.horizon = float(margin), float(reaction_time), float(horizon)
 
     def coast(self, speed: float) -> float:
         """Distance [m] covered in ``horizon`` s by a fish coasting from ``speed`` [m/s] with its fins still."""
-        v = max(float(speed), 0.0)
-        return math.log1p(self.k * v * self.horizon) / self.k
+        return float(tank.coast_distance(float(speed), self.k, self.horizon))
 
     def outline(self, x: float, y: float, psi: float) -> tuple[np.ndarray, np.ndarray]:
         """Centres ``(4, 2)`` (nose, tail, right and left fin pivot) and radii ``(4,)`` of the outline [m]."""
-        c, s = math.cos(psi), math.sin(psi)
-        body = np.array([[self.half_length, 0.0], [-self.half_length, 0.0], [0.0, -self.width], [0.0, self.width]])
-        centres = np.array([x, y]) + body @ np.array([[c, s], [-s, c]])
-        return centres, np.array([self.width, self.width, self.span, self.span])
+        return tank.outline_arrays(x, y, psi, self.shape)
 
     def clearance(self, x: float, y: float, psi: float) -> np.ndarray:
         """Distance [m] from the outline to the walls ``X = 0, X = L, Y = 0, Y = W`` (negative: across)."""
-        p, r = self.outline(x, y, psi)
-        return np.array([np.min(p[:, 0] - r), np.min(TANK_LENGTH - p[:, 0] - r),
-                         np.min(p[:, 1] - r), np.min(TANK_WIDTH - p[:, 1] - r)])
+        return tank.clearance(x, y, psi, self.shape)
 
     def breached(self, x: float, y: float, psi: float, vx: float = 0.0, vy: float = 0.0, age: float = 0.0,
                  spread: tuple[float, float] = (0.0, 0.0), bound: float = math.inf, gain: float = 0.0) -> bool:
@@ -302,7 +297,7 @@ def in_geofence(x: float, y: float, psi: float, body_length: float, margin: floa
     half = 0.5 * body_length
     for sign in (1.0, -1.0):
         px, py = x + sign * half * math.cos(psi), y + sign * half * math.sin(psi)
-        if not (margin <= px <= TANK_LENGTH - margin and margin <= py <= TANK_WIDTH - margin):
+        if min(tank.wall_gaps(px, py)) < margin:
             return True
     return False
 
