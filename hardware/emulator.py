@@ -33,7 +33,7 @@ from hardware.finreplay import CHUNK as _CHUNK
 from hardware.finreplay import apply_firmware
 from hardware.firmware import Firmware, FirmwareConfig, new_boot_id
 from pectoral_gym import strokes
-from pectoral_gym.models import FullModel
+from pectoral_gym.model_spec import FULL_REFERENCE, FullSpec
 from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
 
 __all__ = ["EmulatedRobot", "ROBOT_ADDRESS", "main"]
@@ -57,20 +57,24 @@ class EmulatedRobot:
         camera_port: Serve rendered overhead frames on this TCP port (``hardware.camera.FrameServer``).
         camera_fps: Frame rate of the served camera [wall frames/s].
         seed: Seed of the loss injection and camera noise.
+        model: The physics the emulated fish follows (a full-model spec; default the reference integration).
     """
 
     def __init__(self, port: int | None = 0, pty: bool = False, host: str = "127.0.0.1", speed: float = 1.0,
                  params: FishParams | None = None, firmware: FirmwareConfig | None = None,
                  start_pose: tuple[float, float, float] | None = None, loss: float = 0.0,
-                 camera_port: int | None = None, camera_fps: float = 30.0, seed: int | None = None):
+                 camera_port: int | None = None, camera_fps: float = 30.0, seed: int | None = None,
+                 model: FullSpec = FULL_REFERENCE):
+        if not isinstance(model, FullSpec):
+            raise ValueError(f"model must be a FullSpec (pectoral_gym.model_spec), got {model!r}")
         if not (math.isfinite(speed) and speed > 0):
             raise ValueError(f"speed must be a finite number > 0, got {speed!r}")
         if not 0.0 <= loss < 1.0:
             raise ValueError(f"loss must be in [0, 1), got {loss!r}")
         self.speed = float(speed)
         self.loss = float(loss)
-        self.model = FullModel(1, params)
-        FullModel(1, params).advance(_CHUNK)  # load the compiled kernels now, not while the PC waits for acks
+        self.model = model.build(1, params)
+        model.build(1, params).advance(_CHUNK)  # load the compiled kernels now, not while the PC waits for acks
         self._rng = np.random.default_rng(seed)
         self._firmware_config = firmware
         self.firmware = Firmware(firmware, boot=new_boot_id(self._rng), power_up=0.0)  # emulated clock from 0

@@ -25,7 +25,8 @@ import numpy as np
 from hardware import protocol as pr
 from hardware.firmware import Firmware, FirmwareConfig, stretch_transition
 from pectoral_gym import strokes
-from pectoral_gym.models import FishModel, FullModel
+from pectoral_gym.model_spec import FULL_REFERENCE
+from pectoral_gym.models import FishModel
 from pectoral_gym.params import FinBeat, FishParams
 
 __all__ = ["CHUNK", "FinReplay", "advance_with_firmware", "apply_firmware"]
@@ -79,7 +80,7 @@ class FinReplay:
 
     def __init__(self, params: FishParams | None = None, firmware: FirmwareConfig | None = None):
         self.firmware_config = firmware
-        self.model = FullModel(1, params)
+        self.model = FULL_REFERENCE.build(1, params)  # the fins' kinematics: the integration preset does not matter
         self.reset(0.0)
 
     def reset(self, t: float) -> None:
