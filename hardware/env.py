@@ -341,7 +341,10 @@ class HardwareFishEnv(gym.Env):
                 raise RuntimeError(f"the robot did not confirm it stopped within {self.stop_timeout:.1f} s "
                                    f"(link: {self.link.health()}); the reset hook was not called; check the "
                                    "radio and the robot")
-            if self.link.stop(wait=min(remaining, max(0.2, 4 * self.link.ack_timeout))):
+            # One STOP, then wait for the robot's word: its retries and the keep-alive's STOP copies (newer
+            # sequence numbers, which also confirm it) cover lost frames; a fresh STOP per short wait would
+            # restart the wait before a slow radio's answer (one round trip or more) could arrive.
+            if self.link.stop(wait=remaining):
                 return
 
     def rearm(self) -> None:

@@ -363,9 +363,18 @@ def _inside(points):
             and points[:, 1].max() < TANK_WIDTH)
 
 
+def _wall_rule_stopped(info):
+    """The wall rule stopped the fish: the geofence, or (issue 30, finding 9) the same rule applied while the fish
+    was unseen for longer than the reaction time on a loaded machine (the fastest speed gain since the last pose
+    could reach the stopping band), reported as tracking_lost well before the 3 s tracking timeout."""
+    if info["safety_stop"] == "geofence":
+        return True
+    return info["safety_stop"] == "tracking_lost" and info["tracking"]["lost_for"] < 3.0
+
+
 def test_full_thrust_at_the_far_wall_stops_before_it():
     info, points = _full_thrust_at((1.0, 0.575, 0.0))
-    assert info["safety_stop"] == "geofence"
+    assert _wall_rule_stopped(info), info["tracking"]
     assert _inside(points) and points[:, 0].max() > 1.5  # it did swim towards the wall
 
 
@@ -375,7 +384,7 @@ def test_full_thrust_at_every_wall_and_corner(heading_deg):
     psi = math.radians(heading_deg)
     start = (TANK_LENGTH / 2 - 0.5 * math.cos(psi), TANK_WIDTH / 2 - 0.2 * math.sin(psi), psi)
     info, points = _full_thrust_at(start, steps=80)
-    assert info["safety_stop"] == "geofence" and _inside(points)
+    assert _wall_rule_stopped(info) and _inside(points)
 
 
 def test_fish_parallel_to_a_wall_is_stopped_by_its_fin_tips():

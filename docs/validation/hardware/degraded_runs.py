@@ -1,0 +1,135 @@
+"""How often a degraded radio or camera ends an episode on the emulated robot (issue 30's tolerance targets).
+
+Runs the hand baseline through the whole robot stack (``HardwareFishEnv``: radio link, firmware rules,
+camera, tracker, observer, safety supervisor) against the emulated robot under each condition, and
+counts the episodes that end in a ``link_lost`` or ``tracking_lost`` stop:
+
+* ``clean``: loopback radio, the emulated camera as it is;
+* ``bursty``: a radio with 100 ms one-way latency and fades covering 5 % of the time in 0.2 s bursts
+  (:class:`hardware.radioproxy.RadioProxy`);
+* ``drops``: 10 % of the camera frames lost (:class:`hardware.camerafaults.FaultyCamera`);
+* ``load``: both cores loaded by two busy processes for the whole run.
+
+Example (the figures in docs/hardware.md)::
+
+    python docs/validation/hardware/degraded_runs.py --episodes 25 --speed 1 --out degraded.json
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import json
+import math
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+from tqdm import tqdm
+
+from agents.baselines import make_baseline
+from hardware.camerafaults import FaultyCamera
+from hardware.emulator import EmulatedRobot
+from hardware.env import HardwareFishEnv
+from hardware.radioproxy import RadioProxy
+from pectoral_gym.envs import tasks as tk
+
+CONDITIONS = ("clean", "bursty", "drops", "load")
+
+
+def _start(rng: np.random.Generator) -> tuple[float, float, float]:
+    x = tk.START_INSET + rng.random() * (tk.TANK_X - 2 * tk.START_INSET)
+    y = tk.START_INSET + rng.random() * (tk.TANK_Y - 2 * tk.START_INSET)
+    return x, y, -math.pi + 2 * math.pi * rng.random()
+
+
+@contextlib.contextmanager
+def _busy_cores(n: int):
+    procs = [subprocess.Popen([sys.executable, "-c", "while True: pass"]) for _ in range(n)]
+    try:
+        yield
+    finally:
+        for p in procs:
+            p.kill()
+            p.wait()
+
+
+def run_condition(condition: str, episodes: int, speed: float, seed: int, progress: bool) -> dict:
+    """Run ``episodes`` hand-law episodes under ``condition``; returns counts of how they ended."""
+    robot = EmulatedRobot(speed=speed, seed=seed).start()
+    proxy = None
+    url = robot.url
+    if condition == "bursty":
+        proxy = RadioProxy(robot.url, latency=0.1, burst=(0.05, 0.2), seed=seed, speed=speed)
+        url = proxy.url
+    camera = robot.camera(seed=seed)
+    if condition == "drops":
+        camera = FaultyCamera(camera, drop=0.1, seed=seed)
+    ends: Counter[str] = Counter()
+    reasons: Counter[str] = Counter()
+    stack = contextlib.ExitStack()
+    if condition == "load":
+        stack.enter_context(_busy_cores(2))
+    env = None
+    try:
+        with stack:
+            env = HardwareFishEnv(url, camera, speed=speed, reset_hook=lambda rng: robot.place(*_start(rng)))
+            controller = make_baseline("hand", env.config)
+            for episode in tqdm(range(episodes), desc=condition, disable=not progress):
+                obs, _ = env.reset(seed=seed + episode)
+                controller.reset(seed + episode)
+                while True:
+                    obs, _, terminated, truncated, info = env.step(controller.act(obs))
+                    if terminated or truncated:
+                        break
+                stop = info["safety_stop"]
+                end = stop or ("success" if info.get("is_success") else "end")
+                ends[end] += 1
+                if stop == "tracking_lost":
+                    reasons[info["tracking"]["reason"][:60]] += 1
+    finally:
+        if env is not None:
+            env.close()
+        if proxy is not None:
+            proxy.close()
+        robot.stop()
+    lost = ends["link_lost"] + ends["tracking_lost"]
+    return {"condition": condition, "episodes": episodes, "ends": dict(ends), "tracking_reasons": dict(reasons),
+            "lost_share": lost / episodes}
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--episodes", type=int, default=25, help="episodes per condition (default %(default)s)")
+    parser.add_argument("--speed", type=float, default=1.0, help="emulated clock speed-up (default %(default)s)")
+    parser.add_argument("--seed", type=int, default=100, help="seed of starts, goals and faults (default %(default)s)")
+    parser.add_argument("--conditions", nargs="+", choices=CONDITIONS, default=list(CONDITIONS))
+    parser.add_argument("--out", type=Path, default=None, help="write the results as JSON here")
+    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    args = parser.parse_args(argv)
+    if args.episodes < 1 or not 0.1 <= args.speed <= 5:
+        parser.error("--episodes must be >= 1 and --speed in [0.1, 5]")
+    results = []
+    for condition in args.conditions:
+        t0 = time.monotonic()
+        result = run_condition(condition, args.episodes, args.speed, args.seed, not args.quiet)
+        result["wall_s"] = round(time.monotonic() - t0, 1)
+        results.append(result)
+        print(json.dumps(result), flush=True)
+    if args.out is not None:
+        args.out.write_text(json.dumps({"speed": args.speed, "seed": args.seed, "results": results}, indent=2) + "\n")
+    print("| condition | episodes | link_lost | tracking_lost | share | other ends |")
+    print("|---|---|---|---|---|---|")
+    for r in results:
+        other = {k: v for k, v in r["ends"].items() if k not in ("link_lost", "tracking_lost")}
+        print(f"| {r['condition']} | {r['episodes']} | {r['ends'].get('link_lost', 0)} | "
+              f"{r['ends'].get('tracking_lost', 0)} | {100 * r['lost_share']:.0f} % | {other} |")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
