@@ -81,6 +81,20 @@ def _as_beat_array(beat: BeatLike, n: int) -> np.ndarray:
     return arr.copy()
 
 
+def _setting(name: str, doc: str) -> property:
+    """A model setting the kernels take: a plain attribute whose every assignment bumps ``settings_revision``."""
+    private = "_" + name
+
+    def get(self):
+        return self.__dict__[private]
+
+    def set(self, value) -> None:
+        self.__dict__[private] = value
+        self.settings_revision += 1
+
+    return property(get, set, doc=doc)
+
+
 class FishModel:
     """Common state and interface of the batched models.
 
@@ -101,6 +115,13 @@ class FishModel:
     """
 
     averaged: bool = False
+    #: The settings the step kernels take besides the tables; setting one bumps :attr:`settings_revision`.
+    SETTINGS = ("dt_max", "min_substeps", "mode", "transitions", "ripple_offsets")
+    dt_max = _setting("dt_max", "Largest integration substep [s].")
+    min_substeps = _setting("min_substeps", "Full model: least number of substeps per half-stroke.")
+    mode = _setting("mode", "Averaged forcing form (``averaging.EXACT`` or ``averaging.TAYLOR``).")
+    transitions = _setting("transitions", "Averaged model's ``transitions`` option (:class:`AveragedModel`).")
+    ripple_offsets = _setting("ripple_offsets", "Averaged model's ``ripple_offsets`` option (:class:`AveragedModel`).")
 
     def __init__(self, n: int = 1, params: FishParams | Sequence[FishParams] | None = None, dt_max: float = 0.02):
         if int(n) < 1:
@@ -192,6 +213,10 @@ class FishModel:
         self.time += duration
         return self.state
 
+    #: Bumped whenever a setting the kernels take (:data:`SETTINGS`) or :attr:`tables` is set, so a
+    #: caller that keeps them (``envs.fused.FusedStep``) sees the change by one comparison.
+    settings_revision: int = 0
+
     @property
     def corrections(self) -> int:
         """The averaged model's corrections as the kernels take them (:func:`pectoral_gym.stepping.corrections`)."""
@@ -210,6 +235,7 @@ class FishModel:
     @tables.setter
     def tables(self, tables: KTables) -> None:
         self._tables = tables
+        self.settings_revision += 1
         self._packed_tables = tuple(tables)  # what the kernels take (ktables.as_tables)
         forcing_cache.invalidate(self.forcing_cache)  # the cached forcing depends on them
 

@@ -246,3 +246,17 @@ def test_builtin_info_reads_the_documented_out_slots():
     track = TASK_TABLE["track"].info(out)
     assert track == {"reward_tracking": 0.6, "reward_wall": 0.3, "reward_energy": 0.4, "distance": 0.7,
                      "tracking_error": 0.7}
+
+
+def test_a_given_info_function_must_give_the_task_fields():
+    """A row's hand-written ``info`` is checked against its fields: the built-in ones agree, a wrong one is refused."""
+    import dataclasses
+
+    from pectoral_gym.envs.task_core import TASK_TABLE
+
+    for task in TASK_TABLE.values():
+        row = np.linspace(-1.0, 2.0, 10)
+        assert list(task.info(row).items()) == list(dataclasses.replace(task, info=None).info(row).items())
+    goal = TASK_TABLE["goal"]
+    with pytest.raises(ValueError, match="does not give info_fields"):
+        dataclasses.replace(goal, info=TASK_TABLE["track"].info)

@@ -20,7 +20,7 @@ parallel; every env's arithmetic is the same in both, so the two give the same b
 kernel bound in place of ``reward_one`` (:func:`step_builds`).
 
 The arrays of one core are bound once into a :class:`StepArrays` (a numba structref that holds
-them, not copies), so a step passes one object, the skip mask and the model's settings
+them, not copies), so a step passes one object, the skip mask and the model's settings, bound with the arrays
 (:class:`StepSettings`); the compiled entry point of that exact signature
 (:func:`pectoral_gym._jit.entry_point`) skips numba's argument typing (about 1 us for a structref).
 
@@ -141,17 +141,20 @@ def step_builds(task_kernel: Callable[..., Any]) -> KernelPair:
 
 class _Bound(NamedTuple):
     arrays: StepArrays
-    call: Callable[..., int]
-    tables: tuple
+    kernel: Callable[..., int]  # the build (a dispatcher: any argument types)
+    call: Callable[..., int]  # its entry point for (arrays, a bool mask, settings)
+    settings: StepSettings
+    revision: int  # the model's settings_revision they were bound at
 
 
 class FusedStep:
     """The one-call step of a batch of envs on one model (what ``EnvCore.step`` runs).
 
     Args:
-        model: The batched model; its arrays are bound at the first call, its settings
-            (``dt_max``, ``min_substeps``, ``mode``, ``corrections``) read at every call and
-            its K tables rebound when they change, as :meth:`FishModel.advance` reads them.
+        model: The batched model; its arrays, K tables and settings (``dt_max``, ``min_substeps``,
+            ``mode``, ``corrections``) are bound at the first call and bound again after any of the
+            settings or the tables is set (its ``settings_revision`` changed), so every step uses
+            them as :meth:`FishModel.advance` would.
         duration: Control period [s].
         actions: ``(n, 8)`` C-contiguous float64 action buffer; a call with this very array
             takes the entry point, any other array is copied into it first.
@@ -188,22 +191,25 @@ class FusedStep:
         return builds.parallel if self.parallel else builds.serial
 
     def settings(self) -> StepSettings:
-        """The model's settings now, as the model holds them (the entry point converts them to its types)."""
+        """The model's settings now, with the types the compiled step takes."""
         m = self.model
-        return StepSettings(self.duration, m.dt_max, m.min_substeps, m.averaged, m.mode, m.corrections)
+        return StepSettings(self.duration, float(m.dt_max), float(m.min_substeps), bool(m.averaged), int(m.mode),
+                            int(m.corrections))
 
     def _bind(self) -> _Bound:
         m = self.model
-        tables = m.packed_tables  # the tuple FishModel.advance passes (ktables.as_tables)
+        revision = m.settings_revision  # read first: a change while binding rebinds at the next call
         arrays = new_step_arrays(self.actions, *self.env_arrays, self.everyone, m.state, m.fins, m.forcing_cache,
-                                 m.pending, m.integral, m.coef, tables)
-        m = self.model
-        typed = StepSettings(self.duration, float(m.dt_max), float(m.min_substeps), bool(m.averaged), int(m.mode),
-                             int(m.corrections))  # the types the entry point converts every call's settings to
-        return _Bound(arrays, entry_point(self.kernel, (arrays, self.none, typed)), tables)
+                                 m.pending, m.integral, m.coef, m.packed_tables)
+        settings = self.settings()
+        kernel = self.kernel
+        return _Bound(arrays, kernel, entry_point(kernel, (arrays, self.none, settings)), settings, revision)
 
     def __call__(self, actions: np.ndarray, skip: np.ndarray | None = None) -> int:
         """Step the envs not in ``skip`` (a bool mask); returns -1, or the first env with a non-finite action.
+
+        The arrays and settings are bound once and again whenever the model's ``settings_revision``
+        changes (a setting or the K tables set).
 
         Raises:
             ValueError: If ``actions`` does not have the buffer's shape ``(n, 8)``.
@@ -215,15 +221,12 @@ class FusedStep:
             buffer[...] = actions  # float64, as the kernels read every action entry
         model = self.model
         bound = self._bound
-        if bound is None or bound.tables is not model.packed_tables:
+        if bound is None or bound.revision != model.settings_revision:
             bound = self._bound = self._bind()
         if skip is None:  # the types the entry point was compiled for
-            bad = bound.call(bound.arrays, self.none, self.settings())
+            bad = bound.call(bound.arrays, self.none, bound.settings)
         else:
-            m = model
-            typed = StepSettings(self.duration, float(m.dt_max), float(m.min_substeps), bool(m.averaged),
-                                 int(m.mode), int(m.corrections))
-            bad = self.kernel(bound.arrays, np.ascontiguousarray(skip, dtype=np.bool_), typed)
+            bad = bound.kernel(bound.arrays, np.ascontiguousarray(skip, dtype=np.bool_), bound.settings)
         if bad < 0:
             model.time += self.duration  # as FishModel.advance
         return bad

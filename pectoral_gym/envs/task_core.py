@@ -67,7 +67,13 @@ from pectoral_gym.envs.layout import (
     N_EP,
     N_OUT,
     O_DISTANCE,
+    O_ENERGY,
+    O_GOAL,
+    O_PROGRESS,
     O_SUCCESS,
+    O_TIME,
+    O_TRACKING,
+    O_WALL,
     TRACK,
     fish_array,
 )
@@ -111,6 +117,9 @@ class Task:
         observe: Serial/parallel builds of :func:`observe_body` with ``reward_one``:
             ``observe.run(state, skip, cfg, ep, fish, obs, out)`` (the robot env's step).
         fit_start: ``fit_start(draws, x, y, rng)``: adapt the draws to a measured start pose (or ``None``).
+        info: ``info(out_row) -> dict``: the env's ``info`` (:attr:`info_fields` as numpy scalars, flags as
+            ``np.bool_``). Built from the fields when not given; a given one must agree with them on probe
+            rows (keys in order, values, types), else ``ValueError``.
     """
 
     name: str
@@ -122,15 +131,28 @@ class Task:
     reward_one: Callable[..., Any]
     observe: KernelPair
     fit_start: Callable[[np.ndarray, float, float, np.random.Generator], None] | None = None
-    info: Callable[[np.ndarray], dict] = field(init=False, repr=False, compare=False)
+    info: Callable[[np.ndarray], dict] | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "info", _info_builder(self.info_fields))
+        built = _info_builder(self.info_fields)
+        if self.info is None:
+            object.__setattr__(self, "info", built)
+        elif not _same_info(self.info, built):
+            raise ValueError(f"task {self.name!r}: its info function does not give info_fields")
 
     @property
     def info_fields(self) -> tuple[InfoField, ...]:
         """Every ``info`` entry in order: the reward terms, ``"distance"``, then ``extra_info``."""
         return (*(InfoField(k, i) for k, i in self.terms), InfoField("distance", O_DISTANCE), *self.extra_info)
+
+
+def _same_info(info: Callable[[np.ndarray], dict], built: Callable[[np.ndarray], dict]) -> bool:
+    """Whether ``info`` gives the same keys in the same order, values and types as ``built`` on probe rows."""
+    for row in (np.arange(N_OUT) * 0.25, np.arange(N_OUT)[::-1] * 0.5 - 1.0):
+        a, b = info(row), built(row)
+        if list(a) != list(b) or any(type(a[k]) is not type(b[k]) or a[k] != b[k] for k in b):
+            return False
+    return True
 
 
 def _info_builder(fields: Sequence[InfoField]) -> Callable[[np.ndarray], dict]:
@@ -184,12 +206,26 @@ def _fit_goal(draws: np.ndarray, x: float, y: float, rng: np.random.Generator) -
         draws[4] = tk.GOAL_INSET + u[1] * (tk.TANK_Y - 2.0 * tk.GOAL_INSET)
 
 
+def _goal_info(out: np.ndarray) -> dict:
+    """``goal``'s info as a dict display (the fastest dict Python builds); checked against its fields."""
+    return {"reward_progress": out[O_PROGRESS], "reward_goal": out[O_GOAL], "reward_wall": out[O_WALL],
+            "reward_energy": out[O_ENERGY], "reward_time": out[O_TIME], "distance": out[O_DISTANCE],
+            "is_success": out[O_SUCCESS] > 0.5}
+
+
+def _track_info(out: np.ndarray) -> dict:
+    """``track``'s info as a dict display; checked against its fields."""
+    return {"reward_tracking": out[O_TRACKING], "reward_wall": out[O_WALL], "reward_energy": out[O_ENERGY],
+            "distance": out[O_DISTANCE], "tracking_error": out[O_DISTANCE]}
+
+
 TASK_TABLE: dict[str, Task] = {
     "goal": Task("goal", GOAL, tk.TERMS[GOAL], (InfoField("is_success", O_SUCCESS, flag=True),),
                  lambda rng: tk.draw_episode(rng, GOAL), tk.start_states, tk.reward_one, _OBSERVE,
-                 fit_start=_fit_goal),
+                 fit_start=_fit_goal, info=_goal_info),
     "track": Task("track", TRACK, tk.TERMS[TRACK], (InfoField("tracking_error", O_DISTANCE),),
-                  lambda rng: tk.draw_episode(rng, TRACK), tk.start_states, tk.reward_one, _OBSERVE),
+                  lambda rng: tk.draw_episode(rng, TRACK), tk.start_states, tk.reward_one, _OBSERVE,
+                  info=_track_info),
 }
 _BY_ID: dict[int, Task] = {t.id: t for t in TASK_TABLE.values()}
 
