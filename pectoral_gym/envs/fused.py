@@ -102,20 +102,26 @@ def step_body(a, skip, s):
     Returns -1, or the index of the first env not in ``skip`` whose action is not finite (then
     nothing has been written). The steps are listed in the module docstring.
     """
-    bad = tk.first_non_finite(a.actions, skip)
+    # The fields as locals, read once: inside the prange loops each read of a structref field would
+    # take and drop a reference to the array (atomic counts that the threads would share).
+    actions, cfg, beats, obs, out, fish, ep, before = a.actions, a.cfg, a.beats, a.obs, a.out, a.fish, a.ep, a.before
+    state, fins, cache, pending, integral, coef, tables = a.state, a.fins, a.cache, a.pending, a.integral, a.coef, \
+        a.tables
+    duration, dt_max, min_substeps, averaged, mode, corrections = s
+    bad = tk.first_non_finite(actions, skip)
     if bad >= 0:
         return bad
-    n = a.actions.shape[0]
+    n = actions.shape[0]
     for i in nb.prange(n):
-        tk.apply_keep_one(i, a.actions, skip, a.cfg, a.beats, a.obs, a.out, a.fish, a.integral, a.before)
-    command_fins(a.fins, a.pending, a.beats, a.everyone)
+        tk.apply_keep_one(i, actions, skip, cfg, beats, obs, out, fish, integral, before)
+    command_fins(fins, pending, beats, a.everyone)
     for i in nb.prange(n):
-        stepping.advance_one(i, a.state, a.fins, a.cache, a.pending, a.integral, a.coef, s.duration, s.dt_max,
-                             s.min_substeps, s.averaged, s.mode, s.corrections, a.tables)
+        stepping.advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged,
+                             mode, corrections, tables)
     for i in nb.prange(n):
         if not skip[i]:
-            reward_one(i, a.state, a.cfg, a.ep, a.fish, a.obs, a.out)
-        tk.observe_mean_velocity(i, a.cfg, a.obs, a.integral, a.before)
+            reward_one(i, state, cfg, ep, fish, obs, out)
+        tk.observe_mean_velocity(i, cfg, obs, integral, before)
     return -1
 
 

@@ -8,9 +8,10 @@ the ratios base / this (above 1: this checkout is faster)::
     python docs/validation/step_path/speed_vs_base.py --base /tmp/stepbase
 
 Cases: the single averaged and full envs through :func:`gymnasium.make` (``steps`` steps, actions
-pre-drawn from the seeded action space, reset on termination or truncation), timed in process CPU
-time (:func:`time.process_time`: the single env runs on one thread, so other jobs on the machine
-slow it much less than they slow the wall clock); and the averaged vector env at 4096 envs
+pre-drawn from the seeded action space, reset on termination or truncation), timed in the CPU time
+of the stepping thread (:func:`time.thread_time`: other jobs on the machine slow it much less than
+they slow the wall clock, and the vector env's worker threads, which may still spin after its pass,
+are not counted); and the averaged vector env at 4096 envs
 (``vector_entry_point``, a new action every step), timed in wall-clock time since its parallel
 build runs on several threads.
 """
@@ -44,12 +45,12 @@ def _worker(steps: int, vector_steps: int) -> None:
 
         def single(env=env, actions=actions) -> float:
             env.reset(seed=0)
-            start = time.process_time()
+            start = time.thread_time()
             for action in actions:
                 _, _, terminated, truncated, _ = env.step(action)
                 if terminated or truncated:
                     env.reset()
-            return time.process_time() - start
+            return time.thread_time() - start
 
         runs[case] = single
     envs = gym.make_vec("PectoralFish-Averaged-v0", num_envs=4096, vectorization_mode="vector_entry_point")
@@ -113,7 +114,7 @@ def main() -> None:
     for process in workers.values():
         process.stdin.close()
         process.wait()
-    print(f"# {args.rounds} alternating rounds; single envs: process CPU time of {args.steps} steps, "
+    print(f"# {args.rounds} alternating rounds; single envs: thread CPU time of {args.steps} steps, "
           f"vector env: wall time of {args.vector_steps} batch steps")
     print(f"{'case':<14}{'base us/step':>14}{'this us/step':>14}{'base/this':>11}")
     for case in CASES:
