@@ -47,6 +47,7 @@ def _feed(h, value) -> None:
 
 
 def single(env_id: str, kwargs: dict, seed: int = 0) -> str:
+    """SHA-256 of a 60-step episode (observations, rewards, flags, infos) of one env."""
     env = gym.make(env_id, **kwargs)
     rng = np.random.default_rng(seed)
     h = hashlib.sha256()
@@ -80,6 +81,7 @@ def vector(env_id: str, kwargs: dict, n: int, seed: int = 0) -> tuple[str, str]:
 
 
 def main() -> None:
+    """Print the hash of every setting, single and vector."""
     for name, (env_id, kwargs) in SETTINGS.items():
         print(f"{name:28s} single {single(env_id, kwargs)}", flush=True)
         for n in (4, 80):
