@@ -21,6 +21,8 @@ import time
 
 import numpy as np
 import pytest
+from emulator_helpers import stopped_at as _stopped_at
+from emulator_helpers import wait_for as _wait
 
 from hardware import protocol as pr
 from hardware.emulator import EmulatedRobot
@@ -39,23 +41,6 @@ FULL = np.array([0.0, 1.0, -1.0, 1.0] * 2, dtype=np.float32)  # bias 90 deg, lar
 P = FishParams()
 
 
-def _wait(cond, timeout=5.0):
-    deadline = time.monotonic() + timeout
-    while not cond() and time.monotonic() < deadline:
-        time.sleep(0.005)
-    return cond()
-
-
-def _stopped_at(robot, after):
-    """First emulated time >= ``after`` from which the fins never beat again (``None``: still beating)."""
-    _wait(lambda: not robot.firmware.running)  # a STOP may still be on its way
-    n = len(robot.trace)
-    _wait(lambda: len(robot.trace) > n + 1)  # and the chunk that applied it in the trace
-    trace = list(robot.trace)
-    last_running = max((t for t, _, rates, _, running in trace if running or np.any(rates != 0)), default=None)
-    if trace and trace[-1][4]:
-        return None
-    return max(after, last_running) if last_running is not None else after
 
 
 def _make_rig(speed=2.0, start=(1.15, 0.575, 0.0), camera=None, task="goal", **safety):

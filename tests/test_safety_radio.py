@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 import pytest
+from emulator_helpers import wait_for
 
 from hardware import protocol as pr
 from hardware.emulator import EmulatedRobot
@@ -29,11 +30,10 @@ BEATS = np.array([[math.pi / 2, math.radians(20), 1.0, 3.0]] * 2)
 LEASE = pr.DEFAULT_LEASE
 
 
+
+
 def _wait(cond, timeout=3.0):
-    deadline = time.monotonic() + timeout
-    while not cond() and time.monotonic() < deadline:
-        time.sleep(0.005)
-    return cond()
+    return wait_for(cond, timeout)
 
 
 def _link(url, speed=SPEED, **kwargs):

@@ -14,6 +14,7 @@ import time
 
 import numpy as np
 import pytest
+from emulator_helpers import wait_for as _wait
 
 from hardware import protocol as pr
 from hardware.emulator import EmulatedRobot
@@ -31,11 +32,6 @@ REST = np.array([0.0, -1.0, 0.0, 0.0] * 2, dtype=np.float32)  # bias 90 deg, amp
 FULL = np.array([0.0, 1.0, -1.0, 1.0] * 2, dtype=np.float32)
 
 
-def _wait(cond, timeout=5.0):
-    deadline = time.monotonic() + timeout
-    while not cond() and time.monotonic() < deadline:
-        time.sleep(0.005)
-    return cond()
 
 
 @contextlib.contextmanager
@@ -94,10 +90,21 @@ def test_stop_between_steps_and_inside_a_step_ends_the_episode_and_holds():
             env.reset(seed=1)
         env.rearm()
         env.reset(seed=1)
-        timer = threading.Timer(0.05, env.stop)  # inside the next step
-        timer.start()
+        # Inside the next step, from another thread (a GUI button): fired from the step's first wait, so a
+        # loaded machine cannot move it after the step.
+        pressed = []
+        step_sleep = env._sleep
+
+        def sleep_with_button(dt):
+            if not pressed:
+                pressed.append(threading.Thread(target=env.stop))
+                pressed[0].start()
+                pressed[0].join()
+            step_sleep(dt)
+
+        env._sleep = sleep_with_button
         _, _, _, truncated, info = env.step(FULL)
-        timer.join()
+        assert pressed
         assert truncated and info["safety_stop"] == "stop"
         assert _wait(lambda: not robot.firmware.running)
         with pytest.raises(RuntimeError, match="rearm"):

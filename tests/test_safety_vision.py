@@ -13,6 +13,8 @@ import time
 
 import numpy as np
 import pytest
+from emulator_helpers import stopped_at as _stopped_at
+from emulator_helpers import wait_for as _wait
 
 from hardware.camera import EmulatedCamera
 from hardware.camerafaults import FaultyCamera
@@ -255,26 +257,9 @@ def test_grabber_renders_in_its_own_thread_with_the_pose_stamp():
         grabber.close()
 
 
-def _wait(cond, timeout=5.0):
-    deadline = time.monotonic() + timeout
-    while not cond() and time.monotonic() < deadline:
-        time.sleep(0.005)
-    return cond()
 
 
 # ---------------------------------------------------------------- end to end: the emulated robot stops
-def _stopped_at(robot, after):
-    """First emulated time >= ``after`` from which the fins never beat again (``None``: still beating)."""
-    _wait(lambda: not robot.firmware.running)
-    n = len(robot.trace)
-    _wait(lambda: len(robot.trace) > n + 1)
-    trace = list(robot.trace)
-    last_running = max((t for t, _, rates, _, running in trace if running or np.any(rates != 0)), default=None)
-    if trace and trace[-1][4]:
-        return None
-    return max(after, last_running) if last_running is not None else after
-
-
 @contextlib.contextmanager
 def _rig(wrap):
     from hardware.emulator import EmulatedRobot
