@@ -189,7 +189,7 @@ def source_tree(module: str, file: str | os.PathLike[str]) -> dict[str, Path | N
         if not readable:
             continue
         package = name if source.name == "__init__.py" else name.rpartition(".")[0]
-        for choices in _imports(_read(source).tree, package):
+        for choices in _imports_of(source, package):
             if choices[-1] != top and not choices[-1].startswith(top + "."):
                 continue  # another package
             found = [(c, f) for c in choices if (f := _module_file(base, c)) is not None]
@@ -218,6 +218,17 @@ def _read_version(path: Path, mtime_ns: int, size: int) -> _Source:
     except (SyntaxError, ValueError):
         tree = None
     return _Source(hashlib.sha256(data).digest(), tree)
+
+
+def _imports_of(path: Path, package: str) -> tuple[tuple[str, ...], ...]:
+    """:func:`_imports` of the file's current version (walked once per version: every kernel's digest reads them)."""
+    stat = path.stat()
+    return _imports_of_version(path, stat.st_mtime_ns, stat.st_size, package)
+
+
+@functools.cache
+def _imports_of_version(path: Path, mtime_ns: int, size: int, package: str) -> tuple[tuple[str, ...], ...]:
+    return tuple(_imports(_read_version(path, mtime_ns, size).tree, package))
 
 
 def _imports(tree: ast.Module | None, package: str) -> Iterator[tuple[str, ...]]:
