@@ -22,6 +22,7 @@ import signal
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
@@ -197,25 +198,53 @@ class Geofence:
         return bool(np.any(self.clearance(x, y, psi) < np.array(need)))
 
 
+class _Riccati(NamedTuple):
+    """``du/dt <= gain - kappa u^2`` while the fins may run, ``<= -kappa u^2`` while still; ``|V| <= u / scale``."""
+
+    gain: float
+    kappa: float
+    scale: float
+
+    @property
+    def top(self) -> float:
+        return math.sqrt(self.gain / self.kappa)
+
+    def advance(self, u: float, run: float, coast: float) -> float:
+        """``u`` after ``run`` s with the fins possibly running, then ``coast`` s with them still (closed form)."""
+        top = self.top
+        if run > 0:
+            r = math.sqrt(self.gain * self.kappa)
+            if u < top:  # from below the fixed point
+                u = top * math.tanh(r * run + math.atanh(u / top))
+            elif u > top:
+                u = top / math.tanh(r * run + 0.5 * math.log((u + top) / (u - top)))
+        if coast > 0:
+            u = u / (1.0 + self.kappa * u * coast)
+        return u
+
+
 class SpeedBound:
     """The fastest the fish can move, ``|V| <= bound(t)``, from the times its fins may have run since a reset.
 
-    Derivation (``docs/hardware.md``, "Physical speed bound"): with ``E = (m1 vx^2 + m2 vy^2 + J3 omega^2) / 2``
-    eqs. (19)-(20) give ``dE/dt = vx Fx + vy Fy + omega tau - c1 |V|^3 - C_M |omega|^3`` (the Munk and lift
-    terms exchange energy, they add none). With ``u = sqrt(2 E)``, Cauchy-Schwarz in the energy metric and
-    the smallest dissipation on an energy ellipse: ``du/dt <= G - kappa u^2`` while the fins may run,
-    ``du/dt <= -kappa u^2`` while they are still, and ``|V| <= u / sqrt(min(m1, m2))``. ``G`` bounds
-    ``sqrt(Fx^2 / m1 + Fy^2 / m2 + tau^2 / J3)`` from the largest fin force the servo limits allow (peak
-    rate ``max_speed``, shortest half-stroke ``period_min / (ratio_max + 1)``, eqs. (13)-(17)).
+    Two rigorous bounds of eqs. (19)-(20), each integrated in closed form; the smaller rules (derivations in
+    ``docs/hardware.md``, "Physical speed bound"):
+
+    * impulse: Kirchhoff's linear impulse ``P = R(psi) (m1 vx, m2 vy)`` obeys ``dP/dt = R(psi) (f + h)`` (the
+      Munk terms are the rotation of the body frame; ``f`` the fins' force, ``h`` the drag and lift of
+      (20)), so ``d|P|/dt <= F - kappa_P |P|^2`` and ``|V| <= |P| / min(m1, m2)``: the tighter while the fins
+      run (``F``: the most two fins can push);
+    * energy: ``E = (m1 vx^2 + m2 vy^2 + J3 omega^2) / 2`` gives ``du/dt <= G - kappa_E u^2`` with ``u =
+      sqrt(2 E)`` and ``|V| <= u / sqrt(min(m1, m2))``: the tighter while the fish coasts.
+
+    The fin force is the largest the servo limits allow (peak rate ``max_speed``, shortest half-stroke,
+    eqs. (13)-(17)).
 
     Args:
         params: Fish parameters.
         limits: Servo limits the firmware enforces.
 
     Attributes:
-        gain: ``G`` [N / sqrt(kg)]. kappa: ``kappa`` [1 / (m sqrt(kg))]. mass: ``min(m1, m2)`` [kg].
-        top: The bound's limit with the fins running for ever [m/s]. accel: Its fastest growth ``G / sqrt(mass)``
-            [m/s^2].
+        top: The bound's limit with the fins running for ever [m/s]. accel: Its fastest growth [m/s^2].
     """
 
     def __init__(self, params: FishParams, limits: ServoLimits):
@@ -225,59 +254,60 @@ class SpeedBound:
         # One fin: |F_n| = k g'^2 (13) plus the fin's inertia m_p |a(S_p / 2)| = I_p sqrt(g''^2 + g'^4) (15),
         # with |g''| <= pi |g'|_peak / d for a half-cosine stroke of duration d.
         force = params.fin_drag_constant * w * w + params.fin_inertia_constant * math.hypot(w * w, math.pi * w / d_min)
-        self.mass = min(coef.m1, coef.m2)
-        self.gain = 2.0 * force * math.sqrt(1.0 / self.mass + params.fin_offset ** 2 / coef.J3)  # tau = C_p (fxR - fxL)
-        alpha = coef.c1 / max(coef.m1, coef.m2) ** 1.5  # translational dissipation per (energy speed)^3
-        beta = params.moment_coef / coef.J3 ** 1.5  # rotational
-        self.kappa = alpha * beta / math.hypot(alpha, beta)  # min of alpha c^3 + beta s^3 on the unit circle
-        self._u_top = math.sqrt(self.gain / self.kappa)
-        self.top = self._u_top / math.sqrt(self.mass)
-        self.accel = self.gain / math.sqrt(self.mass)
+        m_min, m_max = min(coef.m1, coef.m2), max(coef.m1, coef.m2)
+        # Impulse: p . h <= -c1 |V| (m1 vx^2 + m2 vy^2) + c2 |alpha| |m1 - m2| |vx vy| |V|, with |alpha| <= pi/2,
+        # |vx vy| <= |V|^2 / 2, |p| / m_max <= |V| <= |p| / m_min.
+        leak = coef.c2 * (math.pi / 4.0) * abs(coef.m1 - coef.m2) / m_min ** 3
+        kappa_p = coef.c1 / m_max ** 2 - leak
+        if kappa_p <= 0:
+            raise ValueError(f"SpeedBound: drag does not dominate lift for these parameters (c1 / max(m1, m2)^2 = "
+                             f"{coef.c1 / m_max ** 2:.4g} <= {leak:.4g})")
+        self._impulse = _Riccati(2.0 * force, kappa_p, m_min)  # |f_R + f_L| <= |f_R| + |f_L|
+        # Energy: G bounds sqrt(Fx^2 / m1 + Fy^2 / m2 + tau^2 / J3), tau = C_p (fx_R - fx_L); the dissipation
+        # c1 |V|^3 + C_M |omega|^3 is at least kappa u^3 on the ellipse E = u^2 / 2.
+        alpha = coef.c1 / m_max ** 1.5
+        beta = params.moment_coef / coef.J3 ** 1.5
+        gain_e = 2.0 * force * math.sqrt(1.0 / m_min + params.fin_offset ** 2 / coef.J3)
+        self._energy = _Riccati(gain_e, alpha * beta / math.hypot(alpha, beta), math.sqrt(m_min))
+        self._bounds = (self._impulse, self._energy)
+        self.top = min(b.top / b.scale for b in self._bounds)
+        self.accel = min(b.gain / b.scale for b in self._bounds)
         self.reset(0.0)
 
     def reset(self, t: float) -> None:
         """The fish is at rest at ``t`` [s] with its fins still (placed after a confirmed stop)."""
-        self._t, self._u, self.run_until = float(t), 0.0, -math.inf
+        self._t, self._u, self.run_until = float(t), (0.0, 0.0), -math.inf
 
     def unknown(self, t: float) -> None:
-        """Nothing is known at ``t`` [s] (a fresh start): the bound's top value, fins possibly running until ``t``.
+        """Nothing is known at ``t`` [s] (a fresh start): the bounds' top values, fins possibly running until ``t``.
 
-        Any history that began at rest keeps ``u`` at or below its top value, so this is an upper bound.
+        Any history that began at rest keeps each bound at or below its top value, so this is an upper bound.
         """
-        self._t, self._u, self.run_until = float(t), self._u_top, float(t)
+        self._t, self._u, self.run_until = float(t), tuple(b.top for b in self._bounds), float(t)
 
     def stopped(self, t: float) -> None:
         """The robot confirmed its fins still at ``t`` [s] (no command sent since)."""
-        self._u, self._t = self._energy(t), float(t)
+        self._u, self._t = self._state(t), float(t)
         self.run_until = min(self.run_until, float(t))
 
     def running(self, t: float, until: float) -> None:
         """The fins may run from ``t`` to ``until`` [s] (a command sent at ``t`` with its lease)."""
-        self._u, self._t = self._energy(t), float(t)
+        self._u, self._t = self._state(t), float(t)
         self.run_until = max(self.run_until, float(until))
 
-    def _energy(self, t: float) -> float:
-        u, t0 = self._u, self._t
-        if t <= t0:
-            return u
-        run = min(t, self.run_until) - t0
-        if run > 0:
-            r = math.sqrt(self.gain * self.kappa)
-            if u < self._u_top:  # du/dt = G - kappa u^2 from below the fixed point
-                u = self._u_top * math.tanh(r * run + math.atanh(u / self._u_top))
-            elif u > self._u_top:
-                u = self._u_top / math.tanh(r * run + 0.5 * math.log((u + self._u_top) / (u - self._u_top)))
-            t0 += run
-        if t > t0:
-            u = u / (1.0 + self.kappa * u * (t - t0))  # coasting: du/dt = -kappa u^2
-        return u
+    def _state(self, t: float) -> tuple[float, ...]:
+        if t <= self._t:
+            return self._u
+        run = max(min(t, self.run_until) - self._t, 0.0)
+        coast = t - self._t - run
+        return tuple(b.advance(u, run, coast) for b, u in zip(self._bounds, self._u, strict=True))
 
     def __call__(self, t: float) -> float:
         """The bound on ``|V|`` [m/s] at time ``t`` (not before the last :meth:`running` or :meth:`reset`)."""
-        return self._energy(t) / math.sqrt(self.mass)
+        return min(u / b.scale for b, u in zip(self._bounds, self._state(t), strict=True))
 
     def peak(self, t0: float, t1: float) -> float:
-        """The largest bound over ``[t0, t1]`` (it rises while the fins may run and falls after)."""
+        """The largest bound over ``[t0, t1]`` (each rises while the fins may run and falls after)."""
         times = [t for t in (t0, t1, self.run_until) if t0 <= t <= t1]
         return max(self(max(t, self._t)) for t in times)
 

@@ -347,14 +347,31 @@ def _patch_boxes(
 def _render_patch(
     box: tuple[int, int, int, int], pose: tuple[float, float, float], camera: CameraModel, conditions: SceneConditions
 ) -> np.ndarray:
+    """Anti-aliased colours of the pixels in ``box``: ``_SUPERSAMPLE^2`` samples where a shape's edge may pass.
+
+    A pixel whose own centre and its eight neighbours' centres show one colour lies inside one region (the
+    shapes are convex and several pixels across): its centre sample is its colour. Only the others (about a
+    fifth of the patch) are supersampled; that keeps an in-process emulated camera at 30 frames/s.
+    """
     u0, v0, u1, v1 = box
-    s = _SUPERSAMPLE
-    offsets = (np.arange(s) + 0.5) / s - 0.5
-    us = (np.arange(u0, u1)[:, None] + offsets).ravel()
-    vs = (np.arange(v0, v1)[:, None] + offsets).ravel()
-    grid_u, grid_v = np.meshgrid(us, vs)
-    colour = _paint(camera.pixel_to_tank(np.stack([grid_u, grid_v], axis=-1)), pose, conditions)
-    return colour.reshape(v1 - v0, s, u1 - u0, s, 3).mean(axis=(1, 3))
+    height, width = v1 - v0, u1 - u0
+    grid_u, grid_v = np.meshgrid(np.arange(u0 - 1, u1 + 1, dtype=float), np.arange(v0 - 1, v1 + 1, dtype=float))
+    centres = _paint(camera.pixel_to_tank(np.stack([grid_u, grid_v], axis=-1)), pose, conditions)
+    inner = centres[1:-1, 1:-1]
+    uniform = np.ones((height, width), dtype=bool)
+    for dv in (0, 1, 2):
+        for du in (0, 1, 2):
+            uniform &= np.all(centres[dv:dv + height, du:du + width] == inner, axis=-1)
+    colour = inner.copy()
+    rows, cols = np.nonzero(~uniform)
+    if rows.size:
+        s = _SUPERSAMPLE
+        offsets = (np.arange(s) + 0.5) / s - 0.5
+        sub_u = (cols + u0)[:, None, None] + offsets[None, None, :] + np.zeros((1, s, 1))
+        sub_v = (rows + v0)[:, None, None] + offsets[None, :, None] + np.zeros((1, 1, s))
+        samples = camera.pixel_to_tank(np.stack([sub_u, sub_v], axis=-1).reshape(-1, 2))
+        colour[rows, cols] = _paint(samples, pose, conditions).reshape(rows.size, s * s, 3).mean(axis=1)
+    return colour
 
 
 def _lighting_gain(camera: CameraModel, conditions: SceneConditions) -> np.ndarray | float:
