@@ -194,6 +194,7 @@ class Supervisor:
         with self._lock:
             if not self.armed:
                 return False
+            self._take_frame()  # judge on the newest frame, not on what this thread last got round to
             for reason in self._rules():
                 self.trip(reason)
             if self.fired or self.stop_requested:
@@ -223,26 +224,37 @@ class Supervisor:
         while not self._closed.wait(self.poll_period / self.speed):
             try:
                 self.poll()
-            except Exception as error:  # noqa: BLE001 - a broken tracker must stop the fish, not the thread
-                with self._lock:
-                    self.watch.reason = f"supervisor error: {type(error).__name__}: {error}"
-                    self.watch.last_seen = None if self.watch.last_seen is None else -math.inf
-                    self.track_ok = False
-                self.trip("tracking_lost")
+            except Exception as error:  # noqa: BLE001 - a broken rule must stop the fish, not the thread
+                self._broken(error)
+
+    def _broken(self, error: Exception) -> None:
+        """A tracker or rule raised: the fish counts as unseen, with the error as the reason."""
+        with self._lock:
+            self.watch.reason = f"supervisor error: {type(error).__name__}: {error}"
+            self.watch.last_seen = None if self.watch.last_seen is None else -math.inf
+            self.track_ok = False
+        self.trip("tracking_lost")
 
     def poll(self) -> str:
         """One round: newest frame, frame checks, tracker, rules; returns the first reason that holds now, or ``""``."""
-        frame = self.camera.read()  # never blocks
         with self._lock:
-            if frame is not None:
-                self._reads += 1
-                self._frame(frame)
-            elif self.camera.lost_reason and not self.track_ok:
-                self.watch.reason = self.watch.reason or self.camera.lost_reason
+            self._take_frame()
             reasons = self._rules()
             for reason in reasons if self.armed else ():
                 self.trip(reason)
             return reasons[0] if reasons else ""
+
+    def _take_frame(self) -> None:
+        """Process the newest frame the camera has, if any (never blocks)."""
+        frame = self.camera.read()
+        if frame is not None:
+            self._reads += 1
+            try:
+                self._frame(frame)
+            except Exception as error:  # noqa: BLE001 - whichever thread met it, a broken tracker stops the fish
+                self._broken(error)
+        elif self.camera.lost_reason and not self.track_ok:
+            self.watch.reason = self.watch.reason or self.camera.lost_reason
 
     def _frame(self, frame) -> None:
         verdict = self.frame_check.check(frame, time.monotonic(), region=self._box)

@@ -445,8 +445,6 @@ class _DroppingCamera:
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(reason="issue 30's tolerance target is not met yet: the blind rule's loose physical bound stops "
-                          "on frame gaps beyond 0.15 s (docs/hardware.md, 'Degraded radio and camera')", strict=False)
 def test_ten_percent_frame_drops_do_not_end_episodes():
     ends = []
     # Real time: the emulated camera then renders at the real camera's 30 frames/s (at speed 2 the renderer,

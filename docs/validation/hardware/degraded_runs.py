@@ -10,6 +10,13 @@ counts the episodes that end in a ``link_lost`` or ``tracking_lost`` stop:
 * ``drops``: 10 % of the camera frames lost (:class:`hardware.camerafaults.FaultyCamera`);
 * ``load``: both cores loaded by two busy processes for the whole run.
 
+The emulated robot and its camera run in a process of their own (radio over TCP, frames over
+``emu://``, as ``python -m hardware.emulator`` serves them), as the real robot and camera run on their
+own hardware: the PC's stack does not share its interpreter with the fish's physics and the camera's
+rendering, and that process runs at a higher priority (``nice -10``, where permitted: the real fish and
+camera do not wait for the PC's CPU; the load of the ``load`` condition competes with the PC's stack
+only).
+
 Example (the figures in docs/hardware.md)::
 
     python docs/validation/hardware/degraded_runs.py --episodes 25 --speed 1 --out degraded.json
@@ -21,6 +28,8 @@ import argparse
 import contextlib
 import json
 import math
+import multiprocessing
+import os
 import subprocess
 import sys
 import time
@@ -31,6 +40,7 @@ import numpy as np
 from tqdm import tqdm
 
 from agents.baselines import make_baseline
+from hardware.camera import open_source
 from hardware.camerafaults import FaultyCamera
 from hardware.emulator import EmulatedRobot
 from hardware.env import HardwareFishEnv
@@ -57,15 +67,61 @@ def _busy_cores(n: int):
             p.wait()
 
 
+def _serve_robot(conn, speed: float, seed: int) -> None:
+    """The robot's process: an emulated robot with its frame server; places the fish when asked."""
+    with contextlib.suppress(OSError):  # the real fish and camera do not wait for the PC's CPU
+        os.nice(-10)
+    robot = EmulatedRobot(speed=speed, seed=seed, camera_port=0).start()
+    try:
+        conn.send((robot.url, robot.camera_spec))
+        while True:
+            request = conn.recv()
+            if request[0] != "place":
+                break
+            robot.place(*request[1:])
+            conn.send("placed")
+    finally:
+        robot.stop()
+
+
+@contextlib.contextmanager
+def _robot_process(speed: float, seed: int):
+    """Start :func:`_serve_robot` in a process; yields ``(radio url, camera spec, place(x, y, psi))``."""
+    context = multiprocessing.get_context("spawn")
+    here, there = context.Pipe()
+    process = context.Process(target=_serve_robot, args=(there, speed, seed), name="emulated-robot", daemon=True)
+    process.start()
+    try:
+        if not here.poll(120):
+            raise RuntimeError("the emulated robot's process did not start within 120 s")
+        url, camera = here.recv()
+
+        def place(x: float, y: float, psi: float) -> None:
+            here.send(("place", x, y, psi))
+            if not here.poll(10) or here.recv() != "placed":
+                raise RuntimeError("the emulated robot's process did not place the fish")
+
+        yield url, camera, place
+    finally:
+        with contextlib.suppress(OSError):
+            here.send(("stop",))
+        process.join(5)
+        if process.is_alive():
+            process.kill()
+
+
 def run_condition(condition: str, episodes: int, speed: float, seed: int, progress: bool) -> dict:
     """Run ``episodes`` hand-law episodes under ``condition``; returns counts of how they ended."""
-    robot = EmulatedRobot(speed=speed, seed=seed).start()
+    with _robot_process(speed, seed) as (url, camera_spec, place):
+        return _run(condition, episodes, speed, seed, progress, url, camera_spec, place)
+
+
+def _run(condition, episodes, speed, seed, progress, url, camera_spec, place) -> dict:
     proxy = None
-    url = robot.url
     if condition == "bursty":
-        proxy = RadioProxy(robot.url, latency=0.1, burst=(0.05, 0.2), seed=seed, speed=speed)
+        proxy = RadioProxy(url, latency=0.1, burst=(0.05, 0.2), seed=seed, speed=speed)
         url = proxy.url
-    camera = robot.camera(seed=seed)
+    camera = open_source(camera_spec)
     if condition == "drops":
         camera = FaultyCamera(camera, drop=0.1, seed=seed)
     ends: Counter[str] = Counter()
@@ -76,13 +132,15 @@ def run_condition(condition: str, episodes: int, speed: float, seed: int, progre
     env = None
     try:
         with stack:
-            env = HardwareFishEnv(url, camera, speed=speed, reset_hook=lambda rng: robot.place(*_start(rng)))
+            env = HardwareFishEnv(url, camera, speed=speed, reset_hook=lambda rng: place(*_start(rng)))
             controller = make_baseline("hand", env.config)
             for episode in tqdm(range(episodes), desc=condition, disable=not progress):
                 obs, _ = env.reset(seed=seed + episode)
                 controller.reset(seed + episode)
+                steps = 0
                 while True:
                     obs, _, terminated, truncated, info = env.step(controller.act(obs))
+                    steps += 1
                     if terminated or truncated:
                         break
                 stop = info["safety_stop"]
@@ -90,14 +148,17 @@ def run_condition(condition: str, episodes: int, speed: float, seed: int, progre
                 ends[end] += 1
                 if stop == "tracking_lost":
                     reasons[info["tracking"]["reason"][:60]] += 1
+                elif stop == "link_lost":
+                    link = info["link"]
+                    reasons[f"link_lost at step {steps}: no reply for {link['status_age']:.2f} s, "
+                            f"rtt {link['rtt']}"] += 1
     finally:
         if env is not None:
             env.close()
         if proxy is not None:
             proxy.close()
-        robot.stop()
     lost = ends["link_lost"] + ends["tracking_lost"]
-    return {"condition": condition, "episodes": episodes, "ends": dict(ends), "tracking_reasons": dict(reasons),
+    return {"condition": condition, "episodes": episodes, "ends": dict(ends), "reasons": dict(reasons),
             "lost_share": lost / episodes}
 
 
