@@ -4,7 +4,9 @@ Wire format (one message per frame, big-endian)::
 
     b"PGF1" | timestamp float64 [s, sender's time.monotonic()] | length uint32 | encoded image of `length` bytes
 
-The image is PNG by default (lossless: the tracker sees exactly what was rendered) or JPEG.
+The image is BMP by default (uncompressed and lossless: the tracker sees exactly what was rendered, and
+neither side spends CPU on a codec; about 0.7 MB a frame at 640 x 360, 21 MB/s at 30 frames/s, for loopback
+or a wired LAN), PNG (lossless, half the bytes, ~15 ms to encode) or JPEG.
 """
 
 from __future__ import annotations
@@ -20,15 +22,16 @@ import numpy as np
 
 from hardware.frames import Frame, FrameSource, NewestSlot
 
-__all__ = ["FrameServer", "NetworkCamera"]
+__all__ = ["ENCODINGS", "FrameServer", "NetworkCamera"]
 
+ENCODINGS = ("bmp", "png", "jpg")
 _MAGIC = b"PGF1"
 _HEADER = struct.Struct("!4sdI")
 _MAX_MESSAGE = 32 * 1024 * 1024  # bytes; a frame bigger than this is a corrupt stream
 
 
 def _encode(frame: Frame, encoding: str) -> bytes:
-    params = [cv2.IMWRITE_PNG_COMPRESSION, 1] if encoding == "png" else [cv2.IMWRITE_JPEG_QUALITY, 95]
+    params = {"png": [cv2.IMWRITE_PNG_COMPRESSION, 1], "jpg": [cv2.IMWRITE_JPEG_QUALITY, 95], "bmp": []}[encoding]
     ok, data = cv2.imencode(f".{encoding}", frame.image, params)
     if not ok:
         raise ValueError(f"cannot encode a frame of shape {frame.image.shape} as {encoding}")
@@ -58,7 +61,7 @@ class FrameServer:
         host: Interface to listen on.
         port: TCP port (0 picks a free one; see :attr:`port`).
         fps: Polling rate of ``source`` [1/s].
-        encoding: ``"png"`` (lossless, default) or ``"jpg"``.
+        encoding: ``"bmp"`` (uncompressed, lossless, default), ``"png"`` (lossless) or ``"jpg"``.
     """
 
     def __init__(
@@ -67,10 +70,10 @@ class FrameServer:
         host: str = "127.0.0.1",
         port: int = 0,
         fps: float = 30.0,
-        encoding: str = "png",
+        encoding: str = "bmp",
     ) -> None:
-        if encoding not in ("png", "jpg"):
-            raise ValueError(f"encoding must be 'png' or 'jpg', got {encoding!r}")
+        if encoding not in ENCODINGS:
+            raise ValueError(f"encoding must be one of {ENCODINGS}, got {encoding!r}")
         if fps <= 0:
             raise ValueError(f"fps must be > 0, got {fps}")
         self.encoding = encoding

@@ -105,8 +105,9 @@ def _wait_for(source, timeout=3.0):
     return None
 
 
-def test_network_camera_over_localhost_is_lossless_and_keeps_timestamps():
-    server = FrameServer(port=0)
+@pytest.mark.parametrize("encoding", ["bmp", "png"])
+def test_network_camera_over_localhost_is_lossless_and_keeps_timestamps(encoding):
+    server = FrameServer(port=0, encoding=encoding)
     client = open_source(server.spec)
     assert isinstance(client, NetworkCamera)
     try:
@@ -162,5 +163,5 @@ def test_open_source_rejects_unknown_specs():
 
 def test_frame_server_arguments():
     with pytest.raises(ValueError, match="encoding"):
-        FrameServer(encoding="bmp")
+        FrameServer(encoding="gif")
     assert CameraModel.default().width == 640
