@@ -6,16 +6,16 @@ import sys
 import numpy as np
 import pytest
 
-from pectoral_gym.kfunctions import FEATURES, ScalingFunctions
-from pectoral_gym.models import AveragedModel
-from pectoral_gym.params import FishParams
-from pectoral_gym.steady import steady_state_batch
-from scaling.grids import GRIDS, Grid, GridError, load_grid
-from scaling.identify import holdout_patterns, identify
-from scaling.nmpc import NmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
-from scaling.reference import reference_runs, velocities_from_turning
-from scaling.regression import feature_matrix, fit_polynomial, fit_spline, select_model
-from scaling.response import predicted_turning
+from pectoral_gym.model.kfunctions import FEATURES, ScalingFunctions
+from pectoral_gym.model.models import AveragedModel
+from pectoral_gym.model.params import FishParams
+from pectoral_gym.model.steady import steady_state_batch
+from scaling.identification.grids import GRIDS, Grid, GridError, load_grid
+from scaling.identification.identify import holdout_patterns, identify
+from scaling.identification.nmpc import NmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
+from scaling.identification.reference import reference_runs, velocities_from_turning
+from scaling.identification.regression import feature_matrix, fit_polynomial, fit_spline, select_model
+from scaling.identification.response import predicted_turning
 
 PARAMS = FishParams()
 FAST = NmpcSettings(horizon=3.0, sampling=1.0)  # the paper's weights, a shorter horizon for speed
