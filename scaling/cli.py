@@ -89,7 +89,7 @@ def _write_table(result, path: Path) -> None:
 def _run_identify(args) -> int:
     from pectoral_gym.model.params import FishParams, load_params
     from scaling.identification.identify import identify
-    from scaling.identification.nmpc import NmpcSettings
+    from scaling.identification.nmpc import IdentificationNmpcSettings
 
     if args.quick:
         if args.install:
@@ -101,7 +101,7 @@ def _run_identify(args) -> int:
             setattr(args, key, value)
     try:
         grid = load_grid(args.grid)
-        settings = NmpcSettings(args.horizon, args.sampling, args.q, args.q_terminal, args.substeps)
+        settings = IdentificationNmpcSettings(args.horizon, args.sampling, args.q, args.q_terminal, args.substeps)
         params = load_params(args.params) if args.params else FishParams()
     except (GridError, ValueError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)

@@ -197,7 +197,7 @@ def test_oscillation_section_round_trips_and_malformed_sections_raise(tmp_path, 
 
 def test_nmpc_with_oscillation_equals_the_algebraic_solution():
     pytest.importorskip("casadi")
-    from scaling.identification.nmpc import NmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
+    from scaling.identification.nmpc import IdentificationNmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
 
     patterns = np.array([FinBeat.from_degrees(85, 25, 1.0, 1.5).as_array(),
                          FinBeat.from_degrees(60, 20, 1.0, 4).as_array()])
@@ -205,7 +205,7 @@ def test_nmpc_with_oscillation_equals_the_algebraic_solution():
     forcing = unscaled_forcing(patterns, P, sway="base")
     oracle = algebraic_scaling(ref.velocities, forcing, P, ref.yaw_oscillation)
     paper = algebraic_scaling(ref.velocities, forcing, P)
-    nmpc = ScalingNmpc(P, NmpcSettings(horizon=3.0), ref.velocities, ref.yaw_oscillation)
+    nmpc = ScalingNmpc(P, IdentificationNmpcSettings(horizon=3.0), ref.velocities, ref.yaw_oscillation)
     for i in range(len(patterns)):
         r = nmpc.solve(ref.velocities[i], forcing[i], oscillation=ref.yaw_oscillation[i])
         assert r.success

@@ -234,7 +234,7 @@ def test_symbolic_rhs_with_waveform_tracks_the_averaged_model(left, rk4_symbolic
 
 def test_nmpc_with_waveform_equals_the_algebraic_solution():
     pytest.importorskip("casadi")
-    from scaling.identification.nmpc import NmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
+    from scaling.identification.nmpc import IdentificationNmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
 
     patterns = np.array([FinBeat.from_degrees(85, 25, 1.0, 1.5).as_array(),
                          FinBeat.from_degrees(60, 20, 1.0, 4).as_array()])
@@ -247,7 +247,7 @@ def test_nmpc_with_waveform_equals_the_algebraic_solution():
         w = v[2]
         yaw = (body.m1 - body.m2) / body.J3 * v[0] * v[1] - body.c4 * waveform_square_mean(w, o) + k[2] * f[2] / body.J3
         assert abs(yaw) < 1e-12
-    nmpc = ScalingNmpc(P, NmpcSettings(horizon=3.0), velocities, samples)
+    nmpc = ScalingNmpc(P, IdentificationNmpcSettings(horizon=3.0), velocities, samples)
     for i in range(len(patterns)):
         r = nmpc.solve(velocities[i], forcing[i], oscillation=samples[i])
         assert r.success

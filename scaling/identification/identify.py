@@ -36,8 +36,8 @@ from pectoral_gym.model.ktables import MAX_HARMONICS, QUADRATURE
 from pectoral_gym.model.params import FishParams
 from scaling.identification.grids import Grid, draw_off_grid
 from scaling.identification.nmpc import (
+    IdentificationNmpcSettings,
     NmpcResult,
-    NmpcSettings,
     algebraic_scaling,
     auto_substeps,
     unscaled_forcing,
@@ -191,7 +191,7 @@ def _turning_errors(pred: np.ndarray, ref: ReferenceRuns) -> dict[str, float]:
 def identify(
     grid: Grid,
     params: FishParams | None = None,
-    settings: NmpcSettings | None = None,
+    settings: IdentificationNmpcSettings | None = None,
     max_degree: int = 7,
     folds: int = 5,
     seed: int = 0,
@@ -234,7 +234,7 @@ def identify(
     if not 1 <= harmonics <= MAX_HARMONICS:
         raise ValueError(f"harmonics must be in [1, {MAX_HARMONICS}], got {harmonics}")
     params = params or FishParams()
-    settings = settings or NmpcSettings()
+    settings = settings or IdentificationNmpcSettings()
     timings: dict[str, float] = {}
 
     t0 = time.perf_counter()

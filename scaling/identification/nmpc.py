@@ -46,7 +46,8 @@ from pectoral_gym.model.kfunctions import UNIT_K, ScalingFunctions
 from pectoral_gym.model.params import FishParams, body_coefficients, coefficient_vector
 from pectoral_gym.model.symbolic import OSCILLATION_FLOOR, body_accel_sx, named_symbols, rk4_sx
 
-__all__ = ["NmpcSettings", "NmpcResult", "ScalingNmpc", "algebraic_scaling", "auto_substeps", "unscaled_forcing"]
+__all__ = ["IdentificationNmpcSettings", "NmpcResult", "ScalingNmpc", "algebraic_scaling", "auto_substeps",
+           "unscaled_forcing"]
 
 _UNIT_BASE_K = ScalingFunctions(UNIT_K.powers, UNIT_K.coefs, sway="base")
 
@@ -61,7 +62,7 @@ class _Parameters(NamedTuple):
 
 
 @dataclass(frozen=True)
-class NmpcSettings:
+class IdentificationNmpcSettings:
     """Settings of the scaling NMPC (defaults: the paper's Sec. 4.3).
 
     Attributes:
@@ -183,7 +184,7 @@ class ScalingNmpc:
             for the paper's damping.
     """
 
-    def __init__(self, params: FishParams, settings: NmpcSettings, velocities: np.ndarray,
+    def __init__(self, params: FishParams, settings: IdentificationNmpcSettings, velocities: np.ndarray,
                  oscillation: np.ndarray | None = None):
         self.params = params
         self.settings = settings

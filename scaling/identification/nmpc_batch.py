@@ -14,14 +14,14 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from pectoral_gym.model.params import FishParams
-from scaling.identification.nmpc import NmpcResult, NmpcSettings, ScalingNmpc
+from scaling.identification.nmpc import IdentificationNmpcSettings, NmpcResult, ScalingNmpc
 
 __all__ = ["solve_nmpc_batch"]
 
 _WORKER: ScalingNmpc | None = None
 
 
-def _init_worker(params: FishParams, settings: NmpcSettings, velocities: np.ndarray,
+def _init_worker(params: FishParams, settings: IdentificationNmpcSettings, velocities: np.ndarray,
                  oscillation: np.ndarray | None) -> None:
     global _WORKER
     _WORKER = ScalingNmpc(params, settings, velocities, oscillation)
@@ -40,7 +40,7 @@ def solve_nmpc_batch(
     velocities: np.ndarray,
     forcing: np.ndarray,
     params: FishParams,
-    settings: NmpcSettings,
+    settings: IdentificationNmpcSettings,
     jobs: int = 0,
     progress: bool = True,
     oscillation: np.ndarray | None = None,
