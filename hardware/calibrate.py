@@ -25,7 +25,7 @@ import numpy as np
 
 from hardware.scene import CameraModel, fit_homography, render_frame
 from hardware.tracker import draw_overlay
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
+from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 
 __all__ = ["detect_dots", "fit_homography", "main", "reprojection_errors", "tank_corners"]
 

@@ -6,7 +6,7 @@ Examples::
     python -m hardware.deploy --policy runs/ppo-goal/model.zip --emulate --speed 2 --episodes 1
     python -m hardware.deploy --controller nmpc --emulate --episodes 1
 
-``--controller nmpc`` plans on the averaged model (:class:`agents.nmpc.NMPCController`, the same
+``--controller nmpc`` plans on the averaged model (:class:`agents.nmpc.controller.NMPCController`, the same
 controller as in simulation) with its step budget set to ``--solve-fraction`` of the control period
 (wall time, so divided by ``--speed`` when emulated): a solve that fails or ends later than that is not
 applied, and the rest of the last plan (then both fins at rest) is sent instead.
@@ -39,7 +39,7 @@ from hardware.deploy_checks import (
     robot_address,
 )
 from hardware.safety import SafetyConfig, install_stop_handlers
-from pectoral_gym.envs import tasks as tk
+from pectoral_gym.envs.tasks import kernels as tk
 
 __all__ = ["main", "make_controller", "run_episodes", "plot_trajectories", "solver_summary"]
 
@@ -129,7 +129,7 @@ def make_controller(name: str, config, step_budget: float, safety: SafetyConfig 
     """The ``nmpc`` or ``hand`` baseline for the robot's env config; NMPC steps end within ``step_budget`` [s].
 
     The NMPC plans with the stopping-distance band of the env's geofence (``safety``, default
-    :class:`hardware.safety.SafetyConfig`), so it does not swim into it (``agents.stop_band``).
+    :class:`hardware.safety.SafetyConfig`), so it does not swim into it (``agents.controllers.stop_band``).
     """
     from agents.baselines import make_baseline
 
@@ -167,7 +167,8 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--controller", choices=("policy", "nmpc", "hand"), default="policy",
                         help="what drives the fish (default %(default)s: needs --policy)")
     parser.add_argument("--policy", default=None, metavar="RUN_OR_ZIP",
-                        help="agents.train or rl-baselines3-zoo run folder, or an SB3 .zip (agents.policy.load_policy)")
+                        help="agents.training.train or rl-baselines3-zoo run folder, or an SB3 .zip "
+                             "(agents.training.policy.load_policy)")
     parser.add_argument("--solve-fraction", type=float, default=0.5, metavar="F",
                         help="nmpc: share of the control period a step's solves may take, in (0, 1] "
                              "(default %(default)s)")
@@ -265,7 +266,7 @@ def main(argv: list[str] | None = None) -> int:
     _check_args(parser, args)
     controller = None
     if args.controller == "policy":
-        from agents.policy import load_policy  # lazy: agents/ pulls in torch
+        from agents.training.policy import load_policy  # lazy: agents/ pulls in torch
 
         try:
             controller = load_policy(args.policy)

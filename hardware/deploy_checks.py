@@ -73,7 +73,7 @@ def _same(a: Any, b: Any) -> bool:
 def env_settings(controller: Any, task: str | None, control_period: float | None) -> tuple[dict[str, Any], list[str]]:
     """The env settings to run ``controller`` with, checked against what it was trained on.
 
-    A trained policy (:class:`agents.policy.SB3Controller`) must meet the env's action size (8) and one of its
+    A trained policy (:class:`agents.training.policy.SB3Controller`) must meet the env's action size (8) and one of its
     observation layouts (19 entries, or 27 with the replayed fin block: ``observe_fins``). Where its run
     folder records them (``trained``), the task and the control period default to the policy's own and an
     explicit other value is refused; the action ranges and the track reference speed are the policy's. A
@@ -120,7 +120,7 @@ def env_settings(controller: Any, task: str | None, control_period: float | None
         else:
             kwargs[key] = fallback if given is None else given
             if obs_size is not None:
-                notes.append(f"the policy records no {key} (no agents.train config.yaml beside it): {flag} "
+                notes.append(f"the policy records no {key} (no agents.training.train config.yaml beside it): {flag} "
                              f"{kwargs[key]} is not checked against its training; only its observation size "
                              f"({obs_size}) and action size are")
     for key in ("bias_range", "amplitude_range", "period_range", "ratio_range", "ref_speed"):

@@ -32,9 +32,9 @@ from hardware import protocol as pr
 from hardware.finreplay import CHUNK as _CHUNK
 from hardware.finreplay import apply_firmware
 from hardware.firmware import Firmware, FirmwareConfig, new_boot_id
-from pectoral_gym import strokes
-from pectoral_gym.model_spec import FULL_REFERENCE, FullSpec
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
+from pectoral_gym.model import strokes
+from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
+from pectoral_gym.model.spec import FULL_REFERENCE, FullSpec
 
 __all__ = ["EmulatedRobot", "ROBOT_ADDRESS", "main"]
 
@@ -66,7 +66,7 @@ class EmulatedRobot:
                  camera_port: int | None = None, camera_fps: float = 30.0, seed: int | None = None,
                  model: FullSpec = FULL_REFERENCE):
         if not isinstance(model, FullSpec):
-            raise ValueError(f"model must be a FullSpec (pectoral_gym.model_spec), got {model!r}")
+            raise ValueError(f"model must be a FullSpec (pectoral_gym.model.spec), got {model!r}")
         if not (math.isfinite(speed) and speed > 0):
             raise ValueError(f"speed must be a finite number > 0, got {speed!r}")
         if not 0.0 <= loss < 1.0:

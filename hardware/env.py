@@ -18,11 +18,11 @@ from hardware.firmware import FirmwareConfig
 from hardware.link import RadioLink
 from hardware.safety import CommandFilter, Geofence, SafetyConfig, check_action, install_stop_handlers
 from hardware.supervisor import Supervisor
-from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.layout import ACTION_SIZE, E_TX, E_TY
 from pectoral_gym.envs.observation import observation_bounds
-from pectoral_gym.envs.task_core import TaskState
+from pectoral_gym.envs.tasks import kernels as tk
+from pectoral_gym.envs.tasks.table import TaskState
 
 __all__ = ["HardwareFishEnv"]
 
@@ -34,7 +34,7 @@ class HardwareFishEnv(gym.Env):
 
     The same tasks, spaces and rewards as ``PectoralFish-{Full,Averaged}-v0``
     (:class:`~pectoral_gym.envs.fish_env.PectoralFishEnv`), computed by the same task core
-    (:class:`pectoral_gym.envs.task_core.TaskState`, the task table's row for ``task``) on the
+    (:class:`pectoral_gym.envs.tasks.table.TaskState`, the task table's row for ``task``) on the
     *estimated* state: for the same states and commands both give the same observations, rewards and
     ``info`` (``tests/test_task_core.py``). An overhead camera frame is tracked
     (:class:`hardware.tracker.MarkerTracker`: red front marker, blue back marker) and a high-gain observer

@@ -24,10 +24,10 @@ import numpy as np
 
 from hardware import protocol as pr
 from hardware.firmware import Firmware, FirmwareConfig, stretch_transition
-from pectoral_gym import strokes
-from pectoral_gym.model_spec import FULL_REFERENCE
-from pectoral_gym.models import FishModel
-from pectoral_gym.params import FinBeat, FishParams
+from pectoral_gym.model import strokes
+from pectoral_gym.model.models import FishModel
+from pectoral_gym.model.params import FinBeat, FishParams
+from pectoral_gym.model.spec import FULL_REFERENCE
 
 __all__ = ["CHUNK", "FinReplay", "advance_with_firmware", "apply_firmware"]
 
@@ -125,5 +125,5 @@ class FinReplay:
 
     @property
     def fins(self) -> np.ndarray:
-        """``(1, 2, strokes.FIN_FIELDS)`` the replayed half-strokes in progress (:mod:`pectoral_gym.strokes`)."""
+        """``(1, 2, strokes.FIN_FIELDS)`` the replayed half-strokes in progress (:mod:`pectoral_gym.model.strokes`)."""
         return self.model.fins

@@ -2,7 +2,7 @@
 
 :class:`Firmware` knows nothing of sockets, clocks or physics: the caller hands it decoded messages
 and the time, and reads back the fin setpoint, whether the fins must halt, and the STATUS replies.
-The emulator drives a :class:`~pectoral_gym.models.FullModel` with it; the same rules are the
+The emulator drives a :class:`~pectoral_gym.model.models.FullModel` with it; the same rules are the
 specification of the real firmware. The fin itself latches a new setpoint at its next stroke turning
 point (the parameter-change rule of the core models, reused by the emulator through
 ``FullModel.command``); a halt is immediate (the servos hold their current angle).
@@ -150,7 +150,7 @@ def stretch_transition(beats: np.ndarray, turn: np.ndarray, next_power: np.ndarr
     A fin latches a new pattern at a turning point ``turn`` [rad] and then swings to ``bias + A`` in
     ``T_p / (zeta + 1)`` (``next_power``) or to ``bias - A`` in ``zeta T_p / (zeta + 1)``
     (``docs/model.md``, "Changing fin parameters"); its peak rate is ``pi |to - turn| / (2 d)``
-    (:func:`pectoral_gym.dynamics.stroke_kinematics`). Input: patterns already clipped by :func:`clip_beats`.
+    (:func:`pectoral_gym.model.dynamics.stroke_kinematics`). Input: patterns already clipped by :func:`clip_beats`.
     """
     out = np.array(beats, dtype=float).reshape(2, 4)
     turn, power = np.asarray(turn, dtype=float), np.asarray(next_power, dtype=bool)

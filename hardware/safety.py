@@ -28,8 +28,8 @@ import numpy as np
 
 from hardware.firmware import ServoLimits, clip_beats, rate_limit, stretch_transition
 from hardware.protocol import DEFAULT_LEASE, MAX_LEASE
-from pectoral_gym import tank
-from pectoral_gym.params import FishParams, body_coefficients
+from pectoral_gym.model import tank
+from pectoral_gym.model.params import FishParams, body_coefficients
 
 __all__ = ["SafetyConfig", "check_action", "CommandFilter", "Geofence", "SpeedBound", "in_geofence", "TrackingWatch",
            "install_stop_handlers"]

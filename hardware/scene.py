@@ -24,7 +24,7 @@ from typing import Any
 import cv2
 import numpy as np
 
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FishParams
+from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
 
 __all__ = [
     "BACK_MARKER_OFFSET",

@@ -21,7 +21,7 @@ import numpy as np
 
 from hardware.frames import Frame
 from hardware.scene import BACK_MARKER_OFFSET, BODY_LENGTH, FRONT_MARKER_OFFSET, MARKER_RADIUS, CameraModel
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
+from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 
 __all__ = ["Blob", "MarkerTracker", "TrackResult", "TrackerConfig", "draw_overlay", "fish_box"]
 

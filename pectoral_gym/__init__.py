@@ -3,9 +3,9 @@
 Importing the package registers ``PectoralFish-Full-v0`` and ``PectoralFish-Averaged-v0``.
 """
 
-from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.models import AveragedModel, FishModel, FullModel
-from pectoral_gym.params import FinBeat, FishParams
+from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.models import AveragedModel, FishModel, FullModel
+from pectoral_gym.model.params import FinBeat, FishParams
 from pectoral_gym.registration import register_envs
 
 __version__ = "0.1.0"

@@ -12,9 +12,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pectoral_gym.kfunctions import K_NAMES, default_scaling_path
-from scaling import fidelity, yaw_balance
-from scaling.grids import GRIDS, GridError, load_grid
+from pectoral_gym.model.kfunctions import K_NAMES, default_scaling_path
+from scaling.identification.grids import GRIDS, GridError, load_grid
+from scaling.validation import fidelity, yaw_balance
 
 __all__ = ["main"]
 
@@ -87,9 +87,9 @@ def _write_table(result, path: Path) -> None:
 
 
 def _run_identify(args) -> int:
-    from pectoral_gym.params import FishParams, load_params
-    from scaling.identify import identify
-    from scaling.nmpc import NmpcSettings
+    from pectoral_gym.model.params import FishParams, load_params
+    from scaling.identification.identify import identify
+    from scaling.identification.nmpc import IdentificationNmpcSettings
 
     if args.quick:
         if args.install:
@@ -101,7 +101,7 @@ def _run_identify(args) -> int:
             setattr(args, key, value)
     try:
         grid = load_grid(args.grid)
-        settings = NmpcSettings(args.horizon, args.sampling, args.q, args.q_terminal, args.substeps)
+        settings = IdentificationNmpcSettings(args.horizon, args.sampling, args.q, args.q_terminal, args.substeps)
         params = load_params(args.params) if args.params else FishParams()
     except (GridError, ValueError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)
@@ -134,7 +134,7 @@ def _run_identify(args) -> int:
     for name, fit in result.fits.items():
         print(f"{name:5} {fit.features:34} {fit.degree:6d} {len(fit.coefs):5d} {fit.r2:9.6f} {fit.cv_rmse:9.2e} "
               f"{fit.cv_max:9.2e}")
-    print("(CV errors are predicted relative speed / yaw-rate errors; see scaling.regression)")
+    print("(CV errors are predicted relative speed / yaw-rate errors; see scaling.identification.regression)")
     if result.splines:
         nodes = "x".join(str(len(n)) for n in result.splines[K_NAMES[0]].nodes)
         spread = max(f.period_spread for f in result.splines.values())
@@ -156,11 +156,10 @@ def _run_identify(args) -> int:
 
 
 def _run_validate(argv: list[str]) -> int:
-    """``validate``: :func:`scaling.validate.main`'s options plus ``--params FILE`` (the models' parameters)."""
-    from pectoral_gym.kfunctions import ScalingFunctions
-    from pectoral_gym.params import load_params
-    from scaling import validate as v
-
+    """``validate``: :func:`scaling.validation.validate.main`'s options and ``--params FILE`` (model parameters)."""
+    from pectoral_gym.model.kfunctions import ScalingFunctions
+    from pectoral_gym.model.params import load_params
+    from scaling.validation import validate as v
     parser = v.build_parser()
     parser.add_argument("--params", metavar="FILE", default=None,
                         help="model parameters of both models: a JSON or YAML file of FishParams fields "

@@ -18,10 +18,10 @@ import pytest
 from scipy.integrate import quad
 from scipy.special import j1
 
-from pectoral_gym.averaging import EXACT, TAYLOR, averaged_fin_forcing, averaged_forcing, bessel_j1
-from pectoral_gym.dynamics import fin_angle_eq21, fin_force_right
-from pectoral_gym.kfunctions import FEATURES, FORMAT, K_NAMES, ScalingFunctions, default_scaling_path
-from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
+from pectoral_gym.model.averaging import EXACT, TAYLOR, averaged_fin_forcing, averaged_forcing, bessel_j1
+from pectoral_gym.model.dynamics import fin_angle_eq21, fin_force_right
+from pectoral_gym.model.kfunctions import FEATURES, FORMAT, K_NAMES, ScalingFunctions, default_scaling_path
+from pectoral_gym.model.params import FinBeat, FishParams, coefficient_vector
 
 P = FishParams()
 K_DRAG = P.fin_force_coef * P.water_density * P.fin_chord * P.fin_span**3 / 6.0
@@ -316,7 +316,7 @@ def test_is_unit_false_for_nontrivial():
 
 
 def test_shipped_default_is_identified_and_brings_the_turn_rate_to_the_full_model():
-    from pectoral_gym.steady import steady_state
+    from pectoral_gym.model.steady import steady_state
 
     assert default_scaling_path().is_file()
     s = ScalingFunctions.load()

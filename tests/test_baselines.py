@@ -6,10 +6,10 @@ import pytest
 
 import pectoral_gym  # noqa: F401  (registers the env ids)
 from agents.baselines import FinMap, HandController, RandomController, make_baseline
-from agents.nmpc_problem import to_z
-from agents.policy import Controller
+from agents.nmpc.problem import to_z
+from agents.training.policy import Controller
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.models import FullModel
+from pectoral_gym.model.models import FullModel
 
 CONFIG = EnvConfig(model="averaged", task="goal")
 
@@ -117,7 +117,7 @@ def _obs_at(x, y, psi, x_body, y_body):
 def test_hand_controller_turns_away_from_a_wall_when_the_target_is_behind(side):
     """Near the top wall (Y = 1.15 m) heading along X, a target behind: the short way round (towards the wall
     side) would run into the wall, so the fish turns the other way; in mid-tank it turns towards the target."""
-    from pectoral_gym.params import TANK_WIDTH
+    from pectoral_gym.model.params import TANK_WIDTH
 
     hand = HandController(CONFIG)
     target = (-0.4, side * 0.05)  # behind, slightly to the left (side +1) or right
@@ -272,7 +272,7 @@ def test_nmpc_with_ipopt_reaches_a_near_goal_on_the_averaged_env():
 
 
 def test_nmpc_compare_runs_variants_on_the_same_episodes():
-    from agents.nmpc_compare import _seeds, compare
+    from agents.nmpc.compare import _seeds, compare
 
     assert _seeds("3-5") == [3, 4, 5] and _seeds("7,9") == [7, 9]
     results = compare({"short": {"horizon": 2, "blocks": None}, "blocked": {"horizon": 3, "blocks": (1, 2)}},

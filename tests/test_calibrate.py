@@ -11,7 +11,7 @@ import pytest
 from hardware.calibrate import detect_dots, fit_homography, main, reprojection_errors, tank_corners
 from hardware.scene import CameraModel, Occluder, SceneConditions, render_frame
 from hardware.tracker import MarkerTracker
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
+from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 
 # A camera written down by hand: 250 px/m, Y up, origin at pixel (40, 320), and a small perspective term.
 TRUE_H = np.array([[250.0, 8.0, 40.0], [3.0, -250.0, 320.0], [0.004, 0.03, 1.0]])

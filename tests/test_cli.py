@@ -10,7 +10,7 @@ import subprocess
 
 import pytest
 
-from pectoral_gym.cli import main
+from pectoral_gym.tools.cli import main
 
 STEADY_KEYS = {"vx", "vy", "omega", "speed", "radius", "period", "drift_angle", "converged", "model", "right", "left"}
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
@@ -134,8 +134,7 @@ def test_bench_quick_json_has_the_keys(capsys):
 
 
 def test_bench_against_keeps_each_rate_best_and_alternates(monkeypatch, tmp_path):
-    from pectoral_gym import bench_compare
-
+    from pectoral_gym.tools import bench_compare
     other = tmp_path / "other"
     (other / "pectoral_gym").mkdir(parents=True)
     (other / "pectoral_gym" / "__init__.py").write_text("")
@@ -181,7 +180,7 @@ def test_console_script_steady_json():
 
 @pytest.mark.slow
 def test_bench_against_runs_both_checkouts(capsys):
-    from pectoral_gym.bench_compare import checkout_root
+    from pectoral_gym.tools.bench_compare import checkout_root
 
     res = run_json(capsys, "bench", "--against", str(checkout_root()), "--rounds", "1", "--quick", "--json")
     rows = {r["rate"]: r for r in res["rows"]}

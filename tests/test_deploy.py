@@ -289,7 +289,7 @@ def test_a_failed_start_exits_normally_in_a_fresh_process(tmp_path):
 
 
 class _Trained:
-    """A stand-in for agents.policy.SB3Controller (no torch): what a run folder records."""
+    """A stand-in for agents.training.policy.SB3Controller (no torch): what a run folder records."""
 
     name = "ppo"
 
@@ -332,7 +332,7 @@ def test_a_goal_policy_is_refused_under_track_and_bad_statistics_are_named(polic
     import pickle
     import shutil
 
-    from agents.policy import load_policy
+    from agents.training.policy import load_policy
 
     run = tmp_path / "run"
     run.mkdir()

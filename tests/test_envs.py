@@ -11,8 +11,8 @@ from gymnasium.utils.env_checker import check_env
 import pectoral_gym  # noqa: F401  (registers the ids)
 from pectoral_gym import FishParams
 from pectoral_gym.envs import PectoralFishEnv
-from pectoral_gym.params import TANK_LENGTH as TANK_X
-from pectoral_gym.params import TANK_WIDTH as TANK_Y
+from pectoral_gym.model.params import TANK_LENGTH as TANK_X
+from pectoral_gym.model.params import TANK_WIDTH as TANK_Y
 
 IDS = ["PectoralFish-Averaged-v0", "PectoralFish-Full-v0"]
 TASKS = ["goal", "track"]
@@ -152,7 +152,7 @@ def test_reward_is_the_sum_of_its_terms(env_id, task):
 
 
 def test_energy_term_matches_mean_fin_power():
-    from pectoral_gym.averaging import mean_fin_power
+    from pectoral_gym.model.averaging import mean_fin_power
 
     env = gym.make("PectoralFish-Averaged-v0", energy_weight=2.0)
     env.reset(seed=0)
@@ -331,7 +331,7 @@ def test_domain_randomisation_per_episode_and_reproducible():
         for name, w in widths.items():
             assert abs(getattr(p, name) / getattr(base, name) - 1) <= w
         assert p.body_mass == base.body_mass
-    np.testing.assert_array_equal(env.model.coef[0], pectoral_gym.params.coefficient_vector(p2))
+    np.testing.assert_array_equal(env.model.coef[0], pectoral_gym.model.params.coefficient_vector(p2))
     assert env.fish_constants.body_length == p2.body_length
     env.reset(seed=11)
     assert env.fish_params == p1

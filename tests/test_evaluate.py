@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from agents.evaluate import evaluate, format_table, main, plot_trajectories, write_json
-from agents.metrics import (
+from agents.training.evaluate import evaluate, format_table, main, plot_trajectories, write_json
+from agents.training.metrics import (
     Trajectory,
     bootstrap_ci,
     episode_metrics,
@@ -208,7 +208,7 @@ def test_swept_work_prices_the_first_stroke_from_rest_by_what_it_sweeps():
     """From rest at 90 deg, the first power stroke sweeps 90 -> 120 deg (half 15 deg) where a regular one
     sweeps 60 -> 120 deg (half 30 deg); after it every 0.5 s step holds one regular beat, priced alike."""
     from pectoral_gym.envs.core import EnvConfig
-    from pectoral_gym.params import FishParams
+    from pectoral_gym.model.params import FishParams
 
     result = evaluate(FastBeatController(), ENV, n_episodes=1, seed=2)
     traj = result.trajectories[0]
@@ -225,7 +225,7 @@ def test_swept_work_prices_the_first_stroke_from_rest_by_what_it_sweeps():
 def test_trained_env_kwargs_drop_the_other_models_settings(tmp_path):
     import yaml
 
-    from agents.evaluate import model_kwargs, trained_env_kwargs
+    from agents.training.evaluate import model_kwargs, trained_env_kwargs
 
     run = {"task": "goal", "observe_fins": True, "integration": "fast", "randomize": {"drag_coef": 0.2}}
     (tmp_path / "config.yaml").write_text(yaml.safe_dump({"env_kwargs": run}))

@@ -1,4 +1,5 @@
-"""Tests of the fidelity benchmark (scaling.fidelity) and the averaged model's transitional-stroke forcing."""
+"""Tests of the fidelity benchmark (scaling.validation.fidelity) and the averaged model's transitional-stroke forcing.
+"""
 
 from __future__ import annotations
 
@@ -9,12 +10,12 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from pectoral_gym.averaging import averaged_forcing, half_stroke_mean_force, ripple_offset
-from pectoral_gym.dynamics import fin_force_right, stroke_kinematics
-from pectoral_gym.models import AveragedModel
-from pectoral_gym.params import FinBeat, FishParams
-from scaling import fidelity as fd
+from pectoral_gym.model.averaging import averaged_forcing, half_stroke_mean_force, ripple_offset
+from pectoral_gym.model.dynamics import fin_force_right, stroke_kinematics
+from pectoral_gym.model.models import AveragedModel
+from pectoral_gym.model.params import FinBeat, FishParams
 from scaling.cli import main as scaling_main
+from scaling.validation import fidelity as fd
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -113,7 +114,7 @@ def test_repeating_the_same_pattern_is_the_constant_scenario():
     rng = np.random.default_rng(3)
     constant = fd.draw_patterns(rng, 3, 1)
     repeated = np.repeat(constant, 4, axis=1)
-    from pectoral_gym.kfunctions import ScalingFunctions
+    from pectoral_gym.model.kfunctions import ScalingFunctions
 
     scaling = ScalingFunctions.unit()
     a = fd.open_loop("full", constant, None, 4.0, FishParams(), scaling)
@@ -125,7 +126,7 @@ def test_repeating_the_same_pattern_is_the_constant_scenario():
 @pytest.mark.parametrize("kind", ["full", "averaged"])
 def test_mirrored_fins_keep_the_heading(kind):
     """Mirrored fins have no net moment or sway force (eq. 18 mirrored): a fish from rest swims straight."""
-    from pectoral_gym.kfunctions import ScalingFunctions
+    from pectoral_gym.model.kfunctions import ScalingFunctions
 
     schedule = fd.split_fins(fd.draw_patterns(np.random.default_rng(5), 4, 6), "mirrored")
     np.testing.assert_array_equal(schedule[:, :, 1], schedule[:, :, 0])
@@ -192,7 +193,7 @@ def test_transitions_make_the_impulse_exact_with_k_1():
     rng = np.random.default_rng(5)
     patterns = fd.draw_patterns(rng, 4, 10)
     patterns[..., 1, :] = patterns[..., 0, :]  # the left fin mirrors the right: no sway, no yaw
-    from pectoral_gym.models import FullModel
+    from pectoral_gym.model.models import FullModel
 
     speeds = {}
     models = (("full", FullModel(4, params)), ("off", AveragedModel(4, params, scaling="none", transitions=False)),

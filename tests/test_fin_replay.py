@@ -11,10 +11,10 @@ from hardware.env import HardwareFishEnv
 from hardware.finreplay import CHUNK, FinReplay
 from hardware.firmware import FirmwareConfig, ServoLimits
 from hardware.safety import SafetyConfig
-from pectoral_gym import strokes
 from pectoral_gym.envs.observation import FIN_OBS_SIZE, OBS_FINS, OBS_SIZE, decode
-from pectoral_gym.models import FullModel
-from pectoral_gym.params import FinBeat
+from pectoral_gym.model import strokes
+from pectoral_gym.model.models import FullModel
+from pectoral_gym.model.params import FinBeat
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from pectoral_gym.averaging import mean_fin_power
-from pectoral_gym.dynamics import stroke_kinematics
-from pectoral_gym.models import AveragedModel, FullModel
-from pectoral_gym.params import FinBeat, FishParams
+from pectoral_gym.model.averaging import mean_fin_power
+from pectoral_gym.model.dynamics import stroke_kinematics
+from pectoral_gym.model.models import AveragedModel, FullModel
+from pectoral_gym.model.params import FinBeat, FishParams
 
 PARAMS = FishParams()
 POWER = 0.75 * PARAMS.fin_drag_constant * PARAMS.fin_span  # 3 k S_p / 4, eq. (14)

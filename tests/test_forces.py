@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from pectoral_gym.averaging import mean_fin_power
-from pectoral_gym.dynamics import body_accel, body_rhs, fin_angle_eq21, fin_force_right, linearised_rate
-from pectoral_gym.params import FishParams, body_coefficients, coefficient_vector
+from pectoral_gym.model.averaging import mean_fin_power
+from pectoral_gym.model.dynamics import body_accel, body_rhs, fin_angle_eq21, fin_force_right, linearised_rate
+from pectoral_gym.model.params import FishParams, body_coefficients, coefficient_vector
 
 P = FishParams()
 LAM, RHO, DP, SP, MP = P.fin_force_coef, P.water_density, P.fin_chord, P.fin_span, P.fin_effective_mass

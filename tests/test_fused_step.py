@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from pectoral_gym import AveragedModel, FinBeat, FullModel
-from pectoral_gym._jit import source_tree
 from pectoral_gym.envs import fused
-from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.core import EnvConfig, EnvCore
-from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
+from pectoral_gym.envs.tasks import kernels as tk
+from pectoral_gym.model.jit import source_tree
+from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 
 REST = FinBeat.rest()
 
@@ -183,7 +183,7 @@ def _pectoral_imports(module: str) -> set[str]:
 
 
 def test_cache_key_covers_every_module_the_kernel_inlines():
-    seen, todo = set(), ["pectoral_gym.stepping", "pectoral_gym.envs.tasks", "pectoral_gym.strokes"]
+    seen, todo = set(), ["pectoral_gym.model.stepping", "pectoral_gym.envs.tasks.kernels", "pectoral_gym.model.strokes"]
     while todo:
         name = todo.pop()
         if name not in seen:

@@ -14,8 +14,8 @@ from hardware.env import HardwareFishEnv
 from hardware.firmware import ServoLimits
 from hardware.safety import CommandFilter, Geofence, SafetyConfig, TrackingWatch, in_geofence, install_stop_handlers
 from hardware.scene import SceneConditions
-from pectoral_gym.models import FullModel
-from pectoral_gym.params import FishParams, body_coefficients
+from pectoral_gym.model.models import FullModel
+from pectoral_gym.model.params import FishParams, body_coefficients
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 

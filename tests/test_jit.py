@@ -1,4 +1,4 @@
-"""The serial/parallel kernel-pair factory of ``pectoral_gym._jit``.
+"""The serial/parallel kernel-pair factory of ``pectoral_gym.model.jit``.
 
 Reference values are written out by hand; the serial loop, the parallel loop
 and the dispatcher must agree with them for batches on both sides of the
@@ -9,7 +9,7 @@ import numba as nb
 import numpy as np
 import pytest
 
-from pectoral_gym._jit import JIT, PARALLEL_MIN_ITEMS, kernel_pair
+from pectoral_gym.model.jit import JIT, PARALLEL_MIN_ITEMS, kernel_pair
 
 
 @nb.njit(**JIT)

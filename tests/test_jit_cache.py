@@ -1,4 +1,4 @@
-"""The kernels' disk cache follows every source they compile from (``pectoral_gym._jit.njit``).
+"""The kernels' disk cache follows every source they compile from (``pectoral_gym.model.jit.njit``).
 
 numba keys its cache on the file of the cached function only; an edit of a
 function in another module, which the cached kernel calls, must still reach it.
@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from pectoral_gym._jit import source_tree
+from pectoral_gym.model.jit import source_tree
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pectoral_gym"
 
@@ -21,7 +21,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "pectoral_gym"
 PROBE = """
 import numpy as np
 import pectoral_gym
-from pectoral_gym import strokes as st
+from pectoral_gym.model import strokes as st
 fins = np.zeros((1, 2, st.FIN_FIELDS))
 fins[0, :, st.DURATION] = 0.5
 fins[0, :, st.ANGLE_FROM] = -0.5
@@ -56,11 +56,11 @@ def test_edit_in_a_called_module_recompiles_the_caller(tmp_path):
     force, loaded = _run(src, cache)
     assert not loaded and force != 0.0
 
-    cli = src / "pectoral_gym" / "cli.py"
+    cli = src / "pectoral_gym" / "tools" / "cli.py"
     cli.write_text(cli.read_text() + "# an edit outside the kernel's sources\n")
     assert _run(src, cache) == (force, True)  # the next process runs the cached kernel
 
-    _edit(src / "pectoral_gym" / "dynamics.py", "    return fx, fy\n", "    return 2.0 * fx, 2.0 * fy\n")
+    _edit(src / "pectoral_gym" / "model" / "dynamics.py", "    return fx, fy\n", "    return 2.0 * fx, 2.0 * fy\n")
     assert _run(src, cache) == (2.0 * force, False)  # compiled afresh, no cache deleted
 
 

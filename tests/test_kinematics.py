@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from pectoral_gym import FinBeat, FullModel
-from pectoral_gym.dynamics import fin_angle_eq21, stroke_kinematics
+from pectoral_gym.model.dynamics import fin_angle_eq21, stroke_kinematics
 
 PATTERNS = [
     (math.radians(90), math.radians(20), 1.0, 4.0),

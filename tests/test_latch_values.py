@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from scipy.interpolate import NdBSpline
 
-from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.ktables import interleave, pattern_values, scaling_values, yaw_oscillation_phasor
+from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.ktables import interleave, pattern_values, scaling_values, yaw_oscillation_phasor
 
 
 def _random_scaling(shared: bool) -> ScalingFunctions:

@@ -1,10 +1,11 @@
-"""agents.metrics.bootstrap_ci through scipy.stats.bootstrap: the documented resampling, written out here, and the
+"""agents.training.metrics.bootstrap_ci through scipy.stats.bootstrap: the documented resampling, written out here, and
+the
 normal approximation of a large sample."""
 
 import numpy as np
 import pytest
 
-from agents.metrics import bootstrap_ci, summarize
+from agents.training.metrics import bootstrap_ci, summarize
 
 
 def reference_percentile_bootstrap(x, confidence, n_resamples, seed):

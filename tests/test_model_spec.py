@@ -1,4 +1,4 @@
-"""One model definition (pectoral_gym.model_spec): presets, round trips, the K check, one default per option."""
+"""One model definition (pectoral_gym.model.spec): presets, round trips, the K check, one default per option."""
 
 from __future__ import annotations
 
@@ -11,8 +11,10 @@ import numpy as np
 import pytest
 
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.model_spec import (
+from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.models import AveragedModel, FullModel
+from pectoral_gym.model.params import FishParams
+from pectoral_gym.model.spec import (
     AVERAGED,
     AVERAGED_ENV,
     AVERAGED_PAPER,
@@ -25,8 +27,6 @@ from pectoral_gym.model_spec import (
     env_spec,
     spec_from_dict,
 )
-from pectoral_gym.models import AveragedModel, FullModel
-from pectoral_gym.params import FishParams
 
 ROBOT = FishParams(fin_span=0.07)
 
@@ -90,7 +90,7 @@ def test_a_k_file_identified_for_other_params_is_refused_unless_told(tmp_path):
 
 
 def test_fin_map_and_nmpc_plan_with_the_envs_k_and_check_it(tmp_path):
-    from agents.fin_map import FinMap, planning_spec
+    from agents.controllers.fin_map import FinMap, planning_spec
 
     path = _k_file(tmp_path, ROBOT)
     config = EnvConfig(model="averaged", params=ROBOT, scaling=str(path))
@@ -134,7 +134,7 @@ def test_bad_spec_dicts_are_refused():
 
 
 def test_run_folders_record_the_spec_and_old_ones_derive_it():
-    from agents.config import run_model_spec
+    from agents.training.config import run_model_spec
 
     old = {"env_id": "PectoralFish-Averaged-v0", "env_kwargs": {"task": "goal", "transitions": True}}
     assert run_model_spec(old) == AVERAGED_PPO

@@ -27,7 +27,7 @@ from scipy.integrate import solve_ivp
 from scipy.special import j1
 
 from pectoral_gym import AveragedModel, FinBeat, FishParams, FullModel, ScalingFunctions
-from pectoral_gym.kfunctions import FEATURES, FORMAT
+from pectoral_gym.model.kfunctions import FEATURES, FORMAT
 
 P = FishParams()
 M1, M2, J3 = 0.795 + 0.095, 0.795 + 0.1794, 4.26e-4 + 2.7e-5

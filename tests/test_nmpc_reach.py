@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 
 from agents.baselines import make_baseline
-from agents.nmpc_problem import to_z
-from agents.nmpc_settings import NMPCSettings
+from agents.nmpc.problem import to_z
+from agents.nmpc.settings import NMPCSettings
 from pectoral_gym.envs.core import EnvConfig
 
 CONFIG = EnvConfig(model="averaged", task="goal")

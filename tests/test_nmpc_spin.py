@@ -1,4 +1,4 @@
-"""The NMPC's on-the-spot turns (agents.nmpc_spin): symmetry, the turn on the full model, the fin copy, pricing."""
+"""The NMPC's on-the-spot turns (agents.nmpc.spin): symmetry, the turn on the full model, the fin copy, pricing."""
 
 import math
 
@@ -8,12 +8,12 @@ import pytest
 
 import pectoral_gym  # noqa: F401 - registers the ids
 from agents.baselines import make_baseline
-from agents.nmpc_problem import pack_decision, to_z
-from agents.nmpc_spin import SPIN_CYCLE, SpinTurns, mirror
+from agents.nmpc.problem import pack_decision, to_z
+from agents.nmpc.spin import SPIN_CYCLE, SpinTurns, mirror
 from hardware.firmware import ServoLimits
 from hardware.safety import CommandFilter
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.models import AveragedModel, FullModel
+from pectoral_gym.model.models import AveragedModel, FullModel
 
 CONFIG = EnvConfig(model="full", task="goal")
 

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from agents.baselines import make_baseline
-from agents.nmpc_problem import pack_decision, to_z
-from agents.nmpc_reference import ReferencePredictor, fit_ellipse, reference_path
-from agents.nmpc_settings import NMPCSettings
+from agents.nmpc.problem import pack_decision, to_z
+from agents.nmpc.reference import ReferencePredictor, fit_ellipse, reference_path
+from agents.nmpc.settings import NMPCSettings
 from pectoral_gym.envs.core import EnvConfig
 
 TRACK = EnvConfig(model="averaged", task="track")

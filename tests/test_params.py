@@ -11,7 +11,7 @@ import math
 import numpy as np
 import pytest
 
-from pectoral_gym.params import COEF_NAMES, FinBeat, FishParams, coefficient_vector
+from pectoral_gym.model.params import COEF_NAMES, FinBeat, FishParams, coefficient_vector
 
 # Table 1 (paper), SI units. Added masses are listed as -m_ax etc., so m_ax < 0.
 TABLE1 = {

@@ -13,8 +13,8 @@ import pytest
 
 import pectoral_gym  # noqa: F401  (registers the ids)
 from pectoral_gym import FishParams
-from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.params import as_params, load_params, params_dict, params_from_dict, save_params
+from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.params import as_params, load_params, params_dict, params_from_dict, save_params
 
 ROOT = Path(__file__).resolve().parents[1]
 ENV = "PectoralFish-Averaged-v0"

@@ -8,12 +8,12 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from pectoral_gym import forcing_cache as fc
-from pectoral_gym.averaging import odd_moment, ripple_offset
-from pectoral_gym.dynamics import fin_angle_eq21, fin_force_right
-from pectoral_gym.models import AveragedModel, FullModel
-from pectoral_gym.params import FinBeat, FishParams
-from pectoral_gym.steady import steady_state_batch
+from pectoral_gym.model import forcing_cache as fc
+from pectoral_gym.model.averaging import odd_moment, ripple_offset
+from pectoral_gym.model.dynamics import fin_angle_eq21, fin_force_right
+from pectoral_gym.model.models import AveragedModel, FullModel
+from pectoral_gym.model.params import FinBeat, FishParams
+from pectoral_gym.model.steady import steady_state_batch
 
 PATTERNS = [(90, 22, 1.0, 4.0), (60, 30, 0.5, 5.0), (120, 10, 2.0, 1.0), (100, 80, 1.3, 0.7), (45, 2, 0.8, 2.5)]
 
@@ -128,7 +128,7 @@ def test_parking_gives_the_offset_back():
 def test_symbolic_ripple_offset_equals_the_compiled_one(pattern):
     import casadi as ca
 
-    from pectoral_gym.symbolic import ripple_offset_sx
+    from pectoral_gym.model.symbolic import ripple_offset_sx
 
     params = FishParams()
     beat = FinBeat.from_degrees(*pattern)

@@ -31,8 +31,8 @@ from hardware.firmware import ServoLimits, clip_beats, peak_rates
 from hardware.frames import Frame
 from hardware.link import RadioLink
 from hardware.safety import CommandFilter, SafetyConfig, check_action
-from pectoral_gym.dynamics import stroke_kinematics
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FishParams
+from pectoral_gym.model.dynamics import stroke_kinematics
+from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 

@@ -23,7 +23,7 @@ from hardware.firmware import ServoLimits
 from hardware.frames import Frame
 from hardware.safety import Geofence, SafetyConfig, SpeedBound
 from hardware.supervisor import PRIORITY, Supervisor, ls_velocity
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FishParams
+from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")
 

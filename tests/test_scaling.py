@@ -6,19 +6,19 @@ import sys
 import numpy as np
 import pytest
 
-from pectoral_gym.kfunctions import FEATURES, ScalingFunctions
-from pectoral_gym.models import AveragedModel
-from pectoral_gym.params import FishParams
-from pectoral_gym.steady import steady_state_batch
-from scaling.grids import GRIDS, Grid, GridError, load_grid
-from scaling.identify import holdout_patterns, identify
-from scaling.nmpc import NmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
-from scaling.reference import reference_runs, velocities_from_turning
-from scaling.regression import feature_matrix, fit_polynomial, fit_spline, select_model
-from scaling.response import predicted_turning
+from pectoral_gym.model.kfunctions import FEATURES, ScalingFunctions
+from pectoral_gym.model.models import AveragedModel
+from pectoral_gym.model.params import FishParams
+from pectoral_gym.model.steady import steady_state_batch
+from scaling.identification.grids import GRIDS, Grid, GridError, load_grid
+from scaling.identification.identify import holdout_patterns, identify
+from scaling.identification.nmpc import IdentificationNmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
+from scaling.identification.reference import reference_runs, velocities_from_turning
+from scaling.identification.regression import feature_matrix, fit_polynomial, fit_spline, select_model
+from scaling.identification.response import predicted_turning
 
 PARAMS = FishParams()
-FAST = NmpcSettings(horizon=3.0, sampling=1.0)  # the paper's weights, a shorter horizon for speed
+FAST = IdentificationNmpcSettings(horizon=3.0, sampling=1.0)  # the paper's weights, a shorter horizon for speed
 
 
 @pytest.fixture(scope="module")
@@ -151,7 +151,7 @@ def test_pipeline_flags_degenerate_and_failed_patterns_and_round_trips(tmp_path)
 def test_solver_failure_is_recorded_not_raised(small):
     grid, ref = small
     forcing = unscaled_forcing(grid.patterns, PARAMS)
-    nmpc = ScalingNmpc(PARAMS, NmpcSettings(horizon=3.0, max_iter=1), ref.velocities)
+    nmpc = ScalingNmpc(PARAMS, IdentificationNmpcSettings(horizon=3.0, max_iter=1), ref.velocities)
     r = nmpc.solve(ref.velocities[0], forcing[0], guess=np.array([5.0, -3.0, 9.0]))
     assert not r.success and r.status
 

@@ -1,4 +1,4 @@
-"""Tests of the averaged-model validation (scaling.validate, scaling.plots)."""
+"""Tests of the averaged-model validation (scaling.validation.validate, scaling.validation.plots)."""
 
 from __future__ import annotations
 
@@ -9,15 +9,15 @@ import math
 import numpy as np
 import pytest
 
-from pectoral_gym.averaging import averaged_forcing
-from pectoral_gym.dynamics import body_rhs
-from pectoral_gym.kfunctions import FEATURES, ScalingFunctions
-from pectoral_gym.params import FinBeat, FishParams, coefficient_vector
-from pectoral_gym.steady import steady_state
-from scaling import comparison as sc
-from scaling import validate as sv
-from scaling.grids import GRIDS
-from scaling.plots import identification_points
+from pectoral_gym.model.averaging import averaged_forcing
+from pectoral_gym.model.dynamics import body_rhs
+from pectoral_gym.model.kfunctions import FEATURES, ScalingFunctions
+from pectoral_gym.model.params import FinBeat, FishParams, coefficient_vector
+from pectoral_gym.model.steady import steady_state
+from scaling.identification.grids import GRIDS
+from scaling.validation import comparison as sc
+from scaling.validation import validate as sv
+from scaling.validation.plots import identification_points
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

@@ -17,7 +17,7 @@ from hardware.scene import (
     SceneConditions,
     render_frame,
 )
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
+from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 
 CAMERA = CameraModel.default()
 

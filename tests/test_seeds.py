@@ -1,4 +1,4 @@
-"""Results across seeds (agents.seeds): across-seed statistics by hand, the command end to end at tiny sizes."""
+"""Results across seeds (agents.studies.seeds): across-seed statistics by hand, the command end to end at tiny sizes."""
 
 import json
 import math
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import yaml
 
-from agents.seeds import aggregate, iqm, main, summarize_seeds
-from agents.solve_time import check_held_out
+from agents.studies.seeds import aggregate, iqm, main, summarize_seeds
+from agents.studies.solve_time import check_held_out
 
 TINY = ["--quick", "--timesteps", "1024", "--episodes", "3", "--probe-episodes", "2", "--no-progress"]
 

@@ -28,8 +28,8 @@ from scipy.optimize import fsolve
 from scipy.special import j1
 
 from pectoral_gym import AveragedModel, FinBeat, FullModel, ScalingFunctions
-from pectoral_gym.kfunctions import FEATURES, FORMAT
-from pectoral_gym.steady import SteadyState, common_period, steady_state, steady_state_batch, turning_quantities
+from pectoral_gym.model.kfunctions import FEATURES, FORMAT
+from pectoral_gym.model.steady import SteadyState, common_period, steady_state, steady_state_batch, turning_quantities
 
 M1, M2, J3 = 0.795 + 0.095, 0.795 + 0.1794, 4.26e-4 + 2.7e-5
 C1 = 0.5 * 1000 * 0.0325 * 0.3870

@@ -1,4 +1,5 @@
-"""The NMPC's stopping-distance band (agents.stop_band) against the robot env's geofence (hardware.safety)."""
+"""The NMPC's stopping-distance band (agents.controllers.stop_band) against the robot env's geofence (hardware.safety).
+"""
 
 import math
 
@@ -7,12 +8,12 @@ import numpy as np
 import pytest
 
 from agents.baselines import make_baseline
-from agents.nmpc_settings import NMPCSettings
-from agents.stop_band import StopBand, band_violation
+from agents.controllers.stop_band import StopBand, band_violation
+from agents.nmpc.settings import NMPCSettings
 from hardware.deploy import make_controller
 from hardware.safety import Geofence, SafetyConfig
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FishParams
+from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
 
 SAFETY = SafetyConfig()
 BAND = StopBand.from_params(FishParams(), SAFETY.geofence_margin, SAFETY.reaction_time, SAFETY.coast_horizon)

@@ -4,8 +4,8 @@ import math
 
 import numpy as np
 
-from pectoral_gym import strokes as st
-from pectoral_gym.params import FinBeat, FishParams
+from pectoral_gym.model import strokes as st
+from pectoral_gym.model.params import FinBeat, FishParams
 
 
 def test_rotated_phase_forces_match_direct_evaluation_over_a_long_segment():

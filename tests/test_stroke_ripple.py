@@ -1,4 +1,4 @@
-"""Yaw-oscillation gain of transitional half-strokes (docs/model.md section 3.9, pectoral_gym.stroke_ripple)."""
+"""Yaw-oscillation gain of transitional half-strokes (docs/model.md section 3.9, pectoral_gym.model.ripple)."""
 
 from __future__ import annotations
 
@@ -8,13 +8,13 @@ import numpy as np
 import pytest
 from scipy.integrate import quad
 
-from pectoral_gym import forcing_cache as fc
-from pectoral_gym.dynamics import fin_force_right, stroke_kinematics
-from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.models import AveragedModel
-from pectoral_gym.params import FinBeat, FishParams
-from pectoral_gym.stroke_ripple import half_stroke_ripple_square, transitional_oscillation_gain
-from scaling.fidelity import draw_patterns, open_loop
+from pectoral_gym.model import forcing_cache as fc
+from pectoral_gym.model.dynamics import fin_force_right, stroke_kinematics
+from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.models import AveragedModel
+from pectoral_gym.model.params import FinBeat, FishParams
+from pectoral_gym.model.ripple import half_stroke_ripple_square, transitional_oscillation_gain
+from scaling.validation.fidelity import draw_patterns, open_loop
 
 PARAMS = FishParams()
 SCALING = ScalingFunctions.load()

@@ -4,12 +4,12 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from pectoral_gym.averaging import EXACT, averaged_fin_forcing, mean_fin_power
-from pectoral_gym.dynamics import body_accel
-from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.models import AveragedModel
-from pectoral_gym.params import FinBeat, FishParams, body_coefficients, coefficient_vector
-from pectoral_gym.symbolic import (
+from pectoral_gym.model.averaging import EXACT, averaged_fin_forcing, mean_fin_power
+from pectoral_gym.model.dynamics import body_accel
+from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.models import AveragedModel
+from pectoral_gym.model.params import FinBeat, FishParams, body_coefficients, coefficient_vector
+from pectoral_gym.model.symbolic import (
     averaged_forcing_sx,
     averaged_rhs_sx,
     bessel_j1_sx,
@@ -178,7 +178,7 @@ def test_spline_forcing_equals_numba_and_is_differentiable(deg, side):
 
 def _quadrature_mean_force(angle_from, angle_to, duration, n=20001):
     """Mean blade-element force (eqs. 9-17) over one half-cosine half-stroke, by the trapezoid rule."""
-    from pectoral_gym.dynamics import fin_force_right, stroke_kinematics
+    from pectoral_gym.model.dynamics import fin_force_right, stroke_kinematics
 
     s = np.linspace(0.0, duration, n)
     f = np.array([fin_force_right(*stroke_kinematics(t, duration, angle_from, angle_to), PARAMS.fin_drag_constant,
@@ -188,7 +188,7 @@ def _quadrature_mean_force(angle_from, angle_to, duration, n=20001):
 
 @pytest.mark.parametrize("power", [True, False])
 def test_transition_forcing_matches_quadrature_of_the_blade_element_forces(power):
-    from pectoral_gym.symbolic import transition_forcing_sx
+    from pectoral_gym.model.symbolic import transition_forcing_sx
 
     beat = (1.3, 0.35, 0.9, 3.0)
     previous = (1.7, 0.2, 0.9, 3.0)
@@ -217,7 +217,7 @@ def test_expected_transition_impulse_is_the_phase_average_of_the_compiled_model(
     """Drag-free body, mirrored fins (no sway, no yaw): the surge velocity the transitional forcing adds
     (transitions on minus off, K = 1) is its impulse / m1. Averaged over switch times spread uniformly over
     one beat of the old pattern, it is the expectation the NMPC plans with."""
-    from pectoral_gym.symbolic import expected_transition_impulse_sx
+    from pectoral_gym.model.symbolic import expected_transition_impulse_sx
 
     params = FishParams().replace(drag_coef=1e-6, lift_coef=1e-6, moment_coef=1e-6)  # ~drag-free; steps stay ~ms
     a = FinBeat.from_degrees(80, 20, 0.8, 4.0)

@@ -1,4 +1,5 @@
-"""pectoral_gym.tank, the one home of the tank's rules, against the robot's geofence and the env's wall contact."""
+"""pectoral_gym.model.tank, the one home of the tank's rules, against the robot's geofence and the env's wall contact.
+"""
 
 from __future__ import annotations
 
@@ -8,10 +9,10 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from agents.stop_band import StopBand, band_violation
+from agents.controllers.stop_band import StopBand, band_violation
 from hardware.safety import Geofence
-from pectoral_gym import tank
-from pectoral_gym.params import FishParams, body_coefficients
+from pectoral_gym.model import tank
+from pectoral_gym.model.params import FishParams, body_coefficients
 
 
 def test_outline_clearance_and_coasting_by_hand():

@@ -14,7 +14,6 @@ import pectoral_gym  # noqa: F401
 from hardware.emulator import EmulatedRobot
 from hardware.env import HardwareFishEnv
 from hardware.safety import SafetyConfig
-from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.core import TASKS, EnvConfig
 from pectoral_gym.envs.layout import (
     C_W_TRACKING,
@@ -31,7 +30,8 @@ from pectoral_gym.envs.layout import (
     O_TRACKING,
     O_WALL,
 )
-from pectoral_gym.envs.task_core import TASK_TABLE, TaskState, observe_fish, register_task, unregister_task
+from pectoral_gym.envs.tasks import kernels as tk
+from pectoral_gym.envs.tasks.table import TASK_TABLE, TaskState, observe_fish, register_task, unregister_task
 from pectoral_gym.envs.vector import PectoralFishVectorEnv
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
@@ -252,7 +252,7 @@ def test_a_given_info_function_must_give_the_task_fields():
     """A row's hand-written ``info`` is checked against its fields: the built-in ones agree, a wrong one is refused."""
     import dataclasses
 
-    from pectoral_gym.envs.task_core import TASK_TABLE
+    from pectoral_gym.envs.tasks.table import TASK_TABLE
 
     for task in TASK_TABLE.values():
         row = np.linspace(-1.0, 2.0, 10)

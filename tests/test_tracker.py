@@ -10,7 +10,7 @@ import pytest
 from hardware.camera import Frame
 from hardware.scene import FRONT_MARKER_OFFSET, CameraModel, Occluder, SceneConditions, render_frame
 from hardware.tracker import MarkerTracker, TrackerConfig
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
+from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 
 CAMERA = CameraModel.default()
 TRACKER = MarkerTracker(CAMERA)

@@ -6,7 +6,7 @@ import pytest
 from stable_baselines3.common.vec_env import DummyVecEnv, VecCheckNan, VecMonitor, VecNormalize
 
 import pectoral_gym  # noqa: F401 - registers the ids
-from agents.vec_adapter import FishVecEnv, make_fish_vec_env
+from agents.training.vec_adapter import FishVecEnv, make_fish_vec_env
 from pectoral_gym.envs import PectoralFishVectorEnv
 
 ENV = "PectoralFish-Averaged-v0"
@@ -115,6 +115,6 @@ def test_errors():
 def test_params_given_as_a_dict():
     venv = make_fish_vec_env(ENV, 2, {"params": {"fin_offset": 0.01}, "check_scaling_params": False})
     assert venv.config.params.fin_offset == 0.01
-    assert venv.config.params.body_mass == pectoral_gym.params.FishParams().body_mass
+    assert venv.config.params.body_mass == pectoral_gym.model.params.FishParams().body_mass
     with pytest.raises(ValueError, match="params"):
         make_fish_vec_env(ENV, 2, {"params": {"fin_width": 1.0}})

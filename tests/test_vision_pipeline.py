@@ -9,8 +9,8 @@ import numpy as np
 from hardware.camera import EmulatedCamera
 from hardware.observer import HighGainObserver
 from hardware.tracker import MarkerTracker
-from pectoral_gym.model_spec import make_model
-from pectoral_gym.params import FinBeat
+from pectoral_gym.model.params import FinBeat
+from pectoral_gym.model.spec import make_model
 
 
 def test_steady_turn_velocities_recovered_from_rendered_frames():

@@ -14,14 +14,14 @@ import pytest
 from scipy import optimize
 from scipy.interpolate import NdBSpline, make_interp_spline
 
-from pectoral_gym import forcing_cache as fc
-from pectoral_gym.dynamics import body_accel as averaged_body_accel
-from pectoral_gym.dynamics import oscillating_square_mean
-from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.models import AveragedModel
-from pectoral_gym.params import FinBeat, FishParams, body_coefficients
-from pectoral_gym.steady import steady_state_batch
-from scaling.reference import reference_runs, yaw_oscillation_statistics
+from pectoral_gym.model import forcing_cache as fc
+from pectoral_gym.model.dynamics import body_accel as averaged_body_accel
+from pectoral_gym.model.dynamics import oscillating_square_mean
+from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.models import AveragedModel
+from pectoral_gym.model.params import FinBeat, FishParams, body_coefficients
+from pectoral_gym.model.steady import steady_state_batch
+from scaling.identification.reference import reference_runs, yaw_oscillation_statistics
 
 P = FishParams()
 THETA = 2 * np.pi * (np.arange(200_000) + 0.5) / 200_000  # midpoint rule: spectrally accurate for smooth periodic
@@ -54,7 +54,7 @@ def test_oscillating_square_mean_limits_slope_and_symmetry():
 
 def test_symbolic_mean_matches_and_has_finite_derivatives():
     ca = pytest.importorskip("casadi")
-    from pectoral_gym.symbolic import oscillating_square_mean_sx
+    from pectoral_gym.model.symbolic import oscillating_square_mean_sx
 
     w = ca.SX.sym("w")
     f = ca.Function("f", [w], [oscillating_square_mean_sx(w, 0.3), ca.jacobian(oscillating_square_mean_sx(w, 0.3), w)])
@@ -197,7 +197,7 @@ def test_oscillation_section_round_trips_and_malformed_sections_raise(tmp_path, 
 
 def test_nmpc_with_oscillation_equals_the_algebraic_solution():
     pytest.importorskip("casadi")
-    from scaling.nmpc import NmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
+    from scaling.identification.nmpc import IdentificationNmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
 
     patterns = np.array([FinBeat.from_degrees(85, 25, 1.0, 1.5).as_array(),
                          FinBeat.from_degrees(60, 20, 1.0, 4).as_array()])
@@ -205,7 +205,7 @@ def test_nmpc_with_oscillation_equals_the_algebraic_solution():
     forcing = unscaled_forcing(patterns, P, sway="base")
     oracle = algebraic_scaling(ref.velocities, forcing, P, ref.yaw_oscillation)
     paper = algebraic_scaling(ref.velocities, forcing, P)
-    nmpc = ScalingNmpc(P, NmpcSettings(horizon=3.0), ref.velocities, ref.yaw_oscillation)
+    nmpc = ScalingNmpc(P, IdentificationNmpcSettings(horizon=3.0), ref.velocities, ref.yaw_oscillation)
     for i in range(len(patterns)):
         r = nmpc.solve(ref.velocities[i], forcing[i], oscillation=ref.yaw_oscillation[i])
         assert r.success
@@ -227,7 +227,7 @@ def _beating_model():
 
 
 def test_latch_reuses_the_forcing_of_an_unchanged_pattern_but_not_after_new_parameters():
-    from pectoral_gym.averaging import averaged_forcing
+    from pectoral_gym.model.averaging import averaged_forcing
 
     beat, model = CACHE_BEAT, _beating_model()
     assert model.forcing_cache[0, 0, fc.CACHED] == 1.0
@@ -261,7 +261,7 @@ def test_new_scaling_tables_invalidate_the_cache():
 def test_symbolic_rhs_with_oscillation_tracks_the_averaged_model(left, rk4_symbolic):
     # One fin, or two fins with equal periods (their beat phases stay equal, as the symbolic model assumes).
     ca = pytest.importorskip("casadi")
-    from pectoral_gym.symbolic import averaged_rhs_sx
+    from pectoral_gym.model.symbolic import averaged_rhs_sx
 
     table = np.random.default_rng(7).normal(0, 0.3, (2, 4, 4, 4))  # phasors differ between the two patterns
     s = dataclasses.replace(_oscillation_scaling(), oscillation_table=table)

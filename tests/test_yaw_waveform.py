@@ -14,16 +14,16 @@ import pytest
 from scipy import optimize
 from scipy.interpolate import NdBSpline, make_interp_spline
 
-from pectoral_gym import forcing_cache as fc
-from pectoral_gym.averaging import averaged_body_accel, equivalent_amplitude, waveform_samples
-from pectoral_gym.dynamics import oscillating_square_mean, waveform_square_mean
-from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.ktables import MAX_HARMONICS, QUADRATURE
-from pectoral_gym.models import AveragedModel
-from pectoral_gym.params import FinBeat, FishParams, body_coefficients
-from pectoral_gym.steady import steady_state_batch
-from scaling.reference import yaw_oscillation_statistics, yaw_waveform_harmonics
-from scaling.regression import fit_waveform
+from pectoral_gym.model import forcing_cache as fc
+from pectoral_gym.model.averaging import averaged_body_accel, equivalent_amplitude, waveform_samples
+from pectoral_gym.model.dynamics import oscillating_square_mean, waveform_square_mean
+from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.ktables import MAX_HARMONICS, QUADRATURE
+from pectoral_gym.model.models import AveragedModel
+from pectoral_gym.model.params import FinBeat, FishParams, body_coefficients
+from pectoral_gym.model.steady import steady_state_batch
+from scaling.identification.reference import yaw_oscillation_statistics, yaw_waveform_harmonics
+from scaling.identification.regression import fit_waveform
 
 P = FishParams()
 NODES = (np.radians([45, 70, 95, 135]), np.radians([5, 15, 25, 30]), 1 / np.array([5, 3, 2, 1.25]))
@@ -215,7 +215,7 @@ def test_symbolic_rhs_with_waveform_tracks_the_averaged_model(left, rk4_symbolic
     # One fin, or two with equal periods (in phase, as the symbolic model assumes). The yaw rate stays above
     # the waveform's reach, so x|x| = x^2 over the beat and the quadrature is exact at any beat phase.
     ca = pytest.importorskip("casadi")
-    from pectoral_gym.symbolic import averaged_rhs_sx
+    from pectoral_gym.model.symbolic import averaged_rhs_sx
 
     s = _waveform_scaling(WAVE * 0.1, rng=np.random.default_rng(7))
     s = dataclasses.replace(s, waveform_table=s.waveform_table * 0.1)
@@ -234,7 +234,7 @@ def test_symbolic_rhs_with_waveform_tracks_the_averaged_model(left, rk4_symbolic
 
 def test_nmpc_with_waveform_equals_the_algebraic_solution():
     pytest.importorskip("casadi")
-    from scaling.nmpc import NmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
+    from scaling.identification.nmpc import IdentificationNmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
 
     patterns = np.array([FinBeat.from_degrees(85, 25, 1.0, 1.5).as_array(),
                          FinBeat.from_degrees(60, 20, 1.0, 4).as_array()])
@@ -247,7 +247,7 @@ def test_nmpc_with_waveform_equals_the_algebraic_solution():
         w = v[2]
         yaw = (body.m1 - body.m2) / body.J3 * v[0] * v[1] - body.c4 * waveform_square_mean(w, o) + k[2] * f[2] / body.J3
         assert abs(yaw) < 1e-12
-    nmpc = ScalingNmpc(P, NmpcSettings(horizon=3.0), velocities, samples)
+    nmpc = ScalingNmpc(P, IdentificationNmpcSettings(horizon=3.0), velocities, samples)
     for i in range(len(patterns)):
         r = nmpc.solve(velocities[i], forcing[i], oscillation=samples[i])
         assert r.success
@@ -314,7 +314,7 @@ def _two_fin_waves(right, left, duration):
 
 
 def test_compiled_rate_corrected_waveform_equals_the_numpy_form_for_two_fins():
-    from pectoral_gym.averaging import combined_waveform
+    from pectoral_gym.model.averaging import combined_waveform
 
     right, left = FinBeat.from_degrees(70, 25, 1.0, 3.0), FinBeat.from_degrees(95, 15, 1.4, 2.0)
     s, model, waves = _two_fin_waves(right, left, 2.9)
@@ -325,8 +325,8 @@ def test_compiled_rate_corrected_waveform_equals_the_numpy_form_for_two_fins():
 
 
 def test_commensurate_periods_average_over_the_common_period():
-    from pectoral_gym.averaging import combined_waveform
-    from pectoral_gym.ktables import quadrature_window
+    from pectoral_gym.model.averaging import combined_waveform
+    from pectoral_gym.model.ktables import quadrature_window
 
     assert quadrature_window(2 * np.pi / 1.8, 2 * np.pi / 0.9) == (2 * QUADRATURE, 1, 2)
     assert quadrature_window(2 * np.pi / 0.6, 2 * np.pi / 0.9) == (3 * QUADRATURE, 3, 2)
@@ -346,7 +346,7 @@ def test_commensurate_periods_average_over_the_common_period():
 
 def test_symbolic_rhs_with_rate_correction_tracks_the_averaged_model(rk4_symbolic):
     ca = pytest.importorskip("casadi")
-    from pectoral_gym.symbolic import averaged_rhs_sx
+    from pectoral_gym.model.symbolic import averaged_rhs_sx
 
     s = _rate_scaling(WAVE * 0.1, 0.05, rng=np.random.default_rng(7))
     s = dataclasses.replace(s, waveform_table=s.waveform_table * 0.1)
@@ -365,7 +365,7 @@ def test_symbolic_rhs_with_rate_correction_tracks_the_averaged_model(rk4_symboli
 
 def test_full_model_yaw_harmonics_are_period_free():
     # Time-scale symmetry of eqs. (9)-(20): omega ~ 1/T_p, so T_p c_k does not depend on T_p.
-    from scaling.reference import reference_runs
+    from scaling.identification.reference import reference_runs
 
     pattern = np.array([math.radians(70), math.radians(25), 1.0, 3.0])
     ref = reference_runs(np.array([pattern, pattern * [1, 1, 2.5, 1]]), P, progress=False)
@@ -375,8 +375,8 @@ def test_full_model_yaw_harmonics_are_period_free():
 
 
 def test_identify_refuses_an_unusable_harmonics_count():
-    from scaling.grids import GRIDS
-    from scaling.identify import identify
+    from scaling.identification.grids import GRIDS
+    from scaling.identification.identify import identify
 
     with pytest.raises(ValueError, match="harmonics must be in"):
         identify(GRIDS["quick"], yaw_damping="waveform", harmonics=MAX_HARMONICS + 1, progress=False)

@@ -14,7 +14,7 @@ named), ``observation`` (the observation layout and ``decode``), ``rendering``
 
 from pectoral_gym.envs.core import EnvConfig, EnvCore
 from pectoral_gym.envs.fish_env import PectoralFishEnv
-from pectoral_gym.envs.task_core import TaskState, register_task
+from pectoral_gym.envs.tasks.table import TaskState, register_task
 from pectoral_gym.envs.vector import PectoralFishVectorEnv
 
 __all__ = ["EnvConfig", "EnvCore", "PectoralFishEnv", "PectoralFishVectorEnv", "TaskState", "register_task"]

@@ -1,7 +1,7 @@
 """Settings and the batched environment core shared by the single and the vector environment.
 
 :class:`EnvCore` holds one batched fish model of ``n`` fish and the task
-state of ``n`` environments (:class:`~pectoral_gym.envs.task_core.TaskState`,
+state of ``n`` environments (:class:`~pectoral_gym.envs.tasks.table.TaskState`,
 the task table's arrays and functions, shared with the robot env). The single
 environment is an ``EnvCore`` with ``n = 1``; the vector environment uses one
 with ``n = num_envs``. Nothing here imports Gymnasium.
@@ -18,14 +18,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pectoral_gym.envs import tasks as tk
 from pectoral_gym.envs.fused import FusedStep
 from pectoral_gym.envs.layout import ACTION_SIZE, FishConstants, ReferenceEllipse, fish_array
-from pectoral_gym.envs.task_core import TASK_IDS, TaskState, task_info
-from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.model_spec import ENV_OPTIONS, MODELS, AveragedSpec, FullSpec, env_spec
-from pectoral_gym.models import REST, FishModel
-from pectoral_gym.params import FishParams, as_params
+from pectoral_gym.envs.tasks import kernels as tk
+from pectoral_gym.envs.tasks.table import TASK_IDS, TaskState, task_info
+from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.models import REST, FishModel
+from pectoral_gym.model.params import FishParams, as_params
+from pectoral_gym.model.spec import ENV_OPTIONS, MODELS, AveragedSpec, FullSpec, env_spec
 
 __all__ = ["EnvConfig", "EnvCore", "MODELS", "TASKS", "env_signature", "task_info"]
 
@@ -58,14 +58,14 @@ class EnvConfig:
     Attributes:
         model: ``"full"`` (blade-element) or ``"averaged"`` (cycle-averaged, scaled).
         task: ``"goal"`` (reach a point), ``"track"`` (follow a point moving on an ellipse), or a task
-            added to the task table (:func:`pectoral_gym.envs.task_core.register_task`).
+            added to the task table (:func:`pectoral_gym.envs.tasks.table.register_task`).
         control_period: Time between actions [s].
         bias_range: ``(low, high)`` of the fin bias ``gamma_0`` [rad].
         amplitude_range: ``(low, high)`` of the fin amplitude ``gamma_A`` [rad].
         period_range: ``(low, high)`` of the fin-beat period ``T_p`` [s].
         ratio_range: ``(low, high)`` of the speed ratio ``zeta`` [-].
         params: Nominal model parameters: a :class:`FishParams`, a dict of its fields, the path of a
-            parameters file (:func:`pectoral_gym.params.load_params`), or ``None`` (Table 1); stored
+            parameters file (:func:`pectoral_gym.model.params.load_params`), or ``None`` (Table 1); stored
             as a ``FishParams``.
         randomize: FishParams field name -> relative half-width ``w``; each
             reset multiplies the field by a factor drawn from ``U(1-w, 1+w)``.
@@ -75,26 +75,26 @@ class EnvConfig:
             records other model parameters than ``params`` (K identified for another robot).
             ``False`` is the explicit opt-out. ``randomize`` draws around ``params`` and is not checked.
             On the full model: the check of the K its model-based controllers plan with
-            (:func:`agents.fin_map.planning_spec`).
+            (:func:`agents.controllers.fin_map.planning_spec`).
         transitions: Averaged model only: add the forcing of transitional half-strokes (after every
-            pattern change; :class:`~pectoral_gym.models.AveragedModel`, ``docs/model.md`` 3.7). Off by
+            pattern change; :class:`~pectoral_gym.model.models.AveragedModel`, ``docs/model.md`` 3.7). Off by
             default in the envs, unlike the model: it depends on the fins' stroke phase, which the default
             observation does not show; use it with ``observe_fins=True``, as the shipped PPO file does
             (alone it did far worse: full-model success 0.36-0.68; with both 0.98-1.00; docs/agents.md).
         ripple_offsets: Averaged model only: the beat-mean ripple offset of a fin that starts,
-            changes or parks a pattern (:class:`~pectoral_gym.models.AveragedModel`, ``docs/model.md``
+            changes or parks a pattern (:class:`~pectoral_gym.model.models.AveragedModel`, ``docs/model.md``
             3.8; on by default in the model). Off by default in the envs until the shipped PPO file's
             figures are re-measured with it.
         integration: Full model only: ``"reference"`` (converged steps) or ``"fast"`` (8 RK4 substeps
             per half-stroke, at most 0.05 s: about 3x faster, within 0.2 % (p90) of the reference in open
-            loop; :data:`~pectoral_gym.models.FULL_INTEGRATION`, ``docs/model.md`` section 6).
+            loop; :data:`~pectoral_gym.model.models.FULL_INTEGRATION`, ``docs/model.md`` section 6).
         yaw_damping: Averaged model only: ``"sinusoid"``, ``"waveform"`` or ``"none"``
-            (:data:`pectoral_gym.model_spec.YAW_DAMPINGS`, ``docs/model.md`` 3.6); ``None``: ``"none"`` for
+            (:data:`pectoral_gym.model.spec.YAW_DAMPINGS`, ``docs/model.md`` 3.6); ``None``: ``"none"`` for
             ``scaling="none"``, else the richest the coefficients file holds (as before it was an option;
             :meth:`model_spec` names the one picked).
 
     The model settings (``model`` and the ``ENV_OPTIONS`` above) resolve to one spec,
-    :meth:`model_spec` (:func:`pectoral_gym.model_spec.env_spec`, which also refuses another model's
+    :meth:`model_spec` (:func:`pectoral_gym.model.spec.env_spec`, which also refuses another model's
     option set away from its default); the env builds its model from it and nothing else.
         observe_fins: Append each fin's half-stroke in progress to the observation (angle now, the next
             turning point, power or recovery, time left; :mod:`pectoral_gym.envs.observation`): the
@@ -188,7 +188,7 @@ class EnvConfig:
             set_(self, "randomize", randomize or None)
 
     def model_spec(self) -> FullSpec | AveragedSpec:
-        """The model these settings name (:mod:`pectoral_gym.model_spec`): what :class:`EnvCore` builds."""
+        """The model these settings name (:mod:`pectoral_gym.model.spec`): what :class:`EnvCore` builds."""
         return self._spec
 
     def scaling_functions(self) -> ScalingFunctions | None:
@@ -210,7 +210,7 @@ class EnvConfig:
         return np.array([self.bias_range, self.amplitude_range, self.period_range, self.ratio_range])
 
     def cfg_array(self) -> np.ndarray:
-        """Pack the settings for the kernels of :mod:`~pectoral_gym.envs.tasks`."""
+        """Pack the settings for the kernels of :mod:`~pectoral_gym.envs.tasks.kernels`."""
         cfg = np.zeros(tk.N_CFG)
         cfg[tk.C_DT] = self.control_period
         cfg[tk.C_TASK] = self.task_id
@@ -236,7 +236,7 @@ class EnvConfig:
         """Fin pattern(s) ``(..., 4)`` of normalised action entries ``(..., 4)``: the env's own action mapping.
 
         Entries are clipped to [-1, 1] and mapped linearly onto the ranges, as
-        :func:`pectoral_gym.envs.tasks.apply_actions` does; ``decode(encode(beat))``
+        :func:`pectoral_gym.envs.tasks.kernels.apply_actions` does; ``decode(encode(beat))``
         returns ``beat`` for a pattern inside the ranges.
         """
         r = self.ranges
@@ -267,8 +267,8 @@ class EnvCore:
         config: The settings.
 
     Attributes:
-        model: The batched :class:`~pectoral_gym.models.FishModel` (``n`` fish).
-        task_state: The :class:`~pectoral_gym.envs.task_core.TaskState` whose arrays follow (the same objects).
+        model: The batched :class:`~pectoral_gym.model.models.FishModel` (``n`` fish).
+        task_state: The :class:`~pectoral_gym.envs.tasks.table.TaskState` whose arrays follow (the same objects).
         obs: ``(n, 19)`` float32 observations after the last reset/step, ``(n, 27)`` with ``observe_fins``
             (``envs.observation``).
         out: ``(n, N_OUT)`` reward, terms and flags of the last step (``layout.O_*``).

@@ -18,7 +18,7 @@ from pectoral_gym.envs.layout import (
     ReferenceEllipse,
 )
 from pectoral_gym.envs.observation import OBS_X, OBS_Y, observation_bounds, observation_structure
-from pectoral_gym.params import FishParams
+from pectoral_gym.model.params import FishParams
 
 __all__ = ["PectoralFishEnv"]
 
@@ -34,7 +34,7 @@ class PectoralFishEnv(gym.Env):
     swims in a 2.30 m x 1.15 m tank. Every ``control_period`` the agent sets
     the beat pattern of each fin, ``(bias, amplitude, period, ratio)`` of
     eq. (21); a fin switches to a new pattern at the next turning point of its
-    stroke (the parameter-change rule of :mod:`pectoral_gym.strokes`). Two
+    stroke (the parameter-change rule of :mod:`pectoral_gym.model.strokes`). Two
     models drive the same environment: ``PectoralFish-Full-v0`` integrates the
     blade-element model through every fin beat, ``PectoralFish-Averaged-v0``
     the cycle-averaged model with identified scaling functions (and, beyond
@@ -92,7 +92,7 @@ class PectoralFishEnv(gym.Env):
     the other task are absent). ``d`` is the distance from the fish's centre of
     mass to the target after the step, ``E`` the fin work of the commanded
     patterns over the control period, ``E = sum_fins mean_fin_power * control_period``
-    (:func:`pectoral_gym.averaging.mean_fin_power`).
+    (:func:`pectoral_gym.model.averaging.mean_fin_power`).
 
     | Term              | Task  | Value                                    |
     |-------------------|-------|------------------------------------------|

@@ -13,7 +13,7 @@ which runs, in this order:
    share ``tasks.reward_one``), then ``tasks.observe_mean_velocity``: the observed velocities are
    the means over the control period.
 
-The body's loops are ``numba.prange`` loops: :func:`pectoral_gym._jit.kernel_builds` compiles it
+The body's loops are ``numba.prange`` loops: :func:`pectoral_gym.model.jit.kernel_builds` compiles it
 serially (below ``PARALLEL_MIN_ITEMS`` envs, where threads cost more than they save) and in
 parallel; every env's arithmetic is the same in both, so the two give the same bits
 (``tests/test_fused_step.py``). A task registered at run time gets builds of the same body with its
@@ -22,10 +22,10 @@ kernel bound in place of ``reward_one`` (:func:`step_builds`).
 The arrays of one core are bound once into a :class:`StepArrays` (a numba structref that holds
 them, not copies), so a step passes one object, the skip mask and the model's settings, bound with the arrays
 (:class:`StepSettings`); the compiled entry point of that exact signature
-(:func:`pectoral_gym._jit.entry_point`) skips numba's argument typing (about 1 us for a structref).
+(:func:`pectoral_gym.model.jit.entry_point`) skips numba's argument typing (about 1 us for a structref).
 
 This body inlines code from many modules; like every kernel it is compiled with
-:func:`pectoral_gym._jit.njit`, whose disk cache is keyed on all the sources it compiles from.
+:func:`pectoral_gym.model.jit.njit`, whose disk cache is keyed on all the sources it compiles from.
 """
 
 from __future__ import annotations
@@ -38,10 +38,10 @@ import numpy as np
 from numba.core import types
 from numba.experimental import structref
 
-from pectoral_gym import stepping
-from pectoral_gym._jit import PARALLEL_MIN_ITEMS, KernelPair, entry_point, kernel_builds, njit
-from pectoral_gym.envs import tasks as tk
-from pectoral_gym.strokes import command_fins
+from pectoral_gym.envs.tasks import kernels as tk
+from pectoral_gym.model import stepping
+from pectoral_gym.model.jit import PARALLEL_MIN_ITEMS, KernelPair, entry_point, kernel_builds, njit
+from pectoral_gym.model.strokes import command_fins
 
 __all__ = ["STEP", "STEP_FIELDS", "FusedStep", "StepArrays", "StepSettings", "step_body", "step_builds"]
 
@@ -59,7 +59,7 @@ class StepArrays(structref.StructRefProxy):
 
 #: The fields of :class:`StepArrays`: the env core's arrays (``actions`` its action buffer,
 #: ``before`` its velocity integrals before the step, ``everyone`` an all-true mask), then the
-#: model's arrays and its K tables as :func:`pectoral_gym.stepping.advance` takes them.
+#: model's arrays and its K tables as :func:`pectoral_gym.model.stepping.advance` takes them.
 STEP_FIELDS = ("actions", "cfg", "beats", "obs", "out", "fish", "ep", "before", "everyone",
                "state", "fins", "cache", "pending", "integral", "coef", "tables")
 structref.define_proxy(StepArrays, StepArraysType, list(STEP_FIELDS))
@@ -74,7 +74,7 @@ def new_step_arrays(actions, cfg, beats, obs, out, fish, ep, before, everyone, s
 
 
 class StepSettings(NamedTuple):
-    """The model's settings of one step, as :func:`pectoral_gym.stepping.advance` takes them.
+    """The model's settings of one step, as :func:`pectoral_gym.model.stepping.advance` takes them.
 
     Attributes:
         duration: Control period [s].

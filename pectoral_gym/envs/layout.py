@@ -1,4 +1,4 @@
-"""The packed arrays of the task kernels (:mod:`pectoral_gym.envs.tasks`): index constants and named views.
+"""The packed arrays of the task kernels (:mod:`pectoral_gym.envs.tasks.kernels`): index constants and named views.
 
 Kernels read and write flat float64 arrays for speed; every field has a name
 here, and Python code reads them through the named views below (or the
@@ -60,7 +60,7 @@ first) the four entries ``A_BIAS, A_AMPLITUDE, A_PERIOD, A_RATIO`` (offset
 ``FIN_ACTIONS`` for the left fin). ``beats`` ``(n, 2, 4)``: the commanded fin
 patterns ``(bias [rad], amplitude [rad], period [s], ratio [-])``, right fin
 first. ``draws`` ``(8,)`` per env: the random start of one episode, see
-:func:`pectoral_gym.envs.tasks.draw_episode`.
+:func:`pectoral_gym.envs.tasks.kernels.draw_episode`.
 """
 
 from __future__ import annotations
@@ -70,7 +70,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from pectoral_gym.params import FishParams
+from pectoral_gym.model.params import FishParams
 
 __all__ = [
     "GOAL", "TRACK", "ACTION_SIZE", "FIN_ACTIONS", "A_BIAS", "A_AMPLITUDE", "A_PERIOD", "A_RATIO",

@@ -16,7 +16,7 @@ MuJoCo envs publish ``observation_structure``.
 
 With ``observe_fins=True`` (:class:`~pectoral_gym.envs.core.EnvConfig`) the observation has
 :data:`FIN_OBS_SIZE` more entries, the half-stroke in progress of each fin (right fin, then left;
-:mod:`pectoral_gym.strokes`), on which the effect of a new command depends: a fin latches it at the
+:mod:`pectoral_gym.model.strokes`), on which the effect of a new command depends: a fin latches it at the
 end of that half-stroke, and the next half-stroke starts at that stroke's end angle
 (``docs/model.md`` 3.7 and 5):
 
@@ -35,7 +35,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
+from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 
 __all__ = [
     "OBS_X", "OBS_Y", "OBS_COS_PSI", "OBS_SIN_PSI", "OBS_VX", "OBS_VY", "OBS_OMEGA",

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from gymnasium.error import DependencyNotInstalled
 
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH
+from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 
 if TYPE_CHECKING:
     from pectoral_gym.envs.core import EnvConfig, EnvCore

@@ -24,7 +24,7 @@ class PectoralFishVectorEnv(VectorEnv):
     """``num_envs`` copies of :class:`~pectoral_gym.envs.fish_env.PectoralFishEnv` stepped as one batch.
 
     One batched model of ``num_envs`` fish and the task kernels of
-    :mod:`pectoral_gym.envs.tasks` advance all environments in a few compiled
+    :mod:`pectoral_gym.envs.tasks.kernels` advance all environments in a few compiled
     calls (threads for 64 envs and more). Env ``i`` behaves exactly like
     ``gym.make(id)`` reset with ``seed + i`` (as ``SyncVectorEnv`` seeds it)
     and given the same actions, step for step, including the autoreset.
@@ -47,7 +47,7 @@ class PectoralFishVectorEnv(VectorEnv):
 
     ``info`` holds one array per key of the single env's ``info`` (reward
     terms, ``"distance"``, ``"is_success"`` or ``"tracking_error"``: the task
-    table's ``Task.info_fields``, :mod:`pectoral_gym.envs.task_core`), each with
+    table's ``Task.info_fields``, :mod:`pectoral_gym.envs.tasks.table`), each with
     its boolean mask ``"_<key>"``, from ``reset()`` as from ``step()``: the
     same as ``SyncVectorEnv`` of single envs gives.
 

@@ -28,10 +28,10 @@ import sys
 
 import numpy as np
 
-from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.models import AveragedModel, FullModel
-from pectoral_gym.params import FinBeat, FishParams
-from scaling.fidelity import DURATION, SEED_SETS, draw_patterns
+from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.models import AveragedModel, FullModel
+from pectoral_gym.model.params import FinBeat, FishParams
+from scaling.validation.fidelity import DURATION, SEED_SETS, draw_patterns
 
 N, DT = 512, 0.01
 START, WINDOW, AFTER = 10.0, 10.0, 3.0  # record [START, START + WINDOW); measure 3 s after the switch

@@ -18,9 +18,9 @@ import math
 
 import numpy as np
 
-from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.params import FishParams
-from scaling.fidelity import (
+from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.params import FishParams
+from scaling.validation.fidelity import (
     DURATION,
     FIN_SPLITS,
     SCENARIOS,

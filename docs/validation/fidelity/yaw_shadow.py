@@ -23,10 +23,10 @@ import change_kick as ck  # this folder (the script's own): change_kick.py's fis
 import numba as nb
 import numpy as np
 
-from pectoral_gym.averaging import EXACT, averaged_fin_forcing
-from pectoral_gym.dynamics import fin_force_right, oscillating_square_mean, stroke_kinematics
-from pectoral_gym.models import AveragedModel, FullModel
-from pectoral_gym.params import coefficient_vector
+from pectoral_gym.model.averaging import EXACT, averaged_fin_forcing
+from pectoral_gym.model.dynamics import fin_force_right, oscillating_square_mean, stroke_kinematics
+from pectoral_gym.model.models import AveragedModel, FullModel
+from pectoral_gym.model.params import coefficient_vector
 
 H = 0.002  # s, the shadows' step
 params, scaling, pairs, switch = ck.params, ck.scaling, ck.pairs, ck.switch

@@ -45,7 +45,7 @@ from hardware.camerafaults import FaultyCamera
 from hardware.emulator import EmulatedRobot
 from hardware.env import HardwareFishEnv
 from hardware.radioproxy import RadioProxy
-from pectoral_gym.envs import tasks as tk
+from pectoral_gym.envs.tasks import kernels as tk
 
 CONDITIONS = ("clean", "bursty", "drops", "load")
 

@@ -1,4 +1,4 @@
-"""Find the NMPC's on-the-spot turn (``agents.nmpc_spin.SPIN_CYCLE``) and check it on the full model.
+"""Find the NMPC's on-the-spot turn (``agents.nmpc.spin.SPIN_CYCLE``) and check it on the full model.
 
 A cross-entropy search on the averaged model (``pectoral_gym.AveragedModel``: identified K, with its
 transitional strokes, docs/model.md 3.7) over cycles of four control periods (0.5 s each) of both
@@ -7,7 +7,7 @@ repeated for 6 s; the score is the heading gained (a left turn) minus 30 per met
 centre of mass strays more than 8 cm from its start, minus 100 per unit by which the robot's servo
 rules would change the cycle (:func:`servo_excess`; off with ``--no-servo-limits``), minus
 ``--work-weight`` [1/J] times the fin work of the strokes swept (default 0). The best cycle is printed
-in the FinInputs order of ``agents.nmpc_spin`` (amplitude right/left, bias right/left, degrees), then
+in the FinInputs order of ``agents.nmpc.spin`` (amplitude right/left, bias right/left, degrees), then
 the turn the shipped cycle gives on both models, from rest and after 5 s of straight swimming, from
 each phase of the cycle, and the searched cycle's turn and fin work::
 
@@ -30,9 +30,9 @@ import math
 
 import numpy as np
 
-from agents.nmpc_spin import SPIN_CYCLE
+from agents.nmpc.spin import SPIN_CYCLE
 from hardware.firmware import ServoLimits, clip_beats, stretch_transition
-from pectoral_gym.models import AveragedModel, FullModel
+from pectoral_gym.model.models import AveragedModel, FullModel
 
 STEPS, DT, CYCLE = 12, 0.5, 4
 LOW = np.array([math.radians(45), 0.0, 0.5, 5.0])  # bias, amplitude, period, ratio of one fin

@@ -26,8 +26,8 @@ import numpy as np
 
 import pectoral_gym  # noqa: F401 - registers the ids
 from agents.baselines import make_baseline
-from agents.policy import load_policy
-from pectoral_gym.params import TANK_LENGTH, TANK_WIDTH, FinBeat
+from agents.training.policy import load_policy
+from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FinBeat
 
 
 def starts(n: int, distance: float, seed: int) -> list[tuple[float, float, float, float, float]]:

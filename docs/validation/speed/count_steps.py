@@ -7,9 +7,9 @@ fields); see README.md here. 512 fish, seeded patterns from the envs' action ran
 
 import numpy as np
 
-from pectoral_gym import forcing_cache as fc
-from pectoral_gym.models import AveragedModel
-from scaling.fidelity import draw_patterns
+from pectoral_gym.model import forcing_cache as fc
+from pectoral_gym.model.models import AveragedModel
+from scaling.validation.fidelity import draw_patterns
 
 N, PERIODS, WARM_UP = 512, 120, 20
 model = AveragedModel(N, transitions=True, ripple_offsets=False)

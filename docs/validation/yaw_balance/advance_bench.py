@@ -1,8 +1,8 @@
 # ruff: noqa
 """model.advance at 4096 fish, patterns changed every call (random, env action ranges), seconds per env-step."""
 import sys, time, numpy as np
-from pectoral_gym.models import AveragedModel
-from pectoral_gym.kfunctions import ScalingFunctions
+from pectoral_gym.model.models import AveragedModel
+from pectoral_gym.model.kfunctions import ScalingFunctions
 n = 4096
 rng = np.random.default_rng(0)
 def beats():

@@ -1,9 +1,9 @@
 # ruff: noqa
 """How many harmonics of the single-fin yaw-rate waveform matter for the damping mean (dev patterns, seed 7)."""
 import numpy as np
-from pectoral_gym.models import FullModel
-from pectoral_gym.params import FinBeat, FishParams
-from pectoral_gym.steady import steady_state_batch
+from pectoral_gym.model.models import FullModel
+from pectoral_gym.model.params import FinBeat, FishParams
+from pectoral_gym.model.steady import steady_state_batch
 rng = np.random.default_rng(7)
 n = 40
 pat = np.column_stack([np.radians(rng.uniform(45, 135, n)), np.radians(rng.uniform(3, 30, n)),

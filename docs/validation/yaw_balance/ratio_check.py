@@ -4,11 +4,11 @@
 PYTHONPATH=. python docs/validation/yaw_balance/ratio_check.py pectoral_gym/data/scaling_coefficients_waveform.json "R(101, 23.8, 1.8, 4.299) L(92.87, 20.81, 0.9, 2.261)"
 """
 import sys, numpy as np
-from pectoral_gym.kfunctions import ScalingFunctions
-from pectoral_gym.params import FishParams, body_coefficients
-from pectoral_gym.averaging import waveform_samples, combined_waveform
-from pectoral_gym.dynamics import waveform_square_mean
-from scaling.yaw_balance import parse_pattern, yaw_balance
+from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.params import FishParams, body_coefficients
+from pectoral_gym.model.averaging import waveform_samples, combined_waveform
+from pectoral_gym.model.dynamics import waveform_square_mean
+from scaling.validation.yaw_balance import parse_pattern, yaw_balance
 S = ScalingFunctions.load(sys.argv[1])
 P = FishParams(); c4 = body_coefficients(P).c4
 for lab in sys.argv[2:]:

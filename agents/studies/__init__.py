@@ -1,0 +1,1 @@
+"""Studies over trained policies and controllers: the benchmark suite, seeds, time to solve, hyperparameter sweeps."""

@@ -1,0 +1,431 @@
+"""Batched fixed-step integration of the full and averaged models: RK4, step size, segments, dispatch.
+
+Free functions compiled with numba. :func:`advance` moves arrays of fish in
+place (fin arrays: :mod:`pectoral_gym.model.strokes`; averaged forcing cache:
+:mod:`pectoral_gym.model.forcing_cache`):
+
+============  ===========  ======================================================================
+array         shape        fields (units)
+============  ===========  ======================================================================
+``state``     ``(n, 6)``   ``X, Y, psi`` (tank frame; m, m, rad), ``vx, vy, omega`` (body frame;
+                           m/s, m/s, rad/s), eq. (19)
+``integral``  ``(n, 3)``   running integrals of ``vx, vy, omega`` (m, m, rad), for cycle averages
+``coef``      ``(n, 9)``   packed coefficients, ``params.COEF_NAMES`` order (``params.Coef``)
+============  ===========  ======================================================================
+
+Time is cut into segments between stroke boundaries (where ``g''`` jumps and
+a fin may latch a new pattern, :func:`pectoral_gym.model.strokes.latch`). The full
+model resolves the fin beat with RK4 substeps that land exactly on every
+stroke boundary, so the integrator keeps its fourth order across the beat.
+The averaged model holds its forcing constant over a segment and sizes its
+substeps by the body dynamics' stiffness (:func:`pectoral_gym.model.dynamics.linearised_rate`).
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+
+import numpy as np
+
+from pectoral_gym.model import forcing_cache as fc
+from pectoral_gym.model import strokes as st
+from pectoral_gym.model.averaging import half_stroke_mean_force, power_stroke_excess, ripple_offset
+from pectoral_gym.model.dynamics import (
+    Forcing,
+    RateConstants,
+    body_accel,
+    body_accel_waveform,
+    rate_bound,
+    rate_constants,
+)
+from pectoral_gym.model.jit import PARALLEL_MIN_ITEMS, kernel_pair, njit
+from pectoral_gym.model.ktables import KTables, as_tables
+from pectoral_gym.model.params import BodyCoefficients, Coef
+from pectoral_gym.model.ripple import transitional_oscillation_gain
+from pectoral_gym.model.strokes import AMPLITUDE, BIAS, DURATION, ELAPSED, PERIOD, RATIO, idle, latch
+
+__all__ = ["ACCURATE_STEP", "RIPPLE_OFFSETS", "STATE_NAMES", "TRANSITIONS", "State", "advance", "corrections"]
+
+STATE_NAMES = ("X", "Y", "psi", "vx", "vy", "omega")
+#: Column of each state (``state[:, State.PSI]``), generated from :data:`STATE_NAMES`; the integrals
+#: of ``vx, vy, omega`` sit in columns 0, 1, 2 of ``integral``.
+State = enum.IntEnum("State", {name.upper(): i for i, name in enumerate(STATE_NAMES)})
+
+_EPS = 1e-12
+#: Bits of the averaged model's ``corrections`` (:func:`corrections`): the transitional half-strokes
+#: (``docs/model.md`` 3.7, with their yaw-oscillation gain, 3.9) and the beat-mean ripple offset (3.8).
+TRANSITIONS, RIPPLE_OFFSETS = 1, 2
+ACCURATE_STEP = 1.5  # averaged model: h * rate bound; RK4 is stable to 2.78, this keeps transients accurate
+
+
+@njit
+def _rotate(c0, s0, delta):
+    """``cos, sin`` of ``psi0 + delta`` from those of ``psi0``.
+
+    RK4 stages move the heading by at most ``h |omega|``, a small angle: a
+    short series (error below 1e-12 for ``|delta| <= 0.1``) replaces three of
+    the four ``sin/cos`` pairs per step.
+    """
+    if abs(delta) > 0.1:
+        cd, sd = math.cos(delta), math.sin(delta)
+    else:
+        d2 = delta * delta
+        cd = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0 - d2 / 720.0))
+        sd = delta * (1.0 - d2 * (1.0 / 6.0 - d2 / 120.0))
+    return c0 * cd - s0 * sd, s0 * cd + c0 * sd
+
+
+@njit
+def _accel(u, v, w, f: Forcing, b: BodyCoefficients, osc, wave):
+    if wave is None:  # resolved when compiling: the None specialisation is the code without the waveform
+        return body_accel(u, v, w, f.fx, f.fy, f.tau, b.m1, b.m2, b.J3, b.c1, b.c2, b.c4, osc)
+    return body_accel_waveform(u, v, w, f.fx, f.fy, f.tau, b.m1, b.m2, b.J3, b.c1, b.c2, b.c4, wave)
+
+
+@njit
+def _rk4(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: BodyCoefficients, osc, wave):
+    """One RK4 step of eq. (19) for fish ``i``; forcing given at t, t+h/2, t+h.
+
+    ``osc`` [rad/s]: the yaw oscillation of the averaged model's damping
+    (:func:`pectoral_gym.model.dynamics.body_accel`); 0 for the full model. ``wave``: ``None``, or
+    the sampled yaw waveform of the waveform damping (``docs/model.md`` 3.6), which then
+    replaces ``osc`` (a compile-time choice: ``None`` is its own specialisation).
+    """
+    x0, y0, p0 = state[i, State.X], state[i, State.Y], state[i, State.PSI]
+    u0, v0, w0 = state[i, State.VX], state[i, State.VY], state[i, State.OMEGA]
+    c0, s0 = math.cos(p0), math.sin(p0)
+    # stage 1
+    k1x, k1y, k1p = u0 * c0 - v0 * s0, u0 * s0 + v0 * c0, w0
+    k1u, k1v, k1w = _accel(u0, v0, w0, f0, body, osc, wave)
+    # stage 2
+    u2, v2, w2 = u0 + 0.5 * h * k1u, v0 + 0.5 * h * k1v, w0 + 0.5 * h * k1w
+    c, s = _rotate(c0, s0, 0.5 * h * k1p)
+    k2x, k2y, k2p = u2 * c - v2 * s, u2 * s + v2 * c, w2
+    k2u, k2v, k2w = _accel(u2, v2, w2, fm, body, osc, wave)
+    # stage 3
+    u3, v3, w3 = u0 + 0.5 * h * k2u, v0 + 0.5 * h * k2v, w0 + 0.5 * h * k2w
+    c, s = _rotate(c0, s0, 0.5 * h * k2p)
+    k3x, k3y, k3p = u3 * c - v3 * s, u3 * s + v3 * c, w3
+    k3u, k3v, k3w = _accel(u3, v3, w3, fm, body, osc, wave)
+    # stage 4
+    u4, v4, w4 = u0 + h * k3u, v0 + h * k3v, w0 + h * k3w
+    c, s = _rotate(c0, s0, h * k3p)
+    k4x, k4y, k4p = u4 * c - v4 * s, u4 * s + v4 * c, w4
+    k4u, k4v, k4w = _accel(u4, v4, w4, f1, body, osc, wave)
+    h6 = h / 6.0
+    state[i, State.X] = x0 + h6 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
+    state[i, State.Y] = y0 + h6 * (k1y + 2.0 * k2y + 2.0 * k3y + k4y)
+    state[i, State.PSI] = p0 + h6 * (k1p + 2.0 * k2p + 2.0 * k3p + k4p)
+    state[i, State.VX] = u0 + h6 * (k1u + 2.0 * k2u + 2.0 * k3u + k4u)
+    state[i, State.VY] = v0 + h6 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+    state[i, State.OMEGA] = w0 + h6 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)
+    # the running integrals are extra RK4 states with derivative (vx, vy, omega)
+    integral[i, 0] += h6 * (u0 + 2.0 * u2 + 2.0 * u3 + u4)
+    integral[i, 1] += h6 * (v0 + 2.0 * v2 + 2.0 * v3 + v4)
+    integral[i, 2] += h6 * (w0 + 2.0 * w2 + 2.0 * w3 + w4)
+
+
+@njit(inline="always")
+def _driven(body: BodyCoefficients, forcing: Forcing):
+    """Yaw rate and speed a constant forcing drives towards: ``sqrt(|tau| / (c4 J3))``, ``sqrt(|F| / c1)``."""
+    return (math.sqrt(abs(forcing.tau) / (body.c4 * body.J3)),
+            math.sqrt(math.hypot(forcing.fx, forcing.fy) / max(body.c1, 1e-12)))
+
+
+@njit
+def _stable_step(state, i, rates: RateConstants, driven_omega, driven_speed, osc, dt_max):
+    """Averaged model: RK4 step, at most ``dt_max`` and ``h * rate <= ACCURATE_STEP``.
+
+    The rate is :func:`pectoral_gym.model.dynamics.linearised_rate` (from the fish's
+    precomputed ``rates``) at the larger of the current yaw rate and speed and those
+    the forcing drives towards (:func:`_driven`, once per segment), so a fish at
+    rest that starts turning does not overshoot.
+    """
+    omega = max(abs(state[i, State.OMEGA]), driven_omega)
+    speed = max(math.sqrt(state[i, State.VX] ** 2 + state[i, State.VY] ** 2), driven_speed)
+    rate = rate_bound(speed, omega, osc, rates)
+    if rate * dt_max > ACCURATE_STEP:
+        return ACCURATE_STEP / rate
+    return dt_max
+
+
+@njit(inline="always")
+def _full_stable_step(state, fins, i, idle0, idle1, body, rates, drag_constant, inertia_constant, fin_offset, h_max):
+    """Full model: ``h_max``, shortened where RK4 would leave its accurate range (:func:`_stable_step`).
+
+    The in-beat forcing peaks within the segment, so the rate is taken at the yaw rate and
+    speed that each half-stroke's peak force and moment would drive: on ``g = mid - half
+    cos(pi s / d)``, ``|g'| <= |half| pi / d`` and ``|g''| <= |half| (pi / d)^2``, so eqs. (16)-(18)
+    give ``|f_hx| <= (k + m_p S_p / 2) g'_max^2 + (m_p S_p / 2) g''_max`` (and ``|tau| <= C_p`` times
+    that). It never binds at the reference steps (``dt_max`` 0.01 s); it keeps the fast
+    preset (:data:`pectoral_gym.model.models.FULL_INTEGRATION`) and any larger ``dt_max`` stable.
+    """
+    force = 0.0
+    for f in range(2):
+        if idle0 if f == 0 else idle1:
+            continue
+        rate = math.pi / max(fins[i, f, DURATION], _EPS)
+        half = 0.5 * abs(fins[i, f, st.ANGLE_TO] - fins[i, f, st.ANGLE_FROM])
+        speed = half * rate  # peak |g'|
+        force += (drag_constant + inertia_constant) * speed * speed + inertia_constant * speed * rate
+    driven_omega = math.sqrt(abs(fin_offset) * force / (body.c4 * body.J3))
+    driven_speed = math.sqrt(force / max(body.c1, 1e-12))
+    return _stable_step(state, i, rates, driven_omega, driven_speed, 0.0, h_max)
+
+
+@njit(inline="always")
+def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables, corrections):
+    """Latch fin ``f``'s commanded pattern; the averaged model also brings its forcing cache up to date.
+
+    The corrections (:data:`TRANSITIONS`: :func:`_transition` and the half-stroke's yaw-oscillation
+    gain, :func:`_oscillation_gain`; :data:`RIPPLE_OFFSETS`: the change of the beat-mean ripple
+    offset, spread over the half-stroke) are constant over the half-stroke, so they are evaluated
+    here, once, and kept in the cache (``TR_*``, ``OSC_EXCESS``).
+    """
+    if averaged and fins[i, f, st.POWER] > 0.5:  # a power stroke ends: keep its pattern (_transition)
+        cache[i, f, fc.PREV_BIAS] = fins[i, f, BIAS]
+        cache[i, f, fc.PREV_AMPLITUDE] = fins[i, f, AMPLITUDE]
+        cache[i, f, fc.PREV_PERIOD] = fins[i, f, PERIOD]
+        cache[i, f, fc.PREV_RATIO] = fins[i, f, RATIO]
+    latch(fins, pending, i, f)
+    if averaged:
+        fc.refresh(cache, i, f, fins[i, f, BIAS], fins[i, f, AMPLITUDE], fins[i, f, PERIOD], fins[i, f, RATIO],
+                   coef, mode, tables)
+        if corrections:
+            dfx = dfy = dtau = 0.0
+            if corrections & TRANSITIONS:
+                dfx, dfy, dtau = _transition(fins, cache, i, f, coef[i, Coef.FIN_DRAG_CONSTANT],
+                                             coef[i, Coef.FIN_OFFSET])
+                cache[i, f, fc.OSC_EXCESS] = _oscillation_gain(fins, i, f, coef) - 1.0
+            if corrections & RIPPLE_OFFSETS:
+                ox, oy, ot = _ripple_offset_change(fins, cache, i, f, coef[i, Coef.FIN_DRAG_CONSTANT],
+                                                   coef[i, Coef.FIN_OFFSET])
+                duration = fins[i, f, DURATION]
+                dfx, dfy, dtau = dfx + ox / duration, dfy + oy / duration, dtau + ot / duration
+            cache[i, f, fc.TR_FX] = dfx
+            cache[i, f, fc.TR_FY] = dfy
+            cache[i, f, fc.TR_TAU] = dtau
+
+
+@njit(inline="always")
+def _oscillation_gain(fins, i, f, coef):
+    """Yaw-oscillation gain of fin ``f``'s latched half-stroke (``docs/model.md`` 3.9; 1 on a regular one)."""
+    return transitional_oscillation_gain(fins[i, f, st.ANGLE_FROM], fins[i, f, st.ANGLE_TO], fins[i, f, DURATION],
+                                         fins[i, f, st.POWER] > 0.5, fins[i, f, BIAS], fins[i, f, AMPLITUDE],
+                                         fins[i, f, PERIOD], fins[i, f, RATIO], coef[i, Coef.FIN_DRAG_CONSTANT],
+                                         coef[i, Coef.FIN_INERTIA_CONSTANT])
+
+
+@njit(inline="always")
+def _ripple_offset_change(fins, cache, i, f, drag_constant, fin_offset):
+    """Impulse [N s, N s, N m s] that moves fin ``f``'s delivered ripple offset to its latched pattern's.
+
+    ``docs/model.md`` section 3.8: the averaged state is the beat mean of the full model's,
+    which runs ahead of its cycle-start value by ``M / m`` (:func:`ripple_offset`); a fin that
+    starts a pattern, changes it or parks moves that offset from the old pattern's ``M`` to the
+    new one's. Zero while the pattern is kept.
+    """
+    mx, my = ripple_offset(fins[i, f, BIAS], fins[i, f, AMPLITUDE], fins[i, f, PERIOD], fins[i, f, RATIO],
+                           drag_constant)
+    side = st.SIDE[f]
+    mx, my, mt = mx, side * my, side * fin_offset * mx  # eq. (18), left fin mirrored
+    ox, oy, ot = mx - cache[i, f, fc.OFF_FX], my - cache[i, f, fc.OFF_FY], mt - cache[i, f, fc.OFF_TAU]
+    cache[i, f, fc.OFF_FX] = mx
+    cache[i, f, fc.OFF_FY] = my
+    cache[i, f, fc.OFF_TAU] = mt
+    return ox, oy, ot
+
+
+@njit(inline="always")
+def _transition(fins, cache, i, f, drag_constant, fin_offset):
+    """Averaged model: forcing of fin ``f``'s half-stroke in progress beyond its pattern's regular one.
+
+    Two parts (``docs/model.md`` section 3.7), both zero at periodic steady state:
+
+    * the exact mean of the half-stroke actually swept (from ``ANGLE_FROM``) minus that of
+      the latched pattern's regular half-stroke (from its other turning point), both ending
+      at ``ANGLE_TO`` in ``DURATION`` s;
+    * on a recovery stroke after a power stroke of another pattern: the impulse offset that
+      power stroke left, ``X(previous) - X(latched)`` (:func:`power_stroke_excess`), spread
+      over the recovery stroke.
+    """
+    duration = fins[i, f, DURATION]
+    if duration <= 0.0:
+        return 0.0, 0.0, 0.0
+    power = fins[i, f, st.POWER] > 0.5
+    bias, amp = fins[i, f, BIAS], fins[i, f, AMPLITUDE]
+    start = bias - amp if power else bias + amp
+    angle_from = fins[i, f, st.ANGLE_FROM]
+    dx = 0.0
+    dy = 0.0
+    if angle_from != start:
+        ax, ay = half_stroke_mean_force(angle_from, fins[i, f, st.ANGLE_TO], duration, drag_constant)
+        rx, ry = half_stroke_mean_force(start, fins[i, f, st.ANGLE_TO], duration, drag_constant)
+        dx, dy = ax - rx, ay - ry
+    if not power and (cache[i, f, fc.PREV_BIAS] != bias or cache[i, f, fc.PREV_AMPLITUDE] != amp
+                      or cache[i, f, fc.PREV_PERIOD] != fins[i, f, PERIOD]
+                      or cache[i, f, fc.PREV_RATIO] != fins[i, f, RATIO]):
+        px, py = power_stroke_excess(cache[i, f, fc.PREV_BIAS], cache[i, f, fc.PREV_AMPLITUDE],
+                                     cache[i, f, fc.PREV_PERIOD], cache[i, f, fc.PREV_RATIO], drag_constant)
+        qx, qy = power_stroke_excess(bias, amp, fins[i, f, PERIOD], fins[i, f, RATIO], drag_constant)
+        dx += (px - qx) / duration
+        dy += (py - qy) / duration
+    side = st.SIDE[f]
+    return dx, side * dy, side * fin_offset * dx  # eq. (18), left fin mirrored
+
+
+@njit
+def _waveform_segment(state, integral, fins, cache, i, seg, idle0, idle1, harmonics, rate_correction, body, rates,
+                      forcing, dt_max):
+    """Averaged model, waveform damping (``docs/model.md`` 3.6): RK4 substeps over one segment of ``seg`` s.
+
+    The combined yaw waveform is sampled once, at the segment's middle
+    (:func:`pectoral_gym.model.forcing_cache.yaw_waveform`), into a workspace of its own, so the
+    default model (no ``yaw_waveform`` section) allocates nothing.
+    """
+    work = np.empty(fc.WORKSPACE)
+    n_wave, osc = fc.yaw_waveform(fins, cache, i, 0.5 * seg, idle0, idle1, harmonics, rate_correction,
+                                  state[i, State.OMEGA], body.c4, work)
+    _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, work[:n_wave], dt_max)
+
+
+@njit(inline="always")
+def _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, wave, dt_max):
+    """Integrate fish ``i`` over a segment of constant forcing.
+
+    Equal RK4 substeps to the segment's end, re-sized as the state's stiffness changes (:func:`_stable_step`).
+    """
+    t_seg = seg
+    driven_omega, driven_speed = _driven(body, forcing)
+    while t_seg > _EPS:
+        h_ok = _stable_step(state, i, rates, driven_omega, driven_speed, osc, dt_max)
+        h = t_seg / max(1, int(math.ceil(t_seg / h_ok - 1e-9)))
+        _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc, wave)
+        t_seg -= h
+
+
+@njit
+def advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode,
+                 corrections, packed_tables):
+    """Advance fish ``i`` by ``duration`` seconds, segment by segment between stroke boundaries."""
+    tables = as_tables(packed_tables)
+    body = BodyCoefficients(coef[i, Coef.M1], coef[i, Coef.M2], coef[i, Coef.J3],
+                            coef[i, Coef.C1], coef[i, Coef.C2], coef[i, Coef.C4])
+    drag_constant = coef[i, Coef.FIN_DRAG_CONSTANT]
+    inertia_constant = coef[i, Coef.FIN_INERTIA_CONSTANT]
+    fin_offset = coef[i, Coef.FIN_OFFSET]
+    rates = rate_constants(body.m1, body.m2, body.J3, body.c1, body.c2, body.c4)
+    harmonics = tables.wave_table.shape[0] // 2 if averaged and tables.wave_table.shape[1] > 0 else 0
+    rate_correction = tables.wave_table.shape[0] % 2 == 1
+    t_left = duration
+    while t_left > _EPS:
+        # A fin at rest that stays at rest never ends a segment: its stroke clock must
+        # not cut the other fin's integration into phase-dependent pieces.
+        idle0 = idle(fins, pending, i, 0)
+        idle1 = idle(fins, pending, i, 1)
+        if not idle0 and fins[i, 0, ELAPSED] >= fins[i, 0, DURATION] - _EPS:
+            _start_half_stroke(fins, cache, pending, i, 0, coef, averaged, mode, tables, corrections)
+        if not idle1 and fins[i, 1, ELAPSED] >= fins[i, 1, DURATION] - _EPS:
+            _start_half_stroke(fins, cache, pending, i, 1, coef, averaged, mode, tables, corrections)
+        rem0 = np.inf if idle0 else fins[i, 0, DURATION] - fins[i, 0, ELAPSED]
+        rem1 = np.inf if idle1 else fins[i, 1, DURATION] - fins[i, 1, ELAPSED]
+        seg = min(t_left, rem0, rem1)
+        if averaged:
+            fx = cache[i, 0, fc.AVG_FX] + cache[i, 1, fc.AVG_FX]
+            fy = cache[i, 0, fc.AVG_FY] + cache[i, 1, fc.AVG_FY]
+            tau = cache[i, 0, fc.AVG_TAU] + cache[i, 1, fc.AVG_TAU]
+            if corrections:  # each fin's, evaluated when it latched (_start_half_stroke)
+                for f in range(2):
+                    fx, fy, tau = fx + cache[i, f, fc.TR_FX], fy + cache[i, f, fc.TR_FY], tau + cache[i, f, fc.TR_TAU]
+            forcing = Forcing(fx, fy, tau)
+            if harmonics > 0:
+                _waveform_segment(state, integral, fins, cache, i, seg, idle0, idle1, harmonics, rate_correction,
+                                  body, rates, forcing, dt_max)
+            else:
+                osc = fc.yaw_oscillation(fins, cache, i, 0.5 * seg, idle0, idle1)
+                _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, None, dt_max)
+        else:
+            h_max = dt_max
+            if not idle0:
+                h_max = min(h_max, fins[i, 0, DURATION] / min_substeps)
+            if not idle1:
+                h_max = min(h_max, fins[i, 1, DURATION] / min_substeps)
+            h_max = _full_stable_step(state, fins, i, idle0, idle1, body, rates, drag_constant, inertia_constant,
+                                      fin_offset, h_max)
+            n_sub = max(1, int(math.ceil(seg / h_max - 1e-9)))
+            h = seg / n_sub
+            # the forces at t, t + h/2, t + h of every substep: each fin's phase rotated by h/2 each time
+            p0 = st.stroke_phase(fins, i, 0, 0.5 * h)
+            p1 = st.stroke_phase(fins, i, 1, 0.5 * h)
+            f0 = Forcing(*st.phase_forcing(p0, p1, drag_constant, inertia_constant, fin_offset))
+            for _ in range(n_sub):
+                p0, p1 = st.advance_phase(p0), st.advance_phase(p1)
+                fm = Forcing(*st.phase_forcing(p0, p1, drag_constant, inertia_constant, fin_offset))
+                p0, p1 = st.advance_phase(p0), st.advance_phase(p1)
+                f1 = Forcing(*st.phase_forcing(p0, p1, drag_constant, inertia_constant, fin_offset))
+                _rk4(state, integral, i, h, f0, fm, f1, body, 0.0, None)
+                f0 = f1
+        if not idle0:  # the strokes actually swept, for the fin work (both models)
+            fins[i, 0, st.SWEPT] += st.swept_cube(fins, i, 0, seg)
+        if not idle1:
+            fins[i, 1, st.SWEPT] += st.swept_cube(fins, i, 1, seg)
+        if rem0 - seg <= _EPS:
+            fins[i, 0, ELAPSED] = fins[i, 0, DURATION]  # exactly on the boundary
+        elif not idle0:
+            fins[i, 0, ELAPSED] += seg
+        if rem1 - seg <= _EPS:
+            fins[i, 1, ELAPSED] = fins[i, 1, DURATION]
+        elif not idle1:
+            fins[i, 1, ELAPSED] += seg
+        t_left -= seg
+
+
+_ADVANCE = kernel_pair(
+    advance_one,
+    "state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, corrections, "
+    "packed_tables",
+)
+_SERIAL, _PARALLEL = _ADVANCE.serial, _ADVANCE.parallel  # bound once: advance() runs at every env step
+
+
+def advance(
+    state: np.ndarray,
+    fins: np.ndarray,
+    cache: np.ndarray,
+    pending: np.ndarray,
+    integral: np.ndarray,
+    coef: np.ndarray,
+    duration: float,
+    dt_max: float,
+    min_substeps: int,
+    averaged: bool,
+    mode: int,
+    tables: KTables,
+    corrections: int = 0,
+) -> None:
+    """Advance every fish by ``duration`` seconds in place (see module docstring).
+
+    Args:
+        state, integral, coef: Batched arrays (module docstring).
+        fins, pending: Fin half-strokes and commanded patterns (:mod:`pectoral_gym.model.strokes`).
+        cache: Averaged forcing cache (:mod:`~pectoral_gym.model.forcing_cache`); read and written only if ``averaged``.
+        duration: Time to advance [s].
+        dt_max: Largest RK4 substep [s].
+        min_substeps: Full model: least number of substeps per half-stroke.
+        averaged: Integrate the averaged model (eq. 25) instead of the full one (eq. 19).
+        mode: Averaged forcing form (``averaging.EXACT`` or ``averaging.TAYLOR``).
+        tables: Scaling functions (``kfunctions.ScalingFunctions.kernel_arrays()``), or ``tuple()`` of them.
+        corrections: Averaged model: a sum of :data:`TRANSITIONS` (each transitional half-stroke's
+            forcing beyond the regular half-stroke, :func:`_transition`, ``docs/model.md`` 3.7) and
+            :data:`RIPPLE_OFFSETS` (the beat-mean ripple offset, 3.8); see :func:`corrections`.
+    """
+    kernel = _PARALLEL if state.shape[0] >= PARALLEL_MIN_ITEMS else _SERIAL
+    kernel(state, fins, cache, pending, integral, coef, float(duration), float(dt_max), float(min_substeps),
+           bool(averaged), int(mode), int(corrections),
+           tuple(tables))  # a plain tuple is faster to dispatch (ktables.as_tables)
+
+
+def corrections(transitions: bool, ripple_offsets: bool) -> int:
+    """The ``corrections`` argument of :func:`advance` from the averaged model's two options."""
+    return (TRANSITIONS if transitions else 0) | (RIPPLE_OFFSETS if ripple_offsets else 0)

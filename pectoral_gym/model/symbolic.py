@@ -1,0 +1,491 @@
+"""CasADi expressions of the cycle-averaged model, for optimal control (NMPC).
+
+The same equations as :class:`~pectoral_gym.model.models.AveragedModel` (exact
+Bessel averages, eq. 25 with scaling functions K, body dynamics eqs. 19-20),
+written with CasADi symbols so that the scaling identification (``scaling/``)
+and the NMPC baseline (``agents/``) share one model. CasADi is an optional
+dependency (``pip install pectoral-gym[nmpc]``); it is imported here only.
+
+Every function accepts CasADi ``SX``/``MX`` (or plain numbers) and returns
+expressions of the same kind.
+
+The averaged model's transitional-stroke forcing (``docs/model.md`` section 3.7) is here as
+its exact building blocks, :func:`half_stroke_mean_force_sx`, :func:`power_stroke_excess_sx` and
+:func:`transition_forcing_sx` (parity with the compiled kernel, ``stepping._transition``, in
+``tests/test_symbolic.py``). Which half-stroke is transitional depends on the fins' stroke phase,
+a discrete state; the NMPC baseline, which does not observe it, uses their expectation over the
+phase (:func:`expected_transition_impulse_sx`, ``agents.nmpc.problem``).
+"""
+
+from __future__ import annotations
+
+import math
+
+try:
+    import casadi as ca
+except ImportError as err:  # pragma: no cover - exercised only without the nmpc extra
+    raise ImportError(
+        "pectoral_gym.model.symbolic needs CasADi: pip install 'pectoral-gym[nmpc]' (or pip install casadi)"
+    ) from err
+
+import numpy as np
+
+from pectoral_gym.model.averaging import ODD_MOMENT_SERIES
+from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.ktables import QUADRATURE, RATE_ITERATIONS
+from pectoral_gym.model.params import FishParams, body_coefficients
+
+__all__ = [
+    "OSCILLATION_FLOOR", "STATE_SIZE", "STATE_POSITION", "STATE_PSI", "STATE_VELOCITY",
+    "bessel_j1_sx", "bspline_basis_sx", "scaling_sx", "averaged_forcing_sx", "oscillating_square_mean_sx",
+    "yaw_oscillation_sx", "combined_yaw_oscillation_sx", "yaw_waveform_sx", "combined_yaw_waveform_sx",
+    "waveform_square_mean_sx", "body_accel_sx", "body_rhs_sx", "averaged_rhs_sx",
+    "mean_fin_power_sx", "rk4_sx", "named_symbols", "half_stroke_mean_force_sx", "power_stroke_excess_sx",
+    "transition_forcing_sx", "expected_transition_impulse_sx", "ripple_offset_sx",
+]
+
+# The state of the symbolic model, ``(X, Y, psi, vx, vy, omega)``: pose in the tank frame, then the
+# body-frame velocities (eq. 19), the order of pectoral_gym.model.models' state rows.
+STATE_SIZE = 6
+STATE_POSITION = slice(0, 2)
+STATE_PSI = 2
+STATE_VELOCITY = slice(3, 6)
+
+#: rad/s: the least yaw-oscillation amplitude the CasADi models use (keeps ``omega / A`` finite when two
+#: mirrored fins cancel, or with no oscillation at all: ``A**2 / 2 = 5e-19`` off the paper's ``omega |omega|``).
+OSCILLATION_FLOOR = 1e-9
+_J1_TERMS = 18  # same truncation as averaging.bessel_j1 (machine precision for |x| <= pi)
+
+
+def bessel_j1_sx(x):
+    """``J1(x)`` by its power series (as :func:`pectoral_gym.model.averaging.bessel_j1`)."""
+    half = 0.5 * x
+    term = half
+    total = half
+    h2 = half * half
+    for k in range(1, _J1_TERMS):
+        term = term * (-h2 / (k * (k + 1)))
+        total = total + term
+    return total
+
+
+def bspline_basis_sx(x, knots):
+    """The ``len(knots) - 4`` cubic B-spline basis functions at ``x`` (clamped to the knot range).
+
+    Cox-de Boor recursion written out symbolically, the same piecewise
+    polynomials as the compiled :func:`pectoral_gym.model.averaging.scaling_values`.
+    """
+    knots = [float(k) for k in knots]
+    n = len(knots) - 4
+    x = ca.fmin(ca.fmax(x, knots[3]), knots[n])
+    basis = []
+    for j in range(len(knots) - 1):  # degree 0: the half-open knot interval, the last non-empty one closed
+        if knots[j] == knots[j + 1]:
+            basis.append(0.0)
+        elif j == n - 1:
+            basis.append(ca.if_else(x >= knots[j], 1.0, 0.0))
+        else:
+            basis.append(ca.if_else(ca.logic_and(x >= knots[j], x < knots[j + 1]), 1.0, 0.0))
+    for degree in range(1, 4):
+        nxt = []
+        for j in range(len(knots) - 1 - degree):
+            term = 0.0
+            if knots[j + degree] != knots[j]:
+                term = term + (x - knots[j]) / (knots[j + degree] - knots[j]) * basis[j]
+            if knots[j + degree + 1] != knots[j + 1]:
+                term = term + (knots[j + degree + 1] - x) / (knots[j + degree + 1] - knots[j + 1]) * basis[j + 1]
+            nxt.append(term)
+        basis = nxt
+    return basis[:n]
+
+
+def scaling_sx(beat, scaling: ScalingFunctions | None):
+    """``[K_fx, K_fy, K_m]`` at ``beat = (bias, amplitude, period, ratio)``; all 1 if ``scaling`` is None.
+
+    ``K_fy`` is in the sense of ``scaling.sway`` (:mod:`pectoral_gym.model.kfunctions`).
+    """
+    if scaling is None:
+        return ca.vertcat(1.0, 1.0, 1.0)
+    bias, amplitude, period, ratio = beat[0], beat[1], beat[2], beat[3]
+    features = (bias, amplitude, period, ratio, 1.0 / period, 1.0 / ratio)
+    values = []
+    for which in range(3):
+        total = 0.0
+        for powers, coef in zip(scaling.powers[which], scaling.coefs[which], strict=True):
+            if coef == 0.0:
+                continue
+            term = float(coef)
+            for feature, p in zip(features, powers, strict=True):
+                if p != 0.0:
+                    term = term * feature ** (int(p) if float(p).is_integer() else float(p))
+            total = total + term
+        values.append(total)
+    if scaling.has_spline:
+        for which, value in enumerate(_tensor_spline_sx((bias, amplitude, 1.0 / ratio), scaling.knots, scaling.table)):
+            values[which] = values[which] + value
+    return ca.vertcat(*values)
+
+
+def _tensor_spline_sx(x, knots, table):
+    """Each channel of a tensor-product cubic spline ``table (channels, n0, n1, n2)`` at ``x``."""
+    bases = [ca.vertcat(*bspline_basis_sx(xi, k)) for xi, k in zip(x, knots, strict=True)]
+    n0, n1, n2 = table.shape[1:]
+    values = []
+    for channel in table:
+        # contract one axis at a time: (n0, n1 n2) -> (n1, n2) -> (n2,) -> scalar
+        first = ca.mtimes(bases[0].T, ca.DM(channel.reshape(n0, n1 * n2)))
+        second = ca.mtimes(bases[1].T, ca.reshape(first, n2, n1).T)
+        values.append(ca.mtimes(second, bases[2]))
+    return values
+
+
+def yaw_oscillation_sx(beat, scaling: ScalingFunctions | None):
+    """Phasor ``A (cos phi, sin phi)`` [rad/s] of the right fin's yaw-rate oscillation (zero without data).
+
+    As :func:`pectoral_gym.model.averaging.yaw_oscillation_phasor`, including the
+    linear shrink below the lowest amplitude node.
+    """
+    if scaling is None or not scaling.has_oscillation:
+        return ca.vertcat(0.0, 0.0)
+    bias, amplitude, period, ratio = beat[0], beat[1], beat[2], beat[3]
+    pc, ps = _tensor_spline_sx((bias, amplitude, 1.0 / ratio), scaling.oscillation_knots, scaling.oscillation_table)
+    lowest = float(scaling.oscillation_knots[1][3])
+    shrink = ca.fmin(ca.fmax(amplitude, 0.0), lowest) / lowest if lowest > 0.0 else 1.0
+    return ca.vertcat(pc, ps) * shrink / period
+
+
+def combined_yaw_oscillation_sx(right, left, scaling: ScalingFunctions | None):
+    """Amplitude [rad/s] of the yaw oscillation of two fins beating in phase; ``None`` without yaw-oscillation data.
+
+    The left fin's oscillation is the mirror image, so the phasors subtract
+    (as in :func:`pectoral_gym.model.forcing_cache.yaw_oscillation` with equal beat phases); a tiny
+    floor keeps ``omega / A`` finite when two equal fins cancel.
+    """
+    if scaling is None or not scaling.has_oscillation:
+        return None
+    phasor = yaw_oscillation_sx(right, scaling) - yaw_oscillation_sx(left, scaling)
+    return ca.sqrt(ca.sumsqr(phasor) + OSCILLATION_FLOOR**2)
+
+
+def yaw_waveform_sx(beat, scaling: ScalingFunctions):
+    """``(Re c_k, Im c_k, |omega|_ref)`` [rad/s] of the right fin's yaw waveform: two ``(H,)`` vectors and a scalar.
+
+    As :meth:`pectoral_gym.model.kfunctions.ScalingFunctions.yaw_waveform` and ``yaw_mean_abs``
+    (0 without the rate correction), including the linear shrink below the lowest amplitude node.
+    """
+    bias, amplitude, period, ratio = beat[0], beat[1], beat[2], beat[3]
+    values = _tensor_spline_sx((bias, amplitude, 1.0 / ratio), scaling.waveform_knots, scaling.waveform_table)
+    lowest = float(scaling.waveform_knots[1][3])
+    shrink = ca.fmin(ca.fmax(amplitude, 0.0), lowest) / lowest if lowest > 0.0 else 1.0
+    scale = shrink / period
+    h = scaling.harmonics
+    mean_abs = values[2 * h] * scale if scaling.has_rate_correction else 0.0
+    return ca.vertcat(*values[0:2 * h:2]) * scale, ca.vertcat(*values[1:2 * h:2]) * scale, mean_abs
+
+
+def combined_yaw_waveform_sx(right, left, scaling: ScalingFunctions | None, omega=None,
+                             params: FishParams | None = None, smoothing: float = 0.0):
+    """The yaw-waveform samples (``QUADRATURE``,) of two fins beating in phase; ``None`` without waveform data.
+
+    The left fin's waveform is the mirror image, so the harmonics subtract (as
+    :func:`pectoral_gym.model.forcing_cache.yaw_waveform` with equal beat phases, the first sample
+    at phase 0). With the file's rate correction the yaw rate ``omega`` and ``params`` are
+    needed: the same relaxed fixed-point steps as the compiled model (``smoothing`` > 0
+    replaces ``|x|`` by ``sqrt(x^2 + smoothing^2)`` in them).
+    """
+    if scaling is None or scaling.harmonics == 0:
+        return None
+    k = np.arange(1, scaling.harmonics + 1)
+    theta = 2.0 * np.pi * np.outer(np.arange(QUADRATURE), k) / QUADRATURE  # (QUADRATURE, H)
+    cos, sin = ca.DM(np.cos(theta)), ca.DM(np.sin(theta))
+    fins = [(yaw_waveform_sx(right, scaling), 1.0, right[2]), (yaw_waveform_sx(left, scaling), -1.0, left[2])]
+    re = sum(side * w[0] for w, side, _ in fins)
+    im = sum(side * w[1] for w, side, _ in fins)
+    samples = ca.mtimes(cos, re) - ca.mtimes(sin, im)
+    if not scaling.has_rate_correction:
+        return samples
+    if omega is None or params is None:
+        raise ValueError("the yaw waveform's rate correction needs the yaw rate and the parameters")
+    c4 = body_coefficients(params).c4
+
+    def mean_abs(x):
+        return ca.sum1(ca.sqrt(x * x + smoothing**2) if smoothing > 0.0 else ca.fabs(x)) / QUADRATURE
+
+    drives = []
+    for (a, b, ref), side, period in fins:
+        kw = ca.DM(k) * (2.0 * np.pi) / period
+        lam_f = 2.0 * c4 * ref
+        drives.append((side * (a * lam_f - b * kw), side * (b * lam_f + a * kw), kw))  # c_k (lambda_f + i k Omega_f)
+    lam = 2.0 * c4 * mean_abs(omega + samples)
+    for it in range(RATE_ITERATIONS):
+        re, im = 0.0, 0.0
+        for dr, di, kw in drives:
+            den = lam * lam + kw * kw
+            re = re + (dr * lam + di * kw) / den
+            im = im + (di * lam - dr * kw) / den
+        samples = ca.mtimes(cos, re) - ca.mtimes(sin, im)
+        if it + 1 < RATE_ITERATIONS:
+            lam = 0.5 * (lam + 2.0 * c4 * mean_abs(omega + samples))
+    return samples
+
+
+def waveform_square_mean_sx(mean, samples, smoothing: float = 0.0):
+    """Mean of ``x|x|`` over ``x = mean + samples[j]``, as :func:`pectoral_gym.model.dynamics.waveform_square_mean`.
+
+    ``smoothing`` > 0 [rad/s] replaces ``|x|`` by ``sqrt(x^2 + smoothing^2)`` (smooth second derivatives).
+    """
+    n = samples.shape[0]
+    x = mean + samples
+    absolute = ca.sqrt(x * x + smoothing * smoothing) if smoothing > 0.0 else ca.fabs(x)
+    return ca.sum1(x * absolute) / n
+
+
+def oscillating_square_mean_sx(mean, amplitude):
+    """Cycle mean of ``x|x|`` for ``x = mean + amplitude sin(theta)``.
+
+    As :func:`pectoral_gym.model.averaging.oscillating_square_mean`; ``amplitude`` must be positive.
+    The branch not taken is evaluated on clamped arguments, so its derivatives stay finite.
+    """
+    u = mean / amplitude
+    a2 = amplitude * amplitude
+    inside = ca.fmin(ca.fmax(u, -1.0 + 1e-12), 1.0 - 1e-12)
+    crossing = a2 * (2.0 * ca.asin(inside) / math.pi * (u * u + 0.5)
+                     + 3.0 / math.pi * u * ca.sqrt(ca.fmax(1.0 - u * u, 1e-300)))
+    return ca.if_else(ca.fabs(u) >= 1.0, ca.sign(u) * a2 * (u * u + 0.5), crossing)
+
+
+def averaged_forcing_sx(beat, side: float, params: FishParams, scaling: ScalingFunctions | None):
+    """Scaled cycle-averaged ``[f_hx, f_hy, tau]`` of one fin on the body (eq. 25, exact averages).
+
+    Args:
+        beat: ``(bias, amplitude, period, ratio)`` (rad, rad, s, -), symbols or numbers.
+        side: +1 for the right fin, -1 for the left.
+        params: Model parameters.
+        scaling: Scaling functions, or ``None`` for K = 1.
+    """
+    bias, amplitude, period, ratio = beat[0], beat[1], beat[2], beat[3]
+    c = params.fin_drag_constant * math.pi**2 * (ratio * ratio - 1.0) / (ratio * period * period)
+    base = c * amplitude * bessel_j1_sx(amplitude)  # exact averages (paper-notes), Taylor form in eqs. (26)-(27)
+    fx = base * ca.sin(bias)
+    fy = base * ca.cos(bias)
+    tau = params.fin_offset * fx  # eq. (28): moment arm C_p
+    k = scaling_sx(beat, scaling)
+    sway = k[1] * base if scaling is not None and scaling.sway == "base" else k[1] * fy
+    return ca.vertcat(k[0] * fx, side * sway, side * k[2] * tau)
+
+
+def body_accel_sx(v, forcing, params: FishParams, smoothing: float = 0.0, yaw_oscillation=None, yaw_waveform=None):
+    """Body-frame accelerations ``d(vx, vy, omega)/dt`` of eqs. (19)-(20).
+
+    Args:
+        v: ``(vx, vy, omega)``.
+        forcing: Total ``(f_x, f_y, tau)`` of the fins on the body.
+        params: Model parameters.
+        smoothing: 0 (default) evaluates ``alpha = arctan(vy / vx)`` and the speed
+            exactly as :func:`pectoral_gym.model.dynamics.body_accel`; a positive speed
+            scale [m/s] (e.g. 1e-4) replaces them by smooth versions whose
+            derivatives exist at rest, which gradient-based solvers need when a
+            trajectory starts from rest.
+        yaw_oscillation: ``None`` (default) for the paper's yaw damping
+            ``c4 omega|omega|``; else the amplitude [rad/s] of the in-beat yaw
+            oscillation (> 0), and the damping is its cycle mean
+            (:func:`oscillating_square_mean_sx`).
+        yaw_waveform: ``None`` (default), or the sampled in-beat yaw waveform
+            (:func:`combined_yaw_waveform_sx`); the damping is then its mean
+            (:func:`waveform_square_mean_sx`), which replaces ``yaw_oscillation``.
+    """
+    vx, vy, omega = v[0], v[1], v[2]
+    m1, m2, j3, c1, c2, c4 = body_coefficients(params)
+    if smoothing > 0.0:
+        eps2 = smoothing * smoothing
+        speed = ca.sqrt(vx * vx + vy * vy + eps2)
+        alpha = ca.atan(vx * vy / (vx * vx + eps2))  # -> arctan(vy / vx) for |vx| >> smoothing
+        yaw_damping = c4 * omega * ca.sqrt(omega * omega + eps2)
+    else:
+        speed = ca.sqrt(vx * vx + vy * vy)
+        alpha = ca.if_else(vx >= 0, ca.atan2(vy, vx), -ca.atan2(vy, -vx))  # arctan(vy / vx), also for vx < 0
+        yaw_damping = c4 * omega * ca.fabs(omega)
+    if yaw_oscillation is not None:
+        yaw_damping = c4 * oscillating_square_mean_sx(omega, yaw_oscillation)
+    if yaw_waveform is not None:
+        yaw_damping = c4 * waveform_square_mean_sx(omega, yaw_waveform, smoothing)
+    dvx = (m2 * vy * omega - c1 * vx * speed + c2 * vy * speed * alpha + forcing[0]) / m1  # eqs. (19)-(20), f1
+    dvy = (-m1 * vx * omega - c1 * vy * speed - c2 * vx * speed * alpha + forcing[1]) / m2  # f2
+    dom = (m1 - m2) / j3 * vx * vy - yaw_damping + forcing[2] / j3  # f3
+    return ca.vertcat(dvx, dvy, dom)
+
+
+def body_rhs_sx(state, forcing, params: FishParams, smoothing: float = 0.0, yaw_oscillation=None, yaw_waveform=None):
+    """Time derivative of ``state = (X, Y, psi, vx, vy, omega)`` under the fin forcing ``(f_x, f_y, tau)``.
+
+    The tank-frame kinematics of eq. (19) and the body accelerations of
+    :func:`body_accel_sx` (whose ``smoothing``, ``yaw_oscillation`` and ``yaw_waveform`` these are).
+    """
+    psi = state[STATE_PSI]
+    vx, vy, omega = (state[i] for i in range(STATE_VELOCITY.start, STATE_VELOCITY.stop))
+    accel = body_accel_sx([vx, vy, omega], forcing, params, smoothing, yaw_oscillation, yaw_waveform)
+    x_dot = vx * ca.cos(psi) - vy * ca.sin(psi)  # eq. (19), kinematics
+    y_dot = vx * ca.sin(psi) + vy * ca.cos(psi)
+    return ca.vertcat(x_dot, y_dot, omega, accel)
+
+
+def averaged_rhs_sx(state, beats, params: FishParams, scaling: ScalingFunctions | None, smoothing: float = 0.0):
+    """Time derivative of ``state = (X, Y, psi, vx, vy, omega)`` under the averaged model (eqs. 19, 25).
+
+    With yaw-oscillation data in ``scaling`` the yaw damping is
+    oscillation-averaged, with the two fins' oscillations added as phasors of
+    fins beating in phase (as fins with equal periods started together do;
+    :func:`pectoral_gym.model.forcing_cache.yaw_oscillation` tracks the actual phases). With
+    yaw-waveform data the damping is the waveform damping of two fins in phase
+    (:func:`combined_yaw_waveform_sx`).
+
+    Args:
+        state: Pose in the tank frame and body-frame velocities.
+        beats: ``(8,)``: right fin ``(bias, amplitude, period, ratio)``, then the left fin.
+        params: Model parameters.
+        scaling: Scaling functions, or ``None`` for K = 1.
+        smoothing: See :func:`body_accel_sx`.
+    """
+    right = averaged_forcing_sx([beats[i] for i in range(4)], 1.0, params, scaling)
+    left = averaged_forcing_sx([beats[i] for i in range(4, 8)], -1.0, params, scaling)
+    fins = [beats[i] for i in range(4)], [beats[i] for i in range(4, 8)]
+    waveform = combined_yaw_waveform_sx(*fins, scaling, state[5], params, smoothing)
+    oscillation = combined_yaw_oscillation_sx(*fins, scaling) if waveform is None else None
+    return body_rhs_sx(state, right + left, params, smoothing, oscillation, waveform)
+
+
+def mean_fin_power_sx(amplitude, period, ratio, params: FishParams):
+    """Mean hydrodynamic power one fin delivers to the water [W], as :func:`~.averaging.mean_fin_power`.
+
+    ``k S_p gA^3 (w1^2 + w2^2) / T_p`` from eq. (14) with the stroke rates
+    ``w1 = pi (zeta + 1) / T_p`` and ``w2 = w1 / zeta`` (docs/model.md, Sec. 3.5):
+    cubic in the amplitude, so ``mean_fin_power_sx(1.0, ...)`` is the factor of ``gA^3``.
+    """
+    w1 = math.pi * (ratio + 1.0) / period
+    w2 = w1 / ratio
+    return params.fin_drag_constant * params.fin_span * amplitude**3 * (w1 * w1 + w2 * w2) / period
+
+
+def half_stroke_mean_force_sx(angle_from, angle_to, duration, drag_constant: float):
+    """Exact mean ``(f_hx, f_hy)`` [N] of one half-cosine half-stroke of the right fin (``docs/model.md`` 3.7).
+
+    As :func:`pectoral_gym.model.averaging.half_stroke_mean_force`:
+    ``k pi^2 |half| J1(half) (sin mid, cos mid) / d^2``.
+    """
+    half = 0.5 * (angle_to - angle_from)
+    mid = 0.5 * (angle_to + angle_from)
+    base = drag_constant * math.pi**2 * ca.fabs(half) * bessel_j1_sx(half) / (duration * duration)
+    return ca.vertcat(base * ca.sin(mid), base * ca.cos(mid))
+
+
+def power_stroke_excess_sx(beat, drag_constant: float):
+    """Impulse ``(X_fx, X_fy)`` [N s] of a regular power stroke beyond the cycle mean (right fin, K = 1).
+
+    As :func:`pectoral_gym.model.averaging.power_stroke_excess`: ``X = d1 (mean_power - mean_cycle)``.
+    """
+    bias, amplitude, period, ratio = beat[0], beat[1], beat[2], beat[3]
+    d1 = period / (ratio + 1.0)
+    d2 = ratio * d1
+    power = half_stroke_mean_force_sx(bias - amplitude, bias + amplitude, d1, drag_constant)
+    recovery = half_stroke_mean_force_sx(bias + amplitude, bias - amplitude, d2, drag_constant)
+    return d1 * power - d1 * (d1 * power + d2 * recovery) / period
+
+
+def transition_forcing_sx(angle_from, beat, previous_power, power: bool, side: float, params: FishParams):
+    """Forcing ``(f_x, f_y, tau)`` of one half-stroke of ``beat`` beyond its regular one (``docs/model.md`` 3.7).
+
+    The two terms of ``stepping._transition``: the exact mean of the half-stroke swept from
+    ``angle_from`` minus that of the regular half-stroke (same end and duration); on a recovery
+    stroke, plus ``(X(previous_power) - X(beat)) / d2`` for the pattern of the power stroke before.
+
+    Args:
+        angle_from: Fin angle [rad] where the half-stroke starts (the previous turning point).
+        beat: The latched pattern ``(bias, amplitude, period, ratio)``.
+        previous_power: Pattern of the fin's last power stroke (used when ``power`` is False).
+        power: True for a power stroke (to ``bias + amplitude``), False for a recovery stroke.
+        side: +1 right fin, -1 left fin (eq. 18 mirrored).
+        params: Model parameters.
+    """
+    bias, amplitude, period, ratio = beat[0], beat[1], beat[2], beat[3]
+    k = params.fin_drag_constant
+    d1 = period / (ratio + 1.0)
+    if power:
+        duration, regular_start, angle_to = d1, bias - amplitude, bias + amplitude
+    else:
+        duration, regular_start, angle_to = ratio * d1, bias + amplitude, bias - amplitude
+    delta = (half_stroke_mean_force_sx(angle_from, angle_to, duration, k)
+             - half_stroke_mean_force_sx(regular_start, angle_to, duration, k))
+    if not power:
+        delta = delta + (power_stroke_excess_sx(previous_power, k) - power_stroke_excess_sx(beat, k)) / duration
+    return ca.vertcat(delta[0], side * delta[1], side * params.fin_offset * delta[0])
+
+
+def ripple_offset_sx(beat, side: float, params: FishParams):
+    """Beat-mean impulse offset ``(M_x, M_y, M_tau)`` of one fin's pattern (``docs/model.md`` 3.8).
+
+    As :func:`pectoral_gym.model.averaging.ripple_offset` (the same closed form and series), with the
+    left fin's sway and moment mirrored (``side = -1``). The averaged model adds its change,
+    spread over the half-stroke, where a fin starts, changes or parks a pattern.
+    """
+    bias, amplitude, period, ratio = beat[0], beat[1], beat[2], beat[3]
+    k = params.fin_drag_constant
+    h2 = amplitude * amplitude
+    term, odd = amplitude, 0.0
+    for n, coefficient in enumerate(ODD_MOMENT_SERIES):
+        odd = odd + coefficient * term
+        term = term * (-h2) / ((2 * n + 2) * (2 * n + 3))
+    a = k * math.pi**2 * amplitude * bessel_j1_sx(amplitude) * (ratio + 1.0 / ratio) / (2.0 * period)
+    b = 2.0 * k * h2 * odd / period
+    mx = a * ca.sin(bias) + b * ca.cos(bias)
+    my = a * ca.cos(bias) - b * ca.sin(bias)
+    return ca.vertcat(mx, side * my, side * params.fin_offset * mx)
+
+
+def expected_transition_impulse_sx(previous, beat, side: float, params: FishParams):
+    """Expected impulse ``(f_x, f_y, tau) dt`` [N s, N m s] of the switch from pattern ``previous`` to ``beat``.
+
+    For patterns with the same period and ratio, commanded at an unknown stroke phase (uniform over
+    the beat): with probability ``zeta / (zeta + 1)`` the fin is in a recovery stroke of ``previous``
+    and the next, transitional, stroke is ``beat``'s power stroke from ``previous``'s lower turning
+    point; otherwise it is in a power stroke and the next is ``beat``'s recovery from the upper one,
+    which also returns ``previous``'s power-stroke excess. Each stroke's impulse is its
+    :func:`transition_forcing_sx` times its duration. Zero when ``beat`` equals ``previous``.
+    """
+    bias0, amplitude0 = previous[0], previous[1]
+    period, ratio = beat[2], beat[3]
+    d1 = period / (ratio + 1.0)
+    d2 = ratio * d1
+    into_power = transition_forcing_sx(bias0 - amplitude0, beat, previous, True, side, params) * d1
+    into_recovery = transition_forcing_sx(bias0 + amplitude0, beat, previous, False, side, params) * d2
+    return (ratio * into_power + into_recovery) / (ratio + 1.0)
+
+
+def named_symbols(sizes):
+    """One ``SX`` column symbol per field of the NamedTuple ``sizes`` (field -> length), as the same NamedTuple.
+
+    For a packed NLP vector with named parts: ``ca.vertcat(*symbols)`` is the
+    packed symbol, and the numbers go in the same order (``np.concatenate``
+    of the same NamedTuple filled with values).
+    """
+    return type(sizes)(*(ca.SX.sym(name, int(size)) for name, size in zip(sizes._fields, sizes, strict=True)))
+
+
+def rk4_sx(rhs, x, u, h, steps: int = 1):
+    """``steps`` classical Runge-Kutta steps of size ``h`` of ``dx/dt = rhs(x, u)``, ``u`` held constant.
+
+    Args:
+        rhs: Callable ``(x, u) -> dx/dt`` (a ``ca.Function`` or a Python function of expressions).
+        x: Initial state (expression or numbers).
+        u: Whatever ``rhs`` takes as its second argument, passed through unchanged.
+        h: Step size [s].
+        steps: Number of steps (>= 1).
+    """
+    if int(steps) < 1:
+        raise ValueError(f"steps must be >= 1, got {steps!r}")
+    for _ in range(int(steps)):
+        k1 = rhs(x, u)
+        k2 = rhs(x + 0.5 * h * k1, u)
+        k3 = rhs(x + 0.5 * h * k2, u)
+        k4 = rhs(x + h * k3, u)
+        x = x + h / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
+    return x

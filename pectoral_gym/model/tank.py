@@ -1,0 +1,148 @@
+"""The tank: its size, the fish's outline in it, wall contact and the stopping distance, written once.
+
+Every rule about the walls lives here and is used by the task kernels (wall contact of nose and tail,
+:mod:`pectoral_gym.envs.tasks.kernels`), the NMPC's wall and stopping-band terms (``agents/controllers/stop_band.py``,
+``agents/nmpc/problem.py``) and the robot's geofence (``hardware.safety.Geofence`` uses the same numbers:
+``tests/test_tank.py``).
+
+The formulas are written once as arithmetic on their arguments (:func:`outline_circles`,
+:func:`wall_gaps`, :func:`coast_distance` with ``ops``), so the same function serves Python floats,
+numpy arrays and CasADi expressions; :func:`nose_tail_contact` is a compiled kernel (numba, inlined into
+the task kernels) and callable from Python.
+
+Frame and units: metres, seconds, radians; the tank frame has its origin at a corner, X along the long
+side (``0 <= X <= TANK_LENGTH``, ``0 <= Y <= TANK_WIDTH``); ``psi`` is the heading from the X axis.
+
+The outline (the robot's geofence): a capsule from nose to tail of radius ``C_p`` (the body's
+half-width, also the fin pivots' lateral offset) and a disc of radius ``S_p`` (the fin span) around each
+fin pivot ``(0, +-C_p)`` in the body frame, which holds the fin tip wherever the fin points.
+
+The stopping distance: coasting with the fins still along one axis, eq. (19) with no fin force, is
+``m dv/dt = -c1 v |v|``, so ``v(t) = v0 / (1 + k v0 t)`` and the distance covered in ``T`` seconds is
+``ln(1 + k v0 T) / k`` with ``k = c1 / max(m1, m2)`` (the larger mass: the slower decay).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, NamedTuple
+
+import numpy as np
+
+from pectoral_gym.model.jit import njit
+
+__all__ = ["TANK_LENGTH", "TANK_WIDTH", "Outline", "clearance", "coast_distance", "coast_rate", "nose_tail_contact",
+           "outline_arrays", "outline_circles", "wall_gaps", "wall_shortfall"]
+
+# The paper's tank (Sec. 4.1): the fish swims in a 2.30 m x 1.15 m area.
+TANK_LENGTH = 2.30  # m, along the tank X axis
+TANK_WIDTH = 1.15  # m, along the tank Y axis
+
+
+class Outline(NamedTuple):
+    """The fish's outline in the tank (module docstring).
+
+    Attributes:
+        half_length: Half the body length ``L / 2`` [m]: nose and tail on the body axis.
+        width: ``C_p`` [m]: the capsule's radius and the fin pivots' lateral offset.
+        span: ``S_p`` [m]: the radius of the fin discs.
+    """
+
+    half_length: float
+    width: float
+    span: float
+
+    @classmethod
+    def from_params(cls, params: Any) -> Outline:
+        """The outline of a fish with these :class:`~pectoral_gym.model.params.FishParams`."""
+        return cls(0.5 * float(params.body_length), float(params.fin_offset), float(params.fin_span))
+
+
+def coast_rate(params: Any) -> float:
+    """``k = c1 / max(m1, m2)`` [1/m] of a :class:`~pectoral_gym.model.params.FishParams` (eq. 19, fins still)."""
+    return params.c1 / max(params.m1, params.m2)
+
+
+def coast_distance(speed: Any, k: float, horizon: float, ops: Any = np) -> Any:
+    """Distance [m] a fish coasting from ``speed`` [m/s] with its fins still covers in ``horizon`` [s].
+
+    ``ln(1 + k v T) / k`` with ``v = max(speed, 0)`` (module docstring).
+
+    Args:
+        speed: Speed towards the wall [m/s]; negative counts as 0.
+        k: :func:`coast_rate` [1/m], > 0.
+        horizon: ``T`` [s].
+        ops: ``numpy`` (floats and arrays) or ``casadi`` (``fmax``, ``log``).
+    """
+    v = ops.fmax(speed, 0.0)
+    return ops.log(1.0 + k * v * horizon) / k
+
+
+def outline_circles(x: Any, y: Any, c: Any, s: Any, outline: Outline) -> tuple[tuple[Any, Any, float], ...]:
+    """The outline's four circles ``(centre X, centre Y, radius)``: nose, tail, right and left fin pivot [m].
+
+    Args:
+        x, y: Centre of mass in the tank frame [m].
+        c, s: ``cos psi``, ``sin psi`` of the heading.
+        outline: The fish's :class:`Outline`.
+    """
+    h, w, span = outline
+    return ((x + c * h, y + s * h, w), (x - c * h, y - s * h, w),  # nose, tail
+            (x + s * w, y - c * w, span), (x - s * w, y + c * w, span))  # right pivot (0, -C_p), left (0, +C_p)
+
+
+def wall_gaps(px: Any, py: Any, r: Any = 0.0) -> tuple[Any, Any, Any, Any]:
+    """Distances [m] of a circle (centre ``(px, py)``, radius ``r``) to the walls ``X = 0, X = L, Y = 0, Y = W``.
+
+    Negative: across the wall.
+    """
+    return px - r, TANK_LENGTH - px - r, py - r, TANK_WIDTH - py - r
+
+
+def outline_arrays(x: float, y: float, psi: float, outline: Outline) -> tuple[np.ndarray, np.ndarray]:
+    """Centres ``(4, 2)`` (nose, tail, right and left fin pivot) and radii ``(4,)`` of the outline [m]."""
+    circles = outline_circles(x, y, math.cos(psi), math.sin(psi), outline)
+    return np.array([[px, py] for px, py, _ in circles]), np.array([r for _, _, r in circles])
+
+
+def clearance(x: float, y: float, psi: float, outline: Outline) -> np.ndarray:
+    """Distance [m] from the outline to the walls ``X = 0, X = L, Y = 0, Y = W`` (negative: across), ``(4,)``."""
+    gaps = [wall_gaps(px, py, r) for px, py, r in outline_circles(x, y, math.cos(psi), math.sin(psi), outline)]
+    return np.min(np.array(gaps), axis=0)
+
+
+def wall_shortfall(x: Any, y: Any, c: Any, s: Any, half_length: float, margin: float, ops: Any = np,
+                   total: Any = 0.0, weight: float = 1.0) -> Any:
+    """``total`` plus ``weight`` times the squared shortfalls [m^2] of nose and tail below ``margin`` from each wall.
+
+    The NMPC's wall term without the stopping band: per point (nose, then tail) and wall
+    (:func:`wall_gaps` order), ``fmax(margin - gap, 0)^2``, added to ``total`` one by one.
+
+    Args:
+        x, y: Centre of mass [m]. c, s: ``cos psi``, ``sin psi``.
+        half_length: Half the body length [m]. margin: Wanted clearance [m].
+        ops: ``numpy`` or ``casadi`` (``fmax``).
+        total: What the terms are added to (a float or an expression).
+        weight: Factor of each term.
+    """
+    for sign in (1.0, -1.0):  # nose, tail
+        for gap in wall_gaps(x + sign * half_length * c, y + sign * half_length * s):
+            term = ops.fmax(margin - gap, 0.0) ** 2
+            total = total + (term if weight == 1.0 else weight * term)
+    return total
+
+
+@njit(inline="always")
+def nose_tail_contact(x, y, c, s, half_length):
+    """Whether the nose or the tail (``(x, y) +- half_length (c, s)``) is outside the tank (on a wall: inside).
+
+    The env's wall contact (``wall_penalty``, termination). Args: position [m], ``cos psi``, ``sin psi``,
+    half the body length [m]. Returns a bool.
+    """
+    contact = False
+    for sign in (1.0, -1.0):  # nose, tail
+        px = x + sign * half_length * c
+        py = y + sign * half_length * s
+        if not (0.0 <= px <= TANK_LENGTH and 0.0 <= py <= TANK_WIDTH):
+            contact = True
+    return contact
