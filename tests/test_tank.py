@@ -78,3 +78,13 @@ def test_nose_tail_contact_is_the_point_test_of_nose_and_tail(psi):
             assert tank.nose_tail_contact(x, y, c, s, half) == outside
             gaps = tank.wall_shortfall(x, y, c, s, half, 0.0)
             assert (gaps > 0) == outside
+
+
+def test_distance_ahead_is_the_ray_to_the_first_wall():
+    # By hand: from (1.0, 0.5) along +X the wall X = 2.30 is 1.30 m away; along -Y the wall Y = 0 is 0.5 m;
+    # at 45 deg towards +X+Y, Y = 1.15 is reached after 0.65 / sin(45 deg) = 0.919 m, before X = 2.30 (1.838 m).
+    assert tank.distance_ahead(1.0, 0.5, 1.0, 0.0) == pytest.approx(1.30)
+    assert tank.distance_ahead(1.0, 0.5, 0.0, -1.0) == pytest.approx(0.5)
+    r = math.sqrt(0.5)
+    assert tank.distance_ahead(1.0, 0.5, r, r) == pytest.approx(0.65 / r)
+    assert tank.distance_ahead(1.0, 0.5, 0.0, 0.0) == math.inf

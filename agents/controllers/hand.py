@@ -23,7 +23,7 @@ from agents.controllers.fin_map import FinMap
 from agents.controllers.turning import circle_room
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, Observation, decode
-from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
+from pectoral_gym.model import tank
 
 __all__ = ["HandController"]
 
@@ -154,13 +154,7 @@ class HandController:
 
     def _room_ahead(self, o) -> float:
         """Distance [m] along the heading from the nose to the first wall."""
-        ahead = []
-        for pos, direction, size in ((o.x, o.cos_psi, TANK_LENGTH), (o.y, o.sin_psi, TANK_WIDTH)):
-            if direction > 1e-9:
-                ahead.append((size - pos) / direction)
-            elif direction < -1e-9:
-                ahead.append(-pos / direction)
-        return min(ahead, default=math.inf) - self.half_length
+        return tank.distance_ahead(o.x, o.y, o.cos_psi, o.sin_psi) - self.half_length
 
 
 def _wrap(angle: float) -> float:

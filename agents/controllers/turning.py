@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 
-from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
+from pectoral_gym.model import tank
 
 __all__ = ["circle_room", "turn_path_length", "turn_paths"]
 
@@ -57,7 +57,7 @@ def circle_room(x: float, y: float, psi: float, side: float, radius: float) -> f
     The circle of radius ``radius`` touches the pose ``(x, y, psi)``; its centre lies ``radius`` to that side.
     """
     cx, cy = x - side * radius * math.sin(psi), y + side * radius * math.cos(psi)
-    return min(cx - radius, TANK_LENGTH - cx - radius, cy - radius, TANK_WIDTH - cy - radius)
+    return min(tank.wall_gaps(cx, cy, radius))
 
 
 def turn_path_length(x: float, y: float, psi: float, gx: float, gy: float, radius: float) -> float:

@@ -31,8 +31,8 @@ import numpy as np
 
 from pectoral_gym.model.jit import njit
 
-__all__ = ["TANK_LENGTH", "TANK_WIDTH", "Outline", "clearance", "coast_distance", "coast_rate", "nose_tail_contact",
-           "outline_arrays", "outline_circles", "wall_gaps", "wall_shortfall"]
+__all__ = ["TANK_LENGTH", "TANK_WIDTH", "Outline", "clearance", "coast_distance", "coast_rate", "distance_ahead",
+           "nose_tail_contact", "outline_arrays", "outline_circles", "wall_gaps", "wall_shortfall"]
 
 # The paper's tank (Sec. 4.1): the fish swims in a 2.30 m x 1.15 m area.
 TANK_LENGTH = 2.30  # m, along the tank X axis
@@ -97,6 +97,17 @@ def wall_gaps(px: Any, py: Any, r: Any = 0.0) -> tuple[Any, Any, Any, Any]:
     Negative: across the wall.
     """
     return px - r, TANK_LENGTH - px - r, py - r, TANK_WIDTH - py - r
+
+
+def distance_ahead(x: float, y: float, c: float, s: float) -> float:
+    """Distance [m] from ``(x, y)`` along the unit direction ``(c, s)`` to the first wall (inf: none ahead)."""
+    ahead = []
+    for position, direction, size in ((x, c, TANK_LENGTH), (y, s, TANK_WIDTH)):
+        if direction > 1e-9:
+            ahead.append((size - position) / direction)
+        elif direction < -1e-9:
+            ahead.append(-position / direction)
+    return min(ahead, default=math.inf)
 
 
 def outline_arrays(x: float, y: float, psi: float, outline: Outline) -> tuple[np.ndarray, np.ndarray]:
