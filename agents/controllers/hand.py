@@ -56,8 +56,8 @@ class HandController:
         heading_gain: Turn command per radian of bearing [1/rad].
         rate_gain: Turn command per rad/s of yaw rate (damping) [s/rad].
         speed_gain: Desired speed per metre of distance [1/s].
-        bias_gain: Bias offset per radian of bearing [-]. Off by default: measured on the full model
-            (30 seeded goal episodes) it lowered success from 14 to 10 at 0.3; the lateral force is small.
+        bias_gain: Bias offset per radian of bearing [-]. Off by default: on the full model it lowered the
+            goal success (the lateral force is small).
         bias_max: Largest bias offset from 90 deg [rad].
         lookahead: ``track``: aim this far ahead of the reference point along its velocity [s].
         turn_level: Largest differential thrust level. Small: the full model turns tightest at small

@@ -47,8 +47,8 @@ class NMPCSettings:
             ``"arc"`` (its velocity turning at the observed rate) or ``"conic"`` (along the ellipse fitted to
             its observed path, the arc before); ``None``: ``"conic"`` for ``track``, ``"line"`` for ``goal``.
         turn_then_straight: Also screen the turns held for 2 s then straight; ``None``: for ``goal`` only
-            (for ``track`` the held turns and straight won 99 % of the steps they were screened in; four
-            rollouts fewer per step).
+            (for ``track`` the turn-then-straight candidates almost never won the steps they were screened
+            in; four rollouts fewer per step).
         w_change: Weight of squared input changes between intervals (inputs scaled to [0, 1]).
         w_reach: Weight of the terminal reachability term: how far the target lies inside the fish's
             turning circle at the end of the horizon [1/m]. The horizon is far shorter than a loop

@@ -86,8 +86,8 @@ class EnvConfig:
             3.8; on by default in the model). Off by default in the envs until the shipped PPO file's
             figures are re-measured with it.
         integration: Full model only: ``"reference"`` (converged steps) or ``"fast"`` (8 RK4 substeps
-            per half-stroke, at most 0.05 s: about 3x faster, within 0.2 % (p90) of the reference in open
-            loop; :data:`~pectoral_gym.model.models.FULL_INTEGRATION`, ``docs/model.md`` section 6).
+            per half-stroke, at most 0.05 s; :data:`~pectoral_gym.model.models.FULL_INTEGRATION`; its speed
+            and accuracy against the reference: ``docs/model.md`` section 6).
         yaw_damping: Averaged model only: ``"sinusoid"``, ``"waveform"`` or ``"none"``
             (:data:`pectoral_gym.model.spec.YAW_DAMPINGS`, ``docs/model.md`` 3.6); ``None``: ``"none"`` for
             ``scaling="none"``, else the richest the coefficients file holds (as before it was an option;

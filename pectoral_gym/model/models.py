@@ -274,7 +274,7 @@ class FullModel(FishModel):
             by < 0.02 % for the strongest patterns of the default action range (e.g. (60 deg, 30 deg,
             0.5 s, 5)), fourth-order convergence.
         integration: ``"reference"`` (default) or ``"fast"`` (:data:`FULL_INTEGRATION`: 8 substeps per
-            half-stroke, at most 0.05 s; about 3x faster, within 0.2 % (p90) of the reference in open loop).
+            half-stroke, at most 0.05 s; its speed and accuracy against the reference: docs/model.md section 6).
     """
 
     averaged = False

@@ -91,8 +91,8 @@ class FullSpec(ModelSpec):
 
     Attributes:
         integration: ``"reference"`` (converged steps) or ``"fast"`` (8 RK4 substeps per half-stroke,
-            at most 0.05 s: about 3x faster, within 0.2 % (p90) of the reference in open loop;
-            :data:`pectoral_gym.model.models.FULL_INTEGRATION`, docs/model.md section 6).
+            at most 0.05 s; :data:`pectoral_gym.model.models.FULL_INTEGRATION`; its speed and accuracy against
+            the reference: docs/model.md section 6).
         dt_max: Largest RK4 substep [s]; ``None``: the integration preset's.
         min_substeps: Least substeps per half-stroke; ``None``: the integration preset's.
     """

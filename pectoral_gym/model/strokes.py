@@ -39,8 +39,7 @@ The kernels index the batched arrays directly (no per-fish views or temporary
 arrays): views and allocations touch shared reference counts, which serialises
 the threads of the parallel kernels. The small ones the integrator calls at
 every segment are inlined (``inline="always"``): a compiled call that passes
-arrays costs reference-count updates too (measured: 20 % of the averaged
-model's time at one fish).
+arrays costs reference-count updates too.
 """
 
 from __future__ import annotations
