@@ -24,6 +24,19 @@ def run_json(capsys: pytest.CaptureFixture[str], *argv: str) -> dict:
     return json.loads(out)
 
 
+def test_model_presets_are_the_specs_they_name(capsys):
+    # The fast integration converges to the same periodic steady state as the reference (docs/model.md 6):
+    # an independent integration of the same equations; the paper's Taylor forcing differs from the exact one.
+    full = run_json(capsys, "steady", "--model", "full", "--right", PATTERN, "--json")
+    fast = run_json(capsys, "steady", "--model", "full-fast", "--right", PATTERN, "--json")
+    assert fast["speed"] == pytest.approx(full["speed"], rel=0.01) and fast["omega"] == pytest.approx(full["omega"],
+                                                                                                       rel=0.01)
+    exact = run_json(capsys, "steady", "--model", "averaged", "--right", PATTERN, "--json")
+    taylor = run_json(capsys, "steady", "--model", "averaged", "--forcing", "taylor", "--right", PATTERN, "--json")
+    paper = run_json(capsys, "steady", "--model", "averaged-paper", "--right", PATTERN, "--json")
+    assert taylor["speed"] != exact["speed"] and paper["model"] == "averaged-paper"
+
+
 @pytest.mark.parametrize("model", ["full", "averaged"])
 def test_steady_json_keys_and_turn_direction(capsys, model):
     right = run_json(capsys, "steady", "--model", model, "--right", PATTERN, "--json")
@@ -70,6 +83,7 @@ def test_steady_table_has_units(capsys):
     (["steady", "--left", "90,20,0,4"], "FinBeat.period must be > 0"),
     (["steady", "--right", "90,20,1,nan"], "FinBeat.ratio must be finite"),
     (["steady", "--model", "hybrid"], "invalid choice"),
+    (["steady", "--model", "full-fast", "--forcing", "taylor"], "--forcing applies to averaged models only"),
     (["simulate", "--duration", "0", "--out", "unused"], "--duration must be a finite number > 0"),
     (["simulate", "--sample", "-1", "--out", "unused"], "--sample must be a finite number > 0"),
     (["bench", "--steps", "0"], "--steps must be >= 1"),

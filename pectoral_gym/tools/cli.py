@@ -24,9 +24,12 @@ from pathlib import Path
 from typing import Any
 
 from pectoral_gym.model.params import FinBeat
+from pectoral_gym.model.spec import PRESETS
 
 __all__ = ["build_parser", "main", "parse_fin"]
 
+#: ``--model`` values: the two models (their reference specs), then every preset of ``PRESETS``.
+MODEL_CHOICES = ("full", "averaged", *PRESETS)
 FIN_HELP = "fin pattern G0,GA,TP,ZETA: bias [deg], amplitude [deg], period [s], ratio [-]; omitted: fin at rest"
 
 
@@ -97,31 +100,44 @@ def _fin_label(right: FinBeat | None, left: FinBeat | None) -> str:
 # --------------------------------------------------------------------------- steady
 
 
-def model_inputs(model: str, params_file: str | None, scaling: str, check: bool = True, forcing: str = "exact"):
+def model_inputs(model: str, params_file: str | None, scaling: str | None = None, check: bool = True,
+                 forcing: str | None = None):
     """``(params, spec)`` of the command line's ``--model, --params, --scaling, --forcing, --no-params-check``.
 
-    The full model is :data:`~pectoral_gym.model.spec.FULL_REFERENCE`; the averaged model is
-    :data:`~pectoral_gym.model.spec.AVERAGED` with the given K (its richest yaw damping) and forcing.
+    ``"full"`` is :data:`~pectoral_gym.model.spec.FULL_REFERENCE`, ``"averaged"`` is
+    :data:`~pectoral_gym.model.spec.AVERAGED`, any other name a preset of
+    :data:`~pectoral_gym.model.spec.PRESETS`; an averaged model's K (with its richest yaw damping) and
+    forcing are the spec's unless given.
 
     Args:
-        model: ``"full"`` or ``"averaged"``.
+        model: ``"full"``, ``"averaged"`` or a preset name.
         params_file: A parameters file (:func:`pectoral_gym.model.params.load_params`) or ``None`` (Table 1).
-        scaling: ``"identified"`` (the shipped file), ``"none"`` (K = 1) or a coefficients file path.
+        scaling: ``"identified"`` (the shipped file), ``"none"`` (K = 1), a coefficients file path, or
+            ``None`` (the spec's).
         check: Refuse a coefficients file identified for other parameters (averaged model).
-        forcing: Averaged model: ``"exact"`` or ``"taylor"``.
+        forcing: Averaged model: ``"exact"``, ``"taylor"`` or ``None`` (the spec's).
 
     Raises:
-        ValueError: For an unreadable file or (``check``) K identified for other parameters.
+        ValueError: For an unknown model, an averaged-only option given to the full model, an unreadable
+            file or (``check``) K identified for other parameters.
         FileNotFoundError: If a file does not exist.
     """
     from pectoral_gym.model.params import FishParams, load_params
-    from pectoral_gym.model.spec import AVERAGED, FULL_REFERENCE, env_spec
+    from pectoral_gym.model.spec import AVERAGED, FULL_REFERENCE, PRESETS, AveragedSpec, env_spec
 
+    spec = {"full": FULL_REFERENCE, "averaged": AVERAGED}.get(model) or PRESETS.get(model)
+    if spec is None:
+        raise ValueError(f"unknown model {model!r}: choose from {MODEL_CHOICES}")
     params = load_params(params_file) if params_file else FishParams()
-    if model != "averaged":
-        return params, FULL_REFERENCE
-    held = env_spec("averaged", scaling=scaling, check_scaling_params=check)
-    spec = AVERAGED.replace(scaling=held.scaling, check_params=check, yaw_damping=held.yaw_damping, forcing=forcing)
+    if not isinstance(spec, AveragedSpec):
+        given = [flag for flag, value in (("--scaling", scaling), ("--forcing", forcing)) if value is not None]
+        if given:
+            raise ValueError(f"{', '.join(given)} applies to averaged models only, not to {model!r}")
+        return params, spec
+    if scaling is not None:
+        held = env_spec("averaged", scaling=scaling, check_scaling_params=check)
+        spec = spec.replace(scaling=held.scaling, yaw_damping=held.yaw_damping)
+    spec = spec.replace(check_params=check, **({} if forcing is None else {"forcing": forcing}))
     spec.scaling_functions(params)  # the parameter check, before any work
     return params, spec
 
@@ -181,8 +197,8 @@ def _cmd_steady(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         ("period", _num(res["period"], ".3f"), "s"),
         ("drift angle", _num(math.degrees(res["drift_angle"]), ".2f"), "deg"),
     ]
-    print(f"steady state, {args.model} model" + ("" if args.model == "full" else
-                                                    f" (scaling {args.scaling}, forcing {args.forcing})"))
+    held = "" if spec.model == "full" else f" (scaling {spec.scaling}, forcing {spec.forcing})"
+    print(f"steady state, {args.model} model{held}")
     print(f"  right fin    {_fin_text(right)}")
     print(f"  left fin     {_fin_text(left)}")
     for name, value, unit in rows:
@@ -205,11 +221,15 @@ def _cmd_simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
             parser.error(f"--{name.replace('_', '-')} must be a finite number, got {getattr(args, name)}")
     if args.duration / args.sample > 10_000_000:
         parser.error("--duration / --sample gives more than 10,000,000 samples; use a larger --sample")
-    models = [args.model] + ([m for m in MODELS if m != args.model] if args.compare else [])
+    family = _model_inputs(args, parser)[1].model  # "full" or "averaged"
+    models = [args.model] + ([m for m in MODELS if m != family] if args.compare else [])
     out = Path(args.out)
     trajectories = []
     for model in models:
-        params, spec = _model_inputs(argparse.Namespace(**{**vars(args), "model": model}), parser)
+        own = model == args.model  # --scaling and --forcing are the chosen model's
+        params, spec = _model_inputs(argparse.Namespace(**{**vars(args), "model": model, "scaling": args.scaling
+                                                           if own else None, "forcing": args.forcing if own else None}),
+                                     parser)
         traj = simulate(spec, right, left, args.duration, args.x0, args.y0, math.radians(args.heading_deg),
                         args.sample, params=params, progress=True)
         name = "trajectory.csv" if model == args.model else f"trajectory_{model}.csv"
@@ -323,19 +343,21 @@ def _bench_against(args: argparse.Namespace, parser: argparse.ArgumentParser, pr
 
 
 def _add_model_options(p: argparse.ArgumentParser) -> None:
-    p.add_argument("--model", choices=("full", "averaged"), default="full",
-                   help="full blade-element model or averaged model (default: %(default)s)")
+    p.add_argument("--model", choices=MODEL_CHOICES, default="full", metavar="MODEL",
+                   help="full (the blade-element model at converged steps), averaged (the cycle-averaged model with "
+                        f"the shipped K), or a preset: {', '.join(MODEL_CHOICES[2:])} (default: %(default)s)")
     p.add_argument("--right", metavar="G0,GA,TP,ZETA", help=f"right {FIN_HELP}")
     p.add_argument("--left", metavar="G0,GA,TP,ZETA", help=f"left {FIN_HELP}")
-    p.add_argument("--scaling", default="identified", metavar="identified|none|FILE",
-                   help="averaged model: scaling functions K: the shipped file, 'none' (K = 1) or a coefficients "
-                        "file from `python -m scaling identify` (default: %(default)s)")
+    p.add_argument("--scaling", default=None, metavar="identified|none|FILE",
+                   help="averaged models: scaling functions K: the shipped file, 'none' (K = 1) or a coefficients "
+                        "file from `python -m scaling identify` (default: the model's, identified)")
     p.add_argument("--params", metavar="FILE",
                    help="model parameters: a JSON or YAML file of FishParams fields (others keep Table 1)")
     p.add_argument("--no-params-check", action="store_true",
                    help="averaged model: use K even if its file was identified for other parameters")
-    p.add_argument("--forcing", choices=("exact", "taylor"), default="exact",
-                   help="averaged model: closed-form or Taylor (eqs. 26-28) averaged forcing (default: %(default)s)")
+    p.add_argument("--forcing", choices=("exact", "taylor"), default=None,
+                   help="averaged models: closed-form or Taylor (eqs. 26-28) averaged forcing (default: the model's, "
+                        "exact but for averaged-paper)")
 
 
 def build_parser() -> argparse.ArgumentParser:
