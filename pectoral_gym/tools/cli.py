@@ -24,42 +24,18 @@ from pathlib import Path
 from typing import Any
 
 from pectoral_gym.model.params import FinBeat
-from pectoral_gym.model.spec import PRESETS
+from pectoral_gym.tools.cli_inputs import (
+    FIN_HELP,
+    MODEL_CHOICES,
+    fin_label,
+    fin_text,
+    format_number,
+    model_inputs,
+    parse_fin,
+    steady_result,
+)
 
 __all__ = ["build_parser", "main", "parse_fin"]
-
-#: ``--model`` values: the two models (their reference specs), then every preset of ``PRESETS``.
-MODEL_CHOICES = ("full", "averaged", *PRESETS)
-FIN_HELP = "fin pattern G0,GA,TP,ZETA: bias [deg], amplitude [deg], period [s], ratio [-]; omitted: fin at rest"
-
-
-def parse_fin(text: str | None, option: str) -> FinBeat | None:
-    """Parse ``"G0,GA,TP,ZETA"`` (degrees, degrees, seconds, ratio) into a :class:`FinBeat`.
-
-    Args:
-        text: The option value, or ``None`` for a fin at rest.
-        option: Option name for the error message (``"--right"``).
-
-    Returns:
-        The pattern, or ``None`` if ``text`` is ``None``.
-
-    Raises:
-        ValueError: With a one-line reason, for a malformed or invalid pattern.
-    """
-    if text is None:
-        return None
-    parts = text.split(",")
-    try:
-        values = [float(p) for p in parts]
-    except ValueError:
-        values = []
-    if len(values) != 4:
-        raise ValueError(f"{option} needs 4 comma-separated numbers G0,GA,TP,ZETA, got {text!r}")
-    try:
-        return FinBeat.from_degrees(*values)
-    except ValueError as exc:
-        raise ValueError(f"{option} {text}: {exc}") from None
-
 
 def _fins(args: argparse.Namespace, parser: argparse.ArgumentParser) -> tuple[FinBeat | None, FinBeat | None]:
     """``(right, left)`` from ``--right``/``--left``, or exit 2 via ``parser.error``."""
@@ -76,97 +52,7 @@ def _positive(parser: argparse.ArgumentParser, **values: float) -> None:
             parser.error(f"--{name.replace('_', '-')} must be a finite number > 0, got {value}")
 
 
-def _fin_tuple(beat: FinBeat | None) -> list[float] | None:
-    """The paper's tuple ``[g0 deg, gA deg, Tp s, zeta]`` (rounded against float noise), or ``None`` at rest."""
-    return None if beat is None else [round(v, 12) for v in beat.degrees()]
-
-
-def _fin_text(beat: FinBeat | None) -> str:
-    if beat is None:
-        return "at rest"
-    g0, ga, tp, zeta = beat.degrees()
-    return f"({g0:g} deg, {ga:g} deg, {tp:g} s, {zeta:g})"
-
-
-def _num(value: float | None, spec: str) -> str:
-    """``value`` formatted with ``spec``, or ``-`` for ``None``."""
-    return "-" if value is None else format(value, spec)
-
-
-def _fin_label(right: FinBeat | None, left: FinBeat | None) -> str:
-    return f"right {_fin_text(right)}, left {_fin_text(left)}"
-
-
 # --------------------------------------------------------------------------- steady
-
-
-def model_inputs(model: str, params_file: str | None, scaling: str | None = None, check: bool = True,
-                 forcing: str | None = None):
-    """``(params, spec)`` of the command line's ``--model, --params, --scaling, --forcing, --no-params-check``.
-
-    ``"full"`` is :data:`~pectoral_gym.model.spec.FULL_REFERENCE`, ``"averaged"`` is
-    :data:`~pectoral_gym.model.spec.AVERAGED`, any other name a preset of
-    :data:`~pectoral_gym.model.spec.PRESETS`; an averaged model's K (with its richest yaw damping) and
-    forcing are the spec's unless given.
-
-    Args:
-        model: ``"full"``, ``"averaged"`` or a preset name.
-        params_file: A parameters file (:func:`pectoral_gym.model.params.load_params`) or ``None`` (Table 1).
-        scaling: ``"identified"`` (the shipped file), ``"none"`` (K = 1), a coefficients file path, or
-            ``None`` (the spec's).
-        check: Refuse a coefficients file identified for other parameters (averaged model).
-        forcing: Averaged model: ``"exact"``, ``"taylor"`` or ``None`` (the spec's).
-
-    Raises:
-        ValueError: For an unknown model, an averaged-only option given to the full model, an unreadable
-            file or (``check``) K identified for other parameters.
-        FileNotFoundError: If a file does not exist.
-    """
-    from pectoral_gym.model.params import FishParams, load_params
-    from pectoral_gym.model.spec import AVERAGED, FULL_REFERENCE, PRESETS, AveragedSpec, env_spec
-
-    spec = {"full": FULL_REFERENCE, "averaged": AVERAGED}.get(model) or PRESETS.get(model)
-    if spec is None:
-        raise ValueError(f"unknown model {model!r}: choose from {MODEL_CHOICES}")
-    params = load_params(params_file) if params_file else FishParams()
-    if not isinstance(spec, AveragedSpec):
-        given = [flag for flag, value in (("--scaling", scaling), ("--forcing", forcing)) if value is not None]
-        if given:
-            raise ValueError(f"{', '.join(given)} applies to averaged models only, not to {model!r}")
-        return params, spec
-    if scaling is not None:
-        held = env_spec("averaged", scaling=scaling, check_scaling_params=check)
-        spec = spec.replace(scaling=held.scaling, yaw_damping=held.yaw_damping)
-    spec = spec.replace(check_params=check, **({} if forcing is None else {"forcing": forcing}))
-    spec.scaling_functions(params)  # the parameter check, before any work
-    return params, spec
-
-
-def steady_result(model: str, right: FinBeat | None, left: FinBeat | None, params: Any = None,
-                  spec: Any = None) -> dict[str, Any]:
-    """Periodic steady state as the JSON object printed by ``steady --json``.
-
-    Args:
-        model: ``"full"`` or ``"averaged"`` (the name in the result).
-        right, left: Fin patterns (``None``: at rest).
-        params: Model parameters (``None``: Table 1).
-        spec: The model's spec (:func:`model_inputs`); ``None``: the preset ``model`` names.
-
-    Returns:
-        A dict with ``vx, vy`` [m/s], ``omega`` [rad/s] (body frame, x forward,
-        y left, ``omega > 0`` a left turn), ``speed`` [m/s], ``radius`` [m] and
-        ``period`` [s] (``None`` when the fish does not turn), ``drift_angle``
-        [rad], ``converged``, ``model``, ``right``, ``left`` (``[g0 deg, gA deg,
-        Tp s, zeta]`` or ``None`` at rest).
-    """
-    from pectoral_gym.model.steady import steady_state
-
-    s = steady_state(spec or model, right=right, left=left, params=params)
-    return {
-        "vx": s.vx, "vy": s.vy, "omega": s.omega, "speed": s.speed, "radius": s.radius, "period": s.period,
-        "drift_angle": s.drift_angle, "converged": s.converged, "model": model,
-        "right": _fin_tuple(right), "left": _fin_tuple(left),
-    }
 
 
 def _model_inputs(args: argparse.Namespace, parser: argparse.ArgumentParser):
@@ -181,7 +67,7 @@ def _cmd_steady(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
     params, spec = _model_inputs(args, parser)
     res = steady_result(args.model, right, left, params, spec)
     if not all(math.isfinite(res[k]) for k in ("vx", "vy", "omega")):
-        print(f"error: the {args.model} model gave non-finite velocities for {_fin_label(right, left)}",
+        print(f"error: the {args.model} model gave non-finite velocities for {fin_label(right, left)}",
               file=sys.stderr)
         return 1
     if args.json:
@@ -189,18 +75,18 @@ def _cmd_steady(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         return 0
     turn = "straight" if res["radius"] is None else ("left turn" if res["omega"] > 0 else "right turn")
     rows = [
-        ("vx", _num(res["vx"], ".5f"), "m/s"),
-        ("vy", _num(res["vy"], ".5f"), "m/s"),
-        ("omega", _num(res["omega"], ".5f"), f"rad/s  ({turn})"),
-        ("speed", _num(res["speed"], ".5f"), "m/s"),
-        ("radius", _num(res["radius"], ".4f"), "m"),
-        ("period", _num(res["period"], ".3f"), "s"),
-        ("drift angle", _num(math.degrees(res["drift_angle"]), ".2f"), "deg"),
+        ("vx", format_number(res["vx"], ".5f"), "m/s"),
+        ("vy", format_number(res["vy"], ".5f"), "m/s"),
+        ("omega", format_number(res["omega"], ".5f"), f"rad/s  ({turn})"),
+        ("speed", format_number(res["speed"], ".5f"), "m/s"),
+        ("radius", format_number(res["radius"], ".4f"), "m"),
+        ("period", format_number(res["period"], ".3f"), "s"),
+        ("drift angle", format_number(math.degrees(res["drift_angle"]), ".2f"), "deg"),
     ]
     held = "" if spec.model == "full" else f" (scaling {spec.scaling}, forcing {spec.forcing})"
     print(f"steady state, {args.model} model{held}")
-    print(f"  right fin    {_fin_text(right)}")
-    print(f"  left fin     {_fin_text(left)}")
+    print(f"  right fin    {fin_text(right)}")
+    print(f"  left fin     {fin_text(left)}")
     for name, value, unit in rows:
         print(f"  {name:<12} {value:>10}  {unit}")
     if not res["converged"]:
@@ -235,7 +121,7 @@ def _cmd_simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
         name = "trajectory.csv" if model == args.model else f"trajectory_{model}.csv"
         print(f"wrote {write_csv(traj, out / name)}")
         trajectories.append(traj)
-    title = f"{' vs '.join(models)} model, {_fin_label(right, left)}"
+    title = f"{' vs '.join(models)} model, {fin_label(right, left)}"
     print(f"wrote {plot_trajectories(trajectories, out / 'trajectory.png', title=title)}")
     return 0
 
@@ -266,7 +152,7 @@ def _cmd_demo(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
             traj = simulate(model, right, left, duration, x0, y0, 0.0, 0.05)
             panel.append(traj)
             res = steady_result(model, right, left)
-            rows.append({"pattern": name, "model": model, "right": _fin_text(right), "left": _fin_text(left),
+            rows.append({"pattern": name, "model": model, "right": fin_text(right), "left": fin_text(left),
                          "vx": res["vx"], "vy": res["vy"], "omega": res["omega"], "speed": res["speed"],
                          "radius": res["radius"], "period": res["period"],
                          "X_end": traj.state[-1, 0], "Y_end": traj.state[-1, 1]})
@@ -283,7 +169,7 @@ def _cmd_demo(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
           f"{'period s':>9}")
     for row in rows:
         print(f"{row['pattern']:<22} {row['model']:<9} {row['vx']:>8.4f} {row['vy']:>8.4f} {row['omega']:>11.4f} "
-              f"{_num(row['radius'], '.3f'):>9} {_num(row['period'], '.1f'):>9}")
+              f"{format_number(row['radius'], '.3f'):>9} {format_number(row['period'], '.1f'):>9}")
     print("(steady-state cycle averages; omega > 0 is a left turn)")
     print(f"wrote {csv_path}")
     print(f"wrote {png}")
