@@ -49,6 +49,15 @@ def _rig(speed=2.0, start=(1.15, 0.575, 0.0), camera=None, env_kwargs=None, **sa
         robot.stop()
 
 
+def _stop_after(env, action, steps):
+    """Step ``action`` until the episode ends or ``steps`` steps; the last ``info["safety_stop"]``."""
+    for _ in range(steps):
+        _, _, terminated, truncated, info = env.step(action)
+        if terminated or truncated:
+            break
+    return info["safety_stop"]
+
+
 def _set_fins_count(robot):
     return sum(m.type == pr.MsgType.SET_FINS for m in robot.received)
 
@@ -260,11 +269,7 @@ def test_fish_at_rest_near_a_wall_with_pose_noise_is_not_stopped():
                      -math.pi / 2: (1.15, 0.30), math.pi: (0.30, 0.575)}[heading]
             env.reset_hook = lambda rng, p=place, h=heading: robot.place(*p, h)
             env.reset(seed=episode)
-            for _ in range(8):
-                _, _, terminated, truncated, info = env.step(REST)
-                if terminated or truncated:
-                    break
-            stops.append(info["safety_stop"])
+            stops.append(_stop_after(env, REST, 8))
     assert stops.count("geofence") == 0, stops
 
 
@@ -447,16 +452,11 @@ class _DroppingCamera:
 @pytest.mark.slow
 def test_ten_percent_frame_drops_do_not_end_episodes():
     ends = []
-    # Real time: the emulated camera then renders at the real camera's 30 frames/s (at speed 2 the renderer,
-    # CPU-bound on this machine, gives about half that many frames per emulated second, so 10 % drops there
-    # leave gaps that a real 30 fps camera with 10 % drops almost never has).
+    # Real time: the emulated camera then renders at the real camera's 30 frames/s (at speed 2 it gives half
+    # that many frames per emulated second, and 10 % drops leave gaps a real 30 fps camera almost never has).
     with _rig(speed=1.0, camera=_DroppingCamera, tracking_timeout=0.5) as (robot, env):
         for episode in range(10):
             env.reset_hook = lambda rng: robot.place(1.15, 0.575, float(rng.uniform(-3, 3)))
             env.reset(seed=episode)
-            for _ in range(10):
-                _, _, terminated, truncated, info = env.step(REST)
-                if terminated or truncated:
-                    break
-            ends.append(info["safety_stop"])
+            ends.append(_stop_after(env, REST, 10))
     assert ends.count("tracking_lost") <= 0.02 * len(ends), ends
