@@ -142,3 +142,30 @@ def test_the_checkout_folders_are_importable_by_one_name_only():
             continue
         done = _run([sys.executable, "-c", f"import {folder}"], cwd=ROOT)  # the checkout's root is on sys.path
         assert done.returncode != 0 and f"ImportError: import {package}, not {folder}" in done.stderr, done.stderr
+
+
+WITHOUT_PLOTS = """
+import sys
+import gymnasium as gym
+import pectoral_gym
+from pectoral_gym.tools.optional import require
+env = gym.make("PectoralFish-Averaged-v0")
+env.reset(seed=0)
+assert not {"matplotlib", "tqdm"} & {name.split(".")[0] for name in sys.modules}, "imported"
+for name in ("matplotlib", "tqdm"):
+    try:
+        require(name)
+    except ModuleNotFoundError as error:
+        assert "pectoral-gym[plots]" in str(error), error
+    else:
+        raise AssertionError(name + " is visible")
+print("ok")
+"""
+
+
+def test_the_model_library_and_the_envs_need_neither_matplotlib_nor_tqdm(wheel, tmp_path_factory, tmp_path):
+    root = tmp_path_factory.mktemp("venv-core")
+    python = _fresh_venv(root, wheel, hide=("matplotlib", "mpl_toolkits", "pylab", "tqdm"))
+    done = _run([str(python), "-c", WITHOUT_PLOTS], cwd=tmp_path, NUMBA_CACHE_DIR=str(root / "numba"))
+    assert done.returncode == 0 and done.stdout.split() == ["ok"], done.stderr[-3000:]
+    assert _run([str(python.parent / "pectoral-fish"), "--help"], cwd=tmp_path).returncode == 0
