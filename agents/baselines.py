@@ -1,10 +1,10 @@
 """Baseline controllers: random actions, a hand-designed feedback law and NMPC.
 
-All three implement :class:`agents.training.policy.Controller` and are built by
+All three implement :class:`pectoral_gym.agents.training.policy.Controller` and are built by
 :func:`make_baseline` from the environment's :class:`~pectoral_gym.envs.core.EnvConfig`
 (``env.unwrapped.config``), so they map physical fin patterns to normalised
 actions through the same ranges as the environment (``EnvConfig.encode``).
-The hand controller lives in :mod:`agents.controllers.hand` (the NMPC uses it as its base policy).
+The hand controller lives in :mod:`pectoral_gym.agents.controllers.hand` (the NMPC uses it as its base policy).
 """
 
 from __future__ import annotations
@@ -13,8 +13,8 @@ from typing import Any
 
 import numpy as np
 
-from agents.controllers.fin_map import FinMap
-from agents.controllers.hand import HandController
+from pectoral_gym.agents.controllers.fin_map import FinMap
+from pectoral_gym.agents.controllers.hand import HandController
 from pectoral_gym.envs.core import EnvConfig
 
 __all__ = ["BASELINES", "FinMap", "HandController", "RandomController", "make_baseline"]
@@ -52,10 +52,10 @@ def make_baseline(name: str, config: EnvConfig, **kwargs: Any):
         name: ``"random"``, ``"hand"`` or ``"nmpc"``.
         config: ``env.unwrapped.config`` of the environment it will drive.
         **kwargs: Passed to the controller (``RandomController(seed)``, :class:`HandController` gains,
-            :class:`agents.nmpc.controller.NMPCController` settings).
+            :class:`pectoral_gym.agents.nmpc.controller.NMPCController` settings).
 
     Returns:
-        A :class:`agents.training.policy.Controller`.
+        A :class:`pectoral_gym.agents.training.policy.Controller`.
 
     Raises:
         ValueError: For an unknown name or a config that is not an ``EnvConfig``.
@@ -67,7 +67,7 @@ def make_baseline(name: str, config: EnvConfig, **kwargs: Any):
     if name == "hand":
         return HandController(config, **kwargs)
     if name == "nmpc":
-        from agents.nmpc.controller import NMPCController  # CasADi is imported only when NMPC is asked for
+        from pectoral_gym.agents.nmpc.controller import NMPCController  # CasADi is imported only when NMPC is asked for
 
         return NMPCController(config, **kwargs)
     raise ValueError(f"unknown baseline {name!r}; choose one of {BASELINES}")

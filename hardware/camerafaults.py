@@ -13,8 +13,8 @@ an attribute that can be changed while frames flow (a test lets the camera run l
 * ``latency``: each frame is handed out this long after the source delivered it [s].
 * ``block``: each ``read()`` blocks this long before reading [s] (``math.inf``: until :meth:`close`).
 
-Pose noise of the emulated camera is :class:`hardware.camera.EmulatedCamera`'s ``pose_noise``; pixel
-noise, blur and lighting are :class:`hardware.scene.SceneConditions`.
+Pose noise of the emulated camera is :class:`pectoral_gym.hardware.camera.EmulatedCamera`'s ``pose_noise``; pixel
+noise, blur and lighting are :class:`pectoral_gym.hardware.scene.SceneConditions`.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import time
 import cv2
 import numpy as np
 
-from hardware.frames import Frame, FrameSource
+from pectoral_gym.hardware.frames import Frame, FrameSource
 
 __all__ = ["FREEZE_MODES", "FaultyCamera"]
 

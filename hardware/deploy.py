@@ -2,11 +2,11 @@
 
 Examples::
 
-    python -m hardware.deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 --episodes 3
-    python -m hardware.deploy --policy runs/ppo-goal/model.zip --emulate --speed 2 --episodes 1
-    python -m hardware.deploy --controller nmpc --emulate --episodes 1
+    python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 --episodes 3
+    python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal/model.zip --emulate --speed 2 --episodes 1
+    python -m pectoral_gym.hardware.deploy --controller nmpc --emulate --episodes 1
 
-``--controller nmpc`` plans on the averaged model (:class:`agents.nmpc.controller.NMPCController`, the same
+``--controller nmpc`` plans on the averaged model (:class:`pectoral_gym.agents.nmpc.controller.NMPCController`, the same
 controller as in simulation) with its step budget set to ``--solve-fraction`` of the control period
 (wall time, so divided by ``--speed`` when emulated): a solve that fails or ends later than that is not
 applied, and the rest of the last plan (then both fins at rest) is sent instead.
@@ -29,7 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from hardware.deploy_checks import (
+from pectoral_gym.envs.tasks import kernels as tk
+from pectoral_gym.hardware.deploy_checks import (
     CONTROL_PERIOD_RANGE,
     MIN_TRACKING_WALL,
     SPEED_RANGE,
@@ -38,8 +39,7 @@ from hardware.deploy_checks import (
     first_frame,
     robot_address,
 )
-from hardware.safety import SafetyConfig, install_stop_handlers
-from pectoral_gym.envs.tasks import kernels as tk
+from pectoral_gym.hardware.safety import SafetyConfig, install_stop_handlers
 
 __all__ = ["main", "make_controller", "run_episodes", "plot_trajectories", "solver_summary"]
 
@@ -129,9 +129,10 @@ def make_controller(name: str, config, step_budget: float, safety: SafetyConfig 
     """The ``nmpc`` or ``hand`` baseline for the robot's env config; NMPC steps end within ``step_budget`` [s].
 
     The NMPC plans with the stopping-distance band of the env's geofence (``safety``, default
-    :class:`hardware.safety.SafetyConfig`), so it does not swim into it (``agents.controllers.stop_band``).
+    :class:`pectoral_gym.hardware.safety.SafetyConfig`), so it does not swim into it
+    (``pectoral_gym.agents.controllers.stop_band``).
     """
-    from agents.baselines import make_baseline
+    from pectoral_gym.agents.baselines import make_baseline
 
     if name == "nmpc":
         safety = safety or SafetyConfig()
@@ -151,24 +152,25 @@ def solver_summary(controller) -> dict:
 
 
 _EXAMPLES = """examples:
-  python -m hardware.deploy --policy runs/ppo-goal --emulate --speed 2 --episodes 2 --out dryrun
-  python -m hardware.deploy --controller nmpc --emulate --speed 2 --episodes 1
-  python -m hardware.deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 \
+  python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --emulate --speed 2 --episodes 2 --out dryrun
+  python -m pectoral_gym.hardware.deploy --controller nmpc --emulate --speed 2 --episodes 1
+  python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 \
       --calibration calibration.json --robot-address 0013A20012345678 --episodes 3 --out tank-run
 
 exit status: 0 done; 1 a device failed (no frame, no fish seen, robot not answering); 2 a bad argument."""
 
 
 def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m hardware.deploy", description=__doc__.split("\n\n")[0],
+    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.hardware.deploy",
+                                     description=__doc__.split("\n\n")[0],
                                      epilog=_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
     lo_speed, hi_speed = SPEED_RANGE
     lo_period, hi_period = CONTROL_PERIOD_RANGE
     parser.add_argument("--controller", choices=("policy", "nmpc", "hand"), default="policy",
                         help="what drives the fish (default %(default)s: needs --policy)")
     parser.add_argument("--policy", default=None, metavar="RUN_OR_ZIP",
-                        help="agents.training.train or rl-baselines3-zoo run folder, or an SB3 .zip "
-                             "(agents.training.policy.load_policy)")
+                        help="pectoral_gym.agents.training.train or rl-baselines3-zoo run folder, or an SB3 .zip "
+                             "(pectoral_gym.agents.training.policy.load_policy)")
     parser.add_argument("--solve-fraction", type=float, default=0.5, metavar="F",
                         help="nmpc: share of the control period a step's solves may take, in (0, 1] "
                              "(default %(default)s)")
@@ -192,8 +194,8 @@ def _parser() -> argparse.ArgumentParser:
                         help=f"emulated clock speed-up, in [{lo_speed}, {hi_speed}] (--emulate only; "
                              "default %(default)s)")
     parser.add_argument("--calibration", default=None, metavar="JSON",
-                        help="camera calibration (python -m hardware.calibrate), made at the camera's resolution "
-                             "(default: the emulator's camera model)")
+                        help="camera calibration (python -m pectoral_gym.hardware.calibrate), made at the camera's "
+                             "resolution (default: the emulator's camera model)")
     parser.add_argument("--geofence", type=float, default=0.05, metavar="M",
                         help="clearance kept from the walls on top of the stopping distance [m] (default %(default)s)")
     parser.add_argument("--robot-address", type=robot_address, default=None, metavar="HEX",
@@ -266,7 +268,7 @@ def main(argv: list[str] | None = None) -> int:
     _check_args(parser, args)
     controller = None
     if args.controller == "policy":
-        from agents.training.policy import load_policy  # lazy: agents/ pulls in torch
+        from pectoral_gym.agents.training.policy import load_policy  # lazy: agents/ pulls in torch
 
         try:
             controller = load_policy(args.policy)
@@ -284,10 +286,10 @@ def main(argv: list[str] | None = None) -> int:
         safety = SafetyConfig(geofence_margin=args.geofence, tracking_timeout=args.tracking_timeout)
     except ValueError as err:
         parser.error(f"safety settings (--geofence, --tracking-timeout): {err}")
-    from hardware.env import HardwareFishEnv
-    from hardware.link import RadioLink
-    from hardware.scene import CameraModel
-    from hardware.tracker import MarkerTracker
+    from pectoral_gym.hardware.env import HardwareFishEnv
+    from pectoral_gym.hardware.link import RadioLink
+    from pectoral_gym.hardware.scene import CameraModel
+    from pectoral_gym.hardware.tracker import MarkerTracker
 
     if args.take_over and not _accepts(HardwareFishEnv, "take_over"):
         parser.error("--take-over: this HardwareFishEnv has no take_over option yet (issue 30); nothing was sent")
@@ -308,7 +310,7 @@ def main(argv: list[str] | None = None) -> int:
     with contextlib.ExitStack() as resources:  # released last in, first out, on every path
         try:
             if args.emulate:
-                from hardware.emulator import EmulatedRobot
+                from pectoral_gym.hardware.emulator import EmulatedRobot
 
                 robot = EmulatedRobot(speed=args.speed, seed=args.seed).start()
                 resources.callback(robot.stop)
@@ -316,7 +318,7 @@ def main(argv: list[str] | None = None) -> int:
                 resources.callback(camera.close)
                 hook = lambda rng: robot.place(*_random_start(rng))  # noqa: E731 - a hand that puts the fish back
             else:
-                from hardware.camera import open_source
+                from pectoral_gym.hardware.camera import open_source
 
                 camera = open_source(args.camera)
                 resources.callback(camera.close)  # idempotent: the env closes it too

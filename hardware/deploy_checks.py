@@ -1,4 +1,6 @@
-"""Checks of ``hardware.deploy``'s settings before anything moves: ranges, the policy against the env, the camera.
+"""Checks of the deployment's settings before anything moves: ranges, the policy against the env, the camera.
+
+The settings are ``pectoral_gym.hardware.deploy``'s.
 
 Every check raises ``ValueError`` with a one-line message naming the setting and what is wrong (the command
 line turns it into an argparse error, exit status 2), or ``RuntimeError`` for a device that does not
@@ -44,7 +46,7 @@ CONTROL_PERIOD_RANGE = (0.1, 2.0)
 
 # The tracking timeout in wall seconds (timeout / speed) must hold 3 frames of a 30 fps camera, so one dropped
 # or late frame does not end the episode as tracking_lost. The upper bound is physical (finding 9 of issue 30:
-# the time to reach a wall from the last seen pose), checked by hardware.safety.SafetyConfig.
+# the time to reach a wall from the last seen pose), checked by pectoral_gym.hardware.safety.SafetyConfig.
 MIN_TRACKING_WALL = 0.1
 
 FIRST_FRAME_TIMEOUT = 5.0  # wall seconds to wait for the camera's first frame (as the env's reset_timeout)
@@ -73,8 +75,8 @@ def _same(a: Any, b: Any) -> bool:
 def env_settings(controller: Any, task: str | None, control_period: float | None) -> tuple[dict[str, Any], list[str]]:
     """The env settings to run ``controller`` with, checked against what it was trained on.
 
-    A trained policy (:class:`agents.training.policy.SB3Controller`) must meet the env's action size (8) and one of its
-    observation layouts (19 entries, or 27 with the replayed fin block: ``observe_fins``). Where its run
+    A trained policy (:class:`pectoral_gym.agents.training.policy.SB3Controller`) must meet the env's action size (8)
+    and one of its observation layouts (19 entries, or 27 with the replayed fin block: ``observe_fins``). Where its run
     folder records them (``trained``), the task and the control period default to the policy's own and an
     explicit other value is refused; the action ranges and the track reference speed are the policy's. A
     controller without ``trained`` (the hand and NMPC baselines) runs any task.
@@ -120,7 +122,8 @@ def env_settings(controller: Any, task: str | None, control_period: float | None
         else:
             kwargs[key] = fallback if given is None else given
             if obs_size is not None:
-                notes.append(f"the policy records no {key} (no agents.training.train config.yaml beside it): {flag} "
+                notes.append(f"the policy records no {key} (no pectoral_gym.agents.training.train config.yaml "
+                             f"beside it): {flag} "
                              f"{kwargs[key]} is not checked against its training; only its observation size "
                              f"({obs_size}) and action size are")
     for key in ("bias_range", "amplitude_range", "period_range", "ratio_range", "ref_speed"):
@@ -152,5 +155,5 @@ def check_frame_size(frame: Any, model: Any, calibration: str | Path | None) -> 
         what = f"the calibration {calibration}" if calibration is not None else "the default camera model (no " \
                                                                                  "--calibration)"
         raise ValueError(f"the camera gives {width}x{height} px frames but {what} is for {model.width}x"
-                         f"{model.height} px: calibrate at the camera's resolution (python -m hardware.calibrate) "
-                         "or set the camera to the calibrated one")
+                         f"{model.height} px: calibrate at the camera's resolution "
+                         "(python -m pectoral_gym.hardware.calibrate) or set the camera to the calibrated one")

@@ -1,12 +1,12 @@
 """Emulated robotic fish: speaks the radio protocol, runs the full model, obeys the firmware rules.
 
-Use it in-process (:class:`EmulatedRobot`, as ``hardware.deploy --emulate`` and the tests do) or as a
+Use it in-process (:class:`EmulatedRobot`, as ``pectoral_gym.hardware.deploy --emulate`` and the tests do) or as a
 process that listens on a pseudo-terminal or a TCP port::
 
-    python -m hardware.emulator                       # prints the pty path, e.g. /dev/pts/7
-    python -m hardware.emulator --port 5700 --camera-port 5600 --speed 2
+    python -m pectoral_gym.hardware.emulator                       # prints the pty path, e.g. /dev/pts/7
+    python -m pectoral_gym.hardware.emulator --port 5700 --camera-port 5600 --speed 2
 
-then ``python -m hardware.deploy --port socket://127.0.0.1:5700 --camera emu://127.0.0.1:5600 ...``.
+then ``python -m pectoral_gym.hardware.deploy --port socket://127.0.0.1:5700 --camera emu://127.0.0.1:5600 ...``.
 
 The emulator stands in for both XBee modules and the dsPIC: it reads the PC's Transmit Request frames
 and answers with Receive Packet frames. Its clock runs ``speed`` times faster than the wall clock;
@@ -28,10 +28,10 @@ import time
 
 import numpy as np
 
-from hardware import protocol as pr
-from hardware.finreplay import CHUNK as _CHUNK
-from hardware.finreplay import apply_firmware
-from hardware.firmware import Firmware, FirmwareConfig, new_boot_id
+from pectoral_gym.hardware import protocol as pr
+from pectoral_gym.hardware.finreplay import CHUNK as _CHUNK
+from pectoral_gym.hardware.finreplay import apply_firmware
+from pectoral_gym.hardware.firmware import Firmware, FirmwareConfig, new_boot_id
 from pectoral_gym.model import strokes
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
 from pectoral_gym.model.spec import FULL_REFERENCE, FullSpec
@@ -54,7 +54,7 @@ class EmulatedRobot:
         firmware: Robot-side rules (watchdog, servo limits).
         start_pose: Initial ``(X, Y, psi)`` [m, m, rad]; default the tank centre, heading +X.
         loss: Probability that an incoming message is lost (radio loss injection for tests).
-        camera_port: Serve rendered overhead frames on this TCP port (``hardware.camera.FrameServer``).
+        camera_port: Serve rendered overhead frames on this TCP port (``pectoral_gym.hardware.camera.FrameServer``).
         camera_fps: Frame rate of the served camera [wall frames/s].
         seed: Seed of the loss injection and camera noise.
         model: The physics the emulated fish follows (a full-model spec; default the reference integration).
@@ -158,8 +158,8 @@ class EmulatedRobot:
             return fresh.boot
 
     def camera(self, conditions=None, seed: int | None = None, camera=None):
-        """An in-process ``hardware.camera.EmulatedCamera`` looking at this fish."""
-        from hardware.camera import EmulatedCamera
+        """An in-process ``pectoral_gym.hardware.camera.EmulatedCamera`` looking at this fish."""
+        from pectoral_gym.hardware.camera import EmulatedCamera
 
         return EmulatedCamera(self.pose_stamped, camera, conditions, self._seed if seed is None else seed)
 
@@ -172,7 +172,7 @@ class EmulatedRobot:
         self._thread = threading.Thread(target=self._run, name="emulated-robot", daemon=True)
         self._thread.start()
         if self._camera_port is not None:
-            from hardware.camera import FrameServer
+            from pectoral_gym.hardware.camera import FrameServer
 
             self._frame_server = FrameServer(self.camera(), port=self._camera_port, fps=self._camera_fps)
         return self
@@ -299,7 +299,8 @@ class EmulatedRobot:
 
 def main(argv: list[str] | None = None) -> int:
     """Run an emulated robot until Ctrl-C (or ``--duration``)."""
-    parser = argparse.ArgumentParser(prog="python -m hardware.emulator", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.hardware.emulator",
+                                     description=__doc__.split("\n\n")[0])
     parser.add_argument("--port", type=int, default=None, metavar="TCP_PORT",
                         help="listen on this TCP port (default: a pseudo-terminal)")
     parser.add_argument("--host", default="127.0.0.1", help="TCP interface (default %(default)s)")

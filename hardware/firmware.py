@@ -42,7 +42,16 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from hardware.protocol import Message, MsgType, RobotState, SequenceTracker, Status, StatusFlag, Verdict, serial_newer
+from pectoral_gym.hardware.protocol import (
+    Message,
+    MsgType,
+    RobotState,
+    SequenceTracker,
+    Status,
+    StatusFlag,
+    Verdict,
+    serial_newer,
+)
 
 __all__ = ["ServoLimits", "FirmwareConfig", "Firmware", "clip_beats", "rate_limit", "rest_beats", "peak_rates",
            "stretch_transition", "new_boot_id"]

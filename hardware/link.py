@@ -5,9 +5,9 @@
 a *copy* of the current fin command (same command identity and deadline, so it never extends the
 command; ``docs/protocol.md``) every ``keepalive_period`` until the lease ends, then STOP; HEARTBEAT when
 stopped. It retries an unacknowledged SET_FINS/STOP after a timeout that adapts to the measured round
-trip (:class:`hardware.linkclock.RttEstimator`), at most ``max_retries`` times (same frame, same sequence
+trip (:class:`pectoral_gym.hardware.linkclock.RttEstimator`), at most ``max_retries`` times (same frame, same sequence
 number). Only :meth:`RadioLink.set_fins` starts a new lease; it also carries a deadline on the robot's
-clock (:class:`hardware.linkclock.RobotClock`), so no copy runs past the lease counted from the call.
+clock (:class:`pectoral_gym.hardware.linkclock.RobotClock`), so no copy runs past the lease counted from the call.
 
 Control (protocol version 3): every STATUS names the session it answers and the session the robot
 serves. :attr:`RadioLink.control_lost` latches why this PC is not (or no longer) the robot's controller:
@@ -28,8 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 import serial
 
-from hardware import protocol as pr
-from hardware.linkclock import CLOCK_TOLERANCE, RobotClock, RttEstimator
+from pectoral_gym.hardware import protocol as pr
+from pectoral_gym.hardware.linkclock import CLOCK_TOLERANCE, RobotClock, RttEstimator
 
 __all__ = ["RadioLink", "LinkStats", "DEADLINE_HORIZON"]
 
@@ -216,7 +216,7 @@ class RadioLink:
         STATUS), the command also carries a deadline on the robot's clock, a lower bound of the robot's
         time ``deadline_horizon`` robot seconds after this call, so no copy of it, however late, runs
         past that; the PC's own keep-alive copies stop ``lease`` after this call. Nothing is checked
-        here beyond finiteness and the wire range: clip with :mod:`hardware.safety` first. While
+        here beyond finiteness and the wire range: clip with :mod:`pectoral_gym.hardware.safety` first. While
         :attr:`control_lost` is set nothing is sent (the command is counted in ``stats.suppressed``) and
         ``-1`` is returned.
         """

@@ -1,4 +1,4 @@
-"""PC-side safety rules of the hardware environment (the robot enforces its own in :mod:`hardware.firmware`).
+"""PC-side safety rules of the hardware environment (the robot's own: :mod:`~pectoral_gym.hardware.firmware`).
 
 * :func:`check_action`: a non-finite action is rejected before anything is sent.
 * :class:`CommandFilter`: commands clipped to the servo limits and rate-limited per control step.
@@ -11,8 +11,8 @@
 * :class:`TrackingWatch`: tracking lost for longer than ``timeout`` -> stop, end the episode.
 * :func:`install_stop_handlers`: Ctrl-C and SIGTERM send stop before the program ends.
 
-:class:`hardware.supervisor.Supervisor` applies these rules in its own thread, also between steps;
-:class:`hardware.framecheck.FrameCheck` decides which camera frames count as a sighting.
+:class:`pectoral_gym.hardware.supervisor.Supervisor` applies these rules in its own thread, also between steps;
+:class:`pectoral_gym.hardware.framecheck.FrameCheck` decides which camera frames count as a sighting.
 """
 
 from __future__ import annotations
@@ -26,8 +26,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from hardware.firmware import ServoLimits, clip_beats, rate_limit, stretch_transition
-from hardware.protocol import DEFAULT_LEASE, MAX_LEASE
+from pectoral_gym.hardware.firmware import ServoLimits, clip_beats, rate_limit, stretch_transition
+from pectoral_gym.hardware.protocol import DEFAULT_LEASE, MAX_LEASE
 from pectoral_gym.model import tank
 from pectoral_gym.model.params import FishParams, body_coefficients
 
@@ -104,9 +104,9 @@ def check_action(action, size: int = 8) -> np.ndarray:
 class CommandFilter:
     """Clip fin commands ``(2, 4)`` to the servo limits and rate-limit them between successive calls.
 
-    Mirrors the firmware: the peak rate of every half-stroke (:func:`hardware.firmware.clip_beats`) and of
+    Mirrors the firmware: the peak rate of every half-stroke (:func:`pectoral_gym.hardware.firmware.clip_beats`) and of
     the transitional half-stroke into the new pattern from either turning point of the previous command
-    (:func:`hardware.firmware.stretch_transition`) stays within ``limits.max_speed``.
+    (:func:`pectoral_gym.hardware.firmware.stretch_transition`) stays within ``limits.max_speed``.
 
     Args:
         limits: Servo limits.

@@ -169,7 +169,7 @@ class CameraModel:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> CameraModel:
-        """Read a calibration JSON written by ``python -m hardware.calibrate``.
+        """Read a calibration JSON written by ``python -m pectoral_gym.hardware.calibrate``.
 
         Raises:
             ValueError: The file is not a calibration (missing or malformed keys).

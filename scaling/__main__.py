@@ -1,5 +1,5 @@
-"""``python -m scaling``: identify or validate the scaling functions."""
+"""``python -m pectoral_gym.scaling``: identify or validate the scaling functions."""
 
-from scaling.cli import main
+from pectoral_gym.scaling.cli import main
 
 raise SystemExit(main())

@@ -1,4 +1,7 @@
-"""Command line: ``python -m scaling identify|validate|fidelity|yaw-balance`` (console script ``pectoral-scaling``)."""
+"""Command line: ``python -m pectoral_gym.scaling identify|validate|fidelity|yaw-balance``.
+
+The console script is ``pectoral-scaling``.
+"""
 
 from __future__ import annotations
 
@@ -13,8 +16,8 @@ from pathlib import Path
 import numpy as np
 
 from pectoral_gym.model.kfunctions import K_NAMES, default_scaling_path
-from scaling.identification.grids import GRIDS, GridError, load_grid
-from scaling.validation import fidelity, yaw_balance
+from pectoral_gym.scaling.identification.grids import GRIDS, GridError, load_grid
+from pectoral_gym.scaling.validation import fidelity, yaw_balance
 
 __all__ = ["main"]
 
@@ -88,8 +91,8 @@ def _write_table(result, path: Path) -> None:
 
 def _run_identify(args) -> int:
     from pectoral_gym.model.params import FishParams, load_params
-    from scaling.identification.identify import identify
-    from scaling.identification.nmpc import IdentificationNmpcSettings
+    from pectoral_gym.scaling.identification.identify import identify
+    from pectoral_gym.scaling.identification.nmpc import IdentificationNmpcSettings
 
     if args.quick:
         if args.install:
@@ -134,7 +137,8 @@ def _run_identify(args) -> int:
     for name, fit in result.fits.items():
         print(f"{name:5} {fit.features:34} {fit.degree:6d} {len(fit.coefs):5d} {fit.r2:9.6f} {fit.cv_rmse:9.2e} "
               f"{fit.cv_max:9.2e}")
-    print("(CV errors are predicted relative speed / yaw-rate errors; see scaling.identification.regression)")
+    print("(CV errors are predicted relative speed / yaw-rate errors; "
+          "see pectoral_gym.scaling.identification.regression)")
     if result.splines:
         nodes = "x".join(str(len(n)) for n in result.splines[K_NAMES[0]].nodes)
         spread = max(f.period_spread for f in result.splines.values())
@@ -156,10 +160,13 @@ def _run_identify(args) -> int:
 
 
 def _run_validate(argv: list[str]) -> int:
-    """``validate``: :func:`scaling.validation.validate.main`'s options and ``--params FILE`` (model parameters)."""
+    """``validate``: the options of :func:`~pectoral_gym.scaling.validation.validate.main` and ``--params FILE``.
+
+    ``FILE`` holds model parameters.
+    """
     from pectoral_gym.model.kfunctions import ScalingFunctions
     from pectoral_gym.model.params import load_params
-    from scaling.validation import validate as v
+    from pectoral_gym.scaling.validation import validate as v
     parser = v.build_parser()
     parser.add_argument("--params", metavar="FILE", default=None,
                         help="model parameters of both models: a JSON or YAML file of FishParams fields "
@@ -183,7 +190,7 @@ def _run_validate(argv: list[str]) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of ``python -m scaling`` and ``pectoral-scaling``."""
+    """Entry point of ``python -m pectoral_gym.scaling`` and ``pectoral-scaling``."""
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv and argv[0] == "validate":
         return _run_validate(argv[1:])

@@ -41,9 +41,9 @@ def warm_emulator_rig(tmp_path_factory):
     kernels; inside a timed test that stalls the control loop for seconds and the safety rules stop the fish
     (seen in CI: 2 of 6 steps, then a safety stop). Tests whose assertions depend on wall time use this fixture.
     """
-    from hardware.deploy import run_episodes
-    from hardware.emulator import EmulatedRobot
-    from hardware.env import HardwareFishEnv
+    from pectoral_gym.hardware.deploy import run_episodes
+    from pectoral_gym.hardware.emulator import EmulatedRobot
+    from pectoral_gym.hardware.env import HardwareFishEnv
 
     robot = EmulatedRobot(speed=2.0, seed=1).start()
     env = HardwareFishEnv(robot.url, robot.camera(seed=1), speed=2.0, max_episode_steps=1)

@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 import pectoral_gym  # noqa: F401  (registers the env ids)
-from agents.baselines import FinMap, HandController, RandomController, make_baseline
-from agents.nmpc.problem import to_z
-from agents.training.policy import Controller
+from pectoral_gym.agents.baselines import FinMap, HandController, RandomController, make_baseline
+from pectoral_gym.agents.nmpc.problem import to_z
+from pectoral_gym.agents.training.policy import Controller
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.model.models import FullModel
 
@@ -272,7 +272,7 @@ def test_nmpc_with_ipopt_reaches_a_near_goal_on_the_averaged_env():
 
 
 def test_nmpc_compare_runs_variants_on_the_same_episodes():
-    from agents.nmpc.compare import _seeds, compare
+    from pectoral_gym.agents.nmpc.compare import _seeds, compare
 
     assert _seeds("3-5") == [3, 4, 5] and _seeds("7,9") == [7, 9]
     results = compare({"short": {"horizon": 2, "blocks": None}, "blocked": {"horizon": 3, "blocks": (1, 2)}},

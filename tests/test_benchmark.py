@@ -2,8 +2,15 @@ import json
 
 import pytest
 
-from agents.studies import benchmark
-from agents.studies.benchmark import ENVS, TASKS, BenchmarkSettings, run_benchmark, to_markdown, write_outputs
+from pectoral_gym.agents.studies import benchmark
+from pectoral_gym.agents.studies.benchmark import (
+    ENVS,
+    TASKS,
+    BenchmarkSettings,
+    run_benchmark,
+    to_markdown,
+    write_outputs,
+)
 
 
 def test_small_benchmark_writes_a_row_per_cell(tmp_path):
@@ -81,13 +88,13 @@ def test_training_throughput_measures_a_short_ppo_run():
 def test_a_policy_is_benchmarked_on_the_model_settings_it_trained_with(tmp_path, monkeypatch):
     # A run folder trained with transitions and the fin block: its averaged cell keeps both, its full cells drop
     # the averaged-only transitions; the cell still decides task and randomisation.
-    import agents.training.evaluate
-    import agents.training.policy
+    import pectoral_gym.agents.training.evaluate
+    import pectoral_gym.agents.training.policy
 
     run = tmp_path / "run"
     run.mkdir()
-    monkeypatch.setattr(agents.training.policy, "load_policy", lambda path: object())
-    monkeypatch.setattr(agents.training.policy, "read_config", lambda path: {"env_kwargs": {
+    monkeypatch.setattr(pectoral_gym.agents.training.policy, "load_policy", lambda path: object())
+    monkeypatch.setattr(pectoral_gym.agents.training.policy, "read_config", lambda path: {"env_kwargs": {
         "task": "track", "transitions": True, "observe_fins": True, "randomize": {"drag_coef": 0.3}}})
     seen = {}
 
@@ -95,7 +102,7 @@ def test_a_policy_is_benchmarked_on_the_model_settings_it_trained_with(tmp_path,
         seen[(env_id, bool(env_kwargs.get("randomize")))] = dict(env_kwargs)
         raise RuntimeError("recorded")  # the benchmark keeps the error per cell and goes on
 
-    monkeypatch.setattr(agents.training.evaluate, "evaluate", fake_evaluate)
+    monkeypatch.setattr(pectoral_gym.agents.training.evaluate, "evaluate", fake_evaluate)
     report = run_benchmark(BenchmarkSettings(episodes=1, train_steps=0), controllers=(), tasks=("goal",),
                            policies=[str(run)], throughput=False)
     assert len(report["errors"]) == 3

@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from hardware.camera import (
+from pectoral_gym.hardware.camera import (
     CameraLostError,
     EmulatedCamera,
     Frame,
@@ -19,7 +19,7 @@ from hardware.camera import (
     VideoFileSource,
     open_source,
 )
-from hardware.scene import CameraModel, SceneConditions
+from pectoral_gym.hardware.scene import CameraModel, SceneConditions
 
 FPS = 20.0
 N_FRAMES = 6

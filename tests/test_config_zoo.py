@@ -14,7 +14,7 @@ import torch
 import yaml
 from doc_snippets import commands, snippet
 
-from agents.training.config import (
+from pectoral_gym.agents.training.config import (
     HYPERPARAMS_DIR,
     algo_kwargs,
     load_hyperparams,
@@ -112,7 +112,8 @@ def test_project_section_and_old_format(tmp_path):
     bad = write(tmp_path, {ENV: {"n_timesteps": 64}, "agents.train": {ENV: {"eval_freq": 8, "save_freq": 1}}})
     with pytest.raises(ValueError, match=r"unknown keys \['save_freq'\]"):
         resolve_config("ppo", ENV, 0, hyperparams_file=bad)
-    # a file of the old format still trains with agents.training.train (zoo_problems names why zoo refuses it)
+    # a file of the old format still trains with pectoral_gym.agents.training.train (zoo_problems names why zoo refuses
+    # it)
     old = write(tmp_path, {ENV: {"n_timesteps": 64, "eval_freq": 8, "normalize": "dict(norm_obs=True)",
                                  "policy_kwargs": {"activation_fn": "relu", "optimizer_class": "th.optim.RMSprop"}}},
                 "old.yml")
@@ -155,9 +156,8 @@ print(json.dumps({
 """
 
 
-# agents.training.policy.load_policy on zoo's layout (<env>.zip, best_model.zip, <env>/vecnormalize.pkl), checked
-# against
-# the zip and the statistics loaded by SB3 itself.
+# pectoral_gym.agents.training.policy.load_policy on zoo's layout (<env>.zip, best_model.zip, <env>/vecnormalize.pkl),
+# checked against the zip and the statistics loaded by SB3 itself.
 _LOAD_POLICY = """
 import json, sys
 import gymnasium as gym
@@ -165,7 +165,7 @@ import numpy as np
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 import pectoral_gym
-from agents.training.policy import load_policy
+from pectoral_gym.agents.training.policy import load_policy
 
 env_id, run_dir = sys.argv[1:]
 stats = VecNormalize.load(f"{run_dir}/{env_id}/vecnormalize.pkl",

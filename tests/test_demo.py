@@ -2,7 +2,7 @@
 
 import json
 
-from agents.training.demo import main
+from pectoral_gym.agents.training.demo import main
 
 
 def test_quick_demo_writes_report_json_and_plot(tmp_path, capsys):

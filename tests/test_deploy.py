@@ -1,4 +1,4 @@
-"""End-to-end dry run: ``hardware.deploy --emulate`` with a PPO policy trained for a few steps."""
+"""End-to-end dry run: ``pectoral_gym.hardware.deploy --emulate`` with a PPO policy trained for a few steps."""
 
 import json
 
@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 import pectoral_gym  # noqa: F401 - registers the ids
-from hardware.deploy import main, plot_trajectories, run_episodes
-from hardware.emulator import EmulatedRobot
-from hardware.env import HardwareFishEnv
-from hardware.safety import SafetyConfig
 from pectoral_gym.envs.core import EnvConfig
+from pectoral_gym.hardware.deploy import main, plot_trajectories, run_episodes
+from pectoral_gym.hardware.emulator import EmulatedRobot
+from pectoral_gym.hardware.env import HardwareFishEnv
+from pectoral_gym.hardware.safety import SafetyConfig
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 
@@ -163,7 +163,7 @@ def test_bad_arguments_are_one_line_errors_with_status_2(tmp_path, capsys, args,
         main(argv + [a.replace("{tmp}", str(tmp_path)) for a in args])
     assert exit_info.value.code == 2
     line = _error_line(capsys)
-    assert line.startswith("python -m hardware.deploy: error:") and message in line
+    assert line.startswith("python -m pectoral_gym.hardware.deploy: error:") and message in line
 
 
 @pytest.mark.parametrize("address", ["-1", "12345", "1FFFFFFFFFFFFFFFF", "0013A2001234567G", "0x-13A20012345678"])
@@ -229,10 +229,10 @@ def test_calibration_for_another_image_size_is_refused_before_the_first_episode(
 
 def test_a_failing_env_or_reset_is_exit_1_with_everything_released(tmp_path, capsys, monkeypatch):
     """RuntimeError while building the env (or at reset: "no fish seen") -> one line, exit 1, no thread/socket left."""
-    import hardware.env
+    import pectoral_gym.hardware.env
 
     before = _alive()
-    real = hardware.env.HardwareFishEnv
+    real = pectoral_gym.hardware.env.HardwareFishEnv
 
     def no_fish(self, *, seed=None, options=None):
         raise RuntimeError("no fish seen for 5.0 s at reset (tracker: no frames); check the camera and the markers")
@@ -246,18 +246,18 @@ def test_a_failing_env_or_reset_is_exit_1_with_everything_released(tmp_path, cap
         def __init__(self, *args, **kwargs):
             raise RuntimeError("supervisor could not start")
 
-    monkeypatch.setattr(hardware.env, "HardwareFishEnv", Broken)
+    monkeypatch.setattr(pectoral_gym.hardware.env, "HardwareFishEnv", Broken)
     assert main(["--controller", "hand", "--emulate", "--quiet", "--out", str(tmp_path / "b")]) == 1
-    assert _error_line(capsys) == "python -m hardware.deploy: error: supervisor could not start"
+    assert _error_line(capsys) == "python -m pectoral_gym.hardware.deploy: error: supervisor could not start"
     _nothing_left(before)
 
 
 def test_take_over_is_passed_to_the_env_or_refused_clearly(tmp_path, capsys, monkeypatch):
     import inspect
 
-    import hardware.env
+    import pectoral_gym.hardware.env
 
-    if "take_over" not in inspect.signature(hardware.env.HardwareFishEnv).parameters:
+    if "take_over" not in inspect.signature(pectoral_gym.hardware.env.HardwareFishEnv).parameters:
         with pytest.raises(SystemExit) as exit_info:
             main(["--controller", "hand", "--emulate", "--quiet", "--take-over", "--out", str(tmp_path)])
         assert exit_info.value.code == 2 and "no take_over option" in _error_line(capsys)
@@ -268,7 +268,7 @@ def test_take_over_is_passed_to_the_env_or_refused_clearly(tmp_path, capsys, mon
             seen["take_over"] = take_over
             raise RuntimeError("recorded")
 
-    monkeypatch.setattr(hardware.env, "HardwareFishEnv", Recorder)
+    monkeypatch.setattr(pectoral_gym.hardware.env, "HardwareFishEnv", Recorder)
     assert main(["--controller", "hand", "--emulate", "--quiet", "--take-over", "--out", str(tmp_path)]) == 1
     assert seen == {"take_over": True}
 
@@ -281,15 +281,15 @@ def test_a_failed_start_exits_normally_in_a_fresh_process(tmp_path):
     calibration = tmp_path / "cal.json"
     calibration.write_text(json.dumps({"width": 320, "height": 180, "homography": [[100, 0, 10], [0, -100, 170],
                                                                                      [0, 0, 1]]}))
-    done = subprocess.run([sys.executable, "-m", "hardware.deploy", "--controller", "hand", "--emulate", "--quiet",
-                           "--calibration", str(calibration), "--out", str(tmp_path / "run")],
+    done = subprocess.run([sys.executable, "-m", "pectoral_gym.hardware.deploy", "--controller", "hand", "--emulate",
+                           "--quiet", "--calibration", str(calibration), "--out", str(tmp_path / "run")],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 2, done.stderr
     assert "Traceback" not in done.stderr and "320x180" in done.stderr.strip().splitlines()[-1]
 
 
 class _Trained:
-    """A stand-in for agents.training.policy.SB3Controller (no torch): what a run folder records."""
+    """A stand-in for pectoral_gym.agents.training.policy.SB3Controller (no torch): what a run folder records."""
 
     name = "ppo"
 
@@ -300,7 +300,7 @@ class _Trained:
 
 
 def test_policy_settings_default_to_its_own_and_a_mismatch_is_refused():
-    from hardware.deploy_checks import env_settings
+    from pectoral_gym.hardware.deploy_checks import env_settings
 
     goal = _Trained(trained={"task": "goal", "control_period": 0.5, "observe_fins": False})
     settings, notes = env_settings(goal, None, None)
@@ -332,7 +332,7 @@ def test_a_goal_policy_is_refused_under_track_and_bad_statistics_are_named(polic
     import pickle
     import shutil
 
-    from agents.training.policy import load_policy
+    from pectoral_gym.agents.training.policy import load_policy
 
     run = tmp_path / "run"
     run.mkdir()

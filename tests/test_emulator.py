@@ -7,10 +7,10 @@ import time
 import numpy as np
 import pytest
 
-from hardware import protocol as pr
-from hardware.emulator import ROBOT_ADDRESS, EmulatedRobot, main
-from hardware.firmware import Firmware, FirmwareConfig, ServoLimits, clip_beats
-from hardware.link import RadioLink
+from pectoral_gym.hardware import protocol as pr
+from pectoral_gym.hardware.emulator import ROBOT_ADDRESS, EmulatedRobot, main
+from pectoral_gym.hardware.firmware import Firmware, FirmwareConfig, ServoLimits, clip_beats
+from pectoral_gym.hardware.link import RadioLink
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 

@@ -6,8 +6,8 @@ import math
 import numpy as np
 import pytest
 
-from agents.training.evaluate import evaluate, format_table, main, plot_trajectories, write_json
-from agents.training.metrics import (
+from pectoral_gym.agents.training.evaluate import evaluate, format_table, main, plot_trajectories, write_json
+from pectoral_gym.agents.training.metrics import (
     Trajectory,
     bootstrap_ci,
     episode_metrics,
@@ -225,7 +225,7 @@ def test_swept_work_prices_the_first_stroke_from_rest_by_what_it_sweeps():
 def test_trained_env_kwargs_drop_the_other_models_settings(tmp_path):
     import yaml
 
-    from agents.training.evaluate import model_kwargs, trained_env_kwargs
+    from pectoral_gym.agents.training.evaluate import model_kwargs, trained_env_kwargs
 
     run = {"task": "goal", "observe_fins": True, "integration": "fast", "randomize": {"drag_coef": 0.2}}
     (tmp_path / "config.yaml").write_text(yaml.safe_dump({"env_kwargs": run}))

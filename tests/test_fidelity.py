@@ -1,4 +1,6 @@
-"""Tests of the fidelity benchmark (scaling.validation.fidelity) and the averaged model's transitional-stroke forcing.
+"""Tests of the fidelity benchmark (pectoral_gym.scaling.validation.fidelity).
+
+And of the averaged model's transitional-stroke forcing.
 """
 
 from __future__ import annotations
@@ -14,8 +16,8 @@ from pectoral_gym.model.averaging import averaged_forcing, half_stroke_mean_forc
 from pectoral_gym.model.dynamics import fin_force_right, stroke_kinematics
 from pectoral_gym.model.models import AveragedModel
 from pectoral_gym.model.params import FinBeat, FishParams
-from scaling.cli import main as scaling_main
-from scaling.validation import fidelity as fd
+from pectoral_gym.scaling.cli import main as scaling_main
+from pectoral_gym.scaling.validation import fidelity as fd
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

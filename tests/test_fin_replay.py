@@ -6,12 +6,12 @@ import time
 import numpy as np
 import pytest
 
-from hardware.emulator import EmulatedRobot
-from hardware.env import HardwareFishEnv
-from hardware.finreplay import CHUNK, FinReplay
-from hardware.firmware import FirmwareConfig, ServoLimits
-from hardware.safety import SafetyConfig
 from pectoral_gym.envs.observation import FIN_OBS_SIZE, OBS_FINS, OBS_SIZE, decode
+from pectoral_gym.hardware.emulator import EmulatedRobot
+from pectoral_gym.hardware.env import HardwareFishEnv
+from pectoral_gym.hardware.finreplay import CHUNK, FinReplay
+from pectoral_gym.hardware.firmware import FirmwareConfig, ServoLimits
+from pectoral_gym.hardware.safety import SafetyConfig
 from pectoral_gym.model import strokes
 from pectoral_gym.model.models import FullModel
 from pectoral_gym.model.params import FinBeat

@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from hardware.emulator import EmulatedRobot
-from hardware.env import HardwareFishEnv
-from hardware.safety import SafetyConfig
+from pectoral_gym.hardware.emulator import EmulatedRobot
+from pectoral_gym.hardware.env import HardwareFishEnv
+from pectoral_gym.hardware.safety import SafetyConfig
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 

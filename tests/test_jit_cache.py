@@ -5,6 +5,7 @@ function in another module, which the cached kernel calls, must still reach it.
 The edits are made in a scratch copy of the package, with its own cache folder.
 """
 
+import importlib.util
 import os
 import shutil
 import subprocess
@@ -87,3 +88,14 @@ def test_source_tree_follows_the_package_imports(package):
     tree = source_tree("pkg.a", package / "a.py")
     assert tree == {"pkg.a": package / "a.py", "pkg.b": package / "b.py", "pkg.c": package / "c.py",
                     "pkg.d": package / "d.py", "pkg.sub": package / "sub" / "__init__.py"}
+
+
+def test_source_tree_follows_imports_into_subpackages_kept_in_other_folders():
+    # pectoral_gym.hardware and .agents live in the checkout's hardware/ and agents/ (package-dir): the
+    # tree of a robot module reaches the agents' and the model's modules, each at the file Python imports.
+    spec = importlib.util.find_spec("pectoral_gym.hardware.deploy")
+    tree = source_tree("pectoral_gym.hardware.deploy", spec.origin)
+    for name in ("pectoral_gym.agents.baselines", "pectoral_gym.hardware.env", "pectoral_gym.model.params"):
+        assert name in tree
+    for name, path in tree.items():
+        assert path == Path(importlib.util.find_spec(name).origin), name

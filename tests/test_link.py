@@ -7,9 +7,9 @@ import time
 import numpy as np
 import pytest
 
-from hardware import protocol as pr
-from hardware.emulator import EmulatedRobot
-from hardware.link import RadioLink
+from pectoral_gym.hardware import protocol as pr
+from pectoral_gym.hardware.emulator import EmulatedRobot
+from pectoral_gym.hardware.link import RadioLink
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 

@@ -1,11 +1,12 @@
-"""agents.training.metrics.bootstrap_ci through scipy.stats.bootstrap: the documented resampling, written out here, and
-the
-normal approximation of a large sample."""
+"""pectoral_gym.agents.training.metrics.bootstrap_ci through scipy.stats.bootstrap.
+
+The documented resampling, written out here, and the normal approximation of a large sample.
+"""
 
 import numpy as np
 import pytest
 
-from agents.training.metrics import bootstrap_ci, summarize
+from pectoral_gym.agents.training.metrics import bootstrap_ci, summarize
 
 
 def reference_percentile_bootstrap(x, confidence, n_resamples, seed):

@@ -90,7 +90,7 @@ def test_a_k_file_identified_for_other_params_is_refused_unless_told(tmp_path):
 
 
 def test_fin_map_and_nmpc_plan_with_the_envs_k_and_check_it(tmp_path):
-    from agents.controllers.fin_map import FinMap, planning_spec
+    from pectoral_gym.agents.controllers.fin_map import FinMap, planning_spec
 
     path = _k_file(tmp_path, ROBOT)
     config = EnvConfig(model="averaged", params=ROBOT, scaling=str(path))
@@ -134,7 +134,7 @@ def test_bad_spec_dicts_are_refused():
 
 
 def test_run_folders_record_the_spec_and_old_ones_derive_it():
-    from agents.training.config import run_model_spec
+    from pectoral_gym.agents.training.config import run_model_spec
 
     old = {"env_id": "PectoralFish-Averaged-v0", "env_kwargs": {"task": "goal", "transitions": True}}
     assert run_model_spec(old) == AVERAGED_PPO

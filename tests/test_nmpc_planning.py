@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from agents.baselines import HandController, make_baseline
-from agents.controllers.turning import circle_room, turn_path_length
+from pectoral_gym.agents.baselines import HandController, make_baseline
+from pectoral_gym.agents.controllers.turning import circle_room, turn_path_length
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import decode
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
@@ -47,7 +47,7 @@ def test_hand_candidate_turns_towards_the_goal_on_the_model(nmpc, side):
     u = nmpc._hand_guess(state, goal, np.zeros(2))
     assert u.shape == (4, nmpc.problem.horizon)
     assert side * (u[0, 0] - u[1, 0]) > 0  # amplitude right - left
-    from agents.nmpc.problem import to_z
+    from pectoral_gym.agents.nmpc.problem import to_z
 
     x = np.asarray(nmpc.problem.rollout(state, to_z(u), to_z(nmpc._u_prev), nmpc.gains))
     bearing = [abs((math.atan2(goal[1] - x[1, k], goal[0] - x[0, k]) - x[2, k] + math.pi) % (2 * math.pi) - math.pi)
@@ -88,7 +88,7 @@ def test_continuation_prices_the_hand_law_beyond_the_horizon():
     behind costs more than the same goal ahead; a wall on the way costs more again."""
     nmpc = make_baseline("nmpc", CONFIG, step_budget=1e6, togo_steps=10)
     z_rest = np.array(nmpc._u_prev)
-    from agents.nmpc.problem import to_z
+    from pectoral_gym.agents.nmpc.problem import to_z
 
     at_goal = np.array([1.15, 0.575, 0.0, 0, 0, 0])
     nmpc._target_end = (1.15, 0.575)

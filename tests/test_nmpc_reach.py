@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from agents.baselines import make_baseline
-from agents.nmpc.problem import to_z
-from agents.nmpc.settings import NMPCSettings
+from pectoral_gym.agents.baselines import make_baseline
+from pectoral_gym.agents.nmpc.problem import to_z
+from pectoral_gym.agents.nmpc.settings import NMPCSettings
 from pectoral_gym.envs.core import EnvConfig
 
 CONFIG = EnvConfig(model="averaged", task="goal")

@@ -1,4 +1,7 @@
-"""The NMPC's on-the-spot turns (agents.nmpc.spin): symmetry, the turn on the full model, the fin copy, pricing."""
+"""The NMPC's on-the-spot turns (pectoral_gym.agents.nmpc.spin).
+
+Symmetry, the turn on the full model, the fin copy, pricing.
+"""
 
 import math
 
@@ -7,12 +10,12 @@ import numpy as np
 import pytest
 
 import pectoral_gym  # noqa: F401 - registers the ids
-from agents.baselines import make_baseline
-from agents.nmpc.problem import pack_decision, to_z
-from agents.nmpc.spin import SPIN_CYCLE, SpinTurns, mirror
-from hardware.firmware import ServoLimits
-from hardware.safety import CommandFilter
+from pectoral_gym.agents.baselines import make_baseline
+from pectoral_gym.agents.nmpc.problem import pack_decision, to_z
+from pectoral_gym.agents.nmpc.spin import SPIN_CYCLE, SpinTurns, mirror
 from pectoral_gym.envs.core import EnvConfig
+from pectoral_gym.hardware.firmware import ServoLimits
+from pectoral_gym.hardware.safety import CommandFilter
 from pectoral_gym.model.models import AveragedModel, FullModel
 
 CONFIG = EnvConfig(model="full", task="goal")

@@ -5,10 +5,10 @@ import math
 import numpy as np
 import pytest
 
-from agents.baselines import make_baseline
-from agents.nmpc.problem import pack_decision, to_z
-from agents.nmpc.reference import ReferencePredictor, fit_ellipse, reference_path
-from agents.nmpc.settings import NMPCSettings
+from pectoral_gym.agents.baselines import make_baseline
+from pectoral_gym.agents.nmpc.problem import pack_decision, to_z
+from pectoral_gym.agents.nmpc.reference import ReferencePredictor, fit_ellipse, reference_path
+from pectoral_gym.agents.nmpc.settings import NMPCSettings
 from pectoral_gym.envs.core import EnvConfig
 
 TRACK = EnvConfig(model="averaged", task="track")

@@ -133,10 +133,10 @@ def test_cli_steady_takes_params_and_checks_the_k_file(tmp_path):
 
 def test_cli_validate_takes_params_and_reports_a_k_file_for_another_robot(tmp_path):
     (tmp_path / "robot.json").write_text('{"fin_span": 0.07}')
-    run = _run("-m", "scaling", "validate", "--params", "robot.json", "--out", "val", "--quick", "--no-plots",
-               "--no-progress", cwd=tmp_path)
+    run = _run("-m", "pectoral_gym.scaling", "validate", "--params", "robot.json", "--out", "val", "--quick",
+               "--no-plots", "--no-progress", cwd=tmp_path)
     assert run.returncode == 0, run.stderr[-2000:]
     report = json.loads((tmp_path / "val" / "validation.json").read_text())
     assert report["params_differ"] == ["fin_span"]  # the shipped K was identified for fin_span 0.061
-    bad = _run("-m", "scaling", "validate", "--params", "missing.json", cwd=tmp_path)
+    bad = _run("-m", "pectoral_gym.scaling", "validate", "--params", "missing.json", cwd=tmp_path)
     assert bad.returncode == 2 and "missing.json" in bad.stderr

@@ -6,7 +6,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hardware import protocol as pr
+from pectoral_gym.hardware import protocol as pr
 
 
 def test_crc16_ccitt_false_check_value():

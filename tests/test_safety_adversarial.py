@@ -24,13 +24,13 @@ import pytest
 from emulator_helpers import stopped_at as _stopped_at
 from emulator_helpers import wait_for as _wait
 
-from hardware import protocol as pr
-from hardware.emulator import EmulatedRobot
-from hardware.env import HardwareFishEnv
-from hardware.firmware import ServoLimits, clip_beats, peak_rates
-from hardware.frames import Frame
-from hardware.link import RadioLink
-from hardware.safety import CommandFilter, SafetyConfig, check_action
+from pectoral_gym.hardware import protocol as pr
+from pectoral_gym.hardware.emulator import EmulatedRobot
+from pectoral_gym.hardware.env import HardwareFishEnv
+from pectoral_gym.hardware.firmware import ServoLimits, clip_beats, peak_rates
+from pectoral_gym.hardware.frames import Frame
+from pectoral_gym.hardware.link import RadioLink
+from pectoral_gym.hardware.safety import CommandFilter, SafetyConfig, check_action
 from pectoral_gym.model.dynamics import stroke_kinematics
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
 
@@ -427,8 +427,8 @@ def test_unknown_robot_state_and_complex_actions():
 _SCRIPT = textwrap.dedent("""
     import sys, time
     import numpy as np
-    from hardware.env import HardwareFishEnv
-    from hardware.safety import SafetyConfig
+    from pectoral_gym.hardware.env import HardwareFishEnv
+    from pectoral_gym.hardware.safety import SafetyConfig
     env = HardwareFishEnv(sys.argv[1], sys.argv[2], safety=SafetyConfig(tracking_timeout=2.0, link_timeout=3.0))
     env.reset(seed=0)
     print("ready", flush=True)
@@ -507,10 +507,10 @@ def test_fuzz_random_streams_and_bit_flips():
 
 
 def test_fish_moved_by_the_reset_hook_is_not_read_as_a_speed_towards_a_wall(tmp_path):
-    # hardware.deploy --emulate puts the fish at a random start in its reset hook: the poses from before the
-    # move, still in the supervisor's velocity window, made the jump read as ~1 m/s and tripped the geofence
+    # pectoral_gym.hardware.deploy --emulate puts the fish at a random start in its reset hook: the poses from before
+    # the move, still in the supervisor's velocity window, made the jump read as ~1 m/s and tripped the geofence
     # on the first step of every episode, far from any wall (fins at rest, 0.36 m of clearance).
-    from hardware.deploy import main as deploy
+    from pectoral_gym.hardware.deploy import main as deploy
 
     assert deploy(["--controller", "hand", "--emulate", "--episodes", "2", "--max-steps", "2", "--speed", "2",
                    "--no-prompt", "--quiet", "--out", str(tmp_path)]) == 0

@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 from emulator_helpers import wait_for
 
-from hardware import protocol as pr
-from hardware.emulator import EmulatedRobot
-from hardware.link import DEADLINE_HORIZON, RadioLink
-from hardware.radioproxy import FrameSplitter, RadioProxy
+from pectoral_gym.hardware import protocol as pr
+from pectoral_gym.hardware.emulator import EmulatedRobot
+from pectoral_gym.hardware.link import DEADLINE_HORIZON, RadioLink
+from pectoral_gym.hardware.radioproxy import FrameSplitter, RadioProxy
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 

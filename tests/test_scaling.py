@@ -10,12 +10,17 @@ from pectoral_gym.model.kfunctions import FEATURES, ScalingFunctions
 from pectoral_gym.model.models import AveragedModel
 from pectoral_gym.model.params import FishParams
 from pectoral_gym.model.steady import steady_state_batch
-from scaling.identification.grids import GRIDS, Grid, GridError, load_grid
-from scaling.identification.identify import holdout_patterns, identify
-from scaling.identification.nmpc import IdentificationNmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
-from scaling.identification.reference import reference_runs, velocities_from_turning
-from scaling.identification.regression import feature_matrix, fit_polynomial, fit_spline, select_model
-from scaling.identification.response import predicted_turning
+from pectoral_gym.scaling.identification.grids import GRIDS, Grid, GridError, load_grid
+from pectoral_gym.scaling.identification.identify import holdout_patterns, identify
+from pectoral_gym.scaling.identification.nmpc import (
+    IdentificationNmpcSettings,
+    ScalingNmpc,
+    algebraic_scaling,
+    unscaled_forcing,
+)
+from pectoral_gym.scaling.identification.reference import reference_runs, velocities_from_turning
+from pectoral_gym.scaling.identification.regression import feature_matrix, fit_polynomial, fit_spline, select_model
+from pectoral_gym.scaling.identification.response import predicted_turning
 
 PARAMS = FishParams()
 FAST = IdentificationNmpcSettings(horizon=3.0, sampling=1.0)  # the paper's weights, a shorter horizon for speed
@@ -161,16 +166,16 @@ def test_cli_identify_small_grid(tmp_path):
     grid.write_text(json.dumps({"bias_deg": [60, 75], "amplitude_deg": [15, 25], "period_s": [1.0],
                                 "ratio": [2, 4]}))
     out = tmp_path / "out"
-    run = subprocess.run([sys.executable, "-m", "scaling", "identify", "--grid", str(grid), "--out", str(out),
-                          "--horizon", "3", "--jobs", "1", "--folds", "2", "--max-degree", "1", "--quiet",
-                          "--yaw-damping", "paper"],
+    run = subprocess.run([sys.executable, "-m", "pectoral_gym.scaling", "identify", "--grid", str(grid),
+                          "--out", str(out), "--horizon", "3", "--jobs", "1", "--folds", "2", "--max-degree", "1",
+                          "--quiet", "--yaw-damping", "paper"],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
     assert "stage times" in run.stdout
     k = ScalingFunctions.load(out / "scaling_coefficients.json")
     assert k.metadata["status"] == "identified" and len(k.metadata["data"]["rows"]) == 8
-    bad = subprocess.run([sys.executable, "-m", "scaling", "identify", "--grid", "nope"], capture_output=True,
-                         text=True, timeout=60)
+    bad = subprocess.run([sys.executable, "-m", "pectoral_gym.scaling", "identify", "--grid", "nope"],
+                         capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "unknown grid" in bad.stderr
 
 

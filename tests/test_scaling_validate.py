@@ -1,4 +1,7 @@
-"""Tests of the averaged-model validation (scaling.validation.validate, scaling.validation.plots)."""
+"""Tests of the averaged-model validation.
+
+pectoral_gym.scaling.validation.validate and pectoral_gym.scaling.validation.plots.
+"""
 
 from __future__ import annotations
 
@@ -14,10 +17,10 @@ from pectoral_gym.model.dynamics import body_rhs
 from pectoral_gym.model.kfunctions import FEATURES, ScalingFunctions
 from pectoral_gym.model.params import FinBeat, FishParams, coefficient_vector
 from pectoral_gym.model.steady import steady_state
-from scaling.identification.grids import GRIDS
-from scaling.validation import comparison as sc
-from scaling.validation import validate as sv
-from scaling.validation.plots import identification_points
+from pectoral_gym.scaling.identification.grids import GRIDS
+from pectoral_gym.scaling.validation import comparison as sc
+from pectoral_gym.scaling.validation import validate as sv
+from pectoral_gym.scaling.validation.plots import identification_points
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

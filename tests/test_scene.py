@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from hardware.scene import (
+from pectoral_gym.hardware.scene import (
     BACK_MARKER_OFFSET,
     FRONT_MARKER_OFFSET,
     MARKER_RADIUS,

@@ -1,4 +1,7 @@
-"""Results across seeds (agents.studies.seeds): across-seed statistics by hand, the command end to end at tiny sizes."""
+"""Results across seeds (pectoral_gym.agents.studies.seeds).
+
+Across-seed statistics by hand, the command end to end at tiny sizes.
+"""
 
 import json
 import math
@@ -7,8 +10,8 @@ import numpy as np
 import pytest
 import yaml
 
-from agents.studies.seeds import aggregate, iqm, main, summarize_seeds
-from agents.studies.solve_time import check_held_out
+from pectoral_gym.agents.studies.seeds import aggregate, iqm, main, summarize_seeds
+from pectoral_gym.agents.studies.solve_time import check_held_out
 
 TINY = ["--quick", "--timesteps", "1024", "--episodes", "3", "--probe-episodes", "2", "--no-progress"]
 

@@ -1,11 +1,14 @@
-"""The training-only action-change penalty (agents.training.smoothing): values by hand, episode starts, config."""
+"""The training-only action-change penalty (pectoral_gym.agents.training.smoothing).
+
+Values by hand, episode starts, config.
+"""
 
 import numpy as np
 import pytest
 
-from agents.training.config import resolve_config
-from agents.training.smoothing import INFO_KEY, ActionChangePenalty
-from agents.training.vec_adapter import make_fish_vec_env
+from pectoral_gym.agents.training.config import resolve_config
+from pectoral_gym.agents.training.smoothing import INFO_KEY, ActionChangePenalty
+from pectoral_gym.agents.training.vec_adapter import make_fish_vec_env
 
 ENV = "PectoralFish-Averaged-v0"
 

@@ -1,4 +1,7 @@
-"""Time to solve: the probe's logic with a scripted evaluation, and its place in agents.training.train.train."""
+"""Time to solve.
+
+The probe's logic with a scripted evaluation, and its place in pectoral_gym.agents.training.train.train.
+"""
 
 import json
 import types
@@ -6,12 +9,12 @@ import types
 import numpy as np
 import pytest
 
-import agents.training.evaluate
-from agents.studies.solve_time import PROBE_SEED, REPORT_SEED, SolveProbe
-from agents.training.config import parse_overrides, resolve_config
-from agents.training.metrics import MetricSummary
-from agents.training.policy import load_policy
-from agents.training.train import train
+import pectoral_gym.agents.training.evaluate
+from pectoral_gym.agents.studies.solve_time import PROBE_SEED, REPORT_SEED, SolveProbe
+from pectoral_gym.agents.training.config import parse_overrides, resolve_config
+from pectoral_gym.agents.training.metrics import MetricSummary
+from pectoral_gym.agents.training.policy import load_policy
+from pectoral_gym.agents.training.train import train
 
 ENV = "PectoralFish-Averaged-v0"
 TINY = ["n_timesteps=1024", "n_envs=4", "n_steps=32", "batch_size=64", "n_epochs=1", "eval_freq=256",
@@ -19,7 +22,10 @@ TINY = ["n_timesteps=1024", "n_envs=4", "n_steps=32", "batch_size=64", "n_epochs
 
 
 class _Scripted:
-    """Stands in for agents.training.evaluate.evaluate: the next success rate of a script, and a log of the calls."""
+    """Stands in for pectoral_gym.agents.training.evaluate.evaluate.
+
+    The next success rate of a script, and a log of the calls.
+    """
 
     def __init__(self, successes):
         self.successes = list(successes)
@@ -37,7 +43,7 @@ def _record(k):
 
 def test_first_probe_at_the_threshold_solves_and_is_confirmed_on_other_episodes(monkeypatch):
     script = _Scripted([0.90, 0.94, 0.95, 0.91])  # the 4th is the confirmation of the 3rd
-    monkeypatch.setattr(agents.training.evaluate, "evaluate", script)
+    monkeypatch.setattr(pectoral_gym.agents.training.evaluate, "evaluate", script)
     probe = SolveProbe(episodes=20, confirm_episodes=30, stop_on_solve=True, env_kwargs={"task": "goal",
                                                                                           "randomize": {"a": 1}})
     for k in range(1, 6):
@@ -58,7 +64,7 @@ def test_first_probe_at_the_threshold_solves_and_is_confirmed_on_other_episodes(
 
 def test_keep_probing_after_the_solve_keeps_the_first_solve(monkeypatch):
     script = _Scripted([0.96, 0.93, 0.5, 0.97])  # the 2nd is the confirmation of the 1st
-    monkeypatch.setattr(agents.training.evaluate, "evaluate", script)
+    monkeypatch.setattr(pectoral_gym.agents.training.evaluate, "evaluate", script)
     probe = SolveProbe(keep_probing=True)
     assert all(probe(object(), _record(k)) is not None for k in (1, 2, 3))
     summary = probe.summary()
@@ -69,7 +75,7 @@ def test_keep_probing_after_the_solve_keeps_the_first_solve(monkeypatch):
 
 def test_probe_every_kth_evaluation_and_never_solved(monkeypatch):
     script = _Scripted([0.5, 0.6, 0.7])
-    monkeypatch.setattr(agents.training.evaluate, "evaluate", script)
+    monkeypatch.setattr(pectoral_gym.agents.training.evaluate, "evaluate", script)
     probe = SolveProbe(every=2, episodes=5)
     returned = [probe(object(), _record(k)) for k in range(1, 7)]
     assert [r is not None for r in returned] == [True, False, True, False, True, False]
@@ -97,7 +103,7 @@ def test_a_probe_neither_changes_training_nor_counts_in_its_elapsed_time(tmp_pat
         clock["t"] += 1.0  # every reading of the training clock moves it by one
         return clock["t"]
 
-    monkeypatch.setattr("agents.training.train.time", types.SimpleNamespace(perf_counter=perf_counter))
+    monkeypatch.setattr("pectoral_gym.agents.training.train.time", types.SimpleNamespace(perf_counter=perf_counter))
     seen = []
 
     def probe(controller, record):
@@ -118,12 +124,12 @@ def test_a_probe_neither_changes_training_nor_counts_in_its_elapsed_time(tmp_pat
 
 
 def test_benchmark_time_to_solve_trains_probes_and_reports(tmp_path, monkeypatch):
-    import agents.studies.solve_time
-    from agents.studies.benchmark import BenchmarkSettings, run_benchmark, to_markdown
+    import pectoral_gym.agents.studies.solve_time
+    from pectoral_gym.agents.studies.benchmark import BenchmarkSettings, run_benchmark, to_markdown
 
-    measure = agents.studies.solve_time.measure_time_to_solve
+    measure = pectoral_gym.agents.studies.solve_time.measure_time_to_solve
     small = {"n_envs": 4, "n_steps": 64, "batch_size": 128, "n_epochs": 1, "eval_freq": 256, "eval_episodes": 2}
-    monkeypatch.setattr(agents.studies.solve_time, "measure_time_to_solve",
+    monkeypatch.setattr(pectoral_gym.agents.studies.solve_time, "measure_time_to_solve",
                         lambda *args, **kwargs: measure(*args, **kwargs, hyperparams=small))  # a smaller network run
 
     settings = BenchmarkSettings(episodes=1, max_episode_steps=2, train_steps=0, solve_seeds=(2,),
@@ -141,7 +147,7 @@ def test_benchmark_time_to_solve_trains_probes_and_reports(tmp_path, monkeypatch
 
 
 def test_time_to_solve_markdown_by_hand():
-    from agents.studies.benchmark_report import to_markdown
+    from pectoral_gym.agents.studies.benchmark_report import to_markdown
 
     settings = {"n_timesteps": 800000, "every": 1, "eval_freq": 50000, "probe_episodes": 100, "probe_seed": 20000,
                 "threshold": 0.95, "confirm_episodes": 100, "confirm_seed": 10000, "jobs": 1}

@@ -1,4 +1,6 @@
-"""The NMPC's stopping-distance band (agents.controllers.stop_band) against the robot env's geofence (hardware.safety).
+"""The NMPC's stopping-distance band against the robot env's geofence.
+
+The band is pectoral_gym.agents.controllers.stop_band, the geofence pectoral_gym.hardware.safety.
 """
 
 import math
@@ -7,12 +9,12 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from agents.baselines import make_baseline
-from agents.controllers.stop_band import StopBand, band_violation
-from agents.nmpc.settings import NMPCSettings
-from hardware.deploy import make_controller
-from hardware.safety import Geofence, SafetyConfig
+from pectoral_gym.agents.baselines import make_baseline
+from pectoral_gym.agents.controllers.stop_band import StopBand, band_violation
+from pectoral_gym.agents.nmpc.settings import NMPCSettings
 from pectoral_gym.envs.core import EnvConfig
+from pectoral_gym.hardware.deploy import make_controller
+from pectoral_gym.hardware.safety import Geofence, SafetyConfig
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
 
 SAFETY = SafetyConfig()

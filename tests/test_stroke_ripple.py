@@ -14,7 +14,7 @@ from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.models import AveragedModel
 from pectoral_gym.model.params import FinBeat, FishParams
 from pectoral_gym.model.ripple import half_stroke_ripple_square, transitional_oscillation_gain
-from scaling.validation.fidelity import draw_patterns, open_loop
+from pectoral_gym.scaling.validation.fidelity import draw_patterns, open_loop
 
 PARAMS = FishParams()
 SCALING = ScalingFunctions.load()

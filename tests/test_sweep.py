@@ -1,4 +1,7 @@
-"""agents.studies.sweep: parameter spaces, each trial's config, the numba warm-up, two tiny trials on embedded Ray."""
+"""pectoral_gym.agents.studies.sweep.
+
+Parameter spaces, each trial's config, the numba warm-up, two tiny trials on embedded Ray.
+"""
 
 import csv
 import importlib.util
@@ -11,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from agents.studies.sweep_space import grid_points, load_param_space, parse_grid, trial_config
-from agents.training.config import resolve_config
-from agents.training.evaluate import DEFAULT_RANDOMIZATION
+from pectoral_gym.agents.studies.sweep_space import grid_points, load_param_space, parse_grid, trial_config
+from pectoral_gym.agents.training.config import resolve_config
+from pectoral_gym.agents.training.evaluate import DEFAULT_RANDOMIZATION
 
 ENV = "PectoralFish-Averaged-v0"
 ROOT = Path(__file__).resolve().parents[1]
@@ -112,7 +115,7 @@ def test_randomize_scale_scales_the_default_ranges():
 
 
 def test_cli_refuses_bad_spaces_before_starting_ray(tmp_path, capsys):
-    from agents.studies.sweep import main
+    from pectoral_gym.agents.studies.sweep import main
 
     base = ["--storage-path", str(tmp_path), "--hyperparams", *TINY]
     assert main([*base, "--grid", "not_an_argument=1,2"]) == 2
@@ -128,7 +131,7 @@ def test_cli_refuses_bad_spaces_before_starting_ray(tmp_path, capsys):
 def test_tune_space_maps_kinds():
     from ray import tune
 
-    from agents.studies.sweep import tune_space
+    from pectoral_gym.agents.studies.sweep import tune_space
 
     space = tune_space({"seed": ("grid", [0, 1]), "lr": ("loguniform", [1e-4, 1e-3]), "n": ("choice", [1, 2]),
                         "k": ("randint", [1, 5]), "g": ("uniform", [0.9, 0.99]), "fixed": ("value", [1, 2])})
@@ -141,14 +144,14 @@ def test_tune_space_maps_kinds():
 _WARM_THEN_TRAIN = """
 import json, sys, time
 from pathlib import Path
-from agents.studies.sweep_space import trial_config
+from pectoral_gym.agents.studies.sweep_space import trial_config
 tiny = dict(n_timesteps=256, n_envs=4, n_steps=32, batch_size=64, n_epochs=1, eval_freq=128, eval_episodes=3)
 config = trial_config("ppo", "PectoralFish-Averaged-v0", {}, hyperparams=tiny)
 if sys.argv[1] == "warm":
-    from agents.studies.sweep import warm_up
+    from pectoral_gym.agents.studies.sweep import warm_up
     print(json.dumps({"seconds": warm_up(config)}))
 else:
-    from agents.training.train import train
+    from pectoral_gym.agents.training.train import train
     start = time.perf_counter()
     train(config, Path(sys.argv[2]), progress=False)
     print(json.dumps({"seconds": time.perf_counter() - start}))
@@ -182,7 +185,7 @@ def test_warm_up_compiles_every_kernel_a_training_run_uses(tmp_path):
 def test_two_tiny_trials_on_an_embedded_ray_and_asha_stops_the_worse(tmp_path, capsys):
     import ray
 
-    from agents.studies.sweep import main
+    from pectoral_gym.agents.studies.sweep import main
 
     # Two trials, one at a time: the second pays 10 per step (time_penalty), so its mean return at the first
     # rung (100 steps) is far below the first trial's, and ASHA (keep the best half) stops it there.
@@ -206,9 +209,9 @@ def test_two_tiny_trials_on_an_embedded_ray_and_asha_stops_the_worse(tmp_path, c
         assert (run / "config.yaml").is_file() and (run / "best_model.zip").is_file()
     assert (Path(good["path"]) / "run" / "model.zip").is_file()
     # the trial that ran out was evaluated on the full model at the end; the stopped one was not
-    from agents.studies.sweep import FINAL_SEED
-    from agents.training.evaluate import evaluate
-    from agents.training.policy import load_policy
+    from pectoral_gym.agents.studies.sweep import FINAL_SEED
+    from pectoral_gym.agents.training.evaluate import evaluate
+    from pectoral_gym.agents.training.policy import load_policy
 
     again = evaluate(load_policy(Path(good["path"]) / "run"), "PectoralFish-Full-v0", n_episodes=2, seed=FINAL_SEED,
                      env_kwargs={"task": "goal", "time_penalty": 0.01})
@@ -222,7 +225,7 @@ def test_two_tiny_trials_on_an_embedded_ray_and_asha_stops_the_worse(tmp_path, c
 
 
 def test_help_names_the_defaults(capsys):
-    from agents.studies.sweep import main
+    from pectoral_gym.agents.studies.sweep import main
 
     with pytest.raises(SystemExit) as exit_info:
         main(["--help"])
@@ -240,7 +243,7 @@ def test_result_rows_status_and_tables(tmp_path):
 
     import pandas as pd
 
-    from agents.studies.sweep_results import format_markdown, plot_results, result_rows, write_tables
+    from pectoral_gym.agents.studies.sweep_results import format_markdown, plot_results, result_rows, write_tables
 
     def result(trial, history, error=None, seed=0):
         return SimpleNamespace(metrics={"trial_id": trial} if history else {}, config={"seed": seed},

@@ -11,9 +11,6 @@ import pytest
 from gymnasium.utils import seeding
 
 import pectoral_gym  # noqa: F401
-from hardware.emulator import EmulatedRobot
-from hardware.env import HardwareFishEnv
-from hardware.safety import SafetyConfig
 from pectoral_gym.envs.core import TASKS, EnvConfig
 from pectoral_gym.envs.layout import (
     C_W_TRACKING,
@@ -33,6 +30,9 @@ from pectoral_gym.envs.layout import (
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.envs.tasks.table import TASK_TABLE, TaskState, observe_fish, register_task, unregister_task
 from pectoral_gym.envs.vector import PectoralFishVectorEnv
+from pectoral_gym.hardware.emulator import EmulatedRobot
+from pectoral_gym.hardware.env import HardwareFishEnv
+from pectoral_gym.hardware.safety import SafetyConfig
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 

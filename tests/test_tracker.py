@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from hardware.camera import Frame
-from hardware.scene import FRONT_MARKER_OFFSET, CameraModel, Occluder, SceneConditions, render_frame
-from hardware.tracker import MarkerTracker, TrackerConfig
+from pectoral_gym.hardware.camera import Frame
+from pectoral_gym.hardware.scene import FRONT_MARKER_OFFSET, CameraModel, Occluder, SceneConditions, render_frame
+from pectoral_gym.hardware.tracker import MarkerTracker, TrackerConfig
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 
 CAMERA = CameraModel.default()

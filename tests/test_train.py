@@ -7,10 +7,10 @@ import pytest
 import torch
 import yaml
 
-from agents.training.config import algo_kwargs, parse_overrides, resolve_config
-from agents.training.evaluate import evaluate
-from agents.training.policy import Controller, load_policy
-from agents.training.train import main
+from pectoral_gym.agents.training.config import algo_kwargs, parse_overrides, resolve_config
+from pectoral_gym.agents.training.evaluate import evaluate
+from pectoral_gym.agents.training.policy import Controller, load_policy
+from pectoral_gym.agents.training.train import main
 
 ENV = "PectoralFish-Averaged-v0"
 TINY = ["n_timesteps=256", "n_envs=4", "n_steps=32", "batch_size=64", "n_epochs=1", "eval_freq=128",
@@ -65,7 +65,8 @@ def test_sac_smoke_run(tmp_path):
     run_dir = run(tmp_path, "s", "--eval-freq", "0", algo="sac",
                   hyperparams=["n_timesteps=200", "n_envs=2", "learning_starts=50", "normalize=false"])
     assert (run_dir / "model.zip").is_file() and not (run_dir / "vecnormalize.pkl").exists()
-    assert not (run_dir / "best_model.zip").exists()  # --eval-freq 0 overrides the file's agents.training.train section
+    # --eval-freq 0 overrides the file's pectoral_gym.agents.training.train section
+    assert not (run_dir / "best_model.zip").exists()
     assert yaml.safe_load((run_dir / "config.yaml").read_text())["eval_freq"] == 0
     policy = load_policy(run_dir)
     assert policy.obs_mean is None
@@ -104,8 +105,8 @@ def test_overrides_and_resolution():
 
 
 def test_on_evaluation_sees_every_evaluation_and_can_stop_the_run(tmp_path):
-    from agents.training.config import resolve_config as resolve
-    from agents.training.train import train
+    from pectoral_gym.agents.training.config import resolve_config as resolve
+    from pectoral_gym.agents.training.train import train
 
     config = resolve("ppo", ENV, seed=3, hyperparams=parse_overrides(TINY + ["n_timesteps=1024"]))
     seen = []
@@ -126,7 +127,7 @@ def test_on_evaluation_sees_every_evaluation_and_can_stop_the_run(tmp_path):
 
 
 def test_evaluation_env_resolution():
-    from agents.training.config import evaluation_env
+    from pectoral_gym.agents.training.config import evaluation_env
 
     shipped = resolve_config("ppo", ENV, 0)  # the shipped file validates on the full model, nominal parameters
     assert evaluation_env(shipped) == ("PectoralFish-Full-v0", {"task": "goal", "observe_fins": True})
@@ -153,7 +154,7 @@ def test_best_model_is_selected_on_the_evaluation_env(tmp_path):
     """The kept model's record is what evaluate() gives on the full model (the validation env), episodes seed + 1e6."""
     import json
 
-    from agents.training.train import EVAL_SEED_OFFSET, train
+    from pectoral_gym.agents.training.train import EVAL_SEED_OFFSET, train
 
     full = "PectoralFish-Full-v0"
     config = resolve_config("ppo", ENV, seed=3, hyperparams=parse_overrides(

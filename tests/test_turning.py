@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from agents.controllers.turning import turn_path_length
+from pectoral_gym.agents.controllers.turning import turn_path_length
 
 R = 0.25
 

@@ -6,7 +6,7 @@ import pytest
 from stable_baselines3.common.vec_env import DummyVecEnv, VecCheckNan, VecMonitor, VecNormalize
 
 import pectoral_gym  # noqa: F401 - registers the ids
-from agents.training.vec_adapter import FishVecEnv, make_fish_vec_env
+from pectoral_gym.agents.training.vec_adapter import FishVecEnv, make_fish_vec_env
 from pectoral_gym.envs import PectoralFishVectorEnv
 
 ENV = "PectoralFish-Averaged-v0"

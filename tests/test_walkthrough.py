@@ -1,8 +1,8 @@
 """The README's "Your own robot, end to end" walk-through, run as written (each python command with --quick).
 
 The commands are parsed from README.md, so the test cannot drift from the text; ``--quick`` is the
-documented smoke-run flag of ``scaling identify|validate``, ``agents.training.train`` and
-``agents.training.evaluate``.
+documented smoke-run flag of ``scaling identify|validate``, ``pectoral_gym.agents.training.train`` and
+``pectoral_gym.agents.training.evaluate``.
 """
 
 import json
@@ -17,7 +17,8 @@ from pathlib import Path
 from pectoral_gym.model.kfunctions import ScalingFunctions
 
 ROOT = Path(__file__).resolve().parents[1]
-QUICK = {("scaling", "identify"), ("scaling", "validate"), ("agents.training.train",), ("agents.training.evaluate",)}
+QUICK = {("pectoral_gym.scaling", "identify"), ("pectoral_gym.scaling", "validate"),
+         ("pectoral_gym.agents.training.train",), ("pectoral_gym.agents.training.evaluate",)}
 
 
 def walkthrough_commands(text: str) -> list[str]:
@@ -39,11 +40,11 @@ def with_quick(command: str) -> str:
 
 def test_parsing_joins_continuations_and_adds_quick_only_where_documented():
     text = "x\n<!-- walkthrough: t -->\n```bash\n# c\necho 1 > a\n" \
-           "python -m agents.training.train --a 1 \\\n    --b 2\n" \
-           "python -m scaling validate --c\npython -m pectoral_gym steady\n```\n"
+           "python -m pectoral_gym.agents.training.train --a 1 \\\n    --b 2\n" \
+           "python -m pectoral_gym.scaling validate --c\npython -m pectoral_gym steady\n```\n"
     commands = walkthrough_commands(text)
-    assert commands == ["echo 1 > a", "python -m agents.training.train --a 1      --b 2",
-                        "python -m scaling validate --c", "python -m pectoral_gym steady"]
+    assert commands == ["echo 1 > a", "python -m pectoral_gym.agents.training.train --a 1      --b 2",
+                        "python -m pectoral_gym.scaling validate --c", "python -m pectoral_gym steady"]
     assert [with_quick(c).endswith("--quick") for c in commands] == [False, True, True, False]
 
 
@@ -53,9 +54,10 @@ def test_the_readme_walk_through_runs_as_written(tmp_path):
     # What the walk-through must show (issue 14): the fin span changed, K identified for it, training on the
     # averaged model with params= and scaling=, evaluation on the full model.
     assert "fin_span" in commands[0]
-    assert re.search(r"python -m scaling identify .*--params robot\.json", text)
-    assert re.search(r"python -m agents\.training\.train .*PectoralFish-Averaged-v0.*\"params\".*\"scaling\"", text)
-    assert re.search(r"python -m agents\.training\.evaluate .*PectoralFish-Full-v0", text)
+    assert re.search(r"python -m pectoral_gym.scaling identify .*--params robot\.json", text)
+    assert re.search(r"python -m pectoral_gym\.agents\.training\.train "
+                     r".*PectoralFish-Averaged-v0.*\"params\".*\"scaling\"", text)
+    assert re.search(r"python -m pectoral_gym\.agents\.training\.evaluate .*PectoralFish-Full-v0", text)
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
     python = bin_dir / "python"  # `python` in the commands is the interpreter running the tests
@@ -79,7 +81,7 @@ def test_the_readme_walk_through_runs_as_written(tmp_path):
 
 
 def test_quick_identify_refuses_install(capsys):
-    from scaling.cli import main
+    from pectoral_gym.scaling.cli import main
 
     assert main(["identify", "--quick", "--install"]) == 2
     assert "--install" in capsys.readouterr().err

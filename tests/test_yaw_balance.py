@@ -1,4 +1,7 @@
-"""scaling.validation.yaw_balance: the yaw row's terms at periodic steady states (docs/scaling.md, "Two fins")."""
+"""pectoral_gym.scaling.validation.yaw_balance.
+
+The yaw row's terms at periodic steady states (docs/scaling.md, "Two fins").
+"""
 
 import json
 import math
@@ -7,8 +10,8 @@ import numpy as np
 import pytest
 
 from pectoral_gym.model.kfunctions import ScalingFunctions
-from scaling.cli import main as scaling_main
-from scaling.validation.yaw_balance import parse_pattern, yaw_balance
+from pectoral_gym.scaling.cli import main as scaling_main
+from pectoral_gym.scaling.validation.yaw_balance import parse_pattern, yaw_balance
 
 PAIRS = ["R(120, 20, 1, 3) L(70, 15, 0.5, 2.5)", "R(100, 25, 1, 3) L(85, 20, 1, 3.5)"]
 

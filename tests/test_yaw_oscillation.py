@@ -21,7 +21,7 @@ from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.models import AveragedModel
 from pectoral_gym.model.params import FinBeat, FishParams, body_coefficients
 from pectoral_gym.model.steady import steady_state_batch
-from scaling.identification.reference import reference_runs, yaw_oscillation_statistics
+from pectoral_gym.scaling.identification.reference import reference_runs, yaw_oscillation_statistics
 
 P = FishParams()
 THETA = 2 * np.pi * (np.arange(200_000) + 0.5) / 200_000  # midpoint rule: spectrally accurate for smooth periodic
@@ -197,7 +197,12 @@ def test_oscillation_section_round_trips_and_malformed_sections_raise(tmp_path, 
 
 def test_nmpc_with_oscillation_equals_the_algebraic_solution():
     pytest.importorskip("casadi")
-    from scaling.identification.nmpc import IdentificationNmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
+    from pectoral_gym.scaling.identification.nmpc import (
+        IdentificationNmpcSettings,
+        ScalingNmpc,
+        algebraic_scaling,
+        unscaled_forcing,
+    )
 
     patterns = np.array([FinBeat.from_degrees(85, 25, 1.0, 1.5).as_array(),
                          FinBeat.from_degrees(60, 20, 1.0, 4).as_array()])

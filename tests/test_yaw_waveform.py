@@ -22,8 +22,8 @@ from pectoral_gym.model.ktables import MAX_HARMONICS, QUADRATURE
 from pectoral_gym.model.models import AveragedModel
 from pectoral_gym.model.params import FinBeat, FishParams, body_coefficients
 from pectoral_gym.model.steady import steady_state_batch
-from scaling.identification.reference import yaw_oscillation_statistics, yaw_waveform_harmonics
-from scaling.identification.regression import fit_waveform
+from pectoral_gym.scaling.identification.reference import yaw_oscillation_statistics, yaw_waveform_harmonics
+from pectoral_gym.scaling.identification.regression import fit_waveform
 
 P = FishParams()
 NODES = (np.radians([45, 70, 95, 135]), np.radians([5, 15, 25, 30]), 1 / np.array([5, 3, 2, 1.25]))
@@ -234,7 +234,12 @@ def test_symbolic_rhs_with_waveform_tracks_the_averaged_model(left, rk4_symbolic
 
 def test_nmpc_with_waveform_equals_the_algebraic_solution():
     pytest.importorskip("casadi")
-    from scaling.identification.nmpc import IdentificationNmpcSettings, ScalingNmpc, algebraic_scaling, unscaled_forcing
+    from pectoral_gym.scaling.identification.nmpc import (
+        IdentificationNmpcSettings,
+        ScalingNmpc,
+        algebraic_scaling,
+        unscaled_forcing,
+    )
 
     patterns = np.array([FinBeat.from_degrees(85, 25, 1.0, 1.5).as_array(),
                          FinBeat.from_degrees(60, 20, 1.0, 4).as_array()])
@@ -365,7 +370,7 @@ def test_symbolic_rhs_with_rate_correction_tracks_the_averaged_model(rk4_symboli
 
 def test_full_model_yaw_harmonics_are_period_free():
     # Time-scale symmetry of eqs. (9)-(20): omega ~ 1/T_p, so T_p c_k does not depend on T_p.
-    from scaling.identification.reference import reference_runs
+    from pectoral_gym.scaling.identification.reference import reference_runs
 
     pattern = np.array([math.radians(70), math.radians(25), 1.0, 3.0])
     ref = reference_runs(np.array([pattern, pattern * [1, 1, 2.5, 1]]), P, progress=False)
@@ -375,8 +380,8 @@ def test_full_model_yaw_harmonics_are_period_free():
 
 
 def test_identify_refuses_an_unusable_harmonics_count():
-    from scaling.identification.grids import GRIDS
-    from scaling.identification.identify import identify
+    from pectoral_gym.scaling.identification.grids import GRIDS
+    from pectoral_gym.scaling.identification.identify import identify
 
     with pytest.raises(ValueError, match="harmonics must be in"):
         identify(GRIDS["quick"], yaw_damping="waveform", harmonics=MAX_HARMONICS + 1, progress=False)

@@ -19,8 +19,8 @@ import math
 
 import numpy as np
 
-from agents.controllers.fin_map import FinMap
-from agents.controllers.turning import circle_room
+from pectoral_gym.agents.controllers.fin_map import FinMap
+from pectoral_gym.agents.controllers.turning import circle_room
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, Observation, decode
 from pectoral_gym.model import tank

@@ -2,11 +2,12 @@
 
 Every variant drives the same episodes, interleaved (episode ``k`` with each variant in turn), so the
 solve times of all variants share the machine's load. Solve time is the wall time of the whole
-control step (screening and every solve), as in :mod:`agents.studies.benchmark`.
+control step (screening and every solve), as in :mod:`pectoral_gym.agents.studies.benchmark`.
 
 CLI::
 
-    python -m agents.nmpc.compare --seeds 100-119 --env full --variants '{"sqp": {}, "exact": {"hessian": "exact"}}'
+    python -m pectoral_gym.agents.nmpc.compare --seeds 100-119 --env full --variants '{"sqp": {}, "exact": {"hessian":
+    "exact"}}'
 
 (``"blocks": null`` in a variant: one input per interval; ``"solver": "ipopt"`` for the interior point.)
 """
@@ -31,7 +32,7 @@ def compare(variants: dict[str, dict[str, Any]], seeds: list[int], env: str = "f
     """Run every NMPC variant on the episodes ``seeds``; per variant: success, time to goal, solve times.
 
     Args:
-        variants: Name -> :class:`agents.nmpc.controller.NMPCSettings` overrides.
+        variants: Name -> :class:`pectoral_gym.agents.nmpc.controller.NMPCSettings` overrides.
         seeds: Episode seeds.
         env: ``"averaged"``, ``"full"`` or ``"full+rand"`` (``DEFAULT_RANDOMIZATION``).
         task: ``"goal"`` or ``"track"``.
@@ -46,8 +47,8 @@ def compare(variants: dict[str, dict[str, Any]], seeds: list[int], env: str = "f
     import gymnasium as gym
 
     import pectoral_gym  # noqa: F401 - registers the ids
-    from agents.baselines import make_baseline
-    from agents.training.evaluate import DEFAULT_RANDOMIZATION
+    from pectoral_gym.agents.baselines import make_baseline
+    from pectoral_gym.agents.training.evaluate import DEFAULT_RANDOMIZATION
 
     if env not in _ENVS:
         raise ValueError(f"env must be one of {list(_ENVS)}, got {env!r}")
@@ -98,7 +99,8 @@ def _seeds(text: str) -> list[int]:
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point: prints one markdown row per variant."""
-    parser = argparse.ArgumentParser(prog="python -m agents.nmpc.compare", description=__doc__.split("\n\n")[0])
+    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.nmpc.compare",
+                                     description=__doc__.split("\n\n")[0])
     parser.add_argument("--variants", required=True, help="JSON: name -> NMPCSettings overrides")
     parser.add_argument("--seeds", default="100-119", help="'A-B' or 'a,b,c' (default %(default)s)")
     parser.add_argument("--env", default="full", choices=list(_ENVS))

@@ -1,19 +1,19 @@
 """NMPC baseline: plans fin-beat parameters on the averaged model with CasADi, in real time.
 
-The problem (:class:`agents.nmpc.problem.NMPCProblem`: model, inputs, move blocks, latching delay,
+The problem (:class:`pectoral_gym.agents.nmpc.problem.NMPCProblem`: model, inputs, move blocks, latching delay,
 cost) is built once per controller (:class:`NMPCController`), parametric in the current state, the
 target and its velocity, and the fin command still being latched. Each control period:
 
 1. screening: candidate plans (the last plan shifted by one interval; swim straight; turn left or
    right, held or (``goal``) for 2 s then straight; the hand law in closed loop on the model) are rolled out on
    the model and ranked by the NLP's cost plus the cost beyond the horizon, or, for a rollout that
-   enters the goal, by its cost up to there (:mod:`agents.nmpc.pricing`): a discrete choice of the
+   enters the goal, by its cost up to there (:mod:`pectoral_gym.agents.nmpc.pricing`): a discrete choice of the
    turn direction, which a few iterations from one guess cannot make;
 2. a solve from the best candidate (default: 8 SQP iterations, the real-time iteration; the shifted
    plan is warm-started with its shifted multipliers);
 3. the solution's inputs are rolled out again and kept only if they cost no more than the candidate
    (an iteration budget may leave the multiple-shooting gaps open; the rollout always obeys the model);
-4. ``goal``: on-the-spot turns (:mod:`agents.nmpc.spin`), a fin cycle whose transitional strokes the
+4. ``goal``: on-the-spot turns (:mod:`pectoral_gym.agents.nmpc.spin`), a fin cycle whose transitional strokes the
    NLP's cycle-averaged model cannot represent, are rolled out on the averaged model with its
    transitional strokes and priced the same way; the cheapest is applied as it is when it costs
    less than the solved plan.
@@ -33,10 +33,10 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.controllers.fin_map import FinMap
-from agents.controllers.hand import HandController
-from agents.nmpc.pricing import PlanPricing
-from agents.nmpc.problem import (
+from pectoral_gym.agents.controllers.fin_map import FinMap
+from pectoral_gym.agents.controllers.hand import HandController
+from pectoral_gym.agents.nmpc.pricing import PlanPricing
+from pectoral_gym.agents.nmpc.problem import (
     GAIN_THRUST,
     GAIN_YAW,
     FinInputs,
@@ -46,9 +46,9 @@ from agents.nmpc.problem import (
     to_u,
     to_z,
 )
-from agents.nmpc.reference import ReferencePredictor
-from agents.nmpc.settings import NMPCSettings
-from agents.nmpc.spin import SpinTurns
+from pectoral_gym.agents.nmpc.reference import ReferencePredictor
+from pectoral_gym.agents.nmpc.settings import NMPCSettings
+from pectoral_gym.agents.nmpc.spin import SpinTurns
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, OBS_VELOCITY, decode
 from pectoral_gym.model.kfunctions import ScalingFunctions
@@ -67,8 +67,8 @@ class NMPCController(PlanPricing):
         settings: :class:`NMPCSettings`; keyword arguments override its fields.
         scaling: Scaling functions of the prediction model, or the path of a coefficients file
             (checked against ``config.params`` unless ``config.check_scaling_params`` is off); default:
-            the K of the planning spec (:func:`agents.controllers.fin_map.planning_spec`: the env's on the averaged
-            model). When the file names its identification grid, planned biases stay inside the grid's range.
+            the K of the planning spec (:func:`pectoral_gym.agents.controllers.fin_map.planning_spec`: the env's on the
+            averaged model). When the file names its identification grid, planned biases stay inside the grid's range.
         **overrides: Fields of :class:`NMPCSettings`.
 
     Attributes:
@@ -349,7 +349,9 @@ class NMPCController(PlanPricing):
         return self.plan[0].copy()
 
     def _spin_plan(self, state: np.ndarray, ref: np.ndarray, p: np.ndarray) -> tuple[float, np.ndarray, None] | None:
-        """The cheapest spin candidate (:mod:`agents.nmpc.spin`) as ``(cost, plan (horizon, 4), None)``, or ``None``.
+        """The cheapest spin candidate as ``(cost, plan (horizon, 4), None)``, or ``None``.
+
+        The candidates are :mod:`pectoral_gym.agents.nmpc.spin`'s turns.
 
         Priced as the NLP's candidates are: the objective's state terms on the rollout plus its input terms,
         or the reach cost; the shallow ranking adds the turn-then-straight cost-to-go, the cheapest one is

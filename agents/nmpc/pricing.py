@@ -1,10 +1,10 @@
 """How the NMPC prices a plan: the hand law as base policy, the turning geometry beyond the horizon, goal reach.
 
-:class:`PlanPricing` is a mixin of :class:`agents.nmpc.controller.NMPCController` (it uses the controller's
+:class:`PlanPricing` is a mixin of :class:`pectoral_gym.agents.nmpc.controller.NMPCController` (it uses the controller's
 ``problem``, ``settings``, ``hand``, ``gains``, bounds and ``_target_end``). Everything here runs on
 the planning model (the averaged model with the identified K), never on the full model:
 
-* :meth:`PlanPricing._hand_loop`: the hand law (:class:`agents.baselines.HandController`) in closed
+* :meth:`PlanPricing._hand_loop`: the hand law (:class:`pectoral_gym.agents.baselines.HandController`) in closed
   loop on the model, the screening's hand candidate and the continuation beyond the horizon;
 * :meth:`PlanPricing._continuation` and :meth:`PlanPricing._togo`: the cost beyond the horizon;
 * :meth:`PlanPricing._reach_cost`: a plan whose rollout enters the goal is priced up to that interval
@@ -18,9 +18,9 @@ import math
 
 import numpy as np
 
-from agents.controllers.stop_band import band_violation
-from agents.controllers.turning import circle_room, turn_paths
-from agents.nmpc.problem import FinInputs, to_z
+from pectoral_gym.agents.controllers.stop_band import band_violation
+from pectoral_gym.agents.controllers.turning import circle_room, turn_paths
+from pectoral_gym.agents.nmpc.problem import FinInputs, to_z
 from pectoral_gym.envs.observation import Observation
 from pectoral_gym.model.symbolic import STATE_PSI, STATE_VELOCITY
 from pectoral_gym.model.tank import wall_shortfall
@@ -29,7 +29,10 @@ __all__ = ["PlanPricing"]
 
 
 class PlanPricing:
-    """Mixin of :class:`agents.nmpc.controller.NMPCController`: the hand law on the model, costs past the horizon."""
+    """Mixin of the NMPC controller: the hand law on the model, costs past the horizon.
+
+    The controller is :class:`pectoral_gym.agents.nmpc.controller.NMPCController`.
+    """
 
     def _hand_input(self, x: np.ndarray, ref: np.ndarray, vref: np.ndarray, rate: float) -> np.ndarray:
         """The hand law's inputs (a :class:`FinInputs` row, clipped to the planner's bounds) at the model state."""
@@ -60,9 +63,10 @@ class PlanPricing:
             x, z_prev = end, z
 
     def _hand_guess(self, state: np.ndarray, ref: np.ndarray, vref: np.ndarray) -> np.ndarray:
-        """Inputs ``(4, horizon)`` of :class:`agents.baselines.HandController` in closed loop on the planning model.
+        """Inputs ``(4, horizon)`` of the hand law in closed loop on the planning model.
 
-        Each interval, the law sees the model's predicted pose and the target (moved with its velocity).
+        The law is :class:`pectoral_gym.agents.baselines.HandController`. Each interval, the law sees the
+        model's predicted pose and the target (moved with its velocity).
         """
         u = np.tile(self._u_prev[:, None], (1, self._n))
         k = -1

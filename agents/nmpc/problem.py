@@ -1,6 +1,7 @@
-"""The optimisation problem of the NMPC baseline (:mod:`agents.nmpc.controller`): packed layouts, CasADi NLP.
+"""The optimisation problem of the NMPC baseline: packed layouts, CasADi NLP.
 
-Its settings are :class:`agents.nmpc.settings.NMPCSettings`.
+The controller is :mod:`pectoral_gym.agents.nmpc.controller`. Its settings are
+:class:`pectoral_gym.agents.nmpc.settings.NMPCSettings`.
 
 Model and inputs. The prediction model is the cycle-averaged model of
 :mod:`pectoral_gym.model.symbolic` (eq. 25 with the identified scaling functions
@@ -26,7 +27,7 @@ change (after the latching delay in the first one). Exactly zero when the input 
 
 Cost (per interval ``k`` of the horizon, position ``p_k`` at its end):
 ``w_distance |p_k - r_k|`` (``r_k`` the goal, or for ``track`` the reference point's predicted position,
-:mod:`agents.nmpc.reference`; the env's own tracking penalty), a terminal ``w_terminal |p_N - r_N|``,
+:mod:`pectoral_gym.agents.nmpc.reference`; the env's own tracking penalty), a terminal ``w_terminal |p_N - r_N|``,
 a heading term ``w_heading (1 - cos(bearing of the aim point))`` (the goal, or the reference a few seconds further on),
 the fin work ``energy_weight sum_fins P(gA) dt`` (the env's energy term, mean fin power of
 :func:`pectoral_gym.model.symbolic.mean_fin_power_sx`), input changes ``w_change |du|^2`` (normalised by the
@@ -45,10 +46,10 @@ from typing import Any, NamedTuple
 import casadi as ca
 import numpy as np
 
-from agents.controllers.fin_map import FinMap
-from agents.controllers.stop_band import StopBand, band_violation
-from agents.nmpc.reference import reference_path
-from agents.nmpc.settings import NMPCSettings
+from pectoral_gym.agents.controllers.fin_map import FinMap
+from pectoral_gym.agents.controllers.stop_band import StopBand, band_violation
+from pectoral_gym.agents.nmpc.reference import reference_path
+from pectoral_gym.agents.nmpc.settings import NMPCSettings
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.symbolic import (
@@ -193,13 +194,13 @@ class NMPCProblem:
         cost: ``(decision, parameters) -> cost``, the NLP's objective (screens candidate plans).
         state_cost: ``(X (6, horizon + 1), parameters) -> cost``, the objective's terms of the states alone
             (distance, heading, reach, walls): prices trajectories rolled out elsewhere
-            (:mod:`agents.nmpc.spin`).
+            (:mod:`pectoral_gym.agents.nmpc.spin`).
         energy_weight: Weight of the fin work [1/J].
         energy_rate: ``energy_weight`` x mean fin power per cubed amplitude: the objective's energy term
             of one fin is ``energy_rate gA^3 dt``.
         input_width: Scale of each input entry (``z``) in the input-change term ``w_change |dz / width|^2``.
-        stop_band: The :class:`agents.controllers.stop_band.StopBand` of the wall terms, or ``None`` (nose and tail
-            ``wall_margin`` from the walls).
+        stop_band: The :class:`pectoral_gym.agents.controllers.stop_band.StopBand` of the wall terms, or ``None`` (nose
+            and tail ``wall_margin`` from the walls).
         interval: ``(x0, z_applied, z_prev, gain) -> (end state, mean body velocities)`` over one
             control period (trapezoid over the RK4 steps).
         lbx, ubx: Bounds of the decision vector.
@@ -363,8 +364,9 @@ class NMPCProblem:
         """The packed parameter vector (the order of :class:`ProblemParameters`).
 
         ``ref``, ``vref``: the target's position and velocity now. ``path``: its predicted positions and
-        velocities ``(2, horizon)`` at the interval ends (:class:`agents.nmpc.reference.ReferencePredictor`);
-        ``None``: straight on with ``vref`` (a goal, ``vref = 0``, stays put).
+        velocities ``(2, horizon)`` at the interval ends
+        (:class:`pectoral_gym.agents.nmpc.reference.ReferencePredictor`); ``None``: straight on with ``vref`` (a goal,
+        ``vref = 0``, stays put).
         """
         path, velocity = path if path is not None else reference_path(ref, vref, 0.0, self.dt, self.horizon)
         return np.concatenate([np.ravel(v, order="F") for v in ProblemParameters(x0, path, velocity, z_prev, gain)])

@@ -1,5 +1,6 @@
-"""Settings of the NMPC baseline (:mod:`agents.nmpc.controller`, :mod:`agents.nmpc.problem`): one frozen dataclass.
+"""Settings of the NMPC baseline: one frozen dataclass.
 
+Read by :mod:`pectoral_gym.agents.nmpc.controller` and :mod:`pectoral_gym.agents.nmpc.problem`.
 Every field is documented with what it does and, where it was chosen on measurements, with the
 development runs behind its default (``docs/benchmark.md``).
 """
@@ -9,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from agents.nmpc.reference import PREDICTIONS
+from pectoral_gym.agents.nmpc.reference import PREDICTIONS
 
 __all__ = ["NMPCSettings"]
 
@@ -30,7 +31,7 @@ class NMPCSettings:
         distance_scale: The distance cost is ``sqrt(|e|^2 + distance_scale^2)`` [m]: the distance far
             out, quadratic within ``distance_scale`` (its curvature there is ``1 / distance_scale``,
             which a few SQP iterations must handle). ``None``: 1 mm for ``goal``, 5 cm for ``track``
-            (``agents.nmpc.compare`` on the full model: ``track`` seeds 100-101, 17.7 cm at 1 mm, 12.5 cm
+            (``pectoral_gym.agents.nmpc.compare`` on the full model: ``track`` seeds 100-101, 17.7 cm at 1 mm, 12.5 cm
             at 2 cm, 8.1 cm at 5 cm; ``goal`` seeds 100-109, 10 of 10 at 1 mm, 9 of 10 at 5 cm).
         w_heading: Weight of ``1 - cos(bearing of the aim point)`` at each interval end; the aim point is
             the target, for ``track`` its predicted position ``heading_lookahead`` seconds further on.
@@ -43,8 +44,8 @@ class NMPCSettings:
             (docs/benchmark.md, ``track`` fifth round; development seeds 106-119: 6.7 cm at 2.5 s, 5.0 at 5 s
             and 10 s).
         reference: How the moving target is predicted over the horizon
-            (:class:`agents.nmpc.reference.ReferencePredictor`): ``"line"`` (straight on with its velocity),
-            ``"arc"`` (its velocity turning at the observed rate) or ``"conic"`` (along the ellipse fitted to
+            (:class:`pectoral_gym.agents.nmpc.reference.ReferencePredictor`): ``"line"`` (straight on with its
+            velocity), ``"arc"`` (its velocity turning at the observed rate) or ``"conic"`` (along the ellipse fitted to
             its observed path, the arc before); ``None``: ``"conic"`` for ``track``, ``"line"`` for ``goal``.
         turn_then_straight: Also screen the turns held for 2 s then straight; ``None``: for ``goal`` only
             (for ``track`` the turn-then-straight candidates almost never won the steps they were screened
@@ -91,30 +92,30 @@ class NMPCSettings:
         observer: Turn those period-mean velocities into current ones: the model's velocities at the
             end of the last period plus the offset between the measured and the model's period means.
         transitions: Plan with the expected impulse of transitional strokes (module docstring).
-            Off by default: on seeds 100-109 (``agents.nmpc.compare``, no step budget) it reached 6 of
+            Off by default: on seeds 100-109 (``pectoral_gym.agents.nmpc.compare``, no step budget) it reached 6 of
             10 goals on the full model against 10 of 10 without, and 8 of 10 on the averaged env either
             way: the optimiser leans on an impulse whose real value depends on the unobserved phase.
-        hand_candidate: Also screen the plan of :class:`agents.baselines.HandController` in closed loop
+        hand_candidate: Also screen the plan of :class:`pectoral_gym.agents.baselines.HandController` in closed loop
             on the planning model (its deadlock escape and long way round near walls). ``None``: for
-            ``goal`` only (``agents.nmpc.compare --task track --seeds 100-101``: 14.7 cm with it, 8.1 cm
+            ``goal`` only (``pectoral_gym.agents.nmpc.compare --task track --seeds 100-101``: 14.7 cm with it, 8.1 cm
             without).
         w_togo: Weight [1/m] of the cost-to-go beyond the horizon in the screening and in the choice
             between a solution and its guess: the turn-then-straight path from the horizon's end to
-            the target (radius ``turn_radius``, :func:`agents.controllers.turning.turn_path_length`) minus the
-            straight distance (already in the NLP's terminal cost). ``None``: 3 for ``goal``
+            the target (radius ``turn_radius``, :func:`pectoral_gym.agents.controllers.turning.turn_path_length`) minus
+            the straight distance (already in the NLP's terminal cost). ``None``: 3 for ``goal``
             (``w_distance + w_terminal``), 0 for ``track`` (a moving reference).
         togo_wall_margin: Room [m] a turning circle of the cost-to-go must leave to the walls (beyond
             half a body; the hand law's ``wall_margin``); a turn with less is charged up to a full
             extra circle (0: walls ignored).
         togo_steps: ``goal``: intervals the hand law is continued on the model after the horizon to
             price a candidate (the NLP's distance and wall terms;
-            :meth:`agents.nmpc.controller.NMPCController._continuation`);
+            :meth:`pectoral_gym.agents.nmpc.controller.NMPCController._continuation`);
             0: the turn-then-straight cost-to-go alone.
         deep_candidates: With ``togo_steps``: how many of the cheapest screened candidates (plus the hand
             law's) are priced with the continuation.
         reach_fraction: ``goal``: a rollout whose interval end comes within this fraction of the goal
-            radius is priced up to there only (:meth:`agents.nmpc.pricing.PlanPricing._reach_cost`); 0: off.
-            Development seeds 100-199 (``docs/benchmark.md``, fourth round): on the full model 0.94 against
+            radius is priced up to there only (:meth:`pectoral_gym.agents.nmpc.pricing.PlanPricing._reach_cost`); 0:
+            off. Development seeds 100-199 (``docs/benchmark.md``, fourth round): on the full model 0.94 against
             0.90 without (0.93 at 1.0: one wall hit more).
         bias_span: Largest planned bias offset from the middle of the bias range [rad] (0: both biases
             held at 90 deg, as the hand law holds them); ``None``: the whole identified range; ``"auto"``:
@@ -124,15 +125,15 @@ class NMPCSettings:
             23.7 to 20.2 s (full model); ``track`` on seeds 106-119: 2.4 cm against 4.4 cm with the range.
             With ``solver="ipopt"``, biases fixed by equal bounds kept one solve in the tests from
             converging in 300 iterations (it converges in 27 with them free); pass ``None`` there.
-        spin: Also screen on-the-spot turns (:mod:`agents.nmpc.spin`: a fin cycle whose transitional strokes
-            turn the fish within ~0.1 m, rolled out on the averaged model with its transitional strokes);
+        spin: Also screen on-the-spot turns (:mod:`pectoral_gym.agents.nmpc.spin`: a fin cycle whose transitional
+            strokes turn the fish within ~0.1 m, rolled out on the averaged model with its transitional strokes);
             a spin candidate that costs less than the solved plan is applied as it is. ``None``: for
             ``goal`` only.
         stop_band: ``(margin [m], reaction time [s], coasting horizon [s])`` of the robot env's
-            stopping-distance band (:mod:`agents.controllers.stop_band`, the rule of ``hardware.safety.Geofence``): the
-            wall terms then keep the fish's whole outline out of the band instead of its nose and tail
-            ``wall_margin`` (and ``togo_wall_margin``) from the walls. ``None`` (the simulated envs, which
-            have no such band): off. ``hardware.deploy`` passes its safety settings.
+            stopping-distance band (:mod:`pectoral_gym.agents.controllers.stop_band`, the rule of
+            ``pectoral_gym.hardware.safety.Geofence``): the wall terms then keep the fish's whole outline out of the
+            band instead of its nose and tail ``wall_margin`` (and ``togo_wall_margin``) from the walls. ``None`` (the
+            simulated envs, which have no such band): off. ``pectoral_gym.hardware.deploy`` passes its safety settings.
     """
 
     horizon: int = 10

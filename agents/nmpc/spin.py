@@ -1,6 +1,6 @@
 """On-the-spot turns for the NMPC: a fin cycle that turns the fish within about a body length.
 
-The NLP (:mod:`agents.nmpc.problem`) plans regular fin beats on their cycle averages, and its
+The NLP (:mod:`pectoral_gym.agents.nmpc.problem`) plans regular fin beats on their cycle averages, and its
 tightest turn is the turning circle (radius ~0.25 m, docs/benchmark.md). Changing the pattern every
 control period makes every half-stroke a transitional one: the fin sweeps from where it is to the
 new pattern's turning point and exerts the forces of that sweep (docs/model.md 3.7). With the right
@@ -8,7 +8,7 @@ sequence the sweeps' surge impulses cancel and their yaw impulses add. :data:`SP
 sequence of four control periods at the NMPC's fixed period (0.5 s) and ratio (5), found by a
 cross-entropy search on the averaged model from rest (``docs/validation/nmpc/spin_cycle.py``, which
 also checks it on the full model), among the cycles the robot's servos execute as commanded (the
-rules of :mod:`hardware.firmware`: every stroke, transitional ones included, within the servos' peak
+rules of :mod:`pectoral_gym.hardware.firmware`: every stroke, transitional ones included, within the servos' peak
 rate, each parameter within its rate limit): on the averaged model 103 deg in 6 s with the centre of
 mass within 0.08 m of its start, on the full model 89-93 deg within 0.06-0.12 m from each phase. The
 turning circle needs 0.5 m of room for a half turn. Without the servo rules the search finds a cycle
@@ -16,10 +16,10 @@ that turns 143-147 deg in 6 s on the full model, with sweeps up to 100 deg in a 
 0.08 s: the servos would stretch its strokes, and on the emulated robot it turns 24-48 deg instead
 (docs/benchmark.md, "Goal, fifth round").
 
-:class:`SpinTurns` prices such turns on the planning model (:func:`agents.controllers.fin_map.planning_spec`: the
-env's averaged model, or on a full env the averaged model with its transitional strokes and the
-identified K), whose transitional strokes the NLP's smooth model lacks. It keeps
-a copy of that model whose fins follow every command the controller sends, so it knows each fin's
+:class:`SpinTurns` prices such turns on the planning model
+(:func:`pectoral_gym.agents.controllers.fin_map.planning_spec`: the env's averaged model, or on a full env the averaged
+model with its transitional strokes and the identified K), whose transitional strokes the NLP's smooth model lacks. It
+keeps a copy of that model whose fins follow every command the controller sends, so it knows each fin's
 angle and stroke phase (both models latch patterns on the same schedule, docs/model.md 5); each
 control step it rolls out, in one batch from the estimated body state, the spin left or right from
 each phase of the cycle, either until the target lies straight ahead (within :data:`AIM`) or for 1 to 8
@@ -33,8 +33,8 @@ import math
 
 import numpy as np
 
-from agents.controllers.fin_map import FinMap
-from agents.nmpc.problem import FinInputs
+from pectoral_gym.agents.controllers.fin_map import FinMap
+from pectoral_gym.agents.nmpc.problem import FinInputs
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.spec import AveragedSpec, held_yaw_damping
@@ -75,11 +75,11 @@ class SpinTurns:
 
     Args:
         config: The environment settings (ranges, control period, parameters).
-        fins: The controller's :class:`agents.controllers.fin_map.FinMap` (fixed period and ratio).
+        fins: The controller's :class:`pectoral_gym.agents.controllers.fin_map.FinMap` (fixed period and ratio).
         scaling: Scaling functions of the planning model (``None``: K = 1).
         horizon: Control intervals per candidate.
-        spec: The planning model's spec (default: ``fins.spec``, :func:`agents.controllers.fin_map.planning_spec`);
-            its rollouts use ``scaling`` as K.
+        spec: The planning model's spec (default: ``fins.spec``,
+            :func:`pectoral_gym.agents.controllers.fin_map.planning_spec`); its rollouts use ``scaling`` as K.
         straight: Inputs ``(4,)`` after the spin (FinInputs order).
 
     Attributes:
@@ -172,7 +172,7 @@ class SpinTurns:
     def input_cost(self, u: np.ndarray, u_prev: np.ndarray, width: np.ndarray, w_change: float) -> np.ndarray:
         """The NLP's input-change term ``w_change |dz / width|^2`` of inputs ``(candidates, horizon, 4)``.
 
-        ``z`` are the NLP's inputs (squared amplitudes, biases; :mod:`agents.nmpc.problem`), ``u_prev`` the
+        ``z`` are the NLP's inputs (squared amplitudes, biases; :mod:`pectoral_gym.agents.nmpc.problem`), ``u_prev`` the
         command still acting.
         """
         u = np.asarray(u)

@@ -1,21 +1,21 @@
 """The project's results table: every controller x task x model, plus env and SB3 training throughput.
 
-Controllers: the baselines of :mod:`agents.baselines` (``random``, ``hand``, ``nmpc``) and any
+Controllers: the baselines of :mod:`pectoral_gym.agents.baselines` (``random``, ``hand``, ``nmpc``) and any
 trained policies given with ``--policy``. Each runs on both tasks (``goal``, ``track``) and three
 settings: the averaged model, the full model, and the full model with per-episode parameter
-randomisation (:data:`agents.training.evaluate.DEFAULT_RANDOMIZATION`), through
-:func:`agents.training.evaluate.evaluate` (seeded: episode ``k`` starts from ``seed + k`` for every
+randomisation (:data:`pectoral_gym.agents.training.evaluate.DEFAULT_RANDOMIZATION`), through
+:func:`pectoral_gym.agents.training.evaluate.evaluate` (seeded: episode ``k`` starts from ``seed + k`` for every
 controller). Also measured: env step rates (:func:`pectoral_gym.tools.bench.run_benchmark`) and the
 steps per second of a short Stable-Baselines3 PPO ``learn()`` on the averaged vector env, and the
 time to solve: per training seed, the wall time until the demo's PPO first reaches 0.95 success on
-the full model on held-out episodes (:mod:`agents.studies.solve_time`; ``--full`` runs seeds 0-4).
+the full model on held-out episodes (:mod:`pectoral_gym.agents.studies.solve_time`; ``--full`` runs seeds 0-4).
 
 CLI::
 
-    python -m agents.studies.benchmark --quick                      # a few minutes on 2 cores
-    python -m agents.studies.benchmark --full --policy runs/PectoralFish-Averaged-v0/ppo_goal_seed0_...
-    python -m agents.studies.benchmark --quick --controllers hand nmpc --out bench_quick
-    python -m agents.studies.benchmark --quick --controllers hand --solve-seeds 0 1 --solve-timesteps 4e5
+    python -m pectoral_gym.agents.studies.benchmark --quick                      # a few minutes on 2 cores
+    python -m pectoral_gym.agents.studies.benchmark --full --policy runs/PectoralFish-Averaged-v0/ppo_goal_seed0_...
+    python -m pectoral_gym.agents.studies.benchmark --quick --controllers hand nmpc --out bench_quick
+    python -m pectoral_gym.agents.studies.benchmark --quick --controllers hand --solve-seeds 0 1 --solve-timesteps 4e5
 
 Writes ``benchmark.md``, ``benchmark.json`` and ``benchmark.png`` into ``--out``.
 """
@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.studies.benchmark_report import plot_report, to_markdown, write_outputs
+from pectoral_gym.agents.studies.benchmark_report import plot_report, to_markdown, write_outputs
 
 __all__ = ["ENVS", "PRESETS", "BenchmarkSettings", "main", "plot_report", "run_benchmark", "to_markdown",
            "write_outputs"]
@@ -54,13 +54,14 @@ class BenchmarkSettings:
         episodes: Episodes per cell for random, hand and trained policies.
         nmpc_episodes: Episodes per cell for NMPC, per task (it solves an optimal control problem each step).
         max_episode_steps: Truncation of every episode (``None``: as registered, 240 steps = 2 min).
-        nmpc: Keyword arguments of the NMPC baseline (:class:`agents.nmpc.controller.NMPCSettings` fields).
+        nmpc: Keyword arguments of the NMPC baseline (:class:`pectoral_gym.agents.nmpc.controller.NMPCSettings` fields).
         env_steps: Single-env steps per timed pass of the env throughput (:mod:`pectoral_gym.tools.bench`).
         vector_steps: Vector-env batch steps per timed pass.
         repeats: Timed passes of the env throughput (best kept).
         train_steps: Timesteps of the timed PPO ``learn()`` (0: skip).
         seed: Episode ``k`` of every cell is reset with ``seed + k``.
-        solve_seeds: Training seeds of the time to solve (:func:`agents.studies.solve_time.measure_time_to_solve`;
+        solve_seeds: Training seeds of the time to solve
+            (:func:`pectoral_gym.agents.studies.solve_time.measure_time_to_solve`;
             empty: skipped).
         solve_timesteps: Training budget per seed of the time to solve (``None``: ``agents/hyperparams/ppo.yml``).
         solve_episodes: Episodes per probe and of the confirmation.
@@ -94,7 +95,7 @@ def _baseline_factory(name: str, env_id: str, env_kwargs: dict[str, Any], settin
     NMPC plans with the nominal parameters whether or not the env randomises them, so one built
     problem per (env id, task) serves both; ``built`` caches it.
     """
-    from agents.baselines import make_baseline
+    from pectoral_gym.agents.baselines import make_baseline
     from pectoral_gym.envs.core import EnvConfig
     from pectoral_gym.registration import ENV_IDS
 
@@ -135,8 +136,8 @@ def measure_training(steps: int, seed: int = 0) -> dict[str, Any]:
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
 
-    from agents.training.config import algo_kwargs, resolve_config
-    from agents.training.vec_adapter import make_fish_vec_env
+    from pectoral_gym.agents.training.config import algo_kwargs, resolve_config
+    from pectoral_gym.agents.training.vec_adapter import make_fish_vec_env
 
     config = resolve_config("ppo", AVERAGED_ID, seed)
     torch.set_num_threads(1)
@@ -167,7 +168,8 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
     Args:
         settings: Sizes (:data:`PRESETS`).
         controllers: Baseline names to include.
-        policies: Run folders or ``.zip`` files of trained policies (:func:`agents.training.policy.load_policy`).
+        policies: Run folders or ``.zip`` files of trained policies
+            (:func:`pectoral_gym.agents.training.policy.load_policy`).
         envs: Labels of :data:`ENVS` to include.
         tasks: Tasks to include.
         throughput: Measure env and training throughput.
@@ -184,7 +186,7 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
     Raises:
         ValueError: For an unknown controller, env label or task.
     """
-    from agents.training.evaluate import DEFAULT_RANDOMIZATION, evaluate, trained_env_kwargs
+    from pectoral_gym.agents.training.evaluate import DEFAULT_RANDOMIZATION, evaluate, trained_env_kwargs
 
     unknown = [c for c in controllers if c not in BASELINE_NAMES] + [e for e in envs if e not in ENVS]
     unknown += [t for t in tasks if t not in TASKS]
@@ -194,7 +196,7 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
     say = progress or (lambda _msg: None)
     loaded, paths = {}, {}
     for path in policies:
-        from agents.training.policy import load_policy
+        from pectoral_gym.agents.training.policy import load_policy
 
         name = Path(path).name.removesuffix(".zip")
         loaded[name], paths[name] = load_policy(path), path
@@ -254,7 +256,7 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
     if settings.solve_seeds:
         say(f"time to solve (PPO, full >= 0.95), seeds {list(settings.solve_seeds)}")
         try:
-            from agents.studies.solve_time import measure_time_to_solve
+            from pectoral_gym.agents.studies.solve_time import measure_time_to_solve
 
             solve = measure_time_to_solve(list(settings.solve_seeds), solve_out, settings.solve_timesteps,
                                           settings.solve_episodes, settings.solve_episodes, jobs=solve_jobs)
@@ -268,7 +270,8 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
 
 
 def _parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m agents.studies.benchmark", description=__doc__.split("\n\n")[0],
+    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.studies.benchmark",
+                                     description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     size = parser.add_mutually_exclusive_group()
     size.add_argument("--quick", action="store_const", const="quick", dest="preset",

@@ -1,4 +1,7 @@
-"""The benchmark report of :func:`agents.studies.benchmark.run_benchmark` as Markdown, JSON and bar charts."""
+"""The benchmark report as Markdown, JSON and bar charts.
+
+The report is the dict of :func:`pectoral_gym.agents.studies.benchmark.run_benchmark`.
+"""
 
 from __future__ import annotations
 
@@ -9,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.training.results import json_default, save_figure
+from pectoral_gym.agents.training.results import json_default, save_figure
 
 __all__ = ["plot_report", "to_markdown", "write_outputs"]
 
@@ -79,7 +82,7 @@ def to_markdown(report: dict[str, Any]) -> str:
 
 
 def _solve_lines(solve: dict[str, Any] | None) -> list[str]:
-    """The time-to-solve table (:func:`agents.studies.solve_time.measure_time_to_solve`), or nothing."""
+    """The time-to-solve table (:func:`pectoral_gym.agents.studies.solve_time.measure_time_to_solve`), or nothing."""
     if not solve:
         return []
     s = solve["settings"]

@@ -5,8 +5,8 @@ Each seed trains exactly as ``pectoral-demo --seed S`` (PPO on ``PectoralFish-Av
 file runs on the full model: ``eval_env``) and is then
 evaluated on three settings, the same held-out episodes for every seed (episode ``k`` reset with
 ``--eval-seed + k``, default the demo's): the averaged model, the full model, and the full model with
-:data:`agents.training.evaluate.DEFAULT_RANDOMIZATION`. A :class:`agents.studies.solve_probe.SolveProbe`
-(``--probe-every``)
+:data:`pectoral_gym.agents.training.evaluate.DEFAULT_RANDOMIZATION`. A
+:class:`pectoral_gym.agents.studies.solve_probe.SolveProbe` (``--probe-every``)
 times each run to 0.95 success on the full model on a third set of episodes.
 
 Across seeds, per setting: the interquartile mean (``scipy.stats.trim_mean(x, 0.25)``, the mean of the
@@ -17,10 +17,11 @@ interval is coarse: it can only take values that subsets of these seeds give.
 
 CLI::
 
-    python -m agents.studies.seeds                              # seeds 0-4, 2 parallel jobs, writes seeds_out/
-    python -m agents.studies.seeds --seeds 100 101 102 103 --jobs 2 --out tune_base
-    python -m agents.studies.seeds --seeds 0 1 --timesteps 2e5 --episodes 50 --hyperparams ent_coef=0.01
-    python -m agents.studies.seeds --train-env PectoralFish-Full-v0 --timesteps 1.6e6 \
+    python -m pectoral_gym.agents.studies.seeds                              # seeds 0-4, 2 parallel jobs, writes
+    seeds_out/
+    python -m pectoral_gym.agents.studies.seeds --seeds 100 101 102 103 --jobs 2 --out tune_base
+    python -m pectoral_gym.agents.studies.seeds --seeds 0 1 --timesteps 2e5 --episodes 50 --hyperparams ent_coef=0.01
+    python -m pectoral_gym.agents.studies.seeds --train-env PectoralFish-Full-v0 --timesteps 1.6e6 \
         --hyperparams env_kwargs.integration=fast
 
 ``--train-env PectoralFish-Full-v0`` trains on the full model instead (its entry of the hyperparameter file);
@@ -45,13 +46,13 @@ from typing import Any
 import numpy as np
 import scipy.stats
 
-from agents.studies.seeds_report import plot_seeds, to_markdown
+from pectoral_gym.agents.studies.seeds_report import plot_seeds, to_markdown
 
 __all__ = ["SETTINGS", "TARGETS", "aggregate", "iqm", "main", "run_seed", "run_seeds", "summarize_seeds",
            "train_seeds"]
 
 TRAIN_ENV = "PectoralFish-Averaged-v0"
-# label -> (env id, randomised); as agents.studies.benchmark.ENVS
+# label -> (env id, randomised); as pectoral_gym.agents.studies.benchmark.ENVS
 SETTINGS = {"averaged": ("PectoralFish-Averaged-v0", False), "full": ("PectoralFish-Full-v0", False),
             "full+rand": ("PectoralFish-Full-v0", True)}
 TARGETS = {"full": 0.95, "full+rand": 0.90, "gap": 0.03}  # issue 16: success >= (gap averaged - full <=)
@@ -109,10 +110,11 @@ def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None
     Args:
         seed: Training seed.
         out: Parent folder; the run goes to ``<out>/seed<seed>/``.
-        overrides: Hyperparameter overrides (``agents.training.config.resolve_config``'s ``hyperparams``).
+        overrides: Hyperparameter overrides (``pectoral_gym.agents.training.config.resolve_config``'s ``hyperparams``).
         episodes: Evaluation episodes per setting.
         eval_seed: Evaluation episode ``k`` is reset with ``eval_seed + k`` (default the demo's).
-        probe: Keyword arguments of :class:`agents.studies.solve_probe.SolveProbe` (``None``: no time to solve).
+        probe: Keyword arguments of :class:`pectoral_gym.agents.studies.solve_probe.SolveProbe` (``None``: no time to
+            solve).
         hyperparams_file: Hyperparameter file (default ``agents/hyperparams/ppo.yml``).
         queue: Anything with ``put``; receives ``(seed, stage, timesteps)`` progress messages.
         settings: Labels of :data:`SETTINGS` to evaluate on after training (empty: none).
@@ -122,11 +124,11 @@ def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None
         ``seed, run_dir, timesteps, train_time_s, best_eval, evaluations`` (per setting, the :data:`REPORTED`
         metric summaries) and ``time_to_solve`` (:meth:`SolveProbe.summary`, or ``None``).
     """
-    from agents.studies.solve_probe import REPORT_SEED, SolveProbe
-    from agents.training.config import resolve_config
-    from agents.training.evaluate import DEFAULT_RANDOMIZATION, TRAINING_ONLY, evaluate, write_json
-    from agents.training.policy import load_policy
-    from agents.training.train import train
+    from pectoral_gym.agents.studies.solve_probe import REPORT_SEED, SolveProbe
+    from pectoral_gym.agents.training.config import resolve_config
+    from pectoral_gym.agents.training.evaluate import DEFAULT_RANDOMIZATION, TRAINING_ONLY, evaluate, write_json
+    from pectoral_gym.agents.training.policy import load_policy
+    from pectoral_gym.agents.training.train import train
 
     put = queue.put if queue is not None else (lambda _message: None)
     eval_seed = REPORT_SEED if eval_seed is None else int(eval_seed)
@@ -139,7 +141,7 @@ def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None
         put((seed, "train", int(record["timesteps"])))
         return True if solve is None else solve.on_evaluation(record)
 
-    command = shlex.join(["python", "-m", "agents.studies.seeds", *sys.argv[1:]])
+    command = shlex.join(["python", "-m", "pectoral_gym.agents.studies.seeds", *sys.argv[1:]])
     train(config, run_dir, progress=False, command=command, on_evaluation=on_evaluation, probe=solve)
     training = json.loads((run_dir / "training.json").read_text())
     put((seed, "train", int(training["timesteps"])))
@@ -217,8 +219,8 @@ def run_seeds(seeds: Sequence[int], out: str | Path, jobs: int = 1, overrides: d
         ValueError: For repeated seeds, ``jobs`` < 1, ``episodes`` < 1 or overlapping episode seeds.
         FileExistsError: If a seed's run folder exists.
     """
-    from agents.studies.solve_probe import REPORT_SEED, SolveProbe, check_held_out
-    from agents.training.config import resolve_config
+    from pectoral_gym.agents.studies.solve_probe import REPORT_SEED, SolveProbe, check_held_out
+    from pectoral_gym.agents.training.config import resolve_config
 
     seeds = [int(s) for s in seeds]
     if not seeds or len(set(seeds)) != len(seeds):
@@ -248,10 +250,11 @@ def run_seeds(seeds: Sequence[int], out: str | Path, jobs: int = 1, overrides: d
                            "eval_env": config["eval_env"],
                            "hyperparams_file": hyperparams_file, "n_timesteps": config["n_timesteps"],
                            "algo_kwargs": {k: str(v) for k, v in config["algo_kwargs"].items()},
-                           "command": command or shlex.join(["python", "-m", "agents.studies.seeds", *sys.argv[1:]]),
+                           "command": command or shlex.join(["python", "-m", "pectoral_gym.agents.studies.seeds",
+                                                             *sys.argv[1:]]),
                            "wall_time_s": time.perf_counter() - start, "cpu_count": os.cpu_count()},
               "per_seed": per_seed, "summary": summarize_seeds(per_seed, confidence=confidence)}
-    from agents.training.results import json_default
+    from pectoral_gym.agents.training.results import json_default
 
     (out / "seeds.json").write_text(json.dumps(report, indent=2, default=json_default) + "\n")
     (out / "seeds.md").write_text(to_markdown(report) + "\n")
@@ -330,7 +333,8 @@ class _Bars:
 
 
 def _parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m agents.studies.seeds", description=__doc__.split("\n\n")[0],
+    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.studies.seeds",
+                                     description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4], help="training seeds")
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
@@ -340,8 +344,9 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
                         default=TRAIN_ENV, help="env trained on (default: %(default)s, as the demo)")
     parser.add_argument("--timesteps", type=float, help="training steps (default: agents/hyperparams/ppo.yml)")
     parser.add_argument("--episodes", type=int, help="evaluation episodes per setting and seed (default 100, quick 4)")
-    parser.add_argument("--eval-seed", type=int, help="evaluation episode k is reset with this + k "
-                                                      "(default: the demo's, agents.training.demo.EVAL_SEED)")
+    parser.add_argument("--eval-seed", type=int,
+                        help="evaluation episode k is reset with this + k "
+                             "(default: the demo's, pectoral_gym.agents.training.demo.EVAL_SEED)")
     parser.add_argument("--hyperparams", nargs="*", default=[], metavar="KEY=VALUE",
                         help="override hyperparameters (YAML values; nested keys with dots)")
     parser.add_argument("--hyperparams-file", metavar="YAML", help="hyperparameter file (default: agents/hyperparams)")
@@ -356,7 +361,7 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point (see the module docstring)."""
-    from agents.training.config import parse_overrides
+    from pectoral_gym.agents.training.config import parse_overrides
 
     args = _parse_args(argv)
     try:
@@ -369,7 +374,8 @@ def main(argv: list[str] | None = None) -> int:
         if args.probe_every:
             probe = {"every": args.probe_every, "episodes": 4 if args.quick else args.probe_episodes,
                      "confirm_episodes": episodes, "keep_probing": True}  # the full model's learning curve
-        command = shlex.join(["python", "-m", "agents.studies.seeds", *(sys.argv[1:] if argv is None else argv)])
+        command = shlex.join(["python", "-m", "pectoral_gym.agents.studies.seeds",
+                              *(sys.argv[1:] if argv is None else argv)])
         report = run_seeds(args.seeds, args.out, jobs=args.jobs, overrides=overrides, episodes=episodes,
                            eval_seed=args.eval_seed, probe=probe, hyperparams_file=args.hyperparams_file,
                            confidence=args.confidence, progress=not args.no_progress, command=command,

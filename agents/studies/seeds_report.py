@@ -1,4 +1,4 @@
-"""The report of :func:`agents.studies.seeds.run_seeds` as Markdown and a plot."""
+"""The report of :func:`pectoral_gym.agents.studies.seeds.run_seeds` as Markdown and a plot."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.training.results import save_figure
+from pectoral_gym.agents.training.results import save_figure
 
 __all__ = ["plot_seeds", "to_markdown"]
 

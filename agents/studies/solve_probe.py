@@ -1,7 +1,7 @@
 """The time-to-solve probe: the wall time until a training run first reaches a success rate on the full model.
 
-A :class:`SolveProbe` is passed to :func:`agents.training.train.train` as ``probe``: after every ``every``-th
-periodic evaluation it evaluates the current policy (deterministic, with its observation statistics at
+A :class:`SolveProbe` is passed to :func:`pectoral_gym.agents.training.train.train` as ``probe``: after every
+``every``-th periodic evaluation it evaluates the current policy (deterministic, with its observation statistics at
 that moment) on ``PectoralFish-Full-v0`` for ``episodes`` seeded episodes. The first probe at or above
 ``threshold`` marks the run solved at that evaluation's ``elapsed_s`` (training wall time, the probes'
 own time left out) and ``timesteps``; that policy is then evaluated once more on ``confirm_episodes``
@@ -11,13 +11,13 @@ policy (the maximum of noisy estimates is biased upwards).
 Three disjoint sets of episode seeds keep this honest (:func:`check_held_out` checks them):
 
 * the periodic evaluation, which selects ``best_model.zip``: ``train seed + EVAL_SEED_OFFSET + k``
-  (:data:`agents.training.train.EVAL_SEED_OFFSET`) on the training env;
+  (:data:`pectoral_gym.agents.training.train.EVAL_SEED_OFFSET`) on the training env;
 * the probe: ``PROBE_SEED + k`` on the full model (it selects nothing; it only times);
 * the confirmation and the reported results: ``REPORT_SEED + k`` (the demo's
-  :data:`agents.training.demo.EVAL_SEED`).
+  :data:`pectoral_gym.agents.training.demo.EVAL_SEED`).
 
 Training episodes start from ``train seed + i`` (env slot ``i``) and then from each slot's generator.
-:func:`agents.studies.solve_time.measure_time_to_solve` trains seeds with the probe.
+:func:`pectoral_gym.agents.studies.solve_time.measure_time_to_solve` trains seeds with the probe.
 """
 
 from __future__ import annotations
@@ -25,8 +25,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from agents.training.demo import EVAL_SEED as REPORT_SEED
-from agents.training.train import EVAL_SEED_OFFSET
+from pectoral_gym.agents.training.demo import EVAL_SEED as REPORT_SEED
+from pectoral_gym.agents.training.train import EVAL_SEED_OFFSET
 
 __all__ = ["FULL_ID", "PROBE_SEED", "REPORT_SEED", "SOLVED", "SolveProbe", "check_held_out"]
 
@@ -113,8 +113,11 @@ class SolveProbe:
         self.env_kwargs = {k: v for k, v in self.env_kwargs.items() if k != "randomize"} | {"task": "goal"}
 
     def __call__(self, controller: Any, record: dict[str, Any]) -> dict[str, Any] | None:
-        """The ``probe`` of :func:`agents.training.train.train`: evaluate ``controller`` when due and not solved yet."""
-        from agents.training.evaluate import evaluate
+        """Evaluate ``controller`` when due and not solved yet.
+
+        The ``probe`` of :func:`pectoral_gym.agents.training.train.train`.
+        """
+        from pectoral_gym.agents.training.evaluate import evaluate
 
         self._calls += 1
         if (self.solved is not None and not self.keep_probing) or (self._calls - 1) % self.every:
@@ -133,7 +136,7 @@ class SolveProbe:
         return entry
 
     def on_evaluation(self, record: dict[str, Any]) -> bool:
-        """The ``on_evaluation`` of :func:`agents.training.train.train`: ``False`` (stop) once solved."""
+        """The ``on_evaluation`` of :func:`pectoral_gym.agents.training.train.train`: ``False`` (stop) once solved."""
         return not (self.stop_on_solve and self.solved is not None)
 
     def summary(self) -> dict[str, Any]:

@@ -1,4 +1,4 @@
-"""Time to solve: train seeds with the probe of :mod:`agents.studies.solve_probe` until it reaches :data:`SOLVED`."""
+"""Time to solve: train seeds with the probe of :mod:`~pectoral_gym.agents.studies.solve_probe` until :data:`SOLVED`."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import time
 from pathlib import Path
 from typing import Any
 
-from agents.studies.seeds import TRAIN_ENV, train_seeds
-from agents.studies.solve_probe import FULL_ID, PROBE_SEED, REPORT_SEED, SOLVED, SolveProbe, check_held_out
+from pectoral_gym.agents.studies.seeds import TRAIN_ENV, train_seeds
+from pectoral_gym.agents.studies.solve_probe import FULL_ID, PROBE_SEED, REPORT_SEED, SOLVED, SolveProbe, check_held_out
 
 __all__ = ["FULL_ID", "PROBE_SEED", "REPORT_SEED", "SOLVED", "SolveProbe", "check_held_out", "measure_time_to_solve"]
 
@@ -35,7 +35,7 @@ def measure_time_to_solve(seeds: list[int], out: str | Path, timesteps: int | No
     Returns:
         ``{"settings", "runs": [{"seed", "timesteps", "train_time_s", **SolveProbe.summary()}]}``.
     """
-    from agents.training.config import resolve_config
+    from pectoral_gym.agents.training.config import resolve_config
 
     overrides = dict(hyperparams or {}) | ({} if timesteps is None else {"n_timesteps": int(timesteps)})
     config = resolve_config("ppo", TRAIN_ENV, int(seeds[0]), task="goal", hyperparams=dict(overrides))

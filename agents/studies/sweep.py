@@ -1,17 +1,21 @@
-"""Sweeps of :func:`agents.training.train.train` on Ray Tune: seeds, hyperparameters and randomisation ranges.
+"""Sweeps of training on Ray Tune: seeds, hyperparameters and randomisation ranges.
+
+Each trial is a :func:`pectoral_gym.agents.training.train.train`.
 
 CLI::
 
-    python -m agents.studies.sweep --grid seed=0,1,2 ent_coef=0,0.005 --n-timesteps 2e5
-    python -m agents.studies.sweep --param-space sweep.yml --num-samples 4 --scheduler asha --metric success
-    python -m agents.studies.sweep --address auto --grid seed=0,1,2,3 randomize_scale=0,1   # an existing cluster
+    python -m pectoral_gym.agents.studies.sweep --grid seed=0,1,2 ent_coef=0,0.005 --n-timesteps 2e5
+    python -m pectoral_gym.agents.studies.sweep --param-space sweep.yml --num-samples 4 --scheduler asha --metric
+    success
+    python -m pectoral_gym.agents.studies.sweep --address auto --grid seed=0,1,2,3 randomize_scale=0,1   # an existing
+    cluster
 
 The parameter space (``--param-space`` file, ``--grid key=v1,v2``; keys and kinds in
-:mod:`agents.studies.sweep_space`) defaults to ``seed=0,1,2``. Without ``--address`` the command
+:mod:`pectoral_gym.agents.studies.sweep_space`) defaults to ``seed=0,1,2``. Without ``--address`` the command
 starts an embedded local Ray (``ray.init(num_cpus=--num-cpus)``) and shuts it down at the
 end; with ``--address`` it joins that cluster (the project must be importable on its nodes).
 
-Each trial is one :func:`agents.training.train.train` run with ``torch_threads=--cpus-per-trial``;
+Each trial is one :func:`pectoral_gym.agents.training.train.train` run with ``torch_threads=--cpus-per-trial``;
 its ``on_evaluation`` callback sends every periodic evaluation to Tune (``ray.tune.report``:
 ``timesteps``, ``success``, ``mean_return``, ...), so ``--scheduler asha`` stops trials that
 trail at a rung (rungs in environment steps: ``--grace-period`` times powers of
@@ -25,7 +29,7 @@ time it took to get its environments ready (``env_ready_s``: numba compiling or 
 cache) so the saving can be read from the table.
 
 Output in ``<storage-path>/<name>/``: Tune's trial folders (each holds the run folder of
-:mod:`agents.training.train` in ``run/``), ``results.csv`` and ``results.md`` (one row per trial:
+:mod:`pectoral_gym.agents.training.train` in ``run/``), ``results.csv`` and ``results.md`` (one row per trial:
 its values, status, last and best evaluation) and ``results.png`` (the metric against
 environment steps, one line per trial).
 """
@@ -42,9 +46,16 @@ from pathlib import Path
 from typing import Any
 
 import pectoral_gym
-from agents.studies.sweep_results import plot_results, result_rows, write_tables
-from agents.studies.sweep_space import SAMPLERS, Dimension, grid_points, load_param_space, parse_grid, trial_config
-from agents.training.config import parse_overrides
+from pectoral_gym.agents.studies.sweep_results import plot_results, result_rows, write_tables
+from pectoral_gym.agents.studies.sweep_space import (
+    SAMPLERS,
+    Dimension,
+    grid_points,
+    load_param_space,
+    parse_grid,
+    trial_config,
+)
+from pectoral_gym.agents.training.config import parse_overrides
 
 __all__ = ["DEFAULT_SPACE", "main", "run_sweep", "tune_space", "warm_up"]
 
@@ -63,8 +74,8 @@ def warm_up(config: dict[str, Any], final: dict[str, Any] | None = None) -> floa
     start = time.perf_counter()
     import numpy as np
 
-    from agents.training.evaluate import evaluate
-    from agents.training.vec_adapter import make_fish_vec_env
+    from pectoral_gym.agents.training.evaluate import evaluate
+    from pectoral_gym.agents.training.vec_adapter import make_fish_vec_env
     from pectoral_gym.envs.layout import ACTION_SIZE
 
     env_kwargs = dict(config["env_kwargs"])
@@ -108,7 +119,7 @@ def _trainable(params: dict[str, Any], base: dict[str, Any]) -> None:
     """One Tune trial: resolve its config, get the envs ready, train, report every evaluation."""
     from ray import tune
 
-    from agents.training.train import train
+    from pectoral_gym.agents.training.train import train
 
     config = trial_config(base["algo"], base["env_id"], params, seed=base["seed"], hyperparams=base["hyperparams"],
                           hyperparams_file=base["hyperparams_file"])
@@ -135,8 +146,8 @@ def _trainable(params: dict[str, Any], base: dict[str, Any]) -> None:
 
 def _final_evaluation(run_dir: Path, config: dict[str, Any], base: dict[str, Any]) -> dict[str, float]:
     """The run's best model on ``base["final_env"]``: the same held-out episodes for every trial."""
-    from agents.training.evaluate import evaluate
-    from agents.training.policy import load_policy
+    from pectoral_gym.agents.training.evaluate import evaluate
+    from pectoral_gym.agents.training.policy import load_policy
 
     final = _final_spec(config, base)
     result = evaluate(load_policy(run_dir), final["env_id"], n_episodes=final["n_episodes"], seed=base["final_seed"],
@@ -151,7 +162,7 @@ def _final_evaluation(run_dir: Path, config: dict[str, Any], base: dict[str, Any
 
 def _final_spec(config: dict[str, Any], base: dict[str, Any]) -> dict[str, Any] | None:
     """The final evaluation's env id, episodes and env arguments (the run's, randomisation as asked), or ``None``."""
-    from agents.training.evaluate import DEFAULT_RANDOMIZATION
+    from pectoral_gym.agents.training.evaluate import DEFAULT_RANDOMIZATION
 
     if not base["final_env"]:
         return None
@@ -162,7 +173,10 @@ def _final_spec(config: dict[str, Any], base: dict[str, Any]) -> dict[str, Any] 
 
 
 def tune_space(space: dict[str, Dimension]) -> dict[str, Any]:
-    """A space of :mod:`agents.studies.sweep_space` as Tune's ``param_space`` (grid search, samplers, fixed values)."""
+    """A space of :mod:`~pectoral_gym.agents.studies.sweep_space` as Tune's ``param_space``.
+
+    Grid search, samplers and fixed values.
+    """
     from ray import tune
 
     out: dict[str, Any] = {}
@@ -253,19 +267,21 @@ def run_sweep(args: argparse.Namespace, space: dict[str, Dimension], base: dict[
 
 
 def _parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m agents.studies.sweep", description=__doc__.split("\n\n")[0],
+    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.studies.sweep",
+                                     description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--env", default="PectoralFish-Averaged-v0", help="environment id")
     parser.add_argument("--algo", default="ppo", help="algorithm: ppo, sac, td3, a2c, ddpg")
     parser.add_argument("--param-space", metavar="FILE",
-                        help="parameter space, YAML or JSON (see agents.studies.sweep_space)")
+                        help="parameter space, YAML or JSON (see pectoral_gym.agents.studies.sweep_space)")
     parser.add_argument("--grid", nargs="*", default=[], metavar="KEY=V1,V2",
                         help="grid keys (over the file's); default space without either: seed=0,1,2")
     parser.add_argument("--num-samples", type=int, default=1, help="repeats of each grid point (fresh draws)")
     parser.add_argument("--seed", type=int, default=0, help="seed of trials whose space has no seed")
     parser.add_argument("--search-seed", type=int, default=0, help="seed of the sampled keys' draws")
     parser.add_argument("--hyperparams", nargs="*", default=[], metavar="KEY=VALUE",
-                        help="hyperparameters of every trial (as agents.training.train; the space's keys go over them)")
+                        help="hyperparameters of every trial (as pectoral_gym.agents.training.train; "
+                             "the space's keys go over them)")
     parser.add_argument("--hyperparams-file", metavar="YAML", help="hyperparameter file (default: agents/hyperparams)")
     parser.add_argument("--n-timesteps", type=float, help="steps per trial (default: the file's)")
     parser.add_argument("--eval-freq", type=float, help="steps in all between evaluations (default: the file's)")
@@ -277,7 +293,7 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help="final evaluation's episode k uses seed + k (the same for every trial; apart from the "
                              "training resets and the periodic evaluations)")
     parser.add_argument("--final-randomize", action="store_true",
-                        help="final evaluation with agents.training.evaluate.DEFAULT_RANDOMIZATION")
+                        help="final evaluation with pectoral_gym.agents.training.evaluate.DEFAULT_RANDOMIZATION")
     parser.add_argument("--metric", choices=METRICS, default="mean_return",
                         help="evaluation figure the scheduler compares (tracking_error: lower is better)")
     parser.add_argument("--scheduler", choices=("fifo", "asha"), default="fifo", help="fifo: run every trial out")
@@ -325,9 +341,9 @@ def main(argv: list[str] | None = None) -> int:
                 "cpus_per_trial": args.cpus_per_trial, "final_env": args.final_env,
                 "final_episodes": args.final_episodes, "final_seed": args.final_seed,
                 "final_randomize": args.final_randomize,
-                "command": shlex.join(["python", "-m", "agents.studies.sweep",
+                "command": shlex.join(["python", "-m", "pectoral_gym.agents.studies.sweep",
                                         *(sys.argv[1:] if argv is None else argv)])}
-        from agents.training.vec_adapter import make_fish_vec_env
+        from pectoral_gym.agents.training.vec_adapter import make_fish_vec_env
 
         for point in grid_points(space):  # every grid point resolves, and its env builds, before Ray starts
             config = trial_config(args.algo, args.env, point, seed=args.seed, hyperparams=hyperparams,

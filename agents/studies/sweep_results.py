@@ -1,4 +1,7 @@
-"""The results of an :mod:`agents.studies.sweep`: one row per trial, as CSV and Markdown tables and a plot of curves."""
+"""The results of a sweep (:mod:`~pectoral_gym.agents.studies.sweep`): one row per trial, tables and a plot of curves.
+
+Tables as CSV and Markdown.
+"""
 
 from __future__ import annotations
 

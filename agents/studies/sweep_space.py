@@ -1,7 +1,9 @@
-"""Parameter spaces of :mod:`agents.studies.sweep`, from YAML/JSON or ``--grid``, and each trial's config (no Ray here).
+"""Parameter spaces of :mod:`~pectoral_gym.agents.studies.sweep`, and each trial's config (no Ray here).
+
+Spaces come from YAML/JSON or ``--grid``.
 
 A space maps a key to the values a trial takes for it. Keys are dotted paths into
-the training config of :func:`agents.training.config.resolve_config`:
+the training config of :func:`pectoral_gym.agents.training.config.resolve_config`:
 
 * ``seed``: the trial's seed;
 * ``task``: ``goal`` or ``track``;
@@ -10,7 +12,7 @@ the training config of :func:`agents.training.config.resolve_config`:
 * environment arguments under ``env_kwargs.`` (``env_kwargs.time_penalty``,
   ``env_kwargs.randomize.drag_coef``: the relative half-width of one parameter);
 * ``randomize_scale``: ``s`` sets ``env_kwargs.randomize`` to
-  :data:`agents.training.evaluate.DEFAULT_RANDOMIZATION` with every width times ``s`` (``0``: none).
+  :data:`pectoral_gym.agents.training.evaluate.DEFAULT_RANDOMIZATION` with every width times ``s`` (``0``: none).
 
 A value in the file is one of::
 
@@ -36,7 +38,7 @@ from typing import Any
 
 import yaml
 
-from agents.training.config import parse_overrides, resolve_config
+from pectoral_gym.agents.training.config import parse_overrides, resolve_config
 
 __all__ = ["SAMPLERS", "Dimension", "grid_points", "load_param_space", "parse_grid", "trial_config"]
 
@@ -157,9 +159,9 @@ def trial_config(algo: str, env_id: str, params: dict[str, Any], seed: int = 0,
         hyperparams_file: Hyperparameter file (default: ``agents/hyperparams/<algo>.yml``).
 
     Raises:
-        ValueError: On unknown keys or values that :func:`agents.training.config.resolve_config` refuses.
+        ValueError: On unknown keys or values that :func:`pectoral_gym.agents.training.config.resolve_config` refuses.
     """
-    from agents.training.evaluate import DEFAULT_RANDOMIZATION
+    from pectoral_gym.agents.training.evaluate import DEFAULT_RANDOMIZATION
 
     params = dict(params)
     seed = params.pop("seed", seed)

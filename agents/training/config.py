@@ -1,7 +1,7 @@
 """Training configuration: hyperparameter YAML files keyed by env id, command-line overrides, the resolved config.
 
 ``agents/hyperparams/<algo>.yml`` is in rl-baselines3-zoo's format, so one file
-serves ``python -m agents.training.train`` and ``python -m rl_zoo3.train --conf-file``.
+serves ``python -m pectoral_gym.agents.training.train`` and ``python -m rl_zoo3.train --conf-file``.
 An env id maps to a dict of SB3 algorithm arguments plus zoo's own keys:
 
 * ``n_envs``: environments in the batched vector env;
@@ -18,7 +18,7 @@ without evaluating it (literals, ``dict(...)``, classes named ``nn.<Name>``,
 (linear decay from ``x`` to 0).
 
 The project's extras, which zoo would pass to the algorithm and which it takes from
-its command line instead, live in the file's top-level ``agents.training.train`` section,
+its command line instead, live in the file's top-level ``pectoral_gym.agents.training.train`` section,
 keyed by env id (zoo reads only the entry of ``--env``):
 
 * ``eval_freq``: environment steps in all between periodic evaluations (0: none);
@@ -30,7 +30,7 @@ keyed by env id (zoo reads only the entry of ``--env``):
   value drops a training argument: ``{randomize: null}`` validates on the nominal parameters). Arguments of
   the averaged model only (``scaling``, ``check_scaling_params``) are dropped on the full model;
 * ``action_change_penalty``: training-only penalty per unit of mean absolute action change between steps
-  (:mod:`agents.training.smoothing`; 0: off).
+  (:mod:`pectoral_gym.agents.training.smoothing`; 0: off).
 """
 
 from __future__ import annotations
@@ -77,7 +77,7 @@ _SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")
 
 def algo_class(algo: str) -> type:
     """The SB3 algorithm class of ``algo`` (``"ppo"``, ``"sac"``, ``"td3"``, ``"a2c"``, ``"ddpg"``)."""
-    from agents.training.policy import _algos
+    from pectoral_gym.agents.training.policy import _algos
 
     classes = _algos()
     if algo.lower() not in classes:
@@ -111,7 +111,9 @@ def load_hyperparams(algo: str, env_id: str, path: str | Path | None = None) -> 
 
 
 def load_project_settings(algo: str, env_id: str, path: str | Path | None = None) -> dict[str, Any]:
-    """The ``agents.training.train`` settings of ``env_id`` (:data:`PROJECT_KEYS`); ``{}`` if there are none.
+    """The training settings of ``env_id`` (:data:`PROJECT_KEYS`); ``{}`` if there are none.
+
+    They are the file's ``agents.train`` section, read by ``pectoral_gym.agents.training.train``.
 
     Raises:
         FileNotFoundError: If the file does not exist.
@@ -232,7 +234,8 @@ def resolve_config(algo: str, env_id: str, seed: int, task: str | None = None,
                    hyperparams_file: str | Path | None = None) -> dict[str, Any]:
     """The full, YAML-ready training config: file entry, then ``hyperparams``, ``env_kwargs``, ``task``.
 
-    The entry's ``agents.training.train`` settings (``eval_freq``, ``eval_episodes``) come first, the entry over them.
+    The entry's ``pectoral_gym.agents.training.train`` settings (``eval_freq``, ``eval_episodes``) come first, the entry
+    over them.
 
     Returns:
         A dict with ``algo``, ``env_id``, ``seed``, the keys of :data:`OWN_KEYS` (``env_kwargs`` always
@@ -240,8 +243,8 @@ def resolve_config(algo: str, env_id: str, seed: int, task: str | None = None,
         read into dicts, class names as text).
 
     Raises:
-        ValueError: On an unknown algorithm or algorithm argument, a zoo key agents.training.train does not support,
-            or invalid ``n_envs``/``n_timesteps``.
+        ValueError: On an unknown algorithm or algorithm argument, a zoo key pectoral_gym.agents.training.train does not
+            support, or invalid ``n_envs``/``n_timesteps``.
     """
     cls = algo_class(algo)
     params = load_project_settings(algo, env_id, hyperparams_file)
@@ -249,8 +252,8 @@ def resolve_config(algo: str, env_id: str, seed: int, task: str | None = None,
     params = _as_dicts(_deep_update(params, copy.deepcopy(hyperparams or {})))
     unsupported = sorted(set(params) & set(_UNSUPPORTED))
     if unsupported:
-        raise ValueError(f"rl-baselines3-zoo keys {unsupported} are not supported by agents.training.train "
-                         "(train with python -m rl_zoo3.train instead)")
+        raise ValueError(f"rl-baselines3-zoo keys {unsupported} are not supported by "
+                         "pectoral_gym.agents.training.train (train with python -m rl_zoo3.train instead)")
     own = {key: params.pop(key, copy.deepcopy(_DEFAULTS.get(key))) for key in OWN_KEYS}
     own["env_kwargs"] = dict(own["env_kwargs"] or {})
     own["env_kwargs"].update(env_kwargs or {})
@@ -286,7 +289,7 @@ def evaluation_env(config: dict[str, Any]) -> tuple[str, dict[str, Any]]:
     Raises:
         ValueError: If ``eval_env`` is not a registered fish env id.
     """
-    from agents.training.evaluate import model_kwargs
+    from pectoral_gym.agents.training.evaluate import model_kwargs
     from pectoral_gym.registration import ENV_IDS
 
     env_id = config.get("eval_env") or config["env_id"]

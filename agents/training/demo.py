@@ -2,13 +2,13 @@
 
 CLI::
 
-    python -m agents.training.demo                 # a few minutes on 2 CPU cores
-    python -m agents.training.demo --quick         # smoke run, seconds
-    python -m agents.training.demo --out demo_out --timesteps 1e6 --episodes 200
+    python -m pectoral_gym.agents.training.demo                 # a few minutes on 2 CPU cores
+    python -m pectoral_gym.agents.training.demo --quick         # smoke run, seconds
+    python -m pectoral_gym.agents.training.demo --out demo_out --timesteps 1e6 --episodes 200
 
 Writes ``<out>/report.md`` (results table, training figures), ``<out>/results.json``,
 ``<out>/trajectories.png`` and the training run folder ``<out>/run/``
-(``python -m agents.training.evaluate --policy <out>/run`` evaluates it again).
+(``python -m pectoral_gym.agents.training.evaluate --policy <out>/run`` evaluates it again).
 """
 
 from __future__ import annotations
@@ -32,10 +32,10 @@ QUICK = {"n_timesteps": 1024, "n_envs": 8, "n_steps": 64, "batch_size": 128, "n_
 def run_demo(out: str | Path, quick: bool = False, seed: int = 0, timesteps: int | None = None,
              episodes: int | None = None, task: str = "goal", progress: bool = True) -> dict[str, Any]:
     """Train, evaluate and report (see the module docstring); returns the results dict written to JSON."""
-    from agents.training.config import resolve_config
-    from agents.training.evaluate import evaluate, format_table, plot_trajectories, write_json
-    from agents.training.policy import load_policy
-    from agents.training.train import train
+    from pectoral_gym.agents.training.config import resolve_config
+    from pectoral_gym.agents.training.evaluate import evaluate, format_table, plot_trajectories, write_json
+    from pectoral_gym.agents.training.policy import load_policy
+    from pectoral_gym.agents.training.train import train
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -48,7 +48,8 @@ def run_demo(out: str | Path, quick: bool = False, seed: int = 0, timesteps: int
     if run_dir.exists():
         raise FileExistsError(f"{run_dir} exists; choose another --out or remove it")
     start = time.perf_counter()
-    train(config, run_dir, progress=progress, command=" ".join(["python", "-m", "agents.training.demo", *sys.argv[1:]]))
+    train(config, run_dir, progress=progress,
+          command=" ".join(["python", "-m", "pectoral_gym.agents.training.demo", *sys.argv[1:]]))
     training = json.loads((run_dir / "training.json").read_text())
     policy = load_policy(run_dir)
     policy.name = f"ppo ({TRAIN_ENV.split('-')[1].lower()})"
@@ -95,9 +96,10 @@ def _report(summary: dict[str, Any], table: str, config: dict[str, Any]) -> str:
         "(transitional ones too); `return` sum of "
         "rewards. Definitions in `agents/training/metrics.py`; per-env JSON next to this report.",
         "",
-        "Going further: `python -m agents.training.train --env PectoralFish-Averaged-v0 --algo ppo --task goal "
-        "--n-timesteps 2e6`, then `python -m agents.training.evaluate --policy runs/... --env PectoralFish-Full-v0 "
-        "--randomize`; `python -m agents.studies.benchmark` for every controller; see `docs/agents.md`.",
+        "Going further: `python -m pectoral_gym.agents.training.train --env PectoralFish-Averaged-v0 --algo ppo "
+        "--task goal --n-timesteps 2e6`, then `python -m pectoral_gym.agents.training.evaluate --policy runs/... "
+        "--env PectoralFish-Full-v0 --randomize`; `python -m pectoral_gym.agents.studies.benchmark` for every "
+        "controller; see `docs/agents.md`.",
         "",
         f"Hyperparameters: `{json.dumps(config['algo_kwargs'])}`, n_envs {config['n_envs']}, "
         f"normalize {json.dumps(config['normalize'])}.",
@@ -107,7 +109,8 @@ def _report(summary: dict[str, Any], table: str, config: dict[str, Any]) -> str:
 
 
 def _parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m agents.training.demo", description=__doc__.split("\n\n")[0],
+    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.training.demo",
+                                     description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--out", default="demo_out", help="output folder")
     parser.add_argument("--quick", action="store_true", help="smoke run: tiny training, 5 episodes")

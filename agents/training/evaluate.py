@@ -3,14 +3,15 @@
 Episode ``k`` of an evaluation with ``seed`` is reset with ``seed + k``, so the
 same seed gives the same starts and targets for every controller and every
 model (averaged, full). Episodes run batched on the native vector env: a
-:class:`~agents.training.policy.BatchController` acts on all of them in one call; other
+:class:`~pectoral_gym.agents.training.policy.BatchController` acts on all of them in one call; other
 controllers come from a factory, one per env slot.
 
 CLI::
 
-    python -m agents.training.evaluate --policy runs/PectoralFish-Averaged-v0/ppo_goal_seed0_...
-    python -m agents.training.evaluate --policy RUN --env PectoralFish-Full-v0 --episodes 100 --seed 0 [--randomize]
-    python -m agents.training.evaluate --baseline hand --env PectoralFish-Full-v0 --task goal
+    python -m pectoral_gym.agents.training.evaluate --policy runs/PectoralFish-Averaged-v0/ppo_goal_seed0_...
+    python -m pectoral_gym.agents.training.evaluate --policy RUN --env PectoralFish-Full-v0 --episodes 100 --seed 0
+    [--randomize]
+    python -m pectoral_gym.agents.training.evaluate --baseline hand --env PectoralFish-Full-v0 --task goal
 
 A run folder's environment arguments (``config.yaml``) are reused, ``--env-kwargs`` on top, except
 ``randomize`` (``--randomize`` sets it) and, on the full model, the averaged model's own settings
@@ -30,9 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from agents.training.metrics import METRICS, Trajectory, episode_metrics, summarize
-from agents.training.policy import BatchController, Controller
-from agents.training.results import EvaluationResult, format_table, jsonable, plot_trajectories, write_json
+from pectoral_gym.agents.training.metrics import METRICS, Trajectory, episode_metrics, summarize
+from pectoral_gym.agents.training.policy import BatchController, Controller
+from pectoral_gym.agents.training.results import EvaluationResult, format_table, jsonable, plot_trajectories, write_json
 from pectoral_gym.envs.layout import ACTION_SIZE
 from pectoral_gym.envs.observation import OBS_POSITION, OBS_SIZE, decode
 from pectoral_gym.model.spec import ENV_OPTIONS
@@ -76,7 +77,7 @@ def trained_env_kwargs(path: str | Path, env_id: str) -> dict[str, Any]:
     Left out: :data:`TRAINING_ONLY` (the randomisation, the full model's ``integration``).
     ``{}`` for a ``.zip`` (no run config next to it).
     """
-    from agents.training.policy import read_config
+    from pectoral_gym.agents.training.policy import read_config
 
     run = read_config(path).get("env_kwargs", {}) if Path(path).is_dir() else {}
     return model_kwargs(env_id, {k: v for k, v in (run or {}).items() if k not in TRAINING_ONLY})
@@ -91,7 +92,7 @@ def make_vector_env(env_id: str, num_envs: int, env_kwargs: dict[str, Any] | Non
 
     if env_id not in ENV_IDS:
         raise ValueError(f"unknown env id {env_id!r}; fish envs: {sorted(ENV_IDS)}")
-    from agents.training.vec_adapter import env_arguments
+    from pectoral_gym.agents.training.vec_adapter import env_arguments
 
     return PectoralFishVectorEnv(num_envs=num_envs, model=ENV_IDS[env_id], **env_arguments(env_kwargs))
 
@@ -113,7 +114,7 @@ def evaluate(controller: ControllerLike, env_id: str, n_episodes: int = 100, see
         n_episodes: Number of episodes (>= 1).
         seed: Episode ``k`` is reset with ``seed + k``.
         env_kwargs: Environment arguments (``task``, ``randomize``, reward weights, ...). A policy trained
-            with the fin block (an ``obs_size`` of 27, :class:`agents.training.policy.SB3Controller`) gets
+            with the fin block (an ``obs_size`` of 27, :class:`pectoral_gym.agents.training.policy.SB3Controller`) gets
             ``observe_fins=True`` unless ``env_kwargs`` sets it.
         n_envs: Vector-env slots (default: ``min(n_episodes, 128)``, 1 for a plain controller).
         confidence: Confidence level of the bootstrap intervals.
@@ -253,10 +254,12 @@ def _trajectory(rec: dict[str, list], dt: float, success: bool, wall: bool, trun
 
 
 def _parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m agents.training.evaluate", description=__doc__.split("\n\n")[0],
+    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.training.evaluate",
+                                     description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     who = parser.add_mutually_exclusive_group(required=True)
-    who.add_argument("--policy", metavar="RUN|ZIP", help="run folder of agents.training.train or an SB3 .zip")
+    who.add_argument("--policy", metavar="RUN|ZIP",
+                     help="run folder of pectoral_gym.agents.training.train or an SB3 .zip")
     who.add_argument("--baseline", metavar="NAME", help="baseline controller: random, hand or nmpc")
     parser.add_argument("--env", default="PectoralFish-Full-v0", help="environment id")
     parser.add_argument("--task", choices=("goal", "track"), help="task (default: the run's task, else goal)")
@@ -285,18 +288,18 @@ def main(argv: list[str] | None = None) -> int:
         if not isinstance(env_kwargs, dict):
             raise ValueError("--env-kwargs must be a JSON object")
         if args.policy:
-            from agents.training.policy import load_policy
+            from pectoral_gym.agents.training.policy import load_policy
 
             env_kwargs = {**trained_env_kwargs(args.policy, args.env), **env_kwargs}
             controller: ControllerLike = load_policy(args.policy, algo=args.algo)
             name = Path(args.policy).name.removesuffix(".zip")
         else:
-            from agents.baselines import make_baseline
+            from pectoral_gym.agents.baselines import make_baseline
             from pectoral_gym.envs.core import EnvConfig
             from pectoral_gym.registration import ENV_IDS
 
             baseline_kwargs = {**env_kwargs, **({"task": args.task} if args.task else {})}
-            from agents.training.vec_adapter import env_arguments
+            from pectoral_gym.agents.training.vec_adapter import env_arguments
 
             config = EnvConfig(model=ENV_IDS.get(args.env, "full"), **env_arguments(baseline_kwargs))
             controller = lambda: make_baseline(args.baseline, config)  # noqa: E731 - factory, one per slot

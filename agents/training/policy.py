@@ -2,9 +2,9 @@
 
 A controller maps one observation ``(19,)`` of a fish environment to one
 normalised action ``(8,)`` in [-1, 1]. Trained Stable-Baselines3 policies and
-the baseline controllers of :mod:`agents.baselines` both implement
-:class:`Controller`, so :mod:`agents.training.evaluate`, the benchmark and
-``hardware.deploy`` treat them alike.
+the baseline controllers of :mod:`pectoral_gym.agents.baselines` both implement
+:class:`Controller`, so :mod:`pectoral_gym.agents.training.evaluate`, the benchmark and
+``pectoral_gym.hardware.deploy`` treat them alike.
 
 A controller that is stateless across steps may also offer
 ``act_batch(obs (n, 19)) -> (n, 8)`` (:class:`BatchController`); the
@@ -225,16 +225,16 @@ def _check_normalization(normalization: dict[str, Any], model: Any, zip_path: Pa
 def _zoo_params_dir(run_dir: Path) -> Path | None:
     """The ``<env>/`` folder of an rl-baselines3-zoo run folder (it holds ``config.yml``), or ``None``."""
     if (run_dir / "config.yaml").is_file():
-        return None  # an agents.training.train run folder
+        return None  # a pectoral_gym.agents.training.train run folder
     found = sorted(p.parent for p in run_dir.glob("*/config.yml"))
     return found[0] if len(found) == 1 else None
 
 
 def _stats_beside(zip_path: Path) -> Path | None:
-    """The ``VecNormalize`` pickle that goes with an SB3 zip, in agents.training.train's or rl-baselines3-zoo's layout.
+    """The ``VecNormalize`` pickle that goes with an SB3 zip, in our training's or rl-baselines3-zoo's layout.
 
-    agents.training.train: ``vecnormalize_final.pkl`` with ``model.zip``, else ``vecnormalize.pkl`` beside the zip.
-    rl-baselines3-zoo (``<log>/<algo>/<env>_<n>/``): ``<env>/vecnormalize.pkl`` (saved on every new best and
+    pectoral_gym.agents.training.train: ``vecnormalize_final.pkl`` with ``model.zip``, else ``vecnormalize.pkl`` beside
+    the zip. rl-baselines3-zoo (``<log>/<algo>/<env>_<n>/``): ``<env>/vecnormalize.pkl`` (saved on every new best and
     at the end, so it holds the final statistics; zoo's ``enjoy --load-best`` uses it with ``best_model.zip``
     too), and ``rl_model_vecnormalize_<N>_steps.pkl`` with a checkpoint ``rl_model_<N>_steps.zip``.
     """
@@ -257,8 +257,8 @@ def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) 
     """Load a trained policy as a deterministic :class:`Controller`.
 
     Args:
-        path: A run folder of :mod:`agents.training.train` (``best_model.zip`` preferred over ``model.zip``;
-            ``vecnormalize.pkl`` applied when present, ``vecnormalize_final.pkl`` with ``model.zip``;
+        path: A run folder of :mod:`pectoral_gym.agents.training.train` (``best_model.zip`` preferred over
+            ``model.zip``; ``vecnormalize.pkl`` applied when present, ``vecnormalize_final.pkl`` with ``model.zip``;
             the algorithm read from ``config.yaml``), a run folder of rl-baselines3-zoo
             (``<log>/<algo>/<env>_<n>``: the final ``<env>.zip``, else ``best_model.zip``, with
             ``<env>/vecnormalize.pkl``, which holds the final statistics), or an SB3 ``.zip`` of either
@@ -307,7 +307,7 @@ def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) 
         stats_path = _stats_beside(path)
         if stats_path is not None:
             normalization = _load_normalization(stats_path)
-        config = read_config(path.parent)  # a model of an agents.training.train run folder
+        config = read_config(path.parent)  # a model of a pectoral_gym.agents.training.train run folder
         if config:
             trained, trained_from = _trained_settings(config, path.parent / "config.yaml"), path.parent / "config.yaml"
     else:

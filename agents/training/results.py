@@ -1,6 +1,6 @@
 """The result of an evaluation and its outputs: JSON file, Markdown table, trajectory plot.
 
-:func:`agents.training.evaluate.evaluate` returns an :class:`EvaluationResult`; the
+:func:`pectoral_gym.agents.training.evaluate.evaluate` returns an :class:`EvaluationResult`; the
 benchmark and the demo write it with these functions.
 """
 
@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from agents.training.metrics import MetricSummary, Trajectory
+from pectoral_gym.agents.training.metrics import MetricSummary, Trajectory
 
 __all__ = ["EvaluationResult", "format_table", "json_default", "jsonable", "plot_trajectories", "save_figure",
            "write_json"]
@@ -22,7 +22,7 @@ __all__ = ["EvaluationResult", "format_table", "json_default", "jsonable", "plot
 
 @dataclass
 class EvaluationResult:
-    """Metrics of an evaluation (see :mod:`agents.training.metrics` for the definitions).
+    """Metrics of an evaluation (see :mod:`pectoral_gym.agents.training.metrics` for the definitions).
 
     Attributes:
         controller: Controller name.

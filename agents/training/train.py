@@ -2,21 +2,21 @@
 
 CLI::
 
-    python -m agents.training.train --env PectoralFish-Averaged-v0 --algo ppo --task goal --seed 0
-    python -m agents.training.train --algo sac --hyperparams n_timesteps=5e4 learning_rate=3e-4 \
+    python -m pectoral_gym.agents.training.train --env PectoralFish-Averaged-v0 --algo ppo --task goal --seed 0
+    python -m pectoral_gym.agents.training.train --algo sac --hyperparams n_timesteps=5e4 learning_rate=3e-4 \
         --env-kwargs '{"task": "track"}'
 
-The hyperparameter files are rl-baselines3-zoo's (``agents.training.config``): ``python -m rl_zoo3.train --conf-file
-agents/hyperparams/ppo.yml --gym-packages pectoral_gym ...`` trains from the same file. The periodic
-evaluation settings come from the file's ``agents.training.train`` section, ``--eval-freq``/``--eval-episodes`` or
-``--hyperparams``.
+The hyperparameter files are rl-baselines3-zoo's (``pectoral_gym.agents.training.config``): ``python -m rl_zoo3.train
+--conf-file agents/hyperparams/ppo.yml --gym-packages pectoral_gym ...`` trains from the same file. The periodic
+evaluation settings come from the file's ``pectoral_gym.agents.training.train`` section,
+``--eval-freq``/``--eval-episodes`` or ``--hyperparams``.
 
 Each run writes ``runs/<env>/<algo>_<task>_seed<seed>_<stamp>/``: ``model.zip``
 (final), ``best_model.zip`` and ``vecnormalize.pkl`` (best on the periodic
 evaluation, its observation statistics; the evaluation runs on ``eval_env``, for
-``ppo.yml`` the full model: :func:`agents.training.config.evaluation_env`), ``vecnormalize_final.pkl`` (statistics
-of ``model.zip``), ``config.yaml`` (resolved config, with the model trained on as ``model_spec``:
-:func:`agents.training.config.run_model_spec`), ``command.txt``,
+``ppo.yml`` the full model: :func:`pectoral_gym.agents.training.config.evaluation_env`), ``vecnormalize_final.pkl``
+(statistics of ``model.zip``), ``config.yaml`` (resolved config, with the model trained on as ``model_spec``:
+:func:`pectoral_gym.agents.training.config.run_model_spec`), ``command.txt``,
 ``training.json`` (time, steps/s, probe time, evaluations) and TensorBoard logs in ``tb/``.
 The same ``--seed`` on the same machine repeats a run.
 
@@ -39,7 +39,7 @@ from typing import Any
 
 import yaml
 
-from agents.training.config import (
+from pectoral_gym.agents.training.config import (
     algo_class,
     algo_kwargs,
     evaluation_env,
@@ -75,13 +75,16 @@ def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool,
     from stable_baselines3.common.callbacks import BaseCallback
     from tqdm.auto import tqdm
 
-    from agents.training.evaluate import evaluate
-    from agents.training.policy import SB3Controller
+    from pectoral_gym.agents.training.evaluate import evaluate
+    from pectoral_gym.agents.training.policy import SB3Controller
 
     eval_env, eval_kwargs = evaluation_env(config)
 
     class TrainCallback(BaseCallback):
-        """Progress bar, periodic evaluation with :func:`agents.training.evaluate.evaluate`, best model kept."""
+        """Progress bar, periodic evaluation, best model kept.
+
+        Evaluates with :func:`pectoral_gym.agents.training.evaluate.evaluate`.
+        """
 
         def __init__(self):
             super().__init__()
@@ -157,7 +160,7 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
           torch_threads: int = 1, device: str = "cpu", command: str | None = None,
           on_evaluation: Callable[[dict[str, Any]], bool | None] | None = None,
           probe: Callable[[Any, dict[str, Any]], dict[str, Any] | None] | None = None) -> Path:
-    """Train with a resolved config (:func:`agents.training.config.resolve_config`) and fill ``run_dir``.
+    """Train with a resolved config (:func:`pectoral_gym.agents.training.config.resolve_config`) and fill ``run_dir``.
 
     Args:
         config: The resolved config.
@@ -172,10 +175,11 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
             ``track``, ``tracking_error``); returning ``False`` stops training there (the final
             model is still saved). Ray Tune's ``tune.report`` and the benchmark's time to solve use it.
         probe: Called after every periodic evaluation (before ``on_evaluation``) with the current
-            policy as a deterministic controller (:class:`agents.training.policy.SB3Controller`, its observation
-            statistics copied) and the record; a dict it returns is stored in the record as ``probe``
+            policy as a deterministic controller (:class:`pectoral_gym.agents.training.policy.SB3Controller`, its
+            observation statistics copied) and the record; a dict it returns is stored in the record as ``probe``
             (JSON values). Its wall time is left out of ``elapsed_s``, and it plays no part in the
-            best-model selection. :class:`agents.studies.solve_time.SolveProbe` evaluates on the full model.
+            best-model selection. :class:`pectoral_gym.agents.studies.solve_time.SolveProbe` evaluates on the full
+            model.
 
     Returns:
         The run folder.
@@ -184,7 +188,7 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
-    from agents.training.vec_adapter import make_fish_vec_env
+    from pectoral_gym.agents.training.vec_adapter import make_fish_vec_env
 
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
@@ -198,9 +202,10 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
     (run_dir / "command.txt").write_text((command or shlex.join(sys.argv)) + "\n")
     venv = make_fish_vec_env(config["env_id"], config["n_envs"], config["env_kwargs"], seed=seed)
     if config.get("action_change_penalty"):
-        from agents.training.smoothing import ActionChangePenalty
+        from pectoral_gym.agents.training.smoothing import ActionChangePenalty
 
-        venv = ActionChangePenalty(venv, config["action_change_penalty"])  # training only (agents.training.smoothing)
+        # training only (pectoral_gym.agents.training.smoothing)
+        venv = ActionChangePenalty(venv, config["action_change_penalty"])
     venv = VecMonitor(venv)
     normalize = config["normalize"]
     if normalize:
@@ -231,7 +236,8 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
 
 
 def _parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m agents.training.train", description=__doc__.split("\n\n")[0],
+    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.training.train",
+                                     description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument("--env", default="PectoralFish-Averaged-v0", help="environment id")
     parser.add_argument("--algo", default="ppo", help="algorithm: ppo, sac, td3, a2c, ddpg")
@@ -252,7 +258,7 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--quick", action="store_true",
                         help="smoke run in seconds: overrides the run's size (n_timesteps 256, 2 envs, no evaluation; "
-                             "see agents.training.train.QUICK); the policy means nothing")
+                             "see pectoral_gym.agents.training.train.QUICK); the policy means nothing")
     return parser.parse_args(argv)
 
 
@@ -282,14 +288,15 @@ def main(argv: list[str] | None = None) -> int:
             raise ValueError("--env-kwargs must be a JSON object")
         config = resolve_config(args.algo, args.env, args.seed, task=args.task, hyperparams=overrides,
                                 env_kwargs=env_kwargs, hyperparams_file=args.hyperparams_file)
-        from agents.training.vec_adapter import make_fish_vec_env
+        from pectoral_gym.agents.training.vec_adapter import make_fish_vec_env
 
         make_fish_vec_env(config["env_id"], 1, config["env_kwargs"]).close()  # bad env arguments fail here, early
     except (ValueError, FileNotFoundError, json.JSONDecodeError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
     run_dir = make_run_dir(config, args.log_dir, args.run_name)
-    command = shlex.join(["python", "-m", "agents.training.train", *(sys.argv[1:] if argv is None else argv)])
+    command = shlex.join(["python", "-m", "pectoral_gym.agents.training.train",
+                          *(sys.argv[1:] if argv is None else argv)])
     train(config, run_dir, progress=not args.no_progress, verbose=args.verbose, torch_threads=args.torch_threads,
           device=args.device, command=command)
     stats = json.loads((run_dir / "training.json").read_text())

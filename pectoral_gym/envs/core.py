@@ -70,12 +70,12 @@ class EnvConfig:
         randomize: FishParams field name -> relative half-width ``w``; each
             reset multiplies the field by a factor drawn from ``U(1-w, 1+w)``.
         scaling: Averaged model only: ``"identified"`` (the shipped coefficients file), ``"none"``
-            (K = 1), or the path of a coefficients file (``python -m scaling identify``).
+            (K = 1), or the path of a coefficients file (``python -m pectoral_gym.scaling identify``).
         check_scaling_params: Averaged model only: raise ``ValueError`` when the coefficients file
             records other model parameters than ``params`` (K identified for another robot).
             ``False`` is the explicit opt-out. ``randomize`` draws around ``params`` and is not checked.
             On the full model: the check of the K its model-based controllers plan with
-            (:func:`agents.controllers.fin_map.planning_spec`).
+            (:func:`pectoral_gym.agents.controllers.fin_map.planning_spec`).
         transitions: Averaged model only: add the forcing of transitional half-strokes (after every
             pattern change; :class:`~pectoral_gym.model.models.AveragedModel`, ``docs/model.md`` 3.7). Off by
             default in the envs, unlike the model: it depends on the fins' stroke phase, which the default
@@ -99,7 +99,7 @@ class EnvConfig:
         observe_fins: Append each fin's half-stroke in progress to the observation (angle now, the next
             turning point, power or recovery, time left; :mod:`pectoral_gym.envs.observation`): the
             stroke phase on which a new command's effect depends. Off by default (the 19-entry
-            observation); the robot env replays the fins on the PC (``hardware.finreplay``).
+            observation); the robot env replays the fins on the PC (``pectoral_gym.hardware.finreplay``).
         progress_weight: Goal task: reward per metre of approach [1/m].
         goal_bonus: Goal task: reward for reaching the goal.
         wall_penalty: Penalty when the nose or tail leaves the tank.

@@ -141,7 +141,7 @@ def combined_waveform(harmonics: np.ndarray, mean_abs: np.ndarray | None, period
     """Samples of the fins' combined yaw waveform over the damping's window, rate-corrected (``docs/model.md`` 3.6).
 
     The numpy form of :func:`pectoral_gym.model.forcing_cache.yaw_waveform`, for analysis
-    (``scaling.validation.yaw_balance``) and tests.
+    (``pectoral_gym.scaling.validation.yaw_balance``) and tests.
 
     Args:
         harmonics: ``(fins, H)`` complex ``c_k`` [rad/s] of each fin at its beat phase at the

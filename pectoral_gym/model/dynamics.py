@@ -212,7 +212,7 @@ def linearised_rate(speed, omega, oscillation, m1, m2, j3, c1, c2, c4):
 
     The step-size rule of every explicit integrator of the body dynamics: the
     averaged model's RK4 (:mod:`pectoral_gym.model.stepping`) and the scaling NMPC's
-    (``scaling.identification.nmpc.auto_substeps``). RK4 is stable for ``h * rate <= 2.78``.
+    (``pectoral_gym.scaling.identification.nmpc.auto_substeps``). RK4 is stable for ``h * rate <= 2.78``.
 
     Derivation, at speed ``V = |v|``, drift angle ``alpha`` (``|alpha| <= pi/2``),
     yaw rate ``w``, with ``u = J v = (vy, -vx)`` (``|u| = V``, ``u . v = 0``) and

@@ -52,8 +52,10 @@ from __future__ import annotations
 import ast
 import functools
 import hashlib
+import importlib.util
 import inspect
 import os
+import sys
 import types
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -174,10 +176,8 @@ def source_tree(module: str, file: str | os.PathLike[str]) -> dict[str, Path | N
         Module name to source file (``None`` where the file cannot be read), ``module`` included.
     """
     path = Path(file)
-    parts = module.split(".")
-    base = path.parents[len(parts) - (path.name != "__init__.py")] if len(parts) > 1 or path.name == "__init__.py" \
-        else path.parent
-    top = parts[0]
+    base = _base(module, path)
+    top = module.split(".")[0]
     tree: dict[str, Path | None] = {}
     todo = [(module, path)]
     while todo:
@@ -249,13 +249,59 @@ def _imports(tree: ast.Module | None, package: str) -> Iterator[tuple[str, ...]]
                 yield (source,) if alias.name == "*" else (f"{source}.{alias.name}", source)
 
 
+def _base(module: str, path: Path) -> Path:
+    """The folder that holds the top-level package of ``module``, whose source file is ``path``.
+
+    The file's folders when they spell the module's name; else (a subpackage that the install maps to a
+    folder of another name, as ``pectoral_gym.agents`` to the checkout's ``agents/``) the folder that the
+    import system finds the top-level package in (found, not imported).
+    """
+    parts = module.split(".")
+    folder = path.parent
+    for name in reversed(parts if path.name == "__init__.py" else parts[:-1]):
+        if folder.name != name:
+            spec = importlib.util.find_spec(parts[0])
+            locations = list(spec.submodule_search_locations or ()) if spec is not None else []
+            return Path(locations[0]).parent if locations else path.parent
+        folder = folder.parent
+    return folder
+
+
 def _module_file(base: Path, module: str) -> Path | None:
-    """The source file of ``module`` below ``base`` (``None`` if it is not a module there, e.g. a name in one)."""
-    stem = base.joinpath(*module.split("."))
-    for candidate in (stem.with_suffix(".py"), stem / "__init__.py"):
-        if candidate.is_file():
-            return candidate
+    """The source file of ``module`` (``None`` if it is not a module, e.g. a name in one).
+
+    Looked up below ``base`` package by package, as the import system would, also in the folder that
+    the install maps a subpackage to where that is not the folder of its name (setuptools'
+    ``package-dir``: ``pectoral_gym.agents`` is the checkout's ``agents/``).
+    """
+    parent, _, leaf = module.rpartition(".")
+    folders = _package_folders(base, parent) if parent else (base,)
+    for folder in folders:
+        stem = folder / leaf
+        for candidate in (stem.with_suffix(".py"), stem / "__init__.py"):
+            if candidate.is_file():
+                return candidate
+    for folder in _mapped_folders(module, folders) if parent and folders else ():
+        if (folder / "__init__.py").is_file():
+            return folder / "__init__.py"
     return None
+
+
+def _package_folders(base: Path, package: str) -> tuple[Path, ...]:
+    """The folder of the submodules of ``package`` (none if it is not a package)."""
+    init = _module_file(base, package)
+    return (init.parent,) if init is not None and init.name == "__init__.py" else ()
+
+
+@functools.cache
+def _mapped_folders(package: str, parent_folders: tuple[Path, ...]) -> tuple[Path, ...]:
+    """The folders a finder of ``sys.meta_path`` (an editable install's) maps ``package`` to; imports nothing."""
+    for finder in sys.meta_path:
+        find_spec = getattr(finder, "find_spec", None)
+        spec = find_spec(package, [os.fspath(f) for f in parent_folders]) if find_spec is not None else None
+        if spec is not None:
+            return tuple(Path(f) for f in spec.submodule_search_locations or ())
+    return ()
 
 
 def _filled(cell: Any) -> bool:

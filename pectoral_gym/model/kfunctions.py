@@ -301,8 +301,8 @@ class ScalingFunctions:
             shown = ", ".join(f"{k}: identified {a!r}, given {b!r}" for k, (a, b) in sorted(mismatch.items()))
             raise ValueError(
                 f"{where} was identified for other model parameters ({shown}); its K would not describe "
-                "this robot. Identify K for it (python -m scaling identify --params FILE) and use that file, "
-                "or turn the check off (check_scaling_params=False, --no-params-check)"
+                "this robot. Identify K for it (python -m pectoral_gym.scaling identify --params FILE) and use that "
+                "file, or turn the check off (check_scaling_params=False, --no-params-check)"
             )
 
     @classmethod

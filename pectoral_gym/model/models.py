@@ -30,7 +30,7 @@ REST = FinBeat.rest()
 #: converged (halving both moves steady states by < 0.02 %); ``"fast"`` takes 8 RK4 substeps per
 #: half-stroke, at most 0.05 s, and runs about 3x faster, within 0.2 % (p90; median 0.02-0.04 %) of the
 #: reference on the fidelity benchmark's open-loop runs and within 1 % on its steady states
-#: (``python -m scaling fidelity --candidate full-fast``; docs/model.md section 6).
+#: (``python -m pectoral_gym.scaling fidelity --candidate full-fast``; docs/model.md section 6).
 FULL_INTEGRATION = {"reference": (0.01, 16), "fast": (0.05, 8)}
 _FIELDS = ("bias", "amplitude", "period", "ratio")
 BeatLike = FinBeat | np.ndarray | Sequence[float] | None

@@ -125,7 +125,7 @@ class AveragedSpec(ModelSpec):
 
     Attributes:
         scaling: The scaling functions K: ``"identified"`` (the shipped coefficients file), ``"none"``
-            (K = 1) or the path of a coefficients file (``python -m scaling identify``).
+            (K = 1) or the path of a coefficients file (``python -m pectoral_gym.scaling identify``).
         check_params: Refuse a coefficients file that records other model parameters than the
             ``params`` it is built for (K identified for another robot); ``False`` is the explicit opt-out.
         yaw_damping: ``"sinusoid"``, ``"waveform"`` or ``"none"`` (:data:`YAW_DAMPINGS`): the spec picks

@@ -14,7 +14,7 @@ its exact building blocks, :func:`half_stroke_mean_force_sx`, :func:`power_strok
 :func:`transition_forcing_sx` (parity with the compiled kernel, ``stepping._transition``, in
 ``tests/test_symbolic.py``). Which half-stroke is transitional depends on the fins' stroke phase,
 a discrete state; the NMPC baseline, which does not observe it, uses their expectation over the
-phase (:func:`expected_transition_impulse_sx`, ``agents.nmpc.problem``).
+phase (:func:`expected_transition_impulse_sx`, ``pectoral_gym.agents.nmpc.problem``).
 """
 
 from __future__ import annotations

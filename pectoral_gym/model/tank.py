@@ -2,7 +2,7 @@
 
 Every rule about the walls lives here and is used by the task kernels (wall contact of nose and tail,
 :mod:`pectoral_gym.envs.tasks.kernels`), the NMPC's wall and stopping-band terms (``agents/controllers/stop_band.py``,
-``agents/nmpc/problem.py``) and the robot's geofence (``hardware.safety.Geofence`` uses the same numbers:
+``agents/nmpc/problem.py``) and the robot's geofence (``pectoral_gym.hardware.safety.Geofence`` uses the same numbers:
 ``tests/test_tank.py``).
 
 The formulas are written once as arithmetic on their arguments (:func:`outline_circles`,

@@ -236,7 +236,8 @@ def _add_model_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--left", metavar="G0,GA,TP,ZETA", help=f"left {FIN_HELP}")
     p.add_argument("--scaling", default=None, metavar="identified|none|FILE",
                    help="averaged models: scaling functions K: the shipped file, 'none' (K = 1) or a coefficients "
-                        "file from `python -m scaling identify` (default: the model's, identified)")
+                        "file from `python -m pectoral_gym.scaling identify` (default: the model's, "
+                        "identified)")
     p.add_argument("--params", metavar="FILE",
                    help="model parameters: a JSON or YAML file of FishParams fields (others keep Table 1)")
     p.add_argument("--no-params-check", action="store_true",

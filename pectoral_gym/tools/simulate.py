@@ -19,6 +19,7 @@ global pyplot state is left alone.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import math
 from collections.abc import Sequence
@@ -30,6 +31,7 @@ import numpy as np
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
 from pectoral_gym.model.spec import MODELS, ModelSpec, make_model
+from pectoral_gym.tools.optional import require
 
 __all__ = [
     "CSV_COLUMNS",
@@ -99,7 +101,7 @@ def simulate(
             lands exactly on ``duration``.
         params: Model parameters (default: Table 1).
         scaling, forcing: Replace the averaged spec's K and forcing (:func:`make_model`; the defaults keep the spec's).
-        progress: Show a tqdm progress bar (on a terminal only).
+        progress: Show a tqdm progress bar (on a terminal only; tqdm comes with the extra ``plots``).
 
     Returns:
         The sampled :class:`Trajectory`, ``t[0] = 0`` is the initial state.
@@ -123,15 +125,15 @@ def simulate(
     state[0] = fish.state[0]
     angles[0] = fish.fin_angles()[0][0]
 
-    from tqdm.auto import tqdm
-
-    bar = tqdm(total=steps, desc=f"{model} model", unit="sample", disable=None if progress else True, leave=False)
-    with bar:
+    bar = require("tqdm.auto").tqdm(total=steps, desc=f"{model} model", unit="sample", disable=None, leave=False) \
+        if progress else None
+    with bar or contextlib.nullcontext():
         for k in range(1, steps + 1):
             fish.advance(t[k] - t[k - 1])
             state[k] = fish.state[0]
             angles[k] = fish.fin_angles()[0][0]
-            bar.update()
+            if bar is not None:
+                bar.update()
     return Trajectory(model.model if isinstance(model, ModelSpec) else model, t, state, angles, right, left)
 
 
@@ -203,8 +205,8 @@ def plot_trajectories(
     Returns:
         The path written.
     """
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Rectangle
+    Figure = require("matplotlib.figure").Figure
+    Rectangle = require("matplotlib.patches").Rectangle
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -261,8 +263,8 @@ def plot_panels(
     Returns:
         The path written.
     """
-    from matplotlib.figure import Figure
-    from matplotlib.patches import Rectangle
+    Figure = require("matplotlib.figure").Figure
+    Rectangle = require("matplotlib.patches").Rectangle
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

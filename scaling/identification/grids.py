@@ -9,7 +9,7 @@ Presets:
 * ``paper``: the paper's 560 patterns (amplitudes 10-30 deg, biases 50-90 deg,
   periods 0.5, 0.66, 1, 2 s, ratios 2-5).
 * ``quick``: 12 patterns (biases 60, 75, 90 deg; amplitudes 15, 25 deg; period
-  1 s; ratios 2, 4) for smoke runs (``python -m scaling identify --quick``);
+  1 s; ratios 2, 4) for smoke runs (``python -m pectoral_gym.scaling identify --quick``);
   the K it gives is not meant for use.
 * ``env``: covers the environments' whole default action ranges (bias 45-135
   deg, amplitude 0-30 deg, period 0.5-2 s, ratio 1-5), so the averaged

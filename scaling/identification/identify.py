@@ -2,13 +2,13 @@
 
 :func:`identify` runs the stages, timing each:
 
-1. reference runs of the full model on every grid pattern (:mod:`scaling.identification.reference`);
-2. one NMPC per pattern (:mod:`scaling.identification.nmpc`), spread over worker processes
-   (:mod:`scaling.identification.nmpc_batch`),
+1. reference runs of the full model on every grid pattern (:mod:`pectoral_gym.scaling.identification.reference`);
+2. one NMPC per pattern (:mod:`pectoral_gym.scaling.identification.nmpc`), spread over worker processes
+   (:mod:`pectoral_gym.scaling.identification.nmpc_batch`),
    each solution checked against the algebraic oracle; unidentifiable K values
    (forcing near zero, failed reference or solver) are flagged with a reason
    and left out of that K's fit;
-3. two closed forms of each K (:mod:`scaling.identification.regression`): the lowest-degree
+3. two closed forms of each K (:mod:`pectoral_gym.scaling.identification.regression`): the lowest-degree
    polynomial chosen by k-fold cross-validation, and the interpolating
    tensor-product cubic spline over (bias, amplitude, 1/ratio); they compete
    on seeded off-grid held-out patterns, where each form's predicted steady
@@ -34,18 +34,25 @@ from pectoral_gym.model.averaging import waveform_samples
 from pectoral_gym.model.kfunctions import FEATURES, FORMAT, K_NAMES, ScalingFunctions
 from pectoral_gym.model.ktables import MAX_HARMONICS, QUADRATURE
 from pectoral_gym.model.params import FishParams
-from scaling.identification.grids import Grid, draw_off_grid
-from scaling.identification.nmpc import (
+from pectoral_gym.scaling.identification.grids import Grid, draw_off_grid
+from pectoral_gym.scaling.identification.nmpc import (
     IdentificationNmpcSettings,
     NmpcResult,
     algebraic_scaling,
     auto_substeps,
     unscaled_forcing,
 )
-from scaling.identification.nmpc_batch import solve_nmpc_batch
-from scaling.identification.reference import ReferenceRuns, reference_runs
-from scaling.identification.regression import Fit, SplineFit, fit_oscillation, fit_spline, fit_waveform, select_model
-from scaling.identification.response import predicted_turning, sensitivity_weights
+from pectoral_gym.scaling.identification.nmpc_batch import solve_nmpc_batch
+from pectoral_gym.scaling.identification.reference import ReferenceRuns, reference_runs
+from pectoral_gym.scaling.identification.regression import (
+    Fit,
+    SplineFit,
+    fit_oscillation,
+    fit_spline,
+    fit_waveform,
+    select_model,
+)
+from pectoral_gym.scaling.identification.response import predicted_turning, sensitivity_weights
 
 __all__ = ["IdentificationResult", "holdout_patterns", "identify"]
 
@@ -215,7 +222,8 @@ def identify(
         jobs: NMPC worker processes (0: all cores).
         progress: Show progress bars.
         fit_target: Accuracy a polynomial must reach in cross-validation
-            (predicted relative speed / yaw-rate error), see :func:`scaling.identification.regression.select_model`.
+            (predicted relative speed / yaw-rate error), see
+            :func:`pectoral_gym.scaling.identification.regression.select_model`.
         holdout: Random off-grid patterns on which the closed forms compete (0: polynomials only).
         turn_target: Worst held-out turning radius / period error a form must reach to count as fitting.
         yaw_damping: ``"oscillation"`` (default): identify K for the averaged model with the
@@ -366,7 +374,7 @@ def identify(
                 "selection": "fewest terms with CV error <= target, else within one standard error of the best",
                 "target": fit_target,
                 "weights": ("relative speed / yaw-rate error per unit K error "
-                            "(scaling.identification.response.sensitivity_weights)"),
+                            "(pectoral_gym.scaling.identification.response.sensitivity_weights)"),
                 "fits": {name: fits[name].summary() for name in K_NAMES},
             },
             "spline": ({name: splines[name].summary() for name in K_NAMES} if "spline" in forms

@@ -1,4 +1,6 @@
-"""One scaling NMPC (:class:`scaling.identification.nmpc.ScalingNmpc`) per pattern, spread over worker processes.
+"""One scaling NMPC per pattern, spread over worker processes.
+
+The NMPC is :class:`pectoral_gym.scaling.identification.nmpc.ScalingNmpc`.
 
 Each worker builds the NMPC problem once and solves its chunk of neighbouring
 patterns in order, each warm-started from the previous solution.
@@ -14,7 +16,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from pectoral_gym.model.params import FishParams
-from scaling.identification.nmpc import IdentificationNmpcSettings, NmpcResult, ScalingNmpc
+from pectoral_gym.scaling.identification.nmpc import IdentificationNmpcSettings, NmpcResult, ScalingNmpc
 
 __all__ = ["solve_nmpc_batch"]
 

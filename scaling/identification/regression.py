@@ -10,7 +10,7 @@ or, if none does, is within one standard error of the best candidate's (the
 one-standard-error rule): a simpler form wins unless a richer one is clearly
 better on held-out patterns.
 
-Weights: :func:`scaling.identification.response.sensitivity_weights` turns an error in ``K_i`` into the
+Weights: :func:`pectoral_gym.scaling.identification.response.sensitivity_weights` turns an error in ``K_i`` into the
 relative error it causes in the steady-state velocity it drives (a
 linearisation of eq. 20), so the fit minimises the predicted velocity error
 rather than treating every K value alike.
@@ -332,7 +332,7 @@ def fit_oscillation(
 
     Args:
         patterns: ``(n, 4)`` grid patterns (a tensor grid, see :func:`fit_spline`).
-        amplitude: ``(n,)`` oscillation amplitudes ``A`` [rad/s] (``scaling.identification.reference``).
+        amplitude: ``(n,)`` oscillation amplitudes ``A`` [rad/s] (``pectoral_gym.scaling.identification.reference``).
         phase: ``(n,)`` phases ``phi`` [rad].
         usable: ``(n,)`` mask (default: finite values).
 
@@ -360,7 +360,7 @@ def fit_waveform(
     Args:
         patterns: ``(n, 4)`` grid patterns (a tensor grid).
         harmonics: ``(n, >= count)`` complex ``c_k`` [rad/s]
-            (``scaling.identification.reference.yaw_waveform_harmonics``).
+            (``pectoral_gym.scaling.identification.reference.yaw_waveform_harmonics``).
         count: Harmonics to keep.
         usable: ``(n,)`` mask (default: finite values).
         mean_abs: ``(n,)`` mean ``|omega|`` [rad/s] of the reference runs (the waveform's rate

@@ -1,9 +1,9 @@
 """How the averaged model's steady state answers the scaling values K (eqs. 19-20, 29).
 
 :func:`predicted_turning` solves for the steady state under given K (the
-held-out comparison of :mod:`scaling.identification.identify`); :func:`sensitivity_weights`
+held-out comparison of :mod:`pectoral_gym.scaling.identification.identify`); :func:`sensitivity_weights`
 linearises it to weigh K errors by the velocity errors they cause (the fit
-weights of :mod:`scaling.identification.regression`).
+weights of :mod:`pectoral_gym.scaling.identification.regression`).
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """Averaged against full model on the same fin patterns: steady states, relative errors, paths.
 
-The building blocks of :mod:`scaling.validation.validate`: both models' cycle-averaged
+The building blocks of :mod:`pectoral_gym.scaling.validation.validate`: both models' cycle-averaged
 periodic steady states (eq. 29) for batches of two-fin patterns, the relative
 errors between them, and trajectories from rest.
 """

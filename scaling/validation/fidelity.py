@@ -1,4 +1,4 @@
-"""Fidelity benchmark of the averaged model against the full model (issue 12; ``python -m scaling fidelity``).
+"""Fidelity benchmark of the averaged model against the full model (issue 12; ``pectoral-scaling fidelity``).
 
 Where the averaged model is used (agents train on it, the NMPCs plan with it),
 fin patterns change and the two fins beat differently. This benchmark measures
@@ -18,13 +18,13 @@ it there, open loop, with the public :mod:`pectoral_gym.model.models` API:
    moment, so both models keep heading 0 and only surge and sway are left).
 3. **Two-fin periodic steady states**: speed, turning radius and turn period
    (eq. 29) of random patterns with different left and right settings.
-4. **Single-fin held-out set and Table 4**, as ``python -m scaling validate``
-   computes them (:mod:`scaling.validation.validate`).
+4. **Single-fin held-out set and Table 4**, as ``python -m pectoral_gym.scaling validate``
+   computes them (:mod:`pectoral_gym.scaling.validation.validate`).
 
 Two seed sets (:data:`SEED_SETS`): ``dev`` to look at while working on the model,
 ``report`` (other seeds, other two-fin periods) run only for the published figures.
 Output: ``fidelity_<set>[_no_transitions][_no_offsets].md``, ``.json`` and PNG plots
-(:mod:`scaling.validation.fidelity_report`). ``candidate="full-fast"`` runs the same benchmark on the full
+(:mod:`pectoral_gym.scaling.validation.fidelity_report`). ``candidate="full-fast"`` runs the same benchmark on the full
 model's fast integration preset instead of the averaged model (``fidelity_<set>_full_fast.*``):
 how far that preset is from the reference integration.
 """
@@ -48,9 +48,9 @@ from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.model.kfunctions import ScalingFunctions, default_scaling_path
 from pectoral_gym.model.params import FishParams
 from pectoral_gym.model.spec import make_model
-from scaling.identification.grids import draw_off_grid
-from scaling.validation.comparison import CANDIDATES, REST, candidate_spec, label, steady_pair, summarize
-from scaling.validation.validate import MIN_TURN_RATE, sampling_box, single_fin_section, table4_section
+from pectoral_gym.scaling.identification.grids import draw_off_grid
+from pectoral_gym.scaling.validation.comparison import CANDIDATES, REST, candidate_spec, label, steady_pair, summarize
+from pectoral_gym.scaling.validation.validate import MIN_TURN_RATE, sampling_box, single_fin_section, table4_section
 
 __all__ = ["DECOMPOSITION", "DURATION", "FIN_SPLITS", "MIN_PATH", "SCENARIOS", "SEED_SETS", "TARGETS", "SeedSet",
            "draw_patterns", "fidelity", "main", "open_loop", "open_loop_errors", "split_fins"]
@@ -114,7 +114,7 @@ def open_loop(kind: str, schedule: np.ndarray, change_every: float | None, durat
     """Poses ``(n, k + 1, 3)`` (X, Y, psi) every :data:`SAMPLE` s of one model under a command schedule.
 
     Args:
-        kind: ``"full"`` or a candidate (:data:`scaling.validation.comparison.CANDIDATES`).
+        kind: ``"full"`` or a candidate (:data:`pectoral_gym.scaling.validation.comparison.CANDIDATES`).
         schedule: ``(n, segments, 2, 4)`` patterns; segment ``j`` is commanded at ``j * change_every``.
         change_every: Seconds between changes (``None``: the first segment for the whole run).
         duration: Simulated time [s], a multiple of :data:`SAMPLE`.
@@ -236,12 +236,12 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         ripple_offsets: The averaged model's beat-mean ripple offset (default on, as in the model);
             the steady states do not depend on it either.
         candidate: The model measured against the full model's reference integration:
-            ``"averaged"`` (default) or ``"full-fast"`` (:data:`scaling.validation.comparison.CANDIDATES`).
+            ``"averaged"`` (default) or ``"full-fast"`` (:data:`pectoral_gym.scaling.validation.comparison.CANDIDATES`).
 
     Returns:
         The results (the content of the JSON file).
     """
-    from scaling.validation import fidelity_report
+    from pectoral_gym.scaling.validation import fidelity_report
     if seed_set not in SEED_SETS:
         raise ValueError(f"seed_set must be one of {sorted(SEED_SETS)}, got {seed_set!r}")
     if candidate not in CANDIDATES:
@@ -310,7 +310,7 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
 
 
 def add_parser(sub) -> None:
-    """The ``fidelity`` subcommand of ``python -m scaling``."""
+    """The ``fidelity`` subcommand of ``python -m pectoral_gym.scaling``."""
     p = sub.add_parser("fidelity", help="averaged vs full model with two fins and changing commands (issue 12)",
                        description="Fidelity benchmark: open-loop runs with constant and changing two-fin patterns, "
                        "their decomposition (one fin / two, from rest / on the pattern), each scenario split by "
@@ -337,8 +337,8 @@ def add_parser(sub) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    """Run ``python -m scaling fidelity`` with parsed ``args``; returns 0 (the report says which targets are met)."""
-    from scaling.validation import fidelity_report
+    """Run ``pectoral-scaling fidelity`` with parsed ``args``; returns 0 (the report says which targets are met)."""
+    from pectoral_gym.scaling.validation import fidelity_report
     path = Path(args.coefficients) if args.coefficients else default_scaling_path()
     try:
         scaling = ScalingFunctions.load(path)

@@ -1,4 +1,7 @@
-"""Rendering of the fidelity benchmark (:mod:`scaling.validation.fidelity`): markdown, stdout summary, PNG plots."""
+"""Rendering of the fidelity benchmark (:mod:`~pectoral_gym.scaling.validation.fidelity`): markdown, summary, plots.
+
+The summary goes to stdout, the plots are PNG.
+"""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Rendering of the averaged-model validation results (:mod:`scaling.validation.validate`).
+"""Rendering of the averaged-model validation results (:mod:`pectoral_gym.scaling.validation.validate`).
 
 The markdown report (:func:`write_report`, read with ``docs/scaling-validation.md``),
 the stdout summary (:func:`summary_text`) and the PNG plots (matplotlib, Agg
@@ -29,7 +29,8 @@ FIG3_RATIO = 2.0
 def identification_points(metadata: dict[str, Any]) -> dict[str, np.ndarray] | None:
     """Identified K values at the grid points, if the metadata carries them (``metadata["data"]``).
 
-    Accepted: a table ``{"columns": [...], "rows": [[...], ...]}`` (as ``scaling.identification.identify`` writes it,
+    Accepted: a table ``{"columns": [...], "rows": [[...], ...]}`` (as ``pectoral_gym.scaling.identification.identify``
+        writes it,
     with optional ``usable_K_*`` flags), a list of records or a dict of columns, with ``bias_deg``/``bias`` (rad),
     ``amplitude_deg``/``amplitude`` (rad), ``period_s``/``period``, ``ratio`` and any of
     ``K_fx, K_fy, K_m`` (missing or ``None`` values: not identified). Anything else: ``None``.

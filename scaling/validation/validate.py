@@ -1,4 +1,4 @@
-"""Validation of the averaged model against the full model (issue 3; ``python -m scaling validate``).
+"""Validation of the averaged model against the full model (issue 3; ``python -m pectoral_gym.scaling validate``).
 
 The averaged model with given scaling functions K is compared with the full
 blade-element model on fin patterns the identification never saw:
@@ -16,7 +16,7 @@ blade-element model on fin patterns the identification never saw:
 
 Relative error = ``|averaged - full| / |full|`` of the cycle-averaged periodic
 steady state (eq. 29). Results go to ``report.md``, ``validation.json`` and PNG
-plots (:mod:`scaling.validation.plots`); the report reading guide is
+plots (:mod:`pectoral_gym.scaling.validation.plots`); the report reading guide is
 ``docs/scaling-validation.md``.
 """
 
@@ -38,9 +38,17 @@ from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.model.kfunctions import ScalingFunctions, default_scaling_path
 from pectoral_gym.model.params import FishParams
 from pectoral_gym.model.spec import make_model
-from scaling.identification.grids import GRIDS, Grid, GridError, draw_off_grid
-from scaling.validation import plots as rendering
-from scaling.validation.comparison import REST, candidate_spec, fin_pattern, label, simulate_xy, steady_pair, summarize
+from pectoral_gym.scaling.identification.grids import GRIDS, Grid, GridError, draw_off_grid
+from pectoral_gym.scaling.validation import plots as rendering
+from pectoral_gym.scaling.validation.comparison import (
+    REST,
+    candidate_spec,
+    fin_pattern,
+    label,
+    simulate_xy,
+    steady_pair,
+    summarize,
+)
 
 __all__ = [
     "MIN_AMPLITUDE",
@@ -341,7 +349,7 @@ def _plots(scaling: ScalingFunctions, params: FishParams, results: dict[str, Any
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """Argument parser of ``python -m scaling validate``."""
+    """Argument parser of ``python -m pectoral_gym.scaling validate``."""
     parser = argparse.ArgumentParser(
         prog="pectoral-scaling validate",
         description="Validate the averaged model (given K) against the full model: Table 4, random single-fin "

@@ -1,7 +1,7 @@
 """Yaw balance of periodic steady states: where the averaged model's two-fin turning rate goes wrong.
 
-``python -m scaling yaw-balance --from docs/validation/fidelity/fidelity_report.json`` takes the
-two-fin steady-state patterns of a fidelity run (``python -m scaling fidelity``), drives the full
+``python -m pectoral_gym.scaling yaw-balance --from docs/validation/fidelity/fidelity_report.json`` takes the
+two-fin steady-state patterns of a fidelity run (``python -m pectoral_gym.scaling fidelity``), drives the full
 model to its periodic steady state, samples one window finely and splits the mean of the yaw row of
 eq. (19)-(20) into its terms, each next to the averaged model's version of it at the same mean state:
 
@@ -153,11 +153,11 @@ def _table(labels: list[str], res: dict[str, np.ndarray]) -> list[str]:
 
 
 def add_parser(sub) -> None:
-    """The ``yaw-balance`` subcommand of ``python -m scaling``."""
+    """The ``yaw-balance`` subcommand of ``python -m pectoral_gym.scaling``."""
     p = sub.add_parser("yaw-balance", help="split two-fin steady states' yaw balance into terms, full vs averaged",
                        description=__doc__.split("\n\n")[0])
     p.add_argument("--from", dest="source", required=True,
-                   help="a fidelity JSON (python -m scaling fidelity): its two-fin steady-state patterns")
+                   help="a fidelity JSON (python -m pectoral_gym.scaling fidelity): its two-fin steady-state patterns")
     p.add_argument("--coefficients", default=None, help="coefficients file (default: the shipped one)")
     p.add_argument("--single", action="store_true", help="also each pattern's right fin alone")
     p.add_argument("--out", default=None, help="write the markdown table (and a JSON next to it) here")
@@ -166,7 +166,7 @@ def add_parser(sub) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    """Run ``python -m scaling yaw-balance``; prints the markdown table."""
+    """Run ``python -m pectoral_gym.scaling yaw-balance``; prints the markdown table."""
     try:
         rows = json.loads(Path(args.source).read_text())["steady"]["rows"]
         labels = [row["pattern"] for row in rows]
@@ -187,7 +187,8 @@ def main(args: argparse.Namespace) -> int:
     if args.out:
         out = Path(args.out)
         out.parent.mkdir(parents=True, exist_ok=True)
-        command = (f"python -m scaling yaw-balance --from {args.source}" + (" --single" if args.single else "")
+        command = (f"python -m pectoral_gym.scaling yaw-balance --from {args.source}"
+                   + (" --single" if args.single else "")
                    + (f" --coefficients {args.coefficients}" if args.coefficients else "") + f" --out {args.out}")
         out.write_text(f"# Yaw balance of two-fin steady states\n\n`{command}`\n\n{text}\n")
         out.with_suffix(".json").write_text(json.dumps(

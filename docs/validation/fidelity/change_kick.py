@@ -7,7 +7,7 @@ of a development seed, not the benchmark's).
 Each fish beats one fin (the left at rest) on a pattern ``A`` from the envs' action ranges, started on
 it (no transitional stroke), and is switched to a pattern ``B`` at a random time between 12 and 14 s
 (so at a random stroke phase). One fin's periodic steady states agree between the models to 0.2 %
-(``python -m scaling validate``), so before the switch and a few seconds after it both models turn at
+(``python -m pectoral_gym.scaling validate``), so before the switch and a few seconds after it both models turn at
 the same rate and their heading difference is constant up to the full model's in-beat ripple. The
 *kick error* is that difference (averaged minus full), averaged over one period of ``B`` 3 s after
 the switch, minus the same over one period of ``A`` just before it: the heading the averaged model
@@ -31,7 +31,7 @@ import numpy as np
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.models import AveragedModel, FullModel
 from pectoral_gym.model.params import FinBeat, FishParams
-from scaling.validation.fidelity import DURATION, SEED_SETS, draw_patterns
+from pectoral_gym.scaling.validation.fidelity import DURATION, SEED_SETS, draw_patterns
 
 N, DT = 512, 0.01
 START, WINDOW, AFTER = 10.0, 10.0, 3.0  # record [START, START + WINDOW); measure 3 s after the switch

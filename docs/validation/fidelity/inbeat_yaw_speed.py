@@ -14,7 +14,7 @@ import time
 import numpy as np
 
 from pectoral_gym.model.models import AveragedModel, FullModel
-from scaling.validation.fidelity import draw_patterns
+from pectoral_gym.scaling.validation.fidelity import draw_patterns
 
 N, STEPS = 4096, 40
 pat = draw_patterns(np.random.default_rng(1), N, STEPS).transpose(1, 0, 2, 3).copy()

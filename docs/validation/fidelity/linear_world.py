@@ -9,7 +9,7 @@ with changing commands comes from")::
 
 (~1 min). Both models then have the linear yaw damping ``c4 0.4 rad/s omega``, equal surge and sway
 masses (no Munk moment) and K = 1, and run the benchmark's open-loop scenarios on the report set's
-schedules (``python -m scaling fidelity --set report``), split by fins as the benchmark does. Without
+schedules (``python -m pectoral_gym.scaling fidelity --set report``), split by fins as the benchmark does. Without
 ``LINEAR_YAW_DAMPING`` (or without the patch) the same script gives the benchmark's own world with K = 1
 and no Munk moment.
 """
@@ -20,7 +20,7 @@ import numpy as np
 
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.params import FishParams
-from scaling.validation.fidelity import (
+from pectoral_gym.scaling.validation.fidelity import (
     DURATION,
     FIN_SPLITS,
     SCENARIOS,

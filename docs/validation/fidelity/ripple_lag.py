@@ -10,7 +10,7 @@ import numpy as np
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.models import AveragedModel, FullModel
 from pectoral_gym.model.params import FishParams
-from scaling.validation.fidelity import SEED_SETS, draw_patterns
+from pectoral_gym.scaling.validation.fidelity import SEED_SETS, draw_patterns
 
 N, DT, DURATION = 128, 0.02, 40.0
 rng = np.random.default_rng(SEED_SETS["dev"].seed)

@@ -5,13 +5,13 @@ The measurement behind docs/validation/fidelity/README.md, "The yaw row alone" (
 
 For two-fin patterns (400 drawn like the benchmark's steady states with a development seed and the dev set's
 periods, and the 16 of ``fidelity_report.json``), the full model is driven to its periodic steady state
-(:func:`scaling.validation.yaw_balance.yaw_balance`). A *yaw shadow* then integrates the yaw row of eq. (19)-(20) alone,
-``domega/dt = tau_R(t) / J3 + tau_L(t) / J3 + munk - c4 omega |omega|``, with both fins' blade-element moments
-(eqs. 16, 18, 21; the left fin mirrored, both started on their power strokes at t = 0 as in the full model)
+(:func:`pectoral_gym.scaling.validation.yaw_balance.yaw_balance`). A *yaw shadow* then integrates the yaw row of eq.
+(19)-(20) alone, ``domega/dt = tau_R(t) / J3 + tau_L(t) / J3 + munk - c4 omega |omega|``, with both fins' blade-element
+moments (eqs. 16, 18, 21; the left fin mirrored, both started on their power strokes at t = 0 as in the full model)
 and the Munk term as the averaged model forms it, from mean velocities (``(m1 - m2) / J3 mean(vx) mean(vy)``
 at the full model's state), to its own periodic state. Printed: the mean yaw rate's relative error against
 the full model, for the shadow and for the averaged model's steady state
-(:func:`scaling.validation.comparison.steady_pair`),
+(:func:`pectoral_gym.scaling.validation.comparison.steady_pair`),
 over the pairs turning faster than 0.02 rad/s.
 """
 
@@ -24,11 +24,11 @@ import numpy as np
 from pectoral_gym.model.dynamics import fin_force_right, stroke_kinematics
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.params import FishParams
-from scaling.identification.grids import draw_off_grid
-from scaling.validation.comparison import steady_pair
-from scaling.validation.fidelity import SEED_SETS
-from scaling.validation.validate import MIN_TURN_RATE, sampling_box
-from scaling.validation.yaw_balance import parse_pattern, yaw_balance
+from pectoral_gym.scaling.identification.grids import draw_off_grid
+from pectoral_gym.scaling.validation.comparison import steady_pair
+from pectoral_gym.scaling.validation.fidelity import SEED_SETS
+from pectoral_gym.scaling.validation.validate import MIN_TURN_RATE, sampling_box
+from pectoral_gym.scaling.validation.yaw_balance import parse_pattern, yaw_balance
 
 params, scaling = FishParams(), ScalingFunctions.load()
 C4, J3, K_DRAG, K_INERTIA, ARM = params.c4, params.J3, params.fin_drag_constant, params.fin_inertia_constant, \

@@ -12,7 +12,7 @@ import numpy as np
 
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.params import FinBeat, FishParams
-from scaling.validation.fidelity import SEED_SETS, draw_patterns, open_loop, open_loop_errors
+from pectoral_gym.scaling.validation.fidelity import SEED_SETS, draw_patterns, open_loop, open_loop_errors
 
 N, DURATION = 128, 40.0
 params, scaling = FishParams(), ScalingFunctions.load()

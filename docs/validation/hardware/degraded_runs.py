@@ -6,12 +6,12 @@ counts the episodes that end in a ``link_lost`` or ``tracking_lost`` stop:
 
 * ``clean``: loopback radio, the emulated camera as it is;
 * ``bursty``: a radio with 100 ms one-way latency and fades covering 5 % of the time in 0.2 s bursts
-  (:class:`hardware.radioproxy.RadioProxy`);
-* ``drops``: 10 % of the camera frames lost (:class:`hardware.camerafaults.FaultyCamera`);
+  (:class:`pectoral_gym.hardware.radioproxy.RadioProxy`);
+* ``drops``: 10 % of the camera frames lost (:class:`pectoral_gym.hardware.camerafaults.FaultyCamera`);
 * ``load``: both cores loaded by two busy processes for the whole run.
 
 The emulated robot and its camera run in a process of their own (radio over TCP, frames over
-``emu://``, as ``python -m hardware.emulator`` serves them), as the real robot and camera run on their
+``emu://``, as ``python -m pectoral_gym.hardware.emulator`` serves them), as the real robot and camera run on their
 own hardware: the PC's stack does not share its interpreter with the fish's physics and the camera's
 rendering, and that process runs at a higher priority (``nice -10``, where permitted: the real fish and
 camera do not wait for the PC's CPU; the load of the ``load`` condition competes with the PC's stack
@@ -39,13 +39,13 @@ from pathlib import Path
 import numpy as np
 from tqdm import tqdm
 
-from agents.baselines import make_baseline
-from hardware.camera import open_source
-from hardware.camerafaults import FaultyCamera
-from hardware.emulator import EmulatedRobot
-from hardware.env import HardwareFishEnv
-from hardware.radioproxy import RadioProxy
+from pectoral_gym.agents.baselines import make_baseline
 from pectoral_gym.envs.tasks import kernels as tk
+from pectoral_gym.hardware.camera import open_source
+from pectoral_gym.hardware.camerafaults import FaultyCamera
+from pectoral_gym.hardware.emulator import EmulatedRobot
+from pectoral_gym.hardware.env import HardwareFishEnv
+from pectoral_gym.hardware.radioproxy import RadioProxy
 
 CONDITIONS = ("clean", "bursty", "drops", "load")
 

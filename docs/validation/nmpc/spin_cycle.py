@@ -1,4 +1,4 @@
-"""Find the NMPC's on-the-spot turn (``agents.nmpc.spin.SPIN_CYCLE``) and check it on the full model.
+"""Find the NMPC's on-the-spot turn (``pectoral_gym.agents.nmpc.spin.SPIN_CYCLE``) and check it on the full model.
 
 A cross-entropy search on the averaged model (``pectoral_gym.AveragedModel``: identified K, with its
 transitional strokes, docs/model.md 3.7) over cycles of four control periods (0.5 s each) of both
@@ -7,7 +7,7 @@ repeated for 6 s; the score is the heading gained (a left turn) minus 30 per met
 centre of mass strays more than 8 cm from its start, minus 100 per unit by which the robot's servo
 rules would change the cycle (:func:`servo_excess`; off with ``--no-servo-limits``), minus
 ``--work-weight`` [1/J] times the fin work of the strokes swept (default 0). The best cycle is printed
-in the FinInputs order of ``agents.nmpc.spin`` (amplitude right/left, bias right/left, degrees), then
+in the FinInputs order of ``pectoral_gym.agents.nmpc.spin`` (amplitude right/left, bias right/left, degrees), then
 the turn the shipped cycle gives on both models, from rest and after 5 s of straight swimming, from
 each phase of the cycle, and the searched cycle's turn and fin work::
 
@@ -30,8 +30,8 @@ import math
 
 import numpy as np
 
-from agents.nmpc.spin import SPIN_CYCLE
-from hardware.firmware import ServoLimits, clip_beats, stretch_transition
+from pectoral_gym.agents.nmpc.spin import SPIN_CYCLE
+from pectoral_gym.hardware.firmware import ServoLimits, clip_beats, stretch_transition
 from pectoral_gym.model.models import AveragedModel, FullModel
 
 STEPS, DT, CYCLE = 12, 0.5, 4
@@ -63,7 +63,7 @@ def run(model: type, cycles: np.ndarray, warm: np.ndarray | None = None, with_wo
 def servo_excess(cycles: np.ndarray, limits: ServoLimits | None = None) -> np.ndarray:
     """How far the robot's servo rules would change each cycle ``(n, CYCLE, 2, 4)`` (0: executed as commanded).
 
-    Sums what :mod:`hardware.firmware` would do to each step of the repeated cycle: clipping (peak fin rate
+    Sums what :mod:`pectoral_gym.hardware.firmware` would do to each step of the repeated cycle: clipping (peak fin rate
     of the regular strokes), period stretching of the transitional half-stroke from either turning point
     of the previous step into either half-stroke of the next (the robot's ``max_speed``), and the excess of
     each parameter's change over ``max_rate`` times the control period.
@@ -111,7 +111,7 @@ def main() -> None:
     parser.add_argument("--iterations", type=int, default=30, help="cross-entropy iterations")
     parser.add_argument("--population", type=int, default=1500, help="cycles drawn per iteration")
     parser.add_argument("--no-servo-limits", action="store_true",
-                        help="search without the robot's servo rules (hardware.firmware)")
+                        help="search without the robot's servo rules (pectoral_gym.hardware.firmware)")
     args = parser.parse_args()
     cycle = search(population=args.population, iterations=args.iterations, work_weight=args.work_weight,
                    servo_limits=not args.no_servo_limits)

@@ -25,8 +25,8 @@ import gymnasium as gym
 import numpy as np
 
 import pectoral_gym  # noqa: F401 - registers the ids
-from agents.baselines import make_baseline
-from agents.training.policy import load_policy
+from pectoral_gym.agents.baselines import make_baseline
+from pectoral_gym.agents.training.policy import load_policy
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FinBeat
 
 

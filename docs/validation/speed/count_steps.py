@@ -9,7 +9,7 @@ import numpy as np
 
 from pectoral_gym.model import forcing_cache as fc
 from pectoral_gym.model.models import AveragedModel
-from scaling.validation.fidelity import draw_patterns
+from pectoral_gym.scaling.validation.fidelity import draw_patterns
 
 N, PERIODS, WARM_UP = 512, 120, 20
 model = AveragedModel(N, transitions=True, ripple_offsets=False)

@@ -13,7 +13,7 @@ import numpy as np
 
 import pectoral_gym  # noqa: F401 - registers the ids
 from pectoral_gym.model.models import AveragedModel
-from scaling.validation.fidelity import draw_patterns
+from pectoral_gym.scaling.validation.fidelity import draw_patterns
 
 N, STEPS = 4096, 100
 

@@ -5,8 +5,8 @@ from pectoral_gym.model.models import FullModel
 from pectoral_gym.model.params import FinBeat, FishParams, body_coefficients
 from pectoral_gym.model.averaging import waveform_samples
 from pectoral_gym.model.dynamics import waveform_square_mean
-from scaling.validation.yaw_balance import parse_pattern, yaw_balance
-from scaling.identification.reference import yaw_waveform_harmonics
+from pectoral_gym.scaling.validation.yaw_balance import parse_pattern, yaw_balance
+from pectoral_gym.scaling.identification.reference import yaw_waveform_harmonics
 lab = sys.argv[1]
 S = ScalingFunctions.load(sys.argv[2])
 b = parse_pattern(lab)

@@ -8,7 +8,7 @@ from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.params import FishParams, body_coefficients
 from pectoral_gym.model.averaging import waveform_samples, combined_waveform
 from pectoral_gym.model.dynamics import waveform_square_mean
-from scaling.validation.yaw_balance import parse_pattern, yaw_balance
+from pectoral_gym.scaling.validation.yaw_balance import parse_pattern, yaw_balance
 S = ScalingFunctions.load(sys.argv[1])
 P = FishParams(); c4 = body_coefficients(P).c4
 for lab in sys.argv[2:]:

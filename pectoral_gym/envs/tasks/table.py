@@ -7,7 +7,7 @@ control period, and the keys of ``info``. Every task is one :class:`Task` row of
 fish each, laid out in :mod:`pectoral_gym.envs.layout` and
 :mod:`pectoral_gym.envs.observation`) and runs the row's functions on them. The
 simulated envs (:class:`~pectoral_gym.envs.core.EnvCore`: the model's state) and
-:class:`hardware.env.HardwareFishEnv` (the observer's estimate of the real fish)
+:class:`pectoral_gym.hardware.env.HardwareFishEnv` (the observer's estimate of the real fish)
 use the same ``TaskState``, so for the same fish states and commands they give
 the same observations, rewards and ``info``. Nothing here imports Gymnasium.
 
