@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import inspect
 import json
 import math
 import sys
@@ -32,11 +31,14 @@ import numpy as np
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.hardware.deploy_checks import (
     CONTROL_PERIOD_RANGE,
+    DEFAULT_NICE,
     MIN_TRACKING_WALL,
+    NICE_RANGE,
     SPEED_RANGE,
     check_frame_size,
     env_settings,
     first_frame,
+    raise_priority,
     robot_address,
 )
 from pectoral_gym.hardware.safety import SafetyConfig, install_stop_handlers
@@ -214,6 +216,10 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--out", default="deploy_out", help="output folder (default %(default)s)")
     parser.add_argument("--no-prompt", action="store_true",
                         help="do not ask to place the fish before each episode (real robot)")
+    parser.add_argument("--nice", type=int, default=DEFAULT_NICE, metavar="N",
+                        help="run at this nice value, in [-20, 0]: above the machine's other work, so that frames "
+                             "are tracked in time under CPU load (needs root or a 'nice' limit in "
+                             "/etc/security/limits.conf; else a warning; 0: leave it) (default %(default)s)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
 
@@ -240,6 +246,8 @@ def _check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> No
                      f"got {args.speed}")
     if args.speed != 1.0 and not args.emulate:
         parser.error("--speed applies with --emulate only (a real robot runs in real time)")
+    if not NICE_RANGE[0] <= args.nice <= NICE_RANGE[1]:
+        parser.error(f"--nice must be in [{NICE_RANGE[0]}, {NICE_RANGE[1]}], got {args.nice}")
     if not 0 < args.solve_fraction <= 1:
         parser.error(f"--solve-fraction must be in (0, 1], got {args.solve_fraction}")
     if not (math.isfinite(args.geofence) and args.geofence >= 0):
@@ -252,10 +260,6 @@ def _check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> No
             and CONTROL_PERIOD_RANGE[0] <= args.control_period <= CONTROL_PERIOD_RANGE[1]):
         parser.error(f"--control-period must be in [{CONTROL_PERIOD_RANGE[0]}, {CONTROL_PERIOD_RANGE[1]}] s, "
                      f"got {args.control_period}")
-
-
-def _accepts(function, name: str) -> bool:
-    return name in inspect.signature(function).parameters
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -291,10 +295,6 @@ def main(argv: list[str] | None = None) -> int:
     from pectoral_gym.hardware.scene import CameraModel
     from pectoral_gym.hardware.tracker import MarkerTracker
 
-    if args.take_over and not _accepts(HardwareFishEnv, "take_over"):
-        parser.error("--take-over: this HardwareFishEnv has no take_over option yet (issue 30); nothing was sent")
-    if args.take_over and args.robot_address is not None and not _accepts(RadioLink, "take_over"):
-        parser.error("--take-over: this RadioLink has no take_over option yet (issue 30); nothing was sent")
     try:
         model = CameraModel.default() if args.calibration is None else CameraModel.load(args.calibration)
     except (OSError, ValueError) as err:
@@ -306,6 +306,9 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--out: cannot create {out}: {err}")
     for note in notes:
         print(f"note: {note}", file=sys.stderr)
+    warning = raise_priority(args.nice)  # before any thread starts: threads inherit it
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
     robot = env = None
     with contextlib.ExitStack() as resources:  # released last in, first out, on every path
         try:
@@ -329,9 +332,9 @@ def main(argv: list[str] | None = None) -> int:
                     resources.callback(port.close)
                 hook = None if args.no_prompt else (lambda rng: input("Place the fish in the tank and press Enter: "))
             check_frame_size(first_frame(camera), model, args.calibration)
-            extra = {"take_over": args.take_over} if _accepts(HardwareFishEnv, "take_over") else {}
             env = HardwareFishEnv(port, camera, safety=safety, speed=args.speed, max_episode_steps=args.max_steps,
-                                  reset_hook=hook, tracker=MarkerTracker(model), **settings, **extra)
+                                  reset_hook=hook, tracker=MarkerTracker(model), take_over=args.take_over,
+                                  **settings)
             resources.callback(env.close)
             resources.callback(install_stop_handlers(env.stop))
             if controller is None:

@@ -11,12 +11,14 @@ Bounds (argued where they are defined):
 * :data:`SPEED_RANGE`: the emulated clock's speed-up.
 * :data:`CONTROL_PERIOD_RANGE`: seconds between actions.
 * :data:`MIN_TRACKING_WALL`: the tracking timeout in wall seconds.
+* :data:`NICE_RANGE`: the scheduling priority (:func:`raise_priority`).
 """
 
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import re
 import time
 from pathlib import Path
@@ -26,8 +28,36 @@ from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.layout import ACTION_SIZE
 from pectoral_gym.envs.observation import OBS_SIZE, observation_size
 
-__all__ = ["CONTROL_PERIOD_RANGE", "FIRST_FRAME_TIMEOUT", "MIN_TRACKING_WALL", "SPEED_RANGE", "check_frame_size",
-           "env_settings", "first_frame", "robot_address"]
+__all__ = ["CONTROL_PERIOD_RANGE", "DEFAULT_NICE", "FIRST_FRAME_TIMEOUT", "MIN_TRACKING_WALL", "NICE_RANGE",
+           "SPEED_RANGE", "check_frame_size", "env_settings", "first_frame", "raise_priority", "robot_address"]
+
+# Nice values the deploy may ask for: [-20, 0] (never below the default priority). The PC's stack tracks 30 frames
+# a second and must judge each within the safety rules' reaction budget (0.15 s); at the default priority, other
+# work on a loaded machine delays it by more than that, and the supervisor stops the fish for want of a fresh
+# pose (tracking_lost). A control process runs above the machine's other work, as real-time robot stacks do.
+NICE_RANGE = (-20, 0)
+DEFAULT_NICE = -5
+
+
+def raise_priority(nice: int) -> str:
+    """Run this thread, and every thread it starts afterwards, at nice value ``nice`` if that is higher priority.
+
+    Call it before any thread starts (Linux keeps the nice value per thread; new threads inherit it).
+
+    Returns:
+        ``""``, or why the priority could not be raised (no permission: root or a ``nice`` limit in
+        ``/etc/security/limits.conf`` is needed).
+    """
+    current = os.getpriority(os.PRIO_PROCESS, 0)
+    if nice >= current:
+        return ""
+    try:
+        os.setpriority(os.PRIO_PROCESS, 0, nice)
+    except OSError as err:
+        return (f"could not raise this process's priority to nice {nice} ({err}); under CPU load its frames may be "
+                "tracked late and the supervisor then stops the fish (tracking_lost): run it as a user allowed to "
+                "(a 'nice' limit in /etc/security/limits.conf), or keep the machine otherwise idle")
+    return ""
 
 # Emulated speed-up [emulated s per wall s]. Below 0.1 a default episode (240 steps of 0.5 s) takes over 20 min
 # of wall time: a slower value is a typo (1e-9 never progresses). Above 5 the PC cannot keep up with the

@@ -1,6 +1,8 @@
 """End-to-end dry run: ``pectoral_gym.hardware.deploy --emulate`` with a PPO policy trained for a few steps."""
 
 import json
+import subprocess
+import sys
 
 import gymnasium as gym
 import numpy as np
@@ -132,6 +134,40 @@ def test_deploy_controller_and_policy_arguments_must_agree(tmp_path):
 
 
 # ---------------------------------------------------------------- issue 30: arguments, policy fit, resources
+@pytest.fixture(autouse=True)
+def _keep_the_test_process_priority(monkeypatch):
+    """The deploy raises its own priority; here that would be the test worker's (its effect: a test of its own)."""
+    asked = []
+    monkeypatch.setattr("pectoral_gym.hardware.deploy.raise_priority", lambda nice: asked.append(nice) or "")
+    return asked
+
+
+def test_raise_priority_sets_the_nice_value_of_threads_started_after_it():
+    code = ("import json, os, threading\n"
+            "from pectoral_gym.hardware.deploy_checks import raise_priority\n"
+            "start = os.getpriority(os.PRIO_PROCESS, 0)\n"
+            "warning = raise_priority(-1)\n"
+            "seen = []\n"
+            "t = threading.Thread(target=lambda: seen.append(os.getpriority(os.PRIO_PROCESS, 0)))\n"
+            "t.start(); t.join()\n"
+            "print(json.dumps([start, warning, os.getpriority(os.PRIO_PROCESS, 0), seen[0], raise_priority(0)]))")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    start, warning, main_nice, thread_nice, zero = json.loads(run.stdout)
+    if start <= -1:  # already there: nothing to do
+        assert not warning and main_nice == thread_nice == start
+    elif not warning:  # allowed (root, or a nice limit): the thread started afterwards inherits it
+        assert main_nice == thread_nice == -1
+    else:  # not allowed: a warning naming the remedy, priority unchanged
+        assert "limits.conf" in warning and main_nice == thread_nice == start
+    assert zero == ""
+
+
+def test_the_deploy_asks_for_its_priority_before_anything_runs(tmp_path, _keep_the_test_process_priority):
+    assert main(["--controller", "hand", "--emulate", "--speed", "2", "--episodes", "1", "--max-steps", "1",
+                 "--quiet", "--nice", "-3", "--out", str(tmp_path)]) == 0
+    assert _keep_the_test_process_priority == [-3]
+
+
 def _error_line(capsys) -> str:
     err = capsys.readouterr().err
     assert "Traceback" not in err
@@ -151,6 +187,7 @@ def _error_line(capsys) -> str:
     (["--control-period", "0.01"], "--control-period must be in [0.1, 2.0]"),
     (["--control-period", "30"], "--control-period must be in [0.1, 2.0]"),
     (["--geofence", "-0.1"], "--geofence must be"),
+    (["--nice", "5"], "--nice must be in [-20, 0]"),
     (["--port", "socket://127.0.0.1:1"], "cannot be used with --emulate"),
     (["--robot-address", "0013A20012345678"], "cannot be used with --emulate"),
     (["--calibration", "{tmp}/missing.json"], "--calibration: cannot load"),

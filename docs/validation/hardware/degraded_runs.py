@@ -43,6 +43,7 @@ from pectoral_gym.agents.baselines import make_baseline
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.hardware.camera import open_source
 from pectoral_gym.hardware.camerafaults import FaultyCamera
+from pectoral_gym.hardware.deploy_checks import DEFAULT_NICE, raise_priority
 from pectoral_gym.hardware.emulator import EmulatedRobot
 from pectoral_gym.hardware.env import HardwareFishEnv
 from pectoral_gym.hardware.radioproxy import RadioProxy
@@ -170,8 +171,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=100, help="seed of starts, goals and faults (default %(default)s)")
     parser.add_argument("--conditions", nargs="+", choices=CONDITIONS, default=list(CONDITIONS))
     parser.add_argument("--out", type=Path, default=None, help="write the results as JSON here")
+    parser.add_argument("--nice", type=int, default=DEFAULT_NICE,
+                        help="the PC stack's nice value, as pectoral_gym.hardware.deploy sets it (default %(default)s)")
     parser.add_argument("--quiet", action="store_true", help="no progress bars")
     args = parser.parse_args(argv)
+    warning = raise_priority(args.nice)  # before any thread starts, as the deploy does
+    if warning:
+        print(f"warning: {warning}", file=sys.stderr)
     if args.episodes < 1 or not 0.1 <= args.speed <= 5:
         parser.error("--episodes must be >= 1 and --speed in [0.1, 5]")
     results = []
