@@ -195,8 +195,11 @@ class Supervisor:
         with self._lock:
             if not self.armed:
                 return False
-            self._take_frame()  # judge on the newest frame, not on what this thread last got round to
-            for reason in self._rules():
+            reasons = self._rules()
+            if reasons:  # judged again on the newest frame, if the poll thread has not got round to it yet
+                self._take_frame()  # (only then: a frame costs milliseconds, and the command would wait for them)
+                reasons = self._rules()
+            for reason in reasons:
                 self.trip(reason)
             if self.fired or self.stop_requested:
                 return False
