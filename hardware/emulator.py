@@ -32,6 +32,7 @@ from pectoral_gym.hardware import protocol as pr
 from pectoral_gym.hardware.finreplay import CHUNK as _CHUNK
 from pectoral_gym.hardware.finreplay import apply_firmware
 from pectoral_gym.hardware.firmware import Firmware, FirmwareConfig, new_boot_id
+from pectoral_gym.hardware.realtime import settle_garbage
 from pectoral_gym.model import strokes
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
 from pectoral_gym.model.spec import FULL_REFERENCE, FullSpec
@@ -168,6 +169,7 @@ class EmulatedRobot:
         """Start the emulation thread (and the frame server); returns ``self``."""
         if self._thread is not None:
             return self
+        settle_garbage()  # nothing runs yet: the collections that fall later walk only what the emulation makes
         self._origin = time.monotonic() - self.model.time / self.speed
         self._thread = threading.Thread(target=self._run, name="emulated-robot", daemon=True)
         self._thread.start()

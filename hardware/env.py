@@ -21,6 +21,7 @@ from pectoral_gym.envs.tasks.table import TaskState
 from pectoral_gym.hardware.finreplay import FinReplay
 from pectoral_gym.hardware.firmware import FirmwareConfig
 from pectoral_gym.hardware.link import RadioLink
+from pectoral_gym.hardware.realtime import settle_garbage
 from pectoral_gym.hardware.safety import CommandFilter, Geofence, SafetyConfig, check_action, install_stop_handlers
 from pectoral_gym.hardware.supervisor import Supervisor
 
@@ -295,6 +296,7 @@ class HardwareFishEnv(gym.Env):
         sup.disarm()
         self._confirm_stop()
         sup.bound.stopped(self.now())
+        settle_garbage()  # the fins are stopped and the rules disarmed: a full collection now, none mid-episode
         resync = getattr(self.link, "resync", None)
         if callable(resync):
             resync()
