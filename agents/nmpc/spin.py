@@ -37,7 +37,8 @@ from pectoral_gym.agents.controllers.fin_map import FinMap
 from pectoral_gym.agents.nmpc.problem import FinInputs
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.model.kfunctions import ScalingFunctions
-from pectoral_gym.model.spec import AveragedSpec, held_yaw_damping
+from pectoral_gym.model.kloading import held_yaw_damping
+from pectoral_gym.model.spec import AveragedSpec
 
 __all__ = ["SPIN_CYCLE", "SPIN_LENGTHS", "SPIN_PERIOD", "SPIN_RATIO", "SpinTurns", "mirror"]
 

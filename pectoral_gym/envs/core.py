@@ -89,7 +89,7 @@ class EnvConfig:
             per half-stroke, at most 0.05 s; :data:`~pectoral_gym.model.models.FULL_INTEGRATION`; its speed
             and accuracy against the reference: ``docs/model.md`` section 6).
         yaw_damping: Averaged model only: ``"sinusoid"``, ``"waveform"`` or ``"none"``
-            (:data:`pectoral_gym.model.spec.YAW_DAMPINGS`, ``docs/model.md`` 3.6); ``None``: ``"none"`` for
+            (:data:`pectoral_gym.model.kloading.YAW_DAMPINGS`, ``docs/model.md`` 3.6); ``None``: ``"none"`` for
             ``scaling="none"``, else the richest the coefficients file holds (as before it was an option;
             :meth:`model_spec` names the one picked).
 

@@ -20,6 +20,7 @@ import numpy as np
 from pectoral_gym.model import forcing_cache, stepping, strokes
 from pectoral_gym.model.averaging import EXACT, TAYLOR
 from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.kloading import load_scaling
 from pectoral_gym.model.ktables import KTables
 from pectoral_gym.model.params import COEF_NAMES, FinBeat, FishParams, coefficient_vector
 
@@ -336,9 +337,7 @@ class AveragedModel(FishModel):
             if scaling not in ("identified", "none"):
                 raise ValueError(f"scaling must be 'identified', 'none' or a ScalingFunctions, got {scaling!r}")
             if scaling == "identified":
-                from pectoral_gym.model.spec import load_scaling  # the one K loader (it imports this module)
-
-                scaling = load_scaling("identified")
+                scaling = load_scaling("identified")  # the one K loader
             else:
                 scaling = None
         self.scaling = scaling or ScalingFunctions.unit()

@@ -1,8 +1,9 @@
 """One model definition: frozen specs of the full and the averaged model, their presets, the only factory.
 
 A spec names every option of a model; ``spec.build(n, params)`` is the one way to build a batched
-model from it, and the averaged spec is the one loader of scaling-function (K) files, with the check
-that the file was identified for the same :class:`~pectoral_gym.model.params.FishParams`::
+model from it, and the averaged spec loads its scaling-function (K) file (with
+:func:`pectoral_gym.model.kloading.load_scaling`, the one K loader), with the check that the file was
+identified for the same :class:`~pectoral_gym.model.params.FishParams`::
 
     from pectoral_gym.model.spec import AVERAGED_ENV, FULL_FAST
     model = AVERAGED_ENV.build(4)          # the averaged model as the registered envs use it
@@ -26,22 +27,19 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.kloading import YAW_DAMPINGS, held_yaw_damping, load_scaling, select_yaw_damping
 from pectoral_gym.model.models import FULL_INTEGRATION, AveragedModel, FullModel
 from pectoral_gym.model.params import FishParams
 
 __all__ = [
     "AVERAGED", "AVERAGED_ENV", "AVERAGED_PAPER", "AVERAGED_PPO", "ENV_OPTIONS", "FORCINGS", "FULL_FAST",
-    "FULL_REFERENCE", "MODELS", "PRESETS", "SCALINGS", "YAW_DAMPINGS", "AveragedSpec", "FullSpec", "ModelSpec",
-    "env_spec", "held_yaw_damping", "load_scaling", "make_model", "select_yaw_damping", "spec_from_dict",
+    "FULL_REFERENCE", "MODELS", "PRESETS", "SCALINGS", "AveragedSpec", "FullSpec", "ModelSpec", "env_spec",
+    "make_model", "spec_from_dict",
 ]
 
 MODELS = ("full", "averaged")
 SCALINGS = ("identified", "none")  # besides the path of a coefficients file
 FORCINGS = ("exact", "taylor")
-#: The averaged model's yaw damping (docs/model.md 3.6) and the coefficients-file section it needs:
-#: ``"none"`` eq. (20)'s damping alone, ``"sinusoid"`` oscillation-averaged with the ``yaw_oscillation``
-#: section's sinusoid, ``"waveform"`` with the ``yaw_waveform`` section's harmonics.
-YAW_DAMPINGS = {"none": None, "sinusoid": "yaw_oscillation", "waveform": "yaw_waveform"}
 #: The env settings (:class:`pectoral_gym.envs.core.EnvConfig` field names) of each model's spec.
 ENV_OPTIONS = {"full": ("integration",),
                "averaged": ("scaling", "check_scaling_params", "transitions", "ripple_offsets", "yaw_damping")}
@@ -128,9 +126,10 @@ class AveragedSpec(ModelSpec):
             (K = 1) or the path of a coefficients file (``python -m pectoral_gym.scaling identify``).
         check_params: Refuse a coefficients file that records other model parameters than the
             ``params`` it is built for (K identified for another robot); ``False`` is the explicit opt-out.
-        yaw_damping: ``"sinusoid"``, ``"waveform"`` or ``"none"`` (:data:`YAW_DAMPINGS`): the spec picks
-            it, never the file: the file must hold the section it needs, and sections it does not use
-            are dropped. K = 1 has none: ``scaling="none"`` needs ``"none"``.
+        yaw_damping: ``"sinusoid"``, ``"waveform"`` or ``"none"``
+            (:data:`~pectoral_gym.model.kloading.YAW_DAMPINGS`): the spec picks it, never the file: the
+            file must hold the section it needs, and sections it does not use are dropped. K = 1 has
+            none: ``scaling="none"`` needs ``"none"``.
         forcing: ``"exact"`` (closed-form Bessel averages) or ``"taylor"`` (the paper's eqs. 26-28).
         transitions: The forcing of transitional half-strokes (docs/model.md 3.7).
         ripple_offsets: The beat-mean ripple offset of a fin that starts, changes or parks a pattern
@@ -193,47 +192,6 @@ class AveragedSpec(ModelSpec):
             k = self.scaling_functions(first)
         return AveragedModel(n, params, scaling=k, forcing=self.forcing,
                              dt_max=self.dt_max, transitions=self.transitions, ripple_offsets=self.ripple_offsets)
-
-
-def load_scaling(scaling: str | os.PathLike = "identified", params: FishParams | None = None, check: bool = True,
-                 yaw_damping: str = "sinusoid") -> ScalingFunctions:
-    """Read a coefficients file (``"identified"``: the shipped one) for a model of ``params``.
-
-    Args:
-        scaling: ``"identified"`` or the path of a coefficients file.
-        params: The parameters the model runs with (``None``: no check).
-        check: Refuse a file identified for other parameters than ``params``.
-        yaw_damping: Which yaw-damping section to keep (:data:`YAW_DAMPINGS`); the others are dropped.
-
-    Raises:
-        ValueError: A parameter mismatch, or a file without the section ``yaw_damping`` needs.
-    """
-    path = None if scaling == "identified" else os.fspath(scaling)
-    k = ScalingFunctions.load_for(params, path, check=check and params is not None)
-    where = "the shipped coefficients file" if path is None else f"coefficients file {path}"
-    return select_yaw_damping(k, yaw_damping, where)
-
-
-def select_yaw_damping(k: ScalingFunctions, yaw_damping: str, where: str = "the scaling functions") \
-        -> ScalingFunctions:
-    """``k`` with only the yaw-damping section ``yaw_damping`` needs (:data:`YAW_DAMPINGS`); ``k`` itself if no other.
-
-    Raises:
-        ValueError: If ``k`` lacks that section (``where`` names it in the message).
-    """
-    if yaw_damping not in YAW_DAMPINGS:
-        raise ValueError(f"yaw_damping must be one of {tuple(YAW_DAMPINGS)}, got {yaw_damping!r}")
-    has = {"sinusoid": k.has_oscillation, "waveform": k.harmonics > 0}
-    if yaw_damping != "none" and not has[yaw_damping]:
-        raise ValueError(f"{where} has no {YAW_DAMPINGS[yaw_damping]} section, which yaw_damping="
-                         f"{yaw_damping!r} needs; pick yaw_damping from what it holds ("
-                         f"{[name for name, held in has.items() if held] + ['none']})")
-    drop: dict[str, Any] = {}
-    if yaw_damping != "sinusoid" and k.has_oscillation:
-        drop.update(oscillation_knots=(), oscillation_table=None)
-    if yaw_damping != "waveform" and k.harmonics > 0:
-        drop.update(waveform_knots=(), waveform_table=None)
-    return dataclasses.replace(k, **drop) if drop else k
 
 
 #: The full model at converged steps (the spec class's defaults).
@@ -311,13 +269,6 @@ def env_spec(model: str, **options: Any) -> FullSpec | AveragedSpec:
     damping = values["yaw_damping"] or _held_damping(scaling)
     return AVERAGED_ENV.replace(scaling=scaling, check_params=values["check_scaling_params"], yaw_damping=damping,
                                 transitions=values["transitions"], ripple_offsets=values["ripple_offsets"])
-
-
-def held_yaw_damping(k: ScalingFunctions | None) -> str:
-    """The richest yaw damping scaling functions hold (``"none"`` for ``None``, K = 1)."""
-    if k is None:
-        return "none"
-    return "waveform" if k.harmonics > 0 else "sinusoid" if k.has_oscillation else "none"
 
 
 def _held_damping(scaling: str) -> str:

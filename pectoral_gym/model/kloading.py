@@ -1,0 +1,73 @@
+"""Loading scaling functions K for the averaged model: the one K loader and the yaw-damping section it keeps.
+
+A coefficients file (:mod:`pectoral_gym.model.kfunctions`) may hold two yaw-damping sections
+(``docs/model.md`` 3.6); a model uses one of them, named by its ``yaw_damping`` (:data:`YAW_DAMPINGS`),
+and the others are dropped. :func:`load_scaling` reads a file for a model of given parameters (with the
+check that the file was identified for them), :func:`select_yaw_damping` keeps one section of K in
+memory and :func:`held_yaw_damping` names the richest one K holds. The model specs
+(:mod:`pectoral_gym.model.spec`) and :class:`~pectoral_gym.model.models.AveragedModel` load K here.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+from typing import Any
+
+from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.params import FishParams
+
+__all__ = ["YAW_DAMPINGS", "held_yaw_damping", "load_scaling", "select_yaw_damping"]
+
+#: The averaged model's yaw damping (docs/model.md 3.6) and the coefficients-file section it needs:
+#: ``"none"`` eq. (20)'s damping alone, ``"sinusoid"`` oscillation-averaged with the ``yaw_oscillation``
+#: section's sinusoid, ``"waveform"`` with the ``yaw_waveform`` section's harmonics.
+YAW_DAMPINGS = {"none": None, "sinusoid": "yaw_oscillation", "waveform": "yaw_waveform"}
+
+
+def load_scaling(scaling: str | os.PathLike = "identified", params: FishParams | None = None, check: bool = True,
+                 yaw_damping: str = "sinusoid") -> ScalingFunctions:
+    """Read a coefficients file (``"identified"``: the shipped one) for a model of ``params``.
+
+    Args:
+        scaling: ``"identified"`` or the path of a coefficients file.
+        params: The parameters the model runs with (``None``: no check).
+        check: Refuse a file identified for other parameters than ``params``.
+        yaw_damping: Which yaw-damping section to keep (:data:`YAW_DAMPINGS`); the others are dropped.
+
+    Raises:
+        ValueError: A parameter mismatch, or a file without the section ``yaw_damping`` needs.
+    """
+    path = None if scaling == "identified" else os.fspath(scaling)
+    k = ScalingFunctions.load_for(params, path, check=check and params is not None)
+    where = "the shipped coefficients file" if path is None else f"coefficients file {path}"
+    return select_yaw_damping(k, yaw_damping, where)
+
+
+def select_yaw_damping(k: ScalingFunctions, yaw_damping: str, where: str = "the scaling functions") \
+        -> ScalingFunctions:
+    """``k`` with only the yaw-damping section ``yaw_damping`` needs (:data:`YAW_DAMPINGS`); ``k`` itself if no other.
+
+    Raises:
+        ValueError: If ``k`` lacks that section (``where`` names it in the message).
+    """
+    if yaw_damping not in YAW_DAMPINGS:
+        raise ValueError(f"yaw_damping must be one of {tuple(YAW_DAMPINGS)}, got {yaw_damping!r}")
+    has = {"sinusoid": k.has_oscillation, "waveform": k.harmonics > 0}
+    if yaw_damping != "none" and not has[yaw_damping]:
+        raise ValueError(f"{where} has no {YAW_DAMPINGS[yaw_damping]} section, which yaw_damping="
+                         f"{yaw_damping!r} needs; pick yaw_damping from what it holds ("
+                         f"{[name for name, held in has.items() if held] + ['none']})")
+    drop: dict[str, Any] = {}
+    if yaw_damping != "sinusoid" and k.has_oscillation:
+        drop.update(oscillation_knots=(), oscillation_table=None)
+    if yaw_damping != "waveform" and k.harmonics > 0:
+        drop.update(waveform_knots=(), waveform_table=None)
+    return dataclasses.replace(k, **drop) if drop else k
+
+
+def held_yaw_damping(k: ScalingFunctions | None) -> str:
+    """The richest yaw damping scaling functions hold (``"none"`` for ``None``, K = 1)."""
+    if k is None:
+        return "none"
+    return "waveform" if k.harmonics > 0 else "sinusoid" if k.has_oscillation else "none"
