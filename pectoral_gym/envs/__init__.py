@@ -4,9 +4,9 @@
 :func:`pectoral_gym.registration.register_envs` when ``pectoral_gym`` is imported.
 
 Modules: ``fish_env`` (the single env), ``vector`` (the native vector env),
-``core`` (settings and the batched core both share), ``task_core`` (the task
-table and ``TaskState``, shared with the robot env), ``tasks`` (the numba
-task kernels), ``fused`` (those kernels and the model advance in one compiled
+``core`` (settings and the batched core both share), ``tasks`` (the numba task
+kernels, a task row, and the task table and ``TaskState``, shared with the robot
+env), ``fused`` (those kernels and the model advance in one compiled
 call per step, for batches below 64 envs), ``layout`` (their packed arrays,
 named), ``observation`` (the observation layout and ``decode``), ``rendering``
 (pygame top view).

@@ -47,7 +47,7 @@ class PectoralFishVectorEnv(VectorEnv):
 
     ``info`` holds one array per key of the single env's ``info`` (reward
     terms, ``"distance"``, ``"is_success"`` or ``"tracking_error"``: the task
-    table's ``Task.info_fields``, :mod:`pectoral_gym.envs.tasks.table`), each with
+    table's ``Task.info_fields``, :class:`pectoral_gym.envs.tasks.row.Task`), each with
     its boolean mask ``"_<key>"``, from ``reset()`` as from ``step()``: the
     same as ``SyncVectorEnv`` of single envs gives.
 

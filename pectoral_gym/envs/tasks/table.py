@@ -2,8 +2,8 @@
 
 A *task* is what turns a fish state into an episode: how its target is drawn
 and where the fish starts, the reward terms and the termination after each
-control period, and the keys of ``info``. Every task is one :class:`Task` row of
-:data:`TASK_TABLE`; :class:`TaskState` holds the task arrays of ``n`` envs (one
+control period, and the keys of ``info``. Every task is one row of :data:`TASK_TABLE`
+(:class:`~pectoral_gym.envs.tasks.row.Task`); :class:`TaskState` holds the task arrays of ``n`` envs (one
 fish each, laid out in :mod:`pectoral_gym.envs.layout` and
 :mod:`pectoral_gym.envs.observation`) and runs the row's functions on them. The
 simulated envs (:class:`~pectoral_gym.envs.core.EnvCore`: the model's state) and
@@ -51,10 +51,8 @@ builds are not cached on disk: its code lives in the caller's file).
 from __future__ import annotations
 
 import math
-import operator
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, NamedTuple
+from typing import TYPE_CHECKING, Any
 
 import numba as nb
 import numpy as np
@@ -77,13 +75,14 @@ from pectoral_gym.envs.layout import (
 )
 from pectoral_gym.envs.observation import OBS_VELOCITY, observation_size
 from pectoral_gym.envs.tasks import kernels as tk
+from pectoral_gym.envs.tasks.row import InfoField, Task
 from pectoral_gym.model.jit import KernelPair, kernel_builds
 from pectoral_gym.model.models import REST
 
 if TYPE_CHECKING:
     from pectoral_gym.envs.core import EnvConfig
 
-__all__ = ["InfoField", "Task", "TASK_TABLE", "TASK_IDS", "TaskState", "register_task", "unregister_task",
+__all__ = ["TASK_TABLE", "TASK_IDS", "TaskState", "register_task", "unregister_task",
            "task_by_id", "task_info", "observe_fish", "observe_body"]
 
 #: ``observe_fish(i, state, ep, fish, obs) -> (distance [m], wall contact)``: env ``i``'s observation up to
@@ -91,87 +90,6 @@ __all__ = ["InfoField", "Task", "TASK_TABLE", "TASK_IDS", "TaskState", "register
 observe_fish = tk.observe_one
 
 _BUILTIN = (GOAL, TRACK)
-
-
-class InfoField(NamedTuple):
-    """One ``info`` entry after the reward terms: ``key`` reads ``out[index]`` (``flag``: ``out[index] > 0.5``)."""
-
-    key: str
-    index: int
-    flag: bool = False
-
-
-@dataclass(frozen=True)
-class Task:
-    """One row of the task table (see the module docstring for the contract of each function).
-
-    Attributes:
-        name: The ``task=`` value.
-        id: ``cfg[C_TASK]``; 0 and 1 are the built-in ``goal`` and ``track``.
-        terms: ``(info key, out index)`` of the reward terms, in summation order.
-        extra_info: The ``info`` entries after ``"distance"``.
-        draw: ``draw(rng) -> (8,)`` random numbers of one episode.
-        start: ``start(index, draws, cfg, ep, start)``: targets into ``ep``, start states into ``start``.
-        reward_one: The task's kernel ``reward_one(i, state, cfg, ep, fish, obs, out)`` (module docstring);
-            the simulated envs' step calls it (``envs.fused.step_builds``).
-        observe: Serial/parallel builds of :func:`observe_body` with ``reward_one``:
-            ``observe.run(state, skip, cfg, ep, fish, obs, out)`` (the robot env's step).
-        fit_start: ``fit_start(draws, x, y, rng)``: adapt the draws to a measured start pose (or ``None``).
-        info: ``info(out_row) -> dict``: the env's ``info`` (:attr:`info_fields` as numpy scalars, flags as
-            ``np.bool_``). Built from the fields when not given; a given one must agree with them on probe
-            rows (keys in order, values, types), else ``ValueError``.
-    """
-
-    name: str
-    id: int
-    terms: tuple[tuple[str, int], ...]
-    extra_info: tuple[InfoField, ...]
-    draw: Callable[[np.random.Generator], np.ndarray]
-    start: Callable[..., Any]
-    reward_one: Callable[..., Any]
-    observe: KernelPair
-    fit_start: Callable[[np.ndarray, float, float, np.random.Generator], None] | None = None
-    info: Callable[[np.ndarray], dict] | None = field(default=None, repr=False, compare=False)
-
-    def __post_init__(self) -> None:
-        built = _info_builder(self.info_fields)
-        if self.info is None:
-            object.__setattr__(self, "info", built)
-        elif not _same_info(self.info, built):
-            raise ValueError(f"task {self.name!r}: its info function does not give info_fields")
-
-    @property
-    def info_fields(self) -> tuple[InfoField, ...]:
-        """Every ``info`` entry in order: the reward terms, ``"distance"``, then ``extra_info``."""
-        return (*(InfoField(k, i) for k, i in self.terms), InfoField("distance", O_DISTANCE), *self.extra_info)
-
-
-def _same_info(info: Callable[[np.ndarray], dict], built: Callable[[np.ndarray], dict]) -> bool:
-    """Whether ``info`` gives the same keys in the same order, values and types as ``built`` on probe rows."""
-    for row in (np.arange(N_OUT) * 0.25, np.arange(N_OUT)[::-1] * 0.5 - 1.0):
-        a, b = info(row), built(row)
-        if list(a) != list(b) or any(type(a[k]) is not type(b[k]) or a[k] != b[k] for k in b):
-            return False
-    return True
-
-
-def _info_builder(fields: Sequence[InfoField]) -> Callable[[np.ndarray], dict]:
-    """``out_row -> info``: the fields' values as numpy scalars (flags as ``np.bool_``)."""
-    for f in fields:
-        if not (isinstance(f.key, str) and f.key.isidentifier() and 0 <= int(f.index) < N_OUT):
-            raise ValueError(f"info field {f!r}: the key must be an identifier and the index an out slot "
-                             f"0..{N_OUT - 1}")
-    keys = tuple(f.key for f in fields)
-    values = operator.itemgetter(*(int(f.index) for f in fields), N_OUT - 1)  # a tuple even for one field
-    flags = tuple(f.key for f in fields if f.flag)
-
-    def info(out: np.ndarray) -> dict:
-        entries = dict(zip(keys, values(out), strict=False))  # numpy scalars; the padding entry is left out
-        for key in flags:
-            entries[key] = entries[key] > 0.5
-        return entries
-
-    return info
 
 
 def observe_body(state, skip, cfg, ep, fish, obs, out):
