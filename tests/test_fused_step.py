@@ -13,7 +13,7 @@ from pectoral_gym import AveragedModel, FinBeat, FullModel
 from pectoral_gym.envs import fused
 from pectoral_gym.envs.core import EnvConfig, EnvCore
 from pectoral_gym.envs.tasks import kernels as tk
-from pectoral_gym.model.jit import source_tree
+from pectoral_gym.model.jit_cache import source_tree
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 

@@ -1,4 +1,4 @@
-"""The kernels' disk cache follows every source they compile from (``pectoral_gym.model.jit.njit``).
+"""The kernels' disk cache follows every source they compile from (``pectoral_gym.model.jit_cache``).
 
 numba keys its cache on the file of the cached function only; an edit of a
 function in another module, which the cached kernel calls, must still reach it.
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from pectoral_gym.model.jit import source_tree
+from pectoral_gym.model.jit_cache import source_tree
 
 PACKAGE = Path(__file__).resolve().parents[1] / "pectoral_gym"
 
