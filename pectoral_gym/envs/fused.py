@@ -82,7 +82,7 @@ class StepSettings(NamedTuple):
         min_substeps: Full model: least number of substeps per half-stroke (a float).
         averaged: Integrate the averaged model (eq. 25) instead of the full one (eq. 19).
         mode: Averaged forcing form (``averaging.EXACT`` or ``averaging.TAYLOR``).
-        corrections: Averaged model's corrections (``stepping.corrections``).
+        corrections: Averaged model's corrections (``stroke_corrections.corrections``).
     """
 
     duration: float

@@ -28,8 +28,8 @@ field              index  unit    meaning
                                   3.6), signed by side; zero beyond the file's harmonics
 ``REF_ABS``        30     rad/s   mean ``|omega|`` of the pattern's reference run (0: none)
 ``TR_FX``          31     N       the half-stroke in progress's transitional forcing (``transitions``,
-``TR_FY``          32     N       ``docs/model.md`` section 3.7; ``stepping._transition``), signed by
-``TR_TAU``         33     N m     side; set when the fin latches, zero after :func:`clear`
+``TR_FY``          32     N       ``docs/model.md`` section 3.7; ``stroke_corrections._transition``),
+``TR_TAU``         33     N m     signed by side; set when the fin latches, zero after :func:`clear`
 ``OFF_FX``         34     N s     the beat-mean ripple offset delivered so far (``ripple_offsets``,
 ``OFF_FY``         35     N s     ``docs/model.md`` 3.8: ``M`` of the fin's latched pattern,
 ``OFF_TAU``        36     N m s   :func:`pectoral_gym.model.averaging.ripple_offset`), signed by side; zero

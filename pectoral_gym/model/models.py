@@ -17,7 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from pectoral_gym.model import forcing_cache, stepping, strokes
+from pectoral_gym.model import forcing_cache, stepping, stroke_corrections, strokes
 from pectoral_gym.model.averaging import EXACT, TAYLOR
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.kloading import load_scaling
@@ -220,8 +220,8 @@ class FishModel:
 
     @property
     def corrections(self) -> int:
-        """The averaged model's corrections as the kernels take them (:func:`~.stepping.corrections`)."""
-        return stepping.corrections(self.transitions, self.ripple_offsets) if self.averaged else 0
+        """The averaged model's corrections as the kernels take them (:func:`~.stroke_corrections.corrections`)."""
+        return stroke_corrections.corrections(self.transitions, self.ripple_offsets) if self.averaged else 0
 
     @property
     def tables(self) -> KTables:

@@ -14,7 +14,8 @@ array         shape        fields (units)
 ============  ===========  ======================================================================
 
 Time is cut into segments between stroke boundaries (where ``g''`` jumps and
-a fin may latch a new pattern, :func:`pectoral_gym.model.strokes.latch`). The full
+a fin may latch a new pattern, :func:`pectoral_gym.model.strokes.latch`; the averaged
+model's corrections of the new half-stroke: :mod:`pectoral_gym.model.stroke_corrections`). The full
 model resolves the fin beat with RK4 substeps that land exactly on every
 stroke boundary, so the integrator keeps its fourth order across the beat.
 The averaged model holds its forcing constant over a segment and sizes its
@@ -30,7 +31,6 @@ import numpy as np
 
 from pectoral_gym.model import forcing_cache as fc
 from pectoral_gym.model import strokes as st
-from pectoral_gym.model.averaging import half_stroke_mean_force, power_stroke_excess, ripple_offset
 from pectoral_gym.model.dynamics import (
     Forcing,
     RateConstants,
@@ -42,10 +42,10 @@ from pectoral_gym.model.dynamics import (
 from pectoral_gym.model.jit import PARALLEL_MIN_ITEMS, kernel_pair, njit
 from pectoral_gym.model.ktables import KTables, as_tables
 from pectoral_gym.model.params import BodyCoefficients, Coef
-from pectoral_gym.model.ripple import transitional_oscillation_gain
-from pectoral_gym.model.strokes import AMPLITUDE, BIAS, DURATION, ELAPSED, PERIOD, RATIO, idle, latch
+from pectoral_gym.model.stroke_corrections import start_half_stroke
+from pectoral_gym.model.strokes import DURATION, ELAPSED, idle
 
-__all__ = ["ACCURATE_STEP", "RIPPLE_OFFSETS", "STATE_NAMES", "TRANSITIONS", "State", "advance", "corrections"]
+__all__ = ["ACCURATE_STEP", "STATE_NAMES", "State", "advance"]
 
 STATE_NAMES = ("X", "Y", "psi", "vx", "vy", "omega")
 #: Column of each state (``state[:, State.PSI]``), generated from :data:`STATE_NAMES`; the integrals
@@ -53,9 +53,6 @@ STATE_NAMES = ("X", "Y", "psi", "vx", "vy", "omega")
 State = enum.IntEnum("State", {name.upper(): i for i, name in enumerate(STATE_NAMES)})
 
 _EPS = 1e-12
-#: Bits of the averaged model's ``corrections`` (:func:`corrections`): the transitional half-strokes
-#: (``docs/model.md`` 3.7, with their yaw-oscillation gain, 3.9) and the beat-mean ripple offset (3.8).
-TRANSITIONS, RIPPLE_OFFSETS = 1, 2
 ACCURATE_STEP = 1.5  # averaged model: h * rate bound; RK4 is stable to 2.78, this keeps transients accurate
 
 
@@ -174,107 +171,6 @@ def _full_stable_step(state, fins, i, idle0, idle1, body, rates, drag_constant, 
     return _stable_step(state, i, rates, driven_omega, driven_speed, 0.0, h_max)
 
 
-@njit(inline="always")
-def _start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables, corrections):
-    """Latch fin ``f``'s commanded pattern; the averaged model also brings its forcing cache up to date.
-
-    The corrections (:data:`TRANSITIONS`: :func:`_transition` and the half-stroke's yaw-oscillation
-    gain, :func:`_oscillation_gain`; :data:`RIPPLE_OFFSETS`: the change of the beat-mean ripple
-    offset, spread over the half-stroke) are constant over the half-stroke, so they are evaluated
-    here, once, and kept in the cache (``TR_*``, ``OSC_EXCESS``).
-    """
-    if averaged and fins[i, f, st.POWER] > 0.5:  # a power stroke ends: keep its pattern (_transition)
-        cache[i, f, fc.PREV_BIAS] = fins[i, f, BIAS]
-        cache[i, f, fc.PREV_AMPLITUDE] = fins[i, f, AMPLITUDE]
-        cache[i, f, fc.PREV_PERIOD] = fins[i, f, PERIOD]
-        cache[i, f, fc.PREV_RATIO] = fins[i, f, RATIO]
-    latch(fins, pending, i, f)
-    if averaged:
-        fc.refresh(cache, i, f, fins[i, f, BIAS], fins[i, f, AMPLITUDE], fins[i, f, PERIOD], fins[i, f, RATIO],
-                   coef, mode, tables)
-        if corrections:
-            dfx = dfy = dtau = 0.0
-            if corrections & TRANSITIONS:
-                dfx, dfy, dtau = _transition(fins, cache, i, f, coef[i, Coef.FIN_DRAG_CONSTANT],
-                                             coef[i, Coef.FIN_OFFSET])
-                cache[i, f, fc.OSC_EXCESS] = _oscillation_gain(fins, i, f, coef) - 1.0
-            if corrections & RIPPLE_OFFSETS:
-                ox, oy, ot = _ripple_offset_change(fins, cache, i, f, coef[i, Coef.FIN_DRAG_CONSTANT],
-                                                   coef[i, Coef.FIN_OFFSET])
-                duration = fins[i, f, DURATION]
-                dfx, dfy, dtau = dfx + ox / duration, dfy + oy / duration, dtau + ot / duration
-            cache[i, f, fc.TR_FX] = dfx
-            cache[i, f, fc.TR_FY] = dfy
-            cache[i, f, fc.TR_TAU] = dtau
-
-
-@njit(inline="always")
-def _oscillation_gain(fins, i, f, coef):
-    """Yaw-oscillation gain of fin ``f``'s latched half-stroke (``docs/model.md`` 3.9; 1 on a regular one)."""
-    return transitional_oscillation_gain(fins[i, f, st.ANGLE_FROM], fins[i, f, st.ANGLE_TO], fins[i, f, DURATION],
-                                         fins[i, f, st.POWER] > 0.5, fins[i, f, BIAS], fins[i, f, AMPLITUDE],
-                                         fins[i, f, PERIOD], fins[i, f, RATIO], coef[i, Coef.FIN_DRAG_CONSTANT],
-                                         coef[i, Coef.FIN_INERTIA_CONSTANT])
-
-
-@njit(inline="always")
-def _ripple_offset_change(fins, cache, i, f, drag_constant, fin_offset):
-    """Impulse [N s, N s, N m s] that moves fin ``f``'s delivered ripple offset to its latched pattern's.
-
-    ``docs/model.md`` section 3.8: the averaged state is the beat mean of the full model's,
-    which runs ahead of its cycle-start value by ``M / m`` (:func:`ripple_offset`); a fin that
-    starts a pattern, changes it or parks moves that offset from the old pattern's ``M`` to the
-    new one's. Zero while the pattern is kept.
-    """
-    mx, my = ripple_offset(fins[i, f, BIAS], fins[i, f, AMPLITUDE], fins[i, f, PERIOD], fins[i, f, RATIO],
-                           drag_constant)
-    side = st.SIDE[f]
-    mx, my, mt = mx, side * my, side * fin_offset * mx  # eq. (18), left fin mirrored
-    ox, oy, ot = mx - cache[i, f, fc.OFF_FX], my - cache[i, f, fc.OFF_FY], mt - cache[i, f, fc.OFF_TAU]
-    cache[i, f, fc.OFF_FX] = mx
-    cache[i, f, fc.OFF_FY] = my
-    cache[i, f, fc.OFF_TAU] = mt
-    return ox, oy, ot
-
-
-@njit(inline="always")
-def _transition(fins, cache, i, f, drag_constant, fin_offset):
-    """Averaged model: forcing of fin ``f``'s half-stroke in progress beyond its pattern's regular one.
-
-    Two parts (``docs/model.md`` section 3.7), both zero at periodic steady state:
-
-    * the exact mean of the half-stroke actually swept (from ``ANGLE_FROM``) minus that of
-      the latched pattern's regular half-stroke (from its other turning point), both ending
-      at ``ANGLE_TO`` in ``DURATION`` s;
-    * on a recovery stroke after a power stroke of another pattern: the impulse offset that
-      power stroke left, ``X(previous) - X(latched)`` (:func:`power_stroke_excess`), spread
-      over the recovery stroke.
-    """
-    duration = fins[i, f, DURATION]
-    if duration <= 0.0:
-        return 0.0, 0.0, 0.0
-    power = fins[i, f, st.POWER] > 0.5
-    bias, amp = fins[i, f, BIAS], fins[i, f, AMPLITUDE]
-    start = bias - amp if power else bias + amp
-    angle_from = fins[i, f, st.ANGLE_FROM]
-    dx = 0.0
-    dy = 0.0
-    if angle_from != start:
-        ax, ay = half_stroke_mean_force(angle_from, fins[i, f, st.ANGLE_TO], duration, drag_constant)
-        rx, ry = half_stroke_mean_force(start, fins[i, f, st.ANGLE_TO], duration, drag_constant)
-        dx, dy = ax - rx, ay - ry
-    if not power and (cache[i, f, fc.PREV_BIAS] != bias or cache[i, f, fc.PREV_AMPLITUDE] != amp
-                      or cache[i, f, fc.PREV_PERIOD] != fins[i, f, PERIOD]
-                      or cache[i, f, fc.PREV_RATIO] != fins[i, f, RATIO]):
-        px, py = power_stroke_excess(cache[i, f, fc.PREV_BIAS], cache[i, f, fc.PREV_AMPLITUDE],
-                                     cache[i, f, fc.PREV_PERIOD], cache[i, f, fc.PREV_RATIO], drag_constant)
-        qx, qy = power_stroke_excess(bias, amp, fins[i, f, PERIOD], fins[i, f, RATIO], drag_constant)
-        dx += (px - qx) / duration
-        dy += (py - qy) / duration
-    side = st.SIDE[f]
-    return dx, side * dy, side * fin_offset * dx  # eq. (18), left fin mirrored
-
-
 @njit
 def _waveform_segment(state, integral, fins, cache, i, seg, idle0, idle1, harmonics, rate_correction, body, rates,
                       forcing, dt_max):
@@ -325,9 +221,9 @@ def advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max
         idle0 = idle(fins, pending, i, 0)
         idle1 = idle(fins, pending, i, 1)
         if not idle0 and fins[i, 0, ELAPSED] >= fins[i, 0, DURATION] - _EPS:
-            _start_half_stroke(fins, cache, pending, i, 0, coef, averaged, mode, tables, corrections)
+            start_half_stroke(fins, cache, pending, i, 0, coef, averaged, mode, tables, corrections)
         if not idle1 and fins[i, 1, ELAPSED] >= fins[i, 1, DURATION] - _EPS:
-            _start_half_stroke(fins, cache, pending, i, 1, coef, averaged, mode, tables, corrections)
+            start_half_stroke(fins, cache, pending, i, 1, coef, averaged, mode, tables, corrections)
         rem0 = np.inf if idle0 else fins[i, 0, DURATION] - fins[i, 0, ELAPSED]
         rem1 = np.inf if idle1 else fins[i, 1, DURATION] - fins[i, 1, ELAPSED]
         seg = min(t_left, rem0, rem1)
@@ -335,7 +231,7 @@ def advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max
             fx = cache[i, 0, fc.AVG_FX] + cache[i, 1, fc.AVG_FX]
             fy = cache[i, 0, fc.AVG_FY] + cache[i, 1, fc.AVG_FY]
             tau = cache[i, 0, fc.AVG_TAU] + cache[i, 1, fc.AVG_TAU]
-            if corrections:  # each fin's, evaluated when it latched (_start_half_stroke)
+            if corrections:  # each fin's, evaluated when it latched (stroke_corrections.start_half_stroke)
                 for f in range(2):
                     fx, fy, tau = fx + cache[i, f, fc.TR_FX], fy + cache[i, f, fc.TR_FY], tau + cache[i, f, fc.TR_TAU]
             forcing = Forcing(fx, fy, tau)
@@ -416,16 +312,12 @@ def advance(
         averaged: Integrate the averaged model (eq. 25) instead of the full one (eq. 19).
         mode: Averaged forcing form (``averaging.EXACT`` or ``averaging.TAYLOR``).
         tables: Scaling functions (``kfunctions.ScalingFunctions.kernel_arrays()``), or ``tuple()`` of them.
-        corrections: Averaged model: a sum of :data:`TRANSITIONS` (each transitional half-stroke's
-            forcing beyond the regular half-stroke, :func:`_transition`, ``docs/model.md`` 3.7) and
-            :data:`RIPPLE_OFFSETS` (the beat-mean ripple offset, 3.8); see :func:`corrections`.
+        corrections: Averaged model: a sum of :data:`~pectoral_gym.model.stroke_corrections.TRANSITIONS`
+            (each transitional half-stroke's forcing beyond the regular half-stroke, ``docs/model.md`` 3.7)
+            and :data:`~pectoral_gym.model.stroke_corrections.RIPPLE_OFFSETS` (the beat-mean ripple
+            offset, 3.8); see :func:`pectoral_gym.model.stroke_corrections.corrections`.
     """
     kernel = _PARALLEL if state.shape[0] >= PARALLEL_MIN_ITEMS else _SERIAL
     kernel(state, fins, cache, pending, integral, coef, float(duration), float(dt_max), float(min_substeps),
            bool(averaged), int(mode), int(corrections),
            tuple(tables))  # a plain tuple is faster to dispatch (ktables.as_tables)
-
-
-def corrections(transitions: bool, ripple_offsets: bool) -> int:
-    """The ``corrections`` argument of :func:`advance` from the averaged model's two options."""
-    return (TRANSITIONS if transitions else 0) | (RIPPLE_OFFSETS if ripple_offsets else 0)

@@ -11,7 +11,7 @@ expressions of the same kind.
 
 The averaged model's transitional-stroke forcing (``docs/model.md`` section 3.7) is here as
 its exact building blocks, :func:`half_stroke_mean_force_sx`, :func:`power_stroke_excess_sx` and
-:func:`transition_forcing_sx` (parity with the compiled kernel, ``stepping._transition``, in
+:func:`transition_forcing_sx` (parity with the compiled kernel, ``stroke_corrections._transition``, in
 ``tests/test_symbolic.py``). Which half-stroke is transitional depends on the fins' stroke phase,
 a discrete state; the NMPC baseline, which does not observe it, uses their expectation over the
 phase (:func:`expected_transition_impulse_sx`, ``pectoral_gym.agents.nmpc.problem``).
@@ -394,7 +394,7 @@ def power_stroke_excess_sx(beat, drag_constant: float):
 def transition_forcing_sx(angle_from, beat, previous_power, power: bool, side: float, params: FishParams):
     """Forcing ``(f_x, f_y, tau)`` of one half-stroke of ``beat`` beyond its regular one (``docs/model.md`` 3.7).
 
-    The two terms of ``stepping._transition``: the exact mean of the half-stroke swept from
+    The two terms of ``stroke_corrections._transition``: the exact mean of the half-stroke swept from
     ``angle_from`` minus that of the regular half-stroke (same end and duration); on a recovery
     stroke, plus ``(X(previous_power) - X(beat)) / d2`` for the pattern of the power stroke before.
 
