@@ -128,7 +128,7 @@ def test_parking_gives_the_offset_back():
 def test_symbolic_ripple_offset_equals_the_compiled_one(pattern):
     import casadi as ca
 
-    from pectoral_gym.model.symbolic import ripple_offset_sx
+    from pectoral_gym.model.symbolic_corrections import ripple_offset_sx
 
     params = FishParams()
     beat = FinBeat.from_degrees(*pattern)

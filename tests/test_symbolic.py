@@ -188,7 +188,7 @@ def _quadrature_mean_force(angle_from, angle_to, duration, n=20001):
 
 @pytest.mark.parametrize("power", [True, False])
 def test_transition_forcing_matches_quadrature_of_the_blade_element_forces(power):
-    from pectoral_gym.model.symbolic import transition_forcing_sx
+    from pectoral_gym.model.symbolic_corrections import transition_forcing_sx
 
     beat = (1.3, 0.35, 0.9, 3.0)
     previous = (1.7, 0.2, 0.9, 3.0)
@@ -217,7 +217,7 @@ def test_expected_transition_impulse_is_the_phase_average_of_the_compiled_model(
     """Drag-free body, mirrored fins (no sway, no yaw): the surge velocity the transitional forcing adds
     (transitions on minus off, K = 1) is its impulse / m1. Averaged over switch times spread uniformly over
     one beat of the old pattern, it is the expectation the NMPC plans with."""
-    from pectoral_gym.model.symbolic import expected_transition_impulse_sx
+    from pectoral_gym.model.symbolic_corrections import expected_transition_impulse_sx
 
     params = FishParams().replace(drag_coef=1e-6, lift_coef=1e-6, moment_coef=1e-6)  # ~drag-free; steps stay ~ms
     a = FinBeat.from_degrees(80, 20, 0.8, 4.0)

@@ -22,7 +22,7 @@ Transitional strokes (optional, :attr:`NMPCSettings.transitions`). Every input c
 also gives the first half-stroke of the new pattern its transitional forcing (``docs/model.md``
 3.7). Where in the stroke a fin is when the command arrives is not observed, so the model applies
 the expectation of that impulse over a uniform stroke phase
-(:func:`pectoral_gym.model.symbolic.expected_transition_impulse_sx`), spread over the interval of the
+(:func:`pectoral_gym.model.symbolic_corrections.expected_transition_impulse_sx`), spread over the interval of the
 change (after the latching delay in the first one). Exactly zero when the input does not change.
 
 Cost (per interval ``k`` of the horizon, position ``p_k`` at its end):
@@ -60,11 +60,11 @@ from pectoral_gym.model.symbolic import (
     averaged_forcing_sx,
     body_rhs_sx,
     combined_yaw_oscillation_sx,
-    expected_transition_impulse_sx,
     mean_fin_power_sx,
     named_symbols,
     rk4_sx,
 )
+from pectoral_gym.model.symbolic_corrections import expected_transition_impulse_sx
 from pectoral_gym.model.tank import wall_shortfall
 
 __all__ = [

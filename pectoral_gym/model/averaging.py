@@ -230,7 +230,7 @@ def _odd_moment_coefficients(terms: int = 14) -> tuple[float, ...]:
                  for n in range(terms))
 
 
-#: Series coefficients of :func:`odd_moment` (14 terms reach rounding for ``|h| <= pi/2``); also symbolic's.
+#: Series coefficients of :func:`odd_moment` (14 terms reach rounding for ``|h| <= pi/2``); also symbolic_corrections'.
 ODD_MOMENT_SERIES = _odd_moment_coefficients()
 
 
