@@ -14,13 +14,12 @@ import torch
 import yaml
 from doc_snippets import commands, snippet
 
-from pectoral_gym.agents.training.config import (
+from pectoral_gym.agents.training.config import algo_kwargs, resolve_config
+from pectoral_gym.agents.training.zoo_format import (
     HYPERPARAMS_DIR,
-    algo_kwargs,
     load_hyperparams,
     load_project_settings,
     parse_python_kwargs,
-    resolve_config,
     zoo_problems,
 )
 

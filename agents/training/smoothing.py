@@ -10,7 +10,7 @@ unchanged.
 The penalty of env ``i`` at step ``t`` is ``weight * mean_j |a_t[i, j] - a_{t-1}[i, j]|`` over the action's
 components (the actions SB3 sends, in the action space's units); the first step of every episode has none.
 It is set by ``action_change_penalty`` in the hyperparameter file's ``pectoral_gym.agents.training.train`` section
-(:mod:`pectoral_gym.agents.training.config`; 0: off). rl-baselines3-zoo does not read that section, so it trains
+(:mod:`pectoral_gym.agents.training.zoo_format`; 0: off). rl-baselines3-zoo does not read that section, so it trains
 without it.
 """
 

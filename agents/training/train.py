@@ -6,9 +6,9 @@ CLI::
     python -m pectoral_gym.agents.training.train --algo sac --hyperparams n_timesteps=5e4 learning_rate=3e-4 \
         --env-kwargs '{"task": "track"}'
 
-The hyperparameter files are rl-baselines3-zoo's (``pectoral_gym.agents.training.config``): ``python -m rl_zoo3.train
---conf-file agents/hyperparams/ppo.yml --gym-packages pectoral_gym ...`` trains from the same file. The periodic
-evaluation settings come from the file's ``pectoral_gym.agents.training.train`` section,
+The hyperparameter files are rl-baselines3-zoo's (``pectoral_gym.agents.training.zoo_format``):
+``python -m rl_zoo3.train --conf-file agents/hyperparams/ppo.yml --gym-packages pectoral_gym ...`` trains from the
+same file. The periodic evaluation settings come from the file's ``pectoral_gym.agents.training.train`` section,
 ``--eval-freq``/``--eval-episodes`` or ``--hyperparams``.
 
 Each run writes ``runs/<env>/<algo>_<task>_seed<seed>_<stamp>/``: ``model.zip``
@@ -40,13 +40,13 @@ from typing import Any
 import yaml
 
 from pectoral_gym.agents.training.config import (
-    algo_class,
     algo_kwargs,
     evaluation_env,
     parse_overrides,
     resolve_config,
     run_model_spec,
 )
+from pectoral_gym.agents.training.zoo_format import algo_class
 
 __all__ = ["EVAL_SEED_OFFSET", "QUICK", "main", "make_run_dir", "train"]
 
