@@ -34,7 +34,7 @@ TRANSITIONS, RIPPLE_OFFSETS = 1, 2
 
 
 def corrections(transitions: bool, ripple_offsets: bool) -> int:
-    """The ``corrections`` argument of :func:`advance` from the averaged model's two options."""
+    """The ``corrections`` argument of :func:`pectoral_gym.model.stepping.advance` from the averaged model's options."""
     return (TRANSITIONS if transitions else 0) | (RIPPLE_OFFSETS if ripple_offsets else 0)
 
 
