@@ -60,7 +60,12 @@ def test_reset_settles_the_collector_while_the_fins_are_stopped(monkeypatch):
     from pectoral_gym.hardware.safety import SafetyConfig
 
     calls = []
-    monkeypatch.setattr(hardware_env, "settle_garbage", lambda: calls.append((env.supervisor.armed, robot.firmware.state.name)) or 0.0)
+
+    def settle():
+        calls.append((env.supervisor.armed, robot.firmware.state.name))
+        return 0.0
+
+    monkeypatch.setattr(hardware_env, "settle_garbage", settle)
     with EmulatedRobot(speed=2.0, seed=0, start_pose=(1.15, 0.575, 0.3)) as robot, \
             HardwareFishEnv(robot.url, robot.camera(seed=1), speed=2.0,
                             safety=SafetyConfig(tracking_timeout=1.5, link_timeout=2.0)) as env:
