@@ -7,7 +7,7 @@ Modules: ``fish_env`` (the single env), ``vector`` (the native vector env),
 ``core`` (settings and the batched core both share), ``tasks`` (the numba task
 kernels, a task row, and the task table and ``TaskState``, shared with the robot
 env), ``fused`` (those kernels and the model advance in one compiled
-call per step, for batches below 64 envs), ``layout`` (their packed arrays,
+call per step, a serial and a parallel build chosen by batch size), ``layout`` (their packed arrays,
 named), ``observation`` (the observation layout and ``decode``), ``rendering``
 (pygame top view).
 """
