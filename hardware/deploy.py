@@ -41,7 +41,7 @@ from pectoral_gym.hardware.deploy_checks import (
     raise_priority,
     robot_address,
 )
-from pectoral_gym.hardware.safety import SafetyConfig, install_stop_handlers
+from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handlers
 
 __all__ = ["main", "make_controller", "run_episodes", "plot_trajectories", "solver_summary"]
 
@@ -131,7 +131,7 @@ def make_controller(name: str, config, step_budget: float, safety: SafetyConfig 
     """The ``nmpc`` or ``hand`` baseline for the robot's env config; NMPC steps end within ``step_budget`` [s].
 
     The NMPC plans with the stopping-distance band of the env's geofence (``safety``, default
-    :class:`pectoral_gym.hardware.safety.SafetyConfig`), so it does not swim into it
+    :class:`pectoral_gym.hardware.safety.rules.SafetyConfig`), so it does not swim into it
     (``pectoral_gym.agents.controllers.stop_band``).
     """
     from pectoral_gym.agents.baselines import make_baseline
@@ -196,8 +196,8 @@ def _parser() -> argparse.ArgumentParser:
                         help=f"emulated clock speed-up, in [{lo_speed}, {hi_speed}] (--emulate only; "
                              "default %(default)s)")
     parser.add_argument("--calibration", default=None, metavar="JSON",
-                        help="camera calibration (python -m pectoral_gym.hardware.calibrate), made at the camera's "
-                             "resolution (default: the emulator's camera model)")
+                        help="camera calibration (python -m pectoral_gym.hardware.vision.calibrate), made at the "
+                             "camera's resolution (default: the emulator's camera model)")
     parser.add_argument("--geofence", type=float, default=0.05, metavar="M",
                         help="clearance kept from the walls on top of the stopping distance [m] (default %(default)s)")
     parser.add_argument("--robot-address", type=robot_address, default=None, metavar="HEX",
@@ -291,9 +291,9 @@ def main(argv: list[str] | None = None) -> int:
     except ValueError as err:
         parser.error(f"safety settings (--geofence, --tracking-timeout): {err}")
     from pectoral_gym.hardware.env import HardwareFishEnv
-    from pectoral_gym.hardware.link import RadioLink
-    from pectoral_gym.hardware.scene import CameraModel
-    from pectoral_gym.hardware.tracker import MarkerTracker
+    from pectoral_gym.hardware.radio.link import RadioLink
+    from pectoral_gym.hardware.vision.cameramodel import CameraModel
+    from pectoral_gym.hardware.vision.tracker import MarkerTracker
 
     try:
         model = CameraModel.default() if args.calibration is None else CameraModel.load(args.calibration)
@@ -321,7 +321,7 @@ def main(argv: list[str] | None = None) -> int:
                 resources.callback(camera.close)
                 hook = lambda rng: robot.place(*_random_start(rng))  # noqa: E731 - a hand that puts the fish back
             else:
-                from pectoral_gym.hardware.camera import open_source
+                from pectoral_gym.hardware.vision.camera import open_source
 
                 camera = open_source(args.camera)
                 resources.callback(camera.close)  # idempotent: the env closes it too

@@ -76,7 +76,7 @@ CONTROL_PERIOD_RANGE = (0.1, 2.0)
 
 # The tracking timeout in wall seconds (timeout / speed) must hold 3 frames of a 30 fps camera, so one dropped
 # or late frame does not end the episode as tracking_lost. The upper bound is physical (finding 9 of issue 30:
-# the time to reach a wall from the last seen pose), checked by pectoral_gym.hardware.safety.SafetyConfig.
+# the time to reach a wall from the last seen pose), checked by pectoral_gym.hardware.safety.rules.SafetyConfig.
 MIN_TRACKING_WALL = 0.1
 
 FIRST_FRAME_TIMEOUT = 5.0  # wall seconds to wait for the camera's first frame (as the env's reset_timeout)
@@ -186,4 +186,4 @@ def check_frame_size(frame: Any, model: Any, calibration: str | Path | None) -> 
                                                                                  "--calibration)"
         raise ValueError(f"the camera gives {width}x{height} px frames but {what} is for {model.width}x"
                          f"{model.height} px: calibrate at the camera's resolution "
-                         "(python -m pectoral_gym.hardware.calibrate) or set the camera to the calibrated one")
+                         "(python -m pectoral_gym.hardware.vision.calibrate) or set the camera to the calibrated one")

@@ -28,10 +28,11 @@ import time
 
 import numpy as np
 
-from pectoral_gym.hardware import protocol as pr
 from pectoral_gym.hardware.finreplay import CHUNK as _CHUNK
 from pectoral_gym.hardware.finreplay import apply_firmware
-from pectoral_gym.hardware.firmware import Firmware, FirmwareConfig, new_boot_id
+from pectoral_gym.hardware.radio import protocol as pr
+from pectoral_gym.hardware.radio import xbee as xb
+from pectoral_gym.hardware.radio.firmware import Firmware, FirmwareConfig, new_boot_id
 from pectoral_gym.hardware.realtime import settle_garbage
 from pectoral_gym.model import strokes
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
@@ -55,7 +56,8 @@ class EmulatedRobot:
         firmware: Robot-side rules (watchdog, servo limits).
         start_pose: Initial ``(X, Y, psi)`` [m, m, rad]; default the tank centre, heading +X.
         loss: Probability that an incoming message is lost (radio loss injection for tests).
-        camera_port: Serve rendered overhead frames on this TCP port (``pectoral_gym.hardware.camera.FrameServer``).
+        camera_port: Serve rendered overhead frames on this TCP port
+            (``pectoral_gym.hardware.vision.camera.FrameServer``).
         camera_fps: Frame rate of the served camera [wall frames/s].
         seed: Seed of the loss injection and camera noise.
         model: The physics the emulated fish follows (a full-model spec; default the reference integration).
@@ -159,8 +161,8 @@ class EmulatedRobot:
             return fresh.boot
 
     def camera(self, conditions=None, seed: int | None = None, camera=None):
-        """An in-process ``pectoral_gym.hardware.camera.EmulatedCamera`` looking at this fish."""
-        from pectoral_gym.hardware.camera import EmulatedCamera
+        """An in-process ``pectoral_gym.hardware.vision.camera.EmulatedCamera`` looking at this fish."""
+        from pectoral_gym.hardware.vision.camera import EmulatedCamera
 
         return EmulatedCamera(self.pose_stamped, camera, conditions, self._seed if seed is None else seed)
 
@@ -174,7 +176,7 @@ class EmulatedRobot:
         self._thread = threading.Thread(target=self._run, name="emulated-robot", daemon=True)
         self._thread.start()
         if self._camera_port is not None:
-            from pectoral_gym.hardware.camera import FrameServer
+            from pectoral_gym.hardware.vision.camera import FrameServer
 
             self._frame_server = FrameServer(self.camera(), port=self._camera_port, fps=self._camera_fps)
         return self
@@ -276,7 +278,7 @@ class EmulatedRobot:
                     replies.append(reply)
             self._apply_firmware()
         for reply in replies:
-            self._write(pr.encode_frame(pr.rx_packet(pr.encode_message(reply), ROBOT_ADDRESS)))
+            self._write(xb.encode_frame(xb.rx_packet(pr.encode_message(reply), ROBOT_ADDRESS)))
 
     def _apply_firmware(self) -> None:
         """Hand the firmware's decision to the model (call with the lock held; the PC's replay does the same)."""

@@ -19,11 +19,12 @@ from pectoral_gym.envs.observation import observation_bounds
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.envs.tasks.table import TaskState
 from pectoral_gym.hardware.finreplay import FinReplay
-from pectoral_gym.hardware.firmware import FirmwareConfig
-from pectoral_gym.hardware.link import RadioLink
+from pectoral_gym.hardware.radio.firmware import FirmwareConfig
+from pectoral_gym.hardware.radio.link import RadioLink
 from pectoral_gym.hardware.realtime import settle_garbage
-from pectoral_gym.hardware.safety import CommandFilter, Geofence, SafetyConfig, check_action, install_stop_handlers
-from pectoral_gym.hardware.supervisor import Supervisor
+from pectoral_gym.hardware.safety.geofence import Geofence
+from pectoral_gym.hardware.safety.rules import CommandFilter, SafetyConfig, check_action, install_stop_handlers
+from pectoral_gym.hardware.safety.supervisor import Supervisor
 
 __all__ = ["HardwareFishEnv"]
 
@@ -38,19 +39,20 @@ class HardwareFishEnv(gym.Env):
     (:class:`pectoral_gym.envs.tasks.table.TaskState`, the task table's row for ``task``) on the
     *estimated* state: for the same states and commands both give the same observations, rewards and
     ``info`` (``tests/test_task_core.py``). An overhead camera frame is tracked
-    (:class:`pectoral_gym.hardware.tracker.MarkerTracker`: red front marker, blue back marker) and a high-gain observer
-    (:class:`pectoral_gym.hardware.observer.HighGainObserver`) estimates the body-frame velocities. Each ``step`` sends
-    the fin command through :class:`pectoral_gym.hardware.link.RadioLink` and then watches the camera for one
-    ``control_period`` of wall-clock time (real-time pacing). The fins latch a new pattern at their next
+    (:class:`pectoral_gym.hardware.vision.tracker.MarkerTracker`: red front marker, blue back marker) and a high-gain
+    observer (:class:`pectoral_gym.hardware.vision.observer.HighGainObserver`) estimates the body-frame velocities. Each
+    ``step`` sends the fin command through :class:`pectoral_gym.hardware.radio.link.RadioLink` and then watches the
+    camera for one ``control_period`` of wall-clock time (real-time pacing). The fins latch a new pattern at their next
     stroke turning point, as in simulation. With an emulated robot (:mod:`pectoral_gym.hardware.emulator`) the
     experiment clock may run ``speed`` times faster than the wall clock.
 
     ## Action Space
 
     ``Box(-1, 1, (8,), float32)``, mapped exactly as in ``PectoralFishEnv``; then the PC-side safety
-    rules clip the command to the servo limits and rate-limit it (:class:`pectoral_gym.hardware.safety.CommandFilter`).
-    The task core is given the command actually sent, normalised: the observation's last action and
-    the energy term are those of that command. A non-finite action raises ``ValueError`` and nothing is sent.
+    rules clip the command to the servo limits and rate-limit it
+    (:class:`pectoral_gym.hardware.safety.rules.CommandFilter`). The task core is given the command actually sent,
+    normalised: the observation's last action and the energy term are those of that command. A non-finite action raises
+    ``ValueError`` and nothing is sent.
 
     | Num | Action                | Fin   | Range (x = -1 .. 1), default  | Unit |
     |-----|-----------------------|-------|-------------------------------|------|
@@ -93,9 +95,9 @@ class HardwareFishEnv(gym.Env):
     ## Episode End
 
     * Termination: the task's own ends (nose or tail outside the tank; ``goal`` reached), or the
-      **geofence** (:class:`pectoral_gym.hardware.safety.Geofence`): some part of the fish, fin tips included, closer
-      to a wall than its stopping distance at the measured speed (with its uncertainty, at most the
-      physical bound :class:`pectoral_gym.hardware.safety.SpeedBound`) plus ``safety.geofence_margin``
+      **geofence** (:class:`pectoral_gym.hardware.safety.geofence.Geofence`): some part of the fish, fin tips included,
+      closer to a wall than its stopping distance at the measured speed (with its uncertainty, at most the
+      physical bound :class:`pectoral_gym.hardware.safety.geofence.SpeedBound`) plus ``safety.geofence_margin``
       (``info["safety_stop"] = "geofence"``).
     * Truncation: ``max_episode_steps`` steps; tracking lost for longer than ``safety.tracking_timeout``
       (``"tracking_lost"``, with the reason in ``info["tracking"]["reason"]``: the tracker's, or a
@@ -103,9 +105,9 @@ class HardwareFishEnv(gym.Env):
       ``safety.link_timeout`` (``"link_lost"``); this PC no longer controls the robot (the link's
       ``control_lost``: ``"taken_over"``, ``"robot_busy"``, ``"robot_rebooted"``); :meth:`stop` or a
       signal (``"stop"``, latched until :meth:`rearm`). Several at once: reported by priority
-      (``pectoral_gym.hardware.supervisor.PRIORITY``, ``docs/hardware.md``), all in ``info["safety_stops"]``.
-    * A safety supervisor (:class:`pectoral_gym.hardware.supervisor.Supervisor`) applies these rules in its own thread,
-      also while the program is outside ``step()``, and sends STOP the moment one trips; the next
+      (``pectoral_gym.hardware.safety.supervisor.PRIORITY``, ``docs/hardware.md``), all in ``info["safety_stops"]``.
+    * A safety supervisor (:class:`pectoral_gym.hardware.safety.supervisor.Supervisor`) applies these rules in its own
+      thread, also while the program is outside ``step()``, and sends STOP the moment one trips; the next
       ``step()`` reports it. Every command carries a lease (``safety.lease``, ``docs/protocol.md``): the
       robot stops by itself unless ``step()`` is called again in time, whatever happens to this process.
     * ``close()`` sends STOP and may be called twice; it also runs at interpreter exit, on leaving a
@@ -124,7 +126,7 @@ class HardwareFishEnv(gym.Env):
     | ``task``            | ``"goal"``     |      | ``"goal"``, ``"track"`` or a registered task (``envs.task_core``) |
     | ``control_period``  | 0.5            | s    | time between actions |
     | ``calibration``     | ``None``       |      | calibration JSON; ``None``: default camera model |
-    | ``safety``          | defaults       |      | :class:`pectoral_gym.hardware.safety.SafetyConfig` |
+    | ``safety``          | defaults       |      | :class:`pectoral_gym.hardware.safety.rules.SafetyConfig` |
     | ``speed``           | 1.0            |      | experiment seconds per wall second (emulated robots only) |
     | ``frame_period``    | 1/30           | s    | camera polling period |
     | ``observer_epsilon``| 0.1            | s    | high-gain observer time constant |
@@ -198,19 +200,19 @@ class HardwareFishEnv(gym.Env):
             self.link = port
         self.link.lease_scale = 1.0 / self.speed  # the robot counts leases in its own (emulated) seconds
         if isinstance(camera, (str, int)):
-            from pectoral_gym.hardware.camera import open_source
+            from pectoral_gym.hardware.vision.camera import open_source
 
             camera = open_source(camera)
         self.camera = camera
         if tracker is None:
-            from pectoral_gym.hardware.scene import CameraModel
-            from pectoral_gym.hardware.tracker import MarkerTracker
+            from pectoral_gym.hardware.vision.cameramodel import CameraModel
+            from pectoral_gym.hardware.vision.tracker import MarkerTracker
 
             model = CameraModel.default() if calibration is None else CameraModel.load(calibration)
             tracker = MarkerTracker(model)
         self.tracker = tracker
         if observer is None:
-            from pectoral_gym.hardware.observer import HighGainObserver
+            from pectoral_gym.hardware.vision.observer import HighGainObserver
 
             observer = HighGainObserver(epsilon=observer_epsilon)
         self.observer = observer

@@ -1,9 +1,9 @@
 """The robot's fins replayed on the PC: the stroke phase a fin-observing policy needs, which the robot does not report.
 
 The robot's STATUS message carries no fin angles, but its fins move by known rules: the firmware
-(:class:`pectoral_gym.hardware.firmware.Firmware`: leases, rate limiting, halts) hands its setpoint to fins that
+(:class:`pectoral_gym.hardware.radio.firmware.Firmware`: leases, rate limiting, halts) hands its setpoint to fins that
 follow the parameter-change rule of ``docs/model.md`` section 5, the transitional half-stroke
-bounded by :func:`pectoral_gym.hardware.firmware.stretch_transition`. :class:`FinReplay` runs those same rules on
+bounded by :func:`pectoral_gym.hardware.radio.firmware.stretch_transition`. :class:`FinReplay` runs those same rules on
 the PC, fed the commands the PC sends (as they go on the wire, quantised) at the times it sends them,
 so :class:`pectoral_gym.hardware.env.HardwareFishEnv` can give the observation's fin block
 (``observe_fins=True``, :mod:`pectoral_gym.envs.observation`). The emulator drives its own fins with
@@ -22,8 +22,8 @@ from collections.abc import Callable
 
 import numpy as np
 
-from pectoral_gym.hardware import protocol as pr
-from pectoral_gym.hardware.firmware import Firmware, FirmwareConfig, stretch_transition
+from pectoral_gym.hardware.radio import protocol as pr
+from pectoral_gym.hardware.radio.firmware import Firmware, FirmwareConfig, stretch_transition
 from pectoral_gym.model import strokes
 from pectoral_gym.model.models import FishModel
 from pectoral_gym.model.params import FinBeat, FishParams
@@ -38,7 +38,7 @@ def apply_firmware(firmware: Firmware, model: FishModel) -> None:
     """Hand the firmware's decision to fish 0 of ``model``: halt the fins where they are, or command the setpoint.
 
     A running command is latched at the next turning point; its transitional half-stroke from there is
-    bounded by :func:`~pectoral_gym.hardware.firmware.stretch_transition`.
+    bounded by :func:`~pectoral_gym.hardware.radio.firmware.stretch_transition`.
     """
     if firmware.halt:
         angles = model.fin_angles()[0][0]

@@ -8,9 +8,10 @@ import cv2
 import numpy as np
 import pytest
 
-from pectoral_gym.hardware.calibrate import detect_dots, fit_homography, main, reprojection_errors, tank_corners
-from pectoral_gym.hardware.scene import CameraModel, Occluder, SceneConditions, render_frame
-from pectoral_gym.hardware.tracker import MarkerTracker
+from pectoral_gym.hardware.vision.calibrate import detect_dots, fit_homography, main, reprojection_errors, tank_corners
+from pectoral_gym.hardware.vision.cameramodel import CameraModel
+from pectoral_gym.hardware.vision.scene import Occluder, SceneConditions, render_frame
+from pectoral_gym.hardware.vision.tracker import MarkerTracker
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 
 # A camera written down by hand: 250 px/m, Y up, origin at pixel (40, 320), and a small perspective term.
@@ -132,7 +133,7 @@ def test_cli_bad_arguments_are_one_line_errors_with_status_2(tmp_path, capsys, a
         main(args)
     assert exit_info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert message in err[-1] and err[-1].startswith("python -m pectoral_gym.hardware.calibrate: error:")
+    assert message in err[-1] and err[-1].startswith("python -m pectoral_gym.hardware.vision.calibrate: error:")
     assert not (tmp_path / "cal.json").exists()
 
 
@@ -141,5 +142,5 @@ def test_cli_help_shows_examples_and_defaults(capsys):
         main(["--help"])
     assert exit_info.value.code == 0
     text = capsys.readouterr().out
-    assert "examples:" in text and "python -m pectoral_gym.hardware.calibrate --image" in text
+    assert "examples:" in text and "python -m pectoral_gym.hardware.vision.calibrate --image" in text
     assert "default calibration.json" in text and "default 60" in text

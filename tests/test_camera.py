@@ -8,7 +8,7 @@ import cv2
 import numpy as np
 import pytest
 
-from pectoral_gym.hardware.camera import (
+from pectoral_gym.hardware.vision.camera import (
     CameraLostError,
     EmulatedCamera,
     Frame,
@@ -19,7 +19,8 @@ from pectoral_gym.hardware.camera import (
     VideoFileSource,
     open_source,
 )
-from pectoral_gym.hardware.scene import CameraModel, SceneConditions
+from pectoral_gym.hardware.vision.cameramodel import CameraModel
+from pectoral_gym.hardware.vision.scene import SceneConditions
 
 FPS = 20.0
 N_FRAMES = 6

@@ -13,7 +13,7 @@ from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.hardware.deploy import main, plot_trajectories, run_episodes
 from pectoral_gym.hardware.emulator import EmulatedRobot
 from pectoral_gym.hardware.env import HardwareFishEnv
-from pectoral_gym.hardware.safety import SafetyConfig
+from pectoral_gym.hardware.safety.rules import SafetyConfig
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 

@@ -7,10 +7,11 @@ import time
 import numpy as np
 import pytest
 
-from pectoral_gym.hardware import protocol as pr
 from pectoral_gym.hardware.emulator import ROBOT_ADDRESS, EmulatedRobot, main
-from pectoral_gym.hardware.firmware import Firmware, FirmwareConfig, ServoLimits, clip_beats
-from pectoral_gym.hardware.link import RadioLink
+from pectoral_gym.hardware.radio import protocol as pr
+from pectoral_gym.hardware.radio import xbee as xb
+from pectoral_gym.hardware.radio.firmware import Firmware, FirmwareConfig, ServoLimits, clip_beats
+from pectoral_gym.hardware.radio.link import RadioLink
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 
@@ -193,7 +194,7 @@ def test_rate_limiting_from_rest():
 
 
 def _raw_send(sock, msg):
-    sock.sendall(pr.encode_frame(pr.tx_request(pr.encode_message(msg))))
+    sock.sendall(xb.encode_frame(xb.tx_request(pr.encode_message(msg))))
 
 
 def test_emulator_watchdog_stops_fins_in_time():

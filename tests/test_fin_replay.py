@@ -10,8 +10,8 @@ from pectoral_gym.envs.observation import FIN_OBS_SIZE, OBS_FINS, OBS_SIZE, deco
 from pectoral_gym.hardware.emulator import EmulatedRobot
 from pectoral_gym.hardware.env import HardwareFishEnv
 from pectoral_gym.hardware.finreplay import CHUNK, FinReplay
-from pectoral_gym.hardware.firmware import FirmwareConfig, ServoLimits
-from pectoral_gym.hardware.safety import SafetyConfig
+from pectoral_gym.hardware.radio.firmware import FirmwareConfig, ServoLimits
+from pectoral_gym.hardware.safety.rules import SafetyConfig
 from pectoral_gym.model import strokes
 from pectoral_gym.model.models import FullModel
 from pectoral_gym.model.params import FinBeat

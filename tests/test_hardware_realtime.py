@@ -57,7 +57,7 @@ def test_reset_settles_the_collector_while_the_fins_are_stopped(monkeypatch):
     from pectoral_gym.hardware import env as hardware_env
     from pectoral_gym.hardware.emulator import EmulatedRobot
     from pectoral_gym.hardware.env import HardwareFishEnv
-    from pectoral_gym.hardware.safety import SafetyConfig
+    from pectoral_gym.hardware.safety.rules import SafetyConfig
 
     calls = []
 

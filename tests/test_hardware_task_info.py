@@ -7,7 +7,7 @@ import pytest
 
 from pectoral_gym.hardware.emulator import EmulatedRobot
 from pectoral_gym.hardware.env import HardwareFishEnv
-from pectoral_gym.hardware.safety import SafetyConfig
+from pectoral_gym.hardware.safety.rules import SafetyConfig
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 

@@ -7,9 +7,10 @@ import time
 import numpy as np
 import pytest
 
-from pectoral_gym.hardware import protocol as pr
 from pectoral_gym.hardware.emulator import EmulatedRobot
-from pectoral_gym.hardware.link import RadioLink
+from pectoral_gym.hardware.radio import protocol as pr
+from pectoral_gym.hardware.radio import xbee as xb
+from pectoral_gym.hardware.radio.link import RadioLink
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 
@@ -54,7 +55,7 @@ def _status(seq, ack=0, state=pr.RobotState.RUNNING, session=SESSION):
     # A STATUS addressed to (and serving) the link's session (protocol v3).
     msg = pr.Message(pr.MsgType.STATUS, seq, session,
                      status=pr.Status(ack, 1, int(state), served=session, boot=BOOT))
-    return pr.encode_frame(pr.rx_packet(pr.encode_message(msg)))
+    return xb.encode_frame(xb.rx_packet(pr.encode_message(msg)))
 
 
 def test_loss_duplicates_reordering_and_corruption_are_counted():
@@ -70,7 +71,7 @@ def test_loss_duplicates_reordering_and_corruption_are_counted():
         bad_checksum[-1] ^= 0x01 if bad_checksum[-1] not in (0x7F, 0x7C) else 0x02
         # robot sequence: 1, 2, 2 (duplicate), 4 (3 lost), 3 (late), then damaged frames, then 5
         script = [_status(1), _status(2), _status(2), _status(4), _status(3),
-                  pr.encode_frame(pr.rx_packet(bytes(bad_crc))), bytes(bad_checksum), b"noise", _status(5)]
+                  xb.encode_frame(xb.rx_packet(bytes(bad_crc))), bytes(bad_checksum), b"noise", _status(5)]
         conn.sendall(b"".join(script))
         assert _wait(lambda: link.stats.received == 4)  # 1, 2, 4, 5
         s = link.stats

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from pectoral_gym.hardware.observer import HighGainObserver
+from pectoral_gym.hardware.vision.observer import HighGainObserver
 
 
 def _circle(t, radius=0.3, rate=0.5, centre=(1.1, 0.6)):

@@ -107,7 +107,7 @@ from pathlib import Path
 import gymnasium as gym
 import pectoral_gym
 import pectoral_gym.agents.training.config as config
-import pectoral_gym.hardware.protocol, pectoral_gym.scaling.cli
+import pectoral_gym.hardware.radio.protocol, pectoral_gym.scaling.cli
 prefix = Path(sys.prefix).resolve()
 for name in ("pectoral_gym", "pectoral_gym.agents", "pectoral_gym.scaling", "pectoral_gym.hardware"):
     assert Path(sys.modules[name].__file__).resolve().is_relative_to(prefix), (name, sys.modules[name].__file__)

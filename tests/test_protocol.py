@@ -6,7 +6,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pectoral_gym.hardware import protocol as pr
+from pectoral_gym.hardware.radio import protocol as pr
+from pectoral_gym.hardware.radio import xbee as xb
 
 
 def test_crc16_ccitt_false_check_value():
@@ -18,24 +19,24 @@ def test_crc16_ccitt_false_check_value():
 def test_digi_escaping_example():
     # Digi's API-mode-2 example: frame data 23 11; 0x11 (XON) is escaped as 7D 31; checksum 0xFF - 0x34 = 0xCB.
     raw = bytes([0x7E, 0x00, 0x02, 0x23, 0x7D, 0x31, 0xCB])
-    assert pr.encode_frame(bytes([0x23, 0x11])) == raw
-    assert pr.decode_frame(raw) == bytes([0x23, 0x11])
+    assert xb.encode_frame(bytes([0x23, 0x11])) == raw
+    assert xb.decode_frame(raw) == bytes([0x23, 0x11])
 
 
 def test_digi_transmit_request_example():
     # Digi's Transmit Request (0x10) example with AP = 2: destination 0013A200400A0127, 16-bit FFFE, frame id 1,
     # RF data "TxData0A"; the 0x13 in the address and the checksum 0x13 both go out escaped as 7D 33.
     expected = bytes.fromhex("7E0016100100 7D33 A200400A0127FFFE0000 5478446174613041 7D33".replace(" ", ""))
-    frame = pr.encode_frame(pr.tx_request(b"TxData0A", dest64=0x0013A200400A0127, frame_id=1))
+    frame = xb.encode_frame(xb.tx_request(b"TxData0A", dest64=0x0013A200400A0127, frame_id=1))
     assert frame == expected
-    assert pr.rf_data(pr.decode_frame(frame)) == b"TxData0A"
+    assert xb.rf_data(xb.decode_frame(frame)) == b"TxData0A"
 
 
 @pytest.mark.parametrize("value", range(256))
 def test_frame_round_trip_every_byte_value(value):
     data = bytes([0x90, value, value, 0x00, value])
-    raw = pr.encode_frame(data)
-    assert pr.decode_frame(raw) == data
+    raw = xb.encode_frame(data)
+    assert xb.decode_frame(raw) == data
     # After the delimiter no raw special byte remains except 0x7D as an escape prefix.
     body = raw[1:]
     assert not any(b in (0x7E, 0x11, 0x13) for b in body)
@@ -45,22 +46,22 @@ def test_frame_round_trip_every_byte_value(value):
 
 def test_frame_of_all_byte_values_round_trips():
     data = bytes(range(255))
-    assert pr.decode_frame(pr.encode_frame(data)) == data
+    assert xb.decode_frame(xb.encode_frame(data)) == data
 
 
 def test_decode_frame_rejects_bad_frames():
-    good = pr.encode_frame(b"\x23\x11")
-    with pytest.raises(pr.ProtocolError, match="checksum"):
-        pr.decode_frame(good[:-1] + bytes([good[-1] ^ 1]))
-    with pytest.raises(pr.ProtocolError):
-        pr.decode_frame(good[:-2])
-    with pytest.raises(pr.ProtocolError, match="framing"):
-        pr.decode_frame(b"\x00" + good[1:])
+    good = xb.encode_frame(b"\x23\x11")
+    with pytest.raises(xb.ProtocolError, match="checksum"):
+        xb.decode_frame(good[:-1] + bytes([good[-1] ^ 1]))
+    with pytest.raises(xb.ProtocolError):
+        xb.decode_frame(good[:-2])
+    with pytest.raises(xb.ProtocolError, match="framing"):
+        xb.decode_frame(b"\x00" + good[1:])
 
 
 def _msg_frames(*messages, tx=True):
-    wrap = pr.tx_request if tx else pr.rx_packet
-    return b"".join(pr.encode_frame(wrap(pr.encode_message(m))) for m in messages)
+    wrap = xb.tx_request if tx else xb.rx_packet
+    return b"".join(xb.encode_frame(wrap(pr.encode_message(m))) for m in messages)
 
 
 FINS = (math.pi / 2, math.radians(20), 1.25, 3.0, 1.2, 0.0, 0.5, 1.0)
@@ -91,7 +92,7 @@ def test_every_single_bit_flip_is_caught_by_the_crc():
         for bit in range(8):
             bad = bytearray(payload)
             bad[i] ^= 1 << bit
-            with pytest.raises(pr.ProtocolError):
+            with pytest.raises(xb.ProtocolError):
                 pr.decode_message(bytes(bad))
 
 
@@ -99,7 +100,7 @@ def test_stream_decoder_counts_crc_errors_with_a_good_xbee_checksum():
     payload = bytearray(pr.encode_message(pr.Message(pr.MsgType.STOP, 3)))
     payload[2] ^= 0x40  # damage the session byte; the XBee checksum is recomputed over the damaged data
     dec = pr.StreamDecoder()
-    assert dec.feed(pr.encode_frame(pr.tx_request(bytes(payload)))) == []
+    assert dec.feed(xb.encode_frame(xb.tx_request(bytes(payload)))) == []
     assert (dec.crc_errors, dec.frames, dec.messages) == (1, 1, 0)
 
 

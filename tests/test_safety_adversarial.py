@@ -24,13 +24,14 @@ import pytest
 from emulator_helpers import stopped_at as _stopped_at
 from emulator_helpers import wait_for as _wait
 
-from pectoral_gym.hardware import protocol as pr
 from pectoral_gym.hardware.emulator import EmulatedRobot
 from pectoral_gym.hardware.env import HardwareFishEnv
-from pectoral_gym.hardware.firmware import ServoLimits, clip_beats, peak_rates
-from pectoral_gym.hardware.frames import Frame
-from pectoral_gym.hardware.link import RadioLink
-from pectoral_gym.hardware.safety import CommandFilter, SafetyConfig, check_action
+from pectoral_gym.hardware.radio import protocol as pr
+from pectoral_gym.hardware.radio import xbee as xb
+from pectoral_gym.hardware.radio.firmware import ServoLimits, clip_beats, peak_rates
+from pectoral_gym.hardware.radio.link import RadioLink
+from pectoral_gym.hardware.safety.rules import CommandFilter, SafetyConfig, check_action
+from pectoral_gym.hardware.vision.frames import Frame
 from pectoral_gym.model.dynamics import stroke_kinematics
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
 
@@ -178,7 +179,7 @@ def test_camera_lies_stop_the_fish_with_the_reason(mode, reason):
 
 # ---------------------------------------------------------------- 4: replays, duplicates, other sessions
 def _frame(msg):
-    return pr.encode_frame(pr.tx_request(pr.encode_message(msg)))
+    return xb.encode_frame(xb.tx_request(pr.encode_message(msg)))
 
 
 def _set(seq, session, command, lease=0.8):
@@ -413,7 +414,7 @@ def test_unknown_robot_state_and_complex_actions():
     conn, _ = server.accept()
     try:
         status = pr.Message(pr.MsgType.STATUS, 1, link.session, status=pr.Status(0, 1, 7, served=link.session, boot=1))
-        conn.sendall(pr.encode_frame(pr.rx_packet(pr.encode_message(status))))
+        conn.sendall(xb.encode_frame(xb.rx_packet(pr.encode_message(status))))
         assert _wait(lambda: link.stats.received == 1)
         assert link.health()["robot_state"] == "UNKNOWN_7"
     finally:
@@ -428,7 +429,7 @@ _SCRIPT = textwrap.dedent("""
     import sys, time
     import numpy as np
     from pectoral_gym.hardware.env import HardwareFishEnv
-    from pectoral_gym.hardware.safety import SafetyConfig
+    from pectoral_gym.hardware.safety.rules import SafetyConfig
     env = HardwareFishEnv(sys.argv[1], sys.argv[2], safety=SafetyConfig(tracking_timeout=2.0, link_timeout=3.0))
     env.reset(seed=0)
     print("ready", flush=True)

@@ -18,10 +18,11 @@ import numpy as np
 import pytest
 from emulator_helpers import wait_for
 
-from pectoral_gym.hardware import protocol as pr
 from pectoral_gym.hardware.emulator import EmulatedRobot
-from pectoral_gym.hardware.link import DEADLINE_HORIZON, RadioLink
-from pectoral_gym.hardware.radioproxy import FrameSplitter, RadioProxy
+from pectoral_gym.hardware.radio import protocol as pr
+from pectoral_gym.hardware.radio import xbee as xb
+from pectoral_gym.hardware.radio.link import DEADLINE_HORIZON, RadioLink
+from pectoral_gym.hardware.radio.radioproxy import FrameSplitter, RadioProxy
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 
@@ -46,8 +47,8 @@ def _link(url, speed=SPEED, **kwargs):
 def _message(raw):
     """The message in one raw XBee frame, or ``None``."""
     try:
-        return pr.decode_message(pr.rf_data(pr.decode_frame(raw)))
-    except (pr.ProtocolError, TypeError, IndexError):
+        return pr.decode_message(xb.rf_data(xb.decode_frame(raw)))
+    except (xb.ProtocolError, TypeError, IndexError):
         return None
 
 
@@ -58,7 +59,7 @@ def _last_running(robot):
 
 # ---------------------------------------------------------------- the proxy itself
 def test_proxy_splits_frames_and_delays_whole_frames():
-    frames = [pr.encode_frame(pr.tx_request(pr.encode_message(pr.Message(pr.MsgType.STOP, k, 0x7E7D1113))))
+    frames = [xb.encode_frame(xb.tx_request(pr.encode_message(pr.Message(pr.MsgType.STOP, k, 0x7E7D1113))))
               for k in range(1, 4)]  # session bytes that all need escaping
     stream = b"junk" + b"".join(frames)
     splitter = FrameSplitter()

@@ -16,13 +16,14 @@ import numpy as np
 import pytest
 from emulator_helpers import wait_for as _wait
 
-from pectoral_gym.hardware import protocol as pr
 from pectoral_gym.hardware.emulator import EmulatedRobot
 from pectoral_gym.hardware.env import HardwareFishEnv
-from pectoral_gym.hardware.firmware import ServoLimits
-from pectoral_gym.hardware.frames import Frame
-from pectoral_gym.hardware.safety import Geofence, SafetyConfig, SpeedBound
-from pectoral_gym.hardware.supervisor import PRIORITY, Supervisor, ls_velocity
+from pectoral_gym.hardware.radio import protocol as pr
+from pectoral_gym.hardware.radio.firmware import ServoLimits
+from pectoral_gym.hardware.safety.geofence import Geofence, SpeedBound
+from pectoral_gym.hardware.safety.rules import SafetyConfig
+from pectoral_gym.hardware.safety.supervisor import PRIORITY, Supervisor, ls_velocity
+from pectoral_gym.hardware.vision.frames import Frame
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")
@@ -160,7 +161,7 @@ def _noisy_poses(rng, n, noise, dt=1 / 30):
 def test_reset_over_a_slow_radio_waits_for_the_robots_word():
     # A 0.15 s one-way radio: the STOP's answer takes over 0.3 s. reset() must wait for it (one STOP, its retries
     # and the keep-alive's STOP copies), not give up and resend before any answer can arrive.
-    from pectoral_gym.hardware.radioproxy import RadioProxy
+    from pectoral_gym.hardware.radio.radioproxy import RadioProxy
 
     robot = EmulatedRobot(speed=1.0, seed=0).start()
     proxy = RadioProxy(robot.url, latency=0.15, seed=0, speed=1.0)
@@ -257,7 +258,7 @@ def test_physical_speed_bound_holds_against_the_full_model_over_random_commands(
 def test_fish_at_rest_near_a_wall_with_pose_noise_is_not_stopped():
     # Issue: 5 mm / 2 deg of pose noise, fish at rest 0.30 m from a wall: 2 of 4 episodes stopped at step 1.
     def noisy(robot):
-        from pectoral_gym.hardware.camera import EmulatedCamera
+        from pectoral_gym.hardware.vision.camera import EmulatedCamera
 
         return EmulatedCamera(robot.pose_stamped, seed=3, pose_noise=(0.005, math.radians(2)))
 

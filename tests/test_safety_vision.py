@@ -1,5 +1,5 @@
 """Issue 30, vision side: frozen cameras that are not bit-identical, a camera pipeline that never blocks its
-reader, degraded cameras (pectoral_gym.hardware.camerafaults), wrong-size calibrations.
+reader, degraded cameras (pectoral_gym.hardware.vision.camerafaults), wrong-size calibrations.
 
 Unit tests run on rendered frames with stamps chosen by the test; the end-to-end tests drive the emulated
 robot through ``HardwareFishEnv`` and measure stops on the emulator's own clock (its trace).
@@ -16,12 +16,13 @@ import pytest
 from emulator_helpers import stopped_at as _stopped_at
 from emulator_helpers import wait_for as _wait
 
-from pectoral_gym.hardware.camera import EmulatedCamera
-from pectoral_gym.hardware.camerafaults import FaultyCamera
-from pectoral_gym.hardware.framecheck import FrameCheck
-from pectoral_gym.hardware.frames import Frame, FrameGrabber
-from pectoral_gym.hardware.scene import CameraModel, SceneConditions, render_frame
-from pectoral_gym.hardware.tracker import MarkerTracker, fish_box
+from pectoral_gym.hardware.vision.camera import EmulatedCamera
+from pectoral_gym.hardware.vision.camerafaults import FaultyCamera
+from pectoral_gym.hardware.vision.cameramodel import CameraModel
+from pectoral_gym.hardware.vision.framecheck import FrameCheck
+from pectoral_gym.hardware.vision.frames import Frame, FrameGrabber
+from pectoral_gym.hardware.vision.scene import SceneConditions, render_frame
+from pectoral_gym.hardware.vision.tracker import MarkerTracker, fish_box
 
 CAMERA = CameraModel.default()
 POSE = (1.0, 0.5, 0.3)
@@ -264,7 +265,7 @@ def test_grabber_renders_in_its_own_thread_with_the_pose_stamp():
 def _rig(wrap):
     from pectoral_gym.hardware.emulator import EmulatedRobot
     from pectoral_gym.hardware.env import HardwareFishEnv
-    from pectoral_gym.hardware.safety import SafetyConfig
+    from pectoral_gym.hardware.safety.rules import SafetyConfig
 
     robot = EmulatedRobot(speed=1.0, seed=0, start_pose=(0.8, 0.575, 0.0)).start()
     robot.trace = []
@@ -288,7 +289,7 @@ def _step_until_stopped(env, steps=6):
 
 
 def _supervisor_passes_region():
-    from pectoral_gym.hardware.supervisor import Supervisor
+    from pectoral_gym.hardware.safety.supervisor import Supervisor
 
     return "region" in inspect.getsource(Supervisor)
 

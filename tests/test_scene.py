@@ -8,11 +8,11 @@ import cv2
 import numpy as np
 import pytest
 
-from pectoral_gym.hardware.scene import (
+from pectoral_gym.hardware.vision.cameramodel import CameraModel
+from pectoral_gym.hardware.vision.scene import (
     BACK_MARKER_OFFSET,
     FRONT_MARKER_OFFSET,
     MARKER_RADIUS,
-    CameraModel,
     Occluder,
     SceneConditions,
     render_frame,

@@ -1,6 +1,6 @@
 """The NMPC's stopping-distance band against the robot env's geofence.
 
-The band is pectoral_gym.agents.controllers.stop_band, the geofence pectoral_gym.hardware.safety.
+The band is pectoral_gym.agents.controllers.stop_band, the geofence pectoral_gym.hardware.safety.geofence.
 """
 
 import math
@@ -14,7 +14,8 @@ from pectoral_gym.agents.controllers.stop_band import StopBand, band_violation
 from pectoral_gym.agents.nmpc.settings import NMPCSettings
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.hardware.deploy import make_controller
-from pectoral_gym.hardware.safety import Geofence, SafetyConfig
+from pectoral_gym.hardware.safety.geofence import Geofence
+from pectoral_gym.hardware.safety.rules import SafetyConfig
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
 
 SAFETY = SafetyConfig()

@@ -10,13 +10,14 @@ import numpy as np
 import pytest
 
 from pectoral_gym.agents.controllers.stop_band import StopBand, band_violation
-from pectoral_gym.hardware.safety import Geofence
+from pectoral_gym.hardware.safety.geofence import Geofence
 from pectoral_gym.model import tank
 from pectoral_gym.model.params import FishParams, body_coefficients
 
 
 def test_outline_clearance_and_coasting_by_hand():
-    # The robot's geofence (pectoral_gym.hardware.safety.Geofence) is built on these; here they are checked by hand.
+    # The robot's geofence (pectoral_gym.hardware.safety.geofence.Geofence) is built on these; here they are checked by
+    # hand.
     params = FishParams()
     coef = body_coefficients(params)
     outline = tank.Outline.from_params(params)

@@ -32,7 +32,7 @@ from pectoral_gym.envs.tasks.table import TASK_TABLE, TaskState, observe_fish, r
 from pectoral_gym.envs.vector import PectoralFishVectorEnv
 from pectoral_gym.hardware.emulator import EmulatedRobot
 from pectoral_gym.hardware.env import HardwareFishEnv
-from pectoral_gym.hardware.safety import SafetyConfig
+from pectoral_gym.hardware.safety.rules import SafetyConfig
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 

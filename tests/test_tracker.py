@@ -7,9 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from pectoral_gym.hardware.camera import Frame
-from pectoral_gym.hardware.scene import FRONT_MARKER_OFFSET, CameraModel, Occluder, SceneConditions, render_frame
-from pectoral_gym.hardware.tracker import MarkerTracker, TrackerConfig
+from pectoral_gym.hardware.vision.camera import Frame
+from pectoral_gym.hardware.vision.cameramodel import CameraModel
+from pectoral_gym.hardware.vision.scene import FRONT_MARKER_OFFSET, Occluder, SceneConditions, render_frame
+from pectoral_gym.hardware.vision.tracker import MarkerTracker, TrackerConfig
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 
 CAMERA = CameraModel.default()

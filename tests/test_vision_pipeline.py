@@ -6,9 +6,9 @@ import math
 
 import numpy as np
 
-from pectoral_gym.hardware.camera import EmulatedCamera
-from pectoral_gym.hardware.observer import HighGainObserver
-from pectoral_gym.hardware.tracker import MarkerTracker
+from pectoral_gym.hardware.vision.camera import EmulatedCamera
+from pectoral_gym.hardware.vision.observer import HighGainObserver
+from pectoral_gym.hardware.vision.tracker import MarkerTracker
 from pectoral_gym.model.params import FinBeat
 from pectoral_gym.model.spec import make_model
 

@@ -1,8 +1,8 @@
 """The robot env's stopping-distance band as a soft wall term of the NMPC (NumPy and CasADi alike).
 
 On the robot (``pectoral_gym.hardware.env.HardwareFishEnv``) the safety supervisor stops the fish, and ends the
-episode, once it could no longer coast to a stop clear of a wall (``pectoral_gym.hardware.safety.Geofence``): per
-wall, the clearance of the fish's outline (a capsule from nose to tail of radius ``C_p`` and a disc of
+episode, once it could no longer coast to a stop clear of a wall (``pectoral_gym.hardware.safety.geofence.Geofence``):
+per wall, the clearance of the fish's outline (a capsule from nose to tail of radius ``C_p`` and a disc of
 radius ``S_p`` around each fin pivot ``(0, +-C_p)``) must exceed ``margin + v t_r + ln(1 + k v T) / k``,
 ``v`` the speed towards that wall, ``t_r`` the reaction time, ``T`` the coasting horizon and
 ``k = c1 / max(m1, m2)`` (eq. 19 with no fin force along one axis). A planner that keeps only its nose
@@ -26,7 +26,7 @@ __all__ = ["StopBand", "band_violation"]
 
 @dataclass(frozen=True)
 class StopBand:
-    """The geometry and rule of the stopping-distance band (``pectoral_gym.hardware.safety.Geofence``'s).
+    """The geometry and rule of the stopping-distance band (``pectoral_gym.hardware.safety.geofence.Geofence``'s).
 
     Attributes:
         margin: Clearance kept on top of the stopping distance [m].

@@ -131,9 +131,10 @@ class NMPCSettings:
             ``goal`` only.
         stop_band: ``(margin [m], reaction time [s], coasting horizon [s])`` of the robot env's
             stopping-distance band (:mod:`pectoral_gym.agents.controllers.stop_band`, the rule of
-            ``pectoral_gym.hardware.safety.Geofence``): the wall terms then keep the fish's whole outline out of the
-            band instead of its nose and tail ``wall_margin`` (and ``togo_wall_margin``) from the walls. ``None`` (the
-            simulated envs, which have no such band): off. ``pectoral_gym.hardware.deploy`` passes its safety settings.
+            ``pectoral_gym.hardware.safety.geofence.Geofence``): the wall terms then keep the fish's whole outline out
+            of the band instead of its nose and tail ``wall_margin`` (and ``togo_wall_margin``) from the walls. ``None``
+            (the simulated envs, which have no such band): off. ``pectoral_gym.hardware.deploy`` passes its safety
+            settings.
     """
 
     horizon: int = 10

@@ -2,8 +2,8 @@
 
 Every rule about the walls lives here and is used by the task kernels (wall contact of nose and tail,
 :mod:`pectoral_gym.envs.tasks.kernels`), the NMPC's wall and stopping-band terms (``agents/controllers/stop_band.py``,
-``agents/nmpc/problem.py``) and the robot's geofence (``pectoral_gym.hardware.safety.Geofence`` uses the same numbers:
-``tests/test_tank.py``).
+``agents/nmpc/problem.py``) and the robot's geofence (``pectoral_gym.hardware.safety.geofence.Geofence`` uses the same
+numbers: ``tests/test_tank.py``).
 
 The formulas are written once as arithmetic on their arguments (:func:`outline_circles`,
 :func:`wall_gaps`, :func:`coast_distance` with ``ops``), so the same function serves Python floats,

@@ -6,8 +6,8 @@ counts the episodes that end in a ``link_lost`` or ``tracking_lost`` stop:
 
 * ``clean``: loopback radio, the emulated camera as it is;
 * ``bursty``: a radio with 100 ms one-way latency and fades covering 5 % of the time in 0.2 s bursts
-  (:class:`pectoral_gym.hardware.radioproxy.RadioProxy`);
-* ``drops``: 10 % of the camera frames lost (:class:`pectoral_gym.hardware.camerafaults.FaultyCamera`);
+  (:class:`pectoral_gym.hardware.radio.radioproxy.RadioProxy`);
+* ``drops``: 10 % of the camera frames lost (:class:`pectoral_gym.hardware.vision.camerafaults.FaultyCamera`);
 * ``load``: both cores loaded by two busy processes for the whole run.
 
 The emulated robot and its camera run in a process of their own (radio over TCP, frames over
@@ -41,12 +41,12 @@ from tqdm import tqdm
 
 from pectoral_gym.agents.baselines import make_baseline
 from pectoral_gym.envs.tasks import kernels as tk
-from pectoral_gym.hardware.camera import open_source
-from pectoral_gym.hardware.camerafaults import FaultyCamera
 from pectoral_gym.hardware.deploy_checks import DEFAULT_NICE, raise_priority
 from pectoral_gym.hardware.emulator import EmulatedRobot
 from pectoral_gym.hardware.env import HardwareFishEnv
-from pectoral_gym.hardware.radioproxy import RadioProxy
+from pectoral_gym.hardware.radio.radioproxy import RadioProxy
+from pectoral_gym.hardware.vision.camera import open_source
+from pectoral_gym.hardware.vision.camerafaults import FaultyCamera
 
 CONDITIONS = ("clean", "bursty", "drops", "load")
 

@@ -31,7 +31,7 @@ import math
 import numpy as np
 
 from pectoral_gym.agents.nmpc.spin import SPIN_CYCLE
-from pectoral_gym.hardware.firmware import ServoLimits, clip_beats, stretch_transition
+from pectoral_gym.hardware.radio.firmware import ServoLimits, clip_beats, stretch_transition
 from pectoral_gym.model.models import AveragedModel, FullModel
 
 STEPS, DT, CYCLE = 12, 0.5, 4
@@ -63,8 +63,8 @@ def run(model: type, cycles: np.ndarray, warm: np.ndarray | None = None, with_wo
 def servo_excess(cycles: np.ndarray, limits: ServoLimits | None = None) -> np.ndarray:
     """How far the robot's servo rules would change each cycle ``(n, CYCLE, 2, 4)`` (0: executed as commanded).
 
-    Sums what :mod:`pectoral_gym.hardware.firmware` would do to each step of the repeated cycle: clipping (peak fin rate
-    of the regular strokes), period stretching of the transitional half-stroke from either turning point
+    Sums what :mod:`pectoral_gym.hardware.radio.firmware` would do to each step of the repeated cycle: clipping (peak
+    fin rate of the regular strokes), period stretching of the transitional half-stroke from either turning point
     of the previous step into either half-stroke of the next (the robot's ``max_speed``), and the excess of
     each parameter's change over ``max_rate`` times the control period.
     """
@@ -111,7 +111,7 @@ def main() -> None:
     parser.add_argument("--iterations", type=int, default=30, help="cross-entropy iterations")
     parser.add_argument("--population", type=int, default=1500, help="cycles drawn per iteration")
     parser.add_argument("--no-servo-limits", action="store_true",
-                        help="search without the robot's servo rules (pectoral_gym.hardware.firmware)")
+                        help="search without the robot's servo rules (pectoral_gym.hardware.radio.firmware)")
     args = parser.parse_args()
     cycle = search(population=args.population, iterations=args.iterations, work_weight=args.work_weight,
                    servo_limits=not args.no_servo_limits)

@@ -19,8 +19,9 @@ from typing import NamedTuple
 import cv2
 import numpy as np
 
-from pectoral_gym.hardware.frames import Frame
-from pectoral_gym.hardware.scene import BACK_MARKER_OFFSET, BODY_LENGTH, FRONT_MARKER_OFFSET, MARKER_RADIUS, CameraModel
+from pectoral_gym.hardware.vision.cameramodel import CameraModel
+from pectoral_gym.hardware.vision.frames import Frame
+from pectoral_gym.hardware.vision.scene import BACK_MARKER_OFFSET, BODY_LENGTH, FRONT_MARKER_OFFSET, MARKER_RADIUS
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 
 __all__ = ["Blob", "MarkerTracker", "TrackResult", "TrackerConfig", "draw_overlay", "fish_box"]
@@ -113,7 +114,7 @@ class TrackResult(NamedTuple):
         reason: Why not ok ("" when ok).
         box: Pixel box ``(row0, row1, col0, col1)``, end exclusive, clipped to the image, that holds the
             whole fish (:func:`fish_box` with :data:`BOX_MARGIN`); ``None`` unless ``ok``. The region
-            ``pectoral_gym.hardware.framecheck.FrameCheck.check`` compares between frames.
+            ``pectoral_gym.hardware.vision.framecheck.FrameCheck.check`` compares between frames.
     """
 
     ok: bool

@@ -1,9 +1,9 @@
-"""A lossy radio between a :class:`~pectoral_gym.hardware.link.RadioLink` and a robot: latency, jitter, loss, bursts.
+"""Lossy radio between a :class:`~pectoral_gym.hardware.radio.link.RadioLink` and a robot: delay, jitter, loss, bursts.
 
 :class:`RadioProxy` listens on ``socket://127.0.0.1:PORT`` (its :attr:`~RadioProxy.url`); every
 connection to it gets its own connection to ``upstream_url`` (an emulated robot's ``socket://`` URL),
 and bytes flow both ways through it. It is frame-aware: it cuts each direction's byte stream into
-XBee API frames (start delimiter ``0x7E``, escaped length; ``pectoral_gym.hardware.protocol``) and delays or drops
+XBee API frames (start delimiter ``0x7E``, escaped length; ``pectoral_gym.hardware.radio.protocol``) and delays or drops
 *whole* frames, so a loss is a lost message, never a damaged stream. Bytes outside any frame are
 passed on with the same delay.
 
@@ -36,7 +36,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pectoral_gym.hardware.protocol import ESCAPE, START
+from pectoral_gym.hardware.radio.xbee import ESCAPE, START
 
 __all__ = ["RadioProxy", "FrameSplitter", "ProxyStats"]
 
@@ -129,7 +129,7 @@ class RadioProxy:
         host: Interface to listen on.
 
     Attributes:
-        url: ``socket://host:port`` for :class:`pectoral_gym.hardware.link.RadioLink`.
+        url: ``socket://host:port`` for :class:`pectoral_gym.hardware.radio.link.RadioLink`.
         stats: A :class:`ProxyStats`.
         log: ``None``, or a list to which every frame appends ``(wall time, "up"/"down", lost)``.
         drop_if: ``None``, or ``f(direction, raw_frame) -> bool``: frames it returns True for are lost too

@@ -5,9 +5,9 @@
 a *copy* of the current fin command (same command identity and deadline, so it never extends the
 command; ``docs/protocol.md``) every ``keepalive_period`` until the lease ends, then STOP; HEARTBEAT when
 stopped. It retries an unacknowledged SET_FINS/STOP after a timeout that adapts to the measured round
-trip (:class:`pectoral_gym.hardware.linkclock.RttEstimator`), at most ``max_retries`` times (same frame, same sequence
-number). Only :meth:`RadioLink.set_fins` starts a new lease; it also carries a deadline on the robot's
-clock (:class:`pectoral_gym.hardware.linkclock.RobotClock`), so no copy runs past the lease counted from the call.
+trip (:class:`pectoral_gym.hardware.radio.linkclock.RttEstimator`), at most ``max_retries`` times (same frame, same
+sequence number). Only :meth:`RadioLink.set_fins` starts a new lease; it also carries a deadline on the robot's
+clock (:class:`pectoral_gym.hardware.radio.linkclock.RobotClock`), so no copy runs past the lease counted from the call.
 
 Control (protocol version 3): every STATUS names the session it answers and the session the robot
 serves. :attr:`RadioLink.control_lost` latches why this PC is not (or no longer) the robot's controller:
@@ -28,8 +28,9 @@ from dataclasses import dataclass
 import numpy as np
 import serial
 
-from pectoral_gym.hardware import protocol as pr
-from pectoral_gym.hardware.linkclock import CLOCK_TOLERANCE, RobotClock, RttEstimator
+from pectoral_gym.hardware.radio import protocol as pr
+from pectoral_gym.hardware.radio import xbee as xb
+from pectoral_gym.hardware.radio.linkclock import CLOCK_TOLERANCE, RobotClock, RttEstimator
 
 __all__ = ["RadioLink", "LinkStats", "DEADLINE_HORIZON"]
 
@@ -107,7 +108,7 @@ class RadioLink:
         boot: The robot's boot id from its STATUS (``None`` before any).
     """
 
-    def __init__(self, port: str | serial.SerialBase, baudrate: int = 57600, dest64: int = pr.BROADCAST,
+    def __init__(self, port: str | serial.SerialBase, baudrate: int = 57600, dest64: int = xb.BROADCAST,
                  keepalive_period: float = 0.1, ack_timeout: float = 0.05, max_retries: int = 3,
                  session: int | None = None, take_over: bool = False, max_ack_timeout: float = 1.0,
                  clock_tolerance: float = CLOCK_TOLERANCE):
@@ -116,7 +117,7 @@ class RadioLink:
         if not max_ack_timeout >= ack_timeout:
             raise ValueError(f"max_ack_timeout must be >= ack_timeout, got {max_ack_timeout!r} < {ack_timeout!r}")
         self.serial = serial.serial_for_url(port, baudrate=baudrate, timeout=0.01) if isinstance(port, str) else port
-        if isinstance(port, str) and "://" not in port and int(dest64) == pr.BROADCAST:
+        if isinstance(port, str) and "://" not in port and int(dest64) == xb.BROADCAST:
             warnings.warn("RadioLink: commands are broadcast, so every robot on this radio channel obeys them; "
                           "pass dest64=<the robot XBee's 64-bit address>", stacklevel=2)
         self.dest64 = int(dest64)
@@ -172,7 +173,7 @@ class RadioLink:
         self._sent_at[self._seq] = (time.monotonic(), False)
         if len(self._sent_at) > 256:
             self._sent_at.pop(next(iter(self._sent_at)))
-        return self._seq, pr.encode_frame(pr.tx_request(pr.encode_message(msg), self.dest64))
+        return self._seq, xb.encode_frame(xb.tx_request(pr.encode_message(msg), self.dest64))
 
     def _write(self, frame: bytes) -> None:
         with self._write_lock:
@@ -203,7 +204,7 @@ class RadioLink:
         seq = (self._seq + 64) & 0xFFFF
         msg = pr.Message(pr.MsgType.STOP, seq, self.session)
         try:
-            self.serial.write(pr.encode_frame(pr.tx_request(pr.encode_message(msg), self.dest64)))
+            self.serial.write(xb.encode_frame(xb.tx_request(pr.encode_message(msg), self.dest64)))
         except Exception:  # noqa: BLE001 - a signal handler must not raise; the lease stops the fins anyway
             pass
         self._emergency = seq
@@ -216,7 +217,7 @@ class RadioLink:
         STATUS), the command also carries a deadline on the robot's clock, a lower bound of the robot's
         time ``deadline_horizon`` robot seconds after this call, so no copy of it, however late, runs
         past that; the PC's own keep-alive copies stop ``lease`` after this call. Nothing is checked
-        here beyond finiteness and the wire range: clip with :mod:`pectoral_gym.hardware.safety` first. While
+        here beyond finiteness and the wire range: clip with :mod:`pectoral_gym.hardware.safety.rules` first. While
         :attr:`control_lost` is set nothing is sent (the command is counted in ``stats.suppressed``) and
         ``-1`` is returned.
         """

@@ -13,8 +13,8 @@ an attribute that can be changed while frames flow (a test lets the camera run l
 * ``latency``: each frame is handed out this long after the source delivered it [s].
 * ``block``: each ``read()`` blocks this long before reading [s] (``math.inf``: until :meth:`close`).
 
-Pose noise of the emulated camera is :class:`pectoral_gym.hardware.camera.EmulatedCamera`'s ``pose_noise``; pixel
-noise, blur and lighting are :class:`pectoral_gym.hardware.scene.SceneConditions`.
+Pose noise of the emulated camera is :class:`pectoral_gym.hardware.vision.camera.EmulatedCamera`'s ``pose_noise``; pixel
+noise, blur and lighting are :class:`pectoral_gym.hardware.vision.scene.SceneConditions`.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import time
 import cv2
 import numpy as np
 
-from pectoral_gym.hardware.frames import Frame, FrameSource
+from pectoral_gym.hardware.vision.frames import Frame, FrameSource
 
 __all__ = ["FREEZE_MODES", "FaultyCamera"]
 

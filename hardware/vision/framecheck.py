@@ -34,7 +34,7 @@ import math
 import cv2
 import numpy as np
 
-from pectoral_gym.hardware.frames import Frame
+from pectoral_gym.hardware.vision.frames import Frame
 
 __all__ = ["FrameCheck", "FRAME_REASONS", "Region"]
 
@@ -106,7 +106,7 @@ class FrameCheck:
             frame: The frame to classify.
             now: Current time on the frames' clock [s].
             region: Optional pixel box ``(row0, row1, col0, col1)``, end exclusive, around the fish's
-                last sighting (``pectoral_gym.hardware.tracker.TrackResult.box``); clipped to the image.
+                last sighting (``pectoral_gym.hardware.vision.tracker.TrackResult.box``); clipped to the image.
 
         Raises:
             ValueError: ``region`` is not four integers with ``row0 < row1`` and ``col0 < col1``.

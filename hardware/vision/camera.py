@@ -2,9 +2,9 @@
 
 Every source implements :class:`FrameSource`: ``read()`` returns the newest :class:`Frame` not returned before, or
 ``None`` when there is none (yet) or the source is lost; it never blocks for long and never hands out a stale frame
-twice. Timestamps are seconds on the ``time.monotonic()`` clock (see :mod:`pectoral_gym.hardware.frames`).
-:class:`FrameServer` and :class:`NetworkCamera` (frames over TCP) live in :mod:`pectoral_gym.hardware.netcamera` and are
-re-exported here.
+twice. Timestamps are seconds on the ``time.monotonic()`` clock (see :mod:`pectoral_gym.hardware.vision.frames`).
+:class:`FrameServer` and :class:`NetworkCamera` (frames over TCP) live in :mod:`pectoral_gym.hardware.vision.netcamera`
+and are re-exported here.
 """
 
 from __future__ import annotations
@@ -19,9 +19,10 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from pectoral_gym.hardware.frames import CameraLostError, Frame, FrameSource, NewestSlot
-from pectoral_gym.hardware.netcamera import FrameServer, NetworkCamera
-from pectoral_gym.hardware.scene import CameraModel, SceneConditions, render_frame
+from pectoral_gym.hardware.vision.cameramodel import CameraModel
+from pectoral_gym.hardware.vision.frames import CameraLostError, Frame, FrameSource, NewestSlot
+from pectoral_gym.hardware.vision.netcamera import FrameServer, NetworkCamera
+from pectoral_gym.hardware.vision.scene import SceneConditions, render_frame
 
 __all__ = [
     "CameraLostError",
@@ -42,10 +43,10 @@ class EmulatedCamera:
     """Renders the overhead view of an emulated fish on every ``read()``.
 
     The frame's stamp is the instant of the pose it shows (``pose_fn``'s), taken before rendering; read
-    it through :class:`pectoral_gym.hardware.frames.FrameGrabber` to render in a thread of its own.
+    it through :class:`pectoral_gym.hardware.vision.frames.FrameGrabber` to render in a thread of its own.
 
     A perfectly noise-free renderer (``noise_std=0``) of a fish at rest repeats its image exactly, which
-    :class:`pectoral_gym.hardware.framecheck.FrameCheck` rightly cannot tell from a frozen camera; the default
+    :class:`pectoral_gym.hardware.vision.framecheck.FrameCheck` rightly cannot tell from a frozen camera; the default
     conditions carry sensor noise (``noise_std=2``) as a real sensor does.
 
     Args:

@@ -3,14 +3,14 @@
 The control loop (``HardwareFishEnv.step``) runs only when the program calls it; between calls (a
 slow policy, a training library between rollouts, a breakpoint, an exception) nothing in it runs. The
 supervisor does, every camera period: it takes the newest frame from a
-:class:`pectoral_gym.hardware.frames.FrameGrabber` (which reads the camera in a thread of its own, so a camera that
-blocks can never hold up the rules), rejects frames that are not new sightings
-(:class:`pectoral_gym.hardware.framecheck.FrameCheck`), tracks the fish, and applies the rules: the operator's stop,
-loss of control of the robot (``RadioLink.control_lost``), the link timeout, the geofence with stopping
-distance (:class:`pectoral_gym.hardware.safety.Geofence`, speeds bounded by
-:class:`pectoral_gym.hardware.safety.SpeedBound`) and the tracking timeout. Each rule that trips is latched and sends
-STOP; commands are refused (:meth:`Supervisor.send`) until the next :meth:`Supervisor.arm`, and the operator's stop
-until :meth:`Supervisor.rearm`. When several have tripped, :attr:`Supervisor.reason` is the first of
+:class:`pectoral_gym.hardware.vision.frames.FrameGrabber` (which reads the camera in a thread of its own, so a camera
+that blocks can never hold up the rules), rejects frames that are not new sightings
+(:class:`pectoral_gym.hardware.vision.framecheck.FrameCheck`), tracks the fish, and applies the rules: the operator's
+stop, loss of control of the robot (``RadioLink.control_lost``), the link timeout, the geofence with stopping
+distance (:class:`pectoral_gym.hardware.safety.geofence.Geofence`, speeds bounded by
+:class:`pectoral_gym.hardware.safety.geofence.SpeedBound`) and the tracking timeout. Each rule that trips is latched and
+sends STOP; commands are refused (:meth:`Supervisor.send`) until the next :meth:`Supervisor.arm`, and the operator's
+stop until :meth:`Supervisor.rearm`. When several have tripped, :attr:`Supervisor.reason` is the first of
 :data:`PRIORITY` (``docs/hardware.md``, "Failsafe priority"). The robot's own lease
 (``docs/protocol.md``) stops the fins even if this thread and the whole PC die.
 """
@@ -24,9 +24,10 @@ import time
 
 import numpy as np
 
-from pectoral_gym.hardware.framecheck import FrameCheck
-from pectoral_gym.hardware.frames import FrameGrabber
-from pectoral_gym.hardware.safety import Geofence, SafetyConfig, SpeedBound, TrackingWatch
+from pectoral_gym.hardware.safety.geofence import Geofence, SpeedBound
+from pectoral_gym.hardware.safety.rules import SafetyConfig, TrackingWatch
+from pectoral_gym.hardware.vision.framecheck import FrameCheck
+from pectoral_gym.hardware.vision.frames import FrameGrabber
 
 __all__ = ["Supervisor", "PRIORITY", "CONTROL_LOST"]
 
@@ -70,7 +71,7 @@ class Supervisor:
     """Safety rules applied at all times, in a thread of their own.
 
     Args:
-        link: A :class:`pectoral_gym.hardware.link.RadioLink` (``set_fins``, ``stop``, ``status_age``,
+        link: A :class:`pectoral_gym.hardware.radio.link.RadioLink` (``set_fins``, ``stop``, ``status_age``,
             ``control_lost``).
         camera: A frame source; the supervisor reads it through a :class:`FrameGrabber` it owns (and closes).
         tracker: ``track(frame) -> TrackResult``.

@@ -1,6 +1,6 @@
 """Camera calibration: the pixel <-> tank homography from points whose tank position is known.
 
-Three ways to get the points (``python -m pectoral_gym.hardware.calibrate --help``):
+Three ways to get the points (``python -m pectoral_gym.hardware.vision.calibrate --help``):
 
 - ``--corners U,V U,V U,V U,V``: the pixels of the tank corners (0, 0), (L, 0), (L, W), (0, W), read off a frame
   in any image viewer; ``--points X,Y:U,V ...`` for any other >= 4 known points.
@@ -23,8 +23,9 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from pectoral_gym.hardware.scene import CameraModel, fit_homography, render_frame
-from pectoral_gym.hardware.tracker import draw_overlay
+from pectoral_gym.hardware.vision.cameramodel import CameraModel, fit_homography
+from pectoral_gym.hardware.vision.scene import render_frame
+from pectoral_gym.hardware.vision.tracker import draw_overlay
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 
 __all__ = ["detect_dots", "fit_homography", "main", "reprojection_errors", "tank_corners"]
@@ -85,11 +86,12 @@ def _size(text: str) -> tuple[int, int]:
 
 
 _EXAMPLES = """examples:
-  python -m pectoral_gym.hardware.calibrate --image frame.png -o calibration.json --overlay check.png
-  python -m pectoral_gym.hardware.calibrate --corners 40,320 615,305 600,40 52,30 --size 640x360 -o calibration.json
-  python -m pectoral_gym.hardware.calibrate --points 0.2,0.1:90,296 2.0,0.2:540,270 2.1,1.0:565,70 \\
+  python -m pectoral_gym.hardware.vision.calibrate --image frame.png -o calibration.json --overlay check.png
+  python -m pectoral_gym.hardware.vision.calibrate --corners 40,320 615,305 600,40 52,30 --size 640x360 \\
+      -o calibration.json
+  python -m pectoral_gym.hardware.vision.calibrate --points 0.2,0.1:90,296 2.0,0.2:540,270 2.1,1.0:565,70 \\
       0.3,1.1:115,45 1.1,0.6:315,170 --size 640x360 --frame frame.png --overlay check.png
-  python -m pectoral_gym.hardware.calibrate --from-emulator -o emulator.json
+  python -m pectoral_gym.hardware.vision.calibrate --from-emulator -o emulator.json
 
 Calibrate at the resolution the camera runs at during deployment: pectoral_gym.hardware.deploy refuses a calibration
 made for another image size. Exit status: 0 written; 2 a bad argument or an unreadable/unwritable file."""
@@ -107,7 +109,7 @@ def _hue(text: str) -> int:
 
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
-        prog="python -m pectoral_gym.hardware.calibrate",
+        prog="python -m pectoral_gym.hardware.vision.calibrate",
         description="Compute the pixel <-> tank homography of the overhead camera and write the calibration JSON.",
         epilog=_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter,
     )

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pectoral_gym.hardware.protocol import (
+from pectoral_gym.hardware.radio.protocol import (
     Message,
     MsgType,
     RobotState,

@@ -20,7 +20,7 @@ import time
 import cv2
 import numpy as np
 
-from pectoral_gym.hardware.frames import Frame, FrameSource, NewestSlot
+from pectoral_gym.hardware.vision.frames import Frame, FrameSource, NewestSlot
 
 __all__ = ["ENCODINGS", "FrameServer", "NetworkCamera"]
 
