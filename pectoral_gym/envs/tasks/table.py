@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Iterator, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 import numba as nb
 import numpy as np
@@ -78,11 +78,9 @@ from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.envs.tasks.row import InfoField, Task
 from pectoral_gym.model.jit import KernelPair, kernel_builds
 from pectoral_gym.model.models import REST
+from pectoral_gym.model.params import FishParams
 
-if TYPE_CHECKING:
-    from pectoral_gym.envs.core import EnvConfig
-
-__all__ = ["TASK_TABLE", "TASK_IDS", "TaskState", "register_task", "unregister_task",
+__all__ = ["TASK_TABLE", "TASK_IDS", "TaskSettings", "TaskState", "register_task", "unregister_task",
            "task_by_id", "task_info", "observe_fish", "observe_body"]
 
 #: ``observe_fish(i, state, ep, fish, obs) -> (distance [m], wall contact)``: env ``i``'s observation up to
@@ -228,6 +226,22 @@ def unregister_task(name: str) -> None:
 
 
 # ---------------------------------------------------------------- the task state of n envs
+class TaskSettings(Protocol):
+    """What :class:`TaskState` reads of its settings (:class:`~pectoral_gym.envs.core.EnvConfig` has it all)."""
+
+    task: str
+    observe_fins: bool
+    params: FishParams
+
+    def cfg_array(self) -> np.ndarray:
+        """The packed settings ``(N_CFG,)`` (:mod:`pectoral_gym.envs.layout`)."""
+        ...
+
+    def encode(self, beat: np.ndarray) -> np.ndarray:
+        """Normalised action entries of one fin pattern."""
+        ...
+
+
 class TaskState:
     """The task arrays of ``n`` envs, one fish each, and the operations of a task on them.
 
@@ -235,7 +249,8 @@ class TaskState:
 
     Args:
         n: Number of envs.
-        config: The settings (:class:`~pectoral_gym.envs.core.EnvConfig`); ``config.task`` names the row.
+        config: The settings (an :class:`~pectoral_gym.envs.core.EnvConfig`: :class:`TaskSettings`);
+            ``config.task`` names the row.
 
     Attributes:
         task: The :class:`Task` row.
@@ -246,7 +261,7 @@ class TaskState:
         action_code: The normalised action of the rest pattern, the last action after a reset.
     """
 
-    def __init__(self, n: int, config: EnvConfig):
+    def __init__(self, n: int, config: TaskSettings):
         self.n = int(n)
         self.config = config
         self.task = TASK_TABLE[config.task]
