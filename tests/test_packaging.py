@@ -144,6 +144,42 @@ def test_the_checkout_folders_are_importable_by_one_name_only():
         assert done.returncode != 0 and f"ImportError: import {package}, not {folder}" in done.stderr, done.stderr
 
 
+NOT_INSTALLED = """
+import sys
+from pathlib import Path
+root, site_dirs = Path(sys.argv[1]), sys.argv[2:]
+sys.path[:0] = [str(root), *site_dirs]  # python -I -S: no .pth files ran, so no editable finder either
+assert "editable" not in repr(sys.meta_path), sys.meta_path
+import pectoral_gym.agents.training.config as config
+import pectoral_gym.hardware.radio.protocol, pectoral_gym.scaling.cli
+for name in ("pectoral_gym.agents", "pectoral_gym.scaling", "pectoral_gym.hardware"):
+    assert Path(sys.modules[name].__file__) == root / name.split(".")[1] / "__init__.py", sys.modules[name].__file__
+assert not {"agents", "scaling", "hardware"} & set(sys.modules)
+files = [Path(m.__file__).resolve() for n, m in list(sys.modules.items())
+         if n.startswith("pectoral_gym") and getattr(m, "__file__", None)]
+assert len(files) == len(set(files)), "a module loaded under two names"
+from pectoral_gym.model.jit_cache import source_tree
+tree = source_tree(config.__name__, config.__file__)  # what a kernel's cache key would walk
+assert tree["pectoral_gym.agents.training.zoo_format"] == root / "agents" / "training" / "zoo_format.py", tree
+assert None not in tree.values(), tree
+try:
+    import scaling
+except ImportError as error:
+    assert "import pectoral_gym.scaling, not scaling" in str(error), error
+else:
+    raise AssertionError("the scaling/ folder imported by a second name")
+print("ok")
+"""
+
+
+def test_a_checkout_that_is_not_installed_imports_the_apps_under_pectoral_gym(tmp_path):
+    # The checkout's root on sys.path, the venv's third-party packages, and neither the editable install's
+    # finder (python -S runs no .pth file) nor the caller's environment (-I).
+    site_dirs = [p for p in {sysconfig.get_paths()["purelib"], sysconfig.get_paths()["platlib"]} if Path(p).is_dir()]
+    done = _run([sys.executable, "-I", "-S", "-c", NOT_INSTALLED, str(ROOT), *site_dirs], cwd=tmp_path)
+    assert done.returncode == 0 and done.stdout.split() == ["ok"], done.stderr[-3000:]
+
+
 WITHOUT_PLOTS = """
 import sys
 import gymnasium as gym
