@@ -1,18 +1,57 @@
-"""Registration of the Gymnasium ids (entry points by string, so importing stays cheap)."""
+"""Registration of the Gymnasium ids (entry points by string, so importing stays cheap).
+
+Each id names one configuration (:data:`ENV_SETTINGS`), used by ``gym.make``, ``gym.make_vec`` and every
+tool that takes an env id (training, evaluation, the baselines' and the NMPC's model, the benchmark, the
+robot env): :func:`registered_settings` is the one way from an id to its settings.
+"""
 
 from __future__ import annotations
 
-__all__ = ["ENV_IDS", "register_envs"]
+from collections.abc import Mapping
+from typing import Any
 
-ENV_IDS = {"PectoralFish-Full-v0": "full", "PectoralFish-Averaged-v0": "averaged"}
+from pectoral_gym.model.servo import ROBOT_MAX_FIN_RATE
+
+__all__ = ["ENV_IDS", "ENV_SETTINGS", "MAX_EPISODE_STEPS", "ROBOT_READY", "register_envs", "registered_settings"]
+
+#: What the v1 envs add to prepare a policy for the robot stack (``PectoralFishEnv``'s Version History): the
+#: fins' stroke phase observed, the robot's stopping band as an episode end with a cost, the servos' rate
+#: limit, goals the band leaves reachable (``docs/agents.md``, "Robot-ready envs").
+ROBOT_READY: dict[str, Any] = {"observe_fins": True, "stop_band": True, "servo_limit": ROBOT_MAX_FIN_RATE,
+                               "goal_inset": 0.3}
+
+#: id -> the EnvConfig arguments it stands for (the others keep EnvConfig's defaults).
+ENV_SETTINGS: dict[str, dict[str, Any]] = {
+    "PectoralFish-Full-v0": {"model": "full"},
+    "PectoralFish-Averaged-v0": {"model": "averaged"},
+    "PectoralFish-Full-v1": {"model": "full", "integration": "fast", **ROBOT_READY},
+    "PectoralFish-Averaged-v1": {"model": "averaged", "transitions": True, **ROBOT_READY},
+}
+#: id -> its model, ``"full"`` or ``"averaged"``.
+ENV_IDS = {env_id: settings["model"] for env_id, settings in ENV_SETTINGS.items()}
 MAX_EPISODE_STEPS = 240  # 2 min at the default control period of 0.5 s
 
 
+def registered_settings(env_id: str, overrides: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The EnvConfig arguments of ``env_id`` with ``overrides`` on top (``model`` is the id's).
+
+    Raises:
+        ValueError: If ``env_id`` is not a fish env id, or ``overrides`` names another model.
+    """
+    if env_id not in ENV_SETTINGS:
+        raise ValueError(f"unknown env id {env_id!r}; fish envs: {sorted(ENV_SETTINGS)}")
+    overrides = dict(overrides or {})
+    model = overrides.pop("model", ENV_IDS[env_id])
+    if model != ENV_IDS[env_id]:
+        raise ValueError(f"{env_id} is the {ENV_IDS[env_id]} model; model={model!r} contradicts it")
+    return {**ENV_SETTINGS[env_id], **overrides}
+
+
 def register_envs() -> None:
-    """Register ``PectoralFish-Full-v0`` and ``PectoralFish-Averaged-v0`` (idempotent)."""
+    """Register the ids of :data:`ENV_SETTINGS` (idempotent)."""
     from gymnasium.envs.registration import register, registry
 
-    for env_id, model in ENV_IDS.items():
+    for env_id, settings in ENV_SETTINGS.items():
         if env_id in registry:
             continue
         register(
@@ -20,5 +59,5 @@ def register_envs() -> None:
             entry_point="pectoral_gym.envs.fish_env:PectoralFishEnv",
             vector_entry_point="pectoral_gym.envs.vector:PectoralFishVectorEnv",
             max_episode_steps=MAX_EPISODE_STEPS,
-            kwargs={"model": model},
+            kwargs=dict(settings),
         )

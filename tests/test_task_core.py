@@ -19,6 +19,7 @@ from pectoral_gym.envs.layout import (
     E_TX,
     E_TY,
     GOAL,
+    N_OUT,
     O_DISTANCE,
     O_ENERGY,
     O_REWARD,
@@ -164,7 +165,8 @@ def _hold_start(index, draws, cfg, ep, start):
 def hold():
     task = register_task("hold", terms=(("reward_hold", O_TRACKING), ("reward_wall", O_WALL),
                                         ("reward_energy", O_ENERGY)),
-                         draw=lambda rng: tk.draw_episode(rng, GOAL), start=_hold_start, reward_one=_hold_reward)
+                         draw=lambda rng, cfg: tk.draw_episode(rng, GOAL, cfg), start=_hold_start,
+                         reward_one=_hold_reward)
     yield task
     unregister_task("hold")
 
@@ -222,13 +224,13 @@ def test_registration_errors_and_unregistered_names():
     with pytest.raises(ValueError, match="task must be one of"):
         EnvConfig(task="hold")
     with pytest.raises(ValueError, match="already registered"):
-        register_task("goal", terms=(("reward_x", O_TRACKING),), draw=lambda rng: None, start=_hold_start,
+        register_task("goal", terms=(("reward_x", O_TRACKING),), draw=lambda rng, cfg: None, start=_hold_start,
                       reward_one=_hold_reward)
     with pytest.raises(TypeError, match="numba.njit"):
-        register_task("plain", terms=(("reward_x", O_TRACKING),), draw=lambda rng: None, start=_hold_start,
+        register_task("plain", terms=(("reward_x", O_TRACKING),), draw=lambda rng, cfg: None, start=_hold_start,
                       reward_one=_hold_reward.py_func)
     with pytest.raises(ValueError, match="repeat"):
-        register_task("twice", terms=(("distance", O_TRACKING),), draw=lambda rng: None, start=_hold_start,
+        register_task("twice", terms=(("distance", O_TRACKING),), draw=lambda rng, cfg: None, start=_hold_start,
                       reward_one=_hold_reward)
     with pytest.raises(ValueError, match="built-in"):
         unregister_task("goal")
@@ -255,7 +257,7 @@ def test_a_given_info_function_must_give_the_task_fields():
     from pectoral_gym.envs.tasks.table import TASK_TABLE
 
     for task in TASK_TABLE.values():
-        row = np.linspace(-1.0, 2.0, 10)
+        row = np.linspace(-1.0, 2.0, N_OUT)
         assert list(task.info(row).items()) == list(dataclasses.replace(task, info=None).info(row).items())
     goal = TASK_TABLE["goal"]
     with pytest.raises(ValueError, match="does not give info_fields"):

@@ -97,9 +97,9 @@ def _baseline_factory(name: str, env_id: str, env_kwargs: dict[str, Any], settin
     """
     from pectoral_gym.agents.baselines import make_baseline
     from pectoral_gym.envs.core import EnvConfig
-    from pectoral_gym.registration import ENV_IDS
+    from pectoral_gym.registration import registered_settings
 
-    config = EnvConfig(model=ENV_IDS[env_id], **env_kwargs)
+    config = EnvConfig(**registered_settings(env_id, env_kwargs))
     if name == "nmpc":
         key = (env_id, config.task)
         if key not in built:

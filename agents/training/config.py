@@ -170,16 +170,13 @@ def run_model_spec(config: dict[str, Any]):
         ValueError: For an unknown env id or invalid model settings.
     """
     from pectoral_gym.model.spec import ENV_OPTIONS, env_spec, spec_from_dict
-    from pectoral_gym.registration import ENV_IDS
+    from pectoral_gym.registration import registered_settings
 
     if config.get("model_spec"):
         return spec_from_dict(config["model_spec"])
-    env_id = config.get("env_id")
-    if env_id not in ENV_IDS:
-        raise ValueError(f"unknown env id {env_id!r}; fish envs: {sorted(ENV_IDS)}")
-    kwargs = config.get("env_kwargs") or {}
+    kwargs = registered_settings(config.get("env_id"), config.get("env_kwargs") or {})
     names = {*ENV_OPTIONS["full"], *ENV_OPTIONS["averaged"]}
-    return env_spec(kwargs.get("model", ENV_IDS[env_id]), **{k: v for k, v in kwargs.items() if k in names})
+    return env_spec(kwargs["model"], **{k: v for k, v in kwargs.items() if k in names})
 
 
 def _schedule(value: Any) -> float | Callable[[float], float] | None:

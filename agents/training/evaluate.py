@@ -87,14 +87,11 @@ ControllerLike = Controller | Callable[[], Controller]
 
 def make_vector_env(env_id: str, num_envs: int, env_kwargs: dict[str, Any] | None = None):
     """The native :class:`~pectoral_gym.envs.PectoralFishVectorEnv` of a registered fish env id."""
-    from pectoral_gym.envs import PectoralFishVectorEnv
-    from pectoral_gym.registration import ENV_IDS
-
-    if env_id not in ENV_IDS:
-        raise ValueError(f"unknown env id {env_id!r}; fish envs: {sorted(ENV_IDS)}")
     from pectoral_gym.agents.training.vec_adapter import env_arguments
+    from pectoral_gym.envs import PectoralFishVectorEnv
+    from pectoral_gym.registration import registered_settings
 
-    return PectoralFishVectorEnv(num_envs=num_envs, model=ENV_IDS[env_id], **env_arguments(env_kwargs))
+    return PectoralFishVectorEnv(num_envs=num_envs, **registered_settings(env_id, env_arguments(env_kwargs)))
 
 
 def _is_factory(controller: Any) -> bool:
@@ -296,12 +293,12 @@ def main(argv: list[str] | None = None) -> int:
         else:
             from pectoral_gym.agents.baselines import make_baseline
             from pectoral_gym.envs.core import EnvConfig
-            from pectoral_gym.registration import ENV_IDS
+            from pectoral_gym.registration import registered_settings
 
             baseline_kwargs = {**env_kwargs, **({"task": args.task} if args.task else {})}
             from pectoral_gym.agents.training.vec_adapter import env_arguments
 
-            config = EnvConfig(model=ENV_IDS.get(args.env, "full"), **env_arguments(baseline_kwargs))
+            config = EnvConfig(**registered_settings(args.env, env_arguments(baseline_kwargs)))
             controller = lambda: make_baseline(args.baseline, config)  # noqa: E731 - factory, one per slot
             name = args.baseline
         if args.task:

@@ -171,15 +171,12 @@ def make_fish_vec_env(env_id: str, n_envs: int, env_kwargs: dict[str, Any] | Non
         max_episode_steps: Truncation (default: as registered).
     """
     from pectoral_gym.envs import PectoralFishVectorEnv
-    from pectoral_gym.registration import ENV_IDS
+    from pectoral_gym.registration import registered_settings
 
-    if env_id not in ENV_IDS:
-        raise ValueError(f"unknown env id {env_id!r}; fish envs: {sorted(ENV_IDS)}")
-    kwargs = env_arguments(env_kwargs)
+    kwargs = registered_settings(env_id, env_arguments(env_kwargs))
     if max_episode_steps is not None:
         kwargs["max_episode_steps"] = max_episode_steps
-    venv = FishVecEnv(PectoralFishVectorEnv(num_envs=n_envs, model=ENV_IDS[env_id],
-                                            autoreset_mode=AutoresetMode.SAME_STEP, **kwargs))
+    venv = FishVecEnv(PectoralFishVectorEnv(num_envs=n_envs, autoreset_mode=AutoresetMode.SAME_STEP, **kwargs))
     if seed is not None:
         venv.seed(seed)
     return venv

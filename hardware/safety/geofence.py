@@ -50,6 +50,12 @@ class Geofence:
         self.shape = tank.Outline.from_params(params)
         self.half_length, self.width, self.span = self.shape
         self.margin, self.reaction_time, self.horizon = float(margin), float(reaction_time), float(horizon)
+        self.breached(0.5 * tank.TANK_LENGTH, 0.5 * tank.TANK_WIDTH, 0.0)  # compile or load the kernel now
+
+    @property
+    def rule(self) -> tank.StopRule:
+        """The band's :class:`~pectoral_gym.model.tank.StopRule` (the envs' ``stop_rule`` of the same name)."""
+        return tank.StopRule(self.margin, self.reaction_time, self.horizon)
 
     def coast(self, speed: float) -> float:
         """Distance [m] covered in ``horizon`` s by a fish coasting from ``speed`` [m/s] with its fins still."""
@@ -79,9 +85,9 @@ class Geofence:
         sx, sy = (max(float(s), 0.0) for s in spread)
         toward = (-vx + sx, vx + sx, -vy + sy, vy + sy)
         react = self.reaction_time + max(age, 0.0)
-        speeds = (min(max(t, 0.0) + max(gain, 0.0), bound) for t in toward)
-        need = [self.margin + v * react + self.coast(v) for v in speeds]
-        return bool(np.any(self.clearance(x, y, psi) < np.array(need)))
+        speeds = tuple(min(max(t, 0.0) + max(gain, 0.0), bound) for t in toward)
+        c, s = math.cos(psi), math.sin(psi)
+        return bool(tank.band_shortfall(x, y, c, s, speeds, self.shape, self.k, self.margin, react, self.horizon) > 0)
 
 
 class _Riccati(NamedTuple):

@@ -25,7 +25,9 @@ from pectoral_gym.envs.tasks.table import TASK_IDS, TaskState, task_info
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.models import REST, FishModel
 from pectoral_gym.model.params import FishParams, as_params
+from pectoral_gym.model.servo import servo_period
 from pectoral_gym.model.spec import ENV_OPTIONS, MODELS, AveragedSpec, FullSpec, env_spec
+from pectoral_gym.model.tank import ROBOT_STOP_RULE, TANK_WIDTH, StopRule
 
 __all__ = ["EnvConfig", "EnvCore", "MODELS", "TASKS", "env_signature", "task_info"]
 
@@ -108,6 +110,19 @@ class EnvConfig:
         tracking_weight: Track task: penalty per metre of distance, per step [1/m].
         goal_radius: Goal task: success radius [m].
         ref_speed: Track task: speed of the reference point [m/s].
+        start_inset: Goal task: least distance of a start position from the walls [m].
+        goal_inset: Goal task: least distance of a goal from the walls [m].
+        stop_band: End the episode, with the ``wall_penalty`` and a per-step ``info["cost"]`` of 1 (the
+            Safety-Gymnasium convention; 0 otherwise), when any part of the fish (body and fin tips) is
+            closer to a wall than it needs to stop: the robot's geofence, whose safety supervisor stops the
+            fish there (:data:`pectoral_gym.model.tank.ROBOT_STOP_RULE`, ``docs/hardware.md``). Checked on the
+            state after each control period.
+        stop_rule: The band's :class:`~pectoral_gym.model.tank.StopRule` ``(margin [m], reaction time [s],
+            horizon [s])``.
+        servo_limit: Fastest fin rate [rad/s] (``None``: no limit): a commanded pattern whose faster
+            half-stroke peaks above it runs with its period lengthened, as the robot's firmware runs it
+            (:func:`pectoral_gym.model.servo.servo_period`; the robot's value:
+            :data:`~pectoral_gym.model.servo.ROBOT_MAX_FIN_RATE`).
     """
 
     model: str = "full"
@@ -134,6 +149,11 @@ class EnvConfig:
     tracking_weight: float = 1.0
     goal_radius: float = 0.08
     ref_speed: float = 0.03
+    start_inset: float = tk.START_INSET
+    goal_inset: float = tk.GOAL_INSET
+    stop_band: bool = False
+    stop_rule: StopRule = ROBOT_STOP_RULE
+    servo_limit: float | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -143,7 +163,7 @@ class EnvConfig:
             raise ValueError(f"task must be one of {tuple(TASKS)}, got {self.task!r}")
         if isinstance(self.scaling, os.PathLike):
             set_(self, "scaling", os.fspath(self.scaling))
-        for name in ("check_scaling_params", "transitions", "ripple_offsets", "observe_fins"):
+        for name in ("check_scaling_params", "transitions", "ripple_offsets", "observe_fins", "stop_band"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         # The one check of the model options (applicability included): the spec's.
@@ -176,6 +196,23 @@ class EnvConfig:
             if not (math.isfinite(number) and number >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {value!r}")
             set_(self, name, number)
+        for name in ("start_inset", "goal_inset"):
+            inset = getattr(self, name)
+            if not (isinstance(inset, (int, float)) and 0 <= inset < 0.5 * TANK_WIDTH - 0.01):
+                raise ValueError(f"{name} must be a number in [0, {0.5 * TANK_WIDTH - 0.01:.3f}) m, got {inset!r}")
+            set_(self, name, float(inset))
+        try:
+            rule = StopRule(*(float(v) for v in self.stop_rule))
+        except (TypeError, ValueError):
+            raise ValueError(f"stop_rule must be (margin, reaction_time, horizon), got {self.stop_rule!r}") from None
+        if not all(math.isfinite(v) and v >= 0 for v in rule):
+            raise ValueError(f"stop_rule entries must be finite and >= 0, got {self.stop_rule!r}")
+        set_(self, "stop_rule", rule)
+        if self.servo_limit is not None:
+            limit = self.servo_limit
+            if not (isinstance(limit, (int, float)) and math.isfinite(limit) and limit > 0):
+                raise ValueError(f"servo_limit must be None or a finite fin rate > 0 rad/s, got {limit!r}")
+            set_(self, "servo_limit", float(limit))
         set_(self, "params", as_params(self.params))
         if self.randomize is not None:
             randomize = dict(self.randomize)
@@ -223,6 +260,11 @@ class EnvConfig:
         cfg[tk.C_W_TRACKING] = self.tracking_weight
         cfg[tk.C_GOAL_RADIUS] = self.goal_radius
         cfg[tk.C_REF_SPEED] = self.ref_speed
+        cfg[tk.C_START_INSET] = self.start_inset
+        cfg[tk.C_GOAL_INSET] = self.goal_inset
+        cfg[tk.C_BAND] = 1.0 if self.stop_band else 0.0
+        cfg[tk.C_BAND_MARGIN:tk.C_BAND_HORIZON + 1] = self.stop_rule
+        cfg[tk.C_FIN_RATE] = 0.0 if self.servo_limit is None else self.servo_limit
         return cfg
 
     def encode(self, beat: np.ndarray) -> np.ndarray:
@@ -236,12 +278,16 @@ class EnvConfig:
         """Fin pattern(s) ``(..., 4)`` of normalised action entries ``(..., 4)``: the env's own action mapping.
 
         Entries are clipped to [-1, 1] and mapped linearly onto the ranges, as
-        :func:`pectoral_gym.envs.tasks.kernels.apply_actions` does; ``decode(encode(beat))``
-        returns ``beat`` for a pattern inside the ranges.
+        :func:`pectoral_gym.envs.tasks.kernels.apply_actions` does, then, with ``servo_limit``, the period
+        lengthened as the servos run the pattern (:func:`pectoral_gym.model.servo.servo_period`);
+        ``decode(encode(beat))`` returns ``beat`` for a pattern inside the ranges (and the servo limit).
         """
         r = self.ranges
         x = np.clip(np.asarray(code, dtype=np.float64), -1.0, 1.0)
-        return np.minimum(r[:, 0] + 0.5 * (x + 1.0) * (r[:, 1] - r[:, 0]), r[:, 1])
+        beat = np.minimum(r[:, 0] + 0.5 * (x + 1.0) * (r[:, 1] - r[:, 0]), r[:, 1])
+        if self.servo_limit is not None:
+            beat[..., 2] = servo_period(beat[..., 1], beat[..., 2], beat[..., 3], self.servo_limit)
+        return beat
 
 
 def env_signature(*parameters: inspect.Parameter) -> inspect.Signature:

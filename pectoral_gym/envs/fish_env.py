@@ -12,6 +12,7 @@ from gymnasium import spaces
 from pectoral_gym.envs.core import EnvConfig, EnvCore, env_signature, task_info
 from pectoral_gym.envs.layout import (
     ACTION_SIZE,
+    O_COST,
     O_REWARD,
     O_TERMINATED,
     FishConstants,
@@ -98,13 +99,15 @@ class PectoralFishEnv(gym.Env):
     |-------------------|-------|------------------------------------------|
     | ``reward_progress`` | goal | ``progress_weight * (d_prev - d)``       |
     | ``reward_goal``   | goal  | ``goal_bonus`` if ``d < goal_radius``, else 0 |
-    | ``reward_wall``   | both  | ``-wall_penalty`` if the fish hit a wall, else 0 |
+    | ``reward_wall``   | both  | ``-wall_penalty`` if the fish hit a wall (``stop_band``: or the band), else 0 |
     | ``reward_energy`` | both  | ``-energy_weight * E``                   |
     | ``reward_time``   | goal  | ``-time_penalty``                        |
     | ``reward_tracking`` | track | ``-tracking_weight * d``               |
 
     ``info`` also holds ``"distance"`` (``d`` [m]), ``"is_success"`` (goal)
-    and ``"tracking_error"`` (track, ``d`` [m]). Every value is a numpy scalar
+    and ``"tracking_error"`` (track, ``d`` [m]), and with ``stop_band`` ``"cost"``: 1.0 on a step
+    that ends inside the stopping band, else 0.0 (Safety-Gymnasium's per-step cost, for constrained
+    RL). Every value is a numpy scalar
     (``np.float64``, ``np.bool_``). ``reset()`` returns the same keys: zero
     reward terms, the real distance, ``is_success = False``.
 
@@ -112,8 +115,8 @@ class PectoralFishEnv(gym.Env):
 
     The fish is at rest with both fins held still at 90 deg
     (``FinBeat.rest()``). ``goal``: position uniform in the tank inset by
-    0.3 m, heading uniform in [-pi, pi); the goal uniform in the tank inset by
-    0.2 m at a distance in [0.3, 1.0] m from the start. ``track``: an ellipse
+    ``start_inset`` (0.3 m), heading uniform in [-pi, pi); the goal uniform in the tank inset by
+    ``goal_inset`` (0.2 m; 0.3 m in v1) at a distance in [0.3, 1.0] m from the start. ``track``: an ellipse
     centred in the tank with semi-axes ``U(0.5, 0.8)`` m (X) and
     ``U(0.25, 0.4)`` m (Y), a random direction of travel and start phase; the
     fish starts uniformly within 0.1 m of the reference point, heading along
@@ -123,8 +126,11 @@ class PectoralFishEnv(gym.Env):
     ## Episode End
 
     * Termination: the nose or the tail (``X +- L/2 cos psi``, ``Y +- L/2 sin psi``,
-      ``L = params.body_length``) leaves the tank; or, ``goal``, ``d < goal_radius``
-      (``info["is_success"] = True``).
+      ``L = params.body_length``) leaves the tank; with ``stop_band``, any part of the fish (body
+      and fin tips) is closer to a wall than it needs to stop (the robot's geofence:
+      ``margin + v t_r + ln(1 + k v T) / k`` with ``v`` the speed towards that wall,
+      :func:`pectoral_gym.model.tank.stop_need`, checked after each control period); or, ``goal``,
+      ``d < goal_radius`` (``info["is_success"] = True``).
     * Truncation: 240 steps (2 min at the default control period), set by
       ``max_episode_steps`` in the registry.
 
@@ -158,6 +164,11 @@ class PectoralFishEnv(gym.Env):
     | ``tracking_weight`` | 1.0            | 1/m  | track: penalty per metre of distance per step |
     | ``goal_radius``   | 0.08             | m    | goal: success radius |
     | ``ref_speed``     | 0.03             | m/s  | track: speed of the reference point |
+    | ``start_inset``   | 0.3              | m    | goal: least distance of a start from the walls |
+    | ``goal_inset``    | 0.2              | m    | goal: least distance of a goal from the walls |
+    | ``stop_band``     | False            |      | end the episode in the robot's stopping band; ``info["cost"]`` |
+    | ``stop_rule``     | (0.05, 0.15, 5.0) |     | the band's margin [m], reaction time [s], horizon [s] |
+    | ``servo_limit``   | ``None``         | rad/s | fastest fin rate: faster patterns run slower, as on the robot |
     | ``render_mode``   | ``None``         |      | ``"rgb_array"`` or ``"human"`` |
 
     All arguments are keywords. The defaults are those of
@@ -172,9 +183,16 @@ class PectoralFishEnv(gym.Env):
 
     ## Version History
 
+    * v1: Prepares a policy for the robot stack (``pectoral_gym.registration.ROBOT_READY``):
+      ``observe_fins=True``, ``stop_band=True`` (the robot's geofence ends the episode, with
+      ``info["cost"]``), ``servo_limit`` = the robot's 13 rad/s, ``goal_inset=0.3`` (goals the band
+      leaves reachable); ``PectoralFish-Averaged-v1`` adds ``transitions=True`` (the shipped PPO
+      recipe's training model), ``PectoralFish-Full-v1`` runs the fast integration
+      (``integration="fast"``). Every other default is v0's.
     * v0: Initial version. Issue 14 (same id, same dynamics): ``reset()`` returns the step's
       ``info`` keys, ``info`` values are numpy scalars, finite observation bounds,
       ``params`` as a dict or file, ``scaling`` as a file, ``render_fps = 1 / control_period``.
+      Stays as it was; Gymnasium notes on ``make`` that v1 exists.
     """
 
     metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 2}  # per instance: 1 / control_period
@@ -193,6 +211,7 @@ class PectoralFishEnv(gym.Env):
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self.observation_structure = observation_structure(self.config.observe_fins)
         self._task = self.config.task_id
+        self._cost = self.config.stop_band  # info["cost"]
         self._renderer = None
         self.trail: list[tuple[float, float]] = []
         self._bind_rows()
@@ -268,8 +287,8 @@ class PectoralFishEnv(gym.Env):
         self._bind_rows()
 
     def _info(self) -> dict[str, Any]:
-        """The ``info`` of the last reset or step (:func:`~pectoral_gym.envs.core.task_info`)."""
-        return task_info(self.core.out[0], self._task)
+        """The ``info`` of the last reset or step (:meth:`~pectoral_gym.envs.tasks.table.TaskState.info`)."""
+        return self.core.task_state.info(0)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start an episode (see "Starting State"); returns ``(observation, info)``, ``info`` with the step's keys."""
@@ -288,6 +307,8 @@ class PectoralFishEnv(gym.Env):
         core.step(core.action_buffer)
         o = self._out_row
         info = task_info(o, self._task)
+        if self._cost:
+            info["cost"] = o[O_COST]
         if self.render_mode is not None:
             self.trail.append((float(core.obs[0, OBS_X]), float(core.obs[0, OBS_Y])))
             if self.render_mode == "human":

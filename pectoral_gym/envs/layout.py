@@ -22,6 +22,11 @@ corner, X along the long side.
 | ``C_W_TRACKING`` | ``tracking_weight`` | track: penalty per metre of distance per step | 1/m |
 | ``C_GOAL_RADIUS`` | ``goal_radius`` | goal: success radius | m |
 | ``C_REF_SPEED`` | ``ref_speed`` | track: speed of the reference point | m/s |
+| ``C_START_INSET`` | ``start_inset`` | goal: least distance of a start from the walls | m |
+| ``C_GOAL_INSET`` | ``goal_inset`` | goal: least distance of a goal from the walls | m |
+| ``C_BAND`` | ``stop_band`` | 1.0: the stopping band ends the episode and prices ``O_COST`` | - |
+| ``C_BAND_MARGIN`` .. ``+2`` | ``stop_rule`` | margin, reaction time, horizon (``tank.StopRule``) | m, s, s |
+| ``C_FIN_RATE`` | ``servo_limit`` | fastest fin rate; faster patterns run with a longer period (0: none) | rad/s |
 
 ``ep`` ``(n, N_EP)``: per-episode state, set at reset and updated every step
 (:class:`ReferenceEllipse` names the ellipse block).
@@ -44,6 +49,8 @@ refilled when the parameters change (:func:`fish_array`, :class:`FishConstants`)
 | ``F_LENGTH`` | body length ``L`` (wall contact of nose and tail) | m |
 | ``F_SPAN`` | fin span ``S_p`` | m |
 | ``F_KDRAG`` | fin drag constant ``k`` of the mean fin power (``docs/model.md``) | kg |
+| ``F_WIDTH`` | ``C_p``: the body's half-width and the fin pivots' lateral offset (the outline) | m |
+| ``F_KCOAST`` | coasting rate ``c1 / max(m1, m2)`` of the stopping distance (``model.tank.coast_rate``) | 1/m |
 
 ``out`` ``(n, N_OUT)``: the result of the last step (zero after a reset).
 
@@ -54,6 +61,7 @@ refilled when the parameters change (:func:`fish_array`, :class:`FishConstants`)
 | ``O_DISTANCE`` | distance from the centre of mass to the target | m |
 | ``O_TERMINATED`` | 1.0 if the episode ended (wall contact or goal reached) | - |
 | ``O_SUCCESS`` | 1.0 if the goal was reached | - |
+| ``O_COST`` | with ``stop_band``: 1.0 if any part of the fish is inside the stopping band | - |
 
 ``actions`` ``(n, ACTION_SIZE)``: normalised, in [-1, 1]; per fin (right fin
 first) the four entries ``A_BIAS, A_AMPLITUDE, A_PERIOD, A_RATIO`` (offset
@@ -70,16 +78,18 @@ from typing import NamedTuple
 
 import numpy as np
 
-from pectoral_gym.model.params import FishParams
+from pectoral_gym.model import tank
+from pectoral_gym.model.params import FishParams, body_coefficients
 
 __all__ = [
     "GOAL", "TRACK", "ACTION_SIZE", "FIN_ACTIONS", "A_BIAS", "A_AMPLITUDE", "A_PERIOD", "A_RATIO",
     "C_DT", "C_TASK", "C_RANGES", "C_W_PROGRESS", "C_GOAL_BONUS", "C_WALL", "C_W_ENERGY", "C_TIME",
-    "C_W_TRACKING", "C_GOAL_RADIUS", "C_REF_SPEED", "N_CFG",
+    "C_W_TRACKING", "C_GOAL_RADIUS", "C_REF_SPEED", "C_START_INSET", "C_GOAL_INSET", "C_BAND", "C_BAND_MARGIN",
+    "C_BAND_REACTION", "C_BAND_HORIZON", "C_FIN_RATE", "N_CFG",
     "E_TX", "E_TY", "E_TVX", "E_TVY", "E_CX", "E_CY", "E_A", "E_B", "E_DIR", "E_PHASE", "E_DPREV", "N_EP",
-    "F_LENGTH", "F_SPAN", "F_KDRAG", "N_FISH",
+    "F_LENGTH", "F_SPAN", "F_KDRAG", "F_WIDTH", "F_KCOAST", "N_FISH",
     "O_REWARD", "O_PROGRESS", "O_GOAL", "O_WALL", "O_ENERGY", "O_TIME", "O_TRACKING", "O_DISTANCE",
-    "O_TERMINATED", "O_SUCCESS", "N_OUT",
+    "O_TERMINATED", "O_SUCCESS", "O_COST", "N_OUT",
     "FishConstants", "ReferenceEllipse", "fish_array",
 ]
 
@@ -94,7 +104,10 @@ ACTION_SIZE = 2 * FIN_ACTIONS
 C_DT, C_TASK, C_RANGES = 0, 1, 2  # C_RANGES..C_RANGES+7: (low, high) of bias, amplitude, period, ratio
 C_W_PROGRESS, C_GOAL_BONUS, C_WALL, C_W_ENERGY, C_TIME, C_W_TRACKING = 10, 11, 12, 13, 14, 15
 C_GOAL_RADIUS, C_REF_SPEED = 16, 17
-N_CFG = 18
+C_START_INSET, C_GOAL_INSET = 18, 19
+C_BAND, C_BAND_MARGIN, C_BAND_REACTION, C_BAND_HORIZON = 20, 21, 22, 23
+C_FIN_RATE = 24
+N_CFG = 25
 
 # ep
 E_TX, E_TY, E_TVX, E_TVY = 0, 1, 2, 3
@@ -103,13 +116,13 @@ E_DPREV = 10
 N_EP = 11
 
 # fish
-F_LENGTH, F_SPAN, F_KDRAG = 0, 1, 2
-N_FISH = 3
+F_LENGTH, F_SPAN, F_KDRAG, F_WIDTH, F_KCOAST = 0, 1, 2, 3, 4
+N_FISH = 5
 
 # out
 O_REWARD, O_PROGRESS, O_GOAL, O_WALL, O_ENERGY, O_TIME, O_TRACKING = 0, 1, 2, 3, 4, 5, 6
-O_DISTANCE, O_TERMINATED, O_SUCCESS = 7, 8, 9
-N_OUT = 10
+O_DISTANCE, O_TERMINATED, O_SUCCESS, O_COST = 7, 8, 9, 10
+N_OUT = 11
 
 
 class FishConstants(NamedTuple):
@@ -118,11 +131,14 @@ class FishConstants(NamedTuple):
     body_length: float  # [m]
     fin_span: float  # [m]
     fin_drag_constant: float  # [kg]
+    fin_offset: float  # C_p [m]
+    coast_rate: float  # c1 / max(m1, m2) [1/m]
 
     @classmethod
     def of(cls, params: FishParams) -> FishConstants:
         """The constants of one parameter set."""
-        return cls(float(params.body_length), float(params.fin_span), float(params.fin_drag_constant))
+        return cls(float(params.body_length), float(params.fin_span), float(params.fin_drag_constant),
+                   float(params.fin_offset), float(tank.coast_rate(body_coefficients(params))))
 
 
 class ReferenceEllipse(NamedTuple):

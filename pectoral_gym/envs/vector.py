@@ -92,7 +92,7 @@ class PectoralFishVectorEnv(VectorEnv):
         self._rngs: list[np.random.Generator | None] = [None] * self.num_envs
         self.steps = np.zeros(self.num_envs, dtype=np.int64)
         self.prev_done = np.zeros(self.num_envs, dtype=np.bool_)
-        self._info_fields = self.core.task_state.task.info_fields  # the task table's info entries, in order
+        self._info_fields = self.core.task_state.info_fields  # the task table's info entries (and cost), in order
         self._all = np.ones(self.num_envs, dtype=np.bool_)
 
     def _infos(self, mask: np.ndarray) -> dict[str, Any]:

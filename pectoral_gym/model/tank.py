@@ -31,8 +31,9 @@ import numpy as np
 
 from pectoral_gym.model.jit import njit
 
-__all__ = ["TANK_LENGTH", "TANK_WIDTH", "Outline", "clearance", "coast_distance", "coast_rate", "distance_ahead",
-           "nose_tail_contact", "outline_arrays", "outline_circles", "wall_gaps", "wall_shortfall"]
+__all__ = ["ROBOT_STOP_RULE", "TANK_LENGTH", "TANK_WIDTH", "Outline", "StopRule", "band_shortfall", "clearance",
+           "coast_distance", "coast_rate", "distance_ahead", "nose_tail_contact", "outline_arrays", "outline_circles",
+           "stop_need", "wall_gaps", "wall_shortfall"]
 
 # The paper's tank (Sec. 4.1): the fish swims in a 2.30 m x 1.15 m area.
 TANK_LENGTH = 2.30  # m, along the tank X axis
@@ -58,6 +59,25 @@ class Outline(NamedTuple):
         return cls(0.5 * float(params.body_length), float(params.fin_offset), float(params.fin_span))
 
 
+class StopRule(NamedTuple):
+    """The stopping band's rule: any part of the outline must keep ``stop_need(v)`` from each wall (module docstring).
+
+    Attributes:
+        margin: Clearance kept on top of the stopping distance [m].
+        reaction_time: ``t_r`` [s]: from a pose to the fins halting (frame age, polling, radio).
+        horizon: ``T`` [s]: the fish stays clear of the walls for this long after a stop.
+    """
+
+    margin: float
+    reaction_time: float
+    horizon: float
+
+
+#: The robot's rule (its safety supervisor's defaults, ``pectoral_gym.hardware.safety.rules.SafetyConfig``), which
+#: the simulated envs' ``stop_band`` applies too (``docs/hardware.md``, "Geofence").
+ROBOT_STOP_RULE = StopRule(margin=0.05, reaction_time=0.15, horizon=5.0)
+
+
 def coast_rate(params: Any) -> float:
     """``k = c1 / max(m1, m2)`` [1/m] of a :class:`~pectoral_gym.model.params.FishParams` (eq. 19, fins still)."""
     return params.c1 / max(params.m1, params.m2)
@@ -76,6 +96,24 @@ def coast_distance(speed: Any, k: float, horizon: float, ops: Any = np) -> Any:
     """
     v = ops.fmax(speed, 0.0)
     return ops.log(1.0 + k * v * horizon) / k
+
+
+def stop_need(speed: Any, k: float, rule: StopRule, react: Any = None, ops: Any = np) -> Any:
+    """Clearance [m] a fish moving at ``speed`` [m/s] towards a wall needs: ``margin + v t_r + ln(1 + k v T) / k``.
+
+    The speed held for the reaction time (the fins still run until the stop arrives), then the coast of
+    :func:`coast_distance` over the rule's horizon.
+
+    Args:
+        speed: Speed towards the wall [m/s]; negative counts as 0.
+        k: :func:`coast_rate` [1/m].
+        rule: The :class:`StopRule`.
+        react: Reaction time [s] to use instead of ``rule.reaction_time`` (the geofence adds a pose's age).
+        ops: ``numpy`` or ``casadi``.
+    """
+    v = ops.fmax(speed, 0.0)
+    t_r = rule.reaction_time if react is None else react
+    return rule.margin + v * t_r + coast_distance(v, k, rule.horizon, ops)
 
 
 def outline_circles(x: Any, y: Any, c: Any, s: Any, outline: Outline) -> tuple[tuple[Any, Any, float], ...]:
@@ -157,3 +195,43 @@ def nose_tail_contact(x, y, c, s, half_length):
         if not (0.0 <= px <= TANK_LENGTH and 0.0 <= py <= TANK_WIDTH):
             contact = True
     return contact
+
+
+@njit(inline="always")
+def band_shortfall(x, y, c, s, toward, outline, k, margin, react, horizon):
+    """The largest shortfall [m] of the outline's clearance below the stopping need over the four walls (> 0: inside).
+
+    The compiled form of :func:`stop_need` against :func:`outline_circles` and :func:`wall_gaps` (the robot's
+    geofence and the envs' ``stop_band``; ``tests/test_tank.py`` checks it against them).
+
+    Args:
+        x, y: Centre of mass [m]. c, s: ``cos psi``, ``sin psi``.
+        toward: Speeds ``(4,)`` towards the walls ``X = 0, X = L, Y = 0, Y = W`` [m/s] (negative counts as 0).
+        outline: ``(half_length, width, span)`` [m] (:class:`Outline`).
+        k: :func:`coast_rate` [1/m]. margin, react, horizon: The :class:`StopRule`'s margin [m], reaction time [s]
+            and horizon [s].
+    """
+    h, w, span = outline[0], outline[1], outline[2]
+    needs = (_need(toward[0], k, margin, react, horizon), _need(toward[1], k, margin, react, horizon),
+             _need(toward[2], k, margin, react, horizon), _need(toward[3], k, margin, react, horizon))
+    worst = -math.inf
+    for q in range(4):  # nose, tail, right pivot (0, -C_p), left pivot (0, +C_p): outline_circles' order
+        if q == 0:
+            px, py, r = x + c * h, y + s * h, w
+        elif q == 1:
+            px, py, r = x - c * h, y - s * h, w
+        elif q == 2:
+            px, py, r = x + s * w, y - c * w, span
+        else:
+            px, py, r = x - s * w, y + c * w, span
+        gaps = (px - r, TANK_LENGTH - px - r, py - r, TANK_WIDTH - py - r)  # wall_gaps' order
+        for j in range(4):
+            worst = max(worst, needs[j] - gaps[j])
+    return worst
+
+
+@njit(inline="always")
+def _need(speed, k, margin, react, horizon):
+    """:func:`stop_need` for floats, compiled."""
+    v = max(speed, 0.0)
+    return margin + v * react + math.log(1.0 + k * v * horizon) / k

@@ -22,11 +22,18 @@ import numpy as np
 from pectoral_gym.envs.layout import *  # noqa: F403 - the index constants, re-exported: tk.E_TX, tk.O_REWARD, ...
 from pectoral_gym.envs.layout import (
     ACTION_SIZE,
+    C_BAND,
+    C_BAND_HORIZON,
+    C_BAND_MARGIN,
+    C_BAND_REACTION,
     C_DT,
+    C_FIN_RATE,
     C_GOAL_BONUS,
+    C_GOAL_INSET,
     C_GOAL_RADIUS,
     C_RANGES,
     C_REF_SPEED,
+    C_START_INSET,
     C_TASK,
     C_TIME,
     C_W_ENERGY,
@@ -44,11 +51,14 @@ from pectoral_gym.envs.layout import (
     E_TVY,
     E_TX,
     E_TY,
+    F_KCOAST,
     F_KDRAG,
     F_LENGTH,
     F_SPAN,
+    F_WIDTH,
     FIN_ACTIONS,
     GOAL,
+    O_COST,
     O_DISTANCE,
     O_ENERGY,
     O_GOAL,
@@ -83,14 +93,15 @@ from pectoral_gym.envs.observation import (  # noqa: F401 - OBS_SIZE re-exported
 )
 from pectoral_gym.model.averaging import mean_fin_power
 from pectoral_gym.model.jit import kernel_pair, njit
+from pectoral_gym.model.servo import servo_period
 from pectoral_gym.model.strokes import ANGLE_FROM, ANGLE_TO, DURATION, ELAPSED, POWER
-from pectoral_gym.model.tank import TANK_LENGTH, TANK_WIDTH, nose_tail_contact
+from pectoral_gym.model.tank import TANK_LENGTH, TANK_WIDTH, band_shortfall, nose_tail_contact
 
 # Tank and task geometry [m], [rad].
 TANK_X = TANK_LENGTH  # tank length along X [m], one source: pectoral_gym.model.tank
 TANK_Y = TANK_WIDTH  # tank width along Y [m]
-START_INSET = 0.3  # goal task: start this far from the walls [m]
-GOAL_INSET = 0.2  # goal task: goal this far from the walls [m]
+START_INSET = 0.3  # goal task: start this far from the walls [m] (EnvConfig.start_inset's default)
+GOAL_INSET = 0.2  # goal task: goal this far from the walls [m] (EnvConfig.goal_inset's default)
 GOAL_MIN_DISTANCE = 0.3  # goal task: least start-goal distance [m]
 GOAL_MAX_DISTANCE = 1.0  # goal task: largest start-goal distance [m]
 GOAL_CANDIDATES = 16  # goal candidates drawn per rejection-sampling block
@@ -125,7 +136,7 @@ def first_non_finite(actions, skip):
 
 @njit(inline="always")
 def apply_one(i, actions, cfg, beats, obs, out, fish):
-    """Map env ``i``'s action to fin patterns, store it in the observation, price its energy."""
+    """Map env ``i``'s action to fin patterns (``servo_limit``: as the servos run them), store it, price its energy."""
     energy = 0.0
     for f in range(2):
         for k in range(FIN_ACTIONS):
@@ -134,6 +145,8 @@ def apply_one(i, actions, cfg, beats, obs, out, fish):
             high = cfg[C_RANGES + 2 * k + 1]
             beats[i, f, k] = min(low + 0.5 * (x + 1.0) * (high - low), high)
             obs[i, OBS_LAST_ACTION + FIN_ACTIONS * f + k] = x
+        if cfg[C_FIN_RATE] > 0.0:  # servo_limit: the robot's servos run a too fast pattern slower
+            beats[i, f, 2] = servo_period(beats[i, f, 1], beats[i, f, 2], beats[i, f, 3], cfg[C_FIN_RATE])
         energy += mean_fin_power(beats[i, f, 1], beats[i, f, 2], beats[i, f, 3], fish[i, F_SPAN], fish[i, F_KDRAG])
     out[i, O_ENERGY] = -cfg[C_W_ENERGY] * energy * cfg[C_DT]  # E = sum of mean fin power * control period [J]
 
@@ -211,7 +224,8 @@ def reward_one(i, state, cfg, ep, fish, obs, out):
     if task == TRACK:
         _move_reference(i, ep, cfg[C_DT], cfg[C_REF_SPEED])
     d, wall = observe_one(i, state, ep, fish, obs)
-    r_wall = -cfg[C_WALL] if wall else 0.0
+    band = cfg[C_BAND] > 0.5 and in_band(i, state, cfg, fish)
+    r_wall = -cfg[C_WALL] if (wall or band) else 0.0
     r_energy = out[i, O_ENERGY]
     if task == GOAL:
         success = d < cfg[C_GOAL_RADIUS]
@@ -233,9 +247,25 @@ def reward_one(i, state, cfg, ep, fish, obs, out):
         out[i, O_REWARD] = r_tracking + r_wall + r_energy  # the order of TERMS[TRACK]
     out[i, O_WALL] = r_wall
     out[i, O_DISTANCE] = d
-    out[i, O_TERMINATED] = 1.0 if (wall or success) else 0.0
+    out[i, O_TERMINATED] = 1.0 if (wall or band or success) else 0.0
     out[i, O_SUCCESS] = 1.0 if success else 0.0
+    out[i, O_COST] = 1.0 if band else 0.0
     ep[i, E_DPREV] = d
+
+
+@njit(inline="always")
+def in_band(i, state, cfg, fish):
+    """Whether any part of env ``i``'s fish is inside the stopping band (``stop_band``; :func:`tank.band_shortfall`).
+
+    The speeds towards the walls are the world-frame components of the body velocity ``state[i, 3:5]``.
+    """
+    x, y, psi = state[i, 0], state[i, 1], state[i, 2]
+    c, s = math.cos(psi), math.sin(psi)
+    vx, vy = c * state[i, 3] - s * state[i, 4], s * state[i, 3] + c * state[i, 4]
+    outline = (0.5 * fish[i, F_LENGTH], fish[i, F_WIDTH], fish[i, F_SPAN])
+    shortfall = band_shortfall(x, y, c, s, (-vx, vx, -vy, vy), outline, fish[i, F_KCOAST], cfg[C_BAND_MARGIN],
+                               cfg[C_BAND_REACTION], cfg[C_BAND_HORIZON])
+    return shortfall > 0.0
 
 
 # ---------------------------------------------------------------- the simulated envs' step (envs.fused)
@@ -294,11 +324,11 @@ def observe_fins(fins, obs, period_max):
 
 # ---------------------------------------------------------------- reset
 @njit
-def _pick_goal(draws, candidates):
+def _pick_goal(draws, candidates, inset):
     """Rejection sampling: the first candidate (uniforms in pairs) that is a valid goal for the start in ``draws``."""
     for k in range(candidates.shape[0] // 2):
-        gx = GOAL_INSET + candidates[2 * k] * (TANK_X - 2.0 * GOAL_INSET)
-        gy = GOAL_INSET + candidates[2 * k + 1] * (TANK_Y - 2.0 * GOAL_INSET)
+        gx = inset + candidates[2 * k] * (TANK_X - 2.0 * inset)
+        gy = inset + candidates[2 * k + 1] * (TANK_Y - 2.0 * inset)
         d = math.hypot(gx - draws[0], gy - draws[1])
         if GOAL_MIN_DISTANCE <= d <= GOAL_MAX_DISTANCE:
             draws[3] = gx
@@ -307,21 +337,28 @@ def _pick_goal(draws, candidates):
     return False
 
 
-def draw_episode(rng: np.random.Generator, task: int) -> np.ndarray:
+def draw_episode(rng: np.random.Generator, task: int, cfg: np.ndarray) -> np.ndarray:
     """Draw one episode's random start from ``rng``; the same sequence of draws for single and vector envs.
 
-    Returns 8 numbers: for ``GOAL`` ``(X, Y, psi, goal X, goal Y, 0, 0, 0)``;
-    for ``TRACK`` ``(a, b, direction, phase, offset radius, offset angle, heading noise, 0)``.
+    Args:
+        rng: The episode's generator.
+        task: ``GOAL`` or ``TRACK``.
+        cfg: The packed settings (``goal``: ``C_START_INSET``, ``C_GOAL_INSET``).
+
+    Returns:
+        8 numbers: for ``GOAL`` ``(X, Y, psi, goal X, goal Y, 0, 0, 0)``;
+        for ``TRACK`` ``(a, b, direction, phase, offset radius, offset angle, heading noise, 0)``.
     """
     draws = np.zeros(8)
     if task == GOAL:
         u = rng.random(3 + 2 * GOAL_CANDIDATES)
-        draws[0] = START_INSET + u[0] * (TANK_X - 2.0 * START_INSET)
-        draws[1] = START_INSET + u[1] * (TANK_Y - 2.0 * START_INSET)
+        start_inset, goal_inset = cfg[C_START_INSET], cfg[C_GOAL_INSET]
+        draws[0] = start_inset + u[0] * (TANK_X - 2.0 * start_inset)
+        draws[1] = start_inset + u[1] * (TANK_Y - 2.0 * start_inset)
         draws[2] = -math.pi + 2.0 * math.pi * u[2]
         candidates = u[3:]
         for _ in range(GOAL_MAX_BLOCKS):
-            if _pick_goal(draws, candidates):
+            if _pick_goal(draws, candidates, goal_inset):
                 return draws
             candidates = rng.random(2 * GOAL_CANDIDATES)
         raise RuntimeError("could not place a goal at the required distance from the start")  # pragma: no cover

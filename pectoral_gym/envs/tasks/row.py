@@ -40,13 +40,13 @@ class Task:
         id: ``cfg[C_TASK]``; 0 and 1 are the built-in ``goal`` and ``track``.
         terms: ``(info key, out index)`` of the reward terms, in summation order.
         extra_info: The ``info`` entries after ``"distance"``.
-        draw: ``draw(rng) -> (8,)`` random numbers of one episode.
+        draw: ``draw(rng, cfg) -> (8,)`` random numbers of one episode.
         start: ``start(index, draws, cfg, ep, start)``: targets into ``ep``, start states into ``start``.
         reward_one: The task's kernel ``reward_one(i, state, cfg, ep, fish, obs, out)`` (its contract: the table);
             the simulated envs' step calls it (``envs.fused.step_builds``).
         observe: Serial/parallel builds of :func:`pectoral_gym.envs.tasks.table.observe_body` with ``reward_one``:
             ``observe.run(state, skip, cfg, ep, fish, obs, out)`` (the robot env's step).
-        fit_start: ``fit_start(draws, x, y, rng)``: adapt the draws to a measured start pose (or ``None``).
+        fit_start: ``fit_start(draws, x, y, rng, cfg)``: adapt the draws to a measured start pose (or ``None``).
         info: ``info(out_row) -> dict``: the env's ``info`` (:attr:`info_fields` as numpy scalars, flags as
             ``np.bool_``). Built from the fields when not given; a given one must agree with them on probe
             rows (keys in order, values, types), else ``ValueError``.
@@ -56,11 +56,11 @@ class Task:
     id: int
     terms: tuple[tuple[str, int], ...]
     extra_info: tuple[InfoField, ...]
-    draw: Callable[[np.random.Generator], np.ndarray]
+    draw: Callable[[np.random.Generator, np.ndarray], np.ndarray]
     start: Callable[..., Any]
     reward_one: Callable[..., Any]
     observe: KernelPair
-    fit_start: Callable[[np.ndarray, float, float, np.random.Generator], None] | None = None
+    fit_start: Callable[[np.ndarray, float, float, np.random.Generator, np.ndarray], None] | None = None
     info: Callable[[np.ndarray], dict] | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self) -> None:

@@ -24,7 +24,8 @@ Adding a task touches this table only: call :func:`register_task` with
 
 * ``terms``: ``(info key, out index)`` of each reward term, in summation order
   (any of the ``layout.O_*`` term slots);
-* ``draw(rng) -> (8,)``: the episode's random numbers, drawn from ``rng`` only;
+* ``draw(rng, cfg) -> (8,)``: the episode's random numbers, drawn from ``rng`` only (``cfg``: the packed
+  settings, e.g. the goal task's insets);
 * ``start(index, draws, cfg, ep, start)``: from the draws, write the targets of
   the envs in ``index`` into ``ep`` (``E_TX .. E_TVY``, tank frame) and their
   start states ``(X, Y, psi, 0, 0, 0)`` into ``start``;
@@ -34,8 +35,12 @@ Adding a task touches this table only: call :func:`register_task` with
   ``O_TERMINATED``, ``O_SUCCESS``) and ``ep[i, E_DPREV]``; ``out[i, O_ENERGY]``
   holds the energy term on entry;
 * optionally ``extra_info`` (``(key, out index, flag)``, a flag reads
-  ``out > 0.5`` as a ``np.bool_``) and ``fit_start(draws, x, y, rng)``, which
+  ``out > 0.5`` as a ``np.bool_``) and ``fit_start(draws, x, y, rng, cfg)``, which
   adapts the draws to a measured start pose (the robot starts where it is).
+
+With ``stop_band`` (``cfg[C_BAND]``) the built-in kernel also ends the episode when any part of the fish is
+inside the robot's stopping band (:func:`pectoral_gym.envs.tasks.kernels.in_band`), prices it as a wall
+contact and writes ``out[O_COST]``; :meth:`TaskState.info` then adds ``"cost"``.
 
 The task is then a valid ``task=`` of ``gym.make("PectoralFish-*-v0")``, of the
 vector env and of ``HardwareFishEnv`` (``tests/test_task_core.py`` registers one).
@@ -59,9 +64,11 @@ import numpy as np
 from numba.core.dispatcher import Dispatcher
 
 from pectoral_gym.envs.layout import (
+    C_BAND,
     GOAL,
     N_EP,
     N_OUT,
+    O_COST,
     O_DISTANCE,
     O_ENERGY,
     O_GOAL,
@@ -112,14 +119,15 @@ def _observe_builds(task_kernel: Callable[..., Any]) -> KernelPair:
 
 
 # ---------------------------------------------------------------- the built-in tasks
-def _fit_goal(draws: np.ndarray, x: float, y: float, rng: np.random.Generator) -> None:
+def _fit_goal(draws: np.ndarray, x: float, y: float, rng: np.random.Generator, cfg: np.ndarray) -> None:
     """Goal at a measured start ``(x, y)``: redraw the goal (as :func:`tasks.draw_episode`) until 0.3-1.0 m away."""
+    inset = cfg[tk.C_GOAL_INSET]
     for _ in range(tk.GOAL_MAX_BLOCKS * tk.GOAL_CANDIDATES):
         if tk.GOAL_MIN_DISTANCE <= math.hypot(draws[3] - x, draws[4] - y) <= tk.GOAL_MAX_DISTANCE:
             return
         u = rng.random(2)
-        draws[3] = tk.GOAL_INSET + u[0] * (tk.TANK_X - 2.0 * tk.GOAL_INSET)
-        draws[4] = tk.GOAL_INSET + u[1] * (tk.TANK_Y - 2.0 * tk.GOAL_INSET)
+        draws[3] = inset + u[0] * (tk.TANK_X - 2.0 * inset)
+        draws[4] = inset + u[1] * (tk.TANK_Y - 2.0 * inset)
 
 
 def _goal_info(out: np.ndarray) -> dict:
@@ -137,10 +145,10 @@ def _track_info(out: np.ndarray) -> dict:
 
 TASK_TABLE: dict[str, Task] = {
     "goal": Task("goal", GOAL, tk.TERMS[GOAL], (InfoField("is_success", O_SUCCESS, flag=True),),
-                 lambda rng: tk.draw_episode(rng, GOAL), tk.start_states, tk.reward_one, _OBSERVE,
+                 lambda rng, cfg: tk.draw_episode(rng, GOAL, cfg), tk.start_states, tk.reward_one, _OBSERVE,
                  fit_start=_fit_goal, info=_goal_info),
     "track": Task("track", TRACK, tk.TERMS[TRACK], (InfoField("tracking_error", O_DISTANCE),),
-                  lambda rng: tk.draw_episode(rng, TRACK), tk.start_states, tk.reward_one, _OBSERVE,
+                  lambda rng, cfg: tk.draw_episode(rng, TRACK, cfg), tk.start_states, tk.reward_one, _OBSERVE,
                   info=_track_info),
 }
 _BY_ID: dict[int, Task] = {t.id: t for t in TASK_TABLE.values()}
@@ -180,10 +188,12 @@ def task_info(out: np.ndarray, task: int) -> dict:
 
 
 # ---------------------------------------------------------------- registering a task
-def register_task(name: str, *, terms: Sequence[tuple[str, int]], draw: Callable[[np.random.Generator], np.ndarray],
+def register_task(name: str, *, terms: Sequence[tuple[str, int]],
+                  draw: Callable[[np.random.Generator, np.ndarray], np.ndarray],
                   start: Callable[..., Any], reward_one: Callable[..., Any],
                   extra_info: Sequence[InfoField | tuple] = (),
-                  fit_start: Callable[[np.ndarray, float, float, np.random.Generator], None] | None = None) -> Task:
+                  fit_start: Callable[[np.ndarray, float, float, np.random.Generator, np.ndarray], None] | None = None
+                  ) -> Task:
     """Add a task to the table (module docstring); it is then a valid ``task=`` of every fish env.
 
     Returns:
@@ -293,7 +303,7 @@ class TaskState:
         Raises:
             ValueError: If the row's ``draw`` gives another shape.
         """
-        draws = self.task.draw(rng)
+        draws = self.task.draw(rng, self.cfg)
         if np.shape(draws) != (8,):
             raise ValueError(f"task {self.task.name!r}: draw(rng) must give 8 numbers, got shape {np.shape(draws)}")
         return draws
@@ -318,7 +328,7 @@ class TaskState:
         index = np.array([i], dtype=np.int64)
         draws = self.draw(rng)
         if self.task.fit_start is not None:
-            self.task.fit_start(draws, x, y, rng)
+            self.task.fit_start(draws, x, y, rng, self.cfg)
         self.start(index, draws[None])
         state = np.zeros((self.n, 6))
         state[i, :3] = x, y, psi
@@ -347,9 +357,18 @@ class TaskState:
         """Observe ``(vx, vy, omega)`` [m/s, m/s, rad/s], the mean over the last control period, for env ``i``."""
         self.obs[i, OBS_VELOCITY] = velocity
 
+    @property
+    def info_fields(self) -> tuple[InfoField, ...]:
+        """Every ``info`` entry in order: the row's (:attr:`Task.info_fields`), then ``"cost"`` with ``stop_band``."""
+        fields = self.task.info_fields
+        return (*fields, InfoField("cost", O_COST)) if self.cfg[C_BAND] > 0.5 else fields
+
     def info(self, i: int) -> dict:
-        """Env ``i``'s ``info`` after the last reset or step (:attr:`Task.info_fields`), numpy scalars."""
-        return self.task.info(self.out[i])
+        """Env ``i``'s ``info`` after the last reset or step (:attr:`info_fields`), numpy scalars."""
+        info = self.task.info(self.out[i])
+        if self.cfg[C_BAND] > 0.5:
+            info["cost"] = self.out[i, O_COST]
+        return info
 
     def reward(self, i: int) -> float:
         """Env ``i``'s reward of the last step."""
