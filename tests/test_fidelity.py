@@ -14,10 +14,13 @@ from scipy.integrate import quad
 
 from pectoral_gym.model.averaging import averaged_forcing, half_stroke_mean_force, ripple_offset
 from pectoral_gym.model.dynamics import fin_force_right, stroke_kinematics
+from pectoral_gym.model.kloading import select_yaw_damping
 from pectoral_gym.model.models import AveragedModel
 from pectoral_gym.model.params import FinBeat, FishParams
+from pectoral_gym.model.spec import AVERAGED, AVERAGED_ENV, AVERAGED_PAPER, FULL_FAST, PRESETS, AveragedSpec
 from pectoral_gym.scaling.cli import main as scaling_main
 from pectoral_gym.scaling.validation import fidelity as fd
+from pectoral_gym.scaling.validation.comparison import REST, as_run, steady_pair
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 
@@ -157,34 +160,68 @@ def test_draw_patterns_inside_the_env_ranges():
 
 
 def test_quick_cli_end_to_end(tmp_path, capsys):
-    assert scaling_main(["fidelity", "--quick", "--out", str(tmp_path), "--no-progress", "--no-transitions",
-                         "--no-ripple-offsets"]) == 0
-    data = json.loads((tmp_path / "fidelity_dev_no_transitions_no_offsets.json").read_text())
-    assert not data["transitions"] and not data["ripple_offsets"] and data["quick"] and data["seed_set"] == "dev"
+    assert scaling_main(["fidelity", "--quick", "--out", str(tmp_path), "--no-progress",
+                         "--candidate", "averaged-env"]) == 0
+    data = json.loads((tmp_path / "fidelity_dev_averaged_env.json").read_text())
+    assert data["candidate"] == "averaged-env" and data["spec"] == AVERAGED_ENV.to_dict()  # the spec it ran
+    assert not data["spec"]["transitions"] and not data["spec"]["ripple_offsets"]
+    assert data["quick"] and data["seed_set"] == "dev"
     assert set(data["scenarios"]) == set(fd.SCENARIOS) and set(data["decomposition"]) == set(fd.DECOMPOSITION)
     assert set(data["by_fins"]) == set(fd.SCENARIOS)
     assert all(set(v) == set(fd.FIN_SPLITS) for v in data["by_fins"].values())
     assert len(data["targets"]) == 16
     for name in data["plots"]:
         assert (tmp_path / name).read_bytes()[:8] == PNG_MAGIC
-    report = (tmp_path / "fidelity_dev_no_transitions_no_offsets.md").read_text()
+    report = (tmp_path / "fidelity_dev_averaged_env.md").read_text()
     assert "## Decomposition" in report and "changed every 0.5 s" in report and "## Each scenario by fins" in report
-    assert "transitions off, ripple offsets off" in capsys.readouterr().out
-    with pytest.raises(SystemExit):
-        scaling_main(["fidelity", "--set", "tuning"])
+    assert '"transitions": false' in report  # the spec, recorded
+    assert "preset averaged-env (transitions off, ripple offsets off" in capsys.readouterr().out
+    for argv in (["--set", "tuning"], ["--candidate", "full"], ["--no-transitions"], ["--no-ripple-offsets"]):
+        with pytest.raises(SystemExit):  # one spelling: the presets' names; the spec's options are no flags
+            scaling_main(["fidelity", *argv])
+
+
+def test_the_default_candidate_is_the_averaged_model_with_both_corrections():
+    # the model of the published report (docs/validation/fidelity/README.md)
+    assert PRESETS[fd.DEFAULT_CANDIDATE] == AveragedSpec(transitions=True, ripple_offsets=True)
+    import argparse
+
+    sub = argparse.ArgumentParser().add_subparsers()
+    fd.add_parser(sub)
+    parser = sub.choices["fidelity"]
+    assert parser.parse_args([]).candidate == fd.DEFAULT_CANDIDATE
+    assert set(next(a for a in parser._actions if a.dest == "candidate").choices) == set(PRESETS)
+
+
+def test_every_section_runs_the_candidates_spec():
+    """The candidate runs as its spec in every section: K keeps the spec's yaw-damping section only, so the steady
+    states of averaged-paper run without the oscillation-averaged damping, and K without a section the spec
+    needs is refused before any work."""
+    from pectoral_gym.model.kfunctions import ScalingFunctions
+
+    with pytest.raises(ValueError, match="no yaw_oscillation section"):
+        fd.fidelity(ScalingFunctions.unit(), candidate="averaged", plots=False, progress=False)
+    with pytest.raises(ValueError, match="candidate must be a model preset"):
+        fd.fidelity(ScalingFunctions.load(), candidate="full-slow")
+    beats = np.array([[REST, FinBeat.from_degrees(90, 22, 1, 4).as_array()]])
+    k = ScalingFunctions.load()
+    paper = steady_pair(beats, k, None, AVERAGED_PAPER.replace(yaw_damping="sinusoid"))["averaged"]["omega"]
+    plain = steady_pair(beats, select_yaw_damping(k, "none"), None, AVERAGED_PAPER)["averaged"]["omega"]
+    assert as_run(AVERAGED_PAPER, select_yaw_damping(k, "none")) == AVERAGED_PAPER
+    assert as_run("averaged", k) == AVERAGED and as_run("full-fast", k) == FULL_FAST
+    assert abs(paper[0] - plain[0]) > 1e-3 * abs(plain[0])  # the damping matters for this turn
 
 
 def test_quick_cli_fast_full_candidate(tmp_path, capsys):
     assert scaling_main(["fidelity", "--quick", "--out", str(tmp_path), "--no-progress", "--no-plots",
                          "--candidate", "full-fast"]) == 0
     data = json.loads((tmp_path / "fidelity_dev_full_fast.json").read_text())
-    assert data["candidate"] == "full-fast"
+    assert data["candidate"] == "full-fast" and data["spec"] == FULL_FAST.to_dict()
     # the same model at two step sizes: far closer than the averaged model's percent-level errors
     assert data["scenarios"]["constant"]["position"]["worst"] < 0.01
     assert "# Fast full-model fidelity benchmark" in (tmp_path / "fidelity_dev_full_fast.md").read_text()
-    assert "fast full model against the reference integration" in capsys.readouterr().out
-    with pytest.raises(ValueError, match="candidate"):
-        fd.fidelity(None, candidate="full-slow")
+    assert "fast full model, preset full-fast (fast integration) against the reference integration" in \
+        capsys.readouterr().out
 
 
 def test_transitions_make_the_impulse_exact_with_k_1():

@@ -13,13 +13,14 @@ from typing import Any
 import numpy as np
 
 from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.model.kloading import held_yaw_damping
 from pectoral_gym.model.models import FishModel
 from pectoral_gym.model.params import FishParams
-from pectoral_gym.model.spec import AVERAGED, FULL_FAST, FULL_REFERENCE, ModelSpec, make_model
+from pectoral_gym.model.spec import AVERAGED, FULL_REFERENCE, AveragedSpec, ModelSpec, make_model, spec_from_dict
 from pectoral_gym.model.steady import common_period, steady_state_batch
 
 __all__ = [
-    "REST", "candidate_spec", "fin_pattern", "label", "relative_error", "simulate_xy", "steady_pair", "summarize",
+    "REST", "as_run", "fin_pattern", "label", "relative_error", "simulate_xy", "steady_pair", "summarize",
 ]
 
 
@@ -69,34 +70,26 @@ def fin_pattern(g0_deg: float, ga_deg: float, period: float, ratio: float) -> np
 REST = fin_pattern(90.0, 0.0, 1.0, 1.0)
 
 
-#: Models compared against the full model's reference integration: the averaged model
-#: (:data:`pectoral_gym.model.spec.AVERAGED`), or the full model's fast integration preset
-#: (:data:`pectoral_gym.model.spec.FULL_FAST`).
-CANDIDATES = ("averaged", "full-fast")
+def as_run(model: str | ModelSpec, scaling: ScalingFunctions | None) -> ModelSpec:
+    """The spec of ``model`` as :func:`~pectoral_gym.model.spec.make_model` builds it with the K ``scaling`` in memory.
 
-
-def candidate_spec(kind: str, transitions: bool = True, ripple_offsets: bool = True) -> ModelSpec:
-    """The spec of ``"full"`` (the reference) or a candidate of :data:`CANDIDATES`.
-
-    ``transitions``, ``ripple_offsets``: the averaged model's options. Build it with
-    ``pectoral_gym.model.spec.make_model(spec, n, params, scaling)``: the K under test, in memory.
+    ``model``: a spec, a preset name (:data:`~pectoral_gym.model.spec.PRESETS`), ``"full"``
+    (:data:`~pectoral_gym.model.spec.FULL_REFERENCE`) or ``"averaged"`` (:data:`~pectoral_gym.model.spec.AVERAGED`).
+    An averaged model runs with the richest yaw damping the K under test holds (the spec names it); the
+    full model does not use K. What a report records as the model it ran.
     """
-    if kind == "full":
-        return FULL_REFERENCE
-    if kind == "full-fast":
-        return FULL_FAST
-    if kind != "averaged":
-        raise ValueError(f"model must be 'full' or one of {CANDIDATES}, got {kind!r}")
-    return AVERAGED.replace(transitions=transitions, ripple_offsets=ripple_offsets)
+    spec = model if isinstance(model, ModelSpec) else FULL_REFERENCE if model == "full" else \
+        AVERAGED if model == "averaged" else spec_from_dict(model)
+    return spec.replace(yaw_damping=held_yaw_damping(scaling)) if isinstance(spec, AveragedSpec) else spec
 
 
-def _steady(kind: str, beats: np.ndarray, params: FishParams, scaling: ScalingFunctions) -> np.ndarray:
+def _steady(model: str | ModelSpec, beats: np.ndarray, params: FishParams, scaling: ScalingFunctions) -> np.ndarray:
     """``(n, 5)`` vx, vy, omega, radius, period (NaN when not turning), one batch per common window."""
     windows = np.array([common_period([b[2] for b in fins if b[1] > 0] or [1.0]) for fins in beats])
     out = np.full((len(beats), 5), np.nan)
     for window in np.unique(np.round(windows, 9)):
         idx = np.flatnonzero(np.abs(windows - window) < 1e-9)
-        for i, s in zip(idx, steady_state_batch(make_model(candidate_spec(kind), idx.size, params, scaling),
+        for i, s in zip(idx, steady_state_batch(make_model(model, idx.size, params, scaling),
                                                      beats[idx]), strict=True):
             out[i] = (s.vx, s.vy, s.omega, np.nan if s.radius is None else s.radius,
                       np.nan if s.period is None else s.period)
@@ -104,11 +97,11 @@ def _steady(kind: str, beats: np.ndarray, params: FishParams, scaling: ScalingFu
 
 
 def steady_pair(beats: np.ndarray, scaling: ScalingFunctions, params: FishParams | None = None,
-                candidate: str = "averaged") -> dict[str, Any]:
-    """Steady states of both models and their relative errors for fish patterns ``(n, 2, 4)``.
+                candidate: str | ModelSpec = "averaged") -> dict[str, Any]:
+    """Steady states of the full model and of ``candidate``, and their relative errors, for patterns ``(n, 2, 4)``.
 
-    ``candidate`` (:data:`CANDIDATES`) is the model compared with the full one; its results
-    are under ``"averaged"`` whichever it is.
+    ``candidate``: the model compared with the full one, as :func:`as_run` names it, built with the K
+    ``scaling``; its results are under ``"averaged"`` whichever it is.
     """
     params = params or FishParams()
     full = _steady("full", beats, params, scaling)

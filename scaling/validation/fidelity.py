@@ -23,10 +23,13 @@ it there, open loop, with the public :mod:`pectoral_gym.model.models` API:
 
 Two seed sets (:data:`SEED_SETS`): ``dev`` to look at while working on the model,
 ``report`` (other seeds, other two-fin periods) run only for the published figures.
-Output: ``fidelity_<set>[_no_transitions][_no_offsets].md``, ``.json`` and PNG plots
-(:mod:`pectoral_gym.scaling.validation.fidelity_report`). ``candidate="full-fast"`` runs the same benchmark on the full
-model's fast integration preset instead of the averaged model (``fidelity_<set>_full_fast.*``):
-how far that preset is from the reference integration.
+
+The candidate, measured against the full model at its reference steps, is a model spec named by its
+preset (:data:`pectoral_gym.model.spec.PRESETS`; default :data:`DEFAULT_CANDIDATE`, the averaged model
+with both corrections): e.g. ``"averaged-env"`` (the cycle averages alone, as the envs run them) or
+``"full-fast"`` (the full model's fast integration preset: how far it is from the reference steps).
+Output: ``fidelity_<set>[_<preset>].md``, ``.json`` (which records the spec it ran) and PNG plots
+(:mod:`pectoral_gym.scaling.validation.fidelity_report`).
 """
 
 from __future__ import annotations
@@ -46,15 +49,18 @@ from tqdm import tqdm
 from pectoral_gym import __version__
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.model.kfunctions import ScalingFunctions, default_scaling_path
+from pectoral_gym.model.kloading import held_yaw_damping, select_yaw_damping
 from pectoral_gym.model.params import FishParams
-from pectoral_gym.model.spec import make_model
+from pectoral_gym.model.spec import PRESETS, AveragedSpec, ModelSpec, make_model
 from pectoral_gym.scaling.identification.grids import draw_off_grid
-from pectoral_gym.scaling.validation.comparison import CANDIDATES, REST, candidate_spec, label, steady_pair, summarize
+from pectoral_gym.scaling.validation.comparison import REST, as_run, label, steady_pair, summarize
 from pectoral_gym.scaling.validation.validate import MIN_TURN_RATE, sampling_box, single_fin_section, table4_section
 
-__all__ = ["DECOMPOSITION", "DURATION", "FIN_SPLITS", "MIN_PATH", "SCENARIOS", "SEED_SETS", "TARGETS", "SeedSet",
-           "draw_patterns", "fidelity", "main", "open_loop", "open_loop_errors", "split_fins"]
+__all__ = ["DECOMPOSITION", "DEFAULT_CANDIDATE", "DURATION", "FIN_SPLITS", "MIN_PATH", "SCENARIOS", "SEED_SETS",
+           "TARGETS", "SeedSet", "draw_patterns", "fidelity", "main", "open_loop", "open_loop_errors", "split_fins"]
 
+#: The candidate of the published report (docs/validation/fidelity): the averaged model with both corrections.
+DEFAULT_CANDIDATE = "averaged"
 DURATION = 40.0  # s of simulated time per open-loop run
 SAMPLE = 0.5  # s between recorded positions (the path length is summed over them)
 MIN_PATH = 0.25  # m: floor of the normaliser, so that fish that barely move do not dominate
@@ -108,23 +114,21 @@ def split_fins(schedule: np.ndarray, split: str) -> np.ndarray:
     return out
 
 
-def open_loop(kind: str, schedule: np.ndarray, change_every: float | None, duration: float,
-              params: FishParams, scaling: ScalingFunctions, on_pattern: bool = False,
-              transitions: bool = True, ripple_offsets: bool = True) -> np.ndarray:
+def open_loop(kind: str | ModelSpec, schedule: np.ndarray, change_every: float | None, duration: float,
+              params: FishParams, scaling: ScalingFunctions, on_pattern: bool = False) -> np.ndarray:
     """Poses ``(n, k + 1, 3)`` (X, Y, psi) every :data:`SAMPLE` s of one model under a command schedule.
 
     Args:
-        kind: ``"full"`` or a candidate (:data:`pectoral_gym.scaling.validation.comparison.CANDIDATES`).
+        kind: The model: a spec, a preset name, ``"full"`` (reference steps) or ``"averaged"``
+            (:func:`pectoral_gym.scaling.validation.comparison.as_run`, which names the spec it runs).
         schedule: ``(n, segments, 2, 4)`` patterns; segment ``j`` is commanded at ``j * change_every``.
         change_every: Seconds between changes (``None``: the first segment for the whole run).
         duration: Simulated time [s], a multiple of :data:`SAMPLE`.
         params, scaling: Both models' parameters; the averaged model's K.
         on_pattern: Start with the fins on the first pattern (no transitional half-stroke) instead of at rest.
-        transitions: The averaged model's transitional-stroke forcing (:class:`pectoral_gym.AveragedModel`).
-        ripple_offsets: The averaged model's beat-mean ripple offset (:class:`pectoral_gym.AveragedModel`).
     """
     n = schedule.shape[0]
-    model = make_model(candidate_spec(kind, transitions, ripple_offsets), n, params, scaling)
+    model = make_model(kind, n, params, scaling)
     if on_pattern:
         model.reset(right=schedule[:, 0, 0], left=schedule[:, 0, 1])
     else:
@@ -151,10 +155,9 @@ def open_loop_errors(full: np.ndarray, averaged: np.ndarray) -> dict[str, np.nda
 
 
 def _scenario(schedule, change_every, duration, params, scaling, on_pattern=False, keep_paths=0,
-              transitions=True, ripple_offsets=True, candidate="averaged") -> dict[str, Any]:
+              candidate: str | ModelSpec = DEFAULT_CANDIDATE) -> dict[str, Any]:
     # the candidate's poses are kept under "averaged" whichever model it is (steady_pair does the same)
-    poses = {slot: open_loop(kind, schedule, change_every, duration, params, scaling, on_pattern, transitions,
-                             ripple_offsets)
+    poses = {slot: open_loop(kind, schedule, change_every, duration, params, scaling, on_pattern)
              for slot, kind in (("full", "full"), ("averaged", candidate))}
     err = open_loop_errors(poses["full"], poses["averaged"])
     labels = [label(s[0]) for s in schedule]
@@ -173,7 +176,7 @@ def _summary_only(stage):
 
 
 def steady_section(scaling: ScalingFunctions, params: FishParams, n: int, rng: np.random.Generator,
-                   periods: tuple[float, ...], candidate: str = "averaged") -> dict[str, Any]:
+                   periods: tuple[float, ...], candidate: str | ModelSpec = DEFAULT_CANDIDATE) -> dict[str, Any]:
     """Two-fin periodic steady states: speed, turning radius and turn period (radius and period of turning fish)."""
     low, high, grid, _ = sampling_box(scaling)
     beats = np.stack([draw_off_grid(rng, n, low, high, grid, periods) for _ in range(2)], axis=1)
@@ -217,12 +220,12 @@ def _targets(results: dict[str, Any]) -> list[dict[str, Any]]:
 
 def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Path = "fidelity",
              params: FishParams | None = None, quick: bool = False, plots: bool = True, progress: bool = True,
-             source: str = "<ScalingFunctions>", transitions: bool = True,
-             ripple_offsets: bool = True, candidate: str = "averaged") -> dict[str, Any]:
-    """Run the benchmark on one seed set; write ``fidelity_<set>[...].md``, ``.json``, plots to ``out_dir``.
+             source: str = "<ScalingFunctions>", candidate: str = DEFAULT_CANDIDATE,
+             spec: ModelSpec | None = None) -> dict[str, Any]:
+    """Run the benchmark on one seed set; write ``fidelity_<set>[_<candidate>].md``, ``.json``, plots to ``out_dir``.
 
     Args:
-        scaling: The averaged model's K.
+        scaling: The averaged model's K (the candidate's yaw damping keeps its section of it).
         seed_set: A key of :data:`SEED_SETS`.
         out_dir: Output folder (created).
         params: Both models' parameters (default: Table 1).
@@ -230,22 +233,27 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         plots: Write the PNG plots.
         progress: Show a progress bar over the stages.
         source: Where ``scaling`` came from, for the report.
-        transitions: The averaged model's transitional-stroke forcing (default on, as in
-            :class:`pectoral_gym.AveragedModel`). The steady states and the single-fin figures do not
-            depend on it.
-        ripple_offsets: The averaged model's beat-mean ripple offset (default on, as in the model);
-            the steady states do not depend on it either.
-        candidate: The model measured against the full model's reference integration:
-            ``"averaged"`` (default) or ``"full-fast"`` (:data:`pectoral_gym.scaling.validation.comparison.CANDIDATES`).
+        candidate: The preset (:data:`pectoral_gym.model.spec.PRESETS`) measured against the full model's
+            reference integration; it names the outputs (no suffix for :data:`DEFAULT_CANDIDATE`).
+        spec: The candidate's spec when it is not the preset's own (the command line's ``--coefficients``
+            file with its yaw damping); ``None``: ``PRESETS[candidate]``.
 
     Returns:
-        The results (the content of the JSON file).
+        The results (the content of the JSON file); ``"spec"`` is the candidate's spec as it ran
+        (:meth:`~pectoral_gym.model.spec.ModelSpec.to_dict`).
+
+    Raises:
+        ValueError: For an unknown seed set or preset, or K without the section the spec's yaw damping needs.
     """
     from pectoral_gym.scaling.validation import fidelity_report
     if seed_set not in SEED_SETS:
         raise ValueError(f"seed_set must be one of {sorted(SEED_SETS)}, got {seed_set!r}")
-    if candidate not in CANDIDATES:
-        raise ValueError(f"candidate must be one of {CANDIDATES}, got {candidate!r}")
+    if candidate not in PRESETS:
+        raise ValueError(f"candidate must be a model preset, one of {sorted(PRESETS)}, got {candidate!r}")
+    spec = PRESETS[candidate] if spec is None else spec
+    if isinstance(spec, AveragedSpec):  # K keeps the spec's section only, so that every build runs the spec itself
+        scaling = select_yaw_damping(scaling, spec.yaw_damping, source)
+    spec = as_run(spec, scaling)
     params = params or FishParams()
     sizes = QUICK if quick else FULL
     seeds = SEED_SETS[seed_set]
@@ -258,8 +266,7 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
     base = schedules["constant"]
     one_fin = split_fins(base, "one_fin")
     def run(schedule, every=None, on=False, keep=0):
-        return lambda: _scenario(schedule, every, duration, params, scaling, on, keep, transitions, ripple_offsets,
-                                 candidate)
+        return lambda: _scenario(schedule, every, duration, params, scaling, on, keep, spec)
 
     stages: list[tuple[tuple[str, ...], Any]] = [
         *((("scenarios", name), run(schedules[name], every, keep=4)) for name, every in SCENARIOS.items()),
@@ -269,13 +276,12 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
           for name, every in SCENARIOS.items() for split in FIN_SPLITS
           if (name, split) != ("constant", "one_fin")),  # that one is decomposition/one_fin_from_rest
         (("steady",), lambda: steady_section(scaling, params, sizes["n_steady"], rng, seeds.steady_periods,
-                                             candidate)),
-        (("single_fin",), lambda: single_fin_section(scaling, params, sizes["n_single"], rng, candidate)),
-        (("table4",), lambda: table4_section(scaling, params, sizes["table4"], candidate=candidate)),
+                                             spec)),
+        (("single_fin",), lambda: single_fin_section(scaling, params, sizes["n_single"], rng, spec)),
+        (("table4",), lambda: table4_section(scaling, params, sizes["table4"], candidate=spec)),
     ]
     results: dict[str, Any] = {"seed_set": seeds.name, "seed": seeds.seed, "quick": quick, "version": __version__,
-                               "source": source, "transitions": transitions, "ripple_offsets": ripple_offsets,
-                               "candidate": candidate,
+                               "source": source, "candidate": candidate, "spec": spec.to_dict(),
                                "scenarios": {}, "decomposition": {}, "by_fins": {}, "timing_s": {}}
     start = time.perf_counter()
     bar = tqdm(total=len(stages) + 1, desc=f"fidelity ({seed_set})", unit="stage", disable=not progress)
@@ -295,11 +301,7 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
         k: v for k, v in results["decomposition"]["one_fin_from_rest"].items() if k not in ("errors", "first_pattern")}
     results["targets"] = _targets(results)
     bar.set_postfix_str("report")
-    if candidate == "averaged":
-        stem = (f"fidelity_{seeds.name}" + ("" if transitions else "_no_transitions")
-                + ("" if ripple_offsets else "_no_offsets"))
-    else:
-        stem = f"fidelity_{seeds.name}_{candidate.replace('-', '_')}"
+    stem = f"fidelity_{seeds.name}" + ("" if candidate == DEFAULT_CANDIDATE else "_" + candidate.replace("-", "_"))
     results["plots"] = fidelity_report.plots(results, out, stem) if plots else []
     results["timing_s"]["total"] = time.perf_counter() - start
     (out / f"{stem}.json").write_text(json.dumps(results, indent=1, allow_nan=False) + "\n")
@@ -311,27 +313,25 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
 
 def add_parser(sub) -> None:
     """The ``fidelity`` subcommand of ``python -m pectoral_gym.scaling``."""
-    p = sub.add_parser("fidelity", help="averaged vs full model with two fins and changing commands (issue 12)",
+    p = sub.add_parser("fidelity", help="a model preset vs the full model with two fins and changing commands "
+                       "(issue 12)",
                        description="Fidelity benchmark: open-loop runs with constant and changing two-fin patterns, "
                        "their decomposition (one fin / two, from rest / on the pattern), each scenario split by "
                        "fins (left fin at rest; mirrored fins), two-fin steady states, the "
-                       "single-fin held-out set and Table 4. Writes fidelity_<set>[_no_transitions][_no_offsets].md, "
-                       ".json and PNG plots.")
+                       "single-fin held-out set and Table 4, of a model preset against the full model at its "
+                       "reference steps. Writes fidelity_<set>[_<preset>].md, .json (with the spec it ran) and "
+                       "PNG plots.")
     p.add_argument("--set", dest="seed_set", choices=sorted(SEED_SETS), default="dev",
                    help="seed set: dev (look at it while working) or report (for the published figures only)")
+    p.add_argument("--candidate", choices=sorted(PRESETS), default=DEFAULT_CANDIDATE, metavar="PRESET",
+                   help="model preset measured against the full model's reference steps (pectoral_gym.model.spec."
+                        f"PRESETS: {', '.join(sorted(PRESETS))}; default: %(default)s, the averaged model with "
+                        "transitional strokes and ripple offsets; averaged-env: the cycle averages alone)")
     p.add_argument("--coefficients", metavar="PATH", default=None,
-                   help=f"scaling coefficients JSON (default: the installed {default_scaling_path().name})")
+                   help=f"scaling coefficients JSON (default: the installed {default_scaling_path().name}); an "
+                        "averaged preset then runs with the richest yaw damping the file holds")
     p.add_argument("--out", metavar="DIR", default="fidelity", help="output folder (default: fidelity)")
     p.add_argument("--quick", action="store_true", help="test-sized run (figures not meaningful)")
-    p.add_argument("--transitions", action=argparse.BooleanOptionalAction, default=True,
-                   help="averaged model with its transitional-stroke forcing (the default; --no-transitions "
-                        "--no-ripple-offsets: the cycle averages alone, the model before issue 12)")
-    p.add_argument("--ripple-offsets", action=argparse.BooleanOptionalAction, default=True,
-                   help="averaged model with its beat-mean ripple offset (the default; docs/model.md 3.8)")
-    p.add_argument("--candidate", choices=CANDIDATES, default="averaged",
-                   help="model measured against the full model's reference integration: the averaged model "
-                        "(default) or the full model's fast integration preset (full-fast; writes "
-                        "fidelity_<set>_full_fast.*)")
     p.add_argument("--no-plots", action="store_true", help="skip the PNG plots")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
 
@@ -346,8 +346,10 @@ def main(args: argparse.Namespace) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     source = "the shipped coefficients file" if not args.coefficients else str(path)  # no machine paths in reports
+    spec = PRESETS[args.candidate]
+    if args.coefficients and isinstance(spec, AveragedSpec):  # as pectoral-fish --scaling FILE
+        spec = spec.replace(scaling=args.coefficients, yaw_damping=held_yaw_damping(scaling))
     results = fidelity(scaling, args.seed_set, args.out, quick=args.quick, plots=not args.no_plots,
-                       progress=not args.no_progress, source=source, transitions=args.transitions,
-                       ripple_offsets=args.ripple_offsets, candidate=args.candidate)
+                       progress=not args.no_progress, source=source, candidate=args.candidate, spec=spec)
     print(fidelity_report.summary_text(results))
     return 0

@@ -5,6 +5,7 @@ The summary goes to stdout, the plots are PNG.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -16,6 +17,7 @@ import numpy as np  # noqa: E402
 
 __all__ = ["plots", "summary_text", "write_markdown"]
 
+_TITLE_MODELS = {"averaged model": "Averaged-model", "fast full model": "Fast full-model", "full model": "Full-model"}
 _TITLES = {"constant": "constant patterns from rest", "every_4s": "patterns changed every 4 s",
            "every_0.5s": "patterns changed every 0.5 s"}
 
@@ -33,20 +35,33 @@ def _deg(value: float | None) -> str:
 
 
 def _fast(results: dict[str, Any]) -> bool:
-    """Whether the benchmark measured the full model's fast preset (``--candidate full-fast``)."""
-    return results.get("candidate") == "full-fast"
+    """Whether the candidate is a full model (e.g. ``--candidate full-fast``) rather than the averaged model."""
+    return results["spec"]["model"] == "full"
 
 
 def _candidate(results: dict[str, Any]) -> str:
     """What the benchmark measured against the full model: ``"averaged model"`` or ``"fast full model"``."""
-    return "fast full model" if _fast(results) else "averaged model"
+    if not _fast(results):
+        return "averaged model"
+    return "fast full model" if results["spec"]["integration"] == "fast" else "full model"
+
+
+def _spec_text(results: dict[str, Any]) -> str:
+    """``preset averaged (transitions on, ...)``: the candidate's preset and the options of the spec it ran."""
+    spec = results["spec"]
+    if _fast(results):
+        options = [f"{spec['integration']} integration"]
+    else:
+        options = [f"transitions {'on' if spec['transitions'] else 'off'}",
+                   f"ripple offsets {'on' if spec['ripple_offsets'] else 'off'}",
+                   f"yaw damping {spec['yaw_damping']}", f"{spec['forcing']} forcing"]
+    return f"preset {results['candidate']} ({', '.join(options)})"
 
 
 def summary_text(results: dict[str, Any]) -> str:
     """A few lines for stdout: the targets table."""
-    model = _candidate(results) + (" against the reference integration" if _fast(results) else
-                                   f", transitions {'on' if results.get('transitions') else 'off'}, ripple offsets "
-                                   f"{'on' if results.get('ripple_offsets') else 'off'}")
+    model = _candidate(results) + ", " + _spec_text(results) + (" against the reference integration"
+                                                                  if _fast(results) else "")
     lines = [f"fidelity benchmark, seed set {results['seed_set']!r}, {model}"
              + (" (quick: not meaningful)" if results["quick"] else "")]
     for t in results["targets"]:
@@ -60,14 +75,13 @@ def write_markdown(results: dict[str, Any], path: Path) -> Path:
     sc, dec, st = results["scenarios"], results["decomposition"], results["steady"]
     first = next(iter(sc.values()))
     fast = _fast(results)
-    model = ("the full model's fast integration preset (`FullModel(integration=\"fast\")`, docs/model.md 6) "
-             "against its reference integration: every error below is the fast preset's against the reference"
+    model = (f"{_candidate(results)}, {_spec_text(results)}, against the full model's reference integration "
+             "(docs/model.md 6): every error below is the candidate's against the reference"
              if fast else
-             f"K from `{results['source']}`, averaged model "
-             + ("with" if results.get("transitions") else "without") + " transitional-stroke forcing and "
-             + ("with" if results.get("ripple_offsets") else "without") + " the ripple offset (docs/model.md 3.7, 3.8)")
+             f"K from `{results['source']}`, averaged model, {_spec_text(results)} (docs/model.md 3.6-3.8)")
+    model += f"; spec `{json.dumps(results['spec'])}`"
     lines = [
-        f"# {'Fast full-model' if fast else 'Averaged-model'} fidelity benchmark: seed set `{results['seed_set']}`",
+        f"# {_TITLE_MODELS[_candidate(results)]} fidelity benchmark: seed set `{results['seed_set']}`",
         "",
         f"Seed {results['seed']}, pectoral-gym {results['version']}, {model}"
         + (" — **quick run: figures not meaningful**" if results["quick"] else "") + ".", "",

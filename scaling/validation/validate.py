@@ -37,12 +37,11 @@ from pectoral_gym import __version__
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.model.kfunctions import ScalingFunctions, default_scaling_path
 from pectoral_gym.model.params import FishParams
-from pectoral_gym.model.spec import make_model
+from pectoral_gym.model.spec import ModelSpec, make_model
 from pectoral_gym.scaling.identification.grids import GRIDS, Grid, GridError, draw_off_grid
 from pectoral_gym.scaling.validation import plots as rendering
 from pectoral_gym.scaling.validation.comparison import (
     REST,
-    candidate_spec,
     fin_pattern,
     label,
     simulate_xy,
@@ -160,8 +159,8 @@ def _num(value) -> float | None:
 
 
 def table4_section(scaling: ScalingFunctions, params: FishParams, count: int = len(TABLE4),
-                   candidate: str = "averaged") -> dict[str, Any]:
-    """Table 4 patterns on the left fin (right fin at rest); ``candidate``: :data:`~.comparison.CANDIDATES`."""
+                   candidate: str | ModelSpec = "averaged") -> dict[str, Any]:
+    """Table 4 patterns on the left fin (right fin at rest); ``candidate`` as :func:`~.comparison.steady_pair`'s."""
     beats = np.array([[REST, fin_pattern(*p)] for p, _, _ in TABLE4[:count]])
     res = steady_pair(beats, scaling, params, candidate)
     rows = _rows(beats, res, ("radius", "period"))
@@ -180,7 +179,7 @@ def _flips(res: dict[str, Any], labels: list[str]) -> dict[str, Any]:
 
 
 def single_fin_section(scaling: ScalingFunctions, params: FishParams, n: int, rng: np.random.Generator,
-                       candidate: str = "averaged") -> dict:
+                       candidate: str | ModelSpec = "averaged") -> dict:
     """Random right-fin patterns in :func:`sampling_box`, off the grid; ``candidate`` as :func:`table4_section`'s."""
     low, high, grid, source = sampling_box(scaling)
     fins = draw_off_grid(rng, n, low, high, grid)
@@ -218,7 +217,7 @@ def two_fin_section(scaling: ScalingFunctions, params: FishParams, n: int, rng: 
     turning = np.abs(res["full"]["omega"]) >= MIN_TURN_RATE
     for key in ("radius_error", "period_error"):
         res[key] = np.where(turning, res[key], np.nan)
-    paths = {kind: simulate_xy(make_model(candidate_spec(kind), n, params, scaling), beats, duration)
+    paths = {kind: simulate_xy(make_model(kind, n, params, scaling), beats, duration)
              for kind in ("full", "averaged")}
     gap = np.linalg.norm(paths["averaged"][:, -1] - paths["full"][:, -1], axis=1)
     travelled = np.sum(np.linalg.norm(np.diff(paths["full"], axis=1), axis=2), axis=1)
@@ -334,7 +333,7 @@ def validate(
 
 def _plots(scaling: ScalingFunctions, params: FishParams, results: dict[str, Any], out: Path) -> list[str]:
     beats = np.array([[REST, fin_pattern(*p)] for p in FIG5_PATTERNS])
-    paths = {kind: simulate_xy(make_model(candidate_spec(kind), len(beats), params, scaling), beats,
+    paths = {kind: simulate_xy(make_model(kind, len(beats), params, scaling), beats,
                                      FIG5_DURATION)
              for kind in ("full", "averaged")}
     low, high, _, _ = sampling_box(scaling)
