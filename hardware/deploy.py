@@ -5,11 +5,17 @@ Examples::
     python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 --episodes 3
     python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal/model.zip --emulate --speed 2 --episodes 1
     python -m pectoral_gym.hardware.deploy --controller nmpc --emulate --episodes 1
+    python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --episodes 100
 
 ``--controller nmpc`` plans on the averaged model (:class:`pectoral_gym.agents.nmpc.controller.NMPCController`, the same
 controller as in simulation) with its step budget set to ``--solve-fraction`` of the control period
 (wall time, so divided by ``--speed`` when emulated): a solve that fails or ends later than that is not
 applied, and the rest of the last plan (then both fins at rest) is sent instead.
+
+``--emulate --lockstep`` runs the emulated robot and the whole PC stack (the same link, firmware, supervisor,
+camera renderer, tracker and observer) in simulated time (:mod:`pectoral_gym.hardware.emurig`): as fast as the
+CPU allows, and the same run for the same seed. ``--radio-*``, ``--camera-*`` and ``--pose-noise-*`` degrade the
+emulated radio and camera, seeded, in either timing.
 
 Writes ``steps.jsonl`` (one JSON object per step: action, command sent, measured pose, estimate,
 reward, ends, link and tracking health, and the true pose when emulated), ``summary.json`` and
@@ -23,12 +29,12 @@ import contextlib
 import json
 import math
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
 
 from pectoral_gym.envs.tasks import kernels as tk
+from pectoral_gym.hardware.clock import REAL_CLOCK
 from pectoral_gym.hardware.deploy_checks import (
     CONTROL_PERIOD_RANGE,
     DEFAULT_NICE,
@@ -41,6 +47,7 @@ from pectoral_gym.hardware.deploy_checks import (
     raise_priority,
     robot_address,
 )
+from pectoral_gym.hardware.emurig import RigConditions, open_rig
 from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handlers
 
 __all__ = ["main", "make_controller", "run_episodes", "plot_trajectories", "solver_summary"]
@@ -55,8 +62,13 @@ def _random_start(rng: np.random.Generator) -> tuple[float, float, float]:
 
 def run_episodes(env, controller, episodes: int, log_path: Path, seed: int | None = None, robot=None,
                  progress: bool = True) -> list[dict]:
-    """Run ``episodes`` episodes; append one JSON line per step to ``log_path``; return per-episode summaries."""
+    """Run ``episodes`` episodes; append one JSON line per step to ``log_path``; return per-episode summaries.
+
+    A step's ``t`` is seconds since the episode's reset on the env's clock (simulated seconds in lockstep).
+    """
     from tqdm import tqdm
+
+    clock = getattr(env.unwrapped, "clock", REAL_CLOCK)
 
     summaries = []
     with open(log_path, "w", encoding="utf-8") as log, tqdm(total=episodes, desc="episodes",
@@ -65,7 +77,7 @@ def run_episodes(env, controller, episodes: int, log_path: Path, seed: int | Non
             ep_seed = None if seed is None else seed + episode
             obs, info = env.reset(seed=ep_seed)
             controller.reset(ep_seed)
-            ret, steps, t0 = 0.0, 0, time.monotonic()
+            ret, steps, t0 = 0.0, 0, clock.monotonic()
             record = {"episode": episode, "step": 0, "event": "reset", "pose": info["pose"],
                       "target": info["target"]}
             if robot is not None:
@@ -76,7 +88,7 @@ def run_episodes(env, controller, episodes: int, log_path: Path, seed: int | Non
                 obs, reward, terminated, truncated, info = env.step(action)
                 ret += reward
                 steps += 1
-                record = {"episode": episode, "step": steps, "t": time.monotonic() - t0,
+                record = {"episode": episode, "step": steps, "t": clock.monotonic() - t0,
                           "action": action.tolist(), "command": info["command"], "pose": info["pose"],
                           "estimate": info["estimate"], "target": env.unwrapped.target, "reward": reward,
                           "terminated": terminated, "truncated": truncated, "safety_stop": info["safety_stop"],
@@ -156,6 +168,9 @@ def solver_summary(controller) -> dict:
 _EXAMPLES = """examples:
   python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --emulate --speed 2 --episodes 2 --out dryrun
   python -m pectoral_gym.hardware.deploy --controller nmpc --emulate --speed 2 --episodes 1
+  python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --episodes 100 --out lockstep
+  python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --radio-latency 0.1 \
+      --radio-loss 0.1 --camera-drop 0.1 --pose-noise-mm 5 --pose-noise-deg 2
   python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 \
       --calibration calibration.json --robot-address 0013A20012345678 --episodes 3 --out tank-run
 
@@ -184,6 +199,19 @@ def _parser() -> argparse.ArgumentParser:
     parser.add_argument("--emulate", action="store_true",
                         help="start an emulated robot and camera in this process (no --port, --camera, "
                              "--robot-address)")
+    parser.add_argument("--lockstep", action="store_true",
+                        help="--emulate only: run the emulated robot and this program's whole robot stack in "
+                             "simulated time, as fast as the CPU allows; the same seed gives the same run "
+                             "(no --speed)")
+    for flag, unit, text in (("--radio-latency", "S", "one-way delay of each radio frame [s]"),
+                             ("--radio-jitter", "S", "extra one-way radio delay, uniform in [0, S] [s]"),
+                             ("--radio-loss", "P", "probability that a radio frame is lost, each way, in [0, 1)"),
+                             ("--camera-latency", "S", "delay from a frame's capture to the PC [s]"),
+                             ("--camera-drop", "P", "probability that a camera frame is lost, in [0, 1]"),
+                             ("--pose-noise-mm", "MM", "standard deviation of the noise on the camera's X and Y [mm]"),
+                             ("--pose-noise-deg", "DEG", "standard deviation of the noise on its heading [deg]")):
+        parser.add_argument(flag, type=float, default=0.0, metavar=unit,
+                            help=f"--emulate only, seeded: {text} (default %(default)s)")
     parser.add_argument("--episodes", type=int, default=1, help="number of episodes, >= 1 (default %(default)s)")
     parser.add_argument("--task", choices=("goal", "track"), default=None,
                         help="task (default: the policy's own from its run folder, else goal); a policy is refused "
@@ -234,6 +262,12 @@ def _check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> No
                          "radio and camera)")
     elif args.port is None or args.camera is None:
         parser.error("--port and --camera are required unless --emulate is given")
+    if args.lockstep and not args.emulate:
+        parser.error("--lockstep needs --emulate (a real robot runs in real time)")
+    if args.lockstep and args.speed != 1.0:
+        parser.error("--speed does not apply with --lockstep (simulated time runs as fast as the CPU allows)")
+    if not args.emulate and rig_conditions(args) != RigConditions():
+        parser.error("--radio-*, --camera-* and --pose-noise-* degrade the emulated robot: they need --emulate")
     if (args.controller == "policy") != (args.policy is not None):
         parser.error("--policy is needed with --controller policy, and only then")
     for flag, value in (("--episodes", args.episodes), ("--max-steps", args.max_steps)):
@@ -262,6 +296,12 @@ def _check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> No
                      f"got {args.control_period}")
 
 
+def rig_conditions(args: argparse.Namespace) -> RigConditions:
+    """The emulated rig's conditions from the arguments (``ValueError`` if one is out of range)."""
+    return RigConditions(args.radio_latency, args.radio_jitter, args.radio_loss, args.camera_latency,
+                         args.camera_drop, (args.pose_noise_mm * 1e-3, math.radians(args.pose_noise_deg)))
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit status (0 done, 1 a device failed; 2 via SystemExit: bad argument).
 
@@ -269,6 +309,10 @@ def main(argv: list[str] | None = None) -> int:
     """
     parser = _parser()
     args = parser.parse_args(argv)
+    try:
+        conditions = rig_conditions(args)
+    except ValueError as err:
+        parser.error(f"--radio-*, --camera-*, --pose-noise-*: {err}")
     _check_args(parser, args)
     controller = None
     if args.controller == "policy":
@@ -310,15 +354,11 @@ def main(argv: list[str] | None = None) -> int:
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
     robot = env = None
+    clock = REAL_CLOCK
     with contextlib.ExitStack() as resources:  # released last in, first out, on every path
         try:
             if args.emulate:
-                from pectoral_gym.hardware.emulator import EmulatedRobot
-
-                robot = EmulatedRobot(speed=args.speed, seed=args.seed).start()
-                resources.callback(robot.stop)
-                port, camera = robot.url, robot.camera(seed=args.seed)
-                resources.callback(camera.close)
+                clock, robot, port, camera = open_rig(resources, args.seed, conditions, args.lockstep, args.speed)
                 hook = lambda rng: robot.place(*_random_start(rng))  # noqa: E731 - a hand that puts the fish back
             else:
                 from pectoral_gym.hardware.vision.camera import open_source
@@ -331,10 +371,10 @@ def main(argv: list[str] | None = None) -> int:
                     port = RadioLink(args.port, dest64=args.robot_address, **extra)
                     resources.callback(port.close)
                 hook = None if args.no_prompt else (lambda rng: input("Place the fish in the tank and press Enter: "))
-            check_frame_size(first_frame(camera), model, args.calibration)
+            check_frame_size(first_frame(camera, clock=clock), model, args.calibration)
             env = HardwareFishEnv(port, camera, safety=safety, speed=args.speed, max_episode_steps=args.max_steps,
                                   reset_hook=hook, tracker=MarkerTracker(model), take_over=args.take_over,
-                                  **settings)
+                                  clock=clock, **settings)
             resources.callback(env.close)
             resources.callback(install_stop_handlers(env.stop))
             if controller is None:

@@ -20,13 +20,13 @@ import argparse
 import math
 import os
 import re
-import time
 from pathlib import Path
 from typing import Any
 
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.layout import ACTION_SIZE
 from pectoral_gym.envs.observation import OBS_SIZE, observation_size
+from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 
 __all__ = ["CONTROL_PERIOD_RANGE", "DEFAULT_NICE", "FIRST_FRAME_TIMEOUT", "MIN_TRACKING_WALL", "NICE_RANGE",
            "SPEED_RANGE", "check_frame_size", "env_settings", "first_frame", "raise_priority", "robot_address"]
@@ -162,20 +162,20 @@ def env_settings(controller: Any, task: str | None, control_period: float | None
     return kwargs, notes
 
 
-def first_frame(camera: Any, timeout: float = FIRST_FRAME_TIMEOUT):
-    """The camera's first frame, polling ``camera.read()`` for up to ``timeout`` wall seconds.
+def first_frame(camera: Any, timeout: float = FIRST_FRAME_TIMEOUT, clock: Clock = REAL_CLOCK):
+    """The camera's first frame, polling ``camera.read()`` for up to ``timeout`` seconds on ``clock``.
 
     Raises:
         RuntimeError: If no frame comes in time.
     """
-    deadline = time.monotonic() + timeout
+    deadline = clock.monotonic() + timeout
     while True:
         frame = camera.read()
         if frame is not None:
             return frame
-        if time.monotonic() >= deadline:
+        if clock.monotonic() >= deadline:
             raise RuntimeError(f"no frame from the camera in {timeout:.0f} s; check --camera and the cable")
-        time.sleep(0.01)
+        clock.sleep(0.01)
 
 
 def check_frame_size(frame: Any, model: Any, calibration: str | Path | None) -> None:

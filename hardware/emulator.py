@@ -9,9 +9,12 @@ process that listens on a pseudo-terminal or a TCP port::
 then ``python -m pectoral_gym.hardware.deploy --port socket://127.0.0.1:5700 --camera emu://127.0.0.1:5600 ...``.
 
 The emulator stands in for both XBee modules and the dsPIC: it reads the PC's Transmit Request frames
-and answers with Receive Packet frames. Its clock runs ``speed`` times faster than the wall clock;
-every time it reports (pose timestamps) is on the wall ``time.monotonic()`` base, so the PC side
-scales with the same ``speed``. Firmware times (watchdog, lease) are emulated-robot seconds. Several
+and answers with Receive Packet frames. Its clock runs ``speed`` times faster than the PC's clock
+(:mod:`pectoral_gym.hardware.clock`; the wall clock by default); every time it reports (pose timestamps)
+is on that clock's base, so the PC side scales with the same ``speed``. On a
+:class:`pectoral_gym.hardware.clock.VirtualClock` with a :class:`pectoral_gym.hardware.radio.pipe.StreamPair` end as
+its radio (``stream``), it runs in lockstep with the PC's threads (``deploy --emulate --lockstep``).
+Firmware times (watchdog, lease) are emulated-robot seconds. Several
 PCs may connect at once (like radios on one channel): every connection is heard and hears every reply;
 the firmware's session rule decides whom the robot obeys.
 """
@@ -28,6 +31,7 @@ import time
 
 import numpy as np
 
+from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 from pectoral_gym.hardware.finreplay import CHUNK as _CHUNK
 from pectoral_gym.hardware.finreplay import apply_firmware
 from pectoral_gym.hardware.radio import protocol as pr
@@ -41,7 +45,7 @@ from pectoral_gym.model.spec import FULL_REFERENCE, FullSpec
 __all__ = ["EmulatedRobot", "ROBOT_ADDRESS", "main"]
 
 ROBOT_ADDRESS = 0x0013A20000000001  # 64-bit source address the emulated XBee reports
-_POLL = 0.002  # wall-clock poll period of the I/O loop [s]
+_POLL = 0.002  # poll period of the I/O loop [clock s]
 
 
 class EmulatedRobot:
@@ -61,13 +65,16 @@ class EmulatedRobot:
         camera_fps: Frame rate of the served camera [wall frames/s].
         seed: Seed of the loss injection and camera noise.
         model: The physics the emulated fish follows (a full-model spec; default the reference integration).
+        clock: The clock of the emulation loop (:mod:`pectoral_gym.hardware.clock`); every stamp is on it.
+        stream: The robot's end of a :class:`pectoral_gym.hardware.radio.pipe.StreamPair` as its radio, instead
+            of a TCP port or a pseudo-terminal (``port`` and ``pty`` are then ignored).
     """
 
     def __init__(self, port: int | None = 0, pty: bool = False, host: str = "127.0.0.1", speed: float = 1.0,
                  params: FishParams | None = None, firmware: FirmwareConfig | None = None,
                  start_pose: tuple[float, float, float] | None = None, loss: float = 0.0,
                  camera_port: int | None = None, camera_fps: float = 30.0, seed: int | None = None,
-                 model: FullSpec = FULL_REFERENCE):
+                 model: FullSpec = FULL_REFERENCE, clock: Clock = REAL_CLOCK, stream=None):
         if not isinstance(model, FullSpec):
             raise ValueError(f"model must be a FullSpec (pectoral_gym.model.spec), got {model!r}")
         if not (math.isfinite(speed) and speed > 0):
@@ -89,17 +96,21 @@ class EmulatedRobot:
         # half-strokes in progress (2,), running): "stopped within" and servo checks on the emulated clock.
         self.trace: list[tuple[float, np.ndarray, np.ndarray, np.ndarray, bool]] | None = None
         self._seed = seed
+        self.clock = clock
         self._lock = threading.Lock()
-        self._stop = threading.Event()
+        self._stop = clock.event()
         self._thread: threading.Thread | None = None
-        self._origin = time.monotonic()
+        self._origin = clock.monotonic()
+        self._stream = stream
         self._clients: list[socket.socket] = []
         self._listener: socket.socket | None = None
         self._master: int | None = None
         self._slave: int | None = None
         self._frame_server = None
         self._camera_port, self._camera_fps = camera_port, float(camera_fps)
-        if pty:
+        if stream is not None:
+            self.url = "stream://"
+        elif pty:
             self._master, self._slave = os.openpty()
             self.url = os.ttyname(self._slave)
         else:
@@ -112,7 +123,7 @@ class EmulatedRobot:
     # ------------------------------------------------------------ clock and state
     def now(self) -> float:
         """Emulated time since :meth:`start` [s]."""
-        return (time.monotonic() - self._origin) * self.speed
+        return (self.clock.monotonic() - self._origin) * self.speed
 
     def place(self, x: float, y: float, psi: float) -> None:
         """Put the fish at rest at ``(x, y, psi)`` with both fins still where they are (a hand in the tank)."""
@@ -133,7 +144,7 @@ class EmulatedRobot:
         return self.pose_stamped()[0]
 
     def pose_stamped(self) -> tuple[tuple[float, float, float], float]:
-        """True pose and the wall ``time.monotonic()`` instant it belongs to (``EmulatedCamera``'s ``pose_fn``)."""
+        """True pose and the ``clock.monotonic()`` instant it belongs to (``EmulatedCamera``'s ``pose_fn``)."""
         with self._lock:
             x, y, psi = self.model.state[0, :3].tolist()
             stamp = self._origin + self.model.time / self.speed
@@ -172,8 +183,8 @@ class EmulatedRobot:
         if self._thread is not None:
             return self
         settle_garbage()  # nothing runs yet: the collections that fall later walk only what the emulation makes
-        self._origin = time.monotonic() - self.model.time / self.speed
-        self._thread = threading.Thread(target=self._run, name="emulated-robot", daemon=True)
+        self._origin = self.clock.monotonic() - self.model.time / self.speed
+        self._thread = self.clock.thread(self._run, "emulated-robot")
         self._thread.start()
         if self._camera_port is not None:
             from pectoral_gym.hardware.vision.camera import FrameServer
@@ -194,6 +205,8 @@ class EmulatedRobot:
         if self._frame_server is not None:
             self._frame_server.close()
             self._frame_server = None
+        if self._stream is not None:
+            self._stream.close()
         for sock in (*self._clients, self._listener):
             if sock is not None:
                 sock.close()
@@ -216,11 +229,17 @@ class EmulatedRobot:
     def _run(self) -> None:
         while not self._stop.is_set():
             data = self._poll()
+            self._advance(self.now())  # the model at the time the firmware hears the message
             if data:
                 self._handle(data)
-            self._advance(self.now())
 
     def _poll(self) -> bytes:
+        if self._stream is not None:
+            # Woken by the bytes themselves: no need to poll faster than the firmware ticks (every _CHUNK)
+            if self._stream.is_open:
+                return self._stream.read(4096, timeout=_CHUNK / self.speed)
+            self.clock.sleep(_CHUNK / self.speed)  # never spin: on a virtual clock that would stop every other thread
+            return b""
         if self._master is not None:
             ready, _, _ = select.select([self._master], [], [], _POLL)
             if ready:
@@ -255,6 +274,8 @@ class EmulatedRobot:
 
     def _write(self, raw: bytes) -> None:
         try:
+            if self._stream is not None:
+                self._stream.write(raw)
             if self._master is not None:
                 os.write(self._master, raw)
             for client in list(self._clients):

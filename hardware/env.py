@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import atexit
 import math
-import time
 from collections.abc import Callable
 from typing import Any
 
@@ -18,13 +17,11 @@ from pectoral_gym.envs.layout import ACTION_SIZE, E_TX, E_TY
 from pectoral_gym.envs.observation import observation_bounds
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.envs.tasks.table import TaskState
-from pectoral_gym.hardware.finreplay import FinReplay
-from pectoral_gym.hardware.radio.firmware import FirmwareConfig
+from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 from pectoral_gym.hardware.radio.link import RadioLink
 from pectoral_gym.hardware.realtime import settle_garbage
-from pectoral_gym.hardware.safety.geofence import Geofence
-from pectoral_gym.hardware.safety.rules import CommandFilter, SafetyConfig, check_action, install_stop_handlers
-from pectoral_gym.hardware.safety.supervisor import Supervisor
+from pectoral_gym.hardware.safety.rules import SafetyConfig, check_action, install_stop_handlers
+from pectoral_gym.hardware.stack import open_stack
 
 __all__ = ["HardwareFishEnv"]
 
@@ -121,7 +118,7 @@ class HardwareFishEnv(gym.Env):
 
     | Argument            | Default        | Unit | Description |
     |---------------------|----------------|------|-------------|
-    | ``port``            |                |      | ``serial_for_url`` URL or a :class:`RadioLink` |
+    | ``port``            |                |      | ``serial_for_url`` URL, serial-like object or :class:`RadioLink` |
     | ``camera``          |                |      | ``camera.open_source`` spec or a frame source |
     | ``task``            | ``"goal"``     |      | ``"goal"``, ``"track"`` or a registered task (``envs.task_core``) |
     | ``control_period``  | 0.5            | s    | time between actions |
@@ -138,6 +135,7 @@ class HardwareFishEnv(gym.Env):
     | ``handle_signals``  | ``True``       |      | SIGINT/SIGTERM send STOP (main thread only; restored at close) |
     | ``take_over``       | ``False``      |      | take the robot from another live session (``RadioLink``) |
     | ``stop_timeout``    | 2.0            | s    | wall time ``reset`` waits for the robot to confirm STOP |
+    | ``clock``           | ``REAL_CLOCK`` |      | the stack's clock (``pectoral_gym.hardware.clock``) |
 
     ## Version History
 
@@ -156,7 +154,7 @@ class HardwareFishEnv(gym.Env):
                  frame_period: float = 1.0 / 30.0, observer_epsilon: float = 0.1, max_episode_steps: int = 240,
                  reset_hook: Callable[[np.random.Generator], None] | None = None, reset_timeout: float = 5.0,
                  tracker=None, observer=None, render_mode: str | None = None, handle_signals: bool = True,
-                 take_over: bool = False, stop_timeout: float = 2.0, **kwargs: Any):
+                 take_over: bool = False, stop_timeout: float = 2.0, clock: Clock = REAL_CLOCK, **kwargs: Any):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         if not (math.isfinite(speed) and speed > 0) or not frame_period > 0 or int(max_episode_steps) < 1:
@@ -182,6 +180,7 @@ class HardwareFishEnv(gym.Env):
         self._closed = False
         self._episode = False  # an episode is armed (a reset succeeded and no reset has started since)
         self.stop_timeout = float(stop_timeout)
+        self.clock, self.stack = clock, None
         self.link = self.camera = self.supervisor = None
         try:
             self._build(port, camera, calibration, tracker, observer, observer_epsilon, take_over)
@@ -192,70 +191,38 @@ class HardwareFishEnv(gym.Env):
         atexit.register(self.close)
 
     def _build(self, port, camera, calibration, tracker, observer, observer_epsilon, take_over) -> None:
-        """Open the link and the camera, build tracker, observer and supervisor (``__init__``'s fallible part)."""
-        if isinstance(port, str):
-            extra = {"take_over": True} if take_over else {}
-            self.link = RadioLink(port, keepalive_period=0.1 / self.speed, ack_timeout=0.05 / self.speed, **extra)
-        else:
-            self.link = port
-        self.link.lease_scale = 1.0 / self.speed  # the robot counts leases in its own (emulated) seconds
-        if isinstance(camera, (str, int)):
-            from pectoral_gym.hardware.vision.camera import open_source
-
-            camera = open_source(camera)
-        self.camera = camera
-        if tracker is None:
-            from pectoral_gym.hardware.vision.cameramodel import CameraModel
-            from pectoral_gym.hardware.vision.tracker import MarkerTracker
-
-            model = CameraModel.default() if calibration is None else CameraModel.load(calibration)
-            tracker = MarkerTracker(model)
-        self.tracker = tracker
-        if observer is None:
-            from pectoral_gym.hardware.vision.observer import HighGainObserver
-
-            observer = HighGainObserver(epsilon=observer_epsilon)
-        self.observer = observer
+        """Open the robot stack (:func:`pectoral_gym.hardware.stack.open_stack`; ``__init__``'s fallible part)."""
+        self._origin = self.clock.monotonic()
+        stack = open_stack(port, camera, self.config, self.safety, self.speed, self.frame_period, calibration,
+                           tracker, observer, observer_epsilon, take_over, origin=self._origin, clock=self.clock)
+        self.stack = stack
+        self.link, self.camera, self.tracker, self.observer = stack.link, stack.camera, stack.tracker, stack.observer
+        self.filter, self.fin_replay, self.geofence = stack.filter, stack.fin_replay, stack.geofence
+        self.supervisor, self.watch = stack.supervisor, stack.supervisor.watch
         self._velocity_sum = np.zeros(3)  # observer velocities summed over the current control period
         self._velocity_count = 0
-        self.filter = CommandFilter(self.safety.limits)
-        cfg = self.config
-        self.task_state = TaskState(1, cfg)  # the simulated envs' task core, fed the observer's estimate
-        # observe_fins: the robot reports no fin angles, so the PC replays its fins from the commands it sends
-        self.fin_replay = FinReplay(cfg.params, FirmwareConfig(limits=self.safety.limits)) \
-            if cfg.observe_fins else None
+        self.task_state = TaskState(1, self.config)  # the simulated envs' task core, fed the observer's estimate
         self._act = np.zeros((1, ACTION_SIZE))
-        self._origin = time.monotonic()
         self._state = np.zeros(6)
         self._last_measure = -math.inf
         self._steps = 0
         self._observing = False
         self._next_tick = 0.0
         self._lease_end = -math.inf  # experiment time the robot's lease of the last command ends
-        self.geofence = Geofence(cfg.params, self.safety.geofence_margin, self.safety.reaction_time,
-                                 self.safety.coast_horizon)
-        self.supervisor = Supervisor(self.link, self.camera, self.tracker, self.geofence, self.safety, self.speed,
-                                     self.frame_period, origin=self._origin).start()
-        self.watch = self.supervisor.watch
 
     def _release(self) -> None:
-        """Stop the supervisor, close the link (sending STOP) and the camera; each step runs whatever fails."""
-        for close in (getattr(self.supervisor, "close", None), getattr(self.link, "close", None),
-                      getattr(self.camera, "close", None)):
-            if close is not None:
-                try:
-                    close()
-                except Exception:  # noqa: BLE001 - release the rest; the first error is the one raised
-                    pass
+        """Release the robot stack, if it was opened (a failed :func:`open_stack` releases its own parts)."""
+        if self.stack is not None:
+            self.stack.release()
 
     # ------------------------------------------------------------ clock
     def now(self) -> float:
         """Experiment time [s] (wall time since construction times ``speed``)."""
-        return (time.monotonic() - self._origin) * self.speed
+        return (self.clock.monotonic() - self._origin) * self.speed
 
     def _sleep(self, duration: float) -> None:
         if duration > 0:
-            time.sleep(duration / self.speed)
+            self.clock.sleep(duration / self.speed)
 
     # ------------------------------------------------------------ camera
     def _observe(self) -> None:
@@ -266,17 +233,6 @@ class HardwareFishEnv(gym.Env):
                 self._last_measure = t
                 self._velocity_sum += self._state[3:6]
                 self._velocity_count += 1
-
-    def _wait_for_fish(self, after: float) -> None:
-        """Wait for sightings in frames captured at or after ``after`` [experiment s] that give a velocity."""
-        deadline = time.monotonic() + self.reset_timeout
-        while time.monotonic() < deadline:
-            seen = self.watch.last_seen
-            if seen is not None and seen >= after and self.supervisor.ready(after):
-                return
-            time.sleep(self.frame_period / self.speed)
-        raise RuntimeError(f"no fish seen for {self.reset_timeout:.1f} s at reset "
-                           f"(tracker: {self.watch.reason or 'no frames'}); check the camera and the markers")
 
     # ------------------------------------------------------------ gym API
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -296,7 +252,7 @@ class HardwareFishEnv(gym.Env):
         sup = self.supervisor
         self._check_not_stopped()
         sup.disarm()
-        self._confirm_stop()
+        self.stack.confirm_stop(self.stop_timeout)
         sup.bound.stopped(self.now())
         settle_garbage()  # the fins are stopped and the rules disarmed: a full collection now, none mid-episode
         resync = getattr(self.link, "resync", None)
@@ -308,7 +264,7 @@ class HardwareFishEnv(gym.Env):
         self._last_measure, self._observing = -math.inf, False
         # Only frames captured after the hook returned: a camera clock may lead by up to max_frame_lead.
         placed = self.now() + self.safety.max_frame_lead * self.speed
-        self._wait_for_fish(placed)
+        self.stack.wait_for_fish(placed, self.reset_timeout, self.frame_period / self.speed)
         sup.drain()
         t = self.watch.last_seen
         x, y, psi = sup.pose
@@ -336,21 +292,6 @@ class HardwareFishEnv(gym.Env):
         if self.supervisor.stop_requested:
             raise RuntimeError("the operator's stop is latched (HardwareFishEnv.stop() or a signal): call "
                                "env.rearm() once it is safe, then reset()")
-
-    def _confirm_stop(self) -> None:
-        """Send STOP until the robot confirms its fins are still, at most ``stop_timeout`` s (wall)."""
-        deadline = time.monotonic() + self.stop_timeout
-        while True:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                raise RuntimeError(f"the robot did not confirm it stopped within {self.stop_timeout:.1f} s "
-                                   f"(link: {self.link.health()}); the reset hook was not called; check the "
-                                   "radio and the robot")
-            # One STOP, then wait for the robot's word: its retries and the keep-alive's STOP copies (newer
-            # sequence numbers, which also confirm it) cover lost frames; a fresh STOP per short wait would
-            # restart the wait before a slow radio's answer (one round trip or more) could arrive.
-            if self.link.stop(wait=remaining):
-                return
 
     def rearm(self) -> None:
         """Clear a latched operator stop (:meth:`stop`, a signal): the operator's explicit decision to go on.

@@ -173,7 +173,7 @@ def _one_step_then_silence(robot, proxy, link, pass_after, deadline=True):
     Returns the fins' running time after the call [robot s] (``None``: they never ran).
     """
     if not deadline:
-        link.clock.deadline_ms = lambda *args: 0  # protocol v2: the lease counts from the robot's receipt
+        link.robot_clock.deadline_ms = lambda *args: 0  # protocol v2: the lease counts from the robot's receipt
     t_sent = [math.inf]
 
     def drop(direction, raw):
@@ -202,7 +202,7 @@ def test_a_late_first_copy_never_runs_past_the_lease():
     with EmulatedRobot(speed=SPEED) as robot, RadioProxy(robot.url, latency=0.3, speed=SPEED) as proxy:
         link = _link(proxy.url)
         try:
-            assert link.stop(wait=3.0) and link.clock.synced
+            assert link.stop(wait=3.0) and link.robot_clock.synced
             ran = _one_step_then_silence(robot, proxy, link, pass_after=0.15)
             assert ran is not None and ran <= DEADLINE_HORIZON + 0.011  # the deadline, one 10 ms tick at most
             assert _wait(lambda: link.stop(wait=1.0), 5.0)
@@ -221,7 +221,7 @@ def test_fins_stop_within_one_second_of_the_last_step_under_lossy_radio(latency,
         link = _link(proxy.url)
         worst, ran = 0.0, 0
         try:
-            assert _wait(lambda: link.stop(wait=1.0), 10.0) and link.clock.synced
+            assert _wait(lambda: link.stop(wait=1.0), 10.0) and link.robot_clock.synced
             for _ in range(20):  # one step, then the controller pauses
                 robot.trace = []
                 t_call = robot.now()

@@ -20,17 +20,17 @@ from __future__ import annotations
 
 import secrets
 import threading
-import time
 import warnings
 from collections import deque
-from dataclasses import dataclass
 
 import numpy as np
 import serial
 
+from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 from pectoral_gym.hardware.radio import protocol as pr
 from pectoral_gym.hardware.radio import xbee as xb
 from pectoral_gym.hardware.radio.linkclock import CLOCK_TOLERANCE, RobotClock, RttEstimator
+from pectoral_gym.hardware.radio.linkstatus import LinkStats, StatusReceiver
 
 __all__ = ["RadioLink", "LinkStats", "DEADLINE_HORIZON"]
 
@@ -42,44 +42,7 @@ __all__ = ["RadioLink", "LinkStats", "DEADLINE_HORIZON"]
 DEADLINE_HORIZON = 0.95
 
 
-@dataclass
-class LinkStats:
-    """Counters of a :class:`RadioLink` (cumulative).
-
-    Attributes:
-        sent: Messages written (incl. keep-alives and retries).
-        received: Valid STATUS messages from the robot with a new sequence number.
-        acked: Commands acknowledged.
-        retries: Re-transmissions of an unacknowledged command.
-        unacked: Commands given up after ``max_retries``.
-        dropped: Robot messages missing from its sequence (gaps).
-        duplicates: Robot messages received twice.
-        stale: Robot messages older than one already received (reordered).
-        crc_errors: Frames with a good XBee checksum but a bad CRC-16.
-        checksum_errors: Frames with a bad XBee checksum.
-        framing_errors: Bad lengths and abandoned frames.
-        write_errors: Failed writes to the port.
-        foreign: STATUS messages addressed to other sessions (heard, not taken as acks).
-        suppressed: Commands not sent because control is lost.
-    """
-
-    sent: int = 0
-    received: int = 0
-    acked: int = 0
-    retries: int = 0
-    unacked: int = 0
-    dropped: int = 0
-    duplicates: int = 0
-    stale: int = 0
-    crc_errors: int = 0
-    checksum_errors: int = 0
-    framing_errors: int = 0
-    write_errors: int = 0
-    foreign: int = 0
-    suppressed: int = 0
-
-
-class RadioLink:
+class RadioLink(StatusReceiver):
     """Talks to the fish's firmware through an XBee (or anything that carries the same bytes).
 
     Args:
@@ -98,8 +61,10 @@ class RadioLink:
             (``control_lost == "robot_busy"``).
         max_ack_timeout: Largest retry timeout [s].
         clock_tolerance: Largest relative rate error of the robot's clock (:class:`RobotClock`).
+        clock: The PC's clock (:mod:`pectoral_gym.hardware.clock`): every time, wait and thread of the link.
 
     Attributes:
+        robot_clock: A lower bound of the robot's clock (:class:`RobotClock`), from its STATUS messages.
         lease_scale: Wall seconds per robot second (``1 / speed`` of an accelerated emulator).
         deadline_horizon: A command's deadline, in robot seconds after :meth:`set_fins` [s]
             (:data:`DEADLINE_HORIZON`).
@@ -111,7 +76,7 @@ class RadioLink:
     def __init__(self, port: str | serial.SerialBase, baudrate: int = 57600, dest64: int = xb.BROADCAST,
                  keepalive_period: float = 0.1, ack_timeout: float = 0.05, max_retries: int = 3,
                  session: int | None = None, take_over: bool = False, max_ack_timeout: float = 1.0,
-                 clock_tolerance: float = CLOCK_TOLERANCE):
+                 clock_tolerance: float = CLOCK_TOLERANCE, clock: Clock = REAL_CLOCK):
         if not keepalive_period > 0 or not ack_timeout > 0 or int(max_retries) < 0:
             raise ValueError("keepalive_period and ack_timeout must be > 0 s and max_retries >= 0")
         if not max_ack_timeout >= ack_timeout:
@@ -121,6 +86,7 @@ class RadioLink:
             warnings.warn("RadioLink: commands are broadcast, so every robot on this radio channel obeys them; "
                           "pass dest64=<the robot XBee's 64-bit address>", stacklevel=2)
         self.dest64 = int(dest64)
+        self.clock = clock
         self.keepalive_period = float(keepalive_period)
         self.ack_timeout = float(ack_timeout)
         self.max_retries = int(max_retries)
@@ -133,7 +99,7 @@ class RadioLink:
         self.boot: int | None = None
         self._served = False  # the robot answered one of our messages as our controller (this boot)
         self.rtt_estimator = RttEstimator(self.ack_timeout, self.ack_timeout, float(max_ack_timeout))
-        self.clock = RobotClock(clock_tolerance)
+        self.robot_clock = RobotClock(clock_tolerance)
         self._sent_at: dict[int, tuple[float, bool]] = {}  # seq -> (send time, re-sent), for RTT samples
         self._deadline = (0, 0)  # (deadline, boot) of the current command
         self._commanded = False  # fins of ours may run: repeat STOP until the robot reports still
@@ -143,9 +109,9 @@ class RadioLink:
         self.decoder = pr.StreamDecoder()
         self.tracker = pr.SequenceTracker()
         self.last_status: pr.Status | None = None
-        self.last_status_time: float | None = None  # time.monotonic() of the newest STATUS
+        self.last_status_time: float | None = None  # clock.monotonic() of the newest STATUS
         self.command: np.ndarray | None = None  # (2, 4) current fin command, None when stopped
-        self.lease_end = -float("inf")  # time.monotonic() after which the robot no longer runs the command
+        self.lease_end = -float("inf")  # clock.monotonic() after which the robot no longer runs the command
         self._command_id = 0
         self._lease = pr.DEFAULT_LEASE
         self._emergency: int | None = None  # seq of a STOP sent by emergency_stop(), for the link thread
@@ -154,11 +120,11 @@ class RadioLink:
         self._acked: set[int] = set()
         self._lock = threading.RLock()
         self._write_lock = threading.Lock()
-        self._acked_event = threading.Condition(self._lock)
+        self._acked_event = clock.condition(self._lock)
         self._closed = False
-        self._stop = threading.Event()
-        self._threads = [threading.Thread(target=self._read_loop, name="radio-read", daemon=True),
-                         threading.Thread(target=self._keepalive_loop, name="radio-keepalive", daemon=True)]
+        self._stop = clock.event()
+        self._threads = [clock.thread(self._read_loop, "radio-read"),
+                         clock.thread(self._keepalive_loop, "radio-keepalive")]
         for thread in self._threads:
             thread.start()
 
@@ -170,7 +136,7 @@ class RadioLink:
         deadline, boot = self._deadline
         msg = pr.Message(mtype, self._seq, self.session, fins=fins, command=self._command_id, lease=self._lease,
                          deadline=deadline, boot=boot)
-        self._sent_at[self._seq] = (time.monotonic(), False)
+        self._sent_at[self._seq] = (self.clock.monotonic(), False)
         if len(self._sent_at) > 256:
             self._sent_at.pop(next(iter(self._sent_at)))
         return self._seq, xb.encode_frame(xb.tx_request(pr.encode_message(msg), self.dest64))
@@ -188,7 +154,7 @@ class RadioLink:
             if self.take_over and not self._served and not self.control_lost:
                 self._write(self._next(pr.MsgType.CLAIM)[1])  # the operator's takeover goes first
             seq, frame = self._next(mtype, fins)
-            self._pending = (seq, frame, time.monotonic() + self.rtt_estimator.timeout(), 0, mtype)
+            self._pending = (seq, frame, self.clock.monotonic() + self.rtt_estimator.timeout(), 0, mtype)
             self._write(frame)  # under the lock: frames leave in sequence order
         return seq
 
@@ -234,14 +200,14 @@ class RadioLink:
                 self.stats.suppressed += 1
                 self.command = None
                 return -1
-            now = time.monotonic()
+            now = self.clock.monotonic()
             self.command = b.copy()
             self._command_id = (self._command_id + 1) & 0xFFFF
             self._lease = float(lease)
             self.lease_end = now + self._lease * self.lease_scale
             horizon = now + self.deadline_horizon * self.lease_scale
-            deadline = self.clock.deadline_ms(horizon, 1.0 / self.lease_scale)
-            self._deadline = (deadline, self.clock.boot or 0) if deadline else (0, 0)
+            deadline = self.robot_clock.deadline_ms(horizon, 1.0 / self.lease_scale)
+            self._deadline = (deadline, self.robot_clock.boot or 0) if deadline else (0, 0)
             self._commanded = True
             return self._send_tracked(pr.MsgType.SET_FINS, fins)
 
@@ -262,10 +228,10 @@ class RadioLink:
 
     def wait_ack(self, seq: int, timeout: float) -> bool:
         """Block until message ``seq`` is acknowledged (by a STATUS addressed to us) or ``timeout`` s pass."""
-        deadline = time.monotonic() + timeout
+        deadline = self.clock.monotonic() + timeout
         with self._acked_event:
             while seq not in self._acked:
-                remaining = deadline - time.monotonic()
+                remaining = deadline - self.clock.monotonic()
                 if remaining <= 0:
                     return False
                 self._acked_event.wait(remaining)
@@ -273,10 +239,10 @@ class RadioLink:
 
     def wait_still(self, seq: int, timeout: float) -> bool:
         """Block until a STATUS to us answering ``seq`` or a later message reports the robot not RUNNING."""
-        deadline = time.monotonic() + timeout
+        deadline = self.clock.monotonic() + timeout
         with self._acked_event:
             while self._quiet is None or not (self._quiet == seq or pr.serial_newer(self._quiet, seq)):
-                remaining = deadline - time.monotonic()
+                remaining = deadline - self.clock.monotonic()
                 if remaining <= 0:
                     return False
                 self._acked_event.wait(remaining)
@@ -294,11 +260,11 @@ class RadioLink:
         return pr.MsgType.HEARTBEAT
 
     def _keepalive_loop(self) -> None:
-        next_keepalive = time.monotonic() + self.keepalive_period
+        next_keepalive = self.clock.monotonic() + self.keepalive_period
         while not self._stop.wait(min(self.ack_timeout, self.keepalive_period) / 4):
             retry = None
             with self._lock:
-                now = time.monotonic()  # after the lock: a stalled thread must not act on an old clock
+                now = self.clock.monotonic()  # after the lock: a stalled thread must not act on an old clock
                 if self._pending is not None and now >= self._pending[2]:
                     seq, frame, _, tries, mtype = self._pending
                     if tries < self.max_retries:
@@ -325,101 +291,7 @@ class RadioLink:
                     if frame is not None:
                         self._write(frame)
 
-    # ------------------------------------------------------------ receiving
-    def _read_loop(self) -> None:
-        while not self._stop.is_set():
-            try:
-                data = self.serial.read(max(1, self.serial.in_waiting))
-            except (serial.SerialException, OSError, TypeError, AttributeError):
-                if self._stop.is_set():
-                    return
-                time.sleep(0.01)
-                continue
-            if data:
-                self._receive(data)
-
-    def _lose(self, reason: str) -> None:
-        """Latch ``reason`` in :attr:`control_lost` (the first one stays); our command is void."""
-        if not self.control_lost:
-            self.control_lost = reason
-        self.command = None
-        self.lease_end = -float("inf")
-
-    def _receive(self, data: bytes) -> None:
-        messages = self.decoder.feed(data)
-        with self._lock:
-            d = self.decoder
-            self.stats.crc_errors, self.stats.checksum_errors = d.crc_errors, d.checksum_errors
-            self.stats.framing_errors = d.framing_errors + d.truncated
-            for msg in messages:
-                if msg.type != pr.MsgType.STATUS:
-                    continue  # our own frames echoed (loop://) or a confused peer
-                status = msg.status
-                if status.boot in self._old_boots:
-                    self.stats.stale += 1  # a late answer from before a reboot
-                    continue
-                verdict = self.tracker.check(msg.seq, status.boot)  # a rebooted robot numbers afresh
-                self.stats.duplicates, self.stats.stale = self.tracker.duplicates, self.tracker.stale
-                self.stats.dropped = self.tracker.lost
-                if verdict != pr.Verdict.NEW:
-                    continue
-                self._status(msg)
-            self._acked_event.notify_all()
-
-    def _status(self, msg: pr.Message) -> None:
-        """A new STATUS, addressed to us or not (call with the lock held)."""
-        status, now = msg.status, time.monotonic()
-        if self.boot is not None and status.boot != self.boot:  # a brown-out: its fins stopped, its rules reset
-            if self._served or self._commanded:
-                self._lose("robot_rebooted")
-            self._old_boots.append(self.boot)
-            self._served, self._commanded, self._pending = False, False, None
-        self.boot, self.served = status.boot, status.served
-        self.clock.add(status.boot, status.uptime_ms, now)  # any STATUS tells the robot's clock
-        if msg.session != self.session:
-            self.stats.foreign += 1  # another PC's answer: no ack, no liveness, but whom the robot serves
-            if self._served and status.served != self.session:
-                self._lose("taken_over")
-                self._served = False
-            return
-        self.stats.received += 1
-        self.last_status, self.last_status_time = status, now
-        sent = self._sent_at.get(status.ack_seq)
-        if sent is not None and not sent[1]:
-            self.rtt_estimator.update(now - sent[0])
-            self._sent_at.pop(status.ack_seq)
-        if status.served == self.session:
-            self._served = True
-        else:  # refused: another session is served (with take_over we keep claiming until we are)
-            if not (self.take_over and not self._served):
-                self._lose("taken_over" if self._served else "robot_busy")
-            self._served = False
-        ack = status.ack_seq
-        if self._pending is not None and self._satisfies(status, self._pending):
-            self._pending = None
-            self.stats.acked += 1
-        if status.state != pr.RobotState.RUNNING:
-            if self._quiet is None or pr.serial_newer(ack, self._quiet) or ack == self._quiet:
-                self._quiet = ack
-            if self.command is None:
-                self._commanded = False
-        self._acked.add(ack)
-        if len(self._acked) > 1024:
-            self._acked = {ack}
-
-    @staticmethod
-    def _satisfies(status: pr.Status, pending: tuple) -> bool:
-        """Whether ``status`` (addressed to us) settles the pending command.
-
-        Its own ack does, and so does the ack of a later keep-alive that repeats it (the keep-alive always
-        carries the current command; after a STOP the robot must also report that it is not running).
-        """
-        seq, mtype = pending[0], pending[4]
-        if status.ack_seq == seq:
-            return True
-        return pr.serial_newer(status.ack_seq, seq) and (mtype == pr.MsgType.SET_FINS
-                                                         or status.state != pr.RobotState.RUNNING)
-
+    # ------------------------------------------------------------ receiving: StatusReceiver (.linkstatus)
     # ------------------------------------------------------------ control
     def resync(self, wait: float = 0.0) -> bool:
         """Clear ``control_lost == "robot_rebooted"`` (and only that) once the link is re-synchronised.
@@ -428,14 +300,14 @@ class RadioLink:
         is known (the keep-alive's HEARTBEAT takes the robot, which serves nobody after a power-up).
         Blocks up to ``wait`` s for it. Returns whether :attr:`control_lost` is empty afterwards.
         """
-        deadline = time.monotonic() + wait
+        deadline = self.clock.monotonic() + wait
         with self._acked_event:
             while True:
-                if self.control_lost == "robot_rebooted" and self._served and self.clock.synced:
+                if self.control_lost == "robot_rebooted" and self._served and self.robot_clock.synced:
                     self.control_lost = ""
                 if self.control_lost != "robot_rebooted":
                     return not self.control_lost
-                remaining = deadline - time.monotonic()
+                remaining = deadline - self.clock.monotonic()
                 if remaining <= 0:
                     return False
                 self._acked_event.wait(remaining)
@@ -448,7 +320,7 @@ class RadioLink:
     def status_age(self) -> float:
         """Seconds since the last STATUS addressed to this session (``inf`` if none yet)."""
         t = self.last_status_time
-        return float("inf") if t is None else time.monotonic() - t
+        return float("inf") if t is None else self.clock.monotonic() - t
 
     def health(self) -> dict[str, float | int | str | None]:
         """Counters and the robot's last reported state, for ``info`` and logs."""

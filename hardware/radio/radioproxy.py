@@ -7,19 +7,12 @@ XBee API frames (start delimiter ``0x7E``, escaped length; ``pectoral_gym.hardwa
 *whole* frames, so a loss is a lost message, never a damaged stream. Bytes outside any frame are
 passed on with the same delay.
 
-Radio conditions, all in *robot* seconds (divided by ``speed`` on the wall clock, for an emulator
-running ``speed`` times faster):
-
-* ``latency`` ``(lo, hi)``: each frame is delayed by a uniform draw from ``[lo, hi]`` (one-way). By
-  default frames of one direction keep their order (a serial radio: a late frame holds up the ones
-  behind it); ``reorder=True`` lets a later frame overtake a slower one.
-* ``loss``: each frame is lost independently with this probability.
-* ``burst`` ``(fraction, length)``: fades of ``length`` seconds cover ``fraction`` of the time (gaps
-  between fades exponential with mean ``length (1 - fraction) / fraction``); every frame that would be
-  *sent* during a fade is lost, in both directions.
-
+Radio conditions (latency, jitter, loss, fades; :class:`pectoral_gym.hardware.radio.channel.RadioChannel`) are in
+*robot* seconds, divided by ``speed`` on the wall clock for an emulator running ``speed`` times faster.
 Every draw comes from one generator seeded with ``seed``, so the sequence of losses, delays and fades is
-the same from run to run (the wall-clock timing of the threads around it is not).
+the same from run to run (the wall-clock timing of the threads around it is not; for a run that is the
+same throughout, use the in-process :class:`pectoral_gym.hardware.radio.pipe.StreamPair` on a
+:class:`pectoral_gym.hardware.clock.VirtualClock`).
 """
 
 from __future__ import annotations
@@ -32,13 +25,11 @@ import socket
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 
-import numpy as np
-
+from pectoral_gym.hardware.radio.channel import ProxyStats, RadioChannel
 from pectoral_gym.hardware.radio.xbee import ESCAPE, START
 
-__all__ = ["RadioProxy", "FrameSplitter", "ProxyStats"]
+__all__ = ["RadioProxy", "FrameSplitter", "ProxyStats"]  # ProxyStats: from .channel
 
 _POLL = 0.001  # longest wait of the proxy loop [wall s]
 
@@ -88,32 +79,6 @@ class FrameSplitter:
         return out
 
 
-@dataclass
-class ProxyStats:
-    """Frames through a :class:`RadioProxy` (cumulative); ``up`` is PC -> robot, ``down`` robot -> PC.
-
-    Attributes:
-        up_sent: Frames delivered to the robot.
-        up_lost: Frames to the robot lost (at random or in a fade).
-        down_sent: Frames delivered to the PC.
-        down_lost: Frames to the PC lost.
-        fades: Fades begun so far.
-    """
-
-    up_sent: int = 0
-    up_lost: int = 0
-    down_sent: int = 0
-    down_lost: int = 0
-    fades: int = 0
-
-
-def _pair(value: float | tuple[float, float], name: str) -> tuple[float, float]:
-    lo, hi = (value, value) if isinstance(value, (int, float)) else (float(value[0]), float(value[1]))
-    if not (math.isfinite(lo) and math.isfinite(hi) and 0.0 <= lo <= hi):
-        raise ValueError(f"RadioProxy: {name} must be s or (lo, hi) s with 0 <= lo <= hi, got {value!r}")
-    return float(lo), float(hi)
-
-
 class RadioProxy:
     """A lossy, delaying radio on loopback between PCs and one robot (see the module docstring).
 
@@ -142,19 +107,16 @@ class RadioProxy:
         if not upstream_url.startswith("socket://") or ":" not in upstream_url[9:]:
             raise ValueError(f"RadioProxy: upstream_url must be socket://host:port, got {upstream_url!r}")
         self._upstream = (upstream_url[9:].rsplit(":", 1)[0], int(upstream_url.rsplit(":", 1)[1]))
-        self.latency = _pair(latency, "latency")
-        if not 0.0 <= loss < 1.0:
-            raise ValueError(f"RadioProxy: loss must be in [0, 1), got {loss!r}")
-        if burst is not None and not (0.0 <= burst[0] < 1.0 and math.isfinite(burst[1]) and burst[1] > 0):
-            raise ValueError(f"RadioProxy: burst must be (fraction in [0, 1), length > 0 s), got {burst!r}")
         if not (math.isfinite(speed) and speed > 0):
             raise ValueError(f"RadioProxy: speed must be a finite number > 0, got {speed!r}")
-        self.loss, self.burst, self.speed, self.reorder = float(loss), burst, float(speed), bool(reorder)
-        self.stats = ProxyStats()
-        self.log: list[tuple[float, str, bool]] | None = None
-        self.drop_if: Callable[[str, bytes], bool] | None = None
-        self._rng = np.random.default_rng(seed)
-        self._fade = (math.inf, math.inf)  # (start, end) of the current or next fade [robot s since start]
+        try:
+            self.channel = RadioChannel(latency, loss, burst, seed, reorder)
+        except ValueError as err:
+            raise ValueError(f"RadioProxy: {err}") from None
+        self.speed = float(speed)
+        self.latency, self.loss, self.burst, self.reorder = (self.channel.latency, self.channel.loss, burst,
+                                                             self.channel.reorder)
+        self.stats = self.channel.stats
         self._listener = socket.create_server((host, 0))
         self._listener.setblocking(False)
         self.host, self.port = self._listener.getsockname()[:2]
@@ -165,39 +127,33 @@ class RadioProxy:
         self._counter = itertools.count()
         self._stop = threading.Event()
         self._origin = time.monotonic()
-        if burst is not None and burst[0] > 0:
-            self._fade = self._next_fade(0.0)
         self._thread = threading.Thread(target=self._run, name="radio-proxy", daemon=True)
         self._thread.start()
 
+    @property
+    def log(self) -> list[tuple[float, str, bool]] | None:
+        """``None``, or a list to which every frame appends ``(wall time, "up"/"down", lost)``."""
+        return self.channel.log
+
+    @log.setter
+    def log(self, value: list[tuple[float, str, bool]] | None) -> None:
+        self.channel.log = value
+
+    @property
+    def drop_if(self) -> Callable[[str, bytes], bool] | None:
+        """``None``, or ``f(direction, raw_frame) -> bool``: frames it returns True for are lost too."""
+        return self.channel.drop_if
+
+    @drop_if.setter
+    def drop_if(self, value: Callable[[str, bytes], bool] | None) -> None:
+        self.channel.drop_if = value
+
     # ------------------------------------------------------------ radio conditions
-    def _next_fade(self, after: float) -> tuple[float, float]:
-        fraction, length = self.burst
-        start = after + float(self._rng.exponential(length * (1.0 - fraction) / fraction))
-        return start, start + length
-
-    def _in_fade(self, t: float) -> bool:
-        """Whether robot time ``t`` (non-decreasing between calls) falls in a fade."""
-        while t >= self._fade[1]:
-            self._fade = self._next_fade(self._fade[1])
-            self.stats.fades += 1
-        return self._fade[0] <= t
-
     def _route(self, unit: bytes, dest: socket.socket, direction: str, now: float) -> None:
-        t = (now - self._origin) * self.speed
-        is_frame = unit[:1] == bytes((START,))
-        lost = is_frame and (self._in_fade(t) or (self.loss > 0 and self._rng.random() < self.loss))
-        if is_frame and not lost and self.drop_if is not None:
-            lost = bool(self.drop_if(direction, unit))
-        delay = float(self._rng.uniform(*self.latency)) / self.speed
-        if self.log is not None and is_frame:
-            self.log.append((now, direction, bool(lost)))
-        if is_frame:
-            name = f"{direction}_{'lost' if lost else 'sent'}"
-            setattr(self.stats, name, getattr(self.stats, name) + 1)
-        if lost:
+        delay = self.channel.route(unit, direction, (now - self._origin) * self.speed, stamp=now)
+        if delay is None:
             return
-        due = now + delay
+        due = now + delay / self.speed
         if not self.reorder:
             due = max(due, self._last.get(dest, 0.0))
             self._last[dest] = due

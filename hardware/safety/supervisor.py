@@ -20,10 +20,10 @@ from __future__ import annotations
 import collections
 import math
 import threading
-import time
 
 import numpy as np
 
+from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 from pectoral_gym.hardware.safety.geofence import Geofence, SpeedBound
 from pectoral_gym.hardware.safety.rules import SafetyConfig, TrackingWatch
 from pectoral_gym.hardware.vision.framecheck import FrameCheck
@@ -79,8 +79,10 @@ class Supervisor:
         safety: Timeouts and limits.
         speed: Experiment seconds per wall second.
         poll_period: Rule period [experiment s].
-        origin: ``time.monotonic()`` at experiment time 0.
+        origin: ``clock.monotonic()`` at experiment time 0.
         bound: The physical speed bound (default from the geofence's fish and ``safety.limits``).
+        clock: The clock of every time, wait and thread (:mod:`pectoral_gym.hardware.clock`); a camera given as a
+            plain source is read by a :class:`FrameGrabber` on it.
 
     Attributes:
         reason: The latched stop reason of highest priority (:data:`PRIORITY`) or ``""``; ``fired`` holds them all.
@@ -94,12 +96,15 @@ class Supervisor:
     """
 
     def __init__(self, link, camera, tracker, geofence: Geofence, safety: SafetyConfig, speed: float = 1.0,
-                 poll_period: float = 1.0 / 30.0, origin: float | None = None, bound: SpeedBound | None = None):
+                 poll_period: float = 1.0 / 30.0, origin: float | None = None, bound: SpeedBound | None = None,
+                 clock: Clock = REAL_CLOCK):
         self.link, self.tracker, self.geofence = link, tracker, geofence
         self.safety, self.speed, self.poll_period = safety, float(speed), float(poll_period)
-        self._origin = time.monotonic() if origin is None else float(origin)
+        self.clock = clock
+        self._origin = clock.monotonic() if origin is None else float(origin)
         self.camera = camera if isinstance(camera, FrameGrabber) else FrameGrabber(
-            camera, max_rate=self.speed / self.poll_period, stale_after=safety.tracking_timeout / self.speed)
+            camera, max_rate=self.speed / self.poll_period, stale_after=safety.tracking_timeout / self.speed,
+            clock=clock)
         self.watch = TrackingWatch(safety.tracking_timeout)
         self.frame_check = FrameCheck(safety.max_frame_lead, safety.tracking_timeout / self.speed)
         self.bound = bound or SpeedBound(geofence.params, safety.limits)
@@ -119,8 +124,8 @@ class Supervisor:
         self._recent: collections.deque[tuple[float, float, float]] = collections.deque(maxlen=128)
         self._measurements: list[tuple[float, float, float, float]] = []
         self._lock = threading.RLock()
-        self._closed = threading.Event()
-        self._thread = threading.Thread(target=self._run, name="safety-supervisor", daemon=True)
+        self._closed = clock.event()
+        self._thread = clock.thread(self._run, "safety-supervisor")
 
     @property
     def reason(self) -> str:
@@ -131,7 +136,7 @@ class Supervisor:
     # ------------------------------------------------------------ clock
     def now(self) -> float:
         """Experiment time [s]."""
-        return (time.monotonic() - self._origin) * self.speed
+        return (self.clock.monotonic() - self._origin) * self.speed
 
     def _stamp(self, monotonic: float) -> float:
         return (monotonic - self._origin) * self.speed
@@ -262,7 +267,7 @@ class Supervisor:
             self.watch.reason = self.watch.reason or self.camera.lost_reason
 
     def _frame(self, frame) -> None:
-        verdict = self.frame_check.check(frame, time.monotonic(), region=self._box)
+        verdict = self.frame_check.check(frame, self.clock.monotonic(), region=self._box)
         t = self.now()
         if verdict:
             self.watch.update(t, False, verdict)

@@ -21,12 +21,12 @@ from __future__ import annotations
 
 import collections
 import math
-import threading
 import time
 
 import cv2
 import numpy as np
 
+from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 from pectoral_gym.hardware.vision.frames import Frame, FrameSource
 
 __all__ = ["FREEZE_MODES", "FaultyCamera"]
@@ -46,13 +46,15 @@ class FaultyCamera:
         latency: Extra delay from the source's delivery to ``read()`` handing the frame out [s], >= 0.
         block: Time each ``read()`` blocks before reading [s], >= 0 (``math.inf``: until ``close()``).
         seed: Seed of the drop generator.
+        clock: The clock ``latency`` and ``block`` count on (:mod:`pectoral_gym.hardware.clock`).
 
     Attributes:
         delivered: Frames handed out; ``dropped``: frames lost to ``drop``.
     """
 
     def __init__(self, source: FrameSource, drop: float = 0.0, freeze: str | None = None, cycle: int = 4,
-                 clock_offset: float = 0.0, latency: float = 0.0, block: float = 0.0, seed: int | None = None):
+                 clock_offset: float = 0.0, latency: float = 0.0, block: float = 0.0, seed: int | None = None,
+                 clock: Clock = REAL_CLOCK):
         if int(cycle) != cycle or cycle < 1:
             raise ValueError(f"cycle must be an integer >= 1, got {cycle!r}")
         self.source = source
@@ -62,7 +64,8 @@ class FaultyCamera:
         self._frozen: list[np.ndarray] = []
         self._turn = 0
         self._pending: collections.deque[tuple[float, Frame]] = collections.deque()
-        self._closed = threading.Event()
+        self.clock = clock
+        self._closed = clock.event()
         self.delivered = self.dropped = 0
 
     def __setattr__(self, name: str, value) -> None:
@@ -85,7 +88,7 @@ class FaultyCamera:
         if self._closed.is_set():
             return None
         frame = self.source.read()
-        now = time.monotonic()
+        now = self.clock.monotonic()
         if frame is not None and self.drop > 0 and self._rng.random() < self.drop:
             self.dropped += 1
             frame = None

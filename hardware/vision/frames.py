@@ -1,7 +1,8 @@
 """Frames and the frame-source protocol shared by every camera in ``hardware/``.
 
-Timestamps are seconds on the ``time.monotonic()`` clock of this machine (on Linux the same clock in every
-process, so a frame served by an emulator process on the same host keeps its capture time).
+Timestamps are seconds on the clock of the stack (:mod:`pectoral_gym.hardware.clock`): by default
+``time.monotonic()`` of this machine (on Linux the same clock in every process, so a frame served by an
+emulator process on the same host keeps its capture time); a lockstep emulation's virtual clock.
 """
 
 from __future__ import annotations
@@ -9,10 +10,11 @@ from __future__ import annotations
 import collections
 import math
 import threading
-import time
 from typing import NamedTuple, Protocol, runtime_checkable
 
 import numpy as np
+
+from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 
 __all__ = ["CameraLostError", "Frame", "FrameGrabber", "FrameSource", "NewestSlot"]
 
@@ -22,7 +24,7 @@ class Frame(NamedTuple):
 
     Attributes:
         image: (H, W, 3) uint8 BGR image.
-        timestamp: Capture time [s] on the ``time.monotonic()`` clock.
+        timestamp: Capture time [s] on the stack's clock (``time.monotonic()`` for real time).
     """
 
     image: np.ndarray
@@ -47,10 +49,14 @@ class CameraLostError(RuntimeError):
 
 
 class NewestSlot:
-    """A one-item mailbox between a grabber thread and ``read()``: newest item only, each taken at most once."""
+    """A one-item mailbox between a grabber thread and ``read()``: newest item only, each taken at most once.
 
-    def __init__(self) -> None:
-        self._condition = threading.Condition()
+    Args:
+        clock: The clock ``take``'s timeout counts on.
+    """
+
+    def __init__(self, clock: Clock = REAL_CLOCK) -> None:
+        self._condition = clock.condition()
         self._item: Frame | None = None
         self._sequence = 0
         self._taken = 0
@@ -95,16 +101,17 @@ class FrameGrabber:
         stale_after: No frame for this long, or one ``read()`` of the source taking this long, makes
             :attr:`lost_reason` non-empty [s].
         name: Name of the thread.
+        clock: The clock of every time, wait and the thread (:mod:`pectoral_gym.hardware.clock`).
 
     Attributes:
         frames: Frames received from the source.
         error: ``"Type: message"`` of the last exception the source raised, ``""`` once a frame arrives.
         ages: Wall time from each recent frame's capture stamp to the moment it became available [s]
-            (for frames stamped on this machine's ``time.monotonic()``; the newest 512).
+            (for frames stamped on ``clock``; the newest 512).
     """
 
     def __init__(self, source: FrameSource, max_rate: float = 30.0, stale_after: float = 1.0,
-                 name: str = "frame-grabber") -> None:
+                 name: str = "frame-grabber", clock: Clock = REAL_CLOCK) -> None:
         if not (math.isfinite(max_rate) and max_rate > 0):
             raise ValueError(f"max_rate must be a finite number > 0 [1/s], got {max_rate!r}")
         if not (math.isfinite(stale_after) and stale_after > 0):
@@ -116,24 +123,25 @@ class FrameGrabber:
         self.frames = 0
         self.error = ""
         self.ages: collections.deque[float] = collections.deque(maxlen=512)
-        self._slot = NewestSlot()
-        self._last_frame_time = time.monotonic()
+        self.clock = clock
+        self._slot = NewestSlot(clock)
+        self._last_frame_time = clock.monotonic()
         self._reading_since: float | None = None
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._stop = clock.event()
+        self._thread = clock.thread(self._run, name)
         self._thread.start()
 
     def _run(self) -> None:
-        next_read = time.monotonic()
+        next_read = self.clock.monotonic()
         while not self._stop.is_set():
-            self._reading_since = time.monotonic()
+            self._reading_since = self.clock.monotonic()
             try:
                 frame = self.source.read()
             except Exception as error:  # noqa: BLE001 - any failure of the source is "no frame", with the reason
                 frame, self.error = None, f"{type(error).__name__}: {error}"
             finally:
                 self._reading_since = None
-            now = time.monotonic()
+            now = self.clock.monotonic()
             if frame is None:
                 self._stop.wait(self.period / 4)
                 continue
@@ -155,7 +163,7 @@ class FrameGrabber:
     @property
     def lost_reason(self) -> str:
         """Why no frame is coming (``""`` while frames arrive): a blocked or raising source, or silence."""
-        now = time.monotonic()
+        now = self.clock.monotonic()
         if self._stop.is_set():
             return "frame grabber closed"
         since = self._reading_since

@@ -1,0 +1,199 @@
+"""Lockstep emulation: the virtual clock, the in-process radio, and a deployment that repeats itself for a seed."""
+
+from __future__ import annotations
+
+import json
+import threading
+
+import numpy as np
+import pytest
+
+from pectoral_gym.hardware.clock import REAL_CLOCK, LockstepError, VirtualClock
+from pectoral_gym.hardware.radio import xbee as xb
+from pectoral_gym.hardware.radio.channel import RadioChannel
+from pectoral_gym.hardware.radio.pipe import StreamPair
+
+
+def _in_thread(fn):
+    """Run ``fn`` in a plain thread (a fresh VirtualClock takes the calling thread in; pytest's must stay out)."""
+    out: dict = {}
+
+    def body():
+        try:
+            out["value"] = fn()
+        except BaseException as err:  # noqa: BLE001 - re-raised in the test's thread
+            out["error"] = err
+
+    thread = threading.Thread(target=body)
+    thread.start()
+    thread.join(timeout=60.0)
+    assert not thread.is_alive(), "the lockstep scenario did not finish"
+    if "error" in out:
+        raise out["error"]
+    return out["value"]
+
+
+def test_real_clock_is_the_standard_library():
+    import time
+
+    assert REAL_CLOCK.monotonic is time.monotonic and REAL_CLOCK.sleep is time.sleep and not REAL_CLOCK.virtual
+    assert isinstance(REAL_CLOCK.event(), threading.Event)
+
+
+def test_sleep_jumps_to_the_wake_up_time():
+    def scenario():
+        clock = VirtualClock()
+        clock.sleep(100.0)
+        clock.sleep(0.0)  # no wait
+        clock.sleep(-1.0)
+        return clock.monotonic()
+
+    assert _in_thread(scenario) == 100.0
+
+
+def test_threads_interleave_by_wake_up_time_then_first_come():
+    """A sleeps 0.3 s three times, B 0.5 s twice: the order follows from the times alone (ties: who waited first)."""
+    def scenario():
+        clock = VirtualClock()
+        log = []
+
+        def worker(name, period, count):
+            for _ in range(count):
+                clock.sleep(period)
+                log.append((round(clock.monotonic(), 9), name))
+
+        threads = [clock.thread(worker, "a", ("a", 0.3, 3)), clock.thread(worker, "b", ("b", 0.5, 2))]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join()
+        return log, clock.monotonic()
+
+    log, end = _in_thread(scenario)
+    assert log == [(0.3, "a"), (0.5, "b"), (0.6, "a"), (0.9, "a"), (1.0, "b")]
+    assert end == pytest.approx(1.0)
+
+
+def test_event_wait_times_out_or_wakes_at_the_setters_time():
+    def scenario():
+        clock = VirtualClock()
+        event = clock.event()
+        assert event.wait(0.25) is False and clock.monotonic() == 0.25
+        woke = []
+
+        def waiter():
+            woke.append((event.wait(10.0), clock.monotonic()))
+
+        thread = clock.thread(waiter, "waiter")
+        thread.start()
+        clock.sleep(1.0)
+        event.set()
+        thread.join()
+        return woke
+
+    assert _in_thread(scenario) == [(True, 1.25)]
+
+
+def test_condition_wait_releases_its_lock_and_counts_simulated_time():
+    def scenario():
+        clock = VirtualClock()
+        lock = threading.RLock()
+        cond = clock.condition(lock)
+        box = []
+
+        def producer():
+            clock.sleep(0.5)
+            with cond:  # the waiter released the lock while it waited
+                box.append(clock.monotonic())
+                cond.notify_all()
+
+        thread = clock.thread(producer, "producer")
+        with cond:
+            thread.start()
+            assert cond.wait_for(lambda: box, timeout=2.0)
+            timed_out = not cond.wait(0.1)
+        thread.join()
+        return box, timed_out, clock.monotonic()
+
+    box, timed_out, end = _in_thread(scenario)
+    assert box == [0.5] and timed_out and end == pytest.approx(0.6)
+
+
+def test_everyone_waiting_for_ever_is_an_error():
+    def scenario():
+        clock = VirtualClock()
+        with pytest.raises(LockstepError, match="no timeout"):
+            clock.event().wait()
+        return True
+
+    assert _in_thread(scenario)
+
+
+def _frame(payload: bytes) -> bytes:
+    return xb.encode_frame(xb.tx_request(payload, xb.BROADCAST))
+
+
+def test_stream_pair_delivers_at_once_or_after_the_channels_delay():
+    def scenario():
+        clock = VirtualClock()
+        pair = StreamPair(clock)
+        pair.pc.write(b"abc")
+        assert pair.robot.in_waiting == 3 and pair.robot.read(10) == b"abc"
+        assert pair.robot.read(10, timeout=0.2) == b"" and clock.monotonic() == pytest.approx(0.2)
+        delayed = StreamPair(clock, RadioChannel(latency=0.1))
+        start = clock.monotonic()
+        first, second = _frame(b"one"), _frame(b"two")
+        delayed.robot.write(first)
+        clock.sleep(0.01)
+        delayed.robot.write(second)
+        got = delayed.pc.read(100)
+        at_first = clock.monotonic() - start
+        got2 = delayed.pc.read(100)
+        return got, at_first, got2, clock.monotonic() - start, first, second
+
+    got, at_first, got2, at_second, first, second = _in_thread(scenario)
+    assert got == first and at_first == pytest.approx(0.1)
+    assert got2 == second and at_second == pytest.approx(0.11)
+
+
+def test_stream_pair_loss_is_seeded():
+    def lost(seed):
+        def scenario():
+            clock = VirtualClock()
+            pair = StreamPair(clock, RadioChannel(loss=0.5, seed=seed))
+            for k in range(40):
+                pair.pc.write(_frame(bytes([k])))
+            return pair.channel.stats.up_lost, pair.robot.read(10_000, timeout=0)
+        return _in_thread(scenario)
+
+    a, b = lost(3), lost(3)
+    assert a == b and 0 < a[0] < 40
+    assert lost(4) != a
+
+
+def _deploy(tmp_path, name, *extra):
+    from pectoral_gym.hardware import deploy
+
+    out = tmp_path / name
+    args = ["--controller", "hand", "--emulate", "--lockstep", "--episodes", "2", "--max-steps", "8", "--seed", "5",
+            "--out", str(out), "--quiet", "--nice", "0", *extra]
+    assert _in_thread(lambda: deploy.main(args)) == 0
+    return (out / "steps.jsonl").read_text(encoding="utf-8"), json.loads((out / "summary.json").read_text())
+
+
+def test_lockstep_deployment_repeats_itself_for_a_seed(tmp_path):
+    """Two lockstep runs, same seed, degraded radio and camera: the same logs, byte for byte."""
+    degraded = ("--radio-latency", "0.05", "--radio-jitter", "0.02", "--radio-loss", "0.1", "--camera-drop", "0.1",
+                "--camera-latency", "0.03", "--pose-noise-mm", "2", "--pose-noise-deg", "1")
+    steps_a, summary_a = _deploy(tmp_path, "a", *degraded)
+    steps_b, summary_b = _deploy(tmp_path, "b", *degraded)
+    assert steps_a == steps_b and summary_a == summary_b
+    records = [json.loads(line) for line in steps_a.splitlines()]
+    assert sum(r.get("event") == "reset" for r in records) == 2
+    steps = [r for r in records if "action" in r]
+    assert steps and all(r["t"] > 0 for r in steps)
+    # the step times are simulated: one control period (0.5 s) apart
+    first = [r["t"] for r in steps if r["episode"] == 0]
+    assert np.allclose(np.diff(first)[:-1], 0.5, atol=1e-6)
+    assert summary_a["link"]["retries"] > 0  # the lossy radio was in the loop
+
