@@ -115,13 +115,21 @@ def test_the_yaw_damping_is_the_specs_choice_not_the_files(tmp_path):
 
 @pytest.mark.parametrize("kwargs,match", [
     ({"model": "full", "scaling": "none"}, "averaged model only"),
-    ({"model": "full", "yaw_damping": "none"}, "averaged model only"),
     ({"model": "averaged", "integration": "fast"}, "full model only"),
-    ({"model": "averaged", "yaw_damping": "cosine"}, "yaw_damping must be one of"),
 ])
 def test_option_applicability_is_checked_by_the_spec(kwargs, match):
     with pytest.raises(ValueError, match=match):
         EnvConfig(**kwargs)
+
+
+def test_the_yaw_damping_is_no_env_option():
+    # retired from the envs (docs/model.md 3.6): the env's spec names the richest damping its file holds
+    with pytest.raises(TypeError, match="yaw_damping"):
+        EnvConfig(model="averaged", yaw_damping="sinusoid")
+    with pytest.raises(ValueError, match="unknown model options"):
+        env_spec("averaged", yaw_damping="none")
+    with pytest.raises(ValueError, match="yaw_damping must be one of"):
+        AveragedSpec(yaw_damping="cosine")
 
 
 def test_bad_spec_dicts_are_refused():

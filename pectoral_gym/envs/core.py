@@ -90,14 +90,11 @@ class EnvConfig:
         integration: Full model only: ``"reference"`` (converged steps) or ``"fast"`` (8 RK4 substeps
             per half-stroke, at most 0.05 s; :data:`~pectoral_gym.model.models.FULL_INTEGRATION`; its speed
             and accuracy against the reference: ``docs/model.md`` section 6).
-        yaw_damping: Averaged model only: ``"sinusoid"``, ``"waveform"`` or ``"none"``
-            (:data:`pectoral_gym.model.kloading.YAW_DAMPINGS`, ``docs/model.md`` 3.6); ``None``: ``"none"`` for
-            ``scaling="none"``, else the richest the coefficients file holds (as before it was an option;
-            :meth:`model_spec` names the one picked).
 
     The model settings (``model`` and the ``ENV_OPTIONS`` above) resolve to one spec,
     :meth:`model_spec` (:func:`pectoral_gym.model.spec.env_spec`, which also refuses another model's
-    option set away from its default); the env builds its model from it and nothing else.
+    option set away from its default); the env builds its model from it and nothing else. Its yaw
+    damping is the richest the coefficients file holds (``"none"`` for ``scaling="none"``; ``docs/model.md`` 3.6).
         observe_fins: Append each fin's half-stroke in progress to the observation (angle now, the next
             turning point, power or recovery, time left; :mod:`pectoral_gym.envs.observation`): the
             stroke phase on which a new command's effect depends. Off by default (the 19-entry
@@ -139,7 +136,6 @@ class EnvConfig:
     transitions: bool = False
     ripple_offsets: bool = False
     integration: str = "reference"
-    yaw_damping: str | None = None
     observe_fins: bool = False
     progress_weight: float = 10.0
     goal_bonus: float = 10.0

@@ -42,7 +42,7 @@ SCALINGS = ("identified", "none")  # besides the path of a coefficients file
 FORCINGS = ("exact", "taylor")
 #: The env settings (:class:`pectoral_gym.envs.core.EnvConfig` field names) of each model's spec.
 ENV_OPTIONS = {"full": ("integration",),
-               "averaged": ("scaling", "check_scaling_params", "transitions", "ripple_offsets", "yaw_damping")}
+               "averaged": ("scaling", "check_scaling_params", "transitions", "ripple_offsets")}
 
 
 def _check_bool(name: str, value: Any) -> bool:
@@ -126,11 +126,13 @@ class AveragedSpec(ModelSpec):
             (K = 1) or the path of a coefficients file (``python -m pectoral_gym.scaling identify``).
         check_params: Refuse a coefficients file that records other model parameters than the
             ``params`` it is built for (K identified for another robot); ``False`` is the explicit opt-out.
-        yaw_damping: ``"sinusoid"``, ``"waveform"`` or ``"none"``
+        yaw_damping: ``"sinusoid"`` (the presets'), ``"none"`` (eq. 20 alone: :data:`AVERAGED_PAPER`, K = 1)
+            or ``"waveform"`` (an experiment of docs/model.md 3.6 that no preset, env or controller uses)
             (:data:`~pectoral_gym.model.kloading.YAW_DAMPINGS`): the spec picks it, never the file: the
             file must hold the section it needs, and sections it does not use are dropped. K = 1 has
             none: ``scaling="none"`` needs ``"none"``.
-        forcing: ``"exact"`` (closed-form Bessel averages) or ``"taylor"`` (the paper's eqs. 26-28).
+        forcing: ``"exact"`` (closed-form Bessel averages) or ``"taylor"`` (the paper's eqs. 26-28, to
+            reproduce the paper: :data:`AVERAGED_PAPER`).
         transitions: The forcing of transitional half-strokes (docs/model.md 3.7).
         ripple_offsets: The beat-mean ripple offset of a fin that starts, changes or parks a pattern
             (docs/model.md 3.8).
@@ -237,16 +239,16 @@ def spec_from_dict(data: Mapping[str, Any] | str) -> FullSpec | AveragedSpec:
 # Another model's env options refused away from their defaults. A full env ignores the averaged model's
 # transitions and ripple_offsets, as it always has (evaluations of averaged-trained policies on the full model
 # pass them on), and check_scaling_params checks the K its model-based controllers plan with.
-_STRICT = ("integration", "scaling", "yaw_damping")
+_STRICT = ("integration", "scaling")
 
 
 def env_spec(model: str, **options: Any) -> FullSpec | AveragedSpec:
     """The spec of an env's model settings (:data:`ENV_OPTIONS`, named as :class:`~pectoral_gym.envs.core.EnvConfig`'s).
 
-    The env's own defaults: :data:`FULL_REFERENCE` and :data:`AVERAGED_ENV`; ``yaw_damping=None``
-    picks the richest damping the coefficients file holds (the envs' behaviour from before it was an
-    option; the returned spec names it). ``integration``, ``scaling`` and ``yaw_damping`` are refused on the
-    other model away from their env defaults; the full model ignores the averaged model's other options.
+    The env's own defaults: :data:`FULL_REFERENCE` and :data:`AVERAGED_ENV`. An env's yaw damping is the
+    richest the coefficients file holds (``"none"`` for K = 1; the returned spec names it): it is no env
+    option (docs/model.md 3.6). ``integration`` and ``scaling`` are refused on the other model away from
+    their env defaults; the full model ignores the averaged model's other options.
 
     Raises:
         ValueError: For an unknown model or option, or another model's option set away from its default.
@@ -254,7 +256,7 @@ def env_spec(model: str, **options: Any) -> FullSpec | AveragedSpec:
     if model not in MODELS:
         raise ValueError(f"model must be one of {MODELS}, got {model!r}")
     defaults = {"integration": "reference", "scaling": "identified", "check_scaling_params": True,
-                "transitions": False, "ripple_offsets": False, "yaw_damping": None}
+                "transitions": False, "ripple_offsets": False}
     unknown = sorted(set(options) - set(defaults))
     if unknown:
         raise ValueError(f"unknown model options {unknown}; valid: {sorted(defaults)}")
@@ -266,8 +268,8 @@ def env_spec(model: str, **options: Any) -> FullSpec | AveragedSpec:
     if model == "full":
         return FullSpec(integration=values["integration"])
     scaling = os.fspath(values["scaling"]) if isinstance(values["scaling"], os.PathLike) else values["scaling"]
-    damping = values["yaw_damping"] or _held_damping(scaling)
-    return AVERAGED_ENV.replace(scaling=scaling, check_params=values["check_scaling_params"], yaw_damping=damping,
+    return AVERAGED_ENV.replace(scaling=scaling, check_params=values["check_scaling_params"],
+                                yaw_damping=_held_damping(scaling),
                                 transitions=values["transitions"], ripple_offsets=values["ripple_offsets"])
 
 
