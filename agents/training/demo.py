@@ -23,8 +23,8 @@ from typing import Any
 
 __all__ = ["main", "run_demo"]
 
-TRAIN_ENV = "PectoralFish-Averaged-v0"
-EVAL_ENVS = ("PectoralFish-Averaged-v0", "PectoralFish-Full-v0")
+TRAIN_ENV = "PectoralFish-Averaged-v1"
+EVAL_ENVS = ("PectoralFish-Averaged-v1", "PectoralFish-Full-v1")
 EVAL_SEED = 10_000  # evaluation episodes k use seed EVAL_SEED + k (training uses seed + env index)
 QUICK = {"n_timesteps": 1024, "n_envs": 8, "n_steps": 64, "batch_size": 128, "n_epochs": 1, "eval_freq": 0}
 
@@ -96,9 +96,9 @@ def _report(summary: dict[str, Any], table: str, config: dict[str, Any]) -> str:
         "(transitional ones too); `return` sum of "
         "rewards. Definitions in `agents/training/metrics.py`; per-env JSON next to this report.",
         "",
-        "Going further: `python -m pectoral_gym.agents.training.train --env PectoralFish-Averaged-v0 --algo ppo "
+        "Going further: `python -m pectoral_gym.agents.training.train --env PectoralFish-Averaged-v1 --algo ppo "
         "--task goal --n-timesteps 2e6`, then `python -m pectoral_gym.agents.training.evaluate --policy runs/... "
-        "--env PectoralFish-Full-v0 --randomize`; `python -m pectoral_gym.agents.studies.benchmark` for every "
+        "--env PectoralFish-Full-v1 --randomize`; `python -m pectoral_gym.agents.studies.benchmark` for every "
         "controller; see `docs/agents.md`.",
         "",
         f"Hyperparameters: `{json.dumps(config['algo_kwargs'])}`, n_envs {config['n_envs']}, "

@@ -14,7 +14,7 @@ Definitions (per episode; ``dt`` is the control period, ``T`` the number of step
   (:meth:`pectoral_gym.model.models.FishModel.fin_work`): transitional strokes included, which
   ``fin_work`` (the price of the commanded patterns' regular beats) leaves out; NaN if not recorded.
 * ``return``: sum of the rewards.
-* ``wall``: 1 if the episode ended at a wall, else 0.
+* ``wall``: 1 if the episode ended at a wall (with ``stop_band``, as the v1 envs: in the stopping band), else 0.
 
 Aggregates are means over episodes (NaN values left out), each with a seeded
 percentile-bootstrap confidence interval (``scipy.stats.bootstrap``).

@@ -28,10 +28,11 @@ from pectoral_gym.envs.observation import OBS_SIZE
 __all__ = ["ALGOS", "BatchController", "Controller", "SB3Controller", "TRAINED_KEYS", "algo_of_zip", "load_policy",
            "read_config"]
 
-# The env settings a policy's actions and observations depend on, recorded from its run folder's config.yaml
-# (``env_kwargs``; EnvConfig's default where a key is absent) in SB3Controller.trained.
+# The env settings a policy's actions and observations depend on, and where its episodes start and end, recorded
+# from its run folder's config.yaml (its env id's settings with ``env_kwargs`` over them; EnvConfig's default where
+# neither has a key) in SB3Controller.trained.
 TRAINED_KEYS = ("task", "control_period", "observe_fins", "bias_range", "amplitude_range", "period_range",
-                "ratio_range", "ref_speed")
+                "ratio_range", "ref_speed", "start_inset", "goal_inset")
 
 
 @runtime_checkable
@@ -171,12 +172,15 @@ def read_config(run_dir: str | Path) -> dict[str, Any]:
 
 
 def _trained_settings(config: dict[str, Any], path: Path) -> dict[str, Any]:
-    """:data:`TRAINED_KEYS` of a run config's ``env_kwargs`` (EnvConfig's defaults where absent)."""
+    """:data:`TRAINED_KEYS` of a run config's env id and ``env_kwargs`` (EnvConfig's defaults where absent)."""
     from pectoral_gym.envs.core import EnvConfig
+    from pectoral_gym.registration import ENV_SETTINGS, registered_settings
 
     env_kwargs = config.get("env_kwargs") or {}
     if not isinstance(env_kwargs, dict):
         raise ValueError(f"{path}: env_kwargs must be a mapping, got {env_kwargs!r}")
+    if config.get("env_id") in ENV_SETTINGS:  # the id's own settings (v1's observe_fins, goal_inset, ...)
+        env_kwargs = registered_settings(config["env_id"], env_kwargs)
     defaults = EnvConfig()
     return {key: env_kwargs.get(key, getattr(defaults, key)) for key in TRAINED_KEYS}
 
