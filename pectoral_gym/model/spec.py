@@ -126,7 +126,7 @@ class AveragedSpec(ModelSpec):
             (K = 1) or the path of a coefficients file (``python -m pectoral_gym.scaling identify``).
         check_params: Refuse a coefficients file that records other model parameters than the
             ``params`` it is built for (K identified for another robot); ``False`` is the explicit opt-out.
-        yaw_damping: ``"sinusoid"`` (the presets'), ``"none"`` (eq. 20 alone: :data:`AVERAGED_PAPER`, K = 1)
+        yaw_damping: ``"sinusoid"`` (the other presets'), ``"none"`` (eq. 20 alone: :data:`AVERAGED_PAPER`, K = 1)
             or ``"waveform"`` (an experiment of docs/model.md 3.6 that no preset, env or controller uses)
             (:data:`~pectoral_gym.model.kloading.YAW_DAMPINGS`): the spec picks it, never the file: the
             file must hold the section it needs, and sections it does not use are dropped. K = 1 has
