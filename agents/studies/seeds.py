@@ -1,11 +1,12 @@
 """Results across training seeds: train the demo's PPO for N seeds, evaluate each, aggregate as rliable does.
 
-Each seed trains exactly as ``pectoral-demo --seed S`` (PPO on ``PectoralFish-Averaged-v0``, task ``goal``,
+Each seed trains exactly as ``pectoral-demo --seed S`` (PPO on ``PectoralFish-Averaged-v1``, task ``goal``,
 ``agents/hyperparams/ppo.yml``, best model chosen on the periodic evaluation's episodes, which the shipped
 file runs on the full model: ``eval_env``) and is then
 evaluated on three settings, the same held-out episodes for every seed (episode ``k`` reset with
 ``--eval-seed + k``, default the demo's): the averaged model, the full model, and the full model with
-:data:`pectoral_gym.agents.training.evaluate.DEFAULT_RANDOMIZATION`. A
+:data:`pectoral_gym.agents.training.evaluate.DEFAULT_RANDOMIZATION`, each as the train env's version
+(v1: with the robot's stopping band, servo limit and goal inset; the full model's fast integration). A
 :class:`pectoral_gym.agents.studies.solve_probe.SolveProbe` (``--probe-every``)
 times each run to 0.95 success on the full model on a third set of episodes.
 
@@ -21,11 +22,12 @@ CLI::
     seeds_out/
     python -m pectoral_gym.agents.studies.seeds --seeds 100 101 102 103 --jobs 2 --out tune_base
     python -m pectoral_gym.agents.studies.seeds --seeds 0 1 --timesteps 2e5 --episodes 50 --hyperparams ent_coef=0.01
-    python -m pectoral_gym.agents.studies.seeds --train-env PectoralFish-Full-v0 --timesteps 1.6e6 \
-        --hyperparams env_kwargs.integration=fast
+    python -m pectoral_gym.agents.studies.seeds --train-env PectoralFish-Full-v1 --timesteps 1.6e6
+    python -m pectoral_gym.agents.studies.seeds --train-env PectoralFish-Averaged-v0   # the v0 envs, as before
 
-``--train-env PectoralFish-Full-v0`` trains on the full model instead (its entry of the hyperparameter file);
-the evaluations run the full model at its reference steps whatever ``integration`` the training used.
+``--train-env PectoralFish-Full-v*`` trains on the full model instead (its entry of the hyperparameter file);
+the evaluations run the full model as the train env's version registers it (v0: the reference steps,
+v1: the fast integration), whatever ``integration`` the training used.
 
 Writes ``<out>/seeds.md``, ``<out>/seeds.json``, ``<out>/seeds.png`` and one training run folder per
 seed, ``<out>/seed<S>/`` (with ``eval_<setting>.json``).
@@ -49,12 +51,20 @@ import scipy.stats
 from pectoral_gym.agents.studies.seeds_report import plot_seeds, to_markdown
 
 __all__ = ["SETTINGS", "TARGETS", "aggregate", "iqm", "main", "run_seed", "run_seeds", "summarize_seeds",
-           "train_seeds"]
+           "train_seeds", "versioned"]
 
-TRAIN_ENV = "PectoralFish-Averaged-v0"
-# label -> (env id, randomised); as pectoral_gym.agents.studies.benchmark.ENVS
-SETTINGS = {"averaged": ("PectoralFish-Averaged-v0", False), "full": ("PectoralFish-Full-v0", False),
-            "full+rand": ("PectoralFish-Full-v0", True)}
+TRAIN_ENV = "PectoralFish-Averaged-v1"
+# label -> (env id, randomised) of the v1 envs; as pectoral_gym.agents.studies.benchmark.ENVS. versioned() gives
+# another version's.
+SETTINGS = {"averaged": ("PectoralFish-Averaged-v1", False), "full": ("PectoralFish-Full-v1", False),
+            "full+rand": ("PectoralFish-Full-v1", True)}
+TRAIN_ENVS = ("PectoralFish-Averaged-v0", "PectoralFish-Full-v0", "PectoralFish-Averaged-v1",
+              "PectoralFish-Full-v1")
+
+
+def versioned(env_id: str, train_env: str) -> str:
+    """``env_id`` in ``train_env``'s version (``-v0`` or ``-v1``): a policy is evaluated on the envs it trained for."""
+    return env_id.rsplit("-", 1)[0] + "-" + train_env.rsplit("-", 1)[1]
 TARGETS = {"full": 0.95, "full+rand": 0.90, "gap": 0.03}  # issue 16: success >= (gap averaged - full <=)
 REPORTED = ("success", "time_to_goal", "final_distance", "fin_work", "return", "wall")
 QUICK = {"n_timesteps": 2048, "n_envs": 8, "n_steps": 64, "batch_size": 128, "n_epochs": 1, "eval_freq": 1024,
@@ -150,6 +160,7 @@ def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None
     evaluations = {}
     for label in settings:
         env_id, randomised = SETTINGS[label]
+        env_id = versioned(env_id, train_env)
         put((seed, f"eval {label}", int(training["timesteps"])))
         kwargs = {**base, "randomize": dict(DEFAULT_RANDOMIZATION)} if randomised else dict(base)
         result = evaluate(policy, env_id, n_episodes=episodes, seed=eval_seed, env_kwargs=kwargs)
@@ -340,7 +351,7 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
                         help="seeds trained at once, each in its own process (1 torch thread each)")
     parser.add_argument("--out", default="seeds_out", help="output folder")
-    parser.add_argument("--train-env", choices=tuple(SETTINGS[k][0] for k in ("averaged", "full")),
+    parser.add_argument("--train-env", choices=TRAIN_ENVS,
                         default=TRAIN_ENV, help="env trained on (default: %(default)s, as the demo)")
     parser.add_argument("--timesteps", type=float, help="training steps (default: agents/hyperparams/ppo.yml)")
     parser.add_argument("--episodes", type=int, help="evaluation episodes per setting and seed (default 100, quick 4)")
@@ -373,7 +384,8 @@ def main(argv: list[str] | None = None) -> int:
         probe = None
         if args.probe_every:
             probe = {"every": args.probe_every, "episodes": 4 if args.quick else args.probe_episodes,
-                     "confirm_episodes": episodes, "keep_probing": True}  # the full model's learning curve
+                     "confirm_episodes": episodes, "keep_probing": True,  # the full model's learning curve
+                     "env_id": versioned(SETTINGS["full"][0], args.train_env)}
         command = shlex.join(["python", "-m", "pectoral_gym.agents.studies.seeds",
                               *(sys.argv[1:] if argv is None else argv)])
         report = run_seeds(args.seeds, args.out, jobs=args.jobs, overrides=overrides, episodes=episodes,
