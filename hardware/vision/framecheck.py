@@ -155,7 +155,7 @@ class FrameCheck:
                 continue
             new = image[top:bottom, left:right]
             old = crop[top - r0 : bottom - r0, left - c0 : right - c0]
-            change = float(np.mean(cv2.absdiff(new, old)))
+            change = cv2.norm(new, old, cv2.NORM_L1) / new.size  # the mean absolute difference, exactly
             smallest = min(smallest, change)
         self._regions.append((box, image[row0:row1, col0:col1].copy()))
         if math.isfinite(smallest):

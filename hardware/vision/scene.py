@@ -128,10 +128,10 @@ def _noise_bank(size: int) -> np.ndarray:
 
 @functools.lru_cache(maxsize=8)
 def _background(camera: CameraModel) -> np.ndarray:
-    """Floor and walls at one sample per pixel (cached per camera)."""
+    """Floor and walls at one sample per pixel (cached per camera; float32 holds the whole colour values exactly)."""
     v, u = np.mgrid[0 : camera.height, 0 : camera.width].astype(float)
     tank = camera.pixel_to_tank(np.stack([u, v], axis=-1))
-    image = np.empty((camera.height, camera.width, 3))
+    image = np.empty((camera.height, camera.width, 3), dtype=np.float32)
     image[:] = WALL_BGR
     image[_inside_tank(tank)] = FLOOR_BGR
     image.setflags(write=False)
@@ -188,6 +188,11 @@ def _patch_boxes(
     return boxes
 
 
+def _whole(colours: np.ndarray) -> bool:
+    """Whether every channel value is a whole number in [0, 255] (then ``B + 256 G + 65536 R`` names the colour)."""
+    return bool(np.all((colours >= 0) & (colours <= 255) & (colours == np.floor(colours))))
+
+
 def _render_patch(
     box: tuple[int, int, int, int], pose: tuple[float, float, float], camera: CameraModel, conditions: SceneConditions
 ) -> np.ndarray:
@@ -202,10 +207,15 @@ def _render_patch(
     grid_u, grid_v = np.meshgrid(np.arange(u0 - 1, u1 + 1, dtype=float), np.arange(v0 - 1, v1 + 1, dtype=float))
     centres = _paint(camera.pixel_to_tank(np.stack([grid_u, grid_v], axis=-1)), pose, conditions)
     inner = centres[1:-1, 1:-1]
+    # Colours are whole BGR triples, so one number per colour compares them all at once (exactly)
+    keys = centres @ np.array([1.0, 256.0, 65536.0]) if _whole(centres) else None
     uniform = np.ones((height, width), dtype=bool)
     for dv in (0, 1, 2):
         for du in (0, 1, 2):
-            uniform &= np.all(centres[dv:dv + height, du:du + width] == inner, axis=-1)
+            if keys is not None:
+                uniform &= keys[dv:dv + height, du:du + width] == keys[1:-1, 1:-1]
+            else:
+                uniform &= np.all(centres[dv:dv + height, du:du + width] == inner, axis=-1)
     colour = inner.copy()
     rows, cols = np.nonzero(~uniform)
     if rows.size:
