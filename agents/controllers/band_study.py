@@ -85,7 +85,7 @@ def _aim_observation(obs: np.ndarray, state: np.ndarray, goal: tuple[float, floa
     obs[OBS_TARGET_X], obs[OBS_TARGET_Y] = c * ex + s * ey, -s * ex + c * ey
 
 
-def run_episode(make_controller: Callable[[EnvConfig], object] | object, seed: int, env_id: str = "PectoralFish-Full-v0",
+def run_episode(make_controller: Callable[[EnvConfig], object] | None, seed: int, env_id: str = "PectoralFish-Full-v0",
                 substeps: int = 5, goal_inset: float | None = None, band: tuple[float, float, float] = ROBOT_BAND,
                 max_steps: int = 240, env_kwargs: dict | None = None, controller=None) -> EpisodeRecord:
     """Run one seeded goal episode and check the stopping band every ``control_period / substeps``.

@@ -19,6 +19,7 @@ import math
 
 import numpy as np
 
+from pectoral_gym.agents.controllers.band_shield import BandShield
 from pectoral_gym.agents.controllers.fin_map import FinMap
 from pectoral_gym.agents.controllers.turning import circle_room
 from pectoral_gym.envs.core import EnvConfig
@@ -74,7 +75,8 @@ class HandController:
     def __init__(self, config: EnvConfig, heading_gain: float = 1.5, rate_gain: float = 1.0,
                  speed_gain: float = 0.3, bias_gain: float = 0.0, bias_max: float = math.radians(15.0),
                  lookahead: float = 2.0, turn_level: float = 0.12, turn_radius: float = 0.25,
-                 alignment_power: float = 8.0, wall_margin: float = 0.15, escape_speed: float = 0.05):
+                 alignment_power: float = 8.0, wall_margin: float = 0.15, escape_speed: float = 0.05,
+                 shield: bool | dict = True):
         self.config = config
         self.fins = FinMap(config)
         self.heading_gain = float(heading_gain)
@@ -91,10 +93,15 @@ class HandController:
         self.half_length = 0.5 * config.params.body_length
         self.track = config.task == "track"
         self._heading: float | None = None
+        self.shield = None
+        if shield:
+            self.shield = BandShield(config, self.fins, **(shield if isinstance(shield, dict) else {}))
 
     def reset(self, seed: int | None = None) -> None:
         """Forget the previous heading (start of an episode)."""
         self._heading = None
+        if self.shield is not None:
+            self.shield.reset()
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Action for one observation ``(19,)``."""
@@ -105,7 +112,15 @@ class HandController:
         heading = math.atan2(o.sin_psi, o.cos_psi)
         rate = 0.0 if self._heading is None else _wrap(heading - self._heading) / self.config.control_period
         self._heading = heading
-        return self.fins.action(*self.command(o, rate))
+        b_r, a_r, b_l, a_l = self.command(o, rate)
+        if self.shield is None:
+            return self.fins.action(b_r, a_r, b_l, a_l)
+        f = self.fins
+        nominal = np.array([[b_r, a_r, f.period, f.ratio], [b_l, a_l, f.period, f.ratio]])
+        state = np.array([o.x, o.y, heading, o.vx, o.vy, o.omega])
+        patterns = self.shield.filter(state, nominal, a_r - a_l)
+        self.shield.applied(patterns)
+        return f.action(patterns[0, 0], patterns[0, 1], patterns[1, 0], patterns[1, 1])
 
     def command(self, o: Observation, rate: float) -> tuple[float, float, float, float]:
         """The law's fin patterns for one observation and yaw rate (no state is kept).

@@ -16,9 +16,32 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from pectoral_gym.model import tank
 
-__all__ = ["circle_room", "turn_path_length", "turn_paths"]
+__all__ = ["SPIN_CYCLE", "circle_room", "mirror", "turn_path_length", "turn_paths"]
+
+# The on-the-spot turn of pectoral_gym.agents.nmpc.spin (which explains it; found by docs/validation/nmpc/spin_cycle.py
+# for a 0.5 s period and ratio 5). Left turn (omega > 0), one row per control period: amplitude right/left, bias
+# right/left [deg] (the FinInputs order). The left fin parks and only swings its bias: its sweeps are the
+# transitional strokes that cancel the right fin's thrust.
+SPIN_CYCLE = np.radians([
+    [6.3, 0.1, 80.8, 66.3],
+    [7.8, 0.1, 92.2, 80.3],
+    [8.4, 0.0, 108.1, 93.9],
+    [6.1, 0.0, 70.9, 54.4],
+])
+
+
+def mirror(u: np.ndarray) -> np.ndarray:
+    """The mirror image of fin inputs ``(..., 4)`` (FinInputs order): the fins swap patterns.
+
+    A fin's lateral force and moment change sign with its side (eq. 25's side sign), its thrust does
+    not, so swapping the two fins' patterns mirrors the motion about the body axis.
+    """
+    u = np.asarray(u)
+    return u[..., [1, 0, 3, 2]]
 
 
 def _left_turn_path(gx: float, gy: float, radius: float) -> tuple[float, float]:

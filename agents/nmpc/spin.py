@@ -34,6 +34,7 @@ import math
 import numpy as np
 
 from pectoral_gym.agents.controllers.fin_map import FinMap
+from pectoral_gym.agents.controllers.turning import SPIN_CYCLE, mirror  # re-exported: the cycle's home is CasADi-free
 from pectoral_gym.agents.nmpc.problem import FinInputs
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.model.kfunctions import ScalingFunctions
@@ -42,15 +43,6 @@ from pectoral_gym.model.spec import AveragedSpec
 
 __all__ = ["SPIN_CYCLE", "SPIN_LENGTHS", "SPIN_PERIOD", "SPIN_RATIO", "SpinTurns", "mirror"]
 
-# Left turn (omega > 0), one row per control period: amplitude right/left, bias right/left [deg]
-# (the FinInputs order); docs/validation/nmpc/spin_cycle.py. The left fin parks and only swings its
-# bias: its sweeps are the transitional strokes that cancel the right fin's thrust.
-SPIN_CYCLE = np.radians([
-    [6.3, 0.1, 80.8, 66.3],
-    [7.8, 0.1, 92.2, 80.3],
-    [8.4, 0.0, 108.1, 93.9],
-    [6.1, 0.0, 70.9, 54.4],
-])
 SPIN_PERIOD = 0.5  # s: the fin-beat period the cycle was found for (the NMPC's fixed period)
 SPIN_RATIO = 5.0  # the speed ratio it was found for (the NMPC's fixed ratio)
 # Intervals a candidate spins before it swims straight (besides the candidates that spin until they face
@@ -59,16 +51,6 @@ SPIN_RATIO = 5.0  # the speed ratio it was found for (the NMPC's fixed ratio)
 # camera loop, and threads on busy cores made solve times spike.
 SPIN_LENGTHS = (1, 2, 3, 4, 6, 8)
 AIM = np.radians(10.0)  # an aiming candidate stops spinning once the target is this close to straight ahead
-
-
-def mirror(u: np.ndarray) -> np.ndarray:
-    """The mirror image of fin inputs ``(..., 4)`` (FinInputs order): the fins swap patterns.
-
-    A fin's lateral force and moment change sign with its side (eq. 25's side sign), its thrust does
-    not, so swapping the two fins' patterns mirrors the motion about the body axis.
-    """
-    u = np.asarray(u)
-    return u[..., [1, 0, 3, 2]]
 
 
 class SpinTurns:

@@ -1,0 +1,181 @@
+"""A safety filter for the hand law: keep the fish where it can still get out of the robot's stopping band.
+
+The robot's geofence stops the fish once any part of its outline is closer to a wall than
+``margin + v t_r + ln(1 + k v T) / k`` (:class:`pectoral_gym.agents.controllers.stop_band.StopBand`). Being
+outside that band now is not enough: the fish's thrust cannot reverse within the env's ratio range
+(eq. 25, ``(zeta^2 - 1) >= 0``), its turning circle has a radius of ~0.25 m whatever the thrust (with
+quadratic surge and yaw damping, eqs. 19-20, the steady radius does not depend on the force), and
+coasting does not keep it outside either: a fish coasting from ``v0`` covers ``ln(1 + k v0 t) / k`` in
+``t`` s and its remaining ``T``-horizon coast adds up to ``ln(1 + k v0 (t + T)) / k``, which grows
+without bound, so a fish drifting towards a wall reaches the band after
+``(exp(k (gap - margin)) - 1) / (k v0) - T`` s.
+
+The filter is a backup shield (the "backup controller" form of a control barrier function): a set of
+backup manoeuvres (coast with the fins still; turn left or right with one fin at a low level for
+1 to 16 control periods, then coast) is known, and a command is allowed when, applied for one control
+period and followed by some backup, the rollout on the planning model
+(:func:`pectoral_gym.agents.controllers.fin_map.planning_spec`) stays out of the band, checked every
+``check`` s, for ``horizon`` s. Otherwise the first interval of the best backup from now is applied:
+a safe one if any (the turn to the side the law wanted first), else the one with the least shortfall.
+If the nominal command was allowed at the last step, a backup from here is available at this one (in
+the model), so the fish keeps an escape. The band is checked with ``extra_margin`` more clearance than
+the robot's: the planning model's cycle-averaged velocity misses the full model's in-beat swing.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pectoral_gym.agents.controllers.fin_map import FinMap
+from pectoral_gym.agents.controllers.stop_band import StopBand, band_violation
+from pectoral_gym.agents.controllers.turning import SPIN_CYCLE, mirror
+from pectoral_gym.envs.core import EnvConfig
+
+__all__ = ["BACKUP_SPINS", "BACKUP_TURNS", "SLOWER", "BandShield"]
+
+BACKUP_TURNS = (4, 8, 16, 32)  # control periods a backup turns before it coasts
+BACKUP_SPINS = (4, 8, 12, 20)  # control periods a backup spins (turning.SPIN_CYCLE) before it coasts
+SPIN_PERIOD, SPIN_RATIO = 0.5, 5.0  # the fin-beat period [s] and ratio the spin cycle was found for
+SLOWER = (1.0, 0.5)  # the law's amplitudes scaled by these (thrust ~ amplitude^2, eq. 25) before a backup
+
+
+class BandShield:
+    """Filters fin patterns so that a backup manoeuvre out of the stopping band always remains.
+
+    Args:
+        config: The environment settings.
+        fins: The controller's fin map (period, ratio, amplitudes, planning model).
+        band: The robot's band ``(margin [m], reaction time [s], horizon [s])``.
+        extra_margin: Clearance [m] added to the band's margin in the rollouts.
+        horizon: Length of each rollout [s].
+        check: Band check interval along the rollouts [s] (a divisor of the control period).
+        turn_level: Thrust level (0..1, :meth:`FinMap.amplitude`) of the one fin a backup turn beats with.
+        tail: The last state of a rollout must keep clear for ``tail`` s more of coasting [s] (the band's horizon
+            ``T + tail`` there): a fish that coasts towards a wall reaches it at last, however slowly.
+    """
+
+    def __init__(self, config: EnvConfig, fins: FinMap, band: tuple[float, float, float] = (0.05, 0.15, 5.0),
+                 extra_margin: float = 0.02, horizon: float = 16.0, check: float = 0.5, turn_level: float = 0.06,
+                 tail: float = 30.0):
+        self.config = config
+        self.fins = fins
+        margin, reaction, coast = band
+        self.band = StopBand.from_params(config.params, margin + extra_margin, reaction, coast)
+        self.final = StopBand.from_params(config.params, margin + extra_margin, reaction, coast + tail)
+        self.dt = float(config.control_period)
+        self.intervals = max(1, int(round(horizon / self.dt)))
+        self.checks = max(1, int(round(self.dt / check)))
+        rest = (fins.bias_mid, 0.0, fins.period, fins.ratio)
+        one_fin = (fins.bias_mid, fins.amplitude(turn_level), fins.period, fins.ratio)
+        self.rest = np.array([rest, rest])
+        left, right = np.array([one_fin, rest]), np.array([rest, one_fin])  # the right fin alone turns left
+        n = self.intervals
+        plans, sides = [np.broadcast_to(self.rest, (n, 2, 4))], [0.0]
+        for side, turn in ((1.0, left), (-1.0, right)):
+            for m in BACKUP_TURNS:
+                plans.append(np.array([turn if k < m else self.rest for k in range(n)]))
+                sides.append(side)
+        self.sides = np.array(sides)
+        self.backups = np.repeat(np.array(plans)[None], len(SPIN_CYCLE), axis=0)  # (spin phase, backups, n, 2, 4)
+        low, high = config.amplitude_range
+        b_low, b_high = config.bias_range
+        self.spins = bool(math.isclose(fins.period, SPIN_PERIOD) and math.isclose(fins.ratio, SPIN_RATIO)
+                          and np.all((SPIN_CYCLE[:, :2] >= low) & (SPIN_CYCLE[:, :2] <= high))
+                          and np.all((SPIN_CYCLE[:, 2:] >= b_low) & (SPIN_CYCLE[:, 2:] <= b_high)))
+        if self.spins:  # on-the-spot turns: the cycle from each phase, left and right (mirrored)
+            spin_plans = []
+            for phase in range(len(SPIN_CYCLE)):
+                rows = []
+                for side in (1.0, -1.0):
+                    for m in BACKUP_SPINS:
+                        plan = np.array(np.broadcast_to(self.rest, (n, 2, 4)))
+                        for k in range(min(m, n)):
+                            u = SPIN_CYCLE[(phase + k) % len(SPIN_CYCLE)]
+                            u = u if side > 0 else mirror(u)  # amplitude R/L, bias R/L
+                            plan[k, :, 0], plan[k, :, 1] = u[2:], u[:2]
+                        rows.append(plan)
+                spin_plans.append(rows)
+            self.backups = np.concatenate([self.backups, np.array(spin_plans)], axis=1)
+            self.sides = np.concatenate([self.sides, np.repeat([1.0, -1.0], len(BACKUP_SPINS))])
+        self._shadow = fins.spec.build(1, config.params, k=fins.scaling)
+        self._batch = None
+        self.interventions = self.slowed = self._phase = 0
+
+    def reset(self) -> None:
+        """Start of an episode: the shadow fins at rest at the start of a power stroke, as the envs reset them."""
+        self._shadow.reset()
+        self.interventions = self.slowed = self._phase = 0
+
+    def applied(self, patterns: np.ndarray) -> None:
+        """Follow the patterns ``(2, 4)`` the controller sent, for one control period."""
+        self._shadow.command_array(self._latched(patterns)[None], validate=False)
+        self._shadow.advance(self.dt)
+        self._phase = (self._phase + 1) % len(SPIN_CYCLE)
+
+    def _latched(self, patterns: np.ndarray) -> np.ndarray:
+        """What the env latches for ``patterns`` ``(..., 2, 4)``: clipped to its ranges."""
+        return self.config.decode(self.config.encode(np.asarray(patterns, dtype=np.float64)))
+
+    def shortfalls(self, state: np.ndarray, firsts: np.ndarray) -> np.ndarray:
+        """Band shortfall [m^2] summed along each rollout: each of ``firsts`` then each backup; each backup from now.
+
+        Args:
+            state: Body state ``(X, Y, psi, vx, vy, omega)`` (the fins are the shadow's).
+            firsts: Patterns ``(F, 2, 4)`` for the first control period.
+
+        Returns:
+            ``(F + 1, backups)``: row ``i < F`` after ``firsts[i]``, the last row from now.
+        """
+        backups = self.backups[self._phase]
+        nb, nf = len(backups), len(firsts)
+        if self._batch is None or self._batch.n != (nf + 1) * nb:
+            self._batch = self.fins.spec.build((nf + 1) * nb, self.config.params, k=self.fins.scaling)
+        b = self._batch
+        plans = np.tile(backups, (nf + 1, 1, 1, 1))
+        plans[:nf * nb, 0] = np.repeat(firsts, nb, axis=0)
+        plans = self._latched(plans)
+        b.state[:] = state
+        b.fins[:] = self._shadow.fins[0]
+        b.pending[:] = self._shadow.pending[0]
+        b.forcing_cache[:] = self._shadow.forcing_cache[0]
+        total = np.zeros(b.n)
+        h = self.dt / self.checks
+        for k in range(self.intervals):
+            b.command_array(plans[:, k], validate=False)
+            for _ in range(self.checks):
+                s = b.advance(h)
+                total += band_violation(s[:, 0], s[:, 1], s[:, 2], s[:, 3], s[:, 4], self.band, np)
+        total += band_violation(s[:, 0], s[:, 1], s[:, 2], s[:, 3], s[:, 4], self.final, np)
+        return total.reshape(nf + 1, nb)
+
+    def filter(self, state: np.ndarray, nominal: np.ndarray, side: float) -> np.ndarray:
+        """The patterns ``(2, 4)`` to send: ``nominal``, or slowed (:data:`SLOWER`), if a backup remains after it.
+
+        Otherwise the first interval of the best backup from now.
+
+        Args:
+            state: Body state ``(6,)`` estimated from the observation.
+            nominal: The law's patterns ``(2, 4)``.
+            side: The turn the law wants (> 0 left, < 0 right): the backup turning that way wins ties.
+        """
+        nominal = np.asarray(nominal, dtype=np.float64)
+        firsts = np.repeat(nominal[None], len(SLOWER), axis=0)
+        firsts[:, :, 1] *= np.asarray(SLOWER)[:, None]
+        rows = self.shortfalls(np.asarray(state, dtype=np.float64), firsts)
+        for i in range(len(SLOWER)):
+            if np.min(rows[i]) <= 0.0:
+                if i > 0:
+                    self.slowed += 1
+                return firsts[i]
+        now = rows[-1]
+        self.interventions += 1
+        safe = now <= 0.0
+        if np.any(safe):
+            # a turn to the law's side first, then the shortest turn (the coast counts as the shortest)
+            preference = np.where(self.sides * side > 0, 0, 1) * len(self.sides) + np.arange(len(self.sides))
+            best = int(np.argmin(np.where(safe, preference, np.iinfo(np.int64).max)))
+        else:
+            best = int(np.argmin(now))
+        return self.backups[self._phase, best, 0].copy()
