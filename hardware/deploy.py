@@ -10,7 +10,9 @@ Examples::
 ``--controller nmpc`` plans on the averaged model (:class:`pectoral_gym.agents.nmpc.controller.NMPCController`, the same
 controller as in simulation) with its step budget set to ``--solve-fraction`` of the control period
 (wall time, so divided by ``--speed`` when emulated): a solve that fails or ends later than that is not
-applied, and the rest of the last plan (then both fins at rest) is sent instead.
+applied, and the rest of the last plan (then both fins at rest) is sent instead. In lockstep a step's
+computing costs no simulated time (as in PX4's lockstep), so no budget applies: measure a controller's
+timing in real time.
 
 ``--emulate --lockstep`` runs the emulated robot and the whole PC stack (the same link, firmware, supervisor,
 camera renderer, tracker and observer) in simulated time (:mod:`pectoral_gym.hardware.emurig`): as fast as the
@@ -24,11 +26,12 @@ reward, ends, link and tracking health, and the true pose when emulated), ``summ
 
 from __future__ import annotations
 
-import argparse
 import contextlib
+import dataclasses
 import json
 import math
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
@@ -37,17 +40,13 @@ from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.hardware.clock import REAL_CLOCK
 from pectoral_gym.hardware.deploy_checks import (
     CONTROL_PERIOD_RANGE,
-    DEFAULT_NICE,
-    MIN_TRACKING_WALL,
-    NICE_RANGE,
-    SPEED_RANGE,
     check_frame_size,
     env_settings,
     first_frame,
     raise_priority,
-    robot_address,
 )
-from pectoral_gym.hardware.emurig import RigConditions, open_rig
+from pectoral_gym.hardware.deploy_cli import check_args, make_parser, rig_conditions
+from pectoral_gym.hardware.emurig import open_rig
 from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handlers
 
 __all__ = ["main", "make_controller", "run_episodes", "plot_trajectories", "solver_summary"]
@@ -165,155 +164,18 @@ def solver_summary(controller) -> dict:
             "failures": int(controller.failures), "late": int(controller.late)}
 
 
-_EXAMPLES = """examples:
-  python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --emulate --speed 2 --episodes 2 --out dryrun
-  python -m pectoral_gym.hardware.deploy --controller nmpc --emulate --speed 2 --episodes 1
-  python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --episodes 100 --out lockstep
-  python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --radio-latency 0.1 \
-      --radio-loss 0.1 --camera-drop 0.1 --pose-noise-mm 5 --pose-noise-deg 2
-  python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 \
-      --calibration calibration.json --robot-address 0013A20012345678 --episodes 3 --out tank-run
-
-exit status: 0 done; 1 a device failed (no frame, no fish seen, robot not answering); 2 a bad argument."""
-
-
-def _parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.hardware.deploy",
-                                     description=__doc__.split("\n\n")[0],
-                                     epilog=_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
-    lo_speed, hi_speed = SPEED_RANGE
-    lo_period, hi_period = CONTROL_PERIOD_RANGE
-    parser.add_argument("--controller", choices=("policy", "nmpc", "hand"), default="policy",
-                        help="what drives the fish (default %(default)s: needs --policy)")
-    parser.add_argument("--policy", default=None, metavar="RUN_OR_ZIP",
-                        help="pectoral_gym.agents.training.train or rl-baselines3-zoo run folder, or an SB3 .zip "
-                             "(pectoral_gym.agents.training.policy.load_policy)")
-    parser.add_argument("--solve-fraction", type=float, default=0.5, metavar="F",
-                        help="nmpc: share of the control period a step's solves may take, in (0, 1] "
-                             "(default %(default)s)")
-    parser.add_argument("--port", default=None,
-                        help="robot radio, a serial URL: /dev/ttyUSB0, socket://HOST:PORT, ... (required without "
-                             "--emulate)")
-    parser.add_argument("--camera", default=None,
-                        help="camera index, stream URL, video file or emu://HOST:PORT (required without --emulate)")
-    parser.add_argument("--emulate", action="store_true",
-                        help="start an emulated robot and camera in this process (no --port, --camera, "
-                             "--robot-address)")
-    parser.add_argument("--lockstep", action="store_true",
-                        help="--emulate only: run the emulated robot and this program's whole robot stack in "
-                             "simulated time, as fast as the CPU allows; the same seed gives the same run "
-                             "(no --speed)")
-    for flag, unit, text in (("--radio-latency", "S", "one-way delay of each radio frame [s]"),
-                             ("--radio-jitter", "S", "extra one-way radio delay, uniform in [0, S] [s]"),
-                             ("--radio-loss", "P", "probability that a radio frame is lost, each way, in [0, 1)"),
-                             ("--camera-latency", "S", "delay from a frame's capture to the PC [s]"),
-                             ("--camera-drop", "P", "probability that a camera frame is lost, in [0, 1]"),
-                             ("--pose-noise-mm", "MM", "standard deviation of the noise on the camera's X and Y [mm]"),
-                             ("--pose-noise-deg", "DEG", "standard deviation of the noise on its heading [deg]")):
-        parser.add_argument(flag, type=float, default=0.0, metavar=unit,
-                            help=f"--emulate only, seeded: {text} (default %(default)s)")
-    parser.add_argument("--episodes", type=int, default=1, help="number of episodes, >= 1 (default %(default)s)")
-    parser.add_argument("--task", choices=("goal", "track"), default=None,
-                        help="task (default: the policy's own from its run folder, else goal); a policy is refused "
-                             "under another task than it was trained on")
-    parser.add_argument("--control-period", type=float, default=None, metavar="S",
-                        help=f"seconds between actions, in [{lo_period}, {hi_period}] (default: the policy's own "
-                             "from its run folder, else 0.5); a policy is refused at another period")
-    parser.add_argument("--max-steps", type=int, default=240, help="steps per episode, >= 1 (default %(default)s)")
-    parser.add_argument("--speed", type=float, default=1.0,
-                        help=f"emulated clock speed-up, in [{lo_speed}, {hi_speed}] (--emulate only; "
-                             "default %(default)s)")
-    parser.add_argument("--calibration", default=None, metavar="JSON",
-                        help="camera calibration (python -m pectoral_gym.hardware.vision.calibrate), made at the "
-                             "camera's resolution (default: the emulator's camera model)")
-    parser.add_argument("--geofence", type=float, default=0.05, metavar="M",
-                        help="clearance kept from the walls on top of the stopping distance [m] (default %(default)s)")
-    parser.add_argument("--robot-address", type=robot_address, default=None, metavar="HEX",
-                        help="64-bit address of the robot's XBee, 16 hex digits, e.g. 0013A20012345678 "
-                             "(default: broadcast, which every robot on the channel obeys)")
-    parser.add_argument("--take-over", action="store_true",
-                        help="take control of a robot that another live session (a second PC, a leftover script) "
-                             "is driving: the robot then obeys this program only, and the other session is told "
-                             "it lost control. Without it such a robot refuses our commands (robot_busy). Use "
-                             "only when you know nobody relies on the other session")
-    parser.add_argument("--tracking-timeout", type=float, default=0.5, metavar="S",
-                        help="stop when the fish has not been seen for this long [s]; at least "
-                             f"{MIN_TRACKING_WALL} s of wall time (timeout / speed) (default %(default)s)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of targets and emulated starts, >= 0 "
-                                                            "(default %(default)s)")
-    parser.add_argument("--out", default="deploy_out", help="output folder (default %(default)s)")
-    parser.add_argument("--no-prompt", action="store_true",
-                        help="do not ask to place the fish before each episode (real robot)")
-    parser.add_argument("--nice", type=int, default=DEFAULT_NICE, metavar="N",
-                        help="run at this nice value, in [-20, 0]: above the machine's other work, so that frames "
-                             "are tracked in time under CPU load (needs root or a 'nice' limit in "
-                             "/etc/security/limits.conf; else a warning; 0: leave it) (default %(default)s)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
-    return parser
-
-
-def _check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
-    """Every range and combination check of the arguments alone; ``parser.error`` (exit 2) on the first fault."""
-    if args.emulate:
-        extra = [flag for flag, value in (("--port", args.port), ("--camera", args.camera),
-                                          ("--robot-address", args.robot_address)) if value is not None]
-        if extra:
-            parser.error(f"{' and '.join(extra)} cannot be used with --emulate (the emulated robot brings its own "
-                         "radio and camera)")
-    elif args.port is None or args.camera is None:
-        parser.error("--port and --camera are required unless --emulate is given")
-    if args.lockstep and not args.emulate:
-        parser.error("--lockstep needs --emulate (a real robot runs in real time)")
-    if args.lockstep and args.speed != 1.0:
-        parser.error("--speed does not apply with --lockstep (simulated time runs as fast as the CPU allows)")
-    if not args.emulate and rig_conditions(args) != RigConditions():
-        parser.error("--radio-*, --camera-* and --pose-noise-* degrade the emulated robot: they need --emulate")
-    if (args.controller == "policy") != (args.policy is not None):
-        parser.error("--policy is needed with --controller policy, and only then")
-    for flag, value in (("--episodes", args.episodes), ("--max-steps", args.max_steps)):
-        if value < 1:
-            parser.error(f"{flag} must be >= 1, got {value}")
-    if args.seed < 0:
-        parser.error(f"--seed must be >= 0, got {args.seed}")
-    if not math.isfinite(args.speed) or not SPEED_RANGE[0] <= args.speed <= SPEED_RANGE[1]:
-        parser.error(f"--speed must be in [{SPEED_RANGE[0]}, {SPEED_RANGE[1]}] (what the emulator keeps up with), "
-                     f"got {args.speed}")
-    if args.speed != 1.0 and not args.emulate:
-        parser.error("--speed applies with --emulate only (a real robot runs in real time)")
-    if not NICE_RANGE[0] <= args.nice <= NICE_RANGE[1]:
-        parser.error(f"--nice must be in [{NICE_RANGE[0]}, {NICE_RANGE[1]}], got {args.nice}")
-    if not 0 < args.solve_fraction <= 1:
-        parser.error(f"--solve-fraction must be in (0, 1], got {args.solve_fraction}")
-    if not (math.isfinite(args.geofence) and args.geofence >= 0):
-        parser.error(f"--geofence must be a finite number >= 0 m, got {args.geofence}")
-    if not (math.isfinite(args.tracking_timeout) and args.tracking_timeout / args.speed >= MIN_TRACKING_WALL):
-        parser.error(f"--tracking-timeout must be a finite number with timeout / speed >= {MIN_TRACKING_WALL} s of "
-                     f"wall time (3 frames at 30 fps), got {args.tracking_timeout} at speed {args.speed}")
-    if args.control_period is not None and not (
-            math.isfinite(args.control_period)
-            and CONTROL_PERIOD_RANGE[0] <= args.control_period <= CONTROL_PERIOD_RANGE[1]):
-        parser.error(f"--control-period must be in [{CONTROL_PERIOD_RANGE[0]}, {CONTROL_PERIOD_RANGE[1]}] s, "
-                     f"got {args.control_period}")
-
-
-def rig_conditions(args: argparse.Namespace) -> RigConditions:
-    """The emulated rig's conditions from the arguments (``ValueError`` if one is out of range)."""
-    return RigConditions(args.radio_latency, args.radio_jitter, args.radio_loss, args.camera_latency,
-                         args.camera_drop, (args.pose_noise_mm * 1e-3, math.radians(args.pose_noise_deg)))
-
-
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit status (0 done, 1 a device failed; 2 via SystemExit: bad argument).
 
     Every resource (emulated robot, radio link, camera, env) is released on every path out.
     """
-    parser = _parser()
+    parser = make_parser(__doc__.split("\n\n")[0])
     args = parser.parse_args(argv)
     try:
         conditions = rig_conditions(args)
     except ValueError as err:
         parser.error(f"--radio-*, --camera-*, --pose-noise-*: {err}")
-    _check_args(parser, args)
+    check_args(parser, args)
     controller = None
     if args.controller == "policy":
         from pectoral_gym.agents.training.policy import load_policy  # lazy: agents/ pulls in torch
@@ -377,14 +239,15 @@ def main(argv: list[str] | None = None) -> int:
                                   clock=clock, **settings)
             resources.callback(env.close)
             resources.callback(install_stop_handlers(env.stop))
-            if controller is None:
-                controller = make_controller(args.controller, env.config, args.solve_fraction * period / args.speed,
-                                             safety)
+            if controller is None:  # lockstep: a step's computing costs no simulated time, so no budget applies
+                budget = math.inf if args.lockstep else args.solve_fraction * period / args.speed
+                controller = make_controller(args.controller, env.config, budget, safety)
         except ValueError as err:  # the settings, found wrong by the devices or the env
             parser.error(str(err))
         except (RuntimeError, OSError) as err:  # a device that does not answer or cannot be opened
             print(f"{parser.prog}: error: {err}", file=sys.stderr)
             return 1
+        started = time.perf_counter()
         try:
             summaries = run_episodes(env, controller, args.episodes, out / "steps.jsonl", args.seed, robot,
                                      progress=not args.quiet)
@@ -395,6 +258,10 @@ def main(argv: list[str] | None = None) -> int:
     report = {"controller": args.controller, "policy": None if args.policy is None else str(args.policy),
               "settings": {k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()},
               "episodes": summaries, "link": link}
+    report["wall_time"] = time.perf_counter() - started  # s for the episodes (the one field a lockstep rerun changes)
+    if args.emulate:
+        report["emulation"] = {"lockstep": args.lockstep, "speed": args.speed, "seed": args.seed,
+                               "conditions": dataclasses.asdict(conditions)}
     if hasattr(controller, "solve_times"):
         report["solver"] = solver_summary(controller)
     (out / "summary.json").write_text(json.dumps(report, indent=2), encoding="utf-8")
@@ -403,7 +270,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"episode {s['episode']}: return {s['return']:.3f}, {s['steps']} steps, "
               f"stop: {s['safety_stop'] or ('success' if s['success'] else 'end')}")
     print(f"log {out / 'steps.jsonl'}, plot {out / 'trajectory.png'}; link: sent {link['sent']}, "
-          f"acked {link['acked']}, retries {link['retries']}, crc errors {link['crc_errors']}")
+          f"acked {link['acked']}, retries {link['retries']}, crc errors {link['crc_errors']}; "
+          f"{len(summaries)} episodes in {report['wall_time']:.1f} s wall time")
     return 0
 
 

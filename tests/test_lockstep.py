@@ -178,7 +178,9 @@ def _deploy(tmp_path, name, *extra):
     args = ["--controller", "hand", "--emulate", "--lockstep", "--episodes", "2", "--max-steps", "8", "--seed", "5",
             "--out", str(out), "--quiet", "--nice", "0", *extra]
     assert _in_thread(lambda: deploy.main(args)) == 0
-    return (out / "steps.jsonl").read_text(encoding="utf-8"), json.loads((out / "summary.json").read_text())
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary.pop("wall_time") > 0  # the one field that may differ
+    return (out / "steps.jsonl").read_text(encoding="utf-8"), summary
 
 
 def test_lockstep_deployment_repeats_itself_for_a_seed(tmp_path):
@@ -196,6 +198,7 @@ def test_lockstep_deployment_repeats_itself_for_a_seed(tmp_path):
     first = [r["t"] for r in steps if r["episode"] == 0]
     assert np.allclose(np.diff(first)[:-1], 0.5, atol=1e-6)
     assert summary_a["link"]["retries"] > 0  # the lossy radio was in the loop
+    assert summary_a["emulation"]["lockstep"] and summary_a["emulation"]["conditions"]["radio_loss"] == 0.1
 
 
 
@@ -235,3 +238,21 @@ def test_lockstep_and_real_time_agree_on_a_scripted_swim():
     assert end_virtual[0] - start_virtual[0] > 0.05  # it swam: the comparison means something
     assert end_virtual[:2] == pytest.approx(end_real[:2], abs=0.02)
     assert abs(end_virtual[2] - end_real[2]) < 0.05
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--lockstep"], "--lockstep needs --emulate"),
+    (["--emulate", "--lockstep", "--speed", "2"], "--speed does not apply with --lockstep"),
+    (["--emulate", "--radio-loss", "1"], "radio_loss must be in [0, 1)"),
+    (["--emulate", "--camera-drop", "-0.1"], "camera_drop must be in [0, 1]"),
+    (["--emulate", "--pose-noise-mm", "nan"], "pose_noise must be"),
+    (["--emulate", "--radio-latency", "-1"], "radio_latency must be a finite number"),
+    (["--port", "/dev/null", "--camera", "0", "--radio-loss", "0.1"], "need --emulate"),
+])
+def test_lockstep_and_condition_flags_are_checked(args, message, capsys):
+    from pectoral_gym.hardware import deploy
+
+    with pytest.raises(SystemExit) as exit_info:
+        deploy.main(["--controller", "hand", "--quiet", *args])
+    assert exit_info.value.code == 2
+    assert message in capsys.readouterr().err

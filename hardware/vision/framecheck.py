@@ -10,8 +10,8 @@ noise alone (photon shot noise, read noise) makes two exposures of a still scene
 region of more than a few pixels. So:
 
 * **whole image**: a bit-identical repeat of *any* of the last ``history`` images is frozen (a driver
-  cycling its last few buffers repeats an image within as many frames). The digest is BLAKE2b over the
-  raw pixels (about 1 ms for a 640 x 480 image).
+  cycling its last few buffers repeats an image within as many frames). The digest is SHA-256 over the
+  raw pixels (computed by the SHA instructions of current processors).
 * **fish region** (``region``, a pixel box around the fish's last sighting, from the caller): a repeat
   of that region's content among the recent frames is frozen, even when the rest of the image changes
   (a frozen sensor under a camera's running clock overlay). "Repeat" means a mean absolute difference
@@ -134,7 +134,7 @@ class FrameCheck:
         if t < now - self.max_age:
             return "frame_too_old"
         self.last_timestamp = t  # a frozen frame still moves the clock on: its stamp was sane
-        digest = hashlib.blake2b(np.ascontiguousarray(image).data, digest_size=16).digest()
+        digest = hashlib.sha256(np.ascontiguousarray(image).data).digest()
         frozen = digest in self._digests
         self._digests.append(digest)
         self.last_change = math.nan

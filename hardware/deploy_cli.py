@@ -1,0 +1,155 @@
+"""The command line of ``python -m pectoral_gym.hardware.deploy``: its arguments and every check of them alone."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from pectoral_gym.hardware.deploy_checks import (
+    CONTROL_PERIOD_RANGE,
+    DEFAULT_NICE,
+    MIN_TRACKING_WALL,
+    NICE_RANGE,
+    SPEED_RANGE,
+    robot_address,
+)
+from pectoral_gym.hardware.emurig import RigConditions
+
+__all__ = ["check_args", "make_parser", "rig_conditions"]
+
+_EXAMPLES = """examples:
+  python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --emulate --speed 2 --episodes 2 --out dryrun
+  python -m pectoral_gym.hardware.deploy --controller nmpc --emulate --speed 2 --episodes 1
+  python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --episodes 100 --out lockstep
+  python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --radio-latency 0.1 \
+      --radio-loss 0.1 --camera-drop 0.1 --pose-noise-mm 5 --pose-noise-deg 2
+  python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 \
+      --calibration calibration.json --robot-address 0013A20012345678 --episodes 3 --out tank-run
+
+exit status: 0 done; 1 a device failed (no frame, no fish seen, robot not answering); 2 a bad argument."""
+
+
+def make_parser(description: str) -> argparse.ArgumentParser:
+    """The argument parser of ``python -m pectoral_gym.hardware.deploy`` (``description``: its first line)."""
+    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.hardware.deploy",
+                                     description=description,
+                                     epilog=_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    lo_speed, hi_speed = SPEED_RANGE
+    lo_period, hi_period = CONTROL_PERIOD_RANGE
+    parser.add_argument("--controller", choices=("policy", "nmpc", "hand"), default="policy",
+                        help="what drives the fish (default %(default)s: needs --policy)")
+    parser.add_argument("--policy", default=None, metavar="RUN_OR_ZIP",
+                        help="pectoral_gym.agents.training.train or rl-baselines3-zoo run folder, or an SB3 .zip "
+                             "(pectoral_gym.agents.training.policy.load_policy)")
+    parser.add_argument("--solve-fraction", type=float, default=0.5, metavar="F",
+                        help="nmpc: share of the control period a step's solves may take, in (0, 1] "
+                             "(default %(default)s)")
+    parser.add_argument("--port", default=None,
+                        help="robot radio, a serial URL: /dev/ttyUSB0, socket://HOST:PORT, ... (required without "
+                             "--emulate)")
+    parser.add_argument("--camera", default=None,
+                        help="camera index, stream URL, video file or emu://HOST:PORT (required without --emulate)")
+    parser.add_argument("--emulate", action="store_true",
+                        help="start an emulated robot and camera in this process (no --port, --camera, "
+                             "--robot-address)")
+    parser.add_argument("--lockstep", action="store_true",
+                        help="--emulate only: run the emulated robot and this program's whole robot stack in "
+                             "simulated time, as fast as the CPU allows; the same seed gives the same run "
+                             "(no --speed)")
+    for flag, unit, text in (("--radio-latency", "S", "one-way delay of each radio frame [s]"),
+                             ("--radio-jitter", "S", "extra one-way radio delay, uniform in [0, S] [s]"),
+                             ("--radio-loss", "P", "probability that a radio frame is lost, each way, in [0, 1)"),
+                             ("--camera-latency", "S", "delay from a frame's capture to the PC [s]"),
+                             ("--camera-drop", "P", "probability that a camera frame is lost, in [0, 1]"),
+                             ("--pose-noise-mm", "MM", "standard deviation of the noise on the camera's X and Y [mm]"),
+                             ("--pose-noise-deg", "DEG", "standard deviation of the noise on its heading [deg]")):
+        parser.add_argument(flag, type=float, default=0.0, metavar=unit,
+                            help=f"--emulate only, seeded: {text} (default %(default)s)")
+    parser.add_argument("--episodes", type=int, default=1, help="number of episodes, >= 1 (default %(default)s)")
+    parser.add_argument("--task", choices=("goal", "track"), default=None,
+                        help="task (default: the policy's own from its run folder, else goal); a policy is refused "
+                             "under another task than it was trained on")
+    parser.add_argument("--control-period", type=float, default=None, metavar="S",
+                        help=f"seconds between actions, in [{lo_period}, {hi_period}] (default: the policy's own "
+                             "from its run folder, else 0.5); a policy is refused at another period")
+    parser.add_argument("--max-steps", type=int, default=240, help="steps per episode, >= 1 (default %(default)s)")
+    parser.add_argument("--speed", type=float, default=1.0,
+                        help=f"emulated clock speed-up, in [{lo_speed}, {hi_speed}] (--emulate only; "
+                             "default %(default)s)")
+    parser.add_argument("--calibration", default=None, metavar="JSON",
+                        help="camera calibration (python -m pectoral_gym.hardware.vision.calibrate), made at the "
+                             "camera's resolution (default: the emulator's camera model)")
+    parser.add_argument("--geofence", type=float, default=0.05, metavar="M",
+                        help="clearance kept from the walls on top of the stopping distance [m] (default %(default)s)")
+    parser.add_argument("--robot-address", type=robot_address, default=None, metavar="HEX",
+                        help="64-bit address of the robot's XBee, 16 hex digits, e.g. 0013A20012345678 "
+                             "(default: broadcast, which every robot on the channel obeys)")
+    parser.add_argument("--take-over", action="store_true",
+                        help="take control of a robot that another live session (a second PC, a leftover script) "
+                             "is driving: the robot then obeys this program only, and the other session is told "
+                             "it lost control. Without it such a robot refuses our commands (robot_busy). Use "
+                             "only when you know nobody relies on the other session")
+    parser.add_argument("--tracking-timeout", type=float, default=0.5, metavar="S",
+                        help="stop when the fish has not been seen for this long [s]; at least "
+                             f"{MIN_TRACKING_WALL} s of wall time (timeout / speed) (default %(default)s)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of targets and emulated starts, >= 0 "
+                                                            "(default %(default)s)")
+    parser.add_argument("--out", default="deploy_out", help="output folder (default %(default)s)")
+    parser.add_argument("--no-prompt", action="store_true",
+                        help="do not ask to place the fish before each episode (real robot)")
+    parser.add_argument("--nice", type=int, default=DEFAULT_NICE, metavar="N",
+                        help="run at this nice value, in [-20, 0]: above the machine's other work, so that frames "
+                             "are tracked in time under CPU load (needs root or a 'nice' limit in "
+                             "/etc/security/limits.conf; else a warning; 0: leave it) (default %(default)s)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    return parser
+
+
+def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Every range and combination check of the arguments alone; ``parser.error`` (exit 2) on the first fault."""
+    if args.lockstep and not args.emulate:
+        parser.error("--lockstep needs --emulate (a real robot runs in real time)")
+    if args.emulate:
+        extra = [flag for flag, value in (("--port", args.port), ("--camera", args.camera),
+                                          ("--robot-address", args.robot_address)) if value is not None]
+        if extra:
+            parser.error(f"{' and '.join(extra)} cannot be used with --emulate (the emulated robot brings its own "
+                         "radio and camera)")
+    elif args.port is None or args.camera is None:
+        parser.error("--port and --camera are required unless --emulate is given")
+    if args.lockstep and args.speed != 1.0:
+        parser.error("--speed does not apply with --lockstep (simulated time runs as fast as the CPU allows)")
+    if not args.emulate and rig_conditions(args) != RigConditions():
+        parser.error("--radio-*, --camera-* and --pose-noise-* degrade the emulated robot: they need --emulate")
+    if (args.controller == "policy") != (args.policy is not None):
+        parser.error("--policy is needed with --controller policy, and only then")
+    for flag, value in (("--episodes", args.episodes), ("--max-steps", args.max_steps)):
+        if value < 1:
+            parser.error(f"{flag} must be >= 1, got {value}")
+    if args.seed < 0:
+        parser.error(f"--seed must be >= 0, got {args.seed}")
+    if not math.isfinite(args.speed) or not SPEED_RANGE[0] <= args.speed <= SPEED_RANGE[1]:
+        parser.error(f"--speed must be in [{SPEED_RANGE[0]}, {SPEED_RANGE[1]}] (what the emulator keeps up with), "
+                     f"got {args.speed}")
+    if args.speed != 1.0 and not args.emulate:
+        parser.error("--speed applies with --emulate only (a real robot runs in real time)")
+    if not NICE_RANGE[0] <= args.nice <= NICE_RANGE[1]:
+        parser.error(f"--nice must be in [{NICE_RANGE[0]}, {NICE_RANGE[1]}], got {args.nice}")
+    if not 0 < args.solve_fraction <= 1:
+        parser.error(f"--solve-fraction must be in (0, 1], got {args.solve_fraction}")
+    if not (math.isfinite(args.geofence) and args.geofence >= 0):
+        parser.error(f"--geofence must be a finite number >= 0 m, got {args.geofence}")
+    if not (math.isfinite(args.tracking_timeout) and args.tracking_timeout / args.speed >= MIN_TRACKING_WALL):
+        parser.error(f"--tracking-timeout must be a finite number with timeout / speed >= {MIN_TRACKING_WALL} s of "
+                     f"wall time (3 frames at 30 fps), got {args.tracking_timeout} at speed {args.speed}")
+    if args.control_period is not None and not (
+            math.isfinite(args.control_period)
+            and CONTROL_PERIOD_RANGE[0] <= args.control_period <= CONTROL_PERIOD_RANGE[1]):
+        parser.error(f"--control-period must be in [{CONTROL_PERIOD_RANGE[0]}, {CONTROL_PERIOD_RANGE[1]}] s, "
+                     f"got {args.control_period}")
+
+
+def rig_conditions(args: argparse.Namespace) -> RigConditions:
+    """The emulated rig's conditions from the arguments (``ValueError`` if one is out of range)."""
+    return RigConditions(args.radio_latency, args.radio_jitter, args.radio_loss, args.camera_latency,
+                         args.camera_drop, (args.pose_noise_mm * 1e-3, math.radians(args.pose_noise_deg)))
