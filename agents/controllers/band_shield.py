@@ -32,13 +32,33 @@ from pectoral_gym.agents.controllers.fin_map import FinMap
 from pectoral_gym.agents.controllers.stop_band import StopBand, band_violation
 from pectoral_gym.agents.controllers.turning import SPIN_CYCLE, mirror
 from pectoral_gym.envs.core import EnvConfig
+from pectoral_gym.model.tank import coast_distance
 
-__all__ = ["BACKUP_SPINS", "BACKUP_TURNS", "SLOWER", "BandShield"]
+__all__ = ["BACKUP_SPINS", "BACKUP_TURNS", "SLOWER", "BandShield", "band_speed"]
 
 BACKUP_TURNS = (4, 8, 16, 32)  # control periods a backup turns before it coasts
 BACKUP_SPINS = (4, 8, 12, 20)  # control periods a backup spins (turning.SPIN_CYCLE) before it coasts
 SPIN_PERIOD, SPIN_RATIO = 0.5, 5.0  # the fin-beat period [s] and ratio the spin cycle was found for
 SLOWER = (1.0, 0.5)  # the law's amplitudes scaled by these (thrust ~ amplitude^2, eq. 25) before a backup
+
+
+def band_speed(clearance: float, band: StopBand) -> float:
+    """The largest speed [m/s] towards a wall at which ``clearance`` [m] is outside ``band`` (0 if none is).
+
+    The need ``margin + v t_r + ln(1 + k v T) / k`` grows with ``v``; solved by bisection.
+    """
+    def need(v: float) -> float:
+        return band.margin + v * band.reaction_time + float(coast_distance(v, band.k, band.horizon))
+
+    if need(0.0) >= clearance:
+        return 0.0
+    low, high = 0.0, 1.0
+    if need(high) < clearance:
+        return high
+    for _ in range(40):
+        mid = 0.5 * (low + high)
+        low, high = (mid, high) if need(mid) < clearance else (low, mid)
+    return low
 
 
 class BandShield:
@@ -113,6 +133,13 @@ class BandShield:
         self._shadow.command_array(self._latched(patterns)[None], validate=False)
         self._shadow.advance(self.dt)
         self._phase = (self._phase + 1) % len(SPIN_CYCLE)
+
+    def spin_patterns(self, side: float) -> np.ndarray:
+        """Patterns ``(2, 4)`` of the spin cycle's row for the current phase (``side`` > 0 left, < 0 right)."""
+        u = SPIN_CYCLE[self._phase]
+        u = u if side > 0 else mirror(u)  # amplitude R/L, bias R/L
+        f = self.fins
+        return np.array([[u[2], u[0], f.period, f.ratio], [u[3], u[1], f.period, f.ratio]])
 
     def _latched(self, patterns: np.ndarray) -> np.ndarray:
         """What the env latches for ``patterns`` ``(..., 2, 4)``: clipped to its ranges."""

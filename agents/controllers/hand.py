@@ -19,7 +19,7 @@ import math
 
 import numpy as np
 
-from pectoral_gym.agents.controllers.band_shield import BandShield
+from pectoral_gym.agents.controllers.band_shield import BandShield, band_speed
 from pectoral_gym.agents.controllers.fin_map import FinMap
 from pectoral_gym.agents.controllers.turning import circle_room
 from pectoral_gym.envs.core import EnvConfig
@@ -68,6 +68,11 @@ class HandController:
         wall_margin: Room [m] a turning circle (or the path ahead) must leave to the walls, beyond half
             the body length.
         escape_speed: Speed [m/s] of the straight run that takes an aim out of the turning circle.
+        shield: Filter the commands through a :class:`~pectoral_gym.agents.controllers.band_shield.BandShield`
+            (``True``, or a dict of its arguments): the fish keeps out of the robot's stopping band and
+            slows towards a goal near a wall so that it arrives outside it (:meth:`_arrival_cap`).
+        spin: With the shield, ``goal``: an aim inside the turning circle is turned to on the spot
+            (:data:`pectoral_gym.agents.controllers.turning.SPIN_CYCLE`) instead of swimming on.
     """
 
     name = "hand"
@@ -76,7 +81,7 @@ class HandController:
                  speed_gain: float = 0.3, bias_gain: float = 0.0, bias_max: float = math.radians(15.0),
                  lookahead: float = 2.0, turn_level: float = 0.12, turn_radius: float = 0.25,
                  alignment_power: float = 8.0, wall_margin: float = 0.15, escape_speed: float = 0.05,
-                 shield: bool | dict = True):
+                 shield: bool | dict = True, spin: bool = True):
         self.config = config
         self.fins = FinMap(config)
         self.heading_gain = float(heading_gain)
@@ -94,6 +99,7 @@ class HandController:
         self.track = config.task == "track"
         self._heading: float | None = None
         self.shield = None
+        self.spin = bool(spin)
         if shield:
             self.shield = BandShield(config, self.fins, **(shield if isinstance(shield, dict) else {}))
 
@@ -117,6 +123,11 @@ class HandController:
             return self.fins.action(b_r, a_r, b_l, a_l)
         f = self.fins
         nominal = np.array([[b_r, a_r, f.period, f.ratio], [b_l, a_l, f.period, f.ratio]])
+        bearing = math.atan2(o.target_y, o.target_x)
+        if (self.spin and not self.track and self.shield.spins
+                and math.hypot(o.target_x, o.target_y) < 2.0 * self.turn_radius * abs(math.sin(bearing))):
+            nominal = self.shield.spin_patterns(1.0 if bearing > 0 else -1.0)  # turn on the spot to the goal
+            a_r, a_l = (1.0, 0.0) if bearing > 0 else (0.0, 1.0)
         state = np.array([o.x, o.y, heading, o.vx, o.vy, o.omega])
         patterns = self.shield.filter(state, nominal, a_r - a_l)
         self.shield.applied(patterns)
@@ -144,6 +155,9 @@ class HandController:
         turn = float(np.clip(self.heading_gain * bearing - self.rate_gain * rate, -1.0, 1.0))
         alignment = max(math.cos(bearing), 0.0) ** self.alignment_power
         speed = (min(self.speed_gain * distance, self.fins.max_speed) + ref_speed) * alignment
+        if self.shield is not None and not self.track:
+            cap = self._arrival_cap(o, aim_x, aim_y, distance)
+            speed = 0.0 if o.vx > cap else min(speed, cap)  # faster than the cap: coast (thrust cannot brake)
         if distance < 2.0 * self.turn_radius * abs(math.sin(bearing)):
             # the aim lies inside the turning circle: swim on until a turn can reach it
             turn = 0.0
@@ -162,6 +176,23 @@ class HandController:
         return (float(np.clip(f.bias_mid - offset, low, high)), f.amplitude(level + self.turn_level * turn),
                 float(np.clip(f.bias_mid + offset, low, high)), f.amplitude(level - self.turn_level * turn))
 
+
+    def _arrival_cap(self, o: Observation, aim_x: float, aim_y: float, distance: float) -> float:
+        """Speed [m/s] from which coasting reaches the goal radius no faster than the band allows there.
+
+        Coasting with the fins still, eq. (19) along one axis, ``dv/dx = -k v``: the speed falls by
+        ``exp(-k x)`` over ``x`` m, so the cap is the band's speed where the fish reaches the goal radius
+        (:func:`band_speed` for that point's clearance to the nearest wall less the nose: half the body and
+        ``C_p``) times ``exp(k (distance - goal_radius))``.
+        """
+        radius = self.config.goal_radius
+        room = max(distance - radius, 0.0)
+        reach = room / distance if distance > 0 else 0.0  # the arrival point, on the line to the goal
+        c, s = o.cos_psi, o.sin_psi
+        gx, gy = o.x + reach * (c * aim_x - s * aim_y), o.y + reach * (s * aim_x + c * aim_y)
+        band = self.shield.band
+        clearance = min(tank.wall_gaps(gx, gy)) - band.half_length - band.width
+        return band_speed(clearance, band) * math.exp(min(band.k * room, 30.0))
 
     def _room(self, o, side: float) -> float:
         """Least distance [m] from the turning circle (``side`` +1 left, -1 right) to a wall, beyond half a body."""
