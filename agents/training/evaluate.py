@@ -8,10 +8,10 @@ controllers come from a factory, one per env slot.
 
 CLI::
 
-    python -m pectoral_gym.agents.training.evaluate --policy runs/PectoralFish-Averaged-v0/ppo_goal_seed0_...
-    python -m pectoral_gym.agents.training.evaluate --policy RUN --env PectoralFish-Full-v0 --episodes 100 --seed 0
+    python -m pectoral_gym.agents.training.evaluate --policy runs/PectoralFish-Averaged-v1/ppo_goal_seed0_...
+    python -m pectoral_gym.agents.training.evaluate --policy RUN --env PectoralFish-Full-v1 --episodes 100 --seed 0
     [--randomize]
-    python -m pectoral_gym.agents.training.evaluate --baseline hand --env PectoralFish-Full-v0 --task goal
+    python -m pectoral_gym.agents.training.evaluate --baseline hand --env PectoralFish-Full-v1 --task goal
 
 A run folder's environment arguments (``config.yaml``) are reused, ``--env-kwargs`` on top, except
 ``randomize`` (``--randomize`` sets it) and, on the full model, the averaged model's own settings
@@ -107,7 +107,7 @@ def evaluate(controller: ControllerLike, env_id: str, n_episodes: int = 100, see
         controller: A :class:`Controller`, a :class:`BatchController` (all slots share it), or a
             zero-argument factory of controllers (one per slot). A plain controller without
             ``act_batch`` runs one episode at a time.
-        env_id: ``PectoralFish-Averaged-v0`` or ``PectoralFish-Full-v0``.
+        env_id: A fish env id (:data:`pectoral_gym.registration.ENV_SETTINGS`).
         n_episodes: Number of episodes (>= 1).
         seed: Episode ``k`` is reset with ``seed + k``.
         env_kwargs: Environment arguments (``task``, ``randomize``, reward weights, ...). A policy trained
@@ -258,7 +258,7 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     who.add_argument("--policy", metavar="RUN|ZIP",
                      help="run folder of pectoral_gym.agents.training.train or an SB3 .zip")
     who.add_argument("--baseline", metavar="NAME", help="baseline controller: random, hand or nmpc")
-    parser.add_argument("--env", default="PectoralFish-Full-v0", help="environment id")
+    parser.add_argument("--env", default="PectoralFish-Full-v1", help="environment id (default %(default)s)")
     parser.add_argument("--task", choices=("goal", "track"), help="task (default: the run's task, else goal)")
     parser.add_argument("--randomize", nargs="?", const="default", metavar="JSON",
                         help="per-episode parameter randomisation: alone for the default preset "

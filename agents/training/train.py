@@ -2,7 +2,7 @@
 
 CLI::
 
-    python -m pectoral_gym.agents.training.train --env PectoralFish-Averaged-v0 --algo ppo --task goal --seed 0
+    python -m pectoral_gym.agents.training.train --env PectoralFish-Averaged-v1 --algo ppo --task goal --seed 0
     python -m pectoral_gym.agents.training.train --algo sac --hyperparams n_timesteps=5e4 learning_rate=3e-4 \
         --env-kwargs '{"task": "track"}'
 
@@ -239,7 +239,7 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.training.train",
                                      description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    parser.add_argument("--env", default="PectoralFish-Averaged-v0", help="environment id")
+    parser.add_argument("--env", default="PectoralFish-Averaged-v1", help="environment id (default %(default)s)")
     parser.add_argument("--algo", default="ppo", help="algorithm: ppo, sac, td3, a2c, ddpg")
     parser.add_argument("--task", choices=("goal", "track"), help="task (default: from the hyperparameters, else goal)")
     parser.add_argument("--seed", type=int, default=0, help="seed of everything (same seed, same run)")
