@@ -154,7 +154,6 @@ class PectoralFishEnv(gym.Env):
     | ``transitions``   | ``False``        |      | averaged only: transitional-stroke forcing (docs/model.md 3.7) |
     | ``ripple_offsets``| ``False``        |      | averaged only: beat-mean ripple offset (docs/model.md 3.8)     |
     | ``integration``   | ``"reference"``  |      | full only: ``"fast"``: fewer substeps (model.md 6)         |
-    | ``yaw_damping``   | ``None``         |      | averaged only: ``"sinusoid"``, ``"waveform"`` or ``"none"`` |
     | ``observe_fins``  | ``False``        |      | observe each fin's half-stroke in progress (8 more entries) |
     | ``progress_weight`` | 10.0           | 1/m  | goal: reward per metre of approach |
     | ``goal_bonus``    | 10.0             |      | goal: reward on reaching the goal |
