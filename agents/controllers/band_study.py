@@ -31,7 +31,15 @@ import numpy as np
 import pectoral_gym  # noqa: F401 - registers the envs
 from pectoral_gym.agents.controllers.stop_band import StopBand, band_violation
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.envs.observation import OBS_TARGET_X, OBS_TARGET_Y, OBS_VELOCITY
+from pectoral_gym.envs.observation import (
+    OBS_COS_PSI,
+    OBS_SIN_PSI,
+    OBS_TARGET_X,
+    OBS_TARGET_Y,
+    OBS_VELOCITY,
+    OBS_X,
+    OBS_Y,
+)
 from pectoral_gym.envs.tasks import kernels as tk
 
 __all__ = ["ROBOT_BAND", "EpisodeRecord", "goal_in_inset", "run_episode", "summarize"]
@@ -78,6 +86,10 @@ def goal_in_inset(seed: int, start: tuple[float, float], inset: float) -> tuple[
     raise RuntimeError(f"no goal {inset} m from the walls within reach of {start}")  # pragma: no cover
 
 
+def _cos_sin(angle: float) -> tuple[float, float]:
+    return math.cos(angle), math.sin(angle)
+
+
 def _aim_observation(obs: np.ndarray, state: np.ndarray, goal: tuple[float, float]) -> None:
     """Write the body-frame target of ``goal`` into ``obs`` in place (the env shows a moved goal one step late)."""
     c, s = math.cos(state[2]), math.sin(state[2])
@@ -87,7 +99,9 @@ def _aim_observation(obs: np.ndarray, state: np.ndarray, goal: tuple[float, floa
 
 def run_episode(make_controller: Callable[[EnvConfig], object] | None, seed: int, env_id: str = "PectoralFish-Full-v0",
                 substeps: int = 5, goal_inset: float | None = None, band: tuple[float, float, float] = ROBOT_BAND,
-                max_steps: int = 240, env_kwargs: dict | None = None, controller=None) -> EpisodeRecord:
+                max_steps: int = 240, env_kwargs: dict | None = None, controller=None,
+                start: tuple[float, float, float] | None = None,
+                goal: tuple[float, float] | None = None) -> EpisodeRecord:
     """Run one seeded goal episode and check the stopping band every ``control_period / substeps``.
 
     Args:
@@ -100,6 +114,8 @@ def run_episode(make_controller: Callable[[EnvConfig], object] | None, seed: int
         max_steps: Control steps before truncation (the registry's 240).
         env_kwargs: More env arguments (``task`` is ``goal``).
         controller: A controller built already for ``config`` (then ``make_controller`` is not called).
+        start: Place the fish at rest at ``(X, Y, psi)`` [m, m, rad] after the reset (a scripted situation).
+        goal: Place the goal at ``(X, Y)`` [m] (instead of the drawn one and of ``goal_inset``).
 
     Returns:
         The episode's :class:`EpisodeRecord`.
@@ -112,12 +128,15 @@ def run_episode(make_controller: Callable[[EnvConfig], object] | None, seed: int
     stop_band = StopBand.from_params(config.params, *band)
     obs, info = env.reset(seed=seed)
     ctrl.reset(seed)
-    goal = env.target
-    if goal_inset is not None:
-        state = env.fish_state
+    if start is not None:
+        env.set_fish_state([*start, 0.0, 0.0, 0.0])
+        obs[OBS_X], obs[OBS_Y], obs[OBS_COS_PSI], obs[OBS_SIN_PSI] = start[0], start[1], *_cos_sin(start[2])
+    state = env.fish_state
+    if goal is None and goal_inset is not None:
         goal = goal_in_inset(seed, (float(state[0]), float(state[1])), goal_inset)
+    if goal is not None:
         env.set_target(*goal)
-        _aim_observation(obs, state, goal)
+    _aim_observation(obs, state, env.target)
     band_time, worst, wall, success, t = None, 0.0, False, False, 0.0
     for step in range(max_steps):
         action = ctrl.act(obs)
