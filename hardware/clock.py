@@ -17,7 +17,10 @@ The rules for code that runs under a :class:`VirtualClock`: never block outside 
 ``time.sleep``, no ``select`` or socket waits, no ``threading`` primitives that a blocked clock thread
 must release), and never wait on the clock while holding a lock another clock thread needs (waits on a
 clock condition release their own lock, as ``threading.Condition`` does). Byte streams between clock
-threads are :class:`pectoral_gym.hardware.radio.pipe.StreamPair` endpoints.
+threads are :class:`pectoral_gym.hardware.radio.pipe.StreamPair` endpoints. What talks to the outside world
+through a device or a socket (``OpenCVCamera``, ``NetworkCamera``/``FrameServer``, ``RadioProxy``, the emulator's
+TCP and pty ports) runs in real time by nature; a lockstep emulation uses their in-process counterparts
+(:mod:`pectoral_gym.hardware.emurig`).
 """
 
 from __future__ import annotations
