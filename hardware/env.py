@@ -41,7 +41,8 @@ class HardwareFishEnv(gym.Env):
     ``step`` sends the fin command through :class:`pectoral_gym.hardware.radio.link.RadioLink` and then watches the
     camera for one ``control_period`` of wall-clock time (real-time pacing). The fins latch a new pattern at their next
     stroke turning point, as in simulation. With an emulated robot (:mod:`pectoral_gym.hardware.emulator`) the
-    experiment clock may run ``speed`` times faster than the wall clock.
+    experiment clock may run ``speed`` times faster than the wall clock, or on simulated time (``clock``, a
+    :class:`pectoral_gym.hardware.clock.VirtualClock`: lockstep emulation, ``docs/hardware.md``).
 
     ## Action Space
 
@@ -144,7 +145,8 @@ class HardwareFishEnv(gym.Env):
       exit and on signals. Issue 14: the task core of the simulated envs (``TaskState``), any task of
       the task table; the energy term prices the command sent (before: the action's pattern). Issue 30:
       latched operator stop (:meth:`rearm`), reset waits for a confirmed stop, frames after the hook only,
-      noise-robust and physically bounded geofence speed, ``step()`` raises with no episode armed.
+      noise-robust and physically bounded geofence speed, ``step()`` raises with no episode armed. Issue 29:
+      ``clock`` (lockstep emulation in simulated time; the wall clock by default, unchanged).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
@@ -217,7 +219,7 @@ class HardwareFishEnv(gym.Env):
 
     # ------------------------------------------------------------ clock
     def now(self) -> float:
-        """Experiment time [s] (wall time since construction times ``speed``)."""
+        """Experiment time [s] (``clock`` time since construction times ``speed``)."""
         return (self.clock.monotonic() - self._origin) * self.speed
 
     def _sleep(self, duration: float) -> None:
