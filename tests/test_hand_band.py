@@ -68,3 +68,22 @@ def test_spin_cycle_has_one_home():
     from pectoral_gym.agents.nmpc import spin
 
     assert spin.SPIN_CYCLE is turning.SPIN_CYCLE and spin.mirror is turning.mirror
+
+
+def test_shield_speed_spread_counts_towards_every_wall():
+    """At rest, the tail ``need(w) -+ 5 mm`` from the wall X = 0: inside the band with a spread ``w``, outside
+    just beyond it (``Geofence.breached`` adds the spread to the speed towards every wall)."""
+    import numpy as np
+
+    from pectoral_gym.agents.controllers.band_shield import BandShield
+    from pectoral_gym.agents.controllers.fin_map import FinMap
+
+    config = EnvConfig()
+    w = 0.02
+    shield = BandShield(config, FinMap(config), extra_margin=0.0, speed_spread=w)
+    band = shield.band
+    need = band.margin + w * band.reaction_time + float(coast_distance(w, band.k, band.horizon))
+    for offset, inside in ((-0.005, True), (0.005, False)):
+        x = band.half_length + band.width + need + offset  # the tail's clearance is need + offset
+        state = np.array([[x, 0.5 * TANK_WIDTH, 0.0, 0.0, 0.0, 0.0]])
+        assert (shield._violation(state, band)[0] > 0) == inside

@@ -72,18 +72,21 @@ class BandShield:
         horizon: Length of each rollout [s].
         check: Band check interval along the rollouts [s] (a divisor of the control period).
         turn_level: Thrust level (0..1, :meth:`FinMap.amplitude`) of the one fin a backup turn beats with.
+        speed_spread: Speed [m/s] added to the speed towards every wall, as the robot's geofence adds its
+            velocity estimate's spread (``Geofence.breached``'s ``spread``).
         tail: The last state of a rollout must keep clear for ``tail`` s more of coasting [s] (the band's horizon
             ``T + tail`` there): a fish that coasts towards a wall reaches it at last, however slowly.
     """
 
     def __init__(self, config: EnvConfig, fins: FinMap, band: tuple[float, float, float] = (0.05, 0.15, 5.0),
                  extra_margin: float = 0.02, horizon: float = 16.0, check: float = 0.5, turn_level: float = 0.06,
-                 tail: float = 30.0):
+                 tail: float = 30.0, speed_spread: float = 0.0):
         self.config = config
         self.fins = fins
         margin, reaction, coast = band
         self.band = StopBand.from_params(config.params, margin + extra_margin, reaction, coast)
         self.final = StopBand.from_params(config.params, margin + extra_margin, reaction, coast + tail)
+        self.speed_spread = float(speed_spread)
         self.dt = float(config.control_period)
         self.intervals = max(1, int(round(horizon / self.dt)))
         self.checks = max(1, int(round(self.dt / check)))
@@ -172,10 +175,26 @@ class BandShield:
         for k in range(self.intervals):
             b.command_array(plans[:, k], validate=False)
             for _ in range(self.checks):
-                s = b.advance(h)
-                total += band_violation(s[:, 0], s[:, 1], s[:, 2], s[:, 3], s[:, 4], self.band, np)
-        total += band_violation(s[:, 0], s[:, 1], s[:, 2], s[:, 3], s[:, 4], self.final, np)
+                total += self._violation(b.advance(h), self.band)
+        total += self._violation(b.state, self.final)
         return total.reshape(nf + 1, nb)
+
+    def _violation(self, s: np.ndarray, band: StopBand) -> np.ndarray:
+        """:func:`band_violation` of states ``(n, 6)``, with :attr:`speed_spread` towards every wall.
+
+        The world velocity shifted by ``(+w, +w)`` adds ``w`` towards the walls ``X = L`` and ``Y = W``, by
+        ``(-w, -w)`` towards ``X = 0`` and ``Y = 0``: the sum of the two is zero exactly when every wall is
+        clear with the spread (as ``Geofence.breached`` adds it).
+        """
+        w = self.speed_spread
+        if w == 0.0:
+            return band_violation(s[:, 0], s[:, 1], s[:, 2], s[:, 3], s[:, 4], band, np)
+        c, si = np.cos(s[:, 2]), np.sin(s[:, 2])
+        total = 0.0
+        for sign in (1.0, -1.0):  # body-frame velocity of the world shift (sign w, sign w)
+            dx, dy = sign * w * (c + si), sign * w * (c - si)
+            total = total + band_violation(s[:, 0], s[:, 1], s[:, 2], s[:, 3] + dx, s[:, 4] + dy, band, np)
+        return total
 
     def filter(self, state: np.ndarray, nominal: np.ndarray, side: float) -> np.ndarray:
         """The patterns ``(2, 4)`` to send: ``nominal``, or slowed (:data:`SLOWER`), if a backup remains after it.
