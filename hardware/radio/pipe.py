@@ -19,6 +19,8 @@ from pectoral_gym.hardware.radio.radioproxy import FrameSplitter
 
 __all__ = ["StreamEnd", "StreamPair"]
 
+_DEFAULT = object()  # read(): the end's own timeout
+
 
 class StreamEnd:
     """One end of a :class:`StreamPair`: ``write``, ``read``, ``in_waiting``, ``close`` as a serial port has them.
@@ -86,14 +88,14 @@ class StreamEnd:
             self._collect()
             return len(self._buffer)
 
-    def read(self, size: int = 1, timeout: float | None = ...) -> bytes:
+    def read(self, size: int = 1, timeout: float | None | object = _DEFAULT) -> bytes:
         """Up to ``size`` bytes, waiting until at least one has arrived, ``timeout`` passed or the stream closed.
 
         Args:
             size: Most bytes returned.
             timeout: Longest wait [clock s] (default :attr:`timeout`; ``None``: no limit; ``0``: no wait).
         """
-        limit = self.timeout if timeout is ... else timeout
+        limit = self.timeout if timeout is _DEFAULT else timeout
         end = None if limit is None else self._clock.monotonic() + limit
         with self._inbox:
             while True:
