@@ -347,6 +347,8 @@ class _Thread(threading.Thread):
         self._finished = _Event(clock)
 
     def start(self) -> None:
+        if self._started.is_set():
+            raise RuntimeError("threads can only be started once")
         clock = self._clock
         with clock._mutex:  # runnable now, so the time cannot pass before it runs
             self._task.blocked = False
