@@ -123,13 +123,14 @@ class HandController:
             return self.fins.action(b_r, a_r, b_l, a_l)
         f = self.fins
         nominal = np.array([[b_r, a_r, f.period, f.ratio], [b_l, a_l, f.period, f.ratio]])
+        side = a_r - a_l  # > 0: the law turns left (the right fin rows harder)
         bearing = math.atan2(o.target_y, o.target_x)
         if (self.spin and not self.track and self.shield.spins
                 and math.hypot(o.target_x, o.target_y) < 2.0 * self.turn_radius * abs(math.sin(bearing))):
-            nominal = self.shield.spin_patterns(1.0 if bearing > 0 else -1.0)  # turn on the spot to the goal
-            a_r, a_l = (1.0, 0.0) if bearing > 0 else (0.0, 1.0)
+            side = 1.0 if bearing > 0 else -1.0
+            nominal = self.shield.spin_patterns(side)  # turn on the spot to the goal
         state = np.array([o.x, o.y, heading, o.vx, o.vy, o.omega])
-        patterns = self.shield.filter(state, nominal, a_r - a_l)
+        patterns = self.shield.filter(state, nominal, side)
         self.shield.applied(patterns)
         return f.action(patterns[0, 0], patterns[0, 1], patterns[1, 0], patterns[1, 1])
 
