@@ -72,6 +72,7 @@ class BandShield:
         horizon: Length of each rollout [s].
         check: Band check interval along the rollouts [s] (a divisor of the control period).
         turn_level: Thrust level (0..1, :meth:`FinMap.amplitude`) of the one fin a backup turn beats with.
+        spin: Also back up with the on-the-spot spin (where the env's ranges, period and ratio allow it).
         speed_spread: Speed [m/s] added to the speed towards every wall, as the robot's geofence adds its
             velocity estimate's spread (``Geofence.breached``'s ``spread``).
         tail: The last state of a rollout must keep clear for ``tail`` s more of coasting [s] (the band's horizon
@@ -80,7 +81,7 @@ class BandShield:
 
     def __init__(self, config: EnvConfig, fins: FinMap, band: tuple[float, float, float] = (0.05, 0.15, 5.0),
                  extra_margin: float = 0.02, horizon: float = 16.0, check: float = 0.5, turn_level: float = 0.06,
-                 tail: float = 30.0, speed_spread: float = 0.0):
+                 tail: float = 30.0, speed_spread: float = 0.0, spin: bool = True):
         self.config = config
         self.fins = fins
         margin, reaction, coast = band
@@ -104,7 +105,7 @@ class BandShield:
         self.backups = np.repeat(np.array(plans)[None], len(SPIN_CYCLE), axis=0)  # (spin phase, backups, n, 2, 4)
         low, high = config.amplitude_range
         b_low, b_high = config.bias_range
-        self.spins = bool(math.isclose(fins.period, SPIN_PERIOD) and math.isclose(fins.ratio, SPIN_RATIO)
+        self.spins = bool(spin and math.isclose(fins.period, SPIN_PERIOD) and math.isclose(fins.ratio, SPIN_RATIO)
                           and np.all((SPIN_CYCLE[:, :2] >= low) & (SPIN_CYCLE[:, :2] <= high))
                           and np.all((SPIN_CYCLE[:, 2:] >= b_low) & (SPIN_CYCLE[:, 2:] <= b_high)))
         if self.spins:  # on-the-spot turns: the cycle from each phase, left and right (mirrored)
