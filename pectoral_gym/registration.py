@@ -11,14 +11,25 @@ from collections.abc import Mapping
 from typing import Any
 
 from pectoral_gym.model.servo import ROBOT_MAX_FIN_RATE
+from pectoral_gym.model.tank import ROBOT_STOP_RULE
 
-__all__ = ["ENV_IDS", "ENV_SETTINGS", "MAX_EPISODE_STEPS", "ROBOT_READY", "register_envs", "registered_settings"]
+#: Clearance [m] the v1 envs' band keeps on top of the robot's rule: the robot's supervisor judges the band on a
+#: least-squares speed from camera poses plus 2 standard errors (>= 2 x 5 mm / 1.58 s = 6.3 mm/s over its 1 s
+#: window), which widens the band by up to 2 sigma (T + t_r) = 3.3 cm at the camera's noise floor, and more with
+#: the in-beat swing of the pose; and the envs check the band after each control period, the robot every frame
+#: (``docs/agents.md``, "Robot-ready envs").
+MEASUREMENT_MARGIN = 0.05
+
+__all__ = ["ENV_IDS", "ENV_SETTINGS", "MAX_EPISODE_STEPS", "MEASUREMENT_MARGIN", "ROBOT_READY", "register_envs",
+           "registered_settings"]
 
 #: What the v1 envs add to prepare a policy for the robot stack (``PectoralFishEnv``'s Version History): the
 #: fins' stroke phase observed, the robot's stopping band as an episode end with a cost, the servos' rate
 #: limit, goals the band leaves reachable (``docs/agents.md``, "Robot-ready envs").
-ROBOT_READY: dict[str, Any] = {"observe_fins": True, "stop_band": True, "servo_limit": ROBOT_MAX_FIN_RATE,
-                               "goal_inset": 0.3}
+ROBOT_READY: dict[str, Any] = {
+    "observe_fins": True, "stop_band": True, "servo_limit": ROBOT_MAX_FIN_RATE, "goal_inset": 0.3,
+    "stop_rule": ROBOT_STOP_RULE._replace(margin=ROBOT_STOP_RULE.margin + MEASUREMENT_MARGIN),
+}
 
 #: id -> the EnvConfig arguments it stands for (the others keep EnvConfig's defaults).
 ENV_SETTINGS: dict[str, dict[str, Any]] = {
