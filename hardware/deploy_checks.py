@@ -156,7 +156,8 @@ def env_settings(controller: Any, task: str | None, control_period: float | None
                              f"beside it): {flag} "
                              f"{kwargs[key]} is not checked against its training; only its observation size "
                              f"({obs_size}) and action size are")
-    for key in ("bias_range", "amplitude_range", "period_range", "ratio_range", "ref_speed"):
+    for key in ("bias_range", "amplitude_range", "period_range", "ratio_range", "ref_speed", "start_inset",
+                "goal_inset"):
         if key in trained and not _same(trained[key], getattr(defaults, key)):
             kwargs[key] = tuple(trained[key]) if isinstance(trained[key], (list, tuple)) else trained[key]
     return kwargs, notes

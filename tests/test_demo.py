@@ -19,6 +19,10 @@ def test_quick_demo_writes_report_json_and_plot(tmp_path, capsys):
     assert "| controller |" in report and "PectoralFish-Full-v1" in report and "trajectories.png" in report
     assert (out / "trajectories.png").read_bytes()[:4] == b"\x89PNG"
     assert (out / "run" / "model.zip").is_file()
+    # the robot stack: 2 lockstep episodes on the emulated robot, their log and their line in the report
+    robot = results["robot_stack"]
+    assert robot["episodes"] == 2 and 0.0 <= robot["success"]["mean"] <= 1.0
+    assert (out / "robot" / "steps.jsonl").is_file() and "emulated robot" in report
     assert "demo finished" in capsys.readouterr().out
     # a second run into the same folder refuses to overwrite it
     assert main(["--quick", "--out", str(out), "--no-progress"]) == 2

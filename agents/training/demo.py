@@ -5,10 +5,14 @@ CLI::
     python -m pectoral_gym.agents.training.demo                 # a few minutes on 2 CPU cores
     python -m pectoral_gym.agents.training.demo --quick         # smoke run, seconds
     python -m pectoral_gym.agents.training.demo --out demo_out --timesteps 1e6 --episodes 200
+    python -m pectoral_gym.agents.training.demo --robot-episodes 0                # no robot-stack episodes
 
 Writes ``<out>/report.md`` (results table, training figures), ``<out>/results.json``,
 ``<out>/trajectories.png`` and the training run folder ``<out>/run/``
-(``python -m pectoral_gym.agents.training.evaluate --policy <out>/run`` evaluates it again).
+(``python -m pectoral_gym.agents.training.evaluate --policy <out>/run`` evaluates it again). The policy then
+drives the emulated robot through the whole robot stack (radio link and firmware rules, camera, tracker,
+observer, safety supervisor) in lockstep, ``--robot-episodes`` seeded episodes
+(``python -m pectoral_gym.hardware.deploy --emulate --lockstep``, its log in ``<out>/robot/``).
 """
 
 from __future__ import annotations
@@ -27,11 +31,17 @@ TRAIN_ENV = "PectoralFish-Averaged-v1"
 EVAL_ENVS = ("PectoralFish-Averaged-v1", "PectoralFish-Full-v1")
 EVAL_SEED = 10_000  # evaluation episodes k use seed EVAL_SEED + k (training uses seed + env index)
 QUICK = {"n_timesteps": 1024, "n_envs": 8, "n_steps": 64, "batch_size": 128, "n_epochs": 1, "eval_freq": 0}
+ROBOT_EPISODES = 20  # robot-stack episodes (lockstep emulation) by default; 2 of at most 40 steps with --quick
 
 
 def run_demo(out: str | Path, quick: bool = False, seed: int = 0, timesteps: int | None = None,
-             episodes: int | None = None, task: str = "goal", progress: bool = True) -> dict[str, Any]:
-    """Train, evaluate and report (see the module docstring); returns the results dict written to JSON."""
+             episodes: int | None = None, task: str = "goal", progress: bool = True,
+             robot_episodes: int | None = None) -> dict[str, Any]:
+    """Train, evaluate and report (see the module docstring); returns the results dict written to JSON.
+
+    ``robot_episodes``: episodes through the robot stack on the emulated robot (``None``: :data:`ROBOT_EPISODES`,
+    2 with ``quick``; 0: none).
+    """
     from pectoral_gym.agents.training.config import resolve_config
     from pectoral_gym.agents.training.evaluate import evaluate, format_table, plot_trajectories, write_json
     from pectoral_gym.agents.training.policy import load_policy
@@ -61,6 +71,9 @@ def run_demo(out: str | Path, quick: bool = False, seed: int = 0, timesteps: int
         write_json(result, out / f"eval_{env_id}.json")
         results.append(result)
     plot_trajectories(results, out / "trajectories.png", max_episodes=12)
+    robot_episodes = (2 if quick else ROBOT_EPISODES) if robot_episodes is None else int(robot_episodes)
+    robot = (_robot_stack(run_dir, out / "robot", robot_episodes, EVAL_SEED, progress, max_steps=40 if quick else None)
+             if robot_episodes else None)
     total = time.perf_counter() - start
     summary = {
         "train_env": TRAIN_ENV, "task": task, "seed": seed, "quick": quick, "run_dir": str(run_dir),
@@ -68,10 +81,54 @@ def run_demo(out: str | Path, quick: bool = False, seed: int = 0, timesteps: int
         "train_steps_per_s": training["steps_per_s"], "total_time_s": total,
         "machine": {"python": platform.python_version(), "processor": platform.processor() or platform.machine()},
         "evaluations": [r.to_dict(per_episode=False) for r in results],
+        "robot_stack": robot,
     }
     (out / "results.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "report.md").write_text(_report(summary, format_table(results), config))
     return summary
+
+
+def _robot_stack(run_dir: Path, out: Path, episodes: int, seed: int, progress: bool,
+                 max_steps: int | None = None) -> dict[str, Any]:
+    """The policy on the emulated robot through the robot stack, in lockstep (``hardware.deploy``); a summary.
+
+    ``max_steps``: steps per episode (``None``: the deploy's default, the envs' 240).
+
+    Raises:
+        RuntimeError: If the deploy does not finish (its exit status and output folder are named).
+    """
+    from collections import Counter
+
+    import numpy as np
+
+    from pectoral_gym.agents.training.metrics import summarize
+    from pectoral_gym.hardware.deploy import main as deploy
+
+    argv = ["--policy", str(run_dir), "--emulate", "--lockstep", "--episodes", str(episodes), "--seed", str(seed),
+            "--out", str(out), "--no-prompt", "--nice", "0", *([] if progress else ["--quiet"]),
+            *([] if max_steps is None else ["--max-steps", str(max_steps)])]
+    status = deploy(argv)
+    if status != 0:
+        raise RuntimeError(f"the robot-stack run (hardware.deploy {' '.join(argv)}) ended with status {status}")
+    summary = json.loads((out / "summary.json").read_text())
+    runs = summary["episodes"]
+    success = summarize(np.array([float(e["success"]) for e in runs]))
+    stops = Counter(e["safety_stop"] for e in runs if e["safety_stop"])
+    return {"episodes": len(runs), "seed": seed, "success": success.as_dict(), "safety_stops": dict(stops),
+            "wall_time_s": summary.get("wall_time"),
+            "command": "python -m pectoral_gym.hardware.deploy " + " ".join(argv)}
+
+
+def _robot_lines(robot: dict[str, Any] | None) -> list[str]:
+    if not robot:
+        return []
+    s = robot["success"]
+    stops = ", ".join(f"{n} {reason}" for reason, n in sorted(robot["safety_stops"].items())) or "none"
+    return [f"On the emulated robot through the whole robot stack (radio link and firmware rules, camera, tracker, "
+            f"observer, safety supervisor), in lockstep: success **{s['mean']:.2f}** [{s['ci_low']:.2f}, "
+            f"{s['ci_high']:.2f}] "
+            f"over {robot['episodes']} seeded episodes (seed {robot['seed']}); safety stops: {stops} "
+            f"({robot['wall_time_s']:.0f} s; `{robot['command']}`, log in `robot/`).", ""]
 
 
 def _report(summary: dict[str, Any], table: str, config: dict[str, Any]) -> str:
@@ -88,6 +145,7 @@ def _report(summary: dict[str, Any], table: str, config: dict[str, Any]) -> str:
         "",
         table,
         "",
+        *_robot_lines(summary.get("robot_stack")),
         "![trajectories](trajectories.png)",
         "",
         "Metrics: `success` fraction of episodes that reached the goal radius; `time_to_goal` [s] over the "
@@ -118,8 +176,14 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--timesteps", type=float, help="training steps (default: agents/hyperparams/ppo.yml)")
     parser.add_argument("--episodes", type=int, help="evaluation episodes per env (default 100, quick 5)")
     parser.add_argument("--task", choices=("goal", "track"), default="goal", help="task")
+    parser.add_argument("--robot-episodes", type=int, default=None, metavar="N",
+                        help=f"episodes on the emulated robot through the robot stack, lockstep (default "
+                             f"{ROBOT_EPISODES}, quick 2; 0: none)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
-    return parser.parse_args(argv)
+    args = parser.parse_args(argv)
+    if args.robot_episodes is not None and args.robot_episodes < 0:
+        parser.error(f"--robot-episodes must be >= 0, got {args.robot_episodes}")
+    return args
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -127,7 +191,8 @@ def main(argv: list[str] | None = None) -> int:
     args = _parse_args(argv)
     try:
         summary = run_demo(args.out, quick=args.quick, seed=args.seed, timesteps=args.timesteps,
-                           episodes=args.episodes, task=args.task, progress=not args.no_progress)
+                           episodes=args.episodes, task=args.task, progress=not args.no_progress,
+                           robot_episodes=args.robot_episodes)
     except (FileExistsError, ValueError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
