@@ -5,24 +5,31 @@ which runs, in this order:
 
 1. ``tasks.first_non_finite``: a non-finite action of an env not in ``skip`` stops the step
    before anything is written (its index is returned);
-2. ``tasks.apply_keep_one`` per env: keep the velocity integrals, map the action to fin
-   patterns, write the last action and the energy term;
-3. ``strokes.command_fins`` for every fish (``FishModel.command_array``);
-4. ``stepping.advance_one`` per fish (``FishModel.advance``);
-5. the task's ``reward_one`` per env not in ``skip`` (the task table's row; the built-in tasks
-   share ``tasks.reward_one``), then ``tasks.observe_mean_velocity``: the observed velocities are
-   the means over the control period.
 
-The body's loops are ``numba.prange`` loops: :func:`pectoral_gym.model.jit.kernel_builds` compiles it
+then, env by env (each touches only its own rows, so the order across envs does not matter):
+
+2. ``tasks.apply_keep_one``: keep the velocity integrals, map the action to fin patterns, write
+   the last action and the energy term;
+3. ``strokes.command_one``: command the fish's fins (``FishModel.command_array``);
+4. ``stepping.advance_one``: advance the fish one control period (``FishModel.advance``);
+5. the task's ``reward_one`` unless the env is in ``skip`` (the task table's row; the built-in
+   tasks share ``tasks.reward_one``), then ``tasks.observe_mean_velocity``: the observed
+   velocities are the means over the control period.
+
+The per-env loop is a ``numba.prange`` loop: :func:`pectoral_gym.model.jit.kernel_builds` compiles it
 serially (below ``PARALLEL_MIN_ITEMS`` envs, where threads cost more than they save) and in
 parallel; every env's arithmetic is the same in both, so the two give the same bits
-(``tests/test_fused_step.py``). A task registered at run time gets builds of the same body with its
-kernel bound in place of ``reward_one`` (:func:`step_builds`).
+(``tests/test_fused_step.py``). One loop is one parallel region per step: its threads meet once.
+A task registered at run time gets builds of the same body with its kernel bound in place of
+``reward_one`` (:func:`step_builds`).
 
 The arrays of one core are bound once into a :class:`StepArrays` (a numba structref that holds
 them, not copies), so a step passes one object, the skip mask and the model's settings, bound with the arrays
 (:class:`StepSettings`); the compiled entry point of that exact signature
 (:func:`pectoral_gym.model.jit.entry_point`) skips numba's argument typing (about 1 us for a structref).
+Inside the body the arrays are :func:`borrow`-ed views: numba's reference counts, which every
+inlined kernel that takes an array would otherwise update atomically (shared by the threads), are
+not touched.
 
 This body inlines code from many modules; like every kernel it is compiled with
 :func:`pectoral_gym.model.jit.njit`, whose disk cache is keyed on all the sources it compiles from.
@@ -35,15 +42,16 @@ from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
-from numba.core import types
+from numba.core import cgutils, types
 from numba.experimental import structref
+from numba.extending import intrinsic
 
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.model import stepping
 from pectoral_gym.model.jit import PARALLEL_MIN_ITEMS, KernelPair, entry_point, kernel_builds, njit
-from pectoral_gym.model.strokes import command_fins
+from pectoral_gym.model.strokes import command_one
 
-__all__ = ["STEP", "STEP_FIELDS", "FusedStep", "StepArrays", "StepSettings", "step_body", "step_builds"]
+__all__ = ["STEP", "STEP_FIELDS", "FusedStep", "StepArrays", "StepSettings", "borrow", "step_body", "step_builds"]
 
 @structref.register
 class StepArraysType(types.StructRef):
@@ -96,17 +104,42 @@ class StepSettings(NamedTuple):
 reward_one = tk.reward_one  # the task kernel the body calls (the built-in tasks'; step_builds rebinds it)
 
 
+@intrinsic
+def borrow(typingctx, array):
+    """A view of ``array`` that holds no reference to it (its meminfo is null), for use inside one call.
+
+    numba counts references to an array atomically at every call or inlined function that takes
+    it (tens per fish and step in the model's kernels), and the threads of a parallel build share
+    those counts. A borrowed view's counting is a null check. It must not outlive the call that
+    borrowed it: here the :class:`StepArrays` argument holds the arrays for the whole step.
+    """
+    if not isinstance(array, types.Array):
+        return None
+
+    def codegen(context, builder, signature, args):
+        view = context.make_array(array)(context, builder, value=args[0])
+        view.meminfo = cgutils.get_null_value(view.meminfo.type)
+        view.parent = cgutils.get_null_value(view.parent.type)
+        return view._getvalue()
+
+    return array(array), codegen
+
+
 def step_body(a, skip, s):
     """Step the envs of ``a`` (a :class:`StepArrays`) except those where ``skip``, with settings ``s``.
 
     Returns -1, or the index of the first env not in ``skip`` whose action is not finite (then
-    nothing has been written). The steps are listed in the module docstring.
+    nothing has been written). The steps are listed in the module docstring; every env's steps 2-5
+    touch only its own rows, so one loop runs them env by env.
     """
-    # The fields as locals, read once: inside the prange loops each read of a structref field would
-    # take and drop a reference to the array (atomic counts that the threads would share).
-    actions, cfg, beats, obs, out, fish, ep, before = a.actions, a.cfg, a.beats, a.obs, a.out, a.fish, a.ep, a.before
-    state, fins, cache, pending, integral, coef, tables = a.state, a.fins, a.cache, a.pending, a.integral, a.coef, \
-        a.tables
+    # The fields as borrowed views, read once: each read of a structref field, and each call that takes
+    # an array, would take and drop a reference to it (atomic counts that the threads would share).
+    actions, cfg, beats, obs, out = borrow(a.actions), borrow(a.cfg), borrow(a.beats), borrow(a.obs), borrow(a.out)
+    fish, ep, before, everyone = borrow(a.fish), borrow(a.ep), borrow(a.before), borrow(a.everyone)
+    state, fins, cache, pending = borrow(a.state), borrow(a.fins), borrow(a.cache), borrow(a.pending)
+    integral, coef, packed = borrow(a.integral), borrow(a.coef), a.tables
+    tables = (borrow(packed[0]), borrow(packed[1]), borrow(packed[2]), borrow(packed[3]), packed[4],
+              borrow(packed[5]), borrow(packed[6]), borrow(packed[7]), borrow(packed[8]), borrow(packed[9]))
     duration, dt_max, min_substeps, averaged, mode, corrections = s
     bad = tk.first_non_finite(actions, skip)
     if bad >= 0:
@@ -114,11 +147,9 @@ def step_body(a, skip, s):
     n = actions.shape[0]
     for i in nb.prange(n):
         tk.apply_keep_one(i, actions, skip, cfg, beats, obs, out, fish, integral, before)
-    command_fins(fins, pending, beats, a.everyone)
-    for i in nb.prange(n):
+        command_one(i, fins, pending, beats, everyone)
         stepping.advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged,
                              mode, corrections, tables)
-    for i in nb.prange(n):
         if not skip[i]:
             reward_one(i, state, cfg, ep, fish, obs, out)
         tk.observe_mean_velocity(i, cfg, obs, integral, before)

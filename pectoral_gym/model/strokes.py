@@ -57,7 +57,7 @@ __all__ = [
     "SWEPT", "swept_cube",
     "BEAT_BIAS", "BEAT_AMPLITUDE", "BEAT_PERIOD", "BEAT_RATIO", "SIDE",
     "command_fins", "fin_angles", "fin_forcing", "idle", "init_fins", "latch",
-    "StrokePhase", "stroke_phase", "advance_phase", "phase_forcing",
+    "StrokePhase", "stroke_phase", "advance_phase", "phase_forcing", "command_one",
 ]
 
 ELAPSED, DURATION, ANGLE_FROM, ANGLE_TO, POWER = 0, 1, 2, 3, 4
@@ -188,6 +188,19 @@ def phase_forcing(right: StrokePhase, left: StrokePhase, drag_constant, inertia_
     return fx_total, fy_total, tau_total
 
 
+@njit(inline="always")
+def command_one(i, fins, pending, new, mask):
+    """:func:`command_fins` for fish ``i`` alone (a no-op unless ``mask[i]``)."""
+    if not mask[i]:
+        return
+    for f in range(2):
+        for j in range(4):
+            pending[i, f, j] = new[i, f, j]
+        if fins[i, f, ANGLE_FROM] == fins[i, f, ANGLE_TO]:
+            fins[i, f, ELAPSED] = fins[i, f, DURATION]
+            fins[i, f, POWER] = 0.0
+
+
 @njit
 def command_fins(fins, pending, new, mask):
     """Store new commanded patterns ``new`` ``(n, 2, 4)`` for the fish where ``mask``.
@@ -197,14 +210,7 @@ def command_fins(fins, pending, new, mask):
     a power stroke.
     """
     for i in range(new.shape[0]):
-        if not mask[i]:
-            continue
-        for f in range(2):
-            for j in range(4):
-                pending[i, f, j] = new[i, f, j]
-            if fins[i, f, ANGLE_FROM] == fins[i, f, ANGLE_TO]:
-                fins[i, f, ELAPSED] = fins[i, f, DURATION]
-                fins[i, f, POWER] = 0.0
+        command_one(i, fins, pending, new, mask)
 
 
 def init_fins(fins: np.ndarray, pending: np.ndarray, beats: np.ndarray, index: np.ndarray | None = None) -> None:
