@@ -50,6 +50,7 @@ from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.model import stepping
 from pectoral_gym.model.jit import PARALLEL_MIN_ITEMS, KernelPair, entry_point, kernel_builds, njit
 from pectoral_gym.model.strokes import command_one
+from pectoral_gym.model.threads import start_passive_threads
 
 __all__ = ["STEP", "STEP_FIELDS", "FusedStep", "StepArrays", "StepSettings", "borrow", "step_body", "step_builds"]
 
@@ -199,7 +200,9 @@ class FusedStep:
         task_kernel: The task's ``reward_one`` kernel (the task table's row).
 
     Attributes:
-        parallel: Whether the parallel build runs (``n >= PARALLEL_MIN_ITEMS``).
+        parallel: Whether the parallel build runs (``n >= PARALLEL_MIN_ITEMS``); its first binding starts
+            numba's threads waiting passively between steps, if no parallel kernel has started them
+            before (:func:`pectoral_gym.model.threads.start_passive_threads`).
 
     Pickles and deep-copies without the binding (compiled code); a copy binds its own arrays.
     """
@@ -240,6 +243,8 @@ class FusedStep:
                                  m.pending, m.integral, m.coef, m.packed_tables)
         settings = self.settings()
         kernel = self.kernel
+        if self.parallel:
+            start_passive_threads()  # before the first parallel step: numba's threads sleep between steps
         return _Bound(arrays, kernel, entry_point(kernel, (arrays, self.none, settings)), settings, revision)
 
     def __call__(self, actions: np.ndarray, skip: np.ndarray | None = None) -> int:
