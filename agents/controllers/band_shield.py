@@ -32,7 +32,7 @@ from pectoral_gym.agents.controllers.fin_map import FinMap
 from pectoral_gym.agents.controllers.stop_band import StopBand, band_violation
 from pectoral_gym.agents.controllers.turning import SPIN_CYCLE, mirror
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.model.tank import coast_distance
+from pectoral_gym.model.tank import ROBOT_STOP_RULE, coast_distance
 
 __all__ = ["BACKUP_SPINS", "BACKUP_TURNS", "SLOWER", "BandShield", "band_speed"]
 
@@ -67,7 +67,9 @@ class BandShield:
     Args:
         config: The environment settings.
         fins: The controller's fin map (period, ratio, amplitudes, planning model).
-        band: The robot's band ``(margin [m], reaction time [s], horizon [s])``.
+        band: The band's :class:`~pectoral_gym.model.tank.StopRule` ``(margin [m], reaction time [s], horizon [s])``;
+            ``None``: the env's ``stop_rule`` where its ``stop_band`` is on (v1), else the robot's
+            (:data:`~pectoral_gym.model.tank.ROBOT_STOP_RULE`).
         extra_margin: Clearance [m] added to the band's margin in the rollouts.
         horizon: Length of each rollout [s].
         check: Band check interval along the rollouts [s] (a divisor of the control period).
@@ -79,11 +81,13 @@ class BandShield:
             ``T + tail`` there): a fish that coasts towards a wall reaches it at last, however slowly.
     """
 
-    def __init__(self, config: EnvConfig, fins: FinMap, band: tuple[float, float, float] = (0.05, 0.15, 5.0),
+    def __init__(self, config: EnvConfig, fins: FinMap, band: tuple[float, float, float] | None = None,
                  extra_margin: float = 0.02, horizon: float = 16.0, check: float = 0.5, turn_level: float = 0.06,
                  tail: float = 30.0, speed_spread: float = 0.0, spin: bool = True):
         self.config = config
         self.fins = fins
+        if band is None:
+            band = config.stop_rule if config.stop_band else ROBOT_STOP_RULE
         margin, reaction, coast = band
         self.band = StopBand.from_params(config.params, margin + extra_margin, reaction, coast)
         self.final = StopBand.from_params(config.params, margin + extra_margin, reaction, coast + tail)

@@ -113,7 +113,7 @@ class NMPCController(PlanPricing):
         self.u_rest = np.array(FinInputs(a_low, a_low, self.bias_mid, self.bias_mid))
         self.z_low, self.z_high = to_z(self.u_low), to_z(self.u_high)
         use_hand = s.hand_candidate if s.hand_candidate is not None else config.task != "track"
-        self.hand = HandController(config)  # the base policy of the candidate and of the continuation
+        self.hand = HandController(config, shield=False)  # the base policy of the candidate and the continuation
         self.hand_candidate = bool(use_hand)
         self.w_togo = s.w_togo if s.w_togo is not None else (0.0 if self.track else 3.0)
         self.turn_then_straight = bool(s.turn_then_straight if s.turn_then_straight is not None else not self.track)
