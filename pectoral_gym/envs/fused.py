@@ -19,7 +19,8 @@ then, env by env (each touches only its own rows, so the order across envs does 
 The per-env loop is a ``numba.prange`` loop: :func:`pectoral_gym.model.jit.kernel_builds` compiles it
 serially (below ``PARALLEL_MIN_ITEMS`` envs, where threads cost more than they save) and in
 parallel; every env's arithmetic is the same in both, so the two give the same bits
-(``tests/test_fused_step.py``). One loop is one parallel region per step: its threads meet once.
+(``tests/test_fused_step.py``). One loop is one parallel region per step: its threads meet once,
+and take its envs in chunks of :data:`CHUNK` as they come free.
 A task registered at run time gets builds of the same body with its kernel bound in place of
 ``reward_one`` (:func:`step_builds`).
 
@@ -52,7 +53,8 @@ from pectoral_gym.model.jit import PARALLEL_MIN_ITEMS, KernelPair, entry_point, 
 from pectoral_gym.model.strokes import command_one
 from pectoral_gym.model.threads import start_passive_threads
 
-__all__ = ["STEP", "STEP_FIELDS", "FusedStep", "StepArrays", "StepSettings", "borrow", "step_body", "step_builds"]
+__all__ = ["CHUNK", "STEP", "STEP_FIELDS", "FusedStep", "StepArrays", "StepSettings", "borrow", "step_body",
+           "step_builds"]
 
 @structref.register
 class StepArraysType(types.StructRef):
@@ -102,6 +104,10 @@ class StepSettings(NamedTuple):
     corrections: int
 
 
+#: Envs per chunk of the parallel build's loop: each thread takes the next chunk when it is free, so a
+#: thread that starts late (woken from its passive wait, or not scheduled on a loaded machine) or meets
+#: slower envs does not hold the others up.
+CHUNK = 32
 reward_one = tk.reward_one  # the task kernel the body calls (the built-in tasks'; step_builds rebinds it)
 
 
@@ -146,14 +152,15 @@ def step_body(a, skip, s):
     if bad >= 0:
         return bad
     n = actions.shape[0]
-    for i in nb.prange(n):
-        tk.apply_keep_one(i, actions, skip, cfg, beats, obs, out, fish, integral, before)
-        command_one(i, fins, pending, beats, everyone)
-        stepping.advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged,
-                             mode, corrections, tables)
-        if not skip[i]:
-            reward_one(i, state, cfg, ep, fish, obs, out)
-        tk.observe_mean_velocity(i, cfg, obs, integral, before)
+    with nb.parallel_chunksize(CHUNK):  # threads take chunks as they come free (the parallel build)
+        for i in nb.prange(n):
+            tk.apply_keep_one(i, actions, skip, cfg, beats, obs, out, fish, integral, before)
+            command_one(i, fins, pending, beats, everyone)
+            stepping.advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps,
+                                 averaged, mode, corrections, tables)
+            if not skip[i]:
+                reward_one(i, state, cfg, ep, fish, obs, out)
+            tk.observe_mean_velocity(i, cfg, obs, integral, before)
     return -1
 
 

@@ -149,10 +149,14 @@ def vector_env_timer(env_id: str, num_envs: int, steps: int, seed: int = 0,
 
 
 def _environment() -> dict[str, Any]:
-    """Versions and hardware that the rates depend on."""
+    """Versions, hardware and thread settings that the rates depend on."""
     import gymnasium as gym
     import numba
 
+    try:
+        layer = numba.threading_layer()
+    except ValueError:  # no parallel kernel has run
+        layer = None
     return {
         "python": platform.python_version(),
         "numpy": np.__version__,
@@ -160,6 +164,8 @@ def _environment() -> dict[str, Any]:
         "gymnasium": gym.__version__,
         "cpu_count": os.cpu_count(),
         "numba_threads": numba.get_num_threads(),
+        "numba_threading_layer": layer,
+        "omp_wait_policy": os.environ.get("OMP_WAIT_POLICY"),  # the user's; unset: the envs start threads passive
         "machine": platform.machine(),
     }
 
