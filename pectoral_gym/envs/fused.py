@@ -45,7 +45,7 @@ import numba as nb
 import numpy as np
 from numba.core import cgutils, types
 from numba.experimental import structref
-from numba.extending import intrinsic
+from numba.extending import intrinsic, overload
 
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.model import stepping
@@ -111,15 +111,20 @@ CHUNK = 32
 reward_one = tk.reward_one  # the task kernel the body calls (the built-in tasks'; step_builds rebinds it)
 
 
-@intrinsic
-def borrow(typingctx, array):
+def borrow(array: np.ndarray) -> np.ndarray:
     """A view of ``array`` that holds no reference to it (its meminfo is null), for use inside one call.
 
     numba counts references to an array atomically at every call or inlined function that takes
     it (tens per fish and step in the model's kernels), and the threads of a parallel build share
     those counts. A borrowed view's counting is a null check. It must not outlive the call that
     borrowed it: here the :class:`StepArrays` argument holds the arrays for the whole step.
+    In Python (``NUMBA_DISABLE_JIT``) it is ``array`` itself.
     """
+    return array
+
+
+@intrinsic
+def _borrowed(typingctx, array):
     if not isinstance(array, types.Array):
         return None
 
@@ -130,6 +135,11 @@ def borrow(typingctx, array):
         return view._getvalue()
 
     return array(array), codegen
+
+
+@overload(borrow, inline="always")
+def _borrow_overload(array):
+    return lambda array: _borrowed(array)
 
 
 def step_body(a, skip, s):
