@@ -52,10 +52,10 @@ from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handle
 __all__ = ["main", "make_controller", "run_episodes", "plot_trajectories", "solver_summary"]
 
 
-def _random_start(rng: np.random.Generator) -> tuple[float, float, float]:
-    """A start pose as the simulated goal task draws one (tank inset by 0.3 m, any heading)."""
-    x = tk.START_INSET + rng.random() * (tk.TANK_X - 2 * tk.START_INSET)
-    y = tk.START_INSET + rng.random() * (tk.TANK_Y - 2 * tk.START_INSET)
+def _random_start(rng: np.random.Generator, inset: float = tk.START_INSET) -> tuple[float, float, float]:
+    """A start pose as the simulated goal task draws one (tank inset by ``inset`` [m], any heading)."""
+    x = inset + rng.random() * (tk.TANK_X - 2 * inset)
+    y = inset + rng.random() * (tk.TANK_Y - 2 * inset)
     return x, y, -math.pi + 2 * math.pi * rng.random()
 
 
@@ -221,7 +221,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             if args.emulate:
                 clock, robot, port, camera = open_rig(resources, args.seed, conditions, args.lockstep, args.speed)
-                hook = lambda rng: robot.place(*_random_start(rng))  # noqa: E731 - a hand that puts the fish back
+                inset = settings.get("start_inset", tk.START_INSET)  # the policy's own, as it trained
+                hook = lambda rng: robot.place(*_random_start(rng, inset))  # noqa: E731 - a hand puts the fish back
             else:
                 from pectoral_gym.hardware.vision.camera import open_source
 

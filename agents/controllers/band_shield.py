@@ -32,7 +32,7 @@ from pectoral_gym.agents.controllers.fin_map import FinMap
 from pectoral_gym.agents.controllers.stop_band import StopBand, band_violation
 from pectoral_gym.agents.controllers.turning import SPIN_CYCLE, mirror
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.model.tank import ROBOT_STOP_RULE, coast_distance
+from pectoral_gym.model.tank import ROBOT_STOP_RULE, StopRule, stop_need
 
 __all__ = ["BACKUP_SPINS", "BACKUP_TURNS", "SLOWER", "BandShield", "band_speed"]
 
@@ -48,7 +48,7 @@ def band_speed(clearance: float, band: StopBand) -> float:
     The need ``margin + v t_r + ln(1 + k v T) / k`` grows with ``v``; solved by bisection.
     """
     def need(v: float) -> float:
-        return band.margin + v * band.reaction_time + float(coast_distance(v, band.k, band.horizon))
+        return float(stop_need(v, band.k, StopRule(band.margin, band.reaction_time, band.horizon)))
 
     if need(0.0) >= clearance:
         return 0.0

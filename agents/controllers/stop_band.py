@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from pectoral_gym.model.params import FishParams
-from pectoral_gym.model.tank import Outline, coast_distance, coast_rate, outline_circles, wall_gaps
+from pectoral_gym.model.tank import Outline, StopRule, coast_rate, outline_circles, stop_need, wall_gaps
 
 __all__ = ["StopBand", "band_violation"]
 
@@ -70,10 +70,11 @@ def band_violation(x: Any, y: Any, psi: Any, vx: Any, vy: Any, band: StopBand, o
     """
     c, s = ops.cos(psi), ops.sin(psi)
     vx_w, vy_w = c * vx - s * vy, s * vx + c * vy
+    rule = StopRule(band.margin, band.reaction_time, band.horizon)
     needs = []
     for toward in (-vx_w, vx_w, -vy_w, vy_w):  # walls X = 0, X = L, Y = 0, Y = W (tank.wall_gaps' order)
         v = ops.fmax(toward, 0.0)
-        needs.append(band.margin + v * band.reaction_time + coast_distance(v, band.k, band.horizon, ops))
+        needs.append(stop_need(v, band.k, rule, ops=ops))
     total = 0.0
     outline = Outline(band.half_length, band.width, band.span)
     for px, py, r in outline_circles(x, y, c, s, outline):  # nose, tail, right and left fin pivot

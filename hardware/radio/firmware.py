@@ -52,6 +52,7 @@ from pectoral_gym.hardware.radio.protocol import (
     Verdict,
     serial_newer,
 )
+from pectoral_gym.model.servo import ROBOT_MAX_FIN_RATE, servo_period
 
 __all__ = ["ServoLimits", "FirmwareConfig", "Firmware", "clip_beats", "rate_limit", "rest_beats", "peak_rates",
            "stretch_transition", "new_boot_id"]
@@ -95,7 +96,7 @@ class ServoLimits:
     period_max: float = 4.0
     ratio_min: float = 0.5
     ratio_max: float = 6.0
-    max_speed: float = 13.0
+    max_speed: float = ROBOT_MAX_FIN_RATE
     max_rate: tuple[float, float, float, float] = field(default_factory=_default_rate)
 
     def __post_init__(self) -> None:
@@ -135,8 +136,7 @@ def clip_beats(beats: np.ndarray, limits: ServoLimits) -> tuple[np.ndarray, bool
     out[:, 2] = np.clip(out[:, 2], limits.period_min, limits.period_max)
     out[:, 3] = np.clip(out[:, 3], limits.ratio_min, limits.ratio_max)
     # Peak rate of the faster half-stroke, eq. (21): pi A (zeta + 1) / (T_p min(1, zeta)); slow the period.
-    slow_period = math.pi * out[:, 1] * (out[:, 3] + 1.0) / (limits.max_speed * np.minimum(1.0, out[:, 3]))
-    out[:, 2] = np.maximum(out[:, 2], slow_period)  # <= period_max (ServoLimits guarantees it)
+    out[:, 2] = servo_period(out[:, 1], out[:, 2], out[:, 3], limits.max_speed)  # <= period_max (ServoLimits)
     return out, bool(np.any(np.abs(out - b) > 1e-12))
 
 
