@@ -149,7 +149,7 @@ def make_controller(name: str, config, step_budget: float, safety: SafetyConfig 
 
     if name == "nmpc":
         safety = safety or SafetyConfig()
-        band = (safety.geofence_margin, safety.reaction_time, safety.coast_horizon)
+        band = (safety.geofence_margin, safety.reaction_time, safety.contact_speed)
         return make_baseline("nmpc", config, step_budget=step_budget, stop_band=band)
     return make_baseline(name, config)
 

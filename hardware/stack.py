@@ -153,7 +153,7 @@ def open_stack(port, camera, config: EnvConfig, safety: SafetyConfig, speed: flo
             observer = HighGainObserver(epsilon=observer_epsilon)
         # observe_fins: the robot reports no fin angles, so the PC replays its fins from the commands it sends
         fin_replay = FinReplay(config.params, FirmwareConfig(limits=safety.limits)) if config.observe_fins else None
-        geofence = Geofence(config.params, safety.geofence_margin, safety.reaction_time, safety.coast_horizon)
+        geofence = Geofence(config.params, safety.geofence_margin, safety.reaction_time, safety.contact_speed)
         supervisor = Supervisor(link, camera, tracker, geofence, safety, speed, frame_period,
                                 origin=clock.monotonic() if origin is None else origin, clock=clock).start()
     except BaseException:

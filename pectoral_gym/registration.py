@@ -15,9 +15,10 @@ from pectoral_gym.model.tank import ROBOT_STOP_RULE
 
 #: Clearance [m] the v1 envs' band keeps on top of the robot's rule: the robot's supervisor judges the band on a
 #: least-squares speed from camera poses plus 2 standard errors (>= 2 x 5 mm / 1.58 s = 6.3 mm/s over its 1 s
-#: window), which widens the band by up to 2 sigma (T + t_r) = 3.3 cm at the camera's noise floor, and more with
-#: the in-beat swing of the pose; and the envs check the band after each control period, the robot every frame
-#: (``docs/agents.md``, "Robot-ready envs").
+#: window), which widens the band by up to 2 sigma (t_r + 1 / (k v_c)) = 3.3 cm at the camera's noise floor (near
+#: the contact speed v_c, where the need grows fastest with speed), and more with the in-beat swing of the pose;
+#: and the envs check the band after each control period, the robot every frame (``docs/agents.md``, "Robot-ready
+#: envs").
 MEASUREMENT_MARGIN = 0.05
 
 __all__ = ["ENV_IDS", "ENV_SETTINGS", "MAX_EPISODE_STEPS", "MEASUREMENT_MARGIN", "ROBOT_READY", "register_envs",

@@ -29,12 +29,13 @@ def test_study_substeps_reproduce_the_env_episode():
 
 
 def test_band_speed_solves_the_band_need():
-    """``band_speed`` inverts the need ``margin + v t_r + ln(1 + k v T) / k`` (Geofence's rule)."""
+    """``band_speed`` inverts the need ``margin + v t_r + ln(max(v, v_c) / v_c) / k`` (Geofence's rule)."""
     band = StopBand.from_params(EnvConfig().params, *ROBOT_BAND)
     assert band_speed(band.margin, band) == 0.0  # at rest the need is the margin
     for clearance in (0.1, 0.2, 0.3):
         v = band_speed(clearance, band)
-        need = band.margin + v * band.reaction_time + float(coast_distance(v, band.k, band.horizon))
+        coast = math.log(max(v, band.contact_speed) / band.contact_speed) / band.k
+        need = band.margin + v * band.reaction_time + coast
         assert need == pytest.approx(clearance, abs=1e-9)
     assert band_speed(0.1, band) < band_speed(0.2, band) < band_speed(0.3, band)
 
@@ -82,7 +83,7 @@ def test_shield_speed_spread_counts_towards_every_wall():
     w = 0.02
     shield = BandShield(config, FinMap(config), extra_margin=0.0, speed_spread=w)
     band = shield.band
-    need = band.margin + w * band.reaction_time + float(coast_distance(w, band.k, band.horizon))
+    need = band.margin + w * band.reaction_time + float(coast_distance(w, band.k, band.contact_speed))
     for offset, inside in ((-0.005, True), (0.005, False)):
         x = band.half_length + band.width + need + offset  # the tail's clearance is need + offset
         state = np.array([[x, 0.5 * TANK_WIDTH, 0.0, 0.0, 0.0, 0.0]])

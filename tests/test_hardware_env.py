@@ -15,6 +15,7 @@ from pectoral_gym.hardware.radio.firmware import ServoLimits
 from pectoral_gym.hardware.safety.geofence import Geofence, in_geofence
 from pectoral_gym.hardware.safety.rules import CommandFilter, SafetyConfig, TrackingWatch, install_stop_handlers
 from pectoral_gym.hardware.vision.scene import SceneConditions
+from pectoral_gym.model import tank
 from pectoral_gym.model.models import FullModel
 from pectoral_gym.model.params import FishParams, body_coefficients
 
@@ -181,7 +182,7 @@ def test_sigterm_handler_sends_stop():
 
 def test_geofence_outline_clearance_by_hand():
     p = FishParams()
-    fence = Geofence(p, margin=0.05, reaction_time=0.0, horizon=5.0)
+    fence = Geofence(p, margin=0.05, reaction_time=0.0, contact_speed=0.03)
     half, cp, sp = 0.5 * p.body_length, p.fin_offset, p.fin_span
     # Heading +X at (1.0, 0.5): tail capsule end to X = 0; fin discs around (1.0, 0.5 -+ C_p) to Y = 0 and Y = W.
     assert np.allclose(fence.clearance(1.0, 0.5, 0.0),
@@ -189,21 +190,30 @@ def test_geofence_outline_clearance_by_hand():
     y_tip = 0.05 + cp + sp + 0.001  # fin disc 1 mm beyond the margin: clear at rest, not when drifting to the wall
     assert not fence.breached(1.0, y_tip, 0.0)
     assert fence.breached(1.0, y_tip - 0.002, 0.0)
-    assert fence.breached(1.0, y_tip, 0.0, vy=-0.01) and not fence.breached(1.0, y_tip, 0.0, vy=0.01)
+    # Below the contact speed a drift needs no coasting distance, only its reaction distance (0 here).
+    assert not fence.breached(1.0, y_tip, 0.0, vy=-0.01) and not fence.breached(1.0, y_tip, 0.0, vy=0.01)
+    assert fence.breached(1.0, y_tip, 0.0, vy=-0.031) and not fence.breached(1.0, y_tip, 0.0, vy=0.031)
     assert fence.breached(1.0, 0.5, 0.0, vx=math.nan)
 
 
 def test_coasting_distance_closed_form_matches_the_full_model():
     # Independent check: the full model's RK4 integration of eq. (19) with the fins held still.
     p = FishParams()
-    fence = Geofence(p, margin=0.0, reaction_time=0.0, horizon=3.0)
+    contact = 0.03
+    fence = Geofence(p, margin=0.0, reaction_time=0.0, contact_speed=contact)
     model = FullModel(1, p)
     coef = body_coefficients(p)
     k = coef.c1 / coef.m1
     model.reset(np.array([0.0, 0.0, 0.0, 0.2, 0.0, 0.0]))  # surge: m1 dv/dt = -c1 v |v| exactly
     model.advance(3.0)
     assert model.state[0, 0] == pytest.approx(math.log1p(k * 0.2 * 3.0) / k, rel=2e-3)
+    # v(t) = v0 / (1 + k v0 t): down to the contact speed at t_c = (v0 / v_c - 1) / (k v0), after ln(v0 / v_c) / k.
+    model.reset(np.array([0.0, 0.0, 0.0, 0.2, 0.0, 0.0]))
+    model.advance((0.2 / contact - 1.0) / (k * 0.2))
+    assert model.state[0, 3] == pytest.approx(contact, rel=2e-3)
+    assert model.state[0, 0] == pytest.approx(math.log(0.2 / contact) / k, rel=2e-3)
     assert fence.coast(0.2) >= model.state[0, 0]  # the fence uses the slower (sway, m2) decay
+    assert fence.coast(contact) == 0.0 and fence.coast(-0.1) == 0.0
     model.reset(np.array([0.0, 0.0, 0.0, 0.0, 0.2, 0.0]))  # sway: the lift term of (20) also drains it
-    model.advance(3.0)
+    model.advance((0.2 / contact - 1.0) / (tank.coast_rate(coef) * 0.2))
     assert 0.5 * fence.coast(0.2) < model.state[0, 1] <= fence.coast(0.2)

@@ -30,7 +30,8 @@ def _clearance_need_by_hand(x, y, psi, vx, vy, rule):
     needs = []
     for v in (-vx, vx, -vy, vy):
         v = max(v, 0.0)
-        needs.append(rule.margin + v * rule.reaction_time + math.log(1 + K * v * rule.horizon) / K)
+        coast = math.log(max(v, rule.contact_speed) / rule.contact_speed) / K  # down to the contact speed
+        needs.append(rule.margin + v * rule.reaction_time + coast)
     return gaps, needs
 
 
@@ -44,7 +45,7 @@ def test_band_shortfall_is_the_written_out_rule_on_random_states():
         gaps, needs = _clearance_need_by_hand(x, y, psi, vx, vy, rule)
         expected = max(n - g for n, g in zip(needs, gaps, strict=True))
         got = tank.band_shortfall(x, y, math.cos(psi), math.sin(psi), (-vx, vx, -vy, vy), (HALF, WIDTH, SPAN), K,
-                                  rule.margin, rule.reaction_time, rule.horizon)
+                                  rule.margin, rule.reaction_time, rule.contact_speed)
         assert got == pytest.approx(expected, abs=1e-12)
         assert geofence.breached(x, y, psi, vx, vy) == (expected > 0)
 

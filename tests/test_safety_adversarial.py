@@ -334,7 +334,7 @@ def _full_thrust_at(start, steps=40):
             if terminated or truncated:
                 break
         t_end = robot.now()
-        _wait(lambda: robot.now() > t_end + SafetyConfig().coast_horizon, timeout=10.0)  # let it coast
+        _wait(lambda: robot.now() > t_end + 5.0, timeout=10.0)  # let it coast (to 1 / (k 5 s) ~ the contact speed)
     finally:
         stop.set()
         sampler.join()

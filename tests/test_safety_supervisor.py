@@ -179,7 +179,7 @@ def test_reset_over_a_slow_radio_waits_for_the_robots_word():
 
 def test_speed_estimate_at_rest_with_5_mm_noise_never_trips_the_geofence():
     # A fish at rest with its centre 0.30 m from the +X wall, heading at it; fins running (bound far above).
-    fence = Geofence(P, 0.05, 0.15, 5.0)
+    fence = Geofence(P, 0.05, 0.15, 0.03)
     rng = np.random.default_rng(0)
     x0 = TANK_LENGTH - 0.30
     before = after = 0
@@ -199,7 +199,7 @@ def test_speed_estimate_at_rest_with_5_mm_noise_never_trips_the_geofence():
 
 
 def test_speed_estimate_still_sees_a_fish_swimming_at_a_wall():
-    fence = Geofence(P, 0.05, 0.15, 5.0)
+    fence = Geofence(P, 0.05, 0.15, 0.03)
     t = np.arange(19) / 30
     poses = [(ti, TANK_LENGTH - 0.45 + 0.2 * ti, 0.575) for ti in t]  # 0.2 m/s towards +X, nose 0.23 m away
     (vx, vy), (sx, sy) = ls_velocity(poses, 0.005)
@@ -303,7 +303,7 @@ def test_reset_takes_only_frames_captured_after_the_hook_with_a_leading_clock():
 
 # ---------------------------------------------------------------- 9: limits bounded by the physics
 def test_safety_config_refuses_limits_beyond_the_physics():
-    with pytest.raises(ValueError, match=r"tracking_timeout = 30.0 s exceeds the physical bound coast_horizon = 5.0"):
+    with pytest.raises(ValueError, match=r"tracking_timeout = 30.0 s exceeds MAX_TRACKING_TIMEOUT = 5.0 s"):
         SafetyConfig(tracking_timeout=30.0)
     with pytest.raises(ValueError, match="tracking_timeout must be > 0"):
         SafetyConfig(tracking_timeout=0.0)

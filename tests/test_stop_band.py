@@ -19,12 +19,12 @@ from pectoral_gym.hardware.safety.rules import SafetyConfig
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
 
 SAFETY = SafetyConfig()
-BAND = StopBand.from_params(FishParams(), SAFETY.geofence_margin, SAFETY.reaction_time, SAFETY.coast_horizon)
+BAND = StopBand.from_params(FishParams(), SAFETY.geofence_margin, SAFETY.reaction_time, SAFETY.contact_speed)
 
 
 def test_violation_is_positive_exactly_where_the_geofence_stops_the_fish():
     # the geofence's own implementation decides; poses and velocities drawn over the tank
-    fence = Geofence(FishParams(), SAFETY.geofence_margin, SAFETY.reaction_time, SAFETY.coast_horizon)
+    fence = Geofence(FishParams(), SAFETY.geofence_margin, SAFETY.reaction_time, SAFETY.contact_speed)
     rng = np.random.default_rng(0)
     breached = 0
     for _ in range(2000):
@@ -38,11 +38,12 @@ def test_violation_is_positive_exactly_where_the_geofence_stops_the_fish():
 
 
 def test_violation_by_hand_and_in_casadi():
-    # heading +Y at 0.1 m/s, centre 0.4 m from the wall Y = W: only the nose circle and the fin discs can
+    # heading +Y at 0.1 m/s, centre 0.35 m from the wall Y = W: only the nose circle and the fin discs can
     # fall short of that wall's need; nothing moves towards the other walls (need = margin there)
-    y = TANK_WIDTH - 0.4
-    need = SAFETY.geofence_margin + 0.1 * SAFETY.reaction_time + math.log(1 + BAND.k * 0.1 * 5.0) / BAND.k
-    gaps = [0.4 - BAND.half_length - BAND.width, 0.4 + BAND.half_length - BAND.width, 0.4 - BAND.span, 0.4 - BAND.span]
+    d = 0.35
+    y = TANK_WIDTH - d
+    need = SAFETY.geofence_margin + 0.1 * SAFETY.reaction_time + math.log(0.1 / SAFETY.contact_speed) / BAND.k
+    gaps = [d - BAND.half_length - BAND.width, d + BAND.half_length - BAND.width, d - BAND.span, d - BAND.span]
     expected = sum(max(need - g, 0.0) ** 2 for g in gaps)
     assert expected > 0
     got = band_violation(1.0, y, math.pi / 2, 0.1, 0.0, BAND, np)

@@ -33,15 +33,18 @@ def test_outline_clearance_and_coasting_by_hand():
                                [1.0 - cp - sp, tank.TANK_LENGTH - 1.0 - cp - sp, 0.5 - half - cp,
                                 tank.TANK_WIDTH - 0.5 - half - cp], atol=1e-15)
     k = tank.coast_rate(coef)
-    # m dv/dt = -c1 v^2 from v0: x(T) = ln(1 + k v0 T) / k; a negative speed (away from the wall) coasts 0 towards it.
-    assert tank.coast_distance(0.2, k, 5.0) == pytest.approx(math.log1p(k * 0.2 * 5.0) / k, rel=1e-14)
-    assert tank.coast_distance(-0.1, k, 5.0) == 0.0
+    # m dv/dt = -c1 v^2 from v0: v dv/dx = -k v^2, v(x) = v0 exp(-k x), down to v_c after ln(v0 / v_c) / k; at or
+    # below v_c, and away from the wall, no distance.
+    assert tank.coast_distance(0.2, k, 0.03) == pytest.approx(math.log(0.2 / 0.03) / k, rel=1e-14)
+    assert 0.2 * math.exp(-k * tank.coast_distance(0.2, k, 0.03)) == pytest.approx(0.03, rel=1e-14)
+    assert tank.coast_distance(0.02, k, 0.03) == 0.0
+    assert tank.coast_distance(-0.1, k, 0.03) == 0.0
 
 
 def test_the_stop_band_is_zero_exactly_where_the_geofence_lets_the_fish_swim_on():
     params = FishParams()
-    fence = Geofence(params, margin=0.05, reaction_time=0.15, horizon=5.0)
-    band = StopBand.from_params(params, 0.05, 0.15, 5.0)
+    fence = Geofence(params, margin=0.05, reaction_time=0.15, contact_speed=0.03)
+    band = StopBand.from_params(params, 0.05, 0.15, 0.03)
     rng = np.random.default_rng(1)
     for _ in range(300):
         x, y, psi = rng.uniform(0, tank.TANK_LENGTH), rng.uniform(0, tank.TANK_WIDTH), rng.uniform(-math.pi, math.pi)
@@ -54,7 +57,7 @@ def test_the_stop_band_is_zero_exactly_where_the_geofence_lets_the_fish_swim_on(
 
 def test_numpy_and_casadi_give_the_same_band_and_wall_terms():
     params = FishParams()
-    band = StopBand.from_params(params, 0.05, 0.15, 5.0)
+    band = StopBand.from_params(params, 0.05, 0.15, 0.03)
     sym = ca.SX.sym("s", 5)
     band_f = ca.Function("band", [sym], [band_violation(sym[0], sym[1], sym[2], sym[3], sym[4], band, ca)])
     wall_f = ca.Function("wall", [sym], [tank.wall_shortfall(sym[0], sym[1], ca.cos(sym[2]), ca.sin(sym[2]),

@@ -1,14 +1,12 @@
 """A safety filter for the hand law: keep the fish where it can still get out of the robot's stopping band.
 
 The robot's geofence stops the fish once any part of its outline is closer to a wall than
-``margin + v t_r + ln(1 + k v T) / k`` (:class:`pectoral_gym.agents.controllers.stop_band.StopBand`). Being
-outside that band now is not enough: the fish's thrust cannot reverse within the env's ratio range
-(eq. 25, ``(zeta^2 - 1) >= 0``), its turning circle has a radius of ~0.25 m whatever the thrust (with
-quadratic surge and yaw damping, eqs. 19-20, the steady radius does not depend on the force), and
-coasting does not keep it outside either: a fish coasting from ``v0`` covers ``ln(1 + k v0 t) / k`` in
-``t`` s and its remaining ``T``-horizon coast adds up to ``ln(1 + k v0 (t + T)) / k``, which grows
-without bound, so a fish drifting towards a wall reaches the band after
-``(exp(k (gap - margin)) - 1) / (k v0) - T`` s.
+``margin + v t_r + ln(max(v, v_c) / v_c) / k`` (:class:`pectoral_gym.agents.controllers.stop_band.StopBand`).
+Being outside that band now is not enough: the fish's thrust cannot reverse within the env's ratio range
+(eq. 25, ``(zeta^2 - 1) >= 0``) and its turning circle has a radius of ~0.25 m whatever the thrust (with
+quadratic surge and yaw damping, eqs. 19-20, the steady radius does not depend on the force). Coasting
+keeps it outside along one axis (the coast distance and the need shrink alike,
+:mod:`pectoral_gym.model.tank`), which the rollouts below check on the planning model.
 
 The filter is a backup shield (the "backup controller" form of a control barrier function): a set of
 backup manoeuvres (coast with the fins still; turn left or right with one fin at a low level for
@@ -45,10 +43,10 @@ SLOWER = (1.0, 0.5)  # the law's amplitudes scaled by these (thrust ~ amplitude^
 def band_speed(clearance: float, band: StopBand) -> float:
     """The largest speed [m/s] towards a wall at which ``clearance`` [m] is outside ``band`` (0 if none is).
 
-    The need ``margin + v t_r + ln(1 + k v T) / k`` grows with ``v``; solved by bisection.
+    The need ``margin + v t_r + ln(max(v, v_c) / v_c) / k`` grows with ``v``; solved by bisection.
     """
     def need(v: float) -> float:
-        return float(stop_need(v, band.k, StopRule(band.margin, band.reaction_time, band.horizon)))
+        return float(stop_need(v, band.k, StopRule(band.margin, band.reaction_time, band.contact_speed)))
 
     if need(0.0) >= clearance:
         return 0.0
@@ -67,7 +65,8 @@ class BandShield:
     Args:
         config: The environment settings.
         fins: The controller's fin map (period, ratio, amplitudes, planning model).
-        band: The band's :class:`~pectoral_gym.model.tank.StopRule` ``(margin [m], reaction time [s], horizon [s])``;
+        band: The band's :class:`~pectoral_gym.model.tank.StopRule` ``(margin [m], reaction time [s], contact speed
+            [m/s])``;
             ``None``: the env's ``stop_rule`` where its ``stop_band`` is on (v1), else the robot's
             (:data:`~pectoral_gym.model.tank.ROBOT_STOP_RULE`).
         extra_margin: Clearance [m] added to the band's margin in the rollouts.
@@ -77,20 +76,17 @@ class BandShield:
         spin: Also back up with the on-the-spot spin (where the env's ranges, period and ratio allow it).
         speed_spread: Speed [m/s] added to the speed towards every wall, as the robot's geofence adds its
             velocity estimate's spread (``Geofence.breached``'s ``spread``).
-        tail: The last state of a rollout must keep clear for ``tail`` s more of coasting [s] (the band's horizon
-            ``T + tail`` there): a fish that coasts towards a wall reaches it at last, however slowly.
     """
 
     def __init__(self, config: EnvConfig, fins: FinMap, band: tuple[float, float, float] | None = None,
                  extra_margin: float = 0.02, horizon: float = 16.0, check: float = 0.5, turn_level: float = 0.06,
-                 tail: float = 30.0, speed_spread: float = 0.0, spin: bool = True):
+                 speed_spread: float = 0.0, spin: bool = True):
         self.config = config
         self.fins = fins
         if band is None:
             band = config.stop_rule if config.stop_band else ROBOT_STOP_RULE
-        margin, reaction, coast = band
-        self.band = StopBand.from_params(config.params, margin + extra_margin, reaction, coast)
-        self.final = StopBand.from_params(config.params, margin + extra_margin, reaction, coast + tail)
+        margin, reaction, contact = band
+        self.band = StopBand.from_params(config.params, margin + extra_margin, reaction, contact)
         self.speed_spread = float(speed_spread)
         self.dt = float(config.control_period)
         self.intervals = max(1, int(round(horizon / self.dt)))
@@ -181,7 +177,6 @@ class BandShield:
             b.command_array(plans[:, k], validate=False)
             for _ in range(self.checks):
                 total += self._violation(b.advance(h), self.band)
-        total += self._violation(b.state, self.final)
         return total.reshape(nf + 1, nb)
 
     def _violation(self, s: np.ndarray, band: StopBand) -> np.ndarray:

@@ -41,11 +41,12 @@ from pectoral_gym.envs.observation import (
     OBS_Y,
 )
 from pectoral_gym.envs.tasks import kernels as tk
+from pectoral_gym.model.tank import ROBOT_STOP_RULE
 
 __all__ = ["ROBOT_BAND", "EpisodeRecord", "goal_in_inset", "run_episode", "summarize"]
 
-# The robot's band: SafetyConfig's geofence_margin, reaction_time and coast_horizon (pectoral_gym.hardware.safety.rules)
-ROBOT_BAND = (0.05, 0.15, 5.0)  # margin [m], reaction time [s], coasting horizon [s]
+# The robot's band: margin [m], reaction time [s], contact speed [m/s] (its supervisor's SafetyConfig defaults)
+ROBOT_BAND = tuple(ROBOT_STOP_RULE)
 
 
 @dataclass
@@ -110,7 +111,7 @@ def run_episode(make_controller: Callable[[EnvConfig], object] | None, seed: int
         env_id: Registered env id.
         substeps: Band checks per control period.
         goal_inset: Redraw the goal this far from the walls [m] (:func:`goal_in_inset`); ``None``: the env's.
-        band: ``(margin [m], reaction time [s], horizon [s])`` of the band.
+        band: ``(margin [m], reaction time [s], contact speed [m/s])`` of the band.
         max_steps: Control steps before truncation (the registry's 240).
         env_kwargs: More env arguments (``task`` is ``goal``).
         controller: A controller built already for ``config`` (then ``make_controller`` is not called).

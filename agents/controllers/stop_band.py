@@ -3,10 +3,11 @@
 On the robot (``pectoral_gym.hardware.env.HardwareFishEnv``) the safety supervisor stops the fish, and ends the
 episode, once it could no longer coast to a stop clear of a wall (``pectoral_gym.hardware.safety.geofence.Geofence``):
 per wall, the clearance of the fish's outline (a capsule from nose to tail of radius ``C_p`` and a disc of
-radius ``S_p`` around each fin pivot ``(0, +-C_p)``) must exceed ``margin + v t_r + ln(1 + k v T) / k``,
-``v`` the speed towards that wall, ``t_r`` the reaction time, ``T`` the coasting horizon and
-``k = c1 / max(m1, m2)`` (eq. 19 with no fin force along one axis). A planner that keeps only its nose
-and tail a few centimetres from the walls swims into that band at speed (about 0.3 m at 0.1 m/s);
+radius ``S_p`` around each fin pivot ``(0, +-C_p)``) must exceed ``margin + v t_r + ln(max(v, v_c) / v_c) / k``,
+``v`` the speed towards that wall, ``t_r`` the reaction time, ``v_c`` the contact speed and
+``k = c1 / max(m1, m2)`` (eq. 19 with no fin force along one axis; :func:`pectoral_gym.model.tank.stop_need`).
+A planner that keeps only its nose and tail a few centimetres from the walls swims into that band at speed
+(about 0.25 m at 0.1 m/s);
 :func:`band_violation` prices every circle of the outline against every wall's need instead, so the
 plan slows down or turns along a wall in time. The same expression serves the NLP (``ops=casadi``)
 and the pricing of rollouts (``ops=numpy``).
@@ -31,7 +32,7 @@ class StopBand:
     Attributes:
         margin: Clearance kept on top of the stopping distance [m].
         reaction_time: ``t_r`` [s].
-        horizon: Coasting horizon ``T`` [s].
+        contact_speed: ``v_c`` [m/s] (:class:`~pectoral_gym.model.tank.StopRule`).
         k: ``c1 / max(m1, m2)`` [1/m].
         half_length: Half the body length [m] (nose and tail).
         width: ``C_p`` [m]: the capsule's radius and the fin pivots' lateral offset.
@@ -40,19 +41,20 @@ class StopBand:
 
     margin: float
     reaction_time: float
-    horizon: float
+    contact_speed: float
     k: float
     half_length: float
     width: float
     span: float
 
     @classmethod
-    def from_params(cls, params: FishParams, margin: float, reaction_time: float, horizon: float) -> StopBand:
-        """The band of a fish with ``params`` and the supervisor's ``margin``, reaction time and horizon."""
-        values = (margin, reaction_time, horizon)
-        if not all(math.isfinite(v) and v >= 0 for v in values):
-            raise ValueError(f"stop band margin, reaction time and horizon must be finite and >= 0, got {values}")
-        return cls(float(margin), float(reaction_time), float(horizon), coast_rate(params),
+    def from_params(cls, params: FishParams, margin: float, reaction_time: float, contact_speed: float) -> StopBand:
+        """The band of a fish with ``params`` and the supervisor's ``margin``, reaction time and contact speed."""
+        values = (margin, reaction_time, contact_speed)
+        if not (all(math.isfinite(v) and v >= 0 for v in values) and contact_speed > 0):
+            raise ValueError("stop band margin and reaction time must be finite and >= 0, the contact speed finite "
+                             f"and > 0, got {values}")
+        return cls(float(margin), float(reaction_time), float(contact_speed), coast_rate(params),
                    *Outline.from_params(params))
 
 
@@ -70,7 +72,7 @@ def band_violation(x: Any, y: Any, psi: Any, vx: Any, vy: Any, band: StopBand, o
     """
     c, s = ops.cos(psi), ops.sin(psi)
     vx_w, vy_w = c * vx - s * vy, s * vx + c * vy
-    rule = StopRule(band.margin, band.reaction_time, band.horizon)
+    rule = StopRule(band.margin, band.reaction_time, band.contact_speed)
     needs = []
     for toward in (-vx_w, vx_w, -vy_w, vy_w):  # walls X = 0, X = L, Y = 0, Y = W (tank.wall_gaps' order)
         v = ops.fmax(toward, 0.0)

@@ -129,7 +129,7 @@ class NMPCSettings:
             strokes turn the fish within ~0.1 m, rolled out on the averaged model with its transitional strokes);
             a spin candidate that costs less than the solved plan is applied as it is. ``None``: for
             ``goal`` only.
-        stop_band: ``(margin [m], reaction time [s], coasting horizon [s])`` of the robot env's
+        stop_band: ``(margin [m], reaction time [s], contact speed [m/s])`` of the robot env's
             stopping-distance band (:mod:`pectoral_gym.agents.controllers.stop_band`, the rule of
             ``pectoral_gym.hardware.safety.geofence.Geofence``): the wall terms then keep the fish's whole outline out
             of the band instead of its nose and tail ``wall_margin`` (and ``togo_wall_margin``) from the walls. ``None``
@@ -205,9 +205,11 @@ class NMPCSettings:
             raise ValueError(f"heading_lookahead must be >= 0 s or None, got {self.heading_lookahead!r}")
         if self.solver not in _SOLVERS:
             raise ValueError(f"solver must be one of {_SOLVERS}, got {self.solver!r}")
-        if self.stop_band is not None and (len(self.stop_band) != 3 or not all(
-                isinstance(v, float | int) and math.isfinite(v) and v >= 0 for v in self.stop_band)):
-            raise ValueError(f"stop_band must be (margin, reaction time, horizon), finite and >= 0, got "
+        if self.stop_band is not None and (len(self.stop_band) != 3 or not (all(
+                isinstance(v, float | int) and math.isfinite(v) and v >= 0 for v in self.stop_band)
+                and self.stop_band[2] > 0)):
+            raise ValueError(f"stop_band must be (margin, reaction time, contact speed), finite and >= 0, the "
+                             f"contact speed > 0, got "
                              f"{self.stop_band!r}")
         if self.blocks is not None and (min(self.blocks, default=0) < 1 or sum(self.blocks) != int(self.horizon)):
             raise ValueError(f"blocks must be positive interval counts summing to horizon={self.horizon}, "

@@ -31,35 +31,37 @@ class Geofence:
     The outline is a capsule from nose to tail of radius ``C_p`` (the body width) and a disc of radius
     ``S_p`` around each fin pivot ``(0, +-C_p)`` (the fin tip wherever the fin points). Per wall, the
     clearance of the outline must exceed ``margin + v t_r + d_coast(v)`` with ``v`` the speed towards
-    that wall, ``t_r`` the reaction time and the coasting distance with the fins still: eq. (19) with no
-    fin force and the motion along one axis is ``m dv/dt = -c1 v |v|``, so
-    ``v(t) = v0 / (1 + k v0 t)`` and ``d(T) = ln(1 + k v0 T) / k`` with ``k = c1 / m`` (``docs/model.md``,
-    body coefficients), ``m`` the larger of ``m1, m2`` (the slower decay). Yaw coupling is neglected;
-    ``margin`` covers it.
+    that wall, ``t_r`` the reaction time and the coasting distance with the fins still down to the contact
+    speed ``v_c``: eq. (19) with no fin force and the motion along one axis is ``m dv/dt = -c1 v |v|``, so
+    ``v(x) = v0 exp(-k x)`` and ``d_coast = ln(max(v0, v_c) / v_c) / k`` with ``k = c1 / m``
+    (``docs/model.md``, body coefficients), ``m`` the larger of ``m1, m2`` (the slower decay). Yaw coupling
+    is neglected; ``margin`` covers it.
 
     Args:
         params: Fish geometry and body coefficients.
         margin: Clearance on top of the stopping distance [m].
         reaction_time: ``t_r`` [s].
-        horizon: ``T`` [s]: the fish stays clear for this long after the stop.
+        contact_speed: ``v_c`` [m/s], > 0: after a stop the fish crosses the margin line no faster than this.
     """
 
-    def __init__(self, params: FishParams, margin: float, reaction_time: float, horizon: float):
+    def __init__(self, params: FishParams, margin: float, reaction_time: float, contact_speed: float):
         self.params = params
         self.k = tank.coast_rate(body_coefficients(params))  # [1/m]
         self.shape = tank.Outline.from_params(params)
         self.half_length, self.width, self.span = self.shape
-        self.margin, self.reaction_time, self.horizon = float(margin), float(reaction_time), float(horizon)
+        self.margin, self.reaction_time, self.contact_speed = float(margin), float(reaction_time), float(contact_speed)
+        if not self.contact_speed > 0:
+            raise ValueError(f"Geofence: contact_speed must be > 0 m/s, got {contact_speed!r}")
         self.breached(0.5 * tank.TANK_LENGTH, 0.5 * tank.TANK_WIDTH, 0.0)  # compile or load the kernel now
 
     @property
     def rule(self) -> tank.StopRule:
         """The band's :class:`~pectoral_gym.model.tank.StopRule` (the envs' ``stop_rule`` of the same name)."""
-        return tank.StopRule(self.margin, self.reaction_time, self.horizon)
+        return tank.StopRule(self.margin, self.reaction_time, self.contact_speed)
 
     def coast(self, speed: float) -> float:
-        """Distance [m] covered in ``horizon`` s by a fish coasting from ``speed`` [m/s] with its fins still."""
-        return float(tank.coast_distance(float(speed), self.k, self.horizon))
+        """Distance [m] a fish coasting from ``speed`` [m/s] with its fins still covers until it is down to ``v_c``."""
+        return float(tank.coast_distance(float(speed), self.k, self.contact_speed))
 
     def outline(self, x: float, y: float, psi: float) -> tuple[np.ndarray, np.ndarray]:
         """Centres ``(4, 2)`` (nose, tail, right and left fin pivot) and radii ``(4,)`` of the outline [m]."""
@@ -87,7 +89,8 @@ class Geofence:
         react = self.reaction_time + max(age, 0.0)
         speeds = tuple(min(max(t, 0.0) + max(gain, 0.0), bound) for t in toward)
         c, s = math.cos(psi), math.sin(psi)
-        return bool(tank.band_shortfall(x, y, c, s, speeds, self.shape, self.k, self.margin, react, self.horizon) > 0)
+        shortfall = tank.band_shortfall(x, y, c, s, speeds, self.shape, self.k, self.margin, react, self.contact_speed)
+        return bool(shortfall > 0)
 
 
 class _Riccati(NamedTuple):

@@ -25,8 +25,13 @@ import numpy as np
 
 from pectoral_gym.hardware.radio.firmware import ServoLimits, clip_beats, rate_limit, stretch_transition
 from pectoral_gym.hardware.radio.protocol import DEFAULT_LEASE, MAX_LEASE
+from pectoral_gym.model import tank
 
-__all__ = ["SafetyConfig", "check_action", "CommandFilter", "TrackingWatch", "install_stop_handlers"]
+#: The longest tracking timeout a :class:`SafetyConfig` accepts [s].
+MAX_TRACKING_TIMEOUT = 5.0
+
+__all__ = ["MAX_TRACKING_TIMEOUT", "SafetyConfig", "check_action", "CommandFilter", "TrackingWatch",
+           "install_stop_handlers"]
 
 
 @dataclass(frozen=True)
@@ -36,16 +41,17 @@ class SafetyConfig:
     Attributes:
         limits: Servo limits (clipping and rate limiting), shared with the firmware rules.
         geofence_margin: Clearance kept from every wall on top of the stopping distance [m].
-        tracking_timeout: Stop when the fish has not been seen for this long [s]; in ``(0, coast_horizon]``
-            (while the fish is unseen the geofence assumes the worst motion the fins allow, and its guarantee
-            lasts ``coast_horizon`` after a stop).
+        tracking_timeout: Stop when the fish has not been seen for this long [s]; in
+            ``(0, MAX_TRACKING_TIMEOUT]`` (while the fish is unseen the geofence also assumes the worst motion
+            the fins allow).
         link_timeout: Stop when the robot has not answered for this long [s].
         lease: Lease of each command from ``step()`` [s]: the robot stops this long after it receives a
             command unless a new one comes (``docs/protocol.md``); at most ``protocol.MAX_LEASE``.
         step_slack: Time allowed between the end of one ``step()`` and the start of the next (policy
             compute time, timing jitter) [s]; ``step()`` renews the lease only while it runs, to last
             this long past its own end.
-        coast_horizon: The geofence keeps the fish off the walls for this long after a stop [s].
+        contact_speed: After a stop the fish crosses the geofence's margin line no faster than this [m/s]
+            (:class:`~pectoral_gym.model.tank.StopRule`).
         reaction_time: Time from a pose to the fins halting (frame age, polling, radio) [s].
         max_frame_lead: Camera timestamps further ahead of this machine's clock are rejected [s].
         pose_noise: Standard deviation of the tracked position assumed for the geofence's speed estimate [m]
@@ -53,28 +59,29 @@ class SafetyConfig:
     """
 
     limits: ServoLimits = field(default_factory=ServoLimits)
-    geofence_margin: float = 0.05
+    geofence_margin: float = tank.ROBOT_STOP_RULE.margin
     tracking_timeout: float = 0.5
     link_timeout: float = 1.0
     lease: float = DEFAULT_LEASE
     step_slack: float = 0.3
-    coast_horizon: float = 5.0
-    reaction_time: float = 0.15
+    contact_speed: float = tank.ROBOT_STOP_RULE.contact_speed
+    reaction_time: float = tank.ROBOT_STOP_RULE.reaction_time
     max_frame_lead: float = 0.05
     pose_noise: float = 0.005
 
     def __post_init__(self) -> None:
-        for name in ("geofence_margin", "tracking_timeout", "link_timeout", "lease", "step_slack", "coast_horizon",
+        for name in ("geofence_margin", "tracking_timeout", "link_timeout", "lease", "step_slack", "contact_speed",
                      "reaction_time", "max_frame_lead", "pose_noise"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"SafetyConfig.{name} must be a finite number >= 0, got {value!r}")
         if self.tracking_timeout <= 0:
             raise ValueError(f"SafetyConfig.tracking_timeout must be > 0 s, got {self.tracking_timeout!r}")
-        if self.tracking_timeout > self.coast_horizon:
-            raise ValueError(f"SafetyConfig.tracking_timeout = {self.tracking_timeout} s exceeds the physical bound "
-                             f"coast_horizon = {self.coast_horizon} s (the geofence keeps a blind fish clear only "
-                             "that long after a stop)")
+        if self.tracking_timeout > MAX_TRACKING_TIMEOUT:
+            raise ValueError(f"SafetyConfig.tracking_timeout = {self.tracking_timeout} s exceeds "
+                             f"MAX_TRACKING_TIMEOUT = {MAX_TRACKING_TIMEOUT} s (a fish unseen that long is lost)")
+        if self.contact_speed <= 0:
+            raise ValueError(f"SafetyConfig.contact_speed must be > 0 m/s, got {self.contact_speed!r}")
         if not 0 < self.step_slack < self.lease <= MAX_LEASE:
             raise ValueError(f"SafetyConfig: need 0 < step_slack < lease <= {MAX_LEASE} s, got "
                              f"{self.step_slack}, {self.lease}")

@@ -115,7 +115,7 @@ class EnvConfig:
             fish there (:data:`pectoral_gym.model.tank.ROBOT_STOP_RULE`, ``docs/hardware.md``). Checked on the
             state after each control period.
         stop_rule: The band's :class:`~pectoral_gym.model.tank.StopRule` ``(margin [m], reaction time [s],
-            horizon [s])``.
+            contact speed [m/s])``.
         servo_limit: Fastest fin rate [rad/s] (``None``: no limit): a commanded pattern whose faster
             half-stroke peaks above it runs with its period lengthened, as the robot's firmware runs it
             (:func:`pectoral_gym.model.servo.servo_period`; the robot's value:
@@ -200,9 +200,11 @@ class EnvConfig:
         try:
             rule = StopRule(*(float(v) for v in self.stop_rule))
         except (TypeError, ValueError):
-            raise ValueError(f"stop_rule must be (margin, reaction_time, horizon), got {self.stop_rule!r}") from None
-        if not all(math.isfinite(v) and v >= 0 for v in rule):
-            raise ValueError(f"stop_rule entries must be finite and >= 0, got {self.stop_rule!r}")
+            raise ValueError(f"stop_rule must be (margin, reaction_time, contact_speed), got {self.stop_rule!r}") \
+                from None
+        if not (all(math.isfinite(v) and v >= 0 for v in rule) and rule.contact_speed > 0):
+            raise ValueError(f"stop_rule entries must be finite and >= 0, its contact_speed > 0, got "
+                             f"{self.stop_rule!r}")
         set_(self, "stop_rule", rule)
         if self.servo_limit is not None:
             limit = self.servo_limit
@@ -259,7 +261,7 @@ class EnvConfig:
         cfg[tk.C_START_INSET] = self.start_inset
         cfg[tk.C_GOAL_INSET] = self.goal_inset
         cfg[tk.C_BAND] = 1.0 if self.stop_band else 0.0
-        cfg[tk.C_BAND_MARGIN:tk.C_BAND_HORIZON + 1] = self.stop_rule
+        cfg[tk.C_BAND_MARGIN:tk.C_BAND_CONTACT + 1] = self.stop_rule
         cfg[tk.C_FIN_RATE] = 0.0 if self.servo_limit is None else self.servo_limit
         return cfg
 

@@ -166,7 +166,7 @@ class PectoralFishEnv(gym.Env):
     | ``start_inset``   | 0.3              | m    | goal: least distance of a start from the walls |
     | ``goal_inset``    | 0.2              | m    | goal: least distance of a goal from the walls |
     | ``stop_band``     | False            |      | end the episode in the robot's stopping band; ``info["cost"]`` |
-    | ``stop_rule``     | (0.05, 0.15, 5.0) |     | the band's margin [m], reaction time [s], horizon [s] |
+    | ``stop_rule``     | (0.05, 0.15, 0.03) |    | the band's margin [m], reaction time [s], contact speed [m/s] |
     | ``servo_limit``   | ``None``         | rad/s | fastest fin rate: faster patterns run slower, as on the robot |
     | ``render_mode``   | ``None``         |      | ``"rgb_array"`` or ``"human"`` |
 
@@ -184,10 +184,11 @@ class PectoralFishEnv(gym.Env):
 
     * v1: Prepares a policy for the robot stack (``pectoral_gym.registration.ROBOT_READY``):
       ``observe_fins=True``, ``stop_band=True`` (the robot's geofence ends the episode, with
-      ``info["cost"]``), ``servo_limit`` = the robot's 13 rad/s, ``goal_inset=0.3`` (goals the band
-      leaves reachable); ``PectoralFish-Averaged-v1`` adds ``transitions=True`` (the shipped PPO
-      recipe's training model), ``PectoralFish-Full-v1`` runs the fast integration
-      (``integration="fast"``). Every other default is v0's.
+      ``info["cost"]``; ``stop_rule`` the robot's with 5 cm more margin, ``(0.10, 0.15, 0.03)``),
+      ``servo_limit`` = the robot's 13 rad/s, ``goal_inset=0.3`` (goals the band leaves reachable);
+      ``PectoralFish-Averaged-v1`` adds ``transitions=True`` (the shipped PPO recipe's training model),
+      ``PectoralFish-Full-v1`` runs the fast integration (``integration="fast"``). Every other default is
+      v0's.
     * v0: Initial version. Issue 14 (same id, same dynamics): ``reset()`` returns the step's
       ``info`` keys, ``info`` values are numpy scalars, finite observation bounds,
       ``params`` as a dict or file, ``scaling`` as a file, ``render_fps = 1 / control_period``.

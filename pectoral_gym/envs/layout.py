@@ -25,7 +25,7 @@ corner, X along the long side.
 | ``C_START_INSET`` | ``start_inset`` | goal: least distance of a start from the walls | m |
 | ``C_GOAL_INSET`` | ``goal_inset`` | goal: least distance of a goal from the walls | m |
 | ``C_BAND`` | ``stop_band`` | 1.0: the stopping band ends the episode and prices ``O_COST`` | - |
-| ``C_BAND_MARGIN`` .. ``+2`` | ``stop_rule`` | margin, reaction time, horizon (``tank.StopRule``) | m, s, s |
+| ``C_BAND_MARGIN`` .. ``+2`` | ``stop_rule`` | margin, reaction time, contact speed (``tank.StopRule``) | m, s, m/s |
 | ``C_FIN_RATE`` | ``servo_limit`` | fastest fin rate; faster patterns run with a longer period (0: none) | rad/s |
 
 ``ep`` ``(n, N_EP)``: per-episode state, set at reset and updated every step
@@ -85,7 +85,7 @@ __all__ = [
     "GOAL", "TRACK", "ACTION_SIZE", "FIN_ACTIONS", "A_BIAS", "A_AMPLITUDE", "A_PERIOD", "A_RATIO",
     "C_DT", "C_TASK", "C_RANGES", "C_W_PROGRESS", "C_GOAL_BONUS", "C_WALL", "C_W_ENERGY", "C_TIME",
     "C_W_TRACKING", "C_GOAL_RADIUS", "C_REF_SPEED", "C_START_INSET", "C_GOAL_INSET", "C_BAND", "C_BAND_MARGIN",
-    "C_BAND_REACTION", "C_BAND_HORIZON", "C_FIN_RATE", "N_CFG",
+    "C_BAND_REACTION", "C_BAND_CONTACT", "C_FIN_RATE", "N_CFG",
     "E_TX", "E_TY", "E_TVX", "E_TVY", "E_CX", "E_CY", "E_A", "E_B", "E_DIR", "E_PHASE", "E_DPREV", "N_EP",
     "F_LENGTH", "F_SPAN", "F_KDRAG", "F_WIDTH", "F_KCOAST", "N_FISH",
     "O_REWARD", "O_PROGRESS", "O_GOAL", "O_WALL", "O_ENERGY", "O_TIME", "O_TRACKING", "O_DISTANCE",
@@ -105,7 +105,7 @@ C_DT, C_TASK, C_RANGES = 0, 1, 2  # C_RANGES..C_RANGES+7: (low, high) of bias, a
 C_W_PROGRESS, C_GOAL_BONUS, C_WALL, C_W_ENERGY, C_TIME, C_W_TRACKING = 10, 11, 12, 13, 14, 15
 C_GOAL_RADIUS, C_REF_SPEED = 16, 17
 C_START_INSET, C_GOAL_INSET = 18, 19
-C_BAND, C_BAND_MARGIN, C_BAND_REACTION, C_BAND_HORIZON = 20, 21, 22, 23
+C_BAND, C_BAND_MARGIN, C_BAND_REACTION, C_BAND_CONTACT = 20, 21, 22, 23
 C_FIN_RATE = 24
 N_CFG = 25
 

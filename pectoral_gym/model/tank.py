@@ -18,8 +18,11 @@ half-width, also the fin pivots' lateral offset) and a disc of radius ``S_p`` (t
 fin pivot ``(0, +-C_p)`` in the body frame, which holds the fin tip wherever the fin points.
 
 The stopping distance: coasting with the fins still along one axis, eq. (19) with no fin force, is
-``m dv/dt = -c1 v |v|``, so ``v(t) = v0 / (1 + k v0 t)`` and the distance covered in ``T`` seconds is
-``ln(1 + k v0 T) / k`` with ``k = c1 / max(m1, m2)`` (the larger mass: the slower decay).
+``m dv/dt = -c1 v |v|``, so ``v dv/dx = -k v^2``, ``v(x) = v0 exp(-k x)``, and the distance a fish
+coasting from ``v0`` covers before it has slowed to ``v_c`` is ``ln(v0 / v_c) / k`` (0 when ``v0 <= v_c``),
+with ``k = c1 / max(m1, m2)`` (the larger mass: the slower decay). The band keeps that distance plus a
+margin: a stopped fish crosses the margin line, if ever, no faster than ``v_c`` (the rule's
+``contact_speed``), and the band is invariant while it coasts (``docs/hardware.md``, "Geofence").
 """
 
 from __future__ import annotations
@@ -65,17 +68,18 @@ class StopRule(NamedTuple):
     Attributes:
         margin: Clearance kept on top of the stopping distance [m].
         reaction_time: ``t_r`` [s]: from a pose to the fins halting (frame age, polling, radio).
-        horizon: ``T`` [s]: the fish stays clear of the walls for this long after a stop.
+        contact_speed: ``v_c`` [m/s], > 0: after a stop the fish crosses the margin line no faster than this.
     """
 
     margin: float
     reaction_time: float
-    horizon: float
+    contact_speed: float
 
 
 #: The robot's rule (its safety supervisor's defaults, ``pectoral_gym.hardware.safety.rules.SafetyConfig``), which
-#: the simulated envs' ``stop_band`` applies too (``docs/hardware.md``, "Geofence").
-ROBOT_STOP_RULE = StopRule(margin=0.05, reaction_time=0.15, horizon=5.0)
+#: the simulated envs' ``stop_band`` applies too (``docs/hardware.md``, "Geofence"). 0.03 m/s is the speed a Table-1
+#: fish coasting from any speed is below after 5 s (``1 / (k T)`` = 0.031 m/s), the earlier rule's bound.
+ROBOT_STOP_RULE = StopRule(margin=0.05, reaction_time=0.15, contact_speed=0.03)
 
 
 def coast_rate(params: Any) -> float:
@@ -83,26 +87,25 @@ def coast_rate(params: Any) -> float:
     return params.c1 / max(params.m1, params.m2)
 
 
-def coast_distance(speed: Any, k: float, horizon: float, ops: Any = np) -> Any:
-    """Distance [m] a fish coasting from ``speed`` [m/s] with its fins still covers in ``horizon`` [s].
+def coast_distance(speed: Any, k: float, contact_speed: float, ops: Any = np) -> Any:
+    """Distance [m] a fish coasting from ``speed`` [m/s] with its fins still covers until down to ``contact_speed``.
 
-    ``ln(1 + k v T) / k`` with ``v = max(speed, 0)`` (module docstring).
+    ``ln(max(v, v_c) / v_c) / k`` (module docstring): 0 at or below ``v_c``, also for a negative speed.
 
     Args:
-        speed: Speed towards the wall [m/s]; negative counts as 0.
+        speed: Speed towards the wall [m/s].
         k: :func:`coast_rate` [1/m], > 0.
-        horizon: ``T`` [s].
+        contact_speed: ``v_c`` [m/s], > 0.
         ops: ``numpy`` (floats and arrays) or ``casadi`` (``fmax``, ``log``).
     """
-    v = ops.fmax(speed, 0.0)
-    return ops.log(1.0 + k * v * horizon) / k
+    return ops.log(ops.fmax(speed, contact_speed) / contact_speed) / k
 
 
 def stop_need(speed: Any, k: float, rule: StopRule, react: Any = None, ops: Any = np) -> Any:
-    """Clearance [m] a fish moving at ``speed`` [m/s] towards a wall needs: ``margin + v t_r + ln(1 + k v T) / k``.
+    """Clearance [m] a fish at ``speed`` [m/s] towards a wall needs: ``margin + v t_r + ln(max(v, v_c) / v_c) / k``.
 
     The speed held for the reaction time (the fins still run until the stop arrives), then the coast of
-    :func:`coast_distance` over the rule's horizon.
+    :func:`coast_distance` down to the rule's contact speed.
 
     Args:
         speed: Speed towards the wall [m/s]; negative counts as 0.
@@ -113,7 +116,7 @@ def stop_need(speed: Any, k: float, rule: StopRule, react: Any = None, ops: Any 
     """
     v = ops.fmax(speed, 0.0)
     t_r = rule.reaction_time if react is None else react
-    return rule.margin + v * t_r + coast_distance(v, k, rule.horizon, ops)
+    return rule.margin + v * t_r + coast_distance(v, k, rule.contact_speed, ops)
 
 
 def outline_circles(x: Any, y: Any, c: Any, s: Any, outline: Outline) -> tuple[tuple[Any, Any, float], ...]:
@@ -198,7 +201,7 @@ def nose_tail_contact(x, y, c, s, half_length):
 
 
 @njit(inline="always")
-def band_shortfall(x, y, c, s, toward, outline, k, margin, react, horizon):
+def band_shortfall(x, y, c, s, toward, outline, k, margin, react, contact_speed):
     """The largest shortfall [m] of the outline's clearance below the stopping need over the four walls (> 0: inside).
 
     The compiled form of :func:`stop_need` against :func:`outline_circles` and :func:`wall_gaps` (the robot's
@@ -208,12 +211,12 @@ def band_shortfall(x, y, c, s, toward, outline, k, margin, react, horizon):
         x, y: Centre of mass [m]. c, s: ``cos psi``, ``sin psi``.
         toward: Speeds ``(4,)`` towards the walls ``X = 0, X = L, Y = 0, Y = W`` [m/s] (negative counts as 0).
         outline: ``(half_length, width, span)`` [m] (:class:`Outline`).
-        k: :func:`coast_rate` [1/m]. margin, react, horizon: The :class:`StopRule`'s margin [m], reaction time [s]
-            and horizon [s].
+        k: :func:`coast_rate` [1/m]. margin, react, contact_speed: The :class:`StopRule`'s margin [m], reaction
+            time [s] and contact speed [m/s].
     """
     h, w, span = outline[0], outline[1], outline[2]
-    needs = (_need(toward[0], k, margin, react, horizon), _need(toward[1], k, margin, react, horizon),
-             _need(toward[2], k, margin, react, horizon), _need(toward[3], k, margin, react, horizon))
+    needs = (_need(toward[0], k, margin, react, contact_speed), _need(toward[1], k, margin, react, contact_speed),
+             _need(toward[2], k, margin, react, contact_speed), _need(toward[3], k, margin, react, contact_speed))
     worst = -math.inf
     for q in range(4):  # nose, tail, right pivot (0, -C_p), left pivot (0, +C_p): outline_circles' order
         if q == 0:
@@ -231,7 +234,7 @@ def band_shortfall(x, y, c, s, toward, outline, k, margin, react, horizon):
 
 
 @njit(inline="always")
-def _need(speed, k, margin, react, horizon):
+def _need(speed, k, margin, react, contact_speed):
     """:func:`stop_need` for floats, compiled."""
     v = max(speed, 0.0)
-    return margin + v * react + math.log(1.0 + k * v * horizon) / k
+    return margin + v * react + math.log(max(v, contact_speed) / contact_speed) / k

@@ -23,7 +23,7 @@ from pectoral_gym.envs.layout import *  # noqa: F403 - the index constants, re-e
 from pectoral_gym.envs.layout import (
     ACTION_SIZE,
     C_BAND,
-    C_BAND_HORIZON,
+    C_BAND_CONTACT,
     C_BAND_MARGIN,
     C_BAND_REACTION,
     C_DT,
@@ -264,7 +264,7 @@ def in_band(i, state, cfg, fish):
     vx, vy = c * state[i, 3] - s * state[i, 4], s * state[i, 3] + c * state[i, 4]
     outline = (0.5 * fish[i, F_LENGTH], fish[i, F_WIDTH], fish[i, F_SPAN])
     shortfall = band_shortfall(x, y, c, s, (-vx, vx, -vy, vy), outline, fish[i, F_KCOAST], cfg[C_BAND_MARGIN],
-                               cfg[C_BAND_REACTION], cfg[C_BAND_HORIZON])
+                               cfg[C_BAND_REACTION], cfg[C_BAND_CONTACT])
     return shortfall > 0.0
 
 
