@@ -1,15 +1,28 @@
+import dataclasses
 import json
+from collections import Counter
+from pathlib import Path
 
+import numpy as np
 import pytest
 
 from pectoral_gym.agents.studies import benchmark
 from pectoral_gym.agents.studies.benchmark import (
+    ALL_ENVS,
     ENVS,
+    PRESETS,
     TASKS,
     BenchmarkSettings,
     run_benchmark,
     to_markdown,
     write_outputs,
+)
+from pectoral_gym.agents.studies.deployment import (
+    DEGRADED,
+    ROBOT_CONDITIONS,
+    conditions_argv,
+    robot_cell,
+    run_robot_stack,
 )
 
 
@@ -29,7 +42,7 @@ def test_small_benchmark_writes_a_row_per_cell(tmp_path):
 def test_tiny_benchmark_has_every_row(tmp_path):
     settings = BenchmarkSettings(episodes=2, nmpc_episodes={"goal": 1, "track": 1}, max_episode_steps=3,
                                  nmpc={"horizon": 3, "blocks": (1, 1, 1), "substeps": 4}, train_steps=0)
-    report = run_benchmark(settings, throughput=False)
+    report = run_benchmark(settings, envs=tuple(ENVS), throughput=False)
     assert report["errors"] == {}
     rows = {(c["controller"], c["env"], c["task"]) for c in report["cells"]}
     expected = {(name, env, task) for name in ("random", "hand", "nmpc") for env in ENVS for task in TASKS}
@@ -104,9 +117,127 @@ def test_a_policy_is_benchmarked_on_the_model_settings_it_trained_with(tmp_path,
 
     monkeypatch.setattr(pectoral_gym.agents.training.evaluate, "evaluate", fake_evaluate)
     report = run_benchmark(BenchmarkSettings(episodes=1, train_steps=0), controllers=(), tasks=("goal",),
-                           policies=[str(run)], throughput=False)
+                           policies=[str(run)], envs=tuple(ENVS), throughput=False)
     assert len(report["errors"]) == 3
     assert seen[("PectoralFish-Averaged-v0", False)] == {"task": "goal", "transitions": True, "observe_fins": True}
     assert seen[("PectoralFish-Full-v0", False)] == {"task": "goal", "observe_fins": True}
     full_rand = seen[("PectoralFish-Full-v0", True)]
     assert full_rand["observe_fins"] and "transitions" not in full_rand and full_rand["task"] == "goal"
+
+
+def test_robot_cells_come_from_the_deploy_summary(tmp_path):
+    # hand through the whole robot stack in lockstep, ideal and degraded: 2 short episodes per cell; no random row
+    from pectoral_gym.hardware.safety.supervisor import PRIORITY
+
+    settings = BenchmarkSettings(episodes=1, train_steps=0, robot_episodes={"goal": 2, "track": 0}, robot_max_steps=12)
+    report = run_benchmark(settings, controllers=("random", "hand"), envs=("robot", "robot+degraded"),
+                           tasks=("goal",), throughput=False, robot_out=tmp_path / "robot")
+    assert report["errors"] == {}
+    assert [(c["controller"], c["env"], c["task"]) for c in report["cells"]] == [
+        ("hand", "robot", "goal"), ("hand", "robot+degraded", "goal")]
+    for cell in report["cells"]:
+        summary = json.loads((Path(cell["robot"]["out"]) / "summary.json").read_text())
+        episodes = summary["episodes"]
+        assert cell["n_episodes"] == len(episodes) == 2
+        stops = [e["safety_stop"] for e in episodes if e["safety_stop"]]
+        assert cell["robot"]["safety_stops"] == dict(Counter(stops)) and set(stops) <= set(PRIORITY)
+        assert sum(cell["robot"]["safety_stops"].values()) <= cell["n_episodes"]
+        m = cell["metrics"]
+        assert m["success"]["mean"] == pytest.approx(np.mean([e["success"] for e in episodes]))
+        assert m["length"]["mean"] == pytest.approx(np.mean([e["steps"] for e in episodes]))
+        assert m["length"]["mean"] <= 12
+        assert m["return"]["mean"] == pytest.approx(np.mean([e["return"] for e in episodes]))
+        assert m["time_to_goal"]["n"] == sum(e["success"] for e in episodes)
+        assert 0 <= cell["robot"]["wall_contacts"] <= cell["n_episodes"]
+        # the conditions reached the deploy: its summary records the column's
+        expected = ROBOT_CONDITIONS[cell["env"]]
+        recorded = summary["emulation"]["conditions"]
+        assert summary["emulation"]["lockstep"] and cell["robot"]["conditions"] == recorded
+        assert recorded == json.loads(json.dumps(dataclasses.asdict(expected)))
+    assert report["cells"][1]["robot"]["conditions"]["radio_loss"] == DEGRADED.radio_loss == 0.1
+    markdown = to_markdown(report)
+    assert "## Robot stack" in markdown and "| hand | robot+degraded | goal | 2 |" in markdown
+    assert "radio latency 100 ms, radio loss 10 %, frame drops 10 %, pose noise 5 mm / 2 deg" in markdown
+
+
+def _fake_deploy(calls, episodes, poses):
+    """A stand-in for ``hardware.deploy.main`` that writes the given summary and step log and records its argv."""
+    def deploy(argv):
+        calls.append(argv)
+        out = Path(argv[argv.index("--out") + 1])
+        (out / "summary.json").write_text(json.dumps({
+            "settings": {"task": "goal", "control_period": 0.5}, "episodes": episodes, "wall_time": 2.0,
+            "emulation": {"conditions": {"radio_loss": 0.1}}}))
+        lines = [{"episode": k, "step": i, "true_pose": pose, "target": [1.0, 0.5]}
+                 for k, path in enumerate(poses) for i, pose in enumerate(path)]
+        (out / "steps.jsonl").write_text("".join(json.dumps(line) + "\n" for line in lines))
+        return 0
+    return deploy
+
+
+def test_robot_cell_counts_stops_contacts_and_time_to_goal(tmp_path, monkeypatch):
+    import pectoral_gym.hardware.deploy
+
+    episodes = [{"episode": 0, "return": 1.0, "steps": 20, "safety_stop": "", "success": True, "final_distance": 0.05},
+                {"episode": 1, "return": -1.0, "steps": 4, "safety_stop": "geofence", "success": False,
+                 "final_distance": 0.5},
+                {"episode": 2, "return": 0.0, "steps": 3, "safety_stop": "tracking_lost", "success": False,
+                 "final_distance": 0.4}]
+    inside = [1.0, 0.5, 0.0]
+    poses = [[inside, inside], [inside, [0.02, 0.5, 0.0]], [inside, [1.0, 0.5, 0.0]]]  # episode 1: nose past X = 0
+    calls = []
+    monkeypatch.setattr(pectoral_gym.hardware.deploy, "main", _fake_deploy(calls, episodes, poses))
+    run = run_robot_stack(tmp_path / "d", 3, seed=7, controller="hand", conditions=DEGRADED, max_steps=20,
+                          capture=True)
+    argv = calls[0]
+    for flag, value in (("--radio-loss", 0.1), ("--radio-latency", 0.1), ("--camera-drop", 0.1),
+                        ("--pose-noise-mm", 5.0), ("--pose-noise-deg", 2.0)):
+        assert float(argv[argv.index(flag) + 1]) == pytest.approx(value)
+    assert "--radio-jitter" not in argv and argv[argv.index("--controller") + 1] == "hand"
+    assert run["safety_stops"] == {"geofence": 1, "tracking_lost": 1} and run["wall_contacts"] == 1
+    cell = robot_cell(run, "hand", "robot+degraded")
+    m = cell["metrics"]
+    assert m["success"]["mean"] == pytest.approx(1 / 3)
+    assert m["time_to_goal"]["mean"] == pytest.approx(10.0) and m["time_to_goal"]["n"] == 1  # 20 steps x 0.5 s
+    assert m["min_clearance"]["n"] == 3 and cell["robot"]["wall_ms_per_step"] == pytest.approx(2e3 / 27)
+    assert cell["robot"]["conditions"] == {"radio_loss": 0.1}
+    # a refused argument (argparse exits) is an error of the cell, not of the whole process
+    monkeypatch.setattr(pectoral_gym.hardware.deploy, "main", lambda argv: (_ for _ in ()).throw(SystemExit(2)))
+    with pytest.raises(RuntimeError, match="status 2"):
+        run_robot_stack(tmp_path / "e", 1, seed=0, controller="hand")
+    assert conditions_argv(ROBOT_CONDITIONS["robot"]) == []
+
+
+def test_a_policy_gets_robot_cells_on_its_own_task_only(tmp_path, monkeypatch):
+    import types
+
+    import pectoral_gym.agents.training.policy
+    from pectoral_gym.agents.studies import deployment
+
+    monkeypatch.setattr(pectoral_gym.agents.training.policy, "load_policy",
+                        lambda path: types.SimpleNamespace(trained={"task": "track"}))
+    seen = []
+
+    def fake_run(out, episodes, seed, **kwargs):
+        seen.append((episodes, seed, kwargs))
+        raise RuntimeError("recorded")
+
+    monkeypatch.setattr(deployment, "run_robot_stack", fake_run)
+    settings = BenchmarkSettings(episodes=1, train_steps=0, robot_episodes={"goal": 3, "track": 1}, seed=5)
+    report = run_benchmark(settings, controllers=("random",), policies=[str(tmp_path / "run")], envs=("robot",),
+                           throughput=False)
+    assert list(report["errors"]) == ["run/robot/track"]
+    assert len(seen) == 1
+    episodes, seed, kwargs = seen[0]
+    assert (episodes, seed, kwargs["controller"], kwargs["task"]) == (1, 5, "policy", "track")
+    assert kwargs["policy"] == str(tmp_path / "run") and kwargs["conditions"] == deployment.NOMINAL
+
+
+def test_cli_offers_the_robot_columns(tmp_path, capsys):
+    parser_args = benchmark._parse_args(["--envs", "robot", "robot+degraded", "--robot-episodes", "1", "0"])
+    assert parser_args.envs == ["robot", "robot+degraded"] and parser_args.robot_episodes == [1, 0]
+    assert set(benchmark._parse_args([]).envs) == set(ALL_ENVS) == {*ENVS, "robot", "robot+degraded"}
+    assert benchmark.main(["--robot-episodes", "-1", "0", "--out", str(tmp_path)]) == 2
+    assert "error" in capsys.readouterr().out
+    quick = PRESETS["quick"]
+    assert sum(quick.robot_episodes.values()) <= 3 and quick.robot_max_steps <= 60

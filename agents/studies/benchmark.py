@@ -9,6 +9,10 @@ controller). Also measured: env step rates (:func:`pectoral_gym.tools.bench.run_
 steps per second of a short Stable-Baselines3 PPO ``learn()`` on the averaged vector env, and the
 time to solve: per training seed, the wall time until the demo's PPO first reaches 0.95 success on
 the full model on held-out episodes (:mod:`pectoral_gym.agents.studies.solve_time`; ``--full`` runs seeds 0-4).
+Two more columns run the robot stack on the emulated robot in lockstep simulated time
+(:func:`pectoral_gym.agents.studies.deployment.run_robot_stack`): ``robot`` (ideal radio and camera) and
+``robot+degraded`` (:data:`pectoral_gym.agents.studies.deployment.DEGRADED`), for the baselines the deploy can drive
+and the trained policies on their own task.
 
 CLI::
 
@@ -16,6 +20,7 @@ CLI::
     python -m pectoral_gym.agents.studies.benchmark --full --policy runs/PectoralFish-Averaged-v0/ppo_goal_seed0_...
     python -m pectoral_gym.agents.studies.benchmark --quick --controllers hand nmpc --out bench_quick
     python -m pectoral_gym.agents.studies.benchmark --quick --controllers hand --solve-seeds 0 1 --solve-timesteps 4e5
+    python -m pectoral_gym.agents.studies.benchmark --quick --envs robot robot+degraded --no-throughput --solve-seeds
 
 Writes ``benchmark.md``, ``benchmark.json`` and ``benchmark.png`` into ``--out``.
 """
@@ -34,14 +39,17 @@ from typing import Any
 import numpy as np
 
 from pectoral_gym.agents.studies.benchmark_report import plot_report, to_markdown, write_outputs
+from pectoral_gym.agents.studies.deployment import ROBOT_CONDITIONS, ROBOT_CONTROLLERS, robot_cells
 
-__all__ = ["ENVS", "PRESETS", "BenchmarkSettings", "main", "plot_report", "run_benchmark", "to_markdown",
+__all__ = ["ALL_ENVS", "ENVS", "PRESETS", "BenchmarkSettings", "main", "plot_report", "run_benchmark", "to_markdown",
            "write_outputs"]
 
 AVERAGED_ID = "PectoralFish-Averaged-v0"
 FULL_ID = "PectoralFish-Full-v0"
 # label -> (env id, randomised)
 ENVS = {"averaged": (AVERAGED_ID, False), "full": (FULL_ID, False), "full+rand": (FULL_ID, True)}
+# the simulated settings, then the robot stack's columns (deployment.ROBOT_CONDITIONS)
+ALL_ENVS = (*ENVS, *ROBOT_CONDITIONS)
 TASKS = ("goal", "track")
 BASELINE_NAMES = ("random", "hand", "nmpc")
 
@@ -65,6 +73,8 @@ class BenchmarkSettings:
             empty: skipped).
         solve_timesteps: Training budget per seed of the time to solve (``None``: ``agents/hyperparams/ppo.yml``).
         solve_episodes: Episodes per probe and of the confirmation.
+        robot_episodes: Episodes per robot-stack cell, per task (each step renders and tracks camera frames).
+        robot_max_steps: Truncation of the robot-stack episodes (``None``: ``max_episode_steps``).
     """
 
     episodes: int = 100
@@ -79,11 +89,14 @@ class BenchmarkSettings:
     solve_seeds: tuple[int, ...] = ()
     solve_timesteps: int | None = None
     solve_episodes: int = 100
+    robot_episodes: dict[str, int] = field(default_factory=lambda: {"goal": 20, "track": 2})
+    robot_max_steps: int | None = None
 
 
 PRESETS = {
     "quick": BenchmarkSettings(episodes=10, nmpc_episodes={"goal": 2, "track": 1}, max_episode_steps=120,
-                               env_steps=2_000, vector_steps=5, repeats=1, train_steps=16_384),
+                               env_steps=2_000, vector_steps=5, repeats=1, train_steps=16_384,
+                               robot_episodes={"goal": 2, "track": 0}, robot_max_steps=60),
     "full": BenchmarkSettings(solve_seeds=(0, 1, 2, 3, 4)),
 }
 
@@ -160,9 +173,10 @@ def measure_training(steps: int, seed: int = 0) -> dict[str, Any]:
 
 
 def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BASELINE_NAMES,
-                  policies: tuple[str, ...] = (), envs: tuple[str, ...] = tuple(ENVS), tasks: tuple[str, ...] = TASKS,
+                  policies: tuple[str, ...] = (), envs: tuple[str, ...] = ALL_ENVS, tasks: tuple[str, ...] = TASKS,
                   throughput: bool = True, progress: Callable[[str], None] | None = None,
-                  solve_out: str | Path = "benchmark/time_to_solve", solve_jobs: int = 1) -> dict[str, Any]:
+                  solve_out: str | Path = "benchmark/time_to_solve", solve_jobs: int = 1,
+                  robot_out: str | Path = "benchmark/robot") -> dict[str, Any]:
     """Run the benchmark and return a JSON-ready dict.
 
     Args:
@@ -170,28 +184,30 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
         controllers: Baseline names to include.
         policies: Run folders or ``.zip`` files of trained policies
             (:func:`pectoral_gym.agents.training.policy.load_policy`).
-        envs: Labels of :data:`ENVS` to include.
+        envs: Labels of :data:`ALL_ENVS` to include (simulated settings and robot-stack columns).
         tasks: Tasks to include.
         throughput: Measure env and training throughput.
         progress: Called with a short message before each cell.
         solve_out: Folder of the time-to-solve training runs.
         solve_jobs: Time-to-solve runs at once (each in its own process; the wall times compete for cores).
+        robot_out: Folder of the robot-stack runs' logs (one deploy output folder per cell).
 
     Returns:
         ``{"settings", "cells": [...], "env_throughput", "training_throughput", "time_to_solve", "errors",
         "environment"}``;
         a cell holds ``controller, env, env_id, task, n_episodes, metrics`` (mean and CI per metric) and,
-        for NMPC, ``solver`` (solve-time statistics).
+        for NMPC, ``solver`` (solve-time statistics); a robot-stack cell also ``robot``
+        (:func:`pectoral_gym.agents.studies.deployment.robot_cell`).
 
     Raises:
         ValueError: For an unknown controller, env label or task.
     """
     from pectoral_gym.agents.training.evaluate import DEFAULT_RANDOMIZATION, evaluate, trained_env_kwargs
 
-    unknown = [c for c in controllers if c not in BASELINE_NAMES] + [e for e in envs if e not in ENVS]
+    unknown = [c for c in controllers if c not in BASELINE_NAMES] + [e for e in envs if e not in ALL_ENVS]
     unknown += [t for t in tasks if t not in TASKS]
     if unknown:
-        raise ValueError(f"unknown controllers/envs/tasks {unknown}; choose from {BASELINE_NAMES}, {tuple(ENVS)}, "
+        raise ValueError(f"unknown controllers/envs/tasks {unknown}; choose from {BASELINE_NAMES}, {ALL_ENVS}, "
                          f"{TASKS}")
     say = progress or (lambda _msg: None)
     loaded, paths = {}, {}
@@ -204,6 +220,11 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
     built: dict[tuple[str, str], Any] = {}
     for task in tasks:
         for label in envs:
+            if label in ROBOT_CONDITIONS:
+                cells += robot_cells(label, task, controllers, {name: (loaded[name], paths[name]) for name in loaded},
+                                     settings.robot_episodes.get(task, 0), settings.seed, Path(robot_out), say, errors,
+                                     max_steps=settings.robot_max_steps or settings.max_episode_steps)
+                continue
             env_id, randomised = ENVS[label]
             env_kwargs: dict[str, Any] = {"task": task}
             if randomised:
@@ -281,13 +302,17 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--policy", nargs="+", default=[], metavar="RUN", help="trained policies (run folder or .zip)")
     parser.add_argument("--controllers", nargs="*", default=list(BASELINE_NAMES), choices=BASELINE_NAMES,
                         help="baselines to include")
-    parser.add_argument("--envs", nargs="+", default=list(ENVS), choices=list(ENVS), help="model settings")
+    parser.add_argument("--envs", nargs="+", default=list(ALL_ENVS), choices=list(ALL_ENVS),
+                        help="model settings; robot, robot+degraded: the robot stack on the emulated robot")
     parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=TASKS, help="tasks")
     parser.add_argument("--episodes", type=int, help="override: episodes per cell (random, hand, policies)")
     parser.add_argument("--nmpc-episodes", type=int, nargs=2, metavar=("GOAL", "TRACK"),
                         help="override: NMPC episodes per cell for goal and track")
+    parser.add_argument("--robot-episodes", type=int, nargs=2, metavar=("GOAL", "TRACK"),
+                        help="override: episodes per robot-stack cell for goal and track")
     parser.add_argument("--seed", type=int, help="override: episode k is reset with seed + k")
-    parser.add_argument("--max-episode-steps", type=int, help="override: truncate episodes after this many steps")
+    parser.add_argument("--max-episode-steps", type=int,
+                        help="override: truncate episodes (robot-stack ones too) after this many steps")
     parser.add_argument("--no-throughput", action="store_true", help="skip env and training throughput")
     parser.add_argument("--solve-seeds", type=int, nargs="*", metavar="SEED",
                         help="override: training seeds of the time to solve (none: skip; --full: 0-4)")
@@ -309,18 +334,21 @@ def main(argv: list[str] | None = None) -> int:
         settings = replace(settings, episodes=args.episodes)
     if args.nmpc_episodes is not None:
         settings = replace(settings, nmpc_episodes=dict(zip(TASKS, args.nmpc_episodes, strict=True)))
+    if args.robot_episodes is not None:
+        settings = replace(settings, robot_episodes=dict(zip(TASKS, args.robot_episodes, strict=True)))
     if args.seed is not None:
         settings = replace(settings, seed=args.seed)
     if args.max_episode_steps is not None:
-        settings = replace(settings, max_episode_steps=args.max_episode_steps)
+        settings = replace(settings, max_episode_steps=args.max_episode_steps, robot_max_steps=None)  # for all cells
     if args.solve_seeds is not None:
         settings = replace(settings, solve_seeds=tuple(args.solve_seeds))
     if args.solve_timesteps is not None:
         settings = replace(settings, solve_timesteps=int(args.solve_timesteps))
     if args.solve_episodes is not None:
         settings = replace(settings, solve_episodes=args.solve_episodes)
-    if settings.episodes < 1 or min(settings.nmpc_episodes.values()) < 0 or (settings.max_episode_steps or 1) < 1:
-        print("error: --episodes and --max-episode-steps must be >= 1, --nmpc-episodes >= 0")
+    if settings.episodes < 1 or min(settings.nmpc_episodes.values()) < 0 or (settings.max_episode_steps or 1) < 1 \
+            or min(settings.robot_episodes.values()) < 0:
+        print("error: --episodes and --max-episode-steps must be >= 1, --nmpc-episodes and --robot-episodes >= 0")
         return 2
     if settings.solve_episodes < 1 or args.solve_jobs < 1 or len(set(settings.solve_seeds)) != len(
             settings.solve_seeds):
@@ -328,7 +356,10 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     from tqdm.auto import tqdm
 
-    n_cells = len(args.tasks) * len(args.envs) * (len(args.controllers) + len(args.policy))
+    robot = [e for e in args.envs if e in ROBOT_CONDITIONS]
+    robot_rows = len([c for c in args.controllers if c in ROBOT_CONTROLLERS]) + len(args.policy)  # at most
+    n_cells = len(args.tasks) * ((len(args.envs) - len(robot)) * (len(args.controllers) + len(args.policy))
+                                 + len(robot) * robot_rows)
     n_items = n_cells + (0 if args.no_throughput else 2) + (1 if settings.solve_seeds else 0)
     bar = tqdm(total=n_items, desc=f"benchmark ({args.preset})")
 
@@ -344,7 +375,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         report = run_benchmark(settings, tuple(args.controllers), tuple(args.policy), tuple(args.envs),
                                tuple(args.tasks), throughput=not args.no_throughput, progress=progress,
-                               solve_out=Path(args.out) / "time_to_solve", solve_jobs=args.solve_jobs)
+                               solve_out=Path(args.out) / "time_to_solve", solve_jobs=args.solve_jobs,
+                               robot_out=Path(args.out) / "robot")
     except (ValueError, FileNotFoundError) as error:
         bar.close()
         print(f"error: {error}")

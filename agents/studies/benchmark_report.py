@@ -40,6 +40,9 @@ def to_markdown(report: dict[str, Any]) -> str:
     lines = ["# Benchmark", "",
              f"Episodes per cell: {s['episodes']} (NMPC: {s['nmpc_episodes']}), episodes of at most {steps} steps; "
              f"episode k is reset with seed {s['seed']} + k. Mean [95 % bootstrap CI].", ""]
+    if any("robot" in c for c in report["cells"]):
+        lines += [f"Robot-stack columns: {s.get('robot_episodes')} episodes per cell, at most "
+                  f"{s.get('robot_max_steps') or steps} steps; see \"Robot stack\" below.", ""]
     for task, columns in (("goal", _GOAL_COLUMNS), ("track", _TRACK_COLUMNS)):
         cells = [c for c in report["cells"] if c["task"] == task]
         if not cells:
@@ -51,6 +54,7 @@ def to_markdown(report: dict[str, Any]) -> str:
             values = [_fmt(c["metrics"].get(key), scale) for key, _, scale in columns]
             lines.append(f"| {c['controller']} | {c['env']} | {c['n_episodes']} | " + " | ".join(values) + " |")
         lines.append("")
+    lines += _robot_lines([c for c in report["cells"] if "robot" in c])
     solver = [c for c in report["cells"] if c.get("solver")]
     if solver:
         lines += ["## NMPC solve times", "", "| env | task | solves | mean [ms] | p50 [ms] | p95 [ms] | max [ms] "
@@ -79,6 +83,45 @@ def to_markdown(report: dict[str, Any]) -> str:
     if report.get("errors"):
         lines += ["## Errors", ""] + [f"- `{k}`: {v}" for k, v in report["errors"].items()] + [""]
     return "\n".join(lines)
+
+
+def _robot_lines(cells: list[dict[str, Any]]) -> list[str]:
+    """The robot-stack table (:func:`pectoral_gym.agents.studies.deployment.robot_cell`), or nothing."""
+    if not cells:
+        return []
+    lines = ["## Robot stack", "",
+             "The controller through `python -m pectoral_gym.hardware.deploy --emulate --lockstep` (radio link and "
+             "firmware rules, rendered camera, tracker, observer, safety supervisor; the emulated robot runs the full "
+             "model), in simulated time. Path, tracking error and wall contacts from the robot's true pose "
+             "after each step; a wall contact: an episode in which the outline (body, and a disc of the fin span "
+             "around each fin pivot) crossed a wall line at a logged pose. Wall time per step depends on the "
+             "machine's load; NMPC solve times are wall times (no budget in lockstep).", "",
+             "| controller | env | task | episodes | safety stops | wall contacts | min clearance [cm] "
+             "| wall time per step [ms] | NMPC solve p50 / p95 / max [ms] | conditions |",
+             "|---" * 10 + "|"]
+    for c in cells:
+        r = c["robot"]
+        stops = ", ".join(f"{n} {reason}" for reason, n in sorted(r["safety_stops"].items())) or "none"
+        t = r.get("solver") or {}
+        solve = " / ".join(f"{t[k]:.0f}" for k in ("p50_ms", "p95_ms", "max_ms")) if "p50_ms" in t else "-"
+        per_step = "-" if r.get("wall_ms_per_step") is None else f"{r['wall_ms_per_step']:.0f}"
+        conditions = _conditions(r.get("conditions") or {})
+        lines.append(f"| {c['controller']} | {c['env']} | {c['task']} | {c['n_episodes']} | {stops} | "
+                     f"{r['wall_contacts']} | {_fmt(c['metrics'].get('min_clearance'), 100.0)} | {per_step} | {solve} "
+                     f"| {conditions} |")
+    return lines + [""]
+
+
+def _conditions(c: dict[str, Any]) -> str:
+    """The deploy's recorded rig conditions (``RigConditions`` as a dict, SI units) in the CLI's units."""
+    noise = c.get("pose_noise") or (0.0, 0.0)
+    parts = [(c.get("radio_latency"), f"radio latency {1e3 * (c.get('radio_latency') or 0):.0f} ms"),
+             (c.get("radio_jitter"), f"jitter {1e3 * (c.get('radio_jitter') or 0):.0f} ms"),
+             (c.get("radio_loss"), f"radio loss {100 * (c.get('radio_loss') or 0):.0f} %"),
+             (c.get("camera_latency"), f"camera latency {1e3 * (c.get('camera_latency') or 0):.0f} ms"),
+             (c.get("camera_drop"), f"frame drops {100 * (c.get('camera_drop') or 0):.0f} %"),
+             (any(noise), f"pose noise {1e3 * noise[0]:.0f} mm / {math.degrees(noise[1]):.0f} deg")]
+    return ", ".join(text for value, text in parts if value) or "ideal"
 
 
 def _solve_lines(solve: dict[str, Any] | None) -> list[str]:

@@ -32,6 +32,8 @@ EVAL_ENVS = ("PectoralFish-Averaged-v1", "PectoralFish-Full-v1")
 EVAL_SEED = 10_000  # evaluation episodes k use seed EVAL_SEED + k (training uses seed + env index)
 QUICK = {"n_timesteps": 1024, "n_envs": 8, "n_steps": 64, "batch_size": 128, "n_epochs": 1, "eval_freq": 0}
 ROBOT_EPISODES = 20  # robot-stack episodes (lockstep emulation) by default; 2 of at most 40 steps with --quick
+# the robot-stack figures results.json keeps (deployment.run_robot_stack returns more)
+ROBOT_SUMMARY = ("episodes", "seed", "success", "safety_stops", "wall_time_s", "command")
 
 
 def run_demo(out: str | Path, quick: bool = False, seed: int = 0, timesteps: int | None = None,
@@ -72,8 +74,13 @@ def run_demo(out: str | Path, quick: bool = False, seed: int = 0, timesteps: int
         results.append(result)
     plot_trajectories(results, out / "trajectories.png", max_episodes=12)
     robot_episodes = (2 if quick else ROBOT_EPISODES) if robot_episodes is None else int(robot_episodes)
-    robot = (_robot_stack(run_dir, out / "robot", robot_episodes, EVAL_SEED, progress, max_steps=40 if quick else None)
-             if robot_episodes else None)
+    robot = None
+    if robot_episodes:
+        from pectoral_gym.agents.studies.deployment import run_robot_stack
+
+        run = run_robot_stack(out / "robot", robot_episodes, EVAL_SEED, policy=run_dir,
+                              max_steps=40 if quick else None, progress=progress)
+        robot = {key: run[key] for key in ROBOT_SUMMARY}
     total = time.perf_counter() - start
     summary = {
         "train_env": TRAIN_ENV, "task": task, "seed": seed, "quick": quick, "run_dir": str(run_dir),
@@ -86,37 +93,6 @@ def run_demo(out: str | Path, quick: bool = False, seed: int = 0, timesteps: int
     (out / "results.json").write_text(json.dumps(summary, indent=2) + "\n")
     (out / "report.md").write_text(_report(summary, format_table(results), config))
     return summary
-
-
-def _robot_stack(run_dir: Path, out: Path, episodes: int, seed: int, progress: bool,
-                 max_steps: int | None = None) -> dict[str, Any]:
-    """The policy on the emulated robot through the robot stack, in lockstep (``hardware.deploy``); a summary.
-
-    ``max_steps``: steps per episode (``None``: the deploy's default, the envs' 240).
-
-    Raises:
-        RuntimeError: If the deploy does not finish (its exit status and output folder are named).
-    """
-    from collections import Counter
-
-    import numpy as np
-
-    from pectoral_gym.agents.training.metrics import summarize
-    from pectoral_gym.hardware.deploy import main as deploy
-
-    argv = ["--policy", str(run_dir), "--emulate", "--lockstep", "--episodes", str(episodes), "--seed", str(seed),
-            "--out", str(out), "--no-prompt", "--nice", "0", *([] if progress else ["--quiet"]),
-            *([] if max_steps is None else ["--max-steps", str(max_steps)])]
-    status = deploy(argv)
-    if status != 0:
-        raise RuntimeError(f"the robot-stack run (hardware.deploy {' '.join(argv)}) ended with status {status}")
-    summary = json.loads((out / "summary.json").read_text())
-    runs = summary["episodes"]
-    success = summarize(np.array([float(e["success"]) for e in runs]))
-    stops = Counter(e["safety_stop"] for e in runs if e["safety_stop"])
-    return {"episodes": len(runs), "seed": seed, "success": success.as_dict(), "safety_stops": dict(stops),
-            "wall_time_s": summary.get("wall_time"),
-            "command": "python -m pectoral_gym.hardware.deploy " + " ".join(argv)}
 
 
 def _robot_lines(robot: dict[str, Any] | None) -> list[str]:
