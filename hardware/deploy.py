@@ -141,16 +141,21 @@ def plot_trajectories(log_path: Path, png_path: Path) -> None:
 def make_controller(name: str, config, step_budget: float, safety: SafetyConfig | None = None):
     """The ``nmpc`` or ``hand`` baseline for the robot's env config; NMPC steps end within ``step_budget`` [s].
 
-    The NMPC plans with the stopping-distance band of the env's geofence (``safety``, default
-    :class:`pectoral_gym.hardware.safety.rules.SafetyConfig`), so it does not swim into it
-    (``pectoral_gym.agents.controllers.stop_band``).
+    Both keep out of the stopping band of the env's geofence (``safety``, default
+    :class:`pectoral_gym.hardware.safety.rules.SafetyConfig`) widened by
+    :data:`pectoral_gym.registration.MEASUREMENT_MARGIN`, the band the v1 envs train and evaluate them with: the
+    NMPC plans with it (``pectoral_gym.agents.controllers.stop_band``), the hand law's shield filters with it.
     """
     from pectoral_gym.agents.baselines import make_baseline
+    from pectoral_gym.model.tank import StopRule
+    from pectoral_gym.registration import MEASUREMENT_MARGIN
 
+    safety = safety or SafetyConfig()
+    band = StopRule(safety.geofence_margin + MEASUREMENT_MARGIN, safety.reaction_time, safety.contact_speed)
     if name == "nmpc":
-        safety = safety or SafetyConfig()
-        band = (safety.geofence_margin, safety.reaction_time, safety.contact_speed)
-        return make_baseline("nmpc", config, step_budget=step_budget, stop_band=band)
+        return make_baseline("nmpc", config, step_budget=step_budget, stop_band=tuple(band))
+    if name == "hand":
+        return make_baseline("hand", config, shield={"band": band})
     return make_baseline(name, config)
 
 

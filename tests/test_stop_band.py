@@ -17,6 +17,7 @@ from pectoral_gym.hardware.deploy import make_controller
 from pectoral_gym.hardware.safety.geofence import Geofence
 from pectoral_gym.hardware.safety.rules import SafetyConfig
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
+from pectoral_gym.registration import MEASUREMENT_MARGIN, registered_settings
 
 SAFETY = SafetyConfig()
 BAND = StopBand.from_params(FishParams(), SAFETY.geofence_margin, SAFETY.reaction_time, SAFETY.contact_speed)
@@ -53,12 +54,21 @@ def test_violation_by_hand_and_in_casadi():
     assert float(f([1.0, y, math.pi / 2, 0.1, 0.0])) == pytest.approx(expected, rel=1e-12)
 
 
-def test_deploy_plans_with_the_geofence_band_and_the_sim_does_not():
+def test_deploy_plans_with_the_geofence_band_widened_as_v1_and_the_sim_only_where_its_band_is_on():
     config = EnvConfig(model="full", task="goal")
+    wide = StopBand.from_params(FishParams(), SAFETY.geofence_margin + MEASUREMENT_MARGIN, SAFETY.reaction_time,
+                                SAFETY.contact_speed)
     nmpc = make_controller("nmpc", config, step_budget=1e6, safety=SAFETY)
-    assert nmpc.problem.stop_band == BAND
+    assert nmpc.problem.stop_band == wide
     x = np.array([1.0, TANK_WIDTH - 0.4, math.pi / 2, 0.1, 0.0, 0.0])
-    assert nmpc._wall_violation(x, 0.03) == pytest.approx(band_violation(*x[[0, 1, 2, 3, 4]], BAND, np))
+    assert nmpc._wall_violation(x, 0.03) == pytest.approx(band_violation(*x[[0, 1, 2, 3, 4]], wide, np))
+    hand = make_controller("hand", config, step_budget=1e6, safety=SAFETY)
+    assert hand.shield.band.margin == pytest.approx(wide.margin + 0.02)  # the shield's own extra margin on top
     assert make_baseline("nmpc", config, step_budget=1e6).problem.stop_band is None
+    v1 = EnvConfig(**registered_settings("PectoralFish-Full-v1"))
+    assert make_baseline("nmpc", v1, step_budget=1e6).problem.stop_band == StopBand.from_params(
+        FishParams(), *v1.stop_rule)
     with pytest.raises(ValueError, match="stop_band"):
-        NMPCSettings(stop_band=(0.05, -1.0, 5.0))
+        NMPCSettings(stop_band=(0.05, -1.0, 0.03))
+    with pytest.raises(ValueError, match="contact speed"):
+        NMPCSettings(stop_band=(0.05, 0.15, 0.0))

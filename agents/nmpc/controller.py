@@ -27,6 +27,7 @@ stop). :attr:`NMPCController.solve_times`, :attr:`NMPCController.failures` and
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from pathlib import Path
@@ -64,7 +65,8 @@ class NMPCController(PlanPricing):
 
     Args:
         config: The environment settings (ranges, control period, parameters, task).
-        settings: :class:`NMPCSettings`; keyword arguments override its fields.
+        settings: :class:`NMPCSettings`; keyword arguments override its fields. Without a ``stop_band`` there, the
+            plan keeps out of the env's band where the env ends episodes in it (``config.stop_band``, v1).
         scaling: Scaling functions of the prediction model, or the path of a coefficients file
             (checked against ``config.params`` unless ``config.check_scaling_params`` is off); default:
             the K of the planning spec (:func:`pectoral_gym.agents.controllers.fin_map.planning_spec`: the env's on the
@@ -87,6 +89,8 @@ class NMPCController(PlanPricing):
         self.config = config
         base = settings or NMPCSettings()
         self.settings = NMPCSettings(**{**base.__dict__, **overrides}) if overrides else base
+        if self.settings.stop_band is None and config.stop_band:
+            self.settings = dataclasses.replace(self.settings, stop_band=tuple(config.stop_rule))
         self.fins = FinMap(config)
         spec = self.fins.spec
         if isinstance(scaling, (str, Path)):
