@@ -32,9 +32,8 @@ def test_model_presets_are_the_specs_they_name(capsys):
     assert fast["speed"] == pytest.approx(full["speed"], rel=0.01) and fast["omega"] == pytest.approx(full["omega"],
                                                                                                        rel=0.01)
     exact = run_json(capsys, "steady", "--model", "averaged", "--right", PATTERN, "--json")
-    taylor = run_json(capsys, "steady", "--model", "averaged", "--forcing", "taylor", "--right", PATTERN, "--json")
     paper = run_json(capsys, "steady", "--model", "averaged-paper", "--right", PATTERN, "--json")
-    assert taylor["speed"] != exact["speed"] and paper["model"] == "averaged-paper"
+    assert paper["speed"] != exact["speed"] and paper["model"] == "averaged-paper"
 
 
 @pytest.mark.parametrize("model", ["full", "averaged"])
@@ -83,7 +82,8 @@ def test_steady_table_has_units(capsys):
     (["steady", "--left", "90,20,0,4"], "FinBeat.period must be > 0"),
     (["steady", "--right", "90,20,1,nan"], "FinBeat.ratio must be finite"),
     (["steady", "--model", "hybrid"], "invalid choice"),
-    (["steady", "--model", "full-fast", "--forcing", "taylor"], "--forcing applies to averaged models only"),
+    (["steady", "--model", "full-fast", "--scaling", "none"], "--scaling applies to averaged models only"),
+    (["steady", "--model", "averaged", "--forcing", "taylor"], "unrecognized arguments: --forcing"),
     (["simulate", "--duration", "0", "--out", "unused"], "--duration must be a finite number > 0"),
     (["simulate", "--sample", "-1", "--out", "unused"], "--sample must be a finite number > 0"),
     (["bench", "--steps", "0"], "--steps must be >= 1"),

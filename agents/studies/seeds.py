@@ -14,7 +14,8 @@ Across seeds, per setting: the interquartile mean (``scipy.stats.trim_mean(x, 0.
 middle half of the seeds, as in rliable) with a percentile-bootstrap interval over seeds
 (``scipy.stats.bootstrap``), the mean, min, median, max, and how many seeds meet the issue's targets
 (full >= 0.95, full+rand >= 0.90, averaged minus full <= 0.03). With a handful of seeds the bootstrap
-interval is coarse: it can only take values that subsets of these seeds give.
+interval is coarse: it can only take values that subsets of these seeds give. The statistics are
+:mod:`pectoral_gym.agents.studies.seeds_stats` (``iqm`` and ``aggregate``, re-exported here).
 
 CLI::
 
@@ -46,9 +47,9 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import scipy.stats
 
 from pectoral_gym.agents.studies.seeds_report import plot_seeds, to_markdown
+from pectoral_gym.agents.studies.seeds_stats import aggregate, iqm
 
 __all__ = ["SETTINGS", "TARGETS", "aggregate", "iqm", "main", "run_seed", "run_seeds", "summarize_seeds",
            "train_seeds", "versioned"]
@@ -69,46 +70,6 @@ TARGETS = {"full": 0.95, "full+rand": 0.90, "gap": 0.03}  # issue 16: success >=
 REPORTED = ("success", "time_to_goal", "final_distance", "fin_work", "return", "wall")
 QUICK = {"n_timesteps": 2048, "n_envs": 8, "n_steps": 64, "batch_size": 128, "n_epochs": 1, "eval_freq": 1024,
          "eval_episodes": 4}
-_RNG_ARG = "rng" if "rng" in __import__("inspect").signature(scipy.stats.bootstrap).parameters else "random_state"
-
-
-def iqm(values: Sequence[float]) -> float:
-    """Interquartile mean: ``scipy.stats.trim_mean(values, 0.25)`` (NaN values left out; NaN if none)."""
-    x = np.asarray(values, dtype=float).ravel()
-    x = x[~np.isnan(x)]
-    return float(scipy.stats.trim_mean(x, 0.25)) if x.size else float("nan")
-
-
-def aggregate(values: Sequence[float], confidence: float = 0.95, n_resamples: int = 2000,
-              seed: int = 0) -> dict[str, Any]:
-    """Across-seed summary of one figure: IQM with its percentile-bootstrap interval, mean, min, median, max.
-
-    Args:
-        values: One value per seed (NaN values left out).
-        confidence: Level of the interval in (0, 1).
-        n_resamples: Bootstrap resamples of the seeds.
-        seed: Seed of the resampling generator.
-
-    Returns:
-        ``{"n", "iqm", "ci_low", "ci_high", "mean", "min", "median", "max"}`` (``None`` where there is no value).
-    """
-    if not 0.0 < confidence < 1.0:
-        raise ValueError(f"confidence must be in (0, 1), got {confidence}")
-    x = np.asarray(values, dtype=float).ravel()
-    x = x[~np.isnan(x)]
-    if x.size == 0:
-        return {"n": 0, "iqm": None, "ci_low": None, "ci_high": None, "mean": None, "min": None, "median": None,
-                "max": None}
-    centre = iqm(x)
-    if x.size == 1 or np.ptp(x) == 0.0:
-        low = high = centre
-    else:
-        result = scipy.stats.bootstrap((x,), lambda s, axis=-1: scipy.stats.trim_mean(s, 0.25, axis=axis),
-                                       n_resamples=n_resamples, confidence_level=confidence, method="percentile",
-                                       vectorized=True, **{_RNG_ARG: np.random.default_rng(seed)})
-        low, high = float(result.confidence_interval.low), float(result.confidence_interval.high)
-    return {"n": int(x.size), "iqm": centre, "ci_low": low, "ci_high": high, "mean": float(x.mean()),
-            "min": float(x.min()), "median": float(np.median(x)), "max": float(x.max())}
 
 
 def run_seed(seed: int, out: str | Path, overrides: dict[str, Any] | None = None, episodes: int = 100,

@@ -4,7 +4,7 @@
 :func:`pectoral_gym.registration.register_envs` when ``pectoral_gym`` is imported.
 
 Modules: ``fish_env`` (the single env), ``vector`` (the native vector env),
-``core`` (settings and the batched core both share), ``tasks`` (the numba task
+``config`` (their settings, ``EnvConfig``), ``core`` (the batched core both share), ``tasks`` (the numba task
 kernels, a task row, and the task table and ``TaskState``, shared with the robot
 env), ``fused`` (those kernels and the model advance in one compiled
 call per step, a serial and a parallel build chosen by batch size), ``layout`` (their packed arrays,

@@ -57,7 +57,7 @@ def _positive(parser: argparse.ArgumentParser, **values: float) -> None:
 
 def _model_inputs(args: argparse.Namespace, parser: argparse.ArgumentParser):
     try:
-        return model_inputs(args.model, args.params, args.scaling, not args.no_params_check, args.forcing)
+        return model_inputs(args.model, args.params, args.scaling, not args.no_params_check)
     except (ValueError, FileNotFoundError) as error:
         parser.error(str(error))
 
@@ -112,10 +112,9 @@ def _cmd_simulate(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
     out = Path(args.out)
     trajectories = []
     for model in models:
-        own = model == args.model  # --scaling and --forcing are the chosen model's
-        params, spec = _model_inputs(argparse.Namespace(**{**vars(args), "model": model, "scaling": args.scaling
-                                                           if own else None, "forcing": args.forcing if own else None}),
-                                     parser)
+        own = model == args.model  # --scaling is the chosen model's
+        params, spec = _model_inputs(argparse.Namespace(**{**vars(args), "model": model,
+                                                           "scaling": args.scaling if own else None}), parser)
         traj = simulate(spec, right, left, args.duration, args.x0, args.y0, math.radians(args.heading_deg),
                         args.sample, params=params, progress=True)
         name = "trajectory.csv" if model == args.model else f"trajectory_{model}.csv"
@@ -242,9 +241,6 @@ def _add_model_options(p: argparse.ArgumentParser) -> None:
                    help="model parameters: a JSON or YAML file of FishParams fields (others keep Table 1)")
     p.add_argument("--no-params-check", action="store_true",
                    help="averaged model: use K even if its file was identified for other parameters")
-    p.add_argument("--forcing", choices=("exact", "taylor"), default=None,
-                   help="averaged models: closed-form or Taylor (eqs. 26-28) averaged forcing (default: the model's, "
-                        "exact but for averaged-paper)")
 
 
 def build_parser() -> argparse.ArgumentParser:

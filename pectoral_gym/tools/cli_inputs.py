@@ -69,14 +69,13 @@ def fin_label(right: FinBeat | None, left: FinBeat | None) -> str:
     return f"right {fin_text(right)}, left {fin_text(left)}"
 
 
-def model_inputs(model: str, params_file: str | None, scaling: str | None = None, check: bool = True,
-                 forcing: str | None = None):
-    """``(params, spec)`` of the command line's ``--model, --params, --scaling, --forcing, --no-params-check``.
+def model_inputs(model: str, params_file: str | None, scaling: str | None = None, check: bool = True):
+    """``(params, spec)`` of the command line's ``--model, --params, --scaling, --no-params-check``.
 
     ``"full"`` is :data:`~pectoral_gym.model.spec.FULL_REFERENCE`, ``"averaged"`` is
     :data:`~pectoral_gym.model.spec.AVERAGED`, any other name a preset of
-    :data:`~pectoral_gym.model.spec.PRESETS`; an averaged model's K (with its richest yaw damping) and
-    forcing are the spec's unless given.
+    :data:`~pectoral_gym.model.spec.PRESETS`; an averaged model's K (with its richest yaw damping) is the
+    spec's unless given, its forcing always the spec's (Taylor for ``averaged-paper``).
 
     Args:
         model: ``"full"``, ``"averaged"`` or a preset name.
@@ -84,7 +83,6 @@ def model_inputs(model: str, params_file: str | None, scaling: str | None = None
         scaling: ``"identified"`` (the shipped file), ``"none"`` (K = 1), a coefficients file path, or
             ``None`` (the spec's).
         check: Refuse a coefficients file identified for other parameters (averaged model).
-        forcing: Averaged model: ``"exact"``, ``"taylor"`` or ``None`` (the spec's).
 
     Raises:
         ValueError: For an unknown model, an averaged-only option given to the full model, an unreadable
@@ -99,14 +97,13 @@ def model_inputs(model: str, params_file: str | None, scaling: str | None = None
         raise ValueError(f"unknown model {model!r}: choose from {MODEL_CHOICES}")
     params = load_params(params_file) if params_file else FishParams()
     if not isinstance(spec, AveragedSpec):
-        given = [flag for flag, value in (("--scaling", scaling), ("--forcing", forcing)) if value is not None]
-        if given:
-            raise ValueError(f"{', '.join(given)} applies to averaged models only, not to {model!r}")
+        if scaling is not None:
+            raise ValueError(f"--scaling applies to averaged models only, not to {model!r}")
         return params, spec
     if scaling is not None:
         held = env_spec("averaged", scaling=scaling, check_scaling_params=check)
         spec = spec.replace(scaling=held.scaling, yaw_damping=held.yaw_damping)
-    spec = spec.replace(check_params=check, **({} if forcing is None else {"forcing": forcing}))
+    spec = spec.replace(check_params=check)
     spec.scaling_functions(params)  # the parameter check, before any work
     return params, spec
 
