@@ -5,7 +5,7 @@ Examples::
     python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 --episodes 3
     python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal/model.zip --emulate --speed 2 --episodes 1
     python -m pectoral_gym.hardware.deploy --controller nmpc --emulate --episodes 1
-    python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --episodes 100
+    python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --episodes 100 --jobs 2
 
 ``--controller nmpc`` plans on the averaged model (:class:`pectoral_gym.agents.nmpc.controller.NMPCController`, the same
 controller as in simulation) with its step budget set to ``--solve-fraction`` of the control period
@@ -16,8 +16,10 @@ timing in real time.
 
 ``--emulate --lockstep`` runs the emulated robot and the whole PC stack (the same link, firmware, supervisor,
 camera renderer, tracker and observer) in simulated time (:mod:`pectoral_gym.hardware.emurig`): as fast as the
-CPU allows, and the same run for the same seed. ``--radio-*``, ``--camera-*`` and ``--pose-noise-*`` degrade the
-emulated radio and camera, seeded, in either timing.
+CPU allows, and the same run for the same seed. Each lockstep episode ``k`` runs on a fresh rig seeded with
+``--seed + k``, so it does not depend on the episodes before it; ``--jobs J`` runs the episodes in ``J`` worker
+processes with the same output (:mod:`pectoral_gym.hardware.lockstep_jobs`). ``--radio-*``, ``--camera-*`` and
+``--pose-noise-*`` degrade the emulated radio and camera, seeded, in either timing.
 
 Writes ``steps.jsonl`` (one JSON object per step: action, command sent, measured pose, estimate,
 reward, ends, link and tracking health, and the true pose when emulated), ``summary.json`` and
@@ -26,6 +28,7 @@ reward, ends, link and tracking health, and the true pose when emulated), ``summ
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import dataclasses
 import json
@@ -33,6 +36,7 @@ import math
 import sys
 import time
 from pathlib import Path
+from typing import TextIO
 
 import numpy as np
 
@@ -46,10 +50,10 @@ from pectoral_gym.hardware.deploy_checks import (
     raise_priority,
 )
 from pectoral_gym.hardware.deploy_cli import check_args, make_parser, rig_conditions
-from pectoral_gym.hardware.emurig import open_rig
+from pectoral_gym.hardware.emurig import RigConditions, open_rig
 from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handlers
 
-__all__ = ["main", "make_controller", "run_episodes", "plot_trajectories", "solver_summary"]
+__all__ = ["main", "make_controller", "run_episode", "run_episodes", "plot_trajectories", "solver_summary"]
 
 
 def _random_start(rng: np.random.Generator, inset: float = tk.START_INSET) -> tuple[float, float, float]:
@@ -59,48 +63,52 @@ def _random_start(rng: np.random.Generator, inset: float = tk.START_INSET) -> tu
     return x, y, -math.pi + 2 * math.pi * rng.random()
 
 
+def run_episode(env, controller, episode: int, log: TextIO, seed: int | None = None, robot=None) -> dict:
+    """Run episode number ``episode``; write one JSON line per step to ``log``; return the episode's summary.
+
+    The env and the controller are reset with ``seed + episode`` (``None``: unseeded). A step's ``t`` is seconds
+    since the episode's reset on the env's clock (simulated seconds in lockstep).
+    """
+    clock = getattr(env.unwrapped, "clock", REAL_CLOCK)
+    ep_seed = None if seed is None else seed + episode
+    obs, info = env.reset(seed=ep_seed)
+    controller.reset(ep_seed)
+    ret, steps, t0 = 0.0, 0, clock.monotonic()
+    record = {"episode": episode, "step": 0, "event": "reset", "pose": info["pose"], "target": info["target"]}
+    if robot is not None:
+        record["true_pose"] = list(robot.pose())
+    log.write(json.dumps(record) + "\n")
+    while True:
+        action = np.asarray(controller.act(obs), dtype=np.float32)
+        obs, reward, terminated, truncated, info = env.step(action)
+        ret += reward
+        steps += 1
+        record = {"episode": episode, "step": steps, "t": clock.monotonic() - t0,
+                  "action": action.tolist(), "command": info["command"], "pose": info["pose"],
+                  "estimate": info["estimate"], "target": env.unwrapped.target, "reward": reward,
+                  "terminated": terminated, "truncated": truncated, "safety_stop": info["safety_stop"],
+                  "distance": info["distance"], "link": info["link"], "tracking": info["tracking"]}
+        if robot is not None:
+            record["true_pose"] = list(robot.pose())
+        log.write(json.dumps(record) + "\n")
+        if terminated or truncated:
+            break
+    return {"episode": episode, "return": ret, "steps": steps, "terminated": terminated, "truncated": truncated,
+            "safety_stop": info["safety_stop"], "success": bool(info.get("is_success", False)),
+            "final_distance": info["distance"]}
+
+
 def run_episodes(env, controller, episodes: int, log_path: Path, seed: int | None = None, robot=None,
                  progress: bool = True) -> list[dict]:
-    """Run ``episodes`` episodes; append one JSON line per step to ``log_path``; return per-episode summaries.
-
-    A step's ``t`` is seconds since the episode's reset on the env's clock (simulated seconds in lockstep).
-    """
+    """Run ``episodes`` episodes on one env (:func:`run_episode`); write the steps to ``log_path``; return summaries."""
     from tqdm import tqdm
-
-    clock = getattr(env.unwrapped, "clock", REAL_CLOCK)
 
     summaries = []
     with open(log_path, "w", encoding="utf-8") as log, tqdm(total=episodes, desc="episodes",
                                                               disable=not progress) as bar:
         for episode in range(episodes):
-            ep_seed = None if seed is None else seed + episode
-            obs, info = env.reset(seed=ep_seed)
-            controller.reset(ep_seed)
-            ret, steps, t0 = 0.0, 0, clock.monotonic()
-            record = {"episode": episode, "step": 0, "event": "reset", "pose": info["pose"],
-                      "target": info["target"]}
-            if robot is not None:
-                record["true_pose"] = list(robot.pose())
-            log.write(json.dumps(record) + "\n")
-            while True:
-                action = np.asarray(controller.act(obs), dtype=np.float32)
-                obs, reward, terminated, truncated, info = env.step(action)
-                ret += reward
-                steps += 1
-                record = {"episode": episode, "step": steps, "t": clock.monotonic() - t0,
-                          "action": action.tolist(), "command": info["command"], "pose": info["pose"],
-                          "estimate": info["estimate"], "target": env.unwrapped.target, "reward": reward,
-                          "terminated": terminated, "truncated": truncated, "safety_stop": info["safety_stop"],
-                          "distance": info["distance"], "link": info["link"], "tracking": info["tracking"]}
-                if robot is not None:
-                    record["true_pose"] = list(robot.pose())
-                log.write(json.dumps(record) + "\n")
-                if terminated or truncated:
-                    break
+            summaries.append(run_episode(env, controller, episode, log, seed, robot))
             log.flush()
-            summaries.append({"episode": episode, "return": ret, "steps": steps, "terminated": terminated,
-                              "truncated": truncated, "safety_stop": info["safety_stop"],
-                              "success": bool(info.get("is_success", False)), "final_distance": info["distance"]})
             bar.update(1)
     return summaries
 
@@ -169,6 +177,111 @@ def solver_summary(controller) -> dict:
             "failures": int(controller.failures), "late": int(controller.late)}
 
 
+class _RunError(Exception):
+    """A device or an episode failed (exit status 1); the message says what and where."""
+
+
+_RunResult = tuple[list[dict], dict, dict | None, float]  # summaries, link health, solver summary, wall time [s]
+
+
+def _run_real_time(parser: argparse.ArgumentParser, args: argparse.Namespace, controller, settings: dict,
+                   safety: SafetyConfig, conditions: RigConditions, model, log_path: Path) -> _RunResult:
+    """The episodes on one robot (real or emulated in real time), one after another on one rig and env.
+
+    Returns:
+        ``(summaries, link health, solver summary or None, wall time [s])``.
+
+    Raises:
+        _RunError: A device did not answer or an episode could not go on.
+    """
+    from pectoral_gym.hardware.env import HardwareFishEnv
+    from pectoral_gym.hardware.radio.link import RadioLink
+    from pectoral_gym.hardware.vision.tracker import MarkerTracker
+
+    robot = env = None
+    clock = REAL_CLOCK
+    with contextlib.ExitStack() as resources:  # released last in, first out, on every path
+        try:
+            if args.emulate:
+                clock, robot, port, camera = open_rig(resources, args.seed, conditions, False, args.speed)
+                inset = settings.get("start_inset", tk.START_INSET)  # the policy's own, as it trained
+                hook = lambda rng: robot.place(*_random_start(rng, inset))  # noqa: E731 - a hand puts the fish back
+            else:
+                from pectoral_gym.hardware.vision.camera import open_source
+
+                camera = open_source(args.camera)
+                resources.callback(camera.close)  # idempotent: the env closes it too
+                port = args.port
+                if args.robot_address is not None:
+                    extra = {"take_over": True} if args.take_over else {}
+                    port = RadioLink(args.port, dest64=args.robot_address, **extra)
+                    resources.callback(port.close)
+                hook = None if args.no_prompt else (lambda rng: input("Place the fish in the tank and press Enter: "))
+            check_frame_size(first_frame(camera, clock=clock), model, args.calibration)
+            env = HardwareFishEnv(port, camera, safety=safety, speed=args.speed, max_episode_steps=args.max_steps,
+                                  reset_hook=hook, tracker=MarkerTracker(model), take_over=args.take_over,
+                                  clock=clock, **settings)
+            resources.callback(env.close)
+            resources.callback(install_stop_handlers(env.stop))
+            if controller is None:
+                budget = args.solve_fraction * settings["control_period"] / args.speed
+                controller = make_controller(args.controller, env.config, budget, safety)
+        except ValueError as err:  # the settings, found wrong by the devices or the env
+            parser.error(str(err))
+        except (RuntimeError, OSError) as err:  # a device that does not answer or cannot be opened
+            raise _RunError(str(err)) from err
+        started = time.perf_counter()
+        try:
+            summaries = run_episodes(env, controller, args.episodes, log_path, args.seed, robot,
+                                     progress=not args.quiet)
+        except (RuntimeError, OSError) as err:  # e.g. no fish seen at reset, the robot not confirming a stop
+            raise _RunError(f"{err} (log so far: {log_path})") from err
+        wall_time = time.perf_counter() - started
+    solver = solver_summary(controller) if hasattr(controller, "solve_times") else None
+    return summaries, env.link.health(), solver, wall_time  # the link's health once the env closed it
+
+
+def _run_lockstep(parser: argparse.ArgumentParser, args: argparse.Namespace, controller, settings: dict,
+                  safety: SafetyConfig, conditions: RigConditions, log_path: Path) -> _RunResult:
+    """The episodes in lockstep, each on a fresh rig (:mod:`pectoral_gym.hardware.lockstep_jobs`), in ``--jobs``.
+
+    ``log_path`` gets each episode's steps in episode order as soon as the episodes before it are done.
+
+    Returns:
+        ``(summaries, link health, solver summary or None, wall time [s])``: the link's counters summed over
+        the episodes (:func:`pectoral_gym.hardware.lockstep_jobs.merge_link`).
+
+    Raises:
+        _RunError: An episode failed (its index and the error named; the log holds the episodes before it).
+    """
+    from pectoral_gym.hardware.lockstep_jobs import EpisodeError, LockstepJob, merge_link, merge_solver, run_lockstep
+
+    job = LockstepJob(args.controller, None if args.policy is None else str(args.policy), args.seed, conditions,
+                      settings, safety, args.max_steps, args.calibration, args.take_over)
+    started = time.perf_counter()
+    with open(log_path, "w", encoding="utf-8") as log:
+        written = 0
+
+        def write(result) -> None:
+            nonlocal written
+            log.write(result.log)
+            log.flush()
+            written += 1
+
+        try:
+            results = run_lockstep(job, range(args.episodes), args.jobs, write, progress=not args.quiet,
+                                   controller=controller)
+        except EpisodeError as err:
+            if err.setup:  # the settings, found wrong by the rig or the env
+                parser.error(str(err))
+            if err.episode == written:  # the episodes before it are in: its own steps follow them
+                log.write(err.log)
+            raise _RunError(f"episode {err.episode}: {err} (log so far: {log_path})") from err
+    wall_time = time.perf_counter() - started
+    return ([r.summary for r in results], merge_link([r.link for r in results]),
+            merge_solver([r.solver for r in results]), wall_time)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit status (0 done, 1 a device failed; 2 via SystemExit: bad argument).
 
@@ -201,10 +314,7 @@ def main(argv: list[str] | None = None) -> int:
         safety = SafetyConfig(geofence_margin=args.geofence, tracking_timeout=args.tracking_timeout)
     except ValueError as err:
         parser.error(f"safety settings (--geofence, --tracking-timeout): {err}")
-    from pectoral_gym.hardware.env import HardwareFishEnv
-    from pectoral_gym.hardware.radio.link import RadioLink
     from pectoral_gym.hardware.vision.cameramodel import CameraModel
-    from pectoral_gym.hardware.vision.tracker import MarkerTracker
 
     try:
         model = CameraModel.default() if args.calibration is None else CameraModel.load(args.calibration)
@@ -220,56 +330,25 @@ def main(argv: list[str] | None = None) -> int:
     warning = raise_priority(args.nice)  # before any thread starts: threads inherit it
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
-    robot = env = None
-    clock = REAL_CLOCK
-    with contextlib.ExitStack() as resources:  # released last in, first out, on every path
-        try:
-            if args.emulate:
-                clock, robot, port, camera = open_rig(resources, args.seed, conditions, args.lockstep, args.speed)
-                inset = settings.get("start_inset", tk.START_INSET)  # the policy's own, as it trained
-                hook = lambda rng: robot.place(*_random_start(rng, inset))  # noqa: E731 - a hand puts the fish back
-            else:
-                from pectoral_gym.hardware.vision.camera import open_source
-
-                camera = open_source(args.camera)
-                resources.callback(camera.close)  # idempotent: the env closes it too
-                port = args.port
-                if args.robot_address is not None:
-                    extra = {"take_over": True} if args.take_over else {}
-                    port = RadioLink(args.port, dest64=args.robot_address, **extra)
-                    resources.callback(port.close)
-                hook = None if args.no_prompt else (lambda rng: input("Place the fish in the tank and press Enter: "))
-            check_frame_size(first_frame(camera, clock=clock), model, args.calibration)
-            env = HardwareFishEnv(port, camera, safety=safety, speed=args.speed, max_episode_steps=args.max_steps,
-                                  reset_hook=hook, tracker=MarkerTracker(model), take_over=args.take_over,
-                                  clock=clock, **settings)
-            resources.callback(env.close)
-            resources.callback(install_stop_handlers(env.stop))
-            if controller is None:  # lockstep: a step's computing costs no simulated time, so no budget applies
-                budget = math.inf if args.lockstep else args.solve_fraction * period / args.speed
-                controller = make_controller(args.controller, env.config, budget, safety)
-        except ValueError as err:  # the settings, found wrong by the devices or the env
-            parser.error(str(err))
-        except (RuntimeError, OSError) as err:  # a device that does not answer or cannot be opened
-            print(f"{parser.prog}: error: {err}", file=sys.stderr)
-            return 1
-        started = time.perf_counter()
-        try:
-            summaries = run_episodes(env, controller, args.episodes, out / "steps.jsonl", args.seed, robot,
-                                     progress=not args.quiet)
-        except (RuntimeError, OSError) as err:  # e.g. no fish seen at reset, the robot not confirming a stop
-            print(f"{parser.prog}: error: {err} (log so far: {out / 'steps.jsonl'})", file=sys.stderr)
-            return 1
-    link = env.link.health()
+    try:
+        if args.lockstep:
+            summaries, link, solver, wall_time = _run_lockstep(parser, args, controller, settings, safety,
+                                                               conditions, out / "steps.jsonl")
+        else:
+            summaries, link, solver, wall_time = _run_real_time(parser, args, controller, settings, safety,
+                                                                conditions, model, out / "steps.jsonl")
+    except _RunError as err:
+        print(f"{parser.prog}: error: {err}", file=sys.stderr)
+        return 1
     report = {"controller": args.controller, "policy": None if args.policy is None else str(args.policy),
               "settings": {k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()},
               "episodes": summaries, "link": link}
-    report["wall_time"] = time.perf_counter() - started  # s for the episodes (the one field a lockstep rerun changes)
+    report["wall_time"] = wall_time  # s for the episodes (the one field a lockstep rerun changes)
     if args.emulate:
         report["emulation"] = {"lockstep": args.lockstep, "speed": args.speed, "seed": args.seed,
                                "conditions": dataclasses.asdict(conditions)}
-    if hasattr(controller, "solve_times"):
-        report["solver"] = solver_summary(controller)
+    if solver is not None:
+        report["solver"] = solver  # its times are wall times: a rerun changes them too
     (out / "summary.json").write_text(json.dumps(report, indent=2), encoding="utf-8")
     plot_trajectories(out / "steps.jsonl", out / "trajectory.png")
     for s in summaries:

@@ -21,6 +21,7 @@ _EXAMPLES = """examples:
   python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --emulate --speed 2 --episodes 2 --out dryrun
   python -m pectoral_gym.hardware.deploy --controller nmpc --emulate --speed 2 --episodes 1
   python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --episodes 100 --out lockstep
+  python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --episodes 100 --jobs 2
   python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --radio-latency 0.1 \
       --radio-loss 0.1 --camera-drop 0.1 --pose-noise-mm 5 --pose-noise-deg 2
   python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 \
@@ -54,8 +55,8 @@ def make_parser(description: str) -> argparse.ArgumentParser:
                              "--robot-address)")
     parser.add_argument("--lockstep", action="store_true",
                         help="--emulate only: run the emulated robot and this program's whole robot stack in "
-                             "simulated time, as fast as the CPU allows; the same seed gives the same run "
-                             "(no --speed)")
+                             "simulated time, as fast as the CPU allows, each episode k on a fresh rig seeded "
+                             "with --seed + k; the same seed gives the same run (no --speed)")
     for flag, unit, text in (("--radio-latency", "S", "one-way delay of each radio frame [s]"),
                              ("--radio-jitter", "S", "extra one-way radio delay, uniform in [0, S] [s]"),
                              ("--radio-loss", "P", "probability that a radio frame is lost, each way, in [0, 1)"),
@@ -66,6 +67,9 @@ def make_parser(description: str) -> argparse.ArgumentParser:
         parser.add_argument(flag, type=float, default=0.0, metavar=unit,
                             help=f"--emulate only, seeded: {text} (default %(default)s)")
     parser.add_argument("--episodes", type=int, default=1, help="number of episodes, >= 1 (default %(default)s)")
+    parser.add_argument("--jobs", type=int, default=1, metavar="J",
+                        help="--lockstep only: run the episodes in J worker processes, >= 1; the output is the same "
+                             "for any J (default %(default)s: in this process)")
     parser.add_argument("--task", choices=("goal", "track"), default=None,
                         help="task (default: the policy's own from its run folder, else goal); a policy is refused "
                              "under another task than it was trained on")
@@ -92,8 +96,8 @@ def make_parser(description: str) -> argparse.ArgumentParser:
     parser.add_argument("--tracking-timeout", type=float, default=0.5, metavar="S",
                         help="stop when the fish has not been seen for this long [s]; at least "
                              f"{MIN_TRACKING_WALL} s of wall time (timeout / speed) (default %(default)s)")
-    parser.add_argument("--seed", type=int, default=0, help="seed of targets and emulated starts, >= 0 "
-                                                            "(default %(default)s)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of targets and emulated starts (episode k: "
+                                                            "seed + k), >= 0 (default %(default)s)")
     parser.add_argument("--out", default="deploy_out", help="output folder (default %(default)s)")
     parser.add_argument("--no-prompt", action="store_true",
                         help="do not ask to place the fish before each episode (real robot)")
@@ -117,6 +121,10 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
                          "radio and camera)")
     elif args.port is None or args.camera is None:
         parser.error("--port and --camera are required unless --emulate is given")
+    if args.jobs < 1:
+        parser.error(f"--jobs must be >= 1, got {args.jobs}")
+    if args.jobs != 1 and not args.lockstep:
+        parser.error("--jobs needs --emulate --lockstep (episodes run in parallel only in simulated time)")
     if args.lockstep and args.speed != 1.0:
         parser.error("--speed does not apply with --lockstep (simulated time runs as fast as the CPU allows)")
     if not args.emulate and rig_conditions(args) != RigConditions():

@@ -15,7 +15,8 @@ Both apply the same :class:`RigConditions`: radio latency, jitter and loss
 (:class:`pectoral_gym.hardware.radio.channel.RadioChannel`), camera latency and frame drops
 (:class:`pectoral_gym.hardware.vision.camerafaults.FaultyCamera`) and pose noise
 (:class:`pectoral_gym.hardware.vision.camera.EmulatedCamera`), each from a generator of its own seeded by the
-run's seed.
+rig's seed (a lockstep deployment opens one rig per episode ``k``, seeded with ``--seed + k``:
+:mod:`pectoral_gym.hardware.lockstep_jobs`).
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ from pectoral_gym.hardware.radio.channel import RadioChannel
 
 __all__ = ["RigConditions", "open_rig", "lockstep_session"]
 
-# Generator streams derived from the run's seed, one per condition (the camera's image noise uses the seed itself).
+# Generator streams derived from the rig's seed, one per condition (the camera's image noise uses the seed itself).
 _RADIO_STREAM, _CAMERA_STREAM, _SESSION_STREAM = 2, 3, 4
 
 
@@ -83,7 +84,7 @@ class RigConditions:
 
 
 def lockstep_session(seed: int) -> int:
-    """The radio session of a lockstep run: from the seed, so that its logs repeat.
+    """The radio session of a lockstep rig: from its seed, so that its logs repeat.
 
     A real robot's session is never seeded (a restarted PC must not reuse one); a lockstep run's robot is
     an emulated one made afresh in the same process, which no other PC can reach.

@@ -171,27 +171,29 @@ def test_stream_pair_loss_is_seeded():
     assert lost(4) != a
 
 
-def _deploy(tmp_path, name, *extra):
+_DEGRADED = ("--radio-latency", "0.05", "--radio-jitter", "0.02", "--radio-loss", "0.1", "--camera-drop", "0.1",
+             "--camera-latency", "0.03", "--pose-noise-mm", "2", "--pose-noise-deg", "1")
+
+
+def _deploy(tmp_path, name, *extra, episodes=2):
     from pectoral_gym.hardware import deploy
 
     out = tmp_path / name
-    args = ["--controller", "hand", "--emulate", "--lockstep", "--episodes", "2", "--max-steps", "8", "--seed", "5",
-            "--out", str(out), "--quiet", "--nice", "0", *extra]
+    args = ["--controller", "hand", "--emulate", "--lockstep", "--episodes", str(episodes), "--max-steps", "8",
+            "--seed", "5", "--out", str(out), "--quiet", "--nice", "0", *extra]
     assert _in_thread(lambda: deploy.main(args)) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary.pop("wall_time") > 0  # the one field that may differ
     return (out / "steps.jsonl").read_text(encoding="utf-8"), summary
 
 
-def test_lockstep_deployment_repeats_itself_for_a_seed(tmp_path):
-    """Two lockstep runs, same seed, degraded radio and camera: the same logs, byte for byte."""
-    degraded = ("--radio-latency", "0.05", "--radio-jitter", "0.02", "--radio-loss", "0.1", "--camera-drop", "0.1",
-                "--camera-latency", "0.03", "--pose-noise-mm", "2", "--pose-noise-deg", "1")
-    steps_a, summary_a = _deploy(tmp_path, "a", *degraded)
-    steps_b, summary_b = _deploy(tmp_path, "b", *degraded)
+def test_lockstep_deployment_repeats_itself_for_a_seed_and_any_jobs(tmp_path):
+    """The same seed, degraded radio and camera, in this process and in 2 workers: the same logs, byte for byte."""
+    steps_a, summary_a = _deploy(tmp_path, "a", *_DEGRADED, episodes=3)
+    steps_b, summary_b = _deploy(tmp_path, "b", *_DEGRADED, "--jobs", "2", episodes=3)
     assert steps_a == steps_b and summary_a == summary_b
     records = [json.loads(line) for line in steps_a.splitlines()]
-    assert sum(r.get("event") == "reset" for r in records) == 2
+    assert [r["episode"] for r in records if r.get("event") == "reset"] == [0, 1, 2]
     steps = [r for r in records if "action" in r]
     assert steps and all(r["t"] > 0 for r in steps)
     # the step times are simulated: one control period (0.5 s) apart
@@ -200,6 +202,23 @@ def test_lockstep_deployment_repeats_itself_for_a_seed(tmp_path):
     assert summary_a["link"]["retries"] > 0  # the lossy radio was in the loop
     assert summary_a["emulation"]["lockstep"] and summary_a["emulation"]["conditions"]["radio_loss"] == 0.1
 
+
+def test_a_lockstep_episode_does_not_depend_on_the_episodes_before_it():
+    """Episode 2 after episodes 0 and 1, alone, and as episode 0 of seed + 2: the same records (renumbered)."""
+    from pectoral_gym.hardware.emurig import RigConditions
+    from pectoral_gym.hardware.lockstep_jobs import LockstepJob, run_lockstep
+
+    conditions = RigConditions(radio_latency=0.05, radio_jitter=0.02, radio_loss=0.1, camera_latency=0.03,
+                               camera_drop=0.1, pose_noise=(0.002, 0.02))
+    job = LockstepJob(seed=5, conditions=conditions, max_steps=6)
+    after = _in_thread(lambda: run_lockstep(job, range(3), progress=False))[2]
+    alone = _in_thread(lambda: run_lockstep(job, [2], progress=False))[0]
+    shifted = _in_thread(lambda: run_lockstep(LockstepJob(seed=7, conditions=conditions, max_steps=6), [0],
+                                              progress=False))[0]
+    assert after.log == alone.log and after.summary == alone.summary and after.link == alone.link
+    renumbered = [json.dumps({**json.loads(line), "episode": 2}) for line in shifted.log.splitlines()]
+    assert renumbered == after.log.splitlines()
+    assert after.summary["steps"] == 6 and after.link["retries"] > 0  # a whole episode, over the lossy radio
 
 
 def _scripted_run(lockstep: bool, steps: int = 6) -> tuple[np.ndarray, list[str]]:
@@ -260,6 +279,10 @@ def test_lockstep_and_real_time_agree_on_a_scripted_swim():
     (["--emulate", "--pose-noise-mm", "nan"], "pose_noise must be"),
     (["--emulate", "--radio-latency", "-1"], "radio_latency must be a finite number"),
     (["--port", "/dev/null", "--camera", "0", "--radio-loss", "0.1"], "need --emulate"),
+    (["--emulate", "--lockstep", "--jobs", "0"], "--jobs must be >= 1, got 0"),
+    (["--emulate", "--lockstep", "--jobs", "two"], "argument --jobs: invalid int value"),
+    (["--emulate", "--jobs", "2"], "--jobs needs --emulate --lockstep"),
+    (["--port", "/dev/null", "--camera", "0", "--jobs", "2"], "--jobs needs --emulate --lockstep"),
 ])
 def test_lockstep_and_condition_flags_are_checked(args, message, capsys):
     from pectoral_gym.hardware import deploy
