@@ -27,6 +27,7 @@ from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.layout import ACTION_SIZE
 from pectoral_gym.envs.observation import OBS_SIZE, observation_size
 from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
+from pectoral_gym.registration import ROBOT_READY
 
 __all__ = ["CONTROL_PERIOD_RANGE", "DEFAULT_NICE", "FIRST_FRAME_TIMEOUT", "MIN_TRACKING_WALL", "NICE_RANGE",
            "SPEED_RANGE", "check_frame_size", "env_settings", "first_frame", "raise_priority", "robot_address"]
@@ -109,7 +110,8 @@ def env_settings(controller: Any, task: str | None, control_period: float | None
     and one of its observation layouts (19 entries, or 27 with the replayed fin block: ``observe_fins``). Where its run
     folder records them (``trained``), the task and the control period default to the policy's own and an
     explicit other value is refused; the action ranges and the track reference speed are the policy's. A
-    controller without ``trained`` (the hand and NMPC baselines) runs any task.
+    controller without ``trained`` runs any task; the hand and NMPC baselines (``controller`` ``None``) get the
+    starts and goals of the v1 envs (:data:`pectoral_gym.registration.ROBOT_READY`).
 
     Args:
         controller: The controller (or ``None`` for a baseline built from the env later).
@@ -160,6 +162,10 @@ def env_settings(controller: Any, task: str | None, control_period: float | None
                 "goal_inset"):
         if key in trained and not _same(trained[key], getattr(defaults, key)):
             kwargs[key] = tuple(trained[key]) if isinstance(trained[key], (list, tuple)) else trained[key]
+    if controller is None:  # a baseline: the starts and goals of the v1 envs, which the stopping band leaves reachable
+        for key in ("start_inset", "goal_inset"):
+            if not _same(ROBOT_READY.get(key, getattr(defaults, key)), getattr(defaults, key)):
+                kwargs[key] = ROBOT_READY[key]
     return kwargs, notes
 
 

@@ -362,7 +362,8 @@ def test_policy_settings_default_to_its_own_and_a_mismatch_is_refused():
     settings, notes = env_settings(_Trained(obs_size=27), "track", None)
     assert settings == {"observe_fins": True, "task": "track", "control_period": 0.5}
     assert len(notes) == 2 and "not checked" in notes[0]
-    assert env_settings(None, None, None) == ({"task": "goal", "control_period": 0.5}, [])  # a baseline
+    # a baseline gets the v1 envs' goals
+    assert env_settings(None, None, None) == ({"task": "goal", "control_period": 0.5, "goal_inset": 0.3}, [])
 
 
 def test_a_goal_policy_is_refused_under_track_and_bad_statistics_are_named(policy_zip, tmp_path, capsys):
