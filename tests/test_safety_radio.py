@@ -113,7 +113,8 @@ def test_take_over_needs_claim_and_the_old_controller_learns_at_once():
             assert _wait(lambda: fw.session == b.session, 2.0)
             assert not fw.running  # a takeover halts: the new controller commands anew
             assert _wait(lambda: a.control_lost == "taken_over", 1.0) and a.command is None
-            assert b.control_lost == "" and b.served == b.session
+            # B learns it is served from the robot's next STATUS, which may come after A learnt it lost control
+            assert _wait(lambda: b.served == b.session, 1.0) and b.control_lost == ""
             assert a.set_fins(BEATS, LEASE) == -1  # nothing sent: A is no longer in control
             assert b.wait_ack(b.set_fins(BEATS, LEASE), 1.0) and _wait(lambda: fw.running)
             assert a.stop(wait=1.0)  # v2 dropped this STOP ("retired") and the fins kept running
