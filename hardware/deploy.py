@@ -53,10 +53,11 @@ from pectoral_gym.hardware.deploy_cli import check_args, make_parser, rig_condit
 from pectoral_gym.hardware.emurig import RigConditions, open_rig
 from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handlers
 
-__all__ = ["main", "make_controller", "run_episode", "run_episodes", "plot_trajectories", "solver_summary"]
+__all__ = ["main", "make_controller", "plot_trajectories", "random_start", "run_episode", "run_episodes",
+           "solver_summary"]
 
 
-def _random_start(rng: np.random.Generator, inset: float = tk.START_INSET) -> tuple[float, float, float]:
+def random_start(rng: np.random.Generator, inset: float = tk.START_INSET) -> tuple[float, float, float]:
     """A start pose as the simulated goal task draws one (tank inset by ``inset`` [m], any heading)."""
     x = inset + rng.random() * (tk.TANK_X - 2 * inset)
     y = inset + rng.random() * (tk.TANK_Y - 2 * inset)
@@ -205,7 +206,7 @@ def _run_real_time(parser: argparse.ArgumentParser, args: argparse.Namespace, co
             if args.emulate:
                 clock, robot, port, camera = open_rig(resources, args.seed, conditions, False, args.speed)
                 inset = settings.get("start_inset", tk.START_INSET)  # the policy's own, as it trained
-                hook = lambda rng: robot.place(*_random_start(rng, inset))  # noqa: E731 - a hand puts the fish back
+                hook = lambda rng: robot.place(*random_start(rng, inset))  # noqa: E731 - a hand puts the fish back
             else:
                 from pectoral_gym.hardware.vision.camera import open_source
 

@@ -28,7 +28,7 @@ from types import SimpleNamespace
 from typing import Any
 
 from pectoral_gym.envs.tasks import kernels as tk
-from pectoral_gym.hardware.deploy import _random_start, make_controller, run_episode, solver_summary
+from pectoral_gym.hardware.deploy import make_controller, random_start, run_episode, solver_summary
 from pectoral_gym.hardware.deploy_checks import check_frame_size, first_frame
 from pectoral_gym.hardware.emurig import RigConditions, open_rig
 from pectoral_gym.hardware.radio.linkstatus import LinkStats
@@ -127,7 +127,7 @@ class _Runner:
                     inset = job.settings.get("start_inset", tk.START_INSET)  # the policy's own, as it trained
                     check_frame_size(first_frame(camera, clock=clock), self.model, job.calibration)
                     env = HardwareFishEnv(port, camera, safety=job.safety, max_episode_steps=job.max_steps,
-                                          reset_hook=lambda rng: robot.place(*_random_start(rng, inset)),
+                                          reset_hook=lambda rng: robot.place(*random_start(rng, inset)),
                                           tracker=MarkerTracker(self.model), take_over=job.take_over, clock=clock,
                                           handle_signals=self.handle_signals, **job.settings)
                     resources.callback(env.close)
