@@ -116,13 +116,36 @@ def test_a_policy_is_benchmarked_on_the_model_settings_it_trained_with(tmp_path,
         raise RuntimeError("recorded")  # the benchmark keeps the error per cell and goes on
 
     monkeypatch.setattr(pectoral_gym.agents.training.evaluate, "evaluate", fake_evaluate)
-    report = run_benchmark(BenchmarkSettings(episodes=1, train_steps=0), controllers=(), tasks=("goal",),
+    report = run_benchmark(BenchmarkSettings(episodes=1, train_steps=0, version="v0"), controllers=(), tasks=("goal",),
                            policies=[str(run)], envs=tuple(ENVS), throughput=False)
     assert len(report["errors"]) == 3
     assert seen[("PectoralFish-Averaged-v0", False)] == {"task": "goal", "transitions": True, "observe_fins": True}
     assert seen[("PectoralFish-Full-v0", False)] == {"task": "goal", "observe_fins": True}
     full_rand = seen[("PectoralFish-Full-v0", True)]
     assert full_rand["observe_fins"] and "transitions" not in full_rand and full_rand["task"] == "goal"
+
+
+def test_the_simulated_columns_run_on_the_version_asked_for_v1_by_default(tmp_path, monkeypatch):
+    import pectoral_gym.agents.training.evaluate
+
+    seen = []
+
+    def fake_evaluate(controller, env_id, n_episodes, seed, env_kwargs):
+        seen.append(env_id)
+        raise RuntimeError("recorded")
+
+    monkeypatch.setattr(pectoral_gym.agents.training.evaluate, "evaluate", fake_evaluate)
+    for version, expected in (("v1", {"PectoralFish-Averaged-v1", "PectoralFish-Full-v1"}),
+                              ("v0", {"PectoralFish-Averaged-v0", "PectoralFish-Full-v0"})):
+        seen.clear()
+        settings = BenchmarkSettings(episodes=1, train_steps=0) if version == "v1" else BenchmarkSettings(
+            episodes=1, train_steps=0, version=version)
+        run_benchmark(settings, controllers=("random",), tasks=("goal",), envs=tuple(ENVS), throughput=False)
+        assert set(seen) == expected and len(seen) == 3
+    assert benchmark._parse_args([]).version == "v1"
+    assert benchmark._parse_args(["--version", "v0"]).version == "v0"
+    with pytest.raises(SystemExit):
+        benchmark._parse_args(["--version", "v2"])
 
 
 def test_robot_cells_come_from_the_deploy_summary(tmp_path):

@@ -17,7 +17,7 @@ and the trained policies on their own task.
 CLI::
 
     python -m pectoral_gym.agents.studies.benchmark --quick                      # a few minutes on 2 cores
-    python -m pectoral_gym.agents.studies.benchmark --full --policy runs/PectoralFish-Averaged-v0/ppo_goal_seed0_...
+    python -m pectoral_gym.agents.studies.benchmark --full --policy runs/PectoralFish-Averaged-v1/ppo_goal_seed0_...
     python -m pectoral_gym.agents.studies.benchmark --quick --controllers hand nmpc --out bench_quick
     python -m pectoral_gym.agents.studies.benchmark --quick --controllers hand --solve-seeds 0 1 --solve-timesteps 4e5
     python -m pectoral_gym.agents.studies.benchmark --quick --envs robot robot+degraded --no-throughput --solve-seeds
@@ -41,17 +41,25 @@ import numpy as np
 from pectoral_gym.agents.studies.benchmark_report import plot_report, to_markdown, write_outputs
 from pectoral_gym.agents.studies.deployment import ROBOT_CONDITIONS, ROBOT_CONTROLLERS, robot_cells
 
-__all__ = ["ALL_ENVS", "ENVS", "PRESETS", "BenchmarkSettings", "main", "plot_report", "run_benchmark", "to_markdown",
-           "write_outputs"]
+__all__ = ["ALL_ENVS", "ENVS", "PRESETS", "VERSIONS", "BenchmarkSettings", "env_id", "main", "plot_report",
+           "run_benchmark", "to_markdown", "write_outputs"]
 
-AVERAGED_ID = "PectoralFish-Averaged-v0"
-FULL_ID = "PectoralFish-Full-v0"
-# label -> (env id, randomised)
+VERSIONS = ("v1", "v0")  # the registered env versions a benchmark can run on; v1 (the default) is the recommended one
+AVERAGED_ID = "PectoralFish-Averaged-v1"
+FULL_ID = "PectoralFish-Full-v1"
+# label -> (env id, randomised), in the default version (env_id() gives another version's)
 ENVS = {"averaged": (AVERAGED_ID, False), "full": (FULL_ID, False), "full+rand": (FULL_ID, True)}
 # the simulated settings, then the robot stack's columns (deployment.ROBOT_CONDITIONS)
 ALL_ENVS = (*ENVS, *ROBOT_CONDITIONS)
 TASKS = ("goal", "track")
 BASELINE_NAMES = ("random", "hand", "nmpc")
+
+
+def env_id(label: str, version: str = VERSIONS[0]) -> str:
+    """The env id of a simulated column label of :data:`ENVS` in ``version`` (``"v1"`` or ``"v0"``)."""
+    if version not in VERSIONS:
+        raise ValueError(f"unknown env version {version!r}; choose from {VERSIONS}")
+    return ENVS[label][0].rsplit("-", 1)[0] + "-" + version
 
 
 @dataclass(frozen=True)
@@ -75,6 +83,8 @@ class BenchmarkSettings:
         solve_episodes: Episodes per probe and of the confirmation.
         robot_episodes: Episodes per robot-stack cell, per task (each step renders and tracks camera frames).
         robot_max_steps: Truncation of the robot-stack episodes (``None``: ``max_episode_steps``).
+        version: The registered env version of the simulated columns and the training throughput (:data:`VERSIONS`;
+            the robot stack's columns always run as the deploy does).
     """
 
     episodes: int = 100
@@ -91,6 +101,7 @@ class BenchmarkSettings:
     solve_episodes: int = 100
     robot_episodes: dict[str, int] = field(default_factory=lambda: {"goal": 20, "track": 2})
     robot_max_steps: int | None = None
+    version: str = VERSIONS[0]
 
 
 PRESETS = {
@@ -101,7 +112,7 @@ PRESETS = {
 }
 
 
-def _baseline_factory(name: str, env_id: str, env_kwargs: dict[str, Any], settings: BenchmarkSettings,
+def _baseline_factory(name: str, cell_env: str, env_kwargs: dict[str, Any], settings: BenchmarkSettings,
                       built: dict[tuple[str, str], Any]):
     """A controller (NMPC: one instance, one episode at a time) or a factory of controllers (one per env slot).
 
@@ -112,9 +123,9 @@ def _baseline_factory(name: str, env_id: str, env_kwargs: dict[str, Any], settin
     from pectoral_gym.envs.core import EnvConfig
     from pectoral_gym.registration import registered_settings
 
-    config = EnvConfig(**registered_settings(env_id, env_kwargs))
+    config = EnvConfig(**registered_settings(cell_env, env_kwargs))
     if name == "nmpc":
-        key = (env_id, config.task)
+        key = (cell_env, config.task)
         if key not in built:
             built[key] = make_baseline("nmpc", config, **settings.nmpc)
         return built[key]
@@ -139,8 +150,10 @@ def _cell(result: Any, label: str, solver: dict[str, Any] | None) -> dict[str, A
     return data
 
 
-def measure_training(steps: int, seed: int = 0) -> dict[str, Any]:
+def measure_training(steps: int, seed: int = 0, version: str = VERSIONS[0]) -> dict[str, Any]:
     """Steps per second of PPO ``learn()`` on the averaged vector env with the project's PPO hyperparameters.
+
+    ``version``: of ``PectoralFish-Averaged`` (:data:`VERSIONS`).
 
     The model is built first (not timed); the timed part is ``learn(steps)``: env stepping through the
     SB3 ``VecEnv`` adapter, rollout collection and the gradient updates, on one torch thread.
@@ -152,9 +165,10 @@ def measure_training(steps: int, seed: int = 0) -> dict[str, Any]:
     from pectoral_gym.agents.training.config import algo_kwargs, resolve_config
     from pectoral_gym.agents.training.vec_adapter import make_fish_vec_env
 
-    config = resolve_config("ppo", AVERAGED_ID, seed)
+    averaged_id = env_id("averaged", version)
+    config = resolve_config("ppo", averaged_id, seed)
     torch.set_num_threads(1)
-    venv = make_fish_vec_env(AVERAGED_ID, config["n_envs"], config["env_kwargs"], seed=seed)
+    venv = make_fish_vec_env(averaged_id, config["n_envs"], config["env_kwargs"], seed=seed)
     normalize = config.get("normalize")
     if normalize:
         venv = VecNormalize(venv, **(normalize if isinstance(normalize, dict) else {}))
@@ -168,7 +182,7 @@ def measure_training(steps: int, seed: int = 0) -> dict[str, Any]:
     elapsed = time.perf_counter() - start
     venv.close()
     done = int(model.num_timesteps)
-    return {"algo": "ppo", "env_id": AVERAGED_ID, "n_envs": config["n_envs"], "timesteps": done,
+    return {"algo": "ppo", "env_id": averaged_id, "n_envs": config["n_envs"], "timesteps": done,
             "seconds": elapsed, "steps_per_s": done / elapsed, "torch_threads": 1}
 
 
@@ -225,7 +239,7 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
                                      settings.robot_episodes.get(task, 0), settings.seed, Path(robot_out), say, errors,
                                      max_steps=settings.robot_max_steps or settings.max_episode_steps)
                 continue
-            env_id, randomised = ENVS[label]
+            cell_env, randomised = env_id(label, settings.version), ENVS[label][1]
             env_kwargs: dict[str, Any] = {"task": task}
             if randomised:
                 env_kwargs["randomize"] = dict(DEFAULT_RANDOMIZATION)
@@ -237,17 +251,17 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
                 n = settings.nmpc_episodes.get(task, settings.episodes) if name == "nmpc" else settings.episodes
                 if n < 1:
                     continue
-                say(f"{name} on {label} ({env_id}), {task}, {n} episodes")
+                say(f"{name} on {label} ({cell_env}), {task}, {n} episodes")
                 try:
-                    controller = policy if policy is not None else _baseline_factory(name, env_id, env_kwargs,
+                    controller = policy if policy is not None else _baseline_factory(name, cell_env, env_kwargs,
                                                                                     settings, built)
                     solves, failures = len(getattr(controller, "solve_times", [])), getattr(controller, "failures", 0)
                     late = getattr(controller, "late", 0)
                     # A policy keeps the model settings it trained with (transitions, observe_fins); the cell
                     # decides task and randomisation.
-                    kwargs = eval_kwargs if policy is None else {**trained_env_kwargs(paths[name], env_id),
+                    kwargs = eval_kwargs if policy is None else {**trained_env_kwargs(paths[name], cell_env),
                                                                  **eval_kwargs}
-                    result = evaluate(controller, env_id, n_episodes=n, seed=settings.seed, env_kwargs=kwargs)
+                    result = evaluate(controller, cell_env, n_episodes=n, seed=settings.seed, env_kwargs=kwargs)
                 except Exception as error:  # noqa: BLE001 - one failing cell must not lose the others
                     errors[f"{name}/{label}/{task}"] = f"{type(error).__name__}: {error}"
                     continue
@@ -270,7 +284,7 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
         if settings.train_steps > 0:
             say(f"SB3 training throughput (PPO, {settings.train_steps} steps)")
             try:
-                training = measure_training(settings.train_steps, settings.seed)
+                training = measure_training(settings.train_steps, settings.seed, settings.version)
             except Exception as error:  # noqa: BLE001
                 errors["training_throughput"] = f"{type(error).__name__}: {error}"
     solve = None
@@ -304,6 +318,8 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help="baselines to include")
     parser.add_argument("--envs", nargs="+", default=list(ALL_ENVS), choices=list(ALL_ENVS),
                         help="model settings; robot, robot+degraded: the robot stack on the emulated robot")
+    parser.add_argument("--version", choices=VERSIONS, default=VERSIONS[0],
+                        help="registered env version of the simulated columns (v0: the tables measured before v1)")
     parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=TASKS, help="tasks")
     parser.add_argument("--episodes", type=int, help="override: episodes per cell (random, hand, policies)")
     parser.add_argument("--nmpc-episodes", type=int, nargs=2, metavar=("GOAL", "TRACK"),
@@ -329,7 +345,7 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point (see the module docstring)."""
     args = _parse_args(argv)
-    settings = PRESETS[args.preset]
+    settings = replace(PRESETS[args.preset], version=args.version)
     if args.episodes is not None:
         settings = replace(settings, episodes=args.episodes)
     if args.nmpc_episodes is not None:

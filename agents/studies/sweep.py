@@ -20,7 +20,7 @@ its ``on_evaluation`` callback sends every periodic evaluation to Tune (``ray.tu
 ``timesteps``, ``success``, ``mean_return``, ...), so ``--scheduler asha`` stops trials that
 trail at a rung (rungs in environment steps: ``--grace-period`` times powers of
 ``--reduction-factor``; ``max_t`` the largest ``n_timesteps``). ``--final-env
-PectoralFish-Full-v0`` evaluates each trial's best model at the end on held-out episodes,
+PectoralFish-Full-v1`` evaluates each trial's best model at the end on held-out episodes,
 the same for every trial (``final_success``, ...).
 numba's kernels are compiled once before the trials, by a warm-up task on every node, into
 numba's cache (beside the sources, which a node's workers share, or ``--numba-cache-dir``,
@@ -270,7 +270,7 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.studies.sweep",
                                      description=__doc__.split("\n\n")[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    parser.add_argument("--env", default="PectoralFish-Averaged-v0", help="environment id")
+    parser.add_argument("--env", default="PectoralFish-Averaged-v1", help="environment id")
     parser.add_argument("--algo", default="ppo", help="algorithm: ppo, sac, td3, a2c, ddpg")
     parser.add_argument("--param-space", metavar="FILE",
                         help="parameter space, YAML or JSON (see pectoral_gym.agents.studies.sweep_space)")
@@ -287,7 +287,7 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--eval-freq", type=float, help="steps in all between evaluations (default: the file's)")
     parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation (default: the file's)")
     parser.add_argument("--final-env", metavar="ID", help="evaluate each trial's best model on this env at the end "
-                                                          "(PectoralFish-Full-v0: train averaged, test full)")
+                                                          "(PectoralFish-Full-v1: train averaged, test full)")
     parser.add_argument("--final-episodes", type=int, default=100, help="episodes of the final evaluation")
     parser.add_argument("--final-seed", type=int, default=FINAL_SEED,
                         help="final evaluation's episode k uses seed + k (the same for every trial; apart from the "
