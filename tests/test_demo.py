@@ -7,7 +7,8 @@ from pectoral_gym.agents.training.demo import main
 
 def test_quick_demo_writes_report_json_and_plot(tmp_path, capsys):
     out = tmp_path / "demo"
-    assert main(["--quick", "--out", str(out), "--episodes", "3", "--no-progress"]) == 0
+    # --jobs 1: the deploy's own process (its --jobs gives the same results for any J: tests/test_lockstep.py)
+    assert main(["--quick", "--out", str(out), "--episodes", "3", "--no-progress", "--jobs", "1"]) == 0
     results = json.loads((out / "results.json").read_text())
     assert [e["env_id"] for e in results["evaluations"]] == ["PectoralFish-Averaged-v1", "PectoralFish-Full-v1"]
     assert all(e["n_episodes"] == 3 for e in results["evaluations"])
@@ -30,3 +31,11 @@ def test_quick_demo_writes_report_json_and_plot(tmp_path, capsys):
     assert "demo finished" in capsys.readouterr().out
     # a second run into the same folder refuses to overwrite it
     assert main(["--quick", "--out", str(out), "--no-progress"]) == 2
+
+
+def test_demo_refuses_a_bad_jobs_count(capsys):
+    import pytest
+
+    with pytest.raises(SystemExit) as exit_:
+        main(["--quick", "--jobs", "0"])
+    assert exit_.value.code == 2 and "--jobs must be >= 1" in capsys.readouterr().err

@@ -60,7 +60,7 @@ def conditions_argv(conditions: RigConditions) -> list[str]:
 def run_robot_stack(out: str | Path, episodes: int, seed: int, controller: str = "policy",
                     policy: str | Path | None = None, conditions: RigConditions = NOMINAL,
                     max_steps: int | None = None, task: str | None = None, progress: bool = False,
-                    capture: bool = False) -> dict[str, Any]:
+                    capture: bool = False, jobs: int = 1) -> dict[str, Any]:
     """Run the deploy on the emulated robot in lockstep and summarise it.
 
     Args:
@@ -74,6 +74,9 @@ def run_robot_stack(out: str | Path, episodes: int, seed: int, controller: str =
         task: ``"goal"`` or ``"track"`` (``None``: the policy's own, else ``goal``).
         progress: Show the deploy's progress bar.
         capture: Write the deploy's printed lines to ``<out>/deploy.txt`` instead of the terminal.
+        jobs: Episodes run at once, each worker process with its own rig (the deploy's ``--jobs``; the results are
+            the same for any number). The calling program's top-level code must sit under
+            ``if __name__ == "__main__":``, as the workers are spawned.
 
     Returns:
         ``{"episodes", "seed", "task", "control_period" [s], "conditions", "success" (mean and 95 % CI),
@@ -93,6 +96,7 @@ def run_robot_stack(out: str | Path, episodes: int, seed: int, controller: str =
             *([] if policy is None else ["--policy", str(policy)]),
             "--emulate", "--lockstep", "--episodes", str(episodes), "--seed", str(seed), "--out", str(out),
             "--no-prompt", "--nice", "0", *([] if progress else ["--quiet"]),
+            *([] if jobs == 1 else ["--jobs", str(jobs)]),
             *([] if max_steps is None else ["--max-steps", str(max_steps)]),
             *([] if task is None else ["--task", task]), *conditions_argv(conditions)]
     command = "python -m pectoral_gym.hardware.deploy " + " ".join(argv)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import platform
 import sys
 import time
@@ -34,15 +35,17 @@ QUICK = {"n_timesteps": 1024, "n_envs": 8, "n_steps": 64, "batch_size": 128, "n_
 ROBOT_EPISODES = 20  # robot-stack episodes (lockstep emulation) by default; 2 of at most 40 steps with --quick
 # the robot-stack figures results.json keeps (deployment.run_robot_stack returns more)
 ROBOT_SUMMARY = ("episodes", "seed", "success", "safety_stops", "wall_time_s", "command")
+ROBOT_JOBS = min(2, os.cpu_count() or 1)  # robot-stack episodes at once (worker processes; same results for any)
 
 
 def run_demo(out: str | Path, quick: bool = False, seed: int = 0, timesteps: int | None = None,
              episodes: int | None = None, task: str = "goal", progress: bool = True,
-             robot_episodes: int | None = None) -> dict[str, Any]:
+             robot_episodes: int | None = None, robot_jobs: int = ROBOT_JOBS) -> dict[str, Any]:
     """Train, evaluate and report (see the module docstring); returns the results dict written to JSON.
 
     ``robot_episodes``: episodes through the robot stack on the emulated robot (``None``: :data:`ROBOT_EPISODES`,
-    2 with ``quick``; 0: none).
+    2 with ``quick``; 0: none); ``robot_jobs`` of them at once, each in a worker process (the deploy's ``--jobs``;
+    the same results for any number).
     """
     from pectoral_gym.agents.training.config import resolve_config
     from pectoral_gym.agents.training.evaluate import evaluate, format_table, plot_trajectories, write_json
@@ -79,7 +82,7 @@ def run_demo(out: str | Path, quick: bool = False, seed: int = 0, timesteps: int
         from pectoral_gym.agents.studies.deployment import run_robot_stack
 
         run = run_robot_stack(out / "robot", robot_episodes, EVAL_SEED, policy=run_dir,
-                              max_steps=40 if quick else None, progress=progress)
+                              max_steps=40 if quick else None, progress=progress, jobs=robot_jobs)
         robot = {key: run[key] for key in ROBOT_SUMMARY}
     total = time.perf_counter() - start
     summary = {
@@ -155,8 +158,12 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--robot-episodes", type=int, default=None, metavar="N",
                         help=f"episodes on the emulated robot through the robot stack, lockstep (default "
                              f"{ROBOT_EPISODES}, quick 2; 0: none)")
+    parser.add_argument("--jobs", type=int, default=ROBOT_JOBS, metavar="J",
+                        help="robot-stack episodes at once, each in a worker process (the same results for any J)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     args = parser.parse_args(argv)
+    if args.jobs < 1:
+        parser.error(f"--jobs must be >= 1, got {args.jobs}")
     if args.robot_episodes is not None and args.robot_episodes < 0:
         parser.error(f"--robot-episodes must be >= 0, got {args.robot_episodes}")
     return args
@@ -168,7 +175,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         summary = run_demo(args.out, quick=args.quick, seed=args.seed, timesteps=args.timesteps,
                            episodes=args.episodes, task=args.task, progress=not args.no_progress,
-                           robot_episodes=args.robot_episodes)
+                           robot_episodes=args.robot_episodes, robot_jobs=args.jobs)
     except (FileExistsError, ValueError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
