@@ -22,8 +22,12 @@ processes with the same output (:mod:`pectoral_gym.hardware.lockstep_jobs`). ``-
 ``--pose-noise-*`` degrade the emulated radio and camera, seeded, in either timing.
 
 Writes ``steps.jsonl`` (one JSON object per step: action, command sent, measured pose, estimate,
-reward, ends, link and tracking health, and the true pose when emulated), ``summary.json`` and
-``trajectory.png`` into ``--out``. Ctrl-C and SIGTERM stop the fins before the program ends.
+reward, ends, link and tracking health, and the true pose when emulated), ``run.jsonl`` (the run log a
+model's calibration reads: episode starts, commands and stops as sent, every camera pose; ``docs/run-log.md``;
+in lockstep the episodes follow one another, each shifted from its own clock), ``summary.json`` and
+``trajectory.png`` into ``--out``. ``--emulate-params FILE`` gives the emulated fish other parameters than
+Table 1's (a robot other than the one the controller was made for). Ctrl-C and SIGTERM stop the fins before
+the program ends.
 """
 
 from __future__ import annotations
@@ -185,6 +189,13 @@ class _RunError(Exception):
 _RunResult = tuple[list[dict], dict, dict | None, float]  # summaries, link health, solver summary, wall time [s]
 
 
+def _run_log(path: Path, args: argparse.Namespace, settings: dict):
+    """The run's :class:`pectoral_gym.hardware.runlog.RunLogWriter` (header written) at ``path``."""
+    from pectoral_gym.hardware.runlog import RunLogWriter
+
+    return RunLogWriter(path, "emulator" if args.emulate else "robot", settings["control_period"])
+
+
 def _run_real_time(parser: argparse.ArgumentParser, args: argparse.Namespace, controller, settings: dict,
                    safety: SafetyConfig, conditions: RigConditions, model, log_path: Path) -> _RunResult:
     """The episodes on one robot (real or emulated in real time), one after another on one rig and env.
@@ -204,7 +215,8 @@ def _run_real_time(parser: argparse.ArgumentParser, args: argparse.Namespace, co
     with contextlib.ExitStack() as resources:  # released last in, first out, on every path
         try:
             if args.emulate:
-                clock, robot, port, camera = open_rig(resources, args.seed, conditions, False, args.speed)
+                clock, robot, port, camera = open_rig(resources, args.seed, conditions, False, args.speed,
+                                                      args.emulate_params)
                 inset = settings.get("start_inset", tk.START_INSET)  # the policy's own, as it trained
                 hook = lambda rng: robot.place(*random_start(rng, inset))  # noqa: E731 - a hand puts the fish back
             else:
@@ -223,6 +235,7 @@ def _run_real_time(parser: argparse.ArgumentParser, args: argparse.Namespace, co
                                   reset_hook=hook, tracker=MarkerTracker(model), take_over=args.take_over,
                                   clock=clock, **settings)
             resources.callback(env.close)
+            env.run_log = resources.enter_context(_run_log(log_path.with_name("run.jsonl"), args, settings))
             resources.callback(install_stop_handlers(env.stop))
             if controller is None:
                 budget = args.solve_fraction * settings["control_period"] / args.speed
@@ -255,18 +268,30 @@ def _run_lockstep(parser: argparse.ArgumentParser, args: argparse.Namespace, con
     Raises:
         _RunError: An episode failed (its index and the error named; the log holds the episodes before it).
     """
-    from pectoral_gym.hardware.lockstep_jobs import EpisodeError, LockstepJob, merge_link, merge_solver, run_lockstep
+    from pectoral_gym.hardware.lockstep_jobs import (
+        EpisodeError,
+        LockstepJob,
+        merge_link,
+        merge_solver,
+        run_lockstep,
+        shift_records,
+    )
 
     job = LockstepJob(args.controller, None if args.policy is None else str(args.policy), args.seed, conditions,
-                      settings, safety, args.max_steps, args.calibration, args.take_over)
+                      settings, safety, args.max_steps, args.calibration, args.take_over, args.emulate_params)
     started = time.perf_counter()
-    with open(log_path, "w", encoding="utf-8") as log:
-        written = 0
+    with open(log_path, "w", encoding="utf-8") as log, _run_log(log_path.with_name("run.jsonl"), args,
+                                                                  settings) as run_log:
+        written, last = 0, None
 
         def write(result) -> None:
-            nonlocal written
+            nonlocal written, last
             log.write(result.log)
             log.flush()
+            records, last = shift_records(result.run_log, result.episode, last)
+            for record in records:  # each through the writer's own check
+                getattr(run_log, record.pop("type"))(**record)
+            run_log.flush()
             written += 1
 
         try:
@@ -347,7 +372,9 @@ def main(argv: list[str] | None = None) -> int:
     report["wall_time"] = wall_time  # s for the episodes (the one field a lockstep rerun changes)
     if args.emulate:
         report["emulation"] = {"lockstep": args.lockstep, "speed": args.speed, "seed": args.seed,
-                               "conditions": dataclasses.asdict(conditions)}
+                               "conditions": dataclasses.asdict(conditions),
+                               "params": None if args.emulate_params is None else dataclasses.asdict(
+                                   args.emulate_params)}
     if solver is not None:
         report["solver"] = solver  # its times are wall times: a rerun changes them too
     (out / "summary.json").write_text(json.dumps(report, indent=2), encoding="utf-8")

@@ -80,6 +80,9 @@ def make_parser(description: str) -> argparse.ArgumentParser:
     parser.add_argument("--speed", type=float, default=1.0,
                         help=f"emulated clock speed-up, in [{lo_speed}, {hi_speed}] (--emulate only; "
                              "default %(default)s)")
+    parser.add_argument("--emulate-params", type=fish_params, default=None, metavar="JSON",
+                        help="--emulate only: the emulated fish's parameters (a FishParams file, e.g. a robot "
+                             "calibrated from its run logs; default: Table 1's)")
     parser.add_argument("--calibration", default=None, metavar="JSON",
                         help="camera calibration (python -m pectoral_gym.hardware.vision.calibrate), made at the "
                              "camera's resolution (default: the emulator's camera model)")
@@ -127,6 +130,8 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
         parser.error("--jobs needs --emulate --lockstep (episodes run in parallel only in simulated time)")
     if args.lockstep and args.speed != 1.0:
         parser.error("--speed does not apply with --lockstep (simulated time runs as fast as the CPU allows)")
+    if args.emulate_params is not None and not args.emulate:
+        parser.error("--emulate-params gives the emulated fish its parameters: it needs --emulate")
     if not args.emulate and rig_conditions(args) != RigConditions():
         parser.error("--radio-*, --camera-* and --pose-noise-* degrade the emulated robot: they need --emulate")
     if (args.controller == "policy") != (args.policy is not None):
@@ -155,6 +160,16 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
             and CONTROL_PERIOD_RANGE[0] <= args.control_period <= CONTROL_PERIOD_RANGE[1]):
         parser.error(f"--control-period must be in [{CONTROL_PERIOD_RANGE[0]}, {CONTROL_PERIOD_RANGE[1]}] s, "
                      f"got {args.control_period}")
+
+
+def fish_params(path: str):
+    """``--emulate-params``: the :class:`pectoral_gym.model.params.FishParams` of a file (argparse's type)."""
+    from pectoral_gym.model.params import load_params
+
+    try:
+        return load_params(path)
+    except (OSError, ValueError) as err:
+        raise argparse.ArgumentTypeError(f"cannot load {path!r}: {err}") from None
 
 
 def rig_conditions(args: argparse.Namespace) -> RigConditions:

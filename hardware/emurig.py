@@ -95,7 +95,7 @@ def lockstep_session(seed: int) -> int:
 
 
 def open_rig(resources: contextlib.ExitStack, seed: int, conditions: RigConditions = RigConditions(),
-             lockstep: bool = False, speed: float = 1.0) -> tuple[Clock, Any, Any, Any]:
+             lockstep: bool = False, speed: float = 1.0, params: Any = None) -> tuple[Clock, Any, Any, Any]:
     """Start an emulated robot; returns ``(clock, robot, port, camera)`` for the PC side.
 
     Everything started is registered in ``resources`` (closed last in, first out). ``port`` is a URL (real
@@ -108,6 +108,8 @@ def open_rig(resources: contextlib.ExitStack, seed: int, conditions: RigConditio
         conditions: Radio and camera conditions.
         lockstep: Run on a :class:`VirtualClock` (then ``speed`` must be 1).
         speed: Emulated seconds per wall second (real time only).
+        params: The emulated fish's :class:`pectoral_gym.model.params.FishParams` (``None``: Table 1's), e.g. a
+            robot other than the one the controller was made for.
     """
     from pectoral_gym.hardware.emulator import EmulatedRobot
 
@@ -119,12 +121,12 @@ def open_rig(resources: contextlib.ExitStack, seed: int, conditions: RigConditio
         from pectoral_gym.hardware.radio.pipe import StreamPair
 
         pair = StreamPair(clock, conditions.channel(seed) if conditions.radio else None)
-        robot = EmulatedRobot(speed=1.0, seed=seed, clock=clock, stream=pair.robot).start()
+        robot = EmulatedRobot(speed=1.0, seed=seed, clock=clock, stream=pair.robot, params=params).start()
         resources.callback(robot.stop)
         port = RadioLink(pair.pc, session=lockstep_session(seed), clock=clock)
         resources.callback(port.close)
     else:
-        robot = EmulatedRobot(speed=speed, seed=seed).start()
+        robot = EmulatedRobot(speed=speed, seed=seed, params=params).start()
         resources.callback(robot.stop)
         port = robot.url
         if conditions.radio:

@@ -137,6 +137,7 @@ class HardwareFishEnv(gym.Env):
     | ``take_over``       | ``False``      |      | take the robot from another live session (``RadioLink``) |
     | ``stop_timeout``    | 2.0            | s    | wall time ``reset`` waits for the robot to confirm STOP |
     | ``clock``           | ``REAL_CLOCK`` |      | the stack's clock (``pectoral_gym.hardware.clock``) |
+    | ``run_log``         | ``None``       |      | ``hardware.runlog.RunLogWriter``: starts, commands, stops, poses |
 
     ## Version History
 
@@ -146,7 +147,8 @@ class HardwareFishEnv(gym.Env):
       the task table; the energy term prices the command sent (before: the action's pattern). Issue 30:
       latched operator stop (:meth:`rearm`), reset waits for a confirmed stop, frames after the hook only,
       noise-robust and physically bounded geofence speed, ``step()`` raises with no episode armed. Issue 29:
-      ``clock`` (lockstep emulation in simulated time; the wall clock by default, unchanged).
+      ``clock`` (lockstep emulation in simulated time; the wall clock by default, unchanged). Issue 27: ``run_log``
+      (what the model's calibration needs, ``docs/run-log.md``; on the env's experiment clock; settable any time).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}
@@ -156,7 +158,8 @@ class HardwareFishEnv(gym.Env):
                  frame_period: float = 1.0 / 30.0, observer_epsilon: float = 0.1, max_episode_steps: int = 240,
                  reset_hook: Callable[[np.random.Generator], None] | None = None, reset_timeout: float = 5.0,
                  tracker=None, observer=None, render_mode: str | None = None, handle_signals: bool = True,
-                 take_over: bool = False, stop_timeout: float = 2.0, clock: Clock = REAL_CLOCK, **kwargs: Any):
+                 take_over: bool = False, stop_timeout: float = 2.0, clock: Clock = REAL_CLOCK, run_log=None,
+                 **kwargs: Any):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
         if not (math.isfinite(speed) and speed > 0) or not frame_period > 0 or int(max_episode_steps) < 1:
@@ -182,7 +185,8 @@ class HardwareFishEnv(gym.Env):
         self._closed = False
         self._episode = False  # an episode is armed (a reset succeeded and no reset has started since)
         self.stop_timeout = float(stop_timeout)
-        self.clock, self.stack = clock, None
+        self.clock, self.stack, self.run_log = clock, None, run_log
+        self._resets, self._fins_running = 0, False  # for the run log
         self.link = self.camera = self.supervisor = None
         try:
             self._build(port, camera, calibration, tracker, observer, observer_epsilon, take_over)
@@ -226,11 +230,20 @@ class HardwareFishEnv(gym.Env):
         if duration > 0:
             self.clock.sleep(duration / self.speed)
 
+    def _log(self, kind: str, t: float, *args: Any, **fields: Any) -> None:
+        """Write a ``kind`` record to the run log, if there is one; a ``stop`` only while the fins run."""
+        if self.run_log is None or (kind == "stop" and not self._fins_running):
+            return
+        if kind in ("command", "stop"):
+            self._fins_running = kind == "command"
+        getattr(self.run_log, kind)(t, *args, **fields)
+
     # ------------------------------------------------------------ camera
     def _observe(self) -> None:
         """Feed the observer the supervisor's new measurements."""
         for t, x, y, psi in self.supervisor.drain():
             if self._observing and t > self._last_measure:
+                self._log("pose", t, x, y, psi, self.supervisor.confidence)
                 self._state = np.asarray(self.observer.update(t, x, y, psi), dtype=float).copy()
                 self._last_measure = t
                 self._velocity_sum += self._state[3:6]
@@ -255,6 +268,7 @@ class HardwareFishEnv(gym.Env):
         self._check_not_stopped()
         sup.disarm()
         self.stack.confirm_stop(self.stop_timeout)
+        self._log("stop", self.now())
         sup.bound.stopped(self.now())
         settle_garbage()  # the fins are stopped and the rules disarmed: a full collection now, none mid-episode
         resync = getattr(self.link, "resync", None)
@@ -273,6 +287,10 @@ class HardwareFishEnv(gym.Env):
         self.observer.reset(x, y, psi, t)
         self._observing = True
         self._last_measure = t
+        if self.run_log is not None:
+            self.run_log.episode(self._resets, placed)
+            self._log("pose", t, x, y, psi, sup.confidence)
+        self._resets += 1
         self._state = np.array([x, y, psi, 0.0, 0.0, 0.0])
         task = self.task_state
         task.reset_at(0, self.np_random, (x, y, psi))  # draw the target, observe at rest
@@ -321,10 +339,13 @@ class HardwareFishEnv(gym.Env):
         period, lease = self.config.control_period, self.safety.lease
         self._next_tick = max(self._next_tick + period, now)  # a late step does not shorten the next one
         overrun = max(0.0, now - (self._next_tick - period))
-        if self.fin_replay is not None and now > self._lease_end:  # a late step: the robot's lease ran out
-            self.fin_replay.stop(self._lease_end)
+        if now > self._lease_end:  # a late step: the robot's lease ran out
+            if self.fin_replay is not None:
+                self.fin_replay.stop(self._lease_end)
+            self._log("stop", self._lease_end)
         if sup.send(command, lease):
             self._lease_end = now + lease
+            self._log("command", now, command)
             if self.fin_replay is not None:
                 self.fin_replay.command(now, command)
         self._velocity_sum = np.zeros(3)
@@ -358,6 +379,8 @@ class HardwareFishEnv(gym.Env):
         if terminated or truncated:
             sup.trip(reason or "episode_end")
             reason = sup.reason if sup.reason != "episode_end" else reason
+        if reason or terminated or truncated:
+            self._log("stop", end)
         info = task.info(0)  # the simulated envs' keys and values
         info.update(safety_stop=reason, safety_stops=list(sup.fired), command=command.tolist(), pose=list(sup.pose),
                     estimate=self._state.tolist(), overrun=overrun, link=self.link.health(),

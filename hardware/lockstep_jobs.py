@@ -17,6 +17,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import io
+import json
 import math
 import multiprocessing
 import signal
@@ -34,7 +35,10 @@ from pectoral_gym.hardware.emurig import RigConditions, open_rig
 from pectoral_gym.hardware.radio.linkstatus import LinkStats
 from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handlers
 
-__all__ = ["EpisodeError", "EpisodeResult", "LockstepJob", "merge_link", "merge_solver", "run_lockstep"]
+__all__ = ["EpisodeError", "EpisodeResult", "LockstepJob", "merge_link", "merge_solver", "run_lockstep",
+           "shift_records"]
+
+RUN_LOG_GAP = 1.0  # s between one episode's last run-log record and the next episode's start in a merged run log
 
 _JOIN_TIMEOUT = 5.0  # wall s a terminated worker gets to end before it is killed
 
@@ -53,6 +57,7 @@ class LockstepJob:
         max_steps: Steps per episode, >= 1.
         calibration: Camera calibration file, or ``None`` for the emulator's camera model.
         take_over: Take control of a robot another session drives (``HardwareFishEnv``'s ``take_over``).
+        params: The emulated fish's :class:`pectoral_gym.model.params.FishParams` (``None``: Table 1's).
     """
 
     controller: str = "hand"
@@ -64,6 +69,7 @@ class LockstepJob:
     max_steps: int = 240
     calibration: str | None = None
     take_over: bool = False
+    params: Any = None
 
 
 @dataclass
@@ -77,6 +83,8 @@ class EpisodeResult:
         link: The link's :meth:`~pectoral_gym.hardware.radio.link.RadioLink.health` once the rig is closed.
         solver: The controller's solve times [s], failed and late steps in this episode, or ``None`` for a
             controller that does not solve (``{"solve_times", "failures", "late"}``).
+        run_log: Its records of the run log (:mod:`pectoral_gym.hardware.runlog`, no header), on its rig's clock
+            (from 0).
     """
 
     episode: int
@@ -84,6 +92,7 @@ class EpisodeResult:
     summary: dict[str, Any]
     link: dict[str, Any]
     solver: dict[str, Any] | None = None
+    run_log: str = ""
 
 
 class EpisodeError(RuntimeError):
@@ -116,14 +125,15 @@ class _Runner:
     def run(self, episode: int) -> EpisodeResult:
         """Episode ``episode`` on a rig opened with ``job.seed + episode``, closed before this returns."""
         from pectoral_gym.hardware.env import HardwareFishEnv
+        from pectoral_gym.hardware.runlog import RunLogWriter
         from pectoral_gym.hardware.vision.tracker import MarkerTracker
 
-        job, log = self.job, io.StringIO()
+        job, log, records = self.job, io.StringIO(), io.StringIO()
         try:
             with contextlib.ExitStack() as resources:  # released last in, first out, on every path
                 try:
                     clock, robot, port, camera = open_rig(resources, job.seed + episode, job.conditions,
-                                                          lockstep=True)
+                                                          lockstep=True, params=job.params)
                     inset = job.settings.get("start_inset", tk.START_INSET)  # the policy's own, as it trained
                     check_frame_size(first_frame(camera, clock=clock), self.model, job.calibration)
                     env = HardwareFishEnv(port, camera, safety=job.safety, max_episode_steps=job.max_steps,
@@ -131,6 +141,7 @@ class _Runner:
                                           tracker=MarkerTracker(self.model), take_over=job.take_over, clock=clock,
                                           handle_signals=self.handle_signals, **job.settings)
                     resources.callback(env.close)
+                    env.run_log = RunLogWriter(records, "emulator", env.config.control_period)
                     if self.controller is None:  # a step's computing costs no simulated time: no budget applies
                         self.controller = make_controller(job.controller, env.config, math.inf, job.safety)
                 except ValueError as err:  # the settings, found wrong by the rig or the env
@@ -146,7 +157,8 @@ class _Runner:
             now = self._solver_stats()
             solver = {"solve_times": now["solve_times"][len(stats["solve_times"]):],
                       "failures": now["failures"] - stats["failures"], "late": now["late"] - stats["late"]}
-        return EpisodeResult(episode, log.getvalue(), summary, env.link.health(), solver)
+        run_log = records.getvalue().split("\n", 1)[1]  # the records; the deploy writes one header for the run
+        return EpisodeResult(episode, log.getvalue(), summary, env.link.health(), solver, run_log)
 
     def _solver_stats(self) -> dict[str, Any] | None:
         c = self.controller
@@ -161,6 +173,25 @@ def merge_link(healths: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     for counter in (f.name for f in dataclasses.fields(LinkStats)):
         out[counter] = sum(int(h[counter]) for h in healths)
     return out
+
+
+def shift_records(text: str, episode: int, after: float | None) -> tuple[list[dict[str, Any]], float | None]:
+    """An episode's run-log records (on its rig's clock, from 0) moved to start :data:`RUN_LOG_GAP` after ``after``.
+
+    A run log's time never goes backwards (``docs/run-log.md``), but every lockstep episode has a clock of its own:
+    the merged log puts the episodes one after another, each record's ``t`` shifted by the same amount (none for
+    ``after=None``, the first), and its ``episode`` record numbered ``episode``. Returns ``(the records, the last
+    shifted t)`` (``after`` if there is no record).
+    """
+    records = [json.loads(line) for line in text.splitlines() if line]
+    if not records:
+        return [], after
+    shift = 0.0 if after is None else after + RUN_LOG_GAP - min(r["t"] for r in records)
+    for record in records:
+        record["t"] += shift
+        if record["type"] == "episode":
+            record["episode"] = int(episode)
+    return records, max(r["t"] for r in records)
 
 
 def merge_solver(solvers: Sequence[Mapping[str, Any] | None]) -> dict[str, Any] | None:

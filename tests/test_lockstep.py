@@ -192,6 +192,7 @@ def test_lockstep_deployment_repeats_itself_for_a_seed_and_any_jobs(tmp_path):
     steps_a, summary_a = _deploy(tmp_path, "a", *_DEGRADED, episodes=3)
     steps_b, summary_b = _deploy(tmp_path, "b", *_DEGRADED, "--jobs", "2", episodes=3)
     assert steps_a == steps_b and summary_a == summary_b
+    assert (tmp_path / "a" / "run.jsonl").read_bytes() == (tmp_path / "b" / "run.jsonl").read_bytes()  # the run log
     records = [json.loads(line) for line in steps_a.splitlines()]
     assert [r["episode"] for r in records if r.get("event") == "reset"] == [0, 1, 2]
     steps = [r for r in records if "action" in r]

@@ -1,0 +1,81 @@
+"""The deploy's run log (``run.jsonl``, docs/run-log.md) and ``--emulate-params``: what a model calibration reads."""
+
+from __future__ import annotations
+
+import json
+import threading
+
+import numpy as np
+import pytest
+
+from pectoral_gym.hardware.runlog import read_run_log
+from pectoral_gym.model.params import FishParams, save_params
+
+
+def _deploy(out, *extra, episodes=2, seed=5, steps=12):
+    from pectoral_gym.hardware import deploy
+
+    args = ["--controller", "hand", "--emulate", "--lockstep", "--episodes", str(episodes), "--max-steps",
+            str(steps), "--seed", str(seed), "--out", str(out), "--quiet", "--nice", "0", *extra]
+    result: dict = {}
+    # a fresh VirtualClock takes the calling thread in: run the deploy in a thread of its own, as tests/test_lockstep.py
+    thread = threading.Thread(target=lambda: result.setdefault("status", deploy.main(args)))
+    thread.start()
+    thread.join(timeout=300.0)
+    assert result.get("status") == 0
+    steps_log = [json.loads(line) for line in (out / "steps.jsonl").read_text().splitlines()]
+    return read_run_log(out / "run.jsonl"), steps_log, json.loads((out / "summary.json").read_text())
+
+
+def test_a_lockstep_deploy_writes_a_run_log_that_matches_its_steps(tmp_path):
+    log, steps, summary = _deploy(tmp_path / "a")
+    assert log.header["source"] == "emulator" and log.header["control_period"] == summary["settings"]["control_period"]
+    assert [ep.index for ep in log.episodes] == [0, 1]
+    for ep in log.episodes:
+        sent = [r["command"] for r in steps if r.get("episode") == ep.index and "command" in r]
+        # every step sends its command once (the lease renewals inside a step repeat it and are not logged)
+        assert len(ep.command_t) == len(sent) and np.allclose(ep.beats, np.asarray(sent))
+        assert np.allclose(np.diff(ep.command_t), 0.5, atol=1e-6)  # one control period apart, simulated time
+        # the camera's poses at 30 frames per simulated second, after the episode's start and in order
+        assert np.all(np.diff(ep.pose_t) > 0) and ep.pose_t[0] >= ep.t_start
+        span = ep.pose_t[-1] - ep.pose_t[0]
+        assert len(ep.pose_t) == pytest.approx(span * 30.0, rel=0.1)
+        assert len(ep.stop_t) >= 1 and ep.stop_t[-1] >= ep.command_t[-1]  # the fins stop at the episode's end
+        # the measured poses are the emulated fish's true poses up to the camera's error (mm)
+        true = np.array([r["true_pose"][:2] for r in steps if r.get("episode") == ep.index and "action" in r])
+        measured = np.array([r["pose"][:2] for r in steps if r.get("episode") == ep.index and "action" in r])
+        assert np.max(np.linalg.norm(true - measured, axis=1)) < 0.02
+    # the second episode follows the first on the merged log's time line
+    assert log.episodes[1].t_start > log.episodes[0].t_end
+
+
+def test_emulate_params_gives_the_emulated_fish_other_parameters(tmp_path):
+    table1 = FishParams()
+    heavy = table1.replace(drag_coef=table1.drag_coef * 1.5, fin_force_coef=table1.fin_force_coef * 0.7)
+    save_params(heavy, tmp_path / "robot.json")
+    _, nominal_steps, _ = _deploy(tmp_path / "nominal", episodes=1)
+    _, heavy_steps, summary = _deploy(tmp_path / "heavy", "--emulate-params", str(tmp_path / "robot.json"),
+                                      episodes=1)
+    assert summary["emulation"]["params"]["drag_coef"] == pytest.approx(heavy.drag_coef)
+
+    def travelled(steps):
+        path = np.array([r["true_pose"][:2] for r in steps if "action" in r])
+        return float(np.sum(np.linalg.norm(np.diff(path, axis=0), axis=1)))
+
+    # the same seed, start and controller: more drag and less fin force make the fish swim less far
+    assert travelled(heavy_steps) < 0.9 * travelled(nominal_steps)
+
+
+def test_emulate_params_refuses_a_bad_file_or_a_real_robot(tmp_path, capsys):
+    from pectoral_gym.hardware import deploy
+
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"drag_coef": "a lot"}')
+    with pytest.raises(SystemExit) as exit_:
+        deploy.main(["--controller", "hand", "--emulate", "--emulate-params", str(bad), "--out", str(tmp_path / "o")])
+    assert exit_.value.code == 2 and "--emulate-params" in capsys.readouterr().err
+    save_params(FishParams(), tmp_path / "ok.json")
+    with pytest.raises(SystemExit) as exit_:
+        deploy.main(["--controller", "hand", "--port", "/dev/null", "--camera", "0", "--emulate-params",
+                     str(tmp_path / "ok.json"), "--out", str(tmp_path / "o")])
+    assert exit_.value.code == 2 and "needs --emulate" in capsys.readouterr().err
