@@ -19,7 +19,7 @@ from pectoral_gym.envs.core import EnvConfig
 
 __all__ = ["BASELINES", "FinMap", "HandController", "RandomController", "make_baseline"]
 
-BASELINES = ("random", "hand", "nmpc")
+BASELINES = ("random", "hand", "nmpc", "excite")
 
 
 class RandomController:
@@ -49,10 +49,11 @@ def make_baseline(name: str, config: EnvConfig, **kwargs: Any):
     """Build a baseline controller for an environment.
 
     Args:
-        name: ``"random"``, ``"hand"`` or ``"nmpc"``.
+        name: ``"random"``, ``"hand"``, ``"nmpc"`` or ``"excite"`` (identification runs,
+            :class:`pectoral_gym.agents.controllers.excitation.ExcitationController`).
         config: ``env.unwrapped.config`` of the environment it will drive.
         **kwargs: Passed to the controller (``RandomController(seed)``, :class:`HandController` gains,
-            :class:`pectoral_gym.agents.nmpc.controller.NMPCController` settings).
+            :class:`pectoral_gym.agents.nmpc.controller.NMPCController` settings, ``ExcitationController``'s).
 
     Returns:
         A :class:`pectoral_gym.agents.training.policy.Controller`.
@@ -70,4 +71,8 @@ def make_baseline(name: str, config: EnvConfig, **kwargs: Any):
         from pectoral_gym.agents.nmpc.controller import NMPCController  # CasADi is imported only when NMPC is asked for
 
         return NMPCController(config, **kwargs)
+    if name == "excite":
+        from pectoral_gym.agents.controllers.excitation import ExcitationController
+
+        return ExcitationController(config, **kwargs)
     raise ValueError(f"unknown baseline {name!r}; choose one of {BASELINES}")

@@ -257,7 +257,8 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     who = parser.add_mutually_exclusive_group(required=True)
     who.add_argument("--policy", metavar="RUN|ZIP",
                      help="run folder of pectoral_gym.agents.training.train or an SB3 .zip")
-    who.add_argument("--baseline", metavar="NAME", help="baseline controller: random, hand or nmpc")
+    who.add_argument("--baseline", metavar="NAME",
+                     help="baseline controller: random, hand, nmpc or excite (identification runs)")
     parser.add_argument("--env", default="PectoralFish-Full-v1", help="environment id (default %(default)s)")
     parser.add_argument("--task", choices=("goal", "track"), help="task (default: the run's task, else goal)")
     parser.add_argument("--randomize", nargs="?", const="default", metavar="JSON",
