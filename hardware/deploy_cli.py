@@ -26,6 +26,10 @@ _EXAMPLES = """examples:
       --radio-loss 0.1 --camera-drop 0.1 --pose-noise-mm 5 --pose-noise-deg 2
   python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 \
       --calibration calibration.json --robot-address 0013A20012345678 --episodes 3 --out tank-run
+  python -m pectoral_gym.hardware.deploy --controller excite --port /dev/ttyUSB0 --camera 0 \
+      --calibration calibration.json --episodes 6 --max-steps 60 --out id-run     # an identification run
+  python -m pectoral_gym.hardware.deploy --controller excite --emulate --lockstep --emulate-params robot_true.json \
+      --episodes 6 --max-steps 60 --out id-run                                      # ... on an emulated robot
 
 exit status: 0 done; 1 a device failed (no frame, no fish seen, robot not answering); 2 a bad argument."""
 
@@ -37,8 +41,9 @@ def make_parser(description: str) -> argparse.ArgumentParser:
                                      epilog=_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
     lo_speed, hi_speed = SPEED_RANGE
     lo_period, hi_period = CONTROL_PERIOD_RANGE
-    parser.add_argument("--controller", choices=("policy", "nmpc", "hand"), default="policy",
-                        help="what drives the fish (default %(default)s: needs --policy)")
+    parser.add_argument("--controller", choices=("policy", "nmpc", "hand", "excite"), default="policy",
+                        help="what drives the fish (default %(default)s: needs --policy; excite: an identification "
+                             "run, seeded random fin patterns for the model's calibration, docs/run-log.md)")
     parser.add_argument("--policy", default=None, metavar="RUN_OR_ZIP",
                         help="pectoral_gym.agents.training.train or rl-baselines3-zoo run folder, or an SB3 .zip "
                              "(pectoral_gym.agents.training.policy.load_policy)")

@@ -13,6 +13,7 @@ from pectoral_gym.model.params import FishParams, save_params
 
 
 def _deploy(out, *extra, episodes=2, seed=5, steps=12):
+    """The deploy in lockstep (the hand law unless ``extra`` names another controller: the last flag wins)."""
     from pectoral_gym.hardware import deploy
 
     args = ["--controller", "hand", "--emulate", "--lockstep", "--episodes", str(episodes), "--max-steps",
@@ -79,3 +80,12 @@ def test_emulate_params_refuses_a_bad_file_or_a_real_robot(tmp_path, capsys):
         deploy.main(["--controller", "hand", "--port", "/dev/null", "--camera", "0", "--emulate-params",
                      str(tmp_path / "ok.json"), "--out", str(tmp_path / "o")])
     assert exit_.value.code == 2 and "needs --emulate" in capsys.readouterr().err
+
+
+def test_an_identification_run_logs_varied_fin_patterns(tmp_path):
+    # --controller excite: seeded random patterns held 2-6 s (4-12 steps), so 24 steps log several distinct ones
+    log, steps, summary = _deploy(tmp_path / "id", "--controller", "excite", episodes=1, steps=24)
+    assert summary["controller"] == "excite"
+    beats = log.episodes[0].beats
+    distinct = np.unique(beats.reshape(len(beats), -1), axis=0)
+    assert len(beats) == 24 and len(distinct) >= 3
