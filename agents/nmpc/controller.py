@@ -18,6 +18,12 @@ target and its velocity, and the fin command still being latched. Each control p
    transitional strokes and priced the same way; the cheapest is applied as it is when it costs
    less than the solved plan.
 
+Band and stalls. With a stopping band (:attr:`NMPCSettings.stop_band`; the v1 envs', the robot's) every
+command passes the hand law's backup shield (:mod:`pectoral_gym.agents.nmpc.shield`): the NLP prices the band
+only softly on the cycle-averaged model, the shield sends a command only if a backup manoeuvre out of the band
+remains after it. Plans that rest both fins for :attr:`NMPCSettings.stall_steps` steps away from the goal hand
+over to the hand law (:meth:`pectoral_gym.agents.nmpc.pricing.PlanPricing._unstall`).
+
 Robustness. A step whose solves fail (exception, non-finite numbers) or end after
 :attr:`NMPCSettings.step_budget` is not applied: the controller falls back to the rest of the last
 good plan, and when that is used up to a safe command (both fins at rest: the fish glides to a
@@ -49,6 +55,7 @@ from pectoral_gym.agents.nmpc.problem import (
 )
 from pectoral_gym.agents.nmpc.reference import ReferencePredictor
 from pectoral_gym.agents.nmpc.settings import NMPCSettings
+from pectoral_gym.agents.nmpc.shield import CommandShield
 from pectoral_gym.agents.nmpc.spin import SpinTurns
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, OBS_VELOCITY, decode
@@ -78,6 +85,7 @@ class NMPCController(PlanPricing):
         failures: Number of control steps whose solves all failed or ended after
             :attr:`NMPCSettings.step_budget` (a fallback command was used).
         late: Number of those steps whose solves ended after the step budget.
+        unstalled: Number of steps the hand law drove because the plans rested too long (``_unstall``).
         statuses: Solver return status -> count, over all solves.
         plan: The last good plan, ``(horizon, 4)``: amplitude right/left, bias right/left [rad].
     """
@@ -131,6 +139,10 @@ class NMPCController(PlanPricing):
         if s.spin if s.spin is not None else not self.track:
             spin = SpinTurns(config, self.fins, self.scaling, s.horizon, self._straight, spec=self.spec)
             self.spin = spin if spin.available else None
+        self.shield = None  # the hard guard against the band: the NLP only prices it
+        if s.shield if s.shield is not None else s.stop_band is not None:
+            self.shield = CommandShield(config, self.fins, s.stop_band, s.shield_margin, s.shield_spread,
+                                        s.shield_spin)
         self._solver = self.problem.solver  # the controller calls it through this attribute (tests replace it)
         self._n = self.problem.horizon
         self.n_delay_steps = self.problem.n_delay_steps
@@ -138,6 +150,8 @@ class NMPCController(PlanPricing):
         self.failures = 0
         self.late = 0
         self.statuses: dict[str, int] = {}
+        self.unstalled = 0
+        self._rest_amplitude = FinInputs(*self.u_rest).amplitude_right + math.radians(1.0)  # "both fins at rest"
         self.reset()
 
     # ------------------------------------------------------------------ controller protocol
@@ -153,14 +167,18 @@ class NMPCController(PlanPricing):
         self.gains = np.array(self.settings.initial_gains, dtype=np.float64)
         self._plan_spins = False  # the plan is a spin candidate (not the NLP's: no multipliers, no shifted guess)
         self._spun = (False, False)  # whether the last two commands were spin steps
+        self._rest_steps = 0  # consecutive plans that rest both fins (_unstall)
         if self.spin is not None:
             self.spin.reset()
+        if self.shield is not None:
+            self.shield.reset()
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Solve the NMPC problem for one observation ``(19,)``; returns the normalised action ``(8,)``."""
         obs = np.asarray(obs, dtype=np.float64)
         if obs.ndim != 1 or obs.shape[0] not in OBS_SIZES:  # the fin block (observe_fins) is not used
             raise ValueError(f"obs must have shape ({OBS_SIZE},) or ({OBS_SIZES[1]},), got {obs.shape}")
+        backup_spin = False
         if not np.all(np.isfinite(obs)):
             u = self._fallback()
         else:
@@ -175,11 +193,19 @@ class NMPCController(PlanPricing):
                     # the observation holds velocities averaged over the last period: they lag the
                     # current ones; shift the model's end-of-period velocities by the measured offset
                     state[STATE_VELOCITY] = end[STATE_VELOCITY] + (state[STATE_VELOCITY] - v_mean)
+            failures = self.failures
             u = self._plan_step(state, ref, vref)
+            if self.failures == failures:  # a fallback's rest is the safe command, not a stall
+                u = self._unstall(state, ref, vref, u)
+            if self.shield is not None:
+                sent = self.shield.filter(state, u, ref)
+                backup_spin, u = self.shield.spun(u, sent), sent
             self._last = (state, to_z(u), to_z(self._u_prev))
-        self._spun = (self._spun[1], self._plan_spins and self.plan is not None)
+        self._spun = (self._spun[1], (self._plan_spins and self.plan is not None) or backup_spin)
         if self.spin is not None:
             self.spin.applied(u)
+        if self.shield is not None:
+            self.shield.applied(u)
         self._prev_obs = obs.copy()
         self._u_prev = u
         u = FinInputs(*u)

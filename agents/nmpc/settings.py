@@ -135,6 +135,17 @@ class NMPCSettings:
             of the band instead of its nose and tail ``wall_margin`` (and ``togo_wall_margin``) from the walls. ``None``
             (the simulated envs, which have no such band): off. ``pectoral_gym.hardware.deploy`` passes its safety
             settings.
+        shield: Filter every command through the hand law's backup shield
+            (:class:`pectoral_gym.agents.nmpc.shield.CommandShield`): a command is sent only if some backup
+            manoeuvre keeps the planning model's rollout out of the band after it, else the best backup's first
+            interval. ``None``: on where ``stop_band`` is set.
+        shield_margin: Clearance [m] the shield adds to the band's margin in its rollouts.
+        shield_spread: Speed [m/s] the shield adds towards every wall in its rollouts.
+        shield_spin: Let the shield back up with the on-the-spot spin (``BandShield``'s ``spin``).
+        stall_steps: ``goal``: consecutive plans that rest both fins, with the fish slower than ``stall_speed``
+            and outside the goal, after which the hand law drives until a plan moves again
+            (:meth:`pectoral_gym.agents.nmpc.pricing.PlanPricing._unstall`); 0: off.
+        stall_speed: Speed [m/s] below which a resting plan counts towards ``stall_steps``.
     """
 
     horizon: int = 10
@@ -177,6 +188,12 @@ class NMPCSettings:
     bias_span: float | str | None = "auto"
     spin: bool | None = None
     stop_band: tuple[float, float, float] | None = None
+    shield: bool | None = None
+    shield_margin: float = 0.02
+    shield_spread: float = 0.0
+    shield_spin: bool = True
+    stall_steps: int = 6
+    stall_speed: float = 0.02
 
     def __post_init__(self) -> None:
         if min(int(self.horizon), int(self.substeps), int(self.max_iter), int(self.max_solves)) < 1:
@@ -211,6 +228,12 @@ class NMPCSettings:
             raise ValueError(f"stop_band must be (margin, reaction time, contact speed), finite and >= 0, the "
                              f"contact speed > 0, got "
                              f"{self.stop_band!r}")
+        if not (self.shield_margin >= 0 and self.shield_spread >= 0):
+            raise ValueError(f"shield_margin and shield_spread must be >= 0, got {self.shield_margin!r}, "
+                             f"{self.shield_spread!r}")
+        if int(self.stall_steps) < 0 or not self.stall_speed >= 0:
+            raise ValueError(f"stall_steps and stall_speed must be >= 0, got {self.stall_steps!r}, "
+                             f"{self.stall_speed!r}")
         if self.blocks is not None and (min(self.blocks, default=0) < 1 or sum(self.blocks) != int(self.horizon)):
             raise ValueError(f"blocks must be positive interval counts summing to horizon={self.horizon}, "
                              f"got {self.blocks!r}")
