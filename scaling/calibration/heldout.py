@@ -1,0 +1,87 @@
+"""The held-out check: the calibrated full model run open loop over logged episodes it was not fitted on.
+
+Each held-out episode is simulated from its first poses (the starting state of
+:func:`~pectoral_gym.scaling.calibration.windows.initial_state`) under its logged commands, with the fins
+replayed by the firmware's rules, for ``horizon`` s (40 s in issue 27); the error is the distance between
+the simulated and the observed end positions, as a percentage of the observed path length. The path is
+measured on the poses averaged over 0.5 s bins, so camera noise does not lengthen it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from pectoral_gym.hardware.runlog import RunLog
+from pectoral_gym.model.params import FishParams
+from pectoral_gym.model.spec import FULL_FAST, FullSpec
+from pectoral_gym.scaling.calibration.replay import simulate
+from pectoral_gym.scaling.calibration.windows import split_windows
+
+__all__ = ["HeldOutRun", "held_out", "path_length"]
+
+
+@dataclass
+class HeldOutRun:
+    """One held-out episode.
+
+    Attributes:
+        log: The log's path. episode: The episode's number.
+        duration: The simulated span [s] (the episode's, at most the horizon).
+        path: Observed path length [m].
+        end_error: Distance between simulated and observed end positions [m].
+        t: ``(s,)`` pose times [s]. observed: ``(s, 3)`` the camera's poses. simulated: ``(s, 3)`` the model's.
+    """
+
+    log: str
+    episode: int
+    duration: float
+    path: float
+    end_error: float
+    t: np.ndarray
+    observed: np.ndarray
+    simulated: np.ndarray
+
+    @property
+    def error_percent(self) -> float:
+        """End-position error as a percentage of the path [%]."""
+        return 100.0 * self.end_error / max(self.path, 1e-9)
+
+
+def path_length(t: np.ndarray, xy: np.ndarray, bin_width: float = 0.5) -> float:
+    """Length [m] of the path through the means of the positions ``xy`` ``(s, 2)`` in ``bin_width`` s bins."""
+    label = np.floor((t - t[0]) / bin_width).astype(int)
+    means = np.array([xy[label == k].mean(axis=0) for k in np.unique(label)])
+    return float(np.sum(np.hypot(*np.diff(means, axis=0).T))) if len(means) > 1 else 0.0
+
+
+def held_out(params: FishParams, logs: Sequence[RunLog], horizon: float = 40.0, min_duration: float | None = None,
+             spec: FullSpec = FULL_FAST) -> list[HeldOutRun]:
+    """Run ``params`` open loop over each episode of ``logs`` for ``horizon`` s (module docstring).
+
+    Args:
+        params: The parameters to check.
+        logs: The held-out logs.
+        horizon: Open-loop span [s].
+        min_duration: Leave out episodes shorter than this [s] (default: ``0.9 * horizon``).
+        spec: The full model's integration.
+    """
+    min_duration = 0.9 * horizon if min_duration is None else min_duration
+    runs = []
+    for log in logs:
+        lw = split_windows(log, math.inf, horizon=horizon)
+        sim = simulate(lw.track, [params], lw.window_t, lw.starts[None], lw.sample_t, spec)[0]
+        episodes = [ep for ep in log.episodes if len(ep.pose_t) >= 8]
+        for w, ep in enumerate(episodes):
+            rows = np.flatnonzero(lw.sample_window == w)
+            t = lw.sample_t[rows]
+            if t[-1] - t[0] < min_duration:
+                continue
+            end = slice(-3, None)  # three frames at the end: a tenth of a second, against the camera's noise
+            error = float(np.hypot(*(sim[rows][end, :2] - lw.observed[rows][end, :2]).mean(axis=0)))
+            runs.append(HeldOutRun(log.path, ep.index, float(t[-1] - t[0]), path_length(t, lw.observed[rows, :2]),
+                                   error, t, lw.observed[rows], sim[rows]))
+    return runs

@@ -1,0 +1,167 @@
+"""What the logs determine: standard errors and the parameter combinations they cannot tell apart.
+
+From the Jacobian of the normalised residuals at the optimum, ``J = [J_theta, J_z]`` (log-parameters, then
+the windows' starting states), the information about the log-parameters with the starting states
+eliminated is the Schur complement ``S = (J_theta' J_theta - J_theta' J_z (J_z' J_z)^-1 J_z' J_theta) / s^2``,
+``s^2`` the residual's variance. Its eigenvectors are the parameter combinations the logs fix, each to
+``1 / sqrt(eigenvalue)``; a combination known worse than the field's ``identified_se`` is left to the
+prior (the regularisation of :mod:`~pectoral_gym.scaling.calibration.fit`). The posterior covariance adds
+the prior's information ``I / prior_sigma^2``.
+
+Some fields can never be told apart, whatever the logs, because the model sees only a product of them
+(eq. 20 and eqs. 11, 13 of the paper): :data:`STRUCTURAL` says which.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from pectoral_gym.model.params import FishParams
+
+__all__ = ["COEFFICIENT", "STRUCTURAL", "Direction", "Identifiability", "analyse"]
+
+#: The packed coefficient each uncertain field enters, eq. (20) and eqs. (11), (13).
+COEFFICIENT = {
+    "added_mass_x": "m1 = body_mass - added_mass_x",
+    "added_mass_y": "m2 = body_mass - added_mass_y",
+    "added_inertia": "J3 = body_inertia - added_inertia",
+    "body_inertia": "J3 = body_inertia - added_inertia",
+    "drag_coef": "c1 = rho wetted_area drag_coef / 2",
+    "lift_coef": "c2 = rho wetted_area lift_coef / 2",
+    "moment_coef": "c4 = moment_coef / J3",
+    "fin_force_coef": "k = fin_force_coef rho fin_chord fin_span^3 / 6",
+}
+#: Fields the model sees only together: the logs can never separate them (one is fixed to its known value).
+STRUCTURAL = (
+    ("body_inertia", "added_inertia", "enter only as J3 = body_inertia - added_inertia (eq. 20)"),
+    ("wetted_area", "drag_coef", "enter only as c1 = rho wetted_area drag_coef / 2 (and lift_coef as c2) (eq. 20)"),
+    ("fin_force_coef", "fin_chord", "enter only as k = fin_force_coef rho fin_chord fin_span^3 / 6 (eqs. 11, 13)"),
+)
+
+
+def _coefficient_gain(name: str, prior: FishParams) -> float:
+    """``d log(coefficient) / d log|field|`` at the prior: 1 for a factor, ``|field| / m`` for an added mass."""
+    if name == "added_mass_x":
+        return -prior.added_mass_x / prior.m1
+    if name == "added_mass_y":
+        return -prior.added_mass_y / prior.m2
+    if name == "added_inertia":
+        return -prior.added_inertia / prior.J3
+    if name == "body_inertia":
+        return prior.body_inertia / prior.J3
+    return 1.0
+
+
+@dataclass
+class Direction:
+    """One combination of log-parameters (an eigenvector of the information).
+
+    Attributes:
+        weights: Field name -> weight of its log (unit vector).
+        data_se: How well the logs alone fix it: standard error of the combination [-, relative].
+        identified: Whether ``data_se`` is within the fields' ``identified_se``.
+        common_scale: Whether it moves every coefficient of eq. (20) and the fin's ``k`` together.
+    """
+
+    weights: dict[str, float]
+    data_se: float
+    identified: bool
+    common_scale: bool
+
+    def formula(self, top: int = 4) -> str:
+        """``+0.71 log drag_coef - 0.70 log added_mass_x`` (the largest weights)."""
+        items = sorted(self.weights.items(), key=lambda kv: -abs(kv[1]))[:top]
+        return " ".join(f"{'+' if w >= 0 else '-'}{abs(w):.2f} log {n}" for n, w in items if abs(w) >= 0.05)
+
+
+@dataclass
+class Identifiability:
+    """Standard errors and what the logs leave open.
+
+    Attributes:
+        std_error: Field -> posterior relative standard error (logs and prior).
+        data_std_error: Field -> relative standard error from the logs alone (``inf``: not determined).
+        identified: Field -> whether the logs alone fix it to ``identified_se``.
+        directions: The combinations, best determined first.
+        variance: The residual's variance ``s^2`` (1 when the noise estimate is right).
+        statements: Plain sentences for the report.
+    """
+
+    std_error: dict[str, float]
+    data_std_error: dict[str, float]
+    identified: dict[str, bool]
+    directions: list[Direction]
+    variance: float
+    statements: list[str]
+
+
+def _schur(J, p: int) -> np.ndarray:
+    """``J_t' J_t - J_t' J_z (J_z' J_z)^-1 J_z' J_t``: the log-parameters' information, starting states eliminated."""
+    H = J.T @ J
+    H = H.toarray() if hasattr(H, "toarray") else np.asarray(H)
+    Htt, Htz, Hzz = H[:p, :p], H[:p, p:], H[p:, p:]
+    if Hzz.size == 0:
+        return Htt
+    return Htt - Htz @ np.linalg.lstsq(Hzz, Htz.T, rcond=None)[0]
+
+
+def analyse(J: np.ndarray, variance: float, p: int, fields: tuple[str, ...], prior: FishParams,
+            prior_sigma: float, identified_se: float, theta: np.ndarray) -> Identifiability:
+    """Standard errors and identifiability of the fitted log-parameters (module docstring).
+
+    Args:
+        J: ``(m, p + 6 w)`` Jacobian of the data residuals (normalised by the noise), dense or sparse.
+        variance: The residual's variance ``s^2``.
+        p: Number of log-parameters (the first columns).
+        fields: Their names.
+        prior: The prior parameters (for the coefficient gains of the added masses).
+        prior_sigma: The prior's standard deviation of each log-parameter.
+        identified_se: Relative standard error below which the logs identify a field or combination.
+        theta: The fitted log-parameters (unused but recorded for the caller's report).
+    """
+    del theta
+    info = _schur(J, p) / max(variance, 1e-12)
+    info = 0.5 * (info + info.T)
+    eigval, eigvec = np.linalg.eigh(info)
+    eigval = np.maximum(eigval, 1e-300)
+    order = np.argsort(eigval)[::-1]
+    eigval, eigvec = eigval[order], eigvec[:, order]
+    data_se = np.sqrt(np.sum(eigvec**2 / eigval, axis=1))
+    posterior = np.linalg.inv(info + np.eye(p) / prior_sigma**2)
+    gains = np.array([_coefficient_gain(n, prior) for n in fields])
+    directions = []
+    for k in range(p):
+        v = eigvec[:, k] * (1.0 if eigvec[np.argmax(np.abs(eigvec[:, k])), k] >= 0 else -1.0)
+        se = 1.0 / math.sqrt(eigval[k])
+        coef = v * gains  # the same move in the coefficients' logs
+        scale = bool(np.linalg.norm(coef) > 0 and abs(coef.sum()) / (np.linalg.norm(coef) * math.sqrt(p)) > 0.8)
+        directions.append(Direction({n: float(w) for n, w in zip(fields, v, strict=True)}, se,
+                                    se <= identified_se, scale))
+    identified = {n: bool(s <= identified_se) for n, s in zip(fields, data_se, strict=True)}
+    statements = []
+    for d in directions:
+        if d.identified:
+            continue
+        why = ("it moves every coefficient the fitted fields enter (" +
+               ", ".join(sorted({COEFFICIENT[n].split(' =')[0] for n in fields if n in COEFFICIENT})) +
+               ") by the same factor: the motion depends on forces divided by masses, so the logs fix the "
+               "ratios and not the common scale; only the fins' own inertia (m_p S_p / 2, eq. 15, known) breaks "
+               "the tie, too weakly to see" if d.common_scale else
+               "the identification commands excite it too little for the camera to see")
+        statements.append(f"The logs cannot fix the combination {d.formula()} (to +-{100 * min(d.data_se, 9.99):.0f} "
+                          f"% from the logs alone): {why}. It is held at the prior (Table 1 or the known values, "
+                          f"+-{100 * prior_sigma:.0f} % in each log) by the regularisation.")
+    for n in fields:
+        if not identified[n]:
+            statements.append(f"{n} ({COEFFICIENT.get(n, n)}) is not identified: +-{100 * min(data_se[fields.index(n)], 9.99):.1f} % "
+                              "from the logs alone; its value leans on the prior.")
+    for a, b, why in STRUCTURAL:
+        if a in fields and b in fields:
+            statements.append(f"{a} and {b} {why}: fit one of them and give the other as known.")
+    return Identifiability(
+        {n: float(math.sqrt(posterior[i, i])) for i, n in enumerate(fields)},
+        {n: float(s) for n, s in zip(fields, data_se, strict=True)},
+        identified, directions, float(variance), statements)
