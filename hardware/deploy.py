@@ -360,7 +360,8 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"--out: cannot create {out}: {err}")
     for note in notes:
         print(f"note: {note}", file=sys.stderr)
-    warning = raise_priority(args.nice)  # before any thread starts: threads inherit it
+    # before any thread starts (threads inherit it); not in lockstep, where simulated time makes priority irrelevant
+    warning = "" if args.lockstep else raise_priority(args.nice)
     if warning:
         print(f"warning: {warning}", file=sys.stderr)
     try:

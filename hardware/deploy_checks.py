@@ -43,14 +43,15 @@ DEFAULT_NICE = -5
 def raise_priority(nice: int) -> str:
     """Run this thread, and every thread it starts afterwards, at nice value ``nice`` if that is higher priority.
 
-    Call it before any thread starts (Linux keeps the nice value per thread; new threads inherit it).
+    Call it before any thread starts (Linux keeps the nice value per thread; new threads inherit it). ``0``
+    leaves the priority as it is (also a lower one the caller chose, e.g. ``nice -n 19``).
 
     Returns:
         ``""``, or why the priority could not be raised (no permission: root or a ``nice`` limit in
         ``/etc/security/limits.conf`` is needed).
     """
     current = os.getpriority(os.PRIO_PROCESS, 0)
-    if nice >= current:
+    if nice == 0 or nice >= current:
         return ""
     try:
         os.setpriority(os.PRIO_PROCESS, 0, nice)

@@ -112,7 +112,8 @@ def make_parser(description: str) -> argparse.ArgumentParser:
     parser.add_argument("--nice", type=int, default=DEFAULT_NICE, metavar="N",
                         help="run at this nice value, in [-20, 0]: above the machine's other work, so that frames "
                              "are tracked in time under CPU load (needs root or a 'nice' limit in "
-                             "/etc/security/limits.conf; else a warning; 0: leave it) (default %(default)s)")
+                             "/etc/security/limits.conf; else a warning; 0: leave it as it is; not with --lockstep, "
+                             "where simulated time makes it irrelevant) (default %(default)s)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
 

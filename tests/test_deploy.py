@@ -168,6 +168,30 @@ def test_the_deploy_asks_for_its_priority_before_anything_runs(tmp_path, _keep_t
     assert _keep_the_test_process_priority == [-3]
 
 
+def test_a_lockstep_deploy_leaves_its_priority_alone(tmp_path, _keep_the_test_process_priority):
+    # simulated time: no priority can change a result, and raising it would only starve the machine's other work
+    import threading
+
+    done = []
+    thread = threading.Thread(target=lambda: done.append(main(
+        ["--controller", "hand", "--emulate", "--lockstep", "--episodes", "1", "--max-steps", "1", "--quiet",
+         "--nice", "-3", "--out", str(tmp_path)])))  # a lockstep clock takes its thread in: not pytest's
+    thread.start()
+    thread.join(timeout=120)
+    assert done == [0] and _keep_the_test_process_priority == []
+
+
+def test_nice_zero_keeps_a_lower_priority_the_caller_chose():
+    code = ("import os\n"
+            "from pectoral_gym.hardware.deploy_checks import raise_priority\n"
+            "os.nice(5)\n"
+            "before = os.getpriority(os.PRIO_PROCESS, 0)\n"
+            "print(before, raise_priority(0) == '', os.getpriority(os.PRIO_PROCESS, 0))")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    before, quiet, after = run.stdout.split()
+    assert quiet == "True" and after == before and int(before) >= 5
+
+
 def _error_line(capsys) -> str:
     err = capsys.readouterr().err
     assert "Traceback" not in err
