@@ -1,4 +1,4 @@
-"""Command line: ``python -m pectoral_gym.scaling identify|validate|fidelity|yaw-balance``.
+"""Command line: ``python -m pectoral_gym.scaling identify|validate|fidelity|yaw-balance|calibrate``.
 
 The console script is ``pectoral-scaling``.
 """
@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from pectoral_gym.model.kfunctions import K_NAMES, default_scaling_path
+from pectoral_gym.scaling.calibration import cli as calibration_cli
 from pectoral_gym.scaling.identification.grids import GRIDS, GridError, load_grid
 from pectoral_gym.scaling.validation import fidelity, yaw_balance
 
@@ -203,8 +204,11 @@ def main(argv: list[str] | None = None) -> int:
     fidelity.add_parser(sub)
     yaw_balance.add_parser(sub)
     sub.add_parser("validate", help="averaged (identified K) against full on held-out patterns; see validate --help")
+    calibration_cli.add_parser(sub)
     args = parser.parse_args(argv)
     np.seterr(all="ignore")
+    if args.command == "calibrate":
+        return calibration_cli.main(args)
     if args.command == "yaw-balance":
         return yaw_balance.main(args)
     return fidelity.main(args) if args.command == "fidelity" else _run_identify(args)

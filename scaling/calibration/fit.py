@@ -31,7 +31,7 @@ from pectoral_gym.hardware.runlog import RunLog
 from pectoral_gym.model.params import FishParams
 from pectoral_gym.model.spec import FULL_FAST, FullSpec
 from pectoral_gym.scaling.calibration.identifiability import Identifiability, analyse
-from pectoral_gym.scaling.calibration.replay import simulate
+from pectoral_gym.scaling.calibration.replay import replay_fins, simulate
 from pectoral_gym.scaling.calibration.synth import UNCERTAIN_FIELDS
 from pectoral_gym.scaling.calibration.windows import LogWindows, split_windows
 
@@ -51,6 +51,7 @@ class CalibrationSettings:
         fields: The FishParams fields to fit (default: the uncertain ones, :data:`UNCERTAIN_FIELDS`).
         window: Shooting window [s]: long enough for drag and turning to show, short enough that the
             model started from the observed pose stays near the path (40 s open loop does not).
+        warmup_window: A first fit on windows this short [s] gives the final fit its start (``None``: none).
         prior_sigma: Standard deviation of the Gaussian prior on each log-parameter (0.3: about +-30 %).
         identified_se: A field counts as identified when the logs alone fix it to this relative
             standard error [-] (the prior excluded).
@@ -62,12 +63,13 @@ class CalibrationSettings:
 
     fields: tuple[str, ...] = UNCERTAIN_FIELDS
     window: float = 6.0
+    warmup_window: float | None = None
     prior_sigma: float = 0.3
     identified_se: float = 0.02
     spec: FullSpec = FULL_FAST
     loss: str = "soft_l1"
     f_scale: float = 3.0
-    max_nfev: int = 60
+    max_nfev: int = 100
 
 
 @dataclass
@@ -125,15 +127,16 @@ class _Problem:
         return self.prior.replace(**{n: float(v * math.exp(t)) for n, v, t in zip(self.fields, self.values, theta,
                                                                                    strict=True)})
 
-    def x0(self) -> np.ndarray:
-        return np.concatenate([np.zeros(self.p), *(w.starts.ravel() for w in self.windows)])
+    def x0(self, theta: np.ndarray | None = None) -> np.ndarray:
+        theta = np.zeros(self.p) if theta is None else theta
+        return np.concatenate([theta, *(w.starts.ravel() for w in self.windows)])
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Each field within a factor :data:`_FACTOR` of its prior, each start near its first estimate.
 
         Without them a trial step far from the data can ask the integrator for a fish of absurd stiffness.
         """
-        x0 = self.x0()
+        x0 = self.x0()  # the log-parameters' bounds are about the prior (0)
         width = np.concatenate([np.full(self.p, math.log(_FACTOR)), np.tile(_START_RANGE, int(self.offsets[-1]))])
         return x0 - width, x0 + width
 
@@ -220,19 +223,25 @@ def calibrate(logs: Sequence[RunLog], prior: FishParams | None = None,
         raise ValueError("no fields to fit")
     start = time.perf_counter()
     prior = prior if prior is not None else prior_params(logs)[0]
-    windows = [split_windows(log, settings.window) for log in logs]
-    problem = _Problem(windows, prior, tuple(settings.fields), settings)
-    # Sparse Jacobian, iterative trust-region solver: the starting states' columns are block-diagonal.
-    result = least_squares(problem.fun, problem.x0(), jac=problem.jac, bounds=problem.bounds(), method="trf",
-                           loss=settings.loss,
-                           f_scale=settings.f_scale, x_scale="jac", tr_solver="lsmr", max_nfev=settings.max_nfev)
+    tracks = [replay_fins(log) for log in logs]
+    theta = np.zeros(len(settings.fields))
+    # Continuation: short windows first (the model started from each window's poses stays near them even with
+    # the prior's parameters, so the fit does not lock onto a wrong turn), then the long ones from that fit.
+    for window in ((settings.warmup_window,) if settings.warmup_window else ()) + (settings.window,):
+        windows = [split_windows(log, window, track) for log, track in zip(logs, tracks, strict=True)]
+        problem = _Problem(windows, prior, tuple(settings.fields), settings)
+        # Sparse Jacobian, iterative trust-region solver: the starting states' columns are block-diagonal.
+        result = least_squares(problem.fun, problem.x0(theta), jac=problem.jac, bounds=problem.bounds(),
+                               method="trf", loss=settings.loss, f_scale=settings.f_scale, x_scale="jac",
+                               tr_solver="lsmr", max_nfev=settings.max_nfev)
+        theta = result.x[:problem.p]
     problem.evaluate(result.x)
     r, J = problem._r, problem._J
     data = slice(0, problem.rows)
     dof = max(problem.rows - problem.size, 1)
     variance = float(np.sum(r[data] ** 2) / dof)  # the residual's scale: the noise estimate's error absorbed
     ident = analyse(J[data], variance, problem.p, tuple(settings.fields), prior, settings.prior_sigma,
-                    settings.identified_se, result.x[:problem.p])
+                    settings.identified_se, result.x[:problem.p], problem.params)
     for k, lw in enumerate(windows):
         lw.starts = result.x[problem.p + 6 * problem.offsets[k]:problem.p + 6 * problem.offsets[k + 1]].reshape(-1, 6)
     raw = r[data].reshape(-1, 3) * np.concatenate([np.broadcast_to(w.sigma, (len(w.sample_t), 3)) for w in windows])

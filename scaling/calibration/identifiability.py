@@ -15,13 +15,14 @@ Some fields can never be told apart, whatever the logs, because the model sees o
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from pectoral_gym.model.params import FishParams
 
-__all__ = ["COEFFICIENT", "STRUCTURAL", "Direction", "Identifiability", "analyse"]
+__all__ = ["COEFFICIENT", "COMBINATIONS", "STRUCTURAL", "Direction", "Identifiability", "analyse", "combinations"]
 
 #: The packed coefficient each uncertain field enters, eq. (20) and eqs. (11), (13).
 COEFFICIENT = {
@@ -40,6 +41,26 @@ STRUCTURAL = (
     ("wetted_area", "drag_coef", "enter only as c1 = rho wetted_area drag_coef / 2 (and lift_coef as c2) (eq. 20)"),
     ("fin_force_coef", "fin_chord", "enter only as k = fin_force_coef rho fin_chord fin_span^3 / 6 (eqs. 11, 13)"),
 )
+
+
+#: The force-to-inertia ratios the motion depends on (eq. 19 divided through): what the logs fix even when the
+#: common scale of masses and force coefficients is left open. Name -> (formula, unit).
+COMBINATIONS = {
+    "c1/m1": ("surge drag per surge mass, eq. (19)", "1/m"),
+    "c2/m2": ("lift per sway mass, eq. (19)", "1/(m rad)"),
+    "c4": ("yaw damping C_M / J3, eq. (20)", "-"),
+    "k/m1": ("fin force constant per surge mass, eqs. (13), (19)", "m"),
+    "k C_p/J3": ("fin yaw moment constant per yaw inertia, eqs. (16), (19)", "m^2/(kg m^2) kg"),
+    "m2/m1": ("sway to surge mass", "-"),
+    "(m1-m2)/J3": ("Munk moment per yaw inertia, eq. (19)", "1/m^2"),
+}
+
+
+def combinations(p: FishParams) -> dict[str, float]:
+    """The values of :data:`COMBINATIONS` for parameters ``p``."""
+    k = p.fin_drag_constant
+    return {"c1/m1": p.c1 / p.m1, "c2/m2": p.c2 / p.m2, "c4": p.c4, "k/m1": k / p.m1,
+            "k C_p/J3": k * p.fin_offset / p.J3, "m2/m1": p.m2 / p.m1, "(m1-m2)/J3": (p.m1 - p.m2) / p.J3}
 
 
 def _coefficient_gain(name: str, prior: FishParams) -> float:
@@ -86,6 +107,7 @@ class Identifiability:
         data_std_error: Field -> relative standard error from the logs alone (``inf``: not determined).
         identified: Field -> whether the logs alone fix it to ``identified_se``.
         directions: The combinations, best determined first.
+        combination_se: :data:`COMBINATIONS` name -> relative standard error from the logs alone.
         variance: The residual's variance ``s^2`` (1 when the noise estimate is right).
         statements: Plain sentences for the report.
     """
@@ -94,6 +116,7 @@ class Identifiability:
     data_std_error: dict[str, float]
     identified: dict[str, bool]
     directions: list[Direction]
+    combination_se: dict[str, float]
     variance: float
     statements: list[str]
 
@@ -109,7 +132,8 @@ def _schur(J, p: int) -> np.ndarray:
 
 
 def analyse(J: np.ndarray, variance: float, p: int, fields: tuple[str, ...], prior: FishParams,
-            prior_sigma: float, identified_se: float, theta: np.ndarray) -> Identifiability:
+            prior_sigma: float, identified_se: float, theta: np.ndarray,
+            params_of: Callable[[np.ndarray], FishParams]) -> Identifiability:
     """Standard errors and identifiability of the fitted log-parameters (module docstring).
 
     Args:
@@ -120,9 +144,9 @@ def analyse(J: np.ndarray, variance: float, p: int, fields: tuple[str, ...], pri
         prior: The prior parameters (for the coefficient gains of the added masses).
         prior_sigma: The prior's standard deviation of each log-parameter.
         identified_se: Relative standard error below which the logs identify a field or combination.
-        theta: The fitted log-parameters (unused but recorded for the caller's report).
+        theta: The fitted log-parameters.
+        params_of: The parameters of log-parameters (for the :data:`COMBINATIONS`' gradients).
     """
-    del theta
     info = _schur(J, p) / max(variance, 1e-12)
     info = 0.5 * (info + info.T)
     eigval, eigvec = np.linalg.eigh(info)
@@ -140,6 +164,12 @@ def analyse(J: np.ndarray, variance: float, p: int, fields: tuple[str, ...], pri
         scale = bool(np.linalg.norm(coef) > 0 and abs(coef.sum()) / (np.linalg.norm(coef) * math.sqrt(p)) > 0.8)
         directions.append(Direction({n: float(w) for n, w in zip(fields, v, strict=True)}, se,
                                     se <= identified_se, scale))
+    base = {n: math.log(abs(v)) for n, v in combinations(params_of(theta)).items()}
+    grads = np.zeros((len(base), p))
+    for i in range(p):
+        moved = combinations(params_of(theta + 1e-6 * np.eye(p)[i]))
+        grads[:, i] = [(math.log(abs(moved[n])) - base[n]) / 1e-6 for n in base]
+    combo_se = np.sqrt(np.sum((grads @ eigvec) ** 2 / eigval, axis=1))
     identified = {n: bool(s <= identified_se) for n, s in zip(fields, data_se, strict=True)}
     statements = []
     for d in directions:
@@ -156,7 +186,8 @@ def analyse(J: np.ndarray, variance: float, p: int, fields: tuple[str, ...], pri
                           f"+-{100 * prior_sigma:.0f} % in each log) by the regularisation.")
     for n in fields:
         if not identified[n]:
-            statements.append(f"{n} ({COEFFICIENT.get(n, n)}) is not identified: +-{100 * min(data_se[fields.index(n)], 9.99):.1f} % "
+            se = 100 * min(data_se[fields.index(n)], 9.99)
+            statements.append(f"{n} ({COEFFICIENT.get(n, n)}) is not identified: +-{se:.1f} % "
                               "from the logs alone; its value leans on the prior.")
     for a, b, why in STRUCTURAL:
         if a in fields and b in fields:
@@ -164,4 +195,5 @@ def analyse(J: np.ndarray, variance: float, p: int, fields: tuple[str, ...], pri
     return Identifiability(
         {n: float(math.sqrt(posterior[i, i])) for i, n in enumerate(fields)},
         {n: float(s) for n, s in zip(fields, data_se, strict=True)},
-        identified, directions, float(variance), statements)
+        identified, directions, {n: float(v) for n, v in zip(base, combo_se, strict=True)}, float(variance),
+        statements)

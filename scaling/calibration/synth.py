@@ -1,4 +1,4 @@
-"""Run logs with a known truth: an emulated robot whose parameters differ from Table 1, driven by identification commands.
+"""Run logs with a known truth: an emulated robot with other parameters than Table 1, driven by identification commands.
 
 The fish is simulated as the emulator simulates it (``hardware/emulator.py``): the full model at its
 reference steps, its fins run by the firmware's rules through
@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pectoral_gym.envs.config import EnvConfig
-from pectoral_gym.hardware.finreplay import FinReplay
+from pectoral_gym.hardware.finreplay import CHUNK, FinReplay
 from pectoral_gym.hardware.radio.firmware import FirmwareConfig
 from pectoral_gym.hardware.runlog import RunLogWriter
 from pectoral_gym.model.params import FinBeat, FishParams
@@ -58,7 +58,7 @@ DEGRADED = Camera(position_noise=0.005, heading_noise=math.radians(2.0), drop=0.
 
 def perturbed_params(seed: int, spread: float = 0.3, base: FishParams | None = None,
                      fields: tuple[str, ...] = UNCERTAIN_FIELDS) -> FishParams:
-    """``base`` (Table 1) with each of ``fields`` multiplied by a seeded factor drawn from ``U(1 - spread, 1 + spread)``."""
+    """``base`` (Table 1) with each of ``fields`` times a seeded factor drawn from ``U(1 - spread, 1 + spread)``."""
     base = base or FishParams()
     rng = np.random.default_rng([27, seed])
     factors = rng.uniform(1.0 - spread, 1.0 + spread, len(fields))
@@ -90,7 +90,7 @@ def write_synthetic_log(path: str | os.PathLike, params: FishParams, seed: int, 
                         camera: Camera | None = None, hold: tuple[float, float] = (2.0, 6.0),
                         episode_length: float | None = None, tank: bool = True, wall_margin: float = 0.12,
                         known_params: dict[str, float] | None = None,
-                        firmware: FirmwareConfig | None = None) -> dict[str, float]:
+                        firmware: FirmwareConfig | None = None, tick_aligned: bool = True) -> dict[str, float]:
     """Write a run log of an emulated robot with parameters ``params`` (the truth), seeded.
 
     Args:
@@ -107,6 +107,10 @@ def write_synthetic_log(path: str | os.PathLike, params: FishParams, seed: int, 
         wall_margin: Least clearance of the fish's outline from a wall before it is re-placed [m].
         known_params: Written to the header's ``known_params``.
         firmware: The firmware settings (default :class:`FirmwareConfig`).
+        tick_aligned: Stamp frames and commands on the firmware's 10 ms tick grid (frames 3-4 ticks apart), so
+            the PC's replay ticks where the emulated robot ticked. ``False``: the emulated robot ticks between
+            frames at other instants than the replay, and a latch can fall a tick apart, as on a real robot
+            (``hardware/finreplay.py``); the fit then meets that mismatch as model error (docs/calibration.md).
 
     Returns:
         ``{"episodes": count, "duration": logged robot time [s]}``.
@@ -123,26 +127,27 @@ def write_synthetic_log(path: str | os.PathLike, params: FishParams, seed: int, 
             _place(replay, 0.5 * TANK_LENGTH, 0.5 * TANK_WIDTH, rng.uniform(-math.pi, math.pi))
             log.episode(episode, t)
             start, next_command, frame = t, t, t
+            grid = (lambda s: round(s / CHUNK) * CHUNK) if tick_aligned else (lambda s: s)
             limit = min(duration - logged, episode_length or math.inf)
             while True:
-                if frame >= next_command - 1e-12:
-                    log.command(next_command, (beats := identification_beats(rng)))
-                    replay.command(next_command, beats)
+                if grid(frame) >= grid(next_command) - 1e-12:
+                    log.command(grid(next_command), (beats := identification_beats(rng)))
+                    replay.command(grid(next_command), beats)
                     next_command += rng.uniform(*hold)
-                replay.advance(frame)
+                replay.advance(grid(frame))
                 x, y, psi = replay.model.state[0, :3]
                 if rng.random() >= camera.drop:
                     noisy = rng.normal(0.0, [camera.position_noise, camera.position_noise, camera.heading_noise])
                     heading = math.remainder(psi + noisy[2], 2.0 * math.pi)
-                    log.pose(frame, x + noisy[0], y + noisy[1], heading, float(rng.uniform(0.9, 1.0)))
+                    log.pose(grid(frame), x + noisy[0], y + noisy[1], heading, float(rng.uniform(0.9, 1.0)))
                 near_wall = tank and float(np.min(clearance(x, y, psi, outline))) < wall_margin
                 if near_wall or frame - start >= limit:
                     break
                 frame += dt
-            replay.stop(frame)
-            log.stop(frame)
+            replay.stop(grid(frame))
+            log.stop(grid(frame))
             logged += frame - start
-            t = frame + 1.0  # the hand's pause between episodes
+            t = grid(frame + 1.0)  # the hand's pause between episodes
             replay.advance(t)
             episode += 1
     return {"episodes": episode, "duration": logged}

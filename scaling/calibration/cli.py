@@ -1,0 +1,105 @@
+"""``python -m pectoral_gym.scaling calibrate``: the model's uncertain parameters from run logs (issue 27)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["add_parser", "main"]
+
+EXAMPLES = """examples:
+  python -m pectoral_gym.scaling calibrate --logs run1.jsonl run2.jsonl --out robot.json
+  python -m pectoral_gym.scaling calibrate --logs run1.jsonl --hold-out run2.jsonl --params measured.json \\
+      --out robot.json --report calibration/
+  python -m pectoral_gym.scaling calibrate --logs run1.jsonl --fields drag_coef,moment_coef,fin_force_coef \\
+      --out robot.json
+
+The logs are run logs (docs/run-log.md). robot.json is a parameters file (load_params) for
+pectoral-scaling identify --params, training and deploy. The report folder gets report.json, report.md
+and paths.png (measured against simulated paths). docs/calibration.md explains the fit and its figures.
+"""
+
+
+def add_parser(sub) -> None:
+    """The ``calibrate`` subcommand of ``python -m pectoral_gym.scaling``."""
+    from pectoral_gym.scaling.calibration.fit import CalibrationSettings
+
+    defaults = CalibrationSettings()
+    p = sub.add_parser(
+        "calibrate", help="fit the uncertain FishParams fields from run logs (issue 27)",
+        description="Fit the physically uncertain FishParams fields (added masses and inertia, drag, lift, moment "
+        "and fin force coefficients) from recorded runs: the full model under the logged commands, its fins "
+        "replayed by the firmware's rules, compared with the camera's poses over short windows (windowed "
+        "shooting, robust least squares). Reports standard errors, what the logs cannot tell apart, and a "
+        "held-out open-loop check. (pectoral-calibrate is the camera's calibration, not this.)",
+        epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--logs", nargs="+", required=True, metavar="RUN", help="run logs to fit (docs/run-log.md)")
+    p.add_argument("--out", type=Path, required=True, help="the calibrated parameters file to write (JSON)")
+    p.add_argument("--params", metavar="KNOWN", default=None,
+                   help="FishParams fields you measured (JSON/YAML); they are held fixed, as are the logs' "
+                        "known_params (default: Table 1 for the rest)")
+    p.add_argument("--hold-out", nargs="*", default=[], metavar="RUN",
+                   help="logs kept out of the fit for the open-loop check (episodes of at least 0.9 x --horizon)")
+    p.add_argument("--report", type=Path, default=None,
+                   help="folder for report.json, report.md and paths.png (default: beside --out, <out>_report)")
+    p.add_argument("--fields", default=None,
+                   help="comma-separated fields to fit (default: the uncertain ones not given as known: "
+                        f"{','.join(defaults.fields)})")
+    p.add_argument("--window", type=float, default=defaults.window,
+                   help=f"shooting window [s] (default {defaults.window})")
+    p.add_argument("--prior-sigma", type=float, default=defaults.prior_sigma,
+                   help=f"prior standard deviation of each log-parameter (default {defaults.prior_sigma})")
+    p.add_argument("--horizon", type=float, default=40.0, help="open-loop span of the held-out check [s] (default 40)")
+    p.add_argument("--no-plot", action="store_true", help="no paths.png")
+
+
+def main(args: argparse.Namespace) -> int:
+    """Run ``calibrate`` with parsed ``args``; 0 on success, 2 for bad input."""
+    from pectoral_gym.hardware.runlog import RunLogError, read_run_log
+    from pectoral_gym.model.params import PARAMS_FIELDS, load_params, params_dict, save_params
+    from pectoral_gym.scaling.calibration.fit import CalibrationSettings, calibrate, prior_params
+    from pectoral_gym.scaling.calibration.heldout import held_out
+    from pectoral_gym.scaling.calibration.report import markdown, plot_paths, report_dict
+
+    if not (args.window > 0 and args.prior_sigma > 0 and args.horizon > 0):
+        print("error: --window, --prior-sigma and --horizon must be > 0", file=sys.stderr)
+        return 2
+    try:
+        logs = [read_run_log(path) for path in args.logs]
+        held = [read_run_log(path) for path in args.hold_out]
+        known = params_dict(load_params(args.params)) if args.params else {}
+        if args.params:  # only the fields the file names are known
+            text = Path(args.params).read_text()
+            named = set(json.loads(text)) if Path(args.params).suffix.lower() == ".json" else set(known)
+            known = {k: v for k, v in known.items() if k in named}
+        prior, known_names = prior_params(logs, known)
+        fields = tuple(f.strip() for f in args.fields.split(",")) if args.fields else tuple(
+            f for f in CalibrationSettings().fields if f not in known_names)
+        bad = sorted(set(fields) - set(PARAMS_FIELDS))
+        if bad or not fields:
+            raise ValueError(f"--fields: unknown FishParams fields {bad}" if bad else "no field left to fit")
+    except (OSError, ValueError, RunLogError) as err:
+        print(f"error: {err}", file=sys.stderr)
+        return 2
+    np.seterr(all="ignore")
+    settings = CalibrationSettings(fields=fields, window=args.window, prior_sigma=args.prior_sigma)
+    print(f"fitting {', '.join(fields)} to {len(logs)} log(s), {sum(log.duration for log in logs):.0f} s")
+    cal = calibrate(logs, prior, settings)
+    runs = held_out(cal.params, held, args.horizon) if held else []
+    prior_runs = held_out(prior, held, args.horizon) if held else []
+    report = report_dict(cal, runs if held else None, prior_runs if held else None)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    save_params(cal.params, args.out)
+    folder = args.report or args.out.with_name(args.out.stem + "_report")
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "report.json").write_text(json.dumps(report, indent=1) + "\n")
+    (folder / "report.md").write_text(markdown(report))
+    if not args.no_plot:
+        plot_paths(cal, runs, folder / "paths.png")
+    print(markdown(report))
+    print(f"wrote {args.out} and {folder}/report.json, report.md{'' if args.no_plot else ', paths.png'}")
+    return 0
