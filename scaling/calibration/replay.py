@@ -31,7 +31,7 @@ _COMMAND, _HALT = 0, 1
 
 
 class _RecordingModel(FullModel):
-    """A one-fish model that records the firmware's hand-overs (:func:`~pectoral_gym.hardware.finreplay.apply_firmware`).
+    """A one-fish model that records the firmware's hand-overs (``finreplay.apply_firmware``).
 
     ``apply_firmware`` commands the setpoint with ``command_array`` and halts the fins with
     ``reset(..., index=...)``; both are recorded with the model time, then run as usual.
