@@ -57,6 +57,15 @@ def add_parser(sub) -> None:
     p.add_argument("--no-plot", action="store_true", help="no paths.png")
 
 
+def _named_fields(path: Path) -> set[str]:
+    """The field names a parameters file gives (``load_params`` has checked it)."""
+    if path.suffix.lower() in (".yaml", ".yml"):
+        import yaml
+
+        return set(yaml.safe_load(path.read_text()) or {})
+    return set(json.loads(path.read_text()))
+
+
 def main(args: argparse.Namespace) -> int:
     """Run ``calibrate`` with parsed ``args``; 0 on success, 2 for bad input."""
     from pectoral_gym.hardware.runlog import RunLogError, read_run_log
@@ -73,9 +82,7 @@ def main(args: argparse.Namespace) -> int:
         held = [read_run_log(path) for path in args.hold_out]
         known = params_dict(load_params(args.params)) if args.params else {}
         if args.params:  # only the fields the file names are known
-            text = Path(args.params).read_text()
-            named = set(json.loads(text)) if Path(args.params).suffix.lower() == ".json" else set(known)
-            known = {k: v for k, v in known.items() if k in named}
+            known = {k: v for k, v in known.items() if k in _named_fields(Path(args.params))}
         prior, known_names = prior_params(logs, known)
         fields = tuple(f.strip() for f in args.fields.split(",")) if args.fields else tuple(
             f for f in CalibrationSettings().fields if f not in known_names)
