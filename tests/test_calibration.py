@@ -43,9 +43,10 @@ def test_replay_drives_the_body_as_the_emulator(tmp_path):
     other = simulate(track, [FishParams()], ep.pose_t[:1], start, ep.pose_t, FULL_REFERENCE)[0]
     path_length = np.sum(np.hypot(*np.diff(ep.poses[:, :2], axis=0).T))
     assert path_length > 0.3  # the fish swam
-    # Not bit-identical: the emulator integrates in 10 ms chunks, the replay between frames (RK4 at other
-    # substeps, ~0.03 % of the path here); a wrong fin would be off by centimetres.
-    assert np.max(np.hypot(*(own[:, :2] - ep.poses[:, :2]).T)) < 1e-3
+    # Not bit-identical: the emulator integrates in 10 ms chunks, the replay between frames and hand-overs (RK4
+    # at other substeps; about 1 mm after 15 s, 0.1 % of the path, grown by the Munk moment's instability);
+    # a wrong fin or another robot is off by centimetres.
+    assert np.max(np.hypot(*(own[:, :2] - ep.poses[:, :2]).T)) < 3e-3
     assert np.max(np.hypot(*(other[:, :2] - ep.poses[:, :2]).T)) > 1e-2  # the check tells parameters apart
 
 
