@@ -242,6 +242,10 @@ def calibrate(logs: Sequence[RunLog], prior: FishParams | None = None,
     variance = float(np.sum(r[data] ** 2) / dof)  # the residual's scale: the noise estimate's error absorbed
     ident = analyse(J[data], variance, problem.p, tuple(settings.fields), prior, settings.prior_sigma,
                     settings.identified_se, result.x[:problem.p], problem.params)
+    if variance > 1.5:  # the model misses some windows by more than the camera's noise: say what helps
+        ident.statements.insert(0, f"The residual's variance is {variance:.2f} times the camera noise's: some windows "
+                                "are misfitted (a wrong start, or model error) and the estimates may be biased by "
+                                "more than their standard errors; try shorter windows (--window 3).")
     for k, lw in enumerate(windows):
         lw.starts = result.x[problem.p + 6 * problem.offsets[k]:problem.p + 6 * problem.offsets[k + 1]].reshape(-1, 6)
     raw = r[data].reshape(-1, 3) * np.concatenate([np.broadcast_to(w.sigma, (len(w.sample_t), 3)) for w in windows])
