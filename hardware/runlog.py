@@ -252,6 +252,10 @@ class _Builder:
         self.lists: list[dict[str, list]] = []
         self.last: dict[str, float] = {}
 
+    def _start(self, index: int, t: float) -> None:
+        self.episodes.append(Episode(index, t))
+        self.lists.append({name: [] for name in ("command_t", "beats", "stop_t", "pose_t", "poses", "confidence")})
+
     def add(self, kind: str, rec: Mapping[str, Any]) -> None:
         t = float(rec["t"])
         if t < self.last.get(kind, -math.inf):
@@ -262,14 +266,10 @@ class _Builder:
             if self.episodes and t < start:
                 raise ValueError(f"timestamps go backwards: episode starts at t = {t!r} s before the previous "
                                  f"episode's last record ({start!r} s)")
-            self.episodes.append(Episode(int(rec["episode"]), t))
-            self.lists.append({"command_t": [], "beats": [], "stop_t": [], "pose_t": [], "poses": [],
-                               "confidence": []})
+            self._start(int(rec["episode"]), t)
             return
         if not self.episodes:  # records before any episode record: an implicit episode 0 (docs/run-log.md)
-            self.episodes.append(Episode(0, t))
-            self.lists.append({"command_t": [], "beats": [], "stop_t": [], "pose_t": [], "poses": [],
-                               "confidence": []})
+            self._start(0, t)
         ep, lists = self.episodes[-1], self.lists[-1]
         if t < ep.t_start:
             raise ValueError(f"timestamps go backwards: {kind} at t = {t!r} s before its episode's start "
@@ -285,13 +285,10 @@ class _Builder:
             lists["confidence"].append(float(rec["confidence"]))
 
     def finish(self) -> list[Episode]:
+        shapes = {"beats": (-1, 2, 4), "poses": (-1, 3)}
         for ep, lists in zip(self.episodes, self.lists, strict=True):
-            ep.command_t = np.asarray(lists["command_t"], dtype=float)
-            ep.beats = np.asarray(lists["beats"], dtype=float).reshape(-1, 2, 4)
-            ep.stop_t = np.asarray(lists["stop_t"], dtype=float)
-            ep.pose_t = np.asarray(lists["pose_t"], dtype=float)
-            ep.poses = np.asarray(lists["poses"], dtype=float).reshape(-1, 3)
-            ep.confidence = np.asarray(lists["confidence"], dtype=float)
+            for name, values in lists.items():
+                setattr(ep, name, np.asarray(values, dtype=float).reshape(shapes.get(name, (-1,))))
         return self.episodes
 
 
