@@ -30,9 +30,8 @@ from scipy.optimize import least_squares
 from pectoral_gym.hardware.runlog import RunLog
 from pectoral_gym.model.params import FishParams
 from pectoral_gym.model.spec import FULL_FAST, FullSpec
-from pectoral_gym.scaling.calibration.identifiability import Identifiability, analyse
+from pectoral_gym.scaling.calibration.identifiability import UNCERTAIN_FIELDS, Identifiability, analyse
 from pectoral_gym.scaling.calibration.replay import replay_fins, simulate
-from pectoral_gym.scaling.calibration.synth import UNCERTAIN_FIELDS
 from pectoral_gym.scaling.calibration.windows import LogWindows, split_windows
 
 __all__ = ["Calibration", "CalibrationSettings", "calibrate"]

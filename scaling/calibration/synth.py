@@ -27,12 +27,10 @@ from pectoral_gym.hardware.runlog import RunLogWriter
 from pectoral_gym.model.params import FinBeat, FishParams
 from pectoral_gym.model.servo import ROBOT_MAX_FIN_RATE
 from pectoral_gym.model.tank import TANK_LENGTH, TANK_WIDTH, Outline, clearance
+from pectoral_gym.scaling.calibration.identifiability import UNCERTAIN_FIELDS
 
 __all__ = ["UNCERTAIN_FIELDS", "Camera", "identification_beats", "perturbed_params", "write_synthetic_log"]
 
-#: The FishParams fields a ruler cannot measure (issue 27): what the calibration fits by default.
-UNCERTAIN_FIELDS = ("added_mass_x", "added_mass_y", "added_inertia", "drag_coef", "lift_coef", "moment_coef",
-                    "fin_force_coef")
 
 
 @dataclass(frozen=True)
