@@ -2,7 +2,8 @@
 
 The commands are parsed from README.md, so the test cannot drift from the text; ``--quick`` is the
 documented smoke-run flag of ``scaling identify|validate``, ``pectoral_gym.agents.training.train`` and
-``pectoral_gym.agents.training.evaluate``.
+``pectoral_gym.agents.training.evaluate``. The deploys (an identification run, then the trained policy on the
+emulated robot) run shortened: 2 episodes of at most 16 steps each.
 """
 
 import json
@@ -30,11 +31,16 @@ def walkthrough_commands(text: str) -> list[str]:
     return [line.strip() for line in joined.splitlines() if line.strip() and not line.strip().startswith("#")]
 
 
+SHORT_DEPLOY = ("--episodes", "2", "--max-steps", "16")  # the last of a repeated flag wins (argparse)
+
+
 def with_quick(command: str) -> str:
-    """``command`` with ``--quick`` appended if it is one of the CLIs that take it."""
+    """``command`` with ``--quick`` appended if it is one of the CLIs that take it; a deploy shortened."""
     tokens = shlex.split(command)
     if tokens[:2] == ["python", "-m"] and (tuple(tokens[2:3]) in QUICK or tuple(tokens[2:4]) in QUICK):
         return command + " --quick"
+    if tokens[:3] == ["python", "-m", "pectoral_gym.hardware.deploy"]:
+        return command + " " + " ".join(SHORT_DEPLOY)
     return command
 
 
@@ -51,13 +57,17 @@ def test_parsing_joins_continuations_and_adds_quick_only_where_documented():
 def test_the_readme_walk_through_runs_as_written(tmp_path):
     commands = walkthrough_commands((ROOT / "README.md").read_text())
     text = "\n".join(commands)
-    # What the walk-through must show (issue 14): the fin span changed, K identified for it, training on the
-    # averaged model with params= and scaling=, evaluation on the full model.
+    # What the walk-through must show (issues 14 and 27): an identification run logged, the model calibrated from
+    # the log, K identified for it, training on the averaged model with params= and scaling=, evaluation on the full
+    # model, the policy deployed on the (emulated) robot.
     assert "fin_span" in commands[0]
+    assert re.search(r"python -m pectoral_gym\.hardware\.deploy --controller excite .*--out id-run", text)
+    assert re.search(r"python -m pectoral_gym\.scaling calibrate --logs id-run/run\.jsonl .*--out robot\.json", text)
     assert re.search(r"python -m pectoral_gym.scaling identify .*--params robot\.json", text)
     assert re.search(r"python -m pectoral_gym\.agents\.training\.train "
-                     r".*PectoralFish-Averaged-v0.*\"params\".*\"scaling\"", text)
-    assert re.search(r"python -m pectoral_gym\.agents\.training\.evaluate .*PectoralFish-Full-v0", text)
+                     r".*PectoralFish-Averaged-v1.*\"params\".*\"scaling\"", text)
+    assert re.search(r"python -m pectoral_gym\.agents\.training\.evaluate .*PectoralFish-Full-v1", text)
+    assert re.search(r"python -m pectoral_gym\.hardware\.deploy --policy runs/PectoralFish-Averaged-v1/robot", text)
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
     python = bin_dir / "python"  # `python` in the commands is the interpreter running the tests
@@ -71,13 +81,18 @@ def test_the_readme_walk_through_runs_as_written(tmp_path):
         run = subprocess.run(["bash", "-c", with_quick(command)], cwd=work, env=env, capture_output=True, text=True,
                              timeout=900)
         assert run.returncode == 0, (command, run.stdout[-1500:], run.stderr[-3000:])
+    calibrated = json.loads((work / "robot.json").read_text())
+    assert calibrated["fin_span"] == 0.07  # measured, kept; the uncertain fields fitted from the log
     k = ScalingFunctions.load(work / "k" / "scaling_coefficients.json")
-    assert k.identified_params["fin_span"] == 0.07  # identified for the robot of step 1
+    assert k.identified_params["fin_span"] == 0.07  # identified for the calibrated robot
+    assert k.identified_params["drag_coef"] == calibrated["drag_coef"]
     assert k.metadata["quick"] is True
     evaluation = json.loads(next((work / "runs" / "eval").glob("*/metrics.json")).read_text())
-    assert evaluation["env_id"] == "PectoralFish-Full-v0"
+    assert evaluation["env_id"] == "PectoralFish-Full-v1"
     assert evaluation["env_kwargs"]["params"] == "robot.json"  # the trained robot, on the full model
     assert "scaling" not in evaluation["env_kwargs"]
+    deployed = json.loads((work / "robot-run" / "summary.json").read_text())
+    assert deployed["emulation"]["params"]["fin_span"] == 0.07 and len(deployed["episodes"]) == 2
 
 
 def test_quick_identify_refuses_install(capsys):
