@@ -129,3 +129,43 @@ def test_a_fallback_rest_is_not_handed_over(monkeypatch):
     assert nmpc.unstalled == 0
     monkeypatch.setattr(nmpc, "_plan_step", lambda state, ref, vref: nmpc.u_rest.copy())  # a plan that rests
     assert nmpc.act(obs) != pytest.approx(rest) and nmpc.unstalled == 1
+
+
+def test_circle_hand_over_waits_for_no_progress_then_the_hand_law_drives_to_the_end():
+    nmpc = _nmpc(circle_steps=2, circle_progress=0.02)
+    state = np.array([1.15, 0.5 * TANK_WIDTH, 0.0, 0.01, 0.0, 0.0])  # heading +X, creeping
+    goal, still = np.array([1.15, 0.5 * TANK_WIDTH - 0.15]), np.zeros(2)  # abeam to the right: inside the circle
+    u = nmpc._straight * 0.1
+    assert [np.array_equal(nmpc._unstall(state, goal, still, u), u) for _ in range(2)] == [True, True]  # too soon
+    hand = nmpc._unstall(state, goal, still, u)  # 2 steps without progress: the hand law drives
+    assert nmpc.circled == 1 and hand == pytest.approx(nmpc._hand_input(state, goal, still, 0.0))
+    facing = state.copy()
+    facing[2] = -0.5 * math.pi  # facing the goal, out of the circle: still the hand law's, it steers all the way in
+    assert nmpc._unstall(facing, goal, still, u) == pytest.approx(nmpc._hand_input(facing, goal, still, 0.0))
+    assert nmpc.circled == 2
+    nmpc.reset()  # a new episode: the plan drives again
+    assert np.array_equal(nmpc._unstall(facing, goal, still, u), u) and nmpc.circled == 2
+    closing = _nmpc(circle_steps=2, circle_progress=0.02)
+    for k in range(4):  # closing in by 3 cm a step: progress, the plan keeps driving
+        moved = state.copy()
+        moved[1] -= 0.03 * k
+        assert np.array_equal(closing._unstall(moved, goal, still, u), u)
+    assert closing.circled == 0
+
+
+@pytest.mark.parametrize("circle_steps", [4, 0])
+def test_a_goal_inside_the_turning_circle_is_reached_on_the_full_model(circle_steps):
+    """At rest, the goal 0.2 m away 80 deg to the right: inside the right turning circle (0.25 m radius). As on
+    the robot, the plan makes no spins of its own (``spin=False``). With the circle hand-over the hand law swims
+    out of the circle, turns back and steers in, and the fish arrives within 40 s; without it (``circle_steps=0``)
+    the plan creeps by the goal for the episode's 60 s (the situation of the time-outs on the emulated robot)."""
+    start = (1.15, 0.5 * TANK_WIDTH, 0.0)
+    angle = math.radians(-80.0)
+    goal = (1.15 + 0.2 * math.cos(angle), 0.5 * TANK_WIDTH + 0.2 * math.sin(angle))
+    r = run_episode(lambda config: make_baseline("nmpc", config, step_budget=1e6, stop_band=ROBOT_BAND, spin=False,
+                                                 circle_steps=circle_steps), 0, start=start, goal=goal, max_steps=120)
+    assert r.band_time is None and not r.wall
+    if circle_steps:
+        assert r.success and r.time <= 40.0, r
+    else:
+        assert not r.success, r

@@ -21,8 +21,8 @@ target and its velocity, and the fin command still being latched. Each control p
 Band and stalls. With a stopping band (:attr:`NMPCSettings.stop_band`; the v1 envs', the robot's) every
 command passes the hand law's backup shield (:mod:`pectoral_gym.agents.nmpc.shield`): the NLP prices the band
 only softly on the cycle-averaged model, the shield sends a command only if a backup manoeuvre out of the band
-remains after it. Plans that rest both fins for :attr:`NMPCSettings.stall_steps` steps away from the goal hand
-over to the hand law (:meth:`pectoral_gym.agents.nmpc.pricing.PlanPricing._unstall`).
+remains after it. Plans that rest both fins away from the goal, or creep by a goal inside the turning circle,
+hand over to the hand law (:mod:`pectoral_gym.agents.nmpc.handover`).
 
 Robustness. A step whose solves fail (exception, non-finite numbers) or end after
 :attr:`NMPCSettings.step_budget` is not applied: the controller falls back to the rest of the last
@@ -42,6 +42,7 @@ import numpy as np
 
 from pectoral_gym.agents.controllers.fin_map import FinMap
 from pectoral_gym.agents.controllers.hand import HandController
+from pectoral_gym.agents.nmpc.handover import HandOver
 from pectoral_gym.agents.nmpc.pricing import PlanPricing
 from pectoral_gym.agents.nmpc.problem import (
     GAIN_THRUST,
@@ -66,8 +67,7 @@ from pectoral_gym.model.symbolic import STATE_POSITION, STATE_PSI, STATE_SIZE, S
 __all__ = ["NMPCController", "NMPCSettings"]
 
 
-
-class NMPCController(PlanPricing):
+class NMPCController(PlanPricing, HandOver):
     """Nonlinear model-predictive control of the fin patterns on the averaged model.
 
     Args:
@@ -86,6 +86,7 @@ class NMPCController(PlanPricing):
             :attr:`NMPCSettings.step_budget` (a fallback command was used).
         late: Number of those steps whose solves ended after the step budget.
         unstalled: Number of steps the hand law drove because the plans rested too long (``_unstall``).
+        circled: Number of steps the hand law drove after the plans crept by a goal inside the turning circle.
         statuses: Solver return status -> count, over all solves.
         plan: The last good plan, ``(horizon, 4)``: amplitude right/left, bias right/left [rad].
     """
@@ -150,8 +151,7 @@ class NMPCController(PlanPricing):
         self.failures = 0
         self.late = 0
         self.statuses: dict[str, int] = {}
-        self.unstalled = 0
-        self._rest_amplitude = FinInputs(*self.u_rest).amplitude_right + math.radians(1.0)  # "both fins at rest"
+        self.unstalled = self.circled = 0
         self.reset()
 
     # ------------------------------------------------------------------ controller protocol
@@ -167,7 +167,7 @@ class NMPCController(PlanPricing):
         self.gains = np.array(self.settings.initial_gains, dtype=np.float64)
         self._plan_spins = False  # the plan is a spin candidate (not the NLP's: no multipliers, no shifted guess)
         self._spun = (False, False)  # whether the last two commands were spin steps
-        self._rest_steps = 0  # consecutive plans that rest both fins (_unstall)
+        self._reset_hand_over()
         if self.spin is not None:
             self.spin.reset()
         if self.shield is not None:
@@ -194,12 +194,12 @@ class NMPCController(PlanPricing):
                     # current ones; shift the model's end-of-period velocities by the measured offset
                     state[STATE_VELOCITY] = end[STATE_VELOCITY] + (state[STATE_VELOCITY] - v_mean)
             failures = self.failures
-            u = self._plan_step(state, ref, vref)
+            u = planned = self._plan_step(state, ref, vref)
             if self.failures == failures:  # a fallback's rest is the safe command, not a stall
                 u = self._unstall(state, ref, vref, u)
-            if self.shield is not None:
-                sent = self.shield.filter(state, u, ref)
-                backup_spin, u = self.shield.spun(u, sent), sent
+            if self.shield is not None:  # a spin sent instead of the plan (hand-over or backup) is no NLP motion
+                u = self.shield.filter(state, u, ref)
+                backup_spin = self.shield.spun(planned, u)
             self._last = (state, to_z(u), to_z(self._u_prev))
         self._spun = (self._spun[1], (self._plan_spins and self.plan is not None) or backup_spin)
         if self.spin is not None:

@@ -77,24 +77,6 @@ class PlanPricing:
             u[:, k + 1:] = u[:, k:k + 1]
         return u
 
-    def _unstall(self, state: np.ndarray, ref: np.ndarray, vref: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """The plan's inputs ``u (4,)``, or the hand law's once the plan has rested too long away from the goal.
-
-        ``goal`` only (:attr:`NMPCSettings.stall_steps`): after ``stall_steps`` consecutive plans whose first
-        command is both fins at rest, with the fish slower than ``stall_speed`` and outside the goal, the hand law
-        (the planner's base policy, which always moves off) drives until a plan moves again. On the emulated
-        robot the NMPC came to rest 0.3-0.6 m from a goal behind it and stayed there until the time-out.
-        """
-        s = self.settings
-        resting = bool(np.all(FinInputs(*u)[:2] <= self._rest_amplitude))
-        self._rest_steps = self._rest_steps + 1 if resting else 0
-        slow = math.hypot(state[3], state[4]) < s.stall_speed
-        away = math.hypot(ref[0] - state[0], ref[1] - state[1]) > self.config.goal_radius
-        if self.track or s.stall_steps <= 0 or self._rest_steps < s.stall_steps or not (slow and away):
-            return u
-        self.unstalled += 1
-        return self._hand_input(state, ref, vref, float(state[STATE_VELOCITY][2]))
-
     def _continuation(self, x: np.ndarray, z_last: np.ndarray) -> float:
         """Cost beyond the horizon: the hand law continued on the model for ``togo_steps`` intervals.
 

@@ -144,8 +144,14 @@ class NMPCSettings:
         shield_spin: Let the shield back up with the on-the-spot spin (``BandShield``'s ``spin``).
         stall_steps: ``goal``: consecutive plans that rest both fins, with the fish slower than ``stall_speed``
             and outside the goal, after which the hand law drives until a plan moves again
-            (:meth:`pectoral_gym.agents.nmpc.pricing.PlanPricing._unstall`); 0: off.
+            (:meth:`pectoral_gym.agents.nmpc.handover.HandOver._unstall`); 0: off.
         stall_speed: Speed [m/s] below which a resting plan counts towards ``stall_steps``.
+        circle_steps: ``goal``: with the goal inside the turning circle (radius ``turn_radius``) and its distance
+            fallen by less than ``circle_progress`` over this many steps, the hand law drives for the rest of the
+            episode (swims on out of the circle, turns back, steers in; :mod:`pectoral_gym.agents.nmpc.handover`);
+            0: off.
+        circle_progress: Distance [m] the fish must close on a goal inside its turning circle over
+            ``circle_steps`` steps for the plan to keep driving.
     """
 
     horizon: int = 10
@@ -194,6 +200,8 @@ class NMPCSettings:
     shield_spin: bool = True
     stall_steps: int = 6
     stall_speed: float = 0.02
+    circle_steps: int = 4
+    circle_progress: float = 0.02
 
     def __post_init__(self) -> None:
         if min(int(self.horizon), int(self.substeps), int(self.max_iter), int(self.max_solves)) < 1:
@@ -231,9 +239,11 @@ class NMPCSettings:
         if not (self.shield_margin >= 0 and self.shield_spread >= 0):
             raise ValueError(f"shield_margin and shield_spread must be >= 0, got {self.shield_margin!r}, "
                              f"{self.shield_spread!r}")
-        if int(self.stall_steps) < 0 or not self.stall_speed >= 0:
-            raise ValueError(f"stall_steps and stall_speed must be >= 0, got {self.stall_steps!r}, "
-                             f"{self.stall_speed!r}")
+        if min(int(self.stall_steps), int(self.circle_steps)) < 0 or not (self.stall_speed >= 0
+                                                                       and self.circle_progress >= 0):
+            raise ValueError(f"stall_steps, stall_speed, circle_steps and circle_progress must be >= 0, got "
+                             f"{self.stall_steps!r}, {self.stall_speed!r}, {self.circle_steps!r}, "
+                             f"{self.circle_progress!r}")
         if self.blocks is not None and (min(self.blocks, default=0) < 1 or sum(self.blocks) != int(self.horizon)):
             raise ValueError(f"blocks must be positive interval counts summing to horizon={self.horizon}, "
                              f"got {self.blocks!r}")
