@@ -21,7 +21,7 @@ import numpy as np
 
 from pectoral_gym.agents.controllers.band_shield import BandShield, band_speed
 from pectoral_gym.agents.controllers.fin_map import FinMap
-from pectoral_gym.agents.controllers.turning import circle_room
+from pectoral_gym.agents.controllers.turning import circle_room, inside_turning_circle
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, Observation, decode
 from pectoral_gym.model import tank
@@ -126,7 +126,7 @@ class HandController:
         side = a_r - a_l  # > 0: the law turns left (the right fin rows harder)
         bearing = math.atan2(o.target_y, o.target_x)
         if (self.spin and not self.track and self.shield.spins
-                and math.hypot(o.target_x, o.target_y) < 2.0 * self.turn_radius * abs(math.sin(bearing))):
+                and inside_turning_circle(math.hypot(o.target_x, o.target_y), bearing, self.turn_radius)):
             side = 1.0 if bearing > 0 else -1.0
             nominal = self.shield.spin_patterns(side)  # turn on the spot to the goal
         state = np.array([o.x, o.y, heading, o.vx, o.vy, o.omega])
@@ -159,7 +159,7 @@ class HandController:
         if self.shield is not None and not self.track:
             cap = self._arrival_cap(o, aim_x, aim_y, distance)
             speed = 0.0 if o.vx > cap else min(speed, cap)  # faster than the cap: coast (thrust cannot brake)
-        if distance < 2.0 * self.turn_radius * abs(math.sin(bearing)):
+        if inside_turning_circle(distance, bearing, self.turn_radius):
             # the aim lies inside the turning circle: swim on until a turn can reach it
             turn = 0.0
             if not self.track:  # a moving reference comes out of the circle by itself

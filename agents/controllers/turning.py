@@ -20,7 +20,7 @@ import numpy as np
 
 from pectoral_gym.model import tank
 
-__all__ = ["SPIN_CYCLE", "circle_room", "mirror", "turn_path_length", "turn_paths"]
+__all__ = ["SPIN_CYCLE", "circle_room", "inside_turning_circle", "mirror", "turn_path_length", "turn_paths"]
 
 # The on-the-spot turn of pectoral_gym.agents.nmpc.spin (which explains it; found by docs/validation/nmpc/spin_cycle.py
 # for a 0.5 s period and ratio 5). Left turn (omega > 0), one row per control period: amplitude right/left, bias
@@ -32,6 +32,15 @@ SPIN_CYCLE = np.radians([
     [8.4, 0.0, 108.1, 93.9],
     [6.1, 0.0, 70.9, 54.4],
 ])
+
+
+def inside_turning_circle(distance: float, bearing: float, radius: float) -> bool:
+    """Whether a point at ``distance`` [m] and body-frame ``bearing`` [rad] lies inside a turning circle of ``radius``.
+
+    The circle on the point's side passes through the fish, its centre ``radius`` abeam: the point lies inside it
+    when ``distance < 2 radius |sin bearing|``; the fish cannot turn into it and must swim on first.
+    """
+    return distance < 2.0 * radius * abs(math.sin(bearing))
 
 
 def mirror(u: np.ndarray) -> np.ndarray:

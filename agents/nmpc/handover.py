@@ -29,10 +29,11 @@ from collections import deque
 
 import numpy as np
 
+from pectoral_gym.agents.controllers.turning import inside_turning_circle
 from pectoral_gym.agents.nmpc.problem import FinInputs
 from pectoral_gym.model.symbolic import STATE_PSI, STATE_VELOCITY
 
-__all__ = ["HandOver", "goal_bearing", "goal_in_circle"]
+__all__ = ["HandOver", "goal_bearing"]
 
 _REST_MARGIN = math.radians(1.0)  # rad: a fin "at rest" beats at most this far above the lowest amplitude
 
@@ -42,15 +43,6 @@ def goal_bearing(state: np.ndarray, goal: np.ndarray) -> tuple[float, float]:
     ex, ey = goal[0] - state[0], goal[1] - state[1]
     bearing = (math.atan2(ey, ex) - state[STATE_PSI] + math.pi) % (2.0 * math.pi) - math.pi
     return math.hypot(ex, ey), bearing
-
-
-def goal_in_circle(distance: float, bearing: float, radius: float) -> bool:
-    """Whether a goal at ``distance`` [m] and ``bearing`` [rad] lies inside a turning circle of ``radius`` [m].
-
-    The hand law's test (:meth:`~pectoral_gym.agents.controllers.hand.HandController.command`): the point lies
-    inside the circle on its side when ``distance < 2 radius |sin bearing|``.
-    """
-    return distance < 2.0 * radius * abs(math.sin(bearing))
 
 
 class HandOver:
@@ -99,6 +91,6 @@ class HandOver:
         self._distances.append(distance)
         if s.circle_steps <= 0 or self._circling:
             return self._circling
-        if goal_in_circle(distance, bearing, s.turn_radius) and len(self._distances) == self._distances.maxlen:
+        if inside_turning_circle(distance, bearing, s.turn_radius) and len(self._distances) == self._distances.maxlen:
             self._circling = self._distances[0] - distance < s.circle_progress
         return self._circling

@@ -18,6 +18,7 @@ import numpy as np
 
 from pectoral_gym.agents.controllers.band_shield import BandShield
 from pectoral_gym.agents.controllers.fin_map import FinMap
+from pectoral_gym.agents.nmpc.handover import goal_bearing
 from pectoral_gym.agents.nmpc.problem import FinInputs
 from pectoral_gym.envs.core import EnvConfig
 
@@ -68,8 +69,7 @@ class CommandShield:
         u = np.asarray(u, dtype=np.float64)
         a = FinInputs(*u)
         turn = a.amplitude_right - a.amplitude_left  # > 0: the right fin rows harder, a left turn
-        bearing = math.atan2(goal[1] - state[1], goal[0] - state[0]) - state[2]
-        side = turn if abs(turn) > 1e-9 else math.copysign(1.0, math.sin(bearing))
+        side = turn if abs(turn) > 1e-9 else math.copysign(1.0, math.sin(goal_bearing(state, goal)[1]))
         p = self.shield.filter(np.asarray(state, dtype=np.float64), self.patterns(u), side)
         return np.array(FinInputs(p[0, 1], p[1, 1], p[0, 0], p[1, 0]))
 
