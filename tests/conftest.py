@@ -53,3 +53,20 @@ def warm_emulator_rig(tmp_path_factory):
     finally:
         env.close()
         robot.stop()
+
+
+@pytest.fixture
+def default_signal_handlers():
+    """Python's own SIGINT/SIGTERM handlers for the test's duration, whatever the process inherited.
+
+    A process started in the background by a shell without job control inherits SIGINT ignored (POSIX), and
+    Python then keeps it ignored: a test that checks what Ctrl-C does must not depend on how pytest was started.
+    """
+    import signal
+
+    saved = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    yield
+    for sig, handler in saved.items():
+        signal.signal(sig, handler)

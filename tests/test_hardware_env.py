@@ -164,7 +164,7 @@ def test_geofence_and_tracking_watch_by_hand():
     assert not watch.expired(0.5) and watch.expired(0.51) and watch.reason == "red marker not found"
 
 
-def test_sigterm_handler_sends_stop():
+def test_sigterm_handler_sends_stop(default_signal_handlers):
     calls = []
     restore = install_stop_handlers(lambda: calls.append("stop"))
     try:
@@ -177,7 +177,21 @@ def test_sigterm_handler_sends_stop():
     finally:
         restore()
     assert calls == ["stop", "stop"]
-    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL or callable(signal.getsignal(signal.SIGTERM))
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_an_ignored_sigint_still_sends_stop_and_stays_ignored(default_signal_handlers):
+    calls = []
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # e.g. a deploy started with `&` from a script
+    restore = install_stop_handlers(lambda: calls.append("stop"))
+    try:
+        os.kill(os.getpid(), signal.SIGINT)
+        signal.sigtimedwait([], 0.1) if hasattr(signal, "sigtimedwait") else None
+    finally:
+        restore()
+    assert calls == ["stop"]  # the fish stops; the process goes on, as the user asked by ignoring SIGINT
+    assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
 
 
 def test_geofence_outline_clearance_by_hand():

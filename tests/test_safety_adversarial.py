@@ -382,7 +382,7 @@ def test_fish_parallel_to_a_wall_is_stopped_by_its_fin_tips():
 
 
 # ---------------------------------------------------------------- 7, 8, 10: signals, sessions, small ones
-def test_signal_while_the_link_lock_is_held_still_sends_stop():
+def test_signal_while_the_link_lock_is_held_still_sends_stop(default_signal_handlers):
     with _rig(speed=2.0, tracking_timeout=1.5) as (robot, env):
         env.reset(seed=0)
         env.step(FULL)
