@@ -213,7 +213,8 @@ def test_nmpc_rejects_bad_settings():
 def test_nmpc_plan_holds_each_block_and_obeys_the_model(monkeypatch):
     """A converged solve's plan is constant within each move block, and its states are the model's rollout of it."""
     # to convergence; the biases free (bias_span=None): with them fixed by equal bounds (the goal default)
-    # IPOPT stops at 300 iterations without converging here (the SQP default is not affected; docs/benchmark.md)
+    # IPOPT stops at 300 iterations without converging here (the SQP default is not affected;
+    # docs/notes/2026-12-01-nmpc-rounds.md)
     nmpc = make_baseline("nmpc", CONFIG, solver="ipopt", max_iter=300, max_cpu_time=30.0, bias_span=None)
     env = gym.make("PectoralFish-Averaged-v0")
     obs = _episode_with_goal_ahead(env)

@@ -52,7 +52,7 @@ def test_mirrored_cycle_mirrors_the_motion(model):
 
 def test_the_cycle_turns_the_full_model_on_the_spot():
     # 6 s of the cycle from rest: a quarter turn with the centre of mass within about half a body
-    # length (the turning circle needs 0.5 m of room for a half turn, docs/benchmark.md)
+    # length (the turning circle needs 0.5 m of room for a half turn, docs/notes/2026-12-01-nmpc-rounds.md)
     m = FullModel(n=1)
     m.reset()
     reach = 0.0

@@ -139,7 +139,7 @@ def test_track_cost_prefers_the_reference_to_lagging_behind_it(track):
     """The heading term aims at the reference 5 s further along its path: no reward for hanging back.
 
     Before (aim at the reference point itself, fading out within 5 cm) 8 cm behind the reference cost
-    less than on it, and the fish lagged 7-9 cm on the straight (docs/benchmark.md, fifth round).
+    less than on it, and the fish lagged 7-9 cm on the straight (docs/notes/2026-12-01-nmpc-rounds.md, fifth round).
     """
     assert _on_path_cost(track, 0.0) < _on_path_cost(track, 0.02) < _on_path_cost(track, 0.08)
     before = make_baseline("nmpc", TRACK, step_budget=1e6, heading_lookahead=0.0, heading_scale=0.05)

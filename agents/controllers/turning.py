@@ -1,7 +1,7 @@
 """Turning-circle geometry for the model-based controllers: the path length to a point, turning at most so tight.
 
 A fish that turns no tighter than a radius ``R`` (the full model: about 0.23-0.25 m, see
-``docs/benchmark.md``) reaches a point target fastest along a turn-then-straight path (a Dubins path
+``docs/notes/2026-12-01-nmpc-rounds.md``) reaches a point target fastest along a turn-then-straight path (a Dubins path
 to a point, free terminal heading). In the body frame (x ahead, y to the left) the left turning
 circle has its centre at ``C = (0, R)``; a target ``G`` outside it (``d = |G - C| >= R``) is reached
 by an arc to the tangent point ``T`` and the tangent ``|G - T| = sqrt(d^2 - R^2)``. ``T`` lies at the

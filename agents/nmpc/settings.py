@@ -2,7 +2,7 @@
 
 Read by :mod:`pectoral_gym.agents.nmpc.controller` and :mod:`pectoral_gym.agents.nmpc.problem`.
 Every field is documented with what it does and, where it was chosen on measurements, with the
-development runs behind its default (``docs/benchmark.md``).
+development runs behind its default (``docs/notes/2026-12-01-nmpc-rounds.md``).
 """
 
 from __future__ import annotations
@@ -41,8 +41,8 @@ class NMPCSettings:
             its predicted velocity (``track``); ``None``: 0 for ``goal``, 5 s for ``track``. Aimed at the
             reference point itself, with the 5 cm fade, the heading term paid the fish to hang back: 8 cm behind
             the reference cost less than on it, and the fish lagged 7-9 cm on straight stretches
-            (docs/benchmark.md, ``track`` fifth round; development seeds 106-119: 6.7 cm at 2.5 s, 5.0 at 5 s
-            and 10 s).
+            (docs/notes/2026-12-01-nmpc-rounds.md, ``track`` fifth round; development seeds 106-119: 6.7 cm at
+            2.5 s, 5.0 at 5 s and 10 s).
         reference: How the moving target is predicted over the horizon
             (:class:`pectoral_gym.agents.nmpc.reference.ReferencePredictor`): ``"line"`` (straight on with its
             velocity), ``"arc"`` (its velocity turning at the observed rate) or ``"conic"`` (along the ellipse fitted to
@@ -55,7 +55,7 @@ class NMPCSettings:
             turning circle at the end of the horizon [1/m]. The horizon is far shorter than a loop
             (tens of seconds), so without it the fish circles a target it passed closely.
         turn_radius: Smallest turning radius assumed by the reachability term [m] (the full model
-            turns no tighter than about 0.23 m; see docs/benchmark.md).
+            turns no tighter than about 0.23 m; see docs/notes/2026-12-01-nmpc-rounds.md).
         w_wall: Weight of the squared wall violation [1/m^2].
         wall_margin: Keep nose and tail this far from the walls [m].
         energy_weight: Weight of the fin work [1/J]; ``None``: the env's ``energy_weight``.
@@ -115,8 +115,8 @@ class NMPCSettings:
             law's) are priced with the continuation.
         reach_fraction: ``goal``: a rollout whose interval end comes within this fraction of the goal
             radius is priced up to there only (:meth:`pectoral_gym.agents.nmpc.pricing.PlanPricing._reach_cost`); 0:
-            off. Development seeds 100-199 (``docs/benchmark.md``, fourth round): on the full model 0.94 against
-            0.90 without (0.93 at 1.0: one wall hit more).
+            off. Development seeds 100-199 (``docs/notes/2026-12-01-nmpc-rounds.md``, fourth round): on the full
+            model 0.94 against 0.90 without (0.93 at 1.0: one wall hit more).
         bias_span: Largest planned bias offset from the middle of the bias range [rad] (0: both biases
             held at 90 deg, as the hand law holds them); ``None``: the whole identified range; ``"auto"``:
             0 (both tasks; before the ``track`` fifth round ``None`` for ``track``). Tilted biases planned on

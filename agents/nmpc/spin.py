@@ -1,7 +1,7 @@
 """On-the-spot turns for the NMPC: a fin cycle that turns the fish within about a body length.
 
 The NLP (:mod:`pectoral_gym.agents.nmpc.problem`) plans regular fin beats on their cycle averages, and its
-tightest turn is the turning circle (radius ~0.25 m, docs/benchmark.md). Changing the pattern every
+tightest turn is the turning circle (radius ~0.25 m, docs/notes/2026-12-01-nmpc-rounds.md). Changing the pattern every
 control period makes every half-stroke a transitional one: the fin sweeps from where it is to the
 new pattern's turning point and exerts the forces of that sweep (docs/model.md 3.7). With the right
 sequence the sweeps' surge impulses cancel and their yaw impulses add. :data:`SPIN_CYCLE` is such a
@@ -14,7 +14,7 @@ mass within 0.08 m of its start, on the full model 89-93 deg within 0.06-0.12 m 
 turning circle needs 0.5 m of room for a half turn. Without the servo rules the search finds a cycle
 that turns 143-147 deg in 6 s on the full model, with sweeps up to 100 deg in a power stroke's
 0.08 s: the servos would stretch its strokes, and on the emulated robot it turns 24-48 deg instead
-(docs/benchmark.md, "Goal, fifth round").
+(docs/notes/2026-12-01-nmpc-rounds.md, "Goal, fifth round").
 
 :class:`SpinTurns` prices such turns on the planning model
 (:func:`pectoral_gym.agents.controllers.fin_map.planning_spec`: the env's averaged model, or on a full env the averaged

@@ -17,7 +17,7 @@ each phase of the cycle, and the searched cycle's turn and fin work::
 Output of 2026-12-02, defaults: the shipped cycle (``SPIN_CYCLE`` holds it rounded to 0.1 deg), servo
 excess 0; full model 89-93 deg in 6 s from rest within 0.06-0.12 m, 92-100 deg from swimming at
 0.11 m/s (displacement up to 0.28 m, mostly the glide); the averaged model about 10 % more; fin work
-0.16 J. The second command finds the faster cycle of docs/benchmark.md ("Goal, fifth round"): full
+0.16 J. The second command finds the faster cycle of docs/notes/2026-12-01-nmpc-rounds.md ("Goal, fifth round"): full
 model 143-152 deg, averaged 18-22 % more, fin work 1.6 J, servo excess 2.4 (the robot would stretch
 its strokes). Without servo limits, ``--work-weight`` 0.5 / 1 / 2 (30 iterations) give cycles of 0.86 /
 0.44 / 0.11 J that turn the full model 136 / 119 / 86 deg.

@@ -1,6 +1,6 @@
 """NMPC `goal` from rest with the goal close by: a development probe for the held-out stalls.
 
-On held-out seeds 1000-1099 (docs/benchmark.md, fourth round) four of the NMPC's eight failures were
+On held-out seeds 1000-1099 (docs/notes/2026-12-01-nmpc-rounds.md, fourth round) four of the NMPC's eight failures were
 stalls: the fish came to rest 0.26-0.36 m from the goal and stayed there. The env's own resets
 rarely start that close, so this probe draws such starts on purpose (development data, not the
 held-out seeds): the fish at rest at a random pose at least 0.15 m from the walls, the goal
