@@ -103,7 +103,7 @@ class HardwareFishEnv(gym.Env):
       ``safety.link_timeout`` (``"link_lost"``); this PC no longer controls the robot (the link's
       ``control_lost``: ``"taken_over"``, ``"robot_busy"``, ``"robot_rebooted"``); :meth:`stop` or a
       signal (``"stop"``, latched until :meth:`rearm`). Several at once: reported by priority
-      (``pectoral_gym.hardware.safety.supervisor.PRIORITY``, ``docs/hardware.md``), all in ``info["safety_stops"]``.
+      (``pectoral_gym.hardware.safety.supervisor.PRIORITY``, ``docs/guide/safety.md``), all in ``info["safety_stops"]``.
     * A safety supervisor (:class:`pectoral_gym.hardware.safety.supervisor.Supervisor`) applies these rules in its own
       thread, also while the program is outside ``step()``, and sends STOP the moment one trips; the next
       ``step()`` reports it. Every command carries a lease (``safety.lease``, ``docs/protocol.md``): the

@@ -249,7 +249,7 @@ def test_physical_speed_bound_holds_against_the_full_model_over_random_commands(
             assert speed <= bound(t) + 1e-9, (trial, t, speed, bound(t))
             worst = max(worst, speed / max(bound(t), 1e-12))
         assert worst > 0.1  # the bound is not absurdly loose everywhere
-    # By hand (docs/hardware.md, "Physical speed bound"): F = 2.53 N, kappa_P = c1 / m2^2 - leak = 6.50 / (kg m),
+    # By hand (docs/guide/safety.md, "Physical speed bound"): F = 2.53 N, kappa_P = c1 / m2^2 - leak = 6.50 / (kg m),
     # top = sqrt(F / kappa_P) / m1 = 0.70 m/s; growth F / m1 = 2.85 m/s^2.
     assert bound.top == pytest.approx(0.70, abs=0.01) and bound.accel == pytest.approx(2.85, abs=0.01)
 

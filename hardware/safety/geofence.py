@@ -4,7 +4,7 @@
   (reaction distance plus the coasting distance of eq. (19) with the fins still) -> stop, end the episode;
   :func:`in_geofence` is the older nose-and-tail test.
 * :class:`SpeedBound`: the fastest the fish can be moving, from what its fins can do since the reset
-  (``docs/hardware.md``, "Physical speed bound"); the geofence never uses a speed above it, and assumes it
+  (``docs/guide/safety.md``, "Physical speed bound"); the geofence never uses a speed above it, and assumes it
   grows while the fish is unseen.
 
 The other PC-side rules are :mod:`pectoral_gym.hardware.safety.rules`'s; the robot's own are
@@ -122,7 +122,7 @@ class SpeedBound:
     """The fastest the fish can move, ``|V| <= bound(t)``, from the times its fins may have run since a reset.
 
     Two rigorous bounds of eqs. (19)-(20), each integrated in closed form; the smaller rules (derivations in
-    ``docs/hardware.md``, "Physical speed bound"):
+    ``docs/guide/safety.md``, "Physical speed bound"):
 
     * impulse: Kirchhoff's linear impulse ``P = R(psi) (m1 vx, m2 vy)`` obeys ``dP/dt = R(psi) (f + h)`` (the
       Munk terms are the rotation of the body frame; ``f`` the fins' force, ``h`` the drag and lift of

@@ -11,7 +11,7 @@ distance (:class:`pectoral_gym.hardware.safety.geofence.Geofence`, speeds bounde
 :class:`pectoral_gym.hardware.safety.geofence.SpeedBound`) and the tracking timeout. Each rule that trips is latched and
 sends STOP; commands are refused (:meth:`Supervisor.send`) until the next :meth:`Supervisor.arm`, and the operator's
 stop until :meth:`Supervisor.rearm`. When several have tripped, :attr:`Supervisor.reason` is the first of
-:data:`PRIORITY` (``docs/hardware.md``, "Failsafe priority"). The robot's own lease
+:data:`PRIORITY` (``docs/guide/safety.md``, "Failsafe priority"). The robot's own lease
 (``docs/protocol.md``) stops the fins even if this thread and the whole PC die.
 """
 

@@ -110,7 +110,7 @@ class EnvConfig:
         stop_band: End the episode, with the ``wall_penalty`` and a per-step ``info["cost"]`` of 1 (the
             Safety-Gymnasium convention; 0 otherwise), when any part of the fish (body and fin tips) is
             closer to a wall than it needs to stop: the robot's geofence, whose safety supervisor stops the
-            fish there (:data:`pectoral_gym.model.tank.ROBOT_STOP_RULE`, ``docs/hardware.md``). Checked on the
+            fish there (:data:`pectoral_gym.model.tank.ROBOT_STOP_RULE`, ``docs/guide/safety.md``). Checked on the
             state after each control period.
         stop_rule: The band's :class:`~pectoral_gym.model.tank.StopRule` ``(margin [m], reaction time [s],
             contact speed [m/s])``.

@@ -22,7 +22,7 @@ The stopping distance: coasting with the fins still along one axis, eq. (19) wit
 coasting from ``v0`` covers before it has slowed to ``v_c`` is ``ln(v0 / v_c) / k`` (0 when ``v0 <= v_c``),
 with ``k = c1 / max(m1, m2)`` (the larger mass: the slower decay). The band keeps that distance plus a
 margin: a stopped fish crosses the margin line, if ever, no faster than ``v_c`` (the rule's
-``contact_speed``), and the band is invariant while it coasts (``docs/hardware.md``, "Geofence").
+``contact_speed``), and the band is invariant while it coasts (``docs/guide/safety.md``, "Geofence").
 """
 
 from __future__ import annotations
@@ -77,7 +77,7 @@ class StopRule(NamedTuple):
 
 
 #: The robot's rule (its safety supervisor's defaults, ``pectoral_gym.hardware.safety.rules.SafetyConfig``), which
-#: the simulated envs' ``stop_band`` applies too (``docs/hardware.md``, "Geofence"). 0.03 m/s is the speed a Table-1
+#: the simulated envs' ``stop_band`` applies too (``docs/guide/safety.md``, "Geofence"). 0.03 m/s is the speed a Table-1
 #: fish coasting from any speed is below after 5 s (``1 / (k T)`` = 0.031 m/s), the earlier rule's bound.
 ROBOT_STOP_RULE = StopRule(margin=0.05, reaction_time=0.15, contact_speed=0.03)
 
