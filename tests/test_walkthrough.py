@@ -1,6 +1,6 @@
-"""The README's "Your own robot, end to end" walk-through, run as written (each python command with --quick).
+"""The "Your own robot" walk-through of docs/calibration.md, run as written (each python command with --quick).
 
-The commands are parsed from README.md, so the test cannot drift from the text; ``--quick`` is the
+The commands are parsed from docs/calibration.md, so the test cannot drift from the text; ``--quick`` is the
 documented smoke-run flag of ``scaling identify|validate``, ``pectoral_gym.agents.training.train`` and
 ``pectoral_gym.agents.training.evaluate``. The deploys (an identification run, then the trained policy on the
 emulated robot) run shortened: 2 episodes of at most 16 steps each.
@@ -23,10 +23,10 @@ QUICK = {("pectoral_gym.scaling", "identify"), ("pectoral_gym.scaling", "validat
 
 
 def walkthrough_commands(text: str) -> list[str]:
-    """The shell commands of the README block after the ``<!-- walkthrough ... -->`` marker."""
+    """The shell commands of the block after the ``<!-- walkthrough ... -->`` marker."""
     match = re.search(r"<!-- walkthrough\b.*?-->\s*```bash\n(.*?)```", text, re.S)
     if match is None:
-        raise AssertionError("README.md has no walk-through block (<!-- walkthrough ... --> then ```bash)")
+        raise AssertionError("docs/calibration.md has no walk-through block (<!-- walkthrough ... --> then ```bash)")
     joined = match.group(1).replace("\\\n", " ")
     return [line.strip() for line in joined.splitlines() if line.strip() and not line.strip().startswith("#")]
 
@@ -55,7 +55,7 @@ def test_parsing_joins_continuations_and_adds_quick_only_where_documented():
 
 
 def test_the_readme_walk_through_runs_as_written(tmp_path):
-    commands = walkthrough_commands((ROOT / "README.md").read_text())
+    commands = walkthrough_commands((ROOT / "docs" / "calibration.md").read_text())
     text = "\n".join(commands)
     # What the walk-through must show (issues 14 and 27): an identification run logged, the model calibrated from
     # the log, K identified for it, training on the averaged model with params= and scaling=, evaluation on the full
