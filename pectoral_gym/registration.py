@@ -17,8 +17,8 @@ from pectoral_gym.model.tank import ROBOT_STOP_RULE
 #: least-squares speed from camera poses plus 2 standard errors (>= 2 x 5 mm / 1.58 s = 6.3 mm/s over its 1 s
 #: window), which widens the band by up to 2 sigma (t_r + 1 / (k v_c)) = 3.3 cm at the camera's noise floor (near
 #: the contact speed v_c, where the need grows fastest with speed), and more with the in-beat swing of the pose;
-#: and the envs check the band after each control period, the robot every frame (``docs/agents.md``, "Robot-ready
-#: envs").
+#: and the envs check the band after each control period, the robot every frame (``docs/guide/envs.md``,
+#: "Versions").
 MEASUREMENT_MARGIN = 0.05
 
 __all__ = ["ENV_IDS", "ENV_SETTINGS", "MAX_EPISODE_STEPS", "MEASUREMENT_MARGIN", "ROBOT_READY", "register_envs",
@@ -26,7 +26,7 @@ __all__ = ["ENV_IDS", "ENV_SETTINGS", "MAX_EPISODE_STEPS", "MEASUREMENT_MARGIN",
 
 #: What the v1 envs add to prepare a policy for the robot stack (``PectoralFishEnv``'s Version History): the
 #: fins' stroke phase observed, the robot's stopping band as an episode end with a cost, the servos' rate
-#: limit, goals the band leaves reachable (``docs/agents.md``, "Robot-ready envs").
+#: limit, goals the band leaves reachable (``docs/guide/envs.md``, "Versions").
 ROBOT_READY: dict[str, Any] = {
     "observe_fins": True, "stop_band": True, "servo_limit": ROBOT_MAX_FIN_RATE, "goal_inset": 0.3,
     "stop_rule": ROBOT_STOP_RULE._replace(margin=ROBOT_STOP_RULE.margin + MEASUREMENT_MARGIN),

@@ -11,7 +11,7 @@ own observation is. A goal counts as reached only at a control step, as in the e
 
 Per episode: success, the first band entry (a would-be geofence stop), time to goal, wall contact.
 
-Example (the figures in ``docs/agents.md``, hand baseline)::
+Example (the figures in ``docs/notes/2026-12-03-robot-stack-rounds.md``, hand baseline)::
 
     python -m pectoral_gym.agents.controllers.band_study --controller hand --seeds 1000-1099
     python -m pectoral_gym.agents.controllers.band_study --controller hand --seeds 1000-1099 --goal-inset 0.3

@@ -1,6 +1,6 @@
 """Training-only reward shaping: a penalty on changing the action from one control period to the next.
 
-Why (``docs/agents.md``, *Results across seeds*): the averaged model the policy trains on takes a new fin
+Why (``docs/notes/2026-12-02-ppo-v0-tuning.md``): the averaged model the policy trains on takes a new fin
 pattern at no cost (its transitional half-strokes are off in the envs, ``EnvConfig.transitions``), while the
 full model, like the robot, pays a transitional stroke at every change. As PPO trains on, its policies switch
 patterns more often, and their success on the full model falls while it still rises on the averaged one. The

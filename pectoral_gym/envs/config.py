@@ -80,7 +80,8 @@ class EnvConfig:
             pattern change; :class:`~pectoral_gym.model.models.AveragedModel`, ``docs/model.md`` 3.7). Off by
             default in the envs, unlike the model: it depends on the fins' stroke phase, which the default
             observation does not show; use it with ``observe_fins=True``, as the shipped PPO file does
-            (alone it did far worse: full-model success 0.36-0.68; with both 0.98-1.00; docs/agents.md).
+            (alone it did far worse: full-model success 0.36-0.68; with both 0.98-1.00;
+            docs/notes/2026-12-02-ppo-v0-tuning.md).
         ripple_offsets: Averaged model only: the beat-mean ripple offset of a fin that starts,
             changes or parks a pattern (:class:`~pectoral_gym.model.models.AveragedModel`, ``docs/model.md``
             3.8; on by default in the model). Off by default in the envs until the shipped PPO file's

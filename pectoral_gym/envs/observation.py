@@ -78,7 +78,7 @@ OBSERVATION_STRUCTURE = {
 
 # Bounds of the observation space. The fish's mean velocities over a control period stay far below these:
 # the most measured with extreme actions (every entry -1 or +1, 64 fish x 240 steps, full model) are
-# |vx| 0.44 m/s, |vy| 0.15 m/s, |omega| 1.5 rad/s (``docs/agents.md``, "Observation bounds").
+# |vx| 0.44 m/s, |vy| 0.15 m/s, |omega| 1.5 rad/s (``docs/guide/envs.md``, "Gymnasium conventions").
 MAX_SPEED = 2.0  # bound of |vx| and |vy| [m/s]
 MAX_YAW_RATE = 10.0  # bound of |omega| [rad/s]
 
