@@ -71,7 +71,7 @@ from pectoral_gym.model.models import AveragedModel, FishModel, FullModel  # noq
 from pectoral_gym.model.params import FinBeat, FishParams  # noqa: E402
 from pectoral_gym.registration import register_envs  # noqa: E402
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 register_envs()
 
