@@ -29,9 +29,21 @@ def strip_roles(text: str) -> str:
 
 
 class SphinxRoles(griffe.Extension):
-    """Rewrites the roles of every docstring as it is read."""
+    """Rewrites the roles of every docstring as it is read.
+
+    Listed after ``griffe_sphinx`` in ``mkdocs.yml``, so that it also sees the attributes' ``#:`` comments, which
+    that extension makes their docstrings.
+    """
 
     def on_instance(self, *, obj: griffe.Object, **kwargs: Any) -> None:
         """Griffe event: an object was created with its docstring."""
-        if obj.docstring is not None and ":`" in obj.docstring.value:
-            obj.docstring.value = strip_roles(obj.docstring.value)
+        _rewrite(obj)
+
+    def on_attribute_instance(self, *, attr: griffe.Attribute, **kwargs: Any) -> None:
+        """Griffe event: an attribute was created (after ``griffe_sphinx`` gave it its ``#:`` comment)."""
+        _rewrite(attr)
+
+
+def _rewrite(obj: griffe.Object) -> None:
+    if obj.docstring is not None and ":`" in obj.docstring.value:
+        obj.docstring.value = strip_roles(obj.docstring.value)
