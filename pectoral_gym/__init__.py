@@ -1,6 +1,6 @@
 """pectoral-gym: a robotic fish with two rowing pectoral fins, as models and Gymnasium environments.
 
-Importing the package registers ``PectoralFish-Full-v0`` and ``PectoralFish-Averaged-v0``.
+Importing the package registers ``PectoralFish-Full-v1`` and ``PectoralFish-Averaged-v1`` (and their ``-v0``).
 
 The repository's folders ``agents/``, ``scaling/`` and ``hardware/`` are the subpackages
 ``pectoral_gym.agents``, ``.scaling`` and ``.hardware``: an install (wheel or editable) maps them through
@@ -71,7 +71,7 @@ from pectoral_gym.model.models import AveragedModel, FishModel, FullModel  # noq
 from pectoral_gym.model.params import FinBeat, FishParams  # noqa: E402
 from pectoral_gym.registration import register_envs  # noqa: E402
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 register_envs()
 
