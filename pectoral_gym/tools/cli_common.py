@@ -61,8 +61,8 @@ class HelpFormatter(argparse.HelpFormatter):
 
     In a description or epilog, a paragraph (lines between blank lines) with an indented line is kept as written
     (``examples:`` and its command lines); the others are wrapped to the terminal. A default of None, False or an
-    empty list is not shown (it means "not given"); a help text that already names its default (``default``,
-    ``%(default)s``) is left as it is.
+    empty list, or a flag's, is not shown (it means "not given"); a help text that already names its default
+    (``default``, ``%(default)s``) is left as it is.
     """
 
     def _fill_text(self, text: str, width: int, indent: str) -> str:
@@ -76,7 +76,8 @@ class HelpFormatter(argparse.HelpFormatter):
     def _get_help_string(self, action: argparse.Action) -> str | None:
         text = action.help or ""
         default = action.default
-        unset = default is None or default is False or default is argparse.SUPPRESS or default == []
+        unset = (default is None or default is False or default is argparse.SUPPRESS or default == []
+                 or action.nargs == 0)  # a flag: its default is "not given"
         if unset or "default" in text.lower() or not action.option_strings or action.help == argparse.SUPPRESS:
             return action.help
         return f"{text} (default: %(default)s)" if text else "(default: %(default)s)"
