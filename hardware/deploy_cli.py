@@ -23,13 +23,13 @@ _EXAMPLES = """examples:
   pectoral-deploy --controller nmpc --emulate --speed 2 --episodes 1
   pectoral-deploy --controller hand --emulate --lockstep --episodes 100 --out lockstep
   pectoral-deploy --controller hand --emulate --lockstep --episodes 100 --jobs 2
-  pectoral-deploy --controller hand --emulate --lockstep --radio-latency 0.1 \
+  pectoral-deploy --controller hand --emulate --lockstep --radio-latency 0.1 \\
       --radio-loss 0.1 --camera-drop 0.1 --pose-noise-mm 5 --pose-noise-deg 2
-  pectoral-deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 \
+  pectoral-deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 \\
       --calibration calibration.json --robot-address 0013A20012345678 --episodes 3 --out tank-run
-  pectoral-deploy --controller excite --port /dev/ttyUSB0 --camera 0 \
+  pectoral-deploy --controller excite --port /dev/ttyUSB0 --camera 0 \\
       --calibration calibration.json --episodes 6 --max-episode-steps 60 --out id-run   # an identification run
-  pectoral-deploy --controller excite --emulate --lockstep --emulate-params robot_true.json \
+  pectoral-deploy --controller excite --emulate --lockstep --emulate-params robot_true.json \\
       --episodes 6 --max-episode-steps 60 --out id-run                                  # ... on an emulated robot
 
 exit status: 0 done; 1 a device failed (no frame, no fish seen, robot not answering); 2 a bad argument."""

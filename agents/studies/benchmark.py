@@ -322,11 +322,12 @@ def build_parser() -> argparse.ArgumentParser:
                       help="the real table: 100 episodes per cell (NMPC: 100 goal, 10 track)")
     parser.add_argument("--policy", nargs="+", default=[], metavar="RUN", help="trained policies (run folder or .zip)")
     controllers = parser.add_argument("--controller", nargs="*", dest="controllers", default=list(BASELINE_NAMES),
-                                      choices=BASELINE_NAMES, help="baseline controllers to include, one or more")
+                                      choices=BASELINE_NAMES, metavar="NAME",
+                                      help=f"baseline controllers to include: {', '.join(BASELINE_NAMES)}")
     deprecated_alias(parser, "--controllers", controllers)
     envs = parser.add_argument("--env", nargs="+", dest="envs", default=list(ALL_ENVS), choices=list(ALL_ENVS),
-                               help="model settings, one or more; robot, robot+degraded: the robot stack on the "
-                                    "emulated robot")
+                               metavar="SETTING", help=f"model settings, one or more of {', '.join(ALL_ENVS)} "
+                               "(robot, robot+degraded: the robot stack on the emulated robot)")
     deprecated_alias(parser, "--envs", envs)
     version = parser.add_argument("--env-version", dest="version", choices=VERSIONS, default=VERSIONS[0],
                                   help="registered env version of the simulated columns (v0: the tables measured "

@@ -319,8 +319,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help="seeds trained at once, each in its own process (1 torch thread each; default: 2, or "
                              "the number of CPUs if fewer)")
     parser.add_argument("--out", default="seeds_out", metavar="DIR", help="output folder")
-    env = parser.add_argument("--env", dest="train_env", choices=TRAIN_ENVS, default=TRAIN_ENV,
-                              help="env trained on (default: %(default)s, as the demo)")
+    env = parser.add_argument("--env", dest="train_env", choices=TRAIN_ENVS, default=TRAIN_ENV, metavar="ID",
+                              help=f"env trained on, one of {', '.join(TRAIN_ENVS)} (default: %(default)s, "
+                                   "as the demo)")
     deprecated_alias(parser, "--train-env", env)
     parser.add_argument("--timesteps", type=float, metavar="N",
                         help="training steps (default: agents/hyperparams/ppo.yml)")
