@@ -31,7 +31,7 @@ def walkthrough_commands(text: str) -> list[str]:
     return [line.strip() for line in joined.splitlines() if line.strip() and not line.strip().startswith("#")]
 
 
-SHORT_DEPLOY = ("--episodes", "2", "--max-steps", "16")  # the last of a repeated flag wins (argparse)
+SHORT_DEPLOY = ("--episodes", "2", "--max-episode-steps", "16")  # the last of a repeated flag wins (argparse)
 
 
 def with_quick(command: str) -> str:
