@@ -133,7 +133,7 @@ def test_cli_bad_arguments_are_one_line_errors_with_status_2(tmp_path, capsys, a
         main(args)
     assert exit_info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert message in err[-1] and err[-1].startswith("python -m pectoral_gym.hardware.vision.calibrate: error:")
+    assert message in err[-1] and err[-1].startswith("pectoral-camera-calibrate: error:")
     assert not (tmp_path / "cal.json").exists()
 
 
@@ -142,5 +142,5 @@ def test_cli_help_shows_examples_and_defaults(capsys):
         main(["--help"])
     assert exit_info.value.code == 0
     text = capsys.readouterr().out
-    assert "examples:" in text and "python -m pectoral_gym.hardware.vision.calibrate --image" in text
+    assert "examples:" in text and "pectoral-camera-calibrate --image" in text
     assert "default calibration.json" in text and "default 60" in text

@@ -225,7 +225,7 @@ def test_bad_arguments_are_one_line_errors_with_status_2(tmp_path, capsys, args,
         main(argv + [a.replace("{tmp}", str(tmp_path)) for a in args])
     assert exit_info.value.code == 2
     line = _error_line(capsys)
-    assert line.startswith("python -m pectoral_gym.hardware.deploy: error:") and message in line
+    assert line.startswith("pectoral-deploy: error:") and message in line
 
 
 @pytest.mark.parametrize("address", ["-1", "12345", "1FFFFFFFFFFFFFFFF", "0013A2001234567G", "0x-13A20012345678"])
@@ -310,7 +310,7 @@ def test_a_failing_env_or_reset_is_exit_1_with_everything_released(tmp_path, cap
 
     monkeypatch.setattr(pectoral_gym.hardware.env, "HardwareFishEnv", Broken)
     assert main(["--controller", "hand", "--emulate", "--no-progress", "--out", str(tmp_path / "b")]) == 1
-    assert _error_line(capsys) == "python -m pectoral_gym.hardware.deploy: error: supervisor could not start"
+    assert _error_line(capsys) == "pectoral-deploy: error: supervisor could not start"
     _nothing_left(before)
 
 
