@@ -136,6 +136,8 @@ def test_prog_is_what_the_user_typed(monkeypatch):
     assert prog_name("pectoral-camera-calibrate", "pectoral_gym.hardware.vision.calibrate") == "pectoral-calibrate"
     monkeypatch.setattr(sys, "argv", ["/venv/bin/pytest"])
     assert prog_name("pectoral-train", "pectoral_gym.agents.training.train") == "pectoral-train"
+    monkeypatch.setattr(sys, "argv", ["/venv/bin/pectoral-demo"])  # the demo runs the deploy in its process
+    assert prog_name("pectoral-deploy", "pectoral_gym.hardware.deploy") == "pectoral-deploy"
     assert prog_name(None, "pectoral_gym.agents.nmpc.compare") == "python -m pectoral_gym.agents.nmpc.compare"
 
 

@@ -15,6 +15,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from pectoral_gym.model.kfunctions import ScalingFunctions
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -98,5 +100,7 @@ def test_the_readme_walk_through_runs_as_written(tmp_path):
 def test_quick_identify_refuses_install(capsys):
     from pectoral_gym.scaling.cli import main
 
-    assert main(["identify", "--quick", "--install"]) == 2
-    assert "--install" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stop:  # a usage error, as every bad argument
+        main(["identify", "--quick", "--install"])
+    assert stop.value.code == 2
+    assert "--install" in capsys.readouterr().err.splitlines()[-1]

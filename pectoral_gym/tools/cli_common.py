@@ -22,8 +22,8 @@ import textwrap
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-__all__ = ["COMMANDS", "DEPRECATED_SCRIPTS", "REMOVED_IN", "Command", "DeprecatedAlias", "HelpFormatter",
-           "deprecated_alias", "examples", "prog_name", "subcommands", "warn_deprecated"]
+__all__ = ["COMMANDS", "DEPRECATED_SCRIPTS", "MODULE_COMMANDS", "REMOVED_IN", "Command", "DeprecatedAlias",
+           "HelpFormatter", "deprecated_alias", "examples", "prog_name", "subcommands", "warn_deprecated"]
 
 REMOVED_IN = "0.3.0"  # the release in which the deprecated spellings go
 
@@ -37,9 +37,9 @@ def prog_name(script: str | None, *modules: str) -> str:
             ``__main__``).
 
     Returns:
-        ``python -m <module>`` when ``__main__`` is one of ``modules`` (or there is no console script), else the
-        name of the running program if it is a ``pectoral-*`` script (a deprecated script name stays as typed),
-        else ``script`` (under pytest, in the docs).
+        ``python -m <module>`` when ``__main__`` is one of ``modules`` (or there is no console script), else
+        ``script``, or the deprecated name of it the user typed (:data:`DEPRECATED_SCRIPTS`). Another program
+        that calls this command's ``main`` (``pectoral-demo`` runs ``pectoral-deploy``) does not lend it its name.
     """
     spec = getattr(sys.modules.get("__main__"), "__spec__", None)
     running = spec.name.removesuffix(".__main__") if spec is not None else None
@@ -48,7 +48,8 @@ def prog_name(script: str | None, *modules: str) -> str:
     if script is None:
         return f"python -m {modules[0]}"
     typed = os.path.basename(sys.argv[0]) if sys.argv and sys.argv[0] else ""
-    return typed if typed.startswith("pectoral-") and running is None else script
+    old_names = {old for old, (new, _) in DEPRECATED_SCRIPTS.items() if new == script}
+    return typed if typed in old_names and running is None else script  # else: not this command's own script
 
 
 def warn_deprecated(prog: str, old: str, new: str) -> None:
