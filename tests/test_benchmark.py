@@ -82,8 +82,9 @@ def test_markdown_reports_throughput_and_errors():
 
 
 def test_cli_rejects_bad_sizes_and_unknown_names(tmp_path, capsys):
-    assert benchmark.main(["--quick", "--episodes", "0", "--out", str(tmp_path)]) == 2
-    assert "error" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as stop:
+        benchmark.main(["--quick", "--episodes", "0", "--out", str(tmp_path)])
+    assert stop.value.code == 2 and "error: --episodes" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         benchmark.main(["--controller", "pid"])
     with pytest.raises(ValueError, match="unknown"):
@@ -260,7 +261,8 @@ def test_cli_offers_the_robot_columns(tmp_path, capsys):
     parser_args = benchmark._parse_args(["--env", "robot", "robot+degraded", "--robot-episodes", "1", "0"])
     assert parser_args.envs == ["robot", "robot+degraded"] and parser_args.robot_episodes == [1, 0]
     assert set(benchmark._parse_args([]).envs) == set(ALL_ENVS) == {*ENVS, "robot", "robot+degraded"}
-    assert benchmark.main(["--robot-episodes", "-1", "0", "--out", str(tmp_path)]) == 2
-    assert "error" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as stop:
+        benchmark.main(["--robot-episodes", "-1", "0", "--out", str(tmp_path)])
+    assert stop.value.code == 2 and "--robot-episodes" in capsys.readouterr().err
     quick = PRESETS["quick"]
     assert sum(quick.robot_episodes.values()) <= 3 and quick.robot_max_steps <= 60

@@ -361,7 +361,9 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point (see the module docstring)."""
-    args = _parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    args.preset = args.preset or "quick"
     settings = replace(PRESETS[args.preset], version=args.version)
     if args.episodes is not None:
         settings = replace(settings, episodes=args.episodes)
@@ -381,12 +383,10 @@ def main(argv: list[str] | None = None) -> int:
         settings = replace(settings, solve_episodes=args.solve_episodes)
     if settings.episodes < 1 or min(settings.nmpc_episodes.values()) < 0 or (settings.max_episode_steps or 1) < 1 \
             or min(settings.robot_episodes.values()) < 0:
-        print("error: --episodes and --max-episode-steps must be >= 1, --nmpc-episodes and --robot-episodes >= 0")
-        return 2
+        parser.error("--episodes and --max-episode-steps must be >= 1, --nmpc-episodes and --robot-episodes >= 0")
     if settings.solve_episodes < 1 or args.solve_jobs < 1 or len(set(settings.solve_seeds)) != len(
             settings.solve_seeds):
-        print("error: --solve-episodes and --solve-jobs must be >= 1, --solve-seeds distinct")
-        return 2
+        parser.error("--solve-episodes and --solve-jobs must be >= 1, --solve-seeds distinct")
     from tqdm.auto import tqdm
 
     robot = [e for e in args.envs if e in ROBOT_CONDITIONS]

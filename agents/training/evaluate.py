@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -319,7 +320,7 @@ def main(argv: list[str] | None = None) -> int:
         result = evaluate(controller, args.env, n_episodes=args.episodes, seed=args.seed, env_kwargs=env_kwargs,
                           n_envs=args.n_envs, progress=True)
     except (ValueError, TypeError, FileNotFoundError, json.JSONDecodeError) as error:
-        print(f"error: {error}")
+        print(f"error: {error}", file=sys.stderr)
         return 2
     tag = f"{name}_{args.env}_{result.task}" + ("_rand" if env_kwargs.get("randomize") else "") + f"_seed{args.seed}"
     out = Path(args.out) if args.out else Path("runs") / "eval" / tag
