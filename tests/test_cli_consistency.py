@@ -158,3 +158,11 @@ def test_the_cli_reference_is_current():
 def test_the_reference_writer_command(tmp_path, capsys):
     assert cli_common.main(["--markdown", str(tmp_path / "cli.md")]) == 0
     assert (tmp_path / "cli.md").read_text() == reference_markdown()
+
+
+def test_an_unknown_subcommand_error_lists_only_the_current_names(parsers, capsys):
+    with pytest.raises(SystemExit) as done:
+        parsers["pectoral-fish"].parse_args(["frobnicate"])
+    assert done.value.code == 2
+    err = capsys.readouterr().err
+    assert "'patterns'" in err and "'step-rate'" in err and "'demo'" not in err and "'bench'" not in err

@@ -125,16 +125,29 @@ def deprecated_alias(container, old: str, canonical: argparse.Action) -> argpars
     return container.add_argument(old, action=DeprecatedAlias, canonical=canonical)
 
 
+class _Choices(dict):
+    """Subcommand name -> parser; iterating skips the deprecated names (so no message lists them), ``in`` does not."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.hidden: set[str] = set()
+
+    def __iter__(self):
+        return (name for name in super().__iter__() if name not in self.hidden)
+
+
 class _Subcommands(argparse._SubParsersAction):  # argparse's only way to dispatch subcommands
     """Subparsers that also accept deprecated names (hidden, with a notice); ``dest`` gets the new name."""
 
     def __init__(self, *args, **kwargs) -> None:
         super().__init__(*args, **kwargs)
+        self._name_parser_map = self.choices = _Choices(self._name_parser_map)
         self.deprecated: dict[str, str] = {}
 
     def add_deprecated(self, old: str, new: str) -> None:
-        """Let ``old`` run the subcommand ``new`` for one release; ``--help`` does not list it."""
+        """Let ``old`` run the subcommand ``new`` for one release; neither ``--help`` nor an error lists it."""
         self.choices[old] = self.choices[new]
+        self.choices.hidden.add(old)
         self.deprecated[old] = new
 
     def add_parser(self, name: str, **kwargs) -> argparse.ArgumentParser:
