@@ -1,11 +1,11 @@
 """Run a controller (a trained policy, the NMPC or the hand baseline) on the robotic fish (or the emulated one).
 
-Examples::
+Examples (``pectoral-deploy``, also ``python -m pectoral_gym.hardware.deploy``)::
 
-    python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 --episodes 3
-    python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal/model.zip --emulate --speed 2 --episodes 1
-    python -m pectoral_gym.hardware.deploy --controller nmpc --emulate --episodes 1
-    python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --episodes 100 --jobs 2
+    pectoral-deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 --episodes 3
+    pectoral-deploy --policy runs/ppo-goal/model.zip --emulate --speed 2 --episodes 1
+    pectoral-deploy --controller nmpc --emulate --episodes 1
+    pectoral-deploy --controller hand --emulate --lockstep --episodes 100 --jobs 2
 
 ``--controller nmpc`` plans on the averaged model (:class:`pectoral_gym.agents.nmpc.controller.NMPCController`, the same
 controller as in simulation) with its step budget set to ``--solve-fraction`` of the control period
@@ -57,8 +57,8 @@ from pectoral_gym.hardware.deploy_cli import check_args, make_parser, rig_condit
 from pectoral_gym.hardware.emurig import RigConditions, open_rig
 from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handlers
 
-__all__ = ["main", "make_controller", "plot_trajectories", "random_start", "run_episode", "run_episodes",
-           "solver_summary"]
+__all__ = ["build_parser", "main", "make_controller", "plot_trajectories", "random_start", "run_episode",
+           "run_episodes", "solver_summary"]
 
 
 def random_start(rng: np.random.Generator, inset: float = tk.START_INSET) -> tuple[float, float, float]:
@@ -254,7 +254,7 @@ def _run_real_time(parser: argparse.ArgumentParser, args: argparse.Namespace, co
         started = time.perf_counter()
         try:
             summaries = run_episodes(env, controller, args.episodes, log_path, args.seed, robot,
-                                     progress=not args.quiet)
+                                     progress=not args.no_progress)
         except (RuntimeError, OSError) as err:  # e.g. no fish seen at reset, the robot not confirming a stop
             raise _RunError(f"{err} (log so far: {log_path})") from err
         wall_time = time.perf_counter() - started
@@ -302,7 +302,7 @@ def _run_lockstep(parser: argparse.ArgumentParser, args: argparse.Namespace, con
             written += 1
 
         try:
-            results = run_lockstep(job, range(args.episodes), args.jobs, write, progress=not args.quiet,
+            results = run_lockstep(job, range(args.episodes), args.jobs, write, progress=not args.no_progress,
                                    controller=controller)
         except EpisodeError as err:
             if err.setup:  # the settings, found wrong by the rig or the env
@@ -315,12 +315,17 @@ def _run_lockstep(parser: argparse.ArgumentParser, args: argparse.Namespace, con
             merge_solver([r.solver for r in results]), wall_time)
 
 
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``pectoral-deploy`` (:func:`pectoral_gym.hardware.deploy_cli.make_parser`)."""
+    return make_parser(__doc__.split("\n\n")[0])
+
+
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit status (0 done, 1 a device failed; 2 via SystemExit: bad argument).
 
     Every resource (emulated robot, radio link, camera, env) is released on every path out.
     """
-    parser = make_parser(__doc__.split("\n\n")[0])
+    parser = build_parser()
     args = parser.parse_args(argv)
     try:
         conditions = rig_conditions(args)

@@ -194,4 +194,4 @@ def check_frame_size(frame: Any, model: Any, calibration: str | Path | None) -> 
                                                                                  "--calibration)"
         raise ValueError(f"the camera gives {width}x{height} px frames but {what} is for {model.width}x"
                          f"{model.height} px: calibrate at the camera's resolution "
-                         "(python -m pectoral_gym.hardware.vision.calibrate) or set the camera to the calibrated one")
+                         "(pectoral-camera-calibrate) or set the camera to the calibrated one")

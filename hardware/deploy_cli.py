@@ -1,4 +1,4 @@
-"""The command line of ``python -m pectoral_gym.hardware.deploy``: its arguments and every check of them alone."""
+"""The command line of ``pectoral-deploy``: its arguments and every check of them alone."""
 
 from __future__ import annotations
 
@@ -14,31 +14,31 @@ from pectoral_gym.hardware.deploy_checks import (
     robot_address,
 )
 from pectoral_gym.hardware.emurig import RigConditions
+from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, prog_name
 
 __all__ = ["check_args", "make_parser", "rig_conditions"]
 
 _EXAMPLES = """examples:
-  python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --emulate --speed 2 --episodes 2 --out dryrun
-  python -m pectoral_gym.hardware.deploy --controller nmpc --emulate --speed 2 --episodes 1
-  python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --episodes 100 --out lockstep
-  python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --episodes 100 --jobs 2
-  python -m pectoral_gym.hardware.deploy --controller hand --emulate --lockstep --radio-latency 0.1 \
+  pectoral-deploy --policy runs/ppo-goal --emulate --speed 2 --episodes 2 --out dryrun
+  pectoral-deploy --controller nmpc --emulate --speed 2 --episodes 1
+  pectoral-deploy --controller hand --emulate --lockstep --episodes 100 --out lockstep
+  pectoral-deploy --controller hand --emulate --lockstep --episodes 100 --jobs 2
+  pectoral-deploy --controller hand --emulate --lockstep --radio-latency 0.1 \\
       --radio-loss 0.1 --camera-drop 0.1 --pose-noise-mm 5 --pose-noise-deg 2
-  python -m pectoral_gym.hardware.deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 \
+  pectoral-deploy --policy runs/ppo-goal --port /dev/ttyUSB0 --camera 0 \\
       --calibration calibration.json --robot-address 0013A20012345678 --episodes 3 --out tank-run
-  python -m pectoral_gym.hardware.deploy --controller excite --port /dev/ttyUSB0 --camera 0 \
-      --calibration calibration.json --episodes 6 --max-steps 60 --out id-run     # an identification run
-  python -m pectoral_gym.hardware.deploy --controller excite --emulate --lockstep --emulate-params robot_true.json \
-      --episodes 6 --max-steps 60 --out id-run                                      # ... on an emulated robot
+  pectoral-deploy --controller excite --port /dev/ttyUSB0 --camera 0 \\
+      --calibration calibration.json --episodes 6 --max-episode-steps 60 --out id-run   # an identification run
+  pectoral-deploy --controller excite --emulate --lockstep --emulate-params robot_true.json \\
+      --episodes 6 --max-episode-steps 60 --out id-run                                  # ... on an emulated robot
 
 exit status: 0 done; 1 a device failed (no frame, no fish seen, robot not answering); 2 a bad argument."""
 
 
 def make_parser(description: str) -> argparse.ArgumentParser:
-    """The argument parser of ``python -m pectoral_gym.hardware.deploy`` (``description``: its first line)."""
-    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.hardware.deploy",
-                                     description=description,
-                                     epilog=_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    """The argument parser of ``pectoral-deploy`` (``description``: its first line)."""
+    parser = argparse.ArgumentParser(prog=prog_name("pectoral-deploy", "pectoral_gym.hardware.deploy"),
+                                     description=description, epilog=_EXAMPLES, formatter_class=HelpFormatter)
     lo_speed, hi_speed = SPEED_RANGE
     lo_period, hi_period = CONTROL_PERIOD_RANGE
     parser.add_argument("--controller", choices=("policy", "nmpc", "hand", "excite"), default="policy",
@@ -81,7 +81,9 @@ def make_parser(description: str) -> argparse.ArgumentParser:
     parser.add_argument("--control-period", type=float, default=None, metavar="S",
                         help=f"seconds between actions, in [{lo_period}, {hi_period}] (default: the policy's own "
                              "from its run folder, else 0.5); a policy is refused at another period")
-    parser.add_argument("--max-steps", type=int, default=240, help="steps per episode, >= 1 (default %(default)s)")
+    deprecated_alias(parser, "--max-steps", parser.add_argument(
+        "--max-episode-steps", dest="max_steps", type=int, default=240, metavar="N",
+        help="steps per episode, >= 1 (default %(default)s)"))
     parser.add_argument("--speed", type=float, default=1.0,
                         help=f"emulated clock speed-up, in [{lo_speed}, {hi_speed}] (--emulate only; "
                              "default %(default)s)")
@@ -89,7 +91,7 @@ def make_parser(description: str) -> argparse.ArgumentParser:
                         help="--emulate only: the emulated fish's parameters (a FishParams file, e.g. a robot "
                              "calibrated from its run logs; default: Table 1's)")
     parser.add_argument("--calibration", default=None, metavar="JSON",
-                        help="camera calibration (python -m pectoral_gym.hardware.vision.calibrate), made at the "
+                        help="camera calibration (pectoral-camera-calibrate), made at the "
                              "camera's resolution (default: the emulator's camera model)")
     parser.add_argument("--geofence", type=float, default=0.05, metavar="M",
                         help="clearance kept from the walls on top of the stopping distance [m] (default %(default)s)")
@@ -114,7 +116,8 @@ def make_parser(description: str) -> argparse.ArgumentParser:
                              "are tracked in time under CPU load (needs root or a 'nice' limit in "
                              "/etc/security/limits.conf; else a warning; 0: leave it as it is; not with --lockstep, "
                              "where simulated time makes it irrelevant) (default %(default)s)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+    deprecated_alias(parser, "--quiet", parser.add_argument("--no-progress", action="store_true",
+                                                            help="no progress bar"))
     return parser
 
 
@@ -142,7 +145,7 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
         parser.error("--radio-*, --camera-* and --pose-noise-* degrade the emulated robot: they need --emulate")
     if (args.controller == "policy") != (args.policy is not None):
         parser.error("--policy is needed with --controller policy, and only then")
-    for flag, value in (("--episodes", args.episodes), ("--max-steps", args.max_steps)):
+    for flag, value in (("--episodes", args.episodes), ("--max-episode-steps", args.max_steps)):
         if value < 1:
             parser.error(f"{flag} must be >= 1, got {value}")
     if args.seed < 0:

@@ -1,12 +1,13 @@
 """Emulated robotic fish: speaks the radio protocol, runs the full model, obeys the firmware rules.
 
 Use it in-process (:class:`EmulatedRobot`, as ``pectoral_gym.hardware.deploy --emulate`` and the tests do) or as a
-process that listens on a pseudo-terminal or a TCP port::
+process that listens on a pseudo-terminal or a TCP port (``pectoral-emulator``, also
+``python -m pectoral_gym.hardware.emulator``)::
 
-    python -m pectoral_gym.hardware.emulator                       # prints the pty path, e.g. /dev/pts/7
-    python -m pectoral_gym.hardware.emulator --port 5700 --camera-port 5600 --speed 2
+    pectoral-emulator                       # prints the pty path, e.g. /dev/pts/7
+    pectoral-emulator --port 5700 --camera-port 5600 --speed 2
 
-then ``python -m pectoral_gym.hardware.deploy --port socket://127.0.0.1:5700 --camera emu://127.0.0.1:5600 ...``.
+then ``pectoral-deploy --port socket://127.0.0.1:5700 --camera emu://127.0.0.1:5600 ...``.
 
 The emulator stands in for both XBee modules and the dsPIC: it reads the PC's Transmit Request frames
 and answers with Receive Packet frames. Its clock runs ``speed`` times faster than the PC's clock
@@ -41,8 +42,9 @@ from pectoral_gym.hardware.realtime import settle_garbage
 from pectoral_gym.model import strokes
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
 from pectoral_gym.model.spec import FULL_REFERENCE, FullSpec
+from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
 
-__all__ = ["EmulatedRobot", "ROBOT_ADDRESS", "main"]
+__all__ = ["EmulatedRobot", "ROBOT_ADDRESS", "build_parser", "main"]
 
 ROBOT_ADDRESS = 0x0013A20000000001  # 64-bit source address the emulated XBee reports
 _POLL = 0.002  # poll period of the I/O loop [clock s]
@@ -322,10 +324,17 @@ class EmulatedRobot:
                                        self.model.fin_angles()[1][0].copy(), peak, self.firmware.running))
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run an emulated robot until Ctrl-C (or ``--duration``)."""
-    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.hardware.emulator",
-                                     description=__doc__.split("\n\n")[0])
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``pectoral-emulator``."""
+    parser = argparse.ArgumentParser(
+        prog=prog_name("pectoral-emulator", "pectoral_gym.hardware.emulator"),
+        description=__doc__.split("\n\n")[0] + " Runs until Ctrl-C (or --duration).",
+        formatter_class=HelpFormatter,
+        epilog=examples("pectoral-emulator",
+                        "pectoral-emulator --port 5700 --camera-port 5600 --speed 2",
+                        "pectoral-deploy --port socket://127.0.0.1:5700 --camera emu://127.0.0.1:5600 "
+                        "--controller hand --speed 2   # in a second shell",
+                        note="The pseudo-terminal or port it prints is the --port of pectoral-deploy."))
     parser.add_argument("--port", type=int, default=None, metavar="TCP_PORT",
                         help="listen on this TCP port (default: a pseudo-terminal)")
     parser.add_argument("--host", default="127.0.0.1", help="TCP interface (default %(default)s)")
@@ -339,6 +348,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--loss", type=float, default=0.0, help="probability of losing an incoming message")
     parser.add_argument("--seed", type=int, default=None, help="seed of loss injection and camera noise")
     parser.add_argument("--duration", type=float, default=None, metavar="S", help="exit after this many wall s")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run an emulated robot until Ctrl-C (or ``--duration``)."""
+    parser = build_parser()
     args = parser.parse_args(argv)
     start = None if args.start is None else (args.start[0], args.start[1], math.radians(args.start[2]))
     try:

@@ -1,6 +1,6 @@
-"""Command line: ``python -m pectoral_gym.scaling identify|validate|fidelity|yaw-balance|calibrate``.
+"""Command line: ``pectoral-scaling identify|fidelity|yaw-balance|validate|calibrate``.
 
-The console script is ``pectoral-scaling``.
+Also ``python -m pectoral_gym.scaling``.
 """
 
 from __future__ import annotations
@@ -9,7 +9,6 @@ import argparse
 import csv
 import json
 import math
-import sys
 import time
 from pathlib import Path
 
@@ -18,14 +17,15 @@ import numpy as np
 from pectoral_gym.model.kfunctions import K_NAMES, default_scaling_path
 from pectoral_gym.scaling.calibration import cli as calibration_cli
 from pectoral_gym.scaling.identification.grids import GRIDS, GridError, load_grid
-from pectoral_gym.scaling.validation import fidelity, yaw_balance
+from pectoral_gym.scaling.validation import fidelity, validate, yaw_balance
+from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name, subcommands
 
-__all__ = ["main"]
+__all__ = ["build_parser", "main"]
 
 # ``identify --quick``: the settings it overrides (with ``grid="quick"``).
 QUICK_IDENTIFY = {"horizon": 3.0, "folds": 2, "max_degree": 1, "holdout": 12, "jobs": 1, "yaw_damping": "paper",
-                  "quiet": True}
-_QUICK_TEXT = " ".join(f"--{k.replace('_', '-')} {v}" if v is not True else f"--{k}"
+                  "no_progress": True}
+_QUICK_TEXT = " ".join(f"--{k.replace('_', '-')} {v}" if v is not True else f"--{k.replace('_', '-')}"
                        for k, v in QUICK_IDENTIFY.items())
 
 
@@ -36,9 +36,13 @@ def _identify_parser(sub) -> None:
         description="Identify the scaling functions K_fx, K_fy, K_m (paper Sec. 4.3): full-model steady states on a "
         "grid of right-fin patterns, one NMPC per pattern, then the closed form: cross-validated polynomials "
         "and tensor-product cubic splines compete on off-grid held-out patterns.",
+        epilog=examples("pectoral-scaling identify --quick --out k_quick",
+                        "pectoral-scaling identify --params robot.json --out robot_k",
+                        "pectoral-scaling identify --grid env --jobs 2 --out scaling_identification --install"),
     )
     p.add_argument("--grid", default="env", help=f"preset ({', '.join(GRIDS)}) or a grid JSON file (default: env)")
-    p.add_argument("--out", type=Path, default=Path("scaling_identification"), help="output folder")
+    p.add_argument("--out", type=Path, default=Path("scaling_identification"), help="output folder (default: "
+                   "%(default)s)")
     p.add_argument("--params", metavar="FILE", default=None,
                    help="model parameters of the robot: a JSON or YAML file of FishParams fields (others keep "
                         "Table 1); recorded in the coefficients file's metadata (default: Table 1)")
@@ -64,7 +68,7 @@ def _identify_parser(sub) -> None:
     p.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
     p.add_argument("--seed", type=int, default=0, help="seed of the CV folds (default 0)")
     p.add_argument("--jobs", type=int, default=0, help="NMPC worker processes (default 0: all cores)")
-    p.add_argument("--quiet", action="store_true", help="no progress bars")
+    deprecated_alias(p, "--quiet", p.add_argument("--no-progress", action="store_true", help="no progress bars"))
     p.add_argument("--quick", action="store_true",
                    help="smoke run in seconds (tests, CI, trying the command): overrides --grid with the 12-pattern "
                         f"'quick' grid and sets {_QUICK_TEXT}; the file records metadata['quick'] (K not meant for "
@@ -90,16 +94,14 @@ def _write_table(result, path: Path) -> None:
             ])
 
 
-def _run_identify(args) -> int:
+def _run_identify(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     from pectoral_gym.model.params import FishParams, load_params
     from pectoral_gym.scaling.identification.identify import identify
     from pectoral_gym.scaling.identification.nmpc import IdentificationNmpcSettings
 
     if args.quick:
         if args.install:
-            print("error: --quick identifies a K that is not meant for use; it cannot be --install'ed",
-                  file=sys.stderr)
-            return 2
+            parser.error("--quick identifies a K that is not meant for use; it cannot be --install'ed")
         args.grid = "quick"
         for key, value in QUICK_IDENTIFY.items():
             setattr(args, key, value)
@@ -108,16 +110,14 @@ def _run_identify(args) -> int:
         settings = IdentificationNmpcSettings(args.horizon, args.sampling, args.q, args.q_terminal, args.substeps)
         params = load_params(args.params) if args.params else FishParams()
     except (GridError, ValueError, FileNotFoundError) as err:
-        print(f"error: {err}", file=sys.stderr)
-        return 2
+        parser.error(str(err))
     if (args.max_degree < 0 or args.folds < 2 or args.jobs < 0 or not args.fit_target > 0 or args.holdout < 0
             or not args.turn_target > 0):
-        print("error: need --max-degree >= 0, --folds >= 2, --jobs >= 0, --fit-target > 0, --holdout >= 0, "
-              "--turn-target > 0", file=sys.stderr)
-        return 2
+        parser.error("need --max-degree >= 0, --folds >= 2, --jobs >= 0, --fit-target > 0, --holdout >= 0, "
+                     "--turn-target > 0")
     print(f"grid {grid.name!r}: {len(grid)} right-fin patterns")
     start = time.perf_counter()
-    result = identify(grid, params, settings, args.max_degree, args.folds, args.seed, args.jobs, not args.quiet,
+    result = identify(grid, params, settings, args.max_degree, args.folds, args.seed, args.jobs, not args.no_progress,
                       args.fit_target, args.holdout, args.turn_target, args.yaw_damping,
                       args.harmonics)
     total = time.perf_counter() - start
@@ -160,58 +160,42 @@ def _run_identify(args) -> int:
     return 0
 
 
-def _run_validate(argv: list[str]) -> int:
-    """``validate``: the options of :func:`~pectoral_gym.scaling.validation.validate.main` and ``--params FILE``.
-
-    ``FILE`` holds model parameters.
-    """
-    from pectoral_gym.model.kfunctions import ScalingFunctions
-    from pectoral_gym.model.params import load_params
-    from pectoral_gym.scaling.validation import validate as v
-    parser = v.build_parser()
-    parser.add_argument("--params", metavar="FILE", default=None,
-                        help="model parameters of both models: a JSON or YAML file of FishParams fields "
-                             "(default: Table 1); the report flags a difference from the coefficients' own")
-    args = parser.parse_args(argv)
-    if args.params is None:
-        return v.main(argv)
-    if args.n_single < 1 or args.n_two < 1:
-        parser.error(f"--n-single and --n-two must be >= 1, got {args.n_single} and {args.n_two}")
-    path = Path(args.coefficients) if args.coefficients else default_scaling_path()
-    try:
-        params = load_params(args.params)
-        scaling = ScalingFunctions.load(path)
-    except (OSError, ValueError) as err:
-        parser.error(str(err))
-    results = v.validate(scaling, params=params, out_dir=args.out, n_single=args.n_single, n_two=args.n_two,
-                         seed=args.seed, quick=args.quick, plots=not args.no_plots, source=str(path),
-                         progress=not args.no_progress)
-    print(v.rendering.summary_text(results, Path(args.out)))
-    return 0
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``pectoral-scaling`` (each subcommand stores its parser as ``parser``)."""
+    parser = argparse.ArgumentParser(
+        prog=prog_name("pectoral-scaling", "pectoral_gym.scaling", "pectoral_gym.scaling.cli"),
+        description="Identify (paper Sec. 4.3) and validate the scaling functions K of the averaged model; "
+                    "calibrate the model's parameters from run logs.",
+        formatter_class=HelpFormatter,
+        epilog=examples("pectoral-scaling identify --quick --out k_quick",
+                        "pectoral-scaling validate --quick --out scaling_validation",
+                        "pectoral-scaling fidelity --quick --out fidelity",
+                        "pectoral-scaling calibrate --logs run1.jsonl run2.jsonl --out robot.json"),
+    )
+    sub = subcommands(parser, dest="command", metavar="COMMAND", required=True)
+    _identify_parser(sub)
+    fidelity.add_parser(sub)
+    yaw_balance.add_parser(sub)
+    validate.add_arguments(sub.add_parser(
+        "validate", help="averaged (identified K) against full on held-out patterns",
+        description=validate.DESCRIPTION, epilog=validate.EXAMPLES))
+    calibration_cli.add_parser(sub)
+    for each in sub.choices.values():
+        each.set_defaults(parser=each)
+    return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``python -m pectoral_gym.scaling`` and ``pectoral-scaling``."""
-    argv = sys.argv[1:] if argv is None else list(argv)
-    if argv and argv[0] == "validate":
-        return _run_validate(argv[1:])
-    parser = argparse.ArgumentParser(
-        prog="pectoral-scaling",
-        description="Identify (paper Sec. 4.3) and validate the scaling functions K of the averaged model.",
-    )
-    sub = parser.add_subparsers(dest="command", required=True)
-    _identify_parser(sub)
-    fidelity.add_parser(sub)
-    yaw_balance.add_parser(sub)
-    sub.add_parser("validate", help="averaged (identified K) against full on held-out patterns; see validate --help")
-    calibration_cli.add_parser(sub)
-    args = parser.parse_args(argv)
+    args = build_parser().parse_args(argv)
     np.seterr(all="ignore")
+    if args.command == "validate":
+        return validate.run(args, args.parser)
     if args.command == "calibrate":
         return calibration_cli.main(args)
     if args.command == "yaw-balance":
         return yaw_balance.main(args)
-    return fidelity.main(args) if args.command == "fidelity" else _run_identify(args)
+    return fidelity.main(args) if args.command == "fidelity" else _run_identify(args, args.parser)
 
 
 if __name__ == "__main__":

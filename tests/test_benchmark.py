@@ -82,10 +82,11 @@ def test_markdown_reports_throughput_and_errors():
 
 
 def test_cli_rejects_bad_sizes_and_unknown_names(tmp_path, capsys):
-    assert benchmark.main(["--quick", "--episodes", "0", "--out", str(tmp_path)]) == 2
-    assert "error" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as stop:
+        benchmark.main(["--quick", "--episodes", "0", "--out", str(tmp_path)])
+    assert stop.value.code == 2 and "error: --episodes" in capsys.readouterr().err
     with pytest.raises(SystemExit):
-        benchmark.main(["--controllers", "pid"])
+        benchmark.main(["--controller", "pid"])
     with pytest.raises(ValueError, match="unknown"):
         run_benchmark(BenchmarkSettings(), controllers=("pid",))
 
@@ -143,9 +144,9 @@ def test_the_simulated_columns_run_on_the_version_asked_for_v1_by_default(tmp_pa
         run_benchmark(settings, controllers=("random",), tasks=("goal",), envs=tuple(ENVS), throughput=False)
         assert set(seen) == expected and len(seen) == 3
     assert benchmark._parse_args([]).version == "v1"
-    assert benchmark._parse_args(["--version", "v0"]).version == "v0"
+    assert benchmark._parse_args(["--env-version", "v0"]).version == "v0"
     with pytest.raises(SystemExit):
-        benchmark._parse_args(["--version", "v2"])
+        benchmark._parse_args(["--env-version", "v2"])
 
 
 def test_robot_cells_come_from_the_deploy_summary(tmp_path):
@@ -257,10 +258,11 @@ def test_a_policy_gets_robot_cells_on_its_own_task_only(tmp_path, monkeypatch):
 
 
 def test_cli_offers_the_robot_columns(tmp_path, capsys):
-    parser_args = benchmark._parse_args(["--envs", "robot", "robot+degraded", "--robot-episodes", "1", "0"])
+    parser_args = benchmark._parse_args(["--env", "robot", "robot+degraded", "--robot-episodes", "1", "0"])
     assert parser_args.envs == ["robot", "robot+degraded"] and parser_args.robot_episodes == [1, 0]
     assert set(benchmark._parse_args([]).envs) == set(ALL_ENVS) == {*ENVS, "robot", "robot+degraded"}
-    assert benchmark.main(["--robot-episodes", "-1", "0", "--out", str(tmp_path)]) == 2
-    assert "error" in capsys.readouterr().out
+    with pytest.raises(SystemExit) as stop:
+        benchmark.main(["--robot-episodes", "-1", "0", "--out", str(tmp_path)])
+    assert stop.value.code == 2 and "--robot-episodes" in capsys.readouterr().err
     quick = PRESETS["quick"]
     assert sum(quick.robot_episodes.values()) <= 3 and quick.robot_max_steps <= 60

@@ -66,7 +66,7 @@ def test_cli_from_image_round_trip_through_json(tmp_path):
     image_path = tmp_path / "dots.png"
     cv2.imwrite(str(image_path), _dot_frame(camera))
     output = tmp_path / "cal.json"
-    assert main(["--image", str(image_path), "-o", str(output)]) == 0
+    assert main(["--image", str(image_path), "--out", str(output)]) == 0
     data = json.loads(output.read_text())
     assert data["width"] == 640 and data["height"] == 360 and data["reprojection_rms_px"] < 1e-9
     loaded = CameraModel.load(output)
@@ -81,14 +81,14 @@ def test_cli_from_image_round_trip_through_json(tmp_path):
 
 def test_cli_corners_points_and_emulator(tmp_path, capsys):
     corners = [f"{u},{v}" for u, v in _project(tank_corners())]
-    assert main(["--corners", *corners, "--size", "640x360", "-o", str(tmp_path / "a.json")]) == 0
+    assert main(["--corners", *corners, "--size", "640x360", "--out", str(tmp_path / "a.json")]) == 0
     np.testing.assert_allclose(CameraModel.load(tmp_path / "a.json").homography, TRUE_H, rtol=1e-9)
     tank = np.array([[0.2, 0.1], [2.0, 0.2], [2.1, 1.0], [0.3, 1.1], [1.1, 0.6], [0.7, 0.9]])
     points = [f"{x},{y}:{u},{v}" for (x, y), (u, v) in zip(tank, _project(tank), strict=True)]
-    assert main(["--points", *points, "--size", "640x360", "-o", str(tmp_path / "b.json")]) == 0
+    assert main(["--points", *points, "--size", "640x360", "--out", str(tmp_path / "b.json")]) == 0
     report = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert report["points"] == 6 and report["reprojection_max_px"] < 1e-9
-    assert main(["--from-emulator", "-o", str(tmp_path / "c.json")]) == 0
+    assert main(["--from-emulator", "--out", str(tmp_path / "c.json")]) == 0
     np.testing.assert_allclose(CameraModel.load(tmp_path / "c.json").homography, CameraModel.default().homography,
                                rtol=1e-9, atol=1e-12)
 
@@ -104,7 +104,7 @@ def test_cli_errors(tmp_path):
 
 def test_overlay_draws_the_calibrated_outline(tmp_path):
     overlay = tmp_path / "overlay.png"
-    assert main(["--from-emulator", "-o", str(tmp_path / "c.json"), "--overlay", str(overlay)]) == 0
+    assert main(["--from-emulator", "--out", str(tmp_path / "c.json"), "--overlay", str(overlay)]) == 0
     image = cv2.imread(str(overlay))
     camera = CameraModel.default()
     u, v = np.rint(camera.tank_to_pixel((TANK_LENGTH / 2, 0.0))).astype(int)  # middle of the near wall
@@ -115,7 +115,7 @@ def test_overlay_draws_the_calibrated_outline(tmp_path):
 
 
 @pytest.mark.parametrize(("args", "message"), [
-    (["--from-emulator", "-o", "{tmp}/missing/cal.json"], "cannot write"),
+    (["--from-emulator", "--out", "{tmp}/missing/cal.json"], "cannot write"),
     (["--from-emulator", "--dot-hue", "500"], "0..179"),
     (["--from-emulator", "--dot-hue", "30"], "only with --image"),
     (["--from-emulator", "--size", "1280x720"], "does not match"),
@@ -127,13 +127,13 @@ def test_overlay_draws_the_calibrated_outline(tmp_path):
 def test_cli_bad_arguments_are_one_line_errors_with_status_2(tmp_path, capsys, args, message):
     """Issue 30: a bad argument or an unwritable file is an argparse error naming it, never a traceback."""
     args = [a.replace("{tmp}", str(tmp_path)) for a in args]
-    if "-o" not in args:
-        args += ["-o", str(tmp_path / "cal.json")]
+    if "--out" not in args:
+        args += ["--out", str(tmp_path / "cal.json")]
     with pytest.raises(SystemExit) as exit_info:
         main(args)
     assert exit_info.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert message in err[-1] and err[-1].startswith("python -m pectoral_gym.hardware.vision.calibrate: error:")
+    assert message in err[-1] and err[-1].startswith("pectoral-camera-calibrate: error:")
     assert not (tmp_path / "cal.json").exists()
 
 
@@ -142,5 +142,5 @@ def test_cli_help_shows_examples_and_defaults(capsys):
         main(["--help"])
     assert exit_info.value.code == 0
     text = capsys.readouterr().out
-    assert "examples:" in text and "python -m pectoral_gym.hardware.vision.calibrate --image" in text
+    assert "examples:" in text and "pectoral-camera-calibrate --image" in text
     assert "default calibration.json" in text and "default 60" in text

@@ -86,7 +86,7 @@ def test_steady_table_has_units(capsys):
     (["steady", "--model", "averaged", "--forcing", "taylor"], "unrecognized arguments: --forcing"),
     (["simulate", "--duration", "0", "--out", "unused"], "--duration must be a finite number > 0"),
     (["simulate", "--sample", "-1", "--out", "unused"], "--sample must be a finite number > 0"),
-    (["bench", "--steps", "0"], "--steps must be >= 1"),
+    (["step-rate", "--steps", "0"], "--steps must be >= 1"),
     (["frobnicate"], "invalid choice"),
     ([], "required"),
 ])
@@ -129,7 +129,7 @@ def test_simulate_compare_writes_both_models(capsys, tmp_path):
 
 
 def test_bench_quick_json_has_the_keys(capsys):
-    res = run_json(capsys, "bench", "--quick", "--json", "--steps", "50")
+    res = run_json(capsys, "step-rate", "--quick", "--json", "--steps", "50")
     assert {"single_env", "vector_env", "num_envs", "ratios", "targets", "all_met", "errors", "settings",
             "environment"} <= set(res)
     assert set(res["single_env"]) == {"PectoralFish-Averaged-v0", "PectoralFish-Full-v0", "CartPole-v1"}
@@ -175,7 +175,7 @@ def test_bench_against_keeps_each_rate_best_and_alternates(monkeypatch, tmp_path
 
 def test_bench_against_a_folder_without_the_package_is_a_usage_error(tmp_path, capsys):
     with pytest.raises(SystemExit) as exc:
-        main(["bench", "--against", str(tmp_path)])
+        main(["step-rate", "--against", str(tmp_path)])
     assert exc.value.code == 2
     assert "holds no pectoral_gym package" in capsys.readouterr().err
 
@@ -196,7 +196,7 @@ def test_console_script_steady_json():
 def test_bench_against_runs_both_checkouts(capsys):
     from pectoral_gym.tools.bench_compare import checkout_root
 
-    res = run_json(capsys, "bench", "--against", str(checkout_root()), "--rounds", "1", "--quick", "--json")
+    res = run_json(capsys, "step-rate", "--against", str(checkout_root()), "--rounds", "1", "--quick", "--json")
     rows = {r["rate"]: r for r in res["rows"]}
     assert rows["single: CartPole-v1"]["this"] > 0 and rows["single: CartPole-v1"]["other"] > 0
     assert rows["vector: PectoralFish-Averaged-v0 @ 4096"]["ratio"] > 0

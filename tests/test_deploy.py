@@ -34,8 +34,8 @@ def policy_zip(tmp_path_factory):
 @pytest.mark.slow  # ~15 s: torch import and a short PPO run
 def test_deploy_emulate_end_to_end(policy_zip, tmp_path, capsys):
     out = tmp_path / "run"
-    code = main(["--policy", str(policy_zip), "--emulate", "--speed", "2", "--episodes", "2", "--max-steps", "3",
-                 "--out", str(out), "--quiet", "--tracking-timeout", "1.5"])
+    code = main(["--policy", str(policy_zip), "--emulate", "--speed", "2", "--episodes", "2",
+                 "--max-episode-steps", "3", "--out", str(out), "--no-progress", "--tracking-timeout", "1.5"])
     assert code == 0
     lines = [json.loads(line) for line in (out / "steps.jsonl").read_text().splitlines()]
     steps = [r for r in lines if r.get("event") != "reset"]
@@ -55,8 +55,8 @@ def test_deploy_runs_a_policy_that_observes_the_fins_on_the_fin_replay(tmp_path)
     path = tmp_path / "fins.zip"
     PPO("MlpPolicy", env, n_steps=32, batch_size=32, n_epochs=1, seed=0, device="cpu").save(path)
     out = tmp_path / "run"
-    code = main(["--policy", str(path), "--emulate", "--speed", "2", "--episodes", "1", "--max-steps", "3",
-                 "--out", str(out), "--quiet", "--tracking-timeout", "1.5"])
+    code = main(["--policy", str(path), "--emulate", "--speed", "2", "--episodes", "1", "--max-episode-steps", "3",
+                 "--out", str(out), "--no-progress", "--tracking-timeout", "1.5"])
     assert code == 0
     steps = [json.loads(line) for line in (out / "steps.jsonl").read_text().splitlines()]
     assert len([r for r in steps if r.get("event") != "reset"]) >= 1
@@ -101,8 +101,8 @@ def test_run_episodes_and_plot_on_the_emulator_fast(tmp_path):
 
 def _deploy(tmp_path, *extra):
     out = tmp_path / "run"
-    code = main(["--emulate", "--speed", "2", "--episodes", "1", "--max-steps", "4", "--out", str(out), "--quiet",
-                 "--tracking-timeout", "1.5", *extra])
+    code = main(["--emulate", "--speed", "2", "--episodes", "1", "--max-episode-steps", "4", "--out", str(out),
+                 "--no-progress", "--tracking-timeout", "1.5", *extra])
     assert code == 0
     steps = [json.loads(line) for line in (out / "steps.jsonl").read_text().splitlines()]
     return [r for r in steps if r.get("event") != "reset"], json.loads((out / "summary.json").read_text())
@@ -163,8 +163,8 @@ def test_raise_priority_sets_the_nice_value_of_threads_started_after_it():
 
 
 def test_the_deploy_asks_for_its_priority_before_anything_runs(tmp_path, _keep_the_test_process_priority):
-    assert main(["--controller", "hand", "--emulate", "--speed", "2", "--episodes", "1", "--max-steps", "1",
-                 "--quiet", "--nice", "-3", "--out", str(tmp_path)]) == 0
+    assert main(["--controller", "hand", "--emulate", "--speed", "2", "--episodes", "1", "--max-episode-steps", "1",
+                 "--no-progress", "--nice", "-3", "--out", str(tmp_path)]) == 0
     assert _keep_the_test_process_priority == [-3]
 
 
@@ -173,9 +173,10 @@ def test_a_lockstep_deploy_leaves_its_priority_alone(tmp_path, _keep_the_test_pr
     import threading
 
     done = []
+    # a lockstep clock takes its thread in: not pytest's
     thread = threading.Thread(target=lambda: done.append(main(
-        ["--controller", "hand", "--emulate", "--lockstep", "--episodes", "1", "--max-steps", "1", "--quiet",
-         "--nice", "-3", "--out", str(tmp_path)])))  # a lockstep clock takes its thread in: not pytest's
+        ["--controller", "hand", "--emulate", "--lockstep", "--episodes", "1", "--max-episode-steps", "1",
+         "--no-progress", "--nice", "-3", "--out", str(tmp_path)])))
     thread.start()
     thread.join(timeout=120)
     assert done == [0] and _keep_the_test_process_priority == []
@@ -206,7 +207,7 @@ def _error_line(capsys) -> str:
     (["--speed", "50"], "--speed must be in [0.1, 5.0]"),
     (["--speed", "5", "--tracking-timeout", "0.4"], "--tracking-timeout must be"),  # 0.08 s of wall time
     (["--episodes", "0"], "--episodes must be >= 1"),
-    (["--max-steps", "0"], "--max-steps must be >= 1"),
+    (["--max-episode-steps", "0"], "--max-episode-steps must be >= 1"),
     (["--seed", "-1"], "--seed must be >= 0"),
     (["--control-period", "0.01"], "--control-period must be in [0.1, 2.0]"),
     (["--control-period", "30"], "--control-period must be in [0.1, 2.0]"),
@@ -219,12 +220,12 @@ def _error_line(capsys) -> str:
 ])
 def test_bad_arguments_are_one_line_errors_with_status_2(tmp_path, capsys, args, message):
     (tmp_path / "broken.json").write_text("{not json")
-    argv = ["--controller", "hand", "--emulate", "--quiet", "--out", str(tmp_path / "run")]
+    argv = ["--controller", "hand", "--emulate", "--no-progress", "--out", str(tmp_path / "run")]
     with pytest.raises(SystemExit) as exit_info:
         main(argv + [a.replace("{tmp}", str(tmp_path)) for a in args])
     assert exit_info.value.code == 2
     line = _error_line(capsys)
-    assert line.startswith("python -m pectoral_gym.hardware.deploy: error:") and message in line
+    assert line.startswith("pectoral-deploy: error:") and message in line
 
 
 @pytest.mark.parametrize("address", ["-1", "12345", "1FFFFFFFFFFFFFFFF", "0013A2001234567G", "0x-13A20012345678"])
@@ -279,7 +280,7 @@ def test_calibration_for_another_image_size_is_refused_before_the_first_episode(
                                        "homography": [[500, 0, 80], [0, -500, 640], [0, 0, 1]]}))
     before = _alive()
     with pytest.raises(SystemExit) as exit_info:
-        main(["--controller", "hand", "--emulate", "--quiet", "--calibration", str(calibration),
+        main(["--controller", "hand", "--emulate", "--no-progress", "--calibration", str(calibration),
               "--out", str(tmp_path / "run")])
     assert exit_info.value.code == 2
     line = _error_line(capsys)
@@ -299,7 +300,7 @@ def test_a_failing_env_or_reset_is_exit_1_with_everything_released(tmp_path, cap
         raise RuntimeError("no fish seen for 5.0 s at reset (tracker: no frames); check the camera and the markers")
 
     monkeypatch.setattr(real, "reset", no_fish)
-    assert main(["--controller", "hand", "--emulate", "--quiet", "--out", str(tmp_path / "a")]) == 1
+    assert main(["--controller", "hand", "--emulate", "--no-progress", "--out", str(tmp_path / "a")]) == 1
     assert "error: no fish seen" in _error_line(capsys)
     _nothing_left(before)
 
@@ -308,8 +309,8 @@ def test_a_failing_env_or_reset_is_exit_1_with_everything_released(tmp_path, cap
             raise RuntimeError("supervisor could not start")
 
     monkeypatch.setattr(pectoral_gym.hardware.env, "HardwareFishEnv", Broken)
-    assert main(["--controller", "hand", "--emulate", "--quiet", "--out", str(tmp_path / "b")]) == 1
-    assert _error_line(capsys) == "python -m pectoral_gym.hardware.deploy: error: supervisor could not start"
+    assert main(["--controller", "hand", "--emulate", "--no-progress", "--out", str(tmp_path / "b")]) == 1
+    assert _error_line(capsys) == "pectoral-deploy: error: supervisor could not start"
     _nothing_left(before)
 
 
@@ -320,7 +321,7 @@ def test_take_over_is_passed_to_the_env_or_refused_clearly(tmp_path, capsys, mon
 
     if "take_over" not in inspect.signature(pectoral_gym.hardware.env.HardwareFishEnv).parameters:
         with pytest.raises(SystemExit) as exit_info:
-            main(["--controller", "hand", "--emulate", "--quiet", "--take-over", "--out", str(tmp_path)])
+            main(["--controller", "hand", "--emulate", "--no-progress", "--take-over", "--out", str(tmp_path)])
         assert exit_info.value.code == 2 and "no take_over option" in _error_line(capsys)
     seen = {}
 
@@ -330,7 +331,7 @@ def test_take_over_is_passed_to_the_env_or_refused_clearly(tmp_path, capsys, mon
             raise RuntimeError("recorded")
 
     monkeypatch.setattr(pectoral_gym.hardware.env, "HardwareFishEnv", Recorder)
-    assert main(["--controller", "hand", "--emulate", "--quiet", "--take-over", "--out", str(tmp_path)]) == 1
+    assert main(["--controller", "hand", "--emulate", "--no-progress", "--take-over", "--out", str(tmp_path)]) == 1
     assert seen == {"take_over": True}
 
 
@@ -343,7 +344,7 @@ def test_a_failed_start_exits_normally_in_a_fresh_process(tmp_path):
     calibration.write_text(json.dumps({"width": 320, "height": 180, "homography": [[100, 0, 10], [0, -100, 170],
                                                                                      [0, 0, 1]]}))
     done = subprocess.run([sys.executable, "-m", "pectoral_gym.hardware.deploy", "--controller", "hand", "--emulate",
-                           "--quiet", "--calibration", str(calibration), "--out", str(tmp_path / "run")],
+                           "--no-progress", "--calibration", str(calibration), "--out", str(tmp_path / "run")],
                           capture_output=True, text=True, timeout=300)
     assert done.returncode == 2, done.stderr
     assert "Traceback" not in done.stderr and "320x180" in done.stderr.strip().splitlines()[-1]

@@ -16,8 +16,8 @@ def _deploy(out, *extra, episodes=2, seed=5, steps=12):
     """The deploy in lockstep (the hand law unless ``extra`` names another controller: the last flag wins)."""
     from pectoral_gym.hardware import deploy
 
-    args = ["--controller", "hand", "--emulate", "--lockstep", "--episodes", str(episodes), "--max-steps",
-            str(steps), "--seed", str(seed), "--out", str(out), "--quiet", "--nice", "0", *extra]
+    args = ["--controller", "hand", "--emulate", "--lockstep", "--episodes", str(episodes), "--max-episode-steps",
+            str(steps), "--seed", str(seed), "--out", str(out), "--no-progress", "--nice", "0", *extra]
     result: dict = {}
     # a fresh VirtualClock takes the calling thread in: run the deploy in a thread of its own, as tests/test_lockstep.py
     thread = threading.Thread(target=lambda: result.setdefault("status", deploy.main(args)))

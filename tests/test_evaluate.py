@@ -188,9 +188,9 @@ def test_json_plot_and_table(tmp_path):
 
 def test_cli_rejects_bad_arguments(capsys, tmp_path):
     assert main(["--policy", str(tmp_path / "nothing"), "--episodes", "1", "--out", str(tmp_path)]) == 2
-    assert "neither" in capsys.readouterr().out
+    assert "neither" in capsys.readouterr().err
     with pytest.raises(SystemExit):
-        main(["--env", ENV])  # needs --policy or --baseline
+        main(["--env", ENV])  # needs --policy or --controller
 
 
 class FastBeatController(StraightController):

@@ -179,8 +179,8 @@ def _deploy(tmp_path, name, *extra, episodes=2):
     from pectoral_gym.hardware import deploy
 
     out = tmp_path / name
-    args = ["--controller", "hand", "--emulate", "--lockstep", "--episodes", str(episodes), "--max-steps", "8",
-            "--seed", "5", "--out", str(out), "--quiet", "--nice", "0", *extra]
+    args = ["--controller", "hand", "--emulate", "--lockstep", "--episodes", str(episodes), "--max-episode-steps", "8",
+            "--seed", "5", "--out", str(out), "--no-progress", "--nice", "0", *extra]
     assert _in_thread(lambda: deploy.main(args)) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert summary.pop("wall_time") > 0  # the one field that may differ
@@ -289,6 +289,6 @@ def test_lockstep_and_condition_flags_are_checked(args, message, capsys):
     from pectoral_gym.hardware import deploy
 
     with pytest.raises(SystemExit) as exit_info:
-        deploy.main(["--controller", "hand", "--quiet", *args])
+        deploy.main(["--controller", "hand", "--no-progress", *args])
     assert exit_info.value.code == 2
     assert message in capsys.readouterr().err

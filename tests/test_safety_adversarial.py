@@ -513,7 +513,7 @@ def test_fish_moved_by_the_reset_hook_is_not_read_as_a_speed_towards_a_wall(tmp_
     # on the first step of every episode, far from any wall (fins at rest, 0.36 m of clearance).
     from pectoral_gym.hardware.deploy import main as deploy
 
-    assert deploy(["--controller", "hand", "--emulate", "--episodes", "2", "--max-steps", "2", "--speed", "2",
-                   "--no-prompt", "--quiet", "--out", str(tmp_path)]) == 0
+    assert deploy(["--controller", "hand", "--emulate", "--episodes", "2", "--max-episode-steps", "2", "--speed", "2",
+                   "--no-prompt", "--no-progress", "--out", str(tmp_path)]) == 0
     episodes = json.loads((tmp_path / "summary.json").read_text())["episodes"]
     assert [e["safety_stop"] for e in episodes] == ["", ""] and [e["steps"] for e in episodes] == [2, 2]

@@ -168,7 +168,7 @@ def test_cli_identify_small_grid(tmp_path):
     out = tmp_path / "out"
     run = subprocess.run([sys.executable, "-m", "pectoral_gym.scaling", "identify", "--grid", str(grid),
                           "--out", str(out), "--horizon", "3", "--jobs", "1", "--folds", "2", "--max-degree", "1",
-                          "--quiet", "--yaw-damping", "paper"],
+                          "--no-progress", "--yaw-damping", "paper"],
                          capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
     assert "stage times" in run.stdout

@@ -120,7 +120,7 @@ def test_parallel_jobs_give_the_same_results_as_one_process(serial_run, tmp_path
 
 def test_training_on_the_fast_full_model_is_evaluated_at_the_reference_steps(tmp_path):
     out = tmp_path / "full"
-    assert main([*TINY, "--probe-every", "0", "--seeds", "3", "--out", str(out), "--train-env", "PectoralFish-Full-v0",
+    assert main([*TINY, "--probe-every", "0", "--seeds", "3", "--out", str(out), "--env", "PectoralFish-Full-v0",
                  "--hyperparams", "env_kwargs.integration=fast"]) == 0
     report = json.loads((out / "seeds.json").read_text())
     assert report["settings"]["train_env"] == "PectoralFish-Full-v0"

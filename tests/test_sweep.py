@@ -117,7 +117,7 @@ def test_randomize_scale_scales_the_default_ranges():
 def test_cli_refuses_bad_spaces_before_starting_ray(tmp_path, capsys):
     from pectoral_gym.agents.studies.sweep import main
 
-    base = ["--storage-path", str(tmp_path), "--hyperparams", *TINY]
+    base = ["--out", str(tmp_path), "--hyperparams", *TINY]
     assert main([*base, "--grid", "not_an_argument=1,2"]) == 2
     assert "unknown PPO arguments ['not_an_argument']" in capsys.readouterr().err
     assert main([*base, "--grid", "env_kwargs.randomize.no_such_field=0.1"]) == 2
@@ -190,7 +190,7 @@ def test_two_tiny_trials_on_an_embedded_ray_and_asha_stops_the_worse(tmp_path, c
     # Two trials, one at a time: the second pays 10 per step (time_penalty), so its mean return at the first
     # rung (100 steps) is far below the first trial's, and ASHA (keep the best half) stops it there.
     argv = ["--grid", "env_kwargs.time_penalty=0.01,10", "--hyperparams", *TINY, "--scheduler", "asha",
-            "--reduction-factor", "2", "--max-concurrent", "1", "--num-cpus", "2", "--storage-path", str(tmp_path),
+            "--reduction-factor", "2", "--max-concurrent", "1", "--num-cpus", "2", "--out", str(tmp_path),
             "--name", "s", "--verbose", "0", "--final-env", "PectoralFish-Full-v0", "--final-episodes", "2"]
     assert main(argv) == 0
     assert not ray.is_initialized()  # the command shut its Ray down

@@ -18,7 +18,7 @@ TINY = ["n_timesteps=256", "n_envs=4", "n_steps=32", "batch_size=64", "n_epochs=
 
 
 def run(tmp_path, name, *extra, algo="ppo", hyperparams=TINY):
-    argv = ["--env", ENV, "--algo", algo, "--seed", "3", "--log-dir", str(tmp_path), "--run-name", name,
+    argv = ["--env", ENV, "--algo", algo, "--seed", "3", "--out", str(tmp_path), "--run-name", name,
             "--no-progress", "--hyperparams", *hyperparams, *extra]
     assert main(argv) == 0
     return tmp_path / ENV / name
@@ -75,7 +75,7 @@ def test_sac_smoke_run(tmp_path):
 
 
 def test_cli_errors(tmp_path, capsys):
-    base = ["--log-dir", str(tmp_path), "--no-progress"]
+    base = ["--out", str(tmp_path), "--no-progress"]
     assert main([*base, "--algo", "dqn"]) == 2
     assert "unknown algorithm" in capsys.readouterr().err
     assert main([*base, "--hyperparams", "not_an_arg=1"]) == 2

@@ -15,6 +15,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
 from pectoral_gym.model.kfunctions import ScalingFunctions
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -31,7 +33,7 @@ def walkthrough_commands(text: str) -> list[str]:
     return [line.strip() for line in joined.splitlines() if line.strip() and not line.strip().startswith("#")]
 
 
-SHORT_DEPLOY = ("--episodes", "2", "--max-steps", "16")  # the last of a repeated flag wins (argparse)
+SHORT_DEPLOY = ("--episodes", "2", "--max-episode-steps", "16")  # the last of a repeated flag wins (argparse)
 
 
 def with_quick(command: str) -> str:
@@ -98,5 +100,7 @@ def test_the_readme_walk_through_runs_as_written(tmp_path):
 def test_quick_identify_refuses_install(capsys):
     from pectoral_gym.scaling.cli import main
 
-    assert main(["identify", "--quick", "--install"]) == 2
-    assert "--install" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stop:  # a usage error, as every bad argument
+        main(["identify", "--quick", "--install"])
+    assert stop.value.code == 2
+    assert "--install" in capsys.readouterr().err.splitlines()[-1]

@@ -185,9 +185,16 @@ def _seeds(text: str) -> list[int]:
     return [int(s) for s in text.split(",")]
 
 
-def main(argv: list[str] | None = None) -> dict:
-    """Command line: run the seeds, print one line per episode and the summary, optionally write JSON."""
-    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``python -m pectoral_gym.agents.controllers.band_study``."""
+    from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
+
+    parser = argparse.ArgumentParser(
+        prog=prog_name(None, "pectoral_gym.agents.controllers.band_study"), description=__doc__.split("\n\n")[0],
+        formatter_class=HelpFormatter,
+        epilog=examples("python -m pectoral_gym.agents.controllers.band_study --controller hand --seeds 0-39",
+                        "python -m pectoral_gym.agents.controllers.band_study --controller nmpc --seeds 0,1 "
+                        "--summary-only --out band.json"))
     parser.add_argument("--controller", default="hand", help="a baseline name (make_baseline)")
     parser.add_argument("--env", default="PectoralFish-Full-v0")
     parser.add_argument("--seeds", default="0-39", help="'a-b' or 'a,b,c'")
@@ -195,8 +202,15 @@ def main(argv: list[str] | None = None) -> dict:
     parser.add_argument("--substeps", type=int, default=5, help="band checks per control period")
     parser.add_argument("--kwargs", default="{}", help="controller keyword arguments (JSON)")
     parser.add_argument("--out", default=None, help="JSON file for the records and the summary")
-    parser.add_argument("--quiet", action="store_true")
-    args = parser.parse_args(argv)
+    summary_only = parser.add_argument("--summary-only", action="store_true",
+                                       help="print the summary only, not a line per episode")
+    deprecated_alias(parser, "--quiet", summary_only)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> dict:
+    """Command line: run the seeds, print one line per episode and the summary, optionally write JSON."""
+    args = build_parser().parse_args(argv)
     from pectoral_gym.agents.baselines import make_baseline  # the baselines import this package's controllers
 
     kwargs = json.loads(args.kwargs)
@@ -205,7 +219,7 @@ def main(argv: list[str] | None = None) -> dict:
         r = run_episode(lambda config: make_baseline(args.controller, config, **kwargs), seed, args.env,
                         args.substeps, args.goal_inset)
         records.append(r)
-        if not args.quiet:
+        if not args.summary_only:
             band = "-" if r.band_time is None else f"{r.band_time:.1f}"
             print(f"seed {seed}: success {int(r.success)} t {r.time:.1f} s band {band} worst {r.worst:.3f} m"
                   f"{' WALL' if r.wall else ''}", flush=True)

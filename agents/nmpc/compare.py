@@ -97,17 +97,30 @@ def _seeds(text: str) -> list[int]:
     return [int(v) for v in text.split(",")]
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Command-line entry point: prints one markdown row per variant."""
-    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.nmpc.compare",
-                                     description=__doc__.split("\n\n")[0])
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``python -m pectoral_gym.agents.nmpc.compare``."""
+    from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
+
+    parser = argparse.ArgumentParser(
+        prog=prog_name(None, "pectoral_gym.agents.nmpc.compare"), description=__doc__.split("\n\n")[0],
+        formatter_class=HelpFormatter,
+        epilog=examples("python -m pectoral_gym.agents.nmpc.compare --seeds 100-119 --env full "
+                        "--variants '{\"sqp\": {}, \"exact\": {\"hessian\": \"exact\"}}'",
+                        "python -m pectoral_gym.agents.nmpc.compare --seeds 100,101 --task track "
+                        "--variants '{\"base\": {}}' --failed"))
     parser.add_argument("--variants", required=True, help="JSON: name -> NMPCSettings overrides")
     parser.add_argument("--seeds", default="100-119", help="'A-B' or 'a,b,c' (default %(default)s)")
     parser.add_argument("--env", default="full", choices=list(_ENVS))
     parser.add_argument("--task", default="goal", choices=("goal", "track"))
-    parser.add_argument("--max-steps", type=int, default=240)
+    deprecated_alias(parser, "--max-steps", parser.add_argument(
+        "--max-episode-steps", dest="max_steps", type=int, default=240, metavar="N", help="steps per episode"))
     parser.add_argument("--failed", action="store_true", help="list the unsuccessful episodes of each variant")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point: prints one markdown row per variant."""
+    args = build_parser().parse_args(argv)
     results = compare(json.loads(args.variants), _seeds(args.seeds), args.env, args.task, args.max_steps)
     print("| variant | episodes | success | time to goal [s] | mean distance [cm] | p50 [ms] | p95 [ms] | max [ms] "
           "| failures | late |")

@@ -14,13 +14,13 @@ Two more columns run the robot stack on the emulated robot in lockstep simulated
 ``robot+degraded`` (:data:`pectoral_gym.agents.studies.deployment.DEGRADED`), for the baselines the deploy can drive
 and the trained policies on their own task.
 
-CLI::
+CLI (``pectoral-benchmark``, also ``python -m pectoral_gym.agents.studies.benchmark``)::
 
-    python -m pectoral_gym.agents.studies.benchmark --quick                      # a few minutes on 2 cores
-    python -m pectoral_gym.agents.studies.benchmark --full --policy runs/PectoralFish-Averaged-v1/ppo_goal_seed0_...
-    python -m pectoral_gym.agents.studies.benchmark --quick --controllers hand nmpc --out bench_quick
-    python -m pectoral_gym.agents.studies.benchmark --quick --controllers hand --solve-seeds 0 1 --solve-timesteps 4e5
-    python -m pectoral_gym.agents.studies.benchmark --quick --envs robot robot+degraded --no-throughput --solve-seeds
+    pectoral-benchmark --quick                      # a few minutes on 2 cores
+    pectoral-benchmark --full --policy runs/PectoralFish-Averaged-v1/ppo_goal_seed0_...
+    pectoral-benchmark --quick --controller hand nmpc --out bench_quick
+    pectoral-benchmark --quick --controller hand --solve-seeds 0 1 --solve-timesteps 4e5
+    pectoral-benchmark --quick --env robot robot+degraded --no-throughput --solve-seeds
 
 Writes ``benchmark.md``, ``benchmark.json`` and ``benchmark.png`` into ``--out``.
 """
@@ -40,9 +40,10 @@ import numpy as np
 
 from pectoral_gym.agents.studies.benchmark_report import plot_report, to_markdown, write_outputs
 from pectoral_gym.agents.studies.deployment import ROBOT_CONDITIONS, ROBOT_CONTROLLERS, robot_cells
+from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
 
-__all__ = ["ALL_ENVS", "ENVS", "PRESETS", "VERSIONS", "BenchmarkSettings", "env_id", "main", "plot_report",
-           "run_benchmark", "to_markdown", "write_outputs"]
+__all__ = ["ALL_ENVS", "ENVS", "PRESETS", "VERSIONS", "BenchmarkSettings", "build_parser", "env_id", "main",
+           "plot_report", "run_benchmark", "to_markdown", "write_outputs"]
 
 VERSIONS = ("v1", "v0")  # the registered env versions a benchmark can run on; v1 (the default) is the recommended one
 AVERAGED_ID = "PectoralFish-Averaged-v1"
@@ -304,22 +305,34 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
                             "time": time.strftime("%Y-%m-%d %H:%M:%S")}}
 
 
-def _parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.studies.benchmark",
-                                     description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``pectoral-benchmark``."""
+    parser = argparse.ArgumentParser(
+        prog=prog_name("pectoral-benchmark", "pectoral_gym.agents.studies.benchmark"),
+        description=__doc__.split("\n\n")[0] + " Writes benchmark.md, benchmark.json and benchmark.png into --out.",
+        formatter_class=HelpFormatter,
+        epilog=examples("pectoral-benchmark --quick",
+                        "pectoral-benchmark --full --policy demo_out/run",
+                        "pectoral-benchmark --quick --controller hand nmpc --out bench_quick",
+                        "pectoral-benchmark --quick --env robot robot+degraded --no-throughput --solve-seeds"))
     size = parser.add_mutually_exclusive_group()
     size.add_argument("--quick", action="store_const", const="quick", dest="preset",
                       help="small sizes, a few minutes on 2 cores (the default)")
     size.add_argument("--full", action="store_const", const="full", dest="preset",
                       help="the real table: 100 episodes per cell (NMPC: 100 goal, 10 track)")
     parser.add_argument("--policy", nargs="+", default=[], metavar="RUN", help="trained policies (run folder or .zip)")
-    parser.add_argument("--controllers", nargs="*", default=list(BASELINE_NAMES), choices=BASELINE_NAMES,
-                        help="baselines to include")
-    parser.add_argument("--envs", nargs="+", default=list(ALL_ENVS), choices=list(ALL_ENVS),
-                        help="model settings; robot, robot+degraded: the robot stack on the emulated robot")
-    parser.add_argument("--version", choices=VERSIONS, default=VERSIONS[0],
-                        help="registered env version of the simulated columns (v0: the tables measured before v1)")
+    controllers = parser.add_argument("--controller", nargs="*", dest="controllers", default=list(BASELINE_NAMES),
+                                      choices=BASELINE_NAMES, metavar="NAME",
+                                      help=f"baseline controllers to include: {', '.join(BASELINE_NAMES)}")
+    deprecated_alias(parser, "--controllers", controllers)
+    envs = parser.add_argument("--env", nargs="+", dest="envs", default=list(ALL_ENVS), choices=list(ALL_ENVS),
+                               metavar="SETTING", help=f"model settings, one or more of {', '.join(ALL_ENVS)} "
+                               "(robot, robot+degraded: the robot stack on the emulated robot)")
+    deprecated_alias(parser, "--envs", envs)
+    version = parser.add_argument("--env-version", dest="version", choices=VERSIONS, default=VERSIONS[0],
+                                  help="registered env version of the simulated columns (v0: the tables measured "
+                                       "before v1)")
+    deprecated_alias(parser, "--version", version)
     parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=TASKS, help="tasks")
     parser.add_argument("--episodes", type=int, help="override: episodes per cell (random, hand, policies)")
     parser.add_argument("--nmpc-episodes", type=int, nargs=2, metavar=("GOAL", "TRACK"),
@@ -337,14 +350,20 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--solve-jobs", type=int, default=1, help="time-to-solve runs at once")
     parser.add_argument("--no-plots", action="store_true", help="skip benchmark.png")
     parser.add_argument("--out", default="benchmark", metavar="DIR", help="output folder")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def _parse_args(argv: list[str] | None) -> argparse.Namespace:
+    args = build_parser().parse_args(argv)
     args.preset = args.preset or "quick"
     return args
 
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point (see the module docstring)."""
-    args = _parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    args.preset = args.preset or "quick"
     settings = replace(PRESETS[args.preset], version=args.version)
     if args.episodes is not None:
         settings = replace(settings, episodes=args.episodes)
@@ -364,12 +383,10 @@ def main(argv: list[str] | None = None) -> int:
         settings = replace(settings, solve_episodes=args.solve_episodes)
     if settings.episodes < 1 or min(settings.nmpc_episodes.values()) < 0 or (settings.max_episode_steps or 1) < 1 \
             or min(settings.robot_episodes.values()) < 0:
-        print("error: --episodes and --max-episode-steps must be >= 1, --nmpc-episodes and --robot-episodes >= 0")
-        return 2
+        parser.error("--episodes and --max-episode-steps must be >= 1, --nmpc-episodes and --robot-episodes >= 0")
     if settings.solve_episodes < 1 or args.solve_jobs < 1 or len(set(settings.solve_seeds)) != len(
             settings.solve_seeds):
-        print("error: --solve-episodes and --solve-jobs must be >= 1, --solve-seeds distinct")
-        return 2
+        parser.error("--solve-episodes and --solve-jobs must be >= 1, --solve-seeds distinct")
     from tqdm.auto import tqdm
 
     robot = [e for e in args.envs if e in ROBOT_CONDITIONS]

@@ -95,9 +95,9 @@ def run_robot_stack(out: str | Path, episodes: int, seed: int, controller: str =
     argv = [*([] if controller == "policy" else ["--controller", controller]),
             *([] if policy is None else ["--policy", str(policy)]),
             "--emulate", "--lockstep", "--episodes", str(episodes), "--seed", str(seed), "--out", str(out),
-            "--no-prompt", "--nice", "0", *([] if progress else ["--quiet"]),
+            "--no-prompt", "--nice", "0", *([] if progress else ["--no-progress"]),
             *([] if jobs == 1 else ["--jobs", str(jobs)]),
-            *([] if max_steps is None else ["--max-steps", str(max_steps)]),
+            *([] if max_steps is None else ["--max-episode-steps", str(max_steps)]),
             *([] if task is None else ["--task", task]), *conditions_argv(conditions)]
     command = "python -m pectoral_gym.hardware.deploy " + " ".join(argv)
     out.mkdir(parents=True, exist_ok=True)

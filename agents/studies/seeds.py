@@ -17,16 +17,15 @@ middle half of the seeds, as in rliable) with a percentile-bootstrap interval ov
 interval is coarse: it can only take values that subsets of these seeds give. The statistics are
 :mod:`pectoral_gym.agents.studies.seeds_stats` (``iqm`` and ``aggregate``, re-exported here).
 
-CLI::
+CLI (``pectoral-seeds``, also ``python -m pectoral_gym.agents.studies.seeds``)::
 
-    python -m pectoral_gym.agents.studies.seeds                              # seeds 0-4, 2 parallel jobs, writes
-    seeds_out/
-    python -m pectoral_gym.agents.studies.seeds --seeds 100 101 102 103 --jobs 2 --out tune_base
-    python -m pectoral_gym.agents.studies.seeds --seeds 0 1 --timesteps 2e5 --episodes 50 --hyperparams ent_coef=0.01
-    python -m pectoral_gym.agents.studies.seeds --train-env PectoralFish-Full-v1 --timesteps 1.6e6
-    python -m pectoral_gym.agents.studies.seeds --train-env PectoralFish-Averaged-v0   # the v0 envs, as before
+    pectoral-seeds                              # seeds 0-4, 2 parallel jobs, writes seeds_out/
+    pectoral-seeds --seeds 100 101 102 103 --jobs 2 --out tune_base
+    pectoral-seeds --seeds 0 1 --timesteps 2e5 --episodes 50 --hyperparams ent_coef=0.01
+    pectoral-seeds --env PectoralFish-Full-v1 --timesteps 1.6e6
+    pectoral-seeds --env PectoralFish-Averaged-v0   # the v0 envs, as before
 
-``--train-env PectoralFish-Full-v*`` trains on the full model instead (its entry of the hyperparameter file);
+``--env PectoralFish-Full-v*`` trains on the full model instead (its entry of the hyperparameter file);
 the evaluations run the full model as the train env's version registers it (v0: the reference steps,
 v1: the fast integration), whatever ``integration`` the training used.
 
@@ -50,9 +49,10 @@ import numpy as np
 
 from pectoral_gym.agents.studies.seeds_report import plot_seeds, to_markdown
 from pectoral_gym.agents.studies.seeds_stats import aggregate, iqm
+from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
 
-__all__ = ["SETTINGS", "TARGETS", "aggregate", "iqm", "main", "run_seed", "run_seeds", "summarize_seeds",
-           "train_seeds", "versioned"]
+__all__ = ["SETTINGS", "TARGETS", "aggregate", "build_parser", "iqm", "main", "run_seed", "run_seeds",
+           "summarize_seeds", "train_seeds", "versioned"]
 
 TRAIN_ENV = "PectoralFish-Averaged-v1"
 # label -> (env id, randomised) of the v1 envs; as pectoral_gym.agents.studies.benchmark.ENVS. versioned() gives
@@ -304,17 +304,27 @@ class _Bars:
             bar.close()
 
 
-def _parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.studies.seeds",
-                                     description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``pectoral-seeds``."""
+    parser = argparse.ArgumentParser(
+        prog=prog_name("pectoral-seeds", "pectoral_gym.agents.studies.seeds"),
+        description=__doc__.split("\n\n")[0] + " Writes seeds.md, seeds.json and seeds.png into --out.",
+        formatter_class=HelpFormatter,
+        epilog=examples("pectoral-seeds --quick --seeds 0 1 --out seeds_quick",
+                        "pectoral-seeds --seeds 100 101 102 103 --jobs 2 --out tune_base",
+                        "pectoral-seeds --seeds 0 1 --timesteps 2e5 --episodes 50 --hyperparams ent_coef=0.01",
+                        "pectoral-seeds --env PectoralFish-Full-v1 --timesteps 1.6e6"))
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4], help="training seeds")
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
-                        help="seeds trained at once, each in its own process (1 torch thread each)")
-    parser.add_argument("--out", default="seeds_out", help="output folder")
-    parser.add_argument("--train-env", choices=TRAIN_ENVS,
-                        default=TRAIN_ENV, help="env trained on (default: %(default)s, as the demo)")
-    parser.add_argument("--timesteps", type=float, help="training steps (default: agents/hyperparams/ppo.yml)")
+                        help="seeds trained at once, each in its own process (1 torch thread each; default: 2, or "
+                             "the number of CPUs if fewer)")
+    parser.add_argument("--out", default="seeds_out", metavar="DIR", help="output folder")
+    env = parser.add_argument("--env", dest="train_env", choices=TRAIN_ENVS, default=TRAIN_ENV, metavar="ID",
+                              help=f"env trained on, one of {', '.join(TRAIN_ENVS)} (default: %(default)s, "
+                                   "as the demo)")
+    deprecated_alias(parser, "--train-env", env)
+    parser.add_argument("--timesteps", type=float, metavar="N",
+                        help="training steps (default: agents/hyperparams/ppo.yml)")
     parser.add_argument("--episodes", type=int, help="evaluation episodes per setting and seed (default 100, quick 4)")
     parser.add_argument("--eval-seed", type=int,
                         help="evaluation episode k is reset with this + k "
@@ -328,14 +338,14 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--confidence", type=float, default=0.95, help="level of the across-seed intervals")
     parser.add_argument("--quick", action="store_true", help="smoke run: tiny training, 4 episodes")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
-    return parser.parse_args(argv)
+    return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point (see the module docstring)."""
     from pectoral_gym.agents.training.config import parse_overrides
 
-    args = _parse_args(argv)
+    args = build_parser().parse_args(argv)
     try:
         overrides = dict(QUICK) if args.quick else {}
         overrides.update(parse_overrides(args.hyperparams))

@@ -2,13 +2,11 @@
 
 Each trial is a :func:`pectoral_gym.agents.training.train.train`.
 
-CLI::
+CLI (``pectoral-sweep``, also ``python -m pectoral_gym.agents.studies.sweep``)::
 
-    python -m pectoral_gym.agents.studies.sweep --grid seed=0,1,2 ent_coef=0,0.005 --n-timesteps 2e5
-    python -m pectoral_gym.agents.studies.sweep --param-space sweep.yml --num-samples 4 --scheduler asha --metric
-    success
-    python -m pectoral_gym.agents.studies.sweep --address auto --grid seed=0,1,2,3 randomize_scale=0,1   # an existing
-    cluster
+    pectoral-sweep --grid seed=0,1,2 ent_coef=0,0.005 --timesteps 2e5
+    pectoral-sweep --param-space sweep.yml --num-samples 4 --scheduler asha --metric success
+    pectoral-sweep --address auto --grid seed=0,1,2,3 randomize_scale=0,1   # an existing cluster
 
 The parameter space (``--param-space`` file, ``--grid key=v1,v2``; keys and kinds in
 :mod:`pectoral_gym.agents.studies.sweep_space`) defaults to ``seed=0,1,2``. Without ``--address`` the command
@@ -28,7 +26,7 @@ set as ``NUMBA_CACHE_DIR`` of every worker: a cluster's shared disk); each trial
 time it took to get its environments ready (``env_ready_s``: numba compiling or loading the
 cache) so the saving can be read from the table.
 
-Output in ``<storage-path>/<name>/``: Tune's trial folders (each holds the run folder of
+Output in ``<out>/<name>/`` (``--out``: Tune's storage path): Tune's trial folders (each holds the run folder of
 :mod:`pectoral_gym.agents.training.train` in ``run/``), ``results.csv`` and ``results.md`` (one row per trial:
 its values, status, last and best evaluation) and ``results.png`` (the metric against
 environment steps, one line per trial).
@@ -56,8 +54,9 @@ from pectoral_gym.agents.studies.sweep_space import (
     trial_config,
 )
 from pectoral_gym.agents.training.config import parse_overrides
+from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
 
-__all__ = ["DEFAULT_SPACE", "main", "run_sweep", "tune_space", "warm_up"]
+__all__ = ["DEFAULT_SPACE", "build_parser", "main", "run_sweep", "tune_space", "warm_up"]
 
 DEFAULT_SPACE: dict[str, Dimension] = {"seed": ("grid", [0, 1, 2])}
 METRICS = ("mean_return", "success", "tracking_error")
@@ -211,7 +210,7 @@ def run_sweep(args: argparse.Namespace, space: dict[str, Dimension], base: dict[
     from ray.tune.schedulers import ASHAScheduler, FIFOScheduler
     from ray.tune.search.basic_variant import BasicVariantGenerator
 
-    storage = Path(args.storage_path).resolve()
+    storage = Path(args.out).resolve()
     cache_dir = args.numba_cache_dir or os.environ.get("NUMBA_CACHE_DIR")
     root = str(Path(pectoral_gym.__file__).resolve().parents[1])  # the folder that holds the package
     env_vars = {"NUMBA_NUM_THREADS": str(args.cpus_per_trial), "OMP_NUM_THREADS": str(args.cpus_per_trial),
@@ -266,10 +265,17 @@ def run_sweep(args: argparse.Namespace, space: dict[str, Dimension], base: dict[
     return folder
 
 
-def _parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.studies.sweep",
-                                     description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``pectoral-sweep``."""
+    parser = argparse.ArgumentParser(
+        prog=prog_name("pectoral-sweep", "pectoral_gym.agents.studies.sweep"),
+        description=__doc__.split("\n\n")[0] + " Writes results.csv, results.md and results.png into "
+        "<out>/<name>/ (needs the sweep extra: pip install -e .[sweep]).",
+        formatter_class=HelpFormatter,
+        epilog=examples("pectoral-sweep --grid seed=0,1,2 ent_coef=0,0.005 --timesteps 2e5",
+                        "pectoral-sweep --param-space sweep.yml --num-samples 4 --scheduler asha --metric success",
+                        "pectoral-sweep --grid seed=0,1 --timesteps 1e5 --final-env PectoralFish-Full-v1 --out sweeps",
+                        "pectoral-sweep --address auto --grid seed=0,1,2,3 randomize_scale=0,1"))
     parser.add_argument("--env", default="PectoralFish-Averaged-v1", help="environment id")
     parser.add_argument("--algo", default="ppo", help="algorithm: ppo, sac, td3, a2c, ddpg")
     parser.add_argument("--param-space", metavar="FILE",
@@ -283,7 +289,8 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help="hyperparameters of every trial (as pectoral_gym.agents.training.train; "
                              "the space's keys go over them)")
     parser.add_argument("--hyperparams-file", metavar="YAML", help="hyperparameter file (default: agents/hyperparams)")
-    parser.add_argument("--n-timesteps", type=float, help="steps per trial (default: the file's)")
+    deprecated_alias(parser, "--n-timesteps", parser.add_argument("--timesteps", type=float, metavar="N",
+                                                                  help="steps per trial (default: the file's)"))
     parser.add_argument("--eval-freq", type=float, help="steps in all between evaluations (default: the file's)")
     parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation (default: the file's)")
     parser.add_argument("--final-env", metavar="ID", help="evaluate each trial's best model on this env at the end "
@@ -303,7 +310,8 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--num-cpus", type=int, help="CPUs of the local Ray (default: all)")
     parser.add_argument("--cpus-per-trial", type=int, default=1, help="CPUs (torch and numba threads) per trial")
     parser.add_argument("--max-concurrent", type=int, default=0, help="trials at once (0: as the CPUs allow)")
-    parser.add_argument("--storage-path", default="runs/sweeps", help="parent folder of the sweep folder")
+    deprecated_alias(parser, "--storage-path", parser.add_argument(
+        "--out", default="runs/sweeps", metavar="DIR", help="parent folder of the sweep folder (Tune's storage path)"))
     parser.add_argument("--name", help="sweep folder name (default: <algo>_sweep_<stamp>)")
     parser.add_argument("--numba-cache-dir", help="numba cache of every worker, e.g. on a cluster's shared disk "
                                                   "(default: $NUMBA_CACHE_DIR, else numba's own: __pycache__ "
@@ -311,7 +319,11 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--no-warm-up", dest="warm_up", action="store_false",
                         help="skip the numba warm-up (every trial compiles or loads the cache itself)")
     parser.add_argument("--verbose", type=int, default=1, choices=(0, 1, 2), help="Tune verbosity")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def _parse_args(argv: list[str] | None) -> argparse.Namespace:
+    args = build_parser().parse_args(argv)
     args.name = args.name or f"{args.algo}_sweep_{datetime.now().strftime('%Y%m%d-%H%M%S')}"
     return args
 
@@ -332,7 +344,7 @@ def main(argv: list[str] | None = None) -> int:
         space = {**(load_param_space(args.param_space) if args.param_space else {}), **parse_grid(args.grid)}
         space = space or dict(DEFAULT_SPACE)
         hyperparams = parse_overrides(args.hyperparams)
-        for key, value in (("n_timesteps", args.n_timesteps), ("eval_freq", args.eval_freq),
+        for key, value in (("n_timesteps", args.timesteps), ("eval_freq", args.eval_freq),
                            ("eval_episodes", args.eval_episodes)):
             if value is not None:
                 hyperparams[key] = int(value)

@@ -1,18 +1,18 @@
 """End-to-end demo: train PPO on the averaged model, evaluate on the averaged and the full model, write a report.
 
-CLI::
+CLI (``pectoral-demo``, also ``python -m pectoral_gym.agents.training.demo``)::
 
-    python -m pectoral_gym.agents.training.demo                 # a few minutes on 2 CPU cores
-    python -m pectoral_gym.agents.training.demo --quick         # smoke run, seconds
-    python -m pectoral_gym.agents.training.demo --out demo_out --timesteps 1e6 --episodes 200
-    python -m pectoral_gym.agents.training.demo --robot-episodes 0                # no robot-stack episodes
+    pectoral-demo                 # a few minutes on 2 CPU cores
+    pectoral-demo --quick         # smoke run, seconds
+    pectoral-demo --out demo_out --timesteps 1e6 --episodes 200
+    pectoral-demo --robot-episodes 0                # no robot-stack episodes
 
 Writes ``<out>/report.md`` (results table, training figures), ``<out>/results.json``,
 ``<out>/trajectories.png`` and the training run folder ``<out>/run/``
-(``python -m pectoral_gym.agents.training.evaluate --policy <out>/run`` evaluates it again). The policy then
+(``pectoral-evaluate --policy <out>/run`` evaluates it again). The policy then
 drives the emulated robot through the whole robot stack (radio link and firmware rules, camera, tracker,
 observer, safety supervisor) in lockstep, ``--robot-episodes`` seeded episodes
-(``python -m pectoral_gym.hardware.deploy --emulate --lockstep``, its log in ``<out>/robot/``).
+(``pectoral-deploy --emulate --lockstep``, its log in ``<out>/robot/``).
 """
 
 from __future__ import annotations
@@ -26,7 +26,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-__all__ = ["main", "run_demo"]
+from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
+
+__all__ = ["build_parser", "main", "run_demo"]
 
 TRAIN_ENV = "PectoralFish-Averaged-v1"
 EVAL_ENVS = ("PectoralFish-Averaged-v1", "PectoralFish-Full-v1")
@@ -133,9 +135,9 @@ def _report(summary: dict[str, Any], table: str, config: dict[str, Any]) -> str:
         "(transitional ones too); `return` sum of "
         "rewards. Definitions in `agents/training/metrics.py`; per-env JSON next to this report.",
         "",
-        "Going further: `python -m pectoral_gym.agents.training.train --env PectoralFish-Averaged-v1 --algo ppo "
-        "--task goal --n-timesteps 2e6`, then `python -m pectoral_gym.agents.training.evaluate --policy runs/... "
-        "--env PectoralFish-Full-v1 --randomize`; `python -m pectoral_gym.agents.studies.benchmark` for every "
+        "Going further: `pectoral-train --env PectoralFish-Averaged-v1 --algo ppo "
+        "--task goal --timesteps 2e6`, then `pectoral-evaluate --policy runs/... "
+        "--env PectoralFish-Full-v1 --randomize`; `pectoral-benchmark` for every "
         "controller; see `docs/agents.md`.",
         "",
         f"Hyperparameters: `{json.dumps(config['algo_kwargs'])}`, n_envs {config['n_envs']}, "
@@ -145,22 +147,35 @@ def _report(summary: dict[str, Any], table: str, config: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def _parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.training.demo",
-                                     description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    parser.add_argument("--out", default="demo_out", help="output folder")
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``pectoral-demo``."""
+    parser = argparse.ArgumentParser(
+        prog=prog_name("pectoral-demo", "pectoral_gym.agents.training.demo"),
+        description=__doc__.split("\n\n")[0] + " Writes report.md, results.json, trajectories.png and the run "
+        "folder into --out; then drives the emulated robot through the robot stack (--robot-episodes).",
+        formatter_class=HelpFormatter,
+        epilog=examples("pectoral-demo", "pectoral-demo --quick --out demo_quick",
+                        "pectoral-demo --out demo_out --timesteps 1e6 --episodes 200",
+                        "pectoral-demo --robot-episodes 0"))
+    parser.add_argument("--out", default="demo_out", metavar="DIR", help="output folder")
     parser.add_argument("--quick", action="store_true", help="smoke run: tiny training, 5 episodes")
     parser.add_argument("--seed", type=int, default=0, help="training seed")
-    parser.add_argument("--timesteps", type=float, help="training steps (default: agents/hyperparams/ppo.yml)")
-    parser.add_argument("--episodes", type=int, help="evaluation episodes per env (default 100, quick 5)")
+    parser.add_argument("--timesteps", type=float, metavar="N",
+                        help="training steps (default: agents/hyperparams/ppo.yml)")
+    parser.add_argument("--episodes", type=int, metavar="N", help="evaluation episodes per env (default 100, quick 5)")
     parser.add_argument("--task", choices=("goal", "track"), default="goal", help="task")
     parser.add_argument("--robot-episodes", type=int, default=None, metavar="N",
                         help=f"episodes on the emulated robot through the robot stack, lockstep (default "
                              f"{ROBOT_EPISODES}, quick 2; 0: none)")
     parser.add_argument("--jobs", type=int, default=ROBOT_JOBS, metavar="J",
-                        help="robot-stack episodes at once, each in a worker process (the same results for any J)")
+                        help="robot-stack episodes at once, each in a worker process (the same results for any J; "
+                             "default: 2, or the number of CPUs if fewer)")
     parser.add_argument("--no-progress", action="store_true", help="no progress bars")
+    return parser
+
+
+def _parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = build_parser()
     args = parser.parse_args(argv)
     if args.jobs < 1:
         parser.error(f"--jobs must be >= 1, got {args.jobs}")

@@ -6,12 +6,11 @@ model (averaged, full). Episodes run batched on the native vector env: a
 :class:`~pectoral_gym.agents.training.policy.BatchController` acts on all of them in one call; other
 controllers come from a factory, one per env slot.
 
-CLI::
+CLI (``pectoral-evaluate``, also ``python -m pectoral_gym.agents.training.evaluate``)::
 
-    python -m pectoral_gym.agents.training.evaluate --policy runs/PectoralFish-Averaged-v1/ppo_goal_seed0_...
-    python -m pectoral_gym.agents.training.evaluate --policy RUN --env PectoralFish-Full-v1 --episodes 100 --seed 0
-    [--randomize]
-    python -m pectoral_gym.agents.training.evaluate --baseline hand --env PectoralFish-Full-v1 --task goal
+    pectoral-evaluate --policy runs/PectoralFish-Averaged-v1/ppo_goal_seed0_...
+    pectoral-evaluate --policy RUN --env PectoralFish-Full-v1 --episodes 100 --seed 0 [--randomize]
+    pectoral-evaluate --controller hand --env PectoralFish-Full-v1 --task goal
 
 A run folder's environment arguments (``config.yaml``) are reused, ``--env-kwargs`` on top, except
 ``randomize`` (``--randomize`` sets it) and, on the full model, the averaged model's own settings
@@ -24,6 +23,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 import time
 from collections.abc import Callable
 from pathlib import Path
@@ -37,10 +37,12 @@ from pectoral_gym.agents.training.results import EvaluationResult, format_table,
 from pectoral_gym.envs.layout import ACTION_SIZE
 from pectoral_gym.envs.observation import OBS_POSITION, OBS_SIZE, decode
 from pectoral_gym.model.spec import ENV_OPTIONS
+from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
 
 __all__ = [
     "DEFAULT_RANDOMIZATION",
     "EvaluationResult",
+    "build_parser",
     "evaluate",
     "format_table",
     "main",
@@ -250,16 +252,24 @@ def _trajectory(rec: dict[str, list], dt: float, success: bool, wall: bool, trun
                       truncated=truncated, seed=seed, swept_work=np.asarray(rec["swept"]))
 
 
-def _parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.training.evaluate",
-                                     description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``pectoral-evaluate``."""
+    parser = argparse.ArgumentParser(
+        prog=prog_name("pectoral-evaluate", "pectoral_gym.agents.training.evaluate"),
+        description=__doc__.split("\n\n")[0] + " Episode k is reset with --seed + k: the same starts and "
+        "targets for every controller. Writes metrics.json and trajectories.png into --out.",
+        formatter_class=HelpFormatter,
+        epilog=examples("pectoral-evaluate --policy demo_out/run --env PectoralFish-Full-v1 --episodes 100 --seed 0",
+                        "pectoral-evaluate --policy demo_out/run --env PectoralFish-Full-v1 --randomize",
+                        "pectoral-evaluate --controller hand --env PectoralFish-Full-v1 --task goal --episodes 100",
+                        "pectoral-evaluate --controller nmpc --quick"))
     who = parser.add_mutually_exclusive_group(required=True)
     who.add_argument("--policy", metavar="RUN|ZIP",
-                     help="run folder of pectoral_gym.agents.training.train or an SB3 .zip")
-    who.add_argument("--baseline", metavar="NAME",
-                     help="baseline controller: random, hand, nmpc or excite (identification runs)")
-    parser.add_argument("--env", default="PectoralFish-Full-v1", help="environment id (default %(default)s)")
+                     help="run folder of pectoral-train or an SB3 .zip")
+    controller = who.add_argument("--controller", metavar="NAME",
+                                  help="baseline controller: random, hand, nmpc or excite (identification runs)")
+    deprecated_alias(who, "--baseline", controller)
+    parser.add_argument("--env", default="PectoralFish-Full-v1", help="environment id")
     parser.add_argument("--task", choices=("goal", "track"), help="task (default: the run's task, else goal)")
     parser.add_argument("--randomize", nargs="?", const="default", metavar="JSON",
                         help="per-episode parameter randomisation: alone for the default preset "
@@ -273,12 +283,12 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--plot-episodes", type=int, default=12, help="episodes drawn in the trajectory plot")
     parser.add_argument("--quick", action="store_true",
                         help=f"smoke run in seconds: at most {QUICK_EPISODES} episodes whatever --episodes says")
-    return parser.parse_args(argv)
+    return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point (see the module docstring)."""
-    args = _parse_args(argv)
+    args = build_parser().parse_args(argv)
     if args.quick:
         args.episodes = min(args.episodes, QUICK_EPISODES)
     try:
@@ -300,8 +310,8 @@ def main(argv: list[str] | None = None) -> int:
             from pectoral_gym.agents.training.vec_adapter import env_arguments
 
             config = EnvConfig(**registered_settings(args.env, env_arguments(baseline_kwargs)))
-            controller = lambda: make_baseline(args.baseline, config)  # noqa: E731 - factory, one per slot
-            name = args.baseline
+            controller = lambda: make_baseline(args.controller, config)  # noqa: E731 - factory, one per slot
+            name = args.controller
         if args.task:
             env_kwargs["task"] = args.task
         if args.randomize:
@@ -310,7 +320,7 @@ def main(argv: list[str] | None = None) -> int:
         result = evaluate(controller, args.env, n_episodes=args.episodes, seed=args.seed, env_kwargs=env_kwargs,
                           n_envs=args.n_envs, progress=True)
     except (ValueError, TypeError, FileNotFoundError, json.JSONDecodeError) as error:
-        print(f"error: {error}")
+        print(f"error: {error}", file=sys.stderr)
         return 2
     tag = f"{name}_{args.env}_{result.task}" + ("_rand" if env_kwargs.get("randomize") else "") + f"_seed{args.seed}"
     out = Path(args.out) if args.out else Path("runs") / "eval" / tag

@@ -1,17 +1,16 @@
 """Train a Stable-Baselines3 agent on a fish environment, fed from the native batched vector env.
 
-CLI::
+CLI (``pectoral-train``, also ``python -m pectoral_gym.agents.training.train``)::
 
-    python -m pectoral_gym.agents.training.train --env PectoralFish-Averaged-v1 --algo ppo --task goal --seed 0
-    python -m pectoral_gym.agents.training.train --algo sac --hyperparams n_timesteps=5e4 learning_rate=3e-4 \
-        --env-kwargs '{"task": "track"}'
+    pectoral-train --env PectoralFish-Averaged-v1 --algo ppo --task goal --seed 0
+    pectoral-train --algo sac --hyperparams n_timesteps=5e4 learning_rate=3e-4 --env-kwargs '{"task": "track"}'
 
 The hyperparameter files are rl-baselines3-zoo's (``pectoral_gym.agents.training.zoo_format``):
 ``python -m rl_zoo3.train --conf-file agents/hyperparams/ppo.yml --gym-packages pectoral_gym ...`` trains from the
 same file. The periodic evaluation settings come from the file's ``pectoral_gym.agents.training.train`` section,
 ``--eval-freq``/``--eval-episodes`` or ``--hyperparams``.
 
-Each run writes ``runs/<env>/<algo>_<task>_seed<seed>_<stamp>/``: ``model.zip``
+Each run writes ``<out>/<env>/<algo>_<task>_seed<seed>_<stamp>/`` (``--out`` default ``runs``): ``model.zip``
 (final), ``best_model.zip`` and ``vecnormalize.pkl`` (best on the periodic
 evaluation, its observation statistics; the evaluation runs on ``eval_env``, for
 ``ppo.yml`` the full model: :func:`pectoral_gym.agents.training.config.evaluation_env`), ``vecnormalize_final.pkl``
@@ -22,7 +21,7 @@ The same ``--seed`` on the same machine repeats a run.
 
 ``--quick`` is a smoke run in seconds (tests, CI, trying a command): it overrides the
 size of the run (:data:`QUICK`; ``n_timesteps`` 256, 2 envs, no periodic evaluation)
-whatever ``--n-timesteps``/``--hyperparams`` say; the policy means nothing.
+whatever ``--timesteps``/``--hyperparams`` say; the policy means nothing.
 """
 
 from __future__ import annotations
@@ -47,8 +46,9 @@ from pectoral_gym.agents.training.config import (
     run_model_spec,
 )
 from pectoral_gym.agents.training.zoo_format import algo_class
+from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
 
-__all__ = ["EVAL_SEED_OFFSET", "QUICK", "main", "make_run_dir", "train"]
+__all__ = ["EVAL_SEED_OFFSET", "QUICK", "build_parser", "main", "make_run_dir", "train"]
 
 #: ``--quick``: the hyperparameters it overrides, common and per algorithm family.
 QUICK: dict[str, dict[str, Any]] = {
@@ -235,11 +235,19 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
     return run_dir
 
 
-def _parse_args(argv: list[str] | None) -> argparse.Namespace:
-    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.training.train",
-                                     description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    parser.add_argument("--env", default="PectoralFish-Averaged-v1", help="environment id (default %(default)s)")
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``pectoral-train``."""
+    parser = argparse.ArgumentParser(
+        prog=prog_name("pectoral-train", "pectoral_gym.agents.training.train"),
+        description=__doc__.split("\n\n")[0] + " Writes a run folder (model, best model, normalisation "
+        "statistics, resolved config, command) under --out.",
+        formatter_class=HelpFormatter,
+        epilog=examples("pectoral-train --env PectoralFish-Averaged-v1 --algo ppo --task goal --seed 0",
+                        "pectoral-train --quick --out runs_smoke",
+                        "pectoral-train --algo sac --timesteps 5e4 --hyperparams learning_rate=3e-4 "
+                        "--env-kwargs '{\"task\": \"track\"}'",
+                        "pectoral-train --env-kwargs '{\"params\": \"robot.json\"}' --out runs --run-name robot"))
+    parser.add_argument("--env", default="PectoralFish-Averaged-v1", help="environment id")
     parser.add_argument("--algo", default="ppo", help="algorithm: ppo, sac, td3, a2c, ddpg")
     parser.add_argument("--task", choices=("goal", "track"), help="task (default: from the hyperparameters, else goal)")
     parser.add_argument("--seed", type=int, default=0, help="seed of everything (same seed, same run)")
@@ -247,10 +255,14 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
                         help="override hyperparameters (YAML values; nested keys with dots)")
     parser.add_argument("--env-kwargs", default="{}", metavar="JSON", help="environment arguments (JSON object)")
     parser.add_argument("--hyperparams-file", metavar="YAML", help="hyperparameter file (default: agents/hyperparams)")
-    parser.add_argument("--n-timesteps", type=float, help="shortcut for --hyperparams n_timesteps=N")
+    timesteps = parser.add_argument("--timesteps", type=float, metavar="N",
+                                    help="training steps, a shortcut for --hyperparams n_timesteps=N "
+                                         "(default: the file's)")
+    deprecated_alias(parser, "--n-timesteps", timesteps)
     parser.add_argument("--eval-freq", type=float, help="steps in all between evaluations, 0: none (default: file)")
     parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation (default: from the file)")
-    parser.add_argument("--log-dir", default="runs", help="parent folder of the run folders")
+    out = parser.add_argument("--out", default="runs", metavar="DIR", help="parent folder of the run folders")
+    deprecated_alias(parser, "--log-dir", out)
     parser.add_argument("--run-name", help="run folder name (default: <algo>_<task>_seed<seed>_<stamp>)")
     parser.add_argument("--torch-threads", type=int, default=1, help="torch CPU threads")
     parser.add_argument("--device", default="cpu", help="torch device")
@@ -259,7 +271,7 @@ def _parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--quick", action="store_true",
                         help="smoke run in seconds: overrides the run's size (n_timesteps 256, 2 envs, no evaluation; "
                              "see pectoral_gym.agents.training.train.QUICK); the policy means nothing")
-    return parser.parse_args(argv)
+    return parser
 
 
 def quick_overrides(algo: str) -> dict[str, Any]:
@@ -272,11 +284,11 @@ def quick_overrides(algo: str) -> dict[str, Any]:
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point (see the module docstring)."""
-    args = _parse_args(argv)
+    args = build_parser().parse_args(argv)
     try:
         overrides = parse_overrides(args.hyperparams)
-        if args.n_timesteps is not None:
-            overrides["n_timesteps"] = int(args.n_timesteps)
+        if args.timesteps is not None:
+            overrides["n_timesteps"] = int(args.timesteps)
         if args.eval_freq is not None:
             overrides["eval_freq"] = int(args.eval_freq)
         if args.eval_episodes is not None:
@@ -294,7 +306,7 @@ def main(argv: list[str] | None = None) -> int:
     except (ValueError, FileNotFoundError, json.JSONDecodeError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
-    run_dir = make_run_dir(config, args.log_dir, args.run_name)
+    run_dir = make_run_dir(config, args.out, args.run_name)
     command = shlex.join(["python", "-m", "pectoral_gym.agents.training.train",
                           *(sys.argv[1:] if argv is None else argv)])
     train(config, run_dir, progress=not args.no_progress, verbose=args.verbose, torch_threads=args.torch_threads,

@@ -1,6 +1,7 @@
 """Camera calibration: the pixel <-> tank homography from points whose tank position is known.
 
-Three ways to get the points (``python -m pectoral_gym.hardware.vision.calibrate --help``):
+Three ways to get the points (``pectoral-camera-calibrate --help``; also
+``python -m pectoral_gym.hardware.vision.calibrate``; ``pectoral-calibrate`` is its deprecated name until 0.3.0):
 
 - ``--corners U,V U,V U,V U,V``: the pixels of the tank corners (0, 0), (L, 0), (L, W), (0, W), read off a frame
   in any image viewer; ``--points X,Y:U,V ...`` for any other >= 4 known points.
@@ -27,8 +28,10 @@ from pectoral_gym.hardware.vision.cameramodel import CameraModel, fit_homography
 from pectoral_gym.hardware.vision.scene import render_frame
 from pectoral_gym.hardware.vision.tracker import draw_overlay
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
+from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, prog_name, warn_deprecated
 
-__all__ = ["detect_dots", "fit_homography", "main", "reprojection_errors", "tank_corners"]
+__all__ = ["build_parser", "deprecated_main", "detect_dots", "fit_homography", "main", "reprojection_errors",
+           "tank_corners"]
 
 
 def tank_corners() -> np.ndarray:
@@ -86,15 +89,14 @@ def _size(text: str) -> tuple[int, int]:
 
 
 _EXAMPLES = """examples:
-  python -m pectoral_gym.hardware.vision.calibrate --image frame.png -o calibration.json --overlay check.png
-  python -m pectoral_gym.hardware.vision.calibrate --corners 40,320 615,305 600,40 52,30 --size 640x360 \\
-      -o calibration.json
-  python -m pectoral_gym.hardware.vision.calibrate --points 0.2,0.1:90,296 2.0,0.2:540,270 2.1,1.0:565,70 \\
+  pectoral-camera-calibrate --image frame.png --out calibration.json --overlay check.png
+  pectoral-camera-calibrate --corners 40,320 615,305 600,40 52,30 --size 640x360 --out calibration.json
+  pectoral-camera-calibrate --points 0.2,0.1:90,296 2.0,0.2:540,270 2.1,1.0:565,70 \\
       0.3,1.1:115,45 1.1,0.6:315,170 --size 640x360 --frame frame.png --overlay check.png
-  python -m pectoral_gym.hardware.vision.calibrate --from-emulator -o emulator.json
+  pectoral-camera-calibrate --from-emulator --out emulator.json
 
-Calibrate at the resolution the camera runs at during deployment: pectoral_gym.hardware.deploy refuses a calibration
-made for another image size. Exit status: 0 written; 2 a bad argument or an unreadable/unwritable file."""
+Calibrate at the resolution the camera runs at during deployment: pectoral-deploy refuses a calibration made for
+another image size. Exit status: 0 written; 2 a bad argument or an unreadable/unwritable file."""
 
 
 def _hue(text: str) -> int:
@@ -107,11 +109,12 @@ def _hue(text: str) -> int:
     return hue
 
 
-def _parser() -> argparse.ArgumentParser:
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``pectoral-camera-calibrate``."""
     parser = argparse.ArgumentParser(
-        prog="python -m pectoral_gym.hardware.vision.calibrate",
+        prog=prog_name("pectoral-camera-calibrate", "pectoral_gym.hardware.vision.calibrate"),
         description="Compute the pixel <-> tank homography of the overhead camera and write the calibration JSON.",
-        epilog=_EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter,
+        epilog=_EXAMPLES, formatter_class=HelpFormatter,
     )
     source = parser.add_mutually_exclusive_group(required=True)
     source.add_argument("--corners", nargs=4, type=_pair, metavar="U,V",
@@ -131,14 +134,16 @@ def _parser() -> argparse.ArgumentParser:
                              "(default: none)")
     parser.add_argument("--frame", type=Path, metavar="FRAME",
                         help="background frame of --overlay with --corners/--points (default: white)")
-    parser.add_argument("-o", "--output", type=Path, default=Path("calibration.json"),
-                        help="calibration file to write (default calibration.json)")
+    out = parser.add_argument("--out", type=Path, default=Path("calibration.json"), metavar="FILE",
+                              help="calibration file to write (default calibration.json)")
+    deprecated_alias(parser, "--output", out)
+    deprecated_alias(parser, "-o", out)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit status."""
-    parser = _parser()
+    parser = build_parser()
     args = parser.parse_args(argv)
     if args.frame is not None and (args.overlay is None or args.corners is None and args.points is None):
         parser.error("--frame is the background of --overlay with --corners/--points; it applies only with those")
@@ -186,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
     rms, worst = float(np.sqrt(np.mean(errors**2))), float(errors.max())
     try:
         camera.save(
-            args.output,
+            args.out,
             source=source,
             tank_points=np.asarray(tank).tolist(),
             pixel_points=np.asarray(pixels).tolist(),
@@ -194,7 +199,7 @@ def main(argv: list[str] | None = None) -> int:
             reprojection_max_px=worst,
         )
     except OSError as error:
-        parser.error(f"cannot write {args.output}: {error}")
+        parser.error(f"cannot write {args.out}: {error}")
     if args.overlay is not None:
         if background is None:
             background = np.full((camera.height, camera.width, 3), 255, np.uint8)
@@ -211,12 +216,18 @@ def main(argv: list[str] | None = None) -> int:
         if not written:
             parser.error(f"cannot write the overlay {args.overlay}")
     scale = camera.pixels_per_metre((TANK_LENGTH / 2, TANK_WIDTH / 2))
-    print(json.dumps({"output": str(args.output), "points": len(tank), "reprojection_rms_px": round(rms, 4),
+    print(json.dumps({"output": str(args.out), "points": len(tank), "reprojection_rms_px": round(rms, 4),
                       "reprojection_max_px": round(worst, 4), "pixels_per_metre_at_centre": round(scale, 2)}))
     if len(tank) == 4:
         print("note: 4 points fit exactly; the reprojection error cannot reveal a mistake. Use more points.",
               file=sys.stderr)
     return 0
+
+
+def deprecated_main(argv: list[str] | None = None) -> int:
+    """``pectoral-calibrate``: the old name of ``pectoral-camera-calibrate`` (until 0.3.0); says so, then runs it."""
+    warn_deprecated("pectoral-calibrate", "pectoral-calibrate", "pectoral-camera-calibrate")
+    return main(argv)
 
 
 if __name__ == "__main__":

@@ -14,7 +14,7 @@
   second (batch steps x ``num_envs``).
 
 Every action is drawn afresh, so the fins change pattern at every step, as under
-a learning agent. ``pectoral-fish bench --against DIR`` runs the same benchmark
+a learning agent. ``pectoral-fish step-rate --against DIR`` runs the same benchmark
 in another checkout, alternating with this one (:mod:`pectoral_gym.tools.bench_compare`).
 
 Every measurement is warmed up first (numba compiles, or loads its cache, on

@@ -1,12 +1,13 @@
-"""``pectoral-fish bench --against DIR``: this checkout's step rates side by side with another checkout's.
+"""``pectoral-fish step-rate --against DIR``: this checkout's step rates side by side with another checkout's.
 
 A speed claim needs a reference measured in the same run: this machine is shared
 and its load changes by the minute. :func:`compare` runs ``python -m pectoral_gym
-bench --json`` alternately in this checkout and in ``other`` (e.g. today's
+bench --json`` (``bench``: the subcommand's old name, which older checkouts know too) alternately in this
+checkout and in ``other`` (e.g. today's
 ``main`` in a worktree: ``git worktree add ../main-ref main``), ``rounds`` times
 each, and keeps each rate's best, so a burst of load slows both alike::
 
-    pectoral-fish bench --against ../main-ref --rounds 3 --vector-steps 30
+    pectoral-fish step-rate --against ../main-ref --rounds 3 --vector-steps 30
 
 Each run is its own process with ``PYTHONPATH`` set to its checkout, so each
 imports its own package (and numba cache). Rates the other checkout does not
@@ -55,7 +56,7 @@ def compare(other: str | os.PathLike, rounds: int = 3, bench_args: Sequence[str]
     Args:
         other: Root of the other checkout (the folder with its ``pectoral_gym`` package).
         rounds: Runs per checkout, alternating (this, other, this, ...).
-        bench_args: Further ``pectoral-fish bench`` arguments (``--steps``, ``--vector-steps``, ...).
+        bench_args: Further ``pectoral-fish step-rate`` arguments (``--steps``, ``--vector-steps``, ...).
         progress: Called with a short message before each run.
 
     Returns:

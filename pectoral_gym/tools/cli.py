@@ -4,8 +4,10 @@ Subcommands::
 
     pectoral-fish steady   --model full --right 90,20,1,4 [--json]
     pectoral-fish simulate --model full --right 90,20,1,4 --duration 60 --out out [--compare]
-    pectoral-fish demo     --out out
-    pectoral-fish bench    [--json] [--quick] [--against DIR]
+    pectoral-fish patterns --out out
+    pectoral-fish step-rate [--json] [--quick] [--against DIR]
+
+``demo`` and ``bench`` are the deprecated names of ``patterns`` and ``step-rate`` (until 0.3.0).
 
 Fin patterns are ``G0,GA,TP,ZETA``: bias and amplitude in degrees, period in
 seconds, power/recovery ratio; an omitted fin is held at rest. Bad arguments
@@ -24,6 +26,7 @@ from pathlib import Path
 from typing import Any
 
 from pectoral_gym.model.params import FinBeat
+from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name, subcommands
 from pectoral_gym.tools.cli_inputs import (
     FIN_HELP,
     MODEL_CHOICES,
@@ -235,7 +238,7 @@ def _add_model_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--left", metavar="G0,GA,TP,ZETA", help=f"left {FIN_HELP}")
     p.add_argument("--scaling", default=None, metavar="identified|none|FILE",
                    help="averaged models: scaling functions K: the shipped file, 'none' (K = 1) or a coefficients "
-                        "file from `python -m pectoral_gym.scaling identify` (default: the model's, "
+                        "file from `pectoral-scaling identify` (default: the model's, "
                         "identified)")
     p.add_argument("--params", metavar="FILE",
                    help="model parameters: a JSON or YAML file of FishParams fields (others keep Table 1)")
@@ -246,18 +249,27 @@ def _add_model_options(p: argparse.ArgumentParser) -> None:
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pectoral-fish`` (each subcommand stores its handler)."""
     parser = argparse.ArgumentParser(
-        prog="pectoral-fish",
-        description="Robotic fish with two rowing pectoral fins: steady states, trajectories, demo, benchmark.",
-        epilog="Example: pectoral-fish steady --model full --right 90,20,1,4",
+        prog=prog_name("pectoral-fish", "pectoral_gym", "pectoral_gym.tools.cli"),
+        description="Robotic fish with two rowing pectoral fins: steady states, trajectories, swimming patterns, "
+                    "step rates. Fin patterns are G0,GA,TP,ZETA: bias and amplitude [deg], period [s], "
+                    "power/recovery ratio; an omitted fin is held at rest.",
+        epilog=examples("pectoral-fish steady --model full --right 90,20,1,4",
+                        "pectoral-fish simulate --model averaged --right 85,22,1,4 --duration 60 --out out --compare",
+                        "pectoral-fish patterns --out out",
+                        "pectoral-fish step-rate --quick"),
+        formatter_class=HelpFormatter,
     )
     from pectoral_gym import __version__
 
     parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    sub = subcommands(parser, dest="command", metavar="COMMAND", required=True)
 
     p = sub.add_parser("steady", help="periodic steady state: velocities, turning radius and period",
                        description="Cycle-averaged periodic steady state from rest (eq. 29). Body frame: x forward, "
-                                   "y left, omega > 0 a left turn. The right fin alone turns the fish left.")
+                                   "y left, omega > 0 a left turn. The right fin alone turns the fish left.",
+                       epilog=examples("pectoral-fish steady --model full --right 90,20,1,4",
+                                       "pectoral-fish steady --model averaged --right 90,20,1,4 --left 90,20,1,4 "
+                                       "--json"))
     _add_model_options(p)
     p.add_argument("--json", action="store_true",
                    help="print one JSON object (SI units: m/s, rad/s, m, s, rad; radius/period null if straight)")
@@ -266,7 +278,9 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("simulate", help="simulate a trajectory in the tank; write CSV and PNG",
                        description="Simulate one fish from rest with constant fin patterns. Writes trajectory.csv "
                                    "(t [s], X, Y [m], psi [rad], vx, vy [m/s], omega [rad/s], fin angles [deg]) and "
-                                   "trajectory.png (top view in the 2.30 m x 1.15 m tank, velocities over time).")
+                                   "trajectory.png (top view in the 2.30 m x 1.15 m tank, velocities over time).",
+                       epilog=examples("pectoral-fish simulate --model full --right 90,20,1,4 --duration 60 --out out",
+                                       "pectoral-fish simulate --model averaged --left 85,22,1,4 --compare --out out"))
     _add_model_options(p)
     p.add_argument("--duration", type=float, metavar="S", default=60.0,
                    help="simulated time [s] (default: %(default)s)")
@@ -283,18 +297,25 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also simulate the other model (written to trajectory_<model>.csv) and plot both")
     p.set_defaults(handler=_cmd_simulate, parser=p)
 
-    p = sub.add_parser("demo", help="illustrative swimming patterns, full vs averaged model",
+    p = sub.add_parser("patterns", help="illustrative swimming patterns, full vs averaged model",
                        description="Forward swim, right-fin turn and left-fin turn with both models "
-                                   "from rest. Writes demo.png and demo.csv, prints a table of steady states.")
+                                   "from rest. Writes demo.png and demo.csv, prints a table of steady states. "
+                                   "(Was `pectoral-fish demo`, a deprecated name until 0.3.0; not the trained-policy "
+                                   "demo, which is pectoral-demo.)",
+                       epilog=examples("pectoral-fish patterns", "pectoral-fish patterns --out patterns_out"))
     p.add_argument("--out", default="out", metavar="DIR", help="output directory (default: %(default)s)")
     p.set_defaults(handler=_cmd_demo, parser=p)
+    sub.add_deprecated("demo", "patterns")
 
-    p = sub.add_parser("bench", help="step rates of the fish envs against CartPole-v1",
+    p = sub.add_parser("step-rate", help="step rates of the fish envs against CartPole-v1",
                        description="Single-env step rates through gymnasium.make (averaged, full, CartPole-v1) and "
                                    "native vector-env rates (averaged @ 4096, full @ 1024 envs, averaged with the PPO "
                                    "file's settings), new random actions every step, best of --repeats (round robin) "
                                    "after a warm-up, compared with the project's targets. --against DIR: side by side "
-                                   "with another checkout.")
+                                   "with another checkout. (Was `pectoral-fish bench`, a deprecated name until 0.3.0; "
+                                   "the controllers' results table is pectoral-benchmark.)",
+                       epilog=examples("pectoral-fish step-rate", "pectoral-fish step-rate --quick --json",
+                                       "pectoral-fish step-rate --against ../main --rounds 3"))
     p.add_argument("--json", action="store_true", help="print one JSON object")
     p.add_argument("--steps", type=int, metavar="N", default=20_000,
                    help="single-env steps per timed run (default: %(default)s)")
@@ -310,6 +331,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rounds", type=int, metavar="N", default=3,
                    help="with --against: alternating runs per checkout, best kept (default: %(default)s)")
     p.set_defaults(handler=_cmd_bench, parser=p)
+    sub.add_deprecated("bench", "step-rate")
     return parser
 
 

@@ -44,16 +44,26 @@ def run_seed(seed: int, out: Path, minutes: float = 3.0, camera: Camera | None =
     return report
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Entry point (module docstring)."""
-    p = argparse.ArgumentParser(prog="python -m pectoral_gym.scaling.calibration.benchmark", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--seeds", type=int, nargs="+", default=[101, 102, 103, 104, 105])
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``python -m pectoral_gym.scaling.calibration.benchmark``."""
+    from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
+
+    p = argparse.ArgumentParser(
+        prog=prog_name(None, "pectoral_gym.scaling.calibration.benchmark"), description=__doc__,
+        formatter_class=HelpFormatter,
+        epilog=examples("python -m pectoral_gym.scaling.calibration.benchmark --seeds 101 102 --minutes 1",
+                        "python -m pectoral_gym.scaling.calibration.benchmark --camera degraded --out cal_bench"))
+    p.add_argument("--seeds", type=int, nargs="+", default=[101, 102, 103, 104, 105], help="robots, one per seed")
     p.add_argument("--camera", choices=sorted(CAMERAS), default="default",
                    help="default: 1 mm, 0.5 deg, no drops; degraded: 5 mm, 2 deg, 10 %% dropped frames")
     p.add_argument("--minutes", type=float, default=3.0, help="logged robot time to fit [min] (default 3)")
-    p.add_argument("--out", type=Path, default=Path("calibration_benchmark"))
-    args = p.parse_args(argv)
+    p.add_argument("--out", type=Path, default=Path("calibration_benchmark"), metavar="DIR", help="output folder")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point (module docstring)."""
+    args = build_parser().parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     rows = []
     print(f"{'seed':>5} {'wall s':>7} {'worst field %':>14} {'worst ratio %':>14} {'held-out median %':>18} "

@@ -1,4 +1,4 @@
-"""``python -m pectoral_gym.scaling calibrate``: the model's uncertain parameters from run logs (issue 27)."""
+"""``pectoral-scaling calibrate``: the model's uncertain parameters from run logs (issue 27)."""
 
 from __future__ import annotations
 
@@ -12,10 +12,10 @@ import numpy as np
 __all__ = ["add_parser", "main"]
 
 EXAMPLES = """examples:
-  python -m pectoral_gym.scaling calibrate --logs run1.jsonl run2.jsonl --out robot.json
-  python -m pectoral_gym.scaling calibrate --logs run1.jsonl --hold-out run2.jsonl --params measured.json \\
+  pectoral-scaling calibrate --logs run1.jsonl run2.jsonl --out robot.json
+  pectoral-scaling calibrate --logs run1.jsonl --hold-out run2.jsonl --params measured.json \\
       --out robot.json --report calibration/
-  python -m pectoral_gym.scaling calibrate --logs run1.jsonl --fields drag_coef,moment_coef,fin_force_coef \\
+  pectoral-scaling calibrate --logs run1.jsonl --fields drag_coef,moment_coef,fin_force_coef \\
       --out robot.json
 
 The logs are run logs (docs/run-log.md). robot.json is a parameters file (load_params) for
@@ -25,8 +25,9 @@ and paths.png (measured against simulated paths). docs/calibration.md explains t
 
 
 def add_parser(sub) -> None:
-    """The ``calibrate`` subcommand of ``python -m pectoral_gym.scaling``."""
+    """The ``calibrate`` subcommand of ``pectoral-scaling``."""
     from pectoral_gym.scaling.calibration.fit import CalibrationSettings
+    from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias
 
     defaults = CalibrationSettings()
     p = sub.add_parser(
@@ -35,8 +36,8 @@ def add_parser(sub) -> None:
         "and fin force coefficients) from recorded runs: the full model under the logged commands, its fins "
         "replayed by the firmware's rules, compared with the camera's poses over short windows (windowed "
         "shooting, robust least squares). Reports standard errors, what the logs cannot tell apart, and a "
-        "held-out open-loop check. (pectoral-calibrate is the camera's calibration, not this.)",
-        epilog=EXAMPLES, formatter_class=argparse.RawDescriptionHelpFormatter)
+        "held-out open-loop check. (pectoral-camera-calibrate is the camera's calibration, not this.)",
+        epilog=EXAMPLES, formatter_class=HelpFormatter)
     p.add_argument("--logs", nargs="+", required=True, metavar="RUN", help="run logs to fit (docs/run-log.md)")
     p.add_argument("--out", type=Path, required=True, help="the calibrated parameters file to write (JSON)")
     p.add_argument("--params", metavar="KNOWN", default=None,
@@ -54,7 +55,7 @@ def add_parser(sub) -> None:
     p.add_argument("--prior-sigma", type=float, default=defaults.prior_sigma,
                    help=f"prior standard deviation of each log-parameter (default {defaults.prior_sigma})")
     p.add_argument("--horizon", type=float, default=40.0, help="open-loop span of the held-out check [s] (default 40)")
-    p.add_argument("--no-plot", action="store_true", help="no paths.png")
+    deprecated_alias(p, "--no-plot", p.add_argument("--no-plots", action="store_true", help="no paths.png"))
 
 
 def _named_fields(path: Path) -> set[str]:
@@ -105,8 +106,8 @@ def main(args: argparse.Namespace) -> int:
     folder.mkdir(parents=True, exist_ok=True)
     (folder / "report.json").write_text(json.dumps(report, indent=1) + "\n")
     (folder / "report.md").write_text(markdown(report))
-    if not args.no_plot:
+    if not args.no_plots:
         plot_paths(cal, runs, folder / "paths.png")
     print(markdown(report))
-    print(f"wrote {args.out} and {folder}/report.json, report.md{'' if args.no_plot else ', paths.png'}")
+    print(f"wrote {args.out} and {folder}/report.json, report.md{'' if args.no_plots else ', paths.png'}")
     return 0

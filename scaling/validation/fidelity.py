@@ -312,7 +312,9 @@ def fidelity(scaling: ScalingFunctions, seed_set: str = "dev", out_dir: str | Pa
 
 
 def add_parser(sub) -> None:
-    """The ``fidelity`` subcommand of ``python -m pectoral_gym.scaling``."""
+    """The ``fidelity`` subcommand of ``pectoral-scaling``."""
+    from pectoral_gym.tools.cli_common import examples
+
     p = sub.add_parser("fidelity", help="a model preset vs the full model with two fins and changing commands "
                        "(issue 12)",
                        description="Fidelity benchmark: open-loop runs with constant and changing two-fin patterns, "
@@ -320,7 +322,11 @@ def add_parser(sub) -> None:
                        "fins (left fin at rest; mirrored fins), two-fin steady states, the "
                        "single-fin held-out set and Table 4, of a model preset against the full model at its "
                        "reference steps. Writes fidelity_<set>[_<preset>].md, .json (with the spec it ran) and "
-                       "PNG plots.")
+                       "PNG plots.",
+                       epilog=examples("pectoral-scaling fidelity --quick --out fidelity",
+                                       "pectoral-scaling fidelity --set report --candidate averaged-env --out fidelity",
+                                       "pectoral-scaling fidelity --coefficients robot_k/scaling_coefficients.json "
+                                       "--out robot_fidelity"))
     p.add_argument("--set", dest="seed_set", choices=sorted(SEED_SETS), default="dev",
                    help="seed set: dev (look at it while working) or report (for the published figures only)")
     p.add_argument("--candidate", choices=sorted(PRESETS), default=DEFAULT_CANDIDATE, metavar="PRESET",

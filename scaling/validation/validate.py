@@ -48,6 +48,7 @@ from pectoral_gym.scaling.validation.comparison import (
     steady_pair,
     summarize,
 )
+from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
 
 __all__ = [
     "MIN_AMPLITUDE",
@@ -55,6 +56,8 @@ __all__ = [
     "SWEEP_FREQUENCIES",
     "TABLE4",
     "TARGETS",
+    "add_arguments",
+    "build_parser",
     "main",
     "sampling_box",
     "validate",
@@ -347,16 +350,18 @@ def _plots(scaling: ScalingFunctions, params: FishParams, results: dict[str, Any
     return [f.name for f in files]
 
 
-def build_parser() -> argparse.ArgumentParser:
-    """Argument parser of ``python -m pectoral_gym.scaling validate``."""
-    parser = argparse.ArgumentParser(
-        prog="pectoral-scaling validate",
-        description="Validate the averaged model (given K) against the full model: Table 4, random single-fin "
-        "patterns off the grid, the Fig. 4 forward sweep, random two-fin patterns. Writes report.md, "
-        "validation.json and PNG plots.",
-    )
+DESCRIPTION = ("Validate the averaged model (given K) against the full model: Table 4, random single-fin patterns "
+               "off the grid, the Fig. 4 forward sweep, random two-fin patterns. Writes report.md, validation.json "
+               "and PNG plots.")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> argparse.ArgumentParser:
+    """Add the options of ``pectoral-scaling validate`` to ``parser`` (and return it)."""
     parser.add_argument("--coefficients", metavar="PATH", default=None,
                         help=f"scaling coefficients JSON (default: the installed {default_scaling_path().name})")
+    parser.add_argument("--params", metavar="FILE", default=None,
+                        help="model parameters of both models: a JSON or YAML file of FishParams fields "
+                             "(default: Table 1); the report flags a difference from the coefficients' own")
     parser.add_argument("--out", metavar="DIR", default="scaling_validation", help="output folder")
     parser.add_argument("--n-single", type=int, default=60, metavar="N", help="random single-fin patterns")
     parser.add_argument("--n-two", type=int, default=30, metavar="N", help="random two-fin patterns")
@@ -367,21 +372,41 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Command-line entry point; returns 0 (also when targets are missed: the report says which)."""
-    parser = build_parser()
-    args = parser.parse_args(argv)
+def build_parser() -> argparse.ArgumentParser:
+    """Argument parser of ``python -m pectoral_gym.scaling.validation.validate`` (``pectoral-scaling validate``)."""
+    return add_arguments(argparse.ArgumentParser(
+        prog=prog_name(None, "pectoral_gym.scaling.validation.validate"), description=DESCRIPTION,
+        formatter_class=HelpFormatter, epilog=EXAMPLES))
+
+
+EXAMPLES = examples("pectoral-scaling validate --quick --out scaling_validation",
+                    "pectoral-scaling validate --coefficients robot_k/scaling_coefficients.json --params robot.json "
+                    "--out robot_validation")
+
+
+def run(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """Run the validation with parsed ``args``; bad input exits 2 through ``parser.error``."""
+    from pectoral_gym.model.params import load_params
+
     if args.n_single < 1 or args.n_two < 1:
         parser.error(f"--n-single and --n-two must be >= 1, got {args.n_single} and {args.n_two}")
     path = Path(args.coefficients) if args.coefficients else default_scaling_path()
     try:
+        params = load_params(args.params) if args.params else None
         scaling = ScalingFunctions.load(path)
     except (OSError, ValueError) as err:
         parser.error(str(err))
-    results = validate(scaling, out_dir=args.out, n_single=args.n_single, n_two=args.n_two, seed=args.seed,
-                       quick=args.quick, plots=not args.no_plots, source=str(path), progress=not args.no_progress)
+    results = validate(scaling, params=params, out_dir=args.out, n_single=args.n_single, n_two=args.n_two,
+                       seed=args.seed, quick=args.quick, plots=not args.no_plots, source=str(path),
+                       progress=not args.no_progress)
     print(rendering.summary_text(results, Path(args.out)))
     return 0
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point; returns 0 (also when targets are missed: the report says which)."""
+    parser = build_parser()
+    return run(parser.parse_args(argv), parser)
 
 
 if __name__ == "__main__":

@@ -153,11 +153,16 @@ def _table(labels: list[str], res: dict[str, np.ndarray]) -> list[str]:
 
 
 def add_parser(sub) -> None:
-    """The ``yaw-balance`` subcommand of ``python -m pectoral_gym.scaling``."""
+    """The ``yaw-balance`` subcommand of ``pectoral-scaling``."""
+    from pectoral_gym.tools.cli_common import examples
+
+    example = "docs/validation/fidelity/fidelity_report.json"
     p = sub.add_parser("yaw-balance", help="split two-fin steady states' yaw balance into terms, full vs averaged",
-                       description=__doc__.split("\n\n")[0])
+                       description=__doc__.split("\n\n")[0],
+                       epilog=examples(f"pectoral-scaling yaw-balance --from {example}",
+                                       f"pectoral-scaling yaw-balance --from {example} --single --out yaw.md"))
     p.add_argument("--from", dest="source", required=True,
-                   help="a fidelity JSON (python -m pectoral_gym.scaling fidelity): its two-fin steady-state patterns")
+                   help="a fidelity JSON (pectoral-scaling fidelity): its two-fin steady-state patterns")
     p.add_argument("--coefficients", default=None, help="coefficients file (default: the shipped one)")
     p.add_argument("--single", action="store_true", help="also each pattern's right fin alone")
     p.add_argument("--out", default=None, help="write the markdown table (and a JSON next to it) here")

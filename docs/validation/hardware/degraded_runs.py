@@ -47,6 +47,7 @@ from pectoral_gym.hardware.env import HardwareFishEnv
 from pectoral_gym.hardware.radio.radioproxy import RadioProxy
 from pectoral_gym.hardware.vision.camera import open_source
 from pectoral_gym.hardware.vision.camerafaults import FaultyCamera
+from pectoral_gym.tools.cli_common import deprecated_alias
 
 CONDITIONS = ("clean", "bursty", "drops", "load")
 
@@ -173,7 +174,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None, help="write the results as JSON here")
     parser.add_argument("--nice", type=int, default=DEFAULT_NICE,
                         help="the PC stack's nice value, as pectoral_gym.hardware.deploy sets it (default %(default)s)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bars")
+    deprecated_alias(parser, "--quiet", parser.add_argument("--no-progress", action="store_true",
+                                                            help="no progress bars"))
     args = parser.parse_args(argv)
     warning = raise_priority(args.nice)  # before any thread starts, as the deploy does
     if warning:
@@ -183,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
     results = []
     for condition in args.conditions:
         t0 = time.monotonic()
-        result = run_condition(condition, args.episodes, args.speed, args.seed, not args.quiet)
+        result = run_condition(condition, args.episodes, args.speed, args.seed, not args.no_progress)
         result["wall_s"] = round(time.monotonic() - t0, 1)
         results.append(result)
         print(json.dumps(result), flush=True)

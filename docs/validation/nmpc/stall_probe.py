@@ -5,7 +5,7 @@ stalls: the fish came to rest 0.26-0.36 m from the goal and stayed there. The en
 rarely start that close, so this probe draws such starts on purpose (development data, not the
 held-out seeds): the fish at rest at a random pose at least 0.15 m from the walls, the goal
 ``--distance`` away at a random bearing, at least 0.1 m inside the tank. It runs the NMPC (or
-``--baseline hand``, or a trained ``--policy``) on the full model and prints one line per start and
+``--controller hand``, or a trained ``--policy``) on the full model and prints one line per start and
 a summary.
 
     PYTHONPATH=. python docs/validation/nmpc/stall_probe.py                       # 30 starts, seed 0
@@ -28,6 +28,7 @@ import pectoral_gym  # noqa: F401 - registers the ids
 from pectoral_gym.agents.baselines import make_baseline
 from pectoral_gym.agents.training.policy import load_policy
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FinBeat
+from pectoral_gym.tools.cli_common import deprecated_alias
 
 
 def starts(n: int, distance: float, seed: int) -> list[tuple[float, float, float, float, float]]:
@@ -50,7 +51,9 @@ def main() -> None:
     parser.add_argument("--distance", type=float, default=0.3, help="goal distance [m] (default %(default)s)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the starts (default %(default)s)")
     parser.add_argument("--settings", default="{}", help="JSON: NMPCSettings overrides (default %(default)s)")
-    parser.add_argument("--baseline", default="nmpc", choices=("nmpc", "hand"), help="default %(default)s")
+    controller = parser.add_argument("--controller", default="nmpc", choices=("nmpc", "hand"),
+                                     help="baseline controller (default %(default)s)")
+    deprecated_alias(parser, "--baseline", controller)
     parser.add_argument("--policy", help="a trained policy's run folder instead (the demo's: fin observation on)")
     args = parser.parse_args()
     # the shipped PPO file trains with the fins' stroke phase in the observation
@@ -58,8 +61,8 @@ def main() -> None:
     if args.policy:
         controller = load_policy(args.policy)
     else:
-        settings = json.loads(args.settings) if args.baseline == "nmpc" else {}
-        controller = make_baseline(args.baseline, env.unwrapped.config, **settings)
+        settings = json.loads(args.settings) if args.controller == "nmpc" else {}
+        controller = make_baseline(args.controller, env.unwrapped.config, **settings)
     core = env.unwrapped.core
     outcomes = []
     for x, y, psi, gx, gy in starts(args.n, args.distance, args.seed):

@@ -1,0 +1,168 @@
+"""Every console script: help with examples, the prog the user typed, one spelling per concept, deprecated aliases."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import types
+from pathlib import Path
+
+import pytest
+
+from pectoral_gym.tools import cli_common
+from pectoral_gym.tools.cli_common import COMMANDS, DEPRECATED_SCRIPTS, MODULE_COMMANDS, REMOVED_IN, prog_name
+from pectoral_gym.tools.cli_reference import deprecated_spellings, iter_parsers, reference_markdown
+
+ROOT = Path(__file__).resolve().parents[1]
+ALL_COMMANDS = {**COMMANDS, **MODULE_COMMANDS}
+
+# Old spellings no parser may show in its help (each is a deprecated alias of the canonical one, or gone).
+RETIRED = {"--log-dir", "--n-timesteps", "--quiet", "--baseline", "--envs", "--controllers", "--train-env",
+           "--storage-path", "--output", "-o", "--no-plot", "--max-steps"}
+
+# (command, arguments every parse needs, the old spelling's arguments, the canonical arguments)
+ALIASES = [
+    ("pectoral-fish", [], ["demo", "--out", "x"], ["patterns", "--out", "x"]),
+    ("pectoral-fish", [], ["bench", "--quick"], ["step-rate", "--quick"]),
+    ("pectoral-scaling", ["identify"], ["--quiet"], ["--no-progress"]),
+    ("pectoral-scaling", ["calibrate", "--logs", "a.jsonl", "--out", "b.json"], ["--no-plot"], ["--no-plots"]),
+    ("pectoral-train", [], ["--n-timesteps", "1e4"], ["--timesteps", "1e4"]),
+    ("pectoral-train", [], ["--log-dir", "d"], ["--out", "d"]),
+    ("pectoral-evaluate", [], ["--baseline", "hand"], ["--controller", "hand"]),
+    ("pectoral-benchmark", [], ["--controllers", "hand", "nmpc"], ["--controller", "hand", "nmpc"]),
+    ("pectoral-benchmark", [], ["--envs", "full", "robot"], ["--env", "full", "robot"]),
+    ("pectoral-benchmark", [], ["--version", "v0"], ["--env-version", "v0"]),
+    ("pectoral-sweep", [], ["--n-timesteps", "1e5"], ["--timesteps", "1e5"]),
+    ("pectoral-sweep", [], ["--storage-path", "d"], ["--out", "d"]),
+    ("pectoral-seeds", [], ["--train-env", "PectoralFish-Full-v1"], ["--env", "PectoralFish-Full-v1"]),
+    ("pectoral-deploy", [], ["--max-steps", "5"], ["--max-episode-steps", "5"]),
+    ("pectoral-deploy", [], ["--quiet"], ["--no-progress"]),
+    ("pectoral-camera-calibrate", ["--from-emulator"], ["--output", "c.json"], ["--out", "c.json"]),
+    ("pectoral-camera-calibrate", ["--from-emulator"], ["-o", "c.json"], ["--out", "c.json"]),
+    ("python -m pectoral_gym.agents.nmpc.compare", ["--variants", "{}"], ["--max-steps", "9"],
+     ["--max-episode-steps", "9"]),
+    ("python -m pectoral_gym.agents.controllers.band_study", [], ["--quiet"], ["--summary-only"]),
+]
+
+
+def _all_parsers():
+    for name, command in ALL_COMMANDS.items():
+        for parser in iter_parsers(command.build_parser()):
+            yield name, parser
+
+
+@pytest.fixture(scope="module")
+def parsers() -> dict[str, argparse.ArgumentParser]:
+    return {name: command.build_parser() for name, command in ALL_COMMANDS.items()}
+
+
+def test_the_registry_is_the_console_scripts_of_pyproject():
+    tomllib = pytest.importorskip("tomllib")  # Python 3.11+
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    expected = {name: command.entry_point for name, command in COMMANDS.items()}
+    expected.update({old: entry for old, (_, entry) in DEPRECATED_SCRIPTS.items()})
+    assert scripts == expected
+
+
+@pytest.mark.parametrize("name", sorted(ALL_COMMANDS))
+def test_help_exits_0_with_the_prog_typed_and_examples(name, parsers, capsys):
+    for parser in iter_parsers(parsers[name]):
+        with pytest.raises(SystemExit) as done:
+            parser.parse_args(["--help"])
+        assert done.value.code == 0
+        out = capsys.readouterr().out
+        assert out.startswith(f"usage: {parser.prog}") and parser.prog.startswith(name), out[:200]
+        assert parser.description, f"{parser.prog}: no description"
+        assert "examples:\n  " in (parser.epilog or ""), f"{parser.prog}: no examples in its epilog"
+
+
+def test_no_parser_shows_a_retired_spelling():
+    for _name, parser in _all_parsers():
+        shown = {option for action in parser._actions if action.help != argparse.SUPPRESS
+                 for option in action.option_strings}
+        assert not shown & RETIRED, f"{parser.prog} shows {sorted(shown & RETIRED)}"
+
+
+@pytest.mark.parametrize("name", sorted(ALL_COMMANDS))
+def test_bad_arguments_exit_2_with_a_one_line_reason(name, parsers, capsys):
+    with pytest.raises(SystemExit) as done:
+        parsers[name].parse_args(["--no-such-option"])
+    assert done.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1].startswith(f"{name}: error: "), err
+
+
+@pytest.mark.parametrize(("name", "base", "old", "new"), ALIASES, ids=lambda v: " ".join(v) if isinstance(v, list)
+                         else v)
+def test_a_deprecated_spelling_parses_as_the_new_one_and_says_so(name, base, old, new, parsers, capsys):
+    parser = parsers[name]
+    canonical = parser.parse_args([*base, *new])
+    assert capsys.readouterr().err == ""
+    deprecated = parser.parse_args([*base, *old])
+    lines = capsys.readouterr().err.splitlines()
+    assert vars(deprecated) == vars(canonical)
+    assert len(lines) == 1 and lines[0].endswith(
+        f": {old[0]} is deprecated, use {new[0]} (the old spelling goes in {REMOVED_IN})"), lines
+    assert lines[0].startswith(name)
+
+
+def test_every_deprecated_spelling_is_tested(parsers):
+    found = {(prog.split()[0] if not prog.startswith("python") else " ".join(prog.split()[:3]), old)
+             for parser in parsers.values() for prog, old, _ in deprecated_spellings(parser)}
+    tested = {(name, old[0]) for name, _, old, _ in ALIASES}
+    assert found == tested
+
+
+def test_the_old_script_name_warns_and_runs(monkeypatch, capsys, tmp_path):
+    from pectoral_gym.hardware.vision import calibrate
+
+    monkeypatch.setattr(calibrate, "main", lambda argv=None: 0)
+    assert calibrate.deprecated_main([]) == 0
+    assert capsys.readouterr().err == (f"pectoral-calibrate: pectoral-calibrate is deprecated, use "
+                                       f"pectoral-camera-calibrate (the old spelling goes in {REMOVED_IN})\n")
+
+
+def test_prog_is_what_the_user_typed(monkeypatch):
+    as_module = types.ModuleType("__main__")
+    as_module.__spec__ = types.SimpleNamespace(name="pectoral_gym.__main__")
+    monkeypatch.setitem(sys.modules, "__main__", as_module)
+    assert prog_name("pectoral-fish", "pectoral_gym", "pectoral_gym.tools.cli") == "python -m pectoral_gym"
+    assert prog_name("pectoral-train", "pectoral_gym.agents.training.train") == "pectoral-train"  # another -m
+
+    as_script = types.ModuleType("__main__")
+    as_script.__spec__ = None  # a console script's wrapper
+    monkeypatch.setitem(sys.modules, "__main__", as_script)
+    monkeypatch.setattr(sys, "argv", ["/venv/bin/pectoral-calibrate", "--help"])
+    assert prog_name("pectoral-camera-calibrate", "pectoral_gym.hardware.vision.calibrate") == "pectoral-calibrate"
+    monkeypatch.setattr(sys, "argv", ["/venv/bin/pytest"])
+    assert prog_name("pectoral-train", "pectoral_gym.agents.training.train") == "pectoral-train"
+    monkeypatch.setattr(sys, "argv", ["/venv/bin/pectoral-demo"])  # the demo runs the deploy in its process
+    assert prog_name("pectoral-deploy", "pectoral_gym.hardware.deploy") == "pectoral-deploy"
+    assert prog_name(None, "pectoral_gym.agents.nmpc.compare") == "python -m pectoral_gym.agents.nmpc.compare"
+
+
+def test_every_command_module_has_build_parser_and_main():
+    import importlib
+
+    for command in ALL_COMMANDS.values():
+        module = importlib.import_module(command.module)
+        assert callable(module.build_parser) and callable(module.main), command.module
+
+
+def test_the_cli_reference_is_current():
+    committed = (ROOT / "docs" / "reference" / "cli.md").read_text()
+    assert reference_markdown() == committed, (
+        "docs/reference/cli.md is stale: run python -m pectoral_gym.tools.cli_common --markdown and commit it")
+
+
+def test_the_reference_writer_command(tmp_path, capsys):
+    assert cli_common.main(["--markdown", str(tmp_path / "cli.md")]) == 0
+    assert (tmp_path / "cli.md").read_text() == reference_markdown()
+
+
+def test_an_unknown_subcommand_error_lists_only_the_current_names(parsers, capsys):
+    with pytest.raises(SystemExit) as done:
+        parsers["pectoral-fish"].parse_args(["frobnicate"])
+    assert done.value.code == 2
+    err = capsys.readouterr().err
+    assert "'patterns'" in err and "'step-rate'" in err and "'demo'" not in err and "'bench'" not in err
