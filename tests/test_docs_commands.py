@@ -19,7 +19,13 @@ import pytest
 from pectoral_gym.tools.cli_common import COMMANDS, DEPRECATED_SCRIPTS, MODULE_COMMANDS, Command
 
 ROOT = Path(__file__).resolve().parents[1]
-DOCS = ("README.md", "docs/getting-started.md")
+# README and every current page (the dated research notes quote commands as they were then, so they are left out)
+DOCS = ("README.md", *sorted(str(p.relative_to(ROOT)) for p in (ROOT / "docs").rglob("*.md")
+                             if "notes" not in p.relative_to(ROOT / "docs").parts[:1]
+                             and "validation" not in p.relative_to(ROOT / "docs").parts[:1]))
+SHELL_ASSIGNMENT = re.compile(r"^(?P<name>[A-Za-z_]\w*)=(?P<value>\"[^\"]*\"|'[^']*'|\S*)$")
+INLINE_DOCS = ("README.md", "docs/getting-started.md", "docs/results.md")  # their tables quote whole commands inline
+INLINE_COMMAND = re.compile(r"(?<!`)`((?:\.venv/bin/)?(?:pectoral-[a-z-]+|python -m pectoral_gym[\w.]*) [^`]*)`(?!`)")
 SHELL_BLOCK = re.compile(r"^```(?:bash|sh|shell|console)[ \t]*\n(.*?)^```", re.S | re.M)
 OPERATORS = {"&&", "||", ";", "|", "&"}
 ENV_ASSIGNMENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*=")
@@ -39,14 +45,23 @@ class DocCommand:
     args: tuple[str, ...]
 
 
-def shell_commands(markdown: str) -> list[list[str]]:
-    """The simple commands (token lists) of every shell block: continuations joined, comments dropped, chains split."""
+def shell_commands(markdown: str, inline: bool = False) -> list[list[str]]:
+    """The simple commands (token lists) of every shell block: continuations joined, comments dropped, chains split.
+
+    With ``inline``, also the commands written inline with their arguments (`` `pectoral-deploy --seed 1` ``, as in
+    the results tables).
+    """
     commands = []
     for block in SHELL_BLOCK.findall(markdown):
+        variables: dict[str, str] = {}  # NAME="..." lines of the block, expanded in the lines after them
         for line in block.replace("\\\n", " ").splitlines():
             line = line.strip().removeprefix("$ ")
             if not line or line.startswith("#"):
                 continue
+            if assignment := SHELL_ASSIGNMENT.match(line):
+                variables[assignment["name"]] = shlex.split(assignment["value"])[0] if assignment["value"] else ""
+                continue
+            line = re.sub(r"\$\{?(\w+)\}?", lambda m, known=variables: known.get(m[1], m[0]), line)
             lexer = shlex.shlex(line, posix=True, punctuation_chars=True)
             lexer.whitespace_split = True
             current: list[str] = []
@@ -57,6 +72,11 @@ def shell_commands(markdown: str) -> list[list[str]]:
                 else:
                     current.append(token)
             commands.append(current)
+    if not inline:
+        return [c for c in commands if c]
+    prose = SHELL_BLOCK.sub("", re.sub(r"^```.*?^```", "", markdown, flags=re.S | re.M))
+    for quoted in INLINE_COMMAND.findall(prose):  # a command written inline, e.g. in a table
+        commands.extend(shell_commands(f"```bash\n{' '.join(quoted.split())}\n```\n"))
     return [c for c in commands if c]
 
 
@@ -80,7 +100,8 @@ def as_doc_command(source: str, tokens: list[str]) -> DocCommand | None:
 def doc_commands(path: Path) -> list[DocCommand]:
     """Every pectoral-gym command quoted in the shell blocks of ``path``."""
     source = str(path.relative_to(ROOT))
-    found = (as_doc_command(source, tokens) for tokens in shell_commands(path.read_text()))
+    inline = source in INLINE_DOCS
+    found = (as_doc_command(source, tokens) for tokens in shell_commands(path.read_text(), inline=inline))
     return [c for c in found if c is not None]
 
 
