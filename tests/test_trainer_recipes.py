@@ -166,6 +166,13 @@ def test_cleanrl_original_lines_fail_under_gymnasium_1():
         assert "final_info" not in infos  # CleanRL's statistics loop never runs
     envs.close()
     assert ended >= 2
+    envs = _cleanrl()["make_envs"](ENV, 2, False, "test", 0.99)
+    infos = next(infos for *_, infos in _rollout(envs, 80) if "final_info" in infos)
+    envs.close()
+    with pytest.raises(TypeError):  # under SameStep, CleanRL's loop meets a dict of arrays
+        for info in infos["final_info"]:
+            if info and "episode" in info:
+                info["episode"]["r"]
 
 
 @pytest.mark.skipif(not _has("minari", "h5py", "jax"), reason="minari[create,hdf5] not installed (clients extra)")
