@@ -4,10 +4,10 @@ import re
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-AGENTS_DOC = ROOT / "docs" / "agents.md"
+TRAINERS_DOC = ROOT / "docs" / "guide" / "trainers.md"  # "Other trainers": one recipe per trainer
 
 
-def snippet(name: str, doc: Path = AGENTS_DOC) -> str:
+def snippet(name: str, doc: Path = TRAINERS_DOC) -> str:
     """The text of the fenced code block right after ``<!-- snippet: name -->`` in ``doc``."""
     match = re.search(rf"<!-- snippet: {re.escape(name)} -->\s*```[a-z]*\n(.*?)\n```", doc.read_text(), re.S)
     assert match, f"no snippet {name!r} in {doc}"

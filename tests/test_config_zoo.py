@@ -28,10 +28,12 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def _doc_argv(line):
-    """A command of the docs as argv: this interpreter for ``python``, the repository's hyperparameter files."""
+    """A command of the docs as argv: this interpreter for ``python`` and its environment's console scripts, the
+    repository's hyperparameter files."""
     argv = shlex.split(line)
-    assert argv[0] == "python", line
-    return [sys.executable, *(str(ROOT / a) if a.startswith("agents/hyperparams/") else a for a in argv[1:])]
+    assert argv[0] == "python" or argv[0].startswith("pectoral-"), line
+    program = [sys.executable] if argv[0] == "python" else [str(Path(sys.executable).parent / argv[0])]
+    return [*program, *(str(ROOT / a) if a.startswith("agents/hyperparams/") else a for a in argv[1:])]
 
 
 def write(tmp_path, table, name="ppo.yml"):
@@ -186,8 +188,8 @@ print(json.dumps(out))
 
 @pytest.mark.skipif(importlib.util.find_spec("rl_zoo3") is None, reason="rl_zoo3 not installed (dev extra)")
 def test_zoo_trains_from_the_shipped_file(tmp_path):
-    # the commands of docs/agents.md's zoo snippet, as written, with smaller sizes appended (zoo's argparse keeps
-    # the last -n, --eval-freq, --eval-episodes and --hyperparams)
+    # the commands of docs/guide/trainers.md's zoo snippet, as written, with smaller sizes appended (zoo's argparse
+    # keeps the last -n, --eval-freq, --eval-episodes and --hyperparams)
     train_cmd, enjoy_cmd, evaluate_cmd = [_doc_argv(line) for line in commands(snippet("zoo"))]
     assert train_cmd[:3] == [sys.executable, "-m", "rl_zoo3.train"] and "--conf-file" in train_cmd
     command = [*train_cmd, "-n", "512", "--eval-freq", "256", "--eval-episodes", "2", "--hyperparams", "n_envs:2",

@@ -1,7 +1,8 @@
-"""The "Using other trainers" snippets of docs/agents.md, run as they are written (sizes shrunk by their constants).
+"""The TorchRL and RLlib snippets of docs/guide/trainers.md, run as they are written (sizes shrunk by their constants).
 
 The RLlib snippet needs ``ray[rllib]``, which pins gymnasium 1.2.2: it runs in ``.ci/run``'s ``.venv-rllib`` and is
-skipped elsewhere. The rl-baselines3-zoo snippet runs in ``tests/test_config_zoo.py``.
+skipped elsewhere. The rl-baselines3-zoo snippet runs in ``tests/test_config_zoo.py``, the page's other recipes in
+``tests/test_trainer_recipes.py``.
 """
 
 import importlib.util
