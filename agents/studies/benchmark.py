@@ -159,16 +159,16 @@ def measure_training(steps: int, seed: int = 0, version: str = VERSIONS[0]) -> d
     The model is built first (not timed); the timed part is ``learn(steps)``: env stepping through the
     SB3 ``VecEnv`` adapter, rollout collection and the gradient updates, on one torch thread.
     """
-    import torch
     from stable_baselines3 import PPO
     from stable_baselines3.common.vec_env import VecNormalize
 
     from pectoral_gym.agents.training.config import algo_kwargs, resolve_config
     from pectoral_gym.agents.training.vec_adapter import make_fish_vec_env
+    from pectoral_gym.model.threads import pin_torch_threads
 
     averaged_id = env_id("averaged", version)
     config = resolve_config("ppo", averaged_id, seed)
-    torch.set_num_threads(1)
+    pin_torch_threads(1)
     venv = make_fish_vec_env(averaged_id, config["n_envs"], config["env_kwargs"], seed=seed)
     normalize = config.get("normalize")
     if normalize:

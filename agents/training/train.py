@@ -46,6 +46,7 @@ from pectoral_gym.agents.training.config import (
     run_model_spec,
 )
 from pectoral_gym.agents.training.zoo_format import algo_class
+from pectoral_gym.model.threads import pin_torch_threads
 from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
 
 __all__ = ["EVAL_SEED_OFFSET", "QUICK", "build_parser", "main", "make_run_dir", "train"]
@@ -184,7 +185,6 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
     Returns:
         The run folder.
     """
-    import torch
     from stable_baselines3.common.utils import set_random_seed
     from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
 
@@ -193,7 +193,7 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
     run_dir = Path(run_dir)
     run_dir.mkdir(parents=True, exist_ok=True)
     seed = config["seed"]
-    torch.set_num_threads(int(torch_threads))
+    pin_torch_threads(torch_threads)  # numba's threads first, or their start resets torch's count
     set_random_seed(seed)
     spec = run_model_spec(config).to_dict()  # the model trained on, explicit (run_model_spec reads it back)
     with open(run_dir / "config.yaml", "w") as f:
