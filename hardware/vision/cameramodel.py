@@ -29,8 +29,18 @@ def _as_points(xy: np.ndarray | tuple | list, name: str) -> np.ndarray:
 
 
 def _apply_homography(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
-    homogeneous = points @ matrix[:, :2].T + matrix[:, 2]
-    return homogeneous[..., :2] / homogeneous[..., 2:3]
+    homogeneous = points @ matrix[:, :2].T
+    if homogeneous.size < 96:
+        homogeneous += matrix[:, 2]
+        return homogeneous[..., :2] / homogeneous[..., 2:3]
+    # The same sums and quotients column by column: numpy's broadcast over the last, short axis is slower
+    columns = homogeneous.reshape(-1, 3)
+    weight = columns[:, 2] + matrix[2, 2]
+    result = np.empty((len(columns), 2))
+    for axis in (0, 1):
+        np.add(columns[:, axis], matrix[axis, 2], out=result[:, axis])
+        np.divide(result[:, axis], weight, out=result[:, axis])
+    return result.reshape(points.shape)
 
 
 def fit_homography(source: np.ndarray, target: np.ndarray) -> np.ndarray:
