@@ -6,6 +6,7 @@ The tank frame is the simulation's (:mod:`pectoral_gym.hardware.vision.scene`); 
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 from dataclasses import dataclass, field
@@ -129,8 +130,9 @@ class CameraModel:
         """Local image scale [px/m] at a tank point (geometric mean of the two axes)."""
         centre = _as_points(xy, "xy")
         step = 1e-3
-        du = self.tank_to_pixel(centre + (step, 0.0)) - self.tank_to_pixel(centre - (step, 0.0))
-        dv = self.tank_to_pixel(centre + (0.0, step)) - self.tank_to_pixel(centre - (0.0, step))
+        project = functools.partial(_apply_homography, self.homography)  # centre is checked: finite
+        du = project(centre + (step, 0.0)) - project(centre - (step, 0.0))
+        dv = project(centre + (0.0, step)) - project(centre - (0.0, step))
         return float(np.sqrt(abs(du[0] * dv[1] - du[1] * dv[0])) / (2 * step))
 
     def to_dict(self) -> dict[str, Any]:

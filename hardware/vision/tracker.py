@@ -27,6 +27,8 @@ from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 __all__ = ["Blob", "MarkerTracker", "TrackResult", "TrackerConfig", "draw_overlay", "fish_box"]
 
 BOX_MARGIN = 0.03  # m beyond the body's half length around the centre in :attr:`TrackResult.box`
+_RING_COS, _RING_SIN = np.cos(np.linspace(0.0, 2 * math.pi, 16, endpoint=False)), np.sin(
+    np.linspace(0.0, 2 * math.pi, 16, endpoint=False))  # the 16 directions of fish_box's ring
 _PREFILTER_MIN_SATURATION = 86  # lowest min_saturation for which MarkerTracker._candidates' test holds
 
 
@@ -150,14 +152,22 @@ def fish_box(camera: CameraModel, pose: tuple[float, ...], margin: float = BOX_M
     if not (math.isfinite(x) and math.isfinite(y)):
         raise ValueError(f"pose position must be finite, got {pose!r}")
     radius = BODY_LENGTH / 2 + margin
-    angles = np.linspace(0.0, 2 * math.pi, 16, endpoint=False)
-    ring = np.stack([x + radius * np.cos(angles), y + radius * np.sin(angles)], axis=1)
+    ring = np.stack([x + radius * _RING_COS, y + radius * _RING_SIN], axis=1)
     pixels = camera.tank_to_pixel(ring)
     col0, row0 = np.floor(pixels.min(axis=0)).astype(int) - 1
     col1, row1 = np.ceil(pixels.max(axis=0)).astype(int) + 2
     row0, row1 = min(max(int(row0), 0), camera.height), min(max(int(row1), 0), camera.height)
     col0, col1 = min(max(int(col0), 0), camera.width), min(max(int(col1), 0), camera.width)
     return row0, max(row1, row0), col0, max(col1, col0)
+
+
+def _covariance(us: np.ndarray, vs: np.ndarray) -> np.ndarray:
+    """``np.cov(np.stack([us, vs]))``, its very operations without its argument handling (the same bits)."""
+    samples = np.stack([us, vs])
+    samples -= samples.mean(axis=1)[:, None]
+    covariance = np.dot(samples, samples.T.conj())
+    covariance *= np.true_divide(1, samples.shape[1] - 1)
+    return covariance
 
 
 def _lost(timestamp: float, reason: str) -> TrackResult:
@@ -234,7 +244,7 @@ class MarkerTracker:
             vs, us = np.nonzero(labels[y0 : y0 + h, x0 : x0 + w] == label)
             us, vs = us + float(x0 + cu), vs + float(y0 + cv)
             centre = (float(us.mean()), float(vs.mean()))
-            eigen = np.linalg.eigvalsh(np.cov(np.stack([us, vs]))) if area > 2 else np.array([0.0, 1.0])
+            eigen = np.linalg.eigvalsh(_covariance(us, vs)) if area > 2 else np.array([0.0, 1.0])
             elongation = float(np.sqrt(eigen[1] / max(eigen[0], 1e-9)))
             tank = self.camera.pixel_to_tank(centre)
             expected = math.pi * (cfg.marker_radius * self.camera.pixels_per_metre(tank)) ** 2
