@@ -364,17 +364,42 @@ def _noise_window(image: np.ndarray, rng: np.random.Generator, noise_std: float)
     return _scaled_noise(image.size, float(noise_std))[start:start + image.size].reshape(image.shape)
 
 
+@functools.lru_cache(maxsize=2)
+def _noisy_backgrounds(camera: CameraModel, noise_std: float) -> tuple[list[np.ndarray], list[list[np.ndarray]]]:
+    """Each colour of the background plus the whole noise bank, rounded to uint8, and where that colour is.
+
+    Returns ``(masks, tables)``: ``masks[k]`` (H, W, 3) uint8 marks the pixels of the background's colour ``k``;
+    ``tables[k][p][j]`` is colour ``k``'s channel ``(j - p) % 3`` plus noise value ``j`` as a frame rounds it,
+    so a frame whose noise window starts at ``start`` reads its background from ``tables[k][start % 3]``.
+    """
+    background = _background(camera)
+    colours, inverse = np.unique(background.reshape(-1, 3), axis=0, return_inverse=True)
+    scaled = _scaled_noise(background.size, noise_std)
+    masks, tables = [], []
+    for k, colour in enumerate(colours):
+        masks.append(np.repeat((inverse.reshape(background.shape[:2]) == k)[..., None], 3, axis=2).astype(np.uint8))
+        repeated = np.tile(colour, scaled.size // 3 + 2)
+        tables.append([cv2.add(repeated[-p % 3:-p % 3 + scaled.size], scaled, dtype=cv2.CV_8U) for p in range(3)])
+    return masks, tables
+
+
 def _render_noisy(
     pose: tuple[float, float, float], camera: CameraModel, rng: np.random.Generator, conditions: SceneConditions
 ) -> np.ndarray:
     """:func:`render_frame` under even, nominal light without glare or blur: the same pixels in fewer passes.
 
-    Background plus noise, rounded and saturated to uint8 in one pass (OpenCV rounds half to even, as
-    ``np.rint``), then each patch the same way over its own pixels.
+    The background's pixels plus noise are read from tables rounded once per camera (:func:`_noisy_backgrounds`),
+    then each patch plus its noise is rounded and saturated to uint8 by OpenCV (half to even, as ``np.rint``).
     """
     background = _background(camera)
-    noise = _noise_window(background, rng, conditions.noise_std)
-    frame = cv2.add(background, noise, dtype=cv2.CV_8U)
+    size = background.size
+    start = int(rng.integers(0, size))
+    masks, tables = _noisy_backgrounds(camera, float(conditions.noise_std))
+    window = slice(start, start + size)
+    frame = tables[0][start % 3][window].reshape(background.shape).copy()
+    for mask, table in zip(masks[1:], tables[1:], strict=True):
+        cv2.copyTo(table[start % 3][window].reshape(background.shape), mask, frame)
+    noise = _scaled_noise(size, float(conditions.noise_std))[window].reshape(background.shape)
     for box in _patch_boxes(pose, camera, conditions):
         u0, v0, u1, v1 = box
         patch = _render_patch(box, pose, camera, conditions).astype(np.float32)
