@@ -212,12 +212,6 @@ def _labels(tank: np.ndarray, pose: tuple[float, float, float], conditions: Scen
     return labels
 
 
-def _paint(tank: np.ndarray, pose: tuple[float, float, float], conditions: SceneConditions) -> np.ndarray:
-    """Colour of the scene at tank points ``(..., 2)`` (float64 BGR)."""
-    palette, index = _palette(conditions)
-    return palette[_labels(tank, pose, conditions, index)]
-
-
 def _patch_boxes(
     pose: tuple[float, float, float], camera: CameraModel, conditions: SceneConditions
 ) -> list[tuple[int, int, int, int]]:

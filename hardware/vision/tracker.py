@@ -7,6 +7,9 @@ marker should have at that place in the image (from the homography) and they are
 axes). Blob centroids go through the pixel -> tank homography; among the surviving red x blue pairs, the one whose
 separation matches the known marker spacing is the fish. A missing marker, an implausible blob or a tie between
 candidates is reported as lost with the reason: the tracker never guesses.
+
+The conversion, thresholds and cleanup run only on the box of the frame that can hold marker pixels (a
+necessary saturation test on every pixel, cheaper than the conversion): the blobs are the whole frame's.
 """
 
 from __future__ import annotations
