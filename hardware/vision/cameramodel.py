@@ -6,6 +6,7 @@ The tank frame is the simulation's (:mod:`pectoral_gym.hardware.vision.scene`); 
 
 from __future__ import annotations
 
+import functools
 import json
 import os
 from dataclasses import dataclass, field
@@ -29,8 +30,18 @@ def _as_points(xy: np.ndarray | tuple | list, name: str) -> np.ndarray:
 
 
 def _apply_homography(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
-    homogeneous = points @ matrix[:, :2].T + matrix[:, 2]
-    return homogeneous[..., :2] / homogeneous[..., 2:3]
+    homogeneous = points @ matrix[:, :2].T
+    if homogeneous.size < 96:
+        homogeneous += matrix[:, 2]
+        return homogeneous[..., :2] / homogeneous[..., 2:3]
+    # The same sums and quotients column by column: numpy's broadcast over the last, short axis is slower
+    columns = homogeneous.reshape(-1, 3)
+    weight = columns[:, 2] + matrix[2, 2]
+    result = np.empty((len(columns), 2))
+    for axis in (0, 1):
+        np.add(columns[:, axis], matrix[axis, 2], out=result[:, axis])
+        np.divide(result[:, axis], weight, out=result[:, axis])
+    return result.reshape(points.shape)
 
 
 def fit_homography(source: np.ndarray, target: np.ndarray) -> np.ndarray:
@@ -119,8 +130,9 @@ class CameraModel:
         """Local image scale [px/m] at a tank point (geometric mean of the two axes)."""
         centre = _as_points(xy, "xy")
         step = 1e-3
-        du = self.tank_to_pixel(centre + (step, 0.0)) - self.tank_to_pixel(centre - (step, 0.0))
-        dv = self.tank_to_pixel(centre + (0.0, step)) - self.tank_to_pixel(centre - (0.0, step))
+        project = functools.partial(_apply_homography, self.homography)  # centre is checked: finite
+        du = project(centre + (step, 0.0)) - project(centre - (step, 0.0))
+        dv = project(centre + (0.0, step)) - project(centre - (0.0, step))
         return float(np.sqrt(abs(du[0] * dv[1] - du[1] * dv[0])) / (2 * step))
 
     def to_dict(self) -> dict[str, Any]:

@@ -138,33 +138,78 @@ def _background(camera: CameraModel) -> np.ndarray:
     return image
 
 
+@functools.lru_cache(maxsize=4)
+def _scaled_noise(size: int, noise_std: float) -> np.ndarray:
+    """:func:`_noise_bank` times ``noise_std`` (float32, as each frame's window of it was scaled before)."""
+    scaled = _noise_bank(size) * np.float32(noise_std)
+    scaled.setflags(write=False)
+    return scaled
+
+
+@functools.lru_cache(maxsize=8)
+def _pixel_grid(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
+    """Tank points of the pixel centres from one pixel before to one after each image edge, and which are inside.
+
+    Shapes ``(H + 2, W + 2, 2)`` and ``(H + 2, W + 2)``, cached per camera. A patch's grid is a slice of them: the
+    matrix product gives a point the same bits in any array of points (tests/test_scene_patch.py).
+    """
+    grid_u, grid_v = np.meshgrid(np.arange(-1, camera.width + 1, dtype=float),
+                                 np.arange(-1, camera.height + 1, dtype=float))
+    tank = camera.pixel_to_tank(np.stack([grid_u, grid_v], axis=-1))
+    inside = _inside_tank(tank)
+    tank.setflags(write=False)
+    inside.setflags(write=False)
+    return tank, inside
+
+
 def _inside_tank(tank: np.ndarray) -> np.ndarray:
     return (tank[..., 0] >= 0) & (tank[..., 0] <= TANK_LENGTH) & (tank[..., 1] >= 0) & (tank[..., 1] <= TANK_WIDTH)
 
 
-def _paint(tank: np.ndarray, pose: tuple[float, float, float], conditions: SceneConditions) -> np.ndarray:
-    """Colour of the scene at tank points ``(..., 2)`` (painter's algorithm, floor first)."""
+@functools.lru_cache(maxsize=16)
+def _palette(conditions: SceneConditions) -> tuple[np.ndarray, tuple[int, ...]]:
+    """The scene's distinct colours ``(k, 3)`` and, per painting step of :func:`_labels`, its colour's index."""
+    steps = [WALL_BGR, FLOOR_BGR, BODY_BGR, conditions.red_bgr, OCCLUDER_BGR, conditions.blue_bgr, OCCLUDER_BGR]
+    steps += [occluder.bgr for occluder in conditions.occluders]
+    colours = np.array(steps, dtype=float)
+    distinct: list[int] = []  # first step of each colour (== as numpy compares: -0.0 is 0.0, NaN is no colour's)
+    index = []
+    for row in colours:
+        same = [j for j, d in enumerate(distinct) if np.all(colours[d] == row)]
+        if not same:
+            distinct.append(len(index))
+            same = [len(distinct) - 1]
+        index.append(same[0])
+    palette = colours[distinct]
+    palette.setflags(write=False)
+    return palette, tuple(index)
+
+
+def _labels(tank: np.ndarray, pose: tuple[float, float, float], conditions: SceneConditions,
+            index: tuple[int, ...], inside: np.ndarray | None = None) -> np.ndarray:
+    """Palette index (uint8) of the scene's colour at tank points ``(..., 2)`` (painter's algorithm, floor first).
+
+    One byte per point instead of a colour triple: the same tests in the same order as colours were painted.
+    """
     x, y, psi = pose
-    colour = np.empty(tank.shape[:-1] + (3,))
-    colour[:] = WALL_BGR
-    colour[_inside_tank(tank)] = FLOOR_BGR
+    tx, ty = tank[..., 0], tank[..., 1]
+    labels = np.full(tank.shape[:-1], index[0], dtype=np.uint8)
+    labels[_inside_tank(tank) if inside is None else inside] = index[1]
     cos, sin = np.cos(psi), np.sin(psi)
-    dx, dy = tank[..., 0] - x, tank[..., 1] - y
+    dx, dy = tx - x, ty - y
     bx, by = cos * dx + sin * dy, -sin * dx + cos * dy  # body-frame coordinates
-    colour[(bx / (BODY_LENGTH / 2)) ** 2 + (by / (BODY_WIDTH / 2)) ** 2 <= 1] = BODY_BGR
-    for offset, bgr, hidden in (
-        (FRONT_MARKER_OFFSET, conditions.red_bgr, conditions.front_occlusion),
-        (BACK_MARKER_OFFSET, conditions.blue_bgr, conditions.back_occlusion),
+    labels[(bx / (BODY_LENGTH / 2)) ** 2 + (by / (BODY_WIDTH / 2)) ** 2 <= 1] = index[2]
+    for offset, step, hidden in (
+        (FRONT_MARKER_OFFSET, 3, conditions.front_occlusion),
+        (BACK_MARKER_OFFSET, 5, conditions.back_occlusion),
     ):
-        colour[(bx - offset) ** 2 + by**2 <= MARKER_RADIUS**2] = bgr
+        labels[(bx - offset) ** 2 + by**2 <= MARKER_RADIUS**2] = index[step]
         if hidden > 0:  # a dark strip over the marker from its left side
             strip = (np.abs(bx - offset) <= 1.5 * MARKER_RADIUS) & (by >= MARKER_RADIUS * (1 - 2 * hidden))
-            colour[strip & (by <= 2.5 * MARKER_RADIUS)] = OCCLUDER_BGR
-    for occluder in conditions.occluders:
-        colour[(tank[..., 0] - occluder.x) ** 2 + (tank[..., 1] - occluder.y) ** 2 <= occluder.radius**2] = (
-            occluder.bgr
-        )
-    return colour
+            labels[strip & (by <= 2.5 * MARKER_RADIUS)] = index[step + 1]
+    for step, occluder in enumerate(conditions.occluders, start=7):
+        labels[(tx - occluder.x) ** 2 + (ty - occluder.y) ** 2 <= occluder.radius**2] = index[step]
+    return labels
 
 
 def _patch_boxes(
@@ -189,7 +234,7 @@ def _patch_boxes(
 
 
 def _whole(colours: np.ndarray) -> bool:
-    """Whether every channel value is a whole number in [0, 255] (then ``B + 256 G + 65536 R`` names the colour)."""
+    """Whether every channel value is a whole number in [0, 255]."""
     return bool(np.all((colours >= 0) & (colours <= 255) & (colours == np.floor(colours))))
 
 
@@ -200,31 +245,36 @@ def _render_patch(
 
     A pixel whose own centre and its eight neighbours' centres show one colour lies inside one region (the
     shapes are convex and several pixels across): its centre sample is its colour. Only the others (about a
-    fifth of the patch) are supersampled; that keeps an in-process emulated camera at 30 frames/s.
+    tenth of the patch) are supersampled; that keeps an in-process emulated camera at 30 frames/s.
     """
     u0, v0, u1, v1 = box
     height, width = v1 - v0, u1 - u0
-    grid_u, grid_v = np.meshgrid(np.arange(u0 - 1, u1 + 1, dtype=float), np.arange(v0 - 1, v1 + 1, dtype=float))
-    centres = _paint(camera.pixel_to_tank(np.stack([grid_u, grid_v], axis=-1)), pose, conditions)
+    palette, index = _palette(conditions)
+    tank, inside = _pixel_grid(camera)
+    centres = _labels(tank[v0:v1 + 2, u0:u1 + 2], pose, conditions, index, inside[v0:v1 + 2, u0:u1 + 2])
     inner = centres[1:-1, 1:-1]
-    # Colours are whole BGR triples, so one number per colour compares them all at once (exactly)
-    keys = centres @ np.array([1.0, 256.0, 65536.0]) if _whole(centres) else None
-    uniform = np.ones((height, width), dtype=bool)
+    # The palette's colours are distinct, so equal labels are equal colours (a NaN colour equals none: not uniform)
+    uniform = np.ones((height, width), dtype=bool) if np.all(palette == palette) else ~np.isnan(palette[inner]).any(-1)
     for dv in (0, 1, 2):
         for du in (0, 1, 2):
-            if keys is not None:
-                uniform &= keys[dv:dv + height, du:du + width] == keys[1:-1, 1:-1]
-            else:
-                uniform &= np.all(centres[dv:dv + height, du:du + width] == inner, axis=-1)
-    colour = inner.copy()
+            if dv != 1 or du != 1:
+                uniform &= centres[dv:dv + height, du:du + width] == inner
+    colour = palette[inner]
     rows, cols = np.nonzero(~uniform)
     if rows.size:
         s = _SUPERSAMPLE
         offsets = (np.arange(s) + 0.5) / s - 0.5
-        sub_u = (cols + u0)[:, None, None] + offsets[None, None, :] + np.zeros((1, s, 1))
-        sub_v = (rows + v0)[:, None, None] + offsets[None, :, None] + np.zeros((1, 1, s))
-        samples = camera.pixel_to_tank(np.stack([sub_u, sub_v], axis=-1).reshape(-1, 2))
-        colour[rows, cols] = _paint(samples, pose, conditions).reshape(rows.size, s * s, 3).mean(axis=1)
+        points = np.empty((rows.size, s * s, 2))  # sample (a, b) of a pixel at (u + offsets[b], v + offsets[a])
+        points[..., 0] = (cols + u0)[:, None] + np.tile(offsets, s)
+        points[..., 1] = (rows + v0)[:, None] + np.repeat(offsets, s)
+        labels = _labels(camera.pixel_to_tank(points.reshape(-1, 2)), pose, conditions, index)
+        if _whole(palette):
+            # Sums of whole colours are exact in any order: counts @ palette is the samples' sum, bit for bit
+            counts = np.bincount(np.arange(labels.size) // (s * s) * len(palette) + labels, minlength=rows.size
+                                 * len(palette)).reshape(rows.size, len(palette))
+            colour[rows, cols] = (counts.astype(float) @ palette) / (s * s)
+        else:
+            colour[rows, cols] = palette[labels.reshape(rows.size, s * s)].mean(axis=1)
     return colour
 
 
@@ -268,11 +318,20 @@ def render_frame(
         raise ValueError(f"pose must be three finite numbers (X, Y, psi), got {pose!r}")
     pose = tuple(float(p) for p in pose)
     conditions = SceneConditions() if conditions is None else conditions
+    if (conditions.noise_std > 0 and conditions.brightness == 1.0 and conditions.gradient == 0
+            and not conditions.glare and conditions.blur_sigma == 0):
+        return _render_noisy(pose, camera, rng, conditions)
+    return _render_general(pose, camera, rng, conditions)
+
+
+def _render_general(
+    pose: tuple[float, float, float], camera: CameraModel, rng: np.random.Generator, conditions: SceneConditions
+) -> np.ndarray:
+    """:func:`render_frame` under any conditions: a float image, the imperfections in turn, rounded at the end."""
     image = np.array(_background(camera), dtype=np.float32)
     for box in _patch_boxes(pose, camera, conditions):
         u0, v0, u1, v1 = box
         image[v0:v1, u0:u1] = _render_patch(box, pose, camera, conditions)
-    # In place: the full-frame passes below are most of a frame's cost (it runs in a camera thread, 30 times a second)
     gain = _lighting_gain(camera, conditions)
     if isinstance(gain, np.ndarray):
         image = image * gain
@@ -283,11 +342,60 @@ def render_frame(
     if conditions.blur_sigma > 0:
         image = cv2.GaussianBlur(image, (0, 0), conditions.blur_sigma)
     if conditions.noise_std > 0:
-        # A window of a noise bank drawn once, at an offset drawn from ``rng``: independent-looking sensor noise
-        # per frame for a fraction of the cost of fresh normals (a camera thread renders 30 frames a second).
-        bank = _noise_bank(image.size)
-        start = int(rng.integers(0, image.size))
-        image += bank[start:start + image.size].reshape(image.shape) * np.float32(conditions.noise_std)
+        image += _noise_window(image, rng, conditions.noise_std)
     np.rint(image, out=image)
     np.clip(image, 0, 255, out=image)
     return image.astype(np.uint8)
+
+
+def _noise_window(image: np.ndarray, rng: np.random.Generator, noise_std: float) -> np.ndarray:
+    """Sensor noise for ``image``: a window of a noise bank drawn once, at an offset drawn from ``rng``.
+
+    Independent-looking sensor noise per frame for a fraction of the cost of fresh normals (a camera thread
+    renders 30 frames a second).
+    """
+    start = int(rng.integers(0, image.size))
+    return _scaled_noise(image.size, float(noise_std))[start:start + image.size].reshape(image.shape)
+
+
+@functools.lru_cache(maxsize=2)
+def _noisy_backgrounds(camera: CameraModel, noise_std: float) -> tuple[list[np.ndarray], list[list[np.ndarray]]]:
+    """Each colour of the background plus the whole noise bank, rounded to uint8, and where that colour is.
+
+    Returns ``(masks, tables)``: ``masks[k]`` (H, W, 3) uint8 marks the pixels of the background's colour ``k``;
+    ``tables[k][p][j]`` is colour ``k``'s channel ``(j - p) % 3`` plus noise value ``j`` as a frame rounds it,
+    so a frame whose noise window starts at ``start`` reads its background from ``tables[k][start % 3]``.
+    """
+    background = _background(camera)
+    colours, inverse = np.unique(background.reshape(-1, 3), axis=0, return_inverse=True)
+    scaled = _scaled_noise(background.size, noise_std)
+    masks, tables = [], []
+    for k, colour in enumerate(colours):
+        masks.append(np.repeat((inverse.reshape(background.shape[:2]) == k)[..., None], 3, axis=2).astype(np.uint8))
+        repeated = np.tile(colour, scaled.size // 3 + 2)
+        tables.append([cv2.add(repeated[-p % 3:-p % 3 + scaled.size], scaled, dtype=cv2.CV_8U) for p in range(3)])
+    return masks, tables
+
+
+def _render_noisy(
+    pose: tuple[float, float, float], camera: CameraModel, rng: np.random.Generator, conditions: SceneConditions
+) -> np.ndarray:
+    """:func:`render_frame` under even, nominal light without glare or blur: the same pixels in fewer passes.
+
+    The background's pixels plus noise are read from tables rounded once per camera (:func:`_noisy_backgrounds`),
+    then each patch plus its noise is rounded and saturated to uint8 by OpenCV (half to even, as ``np.rint``).
+    """
+    background = _background(camera)
+    size = background.size
+    start = int(rng.integers(0, size))
+    masks, tables = _noisy_backgrounds(camera, float(conditions.noise_std))
+    window = slice(start, start + size)
+    frame = tables[0][start % 3][window].reshape(background.shape).copy()
+    for mask, table in zip(masks[1:], tables[1:], strict=True):
+        cv2.copyTo(table[start % 3][window].reshape(background.shape), mask, frame)
+    noise = _scaled_noise(size, float(conditions.noise_std))[window].reshape(background.shape)
+    for box in _patch_boxes(pose, camera, conditions):
+        u0, v0, u1, v1 = box
+        patch = _render_patch(box, pose, camera, conditions).astype(np.float32)
+        frame[v0:v1, u0:u1] = cv2.add(patch, noise[v0:v1, u0:u1], dtype=cv2.CV_8U)
+    return frame

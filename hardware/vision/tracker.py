@@ -7,6 +7,9 @@ marker should have at that place in the image (from the homography) and they are
 axes). Blob centroids go through the pixel -> tank homography; among the surviving red x blue pairs, the one whose
 separation matches the known marker spacing is the fish. A missing marker, an implausible blob or a tie between
 candidates is reported as lost with the reason: the tracker never guesses.
+
+The conversion, thresholds and cleanup run only on the box of the frame that can hold marker pixels (a
+necessary saturation test on every pixel, cheaper than the conversion): the blobs are the whole frame's.
 """
 
 from __future__ import annotations
@@ -27,6 +30,9 @@ from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 __all__ = ["Blob", "MarkerTracker", "TrackResult", "TrackerConfig", "draw_overlay", "fish_box"]
 
 BOX_MARGIN = 0.03  # m beyond the body's half length around the centre in :attr:`TrackResult.box`
+_RING_COS, _RING_SIN = np.cos(np.linspace(0.0, 2 * math.pi, 16, endpoint=False)), np.sin(
+    np.linspace(0.0, 2 * math.pi, 16, endpoint=False))  # the 16 directions of fish_box's ring
+_PREFILTER_MIN_SATURATION = 86  # lowest min_saturation for which MarkerTracker._candidates' test holds
 
 
 @dataclass(frozen=True)
@@ -149,14 +155,22 @@ def fish_box(camera: CameraModel, pose: tuple[float, ...], margin: float = BOX_M
     if not (math.isfinite(x) and math.isfinite(y)):
         raise ValueError(f"pose position must be finite, got {pose!r}")
     radius = BODY_LENGTH / 2 + margin
-    angles = np.linspace(0.0, 2 * math.pi, 16, endpoint=False)
-    ring = np.stack([x + radius * np.cos(angles), y + radius * np.sin(angles)], axis=1)
+    ring = np.stack([x + radius * _RING_COS, y + radius * _RING_SIN], axis=1)
     pixels = camera.tank_to_pixel(ring)
     col0, row0 = np.floor(pixels.min(axis=0)).astype(int) - 1
     col1, row1 = np.ceil(pixels.max(axis=0)).astype(int) + 2
     row0, row1 = min(max(int(row0), 0), camera.height), min(max(int(row1), 0), camera.height)
     col0, col1 = min(max(int(col0), 0), camera.width), min(max(int(col1), 0), camera.width)
     return row0, max(row1, row0), col0, max(col1, col0)
+
+
+def _covariance(us: np.ndarray, vs: np.ndarray) -> np.ndarray:
+    """``np.cov(np.stack([us, vs]))``, its very operations without its argument handling (the same bits)."""
+    samples = np.stack([us, vs])
+    samples -= samples.mean(axis=1)[:, None]
+    covariance = np.dot(samples, samples.T.conj())
+    covariance *= np.true_divide(1, samples.shape[1] - 1)
+    return covariance
 
 
 def _lost(timestamp: float, reason: str) -> TrackResult:
@@ -183,6 +197,31 @@ class MarkerTracker:
         """A tracker for the camera described by a calibration JSON file."""
         return cls(CameraModel.load(path), config)
 
+    def _candidates(self, image: np.ndarray) -> tuple[int, int, int, int] | None:
+        """Pixel box ``(row0, row1, col0, col1)`` outside which no pixel can pass a marker mask; ``None``: none.
+
+        A pixel passes only with saturation ``S >= min_saturation`` and value ``V = max(B, G, R) >= min_value``.
+        OpenCV's 8-bit ``S`` is ``255 (V - min) / V`` rounded, so ``S >= 86`` implies ``3 (V - min) >= V``
+        (tests/test_tracker_crop.py checks all 2^24 colours), a test of a few byte-wide operations, cheaper than
+        the HSV conversion. The box has a margin that keeps the morphological cleanup's result inside it exact.
+        """
+        cfg = self.config
+        height, width = image.shape[:2]
+        if cfg.min_saturation < _PREFILTER_MIN_SATURATION:
+            return 0, height, 0, width
+        blue, green, red = cv2.split(image)
+        high = cv2.max(cv2.max(blue, green), red)
+        spread = cv2.subtract(high, cv2.min(cv2.min(blue, green), red))
+        spread = cv2.add(cv2.add(spread, spread), spread)  # saturates at 255 >= V: still a candidate, rightly
+        candidates = cv2.compare(spread, cv2.max(high, float(cfg.min_value)), cv2.CMP_GE)
+        u, v, w, h = cv2.boundingRect(candidates)
+        if w == 0:
+            return None
+        # Opening and closing each reach kernel_size // 2 pixels; an empty border of more than twice that keeps
+        # every pixel of the cleaned crop as in the whole frame (OpenCV's default border is neutral for both).
+        margin = 2 * cfg.kernel_size + 2
+        return max(v - margin, 0), min(v + h + margin, height), max(u - margin, 0), min(u + w + margin, width)
+
     def _mask(self, hsv: np.ndarray, bands: tuple[tuple[int, int], ...]) -> np.ndarray:
         cfg = self.config
         mask = np.zeros(hsv.shape[:2], np.uint8)
@@ -191,7 +230,8 @@ class MarkerTracker:
         mask = cv2.morphologyEx(mask, cv2.MORPH_OPEN, self._kernel)
         return cv2.morphologyEx(mask, cv2.MORPH_CLOSE, self._kernel)
 
-    def _blobs(self, mask: np.ndarray) -> list[Blob]:
+    def _blobs(self, mask: np.ndarray, origin: tuple[int, int] = (0, 0)) -> list[Blob]:
+        """Blobs of ``mask``, a crop of the frame whose top-left pixel is ``origin`` = (col, row)."""
         cfg = self.config
         points = cv2.findNonZero(mask)
         if points is None:
@@ -200,13 +240,14 @@ class MarkerTracker:
         # the same pixels, as over the whole image, for a fraction of the cost (most of the mask is empty).
         cu, cv, cw, ch = cv2.boundingRect(points)
         count, labels, stats, _ = cv2.connectedComponentsWithStats(mask[cv:cv + ch, cu:cu + cw], connectivity=8)
+        cu, cv = cu + origin[0], cv + origin[1]
         blobs = []
         for label in range(1, count):
             x0, y0, w, h, area = stats[label]
             vs, us = np.nonzero(labels[y0 : y0 + h, x0 : x0 + w] == label)
             us, vs = us + float(x0 + cu), vs + float(y0 + cv)
             centre = (float(us.mean()), float(vs.mean()))
-            eigen = np.linalg.eigvalsh(np.cov(np.stack([us, vs]))) if area > 2 else np.array([0.0, 1.0])
+            eigen = np.linalg.eigvalsh(_covariance(us, vs)) if area > 2 else np.array([0.0, 1.0])
             elongation = float(np.sqrt(eigen[1] / max(eigen[0], 1e-9)))
             tank = self.camera.pixel_to_tank(centre)
             expected = math.pi * (cfg.marker_radius * self.camera.pixels_per_metre(tank)) ** 2
@@ -256,9 +297,13 @@ class MarkerTracker:
                                     f"{self.camera.width}x{self.camera.height} px; recalibrate or set the camera "
                                     "resolution")
         cfg = self.config
-        hsv = cv2.cvtColor(image, cv2.COLOR_BGR2HSV)
-        blobs = {"red": self._blobs(self._mask(hsv, cfg.red_hue_bands)),
-                 "blue": self._blobs(self._mask(hsv, cfg.blue_hue_bands))}
+        blobs: dict[str, list[Blob]] = {"red": [], "blue": []}
+        crop = self._candidates(image)
+        if crop is not None:  # else no pixel of the frame can be a marker's
+            row0, row1, col0, col1 = crop
+            hsv = cv2.cvtColor(image[row0:row1, col0:col1], cv2.COLOR_BGR2HSV)
+            blobs = {"red": self._blobs(self._mask(hsv, cfg.red_hue_bands), (col0, row0)),
+                     "blue": self._blobs(self._mask(hsv, cfg.blue_hue_bands), (col0, row0))}
         self.last_blobs = blobs
         reds = [b for b in blobs["red"] if not b.reason]
         blues = [b for b in blobs["blue"] if not b.reason]
