@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from pectoral_gym.tools import cli_common
+from pectoral_gym.tools import cli_reference
 from pectoral_gym.tools.cli_common import COMMANDS, DEPRECATED_SCRIPTS, MODULE_COMMANDS, REMOVED_IN, prog_name
 from pectoral_gym.tools.cli_reference import deprecated_spellings, iter_parsers, reference_markdown
 
@@ -152,11 +152,11 @@ def test_every_command_module_has_build_parser_and_main():
 def test_the_cli_reference_is_current():
     committed = (ROOT / "docs" / "reference" / "cli.md").read_text()
     assert reference_markdown() == committed, (
-        "docs/reference/cli.md is stale: run python -m pectoral_gym.tools.cli_common --markdown and commit it")
+        "docs/reference/cli.md is stale: run python -m pectoral_gym.tools.cli_reference --markdown and commit it")
 
 
 def test_the_reference_writer_command(tmp_path, capsys):
-    assert cli_common.main(["--markdown", str(tmp_path / "cli.md")]) == 0
+    assert cli_reference.main(["--markdown", str(tmp_path / "cli.md")]) == 0
     assert (tmp_path / "cli.md").read_text() == reference_markdown()
 
 

@@ -8,7 +8,7 @@
 - :data:`COMMANDS`: every console script, its module and parser, so tests and the docs reach every parser
   without running a tool.
 
-``python -m pectoral_gym.tools.cli_common --markdown [FILE]`` writes the command-line reference
+``python -m pectoral_gym.tools.cli_reference --markdown [FILE]`` writes the command-line reference
 (``docs/reference/cli.md``) from the parsers themselves (:mod:`pectoral_gym.tools.cli_reference`).
 """
 
@@ -218,24 +218,3 @@ MODULE_COMMANDS: dict[str, Command] = {c.name: c for c in (
     Command("python -m pectoral_gym.agents.controllers.band_study", "pectoral_gym.agents.controllers.band_study"),
 )}
 
-
-def main(argv: Sequence[str] | None = None) -> int:
-    """``python -m pectoral_gym.tools.cli_common --markdown [FILE]``: write the command-line reference."""
-    from pectoral_gym.tools.cli_reference import DEFAULT_PATH, write_reference
-
-    parser = argparse.ArgumentParser(prog=prog_name(None, "pectoral_gym.tools.cli_common"),
-                                     description="Write the command-line reference from the parsers.",
-                                     formatter_class=HelpFormatter,
-                                     epilog=examples("python -m pectoral_gym.tools.cli_common --markdown",
-                                                     "python -m pectoral_gym.tools.cli_common --markdown -"))
-    parser.add_argument("--markdown", nargs="?", const=DEFAULT_PATH, metavar="FILE", required=True,
-                        help=f"write the reference as markdown to FILE ('-': stdout; default {DEFAULT_PATH})")
-    args = parser.parse_args(argv)
-    path = write_reference(args.markdown)
-    if path is not None:
-        print(f"wrote {path}")
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
