@@ -191,3 +191,28 @@ def test_cache_key_covers_every_module_the_kernel_inlines():
             todo.extend(_pectoral_imports(name))
     keyed = set(source_tree(fused.__name__, fused.__file__))  # what the kernel's disk cache is keyed on
     assert seen <= keyed, sorted(seen - keyed)
+
+
+def test_both_step_builds_can_be_kept_in_the_disk_cache():
+    # numba writes no kernel that links a pointer into its own runtime ("dynamic globals": nb.parallel_chunksize
+    # inside the body did) to its disk cache: every process would compile the step afresh at its first step.
+    small, big = _pair(2, "averaged", "goal")
+    actions = np.zeros((64, 8), dtype=np.float32)
+    small.step(actions[:2], None)
+    big.step(actions, None)
+    for build in (fused.STEP.serial, fused.STEP.parallel):
+        assert build.overloads, build
+        for result in build.overloads.values():
+            assert not result.library.has_dynamic_globals, build
+
+
+def test_the_parallel_step_leaves_the_callers_chunk_size_as_it_found_it():
+    import numba as nb
+
+    _, big = _pair(2, "full", "goal")
+    previous = nb.set_parallel_chunksize(7)
+    try:
+        big.step(np.zeros((64, 8), dtype=np.float32), None)
+        assert nb.get_parallel_chunksize() == 7
+    finally:
+        nb.set_parallel_chunksize(previous)

@@ -20,7 +20,7 @@ The per-env loop is a ``numba.prange`` loop: :func:`pectoral_gym.model.jit.kerne
 serially (below ``PARALLEL_MIN_ITEMS`` envs, where threads cost more than they save) and in
 parallel; every env's arithmetic is the same in both, so the two give the same bits
 (``tests/test_fused_step.py``). One loop is one parallel region per step: its threads meet once,
-and take its envs in chunks of :data:`CHUNK` as they come free.
+and take its envs in chunks of :data:`CHUNK` as they come free (set around the call, from Python).
 A task registered at run time gets builds of the same body with its kernel bound in place of
 ``reward_one`` (:func:`step_builds`).
 
@@ -162,15 +162,18 @@ def step_body(a, skip, s):
     if bad >= 0:
         return bad
     n = actions.shape[0]
-    with nb.parallel_chunksize(CHUNK):  # threads take chunks as they come free (the parallel build)
-        for i in nb.prange(n):
-            tk.apply_keep_one(i, actions, skip, cfg, beats, obs, out, fish, integral, before)
-            command_one(i, fins, pending, beats, everyone)
-            stepping.advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps,
-                                 averaged, mode, corrections, tables)
-            if not skip[i]:
-                reward_one(i, state, cfg, ep, fish, obs, out)
-            tk.observe_mean_velocity(i, cfg, obs, integral, before)
+    # The parallel build's threads take chunks of CHUNK envs as they come free: FusedStep sets numba's
+    # chunk size around the call, from Python. Set here (``nb.parallel_chunksize``), it would link a pointer
+    # into numba's threading layer into the kernel, which keeps it out of the disk cache: every process
+    # would compile the step afresh (seconds) at its first step.
+    for i in nb.prange(n):
+        tk.apply_keep_one(i, actions, skip, cfg, beats, obs, out, fish, integral, before)
+        command_one(i, fins, pending, beats, everyone)
+        stepping.advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps,
+                             averaged, mode, corrections, tables)
+        if not skip[i]:
+            reward_one(i, state, cfg, ep, fish, obs, out)
+        tk.observe_mean_velocity(i, cfg, obs, integral, before)
     return -1
 
 
@@ -282,10 +285,21 @@ class FusedStep:
         bound = self._bound
         if bound is None or bound.revision != model.settings_revision:
             bound = self._bound = self._bind()
-        if skip is None:  # the types the entry point was compiled for
+        if self.parallel:  # numba's chunk size is a setting of the calling thread: this call's, then the caller's
+            previous = nb.set_parallel_chunksize(CHUNK)
+            try:
+                bad = self._run(bound, skip)
+            finally:
+                nb.set_parallel_chunksize(previous)
+        elif skip is None:  # the types the entry point was compiled for
             bad = bound.call(bound.arrays, self.none, bound.settings)
         else:
             bad = bound.kernel(bound.arrays, np.ascontiguousarray(skip, dtype=np.bool_), bound.settings)
         if bad < 0:
             model.time += self.duration  # as FishModel.advance
         return bad
+
+    def _run(self, bound: _Bound, skip: np.ndarray | None) -> int:
+        if skip is None:
+            return bound.call(bound.arrays, self.none, bound.settings)
+        return bound.kernel(bound.arrays, np.ascontiguousarray(skip, dtype=np.bool_), bound.settings)
