@@ -283,3 +283,66 @@ def test_chunk_is_shorter_than_any_half_stroke():
     # latched() relies on at most one latch per fin and tick
     limits = FirmwareConfig().limits
     assert limits.period_min / (limits.ratio_max + 1.0) > CHUNK
+
+
+# ------------------------------------------------------------------ the live robot env
+def _spin_on_the_robot_env(steps: int = 8):
+    """Lockstep: the robot env (observe_fins) commands the spin cycle; after each step the replayed and emulated fins.
+
+    Returns ``[(replayed fins (2, F), emulated fins (2, F), start times of their half-strokes (2,) x 2)]`` (on the
+    PC's clock) and the link's latch count.
+    """
+    import contextlib
+    import copy
+
+    from pectoral_gym.hardware.emurig import open_rig
+    from pectoral_gym.hardware.env import HardwareFishEnv
+
+    out = []
+    with contextlib.ExitStack() as resources:
+        clock, robot, port, camera = open_rig(resources, seed=5, lockstep=True)
+        env = HardwareFishEnv(port, camera, max_episode_steps=steps, handle_signals=False, clock=clock,
+                              observe_fins=True, reset_hook=lambda rng: robot.place(1.15, 0.575, 0.3))
+        resources.callback(env.close)
+        env.reset(seed=0)
+        for k in range(steps):
+            amp_r, amp_l, bias_r, bias_l = SPIN_CYCLE[k % len(SPIN_CYCLE)]
+            beats = np.array([[bias_r, max(amp_r, 0.05), 0.5, 5.0], [bias_l, 0.05, 0.5, 5.0]])
+            action = np.concatenate([env.config.encode(beats[0]), env.config.encode(beats[1])]).astype(np.float32)
+            *_, info = env.step(action)
+            assert info["safety_stop"] == ""
+            with robot._lock:
+                fins, robot_time = robot.model.fins[0].copy(), robot.model.time
+            env._take_latches()
+            replay = env.fin_replay  # at the PC's time, a few ms ahead of the robot's model (its thread lags)
+            start_replay = replay.model.time - replay.fins[0, :, strokes.ELAPSED]
+            start_robot = robot_time + robot._origin - env._origin - fins[:, strokes.ELAPSED]  # on the PC's clock
+            out.append((copy.deepcopy(replay.fins[0]), fins, start_replay, start_robot))
+        latches = env.link.stats.latches
+    return out, latches
+
+
+def test_robot_env_fin_block_follows_the_reports_through_large_changes():
+    # Large bias changes every step (the spin cycle): the firmware slews for up to 0.2 s and the inferred latches
+    # fall on other patterns (test_fin_replay keeps its changes to one tick of slewing for that reason). With
+    # the robot's reports the replayed fins are the emulated ones to the wire's quantisation (mrad, ms).
+    import threading
+
+    result: dict = {}
+    thread = threading.Thread(target=lambda: result.update(value=_spin_on_the_robot_env()))  # a VirtualClock's own
+    thread.start()
+    thread.join(timeout=120.0)
+    assert "value" in result, "the lockstep scenario failed or did not finish"
+    pairs, latches = result["value"]
+    assert latches > 10
+    compared = 0
+    for k, (got, fins, start_replay, start_robot) in enumerate(pairs):
+        for f in range(2):
+            if fins[f, strokes.ELAPSED] < 0.02 or fins[f, strokes.DURATION] - fins[f, strokes.ELAPSED] < 0.02:
+                continue  # at a turning point, the report of this very latch may still be on its way
+            compared += 1
+            for field in (strokes.POWER, strokes.BIAS, strokes.AMPLITUDE, strokes.PERIOD, strokes.RATIO,
+                          strokes.ANGLE_FROM, strokes.ANGLE_TO, strokes.DURATION):
+                assert got[f, field] == pytest.approx(fins[f, field], abs=2e-3), (k, f, field)
+            assert start_replay[f] == pytest.approx(start_robot[f], abs=1.5e-3), (k, f)  # the uptime's ms, mapped
+    assert compared >= 8

@@ -32,10 +32,11 @@ Rules:
   and parameter.
 * **Sequence numbers**: new -> act and acknowledge; duplicate -> acknowledge only (a retry whose first
   copy arrived); stale -> ignore. All counted.
-* **Latch reports**: while running, every time a fin latches a pattern at a stroke turning point the robot
-  sends a LATCH to the served session (:meth:`Firmware.latch_report`; fire and forget, numbered on their own):
-  the uptime then, the fin, the pattern as the fin runs it, the turning-point angle and the stroke's kind.
-  They change nothing on the robot. Messages of the robot's own types (STATUS, LATCH) are ignored.
+* **Latch reports**: while running, every time a fin latches a pattern that moves it (not a half-stroke that
+  ends where it starts) at a stroke turning point, the robot sends a LATCH to the served session
+  (:meth:`Firmware.latch_report`; fire and forget, numbered on their own): the uptime then, the fin, the
+  pattern as the fin runs it, the turning-point angle and the stroke's kind. They change nothing on the robot.
+  Messages of the robot's own types (STATUS, LATCH) are ignored.
 """
 
 from __future__ import annotations
@@ -266,7 +267,11 @@ class Firmware:
         return Message(MsgType.STATUS, self._seq, ack.session, status=status)  # addressed to the asker
 
     def latch_report(self, t: float, fin: int, beat: np.ndarray, turn: float, power: bool) -> Message | None:
-        """The LATCH to send when fin ``fin`` latched ``beat`` at time ``t`` [s] (``None`` unless running).
+        """The LATCH to send when fin ``fin`` latched ``beat`` at time ``t`` [s] (``None``: nothing to send).
+
+        Sent while running, for every half-stroke that moves: a still fin (its half-stroke ends where it starts,
+        e.g. while bias and amplitude slew so that ``bias + amplitude`` stays put) latches again at every tick,
+        moving nothing; the next report carries all a replay needs.
 
         Args:
             t: When the fin latched (its stroke turning point) [s, the caller's clock].
@@ -277,6 +282,9 @@ class Firmware:
         """
         if not self.running or self.session is None:
             return None  # halted fins hold still: nothing latches that a replay needs
+        bias, amplitude = float(beat[0]), float(beat[1])
+        if (bias + amplitude if power else bias - amplitude) == float(turn):
+            return None  # a half-stroke that ends where it starts moves nothing (a still fin latches every tick)
         self._latch_seq = (self._latch_seq + 1) & 0xFFFF
         latch = Latch(self.uptime_ms(t), self.boot, int(fin), bool(power), float(turn),
                       tuple(float(v) for v in np.asarray(beat, dtype=float).reshape(4)))
