@@ -187,7 +187,7 @@ class HardwareFishEnv(gym.Env):
         self.stop_timeout = float(stop_timeout)
         self.clock, self.stack, self.run_log = clock, None, run_log
         self._resets, self._fins_running = 0, False  # for the run log
-        self._latch_floor = -math.inf  # the robot's latch reports before this time belong to no episode
+        self._latch_start = self._latch_last = -math.inf  # this episode's start, its last latch report
         self.link = self.camera = self.supervisor = None
         try:
             self._build(port, camera, calibration, tracker, observer, observer_epsilon, take_over)
@@ -244,9 +244,10 @@ class HardwareFishEnv(gym.Env):
         drain = getattr(self.link, "drain_latches", None)  # a link of this package; a stand-in may have none
         for t_link, latch in drain() if drain is not None else ():
             t = (t_link - self._origin) * self.speed  # the link's clock -> experiment time
-            if t < self._latch_floor:
-                continue  # from before this episode's start (or a late one out of order): nothing to replay
-            self._latch_floor = t
+            if t < self._latch_start:
+                continue  # from before this episode's start: nothing to replay
+            # the clock offset's estimate may shrink by a ms between reports: a log's records keep their order
+            t = self._latch_last = max(t, self._latch_last)
             if self.fin_replay is not None:
                 self.fin_replay.latch(t, latch.fin, latch.beat, latch.turn, latch.power)
             if self.run_log is not None:
@@ -303,7 +304,7 @@ class HardwareFishEnv(gym.Env):
         self.observer.reset(x, y, psi, t)
         self._observing = True
         self._last_measure = t
-        self._latch_floor = placed
+        self._latch_start = self._latch_last = placed
         if self.run_log is not None:
             self.run_log.episode(self._resets, placed)
             self._log("pose", t, x, y, psi, sup.confidence)
