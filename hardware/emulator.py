@@ -34,7 +34,7 @@ import numpy as np
 
 from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 from pectoral_gym.hardware.finreplay import CHUNK as _CHUNK
-from pectoral_gym.hardware.finreplay import apply_firmware
+from pectoral_gym.hardware.finreplay import apply_firmware, latched, stroke_kinds
 from pectoral_gym.hardware.radio import protocol as pr
 from pectoral_gym.hardware.radio import xbee as xb
 from pectoral_gym.hardware.radio.firmware import Firmware, FirmwareConfig, new_boot_id
@@ -307,6 +307,17 @@ class EmulatedRobot:
         """Hand the firmware's decision to the model (call with the lock held; the PC's replay does the same)."""
         apply_firmware(self.firmware, self.model)
 
+    def _latch_reports(self, kinds: np.ndarray) -> list[bytes]:
+        """LATCH frames for the fins that latched in the last advance (call with the lock held)."""
+        frames = []
+        for fin, t in latched(self.model, kinds):
+            stroke = self.model.fins[0, fin]
+            report = self.firmware.latch_report(round(t, 9), fin, stroke[strokes.BIAS:strokes.RATIO + 1],
+                                                stroke[strokes.ANGLE_FROM], stroke[strokes.POWER] > 0.5)
+            if report is not None:
+                frames.append(xb.encode_frame(xb.rx_packet(pr.encode_message(report), ROBOT_ADDRESS)))
+        return frames
+
     def _advance(self, target: float) -> None:
         while True:
             with self._lock:
@@ -315,13 +326,17 @@ class EmulatedRobot:
                     return
                 self.firmware.tick(t, self.model.fin_angles()[0][0])
                 self._apply_firmware()
+                kinds = stroke_kinds(self.model)
                 self.model.advance(min(_CHUNK, target - t))
+                reports = self._latch_reports(kinds)
                 if self.trace is not None:
                     fins = self.model.fins[0]
                     peak = math.pi * np.abs(fins[:, strokes.ANGLE_TO] - fins[:, strokes.ANGLE_FROM]) / (
                         2.0 * np.maximum(fins[:, strokes.DURATION], 1e-9))  # stroke_kinematics' peak |g'|
                     self.trace.append((self.model.time, self.model.state[0].copy(),
                                        self.model.fin_angles()[1][0].copy(), peak, self.firmware.running))
+            for frame in reports:  # the servo controller reports its latches at once, fire and forget
+                self._write(frame)
 
 
 def build_parser() -> argparse.ArgumentParser:

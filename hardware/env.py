@@ -187,6 +187,7 @@ class HardwareFishEnv(gym.Env):
         self.stop_timeout = float(stop_timeout)
         self.clock, self.stack, self.run_log = clock, None, run_log
         self._resets, self._fins_running = 0, False  # for the run log
+        self._latch_start = self._latch_last = -math.inf  # this episode's start, its last latch report
         self.link = self.camera = self.supervisor = None
         try:
             self._build(port, camera, calibration, tracker, observer, observer_epsilon, take_over)
@@ -238,9 +239,24 @@ class HardwareFishEnv(gym.Env):
             self._fins_running = kind == "command"
         getattr(self.run_log, kind)(t, *args, **fields)
 
+    def _take_latches(self) -> None:
+        """The robot's latch reports (``docs/protocol.md``, LATCH): into the run log and the replayed fins."""
+        drain = getattr(self.link, "drain_latches", None)  # a link of this package; a stand-in may have none
+        for t_link, latch in drain() if drain is not None else ():
+            t = (t_link - self._origin) * self.speed  # the link's clock -> experiment time
+            if t < self._latch_start:
+                continue  # from before this episode's start: nothing to replay
+            # the clock offset's estimate may shrink by a ms between reports: a log's records keep their order
+            t = self._latch_last = max(t, self._latch_last)
+            if self.fin_replay is not None:
+                self.fin_replay.latch(t, latch.fin, latch.beat, latch.turn, latch.power)
+            if self.run_log is not None:
+                self.run_log.latch(t, latch.fin, latch.beat, latch.turn, latch.power, latch.uptime_ms, latch.boot)
+
     # ------------------------------------------------------------ camera
     def _observe(self) -> None:
-        """Feed the observer the supervisor's new measurements."""
+        """Feed the observer the supervisor's new measurements (and take the robot's latch reports)."""
+        self._take_latches()
         for t, x, y, psi in self.supervisor.drain():
             if self._observing and t > self._last_measure:
                 self._log("pose", t, x, y, psi, self.supervisor.confidence)
@@ -268,6 +284,7 @@ class HardwareFishEnv(gym.Env):
         self._check_not_stopped()
         sup.disarm()
         self.stack.confirm_stop(self.stop_timeout)
+        self._take_latches()  # the last episode's, before its stop
         self._log("stop", self.now())
         sup.bound.stopped(self.now())
         settle_garbage()  # the fins are stopped and the rules disarmed: a full collection now, none mid-episode
@@ -287,6 +304,7 @@ class HardwareFishEnv(gym.Env):
         self.observer.reset(x, y, psi, t)
         self._observing = True
         self._last_measure = t
+        self._latch_start = self._latch_last = placed
         if self.run_log is not None:
             self.run_log.episode(self._resets, placed)
             self._log("pose", t, x, y, psi, sup.confidence)

@@ -12,7 +12,11 @@ the same two functions, :func:`apply_firmware` and :func:`advance_with_firmware`
 What the replay cannot see: the radio latency (the robot latches a command a few milliseconds after
 the PC sent it) and the firmware's tick (10 ms); a latch may therefore fall one tick apart, and
 after a safety stop the fins are taken as halted when the PC learns of it. The fins' angles at
-power-up are taken as 90 deg (the firmware's rest).
+power-up are taken as 90 deg (the firmware's rest). A robot that reports its latches (LATCH messages,
+``docs/protocol.md``) removes the first: :meth:`FinReplay.latch` starts the reported half-stroke where and
+when the robot says it started (:func:`force_latch`), and the rules infer only what lies between reports
+(a lost report, a robot that does not send them). :func:`latched` finds the latches of a model's
+fins, for the emulator's reports.
 """
 
 from __future__ import annotations
@@ -29,7 +33,8 @@ from pectoral_gym.model.models import FishModel
 from pectoral_gym.model.params import FinBeat, FishParams
 from pectoral_gym.model.spec import FULL_REFERENCE
 
-__all__ = ["CHUNK", "FinReplay", "advance_with_firmware", "apply_firmware"]
+__all__ = ["CHUNK", "FinReplay", "advance_with_firmware", "apply_firmware", "force_latch", "latched",
+           "stroke_kinds"]
 
 CHUNK = 0.01  # fin-model step between firmware ticks [robot s]
 
@@ -53,6 +58,41 @@ def apply_firmware(firmware: Firmware, model: FishModel) -> None:
         next_power = still | (fins[:, strokes.POWER] < 0.5)
         safe = stretch_transition(firmware.setpoint, fins[:, strokes.ANGLE_TO], next_power, firmware.config.limits)
         model.command_array(safe.reshape(1, 2, 4))
+
+
+def stroke_kinds(model: FishModel) -> np.ndarray:
+    """``(2,)`` kinds of fish 0's half-strokes in progress (1 power, 0 recovery), for :func:`latched`."""
+    return model.fins[0, :, strokes.POWER].copy()
+
+
+def latched(model: FishModel, kinds_before: np.ndarray) -> list[tuple[int, float]]:
+    """Fins of fish 0 that latched since ``kinds_before`` (:func:`stroke_kinds`) was read: ``(fin, time)``.
+
+    Every latch flips the stroke's kind, and a half-stroke lasts far longer than one firmware tick (at least
+    ``period_min / (ratio_max + 1)``, 57 ms at the default limits), so an advance of one tick holds at most one
+    latch per fin: a flipped kind is a latch, which happened ``ELAPSED`` before the model's time.
+    """
+    fins = model.fins[0]
+    return [(f, float(model.time - fins[f, strokes.ELAPSED])) for f in range(2)
+            if fins[f, strokes.POWER] != kinds_before[f]]
+
+
+def force_latch(model: FishModel, fin: int, t: float, beat: np.ndarray, turn: float, power: bool) -> None:
+    """Every fish of ``model``: fin ``fin`` latched ``beat`` at time ``t`` [s] at angle ``turn`` [rad] (a report).
+
+    The half-stroke that started there replaces the one in progress (``docs/model.md`` section 5: from
+    ``turn`` to ``bias + amplitude`` in ``period / (ratio + 1)`` for a power stroke, to ``bias - amplitude``
+    in ``ratio period / (ratio + 1)`` for a recovery), ``model.time - t`` into it; the commanded pattern
+    (``pending``) is left as it is, for the next turning point.
+    """
+    bias, amp, period, ratio = (float(v) for v in np.asarray(beat, dtype=float).reshape(4))
+    fins = model.fins
+    fins[:, fin, strokes.ANGLE_FROM] = float(turn)
+    fins[:, fin, strokes.ANGLE_TO] = bias + amp if power else bias - amp
+    fins[:, fin, strokes.DURATION] = (1.0 if power else ratio) * period / (ratio + 1.0)  # eq. (21)
+    fins[:, fin, strokes.ELAPSED] = max(model.time - float(t), 0.0)
+    fins[:, fin, strokes.POWER] = 1.0 if power else 0.0
+    fins[:, fin, strokes.BIAS:strokes.RATIO + 1] = (bias, amp, period, ratio)
 
 
 def advance_with_firmware(firmware: Firmware, model: FishModel, target: float,
@@ -118,6 +158,20 @@ class FinReplay:
         self.advance(t)
         self._message(pr.Message(pr.MsgType.STOP, self._next_seq(), self._SESSION))
         apply_firmware(self.firmware, self.model)  # the halt, now
+
+    def latch(self, t: float, fin: int, beat: np.ndarray, turn: float, power: bool) -> bool:
+        """The robot reported that fin ``fin`` latched ``beat`` at angle ``turn`` at time ``t`` (a LATCH).
+
+        The replay runs to ``t`` and starts that half-stroke (:func:`force_latch`); a report that comes
+        after the replay passed ``t`` starts it as far in as the replay is. What the firmware commands next
+        is inferred as before. Ignored while the replayed fins are halted (a report from just before the
+        robot heard a stop, mapped after it: the fins are still now). Returns whether the report was applied.
+        """
+        self.advance(t)
+        if not self.firmware.running:
+            return False
+        force_latch(self.model, fin, t, beat, turn, power)
+        return True
 
     def advance(self, t: float) -> None:
         """Run the fins to time ``t`` (earlier times are ignored)."""

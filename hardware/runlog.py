@@ -2,7 +2,7 @@
 
 A run log is JSON Lines. Each line is one record with a ``"type"``:
 
-* ``header`` (first line, once): ``format`` (``"pectoral-run-log"``), ``version`` (1), ``source``
+* ``header`` (first line, once): ``format`` (``"pectoral-run-log"``), ``version`` (2; 1 is read too), ``source``
   (``"robot"``, ``"emulator"``, ...), ``control_period`` [s], ``firmware`` (the
   :class:`~pectoral_gym.hardware.radio.firmware.FirmwareConfig` the fins ran under, :func:`firmware_dict`),
   optional ``known_params`` (:class:`~pectoral_gym.model.params.FishParams` fields the user measured).
@@ -12,8 +12,12 @@ A run log is JSON Lines. Each line is one record with a ``"type"``:
 * ``stop``: ``t`` [s]: the fins were halted (STOP, a safety trip, the end of an episode).
 * ``pose``: ``t`` [s, the frame's capture stamp on the same clock], ``x``, ``y`` [m, tank frame], ``psi`` [rad],
   ``confidence`` (0..1).
+* ``latch`` (version 2): ``t`` [s, the robot's report mapped onto the PC clock], ``fin`` (0 right, 1 left),
+  ``beat`` ``[bias, amplitude, period, ratio]`` the fin latched at a stroke turning point, ``turn`` [rad] its
+  angle there, ``power`` (a power stroke starts), ``uptime_ms`` (the robot's clock), optional ``boot``.
 * ``ack``, ``estimate``, ``safety``: ``t`` [s] and free fields; kept, not needed by the calibration.
 
+The records' checks are :mod:`pectoral_gym.hardware.runlog_schema`'s (re-exported here).
 :class:`RunLogWriter` writes it (one method per record type, each record checked before it is written);
 :func:`read_run_log` reads and checks a file and raises :class:`RunLogError` naming the file, the line and
 what is wrong with the first bad record.
@@ -21,7 +25,6 @@ what is wrong with the first bad record.
 
 from __future__ import annotations
 
-import dataclasses
 import io
 import json
 import math
@@ -33,63 +36,20 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from pectoral_gym.hardware.radio.firmware import FirmwareConfig, ServoLimits
-from pectoral_gym.model.params import PARAMS_FIELDS
+from pectoral_gym.hardware.radio.firmware import FirmwareConfig
+from pectoral_gym.hardware.runlog_schema import (
+    FORMAT,
+    RECORD_TYPES,
+    VERSION,
+    VERSIONS,
+    RunLogError,
+    check_record,
+    firmware_dict,
+    firmware_from_dict,
+)
 
-__all__ = ["FORMAT", "VERSION", "RECORD_TYPES", "Episode", "RunLog", "RunLogError", "RunLogWriter",
+__all__ = ["FORMAT", "VERSION", "VERSIONS", "RECORD_TYPES", "Episode", "RunLog", "RunLogError", "RunLogWriter",
            "check_record", "dumps_example", "firmware_dict", "firmware_from_dict", "read_run_log", "validate"]
-
-FORMAT = "pectoral-run-log"
-VERSION = 1
-#: Required fields of each record type besides ``type`` (``ack``, ``estimate``, ``safety``: ``t`` only).
-RECORD_TYPES: dict[str, tuple[str, ...]] = {
-    "header": ("format", "version", "source", "control_period", "firmware"),
-    "episode": ("episode", "t"),
-    "command": ("t", "beats"),
-    "stop": ("t",),
-    "pose": ("t", "x", "y", "psi", "confidence"),
-    "ack": ("t",),
-    "estimate": ("t",),
-    "safety": ("t",),
-}
-_WIRE_MAX = 65.535  # largest SI value a SET_FINS field carries (hardware/radio/protocol.py, _FIN_SCALE)
-
-
-class RunLogError(ValueError):
-    """A run log that cannot be read: ``str()`` is ``"<file>:<line>: <what is wrong>"``.
-
-    Attributes:
-        path: The file (or ``"<stream>"``).
-        line: 1-based line number of the first bad record (0: the file as a whole).
-        reason: What is wrong.
-    """
-
-    def __init__(self, path: str, line: int, reason: str):
-        self.path, self.line, self.reason = path, line, reason
-        super().__init__(f"{path}:{line}: {reason}")
-
-
-def firmware_dict(config: FirmwareConfig) -> dict[str, Any]:
-    """The header's ``firmware`` entry: the fields of ``config`` and of its :class:`ServoLimits` as plain values."""
-    out = dataclasses.asdict(config)
-    out["limits"]["max_rate"] = list(config.limits.max_rate)
-    return out
-
-
-def firmware_from_dict(data: Mapping[str, Any]) -> FirmwareConfig:
-    """The :class:`FirmwareConfig` of a header's ``firmware`` entry (missing fields keep their defaults).
-
-    Raises:
-        ValueError: For unknown fields or invalid values.
-    """
-    data = dict(data)
-    limits = dict(data.pop("limits", {}) or {})
-    if "max_rate" in limits:
-        limits["max_rate"] = tuple(float(v) for v in limits["max_rate"])
-    try:
-        return FirmwareConfig(**data, limits=ServoLimits(**limits))
-    except TypeError as error:  # unknown field names
-        raise ValueError(f"firmware: {error}") from None
 
 
 @dataclass
@@ -105,6 +65,11 @@ class Episode:
         pose_t: ``(p,)`` capture stamps of the poses [s].
         poses: ``(p, 3)`` ``x, y, psi`` [m, m, rad].
         confidence: ``(p,)`` the tracker's confidence (0..1).
+        latch_t: ``(r,)`` times of the robot's latch reports [s, PC clock] (none in a version-1 log).
+        latch_fin: ``(r,)`` their fins (0 right, 1 left).
+        latch_beat: ``(r, 4)`` the patterns latched (rad, rad, s, -).
+        latch_turn: ``(r,)`` the fin angles at the turning points [rad].
+        latch_power: ``(r,)`` 1.0 where a power stroke starts, 0.0 for a recovery.
     """
 
     index: int
@@ -115,6 +80,11 @@ class Episode:
     pose_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
     poses: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     confidence: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    latch_t: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    latch_fin: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    latch_beat: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    latch_turn: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    latch_power: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
     @property
     def t_end(self) -> float:
@@ -155,94 +125,6 @@ class RunLog:
         return float(sum(ep.t_end - ep.t_start for ep in self.episodes))
 
 
-# ------------------------------------------------------------------ record checks
-def _number(rec: Mapping[str, Any], name: str) -> float:
-    value = rec[name]
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{name} must be a number, got {value!r}")
-    if not math.isfinite(value):
-        raise ValueError(f"{name} must be finite, got {value!r}")
-    return float(value)
-
-
-def _check_beats(value: Any) -> np.ndarray:
-    """``(2, 4)`` beats inside the envelope: what the wire carries and a stroke that stays clear of the body."""
-    try:
-        beats = np.array(value, dtype=float)
-    except (TypeError, ValueError):
-        raise ValueError(f"beats must be [[bias, amplitude, period, ratio] right, [...] left], got {value!r}") from None
-    if beats.shape != (2, 4):
-        raise ValueError(f"beats must be 2 rows (right, left) of [bias, amplitude, period, ratio], got {value!r}")
-    if not np.all(np.isfinite(beats)):
-        raise ValueError(f"beats must be finite, got {value!r}")
-    for side, (bias, amp, period, ratio) in zip(("right", "left"), beats, strict=True):
-        if not (0.0 <= min(bias, amp, period, ratio) and max(bias, amp, period, ratio) <= _WIRE_MAX):
-            raise ValueError(f"{side} fin beat {[bias, amp, period, ratio]} outside the envelope: every value "
-                             f"must be in [0, {_WIRE_MAX}] (the wire format)")
-        if period <= 0 or ratio <= 0:
-            raise ValueError(f"{side} fin beat outside the envelope: period {period} s and ratio {ratio} must be > 0")
-        if bias - amp < 0 or bias + amp > math.pi:
-            raise ValueError(f"{side} fin beat outside the envelope: the stroke [{math.degrees(bias - amp):.1f}, "
-                             f"{math.degrees(bias + amp):.1f}] deg leaves [0, 180] deg")
-    return beats
-
-
-def _check_header(rec: Mapping[str, Any]) -> None:
-    if rec["format"] != FORMAT:
-        raise ValueError(f"header: format must be {FORMAT!r}, got {rec['format']!r}")
-    if rec["version"] != VERSION:
-        raise ValueError(f"header: version {rec['version']!r} is not supported (this reader: {VERSION})")
-    if not isinstance(rec["source"], str) or not rec["source"]:
-        raise ValueError(f"header: source must be a non-empty string, got {rec['source']!r}")
-    if not _number(rec, "control_period") > 0:
-        raise ValueError(f"header: control_period must be > 0 s, got {rec['control_period']!r}")
-    if not isinstance(rec["firmware"], Mapping):
-        raise ValueError("header: firmware must be an object of FirmwareConfig fields")
-    try:
-        firmware_from_dict(rec["firmware"])
-    except (TypeError, ValueError) as error:
-        raise ValueError(f"header: bad firmware: {error}") from None
-    known = rec.get("known_params") or {}
-    if not isinstance(known, Mapping):
-        raise ValueError("header: known_params must be an object of FishParams fields")
-    unknown = sorted(set(known) - set(PARAMS_FIELDS))
-    if unknown:
-        raise ValueError(f"header: known_params names unknown FishParams fields {unknown}")
-    for name in known:
-        _number(known, name)
-
-
-def check_record(rec: Any) -> str:
-    """Check one record's fields and values (not its place in the file); returns its type.
-
-    Raises:
-        ValueError: Saying what is wrong.
-    """
-    if not isinstance(rec, Mapping):
-        raise ValueError(f"a record must be a JSON object, got {type(rec).__name__}")
-    kind = rec.get("type")
-    if kind not in RECORD_TYPES:
-        raise ValueError(f"unknown record type {kind!r}; known: {sorted(RECORD_TYPES)}")
-    missing = [name for name in RECORD_TYPES[kind] if name not in rec]
-    if missing:
-        raise ValueError(f"{kind} record lacks field(s) {missing}")
-    if kind == "header":
-        _check_header(rec)
-        return kind
-    if not _number(rec, "t") >= 0:
-        raise ValueError(f"t must be >= 0 s, got {rec['t']!r}")
-    if kind == "episode" and (isinstance(rec["episode"], bool) or not isinstance(rec["episode"], int)):
-        raise ValueError(f"episode must be an integer, got {rec['episode']!r}")
-    if kind == "command":
-        _check_beats(rec["beats"])
-    if kind == "pose":
-        for name in ("x", "y", "psi"):
-            _number(rec, name)
-        if not 0.0 <= _number(rec, "confidence") <= 1.0:
-            raise ValueError(f"confidence must be in [0, 1], got {rec['confidence']!r}")
-    return kind
-
-
 # ------------------------------------------------------------------ reader
 class _Builder:
     """Collects records into episodes, checking their order."""
@@ -254,7 +136,8 @@ class _Builder:
 
     def _start(self, index: int, t: float) -> None:
         self.episodes.append(Episode(index, t))
-        self.lists.append({name: [] for name in ("command_t", "beats", "stop_t", "pose_t", "poses", "confidence")})
+        self.lists.append({name: [] for name in ("command_t", "beats", "stop_t", "pose_t", "poses", "confidence",
+                                                 "latch_t", "latch_fin", "latch_beat", "latch_turn", "latch_power")})
 
     def add(self, kind: str, rec: Mapping[str, Any]) -> None:
         t = float(rec["t"])
@@ -283,9 +166,15 @@ class _Builder:
             lists["pose_t"].append(t)
             lists["poses"].append((float(rec["x"]), float(rec["y"]), float(rec["psi"])))
             lists["confidence"].append(float(rec["confidence"]))
+        elif kind == "latch":
+            lists["latch_t"].append(t)
+            lists["latch_fin"].append(int(rec["fin"]))
+            lists["latch_beat"].append(np.asarray(rec["beat"], dtype=float))
+            lists["latch_turn"].append(float(rec["turn"]))
+            lists["latch_power"].append(1.0 if rec["power"] else 0.0)
 
     def finish(self) -> list[Episode]:
-        shapes = {"beats": (-1, 2, 4), "poses": (-1, 3)}
+        shapes = {"beats": (-1, 2, 4), "poses": (-1, 3), "latch_beat": (-1, 4)}
         for ep, lists in zip(self.episodes, self.lists, strict=True):
             for name, values in lists.items():
                 setattr(ep, name, np.asarray(values, dtype=float).reshape(shapes.get(name, (-1,))))
@@ -331,6 +220,9 @@ def _read(stream: TextIO, name: str) -> RunLog:
                 if header is not None:
                     raise ValueError("a second header record")
                 header = {k: v for k, v in rec.items() if k != "type"}
+            elif kind == "latch" and header["version"] < 2:
+                raise ValueError(f"a latch record in a version-{header['version']} log (latch records came with "
+                                 "version 2: write version 2 in the header)")
             elif kind in ("ack", "estimate", "safety"):
                 other.append(dict(rec))
             else:
@@ -401,6 +293,26 @@ class RunLogWriter:
         self._write({"type": "pose", "t": float(t), "x": float(x), "y": float(y), "psi": float(psi),
                      "confidence": float(confidence)})
 
+    def latch(self, t: float, fin: int, beat: Any, turn: float, power: bool, uptime_ms: int,
+              boot: int | None = None) -> None:
+        """The robot reported that fin ``fin`` (0 right, 1 left) latched ``beat`` at a stroke turning point.
+
+        Args:
+            t: When, on the log's clock (the robot's uptime mapped onto the PC's) [s].
+            fin: 0 right, 1 left.
+            beat: ``[bias, amplitude, period, ratio]`` (rad, rad, s, -) as the fin runs it.
+            turn: The fin angle at the turning point [rad].
+            power: Whether a power stroke starts there (else a recovery).
+            uptime_ms: The robot's clock at the latch [ms since its power-up].
+            boot: The robot's boot id (the clock ``uptime_ms`` is on), if known.
+        """
+        row = np.asarray(beat, dtype=float).reshape(4).tolist()
+        rec = {"type": "latch", "t": float(t), "fin": int(fin), "beat": row,
+               "turn": float(turn), "power": bool(power), "uptime_ms": int(uptime_ms)}
+        if boot is not None:
+            rec["boot"] = int(boot)
+        self._write(rec)
+
     def ack(self, t: float, **fields: Any) -> None:
         """The robot acknowledged a message at ``t`` [s] (free fields, e.g. ``seq``, ``state``)."""
         self._write({"type": "ack", "t": float(t), **fields})
@@ -439,6 +351,7 @@ def dumps_example() -> str:
     log.command(0.10, [[1.5708, 0.5236, 1.0, 2.0], [1.5708, 0.5236, 1.0, 2.0]])
     log.pose(0.133, 1.150, 0.575, 0.000, 0.98)
     log.pose(0.167, 1.150, 0.575, 0.001, 0.97)
+    log.latch(0.434, 0, [1.5708, 0.5236, 1.0, 2.0], 2.0944, False, 1434, boot=2718281)
     log.stop(4.0)
     log.episode(1, 10.0)
     log.pose(10.033, 1.150, 0.575, 3.140, 0.99)

@@ -82,7 +82,7 @@ def test_example_reads_back():
     (2, '{"type": "command", "t": 0.1, "beats": [[1.5, 0.5, 0, 2], [1.5, 0.5, 1, 2]]}', "outside the envelope"),
     (2, '{"type": "command", "t": 0.1, "beats": [[1.5, 0.5, 1, 2]]}', "must be 2 rows"),
     (2, '{"type": "command", "t": "soon", "beats": [[1.5, 0.5, 1, 2], [1.5, 0.5, 1, 2]]}', "t must be a number"),
-    (6, '{"type": "episode", "episode": 1, "t": 2.0}', "timestamps go backwards: episode starts"),
+    (7, '{"type": "episode", "episode": 1, "t": 2.0}', "timestamps go backwards: episode starts"),
     (0, '{"type": "episode", "episode": 0, "t": 0.0}', "the first record must be the header"),
 ])
 def test_bad_record_named(tmp_path, index, text, message):
@@ -97,7 +97,7 @@ def test_bad_record_named(tmp_path, index, text, message):
 
 def test_bad_header(tmp_path):
     header = json.loads(_lines()[0])
-    for change, message in (({"version": 2}, "version 2 is not supported"),
+    for change, message in (({"version": 3}, "version 3 is not supported"),
                             ({"format": "csv"}, "format must be"),
                             ({"control_period": -1}, "control_period must be > 0"),
                             ({"firmware": {"max_lease": 5.0}}, "bad firmware"),

@@ -32,6 +32,11 @@ Rules:
   and parameter.
 * **Sequence numbers**: new -> act and acknowledge; duplicate -> acknowledge only (a retry whose first
   copy arrived); stale -> ignore. All counted.
+* **Latch reports**: while running, every time a fin latches a pattern that moves it (not a half-stroke that
+  ends where it starts) at a stroke turning point, the robot sends a LATCH to the served session
+  (:meth:`Firmware.latch_report`; fire and forget, numbered on their own): the uptime then, the fin, the
+  pattern as the fin runs it, the turning-point angle and the stroke's kind. They change nothing on the robot.
+  Messages of the robot's own types (STATUS, LATCH) are ignored.
 """
 
 from __future__ import annotations
@@ -43,6 +48,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pectoral_gym.hardware.radio.protocol import (
+    Latch,
     Message,
     MsgType,
     RobotState,
@@ -241,6 +247,7 @@ class Firmware:
         self.ignored = dict.fromkeys(("duplicate", "stale", "retired", "refused", "copy", "bad_lease", "late", "boot",
                                       "foreign_stop"), 0)
         self._seq = 0
+        self._latch_seq = 0  # LATCH messages are numbered on their own: a PC that drops them sees no STATUS gap
         self.last_valid: float | None = None  # time of the last new, valid message of the session [s]
         self.tripped_at: float | None = None  # time the watchdog or the lease last stopped the fins [s]
         self._last_tick: float | None = None
@@ -258,6 +265,30 @@ class Firmware:
                         self.tracker.duplicates, self.tracker.stale, self.uptime_ms(now),
                         0 if self.session is None else self.session, self.boot)
         return Message(MsgType.STATUS, self._seq, ack.session, status=status)  # addressed to the asker
+
+    def latch_report(self, t: float, fin: int, beat: np.ndarray, turn: float, power: bool) -> Message | None:
+        """The LATCH to send when fin ``fin`` latched ``beat`` at time ``t`` [s] (``None``: nothing to send).
+
+        Sent while running, for every half-stroke that moves: a still fin (its half-stroke ends where it starts,
+        e.g. while bias and amplitude slew so that ``bias + amplitude`` stays put) latches again at every tick,
+        moving nothing; the next report carries all a replay needs.
+
+        Args:
+            t: When the fin latched (its stroke turning point) [s, the caller's clock].
+            fin: 0 right, 1 left.
+            beat: ``(bias, amplitude, period, ratio)`` the fin runs from there (rad, rad, s, -).
+            turn: The fin angle at the turning point [rad].
+            power: Whether the half-stroke that starts is a power stroke.
+        """
+        if not self.running or self.session is None:
+            return None  # halted fins hold still: nothing latches that a replay needs
+        bias, amplitude = float(beat[0]), float(beat[1])
+        if (bias + amplitude if power else bias - amplitude) == float(turn):
+            return None  # a half-stroke that ends where it starts moves nothing (a still fin latches every tick)
+        self._latch_seq = (self._latch_seq + 1) & 0xFFFF
+        latch = Latch(self.uptime_ms(t), self.boot, int(fin), bool(power), float(turn),
+                      tuple(float(v) for v in np.asarray(beat, dtype=float).reshape(4)))
+        return Message(MsgType.LATCH, self._latch_seq, self.session, latch=latch)
 
     def uptime_ms(self, now: float) -> int:
         """The robot clock [ms since power-up, u32, rounded down] at ``now`` [s]."""
@@ -282,8 +313,8 @@ class Firmware:
 
     def receive(self, msg: Message, now: float) -> Message | None:
         """Handle a valid message received at ``now`` [s]; return the STATUS reply, or ``None`` (ignored)."""
-        if msg.type == MsgType.STATUS:
-            return None  # not for us
+        if msg.type in (MsgType.STATUS, MsgType.LATCH):
+            return None  # the robot's own kinds: not for us
         if msg.session != self.session and not self._admit(msg, now):
             if msg.type == MsgType.STOP:  # a stop never needs authority
                 self.ignored["foreign_stop"] += 1

@@ -108,6 +108,8 @@ class RadioLink(StatusReceiver):
         self.stats = LinkStats()
         self.decoder = pr.StreamDecoder()
         self.tracker = pr.SequenceTracker()
+        self.latch_tracker = pr.SequenceTracker()  # LATCH reports are numbered on their own, keyed by boot
+        self.latch_reports: deque[tuple[float, pr.Latch]] = deque(maxlen=1024)  # until drain_latches()
         self.last_status: pr.Status | None = None
         self.last_status_time: float | None = None  # clock.monotonic() of the newest STATUS
         self.command: np.ndarray | None = None  # (2, 4) current fin command, None when stopped

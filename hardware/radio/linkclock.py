@@ -9,6 +9,8 @@ time, so a SET_FINS can carry a deadline on the robot's clock that no copy, howe
 when it arrives at PC time ``t_rx`` the robot's clock reads at least ``uptime``, and ``t - t_rx`` later at
 least ``uptime + (t - t_rx) * speed * (1 - tolerance)``, with ``tolerance`` the largest relative rate error
 of the robot's oscillator against the PC's clock. The best bound is the largest over recent samples.
+:meth:`RobotClock.pc_time` maps the other way, for the robot's reports (LATCH): the PC time at which the
+robot's clock read a given uptime, late by the fastest recent STATUS's return latency.
 """
 
 from __future__ import annotations
@@ -104,6 +106,27 @@ class RobotClock:
         """
         rate = speed * (1.0 - self.tolerance)
         return max((u + max(t - t_rx, 0.0) * rate for t_rx, u in self._samples), default=None)
+
+    def pc_time(self, boot: int, uptime_ms: int, speed: float = 1.0, span: float = 1.0) -> float | None:
+        """The PC time [s] at which the robot's clock (boot ``boot``) read ``uptime_ms``; ``None`` if not known.
+
+        Every STATUS puts the robot's clock offset at most ``t_rx - uptime / speed`` (its uptime was read before
+        it left); the smallest of these over the samples within ``span`` robot seconds of ``uptime_ms`` is the
+        estimate, late by that STATUS's return latency (0 to a few ms on a quiet radio; the radio's one-way
+        latency in general) plus the clock's rate error over ``span`` (``tolerance * span`` at worst). Not a bound
+        in either direction: for logs and replays, never for safety.
+
+        Args:
+            boot: The boot id the uptime is of (``None`` is returned for another boot than the samples').
+            uptime_ms: The robot's clock [ms].
+            speed: Nominal robot seconds per PC second (an accelerated emulator's ``speed``).
+            span: Samples whose uptime is this close [robot s] count (all samples if none is).
+        """
+        if boot != self.boot or not self._samples:
+            return None
+        u = uptime_ms / 1000.0
+        near = [(t_rx, v) for t_rx, v in self._samples if abs(v - u) <= span] or list(self._samples)
+        return u / speed + min(t_rx - v / speed for t_rx, v in near)
 
     def deadline_ms(self, t: float, speed: float = 1.0) -> int:
         """The SET_FINS ``deadline`` for a command that must stop by PC time ``t``: u32 ms, 0 if not synced."""

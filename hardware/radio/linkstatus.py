@@ -36,6 +36,9 @@ class LinkStats:
         write_errors: Failed writes to the port.
         foreign: STATUS messages addressed to other sessions (heard, not taken as acks).
         suppressed: Commands not sent because control is lost.
+        latches: The robot's latch reports (LATCH) received, addressed to us, new.
+        latches_lost: Latch reports missing from their own numbering (lost on the radio).
+        latches_unplaced: Latch reports dropped because the robot's clock (that boot's) was not known yet.
     """
 
     sent: int = 0
@@ -52,7 +55,9 @@ class LinkStats:
     write_errors: int = 0
     foreign: int = 0
     suppressed: int = 0
-
+    latches: int = 0
+    latches_lost: int = 0
+    latches_unplaced: int = 0
 
 
 class StatusReceiver:
@@ -62,7 +67,8 @@ class StatusReceiver:
     ``tracker``, ``stats``, ``session``, ``boot``, ``served``, ``robot_clock``, ``rtt_estimator``,
     ``last_status``/``last_status_time``, ``command``, ``lease_end``, ``control_lost``, ``take_over`` and its
     private bookkeeping (``_lock``, ``_acked_event``, ``_stop``, ``_pending``, ``_sent_at``, ``_acked``, ``_quiet``,
-    ``_served``, ``_commanded``, ``_old_boots``).
+    ``_served``, ``_commanded``, ``_old_boots``); for the latch reports ``latch_tracker``, ``latch_reports`` and
+    ``lease_scale``.
     """
 
     def _read_loop(self) -> None:
@@ -91,6 +97,9 @@ class StatusReceiver:
             self.stats.crc_errors, self.stats.checksum_errors = d.crc_errors, d.checksum_errors
             self.stats.framing_errors = d.framing_errors + d.truncated
             for msg in messages:
+                if msg.type == pr.MsgType.LATCH:
+                    self._latch(msg)
+                    continue
                 if msg.type != pr.MsgType.STATUS:
                     continue  # our own frames echoed (loop://) or a confused peer
                 status = msg.status
@@ -104,6 +113,33 @@ class StatusReceiver:
                     continue
                 self._status(msg)
             self._acked_event.notify_all()
+
+    def _latch(self, msg: pr.Message) -> None:
+        """A LATCH report (call with the lock held): kept, on the PC's clock, if it is about our fins.
+
+        Reports are fire and forget: a lost one shows as a gap in their own numbering (``latches_lost``) and
+        costs the replay only that half-stroke's pattern (it infers it, as without reports).
+        """
+        latch = msg.latch
+        if msg.session != self.session or latch.boot in self._old_boots:
+            return  # another PC's fins, or a report from before a reboot
+        verdict = self.latch_tracker.check(msg.seq, latch.boot)
+        self.stats.latches_lost = self.latch_tracker.lost
+        if verdict != pr.Verdict.NEW:
+            return
+        t = self.robot_clock.pc_time(latch.boot, latch.uptime_ms, 1.0 / self.lease_scale)
+        if t is None:
+            self.stats.latches_unplaced += 1  # no STATUS of that boot yet: its clock is unknown
+            return
+        self.stats.latches += 1
+        self.latch_reports.append((t, latch))
+
+    def drain_latches(self) -> list[tuple[float, pr.Latch]]:
+        """The latch reports received since the last call: ``(PC clock time of the latch [s], report)``, in order."""
+        with self._lock:
+            out = list(self.latch_reports)
+            self.latch_reports.clear()
+        return out
 
     def _status(self, msg: pr.Message) -> None:
         """A new STATUS, addressed to us or not (call with the lock held)."""

@@ -27,7 +27,7 @@ from pectoral_gym.hardware.radio.xbee import ESCAPE, MAX_FRAME_DATA, START, Prot
 
 __all__ = [
     "PROTOCOL_VERSION", "MAX_LEASE", "DEFAULT_LEASE", "state_name",
-    "MsgType", "RobotState", "Status", "Message",
+    "MsgType", "RobotState", "Status", "Latch", "Message",
     "crc16", "encode_message", "decode_message",
     "StreamDecoder", "SequenceTracker", "Verdict", "serial_newer",
 ]
@@ -41,6 +41,9 @@ _FINS = struct.Struct(">8H")  # per fin: bias [mrad], amplitude [mrad], period [
 _LEASE = struct.Struct(">HHII")  # command identity, lease [ms], deadline [robot uptime ms, 0 = none], boot id
 # ack seq, ack type, state, flags, crc errors, duplicates, stale, uptime [ms], served session, boot id
 _STATUS = struct.Struct(">HBBBHHHIII")
+# uptime [ms], boot id, fin (0 right, 1 left), flags (bit 0: a power stroke starts), turning-point angle [mrad],
+# the pattern latched: bias [mrad], amplitude [mrad], period [ms], ratio [1/1000]
+_LATCH = struct.Struct(">IIBBH4H")
 _CRC = struct.Struct(">H")
 _FIN_SCALE = (1000.0, 1000.0, 1000.0, 1000.0)  # SI value * scale = wire integer
 
@@ -53,6 +56,7 @@ class MsgType(enum.IntEnum):
     HEARTBEAT = 0x03  # PC -> robot: keep-alive, changes nothing
     CLAIM = 0x04  # PC -> robot: take the robot over from another live session (an explicit operator action)
     STATUS = 0x81  # robot -> PC: acknowledgement and health
+    LATCH = 0x82  # robot -> PC: a fin latched a pattern at a stroke turning point (report, never acknowledged)
 
 
 class RobotState(enum.IntEnum):
@@ -101,11 +105,32 @@ class Status:
 
 
 @dataclass(frozen=True)
+class Latch:
+    """Body of a LATCH message: fin ``fin`` started a half-stroke of pattern ``beat`` at robot uptime ``uptime_ms``.
+
+    ``beat`` is ``(bias, amplitude, period, ratio)`` [rad, rad, s, -] as the fin runs it (the rate-limited
+    setpoint with the transitional stretch, ``firmware.stretch_transition``), quantised like SET_FINS;
+    ``turn`` [rad] the fin angle at the turning point (where the half-stroke starts); ``power`` whether it
+    is a power stroke (to ``bias + amplitude``) or a recovery (to ``bias - amplitude``). With these the
+    half-stroke is known whole: the PC needs no earlier report to replay it (a lost report costs nothing
+    after the next one). ``boot`` names the clock ``uptime_ms`` is on.
+    """
+
+    uptime_ms: int
+    boot: int
+    fin: int
+    power: bool
+    turn: float
+    beat: tuple[float, float, float, float]
+
+
+@dataclass(frozen=True)
 class Message:
     """One message: its type, sequence number, session and the body fields of its type.
 
     ``session`` is the sender's (a PC) or, in a STATUS, the session of the message it answers. SET_FINS:
-    ``fins`` (8 floats, right fin first, SI), ``command``, ``lease``, ``deadline``, ``boot``; STATUS: ``status``.
+    ``fins`` (8 floats, right fin first, SI), ``command``, ``lease``, ``deadline``, ``boot``; STATUS: ``status``;
+    LATCH: ``latch`` (its ``session`` is the one the robot serves, its ``seq`` the robot's count of LATCH messages).
 
     ``command`` (u16) names the command: copies (keep-alives, retries) carry the same one, a new command
     from the controller a newer one. ``lease`` [s, ms resolution, (0, MAX_LEASE]] is how long the robot
@@ -119,6 +144,7 @@ class Message:
     session: int = 0
     fins: tuple[float, ...] | None = None
     status: Status | None = field(default=None)
+    latch: Latch | None = None
     command: int = 0
     lease: float = DEFAULT_LEASE
     deadline: int = 0
@@ -158,6 +184,19 @@ def _fins_to_wire(fins: Sequence[float]) -> bytes:
     return _FINS.pack(*words)
 
 
+def _latch_to_wire(latch: Latch | None) -> bytes:
+    if latch is None:
+        raise ValueError("LATCH needs latch")
+    if latch.fin not in (0, 1):
+        raise ValueError(f"LATCH fin must be 0 (right) or 1 (left), got {latch.fin!r}")
+    turn = round(float(latch.turn) * 1000.0) if math.isfinite(latch.turn) else -1
+    if not 0 <= turn <= 0xFFFF:
+        raise ValueError(f"LATCH turn = {latch.turn!r} rad does not fit the wire format (0..65.535 rad)")
+    pattern = _FINS.unpack(_fins_to_wire((*latch.beat, *latch.beat)))[:4]
+    return _LATCH.pack(int(latch.uptime_ms) & 0xFFFFFFFF, int(latch.boot) & 0xFFFFFFFF, latch.fin,
+                       1 if latch.power else 0, turn, *pattern)
+
+
 def encode_message(msg: Message) -> bytes:
     """RF data of ``msg``: header, body, CRC-16."""
     if not 0 <= msg.seq <= 0xFFFF or not 0 <= msg.session <= 0xFFFFFFFF:
@@ -180,6 +219,8 @@ def encode_message(msg: Message) -> bytes:
         body = _STATUS.pack(s.ack_seq & 0xFFFF, s.ack_type & 0xFF, s.state & 0xFF, s.flags & 0xFF,
                             min(s.crc_errors, 0xFFFF), min(s.duplicates, 0xFFFF), min(s.stale, 0xFFFF),
                             s.uptime_ms & 0xFFFFFFFF, s.served & 0xFFFFFFFF, s.boot & 0xFFFFFFFF)
+    elif msg.type == MsgType.LATCH:
+        body = _latch_to_wire(msg.latch)
     else:
         body = b""
     head = _HEADER.pack(PROTOCOL_VERSION, int(msg.type), msg.session, msg.seq) + body
@@ -187,14 +228,14 @@ def encode_message(msg: Message) -> bytes:
 
 
 _BODY_SIZE = {MsgType.SET_FINS: _FINS.size + _LEASE.size, MsgType.STOP: 0, MsgType.HEARTBEAT: 0,
-              MsgType.CLAIM: 0, MsgType.STATUS: _STATUS.size}
+              MsgType.CLAIM: 0, MsgType.STATUS: _STATUS.size, MsgType.LATCH: _LATCH.size}
 
 
 def decode_message(payload: bytes) -> Message:
     """Parse RF data into a :class:`Message`.
 
     Raises:
-        ProtocolError: Not a valid message (``reason``: ``crc``, ``length``, ``version`` or ``type``).
+        ProtocolError: Not a valid message (``reason``: ``crc``, ``length``, ``version``, ``type`` or ``field``).
     """
     if len(payload) < _HEADER.size + _CRC.size:
         raise ProtocolError("length", f"message of {len(payload)} bytes is shorter than header + CRC")
@@ -219,6 +260,12 @@ def decode_message(payload: bytes) -> Message:
                        boot=boot)
     if mtype == MsgType.STATUS:
         return Message(mtype, seq, session, status=Status(*_STATUS.unpack(body)))
+    if mtype == MsgType.LATCH:
+        uptime, boot, fin, flags, turn, *pattern = _LATCH.unpack(body)
+        if fin > 1:
+            raise ProtocolError("field", f"LATCH of fin {fin}; fins are 0 (right) and 1 (left)")
+        beat = tuple(w / _FIN_SCALE[i] for i, w in enumerate(pattern))
+        return Message(mtype, seq, session, latch=Latch(uptime, boot, fin, bool(flags & 1), turn / 1000.0, beat))
     return Message(mtype, seq, session)
 
 

@@ -9,6 +9,11 @@ parameters. :func:`replay_fins` therefore runs the one implementation of those r
 handed to the fins and when (a :class:`FinTrack`). :func:`simulate` then drives a batched full model
 of any number of candidate fish with those same hand-overs, so every candidate sees exactly the fins the
 firmware rules produce, and re-initialises the bodies at the start of each shooting window.
+
+Where the log holds the robot's latch reports (``latch`` records, ``docs/run-log.md``), the replay starts each
+reported half-stroke as reported (:meth:`FinReplay.latch`): which slewed pattern a turning point latches depends
+on the firmware's tick and the radio's delay, which the PC's commands do not show. Between reports (a lost one,
+a log without them) the rules infer the latches as before.
 """
 
 from __future__ import annotations
@@ -18,7 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pectoral_gym.hardware.finreplay import FinReplay
+from pectoral_gym.hardware.finreplay import FinReplay, force_latch
 from pectoral_gym.hardware.radio.firmware import FirmwareConfig
 from pectoral_gym.hardware.runlog import RunLog
 from pectoral_gym.model.models import FullModel
@@ -27,7 +32,7 @@ from pectoral_gym.model.spec import FULL_FAST, FullSpec
 
 __all__ = ["FinTrack", "replay_fins", "simulate"]
 
-_COMMAND, _HALT = 0, 1
+_COMMAND, _HALT, _LATCH = 0, 1, 2
 
 
 class _RecordingModel(FullModel):
@@ -60,9 +65,10 @@ class FinTrack:
 
     Attributes:
         times: ``(e,)`` times of the hand-overs [s, the log's clock].
-        kinds: ``(e,)`` 0: a setpoint commanded (``command_array``), 1: the fins halted where they were.
-        values: ``(e, 2, 4)`` the setpoint (right fin first), or for a halt the fins' angles in ``[:, 0, 0]``
-            and ``[:, 1, 0]`` [rad].
+        kinds: ``(e,)`` 0: a setpoint commanded (``command_array``), 1: the fins halted where they were,
+            2: a reported latch (:func:`~pectoral_gym.hardware.finreplay.force_latch`).
+        values: ``(e, 2, 4)`` the setpoint (right fin first); for a halt the fins' angles in ``[:, 0, 0]``
+            and ``[:, 1, 0]`` [rad]; for a latch the pattern in ``[0]`` and ``[fin, turn, power, 0]`` in ``[1]``.
         t0: The replay's start [s]; the fins are at rest at 90 deg then (power-up).
     """
 
@@ -80,29 +86,42 @@ class _Replay(FinReplay):
         self.model = _RecordingModel()
         self.reset(0.0)
 
+    def latch(self, t: float, fin: int, beat: np.ndarray, turn: float, power: bool) -> bool:  # noqa: D102
+        applied = super().latch(t, fin, beat, turn, power)
+        if applied:
+            value = np.stack([np.asarray(beat, dtype=float), np.array([fin, turn, float(power), 0.0])])
+            self.model.events.append((self.model.time, _LATCH, value))
+        return applied
+
 
 def replay_fins(log: RunLog) -> FinTrack:
     """Replay the fins of ``log`` once under its firmware settings; returns the hand-overs to drive candidates with.
 
-    Commands and stops of all episodes run on one clock (a hand placing the fish does not move its servos).
+    Commands, stops and the robot's latch reports of all episodes run on one clock (a hand placing the fish does
+    not move its servos); a reported latch starts the half-stroke the robot reported (:meth:`FinReplay.latch`).
     """
     commands = [(float(t), 0, b) for ep in log.episodes for t, b in zip(ep.command_t, ep.beats, strict=True)]
     stops = [(float(t), 1, None) for ep in log.episodes for t in ep.stop_t]
-    items = sorted(commands + stops, key=lambda item: (item[0], item[1]))
+    latches = [(float(t), 2, (int(f), beat, float(turn), bool(power))) for ep in log.episodes
+               for t, f, beat, turn, power in zip(ep.latch_t, ep.latch_fin, ep.latch_beat, ep.latch_turn,
+                                                  ep.latch_power, strict=True)]
+    items = sorted(commands + stops + latches, key=lambda item: (item[0], item[1]))
     t0 = min([log.episodes[0].t_start, *(item[0] for item in items)])
     replay = _Replay(log.firmware)
     replay.reset(t0)
     replay.model.events.clear()
-    for t, kind, beats in items:
+    for t, kind, value in items:
         if kind == 0:
-            replay.command(t, beats)
-        else:
+            replay.command(t, value)
+        elif kind == 1:
             replay.stop(t)
+        else:
+            replay.latch(t, *value)
     replay.advance(max(ep.t_end for ep in log.episodes) + 0.05)  # the last setpoints' hand-overs
     events = replay.model.events
     values = np.zeros((len(events), 2, 4))
     for k, (_, kind, value) in enumerate(events):
-        if kind == _COMMAND:
+        if kind in (_COMMAND, _LATCH):
             values[k] = value
         else:
             values[k, :, 0] = value
@@ -147,6 +166,9 @@ def simulate(track: FinTrack, params: Sequence[FishParams], window_t: np.ndarray
             out[:, i] = model.state[:, :3]
         elif track.kinds[i] == _COMMAND:
             model.command_array(np.broadcast_to(track.values[i], (n, 2, 4)).copy(), validate=False)
+        elif track.kinds[i] == _LATCH:  # the robot's report: every candidate's fin starts that half-stroke
+            fin, turn, power = track.values[i, 1, :3]
+            force_latch(model, int(fin), t, track.values[i, 0], turn, power > 0.5)
         else:  # a halt: as apply_firmware does, the fins rest where they are and the body keeps its state
             time_now = model.time
             model.reset(model.state.copy(), right=FinBeat.rest(float(track.values[i, 0, 0])),
