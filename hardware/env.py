@@ -22,6 +22,7 @@ from pectoral_gym.hardware.radio.link import RadioLink
 from pectoral_gym.hardware.realtime import settle_garbage
 from pectoral_gym.hardware.safety.rules import SafetyConfig, check_action, install_stop_handlers
 from pectoral_gym.hardware.stack import open_stack
+from pectoral_gym.sensing.observer import PREDICT_AFTER_FRAMES
 
 __all__ = ["HardwareFishEnv"]
 
@@ -166,6 +167,9 @@ class HardwareFishEnv(gym.Env):
             raise ValueError("speed and frame_period must be > 0 and max_episode_steps >= 1")
         if not (math.isfinite(stop_timeout) and stop_timeout > 0):
             raise ValueError(f"stop_timeout must be a finite number > 0 s, got {stop_timeout!r}")
+        if kwargs.get("sensing") is not None:
+            raise ValueError("HardwareFishEnv observes through its real camera and observer: sensing (the simulated "
+                             "envs' camera, EnvConfig.sensing) must not be set here; leave it out")
         try:
             self.config = EnvConfig(model="full", task=task, control_period=control_period, **kwargs)
         except TypeError as err:
@@ -380,7 +384,7 @@ class HardwareFishEnv(gym.Env):
         self._observe()
         reason = sup.reason
         end = self.now()
-        if end - self._last_measure > 2 * self.frame_period and math.isfinite(self._last_measure):
+        if end - self._last_measure > PREDICT_AFTER_FRAMES * self.frame_period and math.isfinite(self._last_measure):
             self._state = np.asarray(self.observer.predict(end), dtype=float).copy()
         task.observe(self._state[None])
         if self._velocity_count:

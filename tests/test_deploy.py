@@ -420,3 +420,16 @@ def test_a_goal_policy_is_refused_under_track_and_bad_statistics_are_named(polic
     (run / "vecnormalize.pkl").write_bytes(pickle.dumps(other))
     with pytest.raises(ValueError, match="size 27.*another run"):
         load_policy(run)
+
+
+def test_a_policy_trained_through_the_simulated_camera_runs_on_the_real_one():
+    """EnvConfig.sensing is recorded in a run, noted by the deploy, never applied on top of the robot's camera."""
+    from pectoral_gym.hardware.deploy_checks import env_settings
+    from pectoral_gym.hardware.env import HardwareFishEnv
+
+    sensed = _Trained(obs_size=27, trained={"task": "goal", "control_period": 0.5, "observe_fins": True,
+                                            "sensing": {"latency": 0.05}})
+    settings, notes = env_settings(sensed, None, None)
+    assert "sensing" not in settings and any("simulated camera" in note for note in notes)
+    with pytest.raises(ValueError, match="sensing .* must not be set here"):
+        HardwareFishEnv("loop://", None, sensing={"latency": 0.05})

@@ -61,8 +61,9 @@ QUICK_EPISODES = 2  # --quick: episodes of a smoke run
 AVERAGED_ONLY = ENV_OPTIONS["averaged"]
 FULL_ONLY = ENV_OPTIONS["full"]
 # Settings of how a policy was trained, not of what it is evaluated on: evaluations leave them out (a policy
-# trained on the fast full model is evaluated at the reference steps unless the evaluation asks otherwise).
-TRAINING_ONLY = ("randomize", "integration")
+# trained on the fast full model is evaluated at the reference steps, one trained through the simulated camera
+# on the true state, unless the evaluation asks otherwise, e.g. --env-kwargs '{"sensing": {}}').
+TRAINING_ONLY = ("randomize", "integration", "sensing")
 
 
 def model_kwargs(env_id: str, kwargs: dict[str, Any]) -> dict[str, Any]:
@@ -76,7 +77,8 @@ def model_kwargs(env_id: str, kwargs: dict[str, Any]) -> dict[str, Any]:
 def trained_env_kwargs(path: str | Path, env_id: str) -> dict[str, Any]:
     """The env arguments a run folder trained with, for an evaluation on ``env_id``.
 
-    Left out: :data:`TRAINING_ONLY` (the randomisation, the full model's ``integration``).
+    Left out: :data:`TRAINING_ONLY` (the randomisation, the full model's ``integration``, the simulated camera
+    ``sensing``).
     ``{}`` for a ``.zip`` (no run config next to it).
     """
     from pectoral_gym.agents.training.policy import read_config

@@ -14,6 +14,9 @@ system), so a ramp is followed without error at any spacing. Heading is unwrappe
 observer's own prediction, so a measurement jumping from +pi to -pi is a small turn, not a full one. The world rates
 are finally rotated into the body frame: vx, vy (eq. 19's kinematics, inverted) and omega = psi'.
 
+The arithmetic is :mod:`pectoral_gym.sensing.observer`'s batched kernels, on one row: the simulated envs'
+camera (``EnvConfig.sensing``, :mod:`pectoral_gym.envs.sensed`) runs the very same observer.
+
 :meth:`HighGainObserver.predict` extrapolates without a measurement (constant rates) and leaves the observer's state
 alone, so a lost frame is never replaced by a made-up pose.
 """
@@ -23,6 +26,8 @@ from __future__ import annotations
 import math
 
 import numpy as np
+
+from pectoral_gym.sensing import observer as kernels
 
 __all__ = ["HighGainObserver"]
 
@@ -38,52 +43,41 @@ class HighGainObserver:
             from the new pose with zero rates instead of interpolating across it.
     """
 
-    def __init__(self, epsilon: float = 0.1, a1: float = 2.0, a2: float = 1.0, max_gap: float = 1.0) -> None:
+    def __init__(self, epsilon: float = 0.1, a1: float = kernels.A1, a2: float = kernels.A2,
+                 max_gap: float = 1.0) -> None:
         for name, value in (("epsilon", epsilon), ("a1", a1), ("a2", a2), ("max_gap", max_gap)):
             if not math.isfinite(value) or value <= 0:
                 raise ValueError(f"HighGainObserver: {name} must be a finite number > 0, got {value!r}")
         self.epsilon, self.a1, self.a2, self.max_gap = float(epsilon), float(a1), float(a2), float(max_gap)
-        # z' = A z + b u for each coordinate, z = (x1, x2), u the measurement.
-        self._a = np.array([[-a1 / epsilon, 1.0], [-a2 / epsilon**2, 0.0]])
-        self._b = np.array([a1 / epsilon, a2 / epsilon**2])
-        self._a_inv = np.linalg.inv(self._a)
-        self._z = np.zeros((2, 3))  # rows x1, x2; columns X, Y, psi (unwrapped)
-        self._y = np.zeros(3)  # last measurement (psi unwrapped)
-        self._t: float | None = None
-        self._estimate = np.full(6, np.nan)
+        # The batched kernels' arrays, one row (pectoral_gym.sensing.observer).
+        self._z = np.zeros((1, 2, 3))  # rows x1, x2; columns X, Y, psi (unwrapped)
+        self._last = np.full((1, 4), np.nan)  # time and pose (psi unwrapped) of the last measurement
+        self._estimate = np.full((1, 6), np.nan)
         self.restarts = 0
 
     @property
     def initialised(self) -> bool:
         """True once a first pose was given (by :meth:`reset` or :meth:`update`)."""
-        return self._t is not None
+        return not math.isnan(self._last[0, 0])
 
     @property
     def time(self) -> float | None:
         """Timestamp of the last measurement [s]."""
-        return self._t
+        return float(self._last[0, 0]) if self.initialised else None
 
     @property
     def estimate(self) -> np.ndarray:
         """Latest output (6,) = X, Y, psi (unwrapped), vx, vy, omega; NaN before the first pose."""
-        return self._estimate.copy()
+        return self._estimate[0].copy()
 
     def transition(self, step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Exact discretisation over ``step`` with the measurement interpolated linearly from ``u0`` to ``u1``.
 
         Returns ``(Phi, g1, gs)`` such that ``z(step) = Phi z(0) + g1 u1 - gs (u1 - u0) / step``:
-        ``Phi = exp(A h)``, ``g1 = A^-1 (Phi - I) b``, ``gs = A^-1 (h Phi - A^-1 (Phi - I)) b``.
+        ``Phi = exp(A h)``, ``g1 = A^-1 (Phi - I) b``, ``gs = A^-1 (h Phi - A^-1 (Phi - I)) b``
+        (:func:`pectoral_gym.sensing.observer.transition`).
         """
-        a, h = self._a, float(step)
-        # exp(A h) of a 2x2 matrix: e^(m h) [cosh(q h) I + sinh(q h) / q (A - m I)], m = tr / 2, q^2 = m^2 - det.
-        m = 0.5 * np.trace(a)
-        q = np.sqrt(complex(m * m - np.linalg.det(a)))
-        x = q * h
-        sinh_over_q = h * (np.sinh(x) / x if abs(x) > 1e-6 else 1 + x * x / 6)
-        phi = (np.exp(m * h) * (np.cosh(x) * np.eye(2) + sinh_over_q * (a - m * np.eye(2)))).real
-        integral = self._a_inv @ (phi - np.eye(2))  # int_0^h exp(A s) ds
-        weighted = self._a_inv @ (h * phi - integral)  # int_0^h s exp(A s) ds
-        return phi, integral @ self._b, weighted @ self._b
+        return kernels.transition_matrices(self.epsilon, self.a1, self.a2, step)
 
     @staticmethod
     def _check(t: float, x: float, y: float, psi: float) -> None:
@@ -93,19 +87,7 @@ class HighGainObserver:
     def reset(self, x: float, y: float, psi: float, t: float) -> np.ndarray:
         """Start from a measured pose at rest; returns the estimate (6,)."""
         self._check(t, x, y, psi)
-        self._z[0] = (x, y, psi)
-        self._z[1] = 0.0
-        self._y = np.array([x, y, psi], dtype=float)
-        self._t = float(t)
-        return self._output(self._z)
-
-    def _output(self, z: np.ndarray) -> np.ndarray:
-        psi = z[0, 2]
-        cos, sin = math.cos(psi), math.sin(psi)
-        x_rate, y_rate = z[1, 0], z[1, 1]
-        self._estimate = np.array(
-            [z[0, 0], z[0, 1], psi, cos * x_rate + sin * y_rate, -sin * x_rate + cos * y_rate, z[1, 2]]
-        )
+        kernels.observer_reset(0, self._z, self._last, self._estimate, float(t), float(x), float(y), float(psi))
         return self.estimate
 
     def update(self, t: float, x: float, y: float, psi: float) -> np.ndarray:
@@ -117,19 +99,11 @@ class HighGainObserver:
             ValueError: Non-finite input, or ``t`` not after the previous measurement.
         """
         self._check(t, x, y, psi)
-        if self._t is None or t - self._t > self.max_gap:
-            self.restarts += self._t is not None
-            return self.reset(x, y, psi, t)
-        step = t - self._t
-        if step <= 0:
-            raise ValueError(f"measurement time {t!r} is not after the previous one {self._t!r}")
-        predicted_psi = self._z[0, 2] + self._z[1, 2] * step
-        psi_unwrapped = predicted_psi + (psi - predicted_psi + math.pi) % (2 * math.pi) - math.pi
-        measured = np.array([x, y, psi_unwrapped])
-        phi, g1, gs = self.transition(step)
-        self._z = phi @ self._z + np.outer(g1, measured) - np.outer(gs, (measured - self._y) / step)
-        self._y, self._t = measured, float(t)
-        return self._output(self._z)
+        if self.initialised and t - self._last[0, 0] <= 0:
+            raise ValueError(f"measurement time {t!r} is not after the previous one {self.time!r}")
+        self.restarts += kernels.observer_update(0, self._z, self._last, self._estimate, float(t), float(x),
+                                                 float(y), float(psi), self.epsilon, self.a1, self.a2, self.max_gap)
+        return self.estimate
 
     def predict(self, t: float) -> np.ndarray:
         """Estimate at time ``t`` with no new measurement (rates held); the observer state is unchanged.
@@ -138,13 +112,12 @@ class HighGainObserver:
             RuntimeError: No pose was ever given.
             ValueError: ``t`` is before the last measurement.
         """
-        if self._t is None:
+        if not self.initialised:
             raise RuntimeError("HighGainObserver.predict: no pose yet; call reset() or update() first")
-        if not math.isfinite(t) or t < self._t:
-            raise ValueError(f"predict time {t!r} must be finite and not before the last measurement {self._t!r}")
-        z = self._z.copy()
-        z[0] += z[1] * (t - self._t)
-        return self._output(z)
+        if not math.isfinite(t) or t < self._last[0, 0]:
+            raise ValueError(f"predict time {t!r} must be finite and not before the last measurement {self.time!r}")
+        kernels.observer_predict(0, self._z, self._last, self._estimate, float(t))
+        return self.estimate
 
     def frequency_response(self, omega: float) -> complex:
         """Transfer function from the true rate to the estimated rate at angular frequency ``omega`` [rad/s].
@@ -152,5 +125,4 @@ class HighGainObserver:
         ``G(j omega) = w_n^2 / (w_n^2 - omega^2 + j 2 zeta w_n omega)`` with ``w_n^2 = a2 / eps^2`` and
         ``2 zeta w_n = a1 / eps`` (continuous observer; the first-order hold makes it exact for ramps).
         """
-        wn2 = self.a2 / self.epsilon**2
-        return wn2 / (wn2 - omega**2 + 1j * (self.a1 / self.epsilon) * omega)
+        return kernels.frequency_response(omega, self.epsilon, self.a1, self.a2)

@@ -16,6 +16,7 @@ import math
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -26,6 +27,7 @@ from pectoral_gym.model.params import FishParams, as_params
 from pectoral_gym.model.servo import servo_period
 from pectoral_gym.model.spec import ENV_OPTIONS, MODELS, AveragedSpec, FullSpec, env_spec
 from pectoral_gym.model.tank import ROBOT_STOP_RULE, TANK_WIDTH, StopRule
+from pectoral_gym.sensing.camera import SensingConfig
 
 __all__ = ["EnvConfig", "MODELS", "TASKS", "env_signature"]
 
@@ -119,6 +121,13 @@ class EnvConfig:
             half-stroke peaks above it runs with its period lengthened, as the robot's firmware runs it
             (:func:`pectoral_gym.model.servo.servo_period`; the robot's value:
             :data:`~pectoral_gym.model.servo.ROBOT_MAX_FIN_RATE`).
+        sensing: Observe through a simulated camera and the robot's high-gain observer
+            (:mod:`pectoral_gym.envs.sensed`): ``None`` (off: the observation is the true state, its velocities
+            the exact means over the period), ``True`` or ``{}`` (the defaults), or a mapping of
+            :class:`~pectoral_gym.sensing.camera.SensingConfig` fields (frame rate, per-episode ranges of pose
+            noise, frame drops and latency, the observer's ``epsilon``); stored as a ``SensingConfig``. The
+            reward, the termination and ``info`` stay on the true state. Latencies must stay below
+            ``control_period``.
     """
 
     model: str = "full"
@@ -149,6 +158,7 @@ class EnvConfig:
     stop_band: bool = False
     stop_rule: StopRule = ROBOT_STOP_RULE
     servo_limit: float | None = None
+    sensing: SensingConfig | Mapping[str, Any] | bool | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -211,6 +221,10 @@ class EnvConfig:
                 raise ValueError(f"servo_limit must be None or a finite fin rate > 0 rad/s, got {limit!r}")
             set_(self, "servo_limit", float(limit))
         set_(self, "params", as_params(self.params))
+        set_(self, "sensing", SensingConfig.coerce(self.sensing))
+        if self.sensing is not None and self.sensing.latency[1] >= self.control_period:
+            raise ValueError(f"sensing['latency'] must stay below the control period {self.control_period} s, got "
+                             f"{self.sensing.latency}")
         if self.randomize is not None:
             randomize = dict(self.randomize)
             unknown = sorted(set(randomize) - set(_FIELD_NAMES))

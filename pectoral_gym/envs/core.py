@@ -18,6 +18,7 @@ import numpy as np
 from pectoral_gym.envs.config import MODELS, TASKS, EnvConfig, env_signature
 from pectoral_gym.envs.fused import FusedStep
 from pectoral_gym.envs.layout import ACTION_SIZE, FishConstants, ReferenceEllipse, fish_array
+from pectoral_gym.envs.sensed import SensedObservation
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.envs.tasks.table import TaskState, task_info
 from pectoral_gym.model.models import REST, FishModel
@@ -46,6 +47,8 @@ class EnvCore:
         fish: ``(n, N_FISH)`` values derived from each env's parameters (``layout.F_*``).
         beats: ``(n, 2, 4)`` commanded fin patterns ``(bias, amplitude, period, ratio)``, right fin first.
         params: The :class:`FishParams` of each env's current episode.
+        sensed: With ``config.sensing``, the :class:`~pectoral_gym.envs.sensed.SensedObservation` that rewrites
+            ``obs`` through the simulated camera and observer after every reset and step; else ``None``.
         action_buffer: ``(n, 8)`` float64 actions; ``step(core.action_buffer)`` after writing into it
             is the single env's path (no copy; a step is one compiled call,
             :class:`~pectoral_gym.envs.fused.FusedStep`).
@@ -73,6 +76,7 @@ class EnvCore:
         # kernel. Holds the arrays above and the model's: they are updated in place, never replaced.
         self._step = FusedStep(self.model, self.dt, self.action_buffer, self.cfg, self.beats, self.obs, self.out,
                                self.fish, self.ep, self._integral_before, ts.task.reward_one)
+        self.sensed = None if config.sensing is None else SensedObservation(self.model, config.sensing, self.dt)
         if config.randomize:
             self._rand_names = tuple(config.randomize)
             widths = np.array([config.randomize[k] for k in self._rand_names])
@@ -83,7 +87,8 @@ class EnvCore:
         """Start new episodes for the envs in ``index``; env ``i`` draws only from ``rngs[i]``.
 
         Per env, in this order: the randomisation factors (one per field of
-        ``config.randomize``, in its order), then the task's draws (``TaskState.draw``).
+        ``config.randomize``, in its order), then the task's draws (``TaskState.draw``), then, with
+        ``config.sensing``, the camera's levels and the first frame's noise (``SensedObservation.reset``).
         """
         index = np.asarray(index, dtype=np.int64)
         draws = np.empty((index.size, 8))
@@ -100,6 +105,8 @@ class EnvCore:
         start = self.task_state.start(index, draws)
         self.model.reset(start, right=REST, left=REST, index=None if index.size == self.n else index)
         self.task_state.observe_reset(index, self.model.state)
+        if self.sensed is not None:
+            self.sensed.reset(index, rngs, self.model.state, self.ep, self.fish, self.obs)
         self._observe_fin_block()
 
     def step(self, actions: np.ndarray, skip: np.ndarray | None = None) -> None:
@@ -109,9 +116,15 @@ class EnvCore:
             ValueError: If an action of an env not in ``skip`` is not finite, or ``actions`` does not
                 have shape ``(n, 8)``.
         """
+        sensed = self.sensed
+        if sensed is not None:
+            sensed.before_step(self.model)
         bad = self._step(actions, skip)
         if bad >= 0:
             self._raise_non_finite(actions, bad)
+        if sensed is not None:  # the observation through the camera (the envs' generators: after the reset's)
+            sensed.step(self.none if skip is None else np.asarray(skip, dtype=np.bool_), self.model,
+                        self._step.settings(), self.beats, self.ep, self.fish, self.obs)
         self._observe_fin_block()
 
     def _observe_fin_block(self) -> None:
