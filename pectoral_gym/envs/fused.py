@@ -162,10 +162,8 @@ def step_body(a, skip, s):
     if bad >= 0:
         return bad
     n = actions.shape[0]
-    # The parallel build's threads take chunks of CHUNK envs as they come free: FusedStep sets numba's
-    # chunk size around the call, from Python. Set here (``nb.parallel_chunksize``), it would link a pointer
-    # into numba's threading layer into the kernel, which keeps it out of the disk cache: every process
-    # would compile the step afresh (seconds) at its first step.
+    # The parallel build's threads take chunks of CHUNK envs as they come free: set around the call (_chunked),
+    # not here, where it would keep the kernel out of the disk cache (every process would compile it afresh).
     for i in nb.prange(n):
         tk.apply_keep_one(i, actions, skip, cfg, beats, obs, out, fish, integral, before)
         command_one(i, fins, pending, beats, everyone)
@@ -197,10 +195,26 @@ def step_builds(task_kernel: Callable[..., Any]) -> KernelPair:
     return _REGISTERED[task_kernel]
 
 
+def _chunked(function: Callable[..., int]) -> Callable[..., int]:
+    """``function`` run with numba's chunk size :data:`CHUNK`, then the caller's again (a per-thread setting).
+
+    Set here, from Python: set inside the step body (``nb.parallel_chunksize``) it would link a pointer into
+    numba's threading layer into the kernel, which keeps it out of the disk cache.
+    """
+    def run(*args: Any) -> int:
+        previous = nb.set_parallel_chunksize(CHUNK)
+        try:
+            return function(*args)
+        finally:
+            nb.set_parallel_chunksize(previous)
+
+    return run
+
+
 class _Bound(NamedTuple):
     arrays: StepArrays
-    kernel: Callable[..., int]  # the build (a dispatcher: any argument types)
-    call: Callable[..., int]  # its entry point for (arrays, a bool mask, settings)
+    kernel: Callable[..., int]  # the build (a dispatcher: any argument types; the parallel one in _chunked)
+    call: Callable[..., int]  # its entry point for (arrays, a bool mask, settings), likewise
     settings: StepSettings
     revision: int  # the model's settings_revision they were bound at
 
@@ -265,7 +279,10 @@ class FusedStep:
         kernel = self.kernel
         if self.parallel:
             start_passive_threads()  # before the first parallel step: numba's threads sleep between steps
-        return _Bound(arrays, kernel, entry_point(kernel, (arrays, self.none, settings)), settings, revision)
+        call = entry_point(kernel, (arrays, self.none, settings))
+        if self.parallel:
+            kernel, call = _chunked(kernel), _chunked(call)
+        return _Bound(arrays, kernel, call, settings, revision)
 
     def __call__(self, actions: np.ndarray, skip: np.ndarray | None = None) -> int:
         """Step the envs not in ``skip`` (a bool mask); returns -1, or the first env with a non-finite action.
@@ -285,21 +302,10 @@ class FusedStep:
         bound = self._bound
         if bound is None or bound.revision != model.settings_revision:
             bound = self._bound = self._bind()
-        if self.parallel:  # numba's chunk size is a setting of the calling thread: this call's, then the caller's
-            previous = nb.set_parallel_chunksize(CHUNK)
-            try:
-                bad = self._run(bound, skip)
-            finally:
-                nb.set_parallel_chunksize(previous)
-        elif skip is None:  # the types the entry point was compiled for
+        if skip is None:  # the types the entry point was compiled for
             bad = bound.call(bound.arrays, self.none, bound.settings)
         else:
             bad = bound.kernel(bound.arrays, np.ascontiguousarray(skip, dtype=np.bool_), bound.settings)
         if bad < 0:
             model.time += self.duration  # as FishModel.advance
         return bad
-
-    def _run(self, bound: _Bound, skip: np.ndarray | None) -> int:
-        if skip is None:
-            return bound.call(bound.arrays, self.none, bound.settings)
-        return bound.kernel(bound.arrays, np.ascontiguousarray(skip, dtype=np.bool_), bound.settings)
