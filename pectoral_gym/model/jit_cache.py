@@ -204,12 +204,15 @@ def _base(module: str, path: Path) -> Path:
     return folder
 
 
+@functools.cache
 def _module_file(base: Path, module: str) -> Path | None:
     """The source file of ``module`` (``None`` if it is not a module, e.g. a name in one).
 
     Looked up below ``base`` package by package, as the import system would, also in the folder that
     the install maps a subpackage to where that is not the folder of its name (setuptools'
-    ``package-dir``: ``pectoral_gym.agents`` is the checkout's ``agents/``).
+    ``package-dir``: ``pectoral_gym.agents`` is the checkout's ``agents/``). Found once per process: every
+    kernel's digest walks the same modules, and a module added or removed while running is not imported
+    by the running code either (the files' contents are still read at their current version).
     """
     parent, _, leaf = module.rpartition(".")
     folders = _package_folders(base, parent) if parent else (base,)
