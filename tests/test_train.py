@@ -1,5 +1,6 @@
 """Training smoke runs through the real CLI, run folders, config resolution, repeatability, load_policy."""
 
+import contextlib
 import shutil
 
 import numpy as np
@@ -59,6 +60,26 @@ def test_same_seed_repeats_the_run(tmp_path):
     for pa, pb in zip(a.model.policy.parameters(), b.model.policy.parameters(), strict=True):
         assert np.array_equal(pa.detach().numpy(), pb.detach().numpy())
     np.testing.assert_array_equal(a.act_batch(obs), b.act_batch(obs))
+
+
+def test_training_without_distribution_checks_learns_the_same_and_restores_them(tmp_path, monkeypatch):
+    # the checks only raise on invalid parameters: with them on (as a caller may want), the run is the same
+    from torch.distributions import Distribution
+
+    a = load_policy(run(tmp_path, "a") / "model.zip")
+    assert Distribution._validate_args is True  # the caller's setting, restored after the run
+    import pectoral_gym.agents.training.train as train_module
+
+    monkeypatch.setattr(train_module, "_distribution_checks_off", contextlib.nullcontext)
+    b = load_policy(run(tmp_path, "b") / "model.zip")
+    for pa, pb in zip(a.model.policy.parameters(), b.model.policy.parameters(), strict=True):
+        assert np.array_equal(pa.detach().numpy(), pb.detach().numpy())
+    Distribution.set_default_validate_args(False)
+    try:
+        run(tmp_path, "c")
+        assert Distribution._validate_args is False
+    finally:
+        Distribution.set_default_validate_args(True)
 
 
 def test_sac_smoke_run(tmp_path):

@@ -367,7 +367,12 @@ def _noisy_backgrounds(camera: CameraModel, noise_std: float) -> tuple[list[np.n
     so a frame whose noise window starts at ``start`` reads its background from ``tables[k][start % 3]``.
     """
     background = _background(camera)
-    colours, inverse = np.unique(background.reshape(-1, 3), axis=0, return_inverse=True)
+    pixels = background.reshape(-1, 3)
+    # one integer per colour (whole channel values 0-255), in the order of the rows (c0, c1, c2) sorted: a
+    # 1-d unique instead of numpy's row-wise one, which sorts the pixels as structured rows (10x slower)
+    codes = (pixels[:, 0].astype(np.int64) << 16) | (pixels[:, 1].astype(np.int64) << 8) | pixels[:, 2].astype(np.int64)
+    _, first, inverse = np.unique(codes, return_index=True, return_inverse=True)
+    colours = pixels[first]
     scaled = _scaled_noise(background.size, noise_std)
     masks, tables = [], []
     for k, colour in enumerate(colours):
