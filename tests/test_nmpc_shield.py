@@ -166,7 +166,8 @@ def test_a_goal_inside_the_turning_circle_is_reached_on_the_full_model(circle_st
     angle = math.radians(-80.0)
     goal = (1.15 + 0.2 * math.cos(angle), 0.5 * TANK_WIDTH + 0.2 * math.sin(angle))
     r = run_episode(lambda config: make_baseline("nmpc", config, step_budget=1e6, stop_band=ROBOT_BAND, spin=False,
-                                                 shield_firmware=False, circle_steps=circle_steps), 0, start=start, goal=goal, max_steps=120)
+                                                 shield_firmware=False, circle_steps=circle_steps),
+                    0, start=start, goal=goal, max_steps=120)
     assert r.band_time is None and not r.wall
     if circle_steps:
         assert r.success and r.time <= 40.0, r
