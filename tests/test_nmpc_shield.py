@@ -24,7 +24,8 @@ SAFETY = SafetyConfig()
 
 
 def _nmpc(**kwargs):
-    return make_baseline("nmpc", CONFIG, step_budget=1e6, stop_band=ROBOT_BAND, **kwargs)
+    """The NMPC with the robot's band on the simulated full model, which latches the patterns as sent."""
+    return make_baseline("nmpc", CONFIG, step_budget=1e6, stop_band=ROBOT_BAND, shield_firmware=False, **kwargs)
 
 
 def test_shield_is_on_exactly_where_the_plan_has_a_band():
@@ -79,7 +80,8 @@ def test_facing_a_wall_at_the_start_inset_the_shielded_nmpc_keeps_out_of_the_ban
     the goal."""
     y = TANK_WIDTH - tk.START_INSET
     start, goal = (1.15, y, 0.5 * math.pi), (1.15, y - 0.5)
-    r = run_episode(lambda config: make_baseline("nmpc", config, step_budget=1e6, stop_band=ROBOT_BAND), 0,
+    r = run_episode(lambda config: make_baseline("nmpc", config, step_budget=1e6, stop_band=ROBOT_BAND,
+                                                     shield_firmware=False), 0,
                     start=start, goal=goal, max_steps=120)
     assert r.band_time is None and r.worst == 0.0
     assert r.success and not r.wall
@@ -89,7 +91,8 @@ def test_facing_a_wall_at_the_start_inset_the_shielded_nmpc_keeps_out_of_the_ban
 @pytest.mark.parametrize("seed", range(6))
 def test_seeded_full_model_episodes_keep_out_of_the_band(seed):
     """Seeded full-model episodes with the robot's band: no band entry, checked every 0.1 s."""
-    r = run_episode(lambda config: make_baseline("nmpc", config, step_budget=1e6, stop_band=ROBOT_BAND), seed,
+    r = run_episode(lambda config: make_baseline("nmpc", config, step_budget=1e6, stop_band=ROBOT_BAND,
+                                                     shield_firmware=False), seed,
                     goal_inset=0.3)
     assert r.band_time is None, (seed, r)
 
@@ -163,7 +166,8 @@ def test_a_goal_inside_the_turning_circle_is_reached_on_the_full_model(circle_st
     angle = math.radians(-80.0)
     goal = (1.15 + 0.2 * math.cos(angle), 0.5 * TANK_WIDTH + 0.2 * math.sin(angle))
     r = run_episode(lambda config: make_baseline("nmpc", config, step_budget=1e6, stop_band=ROBOT_BAND, spin=False,
-                                                 circle_steps=circle_steps), 0, start=start, goal=goal, max_steps=120)
+                                                 shield_firmware=False, circle_steps=circle_steps),
+                    0, start=start, goal=goal, max_steps=120)
     assert r.band_time is None and not r.wall
     if circle_steps:
         assert r.success and r.time <= 40.0, r

@@ -18,6 +18,12 @@ a safe one if any (the turn to the side the law wanted first), else the one with
 If the nominal command was allowed at the last step, a backup from here is available at this one (in
 the model), so the fish keeps an escape. The band is checked with ``extra_margin`` more clearance than
 the robot's: the planning model's cycle-averaged velocity misses the full model's in-beat swing.
+
+On the robot (``firmware``) the shield's fins, and the rollouts', follow the firmware's command path
+(:class:`pectoral_gym.agents.controllers.firmware_path.FirmwarePath`: clipping, a setpoint that slews at the
+servos' rate limit, stretched transitions) instead of latching every command as sent: the spin backups are made
+of transitional strokes, and through the firmware the spin drifts at ~0.04 m/s where, latched as sent, the model
+has it drift at ~0.015 m/s (:mod:`pectoral_gym.agents.controllers.firmware_path`).
 """
 
 from __future__ import annotations
@@ -27,6 +33,7 @@ import math
 import numpy as np
 
 from pectoral_gym.agents.controllers.fin_map import FinMap
+from pectoral_gym.agents.controllers.firmware_path import FirmwarePath
 from pectoral_gym.agents.controllers.stop_band import StopBand, band_violation
 from pectoral_gym.agents.controllers.turning import SPIN_CYCLE, mirror
 from pectoral_gym.envs.core import EnvConfig
@@ -76,13 +83,19 @@ class BandShield:
         spin: Also back up with the on-the-spot spin (where the env's ranges, period and ratio allow it).
         speed_spread: Speed [m/s] added to the speed towards every wall, as the robot's geofence adds its
             velocity estimate's spread (``Geofence.breached``'s ``spread``).
+        firmware: Predict the commands through the robot firmware's command path (:class:`FirmwarePath`).
+            ``None``: where ``band`` is given and the env does not end episodes in a band of its own
+            (``config.stop_band`` off): the band is then the robot supervisor's, as
+            ``pectoral_gym.hardware.deploy.make_controller`` passes it.
     """
 
     def __init__(self, config: EnvConfig, fins: FinMap, band: tuple[float, float, float] | None = None,
                  extra_margin: float = 0.02, horizon: float = 16.0, check: float = 0.5, turn_level: float = 0.06,
-                 speed_spread: float = 0.0, spin: bool = True):
+                 speed_spread: float = 0.0, spin: bool = True, firmware: bool | None = None):
         self.config = config
         self.fins = fins
+        if firmware is None:
+            firmware = band is not None and not config.stop_band
         if band is None:
             band = config.stop_rule if config.stop_band else ROBOT_STOP_RULE
         margin, reaction, contact = band
@@ -124,18 +137,25 @@ class BandShield:
             self.backups = np.concatenate([self.backups, np.array(spin_plans)], axis=1)
             self.sides = np.concatenate([self.sides, np.repeat([1.0, -1.0], len(BACKUP_SPINS))])
         self._shadow = fins.spec.build(1, config.params, k=fins.scaling)
-        self._batch = None
+        self._path = FirmwarePath(1) if firmware else None  # the shadow's firmware setpoint
+        self._batch = self._batch_path = None
         self.interventions = self.slowed = self._phase = 0
 
     def reset(self) -> None:
         """Start of an episode: the shadow fins at rest at the start of a power stroke, as the envs reset them."""
         self._shadow.reset()
+        if self._path is not None:
+            self._path.reset()
         self.interventions = self.slowed = self._phase = 0
+
+    @property
+    def firmware(self) -> bool:
+        """Whether the commands are predicted through the robot firmware's command path."""
+        return self._path is not None
 
     def applied(self, patterns: np.ndarray) -> None:
         """Follow the patterns ``(2, 4)`` the controller sent, for one control period."""
-        self._shadow.command_array(self._latched(patterns)[None], validate=False)
-        self._shadow.advance(self.dt)
+        self._advance(self._shadow, self._path, self._latched(patterns)[None], self.dt)
         self._phase = (self._phase + 1) % len(SPIN_CYCLE)
 
     def spin_patterns(self, side: float) -> np.ndarray:
@@ -163,7 +183,8 @@ class BandShield:
         nb, nf = len(backups), len(firsts)
         if self._batch is None or self._batch.n != (nf + 1) * nb:
             self._batch = self.fins.spec.build((nf + 1) * nb, self.config.params, k=self.fins.scaling)
-        b = self._batch
+            self._batch_path = None if self._path is None else FirmwarePath(self._batch.n)
+        b, path = self._batch, self._batch_path
         plans = np.tile(backups, (nf + 1, 1, 1, 1))
         plans[:nf * nb, 0] = np.repeat(firsts, nb, axis=0)
         plans = self._latched(plans)
@@ -171,13 +192,25 @@ class BandShield:
         b.fins[:] = self._shadow.fins[0]
         b.pending[:] = self._shadow.pending[0]
         b.forcing_cache[:] = self._shadow.forcing_cache[0]
+        if path is not None:
+            path.copy_from(self._path)
         total = np.zeros(b.n)
         h = self.dt / self.checks
         for k in range(self.intervals):
-            b.command_array(plans[:, k], validate=False)
-            for _ in range(self.checks):
-                total += self._violation(b.advance(h), self.band)
+            for c in range(self.checks):
+                total += self._violation(self._advance(b, path, plans[:, k] if c == 0 else None, h), self.band)
         return total.reshape(nf + 1, nb)
+
+    @staticmethod
+    def _advance(model, path: FirmwarePath | None, patterns: np.ndarray | None, duration: float) -> np.ndarray:
+        """Command ``patterns`` ``(n, 2, 4)`` (``None``: none new) and advance ``model``, through ``path`` if any."""
+        if path is None:
+            if patterns is not None:
+                model.command_array(patterns, validate=False)
+            return model.advance(duration)
+        if patterns is not None:
+            path.command(patterns)
+        return path.advance(model, duration)
 
     def _violation(self, s: np.ndarray, band: StopBand) -> np.ndarray:
         """:func:`band_violation` of states ``(n, 6)``, with :attr:`speed_spread` towards every wall.

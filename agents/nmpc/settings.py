@@ -142,6 +142,9 @@ class NMPCSettings:
         shield_margin: Clearance [m] the shield adds to the band's margin in its rollouts.
         shield_spread: Speed [m/s] the shield adds towards every wall in its rollouts.
         shield_spin: Let the shield back up with the on-the-spot spin (``BandShield``'s ``spin``).
+        shield_firmware: Let the shield predict the commands through the robot firmware's command path
+            (``BandShield``'s ``firmware``: slewed setpoints, stretched transitions); ``None``: where ``stop_band``
+            is given on an env without a band of its own (the robot's deploy).
         stall_steps: ``goal``: consecutive plans that rest both fins, with the fish slower than ``stall_speed``
             and outside the goal, after which the hand law drives until a plan moves again
             (:meth:`pectoral_gym.agents.nmpc.handover.HandOver._unstall`); 0: off.
@@ -198,6 +201,7 @@ class NMPCSettings:
     shield_margin: float = 0.02
     shield_spread: float = 0.0
     shield_spin: bool = True
+    shield_firmware: bool | None = None
     stall_steps: int = 6
     stall_speed: float = 0.02
     circle_steps: int = 4

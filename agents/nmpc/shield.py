@@ -36,6 +36,8 @@ class CommandShield:
         extra_margin: Clearance [m] added to the band's margin in the shield's rollouts.
         speed_spread: Speed [m/s] added towards every wall in the rollouts (``BandShield``'s).
         spin: Back up with the on-the-spot spin too (``BandShield``'s).
+        firmware: Predict the commands through the robot firmware's command path (``BandShield``'s; ``None``: its
+            default).
 
     Attributes:
         shield: The :class:`BandShield` (its ``interventions`` and ``slowed`` count this episode's replaced and
@@ -43,10 +45,11 @@ class CommandShield:
     """
 
     def __init__(self, config: EnvConfig, fins: FinMap, band: tuple[float, float, float] | None,
-                 extra_margin: float = 0.02, speed_spread: float = 0.0, spin: bool = True):
+                 extra_margin: float = 0.02, speed_spread: float = 0.0, spin: bool = True,
+                 firmware: bool | None = None):
         self.fins = fins
         self.shield = BandShield(config, fins, band=None if band is None else tuple(band), extra_margin=extra_margin,
-                                 speed_spread=speed_spread, spin=spin)
+                                 speed_spread=speed_spread, spin=spin, firmware=firmware)
 
     def reset(self) -> None:
         """Start of an episode (the shadow fins at rest)."""

@@ -14,7 +14,10 @@ mass within 0.08 m of its start, on the full model 89-93 deg within 0.06-0.12 m 
 turning circle needs 0.5 m of room for a half turn. Without the servo rules the search finds a cycle
 that turns 143-147 deg in 6 s on the full model, with sweeps up to 100 deg in a power stroke's
 0.08 s: the servos would stretch its strokes, and on the emulated robot it turns 24-48 deg instead
-(docs/notes/2026-12-01-nmpc-rounds.md, "Goal, fifth round").
+(docs/notes/2026-12-01-nmpc-rounds.md, "Goal, fifth round"). The servo check takes a command as reaching the fins at
+once; the firmware slews its setpoint towards it at the servos' rate limit, the fins latch half-slewed patterns,
+and through the firmware the cycle turns ~13 deg/s and drifts at ~0.04 m/s
+(:mod:`pectoral_gym.agents.controllers.firmware_path`; the robot's band shield predicts it so).
 
 :class:`SpinTurns` prices such turns on the planning model
 (:func:`pectoral_gym.agents.controllers.fin_map.planning_spec`: the env's averaged model, or on a full env the averaged
