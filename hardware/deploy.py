@@ -26,8 +26,9 @@ reward, ends, link and tracking health, and the true pose when emulated), ``run.
 model's calibration reads: episode starts, commands and stops as sent, every camera pose; ``docs/run-log.md``;
 in lockstep the episodes follow one another, each shifted from its own clock), ``summary.json`` and
 ``trajectory.png`` into ``--out``. ``--emulate-params FILE`` gives the emulated fish other parameters than
-Table 1's (a robot other than the one the controller was made for). Ctrl-C and SIGTERM stop the fins before
-the program ends.
+Table 1's (a robot other than the one the controller was made for); ``--params FILE`` tells the PC side the
+robot's own model: the geofence's stopping distance and outline, the fin replay. Ctrl-C and SIGTERM stop the
+fins before the program ends.
 """
 
 from __future__ import annotations
@@ -344,6 +345,8 @@ def main(argv: list[str] | None = None) -> int:
         settings, notes = env_settings(controller, args.task, args.control_period)
     except ValueError as err:
         parser.error(f"policy {args.policy!r} does not fit: {err}")
+    if args.params is not None:  # the robot's own model: the supervisor's stopping distance and outline come from it
+        settings["params"] = args.params
     period = settings["control_period"]
     if not CONTROL_PERIOD_RANGE[0] <= period <= CONTROL_PERIOD_RANGE[1]:
         parser.error(f"the policy's control period {period} s is outside [{CONTROL_PERIOD_RANGE[0]}, "
@@ -380,7 +383,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{parser.prog}: error: {err}", file=sys.stderr)
         return 1
     report = {"controller": args.controller, "policy": None if args.policy is None else str(args.policy),
-              "settings": {k: list(v) if isinstance(v, tuple) else v for k, v in settings.items()},
+              "settings": {k: list(v) if isinstance(v, tuple) else dataclasses.asdict(v) if k == "params" else v
+                           for k, v in settings.items()},
               "episodes": summaries, "link": link}
     report["wall_time"] = wall_time  # s for the episodes (the one field a lockstep rerun changes)
     if args.emulate:

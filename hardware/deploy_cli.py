@@ -90,6 +90,12 @@ def make_parser(description: str) -> argparse.ArgumentParser:
     parser.add_argument("--emulate-params", type=fish_params, default=None, metavar="JSON",
                         help="--emulate only: the emulated fish's parameters (a FishParams file, e.g. a robot "
                              "calibrated from its run logs; default: Table 1's)")
+    parser.add_argument("--params", type=fish_params, default=None, metavar="JSON",
+                        help="the robot's model parameters (a FishParams file, e.g. pectoral-scaling calibrate's "
+                             "robot.json): the geofence's stopping distance and fish outline, the PC's fin replay "
+                             "use them (default: Table 1's; a robot that coasts further or is larger than Table 1's "
+                             "fish needs its own). The hand law and the NMPC plan with the shipped K and refuse "
+                             "parameters it was not identified for")
     parser.add_argument("--calibration", default=None, metavar="JSON",
                         help="camera calibration (pectoral-camera-calibrate), made at the "
                              "camera's resolution (default: the emulator's camera model)")

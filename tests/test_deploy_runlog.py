@@ -89,3 +89,34 @@ def test_an_identification_run_logs_varied_fin_patterns(tmp_path):
     beats = log.episodes[0].beats
     distinct = np.unique(beats.reshape(len(beats), -1), axis=0)
     assert len(beats) == 24 and len(distinct) >= 3
+
+
+def test_params_give_the_supervisor_the_robots_own_stopping_distance(tmp_path, capsys):
+    from pectoral_gym.hardware import deploy
+    from pectoral_gym.hardware.deploy_cli import make_parser
+    from pectoral_gym.hardware.safety.geofence import Geofence
+    from pectoral_gym.model import tank
+    from pectoral_gym.model.params import body_coefficients
+
+    # less drag: the robot coasts further than Table 1's fish, so its geofence must keep a wider band
+    table1 = FishParams()
+    slippery = table1.replace(drag_coef=table1.drag_coef * 0.7)
+    save_params(slippery, tmp_path / "robot.json")
+    assert make_parser("deploy").parse_args(["--params", str(tmp_path / "robot.json")]).params == slippery
+    assert Geofence(slippery, 0.05, 0.3, 0.01).k == tank.coast_rate(body_coefficients(slippery))
+    assert Geofence(slippery, 0.05, 0.3, 0.01).k < Geofence(table1, 0.05, 0.3, 0.01).k
+    # the env the supervisor is built from gets them (a policy: the baselines plan with K, identified for Table 1)
+    import gymnasium as gym
+    from stable_baselines3 import PPO
+
+    env = gym.make("PectoralFish-Averaged-v0")
+    PPO("MlpPolicy", env, n_steps=32, batch_size=32, n_epochs=1, seed=0, device="cpu").learn(32).save(
+        tmp_path / "ppo.zip")
+    env.close()
+    _, _, summary = _deploy(tmp_path / "run", "--params", str(tmp_path / "robot.json"), "--controller",
+                            "policy", "--policy", str(tmp_path / "ppo.zip"), episodes=1, steps=4)
+    assert summary["settings"]["params"]["drag_coef"] == pytest.approx(slippery.drag_coef)
+    with pytest.raises(SystemExit) as exit_:
+        deploy.main(["--controller", "hand", "--emulate", "--lockstep", "--params", str(tmp_path / "robot.json"),
+                     "--episodes", "1", "--out", str(tmp_path / "o"), "--no-progress"])
+    assert exit_.value.code == 2 and "identified for other model parameters" in capsys.readouterr().err
