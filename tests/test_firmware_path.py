@@ -12,7 +12,7 @@ import pytest
 
 from pectoral_gym.agents.controllers.band_shield import BandShield
 from pectoral_gym.agents.controllers.fin_map import FinMap
-from pectoral_gym.agents.controllers.firmware_path import FirmwarePath, _clip, _stretch
+from pectoral_gym.agents.controllers.firmware_path import FirmwarePath
 from pectoral_gym.agents.controllers.turning import SPIN_CYCLE
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.hardware.deploy import make_controller
@@ -48,9 +48,10 @@ def test_batched_rules_are_the_firmware_functions():
     limits = ServoLimits()
     beats = np.stack([rng.uniform(0.2, 3.0, (50, 2)), rng.uniform(0.0, 1.5, (50, 2)), rng.uniform(0.2, 5.0, (50, 2)),
                       rng.uniform(0.3, 7.0, (50, 2))], -1)
-    clipped = _clip(beats, limits)
+    clipped, changed = clip_beats(beats, limits)  # the batch at once, as the shield's rollouts call it
+    assert clipped.shape == (50, 2, 4) and changed
     turn, power = rng.uniform(0.2, 3.0, (50, 2)), rng.random((50, 2)) < 0.5
-    stretched = _stretch(clipped, turn, power, limits)
+    stretched = stretch_transition(clipped, turn, power, limits)
     for i in range(50):
         np.testing.assert_allclose(clipped[i], clip_beats(beats[i], limits)[0], rtol=0, atol=1e-12)
         np.testing.assert_allclose(stretched[i], stretch_transition(clipped[i], turn[i], power[i], limits), atol=1e-12)

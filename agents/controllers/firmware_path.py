@@ -20,39 +20,19 @@ stretched, and in one step otherwise.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from pectoral_gym.hardware.finreplay import CHUNK
-from pectoral_gym.hardware.radio.firmware import ServoLimits, rate_limit, rest_beats
+from pectoral_gym.hardware.radio.firmware import ServoLimits, clip_beats, rate_limit, rest_beats, stretch_transition
 from pectoral_gym.model import strokes
 from pectoral_gym.model.models import FishModel
-from pectoral_gym.model.servo import servo_period
 
 __all__ = ["FirmwarePath"]
 
 
 def _clip(beats: np.ndarray, limits: ServoLimits) -> np.ndarray:
-    """``clip_beats`` of patterns ``(..., 2, 4)`` (the firmware's function takes one ``(2, 4)`` at a time)."""
-    out = np.array(beats, dtype=np.float64)
-    half_range = 0.5 * (limits.angle_max - limits.angle_min)
-    out[..., 1] = np.clip(out[..., 1], 0.0, half_range)
-    out[..., 0] = np.clip(out[..., 0], limits.angle_min + out[..., 1], limits.angle_max - out[..., 1])
-    out[..., 2] = np.clip(out[..., 2], limits.period_min, limits.period_max)
-    out[..., 3] = np.clip(out[..., 3], limits.ratio_min, limits.ratio_max)
-    out[..., 2] = servo_period(out[..., 1], out[..., 2], out[..., 3], limits.max_speed)
-    return out
-
-
-def _stretch(beats: np.ndarray, turn: np.ndarray, next_power: np.ndarray, limits: ServoLimits) -> np.ndarray:
-    """``stretch_transition`` of patterns ``(..., 2, 4)``, turning points and stroke kinds ``(..., 2)``."""
-    out = np.array(beats, dtype=np.float64)
-    to = np.where(next_power, out[..., 0] + out[..., 1], out[..., 0] - out[..., 1])
-    share = np.where(next_power, 1.0, out[..., 3]) / (out[..., 3] + 1.0)  # the half-stroke's share of T_p
-    need = math.pi * np.abs(to - turn) / (2.0 * limits.max_speed * share)
-    out[..., 2] = np.minimum(np.maximum(out[..., 2], need), limits.period_max)
-    return out
+    """The firmware's ``clip_beats`` of patterns ``(..., 2, 4)`` (its one definition, batched)."""
+    return clip_beats(beats, limits)[0]
 
 
 class FirmwarePath:
@@ -107,7 +87,7 @@ class FirmwarePath:
         fins = model.fins
         still = fins[..., strokes.ANGLE_FROM] == fins[..., strokes.ANGLE_TO]
         next_power = still | (fins[..., strokes.POWER] < 0.5)
-        safe = _stretch(self.setpoint, fins[..., strokes.ANGLE_TO], next_power, self.limits)
+        safe = stretch_transition(self.setpoint, fins[..., strokes.ANGLE_TO], next_power, self.limits)
         model.command_array(safe, validate=False)
         return bool(np.array_equal(self.setpoint, self.target) and np.array_equal(safe, self.setpoint))
 

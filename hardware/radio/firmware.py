@@ -133,17 +133,27 @@ def rest_beats(angles: np.ndarray | None = None) -> np.ndarray:
 
 
 def clip_beats(beats: np.ndarray, limits: ServoLimits) -> tuple[np.ndarray, bool]:
-    """Clip ``(2, 4)`` fin patterns to ``limits``; returns ``(clipped, changed)``. Input must be finite."""
-    b = np.array(beats, dtype=float).reshape(2, 4)
+    """Clip ``(2, 4)`` fin patterns to ``limits``; returns ``(clipped, changed)``. Input must be finite.
+
+    A batch ``(..., 2, 4)`` is clipped pattern by pattern (``changed``: any of them), as the backup shield's
+    rollouts do (:mod:`pectoral_gym.agents.controllers.firmware_path`); 8 values are read as ``(2, 4)``.
+    """
+    b = _patterns(beats)
     out = b.copy()
     half_range = 0.5 * (limits.angle_max - limits.angle_min)
-    out[:, 1] = np.clip(out[:, 1], 0.0, half_range)
-    out[:, 0] = np.clip(out[:, 0], limits.angle_min + out[:, 1], limits.angle_max - out[:, 1])
-    out[:, 2] = np.clip(out[:, 2], limits.period_min, limits.period_max)
-    out[:, 3] = np.clip(out[:, 3], limits.ratio_min, limits.ratio_max)
+    out[..., 1] = np.clip(out[..., 1], 0.0, half_range)
+    out[..., 0] = np.clip(out[..., 0], limits.angle_min + out[..., 1], limits.angle_max - out[..., 1])
+    out[..., 2] = np.clip(out[..., 2], limits.period_min, limits.period_max)
+    out[..., 3] = np.clip(out[..., 3], limits.ratio_min, limits.ratio_max)
     # Peak rate of the faster half-stroke, eq. (21): pi A (zeta + 1) / (T_p min(1, zeta)); slow the period.
-    out[:, 2] = servo_period(out[:, 1], out[:, 2], out[:, 3], limits.max_speed)  # <= period_max (ServoLimits)
+    out[..., 2] = servo_period(out[..., 1], out[..., 2], out[..., 3], limits.max_speed)  # <= period_max (ServoLimits)
     return out, bool(np.any(np.abs(out - b) > 1e-12))
+
+
+def _patterns(beats: np.ndarray) -> np.ndarray:
+    """A float copy of ``beats`` as ``(..., 2, 4)`` patterns (8 values as one ``(2, 4)``)."""
+    b = np.array(beats, dtype=float)
+    return b if b.shape[-2:] == (2, 4) else b.reshape(2, 4)
 
 
 def peak_rates(beats: np.ndarray) -> np.ndarray:
@@ -165,14 +175,15 @@ def stretch_transition(beats: np.ndarray, turn: np.ndarray, next_power: np.ndarr
     A fin latches a new pattern at a turning point ``turn`` [rad] and then swings to ``bias + A`` in
     ``T_p / (zeta + 1)`` (``next_power``) or to ``bias - A`` in ``zeta T_p / (zeta + 1)``
     (``docs/model.md``, "Changing fin parameters"); its peak rate is ``pi |to - turn| / (2 d)``
-    (:func:`pectoral_gym.model.dynamics.stroke_kinematics`). Input: patterns already clipped by :func:`clip_beats`.
+    (:func:`pectoral_gym.model.dynamics.stroke_kinematics`). Input: patterns already clipped by :func:`clip_beats`;
+    a batch ``(..., 2, 4)`` with ``turn`` and ``next_power`` ``(..., 2)`` is stretched pattern by pattern.
     """
-    out = np.array(beats, dtype=float).reshape(2, 4)
+    out = _patterns(beats)
     turn, power = np.asarray(turn, dtype=float), np.asarray(next_power, dtype=bool)
-    to = np.where(power, out[:, 0] + out[:, 1], out[:, 0] - out[:, 1])
-    share = np.where(power, 1.0, out[:, 3]) / (out[:, 3] + 1.0)  # d = share * T_p
+    to = np.where(power, out[..., 0] + out[..., 1], out[..., 0] - out[..., 1])
+    share = np.where(power, 1.0, out[..., 3]) / (out[..., 3] + 1.0)  # d = share * T_p
     need = math.pi * np.abs(to - turn) / (2.0 * limits.max_speed * share)
-    out[:, 2] = np.minimum(np.maximum(out[:, 2], need), limits.period_max)
+    out[..., 2] = np.minimum(np.maximum(out[..., 2], need), limits.period_max)
     return out
 
 
