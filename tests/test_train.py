@@ -66,20 +66,22 @@ def test_training_without_distribution_checks_learns_the_same_and_restores_them(
     # the checks only raise on invalid parameters: with them on (as a caller may want), the run is the same
     from torch.distributions import Distribution
 
-    a = load_policy(run(tmp_path, "a") / "model.zip")
-    assert Distribution._validate_args is True  # the caller's setting, restored after the run
     import pectoral_gym.agents.training.train as train_module
 
-    monkeypatch.setattr(train_module, "_distribution_checks_off", contextlib.nullcontext)
-    b = load_policy(run(tmp_path, "b") / "model.zip")
-    for pa, pb in zip(a.model.policy.parameters(), b.model.policy.parameters(), strict=True):
-        assert np.array_equal(pa.detach().numpy(), pb.detach().numpy())
-    Distribution.set_default_validate_args(False)
+    before = Distribution._validate_args  # importing torchrl (another test, same worker) turns them off
     try:
+        Distribution.set_default_validate_args(True)
+        a = load_policy(run(tmp_path, "a") / "model.zip")
+        assert Distribution._validate_args is True  # the caller's setting, restored after the run
+        monkeypatch.setattr(train_module, "_distribution_checks_off", contextlib.nullcontext)
+        b = load_policy(run(tmp_path, "b") / "model.zip")
+        for pa, pb in zip(a.model.policy.parameters(), b.model.policy.parameters(), strict=True):
+            assert np.array_equal(pa.detach().numpy(), pb.detach().numpy())
+        Distribution.set_default_validate_args(False)
         run(tmp_path, "c")
         assert Distribution._validate_args is False
     finally:
-        Distribution.set_default_validate_args(True)
+        Distribution.set_default_validate_args(before)
 
 
 def test_sac_smoke_run(tmp_path):
