@@ -27,8 +27,9 @@ model's calibration reads: episode starts, commands and stops as sent, every cam
 in lockstep the episodes follow one another, each shifted from its own clock), ``summary.json`` and
 ``trajectory.png`` into ``--out``. ``--emulate-params FILE`` gives the emulated fish other parameters than
 Table 1's (a robot other than the one the controller was made for); ``--params FILE`` tells the PC side the
-robot's own model: the geofence's stopping distance and outline, the fin replay. Ctrl-C and SIGTERM stop the
-fins before the program ends.
+robot's own model: the geofence's stopping distance and outline, the fin replay; ``--scaling FILE`` the K
+identified for it, which the hand law and the NMPC plan with. Ctrl-C and SIGTERM stop the fins before the program
+ends.
 """
 
 from __future__ import annotations
@@ -152,8 +153,12 @@ def plot_trajectories(log_path: Path, png_path: Path) -> None:
     plt.close(fig)
 
 
-def make_controller(name: str, config, step_budget: float, safety: SafetyConfig | None = None):
+def make_controller(name: str, config, step_budget: float, safety: SafetyConfig | None = None,
+                    scaling: str | None = None):
     """The ``nmpc`` or ``hand`` baseline for the robot's env config; NMPC steps end within ``step_budget`` [s].
+
+    ``scaling``: the K file they plan with (:func:`pectoral_gym.agents.controllers.fin_map.planning_spec`), the
+    robot's own where ``config.params`` are not Table 1's; ``None``: the shipped K.
 
     Both keep out of the stopping band of the env's geofence (``safety``, default
     :class:`pectoral_gym.hardware.safety.rules.SafetyConfig`) widened by
@@ -173,10 +178,19 @@ def make_controller(name: str, config, step_budget: float, safety: SafetyConfig 
 
     safety = safety or SafetyConfig()
     band = StopRule(safety.geofence_margin + MEASUREMENT_MARGIN, safety.reaction_time, safety.contact_speed)
+    if scaling is None and name in ("hand", "nmpc"):
+        from pectoral_gym.model.kfunctions import ScalingFunctions
+
+        differ = sorted(ScalingFunctions.load(None).params_mismatch(config.params))
+        if differ:
+            raise ValueError(f"--controller {name} plans with K, and the shipped K were identified for Table 1's "
+                             f"fish, whose {', '.join(differ)} differ from --params: give the robot's K with "
+                             "--scaling FILE (pectoral-scaling identify --params FILE writes it)")
     if name == "nmpc":
-        return make_baseline("nmpc", config, step_budget=step_budget, stop_band=tuple(band), spin=False)
+        return make_baseline("nmpc", config, step_budget=step_budget, stop_band=tuple(band), spin=False,
+                             scaling=scaling)
     if name == "hand":
-        return make_baseline("hand", config, shield={"band": band})
+        return make_baseline("hand", config, shield={"band": band}, scaling=scaling)
     return make_baseline(name, config)
 
 
@@ -247,7 +261,7 @@ def _run_real_time(parser: argparse.ArgumentParser, args: argparse.Namespace, co
             resources.callback(install_stop_handlers(env.stop))
             if controller is None:
                 budget = args.solve_fraction * settings["control_period"] / args.speed
-                controller = make_controller(args.controller, env.config, budget, safety)
+                controller = make_controller(args.controller, env.config, budget, safety, args.scaling)
         except ValueError as err:  # the settings, found wrong by the devices or the env
             parser.error(str(err))
         except (RuntimeError, OSError) as err:  # a device that does not answer or cannot be opened
@@ -286,7 +300,8 @@ def _run_lockstep(parser: argparse.ArgumentParser, args: argparse.Namespace, con
     )
 
     job = LockstepJob(args.controller, None if args.policy is None else str(args.policy), args.seed, conditions,
-                      settings, safety, args.max_steps, args.calibration, args.take_over, args.emulate_params)
+                      settings, safety, args.max_steps, args.calibration, args.take_over, args.emulate_params,
+                      args.scaling)
     started = time.perf_counter()
     with open(log_path, "w", encoding="utf-8") as log, _run_log(log_path.with_name("run.jsonl"), args,
                                                                   settings) as run_log:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 from pectoral_gym.hardware.deploy_checks import (
     CONTROL_PERIOD_RANGE,
@@ -94,8 +95,13 @@ def make_parser(description: str) -> argparse.ArgumentParser:
                         help="the robot's model parameters (a FishParams file, e.g. pectoral-scaling calibrate's "
                              "robot.json): the geofence's stopping distance and fish outline, the PC's fin replay "
                              "use them (default: Table 1's; a robot that coasts further or is larger than Table 1's "
-                             "fish needs its own). The hand law and the NMPC plan with the shipped K and refuse "
-                             "parameters it was not identified for")
+                             "fish needs its own). The hand law and the NMPC plan with K: give them the robot's "
+                             "with --scaling")
+    parser.add_argument("--scaling", default=None, metavar="JSON",
+                        help="--controller hand|nmpc: the K file they plan with, identified for the robot's --params "
+                             "(pectoral-scaling identify --params robot.json writes it: k/scaling_coefficients.json; "
+                             "default: the shipped K, identified for Table 1's fish, which they refuse for other "
+                             "--params)")
     parser.add_argument("--calibration", default=None, metavar="JSON",
                         help="camera calibration (pectoral-camera-calibrate), made at the "
                              "camera's resolution (default: the emulator's camera model)")
@@ -151,6 +157,10 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
         parser.error("--radio-*, --camera-* and --pose-noise-* degrade the emulated robot: they need --emulate")
     if (args.controller == "policy") != (args.policy is not None):
         parser.error("--policy is needed with --controller policy, and only then")
+    if args.scaling is not None and args.controller not in ("hand", "nmpc"):
+        parser.error("--scaling is the K the hand law and the NMPC plan with: it needs --controller hand or nmpc")
+    if args.scaling is not None and not Path(args.scaling).is_file():
+        parser.error(f"--scaling: no coefficients file at {args.scaling!r} (pectoral-scaling identify writes one)")
     for flag, value in (("--episodes", args.episodes), ("--max-episode-steps", args.max_steps)):
         if value < 1:
             parser.error(f"{flag} must be >= 1, got {value}")

@@ -58,6 +58,7 @@ class LockstepJob:
         calibration: Camera calibration file, or ``None`` for the emulator's camera model.
         take_over: Take control of a robot another session drives (``HardwareFishEnv``'s ``take_over``).
         params: The emulated fish's :class:`pectoral_gym.model.params.FishParams` (``None``: Table 1's).
+        scaling: The K file the hand law and the NMPC plan with (``None``: the shipped K).
     """
 
     controller: str = "hand"
@@ -70,6 +71,7 @@ class LockstepJob:
     calibration: str | None = None
     take_over: bool = False
     params: Any = None
+    scaling: str | None = None
 
 
 @dataclass
@@ -143,7 +145,8 @@ class _Runner:
                     resources.callback(env.close)
                     env.run_log = RunLogWriter(records, "emulator", env.config.control_period)
                     if self.controller is None:  # a step's computing costs no simulated time: no budget applies
-                        self.controller = make_controller(job.controller, env.config, math.inf, job.safety)
+                        self.controller = make_controller(job.controller, env.config, math.inf, job.safety,
+                                                          job.scaling)
                 except ValueError as err:  # the settings, found wrong by the rig or the env
                     raise EpisodeError(episode, str(err), setup=True) from err
                 stats = self._solver_stats()

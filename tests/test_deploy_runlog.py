@@ -119,4 +119,50 @@ def test_params_give_the_supervisor_the_robots_own_stopping_distance(tmp_path, c
     with pytest.raises(SystemExit) as exit_:
         deploy.main(["--controller", "hand", "--emulate", "--lockstep", "--params", str(tmp_path / "robot.json"),
                      "--episodes", "1", "--out", str(tmp_path / "o"), "--no-progress"])
-    assert exit_.value.code == 2 and "identified for other model parameters" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and "drag_coef differ from --params" in err and "--scaling FILE" in err
+
+
+def _k_file_for(params: FishParams, path) -> str:
+    """The shipped K file relabelled as identified for ``params`` (the plumbing's test: which file is used)."""
+    import dataclasses
+
+    from pectoral_gym.model.kfunctions import ScalingFunctions
+
+    k = ScalingFunctions.load(None)
+    k.metadata["model_parameters"] = dataclasses.asdict(params)
+    k.save(path)
+    return str(path)
+
+
+def test_scaling_gives_the_baselines_the_robots_own_k(tmp_path, capsys):
+    from pectoral_gym.agents.controllers.fin_map import FinMap
+    from pectoral_gym.envs.core import EnvConfig
+    from pectoral_gym.hardware import deploy
+
+    robot = FishParams().replace(drag_coef=0.45, fin_force_coef=4.4)
+    save_params(robot, tmp_path / "robot.json")
+    k_robot = _k_file_for(robot, tmp_path / "k_robot.json")
+    # the hand law and the NMPC both plan with the file given, checked against the robot's params
+    config = EnvConfig(model="full", params=robot)
+    hand = deploy.make_controller("hand", config, 1.0, scaling=k_robot)
+    assert hand.fins.spec.scaling == k_robot
+    # the planning model's top speed follows the robot's params: drag balance c1 v^2 = 2 f (eq. 20) with f from K
+    table1 = FinMap(EnvConfig(model="full"))
+    assert hand.fins.max_thrust == pytest.approx(table1.max_thrust * 4.4 / FishParams().fin_force_coef, rel=1e-9)
+    nmpc = deploy.make_controller("nmpc", config, 1.0, scaling=k_robot)
+    assert nmpc.fins.spec.scaling == k_robot and nmpc.hand.fins.spec.scaling == k_robot
+    # a K file identified for another robot is refused, naming the fields
+    k_other = _k_file_for(robot.replace(drag_coef=0.5), tmp_path / "k_other.json")
+    with pytest.raises(ValueError, match="drag_coef"):
+        deploy.make_controller("hand", config, 1.0, scaling=k_other)
+    # through the command line, in lockstep, on an emulated fish of those params
+    _, steps, summary = _deploy(tmp_path / "run", "--params", str(tmp_path / "robot.json"), "--scaling", k_robot,
+                                "--emulate-params", str(tmp_path / "robot.json"), episodes=1, steps=4)
+    assert len(steps) >= 1 and summary["settings"]["params"]["fin_force_coef"] == pytest.approx(4.4)
+    for bad, message in ((["--controller", "policy", "--policy", "x"], "--scaling is the K"),
+                         (["--controller", "hand", "--scaling", str(tmp_path / "none.json")], "no coefficients file")):
+        with pytest.raises(SystemExit) as exit_:
+            deploy.main([*bad, "--emulate", "--lockstep", "--out", str(tmp_path / "o"), "--no-progress"]
+                        + ([] if "--scaling" in bad else ["--scaling", k_robot]))
+        assert exit_.value.code == 2 and message in capsys.readouterr().err

@@ -193,6 +193,27 @@ def test_cli_rejects_bad_arguments(capsys, tmp_path):
         main(["--env", ENV])  # needs --policy or --controller
 
 
+def test_cli_scaling_lets_the_baselines_plan_for_another_robot(capsys, tmp_path):
+    import dataclasses
+
+    from pectoral_gym.model.kfunctions import ScalingFunctions
+    from pectoral_gym.model.params import FishParams, save_params
+
+    robot = FishParams().replace(drag_coef=0.45)
+    save_params(robot, tmp_path / "robot.json")
+    k = ScalingFunctions.load(None)  # relabelled as identified for the robot: which file is used is what counts
+    k.metadata["model_parameters"] = dataclasses.asdict(robot)
+    k.save(tmp_path / "k.json")
+    common = ["--controller", "hand", "--env", "PectoralFish-Full-v1", "--episodes", "1",
+              "--env-kwargs", json.dumps({"params": str(tmp_path / "robot.json")}), "--out", str(tmp_path / "e")]
+    assert main(common) == 2  # the shipped K were identified for Table 1's fish
+    assert "drag_coef" in capsys.readouterr().err
+    assert main([*common, "--scaling", str(tmp_path / "k.json")]) == 0
+    assert main(["--controller", "random", "--env", ENV, "--scaling", str(tmp_path / "k.json"), "--episodes",
+                 "1", "--out", str(tmp_path / "r")]) == 2
+    assert "--scaling is the K" in capsys.readouterr().err
+
+
 class FastBeatController(StraightController):
     """Both fins at full amplitude, the shortest period (one beat per 0.5 s step) and the largest ratio."""
 

@@ -10,6 +10,7 @@ environment's own action mapping.
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 
@@ -17,22 +18,31 @@ from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.model.averaging import averaged_forcing, bessel_j1
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.params import FinBeat
-from pectoral_gym.model.spec import AVERAGED, AveragedSpec
+from pectoral_gym.model.spec import AVERAGED, AveragedSpec, env_spec
 
 __all__ = ["FinMap", "planning_spec"]
 
 
-def planning_spec(config: EnvConfig) -> AveragedSpec:
+def planning_spec(config: EnvConfig, scaling: str | os.PathLike | None = None) -> AveragedSpec:
     """The averaged model the model-based controllers plan on for an env of ``config``.
 
     The env's own spec (:meth:`EnvConfig.model_spec`) on the averaged model; on the full model
     :data:`pectoral_gym.model.spec.AVERAGED` (both corrections, the shipped K, which were identified
-    against the full model), with the env's ``check_scaling_params``.
+    against the full model), with the env's ``check_scaling_params``. ``scaling``, the path of a coefficients file
+    (``pectoral-scaling identify --params FILE``), replaces the K (and the yaw damping it holds): the K of a robot
+    whose ``config.params`` differ from Table 1's, which the shipped K were not identified for.
+
+    Raises:
+        ValueError: ``scaling`` is no coefficients file, or (with the check on) it was identified for other
+            parameters than ``config.params`` (when the controller loads its K).
     """
     spec = config.model_spec()
-    if isinstance(spec, AveragedSpec):
+    if not isinstance(spec, AveragedSpec):
+        spec = AVERAGED.replace(check_params=config.check_scaling_params)
+    if scaling is None:
         return spec
-    return AVERAGED.replace(check_params=config.check_scaling_params)
+    held = env_spec("averaged", scaling=os.fspath(scaling), check_scaling_params=spec.check_params)
+    return spec.replace(scaling=held.scaling, yaw_damping=held.yaw_damping)
 
 _AMPLITUDE_TABLE = 201  # samples of the thrust-level -> amplitude table
 

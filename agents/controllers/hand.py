@@ -16,11 +16,12 @@ Physics used by the hand controller (``docs/model.md``):
 from __future__ import annotations
 
 import math
+import os
 
 import numpy as np
 
 from pectoral_gym.agents.controllers.band_shield import BandShield, band_speed
-from pectoral_gym.agents.controllers.fin_map import FinMap
+from pectoral_gym.agents.controllers.fin_map import FinMap, planning_spec
 from pectoral_gym.agents.controllers.turning import circle_room, inside_turning_circle
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, Observation, decode
@@ -73,6 +74,8 @@ class HandController:
             slows towards a goal near a wall so that it arrives outside it (:meth:`_arrival_cap`).
         spin: With the shield, ``goal``: an aim inside the turning circle is turned to on the spot
             (:data:`pectoral_gym.agents.controllers.turning.SPIN_CYCLE`) instead of swimming on.
+        scaling: The K file of the planning model (:func:`~pectoral_gym.agents.controllers.fin_map.planning_spec`):
+            a robot's own K where ``config.params`` are not Table 1's; ``None``: the env's (the shipped K).
     """
 
     name = "hand"
@@ -81,9 +84,9 @@ class HandController:
                  speed_gain: float = 0.3, bias_gain: float = 0.0, bias_max: float = math.radians(15.0),
                  lookahead: float = 2.0, turn_level: float = 0.12, turn_radius: float = 0.25,
                  alignment_power: float = 8.0, wall_margin: float = 0.15, escape_speed: float = 0.05,
-                 shield: bool | dict = True, spin: bool = True):
+                 shield: bool | dict = True, spin: bool = True, scaling: str | os.PathLike | None = None):
         self.config = config
-        self.fins = FinMap(config)
+        self.fins = FinMap(config, planning_spec(config, scaling))
         self.heading_gain = float(heading_gain)
         self.rate_gain = float(rate_gain)
         self.speed_gain = float(speed_gain)

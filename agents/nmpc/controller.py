@@ -40,7 +40,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pectoral_gym.agents.controllers.fin_map import FinMap
+from pectoral_gym.agents.controllers.fin_map import FinMap, planning_spec
 from pectoral_gym.agents.controllers.hand import HandController
 from pectoral_gym.agents.nmpc.handover import HandOver
 from pectoral_gym.agents.nmpc.pricing import PlanPricing
@@ -61,7 +61,6 @@ from pectoral_gym.agents.nmpc.spin import SpinTurns
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, OBS_VELOCITY, decode
 from pectoral_gym.model.kfunctions import ScalingFunctions
-from pectoral_gym.model.spec import env_spec
 from pectoral_gym.model.symbolic import STATE_POSITION, STATE_PSI, STATE_SIZE, STATE_VELOCITY
 
 __all__ = ["NMPCController", "NMPCSettings"]
@@ -100,13 +99,10 @@ class NMPCController(PlanPricing, HandOver):
         self.settings = NMPCSettings(**{**base.__dict__, **overrides}) if overrides else base
         if self.settings.stop_band is None and config.stop_band:
             self.settings = dataclasses.replace(self.settings, stop_band=tuple(config.stop_rule))
-        self.fins = FinMap(config)
+        path = scaling if isinstance(scaling, (str, Path)) else None
+        self.fins = FinMap(config, planning_spec(config, path))
         spec = self.fins.spec
-        if isinstance(scaling, (str, Path)):
-            held = env_spec("averaged", scaling=str(scaling), check_scaling_params=spec.check_params)
-            spec = spec.replace(scaling=held.scaling, yaw_damping=held.yaw_damping)
-            scaling = spec.scaling_functions(config.params)
-        elif scaling is None:
+        if not isinstance(scaling, ScalingFunctions):
             scaling = self.fins.scaling
         self.spec = spec  # the planning model (the spin turns' rollouts)
         self.scaling = scaling
@@ -126,7 +122,8 @@ class NMPCController(PlanPricing, HandOver):
         self.u_rest = np.array(FinInputs(a_low, a_low, self.bias_mid, self.bias_mid))
         self.z_low, self.z_high = to_z(self.u_low), to_z(self.u_high)
         use_hand = s.hand_candidate if s.hand_candidate is not None else config.task != "track"
-        self.hand = HandController(config, shield=False)  # the base policy of the candidate and the continuation
+        # the base policy of the candidate and the continuation
+        self.hand = HandController(config, shield=False, scaling=path)
         self.hand_candidate = bool(use_hand)
         self.w_togo = s.w_togo if s.w_togo is not None else (0.0 if self.track else 3.0)
         self.turn_then_straight = bool(s.turn_then_straight if s.turn_then_straight is not None else not self.track)

@@ -277,6 +277,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help="per-episode parameter randomisation: alone for the default preset "
                              f"{DEFAULT_RANDOMIZATION}, or a JSON dict {{field: relative half-width}}")
     parser.add_argument("--env-kwargs", default="{}", metavar="JSON", help="more environment arguments")
+    parser.add_argument("--scaling", metavar="JSON",
+                        help="--controller hand|nmpc: the K file they plan with, identified for the env's params "
+                             "(pectoral-scaling identify --params robot.json writes it; default: the env's K, on the "
+                             "full model the shipped K, identified for Table 1's fish)")
     parser.add_argument("--episodes", type=int, default=100, help="number of episodes")
     parser.add_argument("--seed", type=int, default=0, help="episode k is reset with seed + k")
     parser.add_argument("--n-envs", type=int, help="vector-env slots (default: up to 128)")
@@ -312,7 +316,12 @@ def main(argv: list[str] | None = None) -> int:
             from pectoral_gym.agents.training.vec_adapter import env_arguments
 
             config = EnvConfig(**registered_settings(args.env, env_arguments(baseline_kwargs)))
-            controller = lambda: make_baseline(args.controller, config)  # noqa: E731 - factory, one per slot
+            if args.scaling is not None and args.controller not in ("hand", "nmpc"):
+                raise ValueError("--scaling is the K the hand law and the NMPC plan with: it needs --controller "
+                                 "hand or nmpc")
+            planning = {} if args.scaling is None else {"scaling": args.scaling}
+            make_baseline(args.controller, config, **planning)  # a wrong K file fails here, before the episodes
+            controller = lambda: make_baseline(args.controller, config, **planning)  # noqa: E731 - one per slot
             name = args.controller
         if args.task:
             env_kwargs["task"] = args.task

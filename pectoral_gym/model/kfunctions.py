@@ -302,7 +302,8 @@ class ScalingFunctions:
             raise ValueError(
                 f"{where} was identified for other model parameters ({shown}); its K would not describe "
                 "this robot. Identify K for it (python -m pectoral_gym.scaling identify --params FILE) and use that "
-                "file, or turn the check off (check_scaling_params=False, --no-params-check)"
+                "file (scaling=FILE; --scaling FILE on the command lines), or turn the check off "
+                "(check_scaling_params=False; pectoral-fish --no-params-check)"
             )
 
     @classmethod
