@@ -60,16 +60,16 @@ def test_the_readme_walk_through_runs_as_written(tmp_path):
     commands = walkthrough_commands((ROOT / "docs" / "calibration.md").read_text())
     text = "\n".join(commands)
     # What the walk-through must show (issues 14 and 27): an identification run logged, the model calibrated from
-    # the log, K identified for it, training on the averaged model with params= and scaling=, evaluation on the full
-    # model, the policy deployed on the (emulated) robot.
+    # the log, K identified for it, training on the full model with params=, evaluation on the full model, the
+    # policy deployed on the (emulated) robot, the hand law beside it planning with the robot's K.
     assert "fin_span" in commands[0]
     assert re.search(r"python -m pectoral_gym\.hardware\.deploy --controller excite .*--out id-run", text)
     assert re.search(r"python -m pectoral_gym\.scaling calibrate --logs id-run/run\.jsonl .*--out robot\.json", text)
     assert re.search(r"python -m pectoral_gym.scaling identify .*--params robot\.json", text)
-    assert re.search(r"python -m pectoral_gym\.agents\.training\.train "
-                     r".*PectoralFish-Averaged-v1.*\"params\".*\"scaling\"", text)
+    assert re.search(r"python -m pectoral_gym\.agents\.training\.train .*PectoralFish-Full-v1.*\"params\"", text)
     assert re.search(r"python -m pectoral_gym\.agents\.training\.evaluate .*PectoralFish-Full-v1", text)
-    assert re.search(r"python -m pectoral_gym\.hardware\.deploy --policy runs/PectoralFish-Averaged-v1/robot", text)
+    assert re.search(r"python -m pectoral_gym\.hardware\.deploy --policy runs/PectoralFish-Full-v1/robot", text)
+    assert re.search(r"python -m pectoral_gym\.hardware\.deploy --controller hand .*--scaling k/", text)
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
     python = bin_dir / "python"  # `python` in the commands is the interpreter running the tests
@@ -95,6 +95,8 @@ def test_the_readme_walk_through_runs_as_written(tmp_path):
     assert "scaling" not in evaluation["env_kwargs"]
     deployed = json.loads((work / "robot-run" / "summary.json").read_text())
     assert deployed["emulation"]["params"]["fin_span"] == 0.07 and len(deployed["episodes"]) == 2
+    hand = json.loads((work / "hand-run" / "summary.json").read_text())
+    assert hand["settings"]["params"]["fin_span"] == 0.07 and len(hand["episodes"]) == 2
 
 
 def test_quick_identify_refuses_install(capsys):
