@@ -91,7 +91,9 @@ def test_the_readme_walk_through_runs_as_written(tmp_path):
     assert k.metadata["quick"] is True
     evaluation = json.loads(next((work / "runs" / "eval").glob("*/metrics.json")).read_text())
     assert evaluation["env_id"] == "PectoralFish-Full-v1"
-    assert evaluation["env_kwargs"]["params"] == "robot.json"  # the trained robot, on the full model
+    # the trained robot, on the full model: the run folder's copy of robot.json
+    assert Path(evaluation["env_kwargs"]["params"]).name == "params.json"
+    assert json.loads((work / evaluation["env_kwargs"]["params"]).read_text()) == calibrated
     assert "scaling" not in evaluation["env_kwargs"]
     deployed = json.loads((work / "robot-run" / "summary.json").read_text())
     assert deployed["emulation"]["params"]["fin_span"] == 0.07 and len(deployed["episodes"]) == 2

@@ -151,7 +151,7 @@ def algo_of_zip(path: str | Path) -> str | None:
 
 
 def read_config(run_dir: str | Path) -> dict[str, Any]:
-    """The resolved ``config.yaml`` of a run folder (empty dict if absent).
+    """The resolved ``config.yaml`` of a run folder (empty dict if absent), the files it keeps as paths into it.
 
     Raises:
         ValueError: If the file is not YAML or not a mapping (naming the file).
@@ -168,6 +168,11 @@ def read_config(run_dir: str | Path) -> dict[str, Any]:
         raise ValueError(f"{path}: cannot read the run config: {type(error).__name__}: {error}") from None
     if not isinstance(config, dict):
         raise ValueError(f"{path}: the run config must be a mapping, got {type(config).__name__}")
+    from pectoral_gym.agents.training.run_files import resolve_run_files
+
+    for section in ("env_kwargs", "eval_env_kwargs"):  # the robot's files the run keeps, as paths into it
+        if isinstance(config.get(section), dict):
+            config[section] = resolve_run_files(config[section], path.parent)
     return config
 
 

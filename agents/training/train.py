@@ -46,6 +46,7 @@ from pectoral_gym.agents.training.config import (
     resolve_config,
     run_model_spec,
 )
+from pectoral_gym.agents.training.run_files import keep_run_files
 from pectoral_gym.agents.training.zoo_format import algo_class
 from pectoral_gym.model.threads import pin_torch_threads
 from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
@@ -214,10 +215,13 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
     seed = config["seed"]
     pin_torch_threads(torch_threads)  # numba's threads first, or their start resets torch's count
     set_random_seed(seed)
+    config, recorded = keep_run_files(config, run_dir)  # the robot's files, copied: the folder is self-contained
     spec = run_model_spec(config).to_dict()  # the model trained on, explicit (run_model_spec reads it back)
+    kept = config["env_kwargs"].get("scaling"), recorded["env_kwargs"].get("scaling")
+    spec_recorded = {**spec, "scaling": kept[1]} if kept[0] != kept[1] and spec.get("scaling") == kept[0] else spec
     with open(run_dir / "config.yaml", "w") as f:
-        yaml.safe_dump({**config, "torch_threads": int(torch_threads), "device": device, "model_spec": spec}, f,
-                       sort_keys=False)
+        yaml.safe_dump({**recorded, "torch_threads": int(torch_threads), "device": device,
+                        "model_spec": spec_recorded}, f, sort_keys=False)
     (run_dir / "command.txt").write_text((command or shlex.join(sys.argv)) + "\n")
     venv = make_fish_vec_env(config["env_id"], config["n_envs"], config["env_kwargs"], seed=seed)
     if config.get("action_change_penalty"):
