@@ -24,6 +24,11 @@ On the robot (``firmware``) the shield's fins, and the rollouts', follow the fir
 servos' rate limit, stretched transitions) instead of latching every command as sent: the spin backups are made
 of transitional strokes, and through the firmware the spin drifts at ~0.04 m/s where, latched as sent, the model
 has it drift at ~0.015 m/s (:mod:`pectoral_gym.agents.controllers.firmware_path`).
+
+Two options the NMPC turns on for the robot (``docs/notes/2026-12-04-nmpc-stops-2.md``): ``keep_side`` holds a
+backup's kind and side from one intervention to the next while one of them is safe (the law's side flipped the
+spin, restarting its transitional strokes), and ``reserve`` sends the nominal command only while several backups
+remain after it (with one, the shield rode a single escape whose prediction was centimetres off).
 """
 
 from __future__ import annotations
@@ -45,6 +50,7 @@ BACKUP_TURNS = (4, 8, 16, 32)  # control periods a backup turns before it coasts
 BACKUP_SPINS = (4, 8, 12, 20)  # control periods a backup spins (turning.SPIN_CYCLE) before it coasts
 SPIN_PERIOD, SPIN_RATIO = 0.5, 5.0  # the fin-beat period [s] and ratio the spin cycle was found for
 SLOWER = (1.0, 0.5)  # the law's amplitudes scaled by these (thrust ~ amplitude^2, eq. 25) before a backup
+_COAST, _TURN, _SPIN = 0, 1, 2  # the kinds of backup (BandShield.kinds)
 
 
 def band_speed(clearance: float, band: StopBand) -> float:
@@ -87,12 +93,21 @@ class BandShield:
             ``None``: where ``band`` is given and the env does not end episodes in a band of its own
             (``config.stop_band`` off): the band is then the robot supervisor's, as
             ``pectoral_gym.hardware.deploy.make_controller`` passes it.
+        keep_side: Once a backup has been sent, keep to its kind (one-fin turn or spin) and side at the next
+            intervention while one of them is safe, before the law's side: each flip of a spin restarts the
+            firmware's transitional strokes, which drift the fish along its heading.
+        reserve: Safe backups that must remain after the nominal command for it to be sent (1: one escape is
+            enough); more makes the shield take over while it still has several ways out.
     """
 
     def __init__(self, config: EnvConfig, fins: FinMap, band: tuple[float, float, float] | None = None,
                  extra_margin: float = 0.02, horizon: float = 16.0, check: float = 0.5, turn_level: float = 0.06,
-                 speed_spread: float = 0.0, spin: bool = True, firmware: bool | None = None):
+                 speed_spread: float = 0.0, spin: bool = True, firmware: bool | None = None,
+                 keep_side: bool = False, reserve: int = 1):
+        if int(reserve) < 1:
+            raise ValueError(f"reserve must be >= 1 backup, got {reserve!r}")
         self.config = config
+        self.keep_side, self.reserve = bool(keep_side), int(reserve)
         self.fins = fins
         if firmware is None:
             firmware = band is not None and not config.stop_band
@@ -115,6 +130,7 @@ class BandShield:
                 plans.append(np.array([turn if k < m else self.rest for k in range(n)]))
                 sides.append(side)
         self.sides = np.array(sides)
+        self.kinds = np.array([_COAST] + [_TURN] * (len(sides) - 1))
         self.backups = np.repeat(np.array(plans)[None], len(SPIN_CYCLE), axis=0)  # (spin phase, backups, n, 2, 4)
         low, high = config.amplitude_range
         b_low, b_high = config.bias_range
@@ -136,10 +152,12 @@ class BandShield:
                 spin_plans.append(rows)
             self.backups = np.concatenate([self.backups, np.array(spin_plans)], axis=1)
             self.sides = np.concatenate([self.sides, np.repeat([1.0, -1.0], len(BACKUP_SPINS))])
+            self.kinds = np.concatenate([self.kinds, np.full(2 * len(BACKUP_SPINS), _SPIN)])
         self._shadow = fins.spec.build(1, config.params, k=fins.scaling)
         self._path = FirmwarePath(1) if firmware else None  # the shadow's firmware setpoint
         self._batch = self._batch_path = None
         self.interventions = self.slowed = self._phase = 0
+        self._held: int | None = None  # the backup sent at the last step (its index), None after a nominal command
 
     def reset(self) -> None:
         """Start of an episode: the shadow fins at rest at the start of a power stroke, as the envs reset them."""
@@ -147,6 +165,7 @@ class BandShield:
         if self._path is not None:
             self._path.reset()
         self.interventions = self.slowed = self._phase = 0
+        self._held = None
 
     @property
     def firmware(self) -> bool:
@@ -244,17 +263,23 @@ class BandShield:
         firsts[:, :, 1] *= np.asarray(SLOWER)[:, None]
         rows = self.shortfalls(np.asarray(state, dtype=np.float64), firsts)
         for i in range(len(SLOWER)):
-            if np.min(rows[i]) <= 0.0:
+            if np.count_nonzero(rows[i] <= 0.0) >= self.reserve:
                 if i > 0:
                     self.slowed += 1
+                self._held = None
                 return firsts[i]
         now = rows[-1]
         self.interventions += 1
         safe = now <= 0.0
+        n = len(self.sides)
+        # a turn to the law's side first, then the shortest turn (the coast counts as the shortest)
+        preference = np.where(self.sides * side > 0, 0, 1) * n + np.arange(n)
+        if self.keep_side and self._held is not None:  # before those: the manoeuvre under way, same kind and side
+            held = (self.kinds == self.kinds[self._held]) & (self.sides == self.sides[self._held])
+            preference = np.where(held, 0, 2 * n) + preference
         if np.any(safe):
-            # a turn to the law's side first, then the shortest turn (the coast counts as the shortest)
-            preference = np.where(self.sides * side > 0, 0, 1) * len(self.sides) + np.arange(len(self.sides))
             best = int(np.argmin(np.where(safe, preference, np.iinfo(np.int64).max)))
         else:
             best = int(np.argmin(now))
+        self._held = best
         return self.backups[self._phase, best, 0].copy()

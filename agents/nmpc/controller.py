@@ -140,7 +140,7 @@ class NMPCController(PlanPricing, HandOver):
         self.shield = None  # the hard guard against the band: the NLP only prices it
         if s.shield if s.shield is not None else s.stop_band is not None:
             self.shield = CommandShield(config, self.fins, s.stop_band, s.shield_margin, s.shield_spread,
-                                        s.shield_spin, s.shield_firmware)
+                                        s.shield_spin, s.shield_firmware, s.shield_keep_side, s.shield_reserve)
         self._solver = self.problem.solver  # the controller calls it through this attribute (tests replace it)
         self._n = self.problem.horizon
         self.n_delay_steps = self.problem.n_delay_steps

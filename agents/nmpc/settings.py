@@ -145,6 +145,10 @@ class NMPCSettings:
         shield_firmware: Let the shield predict the commands through the robot firmware's command path
             (``BandShield``'s ``firmware``: slewed setpoints, stretched transitions); ``None``: where ``stop_band``
             is given on an env without a band of its own (the robot's deploy).
+        shield_keep_side: Let the shield keep a backup's kind and side while one of them is safe (``BandShield``'s
+            ``keep_side``); ``None``: where it predicts through the firmware.
+        shield_reserve: Safe backups the plan's command must leave for the shield to send it (``BandShield``'s
+            ``reserve``); ``None``: ``pectoral_gym.agents.nmpc.shield.ROBOT_RESERVE`` through the firmware, else 1.
         stall_steps: ``goal``: consecutive plans that rest both fins, with the fish slower than ``stall_speed``
             and outside the goal, after which the hand law drives until a plan moves again
             (:meth:`pectoral_gym.agents.nmpc.handover.HandOver._unstall`); 0: off.
@@ -202,6 +206,8 @@ class NMPCSettings:
     shield_spread: float = 0.0
     shield_spin: bool = True
     shield_firmware: bool | None = None
+    shield_keep_side: bool | None = None
+    shield_reserve: int | None = None
     stall_steps: int = 6
     stall_speed: float = 0.02
     circle_steps: int = 4

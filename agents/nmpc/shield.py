@@ -7,7 +7,9 @@ turns on a ~0.25 m circle, so a plan that is clear now can still leave no way ou
 through only if, after it, some backup (coast, a slow one-fin turn, an on-the-spot spin) keeps a 16 s
 rollout out of the band; otherwise it sends the best backup's first interval. :class:`CommandShield`
 translates between the NMPC's :class:`~pectoral_gym.agents.nmpc.problem.FinInputs` rows and the shield's
-fin patterns, and keeps the shield's shadow fins in step with every command sent.
+fin patterns, and keeps the shield's shadow fins in step with every command sent. On the robot (the shield through
+the firmware's command path) it also keeps a backup's side and wants :data:`ROBOT_RESERVE` safe backups after a
+command, not one (``docs/notes/2026-12-04-nmpc-stops-2.md``).
 """
 
 from __future__ import annotations
@@ -22,7 +24,9 @@ from pectoral_gym.agents.nmpc.handover import goal_bearing
 from pectoral_gym.agents.nmpc.problem import FinInputs
 from pectoral_gym.envs.core import EnvConfig
 
-__all__ = ["CommandShield"]
+__all__ = ["ROBOT_RESERVE", "CommandShield"]
+
+ROBOT_RESERVE = 4  # safe backups the plan's command must leave on the robot (docs/notes/2026-12-04-nmpc-stops-2.md)
 
 
 class CommandShield:
@@ -38,6 +42,10 @@ class CommandShield:
         spin: Back up with the on-the-spot spin too (``BandShield``'s).
         firmware: Predict the commands through the robot firmware's command path (``BandShield``'s; ``None``: its
             default).
+        keep_side: Keep a backup's kind and side while one of them is safe (``BandShield``'s); ``None``: where the
+            shield predicts through the firmware (the robot).
+        reserve: Safe backups the plan's command must leave to be sent (``BandShield``'s); ``None``:
+            :data:`ROBOT_RESERVE` where the shield predicts through the firmware, else 1.
 
     Attributes:
         shield: The :class:`BandShield` (its ``interventions`` and ``slowed`` count this episode's replaced and
@@ -46,10 +54,15 @@ class CommandShield:
 
     def __init__(self, config: EnvConfig, fins: FinMap, band: tuple[float, float, float] | None,
                  extra_margin: float = 0.02, speed_spread: float = 0.0, spin: bool = True,
-                 firmware: bool | None = None):
+                 firmware: bool | None = None, keep_side: bool | None = None, reserve: int | None = None):
         self.fins = fins
         self.shield = BandShield(config, fins, band=None if band is None else tuple(band), extra_margin=extra_margin,
                                  speed_spread=speed_spread, spin=spin, firmware=firmware)
+        robot = self.shield.firmware  # the robot's command path: its spins drift, so hold them and react earlier
+        self.shield.keep_side = robot if keep_side is None else bool(keep_side)
+        self.shield.reserve = (ROBOT_RESERVE if robot else 1) if reserve is None else int(reserve)
+        if self.shield.reserve < 1:
+            raise ValueError(f"reserve must be >= 1 backup, got {reserve!r}")
 
     def reset(self) -> None:
         """Start of an episode (the shadow fins at rest)."""
