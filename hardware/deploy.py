@@ -164,13 +164,12 @@ def make_controller(name: str, config, step_budget: float, safety: SafetyConfig 
     :class:`pectoral_gym.hardware.safety.rules.SafetyConfig`) widened by
     :data:`pectoral_gym.registration.MEASUREMENT_MARGIN`, the band the v1 envs train and evaluate them with: the
     NMPC plans with it (``pectoral_gym.agents.controllers.stop_band``) and both filter their commands through
-    the backup shield (``pectoral_gym.agents.controllers.band_shield``) with it. The NMPC plans no on-the-spot
-    spins here (``spin=False``): through the robot's command path the spin cycle moves the fish at 0.03-0.06 m/s
-    where the planning model has it turn within 0.1 m. On lockstep seed 7000 (20 episodes, before the stall
-    hand-over) it reached 13 goals with its spins (4 geofence stops, each during a spin sequence) and 18 without
-    (1 stop). The shield keeps its spin backups (``shield_spin``): without them, on seed 7200, 3 of the first 10
-    episodes ended in a geofence stop, the fish coasting nose first into the band with no other way out (2 of the
-    first 9 with them).
+    the backup shield (``pectoral_gym.agents.controllers.band_shield``) with it, predicting through the firmware's
+    command path; the NMPC's shield there also keeps a backup's side and wants
+    :data:`pectoral_gym.agents.nmpc.shield.ROBOT_RESERVE` safe backups after a command. The NMPC plans no on-the-spot
+    spins here (``spin=False``: through the robot's command path the spin cycle drifts where the planning model
+    turns it on the spot); the shield keeps its spin backups. The measurements behind these choices are in the
+    research notes (``docs/notes/2026-12-03-robot-stack-rounds.md``, ``docs/notes/2026-12-04-nmpc-stops-2.md``).
     """
     from pectoral_gym.agents.baselines import make_baseline
     from pectoral_gym.model.tank import StopRule
