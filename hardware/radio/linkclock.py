@@ -10,7 +10,8 @@ when it arrives at PC time ``t_rx`` the robot's clock reads at least ``uptime``,
 least ``uptime + (t - t_rx) * speed * (1 - tolerance)``, with ``tolerance`` the largest relative rate error
 of the robot's oscillator against the PC's clock. The best bound is the largest over recent samples.
 :meth:`RobotClock.pc_time` maps the other way, for the robot's reports (LATCH): the PC time at which the
-robot's clock read a given uptime, late by the fastest recent STATUS's return latency.
+robot's clock read a given uptime, the middle of the narrowest interval the samples leave for it (NTP's
+midpoint: exact when the radio's two directions are equally slow).
 """
 
 from __future__ import annotations
@@ -76,19 +77,28 @@ class RobotClock:
             raise ValueError(f"RobotClock: tolerance must be in [0, 1), got {tolerance!r}")
         self.tolerance, self.window = float(tolerance), float(window)
         self.boot: int | None = None
-        self._samples: deque[tuple[float, float]] = deque(maxlen=size)  # (PC time [s], uptime [robot s])
+        # (PC time of arrival [s], uptime [robot s], PC time the answered message left [s] or -inf if not known)
+        self._samples: deque[tuple[float, float, float]] = deque(maxlen=size)
 
     def clear(self) -> None:
         """Forget every sample (the robot rebooted)."""
         self.boot = None
         self._samples.clear()
 
-    def add(self, boot: int, uptime_ms: int, t_rx: float) -> None:
-        """A STATUS of boot ``boot`` reporting ``uptime_ms`` arrived at PC time ``t_rx`` [s]."""
+    def add(self, boot: int, uptime_ms: int, t_rx: float, t_sent: float | None = None) -> None:
+        """A STATUS of boot ``boot`` reporting ``uptime_ms`` arrived at PC time ``t_rx`` [s].
+
+        Args:
+            boot: The robot's boot id.
+            uptime_ms: The robot's clock when it sent the STATUS [ms].
+            t_rx: PC time the STATUS arrived [s].
+            t_sent: PC time the message this STATUS answers was sent [s] (its only copy), if known: the robot
+                read ``uptime_ms`` after that message reached it, which bounds the clock from the other side.
+        """
         if boot != self.boot:
             self.clear()
             self.boot = boot
-        self._samples.append((float(t_rx), uptime_ms / 1000.0))
+        self._samples.append((float(t_rx), uptime_ms / 1000.0, -math.inf if t_sent is None else float(t_sent)))
         while len(self._samples) > 1 and t_rx - self._samples[0][0] > self.window:
             self._samples.popleft()
 
@@ -105,16 +115,20 @@ class RobotClock:
             speed: Nominal robot seconds per PC second (an accelerated emulator's ``speed``).
         """
         rate = speed * (1.0 - self.tolerance)
-        return max((u + max(t - t_rx, 0.0) * rate for t_rx, u in self._samples), default=None)
+        return max((u + max(t - t_rx, 0.0) * rate for t_rx, u, _ in self._samples), default=None)
 
     def pc_time(self, boot: int, uptime_ms: int, speed: float = 1.0, span: float = 1.0) -> float | None:
         """The PC time [s] at which the robot's clock (boot ``boot``) read ``uptime_ms``; ``None`` if not known.
 
-        Every STATUS puts the robot's clock offset at most ``t_rx - uptime / speed`` (its uptime was read before
-        it left); the smallest of these over the samples within ``span`` robot seconds of ``uptime_ms`` is the
-        estimate, late by that STATUS's return latency (0 to a few ms on a quiet radio; the radio's one-way
-        latency in general) plus the clock's rate error over ``span`` (``tolerance * span`` at worst). Not a bound
-        in either direction: for logs and replays, never for safety.
+        Every STATUS puts the robot's clock offset (PC time minus robot time) at most ``t_rx - uptime / speed``
+        (its uptime was read before it left); one that answers a message sent once at ``t_sent`` puts it at
+        least ``t_sent - uptime / speed`` (read after that message arrived). Over the samples within ``span``
+        robot seconds of ``uptime_ms`` the tightest of each bound leave an interval; its middle is the estimate
+        (NTP's midpoint), off by at most half the width of that interval plus the clock's rate error over
+        ``span`` (``tolerance * span`` at worst), and exact when the radio's two directions are equally slow.
+        Without an answered sample it is the upper bound: late by the fastest return latency (100 ms behind a
+        radio 100 ms slow each way, which put a live replay of the fins a tenth of a second behind the robot's).
+        Not a bound in either direction: for logs and replays, never for safety.
 
         Args:
             boot: The boot id the uptime is of (``None`` is returned for another boot than the samples').
@@ -125,8 +139,10 @@ class RobotClock:
         if boot != self.boot or not self._samples:
             return None
         u = uptime_ms / 1000.0
-        near = [(t_rx, v) for t_rx, v in self._samples if abs(v - u) <= span] or list(self._samples)
-        return u / speed + min(t_rx - v / speed for t_rx, v in near)
+        near = [sample for sample in self._samples if abs(sample[1] - u) <= span] or list(self._samples)
+        high = min(t_rx - v / speed for t_rx, v, _ in near)
+        low = max(t_sent - v / speed for _, v, t_sent in near)
+        return u / speed + (high if low == -math.inf else 0.5 * (low + high))
 
     def deadline_ms(self, t: float, speed: float = 1.0) -> int:
         """The SET_FINS ``deadline`` for a command that must stop by PC time ``t``: u32 ms, 0 if not synced."""

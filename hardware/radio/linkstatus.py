@@ -150,7 +150,9 @@ class StatusReceiver:
             self._old_boots.append(self.boot)
             self._served, self._commanded, self._pending = False, False, None
         self.boot, self.served = status.boot, status.served
-        self.robot_clock.add(status.boot, status.uptime_ms, now)  # any STATUS tells the robot's clock
+        sent = self._sent_at.get(status.ack_seq) if msg.session == self.session else None
+        once = sent is not None and not sent[1]  # Karn: of a message sent more than once, which copy is unknown
+        self.robot_clock.add(status.boot, status.uptime_ms, now, sent[0] if once else None)  # any STATUS tells
         if msg.session != self.session:
             self.stats.foreign += 1  # another PC's answer: no ack, no liveness, but whom the robot serves
             if self._served and status.served != self.session:
@@ -159,8 +161,7 @@ class StatusReceiver:
             return
         self.stats.received += 1
         self.last_status, self.last_status_time = status, now
-        sent = self._sent_at.get(status.ack_seq)
-        if sent is not None and not sent[1]:
+        if once:
             self.rtt_estimator.update(now - sent[0])
             self._sent_at.pop(status.ack_seq)
         if status.served == self.session:
