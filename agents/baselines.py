@@ -9,6 +9,7 @@ The hand controller lives in :mod:`pectoral_gym.agents.controllers.hand` (the NM
 
 from __future__ import annotations
 
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -43,6 +44,20 @@ class RandomController:
     def act(self, obs: np.ndarray) -> np.ndarray:
         """A uniform random action (the observation is ignored)."""
         return self._rng.uniform(-1.0, 1.0, 8).astype(np.float32)
+
+
+def scaling_flag_problem(controller: str | None, scaling: str | None) -> str | None:
+    """Why a command line's ``--scaling FILE`` cannot drive ``controller`` (``None``: it can, or none was given).
+
+    The file is the K the hand law and the NMPC plan with on a robot's averaged model; a policy carries its own.
+    """
+    if scaling is None:
+        return None
+    if controller not in ("hand", "nmpc"):
+        return "--scaling is the K the hand law and the NMPC plan with: it needs --controller hand or nmpc"
+    if not Path(scaling).is_file():
+        return f"--scaling: no coefficients file at {scaling!r} (pectoral-scaling identify writes one)"
+    return None
 
 
 def make_baseline(name: str, config: EnvConfig, **kwargs: Any):

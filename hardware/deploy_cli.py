@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import argparse
 import math
-from pathlib import Path
 
 from pectoral_gym.hardware.deploy_checks import (
     CONTROL_PERIOD_RANGE,
@@ -157,10 +156,10 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
         parser.error("--radio-*, --camera-* and --pose-noise-* degrade the emulated robot: they need --emulate")
     if (args.controller == "policy") != (args.policy is not None):
         parser.error("--policy is needed with --controller policy, and only then")
-    if args.scaling is not None and args.controller not in ("hand", "nmpc"):
-        parser.error("--scaling is the K the hand law and the NMPC plan with: it needs --controller hand or nmpc")
-    if args.scaling is not None and not Path(args.scaling).is_file():
-        parser.error(f"--scaling: no coefficients file at {args.scaling!r} (pectoral-scaling identify writes one)")
+    from pectoral_gym.agents.baselines import scaling_flag_problem
+
+    if (problem := scaling_flag_problem(args.controller, args.scaling)) is not None:
+        parser.error(problem)
     for flag, value in (("--episodes", args.episodes), ("--max-episode-steps", args.max_steps)):
         if value < 1:
             parser.error(f"{flag} must be >= 1, got {value}")

@@ -209,9 +209,11 @@ def test_cli_scaling_lets_the_baselines_plan_for_another_robot(capsys, tmp_path)
     assert main(common) == 2  # the shipped K were identified for Table 1's fish
     assert "drag_coef" in capsys.readouterr().err
     assert main([*common, "--scaling", str(tmp_path / "k.json")]) == 0
-    assert main(["--controller", "random", "--env", ENV, "--scaling", str(tmp_path / "k.json"), "--episodes",
-                 "1", "--out", str(tmp_path / "r")]) == 2
-    assert "--scaling is the K" in capsys.readouterr().err
+    for bad, message in ((["--controller", "random", "--scaling", str(tmp_path / "k.json")], "--scaling is the K"),
+                         (["--controller", "hand", "--scaling", str(tmp_path / "none.json")], "no coefficients file")):
+        with pytest.raises(SystemExit) as exit_:  # a usage error, as pectoral-deploy's
+            main([*bad, "--env", ENV, "--episodes", "1", "--out", str(tmp_path / "r")])
+        assert exit_.value.code == 2 and message in capsys.readouterr().err
 
 
 class FastBeatController(StraightController):

@@ -294,7 +294,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point (see the module docstring)."""
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    from pectoral_gym.agents.baselines import scaling_flag_problem
+
+    if (problem := scaling_flag_problem(args.controller if not args.policy else "policy", args.scaling)) is not None:
+        parser.error(problem)
     if args.quick:
         args.episodes = min(args.episodes, QUICK_EPISODES)
     try:
@@ -316,9 +321,6 @@ def main(argv: list[str] | None = None) -> int:
             from pectoral_gym.agents.training.vec_adapter import env_arguments
 
             config = EnvConfig(**registered_settings(args.env, env_arguments(baseline_kwargs)))
-            if args.scaling is not None and args.controller not in ("hand", "nmpc"):
-                raise ValueError("--scaling is the K the hand law and the NMPC plan with: it needs --controller "
-                                 "hand or nmpc")
             planning = {} if args.scaling is None else {"scaling": args.scaling}
             make_baseline(args.controller, config, **planning)  # a wrong K file fails here, before the episodes
             controller = lambda: make_baseline(args.controller, config, **planning)  # noqa: E731 - one per slot

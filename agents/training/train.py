@@ -217,11 +217,12 @@ def train(config: dict[str, Any], run_dir: str | Path, progress: bool = True, ve
     set_random_seed(seed)
     config, recorded = keep_run_files(config, run_dir)  # the robot's files, copied: the folder is self-contained
     spec = run_model_spec(config).to_dict()  # the model trained on, explicit (run_model_spec reads it back)
-    kept = config["env_kwargs"].get("scaling"), recorded["env_kwargs"].get("scaling")
-    spec_recorded = {**spec, "scaling": kept[1]} if kept[0] != kept[1] and spec.get("scaling") == kept[0] else spec
+    recorded_spec = dict(spec)
+    if spec.get("scaling") is not None and spec["scaling"] == config["env_kwargs"].get("scaling"):
+        recorded_spec["scaling"] = recorded["env_kwargs"]["scaling"]  # the kept copy, by its name in the run folder
     with open(run_dir / "config.yaml", "w") as f:
         yaml.safe_dump({**recorded, "torch_threads": int(torch_threads), "device": device,
-                        "model_spec": spec_recorded}, f, sort_keys=False)
+                        "model_spec": recorded_spec}, f, sort_keys=False)
     (run_dir / "command.txt").write_text((command or shlex.join(sys.argv)) + "\n")
     venv = make_fish_vec_env(config["env_id"], config["n_envs"], config["env_kwargs"], seed=seed)
     if config.get("action_change_penalty"):
