@@ -244,16 +244,19 @@ class HardwareFishEnv(gym.Env):
         getattr(self.run_log, kind)(t, *args, **fields)
 
     def _take_latches(self) -> None:
-        """The robot's latch reports (``docs/protocol.md``, LATCH): into the run log and the replayed fins."""
+        """The robot's latch reports (``docs/protocol.md``, LATCH): into the run log, for the calibration.
+
+        Not into the replayed fins the policy observes: those stay the fins as the commands make them from the
+        moment they are sent, the timing of the simulated envs policies train in (``docs/hardware.md``, "Policies
+        that observe the fins").
+        """
         drain = getattr(self.link, "drain_latches", None)  # a link of this package; a stand-in may have none
         for t_link, latch in drain() if drain is not None else ():
             t = (t_link - self._origin) * self.speed  # the link's clock -> experiment time
             if t < self._latch_start:
-                continue  # from before this episode's start: nothing to replay
+                continue  # from before this episode's start: not this run's segment
             # the clock offset's estimate may shrink by a ms between reports: a log's records keep their order
             t = self._latch_last = max(t, self._latch_last)
-            if self.fin_replay is not None:
-                self.fin_replay.latch(t, latch.fin, latch.beat, latch.turn, latch.power)
             if self.run_log is not None:
                 self.run_log.latch(t, latch.fin, latch.beat, latch.turn, latch.power, latch.uptime_ms, latch.boot)
 

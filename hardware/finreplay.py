@@ -15,8 +15,9 @@ after a safety stop the fins are taken as halted when the PC learns of it. The f
 power-up are taken as 90 deg (the firmware's rest). A robot that reports its latches (LATCH messages,
 ``docs/protocol.md``) removes the first: :meth:`FinReplay.latch` starts the reported half-stroke where and
 when the robot says it started (:func:`force_latch`), and the rules infer only what lies between reports
-(a lost report, a robot that does not send them). :func:`latched` finds the latches of a model's
-fins, for the emulator's reports.
+(a lost report, a robot that does not send them). The calibration's replay of a run log uses it; the live
+env's fin block does not (it keeps the commands' timing, as the simulated envs a policy trains in:
+``docs/hardware.md``). :func:`latched` finds the latches of a model's fins, for the emulator's reports.
 """
 
 from __future__ import annotations
