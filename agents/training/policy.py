@@ -72,6 +72,12 @@ ALGOS = ("ppo", "sac", "td3", "a2c", "ddpg")
 class SB3Controller:
     """A trained Stable-Baselines3 model acting deterministically, with its observation normalisation.
 
+    The action: SB3's deterministic action, ``model.predict(obs, deterministic=True)`` (for PPO's and A2C's
+    Gaussian ``clip(mean, -1, 1)``; SAC's squashed mean; the actor of TD3 and DDPG). With ``expected_clip`` and
+    a diagonal-Gaussian policy (PPO, A2C), instead the mean of the clipped Gaussian the policy samples in
+    training, ``E[clip(a, -1, 1)]`` per action entry (:mod:`pectoral_gym.agents.training.deployed_action`; why it
+    is not the default: docs/notes/2026-12-04-deployed-action.md).
+
     Args:
         model: The SB3 model (``BaseAlgorithm``).
         name: Controller name.
@@ -80,17 +86,25 @@ class SB3Controller:
         clip_obs: Clip normalised observations to ``[-clip_obs, clip_obs]``.
         epsilon: Added to the variance before the square root (as ``VecNormalize``).
         trained: The env settings it was trained with (:data:`TRAINED_KEYS`), ``{}`` when unknown.
+        trained_from: The ``config.yaml`` ``trained`` was read from, or ``None``.
+        expected_clip: Deploy ``E[clip(a, -1, 1)]`` where the policy is a diagonal Gaussian (see above).
 
     Attributes:
         obs_size: Observation entries the model takes (19, or 27 with ``observe_fins``).
         action_size: Action entries it returns (8 for the fish envs).
         trained: The env settings it was trained with, where its run folder records them (``{}`` otherwise).
         trained_from: The ``config.yaml`` they were read from, or ``None``.
+        expected_clip: Whether it deploys ``E[clip(a, -1, 1)]``; off unless set (:func:`load_policy` leaves it
+            off), and set after loading too. A policy that is not a diagonal Gaussian deploys SB3's action whatever
+            it says.
     """
 
     def __init__(self, model: Any, name: str = "policy", obs_mean: np.ndarray | None = None,
                  obs_var: np.ndarray | None = None, clip_obs: float = 10.0, epsilon: float = 1e-8,
-                 trained: dict[str, Any] | None = None, trained_from: str | Path | None = None):
+                 trained: dict[str, Any] | None = None, trained_from: str | Path | None = None,
+                 expected_clip: bool = False):
+        from pectoral_gym.agents.training.deployed_action import diag_gaussian_policy
+
         self.model = model
         self.name = name
         self.obs_mean = None if obs_mean is None else np.asarray(obs_mean, dtype=np.float64)
@@ -103,6 +117,7 @@ class SB3Controller:
         self.action_size = int(np.prod(actions.shape)) if getattr(actions, "shape", None) else 8
         self.trained = dict(trained or {})
         self.trained_from = None if trained_from is None else Path(trained_from)
+        self.expected_clip = bool(expected_clip) and diag_gaussian_policy(model)
 
     def reset(self, seed: int | None = None) -> None:
         """Nothing to reset: the policy is deterministic and has no memory."""
@@ -115,17 +130,23 @@ class SB3Controller:
         return np.clip((obs - self.obs_mean) / self.obs_std, -self.clip_obs, self.clip_obs).astype(np.float32)
 
     def act_batch(self, obs: np.ndarray) -> np.ndarray:
-        """Observations ``(n, obs_size)`` -> deterministic actions ``(n, 8)`` float32 in [-1, 1]."""
+        """Observations ``(n, obs_size)`` -> deterministic actions ``(n, 8)`` float32 in [-1, 1] (see the class)."""
         obs = np.asarray(obs)
         if obs.ndim != 2 or obs.shape[1] != self.obs_size:
             hint = " (a policy trained with observe_fins=True needs that env setting)" if self.obs_size > OBS_SIZE \
                 else ""
             raise ValueError(f"observations must have shape (n, {self.obs_size}), got {obs.shape}{hint}")
-        action, _ = self.model.predict(self.normalize(obs), deterministic=True)
+        action = None
+        if self.expected_clip:
+            from pectoral_gym.agents.training.deployed_action import expected_clipped_action
+
+            action = expected_clipped_action(self.model, self.normalize(obs))  # None: not a diagonal Gaussian
+        if action is None:
+            action, _ = self.model.predict(self.normalize(obs), deterministic=True)
         return np.clip(np.asarray(action, dtype=np.float32), -1.0, 1.0)
 
     def act(self, obs: np.ndarray) -> np.ndarray:
-        """Observation ``(obs_size,)`` -> deterministic action ``(8,)`` float32 in [-1, 1]."""
+        """Observation ``(obs_size,)`` -> deterministic action ``(8,)`` float32 in [-1, 1] (see the class)."""
         obs = np.asarray(obs)
         if obs.shape != (self.obs_size,):
             raise ValueError(f"observation must have shape ({self.obs_size},), got {obs.shape}")
