@@ -44,13 +44,22 @@ from pectoral_gym.agents.controllers.turning import SPIN_CYCLE, mirror
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.model.tank import ROBOT_STOP_RULE, StopRule, stop_need
 
-__all__ = ["BACKUP_SPINS", "BACKUP_TURNS", "SLOWER", "BandShield", "band_speed"]
+__all__ = ["BACKUP_SPINS", "BACKUP_TURNS", "SLOWER", "BandShield", "band_speed", "through_firmware"]
 
 BACKUP_TURNS = (4, 8, 16, 32)  # control periods a backup turns before it coasts
 BACKUP_SPINS = (4, 8, 12, 20)  # control periods a backup spins (turning.SPIN_CYCLE) before it coasts
 SPIN_PERIOD, SPIN_RATIO = 0.5, 5.0  # the fin-beat period [s] and ratio the spin cycle was found for
 SLOWER = (1.0, 0.5)  # the law's amplitudes scaled by these (thrust ~ amplitude^2, eq. 25) before a backup
 _COAST, _TURN, _SPIN = 0, 1, 2  # the kinds of backup (BandShield.kinds)
+
+
+def through_firmware(config: EnvConfig, band: tuple[float, float, float] | None, firmware: bool | None) -> bool:
+    """Whether a shield predicts through the robot firmware's command path (``BandShield``'s ``firmware``).
+
+    ``firmware`` when given; else where ``band`` is given and the env ends no episode in a band of its own (the
+    band is then the robot supervisor's).
+    """
+    return bool(firmware) if firmware is not None else band is not None and not config.stop_band
 
 
 def band_speed(clearance: float, band: StopBand) -> float:
@@ -109,8 +118,7 @@ class BandShield:
         self.config = config
         self.keep_side, self.reserve = bool(keep_side), int(reserve)
         self.fins = fins
-        if firmware is None:
-            firmware = band is not None and not config.stop_band
+        firmware = through_firmware(config, band, firmware)
         if band is None:
             band = config.stop_rule if config.stop_band else ROBOT_STOP_RULE
         margin, reaction, contact = band

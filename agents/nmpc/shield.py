@@ -18,7 +18,7 @@ import math
 
 import numpy as np
 
-from pectoral_gym.agents.controllers.band_shield import BandShield
+from pectoral_gym.agents.controllers.band_shield import BandShield, through_firmware
 from pectoral_gym.agents.controllers.fin_map import FinMap
 from pectoral_gym.agents.nmpc.handover import goal_bearing
 from pectoral_gym.agents.nmpc.problem import FinInputs
@@ -56,13 +56,12 @@ class CommandShield:
                  extra_margin: float = 0.02, speed_spread: float = 0.0, spin: bool = True,
                  firmware: bool | None = None, keep_side: bool | None = None, reserve: int | None = None):
         self.fins = fins
-        self.shield = BandShield(config, fins, band=None if band is None else tuple(band), extra_margin=extra_margin,
-                                 speed_spread=speed_spread, spin=spin, firmware=firmware)
-        robot = self.shield.firmware  # the robot's command path: its spins drift, so hold them and react earlier
-        self.shield.keep_side = robot if keep_side is None else bool(keep_side)
-        self.shield.reserve = (ROBOT_RESERVE if robot else 1) if reserve is None else int(reserve)
-        if self.shield.reserve < 1:
-            raise ValueError(f"reserve must be >= 1 backup, got {reserve!r}")
+        band = None if band is None else tuple(band)
+        robot = through_firmware(config, band, firmware)  # the robot's command path: its spins drift, so hold
+        self.shield = BandShield(  # them and react earlier
+            config, fins, band=band, extra_margin=extra_margin, speed_spread=speed_spread, spin=spin, firmware=robot,
+            keep_side=robot if keep_side is None else keep_side,
+            reserve=(ROBOT_RESERVE if robot else 1) if reserve is None else reserve)
 
     def reset(self) -> None:
         """Start of an episode (the shadow fins at rest)."""
