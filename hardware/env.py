@@ -20,6 +20,7 @@ from pectoral_gym.envs.tasks.table import TaskState
 from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 from pectoral_gym.hardware.radio.link import RadioLink
 from pectoral_gym.hardware.realtime import settle_garbage
+from pectoral_gym.hardware.run_recorder import RunRecorder
 from pectoral_gym.hardware.safety.rules import SafetyConfig, check_action, install_stop_handlers
 from pectoral_gym.hardware.stack import open_stack
 from pectoral_gym.sensing.observer import PREDICT_AFTER_FRAMES
@@ -189,9 +190,7 @@ class HardwareFishEnv(gym.Env):
         self._closed = False
         self._episode = False  # an episode is armed (a reset succeeded and no reset has started since)
         self.stop_timeout = float(stop_timeout)
-        self.clock, self.stack, self.run_log = clock, None, run_log
-        self._resets, self._fins_running = 0, False  # for the run log
-        self._latch_start = self._latch_last = -math.inf  # this episode's start, its last latch report
+        self.clock, self.stack, self.recorder = clock, None, RunRecorder(run_log)
         self.link = self.camera = self.supervisor = None
         try:
             self._build(port, camera, calibration, tracker, observer, observer_epsilon, take_over)
@@ -235,13 +234,14 @@ class HardwareFishEnv(gym.Env):
         if duration > 0:
             self.clock.sleep(duration / self.speed)
 
-    def _log(self, kind: str, t: float, *args: Any, **fields: Any) -> None:
-        """Write a ``kind`` record to the run log, if there is one; a ``stop`` only while the fins run."""
-        if self.run_log is None or (kind == "stop" and not self._fins_running):
-            return
-        if kind in ("command", "stop"):
-            self._fins_running = kind == "command"
-        getattr(self.run_log, kind)(t, *args, **fields)
+    @property
+    def run_log(self):
+        """The :class:`pectoral_gym.hardware.runlog.RunLogWriter` the env writes to, or ``None`` (settable)."""
+        return self.recorder.writer
+
+    @run_log.setter
+    def run_log(self, writer) -> None:
+        self.recorder.writer = writer
 
     def _take_latches(self) -> None:
         """The robot's latch reports (``docs/protocol.md``, LATCH): into the run log, for the calibration.
@@ -252,13 +252,7 @@ class HardwareFishEnv(gym.Env):
         """
         drain = getattr(self.link, "drain_latches", None)  # a link of this package; a stand-in may have none
         for t_link, latch in drain() if drain is not None else ():
-            t = (t_link - self._origin) * self.speed  # the link's clock -> experiment time
-            if t < self._latch_start:
-                continue  # from before this episode's start: not this run's segment
-            # the clock offset's estimate may shrink by a ms between reports: a log's records keep their order
-            t = self._latch_last = max(t, self._latch_last)
-            if self.run_log is not None:
-                self.run_log.latch(t, latch.fin, latch.beat, latch.turn, latch.power, latch.uptime_ms, latch.boot)
+            self.recorder.latch((t_link - self._origin) * self.speed, latch)  # the link's clock -> experiment time
 
     # ------------------------------------------------------------ camera
     def _observe(self) -> None:
@@ -266,7 +260,7 @@ class HardwareFishEnv(gym.Env):
         self._take_latches()
         for t, x, y, psi in self.supervisor.drain():
             if self._observing and t > self._last_measure:
-                self._log("pose", t, x, y, psi, self.supervisor.confidence)
+                self.recorder.record("pose", t, x, y, psi, self.supervisor.confidence)
                 self._state = np.asarray(self.observer.update(t, x, y, psi), dtype=float).copy()
                 self._last_measure = t
                 self._velocity_sum += self._state[3:6]
@@ -292,7 +286,7 @@ class HardwareFishEnv(gym.Env):
         sup.disarm()
         self.stack.confirm_stop(self.stop_timeout)
         self._take_latches()  # the last episode's, before its stop
-        self._log("stop", self.now())
+        self.recorder.record("stop", self.now())
         sup.bound.stopped(self.now())
         settle_garbage()  # the fins are stopped and the rules disarmed: a full collection now, none mid-episode
         resync = getattr(self.link, "resync", None)
@@ -311,11 +305,8 @@ class HardwareFishEnv(gym.Env):
         self.observer.reset(x, y, psi, t)
         self._observing = True
         self._last_measure = t
-        self._latch_start = self._latch_last = placed
-        if self.run_log is not None:
-            self.run_log.episode(self._resets, placed)
-            self._log("pose", t, x, y, psi, sup.confidence)
-        self._resets += 1
+        self.recorder.episode(placed)
+        self.recorder.record("pose", t, x, y, psi, sup.confidence)
         self._state = np.array([x, y, psi, 0.0, 0.0, 0.0])
         task = self.task_state
         task.reset_at(0, self.np_random, (x, y, psi))  # draw the target, observe at rest
@@ -367,10 +358,10 @@ class HardwareFishEnv(gym.Env):
         if now > self._lease_end:  # a late step: the robot's lease ran out
             if self.fin_replay is not None:
                 self.fin_replay.stop(self._lease_end)
-            self._log("stop", self._lease_end)
+            self.recorder.record("stop", self._lease_end)
         if sup.send(command, lease):
             self._lease_end = now + lease
-            self._log("command", now, command)
+            self.recorder.record("command", now, command)
             if self.fin_replay is not None:
                 self.fin_replay.command(now, command)
         self._velocity_sum = np.zeros(3)
@@ -405,7 +396,7 @@ class HardwareFishEnv(gym.Env):
             sup.trip(reason or "episode_end")
             reason = sup.reason if sup.reason != "episode_end" else reason
         if reason or terminated or truncated:
-            self._log("stop", end)
+            self.recorder.record("stop", end)
         info = task.info(0)  # the simulated envs' keys and values
         info.update(safety_stop=reason, safety_stops=list(sup.fired), command=command.tolist(), pose=list(sup.pose),
                     estimate=self._state.tolist(), overrun=overrun, link=self.link.health(),

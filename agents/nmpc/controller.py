@@ -101,11 +101,8 @@ class NMPCController(PlanPricing, HandOver):
             self.settings = dataclasses.replace(self.settings, stop_band=tuple(config.stop_rule))
         path = scaling if isinstance(scaling, (str, Path)) else None
         self.fins = FinMap(config, planning_spec(config, path))
-        spec = self.fins.spec
-        if not isinstance(scaling, ScalingFunctions):
-            scaling = self.fins.scaling
-        self.spec = spec  # the planning model (the spin turns' rollouts)
-        self.scaling = scaling
+        self.spec = self.fins.spec  # the planning model (the spin turns' rollouts)
+        self.scaling = scaling if isinstance(scaling, ScalingFunctions) else self.fins.scaling
         self.track = config.task == "track"
         self.dt = config.control_period
         s = self.settings
