@@ -113,7 +113,8 @@ def env_settings(controller: Any, task: str | None, control_period: float | None
     explicit other value is refused; the action ranges and the track reference speed are the policy's. A
     controller without ``trained`` runs any task; the hand and NMPC baselines (``controller`` ``None``) get the
     starts and goals of the v1 envs (:data:`pectoral_gym.registration.ROBOT_READY`). A policy trained through
-    the simulated camera (``sensing``) gets a note, never the setting: ``HardwareFishEnv`` refuses it.
+    the simulated camera (``sensing``) or with the simulated control-loop timing (``timing``) gets a note, never
+    the setting: ``HardwareFishEnv`` refuses both.
 
     Args:
         controller: The controller (or ``None`` for a baseline built from the env later).
@@ -167,6 +168,9 @@ def env_settings(controller: Any, task: str | None, control_period: float | None
     if trained.get("sensing") is not None:  # never passed on: the robot env observes through its own camera
         notes.append(f"the policy trained through the simulated camera (sensing, {source}); the robot env observes "
                      "through the real camera and observer, so sensing is not applied")
+    if trained.get("timing") is not None:  # never passed on: the robot's loop and radio have their own timing
+        notes.append(f"the policy trained with simulated command delays (timing, {source}); on the robot the radio "
+                     "and the control loop bring their own, so timing is not applied")
     if controller is None:  # a baseline: the starts and goals of the v1 envs, which the stopping band leaves reachable
         for key in ("start_inset", "goal_inset"):
             if not _same(ROBOT_READY.get(key, getattr(defaults, key)), getattr(defaults, key)):

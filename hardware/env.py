@@ -171,6 +171,9 @@ class HardwareFishEnv(gym.Env):
         if kwargs.get("sensing") is not None:
             raise ValueError("HardwareFishEnv observes through its real camera and observer: sensing (the simulated "
                              "envs' camera, EnvConfig.sensing) must not be set here; leave it out")
+        if kwargs.get("timing") is not None:
+            raise ValueError("HardwareFishEnv runs on the robot's own clock and radio: timing (the simulated envs' "
+                             "command delays, EnvConfig.timing) must not be set here; leave it out")
         try:
             self.config = EnvConfig(model="full", task=task, control_period=control_period, **kwargs)
         except TypeError as err:

@@ -434,3 +434,16 @@ def test_a_policy_trained_through_the_simulated_camera_runs_on_the_real_one():
     assert "sensing" not in settings and any("simulated camera" in note for note in notes)
     with pytest.raises(ValueError, match="sensing .* must not be set here"):
         HardwareFishEnv("loop://", None, sensing={"latency": 0.05})
+
+
+def test_a_policy_trained_with_simulated_command_delays_runs_on_the_robots_own():
+    """EnvConfig.timing is recorded in a run, noted by the deploy, never applied on top of the robot's clock."""
+    from pectoral_gym.hardware.deploy_checks import env_settings
+    from pectoral_gym.hardware.env import HardwareFishEnv
+
+    timed = _Trained(obs_size=27, trained={"task": "goal", "control_period": 0.5, "observe_fins": True,
+                                           "timing": {"command_latency": [0.0, 0.1]}})
+    settings, notes = env_settings(timed, None, None)
+    assert "timing" not in settings and any("simulated command delays" in note for note in notes)
+    with pytest.raises(ValueError, match="timing .* must not be set here"):
+        HardwareFishEnv("loop://", None, timing={})

@@ -62,8 +62,9 @@ AVERAGED_ONLY = ENV_OPTIONS["averaged"]
 FULL_ONLY = ENV_OPTIONS["full"]
 # Settings of how a policy was trained, not of what it is evaluated on: evaluations leave them out (a policy
 # trained on the fast full model is evaluated at the reference steps, one trained through the simulated camera
-# on the true state, unless the evaluation asks otherwise, e.g. --env-kwargs '{"sensing": {}}').
-TRAINING_ONLY = ("randomize", "integration", "sensing")
+# on the true state, and one trained with the robot's command delays commanding at once, unless the evaluation
+# asks otherwise, e.g. --env-kwargs '{"sensing": {}, "timing": {}}').
+TRAINING_ONLY = ("randomize", "integration", "sensing", "timing")
 
 
 def model_kwargs(env_id: str, kwargs: dict[str, Any]) -> dict[str, Any]:
@@ -78,7 +79,7 @@ def trained_env_kwargs(path: str | Path, env_id: str) -> dict[str, Any]:
     """The env arguments a run folder trained with, for an evaluation on ``env_id``.
 
     Left out: :data:`TRAINING_ONLY` (the randomisation, the full model's ``integration``, the simulated camera
-    ``sensing``).
+    ``sensing``, the control loop's ``timing``).
     ``{}`` for a ``.zip`` (no run config next to it).
     """
     from pectoral_gym.agents.training.policy import read_config

@@ -32,7 +32,7 @@ __all__ = ["ALGOS", "BatchController", "Controller", "SB3Controller", "TRAINED_K
 # from its run folder's config.yaml (its env id's settings with ``env_kwargs`` over them; EnvConfig's default where
 # neither has a key) in SB3Controller.trained.
 TRAINED_KEYS = ("task", "control_period", "observe_fins", "bias_range", "amplitude_range", "period_range",
-                "ratio_range", "ref_speed", "start_inset", "goal_inset", "sensing")
+                "ratio_range", "ref_speed", "start_inset", "goal_inset", "sensing", "timing")
 
 
 @runtime_checkable

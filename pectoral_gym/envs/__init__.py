@@ -8,8 +8,8 @@ Modules: ``fish_env`` (the single env), ``vector`` (the native vector env),
 kernels, a task row, and the task table and ``TaskState``, shared with the robot
 env), ``fused`` (those kernels and the model advance in one compiled
 call per step, a serial and a parallel build chosen by batch size), ``layout`` (their packed arrays,
-named), ``observation`` (the observation layout and ``decode``), ``rendering``
-(pygame top view).
+named), ``observation`` (the observation layout and ``decode``), ``sensed`` (the simulated camera and
+observer), ``timing`` (the robot's command delays and late ticks), ``rendering`` (pygame top view).
 """
 
 from pectoral_gym.envs.core import EnvConfig, EnvCore

@@ -22,6 +22,7 @@ import numpy as np
 
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.envs.tasks.table import TASK_IDS
+from pectoral_gym.envs.timing import TimingConfig
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.params import FishParams, as_params
 from pectoral_gym.model.servo import servo_period
@@ -128,6 +129,11 @@ class EnvConfig:
             noise, frame drops and latency, the observer's ``epsilon``); stored as a ``SensingConfig``. The
             reward, the termination and ``info`` stay on the true state. Latencies must stay below
             ``control_period``.
+        timing: The robot's control-loop timing (:mod:`pectoral_gym.envs.timing`): ``None`` (off: each command
+            acts at once, every period lasts ``control_period``), ``True`` or ``{}`` (the defaults), or a mapping
+            of :class:`~pectoral_gym.envs.timing.TimingConfig` fields: each command reaches the fins after a
+            delay (an episode level plus a per-step jitter) and each observation comes a little after its tick;
+            stored as a ``TimingConfig``. The longest delay must stay below the shortest period.
     """
 
     model: str = "full"
@@ -159,6 +165,7 @@ class EnvConfig:
     stop_rule: StopRule = ROBOT_STOP_RULE
     servo_limit: float | None = None
     sensing: SensingConfig | Mapping[str, Any] | bool | None = None
+    timing: TimingConfig | Mapping[str, Any] | bool | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -225,6 +232,9 @@ class EnvConfig:
         if self.sensing is not None and self.sensing.latency[1] >= self.control_period:
             raise ValueError(f"sensing['latency'] must stay below the control period {self.control_period} s, got "
                              f"{self.sensing.latency}")
+        set_(self, "timing", TimingConfig.coerce(self.timing))
+        if self.timing is not None:
+            self.timing.check_period(self.control_period)
         if self.randomize is not None:
             randomize = dict(self.randomize)
             unknown = sorted(set(randomize) - set(_FIELD_NAMES))

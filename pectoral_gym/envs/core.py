@@ -21,6 +21,7 @@ from pectoral_gym.envs.layout import ACTION_SIZE, FishConstants, ReferenceEllips
 from pectoral_gym.envs.sensed import SensedObservation
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.envs.tasks.table import TaskState, task_info
+from pectoral_gym.envs.timing import ControlTiming
 from pectoral_gym.model.models import REST, FishModel
 from pectoral_gym.model.params import FishParams
 
@@ -49,6 +50,8 @@ class EnvCore:
         params: The :class:`FishParams` of each env's current episode.
         sensed: With ``config.sensing``, the :class:`~pectoral_gym.envs.sensed.SensedObservation` that rewrites
             ``obs`` through the simulated camera and observer after every reset and step; else ``None``.
+        timing: The :class:`~pectoral_gym.envs.timing.ControlTiming` that draws each step's command delay and
+            period length with ``config.timing`` (without it: none, periods of ``control_period``).
         action_buffer: ``(n, 8)`` float64 actions; ``step(core.action_buffer)`` after writing into it
             is the single env's path (no copy; a step is one compiled call,
             :class:`~pectoral_gym.envs.fused.FusedStep`).
@@ -74,9 +77,11 @@ class EnvCore:
         self.params: list[FishParams] = [config.params] * self.n
         # The step: one compiled call (envs.fused), serial or parallel by batch size, with the task row's
         # kernel. Holds the arrays above and the model's: they are updated in place, never replaced.
+        self.timing = ControlTiming(self.n, self.dt, config.timing)
         self._step = FusedStep(self.model, self.dt, self.action_buffer, self.cfg, self.beats, self.obs, self.out,
-                               self.fish, self.ep, self._integral_before, ts.task.reward_one)
-        self.sensed = None if config.sensing is None else SensedObservation(self.model, config.sensing, self.dt)
+                               self.fish, self.ep, self._integral_before, ts.task.reward_one, self.timing.timing)
+        self.sensed = None if config.sensing is None else SensedObservation(self.model, config.sensing, self.dt,
+                                                                            self.timing.longest_period)
         if config.randomize:
             self._rand_names = tuple(config.randomize)
             widths = np.array([config.randomize[k] for k in self._rand_names])
@@ -88,7 +93,8 @@ class EnvCore:
 
         Per env, in this order: the randomisation factors (one per field of
         ``config.randomize``, in its order), then the task's draws (``TaskState.draw``), then, with
-        ``config.sensing``, the camera's levels and the first frame's noise (``SensedObservation.reset``).
+        ``config.sensing``, the camera's levels and the first frame's noise (``SensedObservation.reset``),
+        then, with ``config.timing``, the episode's command delay level (``ControlTiming.reset``).
         """
         index = np.asarray(index, dtype=np.int64)
         draws = np.empty((index.size, 8))
@@ -107,6 +113,7 @@ class EnvCore:
         self.task_state.observe_reset(index, self.model.state)
         if self.sensed is not None:
             self.sensed.reset(index, rngs, self.model.state, self.ep, self.fish, self.obs)
+        self.timing.reset(index, rngs)
         self._observe_fin_block()
 
     def step(self, actions: np.ndarray, skip: np.ndarray | None = None) -> None:
@@ -119,18 +126,30 @@ class EnvCore:
         sensed = self.sensed
         if sensed is not None:
             sensed.before_step(self.model)
+        if self.timing.settings is not None:  # a step that raises draws nothing
+            self._check_actions(actions, skip)
+            self.timing.draw_step(skip)  # the envs' generators: a step's timing first, then the camera's frames
         bad = self._step(actions, skip)
         if bad >= 0:
             self._raise_non_finite(actions, bad)
         if sensed is not None:  # the observation through the camera (the envs' generators: after the reset's)
             sensed.step(self.none if skip is None else np.asarray(skip, dtype=np.bool_), self.model,
-                        self._step.settings(), self.beats, self.ep, self.fish, self.obs)
+                        self._step.settings(), self.beats, self.ep, self.fish, self.obs, self.timing.timing)
         self._observe_fin_block()
 
     def _observe_fin_block(self) -> None:
         """With ``observe_fins``: the observation's fin block from the model's half-strokes."""
         if self._observe_fins:
             tk.observe_fins(self.model.fins, self.obs, self._period_max)
+
+    def _check_actions(self, actions: np.ndarray, skip: np.ndarray | None) -> None:
+        """Raise as :meth:`step` would for actions of the wrong shape or non-finite ones (before any draw)."""
+        arr = np.asarray(actions, dtype=np.float64)
+        if arr.shape != self.action_buffer.shape:
+            raise ValueError(f"actions must have shape {self.action_buffer.shape}, got {arr.shape}")
+        bad = tk.first_non_finite(arr, self.none if skip is None else np.asarray(skip, dtype=np.bool_))
+        if bad >= 0:
+            self._raise_non_finite(arr, bad)
 
     def _raise_non_finite(self, actions: np.ndarray, bad: int) -> None:
         where = f" for env {bad}" if self.n > 1 else ""

@@ -169,6 +169,7 @@ class PectoralFishEnv(gym.Env):
     | ``stop_rule``     | (0.05, 0.15, 0.03) |    | the band's margin [m], reaction time [s], contact speed [m/s] |
     | ``servo_limit``   | ``None``         | rad/s | fastest fin rate: faster patterns run slower, as on the robot |
     | ``sensing``       | ``None``         |      | observe through a simulated camera and observer (below) |
+    | ``timing``        | ``None``         |      | the robot's command delay and late ticks (below) |
     | ``render_mode``   | ``None``         |      | ``"rgb_array"`` or ``"human"`` |
 
     All arguments are keywords. The defaults are those of
@@ -181,6 +182,11 @@ class PectoralFishEnv(gym.Env):
     robot env does: camera frames at 30 frames/s with per-episode pose noise (0.3-5 mm, 0.2-2 deg), frame drops
     (0-10 %) and latency (0-0.1 s), through the robot's high-gain observer (:mod:`pectoral_gym.envs.sensed`).
     Rewards, episode ends and ``info`` stay computed on the true state.
+
+    ``timing`` (``True``, ``{}`` for the defaults, or a dict of :class:`~pectoral_gym.envs.timing.TimingConfig`
+    fields) runs the control loop as the robot's does: each command reaches the fins after a delay (a per-episode
+    level of 0-0.12 s plus up to 0.03 s per step) and each observation comes up to 0.01 s after its tick, the
+    ticks staying on the ``control_period`` grid (:mod:`pectoral_gym.envs.timing`).
 
     The unwrapped env reads its task state through ``target``,
     ``target_velocity``, ``reference`` (track ellipse), ``fish_state``,

@@ -16,6 +16,11 @@ then, env by env (each touches only its own rows, so the order across envs does 
    tasks share ``tasks.reward_one``), then ``tasks.observe_mean_velocity``: the observed
    velocities are the means over the control period.
 
+With the env's control timing (``timing``, ``(n, 2)``: :mod:`pectoral_gym.envs.timing`) env ``i``'s
+period lasts ``timing[i, SPAN]`` seconds and its command is taken ``timing[i, LAG]`` seconds into it
+(steps 3-4 become: advance ``LAG`` on the previous command, command, advance the rest). Without it
+``LAG = 0`` and ``SPAN`` is the control period: the same arithmetic as steps 3-4 above.
+
 The per-env loop is a ``numba.prange`` loop: :func:`pectoral_gym.model.jit.kernel_builds` compiles it
 serially (below ``PARALLEL_MIN_ITEMS`` envs, where threads cost more than they save) and in
 parallel; every env's arithmetic is the same in both, so the two give the same bits
@@ -69,18 +74,19 @@ class StepArrays(structref.StructRefProxy):
 
 
 #: The fields of :class:`StepArrays`: the env core's arrays (``actions`` its action buffer,
-#: ``before`` its velocity integrals before the step, ``everyone`` an all-true mask), then the
-#: model's arrays and its K tables as :func:`pectoral_gym.model.stepping.advance` takes them.
-STEP_FIELDS = ("actions", "cfg", "beats", "obs", "out", "fish", "ep", "before", "everyone",
+#: ``before`` its velocity integrals before the step, ``everyone`` an all-true mask, ``timing`` each
+#: env's command delay and period length), then the model's arrays and its K tables as
+#: :func:`pectoral_gym.model.stepping.advance` takes them.
+STEP_FIELDS = ("actions", "cfg", "beats", "obs", "out", "fish", "ep", "before", "everyone", "timing",
                "state", "fins", "cache", "pending", "integral", "coef", "tables")
 structref.define_proxy(StepArrays, StepArraysType, list(STEP_FIELDS))
 
 
 @njit
-def new_step_arrays(actions, cfg, beats, obs, out, fish, ep, before, everyone, state, fins, cache, pending, integral,
-                    coef, tables):
+def new_step_arrays(actions, cfg, beats, obs, out, fish, ep, before, everyone, timing, state, fins, cache, pending,
+                    integral, coef, tables):
     """A :class:`StepArrays` of these arrays; compiled and cached (``StepArrays(...)`` compiles anew per process)."""
-    return StepArrays(actions, cfg, beats, obs, out, fish, ep, before, everyone, state, fins, cache, pending,
+    return StepArrays(actions, cfg, beats, obs, out, fish, ep, before, everyone, timing, state, fins, cache, pending,
                       integral, coef, tables)
 
 
@@ -153,6 +159,7 @@ def step_body(a, skip, s):
     # an array, would take and drop a reference to it (atomic counts that the threads would share).
     actions, cfg, beats, obs, out = borrow(a.actions), borrow(a.cfg), borrow(a.beats), borrow(a.obs), borrow(a.out)
     fish, ep, before, everyone = borrow(a.fish), borrow(a.ep), borrow(a.before), borrow(a.everyone)
+    timing = borrow(a.timing)
     state, fins, cache, pending = borrow(a.state), borrow(a.fins), borrow(a.cache), borrow(a.pending)
     integral, coef, packed = borrow(a.integral), borrow(a.coef), a.tables
     tables = (borrow(packed[0]), borrow(packed[1]), borrow(packed[2]), borrow(packed[3]), packed[4],
@@ -166,12 +173,16 @@ def step_body(a, skip, s):
     # not here, where it would keep the kernel out of the disk cache (every process would compile it afresh).
     for i in nb.prange(n):
         tk.apply_keep_one(i, actions, skip, cfg, beats, obs, out, fish, integral, before)
+        lag, span = timing[i, 0], timing[i, 1]
+        if lag > 0.0:  # the command reaches the fins lag into the period (envs.timing)
+            stepping.advance_one(i, state, fins, cache, pending, integral, coef, lag, dt_max, min_substeps,
+                                 averaged, mode, corrections, tables)
         command_one(i, fins, pending, beats, everyone)
-        stepping.advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps,
+        stepping.advance_one(i, state, fins, cache, pending, integral, coef, span - lag, dt_max, min_substeps,
                              averaged, mode, corrections, tables)
         if not skip[i]:
             reward_one(i, state, cfg, ep, fish, obs, out)
-        tk.observe_mean_velocity(i, cfg, obs, integral, before)
+        tk.observe_mean_velocity(i, span, obs, integral, before)
     return -1
 
 
@@ -231,6 +242,8 @@ class FusedStep:
         actions: ``(n, 8)`` C-contiguous float64 action buffer; a call with this very array
             takes the entry point, any other array is copied into it first.
         cfg, beats, obs, out, fish, ep, before: The env core's arrays (:data:`STEP_FIELDS`).
+        timing: ``(n, 2)`` each env's command delay and period length [s] (:mod:`pectoral_gym.envs.timing`),
+            read at every step; ``None``: no delay, periods of ``duration``.
         task_kernel: The task's ``reward_one`` kernel (the task table's row).
 
     Attributes:
@@ -242,12 +255,16 @@ class FusedStep:
     """
 
     def __init__(self, model, duration: float, actions: np.ndarray, cfg, beats, obs, out, fish, ep, before,
-                 task_kernel: Callable[..., Any] = tk.reward_one):
+                 task_kernel: Callable[..., Any] = tk.reward_one, timing: np.ndarray | None = None):
         self.model = model
         self.duration = float(duration)
         self.actions = actions
         self.env_arrays = (cfg, beats, obs, out, fish, ep, before)
         self.everyone = np.ones(actions.shape[0], dtype=np.bool_)
+        if timing is None:
+            timing = np.zeros((actions.shape[0], 2))
+            timing[:, 1] = self.duration
+        self.timing = timing
         self.none = np.zeros(actions.shape[0], dtype=np.bool_)
         self.parallel = actions.shape[0] >= PARALLEL_MIN_ITEMS
         self.task_kernel = task_kernel
@@ -273,8 +290,8 @@ class FusedStep:
     def _bind(self) -> _Bound:
         m = self.model
         revision = m.settings_revision  # read first: a change while binding rebinds at the next call
-        arrays = new_step_arrays(self.actions, *self.env_arrays, self.everyone, m.state, m.fins, m.forcing_cache,
-                                 m.pending, m.integral, m.coef, m.packed_tables)
+        arrays = new_step_arrays(self.actions, *self.env_arrays, self.everyone, self.timing, m.state, m.fins,
+                                 m.forcing_cache, m.pending, m.integral, m.coef, m.packed_tables)
         settings = self.settings()
         kernel = self.kernel
         if self.parallel:

@@ -61,11 +61,13 @@ _POSITION_NOISE, _HEADING_NOISE, _DROP, _LATENCY, _PHASE = range(5)
 
 
 @njit
-def _reset_kernel(index, noise, levels, state, frame, recorded, period, z, last, estimate, sensed, ep, fish, obs):
+def _reset_kernel(index, noise, levels, state, frame, recorded, period, offset, z, last, estimate, sensed, ep, fish,
+                  obs):
     """Start the camera and the observer of the envs in ``index`` at their start states (``noise`` (k, 3))."""
     for k in range(index.shape[0]):
         i = index[k]
         frame[i] = recorded[i] = period[i] = 0
+        offset[i] = 0.0
         x = state[i, 0] + levels[i, _POSITION_NOISE] * noise[k, 0]
         y = state[i, 1] + levels[i, _POSITION_NOISE] * noise[k, 1]
         psi = state[i, 2] + levels[i, _HEADING_NOISE] * noise[k, 2]
@@ -76,20 +78,28 @@ def _reset_kernel(index, noise, levels, state, frame, recorded, period, z, last,
 
 
 @njit
-def _record(i, levels, recorded, poses, t0, t1, frame_dt, beats, everyone, state, fins, cache, pending, integral,
-            coef, s, tables):
+def _record(i, levels, recorded, poses, t0, t1, lag, frame_dt, beats, everyone, state, fins, cache, pending,
+            integral, coef, s, tables):
     """Advance env ``i``'s shadow fish from ``t0`` through the period, recording its pose at each capture <= ``t1``.
 
     The shadow holds the true model's arrays at the period's start; it takes the step's command as the
-    fused step does (``command_one``) and advances with the model's own kernel (``advance_one``) from one
-    capture instant to the next. Frame ``k``'s pose goes to ``poses[i, k % poses.shape[1]]``.
+    fused step does (``command_one``, ``lag`` seconds into the period: ``envs.timing``) and advances with the
+    model's own kernel (``advance_one``) from one capture instant (or the command's) to the next. Frame ``k``'s
+    pose goes to ``poses[i, k % poses.shape[1]]``.
     """
-    command_one(i, fins, pending, beats, everyone)
+    commanded = lag <= 0.0
+    if commanded:
+        command_one(i, fins, pending, beats, everyone)
     t = t0
     while True:
         capture = levels[i, _PHASE] + recorded[i] * frame_dt
         if capture > t1:
             break
+        if not commanded and capture > t0 + lag:  # the command reaches the fins before this frame
+            advance_one(i, state, fins, cache, pending, integral, coef, t0 + lag - t, s[1], s[2], s[3], s[4],
+                        s[5], tables)
+            command_one(i, fins, pending, beats, everyone)
+            commanded, t = True, t0 + lag
         advance_one(i, state, fins, cache, pending, integral, coef, capture - t, s[1], s[2], s[3], s[4], s[5],
                     tables)
         t = capture
@@ -99,22 +109,26 @@ def _record(i, levels, recorded, poses, t0, t1, frame_dt, beats, everyone, state
 
 
 @njit
-def _step_kernel(skip, draws, levels, frame, recorded, period, poses, z, last, estimate, sensed, ep, fish, obs,
-                 frame_rate, epsilon, max_gap, beats, everyone, state, fins, cache, pending, integral, coef, s,
-                 tables):
+def _step_kernel(skip, draws, levels, frame, recorded, period, offset, timing, poses, z, last, estimate, sensed, ep,
+                 fish, obs, frame_rate, epsilon, max_gap, beats, everyone, state, fins, cache, pending, integral, coef,
+                 s, tables):
     """One control period of every env not in ``skip``: its frames recorded, delivered, observed.
 
     Records the frames captured in the period (:func:`_record`), feeds those delivered by its end to the
-    observer, then writes the observation (``s``: the model's :class:`~pectoral_gym.envs.fused.StepSettings`).
+    observer, then writes the observation (``s``: the model's :class:`~pectoral_gym.envs.fused.StepSettings`;
+    ``timing``: each env's command delay and period length, ``offset`` how far its periods' ends have moved
+    from the nominal grid).
     """
     frame_dt = 1.0 / frame_rate
     dt = s[0]
     for i in range(skip.shape[0]):
         if skip[i]:
             continue
-        t0, t1 = period[i] * dt, (period[i] + 1) * dt  # the period [s since the reset]; t1 is the next t0
-        _record(i, levels, recorded, poses, t0, t1, frame_dt, beats, everyone, state, fins, cache, pending, integral,
-                coef, s, tables)
+        t0 = period[i] * dt + offset[i]  # the period [s since the reset]; t1 is the next t0
+        offset[i] += timing[i, 1] - dt
+        t1 = (period[i] + 1) * dt + offset[i]
+        _record(i, levels, recorded, poses, t0, t1, timing[i, 0], frame_dt, beats, everyone, state, fins, cache,
+                pending, integral, coef, s, tables)
         latency = levels[i, _LATENCY]
         count = 0
         vx = vy = omega = 0.0
@@ -155,6 +169,7 @@ class SensedObservation:
         model: The envs' batched model (its shapes; its arrays are copied into the shadow before each step).
         settings: The camera and observer settings.
         control_period: The envs' control period [s] (above every latency of ``settings``).
+        longest_period: The longest period a step can last [s] (``envs.timing``; default ``control_period``).
 
     Attributes:
         levels: ``(n, 5)`` each env's episode levels (:data:`pectoral_gym.sensing.camera.LEVELS`).
@@ -163,14 +178,16 @@ class SensedObservation:
         poses: ``(n, r, 3)`` the true poses of the recent frames (frame ``k`` at ``k % r``).
     """
 
-    def __init__(self, model, settings: SensingConfig, control_period: float):
+    def __init__(self, model, settings: SensingConfig, control_period: float, longest_period: float | None = None):
         n = model.n
         self.settings, self.dt = settings, float(control_period)
-        self.frames = settings.frames_per_period(self.dt)  # frame draws per env and step
+        # frame draws per env and step
+        self.frames = settings.frames_per_period(self.dt if longest_period is None else float(longest_period))
         self.levels = np.zeros((n, 5))
         self.frame = np.zeros(n, dtype=np.int64)  # index of each camera's next frame to deliver
         self.recorded = np.zeros(n, dtype=np.int64)  # index of each camera's next frame to capture
         self.period = np.zeros(n, dtype=np.int64)  # control periods since the reset
+        self.offset = np.zeros(n)  # the last period's end minus its nominal instant (envs.timing) [s]
         self.poses = np.zeros((n, 2 * self.frames, 3))  # undelivered frames: this period's and the last one's
         self.z, self.last = np.zeros((n, 2, 3)), np.full((n, 4), np.nan)
         self.estimate, self.sensed = np.zeros((n, 6)), np.zeros((n, 6))
@@ -191,8 +208,8 @@ class SensedObservation:
         for k, i in enumerate(index):
             self.levels[i] = self.settings.draw(rngs[i])
             noise[k] = rngs[i].standard_normal(3)
-        _reset_kernel(index, noise, self.levels, state, self.frame, self.recorded, self.period, self.z, self.last,
-                      self.estimate, self.sensed, ep, fish, obs)
+        _reset_kernel(index, noise, self.levels, state, self.frame, self.recorded, self.period, self.offset, self.z,
+                      self.last, self.estimate, self.sensed, ep, fish, obs)
 
     def before_step(self, model) -> None:
         """Copy the model's arrays at the period's start into the shadow (before the env step advances them)."""
@@ -200,10 +217,11 @@ class SensedObservation:
             copy[...] = array
 
     def step(self, skip: np.ndarray, model, settings, beats: np.ndarray, ep: np.ndarray, fish: np.ndarray,
-             obs: np.ndarray) -> None:
+             obs: np.ndarray, timing: np.ndarray) -> None:
         """After a control period: the frames of the envs not in ``skip`` (drawn from their generators), observed.
 
-        ``settings`` are the model's :class:`~pectoral_gym.envs.fused.StepSettings`, ``beats`` the step's commands.
+        ``settings`` are the model's :class:`~pectoral_gym.envs.fused.StepSettings`, ``beats`` the step's commands,
+        ``timing`` ``(n, 2)`` each env's command delay and period length (:mod:`pectoral_gym.envs.timing`).
         """
         draws, frames = self.draws, self.frames
         for i in np.flatnonzero(~skip):
@@ -211,6 +229,6 @@ class SensedObservation:
             draws[i, :, 0] = rng.random(frames)
             draws[i, :, 1:] = rng.standard_normal((frames, 3))
         c = self.settings
-        _step_kernel(skip, draws, self.levels, self.frame, self.recorded, self.period, self.poses, self.z, self.last,
-                     self.estimate, self.sensed, ep, fish, obs, c.frame_rate, c.observer_epsilon, c.max_gap, beats,
-                     self.everyone, *self.shadow, model.coef, tuple(settings), model.packed_tables)
+        _step_kernel(skip, draws, self.levels, self.frame, self.recorded, self.period, self.offset, timing, self.poses,
+                     self.z, self.last, self.estimate, self.sensed, ep, fish, obs, c.frame_rate, c.observer_epsilon,
+                     c.max_gap, beats, self.everyone, *self.shadow, model.coef, tuple(settings), model.packed_tables)

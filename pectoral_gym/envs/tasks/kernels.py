@@ -245,9 +245,8 @@ def apply_keep_one(i, actions, skip, cfg, beats, obs, out, fish, integral, befor
 
 
 @njit(inline="always")
-def observe_mean_velocity(i, cfg, obs, integral, before):
-    """Observe env ``i``'s mean velocities over the control period: (integral now - ``before``) / dt."""
-    dt = cfg[C_DT]
+def observe_mean_velocity(i, dt, obs, integral, before):
+    """Observe env ``i``'s mean velocities over its last period of ``dt`` seconds: (integral now - ``before``) / dt."""
     obs[i, OBS_VX] = (integral[i, 0] - before[i, 0]) / dt
     obs[i, OBS_VY] = (integral[i, 1] - before[i, 1]) / dt
     obs[i, OBS_OMEGA] = (integral[i, 2] - before[i, 2]) / dt
