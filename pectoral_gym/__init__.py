@@ -1,6 +1,6 @@
 """pectoral-gym: a robotic fish with two rowing pectoral fins, as models and Gymnasium environments.
 
-Importing the package registers ``PectoralFish-Full-v1`` and ``PectoralFish-Averaged-v1`` (and their ``-v0``).
+Importing the package registers ``PectoralFish-Full-v2`` and ``PectoralFish-Averaged-v2`` (and their ``-v1``, ``-v0``).
 
 The repository's folders ``agents/``, ``scaling/`` and ``hardware/`` are the subpackages
 ``pectoral_gym.agents``, ``.scaling`` and ``.hardware``: an install (wheel or editable) maps them through

@@ -38,6 +38,10 @@ ENV_SETTINGS: dict[str, dict[str, Any]] = {
     "PectoralFish-Averaged-v0": {"model": "averaged"},
     "PectoralFish-Full-v1": {"model": "full", "integration": "fast", **ROBOT_READY},
     "PectoralFish-Averaged-v1": {"model": "averaged", "transitions": True, **ROBOT_READY},
+    # v2: the averaged model with both of its corrections (the model's own defaults, docs/model.md 3.7-3.8); the
+    # full id moves with it unchanged, so the two ids of a version go together (train on one, evaluate on the other).
+    "PectoralFish-Full-v2": {"model": "full", "integration": "fast", **ROBOT_READY},
+    "PectoralFish-Averaged-v2": {"model": "averaged", "transitions": True, "ripple_offsets": True, **ROBOT_READY},
 }
 #: id -> its model, ``"full"`` or ``"averaged"``.
 ENV_IDS = {env_id: settings["model"] for env_id, settings in ENV_SETTINGS.items()}

@@ -136,17 +136,18 @@ def test_the_simulated_columns_run_on_the_version_asked_for_v1_by_default(tmp_pa
         raise RuntimeError("recorded")
 
     monkeypatch.setattr(pectoral_gym.agents.training.evaluate, "evaluate", fake_evaluate)
-    for version, expected in (("v1", {"PectoralFish-Averaged-v1", "PectoralFish-Full-v1"}),
+    for version, expected in (("v2", {"PectoralFish-Averaged-v2", "PectoralFish-Full-v2"}),
+                              ("v1", {"PectoralFish-Averaged-v1", "PectoralFish-Full-v1"}),
                               ("v0", {"PectoralFish-Averaged-v0", "PectoralFish-Full-v0"})):
         seen.clear()
-        settings = BenchmarkSettings(episodes=1, train_steps=0) if version == "v1" else BenchmarkSettings(
+        settings = BenchmarkSettings(episodes=1, train_steps=0) if version == "v2" else BenchmarkSettings(
             episodes=1, train_steps=0, version=version)
         run_benchmark(settings, controllers=("random",), tasks=("goal",), envs=tuple(ENVS), throughput=False)
         assert set(seen) == expected and len(seen) == 3
-    assert benchmark._parse_args([]).version == "v1"
+    assert benchmark._parse_args([]).version == "v2"
     assert benchmark._parse_args(["--env-version", "v0"]).version == "v0"
     with pytest.raises(SystemExit):
-        benchmark._parse_args(["--env-version", "v2"])
+        benchmark._parse_args(["--env-version", "v3"])
 
 
 def test_robot_cells_come_from_the_deploy_summary(tmp_path):

@@ -20,7 +20,7 @@ from pectoral_gym.registration import registered_settings
 NO_JITTER = {"latency_jitter": 0.0, "tick_jitter": 0.0}
 
 
-def _env(env_id="PectoralFish-Averaged-v1", **kwargs):
+def _env(env_id="PectoralFish-Averaged-v2", **kwargs):
     return PectoralFishEnv(**registered_settings(env_id, kwargs))
 
 
@@ -41,13 +41,13 @@ def _run(env, seed, actions):
 
 def test_off_by_default_in_every_registered_id():
     assert EnvConfig().timing is None
-    for env_id in ("PectoralFish-Averaged-v0", "PectoralFish-Averaged-v1", "PectoralFish-Full-v0",
-                   "PectoralFish-Full-v1"):
+    for env_id in ("PectoralFish-Averaged-v0", "PectoralFish-Averaged-v1", "PectoralFish-Averaged-v2",
+                   "PectoralFish-Full-v0", "PectoralFish-Full-v1", "PectoralFish-Full-v2"):
         assert "timing" not in registered_settings(env_id)
         assert gym.make(env_id).unwrapped.core.timing.settings is None
 
 
-@pytest.mark.parametrize("env_id", ["PectoralFish-Averaged-v1", "PectoralFish-Full-v1"])
+@pytest.mark.parametrize("env_id", ["PectoralFish-Averaged-v2", "PectoralFish-Full-v2"])
 def test_zero_delay_and_jitter_is_the_plain_step_to_the_bit(env_id):
     actions = _actions(30)
     plain = _run(_env(env_id), 3, actions)
@@ -55,7 +55,7 @@ def test_zero_delay_and_jitter_is_the_plain_step_to_the_bit(env_id):
     np.testing.assert_array_equal(plain, timed)
 
 
-@pytest.mark.parametrize("env_id", ["PectoralFish-Averaged-v1", "PectoralFish-Full-v1"])
+@pytest.mark.parametrize("env_id", ["PectoralFish-Averaged-v2", "PectoralFish-Full-v2"])
 def test_a_delayed_command_is_the_model_run_on_the_old_command_then_the_new(env_id):
     """Against the model driven by hand: advance ``d`` on the previous patterns, command, advance ``dt - d``."""
     delay = 0.2
@@ -118,7 +118,7 @@ def test_seeded_resets_reproduce_and_the_vector_env_matches_single_envs():
     np.testing.assert_array_equal(first, again)
     assert not np.array_equal(first[:5], other[:5])
     n = 3
-    vector = PectoralFishVectorEnv(n, **registered_settings("PectoralFish-Averaged-v1", settings))
+    vector = PectoralFishVectorEnv(n, **registered_settings("PectoralFish-Averaged-v2", settings))
     singles = [_env(**settings) for _ in range(n)]
     obs, _ = vector.reset(seed=20)
     np.testing.assert_array_equal(obs, [s.reset(seed=20 + i)[0] for i, s in enumerate(singles)])
@@ -170,7 +170,7 @@ def test_check_env_passes_without_warnings():
     from gymnasium.utils.env_checker import check_env
     from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-    for env_id in ("PectoralFish-Averaged-v1", "PectoralFish-Full-v1"):
+    for env_id in ("PectoralFish-Averaged-v2", "PectoralFish-Full-v2"):
         with warnings.catch_warnings():
             warnings.simplefilter("error")
             check_env(gym.make(env_id, timing={}).unwrapped, skip_render_check=True)
@@ -182,9 +182,9 @@ def test_a_run_records_timing_and_evaluations_leave_it_out_unless_asked(tmp_path
     from pectoral_gym.agents.training.evaluate import trained_env_kwargs
     from pectoral_gym.agents.training.policy import _trained_settings
 
-    (tmp_path / "config.yaml").write_text("env_id: PectoralFish-Averaged-v1\nenv_kwargs:\n  task: goal\n"
+    (tmp_path / "config.yaml").write_text("env_id: PectoralFish-Averaged-v2\nenv_kwargs:\n  task: goal\n"
                                           "  timing: {command_latency: [0.0, 0.1]}\n")
-    assert trained_env_kwargs(tmp_path, "PectoralFish-Full-v1") == {"task": "goal"}
+    assert trained_env_kwargs(tmp_path, "PectoralFish-Full-v2") == {"task": "goal"}
     config = yaml.safe_load((tmp_path / "config.yaml").read_text())
     assert _trained_settings(config, tmp_path)["timing"] == {"command_latency": [0.0, 0.1]}
 

@@ -10,14 +10,14 @@ def test_quick_demo_writes_report_json_and_plot(tmp_path, capsys):
     # --jobs 1: the deploy's own process (its --jobs gives the same results for any J: tests/test_lockstep.py)
     assert main(["--quick", "--out", str(out), "--episodes", "3", "--no-progress", "--jobs", "1"]) == 0
     results = json.loads((out / "results.json").read_text())
-    assert [e["env_id"] for e in results["evaluations"]] == ["PectoralFish-Averaged-v1", "PectoralFish-Full-v1"]
+    assert [e["env_id"] for e in results["evaluations"]] == ["PectoralFish-Averaged-v2", "PectoralFish-Full-v2"]
     assert all(e["n_episodes"] == 3 for e in results["evaluations"])
     assert results["timesteps"] >= 1024
     for evaluation in results["evaluations"]:
         success = evaluation["metrics"]["success"]
         assert 0.0 <= success["ci_low"] <= success["mean"] <= success["ci_high"] <= 1.0
     report = (out / "report.md").read_text()
-    assert "| controller |" in report and "PectoralFish-Full-v1" in report and "trajectories.png" in report
+    assert "| controller |" in report and "PectoralFish-Full-v2" in report and "trajectories.png" in report
     assert (out / "trajectories.png").read_bytes()[:4] == b"\x89PNG"
     assert (out / "run" / "model.zip").is_file()
     # the robot stack: 2 lockstep episodes on the emulated robot, their log and their line in the report

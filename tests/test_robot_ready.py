@@ -130,6 +130,18 @@ def test_v1_ids_are_their_settings_everywhere():
         registered_settings("CartPole-v1")
 
 
+def test_v2_is_v1_with_the_averaged_models_ripple_offsets():
+    """v2 changes one setting: the averaged id's ripple offsets (docs/model.md 3.8); the full id moves unchanged."""
+    from pectoral_gym.model.spec import AVERAGED
+
+    assert ENV_SETTINGS["PectoralFish-Full-v2"] == ENV_SETTINGS["PectoralFish-Full-v1"]
+    assert ENV_SETTINGS["PectoralFish-Averaged-v2"] == {**ENV_SETTINGS["PectoralFish-Averaged-v1"],
+                                                         "ripple_offsets": True}
+    spec = gym.make("PectoralFish-Averaged-v2").unwrapped.config.model_spec()
+    assert spec.transitions and spec.ripple_offsets
+    assert spec == AVERAGED  # the averaged model's own defaults
+
+
 @pytest.mark.parametrize("kwargs, match", [({"goal_inset": 0.6}, "goal_inset"), ({"start_inset": -1}, "start_inset"),
                                            ({"stop_rule": (0.05, 0.1)}, "stop_rule"),
                                            ({"stop_rule": (0.05, math.nan, 5.0)}, "stop_rule"),

@@ -31,9 +31,9 @@ def test_a_run_trained_with_robot_files_evaluates_from_anywhere(tmp_path, monkey
     robot = _robot_files(train_dir)
     monkeypatch.chdir(train_dir)
     kwargs = json.dumps({"params": "robot.json", "scaling": "k.json"})
-    assert train_main(["--env", "PectoralFish-Averaged-v1", "--quick", "--no-progress", "--out", "runs",
+    assert train_main(["--env", "PectoralFish-Averaged-v2", "--quick", "--no-progress", "--out", "runs",
                        "--run-name", "r", "--env-kwargs", kwargs]) == 0
-    run_dir = train_dir / "runs" / "PectoralFish-Averaged-v1" / "r"
+    run_dir = train_dir / "runs" / "PectoralFish-Averaged-v2" / "r"
     recorded = yaml.safe_load((run_dir / "config.yaml").read_text())
     assert recorded["env_kwargs"]["params"] == "params.json" and recorded["env_kwargs"]["scaling"] == \
         "scaling_coefficients.json"
@@ -46,7 +46,7 @@ def test_a_run_trained_with_robot_files_evaluates_from_anywhere(tmp_path, monkey
     config = read_config(run_dir)
     assert config["env_kwargs"]["params"] == str(run_dir / "params.json")
     assert load_policy(run_dir).trained_from == run_dir / "config.yaml"
-    assert evaluate_main(["--policy", str(run_dir), "--env", "PectoralFish-Full-v1", "--quick",
+    assert evaluate_main(["--policy", str(run_dir), "--env", "PectoralFish-Full-v2", "--quick",
                           "--out", str(elsewhere / "eval")]) == 0
     metrics = json.loads((elsewhere / "eval" / "metrics.json").read_text())
     assert load_params(metrics["env_kwargs"]["params"]) == robot

@@ -59,7 +59,7 @@ def test_first_probe_at_the_threshold_solves_and_is_confirmed_on_other_episodes(
     assert summary["best_probe_success"] == 0.95 and len(summary["probes"]) == 3
     assert [c["seed"] for c in script.calls] == [PROBE_SEED] * 3 + [REPORT_SEED]
     assert [c["n_episodes"] for c in script.calls] == [20, 20, 20, 30]
-    assert all(c["env_id"] == "PectoralFish-Full-v1" and "randomize" not in c["env_kwargs"] for c in script.calls)
+    assert all(c["env_id"] == "PectoralFish-Full-v2" and "randomize" not in c["env_kwargs"] for c in script.calls)
 
 
 def test_keep_probing_after_the_solve_keeps_the_first_solve(monkeypatch):

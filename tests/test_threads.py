@@ -98,7 +98,7 @@ def test_training_keeps_the_torch_thread_count_it_was_given(tmp_path):
         PPO.learn = learn_and_report
         from pectoral_gym.agents.training import train
 
-        train.main(["--quick", "--env", "PectoralFish-Averaged-v1", "--out", {str(tmp_path / "runs")!r},
+        train.main(["--quick", "--env", "PectoralFish-Averaged-v2", "--out", {str(tmp_path / "runs")!r},
                     "--torch-threads", "1", "--no-progress"])
     """))
     run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=600,

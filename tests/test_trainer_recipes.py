@@ -21,7 +21,7 @@ from doc_snippets import ROOT, commands, snippet, with_constants
 
 import pectoral_gym  # noqa: F401  (registers the ids)
 
-ENV = "PectoralFish-Averaged-v1"
+ENV = "PectoralFish-Averaged-v2"
 
 
 def _has(*modules):

@@ -17,7 +17,7 @@ and the trained policies on their own task.
 CLI (``pectoral-benchmark``, also ``python -m pectoral_gym.agents.studies.benchmark``)::
 
     pectoral-benchmark --quick                      # a few minutes on 2 cores
-    pectoral-benchmark --full --policy runs/PectoralFish-Averaged-v1/ppo_goal_seed0_...
+    pectoral-benchmark --full --policy runs/PectoralFish-Averaged-v2/ppo_goal_seed0_...
     pectoral-benchmark --quick --controller hand nmpc --out bench_quick
     pectoral-benchmark --quick --controller hand --solve-seeds 0 1 --solve-timesteps 4e5
     pectoral-benchmark --quick --env robot robot+degraded --no-throughput --solve-seeds
@@ -45,9 +45,9 @@ from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examp
 __all__ = ["ALL_ENVS", "ENVS", "PRESETS", "VERSIONS", "BenchmarkSettings", "build_parser", "env_id", "main",
            "plot_report", "run_benchmark", "to_markdown", "write_outputs"]
 
-VERSIONS = ("v1", "v0")  # the registered env versions a benchmark can run on; v1 (the default) is the recommended one
-AVERAGED_ID = "PectoralFish-Averaged-v1"
-FULL_ID = "PectoralFish-Full-v1"
+VERSIONS = ("v2", "v1", "v0")  # the registered env versions a benchmark can run on; v2 (the default) is recommended
+AVERAGED_ID = "PectoralFish-Averaged-v2"
+FULL_ID = "PectoralFish-Full-v2"
 # label -> (env id, randomised), in the default version (env_id() gives another version's)
 ENVS = {"averaged": (AVERAGED_ID, False), "full": (FULL_ID, False), "full+rand": (FULL_ID, True)}
 # the simulated settings, then the robot stack's columns (deployment.ROBOT_CONDITIONS)

@@ -1,6 +1,6 @@
 """Results across training seeds: train the demo's PPO for N seeds, evaluate each, aggregate as rliable does.
 
-Each seed trains exactly as ``pectoral-demo --seed S`` (PPO on ``PectoralFish-Averaged-v1``, task ``goal``,
+Each seed trains exactly as ``pectoral-demo --seed S`` (PPO on ``PectoralFish-Averaged-v2``, task ``goal``,
 ``agents/hyperparams/ppo.yml``, best model chosen on the periodic evaluation's episodes, which the shipped
 file runs on the full model: ``eval_env``) and is then
 evaluated on three settings, the same held-out episodes for every seed (episode ``k`` reset with
@@ -22,7 +22,7 @@ CLI (``pectoral-seeds``, also ``python -m pectoral_gym.agents.studies.seeds``)::
     pectoral-seeds                              # seeds 0-4, 2 parallel jobs, writes seeds_out/
     pectoral-seeds --seeds 100 101 102 103 --jobs 2 --out tune_base
     pectoral-seeds --seeds 0 1 --timesteps 2e5 --episodes 50 --hyperparams ent_coef=0.01
-    pectoral-seeds --env PectoralFish-Full-v1 --timesteps 1.6e6
+    pectoral-seeds --env PectoralFish-Full-v2 --timesteps 1.6e6
     pectoral-seeds --env PectoralFish-Averaged-v0   # the v0 envs, as before
 
 ``--env PectoralFish-Full-v*`` trains on the full model instead (its entry of the hyperparameter file);
@@ -54,17 +54,17 @@ from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examp
 __all__ = ["SETTINGS", "TARGETS", "aggregate", "build_parser", "iqm", "main", "run_seed", "run_seeds",
            "summarize_seeds", "train_seeds", "versioned"]
 
-TRAIN_ENV = "PectoralFish-Averaged-v1"
-# label -> (env id, randomised) of the v1 envs; as pectoral_gym.agents.studies.benchmark.ENVS. versioned() gives
+TRAIN_ENV = "PectoralFish-Averaged-v2"
+# label -> (env id, randomised) of the v2 envs; as pectoral_gym.agents.studies.benchmark.ENVS. versioned() gives
 # another version's.
-SETTINGS = {"averaged": ("PectoralFish-Averaged-v1", False), "full": ("PectoralFish-Full-v1", False),
-            "full+rand": ("PectoralFish-Full-v1", True)}
+SETTINGS = {"averaged": ("PectoralFish-Averaged-v2", False), "full": ("PectoralFish-Full-v2", False),
+            "full+rand": ("PectoralFish-Full-v2", True)}
 TRAIN_ENVS = ("PectoralFish-Averaged-v0", "PectoralFish-Full-v0", "PectoralFish-Averaged-v1",
-              "PectoralFish-Full-v1")
+              "PectoralFish-Full-v1", "PectoralFish-Averaged-v2", "PectoralFish-Full-v2")
 
 
 def versioned(env_id: str, train_env: str) -> str:
-    """``env_id`` in ``train_env``'s version (``-v0`` or ``-v1``): a policy is evaluated on the envs it trained for."""
+    """``env_id`` in ``train_env``'s version: a policy is evaluated on the envs it trained for."""
     return env_id.rsplit("-", 1)[0] + "-" + train_env.rsplit("-", 1)[1]
 TARGETS = {"full": 0.95, "full+rand": 0.90, "gap": 0.03}  # issue 16: success >= (gap averaged - full <=)
 REPORTED = ("success", "time_to_goal", "final_distance", "fin_work", "return", "wall")
@@ -313,7 +313,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=examples("pectoral-seeds --quick --seeds 0 1 --out seeds_quick",
                         "pectoral-seeds --seeds 100 101 102 103 --jobs 2 --out tune_base",
                         "pectoral-seeds --seeds 0 1 --timesteps 2e5 --episodes 50 --hyperparams ent_coef=0.01",
-                        "pectoral-seeds --env PectoralFish-Full-v1 --timesteps 1.6e6"))
+                        "pectoral-seeds --env PectoralFish-Full-v2 --timesteps 1.6e6"))
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4], help="training seeds")
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
                         help="seeds trained at once, each in its own process (1 torch thread each; default: 2, or "

@@ -18,7 +18,7 @@ its ``on_evaluation`` callback sends every periodic evaluation to Tune (``ray.tu
 ``timesteps``, ``success``, ``mean_return``, ...), so ``--scheduler asha`` stops trials that
 trail at a rung (rungs in environment steps: ``--grace-period`` times powers of
 ``--reduction-factor``; ``max_t`` the largest ``n_timesteps``). ``--final-env
-PectoralFish-Full-v1`` evaluates each trial's best model at the end on held-out episodes,
+PectoralFish-Full-v2`` evaluates each trial's best model at the end on held-out episodes,
 the same for every trial (``final_success``, ...).
 numba's kernels are compiled once before the trials, by a warm-up task on every node, into
 numba's cache (beside the sources, which a node's workers share, or ``--numba-cache-dir``,
@@ -274,9 +274,9 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=HelpFormatter,
         epilog=examples("pectoral-sweep --grid seed=0,1,2 ent_coef=0,0.005 --timesteps 2e5",
                         "pectoral-sweep --param-space sweep.yml --num-samples 4 --scheduler asha --metric success",
-                        "pectoral-sweep --grid seed=0,1 --timesteps 1e5 --final-env PectoralFish-Full-v1 --out sweeps",
+                        "pectoral-sweep --grid seed=0,1 --timesteps 1e5 --final-env PectoralFish-Full-v2 --out sweeps",
                         "pectoral-sweep --address auto --grid seed=0,1,2,3 randomize_scale=0,1"))
-    parser.add_argument("--env", default="PectoralFish-Averaged-v1", help="environment id")
+    parser.add_argument("--env", default="PectoralFish-Averaged-v2", help="environment id")
     parser.add_argument("--algo", default="ppo", help="algorithm: ppo, sac, td3, a2c, ddpg")
     parser.add_argument("--param-space", metavar="FILE",
                         help="parameter space, YAML or JSON (see pectoral_gym.agents.studies.sweep_space)")
@@ -294,7 +294,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--eval-freq", type=float, help="steps in all between evaluations (default: the file's)")
     parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation (default: the file's)")
     parser.add_argument("--final-env", metavar="ID", help="evaluate each trial's best model on this env at the end "
-                                                          "(PectoralFish-Full-v1: train averaged, test full)")
+                                                          "(PectoralFish-Full-v2: train averaged, test full)")
     parser.add_argument("--final-episodes", type=int, default=100, help="episodes of the final evaluation")
     parser.add_argument("--final-seed", type=int, default=FINAL_SEED,
                         help="final evaluation's episode k uses seed + k (the same for every trial; apart from the "

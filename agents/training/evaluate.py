@@ -8,9 +8,9 @@ controllers come from a factory, one per env slot.
 
 CLI (``pectoral-evaluate``, also ``python -m pectoral_gym.agents.training.evaluate``)::
 
-    pectoral-evaluate --policy runs/PectoralFish-Averaged-v1/ppo_goal_seed0_...
-    pectoral-evaluate --policy RUN --env PectoralFish-Full-v1 --episodes 100 --seed 0 [--randomize]
-    pectoral-evaluate --controller hand --env PectoralFish-Full-v1 --task goal
+    pectoral-evaluate --policy runs/PectoralFish-Averaged-v2/ppo_goal_seed0_...
+    pectoral-evaluate --policy RUN --env PectoralFish-Full-v2 --episodes 100 --seed 0 [--randomize]
+    pectoral-evaluate --controller hand --env PectoralFish-Full-v2 --task goal
 
 A run folder's environment arguments (``config.yaml``) are reused, ``--env-kwargs`` on top, except
 ``randomize`` (``--randomize`` sets it) and, on the full model, the averaged model's own settings
@@ -262,9 +262,9 @@ def build_parser() -> argparse.ArgumentParser:
         description=__doc__.split("\n\n")[0] + " Episode k is reset with --seed + k: the same starts and "
         "targets for every controller. Writes metrics.json and trajectories.png into --out.",
         formatter_class=HelpFormatter,
-        epilog=examples("pectoral-evaluate --policy demo_out/run --env PectoralFish-Full-v1 --episodes 100 --seed 0",
-                        "pectoral-evaluate --policy demo_out/run --env PectoralFish-Full-v1 --randomize",
-                        "pectoral-evaluate --controller hand --env PectoralFish-Full-v1 --task goal --episodes 100",
+        epilog=examples("pectoral-evaluate --policy demo_out/run --env PectoralFish-Full-v2 --episodes 100 --seed 0",
+                        "pectoral-evaluate --policy demo_out/run --env PectoralFish-Full-v2 --randomize",
+                        "pectoral-evaluate --controller hand --env PectoralFish-Full-v2 --task goal --episodes 100",
                         "pectoral-evaluate --controller nmpc --quick"))
     who = parser.add_mutually_exclusive_group(required=True)
     who.add_argument("--policy", metavar="RUN|ZIP",
@@ -272,7 +272,7 @@ def build_parser() -> argparse.ArgumentParser:
     controller = who.add_argument("--controller", metavar="NAME",
                                   help="baseline controller: random, hand, nmpc or excite (identification runs)")
     deprecated_alias(who, "--baseline", controller)
-    parser.add_argument("--env", default="PectoralFish-Full-v1", help="environment id")
+    parser.add_argument("--env", default="PectoralFish-Full-v2", help="environment id")
     parser.add_argument("--task", choices=("goal", "track"), help="task (default: the run's task, else goal)")
     parser.add_argument("--randomize", nargs="?", const="default", metavar="JSON",
                         help="per-episode parameter randomisation: alone for the default preset "

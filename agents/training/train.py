@@ -2,7 +2,7 @@
 
 CLI (``pectoral-train``, also ``python -m pectoral_gym.agents.training.train``)::
 
-    pectoral-train --env PectoralFish-Averaged-v1 --algo ppo --task goal --seed 0
+    pectoral-train --env PectoralFish-Averaged-v2 --algo ppo --task goal --seed 0
     pectoral-train --algo sac --hyperparams n_timesteps=5e4 learning_rate=3e-4 --env-kwargs '{"task": "track"}'
 
 The hyperparameter files are rl-baselines3-zoo's (``pectoral_gym.agents.training.zoo_format``):
@@ -267,12 +267,12 @@ def build_parser() -> argparse.ArgumentParser:
         description=__doc__.split("\n\n")[0] + " Writes a run folder (model, best model, normalisation "
         "statistics, resolved config, command) under --out.",
         formatter_class=HelpFormatter,
-        epilog=examples("pectoral-train --env PectoralFish-Averaged-v1 --algo ppo --task goal --seed 0",
+        epilog=examples("pectoral-train --env PectoralFish-Averaged-v2 --algo ppo --task goal --seed 0",
                         "pectoral-train --quick --out runs_smoke",
                         "pectoral-train --algo sac --timesteps 5e4 --hyperparams learning_rate=3e-4 "
                         "--env-kwargs '{\"task\": \"track\"}'",
                         "pectoral-train --env-kwargs '{\"params\": \"robot.json\"}' --out runs --run-name robot"))
-    parser.add_argument("--env", default="PectoralFish-Averaged-v1", help="environment id")
+    parser.add_argument("--env", default="PectoralFish-Averaged-v2", help="environment id")
     parser.add_argument("--algo", default="ppo", help="algorithm: ppo, sac, td3, a2c, ddpg")
     parser.add_argument("--task", choices=("goal", "track"), help="task (default: from the hyperparameters, else goal)")
     parser.add_argument("--seed", type=int, default=0, help="seed of everything (same seed, same run)")

@@ -1,6 +1,6 @@
 """Gymnasium environments of the pectoral-fin fish (the only package that imports Gymnasium).
 
-``PectoralFish-Full-v1`` and ``PectoralFish-Averaged-v1`` (and their ``-v0``) are registered by
+``PectoralFish-Full-v2`` and ``PectoralFish-Averaged-v2`` (and their ``-v1`` and ``-v0``) are registered by
 :func:`pectoral_gym.registration.register_envs` when ``pectoral_gym`` is imported.
 
 Modules: ``fish_env`` (the single env), ``vector`` (the native vector env),

@@ -87,8 +87,8 @@ class EnvConfig:
             docs/notes/2026-12-02-ppo-v0-tuning.md).
         ripple_offsets: Averaged model only: the beat-mean ripple offset of a fin that starts,
             changes or parks a pattern (:class:`~pectoral_gym.model.models.AveragedModel`, ``docs/model.md``
-            3.8; on by default in the model). Off by default in the envs until the shipped PPO file's
-            figures are re-measured with it.
+            3.8; on by default in the model). Off by default in the envs (``-v0``, ``-v1``); on in
+            ``PectoralFish-Averaged-v2``, which the PPO recipe trains on.
         integration: Full model only: ``"reference"`` (converged steps) or ``"fast"`` (8 RK4 substeps
             per half-stroke, at most 0.05 s; :data:`~pectoral_gym.model.models.FULL_INTEGRATION`; its speed
             and accuracy against the reference: ``docs/model.md`` section 6).

@@ -195,6 +195,12 @@ class PectoralFishEnv(gym.Env):
 
     ## Version History
 
+    * v2: ``PectoralFish-Averaged-v2`` adds ``ripple_offsets=True``: the averaged model with both of its
+      corrections, the model's own defaults (the beat-mean ripple offset, ``docs/model.md`` 3.8, on top of v1's
+      transitional half-strokes); the PPO recipe trained on it reaches more goals on the full model for every
+      training seed (``docs/notes/2026-12-04-ripple-offsets-training.md``). ``PectoralFish-Full-v2`` is
+      ``PectoralFish-Full-v1`` (the full model did not change; it moves with the averaged id so the two ids of a
+      version go together). Every other setting is v1's.
     * v1: Prepares a policy for the robot stack (``pectoral_gym.registration.ROBOT_READY``):
       ``observe_fins=True``, ``stop_band=True`` (the robot's geofence ends the episode, with
       ``info["cost"]``; ``stop_rule`` the robot's with 5 cm more margin, ``(0.10, 0.15, 0.03)``),
