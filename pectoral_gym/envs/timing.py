@@ -24,11 +24,13 @@ control_period``: the same bits).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, fields
+from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from pectoral_gym.option_groups import coerce_group, level_range
 
 __all__ = ["ControlTiming", "LAG", "SPAN", "TimingConfig"]
 
@@ -56,17 +58,7 @@ class TimingConfig:
     tick_jitter: float = 0.01
 
     def __post_init__(self) -> None:
-        value = self.command_latency
-        if isinstance(value, (int, float)) and not isinstance(value, bool):
-            value = (value, value)
-        try:
-            low, high = (float(v) for v in value)
-        except (TypeError, ValueError):
-            raise ValueError(f"timing['command_latency'] must be a number or a pair (low, high), got {value!r}") \
-                from None
-        if not (math.isfinite(low) and math.isfinite(high) and 0.0 <= low <= high):
-            raise ValueError(f"timing['command_latency'] needs finite 0 <= low <= high [s], got {value!r}")
-        object.__setattr__(self, "command_latency", (low, high))
+        object.__setattr__(self, "command_latency", level_range("timing", "command_latency", self.command_latency))
         for name in ("latency_jitter", "tick_jitter"):
             jitter = getattr(self, name)
             if not (isinstance(jitter, (int, float)) and not isinstance(jitter, bool) and math.isfinite(jitter)
@@ -83,19 +75,7 @@ class TimingConfig:
         Raises:
             ValueError: For another value, an unknown key, or an invalid setting.
         """
-        if value is None or value is False:
-            return None
-        if value is True:
-            return cls()
-        if isinstance(value, cls):
-            return value
-        names = [f.name for f in fields(cls)]
-        if not isinstance(value, Mapping):
-            raise ValueError(f"timing must be None, True, or a mapping of {names}, got {value!r}")
-        unknown = sorted(set(value) - set(names))
-        if unknown:
-            raise ValueError(f"timing: unknown settings {unknown}; valid: {names}")
-        return cls(**value)
+        return coerce_group(cls, "timing", value)
 
     def longest_lag(self) -> float:
         """The longest command delay a step can draw [s]."""

@@ -13,11 +13,12 @@ the next (:mod:`pectoral_gym.envs.sensed` says how, and why not by interpolation
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from pectoral_gym.option_groups import coerce_group, level_range
 
 __all__ = ["CLEAN_CAMERA", "DEGRADED_CAMERA", "LEVELS", "N_LEVELS", "SensingConfig"]
 
@@ -31,20 +32,6 @@ DEGRADED_CAMERA = {"position_noise": 5e-3, "heading_noise": math.radians(2.0), "
 LEVELS = ("position_noise", "heading_noise", "frame_drop", "latency", "phase")
 N_LEVELS = len(LEVELS)
 _RANGES = LEVELS[:4]
-
-
-def _pair(name: str, value: Any, upper: float | None = None) -> tuple[float, float]:
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        value = (value, value)
-    try:
-        low, high = (float(v) for v in value)
-    except (TypeError, ValueError):
-        raise ValueError(f"sensing[{name!r}] must be a number or a pair (low, high), got {value!r}") from None
-    if not (math.isfinite(low) and math.isfinite(high) and 0.0 <= low <= high):
-        raise ValueError(f"sensing[{name!r}] needs finite 0 <= low <= high, got {value!r}")
-    if upper is not None and high > upper:
-        raise ValueError(f"sensing[{name!r}] must stay <= {upper}, got {value!r}")
-    return low, high
 
 
 @dataclass(frozen=True)
@@ -82,7 +69,7 @@ class SensingConfig:
                 raise ValueError(f"sensing[{name!r}] must be a finite number > 0, got {value!r}")
             set_(self, name, float(value))
         for name in _RANGES:
-            set_(self, name, _pair(name, getattr(self, name), 1.0 if name == "frame_drop" else None))
+            set_(self, name, level_range("sensing", name, getattr(self, name), 1.0 if name == "frame_drop" else None))
 
     @classmethod
     def coerce(cls, value: Any) -> SensingConfig | None:
@@ -93,19 +80,7 @@ class SensingConfig:
         Raises:
             ValueError: For another value, an unknown key, or an invalid setting.
         """
-        if value is None or value is False:
-            return None
-        if value is True:
-            return cls()
-        if isinstance(value, cls):
-            return value
-        if not isinstance(value, Mapping):
-            raise ValueError(f"sensing must be None, True, or a mapping of {[f.name for f in fields(cls)]}, "
-                             f"got {value!r}")
-        unknown = sorted(set(value) - {f.name for f in fields(cls)})
-        if unknown:
-            raise ValueError(f"sensing: unknown settings {unknown}; valid: {[f.name for f in fields(cls)]}")
-        return cls(**value)
+        return coerce_group(cls, "sensing", value)
 
     def frames_per_period(self, control_period: float) -> int:
         """Most frames delivered in one control period (a window of ``control_period`` seconds)."""
