@@ -260,3 +260,12 @@ def test_trained_env_kwargs_drop_the_other_models_settings(tmp_path):
         "transitions": True}
     assert model_kwargs("PectoralFish-Full-v0", {"integration": "fast", "transitions": True}) == {
         "integration": "fast"}
+
+
+def test_cli_no_progress_draws_no_bar(capsys, tmp_path):
+    """``--no-progress``, as every other command with a progress bar spells it."""
+    args = ["--controller", "hand", "--env", ENV, "--episodes", "1", "--out", str(tmp_path / "e")]
+    assert main([*args, "--no-progress"]) == 0
+    assert "it/s" not in capsys.readouterr().err
+    assert main(args) == 0
+    assert "it/s" in capsys.readouterr().err

@@ -290,6 +290,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--plot-episodes", type=int, default=12, help="episodes drawn in the trajectory plot")
     parser.add_argument("--quick", action="store_true",
                         help=f"smoke run in seconds: at most {QUICK_EPISODES} episodes whatever --episodes says")
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     return parser
 
 
@@ -332,7 +333,7 @@ def main(argv: list[str] | None = None) -> int:
             env_kwargs["randomize"] = DEFAULT_RANDOMIZATION if args.randomize == "default" else json.loads(
                 args.randomize)
         result = evaluate(controller, args.env, n_episodes=args.episodes, seed=args.seed, env_kwargs=env_kwargs,
-                          n_envs=args.n_envs, progress=True)
+                          n_envs=args.n_envs, progress=not args.no_progress)
     except (ValueError, TypeError, FileNotFoundError, json.JSONDecodeError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2

@@ -88,13 +88,15 @@ class EnvCore:
             self._rand_low, self._rand_high = 1.0 - widths, 1.0 + widths
             self._rand_base = np.array([float(getattr(config.params, k)) for k in self._rand_names])
 
-    def reset(self, index: np.ndarray, rngs: Sequence[np.random.Generator]) -> None:
+    def reset(self, index: np.ndarray, rngs: Sequence[np.random.Generator], pinned: np.ndarray | None = None) -> None:
         """Start new episodes for the envs in ``index``; env ``i`` draws only from ``rngs[i]``.
 
         Per env, in this order: the randomisation factors (one per field of
         ``config.randomize``, in its order), then the task's draws (``TaskState.draw``), then, with
         ``config.sensing``, the camera's levels and the first frame's noise (``SensedObservation.reset``),
         then, with ``config.timing``, the episode's command delay level (``ControlTiming.reset``).
+        ``pinned`` ``(len(index), 8)``, goal task: draws that replace the drawn ones where not NaN
+        (``X, Y, psi, goal X, goal Y``; :func:`pin_start`); the generators draw as without it.
         """
         index = np.asarray(index, dtype=np.int64)
         draws = np.empty((index.size, 8))
@@ -106,6 +108,8 @@ class EnvCore:
                 self.params[i] = self.config.params.replace(**changes)
                 self.model.set_params(self.params[i], i)
             draws[k] = self.task_state.draw(rng)
+        if pinned is not None:
+            draws = np.where(np.isnan(pinned), draws, pinned)
         if self.config.randomize:
             self.fish[index] = fish_array([self.params[i] for i in index])
         start = self.task_state.start(index, draws)

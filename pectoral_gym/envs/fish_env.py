@@ -19,6 +19,7 @@ from pectoral_gym.envs.layout import (
     ReferenceEllipse,
 )
 from pectoral_gym.envs.observation import OBS_X, OBS_Y, observation_bounds, observation_structure
+from pectoral_gym.envs.tasks.episode_start import pin_start
 from pectoral_gym.model.params import FishParams
 
 __all__ = ["PectoralFishEnv"]
@@ -121,7 +122,9 @@ class PectoralFishEnv(gym.Env):
     ``U(0.25, 0.4)`` m (Y), a random direction of travel and start phase; the
     fish starts uniformly within 0.1 m of the reference point, heading along
     the tangent +- U(0.3) rad. With ``randomize``, each reset first draws the
-    model parameters. All randomness comes from ``self.np_random``.
+    model parameters. All randomness comes from ``self.np_random``. ``reset(options={"start": (X, Y, psi),
+    "goal": (X, Y)})`` (goal task, either or both) starts the episode there instead (a deploy's logged
+    episode, a scenario of one's own).
 
     ## Episode End
 
@@ -195,6 +198,7 @@ class PectoralFishEnv(gym.Env):
 
     ## Version History
 
+    * Unversioned addition (no id changes its episodes): ``reset(options={"start": ..., "goal": ...})``.
     * v2: ``PectoralFish-Averaged-v2`` adds ``ripple_offsets=True``: the averaged model with both of its
       corrections, the model's own defaults (the beat-mean ripple offset, ``docs/model.md`` 3.8, on top of v1's
       transitional half-strokes); the PPO recipe trained on it reaches more goals on the full model for every
@@ -310,9 +314,17 @@ class PectoralFishEnv(gym.Env):
         return self.core.task_state.info(0)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        """Start an episode (see "Starting State"); returns ``(observation, info)``, ``info`` with the step's keys."""
+        """Start an episode (see "Starting State"); returns ``(observation, info)``, ``info`` with the step's keys.
+
+        ``options`` (goal task): ``{"start": (X, Y, psi), "goal": (X, Y)}``, either or both, in m and rad:
+        the episode starts there instead of at its draws (the generator draws as without them).
+
+        Raises:
+            ValueError: If ``options`` has other keys, the task is ``track``, or a position is outside the tank.
+        """
+        pinned = pin_start(options, self.config.task_id)  # checked before the generator moves
         super().reset(seed=seed)
-        self.core.reset(_ZERO_INDEX, (self.np_random,))
+        self.core.reset(_ZERO_INDEX, (self.np_random,), None if pinned is None else pinned[None])
         if self.render_mode is not None:
             self.trail = [(float(self.core.obs[0, OBS_X]), float(self.core.obs[0, OBS_Y]))]
             if self.render_mode == "human":

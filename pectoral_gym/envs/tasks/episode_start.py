@@ -39,7 +39,7 @@ from pectoral_gym.model.tank import TANK_LENGTH, TANK_WIDTH
 
 __all__ = ["GOAL_CANDIDATES", "GOAL_INSET", "GOAL_MAX_BLOCKS", "GOAL_MAX_DISTANCE", "GOAL_MIN_DISTANCE",
            "START_INSET", "TANK_X", "TANK_Y", "TRACK_A_RANGE", "TRACK_B_RANGE", "TRACK_HEADING_NOISE",
-           "TRACK_START_RADIUS", "draw_episode", "start_states"]
+           "TRACK_START_RADIUS", "draw_episode", "pin_start", "start_states"]
 
 # Tank and task geometry [m], [rad].
 TANK_X = TANK_LENGTH  # tank length along X [m], one source: pectoral_gym.model.tank
@@ -104,6 +104,41 @@ def draw_episode(rng: np.random.Generator, task: int, cfg: np.ndarray) -> np.nda
     draws[5] = -math.pi + 2.0 * math.pi * u[5]
     draws[6] = TRACK_HEADING_NOISE * (2.0 * u[6] - 1.0)
     return draws
+
+
+def pin_start(options: dict | None, task: int) -> np.ndarray | None:
+    """The draws ``reset(options=...)`` fixes: ``(8,)``, NaN where the episode's own draw stays; ``None``: none.
+
+    ``options`` (goal task): ``"start"``, the fish's pose ``(X [m], Y [m], psi [rad])``, and ``"goal"``, the
+    goal ``(X [m], Y [m])``, either or both; both positions inside the tank. The fish starts at rest, as
+    always; a start or goal drawn where the other is pinned keeps its own distribution, not the start-goal
+    distance (a deploy's logged episode, a scenario of one's own).
+
+    Raises:
+        ValueError: Unknown keys, the track task, or a start or goal that is not finite numbers in the tank.
+    """
+    if not options:
+        return None
+    unknown = sorted(set(options) - {"start", "goal"})
+    if unknown:
+        raise ValueError(f"reset options: unknown keys {unknown}; the goal task takes 'start' (X, Y, psi) and 'goal' "
+                         "(X, Y)")
+    if task != GOAL:
+        raise ValueError("reset options 'start' and 'goal' are the goal task's; the track task draws its ellipse")
+    pinned = np.full(8, np.nan)
+    for key, size, slot in (("start", 3, 0), ("goal", 2, 3)):
+        if key not in options:
+            continue
+        try:
+            values = np.asarray(options[key], dtype=float).reshape(size)
+        except (TypeError, ValueError):
+            raise ValueError(f"reset options[{key!r}] must be {size} numbers, got {options[key]!r}") from None
+        x, y = values[0], values[1]
+        if not (np.all(np.isfinite(values)) and 0.0 < x < TANK_X and 0.0 < y < TANK_Y):
+            raise ValueError(f"reset options[{key!r}] must be finite with its position inside the "
+                             f"{TANK_X} x {TANK_Y} m tank, got {options[key]!r}")
+        pinned[slot:slot + size] = values
+    return pinned
 
 
 @njit
