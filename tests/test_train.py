@@ -53,6 +53,24 @@ def test_ppo_smoke_run_fills_the_run_folder(tmp_path):
     assert result.n_episodes == 3
 
 
+def test_keep_checkpoints_keeps_every_evaluated_policy_with_its_statistics(tmp_path):
+    import json
+
+    run_dir = run(tmp_path, "k", "--keep-checkpoints")
+    evaluations = json.loads((run_dir / "training.json").read_text())["evaluations"]
+    names = [e["checkpoint"] for e in evaluations]
+    assert len(names) == 2 and all((run_dir / n).is_file() for n in names)  # 256 steps, evaluated every 128
+    for e in evaluations:
+        assert (run_dir / f"rl_model_vecnormalize_{e['timesteps']}_steps.pkl").is_file()
+    # The best one is the same policy as best_model.zip, statistics included (load_policy finds them by name).
+    best = next(e for e in reversed(evaluations) if e["best"])
+    obs = np.random.default_rng(2).normal(size=(6, 27)).astype(np.float32)
+    kept = load_policy(run_dir / best["checkpoint"])
+    np.testing.assert_array_equal(kept.obs_mean, load_policy(run_dir).obs_mean)
+    np.testing.assert_allclose(kept.act_batch(obs), load_policy(run_dir).act_batch(obs), atol=1e-6)
+    assert not list(run(tmp_path, "n").glob("rl_model_*"))  # off by default
+
+
 def test_same_seed_repeats_the_run(tmp_path):
     a = load_policy(run(tmp_path, "a") / "model.zip")
     b = load_policy(run(tmp_path, "b") / "model.zip")

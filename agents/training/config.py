@@ -32,11 +32,11 @@ from pectoral_gym.agents.training.zoo_format import (
 __all__ = ["OWN_KEYS", "algo_kwargs", "evaluation_env", "parse_overrides", "resolve_config"]
 
 OWN_KEYS = ("n_envs", "n_timesteps", "normalize", "policy", "env_kwargs", "eval_freq", "eval_episodes", "eval_env",
-            "eval_env_kwargs", "action_change_penalty")
+            "eval_env_kwargs", "action_change_penalty", "keep_checkpoints")
 _UNSUPPORTED = ("frame_stack", "env_wrapper", "vec_env_wrapper", "callback", "monitor_kwargs", "replay_buffer_class")
 _DEFAULTS = {"n_envs": 8, "normalize": False, "policy": "MlpPolicy", "env_kwargs": {}, "eval_freq": 0,
              "eval_episodes": 20, "eval_env": None, "eval_env_kwargs": {},
-             "action_change_penalty": 0.0}
+             "action_change_penalty": 0.0, "keep_checkpoints": False}
 
 
 def parse_overrides(items: Sequence[str] | None) -> dict[str, Any]:

@@ -16,8 +16,10 @@ evaluation, its observation statistics; the evaluation runs on ``eval_env``, for
 ``ppo.yml`` the full model: :func:`pectoral_gym.agents.training.config.evaluation_env`), ``vecnormalize_final.pkl``
 (statistics of ``model.zip``), ``config.yaml`` (resolved config, with the model trained on as ``model_spec``:
 :func:`pectoral_gym.agents.training.config.run_model_spec`), ``command.txt``,
-``training.json`` (time, steps/s, probe time, evaluations) and TensorBoard logs in ``tb/``.
-The same ``--seed`` on the same machine repeats a run.
+``training.json`` (time, steps/s, probe time, evaluations) and TensorBoard logs in ``tb/``; with
+``--keep-checkpoints`` also the policy of every periodic evaluation, ``rl_model_<steps>_steps.zip`` with
+``rl_model_vecnormalize_<steps>_steps.pkl`` (SB3's ``CheckpointCallback`` names; ``load_policy`` and
+``pectoral-deploy --policy`` take such a zip). The same ``--seed`` on the same machine repeats a run.
 
 ``--quick`` is a smoke run in seconds (tests, CI, trying a command): it overrides the
 size of the run (:data:`QUICK`; ``n_timesteps`` 256, 2 envs, no periodic evaluation)
@@ -137,12 +139,17 @@ def _callbacks(config: dict[str, Any], run_dir: Path, progress: bool,
             if "tracking_error" in result.metrics:
                 record["tracking_error"] = result.metrics["tracking_error"].mean
             self.evaluations.append(record)
+            venv = self.model.get_env()
             if improved:
                 self.best = score
                 self.model.save(run_dir / "best_model.zip")
-                venv = self.model.get_env()
                 if hasattr(venv, "obs_rms"):
                     venv.save(str(run_dir / "vecnormalize.pkl"))
+            if config.get("keep_checkpoints"):  # SB3 CheckpointCallback's names: load_policy finds the statistics
+                record["checkpoint"] = f"rl_model_{self.num_timesteps}_steps.zip"
+                self.model.save(run_dir / record["checkpoint"])
+                if hasattr(venv, "obs_rms"):
+                    venv.save(str(run_dir / f"rl_model_vecnormalize_{self.num_timesteps}_steps.pkl"))
             self.bar.set_postfix(eval_success=f"{success:.2f}", eval_return=f"{mean_return:.1f}")
             if probe is not None:
                 probe_start = time.perf_counter()
@@ -292,6 +299,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--torch-threads", type=int, default=1, help="torch CPU threads")
     parser.add_argument("--device", default="cpu", help="torch device")
     parser.add_argument("--verbose", type=int, default=0, help="SB3 verbosity")
+    parser.add_argument("--keep-checkpoints", action="store_true",
+                        help="keep the policy of every periodic evaluation (rl_model_<steps>_steps.zip and its "
+                             "statistics in the run folder), e.g. to select one on the robot stack")
     parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     parser.add_argument("--quick", action="store_true",
                         help="smoke run in seconds: overrides the run's size (n_timesteps 256, 2 envs, no evaluation; "
@@ -318,6 +328,8 @@ def main(argv: list[str] | None = None) -> int:
             overrides["eval_freq"] = int(args.eval_freq)
         if args.eval_episodes is not None:
             overrides["eval_episodes"] = int(args.eval_episodes)
+        if args.keep_checkpoints:
+            overrides["keep_checkpoints"] = True
         if args.quick:
             overrides.update(quick_overrides(args.algo))
         env_kwargs = json.loads(args.env_kwargs)
