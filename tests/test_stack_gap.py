@@ -55,6 +55,8 @@ def test_bad_options_name_what_is_wrong(options, match):
         env.reset(seed=0, options=options)
     with pytest.raises(ValueError, match="goal task"):
         gym.make(ENV, task="track").reset(seed=0, options={"goal": (1.0, 0.5)})
+    with pytest.raises(ValueError, match="unknown keys"):  # the vector env does not pin: it says so
+        gym.make_vec(ENV, num_envs=2, vectorization_mode="vector_entry_point").reset(seed=0, options=options)
 
 
 def _simulated_deploy(folder, episodes, fail_on_stack=()):

@@ -144,6 +144,10 @@ class PectoralFishVectorEnv(VectorEnv):
             seeds = list(seed)
             if len(seeds) != self.num_envs:
                 raise ValueError(f"got {len(seeds)} seeds for {self.num_envs} envs")
+        unknown = sorted(set(options or ()) - {"reset_mask"})
+        if unknown:  # e.g. the single env's "start" and "goal": silently ignoring them would mislead
+            raise ValueError(f"reset options: unknown keys {unknown}; the vector env takes 'reset_mask' (pin a start "
+                             "or goal with the single env's reset options)")
         mask = np.ones(self.num_envs, dtype=np.bool_)
         if options and "reset_mask" in options:
             mask = np.asarray(options["reset_mask"], dtype=np.bool_)
