@@ -12,7 +12,6 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.envs.registration import EnvSpec
 
-from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.layout import ACTION_SIZE, E_TX, E_TY
 from pectoral_gym.envs.observation import observation_bounds
 from pectoral_gym.envs.tasks import kernels as tk
@@ -22,7 +21,7 @@ from pectoral_gym.hardware.radio.link import RadioLink
 from pectoral_gym.hardware.realtime import settle_garbage
 from pectoral_gym.hardware.run_recorder import RunRecorder
 from pectoral_gym.hardware.safety.rules import SafetyConfig, check_action, install_stop_handlers
-from pectoral_gym.hardware.stack import open_stack
+from pectoral_gym.hardware.stack import env_config, open_stack
 from pectoral_gym.sensing.observer import PREDICT_AFTER_FRAMES
 
 __all__ = ["HardwareFishEnv"]
@@ -54,13 +53,8 @@ class HardwareFishEnv(gym.Env):
     normalised: the observation's last action and the energy term are those of that command. A non-finite action raises
     ``ValueError`` and nothing is sent.
 
-    | Num | Action                | Fin   | Range (x = -1 .. 1), default  | Unit |
-    |-----|-----------------------|-------|-------------------------------|------|
-    | 0   | bias ``gamma_0``      | right | ``bias_range``, 45 .. 135 deg | rad  |
-    | 1   | amplitude ``gamma_A`` | right | ``amplitude_range``, 0 .. 30 deg | rad |
-    | 2   | period ``T_p``        | right | ``period_range``, 0.5 .. 2.0  | s    |
-    | 3   | ratio ``zeta``        | right | ``ratio_range``, 1 .. 5       | -    |
-    | 4-7 | same                  | left  | same                          |      |
+    The entries (bias, amplitude, period, ratio of the right fin, then the left) and their ranges are
+    ``PectoralFishEnv``'s Action Space table.
 
     ## Observation Space
 
@@ -168,16 +162,7 @@ class HardwareFishEnv(gym.Env):
             raise ValueError("speed and frame_period must be > 0 and max_episode_steps >= 1")
         if not (math.isfinite(stop_timeout) and stop_timeout > 0):
             raise ValueError(f"stop_timeout must be a finite number > 0 s, got {stop_timeout!r}")
-        if kwargs.get("sensing") is not None:
-            raise ValueError("HardwareFishEnv observes through its real camera and observer: sensing (the simulated "
-                             "envs' camera, EnvConfig.sensing) must not be set here; leave it out")
-        if kwargs.get("timing") is not None:
-            raise ValueError("HardwareFishEnv runs on the robot's own clock and radio: timing (the simulated envs' "
-                             "command delays, EnvConfig.timing) must not be set here; leave it out")
-        try:
-            self.config = EnvConfig(model="full", task=task, control_period=control_period, **kwargs)
-        except TypeError as err:
-            raise ValueError(f"unknown HardwareFishEnv argument: {err}") from None
+        self.config = env_config(task, control_period, kwargs)
         self.safety = safety or SafetyConfig()
         self.speed, self.frame_period = float(speed), float(frame_period)
         self.max_episode_steps = int(max_episode_steps)

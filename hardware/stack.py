@@ -21,7 +21,30 @@ from pectoral_gym.hardware.safety.geofence import Geofence
 from pectoral_gym.hardware.safety.rules import CommandFilter, SafetyConfig
 from pectoral_gym.hardware.safety.supervisor import Supervisor
 
-__all__ = ["RobotStack", "open_stack"]
+__all__ = ["SIMULATION_ONLY", "RobotStack", "env_config", "open_stack"]
+
+#: ``EnvConfig`` option groups that simulate what the robot stack really does: the robot env refuses them, saying why.
+SIMULATION_ONLY = {
+    "sensing": "observes through its real camera and observer: sensing (the simulated envs' camera, "
+               "EnvConfig.sensing)",
+    "timing": "runs on the robot's own clock and radio: timing (the simulated envs' command delays, "
+              "EnvConfig.timing)",
+}
+
+
+def env_config(task: str, control_period: float, kwargs: dict[str, Any]) -> EnvConfig:
+    """The full-model :class:`EnvConfig` of a robot env (``HardwareFishEnv``'s ``**kwargs`` on top).
+
+    Raises:
+        ValueError: A :data:`SIMULATION_ONLY` group is set, an argument is unknown, or a setting is invalid.
+    """
+    for name, why in SIMULATION_ONLY.items():
+        if kwargs.get(name) is not None:
+            raise ValueError(f"HardwareFishEnv {why} must not be set here; leave it out")
+    try:
+        return EnvConfig(model="full", task=task, control_period=control_period, **kwargs)
+    except TypeError as err:
+        raise ValueError(f"unknown HardwareFishEnv argument: {err}") from None
 
 
 @dataclass

@@ -32,16 +32,19 @@ ROBOT_READY: dict[str, Any] = {
     "stop_rule": ROBOT_STOP_RULE._replace(margin=ROBOT_STOP_RULE.margin + MEASUREMENT_MARGIN),
 }
 
+_FULL_V1 = {"model": "full", "integration": "fast", **ROBOT_READY}
+_AVERAGED_V1 = {"model": "averaged", "transitions": True, **ROBOT_READY}
+
 #: id -> the EnvConfig arguments it stands for (the others keep EnvConfig's defaults).
 ENV_SETTINGS: dict[str, dict[str, Any]] = {
     "PectoralFish-Full-v0": {"model": "full"},
     "PectoralFish-Averaged-v0": {"model": "averaged"},
-    "PectoralFish-Full-v1": {"model": "full", "integration": "fast", **ROBOT_READY},
-    "PectoralFish-Averaged-v1": {"model": "averaged", "transitions": True, **ROBOT_READY},
+    "PectoralFish-Full-v1": dict(_FULL_V1),
+    "PectoralFish-Averaged-v1": dict(_AVERAGED_V1),
     # v2: the averaged model with both of its corrections (the model's own defaults, docs/model.md 3.7-3.8); the
     # full id moves with it unchanged, so the two ids of a version go together (train on one, evaluate on the other).
-    "PectoralFish-Full-v2": {"model": "full", "integration": "fast", **ROBOT_READY},
-    "PectoralFish-Averaged-v2": {"model": "averaged", "transitions": True, "ripple_offsets": True, **ROBOT_READY},
+    "PectoralFish-Full-v2": dict(_FULL_V1),
+    "PectoralFish-Averaged-v2": {**_AVERAGED_V1, "ripple_offsets": True},
 }
 #: id -> its model, ``"full"`` or ``"averaged"``.
 ENV_IDS = {env_id: settings["model"] for env_id, settings in ENV_SETTINGS.items()}

@@ -28,7 +28,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["DeployedEpisode", "ReplayedEpisode", "build_parser", "main", "read_deploy", "replay"]
+__all__ = ["DEFAULT_ENV", "DeployedEpisode", "ReplayedEpisode", "build_parser", "main", "read_deploy", "replay",
+           "report"]
 
 DEFAULT_ENV = "PectoralFish-Full-v2"  # the full model the emulated robot runs, in the recipe's version
 

@@ -137,7 +137,7 @@ def _report(summary: dict[str, Any], table: str, config: dict[str, Any]) -> str:
         "",
         "Going further: `pectoral-train --env PectoralFish-Averaged-v2 --algo ppo "
         "--task goal --timesteps 2e6`, then `pectoral-evaluate --policy runs/... "
-        "--env PectoralFish-Full-v1 --randomize`; `pectoral-benchmark` for every "
+        "--env PectoralFish-Full-v2 --randomize`; `pectoral-benchmark` for every "
         "controller; see `docs/agents.md`.",
         "",
         f"Hyperparameters: `{json.dumps(config['algo_kwargs'])}`, n_envs {config['n_envs']}, "
