@@ -28,7 +28,7 @@ from collections.abc import Callable
 import numpy as np
 
 from pectoral_gym.hardware.radio import protocol as pr
-from pectoral_gym.hardware.radio.firmware import Firmware, FirmwareConfig, stretch_transition
+from pectoral_gym.hardware.radio.firmware import Firmware, FirmwareConfig, slew_at_latch, stretch_transition
 from pectoral_gym.model import strokes
 from pectoral_gym.model.models import FishModel
 from pectoral_gym.model.params import FinBeat, FishParams
@@ -43,7 +43,8 @@ CHUNK = 0.01  # fin-model step between firmware ticks [robot s]
 def apply_firmware(firmware: Firmware, model: FishModel) -> None:
     """Hand the firmware's decision to fish 0 of ``model``: halt the fins where they are, or command the setpoint.
 
-    A running command is latched at the next turning point; its transitional half-stroke from there is
+    A running command is latched at the next turning point, rate-limited there
+    (:func:`~pectoral_gym.hardware.radio.firmware.slew_at_latch`); its transitional half-stroke from there is
     bounded by :func:`~pectoral_gym.hardware.radio.firmware.stretch_transition`.
     """
     if firmware.halt:
@@ -57,7 +58,10 @@ def apply_firmware(firmware: Firmware, model: FishModel) -> None:
         fins = model.fins[0]
         still = fins[:, strokes.ANGLE_FROM] == fins[:, strokes.ANGLE_TO]
         next_power = still | (fins[:, strokes.POWER] < 0.5)
-        safe = stretch_transition(firmware.setpoint, fins[:, strokes.ANGLE_TO], next_power, firmware.config.limits)
+        limits = firmware.config.limits
+        beats = slew_at_latch(firmware.setpoint, fins[:, strokes.BIAS:strokes.RATIO + 1], fins[:, strokes.DURATION],
+                              still, limits)
+        safe = stretch_transition(beats, fins[:, strokes.ANGLE_TO], next_power, limits)
         model.command_array(safe.reshape(1, 2, 4))
 
 

@@ -10,7 +10,14 @@ import pytest
 from pectoral_gym.hardware.emulator import ROBOT_ADDRESS, EmulatedRobot, main
 from pectoral_gym.hardware.radio import protocol as pr
 from pectoral_gym.hardware.radio import xbee as xb
-from pectoral_gym.hardware.radio.firmware import Firmware, FirmwareConfig, ServoLimits, clip_beats
+from pectoral_gym.hardware.radio.firmware import (
+    Firmware,
+    FirmwareConfig,
+    ServoLimits,
+    clip_beats,
+    peak_rates,
+    slew_at_latch,
+)
 from pectoral_gym.hardware.radio.link import RadioLink
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
@@ -178,19 +185,37 @@ def test_clipping_to_servo_limits_by_hand():
     assert clip_beats(slow_recovery, lim)[0][0, 2] == pytest.approx(math.pi * math.radians(40) * 1.5 / (0.5 * 13))
 
 
-def test_rate_limiting_from_rest():
+def test_the_setpoint_is_the_command_at_the_next_tick():
     fw = Firmware(FirmwareConfig(limits=ServoLimits(max_rate=(math.radians(180), 1.0, 4.0, 10.0))))
     target = np.array([[math.radians(135), math.radians(20), 1.0, 3.0]] * 2)
     fw.receive(_set(1, target), 0.0)
-    fw.tick(0.0)
-    fw.tick(0.1)
-    # 0.1 s at 180 deg/s: bias 90 -> 108 deg; amplitude 0 -> 0.1 rad; ratio 1 -> 2 (10/s)
-    assert fw.setpoint[0, 0] == pytest.approx(math.radians(108), abs=1e-3)
-    assert fw.setpoint[0, 1] == pytest.approx(0.1, abs=1e-3)
-    assert fw.setpoint[0, 3] == pytest.approx(2.0, abs=1e-3)
-    fw.receive(pr.Message(pr.MsgType.HEARTBEAT, 2), 0.4)  # keep the watchdog fed (lease 1 s)
-    fw.tick(0.45)  # long enough for every parameter to arrive
-    assert np.allclose(fw.setpoint, fw.command)
+    fw.tick(0.01)
+    # the rate rule acts where a fin latches (slew_at_latch), not on the setpoint: no slewing between ticks
+    np.testing.assert_array_equal(fw.setpoint, fw.command)
+
+
+def test_rate_limiting_at_the_latch():
+    limits = ServoLimits(max_rate=(math.radians(180), 1.0, 4.0, 10.0))
+    ran = np.array([[math.radians(90), 0.0, 1.0, 1.0]] * 2)
+    command = np.array([[math.radians(135), math.radians(20), 1.0, 3.0]] * 2)
+    out = slew_at_latch(command, ran, np.array([0.1, 0.1]), np.array([False, True]), limits)
+    # moving fin, a 0.1 s half-stroke ends: bias 90 -> 108 deg (180 deg/s), amplitude 0 -> 0.1 rad (1 rad/s),
+    # ratio 1 -> 2 (10 /s); period unchanged
+    np.testing.assert_allclose(out[0], [math.radians(108), 0.1, 1.0, 2.0], atol=1e-12)
+    np.testing.assert_allclose(out[1], command[1], atol=1e-12)  # a still fin latches the command
+    # a half-stroke long enough for every parameter: the command itself
+    np.testing.assert_allclose(slew_at_latch(command, ran, np.array([0.5, 0.5]), np.array([False, False]), limits),
+                               command, atol=1e-12)
+    # a pattern part-way may outrun the servo where the amplitude grows faster than the period shrinks: clipped
+    limits, rng, outran = ServoLimits(), np.random.default_rng(0), 0
+    for _ in range(5000):
+        ran, command = (clip_beats(b, limits)[0] for b in rng.uniform([0.8, 0, 0.4, 0.5], [2.3, 0.7, 4, 6], (2, 2, 4)))
+        duration = rng.uniform(0.05, 1.0, 2)
+        step = np.asarray(limits.max_rate) * duration[:, None]
+        outran += bool(np.any(peak_rates(ran + np.clip(command - ran, -step, step)) > limits.max_speed))
+        out = slew_at_latch(command, ran, duration, np.array([False, False]), limits)
+        assert np.all(peak_rates(out) <= limits.max_speed * (1 + 1e-9))
+    assert outran > 0  # the clip had something to do
 
 
 def _raw_send(sock, msg):

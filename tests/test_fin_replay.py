@@ -34,12 +34,12 @@ def test_replay_follows_the_parameter_change_rule_when_the_firmware_passes_comma
         t = 0.5 * k
         command = np.array([patterns[i].as_array() for i in rng.integers(0, len(patterns), 2)])
         replay.command(t, command)
-        model.advance(t + CHUNK - model.time)
+        model.advance(t - model.time)
         model.command_array(command[None])
         replay.advance(t + 0.5)
         model.advance(t + 0.5 - model.time)
-        # the wire's mrad and ms; the firmware applies a command at its next 10 ms tick, so the stroke clock
-        # runs one tick behind the model's (the model's swept-work accumulator is not the replay's business)
+        # the wire's mrad and ms; the firmware applies a command at its next 10 ms tick, here the one at the
+        # command's time (the model's swept-work accumulator is not the replay's business)
         np.testing.assert_allclose(replay.fins[..., :strokes.SWEPT], model.fins[..., :strokes.SWEPT], atol=2e-3,
                                    err_msg=f"step {k}")
 
@@ -82,10 +82,10 @@ def _robot_fins_mid_stroke(robot, tries=15):
 
 
 def test_robot_env_fin_block_matches_the_emulated_fins(rig):
-    # Commands that change by about one firmware tick of slewing per step (ServoLimits.max_rate x 10 ms):
-    # then which tick a turning point falls on does not change the latched pattern, and the replay must follow
-    # the emulated fins to the radio latency. (With large changes every step the firmware slews for up to
-    # 0.4 s and the two drift apart: docs/hardware.md gives the measured figures.)
+    # Commands that change by about ServoLimits.max_rate x 10 ms per step: where a command reaches the robot
+    # a few ms (radio, poll, tick) before a turning point and the replay a few ms after it, the two latch
+    # patterns one command apart, which differ by no more than that; the replay must follow the emulated fins
+    # to the radio latency (the rate rule acts at the latch, on the fins' own clock: slew_at_latch).
     robot, env = rig
     obs, _ = env.reset(seed=0)
     assert obs.shape == (OBS_SIZE + FIN_OBS_SIZE,) and env.observation_space.contains(obs)
@@ -103,8 +103,7 @@ def test_robot_env_fin_block_matches_the_emulated_fins(rig):
         replay.advance(robot_time + (robot._origin - env._origin) * SPEED)
         got = replay.fins[0]
         np.testing.assert_array_equal(got[:, strokes.POWER], fins[0, :, strokes.POWER], err_msg=f"step {k}")
-        # to one tick of slewing (a latch may fall one tick apart; ServoLimits.max_rate x CHUNK) and the wire's
-        # quantisation
+        # to one command's change (ServoLimits.max_rate x CHUNK, above) and the wire's quantisation
         bias_rate, amplitude_rate, period_rate, ratio_rate = env.safety.limits.max_rate
         for field, rate in ((strokes.BIAS, bias_rate), (strokes.AMPLITUDE, amplitude_rate),
                             (strokes.PERIOD, period_rate), (strokes.RATIO, ratio_rate),

@@ -62,24 +62,25 @@ def test_full_model_through_the_path_follows_the_firmware():
     replay = FinReplay(CONFIG.params)
     model, path = FULL_REFERENCE.build(1, CONFIG.params), FirmwarePath(1)
     model.reset()
-    replay.advance(DT)  # the firmware ticks from power-up, before the first command (its first tick slews nothing)
+    replay.advance(DT)  # the firmware ticks from power-up, before the first command
     path.advance(model, DT)
     for k, p in enumerate(_spin_sequence(fins, 4, 12)):
         replay.command((k + 1) * DT, p)
         replay.advance((k + 2) * DT)
         path.command(p[None])
         path.advance(model, DT)
-    # 8 s, 6 of them spinning: the wire rounds the command to 1 mrad and the replay's ticks fall on their own grid
-    # (a slewing step may come a tick apart), nothing else differs
-    np.testing.assert_allclose(model.state[0, :2], replay.model.state[0, :2], atol=0.02)
-    assert model.state[0, 2] == pytest.approx(replay.model.state[0, 2], abs=math.radians(3.0))
+    # 8 s, 6 of them spinning: the wire rounds the command to 1 mrad, nothing else differs (the rate rule acts
+    # where a fin latches, on the fins' own clock: on which grid the replay ticks does not matter)
+    np.testing.assert_allclose(model.state[0, :2], replay.model.state[0, :2], atol=0.002)
+    assert model.state[0, 2] == pytest.approx(replay.model.state[0, 2], abs=math.radians(0.5))
 
 
 def test_shield_predicts_the_spin_drift_the_robot_has():
     """The shield's planning model through the firmware's rules moves as the full model through the firmware does.
 
-    From 3 s of straight swimming, 10 s of the spin: through the firmware the transitional strokes latch half-slewed
-    patterns and the fish drifts ~0.2 m further than when every pattern latches as sent (the old prediction).
+    From 3 s of straight swimming, 10 s of the spin: through the firmware each latch is rate-limited
+    (``slew_at_latch``: the spin's 0.083 s power strokes let the bias move 15 deg) and the transitional strokes
+    stretched; a prediction that latches every pattern as sent misses that.
     """
     fins = FinMap(CONFIG)
     sequence = _spin_sequence(fins, 6, 20)
@@ -100,8 +101,8 @@ def test_shield_predicts_the_spin_drift_the_robot_has():
     predicted = shield._shadow.state[0, :2] - starts["shield"]
     old = as_sent._shadow.state[0, :2] - starts["as_sent"]
     assert np.hypot(*robot) > 0.3  # the drift: 10 s at ~0.04 m/s, and the glide out of the swim
-    assert np.hypot(*(predicted - robot)) < 0.08
-    assert np.hypot(*(old - robot)) > 0.15
+    assert np.hypot(*(predicted - robot)) < 0.03
+    assert np.hypot(*(old - robot)) > 2 * np.hypot(*(predicted - robot))
 
 
 def test_firmware_path_is_on_where_the_band_is_the_robot_supervisors():

@@ -28,8 +28,13 @@ Rules:
   period and ratio inside theirs, and the *peak* fin rate of both half-strokes at most ``max_speed``
   (the period is lengthened, :func:`clip_beats`); the transitional half-stroke from the fin's next
   turning point is bounded the same way (:func:`stretch_transition`, applied where the fin latches).
-* **Rate limiting**: the setpoint slews towards the clipped command at most ``max_rate`` per second
-  and parameter.
+* **Rate limiting, per latch**: the pattern a moving fin latches at a turning point differs from the one it
+  ran by at most ``max_rate`` per parameter times that half-stroke's duration (:func:`slew_at_latch`); a
+  still fin latches the command, its first half-stroke from rest bounded by ``max_speed`` (above). The fins
+  only ever run latched patterns, so a moving fin's pattern changes at most ``max_rate`` per second, as a
+  per-tick slew of the setpoint bounds it; but what a turning point latches does not depend on the
+  milliseconds between a command's arrival and the firmware's tick, so the PC's replay knows it
+  (``docs/hardware.md``, "The firmware's rate rule").
 * **Sequence numbers**: new -> act and acknowledge; duplicate -> acknowledge only (a retry whose first
   copy arrived); stale -> ignore. All counted.
 * **Latch reports**: while running, every time a fin latches a pattern that moves it (not a half-stroke that
@@ -61,7 +66,7 @@ from pectoral_gym.hardware.radio.protocol import (
 from pectoral_gym.model.servo import ROBOT_MAX_FIN_RATE, servo_period
 
 __all__ = ["ServoLimits", "FirmwareConfig", "Firmware", "clip_beats", "rate_limit", "rest_beats", "peak_rates",
-           "stretch_transition", "new_boot_id"]
+           "slew_at_latch", "stretch_transition", "new_boot_id"]
 
 _RETIRED = 16  # sessions remembered as retired (a restarted PC gets a fresh random 32-bit session)
 
@@ -187,6 +192,27 @@ def stretch_transition(beats: np.ndarray, turn: np.ndarray, next_power: np.ndarr
     return out
 
 
+def slew_at_latch(beats: np.ndarray, latched: np.ndarray, duration: np.ndarray, still: np.ndarray,
+                  limits: ServoLimits) -> np.ndarray:
+    """The patterns fins latch at their next turning point for the command ``beats`` (the firmware's rate rule).
+
+    A moving fin latches ``beats`` moved from the pattern it runs, ``latched``, by at most ``max_rate`` times
+    ``duration`` [s], the half-stroke that the turning point ends; a ``still`` fin latches ``beats``. The result
+    is clipped (:func:`clip_beats`: a pattern part-way may need a longer period for ``max_speed``).
+
+    Args:
+        beats: ``(..., 2, 4)`` commanded patterns, clipped by :func:`clip_beats`.
+        latched: ``(..., 2, 4)`` the patterns the fins run (bias, amplitude, period, ratio).
+        duration: ``(..., 2)`` duration of each fin's half-stroke in progress [s].
+        still: ``(..., 2)`` whether each fin is at rest (its half-stroke ends where it starts).
+        limits: The servo limits (``max_rate``).
+    """
+    b = _patterns(beats)
+    step = np.asarray(limits.max_rate, dtype=float) * np.maximum(np.asarray(duration, dtype=float), 0.0)[..., None]
+    moved = np.asarray(latched, dtype=float) + np.clip(b - latched, -step, step)
+    return clip_beats(np.where(np.asarray(still, dtype=bool)[..., None], b, moved), limits)[0]
+
+
 def rate_limit(current: np.ndarray, target: np.ndarray, dt: float, limits: ServoLimits) -> np.ndarray:
     """Move ``current`` towards ``target`` by at most ``max_rate * dt`` per parameter (both ``(2, 4)``)."""
     step = np.asarray(limits.max_rate, dtype=float) * max(float(dt), 0.0)
@@ -225,7 +251,8 @@ class Firmware:
     Attributes:
         state: A :class:`RobotState`.
         command: ``(2, 4)`` the last accepted SET_FINS, clipped to the servo limits.
-        setpoint: ``(2, 4)`` the rate-limited pattern the fins should follow (valid while running).
+        setpoint: ``(2, 4)`` the pattern the fins should run (valid while running): the command, or rest where
+            halted fins hold still; what a turning point latches of it is :func:`slew_at_latch`'s.
         halt: Set when the fins must stop at once; the caller clears it after halting them.
         tracker: Sequence bookkeeping of the current session's messages.
         session: The session served (``None`` before the first message).
@@ -261,7 +288,6 @@ class Firmware:
         self._latch_seq = 0  # LATCH messages are numbered on their own: a PC that drops them sees no STATUS gap
         self.last_valid: float | None = None  # time of the last new, valid message of the session [s]
         self.tripped_at: float | None = None  # time the watchdog or the lease last stopped the fins [s]
-        self._last_tick: float | None = None
 
     @property
     def running(self) -> bool:
@@ -280,9 +306,8 @@ class Firmware:
     def latch_report(self, t: float, fin: int, beat: np.ndarray, turn: float, power: bool) -> Message | None:
         """The LATCH to send when fin ``fin`` latched ``beat`` at time ``t`` [s] (``None``: nothing to send).
 
-        Sent while running, for every half-stroke that moves: a still fin (its half-stroke ends where it starts,
-        e.g. while bias and amplitude slew so that ``bias + amplitude`` stays put) latches again at every tick,
-        moving nothing; the next report carries all a replay needs.
+        Sent while running, for every half-stroke that moves: a half-stroke that ends where it starts (a still
+        fin, which latches again at every tick) moves nothing; the next report carries all a replay needs.
 
         Args:
             t: When the fin latched (its stroke turning point) [s, the caller's clock].
@@ -379,14 +404,12 @@ class Firmware:
         self.state = state
 
     def tick(self, now: float, fin_angles: np.ndarray | None = None) -> None:
-        """Advance the rules to ``now`` [s]: lease, watchdog, rate limiting.
+        """Advance the rules to ``now`` [s]: lease, watchdog, the setpoint.
 
         Args:
             now: Current time [s].
             fin_angles: Current fin angles ``(2,)`` [rad]; a halted fin's setpoint is rest at its angle.
         """
-        dt = 0.0 if self._last_tick is None else now - self._last_tick
-        self._last_tick = now
         if self.running and now >= self.lease_end:
             self._stop(RobotState.EXPIRED)
             self.tripped_at = now
@@ -395,7 +418,6 @@ class Firmware:
             self._stop(RobotState.WATCHDOG)
             self.tripped_at = now
         if self.running:
-            slewed = rate_limit(self.setpoint, self.command, dt, self.config.limits)
-            self.setpoint = clip_beats(slewed, self.config.limits)[0]  # per-parameter slewing may leave the limits
+            self.setpoint = self.command.copy()  # rate-limited where the fins latch it (slew_at_latch)
         elif fin_angles is not None:
             self.setpoint = rest_beats(fin_angles)
