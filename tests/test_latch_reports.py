@@ -160,6 +160,9 @@ def test_what_a_turning_point_latches_does_not_depend_on_when_the_command_arrive
         power = [r for r in rig.reports() if r.uptime_ms == 505]
         assert [r.fin for r in power] == [0, 1] and all(r.power for r in power)
         latched.append([r.beat for r in power])
+        rig.send(0.55, pr.MsgType.HEARTBEAT)  # the STATUS says the rule held the fins back
+        statuses = [m.status for m in pr.StreamDecoder().feed(rig.sink.data) if m.type == pr.MsgType.STATUS]
+        assert statuses[-1].flags & pr.StatusFlag.RATE_LIMITED and not statuses[0].flags & pr.StatusFlag.RATE_LIMITED
     assert np.degrees(latched[0][0][0]) == pytest.approx(126.0, abs=0.1)
     assert all(b == latched[0] for b in latched)
 

@@ -20,10 +20,9 @@ the model), so the fish keeps an escape. The band is checked with ``extra_margin
 the robot's: the planning model's cycle-averaged velocity misses the full model's in-beat swing.
 
 On the robot (``firmware``) the shield's fins, and the rollouts', follow the firmware's command path
-(:class:`pectoral_gym.agents.controllers.firmware_path.FirmwarePath`: clipping, a setpoint that slews at the
-servos' rate limit, stretched transitions) instead of latching every command as sent: the spin backups are made
-of transitional strokes, and through the firmware the spin drifts at ~0.04 m/s where, latched as sent, the model
-has it drift at ~0.015 m/s (:mod:`pectoral_gym.agents.controllers.firmware_path`).
+(:class:`pectoral_gym.agents.controllers.firmware_path.FirmwarePath`: clipping, the rate rule where a fin
+latches, stretched transitions) instead of latching every command as sent: the spin backups are made of
+transitional strokes, whose latches the rules bound (``tests/test_firmware_path.py``).
 
 Two options the NMPC turns on for the robot (``docs/notes/2026-12-04-nmpc-stops-2.md``): ``keep_side`` holds a
 backup's kind and side from one intervention to the next while one of them is safe (the law's side flipped the

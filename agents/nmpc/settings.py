@@ -143,8 +143,8 @@ class NMPCSettings:
         shield_spread: Speed [m/s] the shield adds towards every wall in its rollouts.
         shield_spin: Let the shield back up with the on-the-spot spin (``BandShield``'s ``spin``).
         shield_firmware: Let the shield predict the commands through the robot firmware's command path
-            (``BandShield``'s ``firmware``: slewed setpoints, stretched transitions); ``None``: where ``stop_band``
-            is given on an env without a band of its own (the robot's deploy).
+            (``BandShield``'s ``firmware``: the rate rule at the latch, stretched transitions); ``None``: where
+            ``stop_band`` is given on an env without a band of its own (the robot's deploy).
         shield_keep_side: Let the shield keep a backup's kind and side while one of them is safe (``BandShield``'s
             ``keep_side``); ``None``: where it predicts through the firmware.
         shield_reserve: Safe backups the plan's command must leave for the shield to send it (``BandShield``'s

@@ -15,8 +15,7 @@ turning circle needs 0.5 m of room for a half turn. Without the servo rules the 
 that turns 143-147 deg in 6 s on the full model, with sweeps up to 100 deg in a power stroke's
 0.08 s: the servos would stretch its strokes, and on the emulated robot it turns 24-48 deg instead
 (docs/notes/2026-12-01-nmpc-rounds.md, "Goal, fifth round"). The servo check takes a command as reaching the fins at
-once; the firmware slews its setpoint towards it at the servos' rate limit, the fins latch half-slewed patterns,
-and through the firmware the cycle turns ~13 deg/s and drifts at ~0.04 m/s
+once; the firmware rate-limits what each turning point latches and stretches the transitional strokes
 (:mod:`pectoral_gym.agents.controllers.firmware_path`; the robot's band shield predicts it so).
 
 :class:`SpinTurns` prices such turns on the planning model

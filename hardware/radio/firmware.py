@@ -286,6 +286,7 @@ class Firmware:
                                       "foreign_stop"), 0)
         self._seq = 0
         self._latch_seq = 0  # LATCH messages are numbered on their own: a PC that drops them sees no STATUS gap
+        self._held_back = np.zeros(2, dtype=bool)  # per fin: its last latch ran less than the command (rate rule)
         self.last_valid: float | None = None  # time of the last new, valid message of the session [s]
         self.tripped_at: float | None = None  # time the watchdog or the lease last stopped the fins [s]
 
@@ -297,7 +298,7 @@ class Firmware:
     def _status(self, ack: Message, now: float) -> Message:
         self._seq = (self._seq + 1) & 0xFFFF
         flags = (StatusFlag.CLIPPED if self.clipped else 0) | (
-            StatusFlag.RATE_LIMITED if self.running and not np.allclose(self.setpoint, self.command) else 0)
+            StatusFlag.RATE_LIMITED if self.running and self._held_back.any() else 0)
         status = Status(ack.seq, int(ack.type), int(self.state), int(flags), self.crc_errors,
                         self.tracker.duplicates, self.tracker.stale, self.uptime_ms(now),
                         0 if self.session is None else self.session, self.boot)
@@ -318,6 +319,9 @@ class Firmware:
         """
         if not self.running or self.session is None:
             return None  # halted fins hold still: nothing latches that a replay needs
+        # bias, amplitude and ratio: the period may be stretched for the transition, which is not the rate rule
+        ran = np.asarray(beat, dtype=float)[[0, 1, 3]]
+        self._held_back[int(fin)] = not np.allclose(ran, self.command[int(fin), [0, 1, 3]])
         bias, amplitude = float(beat[0]), float(beat[1])
         if (bias + amplitude if power else bias - amplitude) == float(turn):
             return None  # a half-stroke that ends where it starts moves nothing (a still fin latches every tick)

@@ -81,7 +81,7 @@ class StatusFlag(enum.IntFlag):
     """Bits of :attr:`Status.flags`."""
 
     CLIPPED = 0x01  # the last SET_FINS was clipped to the servo limits
-    RATE_LIMITED = 0x02  # the setpoint is still slewing towards the last SET_FINS
+    RATE_LIMITED = 0x02  # a fin's last latch ran less than the last SET_FINS (the rate rule held it back)
 
 
 @dataclass(frozen=True)

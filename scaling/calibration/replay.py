@@ -11,8 +11,9 @@ of any number of candidate fish with those same hand-overs, so every candidate s
 firmware rules produce, and re-initialises the bodies at the start of each shooting window.
 
 Where the log holds the robot's latch reports (``latch`` records, ``docs/run-log.md``), the replay starts each
-reported half-stroke as reported (:meth:`FinReplay.latch`): which slewed pattern a turning point latches depends
-on the firmware's tick and the radio's delay, which the PC's commands do not show. Between reports (a lost one,
+reported half-stroke as reported (:meth:`FinReplay.latch`): whether a command that reached the robot near a
+turning point was latched there depends on the firmware's tick and the radio's delay, which the PC's commands do
+not show. Between reports (a lost one,
 a log without them) the rules infer the latches as before.
 """
 
