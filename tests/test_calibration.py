@@ -12,6 +12,7 @@ from pectoral_gym.hardware.runlog import read_run_log
 from pectoral_gym.model.params import FishParams, load_params
 from pectoral_gym.model.spec import FULL_REFERENCE
 from pectoral_gym.scaling.calibration.fit import CalibrationSettings, calibrate
+from pectoral_gym.scaling.calibration.identifiability import _ratio_why
 from pectoral_gym.scaling.calibration.replay import replay_fins, simulate
 from pectoral_gym.scaling.calibration.synth import Camera, perturbed_params, write_synthetic_log
 from pectoral_gym.scaling.cli import main
@@ -136,3 +137,13 @@ def test_cli_end_to_end(tmp_path):
     for name in FIELDS:
         assert getattr(fitted, name) == pytest.approx(getattr(TRUTH, name), rel=0.06)
     assert report["residual_variance"] < 1.5 or "--window 3" in report["statements"][0]
+
+
+def test_the_report_says_why_the_munk_ratio_is_poorly_fixed():
+    # m1 = body_mass - added_mass_x = 0.8 + 0.1 = 0.9 kg, m2 = 0.8 + 0.15 = 0.95 kg: m1 - m2 = -0.05 kg, and a
+    # relative error of the masses becomes 0.95 / 0.05 = 19 times larger in the difference
+    fish = FishParams(body_mass=0.8, added_mass_x=-0.1, added_mass_y=-0.15)
+    why = _ratio_why("(m1-m2)/J3", fish)
+    assert "-0.050 kg" in why and "19 times" in why
+    apart = FishParams(body_mass=0.8, added_mass_x=-0.1, added_mass_y=-0.6)  # m2 = 1.4 kg: no cancellation
+    assert "nearly equal" not in _ratio_why("(m1-m2)/J3", apart)

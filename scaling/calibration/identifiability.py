@@ -80,6 +80,16 @@ def _coefficient_gain(name: str, prior: FishParams) -> float:
     return 1.0
 
 
+def _ratio_why(name: str, p: FishParams) -> str:
+    """Why the logs fix the ratio ``name`` of :data:`COMBINATIONS` poorly, for the report."""
+    if name == "(m1-m2)/J3" and abs(p.m1 - p.m2) < 0.25 * max(p.m1, p.m2):
+        return (f"m1 - m2 = {p.m1 - p.m2:+.3f} kg is a difference of nearly equal masses (m1 = {p.m1:.3f} kg, "
+                f"m2 = {p.m2:.3f} kg), so its relative error is {max(p.m1, p.m2) / abs(p.m1 - p.m2):.0f} times theirs")
+    if name == "c2/m2":
+        return "lift acts through the sideslip angle, which the camera's heading noise hides"
+    return "the identification commands excite it too little for the camera to see"
+
+
 @dataclass
 class Direction:
     """One combination of log-parameters (an eigenvector of the information).
@@ -193,6 +203,11 @@ def analyse(J: np.ndarray, variance: float, p: int, fields: tuple[str, ...], pri
             se = 100 * min(data_se[fields.index(n)], 9.99)
             statements.append(f"{n} ({COEFFICIENT.get(n, n)}) is not identified: +-{se:.1f} % "
                               "from the logs alone; its value leans on the prior.")
+    fitted = params_of(theta)
+    for (name, (meaning, _)), se in zip(COMBINATIONS.items(), combo_se, strict=True):
+        if se > identified_se:
+            statements.append(f"The ratio {name} ({meaning}) is fixed only to +-{100 * min(se, 9.99):.1f} % by the "
+                              f"logs: {_ratio_why(name, fitted)}.")
     for a, b, why in STRUCTURAL:
         if a in fields and b in fields:
             statements.append(f"{a} and {b} {why}: fit one of them and give the other as known.")
