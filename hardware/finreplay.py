@@ -43,7 +43,8 @@ CHUNK = 0.01  # fin-model step between firmware ticks [robot s]
 def apply_firmware(firmware: Firmware, model: FishModel) -> None:
     """Hand the firmware's decision to fish 0 of ``model``: halt the fins where they are, or command the setpoint.
 
-    A running command is latched at the next turning point, rate-limited there
+    A running command is handed over when it arrives or what the fins are to run changes (not again at every
+    tick), latched at the next turning point, rate-limited there
     (:func:`~pectoral_gym.hardware.radio.firmware.slew_at_latch`); its transitional half-stroke from there is
     bounded by :func:`~pectoral_gym.hardware.radio.firmware.stretch_transition`.
     """
@@ -54,6 +55,7 @@ def apply_firmware(firmware: Firmware, model: FishModel) -> None:
                     index=np.arange(1))
         model.time = time_now
         firmware.halt = False
+        firmware.handed = None  # a restart hands the fins its pattern
     elif firmware.running:
         fins = model.fins[0]
         still = fins[:, strokes.ANGLE_FROM] == fins[:, strokes.ANGLE_TO]
@@ -62,7 +64,29 @@ def apply_firmware(firmware: Firmware, model: FishModel) -> None:
         beats = slew_at_latch(firmware.setpoint, fins[:, strokes.BIAS:strokes.RATIO + 1], fins[:, strokes.DURATION],
                               still, limits)
         safe = stretch_transition(beats, fins[:, strokes.ANGLE_TO], next_power, limits)
-        model.command_array(safe.reshape(1, 2, 4))
+        _hand_over(firmware, model, safe)
+
+
+def _hand_over(firmware: Firmware, model: FishModel, safe: np.ndarray) -> None:
+    """Hand fin patterns ``safe`` ``(2, 4)`` to fish 0: every fin when a command arrived, else the fins whose changed.
+
+    As the simulated envs command the fins once per control period: handing an unchanged pattern over at every
+    tick would restart a still fin's half-stroke (``strokes.command_one``: a fin not moving latches at once) at
+    every tick, a phase (the fin block's time left) the simulation never shows. A fin handed its own pattern
+    again is otherwise untouched, so keeping its phase is all that handing over per fin changes.
+    """
+    if firmware.command_id != firmware.handed_id or firmware.handed is None:
+        changed = np.ones(2, dtype=bool)
+    else:
+        changed = np.any(safe != firmware.handed, axis=1)
+    if not changed.any():
+        return
+    fins = model.fins[0]
+    kept = fins[:, [strokes.ELAPSED, strokes.POWER]].copy()
+    model.command_array(safe.reshape(1, 2, 4))
+    for f in np.flatnonzero(~changed):
+        fins[f, strokes.ELAPSED], fins[f, strokes.POWER] = kept[f]
+    firmware.handed, firmware.handed_id = safe, firmware.command_id
 
 
 def stroke_kinds(model: FishModel) -> np.ndarray:

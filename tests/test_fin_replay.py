@@ -44,6 +44,36 @@ def test_replay_follows_the_parameter_change_rule_when_the_firmware_passes_comma
                                    err_msg=f"step {k}")
 
 
+def test_replay_with_the_robots_limits_follows_the_model_through_still_fins():
+    # The robot's own limits, patterns that neither the rate rule nor the servos' peak rate bind, and still fins
+    # (amplitude 0) among them: the firmware's fins must run what the model commanded at the same times runs,
+    # advanced in the same 10 ms pieces. Two past faults: a still fin handed its pattern again at every tick
+    # restarted its half-stroke each time; and a moving fin latched ran + (command - ran), 1e-16 rad off the
+    # command, so the still half-stroke that followed counted as moving and missed its latch at once for up to
+    # its whole duration (1.855 -> 0.785 rad below is such a pair).
+    still = [np.array([1.855, 0.0, 1.534, 1.195]), np.array([0.785, 0.0, 1.786, 3.483]),
+             np.array([1.765, 0.0, 1.914, 3.062]), np.array([1.2, 0.0, 1.3, 2.0])]
+    moving = [FinBeat.from_degrees(90, 15, 1.6, 1.5).as_array(), FinBeat.from_degrees(100, 10, 1.3, 2.0).as_array(),
+              FinBeat.from_degrees(75, 20, 1.8, 1.2).as_array()]
+    patterns = still + moving
+    order = [0, 1, 2, 2, 1, 4, 1, 5, 3, 3, 6, 0, 1, 2, 4, 4]  # the incident's sequence first, then a mix
+    rng = np.random.default_rng(3)
+    replay, model = FinReplay(), FullModel(1)
+    model.reset()
+    for k, first in enumerate(order):
+        t = 0.5 * k
+        command = np.array([patterns[first], patterns[order[(k + 3 + int(rng.integers(0, 5))) % len(order)]]])
+        replay.command(t, command)
+        while model.time < t - 1e-12:
+            model.advance(min(CHUNK, t - model.time))
+        model.command_array(command[None])
+        replay.advance(t + 0.5)
+        while model.time < t + 0.5 - 1e-12:
+            model.advance(min(CHUNK, t + 0.5 - model.time))
+        np.testing.assert_allclose(replay.fins[..., :strokes.SWEPT], model.fins[..., :strokes.SWEPT], atol=2e-3,
+                                   err_msg=f"step {k}")
+
+
 def test_replay_halts_the_fins_where_they_are():
     replay = FinReplay()
     replay.command(0.0, np.array([FinBeat.from_degrees(90, 20, 1.0, 1.0).as_array()] * 2))

@@ -209,7 +209,10 @@ def slew_at_latch(beats: np.ndarray, latched: np.ndarray, duration: np.ndarray, 
     """
     b = _patterns(beats)
     step = np.asarray(limits.max_rate, dtype=float) * np.maximum(np.asarray(duration, dtype=float), 0.0)[..., None]
-    moved = np.asarray(latched, dtype=float) + np.clip(b - latched, -step, step)
+    ran = np.asarray(latched, dtype=float)
+    # Within reach the command itself, bit for bit: ran + (b - ran) may differ from b in the last bit, and a fin
+    # whose half-stroke then ends 1e-16 rad from where it starts counts as moving and misses its latch at once.
+    moved = np.where(np.abs(b - ran) <= step, b, ran + np.clip(b - ran, -step, step))
     return clip_beats(np.where(np.asarray(still, dtype=bool)[..., None], b, moved), limits)[0]
 
 
@@ -257,6 +260,8 @@ class Firmware:
         tracker: Sequence bookkeeping of the current session's messages.
         session: The session served (``None`` before the first message).
         command_id: Identity of the last command run (``None`` before the first).
+        handed: ``(2, 4)`` the pattern last handed to the fins and ``handed_id`` the command it came from
+            (``None``: nothing handed since power-up or a halt; ``finreplay.apply_firmware``).
         lease_end: Time the running command's lease ends [s].
         ignored: Messages not acted on: ``duplicate``, ``stale``, ``retired`` (from a retired session),
             ``refused`` (another session while the served one is live), ``copy``, ``bad_lease``, ``late``
@@ -281,6 +286,8 @@ class Firmware:
         self.session: int | None = None
         self.retired: list[int] = []
         self.command_id: int | None = None
+        self.handed: np.ndarray | None = None
+        self.handed_id: int | None = None
         self.lease_end = -math.inf
         self.ignored = dict.fromkeys(("duplicate", "stale", "retired", "refused", "copy", "bad_lease", "late", "boot",
                                       "foreign_stop"), 0)
