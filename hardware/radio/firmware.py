@@ -315,7 +315,7 @@ class Firmware:
         """The LATCH to send when fin ``fin`` latched ``beat`` at time ``t`` [s] (``None``: nothing to send).
 
         Sent while running, for every half-stroke that moves: a half-stroke that ends where it starts (a still
-        fin, which latches again at every tick) moves nothing; the next report carries all a replay needs.
+        fin) moves nothing; the next report carries all a replay needs.
 
         Args:
             t: When the fin latched (its stroke turning point) [s, the caller's clock].
@@ -331,7 +331,7 @@ class Firmware:
         self._held_back[int(fin)] = not np.allclose(ran, self.command[int(fin), [0, 1, 3]])
         bias, amplitude = float(beat[0]), float(beat[1])
         if (bias + amplitude if power else bias - amplitude) == float(turn):
-            return None  # a half-stroke that ends where it starts moves nothing (a still fin latches every tick)
+            return None  # a half-stroke that ends where it starts moves nothing (a still fin's)
         self._latch_seq = (self._latch_seq + 1) & 0xFFFF
         latch = Latch(self.uptime_ms(t), self.boot, int(fin), bool(power), float(turn),
                       tuple(float(v) for v in np.asarray(beat, dtype=float).reshape(4)))
