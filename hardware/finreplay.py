@@ -55,7 +55,7 @@ def apply_firmware(firmware: Firmware, model: FishModel) -> None:
                     index=np.arange(1))
         model.time = time_now
         firmware.halt = False
-        firmware.handed = None  # a restart hands the fins its pattern
+        firmware.handed = None  # a restart hands the fins their patterns
     elif firmware.running:
         fins = model.fins[0]
         still = fins[:, strokes.ANGLE_FROM] == fins[:, strokes.ANGLE_TO]
@@ -68,7 +68,7 @@ def apply_firmware(firmware: Firmware, model: FishModel) -> None:
 
 
 def _hand_over(firmware: Firmware, model: FishModel, safe: np.ndarray) -> None:
-    """Hand fin patterns ``safe`` ``(2, 4)`` to fish 0: every fin when a command arrived, else the fins whose changed.
+    """Hand patterns ``safe`` ``(2, 4)`` to fish 0: both fins on a new command, else each fin whose pattern changed.
 
     As the simulated envs command the fins once per control period: handing an unchanged pattern over at every
     tick would restart a still fin's half-stroke (``strokes.command_one``: a fin not moving latches at once) at

@@ -396,7 +396,7 @@ def test_robot_env_logs_each_latch_when_and_as_the_robot_made_it(radio_latency):
             if fins[f, strokes.ELAPSED] < 0.005:
                 continue  # at a turning point: which side of it the sample is
             if fins[f, strokes.ANGLE_FROM] == fins[f, strokes.ANGLE_TO]:
-                continue  # a still fin is not reported (it latches every tick)
+                continue  # a still fin is not reported (it moves nothing)
             mine = [r for r in records if r["fin"] == f and abs(r["t"] - start_robot[f]) <= 1.5e-3]
             assert len(mine) == 1, (k, f, start_robot[f])
             record = mine[0]
