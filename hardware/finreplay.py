@@ -28,13 +28,19 @@ from collections.abc import Callable
 import numpy as np
 
 from pectoral_gym.hardware.radio import protocol as pr
-from pectoral_gym.hardware.radio.firmware import Firmware, FirmwareConfig, slew_at_latch, stretch_transition
+from pectoral_gym.hardware.radio.firmware import (
+    Firmware,
+    FirmwareConfig,
+    ServoLimits,
+    slew_at_latch,
+    stretch_transition,
+)
 from pectoral_gym.model import strokes
 from pectoral_gym.model.models import FishModel
 from pectoral_gym.model.params import FinBeat, FishParams
 from pectoral_gym.model.spec import FULL_REFERENCE
 
-__all__ = ["CHUNK", "FinReplay", "advance_with_firmware", "apply_firmware", "force_latch", "latched",
+__all__ = ["CHUNK", "FinReplay", "advance_with_firmware", "apply_firmware", "force_latch", "latched", "next_latch",
            "stroke_kinds"]
 
 CHUNK = 0.01  # fin-model step between firmware ticks [robot s]
@@ -57,14 +63,23 @@ def apply_firmware(firmware: Firmware, model: FishModel) -> None:
         firmware.halt = False
         firmware.handed = None  # a restart hands the fins their patterns
     elif firmware.running:
-        fins = model.fins[0]
-        still = fins[:, strokes.ANGLE_FROM] == fins[:, strokes.ANGLE_TO]
-        next_power = still | (fins[:, strokes.POWER] < 0.5)
-        limits = firmware.config.limits
-        beats = slew_at_latch(firmware.setpoint, fins[:, strokes.BIAS:strokes.RATIO + 1], fins[:, strokes.DURATION],
-                              still, limits)
-        safe = stretch_transition(beats, fins[:, strokes.ANGLE_TO], next_power, limits)
-        _hand_over(firmware, model, safe)
+        _hand_over(firmware, model, next_latch(firmware.setpoint, model.fins[0], firmware.config.limits))
+
+
+def next_latch(beats: np.ndarray, fins: np.ndarray, limits: ServoLimits) -> np.ndarray:
+    """What fins latch at their next turning point for the command ``beats`` ``(..., 2, 4)`` (the firmware's rules).
+
+    The rate rule from the pattern each fin runs (:func:`~pectoral_gym.hardware.radio.firmware.slew_at_latch`),
+    then the transitional half-stroke from the fin's next turning point bounded by the servos' peak rate
+    (:func:`~pectoral_gym.hardware.radio.firmware.stretch_transition`). ``fins`` ``(..., 2, FIN_FIELDS)`` are the
+    half-strokes in progress (:mod:`pectoral_gym.model.strokes`); a fin whose half-stroke ends where it starts is
+    still (it latches at once, and its next half-stroke is a power stroke).
+    """
+    still = fins[..., strokes.ANGLE_FROM] == fins[..., strokes.ANGLE_TO]
+    next_power = still | (fins[..., strokes.POWER] < 0.5)
+    latched = slew_at_latch(beats, fins[..., strokes.BIAS:strokes.RATIO + 1], fins[..., strokes.DURATION], still,
+                            limits)
+    return stretch_transition(latched, fins[..., strokes.ANGLE_TO], next_power, limits)
 
 
 def _hand_over(firmware: Firmware, model: FishModel, safe: np.ndarray) -> None:

@@ -19,9 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from pectoral_gym.hardware.finreplay import CHUNK
-from pectoral_gym.hardware.radio.firmware import ServoLimits, clip_beats, rest_beats, slew_at_latch, stretch_transition
-from pectoral_gym.model import strokes
+from pectoral_gym.hardware.finreplay import CHUNK, next_latch
+from pectoral_gym.hardware.radio.firmware import ServoLimits, clip_beats, rest_beats
 from pectoral_gym.model.models import FishModel
 
 __all__ = ["FirmwarePath"]
@@ -68,12 +67,7 @@ class FirmwarePath:
         Settled (nothing changes until the next command): what the fins latch next is the target itself
         (``slew_at_latch`` and ``stretch_transition`` leave it as it is).
         """
-        fins = model.fins
-        still = fins[..., strokes.ANGLE_FROM] == fins[..., strokes.ANGLE_TO]
-        next_power = still | (fins[..., strokes.POWER] < 0.5)
-        beats = slew_at_latch(self.target, fins[..., strokes.BIAS:strokes.RATIO + 1], fins[..., strokes.DURATION],
-                              still, self.limits)
-        safe = stretch_transition(beats, fins[..., strokes.ANGLE_TO], next_power, self.limits)
+        safe = next_latch(self.target, model.fins, self.limits)
         model.command_array(safe, validate=False)
         return bool(np.array_equal(safe, self.target))
 

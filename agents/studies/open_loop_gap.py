@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from pectoral_gym.agents.studies.stack_gap import DEFAULT_ENV, read_deploy
+from pectoral_gym.agents.studies.stack_gap import DEFAULT_ENV, log_records, read_deploy
 
 __all__ = ["Parting", "build_parser", "main", "read_steps", "replay_open_loop"]
 
@@ -68,24 +68,18 @@ def read_steps(folder: str | Path) -> dict[int, list[tuple[np.ndarray, np.ndarra
     if not path.is_file():
         raise ValueError(f"{path}: not found (a pectoral-deploy output folder has steps.jsonl)")
     episodes: dict[int, list[tuple[int, np.ndarray, np.ndarray]]] = {}
-    with path.open() as lines:
-        for number, line in enumerate(lines, 1):
-            try:
-                record = json.loads(line)
-            except json.JSONDecodeError as err:
-                raise ValueError(f"{path}:{number}: not JSON ({err.msg})") from None
-            if not isinstance(record, dict) or record.get("event") == "reset" or "action" not in record:
-                continue
-            try:
-                action = np.asarray(record["action"], dtype=float)
-                pose = np.asarray(record.get("true_pose") or record["pose"], dtype=float)
-                step, episode = int(record["step"]), int(record["episode"])
-            except (TypeError, ValueError, KeyError):
-                raise ValueError(f"{path}:{number}: a step record needs episode, step, action and a pose") from None
-            if action.shape != (8,) or pose.shape != (3,) or not (np.isfinite(action).all()
-                                                                  and np.isfinite(pose).all()):
-                raise ValueError(f"{path}:{number}: the step's action (8) and pose (3) must be finite")
-            episodes.setdefault(episode, []).append((step, action, pose))
+    for number, record in log_records(path):
+        if record.get("event") == "reset" or "action" not in record:
+            continue
+        try:
+            action = np.asarray(record["action"], dtype=float)
+            pose = np.asarray(record.get("true_pose") or record["pose"], dtype=float)
+            step, episode = int(record["step"]), int(record["episode"])
+        except (TypeError, ValueError, KeyError):
+            raise ValueError(f"{path}:{number}: a step record needs episode, step, action and a pose") from None
+        if action.shape != (8,) or pose.shape != (3,) or not (np.isfinite(action).all() and np.isfinite(pose).all()):
+            raise ValueError(f"{path}:{number}: the step's action (8) and pose (3) must be finite")
+        episodes.setdefault(episode, []).append((step, action, pose))
     return {k: [(a, p) for _, a, p in sorted(rows, key=lambda row: row[0])] for k, rows in episodes.items()}
 
 

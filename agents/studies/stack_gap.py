@@ -24,12 +24,13 @@ import json
 import math
 import sys
 from collections import Counter
+from collections.abc import Iterator
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-__all__ = ["DEFAULT_ENV", "DeployedEpisode", "ReplayedEpisode", "build_parser", "main", "read_deploy", "replay",
-           "report"]
+__all__ = ["DEFAULT_ENV", "DeployedEpisode", "ReplayedEpisode", "build_parser", "log_records", "main", "read_deploy",
+           "replay", "report"]
 
 DEFAULT_ENV = "PectoralFish-Full-v2"  # the full model the emulated robot runs, in the recipe's version
 
@@ -62,6 +63,22 @@ class ReplayedEpisode:
     sim_steps: int
 
 
+def log_records(path: Path) -> Iterator[tuple[int, dict[str, Any]]]:
+    """``(line number, record)`` of each JSON object of a deploy's ``steps.jsonl`` (other values are skipped).
+
+    Raises:
+        ValueError: A line is not JSON (the message names the file and line).
+    """
+    with path.open() as lines:
+        for number, line in enumerate(lines, 1):
+            try:
+                record = json.loads(line)
+            except json.JSONDecodeError as err:
+                raise ValueError(f"{path}:{number}: not JSON ({err.msg})") from None
+            if isinstance(record, dict):
+                yield number, record
+
+
 def read_deploy(folder: str | Path) -> list[DeployedEpisode]:
     """The episodes of a ``pectoral-deploy`` output folder (``summary.json`` and ``steps.jsonl``).
 
@@ -75,21 +92,16 @@ def read_deploy(folder: str | Path) -> list[DeployedEpisode]:
         if not path.is_file():
             raise ValueError(f"{path}: not found (a pectoral-deploy output folder has summary.json and steps.jsonl)")
     starts: dict[int, tuple[tuple[float, ...], tuple[float, ...]]] = {}
-    with steps_path.open() as lines:
-        for number, line in enumerate(lines, 1):
+    for number, record in log_records(steps_path):
+        if record.get("event") == "reset":
+            pose = record.get("true_pose") or record.get("pose")  # the robot's own pose where known
             try:
-                record = json.loads(line)
-            except json.JSONDecodeError as err:
-                raise ValueError(f"{steps_path}:{number}: not JSON ({err.msg})") from None
-            if isinstance(record, dict) and record.get("event") == "reset":
-                pose = record.get("true_pose") or record.get("pose")  # the robot's own pose where known
-                try:
-                    start, goal = tuple(float(v) for v in pose), tuple(float(v) for v in record["target"])
-                except (TypeError, ValueError, KeyError):
-                    raise ValueError(f"{steps_path}:{number}: a reset record needs a pose and a target") from None
-                if len(start) != 3 or len(goal) != 2 or not all(map(math.isfinite, start + goal)):
-                    raise ValueError(f"{steps_path}:{number}: the reset's pose (3) and target (2) must be finite")
-                starts[int(record["episode"])] = (start, goal)
+                start, goal = tuple(float(v) for v in pose), tuple(float(v) for v in record["target"])
+            except (TypeError, ValueError, KeyError):
+                raise ValueError(f"{steps_path}:{number}: a reset record needs a pose and a target") from None
+            if len(start) != 3 or len(goal) != 2 or not all(map(math.isfinite, start + goal)):
+                raise ValueError(f"{steps_path}:{number}: the reset's pose (3) and target (2) must be finite")
+            starts[int(record["episode"])] = (start, goal)
     try:
         episodes = json.loads(summary_path.read_text())["episodes"]
     except (json.JSONDecodeError, KeyError, TypeError) as err:
