@@ -23,6 +23,7 @@ static volatile uint32_t clock_ms;
 static volatile uint8_t rx_buf[RX_SIZE], tx_buf[TX_SIZE];
 static volatile uint8_t rx_head, rx_tail, tx_head, tx_tail;
 static volatile uint16_t rx_overflows;
+static volatile uint16_t servo_counts[2] = {2u * 1500u, 2u * 1500u}; /* the widths the next frame starts with */
 static uint32_t boot_random;
 
 /* Start-up code (stack paint, watchdog off after a watchdog reset): hal_avr_init.S. */
@@ -30,6 +31,16 @@ static uint32_t boot_random;
 ISR(TIMER0_COMPA_vect)
 {
     clock_ms++;
+}
+
+/* Timer1 reached TOP: the next 20 ms frame starts. The new widths go into OCR1A/B here, at the frame's start,
+ * as the ATmega2560's own double buffering of OCR1x in the PWM modes would load them. Done by hand because simavr
+ * 1.6 applies an OCR1x write at once: a width lowered below the counter mid-pulse missed its compare there and
+ * stretched that pulse to 21 ms (a servo would jump). On the chip the result is the same either way. */
+ISR(TIMER1_OVF_vect)
+{
+    OCR1A = servo_counts[0];
+    OCR1B = servo_counts[1];
 }
 
 ISR(USART0_RX_vect)
@@ -104,15 +115,8 @@ static void hal_servo_write(void *ctx, uint8_t fin, float angle_rad)
 {
     uint16_t counts = (uint16_t)(2u * hal_avr_pulse_us(angle_rad)); /* 0.5 us per count */
     (void)ctx;
-    /* OCR1x is double-buffered in fast PWM: the new width starts with the next 20 ms frame, never mid-pulse.
-     * The 16-bit write goes through the shared TEMP register: no interrupt may touch Timer1 in between. */
-    ATOMIC_BLOCK(ATOMIC_RESTORESTATE)
-    {
-        if (fin == 0u)
-            OCR1A = counts;
-        else
-            OCR1B = counts;
-    }
+    /* The 16-bit store must not be torn by the frame-start interrupt that reads it. */
+    ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { servo_counts[fin ? 1 : 0] = counts; }
 }
 
 static uint32_t hal_random32(void *ctx)
@@ -175,6 +179,7 @@ void hal_avr_init(pfw_hal *hal)
     ICR1 = SERVO_TOP;
     TCCR1A = _BV(COM1A1) | _BV(COM1B1) | _BV(WGM11);
     TCCR1B = _BV(WGM13) | _BV(WGM12) | _BV(CS11);
+    TIMSK1 = _BV(TOIE1); /* frame start: load the widths (TIMER1_OVF_vect) */
     DDRB |= _BV(PB5) | _BV(PB6);
 
     /* USART0: 57600 baud (double speed), 8N1, receive interrupt; the transmit interrupt runs while bytes wait */

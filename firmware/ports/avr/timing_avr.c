@@ -5,9 +5,11 @@
  * advances 1 ms per step, and SET_FINS commands (both fins the same large pattern, a newer command identity each
  * time, alternating between two patterns so that the rate rule and the transition's stretch work) arrive so that
  * the step completing each frame is the first tick at or after both fins' stroke turning point: the frame's first
- * bytes arrive 3-4 ms before the turning point, its last 8 bytes in that step. That step runs the fins past the
- * turning point (both latch: the rate rule, clip and stretch for each, two LATCH reports encoded), decodes and
- * handles the SET_FINS and encodes its STATUS, hands the fins the new command, then runs the 10 ms tick (lease,
+ * bytes arrive 3-4 ms before the turning point, its last bytes, and a HEARTBEAT right behind it, in that step
+ * (32 bytes, what one step reads). That step runs the fins past the turning point (both latch: the rate rule,
+ * clip and stretch for each, two LATCH reports encoded), decodes and handles the SET_FINS and the HEARTBEAT and
+ * encodes two STATUS replies (the most messages one 32-byte read can complete: the shortest frame, a STOP or
+ * HEARTBEAT, is 26 bytes), hands the fins the new command, then runs the 10 ms tick (lease,
  * watchdog, hand-over) and writes both servos and up to 64 bytes to the UART. A heartbeat between commands keeps
  * the watchdog fed; the scripted UART takes every byte the core offers.
  *
@@ -50,7 +52,7 @@ static pfw_app app;
 static uint32_t fake_ms;
 static const uint8_t *feed;
 static size_t feed_len;
-static uint8_t frame[2 * PFW_MAX_FRAME_DATA + 8];
+static uint8_t frame[2 * (2 * PFW_MAX_FRAME_DATA + 8)]; /* room for two frames back to back */
 static uint16_t seq, command;
 static volatile uint8_t sink;
 
@@ -92,7 +94,7 @@ static void put32(uint8_t *p, uint32_t v)
 }
 
 /* An escaped Receive Packet frame carrying one message of `type` with `body` (docs/protocol.md, sections 1-2). */
-static size_t build(uint8_t type, const uint8_t *body, uint8_t body_len)
+static size_t build(uint8_t *out, uint8_t type, const uint8_t *body, uint8_t body_len)
 {
     uint8_t data[12 + 10 + 28];
     uint8_t *msg = data + 12;
@@ -109,7 +111,7 @@ static size_t build(uint8_t type, const uint8_t *body, uint8_t body_len)
     memcpy(msg + 8, body, body_len);
     crc = pfw_crc16(msg, n);
     put16(msg + n, crc);
-    return pfw_frame_encode(data, 12u + n + 2u, frame, sizeof frame);
+    return pfw_frame_encode(data, 12u + n + 2u, out, 2 * PFW_MAX_FRAME_DATA + 8);
 }
 
 static size_t build_set_fins(int variant)
@@ -124,7 +126,7 @@ static size_t build_set_fins(int variant)
     put16(body + 18, 1000u); /* lease [ms] */
     put32(body + 20, 0u);    /* no deadline */
     put32(body + 24, 0u);
-    return build(PFW_SET_FINS, body, sizeof body);
+    return build(frame, PFW_SET_FINS, body, sizeof body);
 }
 
 /* When fin's half-stroke in progress ends [clock ms, float], or -1 if it is still or already over. */
@@ -159,7 +161,7 @@ int main(void)
         const pfw_fw *fw = &app.fw;
         int worst = 0;
         if (held && fake_ms == target) {
-            feed_len += held; /* the frame's last bytes: the message completes in this step */
+            feed_len += held; /* the frames' last bytes: both messages complete in this step */
             held = 0;
             worst = 1;
         } else if (!held && feed_len == 0u) {
@@ -168,16 +170,20 @@ int main(void)
                 turn - (float)fake_ms <= 4.0f) {
                 /* both fins turn in 3..4 ms: a new command's frame starts now (two steps read it, both before
                  * the turning point), and its last bytes wait for the first tick at or after the turning point */
+                size_t beat;
                 variant ^= 1;
                 len = build_set_fins(variant);
-                held = 8u;
+                beat = build(frame + len, PFW_HEARTBEAT, NULL, 0); /* a keep-alive right behind it */
+                held = 32u - beat; /* the last step's read (32 bytes) completes both messages */
+                len += beat;
+                held += beat;
                 feed = frame, feed_len = len - held;
                 target = app.last_tick_ms + PFW_TICK_MS;
                 while ((float)target < turn)
                     target += PFW_TICK_MS;
                 last_message = fake_ms;
             } else if (fake_ms - last_message >= HEARTBEAT_MS && (turn < 0.0f || turn - (float)fake_ms > 8.0f)) {
-                len = build(PFW_HEARTBEAT, NULL, 0);
+                len = build(frame, PFW_HEARTBEAT, NULL, 0);
                 feed = frame, feed_len = len;
                 last_message = fake_ms;
             }

@@ -59,7 +59,7 @@ typedef struct {
 
 typedef struct {
     uint64_t rise, pulses;
-    double last_us, min_us, max_us, logged_us;
+    double first_us, last_us, min_us, max_us, logged_us; /* min, max: from the second pulse on (see on_servo) */
     int high;
 } servo_t;
 
@@ -113,9 +113,12 @@ static void on_servo(struct avr_irq_t *irq, uint32_t value, void *param)
         s->rise = avr->cycle;
     } else if (!value && s->high) {
         double us = 1e6 * (double)(avr->cycle - s->rise) / (double)avr->frequency;
-        if (s->pulses == 0 || us < s->min_us)
+        /* The first pulse is the timer's start (simavr 1.6 gives a sub-microsecond one there), not a command. */
+        if (s->pulses == 0)
+            s->first_us = us;
+        if (s->pulses == 1 || (s->pulses > 1 && us < s->min_us))
             s->min_us = us;
-        if (s->pulses == 0 || us > s->max_us)
+        if (s->pulses == 1 || (s->pulses > 1 && us > s->max_us))
             s->max_us = us;
         s->pulses++;
         s->last_us = us;
@@ -351,8 +354,8 @@ static void report(FILE *out, const char *elf, int stack_floor)
     fprintf(out, "],\n \"servos\": [");
     for (int i = 0; i < N_SERVOS; i++)
         fprintf(out, "%s{\"pin\": \"%s\", \"pulses\": %" PRIu64 ", \"last_us\": %.2f, \"min_us\": %.2f, "
-                     "\"max_us\": %.2f}", i ? ", " : "", i ? "OC1B" : "OC1A", servos[i].pulses, servos[i].last_us,
-                servos[i].min_us, servos[i].max_us);
+                     "\"max_us\": %.2f, \"first_us\": %.2f}", i ? ", " : "", i ? "OC1B" : "OC1A", servos[i].pulses, servos[i].last_us,
+                servos[i].min_us, servos[i].max_us, servos[i].first_us);
     fprintf(out, "]");
     if (stack_floor > 0) {
         int ramend = (int)avr->ramend, lowest = ramend + 1;

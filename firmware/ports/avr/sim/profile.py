@@ -10,12 +10,13 @@ import sys
 
 
 def main() -> None:
+    """Print the costliest functions of a profile (arguments: see the module docstring)."""
     elf, path = sys.argv[1], sys.argv[2]
     top = int(sys.argv[3]) if len(sys.argv) > 3 else 25
     symbols = []
     for line in subprocess.run(["avr-nm", "-n", elf], capture_output=True, text=True, check=True).stdout.splitlines():
         parts = line.split()
-        if len(parts) == 3 and parts[1] in "tTwW":
+        if len(parts) == 3 and parts[1] in "tTwW" and not parts[2].startswith("__stack"):
             symbols.append((int(parts[0], 16), parts[2]))
     starts = [a for a, _ in symbols]
     cost: dict[str, int] = {}
