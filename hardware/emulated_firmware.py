@@ -5,8 +5,9 @@
 * :class:`PythonFirmware` (the default, and the specification): the reference state machine
   :class:`pectoral_gym.hardware.radio.firmware.Firmware`, which hands its setpoint to the model's own fins
   (:func:`pectoral_gym.hardware.finreplay.apply_firmware`), ticked before every :data:`CHUNK` of the model;
-* :class:`CFirmware` (:mod:`pectoral_gym.hardware.emulated_cfirmware`): the robot's C firmware core through its
-  binding, fed the bytes the robot's XBee would deliver, its fins followed by the model.
+* :class:`CFirmwareAdapter`: the robot's C firmware core through its binding
+  (:class:`pectoral_gym.hardware.radio.cfirmware.CFirmware`), fed what the robot's XBee would deliver and ticked
+  every 10 ms of emulated time; the model's fins follow the C fins' latches and halts.
 
 Both satisfy :class:`RobotFirmware`: ``receive`` takes the bytes from the PC's radio (the PC's XBee sends
 Transmit Requests, ``0x10``) and returns the escaped Receive Packet frames (``0x90``) the PC's XBee hands the PC;
@@ -18,18 +19,21 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from types import SimpleNamespace
 from typing import Any, Protocol
 
 import numpy as np
 
-from pectoral_gym.hardware.finreplay import CHUNK, apply_firmware, latched, stroke_kinds
+from pectoral_gym.hardware.finreplay import CHUNK, apply_firmware, force_latch, latched, stroke_kinds
 from pectoral_gym.hardware.radio import protocol as pr
 from pectoral_gym.hardware.radio import xbee as xb
-from pectoral_gym.hardware.radio.firmware import Firmware, FirmwareConfig
+from pectoral_gym.hardware.radio.firmware import MS_GUARD, Firmware, FirmwareConfig
 from pectoral_gym.model import strokes
 from pectoral_gym.model.models import FishModel
+from pectoral_gym.model.params import FinBeat
 
-__all__ = ["ROBOT_ADDRESS", "FIRMWARES", "RobotFirmware", "PythonFirmware", "make_firmware", "trace_entry"]
+__all__ = ["ROBOT_ADDRESS", "PC_ADDRESS", "FIRMWARES", "RobotFirmware", "PythonFirmware", "CFirmwareAdapter",
+           "make_firmware", "trace_entry"]
 
 ROBOT_ADDRESS = 0x0013A20000000001  # 64-bit source address the emulated XBee reports
 FIRMWARES = ("python", "c")  # the implementations an emulated robot can run
@@ -47,9 +51,9 @@ class RobotFirmware(Protocol):
     firmware: Any
     decoder: Any
 
-    def receive(self, data: bytes, now: float, model: FishModel,
-                keep: Callable[[], bool]) -> tuple[list[bytes], list[pr.Message]]:
-        """Bytes from the PC at ``now`` (the model is there): frames to send back, and the messages acted on.
+    def receive(self, data: bytes, now: float, model: FishModel, keep: Callable[[], bool],
+                trace: list | None) -> tuple[list[bytes], list[pr.Message]]:
+        """Bytes from the PC at ``now`` (after :meth:`advance` to ``now``): frames to send back, messages heard.
 
         ``keep()`` is asked once per message; ``False`` drops it (the emulator's loss injection).
         """
@@ -91,8 +95,8 @@ class PythonFirmware:
         self.firmware = Firmware(config, boot=boot, power_up=power_up)
         self.decoder = pr.StreamDecoder()
 
-    def receive(self, data: bytes, now: float, model: FishModel,
-                keep: Callable[[], bool]) -> tuple[list[bytes], list[pr.Message]]:
+    def receive(self, data: bytes, now: float, model: FishModel, keep: Callable[[], bool],
+                trace: list | None) -> tuple[list[bytes], list[pr.Message]]:
         """See :meth:`RobotFirmware.receive`: decoded, handed to the rules, the fins handed their patterns."""
         messages = [m for m in self.decoder.feed(data) if keep()]
         self.firmware.crc_errors = self.decoder.crc_errors + self.decoder.checksum_errors
@@ -132,6 +136,158 @@ class PythonFirmware:
         apply_firmware(self.firmware, model)
 
 
+PC_ADDRESS = 0x0013A20000000002  # 64-bit source address of the PC's XBee, as the robot's XBee reports it
+_GRID_MS = 10  # the C firmware's tick [ms]
+_EPS = 1e-9  # [s]: a model this close to a time is there (float sums of chunks)
+
+
+class CFirmwareAdapter:
+    """The C firmware core as the emulated robot's dsPIC; the model's fins follow the C fins.
+
+    The robot's XBee turns the PC's Transmit Requests into Receive Packets (from :data:`PC_ADDRESS`) for the
+    core, and the core's Transmit Requests into Receive Packets to the PC; frames the PC's XBee would not send
+    (a bad checksum, another frame type) never reach the core. The core's clock is the emulated time in whole ms;
+    it is ticked at every multiple of 10 ms. After each call the model runs to each latch or halt the core
+    reports, at its time, and applies it: a latch starts the reported half-stroke
+    (:func:`pectoral_gym.hardware.finreplay.force_latch`), a halt rests both fins at the core's angles. The
+    model thus lags the core by less than a tick between its calls.
+
+    Args:
+        config: The rules' settings (passed to the core).
+        boot: The boot id of this power-up.
+        variant: ``None``, or a deliberately broken build (``pectoral_gym.hardware.radio.cfirmware.VARIANTS``).
+        power_up: Emulated time of the power-up [s].
+    """
+
+    def __init__(self, config: FirmwareConfig | None, boot: int, variant: str | None = None, power_up: float = 0.0):
+        from pectoral_gym.hardware.radio.cfirmware import CFirmware
+        from pectoral_gym.hardware.radio.radioproxy import FrameSplitter
+
+        self.config, self.variant = config, variant
+        self.core = CFirmware(config, boot=boot, power_up_ms=_ms(power_up), variant=variant)
+        self.firmware = self  # what tests inspect: state, running, boot, ignored
+        self._splitter, self._tx_splitter = FrameSplitter(), FrameSplitter()
+        self._next_tick_ms = _ms(power_up)
+
+    # ------------------------------------------------------------ what tests and logs read
+    @property
+    def state(self) -> pr.RobotState:
+        """The core's state."""
+        return pr.RobotState(self.core.state)
+
+    @property
+    def running(self) -> bool:
+        """Whether the fins beat."""
+        return self.core.state == pr.RobotState.RUNNING
+
+    @property
+    def boot(self) -> int:
+        """This power-up's boot id."""
+        return self.core.boot
+
+    @property
+    def ignored(self) -> dict[str, int]:
+        """Messages not acted on, by reason (as :attr:`Firmware.ignored`)."""
+        info = self.core.info()
+        names = ("duplicate", "stale", "retired", "refused", "copy", "bad_lease", "late", "foreign_stop")
+        return {**{n: info[n] for n in names}, "boot": info["boot_mismatch"]}
+
+    @property
+    def decoder(self) -> SimpleNamespace:
+        """The core's decoder counters (``messages``, ``crc_errors``, ...)."""
+        info = self.core.info()
+        names = ("frames", "messages", "skipped_bytes", "framing_errors", "truncated", "checksum_errors",
+                 "crc_errors", "malformed", "other_frames")
+        return SimpleNamespace(**{n: info[n] for n in names})
+
+    # ------------------------------------------------------------ RobotFirmware
+    def receive(self, data: bytes, now: float, model: FishModel, keep: Callable[[], bool],
+                trace: list | None) -> tuple[list[bytes], list[pr.Message]]:
+        """See :meth:`RobotFirmware.receive`: re-framed as the robot's XBee delivers it, at the ms ``now`` is in."""
+        frames, messages = [], []
+        for unit in self._splitter.feed(data):
+            try:
+                frame = xb.decode_frame(unit)
+            except xb.ProtocolError:
+                continue  # garbage or a damaged frame: the PC's XBee sends nothing
+            if frame[0] != xb.TX_REQUEST or (payload := xb.rf_data(frame)) is None or not keep():
+                continue
+            try:
+                messages.append(pr.decode_message(payload))  # the record; the core decodes for itself
+            except xb.ProtocolError:
+                pass
+            frames.append(xb.encode_frame(xb.rx_packet(payload, PC_ADDRESS)))
+        if not frames:
+            return [], messages
+        now_ms = max(_ms(now), self._next_tick_ms - _GRID_MS)  # never before the core's last tick
+        self.core.receive_bytes(b"".join(frames), now_ms)
+        self._follow(model, now_ms, trace)
+        return self._sent(), messages
+
+    def advance(self, model: FishModel, target: float, trace: list | None) -> list[bytes]:
+        """See :meth:`RobotFirmware.advance`: a tick at every multiple of 10 ms up to ``target``."""
+        while self._next_tick_ms <= _ms(target):
+            self.core.tick(self._next_tick_ms)
+            self._follow(model, self._next_tick_ms, trace)
+            self._next_tick_ms += _GRID_MS
+        return self._sent()
+
+    def reboot(self, now: float, model: FishModel, boot: int) -> None:
+        """See :meth:`RobotFirmware.reboot`; the core powers up with its fins at rest at 90 deg, so does the model."""
+        from pectoral_gym.hardware.radio.cfirmware import CFirmware
+
+        self.core = CFirmware(self.config, boot=boot, power_up_ms=_ms(now), variant=self.variant)
+        self._splitter = type(self._splitter)()  # a frame half received is lost; one half sent too
+        self._tx_splitter = type(self._tx_splitter)()
+        _rest(model, self.core.fin_angles())
+
+    # ------------------------------------------------------------ the model follows the core
+    def _sent(self) -> list[bytes]:
+        """The core's Transmit Requests, as the PC's XBee hands them to the PC."""
+        out = []
+        for unit in self._tx_splitter.feed(self.core.take_tx()):
+            payload = xb.rf_data(xb.decode_frame(unit))
+            if payload is not None:
+                out.append(to_pc(payload))
+        return out
+
+    def _follow(self, model: FishModel, until_ms: int, trace: list | None) -> None:
+        """Run the model through the core's latches and halts since the last call, then to ``until_ms``."""
+        running = self.running
+        for event in self.core.take_events():
+            t = (event.ms + event.frac_ms) / 1000.0
+            _run_model(model, t, trace, running)
+            if event.kind == "halt":
+                _rest(model, np.asarray(event.angles))
+            else:
+                force_latch(model, event.fin, t, np.asarray(event.pattern), event.turn, event.power)
+                pending = self.core.raw_fin(event.fin)[10:14].astype(float)
+                if pending[2] > 0:  # what the fin latches next, should the model reach its turning point first
+                    model.pending[0, event.fin] = (*pending[:2], pending[2] / 1000.0, pending[3])
+        _run_model(model, until_ms / 1000.0, trace, running)
+
+
+def _ms(t: float) -> int:
+    """Emulated time ``t`` [s] as the core's whole-ms clock (a hair below a whole ms counts as it)."""
+    return int(math.floor(1000.0 * t + MS_GUARD))
+
+
+def _run_model(model: FishModel, until: float, trace: list | None, running: bool) -> None:
+    """Advance the model to ``until`` [s] in chunks of at most :data:`CHUNK`."""
+    while model.time < until - _EPS:
+        model.advance(min(CHUNK, until - model.time))
+        if trace is not None:
+            trace.append(trace_entry(model, running))
+
+
+def _rest(model: FishModel, angles: np.ndarray) -> None:
+    """Both fins of fish 0 held still at ``angles`` [rad] from now (a halt, as ``apply_firmware`` does)."""
+    time_now = model.time
+    model.reset(model.state.copy(), right=FinBeat.rest(float(angles[0])), left=FinBeat.rest(float(angles[1])),
+                index=np.arange(1))
+    model.time = time_now
+
+
 def make_firmware(impl: str, config: FirmwareConfig | None, boot: int, variant: str | None = None) -> RobotFirmware:
     """The rules an emulated robot runs: ``impl`` ``"python"`` (reference) or ``"c"`` (``variant``: a broken build)."""
     if impl == "python":
@@ -139,7 +295,5 @@ def make_firmware(impl: str, config: FirmwareConfig | None, boot: int, variant: 
             raise ValueError("a firmware variant needs the C firmware (firmware_impl='c')")
         return PythonFirmware(config, boot)
     if impl == "c":
-        from pectoral_gym.hardware.emulated_cfirmware import CFirmware
-
-        return CFirmware(config, boot, variant=variant)
+        return CFirmwareAdapter(config, boot, variant=variant)
     raise ValueError(f"firmware_impl must be one of {', '.join(FIRMWARES)}, got {impl!r}")

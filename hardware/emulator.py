@@ -296,7 +296,7 @@ class EmulatedRobot:
 
     def _handle(self, data: bytes) -> None:
         with self._lock:
-            frames, messages = self.rules.receive(data, self.now(), self.model, self._keep)
+            frames, messages = self.rules.receive(data, self.now(), self.model, self._keep, self.trace)
             self.received += messages
         for frame in frames:
             self._write(frame)
@@ -356,7 +356,7 @@ def main(argv: list[str] | None = None) -> int:
                               firmware=FirmwareConfig(watchdog_timeout=args.watchdog), start_pose=start,
                               loss=args.loss, camera_port=args.camera_port, camera_fps=args.camera_fps,
                               seed=args.seed, firmware_impl=args.firmware, variant=args.variant)
-    except (ValueError, OSError, ImportError) as err:
+    except (ValueError, OSError, RuntimeError) as err:
         parser.error(str(err))
     robot.start()
     print(f"emulated robot listening on {robot.url}", flush=True)

@@ -130,12 +130,19 @@ def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``pectoral-firmware-check``."""
     parser = argparse.ArgumentParser(
         prog=prog_name("pectoral-firmware-check", "pectoral_gym.hardware.firmware_check"),
-        description=__doc__.split("\n\n")[1].replace("\n", " "), formatter_class=HelpFormatter,
-        epilog=examples("pectoral-firmware-check",
+        description=("Check a robot firmware against the robot rules of the radio protocol (docs/protocol.md, "
+                     "section 5), one scripted scenario per rule, over the radio: a robot on --port (its fins free "
+                     "to move; no camera) or an emulated one (--emulate) running the Python reference or the C "
+                     "firmware. Verdicts come from the robot's STATUS and LATCH messages and the robot-clock times "
+                     "they carry, so the radio's latency does not enter them. Prints PASS, FAIL or SKIP per rule "
+                     "with the reason. Exit status: 0 every rule passed, 1 a rule failed (or no robot answered), "
+                     "3 none failed but some were skipped, 2 bad arguments."),
+        formatter_class=HelpFormatter,
+        epilog=examples("pectoral-firmware-check --emulate",
                         "pectoral-firmware-check --port /dev/ttyUSB0 --dest64 0013A20041B2C3D4",
                         "pectoral-firmware-check --emulate --firmware c --json report.json",
                         "pectoral-firmware-check --emulate --firmware c --variant ignore_lease   # must fail",
-                        note="The fins must be free to move. Exit status 0 only if every rule passed."))
+                        note="The round trip is measured first; the scenarios need it below 0.45 s."))
     where = parser.add_mutually_exclusive_group(required=True)
     where.add_argument("--port", metavar="URL", help="the PC's XBee: a serial device or serial_for_url URL")
     where.add_argument("--emulate", action="store_true", help="start an emulated robot in this process")
@@ -186,7 +193,7 @@ def main(argv: list[str] | None = None) -> int:
                 port = stack.enter_context(serial.serial_for_url(args.port, baudrate=args.baudrate, timeout=0.01))
                 probe = Probe(port, dest64=dest64)
             rtt, results = check(probe, args.rules)
-    except (OSError, ValueError, ConnectionError) as err:
+    except (OSError, ValueError, ConnectionError, RuntimeError) as err:
         print(f"pectoral-firmware-check: {err}", file=sys.stderr)
         return 1
     report = {"target": "emulator" if args.emulate else args.port, "firmware": args.firmware if args.emulate else None,
