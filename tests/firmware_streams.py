@@ -99,8 +99,9 @@ class ReferenceRobot:
             stroke = fins[fin]
             beat = stroke[strokes.BIAS:strokes.RATIO + 1].copy()
             power = bool(stroke[strokes.POWER] > 0.5)
-            latches.append((round(t * 1000.0, 6), fin, power, bool(stroke[strokes.ANGLE_FROM] == stroke[strokes.ANGLE_TO]),
-                            float(stroke[strokes.ANGLE_FROM]), tuple(float(v) for v in beat)))
+            still = bool(stroke[strokes.ANGLE_FROM] == stroke[strokes.ANGLE_TO])
+            latches.append((round(t * 1000.0, 6), fin, power, still, float(stroke[strokes.ANGLE_FROM]),
+                            tuple(float(v) for v in beat)))
             report = self.fw.latch_report(round(t, 9), fin, beat, stroke[strokes.ANGLE_FROM], power)
             if report is not None:
                 tx.append((self.address, pr.encode_message(report)))
@@ -243,7 +244,8 @@ def _pattern(rng: np.random.Generator, last: list[int]) -> list[int]:
     if roll < 0.2:  # small changes: within the rate rule's reach or just beyond
         return [int(np.clip(w + rng.integers(-200, 201), 0, 65535)) for w in last]
     fin = [int(rng.integers(0, 3300)), int(rng.choice([0, rng.integers(0, 1700)])),
-           int(rng.choice([1000, 500, 800, rng.integers(50, 5500)])), int(rng.choice([1000, 2000, rng.integers(100, 7000)]))]
+           int(rng.choice([1000, 500, 800, rng.integers(50, 5500)])),
+           int(rng.choice([1000, 2000, rng.integers(100, 7000)]))]
     other = fin if rng.random() < 0.4 else [int(rng.integers(0, 3300)), int(rng.integers(0, 1700)),
                                              int(rng.integers(300, 5000)), int(rng.integers(300, 7000))]
     return fin + other
@@ -309,7 +311,8 @@ def _traffic(rng: np.random.Generator, s: Stream, pcs: list[_Pc], main: int, ret
         pc.command += 1 if c < 0.8 else 0 if c < 0.9 else -int(rng.integers(1, 5)) if c < 0.95 else 40000
         if c < 0.8 or rng.random() < 0.5:
             pc.words = _pattern(rng, pc.words)
-        lease = int(rng.choice([800, 800, 1000, rng.integers(1, 1001), 0, 1001, 65535], p=[.4, .1, .1, .3, .03, .04, .03]))
+        lease = int(rng.choice([800, 800, 1000, rng.integers(1, 1001), 0, 1001, 65535],
+                               p=[.4, .1, .1, .3, .03, .04, .03]))
         d = rng.random()
         deadline, boot = 0, 0
         if d > 0.4:
@@ -349,7 +352,11 @@ def _traffic(rng: np.random.Generator, s: Stream, pcs: list[_Pc], main: int, ret
                                       set_fins_body(pc.words, pc.command, 800, 0, 0)), rng))
     pc.frames.pop()
     r = rng.random()
-    if r < 0.3:
+    if r < 0.15:  # a damaged message in an intact frame: only the CRC-16 catches it
+        rf = bytearray(message(pr.MsgType.HEARTBEAT, pc.session, pc.seq))
+        rf[int(rng.integers(0, len(rf)))] ^= 1 << int(rng.integers(0, 8))
+        return xb.encode_frame(xb.rx_packet(bytes(rf), pc.address))
+    if r < 0.35:
         i = int(rng.integers(1, len(good)))
         good[i] ^= 1 << int(rng.integers(0, 8))
     elif r < 0.5:
