@@ -31,7 +31,7 @@ void pfw_decoder_init(pfw_decoder *dec)
 
 static uint16_t get16(const uint8_t *p)
 {
-    return (uint16_t)((uint16_t)(p[0] << 8) | p[1]);
+    return (uint16_t)(((uint16_t)p[0] << 8) | p[1]); /* no int overflow where int is 16 bits */
 }
 
 static uint32_t get32(const uint8_t *p)
