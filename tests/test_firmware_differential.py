@@ -60,6 +60,7 @@ from firmware_streams import (  # noqa: E402
     generate,
     message,
     set_fins_body,
+    split_frames,
 )
 
 from pectoral_gym.hardware.radio import protocol as pr  # noqa: E402
@@ -197,6 +198,45 @@ def test_c_default_config_is_the_python_default():
 def test_config_that_is_not_whole_ms_is_refused():
     with pytest.raises(ValueError, match="whole ms"):
         CFirmware(FirmwareConfig(watchdog_timeout=0.2505))
+
+
+def test_binding_errors_are_one_line(monkeypatch, tmp_path):
+    from pectoral_gym.hardware.radio import cfirmware
+
+    with pytest.raises(RuntimeError, match="unknown firmware variant"):
+        cfirmware.library_path("no_such_variant")
+    shutil.copytree(FIRMWARE_DIR / "core", tmp_path / "core")
+    shutil.copy(FIRMWARE_DIR / "Makefile", tmp_path / "Makefile")
+    monkeypatch.setattr(cfirmware, "FIRMWARE_DIR", tmp_path)
+    monkeypatch.setattr(cfirmware.shutil, "which", lambda name: None)
+    monkeypatch.delenv("PECTORAL_FIRMWARE_LIB", raising=False)
+    with pytest.raises(RuntimeError, match="needs make and a C compiler") as err:
+        cfirmware.library_path()
+    assert "\n" not in str(err.value)
+    monkeypatch.setenv("PECTORAL_FIRMWARE_LIB", "/prebuilt/libpfw_host.so")
+    assert str(cfirmware.library_path()) == "/prebuilt/libpfw_host.so"
+
+
+def test_robot_answers_the_asker_and_reports_latches_to_the_served_address():
+    fw = CFirmware(FirmwareConfig(), boot=77, power_up_ms=0)
+    words = [1571, 500, 1000, 1000, 1571, 500, 1000, 1000]
+    rf = message(pr.MsgType.SET_FINS, 5, 1, set_fins_body(words, 1, 800, 0, 0))
+    fw.receive_bytes(xb.encode_frame(xb.rx_packet(rf, 0x0013A200ABCDEF01)), 3)
+    fw.tick(10)
+    fw.tick(20)
+    sent = [(dest, pr.decode_message(rf)) for dest, rf in split_frames(fw.take_tx())]
+    assert [(d, m.type) for d, m in sent] == [(0x0013A200ABCDEF01, pr.MsgType.STATUS)] + [
+        (0x0013A200ABCDEF01, pr.MsgType.LATCH)] * 2
+    status = sent[0][1].status
+    assert (status.state, status.served, status.boot, status.uptime_ms) == (pr.RobotState.RUNNING, 5, 77, 3)
+    # the fins took the command at the tick at 10 ms (the setpoint follows the command at a tick), from rest
+    events = fw.take_events()
+    assert [(e.kind, e.fin, e.ms, e.power, e.still) for e in events] == [("latch", 0, 10, True, False),
+                                                                          ("latch", 1, 10, True, False)]
+    assert events[0].pattern == pytest.approx((1.571, 0.5, 1.0, 1.0), rel=1e-6)
+    stroke = fw.fins()[0]
+    assert stroke.duration == pytest.approx(0.5) and stroke.elapsed == pytest.approx(0.01)
+    assert stroke.angle_to == pytest.approx(2.071, abs=1e-6) and stroke.power
 
 
 # ---------------------------------------------------------------- generated streams
