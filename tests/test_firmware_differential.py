@@ -163,28 +163,47 @@ def compare(a: Snapshot, b: Snapshot, t_s: float, lsb: Counter) -> list[str]:
     return problems
 
 
-def run_stream(stream: Stream, config: FirmwareConfig, lsb: Counter, variant: str | None = None) -> list[str]:
-    """Run ``stream`` through both robots; the first event's differences (empty: identical throughout)."""
+def run_stream(stream: Stream, config: FirmwareConfig, stats: Counter, variant: str | None = None) -> list[str]:
+    """Run ``stream`` through both robots; the first event's differences (empty: identical throughout).
+
+    ``stats`` counts the events, the messages and LATCH messages compared, the latches, and the LSB cases by field
+    (``lsb_<field>``), and keeps the largest latch-time error per second of stream and the largest angle error.
+    """
     ref = ReferenceRobot(config, stream.boot, stream.uptime0)
     c = CRobot(config, stream.boot, stream.uptime0, stream.clock0, variant)
+    lsb = Counter()
     for t, kind, data in stream.events:
-        problems = compare(ref.step(t, kind, data), c.step(t, kind, data), t / 1000.0, lsb)
+        a, b = ref.step(t, kind, data), c.step(t, kind, data)
+        problems = compare(a, b, t / 1000.0, lsb)
+        stats["events"] += 1
+        stats["messages"] += len(a.tx)
+        stats["latch_messages"] += sum(1 for _, rf in a.tx if rf[1] == pr.MsgType.LATCH)
+        stats["latches"] += len(a.latches)
+        if len(a.latches) == len(b.latches):
+            for x, y in zip(a.latches, b.latches, strict=True):
+                stats["max_latch_time_error_per_s"] = max(stats["max_latch_time_error_per_s"],
+                                                          abs(x[0] - y[0]) / max(t, 1.0))  # (ms / 1000) / (t / 1000)
+        stats["max_angle_error"] = max(stats["max_angle_error"], float(np.abs(a.fins[:, 9] - b.fins[:, 9]).max()))
         if problems:
             return [f"seed {stream.seed}, t = {t} ms, {kind} {data.hex() if isinstance(data, bytes) else data}:",
                     *problems]
+    stats.update({f"lsb_{field}": n for field, n in lsb.items()})
     return []
 
 
-def run_many(seeds: range, config: FirmwareConfig | None = None) -> tuple[int, Counter, list[str], int]:
+def run_many(seeds: range, config: FirmwareConfig | None = None) -> tuple[int, Counter, list[str]]:
+    """Streams of ``seeds`` through both robots: ``(identical streams, stats, failures)``."""
     config = config or FirmwareConfig()
-    lsb, failures, latch_messages = Counter(), [], 0
+    stats, failures = Counter(), []
     for seed in seeds:
-        stream = generate(seed)
-        problems = run_stream(stream, config, lsb)
+        problems = run_stream(generate(seed), config, stats)
         if problems:
             failures.append("\n".join(problems))
-        latch_messages += sum(1 for _, kind, data in stream.events if kind == "tick")  # upper bound of reports
-    return len(seeds) - len(failures), lsb, failures, latch_messages
+    return len(seeds) - len(failures), stats, failures
+
+
+def lsb_cases(stats: Counter) -> int:
+    return sum(n for key, n in stats.items() if key.startswith("lsb_"))
 
 
 # ---------------------------------------------------------------- one source of truth for the numbers
@@ -241,27 +260,28 @@ def test_robot_answers_the_asker_and_reports_latches_to_the_served_address():
 
 # ---------------------------------------------------------------- generated streams
 def test_generated_streams_are_identical():
-    identical, lsb, failures, _ = run_many(range(DEFAULT_STREAMS))
+    identical, stats, failures = run_many(range(DEFAULT_STREAMS))
     assert not failures, failures[0]
     assert identical == DEFAULT_STREAMS
-    assert sum(lsb.values()) <= 2, lsb
+    assert stats["latch_messages"] > 300 and stats["messages"] > 3000  # the streams do exercise the fins and rules
+    assert lsb_cases(stats) <= max(2, MAX_LSB_SHARE * stats["latch_messages"]), stats
 
 
 def test_generated_streams_with_other_limits_are_identical():
     config = FirmwareConfig(watchdog_timeout=0.3, max_lease=0.6,
                             limits=ServoLimits(max_speed=10.0, period_max=6.0, max_rate=(2.0, 1.0, 3.0, 5.0)))
-    identical, lsb, failures, _ = run_many(range(1000, 1030), config)
+    identical, stats, failures = run_many(range(1000, 1030), config)
     assert not failures, failures[0]
-    assert identical == 30
+    assert identical == 30 and lsb_cases(stats) <= 2
 
 
 @pytest.mark.slow
 def test_ten_thousand_generated_streams_are_identical():
     n = int(os.environ.get("PFW_DIFF_STREAMS", "10000"))
-    identical, lsb, failures, ticks = run_many(range(10_000, 10_000 + n))
-    print(f"{identical} of {n} streams identical; LSB cases {dict(lsb)}")
+    identical, stats, failures = run_many(range(10_000, 10_000 + n))
+    print(f"{identical} of {n} streams identical; {dict(stats)}")
     assert not failures, failures[0]
-    assert sum(lsb.values()) <= MAX_LSB_SHARE * ticks, lsb
+    assert lsb_cases(stats) <= max(2, MAX_LSB_SHARE * stats["latch_messages"]), stats
 
 
 # ---------------------------------------------------------------- wrap-around edges
@@ -291,9 +311,10 @@ def _edge_stream(seq0: int, command0: int, uptime0: int, clock0: int, ahead: int
        ahead=st.sampled_from([-1, 0, 1, 5, 50, 400, 2000]) | st.integers(-3000, 3000),
        lease=st.sampled_from([1, 10, 800, 1000]) | st.integers(1, 1000))
 def test_wrap_around_edges_are_identical(seq0, command0, uptime0, clock0, ahead, lease):
-    lsb = Counter()
-    problems = run_stream(_edge_stream(seq0, command0, uptime0, clock0, ahead, lease), FirmwareConfig(), lsb)
+    stats = Counter()
+    problems = run_stream(_edge_stream(seq0, command0, uptime0, clock0, ahead, lease), FirmwareConfig(), stats)
     assert not problems, "\n".join(problems)
+    assert lsb_cases(stats) == 0
 
 
 # ---------------------------------------------------------------- the broken variants are broken
@@ -341,7 +362,7 @@ def test_a_million_fuzzed_frames_find_nothing():
 
 if __name__ == "__main__":  # measured figures: python tests/test_firmware_differential.py --measure N
     count = int(sys.argv[2]) if len(sys.argv) > 2 else 200
-    ok, lsb_cases, bad, _ = run_many(range(count))
-    print(f"{ok} of {count} streams identical; LSB cases {dict(lsb_cases)}")
+    ok, totals, bad = run_many(range(count))
+    print(f"{ok} of {count} streams identical; {dict(totals)}")
     for text in bad[:3]:
         print(text)
