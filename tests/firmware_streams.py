@@ -259,6 +259,8 @@ def generate(seed: int) -> Stream:
     clock0 = int(rng.choice([0, rng.integers(0, 2**32), 2**32 - int(rng.integers(1, 3000))]))
     s = Stream(seed, boot, uptime0, clock0)
     pcs = [_Pc(rng) for _ in range(3)]
+    if rng.random() < 0.4:
+        return _calm(rng, s, pcs[0])
     main, retired = 0, []
     end = int(rng.integers(1000, 3000))
     t, silent_until, pending = 0, -1, b""
@@ -288,6 +290,37 @@ def generate(seed: int) -> Stream:
             raw, pending = raw[:cut], raw[cut:]
         s.events.append((at, "rx", raw))
         t = max(t, at)
+    return s
+
+
+def _calm(rng: np.random.Generator, s: Stream, pc: _Pc) -> Stream:
+    """A controller at work: a new command every 0.5 s, keep-alive copies every 0.1 s, deadlines 0.95 s ahead.
+
+    The fins run for seconds: many turning points, the rate rule and the transition's stretch at work.
+    """
+    end, t = int(rng.integers(2000, 5000)), 0
+    jitter = int(rng.choice([0, 3, 9]))
+    k = 0
+    while t < end:
+        t += 10
+        s.events.append((t, "tick", None))
+        if t % 100 != 50:
+            continue
+        at = t + int(rng.integers(0, jitter + 1))
+        pc.seq += 1
+        if k % 5 == 0:
+            pc.command += 1
+            pc.words = _pattern(rng, pc.words)
+        k += 1
+        deadline = (_uptime(s, at) + 950) & 0xFFFFFFFF
+        body = set_fins_body(pc.words, pc.command, 800, deadline or 1, s.boot)
+        raw = pc.frame(message(pr.MsgType.SET_FINS, pc.session, pc.seq, body), rng)
+        if rng.random() < 0.03:
+            raw = bytes(rng.integers(0, 256, 12).astype(np.uint8).tobytes()) + raw  # line noise before it
+        s.events.append((at, "rx", raw))
+        if at > t:  # a read between ticks: the next tick comes after it
+            s.events.append((t + 10, "tick", None))
+            t += 10
     return s
 
 

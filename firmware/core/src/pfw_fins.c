@@ -85,8 +85,6 @@ int pfw_event_take(pfw_fw *fw, pfw_event *ev)
     return 1;
 }
 
-void pfw_latch_report(pfw_fw *fw, unsigned fin, uint32_t ms, float frac);
-
 /* strokes.latch: start the next half-stroke of fin f at time base_ms + off_ms with its pending pattern. */
 static void latch(pfw_fw *fw, unsigned f, uint32_t base_ms, float off_ms)
 {

@@ -19,5 +19,9 @@ float pfw_round_even(float x);
 void pfw_advance(pfw_fw *fw, uint32_t now_ms);
 void pfw_apply(pfw_fw *fw);
 void pfw_fin_rest(pfw_fin *fin, float angle);
+/* Queue the STATUS answering ack (pfw_output.c). */
+void pfw_status(pfw_fw *fw, const pfw_msg *ack, uint32_t now_ms);
+/* The LATCH report of fin's latch at clock ms + frac (sent while running, for half-strokes that move). */
+void pfw_latch_report(pfw_fw *fw, unsigned fin, uint32_t ms, float frac);
 
 #endif
