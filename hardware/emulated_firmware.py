@@ -292,7 +292,7 @@ def make_firmware(impl: str, config: FirmwareConfig | None, boot: int, variant: 
     """The rules an emulated robot runs: ``impl`` ``"python"`` (reference) or ``"c"`` (``variant``: a broken build)."""
     if impl == "python":
         if variant is not None:
-            raise ValueError("a firmware variant needs the C firmware (firmware_impl='c')")
+            raise ValueError("a firmware variant is a build of the C firmware: it needs --firmware c")
         return PythonFirmware(config, boot)
     if impl == "c":
         return CFirmwareAdapter(config, boot, variant=variant)

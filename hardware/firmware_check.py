@@ -22,7 +22,7 @@ import numpy as np
 
 from pectoral_gym.hardware.conformance import fins, sessions, timing
 from pectoral_gym.hardware.conformance.judge import Broken, Result, Unchecked
-from pectoral_gym.hardware.conformance.probe import Probe
+from pectoral_gym.hardware.conformance.probe import READ_SLICE, Probe
 from pectoral_gym.hardware.radio import protocol as pr
 from pectoral_gym.hardware.radio import xbee as xb
 from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
@@ -108,7 +108,7 @@ def emulated_probe(firmware: str = "python", variant: str | None = None, seed: i
 
             robot = EmulatedRobot(port=0, speed=speed, seed=seed, **options).start()
             stack.callback(robot.stop)
-            port = serial.serial_for_url(robot.url, timeout=0.01)
+            port = serial.serial_for_url(robot.url, timeout=READ_SLICE)
             stack.callback(port.close)
             probe = Probe(port, REAL_CLOCK, speed=speed, rng=rng)
         probe.reboot_robot = robot.reboot
@@ -181,6 +181,9 @@ def main(argv: list[str] | None = None) -> int:
         dest64 = xb.BROADCAST if args.dest64 is None else int(args.dest64, 16)
     except ValueError:
         parser.error(f"--dest64 must be 16 hex digits, got {args.dest64!r}")
+    if args.port and "://" not in args.port and dest64 == xb.BROADCAST:
+        print("pectoral-firmware-check: messages are broadcast, so every robot on this radio channel obeys them; "
+              "pass --dest64 <the robot XBee's address>", file=sys.stderr)
     started = time.monotonic()
     try:
         with contextlib.ExitStack() as stack:
@@ -190,7 +193,7 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 import serial
 
-                port = stack.enter_context(serial.serial_for_url(args.port, baudrate=args.baudrate, timeout=0.01))
+                port = stack.enter_context(serial.serial_for_url(args.port, baudrate=args.baudrate, timeout=READ_SLICE))
                 probe = Probe(port, dest64=dest64)
             rtt, results = check(probe, args.rules)
     except (OSError, ValueError, ConnectionError, RuntimeError) as err:

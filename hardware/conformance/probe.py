@@ -23,9 +23,9 @@ from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 from pectoral_gym.hardware.radio import protocol as pr
 from pectoral_gym.hardware.radio import xbee as xb
 
-__all__ = ["Answer", "Probe", "Session"]
+__all__ = ["READ_SLICE", "Answer", "Probe", "Session", "with_seq"]
 
-_READ_SLICE = 0.01  # longest single read of a serial port [PC s]: waits are cut into these
+READ_SLICE = 0.01  # the serial port's read timeout [PC s]: waits are cut into reads this long
 
 
 @dataclass(frozen=True)
@@ -100,8 +100,8 @@ class Probe:
     """Sends protocol messages over a byte stream and collects the robot's answers.
 
     Args:
-        port: A serial-like object: ``write(bytes)`` and ``read(size)`` (a pyserial port, whose ``timeout``
-            the probe sets, or a :class:`pectoral_gym.hardware.radio.pipe.StreamEnd`, read with a timeout).
+        port: A serial-like object: ``write(bytes)`` and ``read(size)`` (a pyserial port opened with a short
+            timeout, 0.01 s, or a :class:`pectoral_gym.hardware.radio.pipe.StreamEnd`, read with a timeout).
         clock: The PC's clock (a ``VirtualClock`` with an in-process emulator in lockstep).
         speed: Robot seconds per PC second (an accelerated emulator); robot durations are divided by it.
         dest64: The robot XBee's 64-bit address (broadcast by default).
@@ -156,11 +156,9 @@ class Probe:
         return xb.encode_frame(xb.tx_request(bytes(payload), self.dest64))
 
     def _read(self, timeout: float) -> None:
-        timeout = max(min(timeout, _READ_SLICE if not self._stream else timeout), 0.0)
         if self._stream:
-            data = self.port.read(4096, timeout=timeout)
-        else:
-            self.port.timeout = timeout
+            data = self.port.read(4096, timeout=max(timeout, 0.0))
+        else:  # a serial port opened with a timeout of about READ_SLICE (reconfiguring it per read costs a syscall)
             data = self.port.read(max(1, getattr(self.port, "in_waiting", 0) or 1))
         if data:
             t = self.now()
