@@ -8,6 +8,7 @@ packages gcc-avr, avr-libc, binutils-avr, simavr, libsimavr-dev, libelf-dev, pkg
 
 from __future__ import annotations
 
+import fcntl
 import json
 import math
 import shutil
@@ -30,7 +31,11 @@ TICK_S = 0.010  # the firmware's tick
 
 
 def _make(*targets: str) -> subprocess.CompletedProcess:
-    return subprocess.run(["make", "-C", str(FIRMWARE), *targets], capture_output=True, text=True, timeout=600)
+    """``make -C firmware targets``, one at a time across test workers (pytest -n: they share firmware/build)."""
+    (FIRMWARE / "build").mkdir(exist_ok=True)
+    with open(FIRMWARE / "build" / ".ports-make.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+        return subprocess.run(["make", "-C", str(FIRMWARE), *targets], capture_output=True, text=True, timeout=600)
 
 
 def _need_avr_gcc() -> None:
