@@ -95,3 +95,17 @@ def test_cli_rejects_bad_arguments(argv):
     with pytest.raises(SystemExit) as exc:
         main(argv)
     assert exc.value.code == 2
+
+
+def test_latch_pairs_skip_lost_reports_and_quiet_intervals():
+    from pectoral_gym.hardware.conformance import fins
+
+    def latch(seq, uptime, fin):
+        body = pr.Latch(uptime, 9, fin, seq % 2 == 0, 1.5, (1.5, 0.2, 0.8, 1.0))
+        return pr.Message(pr.MsgType.LATCH, seq, 1, latch=body)
+
+    reports = [latch(1, 0, 0), latch(2, 10, 1), latch(3, 400, 0), latch(5, 800, 0), latch(6, 1200, 0),
+               latch(7, 2500, 0)]
+    pairs = fins._pairs(reports, [(1300, 2400)])
+    # 1-3 (fin 1's report between them is no gap); 3-5 skips the lost report 4; 6-7 spans the quiet interval.
+    assert [(a.uptime_ms, b.uptime_ms) for a, b in pairs] == [(0, 400), (800, 1200)]

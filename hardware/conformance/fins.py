@@ -26,6 +26,7 @@ __all__ = ["clipping", "rate_at_latch", "turning_points"]
 S = pr.RobotState
 _Q = 0.002  # two wire quanta: 2 mrad, 2 ms, 0.002 of ratio
 _LATCH_MS = 1000 * TICK + 2
+_QUIET_MS = 400  # commands received further apart than this: the watchdog (500 ms) may have halted the fins
 _SPEED_SLACK = 1.01  # peak rates from quantised patterns: 1 % above max_speed is rounding, not a breach
 LIMITS = ServoLimits()  # the protocol's default servo limits (section 5, "Clipping")
 
@@ -55,16 +56,28 @@ def _answers(probe: Probe, sent: list[pr.Message]) -> list[pr.Status]:
     return [expect_state(a, "a SET_FINS", S.RUNNING) for a in answers]
 
 
-def _pairs(latches: list[pr.Message]) -> list[tuple[pr.Latch, pr.Latch]]:
-    """Consecutive reports of each fin with no LATCH lost between them (their numbering without a gap)."""
+def _pairs(latches: list[pr.Message], quiet: list[tuple[int, int]]) -> list[tuple[pr.Latch, pr.Latch]]:
+    """Consecutive reports of each fin with no LATCH lost between them (their numbering without a gap).
+
+    A pair across a ``quiet`` interval ``(from_ms, to_ms)`` is left out: the fins may have halted there (the
+    watchdog, when the probe's commands stalled or were lost) and restarted from rest, legitimately anywhere.
+    """
     pairs: list[tuple[pr.Latch, pr.Latch]] = []
     last: dict[int, int] = {}
     for i, msg in enumerate(latches):
         j = last.get(msg.latch.fin)
         if j is not None and all((latches[k + 1].seq - latches[k].seq) & 0xFFFF == 1 for k in range(j, i)):
-            pairs.append((latches[j].latch, msg.latch))
+            prev, cur = latches[j].latch, msg.latch
+            if not any(prev.uptime_ms < end and start < cur.uptime_ms for start, end in quiet):
+                pairs.append((prev, cur))
         last[msg.latch.fin] = i
     return pairs
+
+
+def _quiet(statuses: list[pr.Status]) -> list[tuple[int, int]]:
+    """Intervals [ms of uptime] between commands the robot received more than :data:`_QUIET_MS` apart."""
+    times = sorted(s.uptime_ms for s in statuses)
+    return [(a, b) for a, b in zip(times, times[1:], strict=False) if b - a > _QUIET_MS]
 
 
 def _duration(latch: pr.Latch) -> float:
@@ -82,9 +95,9 @@ def _slew(probe: Probe) -> dict:
     slow = _run(probe, session, SLOW, 1.2)
     far = _run(probe, session, FAR, 4.0)
     expect(session.send(session.message(pr.MsgType.STOP)), "a STOP")
-    _answers(probe, slow)
     statuses = _answers(probe, far)
-    run = {"latches": probe.latches(status.uptime_ms, status.boot), "statuses": statuses}
+    quiet = _quiet(_answers(probe, slow) + statuses)
+    run = {"latches": probe.latches(status.uptime_ms, status.boot), "statuses": statuses, "quiet": quiet}
     probe._slew_run = run
     return run
 
@@ -92,7 +105,7 @@ def _slew(probe: Probe) -> dict:
 def rate_at_latch(probe: Probe) -> dict:
     """A moving fin's latched pattern moves at most ``max_rate`` x the half-stroke it ends; the command is reached."""
     run = _slew(probe)
-    pairs = _pairs(run["latches"])
+    pairs = _pairs(run["latches"], run["quiet"])
     if len(pairs) < 6:
         raise Broken(f"only {len(pairs)} consecutive LATCH pairs reported in 5 s of beating (expected >= 6)")
     rate = np.asarray(LIMITS.max_rate)
@@ -119,13 +132,14 @@ def rate_at_latch(probe: Probe) -> dict:
         raise Broken("no STATUS set the RATE_LIMITED flag while the rate rule held the fins back")
     if flagged[-1]:
         raise Broken("the RATE_LIMITED flag stayed set after both fins latched the command")
-    return {"pairs": len(pairs), "held_back": held, "largest_change_of_reach": round(worst, 3)}
+    return {"pairs": len(pairs), "held_back": held, "largest_change_of_reach": round(worst, 3),
+            "quiet_intervals": len(run["quiet"])}
 
 
 def turning_points(probe: Probe) -> dict:
     """Fins latch only at turning points: a half-stroke duration after the last latch, at its end angle."""
     run = _slew(probe)
-    pairs = _pairs(run["latches"])
+    pairs = _pairs(run["latches"], run["quiet"])
     if len(pairs) < 6:
         raise Broken(f"only {len(pairs)} consecutive LATCH pairs reported in 5 s of beating (expected >= 6)")
     worst_ms = worst_mrad = 0.0
