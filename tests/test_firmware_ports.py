@@ -166,3 +166,51 @@ def test_dspic_port_checked_on_the_host():
     done = _make("dspic-check")
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     assert "all checks passed" in done.stdout
+
+
+def test_avr_lockstep_core_follows_the_rules(simulator):
+    """The events build in lockstep (what an emulated fish follows, sim/simavr_core.py): start, latches, watchdog."""
+    done = _make("avr-events")
+    assert done.returncode == 0, done.stderr[-2000:]
+    sys.path.insert(0, str(FIRMWARE / "ports" / "avr" / "sim"))
+    try:
+        from simavr_core import SimavrCore
+    finally:
+        sys.path.pop(0)
+    core = SimavrCore(adc_seed=5)
+    try:
+        core.tick(100)
+        core.take_events()
+        assert core.state == pr.RobotState.IDLE and core.boot != 0
+        fins = (math.pi / 2, 0.5, 1.0, 2.0) * 2  # both fins: 1 s beats, ratio 2: half-strokes of 333 and 667 ms
+        msg = pr.Message(pr.MsgType.SET_FINS, 1, 0x1234, fins=fins, command=1, lease=0.8)
+        core.receive_bytes(xb.encode_frame(xb.rx_packet(pr.encode_message(msg), 0x0013A20000000002)), 110)
+        events, tx = [], b""
+        for ms in range(120, 1000, 10):
+            core.tick(ms)
+            events += core.take_events()
+            tx += core.take_tx()
+        latches = [e for e in events if e.kind == "latch"]
+        halts = [e for e in events if e.kind == "halt"]
+        # The frame (about 54 bytes at 57143 baud: ~9.5 ms) completes near 120 ms; the still fins latch the command at
+        # the next tick, both together, then 333 ms later turn (power -> recovery).
+        assert [e.fin for e in latches[:4]] == [0, 1, 0, 1]
+        first, second = latches[0], latches[2]
+        assert 120 <= first.ms <= 140 and first.power
+        assert abs((second.ms + second.frac_ms) - (first.ms + first.frac_ms) - 1000.0 / 3.0) < 1.0
+        assert not second.power
+        # No message after the SET_FINS: the watchdog halts the fins 500 ms after it (lease 800 ms comes later).
+        assert len(halts) == 1 and 600 <= halts[0].ms <= 650
+        assert core.state == pr.RobotState.WATCHDOG
+        # STATUS and LATCH reports went out as Transmit Requests.
+        replies = pr.StreamDecoder().feed(b"".join(xb.encode_frame(xb.rx_packet(xb.rf_data(xb.decode_frame(u)),
+                                                                                  0)) for u in _frames(tx)))
+        kinds = [m.type for m in replies]
+        assert kinds.count(pr.MsgType.STATUS) == 1 and kinds.count(pr.MsgType.LATCH) >= 2
+    finally:
+        core.close()
+
+
+def _frames(stream: bytes) -> list[bytes]:
+    """Split a byte stream of escaped API frames at their start delimiters."""
+    return [b"\x7e" + part for part in stream.split(b"\x7e") if part]

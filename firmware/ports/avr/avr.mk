@@ -5,6 +5,8 @@
 #   make -C firmware avr-timing   the constructed worst-case step, run in simavr: build/avr/timing.json
 #   make -C firmware avr-stack    the firmware idle for 2 s in simavr, stack high-water mark: build/avr/idle.json
 #   make -C firmware avr-check    avr + avr-timing, and the size limits of the dsPIC30F6014 checked
+#   make -C firmware avr-events   build/avr/pfw_avr_events.elf: the firmware reporting its fin events on USART1, for
+#                                 an emulated fish that follows the simulated microcontroller (sim/simavr_core.py)
 # Needs the Debian packages gcc-avr, avr-libc, binutils-avr (and for the simulator simavr, libsimavr-dev,
 # libelf-dev, pkg-config).
 AVR_CC ?= avr-gcc
@@ -31,7 +33,7 @@ SIM_SRC := $(AVR_DIR)/sim/pfw_simavr.c $(AVR_DIR)/sim/xbee_pair.c $(AVR_DIR)/sim
 DSPIC_FLASH := 147456
 DSPIC_RAM := 8192
 
-.PHONY: avr avr-sim avr-timing avr-stack avr-check avr-clean
+.PHONY: avr avr-sim avr-timing avr-stack avr-check avr-events avr-clean
 
 avr: $(AVR_BUILD)/pfw_avr.elf $(AVR_BUILD)/pfw_avr.hex $(AVR_BUILD)/size.txt $(AVR_BUILD)/stack_usage.txt
 	@cat $(AVR_BUILD)/size.txt
@@ -58,6 +60,15 @@ $(AVR_BUILD)/%_avr.o: $(AVR_DIR)/%_avr.c $(AVR_HDR) $(AVR_DIR)/avr.mk
 
 $(AVR_BUILD)/pfw_avr.elf: $(AVR_BUILD)/main_avr.o $(AVR_PORT_OBJ) $(AVR_CORE_OBJ)
 	$(AVR_CC) $(AVR_LDFLAGS) -o $@ $^ -lm
+
+$(AVR_BUILD)/main_avr_events.o: $(AVR_DIR)/main_avr.c $(AVR_HDR) $(AVR_DIR)/avr.mk
+	@mkdir -p $(AVR_BUILD)
+	$(AVR_CC) $(AVR_CFLAGS) -DPFW_AVR_EVENTS -c -o $@ $<
+
+$(AVR_BUILD)/pfw_avr_events.elf: $(AVR_BUILD)/main_avr_events.o $(AVR_PORT_OBJ) $(AVR_CORE_OBJ)
+	$(AVR_CC) $(AVR_LDFLAGS:pfw_avr.map=pfw_avr_events.map) -o $@ $^ -lm
+
+avr-events: $(AVR_BUILD)/pfw_avr_events.elf $(SIM)
 
 $(AVR_BUILD)/pfw_avr_timing.elf: $(AVR_BUILD)/timing_avr.o $(AVR_PORT_OBJ) $(AVR_CORE_OBJ)
 	$(AVR_CC) $(AVR_LDFLAGS:pfw_avr.map=pfw_avr_timing.map) -o $@ $^ -lm

@@ -18,6 +18,10 @@
  *  - Feeds noise to the ADC (the boot id's entropy source) from --adc-seed, so each run gets its own boot id.
  *  - --profile FILE writes a flat profile of the cycles spent while PA1 is high: "address cycles" per
  *    instruction (map the addresses to functions with avr-nm -n; sim/profile.py does).
+ *  - --lockstep: the caller drives time on stdin, one command a line: "R <ms>" runs the MCU to that simulated
+ *    millisecond, then prints "T <hex>" (USART0 bytes sent since), "E <hex>" (USART1 bytes: the events build's
+ *    fin events) and "K"; "B <hex>" queues bytes for USART0 (Receive Packet frames, as the robot's XBee delivers
+ *    them: no re-framing); "Q" ends the run.
  *  - --realtime paces simulated time to the wall clock (times --speed); without it the simulation runs free.
  *  - Stops after --run-ms simulated milliseconds, on SIGINT/SIGTERM, or (--until-disconnect) when the last
  *    client leaves; then prints a JSON report on stdout (or --report FILE).
@@ -77,6 +81,9 @@ static int raw_mode;
 static uint64_t bytes_to_mcu, bytes_from_mcu, frames_to_mcu, frames_from_mcu, frames_consumed, queue_dropped;
 static uint32_t adc_state;
 static avr_irq_t *uart_input;
+static uint8_t lockstep_tx[65536], lockstep_events[65536];
+static size_t lockstep_tx_len, lockstep_events_len;
+static int lockstep;
 static uint64_t *profile; /* cycles spent at each flash byte address while PA1 is high (--profile) */
 
 static double cycles_to_ms(uint64_t cycles) { return 1000.0 * (double)cycles / (double)avr->frequency; }
@@ -184,12 +191,24 @@ static void send_to_clients(const uint8_t *data, size_t len)
     }
 }
 
+static void on_uart1_out(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq, (void)param;
+    if (lockstep_events_len < sizeof lockstep_events)
+        lockstep_events[lockstep_events_len++] = (uint8_t)value;
+}
+
 static void on_uart_out(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     uint8_t byte = (uint8_t)value, out[XBEE_MAX_ENCODED];
     size_t len, enc;
     (void)irq, (void)param;
     bytes_from_mcu++;
+    if (lockstep) {
+        if (lockstep_tx_len < sizeof lockstep_tx)
+            lockstep_tx[lockstep_tx_len++] = byte;
+        return;
+    }
     if (raw_mode) {
         send_to_clients(&byte, 1);
         return;
@@ -327,6 +346,49 @@ count:
     return live;
 }
 
+static void print_hex(char tag, const uint8_t *data, size_t len)
+{
+    putchar(tag);
+    putchar(' ');
+    for (size_t i = 0; i < len; i++)
+        printf("%02x", data[i]);
+    putchar('\n');
+}
+
+/* Lockstep: answer the last run, then read commands until the next run. Returns the cycle to run to, 0 to quit. */
+static uint64_t lockstep_command(void)
+{
+    static char line[1 << 17];
+    print_hex('T', lockstep_tx, lockstep_tx_len);
+    print_hex('E', lockstep_events, lockstep_events_len);
+    lockstep_tx_len = lockstep_events_len = 0;
+    puts("K");
+    fflush(stdout);
+    while (fgets(line, sizeof line, stdin)) {
+        if (line[0] == 'R') {
+            uint64_t target = (uint64_t)(strtod(line + 1, NULL) * (double)avr->frequency / 1000.0);
+            return target > avr->cycle ? target : avr->cycle + 1u;
+        }
+        if (line[0] == 'B') {
+            const char *hex = line + 1;
+            while (*hex == ' ')
+                hex++;
+            for (; hex[0] && hex[1] && hex[0] != '\n'; hex += 2) {
+                unsigned byte;
+                if (sscanf(hex, "%2x", &byte) != 1)
+                    break;
+                uint8_t b = (uint8_t)byte;
+                queue_to_mcu(&b, 1);
+            }
+            feed_mcu();
+            continue;
+        }
+        if (line[0] == 'Q')
+            break;
+    }
+    return 0;
+}
+
 static void usage(const char *prog)
 {
     fprintf(stderr,
@@ -387,6 +449,7 @@ int main(int argc, char **argv)
     for (int i = 1; i < argc; i++) {
         const char *a = argv[i], *v = i + 1 < argc ? argv[i + 1] : NULL;
         if (!strcmp(a, "--raw")) raw_mode = 1;
+        else if (!strcmp(a, "--lockstep")) lockstep = 1;
         else if (!strcmp(a, "--realtime")) realtime = 1;
         else if (!strcmp(a, "--until-disconnect")) until_disconnect = 1;
         else if (a[0] == '-' && a[1] == '-' && !v) { usage(argv[0]); return 2; }
@@ -435,6 +498,13 @@ int main(int argc, char **argv)
     }
     uart_input = avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_INPUT);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT), on_uart_out, NULL);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('1'), UART_IRQ_OUTPUT), on_uart1_out, NULL);
+    {
+        uint32_t flags = 0;
+        avr_ioctl(avr, AVR_IOCTL_UART_GET_FLAGS('1'), &flags);
+        flags &= ~(uint32_t)(AVR_UART_FLAG_STDIO | AVR_UART_FLAG_POLL_SLEEP);
+        avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('1'), &flags);
+    }
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XON), on_xon, NULL);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUT_XOFF), on_xoff, NULL);
     avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, ADC_IRQ_OUT_TRIGGER), on_adc_trigger, NULL);
@@ -458,6 +528,23 @@ int main(int argc, char **argv)
     chunk = freq / 1000u; /* service the sockets and the pacing every simulated millisecond */
     next_service = chunk;
     wall0 = wall_s();
+    if (lockstep) {
+        uint64_t target = lockstep_command(); /* the first command: nothing has run yet */
+        while (target && !stop_requested) {
+            while (avr->cycle < target) {
+                int state = avr_run(avr);
+                if (state == cpu_Done || state == cpu_Crashed) {
+                    fprintf(stderr, "pfw_simavr: the MCU %s\n", state == cpu_Done ? "stopped" : "crashed");
+                    target = 0;
+                    break;
+                }
+                feed_mcu();
+            }
+            if (target)
+                target = lockstep_command();
+        }
+        stop_requested = 1; /* skip the free-running loop: report and end */
+    }
     if (profile_path)
         profile = calloc((size_t)avr->flashend + 1u, sizeof *profile);
     while (!stop_requested) {
