@@ -36,7 +36,10 @@ __all__ = ["ROBOT_ADDRESS", "PC_ADDRESS", "FIRMWARES", "RobotFirmware", "PythonF
            "make_firmware", "trace_entry"]
 
 ROBOT_ADDRESS = 0x0013A20000000001  # 64-bit source address the emulated XBee reports
-FIRMWARES = ("python", "c")  # the implementations an emulated robot can run
+PC_ADDRESS = 0x0013A20000000002  # 64-bit source address of the PC's XBee, as the robot's XBee reports it
+_GRID_MS = 10  # the C firmware's tick [ms]
+_EPS = 1e-9  # [s]: a model this close to a time is there (float sums of chunks)
+FIRMWARES = ("python", "c", "python-10ms")  # the rules an emulated robot can run (PythonFirmware's grid: the last)
 
 
 class RobotFirmware(Protocol):
@@ -84,34 +87,64 @@ def trace_entry(model: FishModel, running: bool) -> tuple[float, np.ndarray, np.
 class PythonFirmware:
     """The reference rules (:class:`Firmware`) on the model's own fins: the specification.
 
+    By default the rules tick before every :data:`CHUNK` of the model, whose chunks end wherever the emulator
+    wakes (a byte arriving, its 10 ms poll), and a message is heard at the emulated time it arrives. With
+    ``grid`` they run as the C core is driven (:class:`CFirmwareAdapter`): ticks at every multiple of 10 ms of
+    emulated time, a message heard at the whole millisecond it arrives in; the rules are the same, only when
+    they act differs (by less than a tick), which is what a closed loop may amplify.
+
     Args:
         config: The rules' settings.
         boot: The boot id of this power-up.
         power_up: Emulated time of the power-up [s].
+        grid: Tick on the 10 ms grid, as the robot (``firmware_impl="python-10ms"``).
     """
 
-    def __init__(self, config: FirmwareConfig | None, boot: int, power_up: float = 0.0):
-        self.config = config
+    def __init__(self, config: FirmwareConfig | None, boot: int, power_up: float = 0.0, grid: bool = False):
+        self.config, self.grid = config, grid
         self.firmware = Firmware(config, boot=boot, power_up=power_up)
         self.decoder = pr.StreamDecoder()
+        self._next_tick_ms = _ms(power_up)
 
     def receive(self, data: bytes, now: float, model: FishModel, keep: Callable[[], bool],
                 trace: list | None) -> tuple[list[bytes], list[pr.Message]]:
         """See :meth:`RobotFirmware.receive`: decoded, handed to the rules, the fins handed their patterns."""
+        frames: list[bytes] = []
+        if self.grid:  # heard at the whole ms, the fins run there first (as pfw_receive does)
+            now = max(_ms(now) / 1000.0, model.time)
+            frames = self._run_model(model, now, trace)
         messages = [m for m in self.decoder.feed(data) if keep()]
         self.firmware.crc_errors = self.decoder.crc_errors + self.decoder.checksum_errors
         replies = [self.firmware.receive(m, now) for m in messages]
         apply_firmware(self.firmware, model)
-        return [to_pc(pr.encode_message(r)) for r in replies if r is not None], messages
+        return frames + [to_pc(pr.encode_message(r)) for r in replies if r is not None], messages
 
     def advance(self, model: FishModel, target: float, trace: list | None) -> list[bytes]:
-        """See :meth:`RobotFirmware.advance`: a tick before every :data:`CHUNK` of the model."""
+        """See :meth:`RobotFirmware.advance`: a tick before every :data:`CHUNK` of the model (or on the grid)."""
         frames: list[bytes] = []
+        if self.grid:
+            while self._next_tick_ms <= _ms(target):
+                frames += self._run_model(model, self._next_tick_ms / 1000.0, trace)
+                self.firmware.tick(self._next_tick_ms / 1000.0, model.fin_angles()[0][0])
+                apply_firmware(self.firmware, model)
+                self._next_tick_ms += _GRID_MS
+            return frames
         while model.time < target:
             self.firmware.tick(model.time, model.fin_angles()[0][0])
             apply_firmware(self.firmware, model)
             kinds = stroke_kinds(model)
             model.advance(min(CHUNK, target - model.time))
+            frames += self._latch_reports(model, kinds)
+            if trace is not None:
+                trace.append(trace_entry(model, self.firmware.running))
+        return frames
+
+    def _run_model(self, model: FishModel, until: float, trace: list | None) -> list[bytes]:
+        """The model (no tick) to ``until`` [s]; the LATCH frames of its latches meanwhile."""
+        frames: list[bytes] = []
+        while model.time < until - _EPS:
+            kinds = stroke_kinds(model)
+            model.advance(min(CHUNK, until - model.time))
             frames += self._latch_reports(model, kinds)
             if trace is not None:
                 trace.append(trace_entry(model, self.firmware.running))
@@ -136,9 +169,6 @@ class PythonFirmware:
         apply_firmware(self.firmware, model)
 
 
-PC_ADDRESS = 0x0013A20000000002  # 64-bit source address of the PC's XBee, as the robot's XBee reports it
-_GRID_MS = 10  # the C firmware's tick [ms]
-_EPS = 1e-9  # [s]: a model this close to a time is there (float sums of chunks)
 
 
 class CFirmwareAdapter:
@@ -290,10 +320,10 @@ def _rest(model: FishModel, angles: np.ndarray) -> None:
 
 def make_firmware(impl: str, config: FirmwareConfig | None, boot: int, variant: str | None = None) -> RobotFirmware:
     """The rules an emulated robot runs: ``impl`` ``"python"`` (reference) or ``"c"`` (``variant``: a broken build)."""
-    if impl == "python":
+    if impl in ("python", "python-10ms"):
         if variant is not None:
             raise ValueError("a firmware variant is a build of the C firmware: it needs --firmware c")
-        return PythonFirmware(config, boot)
+        return PythonFirmware(config, boot, grid=impl == "python-10ms")
     if impl == "c":
         return CFirmwareAdapter(config, boot, variant=variant)
     raise ValueError(f"firmware_impl must be one of {', '.join(FIRMWARES)}, got {impl!r}")

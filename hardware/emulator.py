@@ -67,8 +67,9 @@ class EmulatedRobot:
         clock: The clock of the emulation loop (:mod:`pectoral_gym.hardware.clock`); every stamp is on it.
         stream: The robot's end of a :class:`pectoral_gym.hardware.radio.pipe.StreamPair` as its radio, instead
             of a TCP port or a pseudo-terminal (``port`` and ``pty`` are then ignored).
-        firmware_impl: The robot's rules: ``"python"`` (the reference state machine) or ``"c"`` (the C firmware
-            core through its binding), :mod:`pectoral_gym.hardware.emulated_firmware`.
+        firmware_impl: The robot's rules: ``"python"`` (the reference state machine), ``"c"`` (the C firmware
+            core through its binding) or ``"python-10ms"`` (the reference ticked every 10 ms as the C core is),
+            :mod:`pectoral_gym.hardware.emulated_firmware`.
         variant: With ``"c"``: a deliberately broken build of the C core (for the conformance suite's own tests).
     """
 
@@ -340,7 +341,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=None, help="seed of loss injection and camera noise")
     parser.add_argument("--duration", type=float, default=None, metavar="S", help="exit after this many wall s")
     parser.add_argument("--firmware", choices=FIRMWARES, default="python",
-                        help="the robot's rules: the Python reference or the C firmware core (default %(default)s)")
+                        help="the robot's rules: the Python reference, the C firmware core, or the reference ticked "
+                             "every 10 ms as the C core is (default %(default)s)")
     parser.add_argument("--variant", default=None, metavar="NAME",
                         help="with --firmware c: a deliberately broken build (as pectoral-firmware-check --variant)")
     return parser

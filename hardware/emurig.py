@@ -111,7 +111,7 @@ def open_rig(resources: contextlib.ExitStack, seed: int, conditions: RigConditio
         speed: Emulated seconds per wall second (real time only).
         params: The emulated fish's :class:`pectoral_gym.model.params.FishParams` (``None``: Table 1's), e.g. a
             robot other than the one the controller was made for.
-        firmware: The emulated robot's rules: ``"python"`` (the reference) or ``"c"`` (the C firmware core).
+        firmware: The emulated robot's rules (``pectoral_gym.hardware.emulated_firmware.FIRMWARES``).
     """
     from pectoral_gym.hardware.emulator import EmulatedRobot
 

@@ -23,6 +23,7 @@ import numpy as np
 from pectoral_gym.hardware.conformance import fins, sessions, timing
 from pectoral_gym.hardware.conformance.judge import Broken, Result, Unchecked
 from pectoral_gym.hardware.conformance.probe import READ_SLICE, Probe
+from pectoral_gym.hardware.emulated_firmware import FIRMWARES
 from pectoral_gym.hardware.radio import protocol as pr
 from pectoral_gym.hardware.radio import xbee as xb
 from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
@@ -82,7 +83,8 @@ def emulated_probe(firmware: str = "python", variant: str | None = None, seed: i
     """A :class:`Probe` on an emulated robot started here (lockstep on a virtual clock, or real time over TCP).
 
     Args:
-        firmware: ``"python"`` (the reference rules) or ``"c"`` (the C firmware through its binding).
+        firmware: ``"python"`` (the reference rules), ``"c"`` (the C firmware through its binding) or
+            ``"python-10ms"`` (the reference ticked as the C firmware is).
         variant: A deliberately broken build of the C firmware (``"ignore_lease"``, ...), for the suite's own test.
         seed: Seed of the robot's boot ids and of the probe's session ids.
         lockstep: Run on a :class:`~pectoral_gym.hardware.clock.VirtualClock` (as fast as the CPU allows).
@@ -149,8 +151,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--baudrate", type=int, default=57600, help="serial speed (default %(default)s)")
     parser.add_argument("--dest64", default=None, metavar="HEX",
                         help="the robot XBee's 64-bit address (default broadcast)")
-    parser.add_argument("--firmware", choices=("python", "c"), default="python",
-                        help="with --emulate: the reference rules or the C firmware (default %(default)s)")
+    parser.add_argument("--firmware", choices=FIRMWARES, default="python",
+                        help="with --emulate: the reference rules, the C firmware, or the reference ticked every 10 "
+                             "ms as the C firmware is (default %(default)s)")
     parser.add_argument("--variant", default=None, metavar="NAME",
                         help="with --firmware c: a deliberately broken build (ignore_lease, ignore_retired_stop, "
                              "skip_crc, latch_midstroke), to see the suite catch it")

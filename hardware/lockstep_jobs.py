@@ -59,7 +59,7 @@ class LockstepJob:
         take_over: Take control of a robot another session drives (``HardwareFishEnv``'s ``take_over``).
         params: The emulated fish's :class:`pectoral_gym.model.params.FishParams` (``None``: Table 1's).
         scaling: The K file the hand law and the NMPC plan with (``None``: the shipped K).
-        firmware: The emulated robot's rules: ``"python"`` (the reference) or ``"c"`` (the C firmware core).
+        firmware: The emulated robot's rules (``pectoral_gym.hardware.emulated_firmware.FIRMWARES``).
     """
 
     controller: str = "hand"

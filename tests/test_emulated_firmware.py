@@ -92,3 +92,27 @@ def test_the_python_reference_stays_the_default():
         make_firmware("rust", None, 7)
     with pytest.raises(ValueError, match="C firmware"):
         make_firmware("python", None, 7, variant="skip_crc")
+
+
+def test_c_core_and_python_reference_on_the_same_ticks_move_the_fish_alike(adapter):
+    # The same bytes at the same times to the C core and to the reference ticked on the same 10 ms grid: the fins
+    # and the fish agree to float32's precision (the default reference ticks wherever the emulator wakes instead).
+    from pectoral_gym.hardware.emulated_firmware import PythonFirmware
+
+    reference = PythonFirmware(None, boot=0x1234, grid=True)
+    models = [FULL_REFERENCE.build(1, None) for _ in range(2)]
+    patterns = [_beats((80, 25, 1.6, 4.3), (75, 10, 1.4, 1.8)), _beats((100, 20, 1.0, 2.0), (95, 30, 0.9, 1.0)),
+                _beats((60, 30, 0.8, 1.0), (120, 30, 0.8, 1.0))]
+    worst_angle = worst_pose = 0.0
+    for k in range(1, 300):
+        t = k / 100.0
+        for rules, model in zip((adapter, reference), models, strict=True):
+            if k % 50 == 13:  # a new command every 0.5 s, 3.7 ms after a tick
+                msg = pr.Message(pr.MsgType.SET_FINS, k, 77, fins=patterns[(k // 50) % 3], command=k, lease=1.0)
+                rules.advance(model, t - 0.0063, None)
+                rules.receive(_to_robot(msg), t - 0.0063, model, lambda: True, None)
+            rules.advance(model, t, None)
+        worst_angle = max(worst_angle, float(np.max(np.abs(models[0].fin_angles()[0][0] -
+                                                           models[1].fin_angles()[0][0]))))
+        worst_pose = max(worst_pose, float(np.max(np.abs(models[0].state[0, :3] - models[1].state[0, :3]))))
+    assert worst_angle < 1e-4 and worst_pose < 1e-5, (worst_angle, worst_pose)

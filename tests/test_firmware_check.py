@@ -28,8 +28,9 @@ def _verdicts(**options) -> dict[str, judge.Result]:
     return {r.rule: r for r in results}
 
 
-def test_python_reference_passes_every_rule():
-    results = _verdicts(firmware="python", seed=3)
+@pytest.mark.parametrize("firmware", ["python", "python-10ms"])
+def test_python_reference_passes_every_rule(firmware):
+    results = _verdicts(firmware=firmware, seed=3)
     assert list(results) == list(RULES)
     assert {r.rule: r.verdict for r in results.values()} == dict.fromkeys(RULES, "PASS")
     # The brackets are the poll spacing wide and hold the rule's moment (figures on the robot's clock).
