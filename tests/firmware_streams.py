@@ -92,10 +92,16 @@ class ReferenceRobot:
         if t_ms <= self.t_ms:
             return
         kinds = stroke_kinds(self.model)
+        before = self.model.fins[0].copy()
+        start = self.model.time
         self.model.advance(t_ms / 1000.0 - self.model.time)
         self.model.time, self.t_ms = t_ms / 1000.0, t_ms
         fins = self.model.fins[0]
-        for fin, t in sorted(latched(self.model, kinds), key=lambda ft: (round(ft[1], 9), ft[0])):
+        # A fin latches where its half-stroke in progress ends (at once if it was over). ``latched`` reads the time
+        # back from ELAPSED, which stands still for a fin that then holds idle (``stepping.advance_one``).
+        ends = start + np.maximum(before[:, strokes.DURATION] - before[:, strokes.ELAPSED], 0.0)
+        flipped = sorted((ends[fin], fin) for fin, _ in latched(self.model, kinds))
+        for t, fin in sorted(flipped, key=lambda tf: (round(tf[0], 9), tf[1])):
             stroke = fins[fin]
             beat = stroke[strokes.BIAS:strokes.RATIO + 1].copy()
             power = bool(stroke[strokes.POWER] > 0.5)
