@@ -79,6 +79,7 @@ from pectoral_gym.hardware.radio import xbee as xb  # noqa: E402
 from pectoral_gym.hardware.radio.cfirmware import (  # noqa: E402
     FIRMWARE_DIR,
     CFirmware,
+    build,
     config_arrays,
     library_defaults,
 )
@@ -366,7 +367,7 @@ def test_each_broken_variant_departs_from_the_reference(variant):
 
 # ---------------------------------------------------------------- C tests and fuzzing
 def _make(target: str) -> None:
-    subprocess.run(["make", "-s", "-C", str(FIRMWARE_DIR), target], check=True, capture_output=True, text=True)
+    build(target)  # one build at a time: pytest-xdist workers share firmware/build
 
 
 def test_c_unit_tests_pass_under_the_sanitizers():

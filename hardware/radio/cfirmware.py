@@ -12,6 +12,7 @@ built with ``make -C <repo>/firmware host`` (``variants``) when missing or older
 from __future__ import annotations
 
 import ctypes
+import fcntl
 import os
 import shutil
 import subprocess
@@ -22,7 +23,8 @@ import numpy as np
 
 from pectoral_gym.hardware.radio.firmware import FirmwareConfig
 
-__all__ = ["VARIANTS", "FIRMWARE_DIR", "CFirmware", "FinStroke", "FinEvent", "library_path", "config_arrays"]
+__all__ = ["VARIANTS", "FIRMWARE_DIR", "CFirmware", "FinStroke", "FinEvent", "build", "library_path", "config_arrays",
+           "library_defaults"]
 
 VARIANTS = ("ignore_lease", "ignore_retired_stop", "skip_crc", "latch_midstroke")
 FIRMWARE_DIR = Path(__file__).resolve().parents[2] / "firmware"
@@ -59,15 +61,26 @@ def library_path(variant: str | None = None) -> Path:
         raise RuntimeError(f"no firmware sources at {FIRMWARE_DIR}; set ${_ENV} to a prebuilt libpfw_host.so")
     if lib.exists() and lib.stat().st_mtime >= max(p.stat().st_mtime for p in _sources()):
         return lib
+    build("host" if variant is None else f"build/{name}")
+    return lib
+
+
+def build(target: str) -> None:
+    """``make -C <repo>/firmware <target>``, one build at a time (test workers share the build directory).
+
+    Raises:
+        RuntimeError: No make or C compiler, or a failed build (its last line).
+    """
     if shutil.which("make") is None or not (shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")):
         raise RuntimeError("building the C firmware needs make and a C compiler (cc or gcc); "
                            f"install them or set ${_ENV} to a prebuilt libpfw_host.so")
-    target = "host" if variant is None else f"build/{name}"
-    done = subprocess.run(["make", "-s", "-C", str(FIRMWARE_DIR), target], capture_output=True, text=True)
+    (FIRMWARE_DIR / "build").mkdir(exist_ok=True)
+    with open(FIRMWARE_DIR / "build" / ".lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file closes
+        done = subprocess.run(["make", "-s", "-C", str(FIRMWARE_DIR), target], capture_output=True, text=True)
     if done.returncode != 0:
         last = (done.stderr.strip() or done.stdout.strip()).splitlines()[-1:] or ["(no output)"]
         raise RuntimeError(f"make -C {FIRMWARE_DIR} {target} failed: {last[0]}")
-    return lib
 
 
 def _load(variant: str | None) -> ctypes.CDLL:
