@@ -3,7 +3,8 @@
  *   build/fuzz_frames [frames [seed]]      (make -C firmware fuzz; default 1000000 frames, seed 1)
  *
  * Deterministic (xorshift64* from the seed). Each iteration builds a valid SET_FINS, STOP, CLAIM or HEARTBEAT
- * message (random sessions, sequence numbers, command ids, leases, deadlines, patterns), mutates it (bit flips,
+ * message (random sessions, sequence numbers, command ids, leases, deadlines, patterns; 1 in 25 with a bit flipped
+ * inside an intact frame, for the CRC-16), mutates the frame (bit flips,
  * truncation, length lies, escape abuse, stray delimiters, garbage, splicing) or not, feeds it in random pieces,
  * and ticks the clock by 0..60 ms (sometimes across the u32 wrap). After every call it checks invariants: a state
  * in 0..4, fin angles finite and inside the servo range, every byte the robot sends decodes as a well-formed
@@ -45,7 +46,19 @@ static void put32(uint8_t *p, uint32_t v)
 static pfw_fw fw;
 static pfw_decoder out_dec;
 static uint32_t sessions[4], seqs[4], commands[4];
-static unsigned long tx_frames, violations, latches, running_ticks;
+static unsigned long tx_frames, violations, latches, running_ticks, reboots;
+static unsigned long seen[6]; /* decoder counters of the power-ups before this one: messages, crc, checksum,
+                               * framing, truncated, malformed */
+
+static void add_decoder(unsigned long *to)
+{
+    to[0] += fw.dec.messages;
+    to[1] += fw.dec.crc_errors;
+    to[2] += fw.dec.checksum_errors;
+    to[3] += fw.dec.framing_errors;
+    to[4] += fw.dec.truncated;
+    to[5] += fw.dec.malformed;
+}
 
 static size_t build_frame(uint8_t *out, size_t max, uint32_t clock)
 {
@@ -78,6 +91,9 @@ static size_t build_frame(uint8_t *out, size_t max, uint32_t clock)
         body = 28;
     }
     put16(msg + 8 + body, pfw_crc16(msg, 8 + body));
+    if (below(25) == 0) { /* damaged inside an intact frame: only the CRC-16 catches it */
+        msg[below((uint32_t)(10 + body))] ^= (uint8_t)(1u << below(8));
+    }
     n = pfw_frame_encode(data, 12 + 10 + body, out, max);
     return n;
 }
@@ -202,13 +218,16 @@ int main(int argc, char **argv)
         running_ticks += fw.state == PFW_RUNNING;
         check();
         if (below(200000) == 0) {
+            add_decoder(seen);
+            reboots++;
             (void)pfw_init(&fw, &cfg, rnd() | 1u, clock); /* a reboot */
         }
     }
-    printf("fuzz_frames: %lu frames, seed %lu, %lu robot frames checked, decoder: %lu messages, %lu crc, "
-           "%lu checksum, %lu framing, %lu truncated, %lu malformed; %lu latches, %lu ticks running; %lu violations\n",
-           it, seed, tx_frames, (unsigned long)fw.dec.messages, (unsigned long)fw.dec.crc_errors,
-           (unsigned long)fw.dec.checksum_errors, (unsigned long)fw.dec.framing_errors,
-           (unsigned long)fw.dec.truncated, (unsigned long)fw.dec.malformed, latches, running_ticks, violations);
+    add_decoder(seen);
+    printf("fuzz_frames: %lu frames, seed %lu, %lu reboots, %lu robot frames checked, decoder: %lu messages, "
+           "%lu crc, %lu checksum, %lu framing, %lu truncated, %lu malformed; %lu latches, %lu ticks running; "
+           "%lu violations\n",
+           it, seed, reboots, tx_frames, seen[0], seen[1], seen[2], seen[3], seen[4], seen[5], latches,
+           running_ticks, violations);
     return violations ? 1 : 0;
 }
