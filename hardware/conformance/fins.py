@@ -88,9 +88,8 @@ def _duration(latch: pr.Latch) -> float:
 
 def _slew(probe: Probe) -> dict:
     """One run for both latch rules (cached on the probe): :data:`SLOW`, then :data:`FAR` for 4 s."""
-    cached = getattr(probe, "_slew_run", None)
-    if cached is not None:
-        return cached
+    if "slew" in probe.cache:
+        return probe.cache["slew"]
     session, status = claim(probe)
     slow = _run(probe, session, SLOW, 1.2)
     far = _run(probe, session, FAR, 4.0)
@@ -98,7 +97,7 @@ def _slew(probe: Probe) -> dict:
     statuses = _answers(probe, far)
     quiet = _quiet(_answers(probe, slow) + statuses)
     run = {"latches": probe.latches(status.uptime_ms, status.boot), "statuses": statuses, "quiet": quiet}
-    probe._slew_run = run
+    probe.cache["slew"] = run
     return run
 
 

@@ -123,6 +123,9 @@ class Probe:
         self.resent = 0
         self.rtts: list[float] = []
         self.rtt_max = 0.0  # slowest round trip measured by measure_rtt [robot s]
+        self.outgoing: list[pr.Message] = []  # every message sent through exchange (posts included), in order
+        self.unanswerable = 0  # messages sent that must go unanswered (stale, bad CRC)
+        self.cache: dict = {}  # runs that several scenarios judge (fins.py's latch run); cleared for a re-run
         self.reboot_robot = None  # a callable that power-cycles the robot, where the transport allows it
         self._rng = rng
         self._stream = hasattr(port, "peer")  # a StreamEnd: reads wait on the clock
@@ -170,6 +173,7 @@ class Probe:
         A STATUS answers ``msg`` when it is addressed to its session and acknowledges its sequence number and
         type. Returns ``None`` when none came after :attr:`retries` re-sendings.
         """
+        self.outgoing.append(msg)
         for attempt in range(self.retries + 1 if expect else 1):
             if attempt:
                 self.resent += 1
@@ -198,15 +202,38 @@ class Probe:
                 return None
             self._read(end - self.now())
 
+    def mark(self) -> tuple[int, int, int]:
+        """A point to ask :meth:`lost_since` about: ``(messages sent, re-sendings, unanswerable)`` so far."""
+        return len(self.outgoing), self.resent, self.unanswerable
+
+    def lost_since(self, mark: tuple[int, int, int]) -> int:
+        """Messages since ``mark`` that a lossy radio may have lost, after a wait for the answers on their way.
+
+        Those unanswered or re-sent; and, once the radio has lost any message, those that must go unanswered
+        (their loss looks like the robot ignoring them). A scenario that failed over such a radio may have failed
+        on the loss, not on the robot: it is run again.
+        """
+        self.wait(self.reply_timeout)
+        heard = {(a.msg.session, a.status.ack_seq, a.status.ack_type) for a in self.statuses()}
+        unanswered = sum((m.session, m.seq, int(m.type)) not in heard for m in self.outgoing[mark[0]:])
+        lost = unanswered + self.resent - mark[1]
+        lossy = lost or self.resent or any((m.session, m.seq, int(m.type)) not in heard for m in self.outgoing)
+        return lost + (self.unanswerable - mark[2] if lossy else 0)
+
     def answer_to(self, msg: pr.Message) -> Answer | None:
         """The STATUS answering ``msg`` among everything received, waiting up to :attr:`reply_timeout` for it."""
         return self.await_status(msg, 0, self.reply_timeout)
 
-    def silent_after(self, msg: pr.Message, timeout: float | None = None) -> bool:
-        """Send ``msg`` and wait ``timeout`` (default :attr:`reply_timeout`): whether nothing answered it."""
+    def silent_after(self, msg: pr.Message, corrupt_crc: bool = False) -> bool:
+        """Send ``msg`` that must go unanswered, and wait :attr:`reply_timeout`: whether nothing answered it.
+
+        Counted in :attr:`unanswerable`: over a radio that has lost messages, its own loss cannot be told
+        from a robot that ignored it (:meth:`lost_since`).
+        """
         start = len(self.answers)
-        self.write_raw(self.frame(msg))
-        return self.await_status(msg, start, self.reply_timeout if timeout is None else timeout) is None
+        self.unanswerable += 1
+        self.write_raw(self.frame(msg, corrupt_crc))
+        return self.await_status(msg, start, self.reply_timeout) is None
 
     # ------------------------------------------------------------ what was heard
     def latches(self, since_ms: int, boot: int) -> list[pr.Message]:
@@ -238,12 +265,13 @@ class Probe:
         rtts = []
         for _ in range(count):
             msg = session.message(pr.MsgType.HEARTBEAT)
-            sent = self.now()
+            sent, resent = self.now(), self.resent
             answer = self.exchange(msg)
-            if answer is not None:
+            if answer is not None and self.resent == resent:  # Karn: not from a re-sent message's answer
                 rtts.append((answer.t - sent) * self.speed)
         if not rtts:
-            raise ConnectionError("no STATUS answered 10 HEARTBEATs: is the robot on, and the port right?")
+            raise ConnectionError(f"no STATUS answered {count} HEARTBEATs at their first sending: is the robot on, "
+                                  "and the port right?")
         self.reply_timeout = max(0.25, 3.0 * max(rtts) + 0.1)
         self.rtt_max = max(rtts)
         return {"median": statistics.median(rtts), "max": max(rtts), "answered": len(rtts), "sent": count,

@@ -117,10 +117,10 @@ def stale_duplicate(probe: Probe) -> dict:
     again = expect(session.repeat(), "a duplicate HEARTBEAT")
     if again.duplicates != first.duplicates + 1 + (probe.resent - resent):
         raise Broken(f"a duplicate moved the STATUS duplicates count from {first.duplicates} to {again.duplicates}")
-    expect_state(session.send(session.set_fins(MOVING)), "a SET_FINS", S.RUNNING)
+    fins = session.post(session.set_fins(MOVING))  # not waited for: the session stays live for the STOP below
     stranger = probe.session()  # stops the fins without touching this session's numbering
-    _live(session)
     expect_state(stranger.send(stranger.message(pr.MsgType.STOP)), "an unknown session's STOP", S.STOPPED)
+    expect_state(probe.answer_to(fins), "a SET_FINS", S.RUNNING)
     dup = expect(session.repeat(), "a duplicate of the SET_FINS after a STOP")
     if dup.state != S.STOPPED:
         raise Broken(f"a duplicate SET_FINS after a STOP left the robot {pr.state_name(dup.state)}: it was re-applied")
@@ -137,10 +137,7 @@ def crc(probe: Probe) -> dict:
     """A frame whose CRC-16 is wrong under a good XBee checksum is dropped unanswered and counted in crc_errors."""
     session, _ = claim(probe)
     before = expect(session.heartbeat(), "a HEARTBEAT")
-    bad = session.set_fins(MOVING)
-    start = len(probe.answers)
-    probe.write_raw(probe.frame(bad, corrupt_crc=True))
-    if probe.await_status(bad, start, probe.reply_timeout) is not None:
+    if not probe.silent_after(session.set_fins(MOVING), corrupt_crc=True):
         raise Broken("a SET_FINS whose CRC-16 is wrong was answered (so acted on)")
     after = expect(session.heartbeat(), "a HEARTBEAT after the bad frame")
     if after.state == S.RUNNING:
