@@ -161,18 +161,20 @@ def compare(a: Snapshot, b: Snapshot, t_s: float, lsb: Counter) -> list[str]:
         for x, y in zip(a.latches, b.latches, strict=True):
             if abs(x[0] - y[0]) > 1000.0 * dt or abs(x[4] - y[4]) > ANGLE_ABS:
                 problems.append(f"latch time or turn {x} != {y}")
-            if not np.allclose(x[5], y[5], rtol=TIME_REL, atol=ANGLE_ABS):
+            if any(abs(p - q) > ANGLE_ABS + TIME_REL * abs(q) for p, q in zip(x[5], y[5], strict=True)):
                 problems.append(f"latched pattern {x[5]} != {y[5]}")
-    if len(a.halts) != len(b.halts) or not np.allclose(a.halts, b.halts, rtol=0, atol=ANGLE_ABS + 13.0 * dt):
+    halt_gap = max((abs(p - q) for x, y in zip(a.halts, b.halts, strict=False) for p, q in zip(x, y, strict=True)),
+                   default=0.0)
+    if len(a.halts) != len(b.halts) or halt_gap > ANGLE_ABS + 13.0 * dt:
         problems.append(f"halts {a.halts} != {b.halts}")
     fa, fb = a.fins, b.fins
-    if not np.array_equal(fa[:, 4], fb[:, 4]):
-        problems.append("stroke kinds differ")
-    angles_ok = np.allclose(fa[:, [0, 1, 5, 6]], fb[:, [0, 1, 5, 6]], rtol=0, atol=ANGLE_ABS)
-    times_ok = (np.allclose(fa[:, [2, 7, 8]], fb[:, [2, 7, 8]], rtol=TIME_REL, atol=0)
-                and np.allclose(fa[:, 3], fb[:, 3], rtol=0, atol=dt + TIME_REL * fa[:, 2].max()))
-    g_ok = np.all(np.abs(fa[:, 9] - fb[:, 9]) <= ANGLE_ABS + 13.0 * (dt + TIME_REL * fa[:, 2]))
-    if not (angles_ok and times_ok and g_ok):
+    diff = np.abs(fa - fb)
+    ok = (np.array_equal(fa[:, 4], fb[:, 4])  # the stroke kinds
+          and diff[:, [0, 1, 5, 6]].max() <= ANGLE_ABS  # from, to, bias, amplitude
+          and np.all(diff[:, [2, 7, 8]] <= TIME_REL * np.abs(fb[:, [2, 7, 8]]))  # duration, period, ratio
+          and diff[:, 3].max() <= dt + TIME_REL * fa[:, 2].max()  # elapsed
+          and np.all(diff[:, 9] <= ANGLE_ABS + 13.0 * (dt + TIME_REL * fa[:, 2])))  # the fin angle
+    if not ok:
         problems.append(f"fins\n{fa}\n!=\n{fb}")
     return problems
 
