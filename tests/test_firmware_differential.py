@@ -45,6 +45,13 @@ follow different, equally valid branches of the rules. A stream whose first diff
 half-stroke (``0 < |end - start| <= 8 u pi`` in either implementation, :data:`STILL_TIE`) counts as a still tie
 and is not compared further; ties must stay below :data:`MAX_TIE_SHARE` of the streams, and any other difference
 fails (measured: 4 of 500 streams, seeds 10140, 10304, 10370, 10410).
+
+**Tick ties.** The C core latches a turning point within 1 us of the end of an advance at the start of the next one
+(``PFW_TIE_MS``: float32 cannot tell a turning point on a whole ms, which quantised patterns make common, from one
+a few tenths of a us away after seconds of strokes); the reference does so within 1e-12 s. A turning point that lies
+in the last microsecond before a tick is latched by the reference before the tick and by the C core after it, with
+the pattern the tick hands over. A stream whose first difference is at an event where the reference latched within
+1 us before the event's time counts as a tick tie (expected about once per 1e4 latches: 1 us of each 10 ms tick).
 """
 
 from __future__ import annotations
@@ -215,6 +222,9 @@ def run_stream(stream: Stream, config: FirmwareConfig, stats: Counter, variant: 
         if problems and tie and variant is None:
             stats["still_ties"] += 1  # parted where float64 and float32 disagree on an exact tie (module docstring)
             return []
+        if problems and variant is None and any(0.0 < t - x[0] <= 1000.0 * TIE for x in a.latches):
+            stats["tick_ties"] += 1  # a turning point within 1 us before a tick (module docstring)
+            return []
         if problems:
             return [f"seed {stream.seed}, t = {t} ms, {kind} {data.hex() if isinstance(data, bytes) else data}:",
                     *problems]
@@ -227,13 +237,18 @@ def run_many(seeds: range, config: FirmwareConfig | None = None) -> tuple[int, C
     config = config or FirmwareConfig()
     stats, failures = Counter(), []
     for seed in seeds:
-        ties = stats["still_ties"]
+        ties = ties_of(stats)
         problems = run_stream(generate(seed), config, stats)
         if problems:
             failures.append("\n".join(problems))
-        if stats["still_ties"] > ties:
+        if ties_of(stats) > ties:
             stats[f"tie_seed_{seed}"] = 1
-    return len(seeds) - len(failures) - stats["still_ties"], stats, failures
+    return len(seeds) - len(failures) - ties_of(stats), stats, failures
+
+
+def ties_of(stats: Counter) -> int:
+    """Streams that parted at a stillness tie or a tick tie (module docstring)."""
+    return stats["still_ties"] + stats["tick_ties"]
 
 
 def lsb_cases(stats: Counter) -> int:
@@ -296,8 +311,8 @@ def test_robot_answers_the_asker_and_reports_latches_to_the_served_address():
 def test_generated_streams_are_identical():
     identical, stats, failures = run_many(range(DEFAULT_STREAMS))
     assert not failures, failures[0]
-    assert identical + stats["still_ties"] == DEFAULT_STREAMS
-    assert stats["still_ties"] <= max(2, MAX_TIE_SHARE * DEFAULT_STREAMS), stats
+    assert identical + ties_of(stats) == DEFAULT_STREAMS
+    assert ties_of(stats) <= max(2, MAX_TIE_SHARE * DEFAULT_STREAMS), stats
     assert stats["latch_messages"] > 300 and stats["messages"] > 3000  # the streams do exercise the fins and rules
     assert lsb_cases(stats) <= max(2, MAX_LSB_SHARE * stats["latch_messages"]), stats
 
@@ -307,7 +322,7 @@ def test_generated_streams_with_other_limits_are_identical():
                             limits=ServoLimits(max_speed=10.0, period_max=6.0, max_rate=(2.0, 1.0, 3.0, 5.0)))
     identical, stats, failures = run_many(range(1000, 1030), config)
     assert not failures, failures[0]
-    assert identical + stats["still_ties"] == 30 and stats["still_ties"] <= 2 and lsb_cases(stats) <= 2
+    assert identical + ties_of(stats) == 30 and ties_of(stats) <= 2 and lsb_cases(stats) <= 2
 
 
 @pytest.mark.slow
@@ -316,7 +331,7 @@ def test_ten_thousand_generated_streams_are_identical():
     identical, stats, failures = run_many(range(10_000, 10_000 + n))
     print(f"{identical} of {n} streams identical; {dict(stats)}")
     assert not failures, failures[0]
-    assert identical + stats["still_ties"] == n and stats["still_ties"] <= MAX_TIE_SHARE * n, stats
+    assert identical + ties_of(stats) == n and ties_of(stats) <= MAX_TIE_SHARE * n, stats
     assert lsb_cases(stats) <= max(2, MAX_LSB_SHARE * stats["latch_messages"]), stats
 
 
