@@ -237,7 +237,7 @@ def _run_real_time(parser: argparse.ArgumentParser, args: argparse.Namespace, co
         try:
             if args.emulate:
                 clock, robot, port, camera = open_rig(resources, args.seed, conditions, False, args.speed,
-                                                      args.emulate_params)
+                                                      args.emulate_params, args.firmware)
                 inset = settings.get("start_inset", tk.START_INSET)  # the policy's own, as it trained
                 hook = lambda rng: robot.place(*random_start(rng, inset))  # noqa: E731 - a hand puts the fish back
             else:
@@ -300,7 +300,7 @@ def _run_lockstep(parser: argparse.ArgumentParser, args: argparse.Namespace, con
 
     job = LockstepJob(args.controller, None if args.policy is None else str(args.policy), args.seed, conditions,
                       settings, safety, args.max_steps, args.calibration, args.take_over, args.emulate_params,
-                      args.scaling)
+                      args.scaling, args.firmware)
     started = time.perf_counter()
     with open(log_path, "w", encoding="utf-8") as log, _run_log(log_path.with_name("run.jsonl"), args,
                                                                   settings) as run_log:
@@ -403,7 +403,7 @@ def main(argv: list[str] | None = None) -> int:
     report["wall_time"] = wall_time  # s for the episodes (the one field a lockstep rerun changes)
     if args.emulate:
         report["emulation"] = {"lockstep": args.lockstep, "speed": args.speed, "seed": args.seed,
-                               "conditions": dataclasses.asdict(conditions),
+                               "firmware": args.firmware, "conditions": dataclasses.asdict(conditions),
                                "params": None if args.emulate_params is None else dataclasses.asdict(
                                    args.emulate_params)}
     if solver is not None:

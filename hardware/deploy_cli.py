@@ -13,6 +13,7 @@ from pectoral_gym.hardware.deploy_checks import (
     SPEED_RANGE,
     robot_address,
 )
+from pectoral_gym.hardware.emulated_firmware import FIRMWARES
 from pectoral_gym.hardware.emurig import RigConditions
 from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, prog_name
 
@@ -90,6 +91,9 @@ def make_parser(description: str) -> argparse.ArgumentParser:
     parser.add_argument("--emulate-params", type=fish_params, default=None, metavar="JSON",
                         help="--emulate only: the emulated fish's parameters (a FishParams file, e.g. a robot "
                              "calibrated from its run logs; default: Table 1's)")
+    parser.add_argument("--firmware", choices=FIRMWARES, default="python",
+                        help="--emulate only: the emulated robot's rules, the Python reference, the C firmware "
+                             "core, or the reference ticked every 10 ms as the C core is (default %(default)s)")
     parser.add_argument("--params", type=fish_params, default=None, metavar="JSON",
                         help="the robot's model parameters (a FishParams file, e.g. pectoral-scaling calibrate's "
                              "robot.json): the geofence's stopping distance and fish outline, the PC's fin replay "
@@ -150,6 +154,8 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
         parser.error("--jobs needs --emulate --lockstep (episodes run in parallel only in simulated time)")
     if args.lockstep and args.speed != 1.0:
         parser.error("--speed does not apply with --lockstep (simulated time runs as fast as the CPU allows)")
+    if args.firmware != "python" and not args.emulate:
+        parser.error("--firmware chooses the emulated robot's rules: it needs --emulate")
     if args.emulate_params is not None and not args.emulate:
         parser.error("--emulate-params gives the emulated fish its parameters: it needs --emulate")
     if not args.emulate and rig_conditions(args) != RigConditions():

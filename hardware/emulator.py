@@ -33,20 +33,17 @@ import time
 import numpy as np
 
 from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
+from pectoral_gym.hardware.emulated_firmware import FIRMWARES, ROBOT_ADDRESS, make_firmware
 from pectoral_gym.hardware.finreplay import CHUNK as _CHUNK
-from pectoral_gym.hardware.finreplay import apply_firmware, latched, stroke_kinds
 from pectoral_gym.hardware.radio import protocol as pr
-from pectoral_gym.hardware.radio import xbee as xb
-from pectoral_gym.hardware.radio.firmware import Firmware, FirmwareConfig, new_boot_id
+from pectoral_gym.hardware.radio.firmware import FirmwareConfig, new_boot_id
 from pectoral_gym.hardware.realtime import settle_garbage
-from pectoral_gym.model import strokes
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
 from pectoral_gym.model.spec import FULL_REFERENCE, FullSpec
 from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
 
 __all__ = ["EmulatedRobot", "ROBOT_ADDRESS", "build_parser", "main"]
 
-ROBOT_ADDRESS = 0x0013A20000000001  # 64-bit source address the emulated XBee reports
 _POLL = 0.002  # poll period of the I/O loop [clock s]
 
 
@@ -70,13 +67,18 @@ class EmulatedRobot:
         clock: The clock of the emulation loop (:mod:`pectoral_gym.hardware.clock`); every stamp is on it.
         stream: The robot's end of a :class:`pectoral_gym.hardware.radio.pipe.StreamPair` as its radio, instead
             of a TCP port or a pseudo-terminal (``port`` and ``pty`` are then ignored).
+        firmware_impl: The robot's rules: ``"python"`` (the reference state machine), ``"c"`` (the C firmware
+            core through its binding) or ``"python-10ms"`` (the reference ticked every 10 ms as the C core is),
+            :mod:`pectoral_gym.hardware.emulated_firmware`.
+        variant: With ``"c"``: a deliberately broken build of the C core (for the conformance suite's own tests).
     """
 
     def __init__(self, port: int | None = 0, pty: bool = False, host: str = "127.0.0.1", speed: float = 1.0,
                  params: FishParams | None = None, firmware: FirmwareConfig | None = None,
                  start_pose: tuple[float, float, float] | None = None, loss: float = 0.0,
                  camera_port: int | None = None, camera_fps: float = 30.0, seed: int | None = None,
-                 model: FullSpec = FULL_REFERENCE, clock: Clock = REAL_CLOCK, stream=None):
+                 model: FullSpec = FULL_REFERENCE, clock: Clock = REAL_CLOCK, stream=None,
+                 firmware_impl: str = "python", variant: str | None = None):
         if not isinstance(model, FullSpec):
             raise ValueError(f"model must be a FullSpec (pectoral_gym.model.spec), got {model!r}")
         if not (math.isfinite(speed) and speed > 0):
@@ -89,9 +91,10 @@ class EmulatedRobot:
         model.build(1, params).advance(_CHUNK)  # load the compiled kernels now, not while the PC waits for acks
         self._rng = np.random.default_rng(seed)
         self._firmware_config = firmware
-        self.firmware = Firmware(firmware, boot=new_boot_id(self._rng), power_up=0.0)  # emulated clock from 0
+        self.firmware_impl = firmware_impl
+        # emulated clock from 0
+        self.rules = make_firmware(firmware_impl, firmware, new_boot_id(self._rng), variant)
         self.reboots = 0
-        self.decoder = pr.StreamDecoder()
         self.received: list[pr.Message] = []  # every valid message, in arrival order (for tests and logs)
         self.lost_messages = 0
         # With a list here, every physics chunk appends (t, state (6,), fin rates (2,), peak rates of the
@@ -123,6 +126,16 @@ class EmulatedRobot:
         self.place(*(start_pose or (0.5 * TANK_LENGTH, 0.5 * TANK_WIDTH, 0.0)))
 
     # ------------------------------------------------------------ clock and state
+    @property
+    def firmware(self):
+        """The robot's rules as tests inspect them: ``state``, ``running``, ``boot`` (a ``Firmware`` in Python)."""
+        return self.rules.firmware
+
+    @property
+    def decoder(self):
+        """Counters of what the robot received (``messages``, ``crc_errors``, ...)."""
+        return self.rules.decoder
+
     def now(self) -> float:
         """Emulated time since :meth:`start` [s]."""
         return (self.clock.monotonic() - self._origin) * self.speed
@@ -165,13 +178,10 @@ class EmulatedRobot:
         is lost. The fish keeps coasting (the physics does not reboot).
         """
         with self._lock:
-            fresh = Firmware(self._firmware_config, boot=new_boot_id(self._rng), power_up=self.model.time)
-            fresh.halt = True  # the servos hold where the brown-out left them
-            self.firmware = fresh
-            self.decoder = pr.StreamDecoder()
+            boot = new_boot_id(self._rng)
+            self.rules.reboot(self.model.time, self.model, boot)
             self.reboots += 1
-            self._apply_firmware()
-            return fresh.boot
+            return boot
 
     def camera(self, conditions=None, seed: int | None = None, camera=None):
         """An in-process ``pectoral_gym.hardware.vision.camera.EmulatedCamera`` looking at this fish."""
@@ -286,57 +296,24 @@ class EmulatedRobot:
             pass
 
     def _handle(self, data: bytes) -> None:
-        messages = self.decoder.feed(data)
-        now = self.now()
         with self._lock:
-            self.firmware.crc_errors = self.decoder.crc_errors + self.decoder.checksum_errors
-            replies = []
-            for msg in messages:
-                if self.loss and self._rng.random() < self.loss:
-                    self.lost_messages += 1
-                    continue
-                self.received.append(msg)
-                reply = self.firmware.receive(msg, now)
-                if reply is not None:
-                    replies.append(reply)
-            self._apply_firmware()
-        for reply in replies:
-            self._write(xb.encode_frame(xb.rx_packet(pr.encode_message(reply), ROBOT_ADDRESS)))
+            frames, messages = self.rules.receive(data, self.now(), self.model, self._keep, self.trace)
+            self.received += messages
+        for frame in frames:
+            self._write(frame)
 
-    def _apply_firmware(self) -> None:
-        """Hand the firmware's decision to the model (call with the lock held; the PC's replay does the same)."""
-        apply_firmware(self.firmware, self.model)
-
-    def _latch_reports(self, kinds: np.ndarray) -> list[bytes]:
-        """LATCH frames for the fins that latched in the last advance (call with the lock held)."""
-        frames = []
-        for fin, t in latched(self.model, kinds):
-            stroke = self.model.fins[0, fin]
-            report = self.firmware.latch_report(round(t, 9), fin, stroke[strokes.BIAS:strokes.RATIO + 1],
-                                                stroke[strokes.ANGLE_FROM], stroke[strokes.POWER] > 0.5)
-            if report is not None:
-                frames.append(xb.encode_frame(xb.rx_packet(pr.encode_message(report), ROBOT_ADDRESS)))
-        return frames
+    def _keep(self) -> bool:
+        """Whether the next incoming message survives the injected loss (counted when not)."""
+        if self.loss and self._rng.random() < self.loss:
+            self.lost_messages += 1
+            return False
+        return True
 
     def _advance(self, target: float) -> None:
-        while True:
-            with self._lock:
-                t = self.model.time
-                if t >= target:
-                    return
-                self.firmware.tick(t, self.model.fin_angles()[0][0])
-                self._apply_firmware()
-                kinds = stroke_kinds(self.model)
-                self.model.advance(min(_CHUNK, target - t))
-                reports = self._latch_reports(kinds)
-                if self.trace is not None:
-                    fins = self.model.fins[0]
-                    peak = math.pi * np.abs(fins[:, strokes.ANGLE_TO] - fins[:, strokes.ANGLE_FROM]) / (
-                        2.0 * np.maximum(fins[:, strokes.DURATION], 1e-9))  # stroke_kinematics' peak |g'|
-                    self.trace.append((self.model.time, self.model.state[0].copy(),
-                                       self.model.fin_angles()[1][0].copy(), peak, self.firmware.running))
-            for frame in reports:  # the servo controller reports its latches at once, fire and forget
-                self._write(frame)
+        with self._lock:
+            frames = self.rules.advance(self.model, target, self.trace)
+        for frame in frames:  # the servo controller reports its latches at once, fire and forget
+            self._write(frame)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -363,6 +340,11 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--loss", type=float, default=0.0, help="probability of losing an incoming message")
     parser.add_argument("--seed", type=int, default=None, help="seed of loss injection and camera noise")
     parser.add_argument("--duration", type=float, default=None, metavar="S", help="exit after this many wall s")
+    parser.add_argument("--firmware", choices=FIRMWARES, default="python",
+                        help="the robot's rules: the Python reference, the C firmware core, or the reference ticked "
+                             "every 10 ms as the C core is (default %(default)s)")
+    parser.add_argument("--variant", default=None, metavar="NAME",
+                        help="with --firmware c: a deliberately broken build (as pectoral-firmware-check --variant)")
     return parser
 
 
@@ -375,8 +357,8 @@ def main(argv: list[str] | None = None) -> int:
         robot = EmulatedRobot(port=args.port, pty=args.port is None, host=args.host, speed=args.speed,
                               firmware=FirmwareConfig(watchdog_timeout=args.watchdog), start_pose=start,
                               loss=args.loss, camera_port=args.camera_port, camera_fps=args.camera_fps,
-                              seed=args.seed)
-    except (ValueError, OSError) as err:
+                              seed=args.seed, firmware_impl=args.firmware, variant=args.variant)
+    except (ValueError, OSError, RuntimeError) as err:
         parser.error(str(err))
     robot.start()
     print(f"emulated robot listening on {robot.url}", flush=True)

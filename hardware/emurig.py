@@ -95,7 +95,8 @@ def lockstep_session(seed: int) -> int:
 
 
 def open_rig(resources: contextlib.ExitStack, seed: int, conditions: RigConditions = RigConditions(),
-             lockstep: bool = False, speed: float = 1.0, params: Any = None) -> tuple[Clock, Any, Any, Any]:
+             lockstep: bool = False, speed: float = 1.0, params: Any = None,
+             firmware: str = "python") -> tuple[Clock, Any, Any, Any]:
     """Start an emulated robot; returns ``(clock, robot, port, camera)`` for the PC side.
 
     Everything started is registered in ``resources`` (closed last in, first out). ``port`` is a URL (real
@@ -110,6 +111,7 @@ def open_rig(resources: contextlib.ExitStack, seed: int, conditions: RigConditio
         speed: Emulated seconds per wall second (real time only).
         params: The emulated fish's :class:`pectoral_gym.model.params.FishParams` (``None``: Table 1's), e.g. a
             robot other than the one the controller was made for.
+        firmware: The emulated robot's rules (``pectoral_gym.hardware.emulated_firmware.FIRMWARES``).
     """
     from pectoral_gym.hardware.emulator import EmulatedRobot
 
@@ -121,12 +123,13 @@ def open_rig(resources: contextlib.ExitStack, seed: int, conditions: RigConditio
         from pectoral_gym.hardware.radio.pipe import StreamPair
 
         pair = StreamPair(clock, conditions.channel(seed) if conditions.radio else None)
-        robot = EmulatedRobot(speed=1.0, seed=seed, clock=clock, stream=pair.robot, params=params).start()
+        robot = EmulatedRobot(speed=1.0, seed=seed, clock=clock, stream=pair.robot, params=params,
+                              firmware_impl=firmware).start()
         resources.callback(robot.stop)
         port = RadioLink(pair.pc, session=lockstep_session(seed), clock=clock)
         resources.callback(port.close)
     else:
-        robot = EmulatedRobot(speed=speed, seed=seed, params=params).start()
+        robot = EmulatedRobot(speed=speed, seed=seed, params=params, firmware_impl=firmware).start()
         resources.callback(robot.stop)
         port = robot.url
         if conditions.radio:

@@ -59,6 +59,7 @@ class LockstepJob:
         take_over: Take control of a robot another session drives (``HardwareFishEnv``'s ``take_over``).
         params: The emulated fish's :class:`pectoral_gym.model.params.FishParams` (``None``: Table 1's).
         scaling: The K file the hand law and the NMPC plan with (``None``: the shipped K).
+        firmware: The emulated robot's rules (``pectoral_gym.hardware.emulated_firmware.FIRMWARES``).
     """
 
     controller: str = "hand"
@@ -72,6 +73,7 @@ class LockstepJob:
     take_over: bool = False
     params: Any = None
     scaling: str | None = None
+    firmware: str = "python"
 
 
 @dataclass
@@ -135,7 +137,7 @@ class _Runner:
             with contextlib.ExitStack() as resources:  # released last in, first out, on every path
                 try:
                     clock, robot, port, camera = open_rig(resources, job.seed + episode, job.conditions,
-                                                          lockstep=True, params=job.params)
+                                                          lockstep=True, params=job.params, firmware=job.firmware)
                     inset = job.settings.get("start_inset", tk.START_INSET)  # the policy's own, as it trained
                     check_frame_size(first_frame(camera, clock=clock), self.model, job.calibration)
                     env = HardwareFishEnv(port, camera, safety=job.safety, max_episode_steps=job.max_steps,

@@ -37,6 +37,12 @@ Rules:
   (``docs/hardware.md``, "The firmware's rate rule").
 * **Sequence numbers**: new -> act and acknowledge; duplicate -> acknowledge only (a retry whose first
   copy arrived); stale -> ignore. All counted.
+* **The robot's clock**: the rules' times (uptime, lease end, deadline, watchdog) are whole milliseconds, as on the
+  robot's u32 millisecond clock: the caller's float seconds are read as the millisecond they fall in, a time within
+  :data:`MS_GUARD` ms below a whole ms counting as that ms (``k / 1000.0`` is often a hair below ``k`` ms in
+  float64, and the robot's float32 turning points are known to ~1e-4 ms), and the comparisons are between integers.
+  Float sums such as ``now + lease`` against a tick's float time tie-broke 1 ms differently from the robot; the
+  C firmware (``firmware/``) is held to this reference stream by stream (``tests/test_firmware_differential.py``).
 * **Latch reports**: while running, every time a fin latches a pattern that moves it (not a half-stroke that
   ends where it starts) at a stroke turning point, the robot sends a LATCH to the served session
   (:meth:`Firmware.latch_report`; fire and forget, numbered on their own): the uptime then, the fin, the
@@ -65,10 +71,13 @@ from pectoral_gym.hardware.radio.protocol import (
 )
 from pectoral_gym.model.servo import ROBOT_MAX_FIN_RATE, servo_period
 
-__all__ = ["ServoLimits", "FirmwareConfig", "Firmware", "clip_beats", "rate_limit", "rest_beats", "peak_rates",
-           "slew_at_latch", "stretch_transition", "new_boot_id"]
+__all__ = ["MS_GUARD", "ServoLimits", "FirmwareConfig", "Firmware", "clip_beats", "rate_limit", "rest_beats",
+           "peak_rates", "slew_at_latch", "stretch_transition", "new_boot_id"]
 
 _RETIRED = 16  # sessions remembered as retired (a restarted PC gets a fresh random 32-bit session)
+#: A time within this many ms below a whole millisecond counts as that millisecond (1 us: above float64's rounding
+#: of a time and the robot's float32 turning points, far below anything a millisecond clock resolves).
+MS_GUARD = 1e-3
 
 
 def new_boot_id(rng=None) -> int:
@@ -338,15 +347,20 @@ class Firmware:
         return Message(MsgType.LATCH, self._latch_seq, self.session, latch=latch)
 
     def uptime_ms(self, now: float) -> int:
-        """The robot clock [ms since power-up, u32, rounded down] at ``now`` [s]."""
-        return int(math.floor(1000.0 * max(now - self.power_up, 0.0))) & 0xFFFFFFFF
+        """The robot clock [ms since power-up, u32, rounded down with the :data:`MS_GUARD`] at ``now`` [s]."""
+        return int(math.floor(1000.0 * max(now - self.power_up, 0.0) + MS_GUARD)) & 0xFFFFFFFF
+
+    def _clock_ms(self, t: float) -> float:
+        """``t`` [s] as a whole ms since power-up (not wrapped; an infinite ``t`` stays infinite)."""
+        return math.floor(1000.0 * (t - self.power_up) + MS_GUARD) if math.isfinite(t) else t
 
     def _admit(self, msg: Message, now: float) -> bool:
         """Whether a message of a session other than the served one takes the robot over (then it does)."""
         if msg.session in self.retired:
             self.ignored["retired"] += 1
             return False
-        silent = self.last_valid is None or now - self.last_valid >= self.config.watchdog_timeout
+        silent = (self.last_valid is None
+                  or self._clock_ms(now) - self._clock_ms(self.last_valid) >= 1000.0 * self.config.watchdog_timeout)
         if self.session is not None and not silent and msg.type != MsgType.CLAIM:
             self.ignored["refused"] += 1  # the served session is live: taking over needs a CLAIM
             return False
@@ -389,14 +403,16 @@ class Firmware:
             self.ignored["copy"] += 1  # a copy (or an older command): it neither extends nor restarts
             return
         self.command_id = msg.command
-        end = now + msg.lease  # counted from our own receipt of the first copy
+        now_ms = self._clock_ms(now)
+        end_ms = now_ms + round(msg.lease * 1000.0)  # counted from our own receipt of the first copy
         if msg.deadline:
             if msg.boot != self.boot:
                 self.ignored["boot"] += 1  # a deadline on another power-up's clock: meaningless here
                 return
             ahead_ms = ((msg.deadline - self.uptime_ms(now) + 0x80000000) & 0xFFFFFFFF) - 0x80000000
-            end = min(end, self.power_up + (self.uptime_ms(now) + ahead_ms) / 1000.0)  # u32 wrap-safe
-        if end <= now:
+            end_ms = min(end_ms, now_ms + ahead_ms)  # u32 wrap-safe
+        end = self.power_up + end_ms / 1000.0
+        if end_ms <= now_ms:
             self.ignored["late"] += 1  # this command's time is over: never start it, stop the previous one
             if self.running:
                 self._stop(RobotState.EXPIRED)
@@ -421,11 +437,12 @@ class Firmware:
             now: Current time [s].
             fin_angles: Current fin angles ``(2,)`` [rad]; a halted fin's setpoint is rest at its angle.
         """
-        if self.running and now >= self.lease_end:
+        now_ms = self._clock_ms(now)
+        if self.running and now_ms >= self._clock_ms(self.lease_end):
             self._stop(RobotState.EXPIRED)
             self.tripped_at = now
         if (self.running and self.last_valid is not None
-                and now - self.last_valid > self.config.watchdog_timeout):
+                and now_ms - self._clock_ms(self.last_valid) > 1000.0 * self.config.watchdog_timeout):
             self._stop(RobotState.WATCHDOG)
             self.tripped_at = now
         if self.running:

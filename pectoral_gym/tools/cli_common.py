@@ -201,6 +201,7 @@ COMMANDS: dict[str, Command] = {c.name: c for c in (
     Command("pectoral-seeds", "pectoral_gym.agents.studies.seeds"),
     Command("pectoral-emulator", "pectoral_gym.hardware.emulator"),
     Command("pectoral-deploy", "pectoral_gym.hardware.deploy"),
+    Command("pectoral-firmware-check", "pectoral_gym.hardware.firmware_check"),
     Command("pectoral-camera-calibrate", "pectoral_gym.hardware.vision.calibrate"),
 )}
 """Every console script of the distribution (``[project.scripts]``), by name."""
