@@ -138,6 +138,7 @@ def test_avr_answers_a_heartbeat_and_draws_its_boot_id_from_noise(simulator, avr
     assert _status_of(simulator, avr_build, adc_seed=12, session=session).boot != first.boot
 
 
+@pytest.mark.slow  # real time against the simulated MCU: a loaded machine stalls it and the robot's watchdog trips
 def test_avr_radiolink_runs_the_servos(simulator):
     sys.path.insert(0, str(FIRMWARE / "ports" / "avr" / "sim"))
     try:
