@@ -38,11 +38,9 @@ import argparse
 import contextlib
 import dataclasses
 import json
-import math
 import sys
 import time
 from pathlib import Path
-from typing import TextIO
 
 import numpy as np
 
@@ -56,101 +54,19 @@ from pectoral_gym.hardware.deploy_checks import (
     raise_priority,
 )
 from pectoral_gym.hardware.deploy_cli import check_args, make_parser, rig_conditions
+from pectoral_gym.hardware.deploy_episodes import (  # re-exported: the deploy's episode loop
+    displaced_reason,
+    plot_trajectories,
+    random_start,
+    run_episode,
+    run_episodes,
+)
 from pectoral_gym.hardware.emurig import RigConditions, open_rig
 from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handlers
 
-__all__ = ["build_parser", "main", "make_controller", "plot_trajectories", "random_start", "run_episode",
+__all__ = ["EXIT_DISPLACED", "build_parser", "main", "make_controller", "plot_trajectories", "random_start",
+           "run_episode",
            "run_episodes", "solver_summary"]
-
-
-def random_start(rng: np.random.Generator, inset: float = tk.START_INSET) -> tuple[float, float, float]:
-    """A start pose as the simulated goal task draws one (tank inset by ``inset`` [m], any heading)."""
-    x = inset + rng.random() * (tk.TANK_X - 2 * inset)
-    y = inset + rng.random() * (tk.TANK_Y - 2 * inset)
-    return x, y, -math.pi + 2 * math.pi * rng.random()
-
-
-def run_episode(env, controller, episode: int, log: TextIO, seed: int | None = None, robot=None) -> dict:
-    """Run episode number ``episode``; write one JSON line per step to ``log``; return the episode's summary.
-
-    The env and the controller are reset with ``seed + episode`` (``None``: unseeded). A step's ``t`` is seconds
-    since the episode's reset on the env's clock (simulated seconds in lockstep).
-    """
-    clock = getattr(env.unwrapped, "clock", REAL_CLOCK)
-    ep_seed = None if seed is None else seed + episode
-    obs, info = env.reset(seed=ep_seed)
-    controller.reset(ep_seed)
-    ret, steps, t0 = 0.0, 0, clock.monotonic()
-    record = {"episode": episode, "step": 0, "event": "reset", "pose": info["pose"], "target": info["target"]}
-    if robot is not None:
-        record["true_pose"] = list(robot.pose())
-    log.write(json.dumps(record) + "\n")
-    while True:
-        action = np.asarray(controller.act(obs), dtype=np.float32)
-        obs, reward, terminated, truncated, info = env.step(action)
-        ret += reward
-        steps += 1
-        record = {"episode": episode, "step": steps, "t": clock.monotonic() - t0,
-                  "action": action.tolist(), "command": info["command"], "pose": info["pose"],
-                  "estimate": info["estimate"], "target": env.unwrapped.target, "reward": reward,
-                  "terminated": terminated, "truncated": truncated, "safety_stop": info["safety_stop"],
-                  "distance": info["distance"], "link": info["link"], "tracking": info["tracking"]}
-        if robot is not None:
-            record["true_pose"] = list(robot.pose())
-        log.write(json.dumps(record) + "\n")
-        if terminated or truncated:
-            break
-    return {"episode": episode, "return": ret, "steps": steps, "terminated": terminated, "truncated": truncated,
-            "safety_stop": info["safety_stop"], "success": bool(info.get("is_success", False)),
-            "final_distance": info["distance"]}
-
-
-def run_episodes(env, controller, episodes: int, log_path: Path, seed: int | None = None, robot=None,
-                 progress: bool = True) -> list[dict]:
-    """Run ``episodes`` episodes on one env (:func:`run_episode`); write the steps to ``log_path``; return summaries."""
-    from tqdm import tqdm
-
-    summaries = []
-    with open(log_path, "w", encoding="utf-8") as log, tqdm(total=episodes, desc="episodes",
-                                                              disable=not progress) as bar:
-        for episode in range(episodes):
-            summaries.append(run_episode(env, controller, episode, log, seed, robot))
-            log.flush()
-            bar.update(1)
-    return summaries
-
-
-def plot_trajectories(log_path: Path, png_path: Path) -> None:
-    """Tank, measured/estimated path (and the true path when emulated) and targets of every episode."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    episodes: dict[int, list[dict]] = {}
-    for line in Path(log_path).read_text(encoding="utf-8").splitlines():
-        rec = json.loads(line)
-        episodes.setdefault(rec["episode"], []).append(rec)
-    fig, ax = plt.subplots(figsize=(9, 5))
-    ax.add_patch(plt.Rectangle((0, 0), tk.TANK_X, tk.TANK_Y, fill=False, lw=2, color="k"))
-    for k, recs in episodes.items():
-        colour = f"C{k % 10}"
-        est = np.array([r["estimate"][:2] for r in recs if "estimate" in r])
-        if len(est):
-            ax.plot(est[:, 0], est[:, 1], "-", color=colour, label=f"episode {k} estimate")
-        true = np.array([r["true_pose"][:2] for r in recs if "true_pose" in r])
-        if len(true):
-            ax.plot(true[:, 0], true[:, 1], ":", color=colour, label=f"episode {k} true")
-        start = recs[0]["pose"]
-        ax.plot(start[0], start[1], "o", color=colour)
-        targets = np.array([r["target"] for r in recs if "target" in r])
-        ax.plot(targets[:, 0], targets[:, 1], "x", color=colour, ms=8)
-    ax.set(xlim=(-0.05, tk.TANK_X + 0.05), ylim=(-0.05, tk.TANK_Y + 0.05), xlabel="X [m]", ylabel="Y [m]",
-           title="Deployment: path (o start, x target)", aspect="equal")
-    ax.legend(fontsize=7, loc="upper right")
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=120)
-    plt.close(fig)
 
 
 def make_controller(name: str, config, step_budget: float, safety: SafetyConfig | None = None,
@@ -203,11 +119,19 @@ def solver_summary(controller) -> dict:
             "failures": int(controller.failures), "late": int(controller.late)}
 
 
+_DISPLACED_TEXT = {"taken_over": "another session took the robot over (taken_over)",
+                   "robot_busy": "the robot serves another live session (robot_busy; --take-over takes it over)"}
+
+
 class _RunError(Exception):
     """A device or an episode failed (exit status 1); the message says what and where."""
 
 
-_RunResult = tuple[list[dict], dict, dict | None, float]  # summaries, link health, solver summary, wall time [s]
+# summaries, link health, solver summary, wall time [s], why the run ended early ("" or a DISPLACED reason)
+_RunResult = tuple[list[dict], dict, dict | None, float, str]
+
+#: Exit status of a run displaced by another session (``taken_over``, ``robot_busy``): it ended at once.
+EXIT_DISPLACED = 3
 
 
 def _run_log(path: Path, args: argparse.Namespace, settings: dict):
@@ -222,7 +146,9 @@ def _run_real_time(parser: argparse.ArgumentParser, args: argparse.Namespace, co
     """The episodes on one robot (real or emulated in real time), one after another on one rig and env.
 
     Returns:
-        ``(summaries, link health, solver summary or None, wall time [s])``.
+        ``(summaries, link health, solver summary or None, wall time [s], ended)``: ``ended`` is
+        ``"taken_over"`` or ``"robot_busy"`` if the robot came to serve another session (the run then ended at
+        once and sent nothing more), else ``""``.
 
     Raises:
         _RunError: A device did not answer or an episode could not go on.
@@ -272,8 +198,9 @@ def _run_real_time(parser: argparse.ArgumentParser, args: argparse.Namespace, co
         except (RuntimeError, OSError) as err:  # e.g. no fish seen at reset, the robot not confirming a stop
             raise _RunError(f"{err} (log so far: {log_path})") from err
         wall_time = time.perf_counter() - started
+        ended = displaced_reason(env)
     solver = solver_summary(controller) if hasattr(controller, "solve_times") else None
-    return summaries, env.link.health(), solver, wall_time  # the link's health once the env closed it
+    return summaries, env.link.health(), solver, wall_time, ended  # the link's health once the env closed it
 
 
 def _run_lockstep(parser: argparse.ArgumentParser, args: argparse.Namespace, controller, settings: dict,
@@ -327,7 +254,7 @@ def _run_lockstep(parser: argparse.ArgumentParser, args: argparse.Namespace, con
             raise _RunError(f"episode {err.episode}: {err} (log so far: {log_path})") from err
     wall_time = time.perf_counter() - started
     return ([r.summary for r in results], merge_link([r.link for r in results]),
-            merge_solver([r.solver for r in results]), wall_time)
+            merge_solver([r.solver for r in results]), wall_time, "")  # a fresh rig per episode: nobody else
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -336,7 +263,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Command-line entry point; returns the exit status (0 done, 1 a device failed; 2 via SystemExit: bad argument).
+    """Command-line entry point; returns the exit status.
+
+    0 done, 1 a device failed, 2 via SystemExit: a bad argument, :data:`EXIT_DISPLACED` (3): the robot came to
+    serve another session (``summary.json``'s ``ended``).
 
     Every resource (emulated robot, radio link, camera, env) is released on every path out.
     """
@@ -388,10 +318,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"warning: {warning}", file=sys.stderr)
     try:
         if args.lockstep:
-            summaries, link, solver, wall_time = _run_lockstep(parser, args, controller, settings, safety,
+            summaries, link, solver, wall_time, ended = _run_lockstep(parser, args, controller, settings, safety,
                                                                conditions, out / "steps.jsonl")
         else:
-            summaries, link, solver, wall_time = _run_real_time(parser, args, controller, settings, safety,
+            summaries, link, solver, wall_time, ended = _run_real_time(parser, args, controller, settings, safety,
                                                                 conditions, model, out / "steps.jsonl")
     except _RunError as err:
         print(f"{parser.prog}: error: {err}", file=sys.stderr)
@@ -399,7 +329,7 @@ def main(argv: list[str] | None = None) -> int:
     report = {"controller": args.controller, "policy": None if args.policy is None else str(args.policy),
               "settings": {k: list(v) if isinstance(v, tuple) else dataclasses.asdict(v) if k == "params" else v
                            for k, v in settings.items()},
-              "episodes": summaries, "link": link}
+              "episodes": summaries, "link": link, "ended": ended or "done"}
     report["wall_time"] = wall_time  # s for the episodes (the one field a lockstep rerun changes)
     if args.emulate:
         report["emulation"] = {"lockstep": args.lockstep, "speed": args.speed, "seed": args.seed,
@@ -416,6 +346,10 @@ def main(argv: list[str] | None = None) -> int:
     print(f"log {out / 'steps.jsonl'}, plot {out / 'trajectory.png'}; link: sent {link['sent']}, "
           f"acked {link['acked']}, retries {link['retries']}, crc errors {link['crc_errors']}; "
           f"{len(summaries)} episodes in {report['wall_time']:.1f} s wall time")
+    if ended:
+        print(f"{parser.prog}: {_DISPLACED_TEXT[ended]}: this run ended after {len(summaries)} of {args.episodes} "
+              "episodes and sends nothing more (summary.json: ended)", file=sys.stderr)
+        return EXIT_DISPLACED
     return 0
 
 

@@ -32,7 +32,9 @@ _EXAMPLES = """examples:
   pectoral-deploy --controller excite --emulate --lockstep --emulate-params robot_true.json \\
       --episodes 6 --max-episode-steps 60 --out id-run                                  # ... on an emulated robot
 
-exit status: 0 done; 1 a device failed (no frame, no fish seen, robot not answering); 2 a bad argument."""
+exit status: 0 done; 1 a device failed (no frame, no fish seen, robot not answering); 2 a bad argument;
+  3 the robot serves another session (another PC took it over, or it was never ours): the run ended at once
+  and sent nothing more, not even STOP (Ctrl-C still sends the operator's STOP)."""
 
 
 def make_parser(description: str) -> argparse.ArgumentParser:

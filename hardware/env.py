@@ -264,6 +264,8 @@ class HardwareFishEnv(gym.Env):
             RuntimeError: The operator's stop is latched (:meth:`stop`; :meth:`rearm` clears it), also when it
                 comes during the reset; the robot did not confirm it stopped within ``stop_timeout`` (the
                 hook is then not called); no fish was seen within ``reset_timeout``; the env is closed.
+            pectoral_gym.hardware.radio.link.DisplacedError: The robot serves another session (``taken_over``,
+                ``robot_busy``): nothing is sent, not even the reset's STOP; the run must end.
         """
         super().reset(seed=seed)
         if self._closed:
@@ -287,6 +289,7 @@ class HardwareFishEnv(gym.Env):
         # Only frames captured after the hook returned: a camera clock may lead by up to max_frame_lead.
         placed = self.now() + self.safety.max_frame_lead * self.speed
         self.stack.wait_for_fish(placed, self.reset_timeout, self.frame_period / self.speed)
+        sup.check_latency()  # measured on the frames of this wait; a latency the tank cannot afford: fins stay stopped
         sup.drain()
         t = self.watch.last_seen
         x, y, psi = sup.pose
@@ -390,7 +393,7 @@ class HardwareFishEnv(gym.Env):
                     estimate=self._state.tolist(), overrun=overrun, link=self.link.health(),
                     tracking={"ok": sup.track_ok, "lost_for": self.watch.lost_for(end), "reason": self.watch.reason,
                               "confidence": sup.confidence, "frames": sup.frames, "lost_frames": sup.lost_frames,
-                              "rejected": dict(sup.frame_check.rejected)})
+                              "rejected": dict(sup.frame_check.rejected), "latency": sup.latency})
         return task.obs[0].copy(), task.reward(0), terminated, truncated, info
 
     def _observe_fins(self, t: float | None = None) -> None:
