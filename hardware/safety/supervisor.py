@@ -28,6 +28,7 @@ from pectoral_gym.hardware.safety.geofence import Geofence, SpeedBound
 from pectoral_gym.hardware.safety.rules import SafetyConfig, TrackingWatch
 from pectoral_gym.hardware.vision.framecheck import FrameCheck
 from pectoral_gym.hardware.vision.frames import FrameGrabber
+from pectoral_gym.hardware.vision.latency import CameraLatencyError, afforded_latency, pipeline_latency
 
 __all__ = ["Supervisor", "PRIORITY", "CONTROL_LOST"]
 
@@ -118,6 +119,8 @@ class Supervisor:
         self.confidence = 0.0
         self.track_ok = False
         self.frames = self.lost_frames = 0
+        self.afforded_latency = afforded_latency(safety.tracking_timeout, safety.reaction_time)
+        self._last_read = -math.inf  # experiment time the last frame was read
         self._box = None
         self._since = -math.inf
         self._reads = self._reads_at_sighting = 0  # frames read; frames read up to the last sighting
@@ -259,6 +262,7 @@ class Supervisor:
         frame = self.camera.read()
         if frame is not None:
             self._reads += 1
+            self._last_read = self.now()
             try:
                 self._frame(frame)
             except Exception as error:  # noqa: BLE001 - whichever thread met it, a broken tracker stops the fish
@@ -304,10 +308,48 @@ class Supervisor:
         seen = self.watch.last_seen
         age = now - seen
         bound = self.bound.peak(seen, now + self.geofence.reaction_time)
-        unseen = max(0.0, age - self.geofence.reaction_time)  # unseen beyond the reaction budget
+        # Unseen beyond the reaction budget and the camera's measured latency: a frame that arrives late but
+        # regularly is a sighting of an older time (its age already lengthens the stopping distance, speed x age).
+        unseen = max(0.0, age - self.geofence.reaction_time - self.latency_budget)
         gain = self.bound.accel * unseen if blind and self.bound.run_until >= seen else 0.0
         spread = tuple(_Z * s for s in self.spread)
         return self.geofence.breached(*self.pose, *self.velocity, age=age, spread=spread, bound=bound, gain=gain)
+
+    def _unseen_reason(self, now: float, seen: float) -> str:
+        """What the blind rule saw: no frames, frames that arrive too late, or frames without the fish."""
+        budget = f"the reaction time {self.geofence.reaction_time:.2f} s plus the measured camera latency " \
+                 f"{self.latency_budget:.2f} s"
+        if now - self._last_read > self.geofence.reaction_time:
+            return f"no frame from the camera for {now - self._last_read:.2f} s: the fastest motion since could " \
+                   "reach the stopping band"
+        if self._reads == self._reads_at_sighting:
+            return f"camera frames arrive {now - seen:.2f} s after their capture, more than {budget}: the fastest " \
+                   "motion since could reach the stopping band"
+        return f"fish unseen for {now - seen:.2f} s (more than {budget}): the fastest motion since could reach " \
+               "the stopping band"
+
+    # ------------------------------------------------------------ camera latency
+    @property
+    def latency(self) -> float:
+        """The camera pipeline's measured latency [experiment s] (:func:`pipeline_latency`); ``nan`` before frames."""
+        return pipeline_latency(tuple(getattr(self.camera, "ages", ()))) * self.speed
+
+    @property
+    def latency_budget(self) -> float:
+        """The latency the blind rule credits [s]: the measured one, at most :attr:`afforded_latency` (0 unmeasured)."""
+        latency = self.latency
+        return min(latency, self.afforded_latency) if math.isfinite(latency) else 0.0
+
+    def check_latency(self) -> float:
+        """The measured latency [s]; raises :class:`CameraLatencyError` if the tank cannot afford it."""
+        latency = self.latency
+        if math.isfinite(latency) and latency > self.afforded_latency:
+            raise CameraLatencyError(
+                f"the camera's frames reach this PC {latency:.3f} s after capture; the tank affords at most "
+                f"{self.afforded_latency:.3f} s (tracking timeout {self.safety.tracking_timeout:.2f} s minus the "
+                f"reaction time {self.safety.reaction_time:.2f} s); the fins stay stopped: use a faster camera "
+                "pipeline (docs/guide/safety.md, \"Camera latency\")")
+        return latency
 
     def _rules(self) -> list[str]:
         """Every reason that holds now, highest priority first (:data:`PRIORITY`)."""
@@ -325,9 +367,7 @@ class Supervisor:
             out.append("geofence")
         elif seen is not None and math.isfinite(seen) and self._geofence(now, blind=True):
             # Unseen for so long that the fastest motion the fins allow could reach the stopping band.
-            late = "no frames from the camera" if self._reads == self._reads_at_sighting else \
-                f"unseen for {now - seen:.2f} s: the fastest motion since could reach the stopping band"
-            self.watch.reason = self.watch.reason or self.camera.lost_reason or late
+            self.watch.reason = self.watch.reason or self.camera.lost_reason or self._unseen_reason(now, seen)
             out.append("tracking_lost")
         if self.watch.expired(now) and "tracking_lost" not in out:
             if not self.watch.reason:
