@@ -289,6 +289,7 @@ class HardwareFishEnv(gym.Env):
         # Only frames captured after the hook returned: a camera clock may lead by up to max_frame_lead.
         placed = self.now() + self.safety.max_frame_lead * self.speed
         self.stack.wait_for_fish(placed, self.reset_timeout, self.frame_period / self.speed)
+        sup.check_latency()  # measured on the frames of this wait; a latency the tank cannot afford: fins stay stopped
         sup.drain()
         t = self.watch.last_seen
         x, y, psi = sup.pose
@@ -392,7 +393,7 @@ class HardwareFishEnv(gym.Env):
                     estimate=self._state.tolist(), overrun=overrun, link=self.link.health(),
                     tracking={"ok": sup.track_ok, "lost_for": self.watch.lost_for(end), "reason": self.watch.reason,
                               "confidence": sup.confidence, "frames": sup.frames, "lost_frames": sup.lost_frames,
-                              "rejected": dict(sup.frame_check.rejected)})
+                              "rejected": dict(sup.frame_check.rejected), "latency": sup.latency})
         return task.obs[0].copy(), task.reward(0), terminated, truncated, info
 
     def _observe_fins(self, t: float | None = None) -> None:
