@@ -25,6 +25,7 @@ import numpy as np
 
 from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 from pectoral_gym.hardware.safety.geofence import Geofence, SpeedBound
+from pectoral_gym.hardware.safety.liveness import LivenessWatch
 from pectoral_gym.hardware.safety.rules import SafetyConfig, TrackingWatch
 from pectoral_gym.hardware.vision.framecheck import FrameCheck
 from pectoral_gym.hardware.vision.frames import FrameGrabber
@@ -110,6 +111,8 @@ class Supervisor:
         self.frame_check = FrameCheck(safety.max_frame_lead, safety.tracking_timeout / self.speed)
         self.bound = bound or SpeedBound(geofence.params, safety.limits)
         self.bound.unknown(self.now())
+        self.liveness = LivenessWatch(geofence.params, self.bound, safety.pose_noise)
+        self._not_live = ""  # why the camera's poses do not follow our fins (latched until the next arm)
         self.fired: dict[str, float] = {}
         self.armed = False
         self.stop_requested = False  # set by a signal handler (no lock there); latched until rearm()
@@ -170,6 +173,8 @@ class Supervisor:
             self._recent.extend(recent)
             self._since = since
             self._estimate()  # from the poses since the reset only
+            self.liveness.reset()
+            self._not_live = ""
             self.fired.clear()
             self.armed = True
 
@@ -216,6 +221,7 @@ class Supervisor:
             # The fins may run until the lease ends, plus the reaction time (radio latency, firmware tick).
             self.bound.running(now, now + lease + self.safety.reaction_time)
             self.link.set_fins(beats, lease)
+            self.liveness.command(now, beats)
             return True
 
     def trip(self, reason: str) -> None:
@@ -293,6 +299,8 @@ class Supervisor:
         self._box = getattr(result, "box", None)
         self.pose = (float(result.x), float(result.y), float(result.psi))
         self._measurements.append((t, *self.pose))
+        if self.armed and t >= self._since and not self._not_live:
+            self._not_live = self.liveness.sighting(t, *self.pose)
         if t >= self._since:
             self._recent.append((t, self.pose[0], self.pose[1]))
         self._estimate()
@@ -320,8 +328,7 @@ class Supervisor:
         budget = f"the reaction time {self.geofence.reaction_time:.2f} s plus the measured camera latency " \
                  f"{self.latency_budget:.2f} s"
         if now - self._last_read > self.geofence.reaction_time:
-            return f"no frame from the camera for {now - self._last_read:.2f} s: the fastest motion since could " \
-                   "reach the stopping band"
+            return "no frames from the camera"
         if self._reads == self._reads_at_sighting:
             return f"camera frames arrive {now - seen:.2f} s after their capture, more than {budget}: the fastest " \
                    "motion since could reach the stopping band"
@@ -363,7 +370,10 @@ class Supervisor:
             out.append("link_lost")
         now = self.now()
         seen = self.watch.last_seen
-        if seen is not None and math.isfinite(seen) and self._geofence(now, blind=False):
+        if self._not_live:  # the camera's poses do not follow our fins: the fish is not seen
+            self.watch.reason = self._not_live
+            out.append("tracking_lost")
+        elif seen is not None and math.isfinite(seen) and self._geofence(now, blind=False):
             out.append("geofence")
         elif seen is not None and math.isfinite(seen) and self._geofence(now, blind=True):
             # Unseen for so long that the fastest motion the fins allow could reach the stopping band.

@@ -1,0 +1,162 @@
+"""Whether the camera shows *our* fish, live: the poses it reports against what our fins can and must do.
+
+Pixel tests (:class:`pectoral_gym.hardware.vision.framecheck.FrameCheck`) can always be outrun: a source that
+replays more frames than they remember, or a frozen image under fresh sensor noise. Physics cannot. The PC
+knows every command it sent, hence what the fins did, and the fish must follow them. :class:`LivenessWatch`
+checks three consequences on the sightings (each a stop with a reason saying what was seen):
+
+* **jump**: two consecutive sightings further apart than the fastest the fish can move
+  (:class:`pectoral_gym.hardware.safety.geofence.SpeedBound`) plus the pose noise allowance: a replayed ring of
+  frames going round, a cut to another recording;
+* **too fast**: the camera's fish moving (least-squares speed less two standard errors) faster than the physical
+  bound allows ours: fins still and the fish coasted to rest, while the camera shows a fish that swims;
+* **no motion while the fins beat**: over the last ``window`` s the fins ran the commands sent, the averaged
+  model (:class:`pectoral_gym.model.models.AveragedModel`, from the pose and velocity measured at the window's
+  start) predicts the fish to move ``M_pred`` (displacement plus half a body length times the heading change),
+  and the camera shows less than ``ratio * M_pred``: a frozen camera, however its pixels are dressed up.
+  Only predictions of at least ``min_motion`` count (fins that beat hard); ``docs/guide/safety.md``, "Liveness
+  from physics", gives the figures behind ``window``, ``ratio`` and ``min_motion``.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+
+import numpy as np
+
+from pectoral_gym.hardware.safety.geofence import SpeedBound
+from pectoral_gym.model.params import FishParams
+
+__all__ = ["LivenessWatch"]
+
+_NOISE_SIGMAS = 9.0  # a jump allowance of 9 pose-noise sigmas: P(|2-D noise step| > 9 sigma) = exp(-81/4) ~ 2e-9
+_FIT_SPAN = 0.3  # poses this long before the window's start give its pose and velocity [s]
+_END_SPAN = 0.1  # poses this long at the window's end are averaged for its pose [s]
+
+
+def _fit(poses: np.ndarray, at: float) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares line through ``(t, X, Y, psi)`` rows: ``(X, Y, psi)`` at ``at`` and the rates."""
+    t = poses[:, 0] - at
+    if len(poses) < 2 or np.ptp(t) <= 0:
+        return poses[:, 1:4].mean(axis=0), np.zeros(3)
+    design = np.stack([np.ones_like(t), t], axis=1)
+    coef, *_ = np.linalg.lstsq(design, poses[:, 1:4], rcond=None)
+    return coef[0], coef[1]
+
+
+class LivenessWatch:
+    """Checks the camera's poses against the fins' commands (module docstring); :meth:`check` gives the reason.
+
+    Args:
+        params: The fish's parameters (the averaged model's and the speed bound's).
+        bound: The physical speed bound, fed every command sent (the supervisor's).
+        pose_noise: Standard deviation of a tracked position [m] (the jump allowance is 9 of them).
+        window: Span of the no-motion check [s].
+        ratio: The camera must show at least this share of the predicted motion.
+        min_motion: Predicted motions below this are not judged [m].
+
+    Attributes:
+        last_prediction: ``(M_pred, M_meas)`` of the last no-motion check [m] (``nan`` when none ran).
+    """
+
+    def __init__(self, params: FishParams, bound: SpeedBound, pose_noise: float, window: float = 0.8,
+                 ratio: float = 0.1, min_motion: float = 0.03):
+        from pectoral_gym.model.models import AveragedModel
+
+        self.params, self.bound, self.pose_noise = params, bound, float(pose_noise)
+        self.window, self.ratio, self.min_motion = float(window), float(ratio), float(min_motion)
+        self._model = AveragedModel(n=1, params=params)
+        self._commands: collections.deque[tuple[float, np.ndarray]] = collections.deque(maxlen=64)
+        self._poses: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=256)
+        self.last_prediction = (math.nan, math.nan)
+        self._next_check = -math.inf
+
+    def reset(self) -> None:
+        """Forget poses and commands (a reset: the fish may be moved by hand)."""
+        self._commands.clear()
+        self._poses.clear()
+        self._next_check = -math.inf
+
+    def command(self, t: float, beats: np.ndarray) -> None:
+        """A command ``(2, 4)`` sent at ``t`` [s]."""
+        if self._commands and np.array_equal(self._commands[-1][1], beats):
+            return  # a lease renewal of the same command: the fins go on as they were
+        self._commands.append((float(t), np.array(beats, dtype=float).reshape(2, 4)))
+
+    def sighting(self, t: float, x: float, y: float, psi: float) -> str:
+        """A tracked pose captured at ``t`` [s]; returns why the camera is not live, or ``""``."""
+        reason = ""
+        if self._poses:
+            t0, x0, y0, psi0 = self._poses[-1]
+            psi = psi0 + math.remainder(psi - psi0, math.tau)  # unwrapped against the last sighting
+            dt = t - t0
+            if dt > 0:
+                step = math.hypot(x - x0, y - y0)
+                allowed = self.bound.peak(t0, t) * dt + _NOISE_SIGMAS * self.pose_noise
+                if step > allowed:
+                    reason = (f"camera not live: the fish jumped {step * 1000:.0f} mm in {dt:.3f} s, more than our "
+                              f"fish can move ({allowed * 1000:.0f} mm with the pose noise)")
+        self._poses.append((float(t), float(x), float(y), float(psi)))
+        if not reason and t >= self._next_check:
+            self._next_check = t + 0.1  # the model check at 10 per second is plenty for a window of 0.8 s
+            reason = self._too_fast(t) or self._no_motion(t)
+        return reason
+
+    # ------------------------------------------------------------ the checks
+    def _recent(self, t0: float, t1: float) -> np.ndarray:
+        return np.array([p for p in self._poses if t0 <= p[0] <= t1]).reshape(-1, 4)
+
+    def _too_fast(self, t: float) -> str:
+        poses = self._recent(t - 0.5, t)
+        if len(poses) < 6 or np.ptp(poses[:, 0]) < 0.3:
+            return ""
+        _, rates = _fit(poses, t)
+        centred = poses[:, 0] - poses[:, 0].mean()
+        error = 2.0 * max(self.pose_noise, 1e-4) / math.sqrt(float(centred @ centred))
+        speed = math.hypot(rates[0], rates[1]) - math.sqrt(2.0) * error
+        allowed = self.bound.peak(t - 0.5, t)
+        if speed > allowed:
+            return (f"camera not live: it shows a fish moving at {speed:.2f} m/s, and ours cannot exceed "
+                    f"{allowed:.2f} m/s with the fins it was sent")
+        return ""
+
+    def _no_motion(self, t1: float) -> str:
+        """The averaged model's motion over the window against the camera's."""
+        t0 = t1 - self.window
+        start = self._recent(t0 - _FIT_SPAN, t0)
+        end = self._recent(t1 - _END_SPAN, t1)
+        if len(start) < 4 or len(end) < 2 or start[0, 0] > t0 - 0.5 * _FIT_SPAN:
+            return ""
+        if not (self._commands and self._commands[0][0] <= t0 and self.bound.run_until >= t1):
+            return ""  # the fins did not run the whole window on commands we know
+        pose0, rates0 = _fit(start, t0)
+        pose1 = end[:, 1:4].mean(axis=0)
+        c, s = math.cos(pose0[2]), math.sin(pose0[2])
+        body = (c * rates0[0] + s * rates0[1], -s * rates0[0] + c * rates0[1], rates0[2])
+        predicted = self._predict(np.array([*pose0, *body]), t0, t1, float(end[:, 0].mean()))
+        reach = 0.5 * self.params.body_length
+        m_pred = math.hypot(*(predicted[:2] - pose0[:2])) + reach * abs(predicted[2] - pose0[2])
+        m_meas = math.hypot(*(pose1[:2] - pose0[:2])) + reach * abs(pose1[2] - pose0[2])
+        self.last_prediction = (m_pred, m_meas)
+        if m_pred >= self.min_motion and m_meas < self.ratio * m_pred:
+            return (f"camera frozen: the fish has moved {m_meas * 1000:.0f} mm in {self.window:.1f} s while its "
+                    f"fins beat for {m_pred * 1000:.0f} mm (the averaged model; at least "
+                    f"{self.ratio * m_pred * 1000:.0f} mm expected)")
+        return ""
+
+    def _predict(self, state: np.ndarray, t0: float, t1: float, t_end: float) -> np.ndarray:
+        """The averaged model from ``state`` at ``t0`` under the commands sent, to ``t_end``; pose (3,)."""
+        commands = list(self._commands)
+        active = [beats for t, beats in commands if t <= t0][-1]
+        model = self._model
+        model.reset(state[None], right=active[0][None], left=active[1][None])
+        now = t0
+        for t, beats in commands:
+            if t0 < t < t_end:
+                model.advance(t - now)
+                model.command_array(beats[None])
+                now = t
+        model.advance(max(t_end - now, 0.0))
+        del t1
+        return model.state[0, :3].copy()
