@@ -1,0 +1,85 @@
+"""Camera latency measured and afforded; liveness of the camera judged by the fins' physics (synthetic poses)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from pectoral_gym.hardware.radio.firmware import ServoLimits
+from pectoral_gym.hardware.safety.geofence import SpeedBound
+from pectoral_gym.hardware.safety.liveness import LivenessWatch
+from pectoral_gym.hardware.vision.latency import afforded_latency, pipeline_latency
+from pectoral_gym.model.models import AveragedModel
+from pectoral_gym.model.params import FishParams
+
+P = FishParams()
+FULL = np.array([[math.pi / 2, math.radians(60), 0.6, 3.0]] * 2)  # both fins beating hard, straight ahead
+
+
+def test_pipeline_latency_is_the_smallest_recent_age():
+    assert pipeline_latency([0.25, 0.2, 0.233, math.nan]) == pytest.approx(0.2)
+    assert pipeline_latency([0.3, -0.01]) == 0.0  # a clock slightly ahead counts as no latency
+    assert math.isnan(pipeline_latency([]))
+    assert pipeline_latency([0.0] + [0.3] * 60) == pytest.approx(0.3)  # only the newest 60
+
+
+def test_afforded_latency_leaves_the_reaction_budget_before_the_tracking_timeout():
+    assert afforded_latency(0.5, 0.15) == pytest.approx(0.35)
+    assert afforded_latency(0.1, 0.15) == 0.0
+
+
+def _watch():
+    bound = SpeedBound(P, ServoLimits())
+    bound.reset(0.0)
+    return LivenessWatch(P, bound, pose_noise=0.005), bound
+
+
+def _true_poses(duration, dt=1 / 30):
+    """The averaged model's own poses under FULL from rest at (1, 0.5, 0): a live camera of that fish."""
+    model = AveragedModel(n=1, params=P)
+    model.reset(np.array([[1.0, 0.5, 0.0, 0.0, 0.0, 0.0]]), right=FULL[0][None], left=FULL[1][None])
+    out = []
+    for k in range(int(duration / dt)):
+        out.append((k * dt, *model.state[0, :3]))
+        model.advance(dt)
+    return out
+
+
+def test_frozen_pose_under_beating_fins_stops_with_the_reason():
+    watch, bound = _watch()
+    watch.command(0.0, FULL)
+    bound.running(0.0, 100.0)
+    reasons = []
+    live = _true_poses(6.0)
+    for t, x, y, psi in live[:90]:  # 3 s live
+        reasons.append(watch.sighting(t, x, y, psi))
+    assert not any(reasons)
+    frozen = live[89]
+    stopped = None
+    for k in range(90, 180):  # then the same pose, with fresh noise
+        t = k / 30
+        rng = np.random.default_rng(k)
+        reason = watch.sighting(t, frozen[1] + 1e-3 * rng.standard_normal(), frozen[2] + 1e-3 * rng.standard_normal(),
+                                frozen[3])
+        if reason:
+            stopped = t
+            break
+    assert stopped is not None and stopped - 3.0 <= 1.0, watch.last_prediction
+    assert reason.startswith("camera frozen")
+
+
+def test_jump_faster_than_the_fish_can_move_stops():
+    watch, bound = _watch()
+    watch.command(0.0, FULL)
+    bound.running(0.0, 100.0)
+    assert watch.sighting(0.0, 1.0, 0.5, 0.0) == ""
+    assert watch.sighting(1 / 30, 1.001, 0.5, 0.0) == ""
+    assert "jumped" in watch.sighting(2 / 30, 1.2, 0.5, 0.0)  # 0.2 m in 33 ms: 6 m/s
+
+
+def test_moving_fish_while_ours_is_at_rest_stops():
+    watch, bound = _watch()  # fins still since the reset at 0: the bound stays 0
+    reason = ""
+    for k in range(30):
+        reason = reason or watch.sighting(k / 30, 1.0 + 0.1 * k / 30, 0.5, 0.0)  # 0.1 m/s
+    assert "jumped" in reason or "cannot exceed" in reason
