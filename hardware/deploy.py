@@ -49,8 +49,10 @@ from pectoral_gym.hardware.clock import REAL_CLOCK
 from pectoral_gym.hardware.deploy_checks import (
     CONTROL_PERIOD_RANGE,
     check_frame_size,
+    check_scaling,
     env_settings,
     first_frame,
+    policy_preflight,
     raise_priority,
 )
 from pectoral_gym.hardware.deploy_cli import check_args, make_parser, rig_conditions
@@ -266,19 +268,51 @@ def main(argv: list[str] | None = None) -> int:
     """Command-line entry point; returns the exit status.
 
     0 done, 1 a device failed, 2 via SystemExit: a bad argument, :data:`EXIT_DISPLACED` (3): the robot came to
-    serve another session (``summary.json``'s ``ended``).
-
+    serve another session (``summary.json``'s ``ended``), 130: interrupted (Ctrl-C, after the fins were stopped).
+    A run that fails before its first episode leaves no files behind (nor the ``--out`` folder it created).
     Every resource (emulated robot, radio link, camera, env) is released on every path out.
     """
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        return _main(parser, parser.parse_args(argv))
+    except KeyboardInterrupt:  # the stop handlers sent STOP first; the resources were released on the way out
+        print(f"{parser.prog}: interrupted: the fins were stopped", file=sys.stderr)
+        return 130
+
+
+def _checked_inputs(parser: argparse.ArgumentParser, args: argparse.Namespace):
+    """Every check of the arguments and their files that runs no code from them; ``parser.error`` on a fault.
+
+    Returns ``(conditions, safety, camera model)``. A policy folder is code (its pickles run when loaded): only
+    its ``config.yaml`` (YAML, safe) and its files' presence are checked here; :func:`_load_policy` comes last.
+    """
     try:
         conditions = rig_conditions(args)
     except ValueError as err:
         parser.error(f"--radio-*, --camera-*, --pose-noise-*: {err}")
     check_args(parser, args)
-    controller = None
     if args.controller == "policy":
+        try:
+            policy_preflight(args.policy)
+        except (OSError, ValueError) as err:
+            parser.error(f"cannot load policy {args.policy!r}: {err}")
+    try:
+        safety = SafetyConfig(geofence_margin=args.geofence, tracking_timeout=args.tracking_timeout)
+    except ValueError as err:
+        parser.error(f"safety settings (--geofence, --tracking-timeout): {err}")
+    from pectoral_gym.hardware.vision.cameramodel import CameraModel
+
+    try:
+        model = CameraModel.default() if args.calibration is None else CameraModel.load(args.calibration)
+    except (OSError, ValueError) as err:
+        parser.error(f"--calibration: cannot load {args.calibration}: {err}")
+    return conditions, safety, model
+
+
+def _main(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    conditions, safety, model = _checked_inputs(parser, args)
+    controller = None
+    if args.controller == "policy":  # the pickles, after every other check of the inputs
         from pectoral_gym.agents.training.policy import load_policy  # lazy: agents/ pulls in torch
 
         try:
@@ -291,21 +325,17 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"policy {args.policy!r} does not fit: {err}")
     if args.params is not None:  # the robot's own model: the supervisor's stopping distance and outline come from it
         settings["params"] = args.params
+    if args.scaling is not None:
+        try:
+            check_scaling(args.scaling, settings)
+        except (OSError, ValueError) as err:
+            parser.error(f"--scaling: {err}")
     period = settings["control_period"]
     if not CONTROL_PERIOD_RANGE[0] <= period <= CONTROL_PERIOD_RANGE[1]:
         parser.error(f"the policy's control period {period} s is outside [{CONTROL_PERIOD_RANGE[0]}, "
                      f"{CONTROL_PERIOD_RANGE[1]}] s")
-    try:
-        safety = SafetyConfig(geofence_margin=args.geofence, tracking_timeout=args.tracking_timeout)
-    except ValueError as err:
-        parser.error(f"safety settings (--geofence, --tracking-timeout): {err}")
-    from pectoral_gym.hardware.vision.cameramodel import CameraModel
-
-    try:
-        model = CameraModel.default() if args.calibration is None else CameraModel.load(args.calibration)
-    except (OSError, ValueError) as err:
-        parser.error(f"--calibration: cannot load {args.calibration}: {err}")
     out = Path(args.out)
+    created = [p for p in (out, *out.parents) if not p.exists()]
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
@@ -318,14 +348,37 @@ def main(argv: list[str] | None = None) -> int:
         print(f"warning: {warning}", file=sys.stderr)
     try:
         if args.lockstep:
-            summaries, link, solver, wall_time, ended = _run_lockstep(parser, args, controller, settings, safety,
-                                                               conditions, out / "steps.jsonl")
+            result = _run_lockstep(parser, args, controller, settings, safety, conditions, out / "steps.jsonl")
         else:
-            summaries, link, solver, wall_time, ended = _run_real_time(parser, args, controller, settings, safety,
-                                                                conditions, model, out / "steps.jsonl")
+            result = _run_real_time(parser, args, controller, settings, safety, conditions, model,
+                                    out / "steps.jsonl")
     except _RunError as err:
+        _remove_unstarted(out, created)
         print(f"{parser.prog}: error: {err}", file=sys.stderr)
         return 1
+    except BaseException:  # a bad setting found by the devices (SystemExit 2), Ctrl-C
+        _remove_unstarted(out, created)
+        raise
+    return _report(parser, args, out, settings, conditions, result)
+
+
+def _remove_unstarted(out: Path, created: list[Path]) -> None:
+    """Remove a failed run's files if no episode started (no step logged), and the folders made for them."""
+    steps = out / "steps.jsonl"
+    if steps.is_file() and steps.stat().st_size > 0:
+        return  # the log so far: the error message points to it
+    for name in ("steps.jsonl", "run.jsonl"):
+        with contextlib.suppress(OSError):
+            (out / name).unlink()
+    for folder in created:  # deepest first
+        with contextlib.suppress(OSError):
+            folder.rmdir()  # only if empty
+
+
+def _report(parser: argparse.ArgumentParser, args: argparse.Namespace, out: Path, settings: dict,
+            conditions: RigConditions, result: _RunResult) -> int:
+    """Write ``summary.json`` and ``trajectory.png``, print the episodes; returns the exit status."""
+    summaries, link, solver, wall_time, ended = result
     report = {"controller": args.controller, "policy": None if args.policy is None else str(args.policy),
               "settings": {k: list(v) if isinstance(v, tuple) else dataclasses.asdict(v) if k == "params" else v
                            for k, v in settings.items()},

@@ -189,13 +189,27 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
 
 
 def fish_params(path: str):
-    """``--emulate-params``: the :class:`pectoral_gym.model.params.FishParams` of a file (argparse's type)."""
+    """``--params``, ``--emulate-params``: a plausible robot's ``FishParams`` from a file.
+
+    argparse's type: the file is read bounded (:mod:`pectoral_gym.inputfile`) and its parameters must pass the
+    plausibility bounds (:func:`pectoral_gym.model.plausible.check_params`): both describe a robot.
+    """
     from pectoral_gym.model.params import load_params
+    from pectoral_gym.model.plausible import check_params
 
     try:
-        return load_params(path)
+        params = load_params(path)
+        check_params(params, path)
     except (OSError, ValueError) as err:
         raise argparse.ArgumentTypeError(f"cannot load {path!r}: {err}") from None
+    from pectoral_gym.hardware.vision.tracker import TrackerConfig
+
+    tracker = TrackerConfig()
+    span = tracker.front_offset - tracker.back_offset + 2 * tracker.marker_radius
+    if params.body_length < span:
+        raise argparse.ArgumentTypeError(f"{path}: body_length {params.body_length:.3f} m cannot carry the tracker's "
+                                         f"markers, {span:.3f} m from end to end (hardware/vision/scene.py)")
+    return params
 
 
 def rig_conditions(args: argparse.Namespace) -> RigConditions:
