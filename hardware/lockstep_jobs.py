@@ -35,12 +35,24 @@ from pectoral_gym.hardware.emurig import RigConditions, open_rig
 from pectoral_gym.hardware.radio.linkstatus import LinkStats
 from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handlers
 
-__all__ = ["EpisodeError", "EpisodeResult", "LockstepJob", "merge_link", "merge_solver", "run_lockstep",
-           "shift_records"]
+__all__ = ["EpisodeError", "EpisodeResult", "LockstepJob", "episode_time_limit", "merge_link", "merge_solver",
+           "run_lockstep", "shift_records"]
 
 RUN_LOG_GAP = 1.0  # s between one episode's last run-log record and the next episode's start in a merged run log
 
 _JOIN_TIMEOUT = 5.0  # wall s a terminated worker gets to end before it is killed
+_RESET_ALLOWANCE = 60.0  # simulated s an episode's resets, stop confirmations and camera checks may take at most
+
+
+def episode_time_limit(job: LockstepJob) -> float:
+    """Simulated seconds past which an episode's rig counts as stuck (``LockstepError``: a run that cannot end).
+
+    Twice the episode's steps at its control period, plus :data:`_RESET_ALLOWANCE`: a step that overruns its
+    period by as much again, every reset wait at its time-out, and still far below what a loop that never ends
+    runs to. The run then ends with one line naming the waiting threads, instead of hanging.
+    """
+    period = float(job.settings.get("control_period", 0.5))
+    return 2.0 * job.max_steps * period + _RESET_ALLOWANCE
 
 
 @dataclass(frozen=True)
@@ -132,10 +144,13 @@ class _Runner:
 
         job, log, records = self.job, io.StringIO(), io.StringIO()
         try:
-            with contextlib.ExitStack() as resources:  # released last in, first out, on every path
+            with contextlib.ExitStack() as signals, contextlib.ExitStack() as resources:  # last in, first out
                 try:
                     clock, robot, port, camera = open_rig(resources, job.seed + episode, job.conditions,
                                                           lockstep=True, params=job.params)
+                    clock.limit = episode_time_limit(job)
+                    if self.handle_signals:  # Ctrl-C and SIGTERM taken between the rig's waits, until it is closed
+                        signals.callback(clock.defer_signals())
                     inset = job.settings.get("start_inset", tk.START_INSET)  # the policy's own, as it trained
                     check_frame_size(first_frame(camera, clock=clock), self.model, job.calibration)
                     env = HardwareFishEnv(port, camera, safety=job.safety, max_episode_steps=job.max_steps,
