@@ -46,43 +46,88 @@ def _fit(poses: np.ndarray, at: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 class LivenessWatch:
-    """Checks the camera's poses against the fins' commands (module docstring); :meth:`check` gives the reason.
+    """Checks the camera's poses against the fins' commands (module docstring); :meth:`sighting` gives the reason.
+
+    A shadow averaged model runs the commands sent from the arm on, so the fins' phase at any past instant is
+    known; a prediction starts the averaged model from the fins' phase of the window's start and the fish's
+    measured pose and velocity there.
 
     Args:
         params: The fish's parameters (the averaged model's and the speed bound's).
         bound: The physical speed bound, fed every command sent (the supervisor's).
         pose_noise: Standard deviation of a tracked position [m] (the jump allowance is 9 of them).
-        window: Span of the no-motion check [s].
+        window: Span of the motion and innovation checks [s].
+        long_window: A second, longer span of the motion check [s]: fins that beat gently move the fish slowly,
+            and a longer span makes their motion large enough to judge.
         ratio: The camera must show at least this share of the predicted motion.
         min_motion: Predicted motions below this are not judged [m].
+        innovation: The model's own error allowed between the predicted and the measured end position [m]; three
+            standard errors of the measurement (from the poses' scatter) are added.
 
     Attributes:
-        last_prediction: ``(M_pred, M_meas)`` of the last no-motion check [m] (``nan`` when none ran).
+        last_prediction: ``(M_pred, M_meas, innovation)`` of the last motion check [m] (``nan`` when none ran).
+        predictions: The recent checks, ``(t, M_pred, M_meas, innovation, allowed)`` (the newest 4096, for studies).
     """
 
     def __init__(self, params: FishParams, bound: SpeedBound, pose_noise: float, window: float = 0.8,
-                 ratio: float = 0.1, min_motion: float = 0.03):
+                 long_window: float = 3.2, ratio: float = 0.1, min_motion: float = 0.03, innovation: float = 0.04):
         from pectoral_gym.model.models import AveragedModel
 
         self.params, self.bound, self.pose_noise = params, bound, float(pose_noise)
         self.window, self.ratio, self.min_motion = float(window), float(ratio), float(min_motion)
+        self.innovation, self.long_window = float(innovation), float(long_window)
+        self._strikes = 0
+        self._shadow = AveragedModel(n=1, params=params)
         self._model = AveragedModel(n=1, params=params)
-        self._commands: collections.deque[tuple[float, np.ndarray]] = collections.deque(maxlen=64)
+        self._queue: collections.deque[tuple[float, np.ndarray]] = collections.deque()  # sent, not yet in the shadow
+        self._applied: collections.deque[tuple[float, np.ndarray]] = collections.deque(maxlen=64)
+        self._snapshots: collections.deque[tuple[float, tuple[np.ndarray, ...]]] = collections.deque(maxlen=128)
         self._poses: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=256)
-        self.last_prediction = (math.nan, math.nan)
+        self._shadow_t = math.nan
+        self.last_prediction = (math.nan, math.nan, math.nan)
+        self.predictions: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=4096)
         self._next_check = -math.inf
 
-    def reset(self) -> None:
-        """Forget poses and commands (a reset: the fish may be moved by hand)."""
-        self._commands.clear()
+    def reset(self, t: float = math.nan) -> None:
+        """Start over at ``t`` [s] with the fins still (an arm after a confirmed stop); forget poses and commands."""
+        self._queue.clear()
+        self._applied.clear()
+        self._snapshots.clear()
         self._poses.clear()
+        self._shadow.reset()
+        self._shadow_t = float(t)
         self._next_check = -math.inf
+        self._strikes = 0
+        if math.isfinite(self._shadow_t):
+            self._snapshot()
 
     def command(self, t: float, beats: np.ndarray) -> None:
         """A command ``(2, 4)`` sent at ``t`` [s]."""
-        if self._commands and np.array_equal(self._commands[-1][1], beats):
+        last = self._queue[-1][1] if self._queue else self._applied[-1][1] if self._applied else None
+        if last is not None and np.array_equal(last, beats):
             return  # a lease renewal of the same command: the fins go on as they were
-        self._commands.append((float(t), np.array(beats, dtype=float).reshape(2, 4)))
+        if not math.isfinite(self._shadow_t):
+            self.reset(t)
+        self._queue.append((float(t), np.array(beats, dtype=float).reshape(2, 4)))
+
+    # ------------------------------------------------------------ the fins' phase
+    def _snapshot(self) -> None:
+        m = self._shadow
+        self._snapshots.append((self._shadow_t, (m.fins.copy(), m.pending.copy(), m.forcing_cache.copy())))
+
+    def _advance_shadow(self, to: float, step: float = 0.05) -> None:
+        """Run the shadow's fins to ``to`` [s], taking the commands sent up to then; a snapshot every ``step`` s."""
+        while self._shadow_t < to:
+            target = min(to, self._shadow_t + step)
+            if self._queue and self._queue[0][0] <= target:
+                target = max(self._queue[0][0], self._shadow_t)
+            self._shadow.advance(target - self._shadow_t)
+            self._shadow_t = target
+            while self._queue and self._queue[0][0] <= self._shadow_t:
+                t, beats = self._queue.popleft()
+                self._shadow.command_array(beats[None])
+                self._applied.append((t, beats))
+            self._snapshot()
 
     def sighting(self, t: float, x: float, y: float, psi: float) -> str:
         """A tracked pose captured at ``t`` [s]; returns why the camera is not live, or ``""``."""
@@ -98,9 +143,12 @@ class LivenessWatch:
                     reason = (f"camera not live: the fish jumped {step * 1000:.0f} mm in {dt:.3f} s, more than our "
                               f"fish can move ({allowed * 1000:.0f} mm with the pose noise)")
         self._poses.append((float(t), float(x), float(y), float(psi)))
+        if math.isfinite(self._shadow_t):
+            self._advance_shadow(t)
         if not reason and t >= self._next_check:
             self._next_check = t + 0.1  # the model check at 10 per second is plenty for a window of 0.8 s
-            reason = self._too_fast(t) or self._no_motion(t)
+            reason = self._too_fast(t) or self._motion(t, self.window, True) or \
+                self._motion(t, self.long_window, False)
         return reason
 
     # ------------------------------------------------------------ the checks
@@ -121,42 +169,62 @@ class LivenessWatch:
                     f"{allowed:.2f} m/s with the fins it was sent")
         return ""
 
-    def _no_motion(self, t1: float) -> str:
-        """The averaged model's motion over the window against the camera's."""
-        t0 = t1 - self.window
+    def _motion(self, t1: float, window: float, innovation_check: bool) -> str:
+        """The averaged model's motion over ``window`` against the camera's; the innovation too if asked."""
+        t0 = t1 - window
         start = self._recent(t0 - _FIT_SPAN, t0)
         end = self._recent(t1 - _END_SPAN, t1)
-        if len(start) < 4 or len(end) < 2 or start[0, 0] > t0 - 0.5 * _FIT_SPAN:
+        snaps = [s for s in self._snapshots if s[0] <= t0]
+        if len(start) < 4 or len(end) < 2 or start[0, 0] > t0 - 0.5 * _FIT_SPAN or not snaps:
             return ""
-        if not (self._commands and self._commands[0][0] <= t0 and self.bound.run_until >= t1):
+        if not (self._applied and self._applied[0][0] <= t0 and self.bound.run_until >= t1):
             return ""  # the fins did not run the whole window on commands we know
         pose0, rates0 = _fit(start, t0)
+        t_end = float(end[:, 0].mean())
         pose1 = end[:, 1:4].mean(axis=0)
         c, s = math.cos(pose0[2]), math.sin(pose0[2])
         body = (c * rates0[0] + s * rates0[1], -s * rates0[0] + c * rates0[1], rates0[2])
-        predicted = self._predict(np.array([*pose0, *body]), t0, t1, float(end[:, 0].mean()))
+        predicted = self._predict(snaps[-1], np.array([*pose0, *body]), t0, t_end)
         reach = 0.5 * self.params.body_length
         m_pred = math.hypot(*(predicted[:2] - pose0[:2])) + reach * abs(predicted[2] - pose0[2])
         m_meas = math.hypot(*(pose1[:2] - pose0[:2])) + reach * abs(pose1[2] - pose0[2])
-        self.last_prediction = (m_pred, m_meas)
+        innovation = math.hypot(*(pose1[:2] - predicted[:2]))
+        allowed = self.innovation + 3.0 * self._estimate_error(start, end, t0)
+        if innovation_check:
+            self.last_prediction = (m_pred, m_meas, innovation)
+            self.predictions.append((t1, m_pred, m_meas, innovation, allowed))
         if m_pred >= self.min_motion and m_meas < self.ratio * m_pred:
-            return (f"camera frozen: the fish has moved {m_meas * 1000:.0f} mm in {self.window:.1f} s while its "
+            return (f"camera frozen: the fish has moved {m_meas * 1000:.0f} mm in {window:.1f} s while its "
                     f"fins beat for {m_pred * 1000:.0f} mm (the averaged model; at least "
                     f"{self.ratio * m_pred * 1000:.0f} mm expected)")
+        if not innovation_check:
+            return ""
+        self._strikes = self._strikes + 1 if innovation > allowed else 0
+        if self._strikes >= 2:  # twice in a row (0.1 s apart): one odd window is not enough
+            return (f"camera not live: the fish it shows ended {innovation * 1000:.0f} mm from where the fins sent "
+                    f"{self.window:.1f} s ago put ours (the averaged model; at most {allowed * 1000:.0f} mm allowed)")
         return ""
 
-    def _predict(self, state: np.ndarray, t0: float, t1: float, t_end: float) -> np.ndarray:
-        """The averaged model from ``state`` at ``t0`` under the commands sent, to ``t_end``; pose (3,)."""
-        commands = list(self._commands)
-        active = [beats for t, beats in commands if t <= t0][-1]
+    def _estimate_error(self, start: np.ndarray, end: np.ndarray, t0: float) -> float:
+        """Standard error [m] of the measured end position less the start's extrapolation, from the fit's scatter."""
+        pose0, rates0 = _fit(start, t0)
+        residual = start[:, 1:3] - (pose0[:2] + np.outer(start[:, 0] - t0, rates0[:2]))
+        scatter = math.sqrt(float((residual ** 2).sum()) / max(2 * (len(start) - 2), 1))
+        centred = start[:, 0] - start[:, 0].mean()
+        lever = self.window + t0 - float(start[:, 0].mean())  # the start line's slope error grows over this
+        return scatter * math.sqrt(1.0 / len(start) + lever ** 2 / float(centred @ centred) + 1.0 / len(end))
+
+    def _predict(self, snap, state: np.ndarray, t0: float, t_end: float) -> np.ndarray:
+        """Pose (3,) at ``t_end`` of the averaged model from the fins' phase ``snap`` and ``state`` at ``t0``."""
+        t_snap, (fins, pending, cache) = snap
         model = self._model
-        model.reset(state[None], right=active[0][None], left=active[1][None])
-        now = t0
-        for t, beats in commands:
-            if t0 < t < t_end:
+        model.reset(state[None])
+        model.fins[:], model.pending[:], model.forcing_cache[:] = fins, pending, cache
+        now = t_snap
+        for t, beats in list(self._applied) + list(self._queue):
+            if t_snap < t < t_end:
                 model.advance(t - now)
                 model.command_array(beats[None])
                 now = t
         model.advance(max(t_end - now, 0.0))
-        del t1
         return model.state[0, :3].copy()

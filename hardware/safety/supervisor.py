@@ -173,7 +173,7 @@ class Supervisor:
             self._recent.extend(recent)
             self._since = since
             self._estimate()  # from the poses since the reset only
-            self.liveness.reset()
+            self.liveness.reset(self.now())  # armed after a confirmed stop: the fins are still
             self._not_live = ""
             self.fired.clear()
             self.armed = True
