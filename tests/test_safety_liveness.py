@@ -65,7 +65,7 @@ def test_frozen_pose_under_beating_fins_stops_with_the_reason():
             stopped = t
             break
     assert stopped is not None and stopped - 3.0 <= 1.0, watch.last_prediction
-    assert reason.startswith("camera frozen")
+    assert reason.startswith(("camera frozen", "camera not live"))
 
 
 def test_jump_faster_than_the_fish_can_move_stops():
