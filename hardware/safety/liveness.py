@@ -31,7 +31,6 @@ from pectoral_gym.model.params import FishParams
 __all__ = ["LivenessWatch"]
 
 _NOISE_SIGMAS = 9.0  # a jump allowance of 9 pose-noise sigmas: P(|2-D noise step| > 9 sigma) = exp(-81/4) ~ 2e-9
-_FIT_SPAN = 0.3  # poses this long before the window's start give its pose and velocity [s]
 _END_SPAN = 0.1  # poses this long at the window's end are averaged for its pose [s]
 
 
@@ -70,7 +69,7 @@ class LivenessWatch:
     """
 
     def __init__(self, params: FishParams, bound: SpeedBound, pose_noise: float, window: float = 0.8,
-                 long_window: float = 3.2, ratio: float = 0.1, min_motion: float = 0.03, innovation: float = 0.04):
+                 long_window: float = 2.4, ratio: float = 0.1, min_motion: float = 0.03, innovation: float = 0.04):
         from pectoral_gym.model.models import AveragedModel
 
         self.params, self.bound, self.pose_noise = params, bound, float(pose_noise)
@@ -170,30 +169,43 @@ class LivenessWatch:
         return ""
 
     def _motion(self, t1: float, window: float, innovation_check: bool) -> str:
-        """The averaged model's motion over ``window`` against the camera's; the innovation too if asked."""
-        t0 = t1 - window
-        start = self._recent(t0 - _FIT_SPAN, t0)
+        """The averaged model's motion over the last ``window`` against the camera's; the innovation too if asked.
+
+        The model starts at the centre of the window before (``[t1 - 2 window, t1 - window]``), from the
+        least-squares line through its poses: there the line's position and slope are the pose and velocity
+        at that instant (exactly so for a constant acceleration) with the smallest errors, ``sigma / sqrt(n)``
+        and ``sigma / sqrt(sum (t - t_c)^2)``, and uncorrelated. The motion compared is the one inside the
+        last window, between the mean poses of its first and last 0.1 s.
+        """
+        before = self._recent(t1 - 2.0 * window, t1 - window)
+        middle = self._recent(t1 - window - 0.5 * _END_SPAN, t1 - window + 0.5 * _END_SPAN)
         end = self._recent(t1 - _END_SPAN, t1)
-        snaps = [s for s in self._snapshots if s[0] <= t0]
-        if len(start) < 4 or len(end) < 2 or start[0, 0] > t0 - 0.5 * _FIT_SPAN or not snaps:
+        if len(before) < 6 or np.ptp(before[:, 0]) < 0.6 * window or len(middle) < 2 or len(end) < 2:
             return ""
-        if not (self._applied and self._applied[0][0] <= t0 and self.bound.run_until >= t1):
-            return ""  # the fins did not run the whole window on commands we know
-        pose0, rates0 = _fit(start, t0)
-        t_end = float(end[:, 0].mean())
-        pose1 = end[:, 1:4].mean(axis=0)
-        c, s = math.cos(pose0[2]), math.sin(pose0[2])
-        body = (c * rates0[0] + s * rates0[1], -s * rates0[0] + c * rates0[1], rates0[2])
-        predicted = self._predict(snaps[-1], np.array([*pose0, *body]), t0, t_end)
+        t_c = float(before[:, 0].mean())
+        snaps = [s for s in self._snapshots if s[0] <= t_c]
+        if not (snaps and self._applied and self._applied[0][0] <= t_c and self.bound.run_until >= t1):
+            return ""  # the fins did not run the whole span on commands we know
+        pose_c, rates_c = _fit(before, t_c)
+        c, s = math.cos(pose_c[2]), math.sin(pose_c[2])
+        body = (c * rates_c[0] + s * rates_c[1], -s * rates_c[0] + c * rates_c[1], rates_c[2])
+        t_m, t_e = float(middle[:, 0].mean()), float(end[:, 0].mean())
+        pred_m, pred_e = self._predict(snaps[-1], np.array([*pose_c, *body]), (t_m, t_e))
+        meas_m, meas_e = middle[:, 1:4].mean(axis=0), end[:, 1:4].mean(axis=0)
         reach = 0.5 * self.params.body_length
-        m_pred = math.hypot(*(predicted[:2] - pose0[:2])) + reach * abs(predicted[2] - pose0[2])
-        m_meas = math.hypot(*(pose1[:2] - pose0[:2])) + reach * abs(pose1[2] - pose0[2])
-        innovation = math.hypot(*(pose1[:2] - predicted[:2]))
-        allowed = self.innovation + 3.0 * self._estimate_error(start, end, t0)
+        m_pred = math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2])
+        m_meas = math.hypot(*(meas_e[:2] - meas_m[:2])) + reach * abs(meas_e[2] - meas_m[2])
+        innovation = math.hypot(*(meas_e[:2] - pred_e[:2]))
+        scatter, sxx = self._scatter(before, t_c)
+        # Standard errors [m]: of the predicted motion inside the window (the start's slope error over it), and of
+        # the end position (the start's position and slope, and the end's mean).
+        motion_error = scatter * (t_e - t_m) / math.sqrt(sxx)
+        end_error = scatter * math.sqrt(1.0 / len(before) + (t_e - t_c) ** 2 / sxx + 1.0 / len(end))
+        allowed = self.innovation + 3.0 * end_error
         if innovation_check:
             self.last_prediction = (m_pred, m_meas, innovation)
             self.predictions.append((t1, m_pred, m_meas, innovation, allowed))
-        if m_pred >= self.min_motion and m_meas < self.ratio * m_pred:
+        if m_pred - 3.0 * motion_error >= self.min_motion and m_meas < self.ratio * m_pred:
             return (f"camera frozen: the fish has moved {m_meas * 1000:.0f} mm in {window:.1f} s while its "
                     f"fins beat for {m_pred * 1000:.0f} mm (the averaged model; at least "
                     f"{self.ratio * m_pred * 1000:.0f} mm expected)")
@@ -202,29 +214,32 @@ class LivenessWatch:
         self._strikes = self._strikes + 1 if innovation > allowed else 0
         if self._strikes >= 2:  # twice in a row (0.1 s apart): one odd window is not enough
             return (f"camera not live: the fish it shows ended {innovation * 1000:.0f} mm from where the fins sent "
-                    f"{self.window:.1f} s ago put ours (the averaged model; at most {allowed * 1000:.0f} mm allowed)")
+                    f"over the last {t_e - t_c:.1f} s put ours (the averaged model; at most {allowed * 1000:.0f} mm "
+                    "allowed)")
         return ""
 
-    def _estimate_error(self, start: np.ndarray, end: np.ndarray, t0: float) -> float:
-        """Standard error [m] of the measured end position less the start's extrapolation, from the fit's scatter."""
-        pose0, rates0 = _fit(start, t0)
-        residual = start[:, 1:3] - (pose0[:2] + np.outer(start[:, 0] - t0, rates0[:2]))
-        scatter = math.sqrt(float((residual ** 2).sum()) / max(2 * (len(start) - 2), 1))
-        centred = start[:, 0] - start[:, 0].mean()
-        lever = self.window + t0 - float(start[:, 0].mean())  # the start line's slope error grows over this
-        return scatter * math.sqrt(1.0 / len(start) + lever ** 2 / float(centred @ centred) + 1.0 / len(end))
+    def _scatter(self, poses: np.ndarray, t_c: float) -> tuple[float, float]:
+        """The positions' scatter about their line [m] (at least the assumed pose noise) and ``sum (t - t_c)^2``."""
+        pose_c, rates_c = _fit(poses, t_c)
+        residual = poses[:, 1:3] - (pose_c[:2] + np.outer(poses[:, 0] - t_c, rates_c[:2]))
+        scatter = math.sqrt(float((residual ** 2).sum()) / max(2 * (len(poses) - 2), 1))
+        centred = poses[:, 0] - t_c
+        return max(scatter, 1e-4), float(centred @ centred)
 
-    def _predict(self, snap, state: np.ndarray, t0: float, t_end: float) -> np.ndarray:
-        """Pose (3,) at ``t_end`` of the averaged model from the fins' phase ``snap`` and ``state`` at ``t0``."""
+    def _predict(self, snap, state: np.ndarray, times: tuple[float, ...]) -> list[np.ndarray]:
+        """Poses (3,) at ``times`` (increasing) of the averaged model from the fins' phase ``snap`` and ``state``."""
         t_snap, (fins, pending, cache) = snap
         model = self._model
         model.reset(state[None])
         model.fins[:], model.pending[:], model.forcing_cache[:] = fins, pending, cache
-        now = t_snap
-        for t, beats in list(self._applied) + list(self._queue):
-            if t_snap < t < t_end:
-                model.advance(t - now)
+        sent = [(t, 0, beats) for t, beats in list(self._applied) + list(self._queue) if t_snap < t < times[-1]]
+        events = sorted(sent + [(t, 1, None) for t in times], key=lambda e: (e[0], e[1]))
+        now, out = t_snap, []
+        for t, kind, beats in events:
+            model.advance(max(t - now, 0.0))
+            now = max(t, now)
+            if kind == 0:
                 model.command_array(beats[None])
-                now = t
-        model.advance(max(t_end - now, 0.0))
-        return model.state[0, :3].copy()
+            else:
+                out.append(model.state[0, :3].copy())
+        return out
