@@ -36,8 +36,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
-import json
 import sys
 import time
 from pathlib import Path
@@ -54,17 +52,22 @@ from pectoral_gym.hardware.deploy_checks import (
     first_frame,
     policy_preflight,
     raise_priority,
+    shipped_k_problem,
 )
 from pectoral_gym.hardware.deploy_cli import check_args, make_parser, rig_conditions
 from pectoral_gym.hardware.deploy_episodes import (  # re-exported: the deploy's episode loop
+    EXIT_DISPLACED,
     displaced_reason,
     plot_trajectories,
     random_start,
     run_episode,
     run_episodes,
+    write_report,
 )
 from pectoral_gym.hardware.emurig import RigConditions, open_rig
+from pectoral_gym.hardware.params_probe import check_on_lockstep_rig, check_on_robot, probe_start
 from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handlers
+from pectoral_gym.model.params import FishParams
 
 __all__ = ["EXIT_DISPLACED", "build_parser", "main", "make_controller", "plot_trajectories", "random_start",
            "run_episode",
@@ -95,14 +98,8 @@ def make_controller(name: str, config, step_budget: float, safety: SafetyConfig 
 
     safety = safety or SafetyConfig()
     band = StopRule(safety.geofence_margin + MEASUREMENT_MARGIN, safety.reaction_time, safety.contact_speed)
-    if scaling is None and name in ("hand", "nmpc"):
-        from pectoral_gym.model.kfunctions import ScalingFunctions
-
-        differ = sorted(ScalingFunctions.load(None).params_mismatch(config.params))
-        if differ:
-            raise ValueError(f"--controller {name} plans with K, and the shipped K were identified for Table 1's "
-                             f"fish, whose {', '.join(differ)} differ from --params: give the robot's K with "
-                             "--scaling FILE (pectoral-scaling identify --params FILE writes it)")
+    if (problem := shipped_k_problem(name, config.params, scaling)) is not None:
+        raise ValueError(problem)
     if name == "nmpc":
         return make_baseline("nmpc", config, step_budget=step_budget, stop_band=tuple(band), spin=False,
                              scaling=scaling)
@@ -121,19 +118,12 @@ def solver_summary(controller) -> dict:
             "failures": int(controller.failures), "late": int(controller.late)}
 
 
-_DISPLACED_TEXT = {"taken_over": "another session took the robot over (taken_over)",
-                   "robot_busy": "the robot serves another live session (robot_busy; --take-over takes it over)"}
-
-
 class _RunError(Exception):
     """A device or an episode failed (exit status 1); the message says what and where."""
 
 
 # summaries, link health, solver summary, wall time [s], why the run ended early ("" or a DISPLACED reason)
 _RunResult = tuple[list[dict], dict, dict | None, float, str]
-
-#: Exit status of a run displaced by another session (``taken_over``, ``robot_busy``): it ended at once.
-EXIT_DISPLACED = 3
 
 
 def _run_log(path: Path, args: argparse.Namespace, settings: dict):
@@ -189,6 +179,12 @@ def _run_real_time(parser: argparse.ArgumentParser, args: argparse.Namespace, co
             if controller is None:
                 budget = args.solve_fraction * settings["control_period"] / args.speed
                 controller = make_controller(args.controller, env.config, budget, safety, args.scaling)
+            if _probe_wanted(args):
+                _probe_note(check_on_robot(
+                    env, settings.get("params", FishParams()), (lambda rng: robot.place(*probe_start()))
+                    if args.emulate else None if args.no_prompt else (lambda rng: input(
+                        "Place the fish near the tank's centre, heading along its length, for a 12 s check of "
+                        "--params against the robot, and press Enter: ")), args.seed))
         except ValueError as err:  # the settings, found wrong by the devices or the env
             parser.error(str(err))
         except (RuntimeError, OSError) as err:  # a device that does not answer or cannot be opened
@@ -203,6 +199,22 @@ def _run_real_time(parser: argparse.ArgumentParser, args: argparse.Namespace, co
         ended = displaced_reason(env)
     solver = solver_summary(controller) if hasattr(controller, "solve_times") else None
     return summaries, env.link.health(), solver, wall_time, ended  # the link's health once the env closed it
+
+
+def _probe_wanted(args: argparse.Namespace) -> bool:
+    """Whether the run checks its model against the robot first (:mod:`pectoral_gym.hardware.params_probe`).
+
+    Every run on a real robot, and every emulated one whose robot or model is not Table 1's (``--params``,
+    ``--emulate-params``; without either the emulated robot is the model by construction), but an identification
+    run (``--controller excite``), whose purpose is to find the parameters the probe would check.
+    """
+    return args.controller != "excite" and (not args.emulate or args.params is not None
+                                            or args.emulate_params is not None)
+
+
+def _probe_note(result) -> None:
+    print(f"note: --params checked against the robot: {result.excess * 1000:.1f} mm beyond the camera's noise "
+          f"over a {result.duration:.0f} s probe", file=sys.stderr)
 
 
 def _run_lockstep(parser: argparse.ArgumentParser, args: argparse.Namespace, controller, settings: dict,
@@ -330,6 +342,8 @@ def _main(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
             check_scaling(args.scaling, settings)
         except (OSError, ValueError) as err:
             parser.error(f"--scaling: {err}")
+    if (problem := shipped_k_problem(args.controller, settings.get("params"), args.scaling)) is not None:
+        parser.error(problem)  # before the probe: a run that cannot plan is refused without moving the robot
     period = settings["control_period"]
     if not CONTROL_PERIOD_RANGE[0] <= period <= CONTROL_PERIOD_RANGE[1]:
         parser.error(f"the policy's control period {period} s is outside [{CONTROL_PERIOD_RANGE[0]}, "
@@ -348,6 +362,17 @@ def _main(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         print(f"warning: {warning}", file=sys.stderr)
     try:
         if args.lockstep:
+            if _probe_wanted(args):
+                from pectoral_gym.hardware.vision.tracker import MarkerTracker
+
+                try:
+                    _probe_note(check_on_lockstep_rig(args.seed, conditions, args.emulate_params, safety=safety,
+                                                      tracker=MarkerTracker(model), take_over=args.take_over,
+                                                      **settings))
+                except ValueError as err:
+                    parser.error(str(err))
+                except (RuntimeError, OSError) as err:
+                    raise _RunError(str(err)) from err
             result = _run_lockstep(parser, args, controller, settings, safety, conditions, out / "steps.jsonl")
         else:
             result = _run_real_time(parser, args, controller, settings, safety, conditions, model,
@@ -359,7 +384,7 @@ def _main(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
     except BaseException:  # a bad setting found by the devices (SystemExit 2), Ctrl-C
         _remove_unstarted(out, created)
         raise
-    return _report(parser, args, out, settings, conditions, result)
+    return write_report(parser, args, out, settings, conditions, result)
 
 
 def _remove_unstarted(out: Path, created: list[Path]) -> None:
@@ -373,37 +398,6 @@ def _remove_unstarted(out: Path, created: list[Path]) -> None:
     for folder in created:  # deepest first
         with contextlib.suppress(OSError):
             folder.rmdir()  # only if empty
-
-
-def _report(parser: argparse.ArgumentParser, args: argparse.Namespace, out: Path, settings: dict,
-            conditions: RigConditions, result: _RunResult) -> int:
-    """Write ``summary.json`` and ``trajectory.png``, print the episodes; returns the exit status."""
-    summaries, link, solver, wall_time, ended = result
-    report = {"controller": args.controller, "policy": None if args.policy is None else str(args.policy),
-              "settings": {k: list(v) if isinstance(v, tuple) else dataclasses.asdict(v) if k == "params" else v
-                           for k, v in settings.items()},
-              "episodes": summaries, "link": link, "ended": ended or "done"}
-    report["wall_time"] = wall_time  # s for the episodes (the one field a lockstep rerun changes)
-    if args.emulate:
-        report["emulation"] = {"lockstep": args.lockstep, "speed": args.speed, "seed": args.seed,
-                               "conditions": dataclasses.asdict(conditions),
-                               "params": None if args.emulate_params is None else dataclasses.asdict(
-                                   args.emulate_params)}
-    if solver is not None:
-        report["solver"] = solver  # its times are wall times: a rerun changes them too
-    (out / "summary.json").write_text(json.dumps(report, indent=2), encoding="utf-8")
-    plot_trajectories(out / "steps.jsonl", out / "trajectory.png")
-    for s in summaries:
-        print(f"episode {s['episode']}: return {s['return']:.3f}, {s['steps']} steps, "
-              f"stop: {s['safety_stop'] or ('success' if s['success'] else 'end')}")
-    print(f"log {out / 'steps.jsonl'}, plot {out / 'trajectory.png'}; link: sent {link['sent']}, "
-          f"acked {link['acked']}, retries {link['retries']}, crc errors {link['crc_errors']}; "
-          f"{len(summaries)} episodes in {report['wall_time']:.1f} s wall time")
-    if ended:
-        print(f"{parser.prog}: {_DISPLACED_TEXT[ended]}: this run ended after {len(summaries)} of {args.episodes} "
-              "episodes and sends nothing more (summary.json: ended)", file=sys.stderr)
-        return EXIT_DISPLACED
-    return 0
 
 
 if __name__ == "__main__":

@@ -31,7 +31,7 @@ from pectoral_gym.registration import ROBOT_READY
 
 __all__ = ["CONTROL_PERIOD_RANGE", "DEFAULT_NICE", "FIRST_FRAME_TIMEOUT", "MIN_TRACKING_WALL", "NICE_RANGE",
            "SPEED_RANGE", "check_frame_size", "check_scaling", "env_settings", "first_frame", "policy_preflight",
-           "raise_priority", "robot_address"]
+           "raise_priority", "robot_address", "shipped_k_problem"]
 
 # Nice values the deploy may ask for: [-20, 0] (never below the default priority). The PC's stack tracks 30 frames
 # a second and must judge each within the safety rules' reaction budget (0.15 s); at the default priority, other
@@ -266,3 +266,20 @@ def policy_preflight(policy: str) -> None:
     from pectoral_gym.agents.training.policy import read_config  # YAML's safe loader: runs no code
 
     read_config(folder)
+
+
+def shipped_k_problem(controller: str, params: Any, scaling: str | None) -> str | None:
+    """Why ``controller`` cannot plan with the shipped K for the robot ``params`` (``None``: it can, or needs no K).
+
+    The hand law and the NMPC plan with K; the shipped K were identified for Table 1's fish.
+    """
+    if scaling is not None or controller not in ("hand", "nmpc") or params is None:
+        return None
+    from pectoral_gym.model.kfunctions import ScalingFunctions
+
+    differ = sorted(ScalingFunctions.load(None).params_mismatch(params))
+    if not differ:
+        return None
+    return (f"--controller {controller} plans with K, and the shipped K were identified for Table 1's fish, whose "
+            f"{', '.join(differ)} differ from --params: give the robot's K with --scaling FILE (pectoral-scaling "
+            "identify --params FILE writes it)")

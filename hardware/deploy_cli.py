@@ -48,7 +48,9 @@ def make_parser(description: str) -> argparse.ArgumentParser:
                              "run, seeded random fin patterns for the model's calibration, docs/run-log.md)")
     parser.add_argument("--policy", default=None, metavar="RUN_OR_ZIP",
                         help="pectoral_gym.agents.training.train or rl-baselines3-zoo run folder, or an SB3 .zip "
-                             "(pectoral_gym.agents.training.policy.load_policy)")
+                             "(pectoral_gym.agents.training.policy.load_policy). A policy folder is code: its zip's "
+                             "data section and vecnormalize.pkl are pickles, which run what they hold when loaded; "
+                             "deploy only folders you made or trust (they are loaded after every other check)")
     parser.add_argument("--solve-fraction", type=float, default=0.5, metavar="F",
                         help="nmpc: share of the control period a step's solves may take, in (0, 1] "
                              "(default %(default)s)")
@@ -96,8 +98,10 @@ def make_parser(description: str) -> argparse.ArgumentParser:
                         help="the robot's model parameters (a FishParams file, e.g. pectoral-scaling calibrate's "
                              "robot.json): the geofence's stopping distance and fish outline, the PC's fin replay "
                              "use them (default: Table 1's; a robot that coasts further or is larger than Table 1's "
-                             "fish needs its own). The hand law and the NMPC plan with K: give them the robot's "
-                             "with --scaling")
+                             "fish needs its own). Checked: every field within physical bounds, then, before the "
+                             "first episode, a 12 s open-loop probe of the robot seen by the camera against the "
+                             "model under these parameters (refused if they miss it; not with --controller excite). "
+                             "The hand law and the NMPC plan with K: give them the robot's with --scaling")
     parser.add_argument("--scaling", default=None, metavar="JSON",
                         help="--controller hand|nmpc: the K file they plan with, identified for the robot's --params "
                              "(pectoral-scaling identify --params robot.json writes it: k/scaling_coefficients.json; "
