@@ -83,3 +83,58 @@ def test_moving_fish_while_ours_is_at_rest_stops():
     for k in range(30):
         reason = reason or watch.sighting(k / 30, 1.0 + 0.1 * k / 30, 0.5, 0.0)  # 0.1 m/s
     assert "jumped" in reason or "cannot exceed" in reason
+
+
+# ---------------------------------------------------------------- lockstep: the whole stack on the emulated robot
+class _Rowing:
+    """A scripted controller: both fins rowing hard, straight ahead (the policy's interface)."""
+
+    action = np.array([0.0, 1.0, -0.5, 0.0] * 2, dtype=np.float32)  # 90 deg bias, 30 deg amplitude, 0.875 s, ratio 3
+
+    def reset(self, seed=None):
+        pass
+
+    def act(self, obs):
+        return self.action
+
+
+def _study(fault, seed, **kwargs):
+    from pectoral_gym.hardware.safety.liveness_study import _record, run_episode
+
+    settings = {"task": "track", "max_episode_steps": 16}
+    recording = _record(_Rowing(), settings, seed + 10000, duration=8.0) if fault == "recording" else None
+    return run_episode(_Rowing(), settings, seed, fault, 6, recording=recording, **kwargs)
+
+
+@pytest.mark.parametrize("fault", ["noisy", "cycle60"])
+def test_frozen_camera_under_rowing_fins_stops_within_a_second_inside_the_tank(fault):
+    row = _study(fault, seed=21)
+    assert row["stop"] == "tracking_lost", row
+    assert row["reason"].startswith(("camera frozen", "camera not live")), row
+    assert row["delay"] <= 1.0, row
+    assert row["min_clearance"] > 0.0, row  # the true outline never crossed a wall
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("fault", ["repeat", "cycle31", "cycle300", "recording", "other-fish"])
+def test_every_kind_of_dead_camera_stops_inside_the_tank(fault):
+    row = _study(fault, seed=22)
+    assert row["stop"] == "tracking_lost", row
+    assert row["delay"] <= 2.5, row
+    assert row["min_clearance"] > 0.0, row
+
+
+def test_live_camera_is_not_stopped():
+    row = _study("none", seed=23)
+    assert row["stop"] != "tracking_lost" and row["steps"] >= 10, row  # ended by the task, the steps or the wall
+
+
+def test_camera_latency_is_measured_credited_and_refused_above_what_the_tank_affords():
+    from pectoral_gym.hardware.emurig import RigConditions
+    from pectoral_gym.hardware.vision.latency import CameraLatencyError
+
+    row = _study("none", seed=24, conditions=RigConditions(camera_latency=0.25))
+    assert row["stop"] != "tracking_lost" and row["steps"] >= 10, row  # before: tracking_lost at step 1
+    assert 0.25 <= row["latency"] < 0.25 + 2 / 30  # capture to arrival, within the grabber's polling
+    with pytest.raises(CameraLatencyError, match=r"0\.4\d\d s after capture; the tank affords at most 0\.350 s"):
+        _study("none", seed=25, conditions=RigConditions(camera_latency=0.4))
