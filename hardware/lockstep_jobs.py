@@ -41,6 +41,9 @@ __all__ = ["EpisodeError", "EpisodeResult", "LockstepJob", "episode_time_limit",
 RUN_LOG_GAP = 1.0  # s between one episode's last run-log record and the next episode's start in a merged run log
 
 _JOIN_TIMEOUT = 5.0  # wall s a terminated worker gets to end before it is killed
+# Wall seconds the parent waits for any worker's next result: far above an episode's (seconds to a minute, plus a
+# cold numba compile of up to ~100 s), far below "for ever".
+EPISODE_WALL_TIMEOUT = 1800.0
 _RESET_ALLOWANCE = 60.0  # simulated s an episode's resets, stop confirmations and camera checks may take at most
 
 
@@ -283,7 +286,12 @@ def _run_workers(job: LockstepJob, order: list[int], jobs: int, collect: Callabl
             busy[conn] = queue.pop()
             conn.send(busy[conn])
         while busy:
-            for conn in wait(list(busy)):  # a pipe is ready on a message, or at EOF when its worker died
+            ready = wait(list(busy), timeout=EPISODE_WALL_TIMEOUT)  # a message, or EOF when its worker died
+            if not ready:  # every clock wait ends or fails in simulated time: a worker stuck outside the clock
+                episode = min(busy.values())
+                raise EpisodeError(episode, f"no episode ended within {EPISODE_WALL_TIMEOUT:g} s of wall time "
+                                            f"(episodes {sorted(busy.values())} running): a worker is stuck")
+            for conn in ready:
                 episode = busy[conn]
                 try:
                     kind, payload = conn.recv()

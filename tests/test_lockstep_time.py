@@ -226,6 +226,21 @@ def test_signal_deferral_nests_and_is_undone():
     assert signal.getsignal(signal.SIGTERM) is before
 
 
+
+def test_a_worker_silent_past_the_wall_time_out_ends_the_run(monkeypatch):
+    """The parent of worker processes waits for a result at most EPISODE_WALL_TIMEOUT, then ends every worker."""
+    import time
+
+    from pectoral_gym.hardware import lockstep_jobs
+    from pectoral_gym.hardware.lockstep_jobs import EpisodeError, LockstepJob, run_lockstep
+
+    monkeypatch.setattr(lockstep_jobs, "EPISODE_WALL_TIMEOUT", 0.2)  # shorter than a worker's start-up
+    started = time.monotonic()
+    with pytest.raises(EpisodeError, match="no episode ended within 0.2 s of wall time"):
+        run_lockstep(LockstepJob(max_steps=1), [0, 1], jobs=2, progress=False)
+    assert time.monotonic() - started < 30.0
+
+
 @pytest.mark.slow
 def test_fifty_episodes_with_a_third_of_the_frames_dropped_all_end(tmp_path):
     """The run that hung (10 of 50 episodes with 30 % of the camera's frames dropped): every episode ends."""
