@@ -83,9 +83,21 @@ class LivenessWatch:
         self._snapshots: collections.deque[tuple[float, tuple[np.ndarray, ...]]] = collections.deque(maxlen=128)
         self._poses: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=256)
         self._shadow_t = math.nan
+        self._warm_up()
         self.last_prediction = (math.nan, math.nan, math.nan)
         self.predictions: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=4096)
         self._next_check = -math.inf
+
+    def _warm_up(self) -> None:
+        """Compile or load the models' kernels now, as they will be called, not inside a supervisor poll."""
+        beats = np.array([[math.pi / 2, 0.5, 1.0, 1.0]] * 2)
+        self._shadow.command_array(beats[None])
+        self._shadow.advance(0.3)
+        snap = (0.0, (self._shadow.fins.copy(), self._shadow.pending.copy(), self._shadow.forcing_cache.copy()))
+        self._applied.append((0.1, beats))
+        self._predict(snap, np.array([1.0, 0.5, 0.0, 0.01, 0.0, 0.0]), (0.2, 0.4))
+        self._applied.clear()
+        self._shadow.reset()
 
     def reset(self, t: float = math.nan) -> None:
         """Start over at ``t`` [s] with the fins still (an arm after a confirmed stop); forget poses and commands."""
