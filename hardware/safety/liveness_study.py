@@ -108,10 +108,27 @@ def run_episode(policy, settings: dict, seed: int, fault: str, fault_after: int,
             step += 1
         sup = env.supervisor
         stopped = min(sup.fired.values()) if sup.fired else math.nan
+        model = _model_error(sup.liveness, t_fault)
         return {"seed": seed, "fault": fault, "steps": step, "stop": info["safety_stop"],
                 "success": bool(info.get("is_success", False)), "reason": info["tracking"]["reason"],
                 "fault_time": t_fault, "delay": stopped - t_fault if math.isfinite(t_fault) else math.nan,
-                "min_clearance": clearance[0], "latency": info["tracking"].get("latency")}
+                "min_clearance": clearance[0], "latency": info["tracking"].get("latency"), **model}
+
+
+def _model_error(watch, t_fault: float) -> dict:
+    """The motion checks' margins while the camera was live (windows ending before ``t_fault``).
+
+    ``model_miss_max``: the innovation less three standard errors (the model's own miss), at most [m];
+    ``shown_share_min``: the share of the predicted motion the camera showed, at least (windows predicting
+    ``min_motion`` or more).
+    """
+    rows = np.array([p for p in watch.predictions if not p[0] >= t_fault]).reshape(-1, 5)
+    if not len(rows):
+        return {"model_miss_max": None, "shown_share_min": None}
+    miss = rows[:, 3] - (rows[:, 4] - watch.innovation)
+    hard = rows[:, 1] >= watch.min_motion
+    return {"model_miss_max": float(miss.max()),
+            "shown_share_min": float((rows[hard, 2] / rows[hard, 1]).min()) if hard.any() else None}
 
 
 def _params(settings: dict):
@@ -181,6 +198,10 @@ def main(argv: list[str] | None = None) -> int:
                "delay_max": max(delays) if delays else None,
                "delay_median": float(np.median(delays)) if delays else None,
                "min_clearance": min(r["min_clearance"] for r in rows),
+               "model_miss_max": max((r["model_miss_max"] for r in rows if r["model_miss_max"] is not None),
+                                     default=None),
+               "shown_share_min": min((r["shown_share_min"] for r in rows if r["shown_share_min"] is not None),
+                                      default=None),
                "stops": {s: sum(r["stop"] == s for r in rows) for s in sorted({r["stop"] for r in rows})}}
     print(json.dumps({"summary": summary}), flush=True)
     return 0
