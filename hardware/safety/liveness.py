@@ -10,12 +10,15 @@ checks three consequences on the sightings (each a stop with a reason saying wha
   frames going round, a cut to another recording;
 * **too fast**: the camera's fish moving (least-squares speed less two standard errors) faster than the physical
   bound allows ours: fins still and the fish coasted to rest, while the camera shows a fish that swims;
-* **no motion while the fins beat**: over the last ``window`` s the fins ran the commands sent, the averaged
-  model (:class:`pectoral_gym.model.models.AveragedModel`, from the pose and velocity measured at the window's
-  start) predicts the fish to move ``M_pred`` (displacement plus half a body length times the heading change),
-  and the camera shows less than ``ratio * M_pred``: a frozen camera, however its pixels are dressed up.
-  Only predictions of at least ``min_motion`` count (fins that beat hard); ``docs/guide/safety.md``, "Liveness
-  from physics", gives the figures behind ``window``, ``ratio`` and ``min_motion``.
+* **motion**: a shadow averaged model (:class:`pectoral_gym.model.models.AveragedModel`) runs the commands sent,
+  so the fins' phase at any past instant is known; the averaged model, started from the pose and velocity of the
+  window before the last ``window`` s, predicts the fish's motion in that window. *Frozen*: it predicts at least
+  ``min_motion`` (displacement plus half a body length times the heading change, less three standard errors)
+  and the camera shows less than ``ratio`` of it, over ``window`` or ``long_window``, however the pixels are
+  dressed up. *Innovation*: the end position misses the prediction by more than ``innovation`` plus three
+  standard errors of the measurement, twice in a row: a recording, another fish.
+
+``docs/guide/safety.md``, "Liveness from physics", gives the figures behind the bounds.
 """
 
 from __future__ import annotations
