@@ -8,20 +8,22 @@ model under ``--params`` then replays the logged commands (the fins through the 
 calibration does, :mod:`pectoral_gym.scaling.calibration`), each :data:`WINDOW` s window started from the state
 that fits its poses best, and the camera's poses are compared with the model's.
 
-The statistic is the position residual beyond the camera's noise: with ``chi2`` the mean square of the ``X, Y``
-residuals normalised by the camera's noise ``sigma`` (estimated from the poses themselves, second differences)
-over the degrees of freedom left after the fitted starts, the **excess** ``sigma sqrt(max(0, chi2 - 1))`` is the
-model's own miss, in metres. ``--params`` is refused when the excess exceeds :data:`EXCESS_LIMIT` and ``chi2 - 1``
-is significant (more than 5 standard deviations of ``chi2`` under noise alone, ``sqrt(2 / dof)``). The limit sits
-between what calibration accuracy leaves (a few per cent off: under 1 mm) and what 30 % off in drag or fin size
-gives (6 mm and more): the measurement is in ``docs/calibration.md``, "Checking --params against the robot".
+The statistic is the position residual beyond the camera's noise. The ``X, Y`` residuals, in units of the
+camera's noise ``sigma`` (estimated from the poses themselves, second differences, as the calibration does),
+are unit normal deviates under the robot's own model; ``chi2`` is their mean square without the largest 2 % (a
+few mis-tracked frames do not move it), scaled to 1 for such deviates, and the **excess**
+``sigma sqrt(max(0, chi2 - 1))`` is the model's own miss, in metres. ``--params`` is refused when the excess
+exceeds :data:`EXCESS_LIMIT` and ``chi2 - 1`` is significant (more than 5 standard deviations of that estimate
+under noise alone, ``1.45 / sqrt(n)`` for ``n`` residuals). The limit sits between what calibration accuracy
+leaves and what 30 % off in drag or fin size gives: the measurement is in ``docs/calibration.md``, "Checking
+--params against the robot".
 """
 
 from __future__ import annotations
 
 import io
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -42,7 +44,25 @@ WINDOW = 6.0  # s: the calibration's shooting window (scaling.calibration.fit.Ca
 #: robot".
 EXCESS_LIMIT = 0.001
 _SIGNIFICANCE = 5.0  # standard deviations of chi2 under the camera's noise alone
+_TRIM = 0.02  # the largest residuals left out of chi2: a few mis-tracked frames, not the model
 _MIN_SECONDS = 8.0  # a probe cut shorter than this (by a safety stop) tells too little: the deploy refuses
+
+
+def _trimmed_chi2_1() -> tuple[float, float]:
+    """``(mean, spread)`` of the mean of the ``1 - _TRIM`` smallest of ``n`` squared unit normal deviates.
+
+    ``mean`` is its expectation, ``spread / sqrt(n)`` its standard deviation (a one-sided trimmed mean's
+    asymptotic variance: the winsorised variance over ``(1 - _TRIM)^2``). With ``x f_1(x) = f_3(x)`` and
+    ``x^2 f_1(x) = 3 f_5(x)`` for the chi-squared densities, both are closed forms.
+    """
+    from scipy.stats import chi2
+
+    keep = 1.0 - _TRIM
+    q = float(chi2.ppf(keep, 1))
+    mean = float(chi2.cdf(q, 3)) / keep
+    second = 3.0 * float(chi2.cdf(q, 5)) / keep
+    winsorised = keep * (second - mean ** 2) + _TRIM * (q - mean) ** 2
+    return mean, math.sqrt(winsorised) / keep / mean
 
 
 def probe_start() -> tuple[float, float, float]:
@@ -55,12 +75,14 @@ class ProbeResult:
     """What the probe found.
 
     Attributes:
-        chi2: Mean square of the noise-normalised ``X, Y`` residuals per degree of freedom (``inf``: too short).
-        dof: Its degrees of freedom.
+        chi2: The noise-normalised ``X, Y`` residuals' mean square without the largest 2 % (module docstring;
+            ``inf``: too short).
+        dof: The number of residuals it comes from.
         sigma: The camera's position noise estimated from the poses [m].
         duration: Seconds of poses the probe logged.
         rms: Root-mean-square position residual [m].
         stop: The safety stop that ended the probe early, or ``""``.
+        log: The probe's run log (``docs/run-log.md``), for :func:`judge_probe` under other parameters.
     """
 
     chi2: float
@@ -69,6 +91,7 @@ class ProbeResult:
     duration: float
     rms: float
     stop: str = ""
+    log: str = field(default="", repr=False)
 
     @property
     def excess(self) -> float:
@@ -78,7 +101,7 @@ class ProbeResult:
     @property
     def significant(self) -> bool:
         """Whether ``chi2`` exceeds 1 by more than noise alone explains."""
-        return self.chi2 - 1.0 > _SIGNIFICANCE * math.sqrt(2.0 / max(self.dof, 1))
+        return self.chi2 - 1.0 > _SIGNIFICANCE * _trimmed_chi2_1()[1] / math.sqrt(max(self.dof, 1))
 
     @property
     def accepted(self) -> bool:
@@ -111,12 +134,17 @@ def judge_probe(log, params: FishParams) -> ProbeResult:
     problem = _Problem([lw], params, (), CalibrationSettings(fields=()))
     result = least_squares(problem.fun, problem.x0(), jac=problem.jac, bounds=problem.bounds(), method="trf",
                            x_scale="jac", tr_solver="lsmr", max_nfev=30)
-    r = problem.fun(result.x)[:problem.rows].reshape(-1, 3)[:, :2]  # X, Y (heading: the camera's noisiest)
+    # X, Y (the heading is the camera's noisiest), in noise units without the fit's confidence weights: under the
+    # robot's own model each is then a unit normal deviate and chi2 is near 1 whatever the confidences
+    r = problem.fun(result.x)[:problem.rows].reshape(-1, 3)[:, :2] / np.sqrt(np.maximum(lw.weight, 1e-12))[:, None]
     dof = max(1, r.size - 4 * len(lw.window_t))  # each window's fitted position and velocity in X, Y
     sigma = float(np.sqrt(np.mean(lw.sigma[:2] ** 2)))
-    miss = r * lw.sigma[:2] / np.sqrt(np.maximum(lw.weight, 1e-12))[:, None]
-    rms = float(np.sqrt(np.mean(np.sum(miss ** 2, axis=1))))
-    return ProbeResult(float(np.sum(r ** 2) / dof), dof, sigma, duration, rms)
+    rms = float(np.sqrt(np.mean(np.sum((r * lw.sigma[:2]) ** 2, axis=1))))
+    # the mean of r^2 without its largest 2 %, over that mean for unit normal deviates: a few mis-tracked frames do
+    # not move it, a model that misses does, without bound; the fitted starts' degrees of freedom scale it
+    squares = np.sort(r.ravel() ** 2)[:int((1.0 - _TRIM) * r.size)]
+    chi2 = float(np.mean(squares) / _trimmed_chi2_1()[0] * r.size / dof)
+    return ProbeResult(chi2, r.size, sigma, duration, rms)
 
 
 def run_probe(env, params: FishParams, seed: int | None = None) -> ProbeResult:
@@ -149,7 +177,7 @@ def run_probe(env, params: FishParams, seed: int | None = None) -> ProbeResult:
     finally:  # the fins run on until the next reset, which stops them and waits for the robot's word
         env.recorder, env.max_episode_steps = saved, max_steps
     result = judge_probe(read_run_log(io.StringIO(buffer.getvalue())), params)
-    return ProbeResult(result.chi2, result.dof, result.sigma, result.duration, result.rms, stop)
+    return ProbeResult(result.chi2, result.dof, result.sigma, result.duration, result.rms, stop, buffer.getvalue())
 
 
 def check_on_robot(env, params: FishParams, place, seed: int | None = None) -> ProbeResult:

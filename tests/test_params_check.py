@@ -23,7 +23,7 @@ def test_statistic_by_hand():
     r = ProbeResult(chi2=5.0, dof=1000, sigma=0.001, duration=12.0, rms=0.003)
     assert r.excess == pytest.approx(0.002) and r.significant
     assert r.accepted == (0.002 <= EXCESS_LIMIT)
-    noise = ProbeResult(chi2=1.2, dof=1000, sigma=0.005, duration=12.0, rms=0.007)  # 0.2 < 5 sqrt(2 / 1000) = 0.22
+    noise = ProbeResult(chi2=1.2, dof=1000, sigma=0.005, duration=12.0, rms=0.007)  # 0.2 < 5 x 1.45 / sqrt(1000)
     assert noise.excess == pytest.approx(0.005 * math.sqrt(0.2)) and not noise.significant and noise.accepted
     short = ProbeResult(chi2=0.5, dof=100, sigma=0.001, duration=3.0, rms=0.001, stop="geofence")
     assert not short.accepted and "geofence" in short.why()
@@ -57,3 +57,19 @@ def test_fin_size_30_percent_off_refused():
         with pytest.raises(ValueError, match="--params does not describe this robot"):
             check_on_lockstep_rig(101, RigConditions(), ROBOT, params=ROBOT.replace(
                 fin_span=ROBOT.fin_span * factor, fin_chord=ROBOT.fin_chord * factor))
+
+
+def test_trimmed_chi2_is_one_under_noise_with_the_stated_spread():
+    # the probe's chi2 from the squared unit normal deviates without their largest 2 %: unbiased, and its spread
+    # (the significance test's unit, from closed forms) as a simulation finds it
+    import numpy as np
+
+    from pectoral_gym.hardware import params_probe as pp
+
+    mean, spread = pp._trimmed_chi2_1()
+    rng = np.random.default_rng(0)
+    n = 1428
+    squares = np.sort(rng.standard_normal((2000, n)) ** 2, axis=1)[:, :int(0.98 * n)]
+    estimates = squares.mean(axis=1) / mean
+    assert np.mean(estimates) == pytest.approx(1.0, abs=0.01)
+    assert np.std(estimates) * math.sqrt(n) == pytest.approx(spread, rel=0.05)
