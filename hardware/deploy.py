@@ -67,6 +67,7 @@ from pectoral_gym.hardware.deploy_episodes import (  # re-exported: the deploy's
 from pectoral_gym.hardware.emurig import RigConditions, open_rig
 from pectoral_gym.hardware.params_probe import check_on_lockstep_rig, check_on_robot, probe_start
 from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handlers
+from pectoral_gym.hardware.signal_latch import SignalLatch
 from pectoral_gym.model.params import FishParams
 
 __all__ = ["EXIT_DISPLACED", "build_parser", "main", "make_controller", "plot_trajectories", "random_start",
@@ -244,7 +245,7 @@ def _run_lockstep(parser: argparse.ArgumentParser, args: argparse.Namespace, con
                       args.scaling)
     started = time.perf_counter()
     with open(log_path, "w", encoding="utf-8") as log, _run_log(log_path.with_name("run.jsonl"), args,
-                                                                  settings) as run_log:
+                                                                  settings) as run_log, SignalLatch() as latch:
         written, last = 0, None
 
         def write(result) -> None:
@@ -256,10 +257,12 @@ def _run_lockstep(parser: argparse.ArgumentParser, args: argparse.Namespace, con
                 getattr(run_log, record.pop("type"))(**record)
             run_log.flush()
             written += 1
+            latch.check()  # a signal whose exception the interpreter swallowed ends the run here
 
         try:
             results = run_lockstep(job, range(args.episodes), args.jobs, write, progress=not args.no_progress,
                                    controller=controller)
+            latch.check()  # a signal lost during the last episode's clean-up
         except EpisodeError as err:
             if err.setup:  # the settings, found wrong by the rig or the env
                 parser.error(str(err))

@@ -192,3 +192,26 @@ def test_displaced_run_exit_3_and_summary_says_so(tmp_path, capsys, monkeypatch)
     assert code == deploy.EXIT_DISPLACED == 3
     assert json.loads((tmp_path / "summary.json").read_text())["ended"] == "taken_over"
     assert "another session took the robot over" in capsys.readouterr().err
+
+
+def test_a_ctrl_c_lost_in_a_finaliser_still_ends_a_lockstep_run():
+    # a Ctrl-C that arrives while a weakref callback runs (a lockstep rig's garbage being collected) was printed as
+    # "Exception ignored" and lost: the run went on
+    import weakref
+
+    from pectoral_gym.hardware.signal_latch import SignalLatch
+
+    class Garbage:
+        pass
+
+    def interrupted(_):
+        raise KeyboardInterrupt
+
+    with SignalLatch() as latch:
+        latch.check()  # nothing latched: nothing raised
+        thing = Garbage()
+        ref = weakref.ref(thing, interrupted)
+        del thing  # the callback's KeyboardInterrupt is unraisable
+        assert ref() is None
+        with pytest.raises(KeyboardInterrupt):
+            latch.check()
