@@ -28,7 +28,10 @@ import math
 
 import numpy as np
 
+from pectoral_gym.hardware.finreplay import FinReplay
+from pectoral_gym.hardware.radio.firmware import FirmwareConfig, ServoLimits
 from pectoral_gym.hardware.safety.geofence import SpeedBound
+from pectoral_gym.model import forcing_cache
 from pectoral_gym.model.params import FishParams
 
 __all__ = ["LivenessWatch"]
@@ -72,18 +75,19 @@ class LivenessWatch:
     """
 
     def __init__(self, params: FishParams, bound: SpeedBound, pose_noise: float, window: float = 0.8,
-                 long_window: float = 2.4, ratio: float = 0.1, min_motion: float = 0.03, innovation: float = 0.04):
+                 long_window: float = 2.4, ratio: float = 0.1, min_motion: float = 0.03, innovation: float = 0.04,
+                 limits: ServoLimits | None = None):
         from pectoral_gym.model.models import AveragedModel
 
         self.params, self.bound, self.pose_noise = params, bound, float(pose_noise)
         self.window, self.ratio, self.min_motion = float(window), float(ratio), float(min_motion)
         self.innovation, self.long_window = float(innovation), float(long_window)
         self._strikes = 0
-        self._shadow = AveragedModel(n=1, params=params)
+        self._replay = FinReplay(params, FirmwareConfig(limits=limits or ServoLimits()))
         self._model = AveragedModel(n=1, params=params)
         self._queue: collections.deque[tuple[float, np.ndarray]] = collections.deque()  # sent, not yet in the shadow
         self._applied: collections.deque[tuple[float, np.ndarray]] = collections.deque(maxlen=64)
-        self._snapshots: collections.deque[tuple[float, tuple[np.ndarray, ...]]] = collections.deque(maxlen=128)
+        self._snapshots: collections.deque[tuple[float, np.ndarray, np.ndarray]] = collections.deque(maxlen=128)
         self._poses: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=256)
         self._shadow_t = math.nan
         self._warm_up()
@@ -93,14 +97,11 @@ class LivenessWatch:
 
     def _warm_up(self) -> None:
         """Compile or load the models' kernels now, as they will be called, not inside a supervisor poll."""
-        beats = np.array([[math.pi / 2, 0.5, 1.0, 1.0]] * 2)
-        self._shadow.command_array(beats[None])
-        self._shadow.advance(0.3)
-        snap = (0.0, (self._shadow.fins.copy(), self._shadow.pending.copy(), self._shadow.forcing_cache.copy()))
-        self._applied.append((0.1, beats))
-        self._predict(snap, np.array([1.0, 0.5, 0.0, 0.01, 0.0, 0.0]), (0.2, 0.4))
-        self._applied.clear()
-        self._shadow.reset()
+        self.reset(0.0)
+        self.command(0.0, np.array([[math.pi / 2, 0.5, 1.0, 1.0]] * 2))
+        self._advance_shadow(0.4)
+        self._predict(np.array([1.0, 0.5, 0.0, 0.01, 0.0, 0.0]), 0.05, (0.2, 0.4))
+        self.reset()
 
     def reset(self, t: float = math.nan) -> None:
         """Start over at ``t`` [s] with the fins still (an arm after a confirmed stop); forget poses and commands."""
@@ -108,7 +109,7 @@ class LivenessWatch:
         self._applied.clear()
         self._snapshots.clear()
         self._poses.clear()
-        self._shadow.reset()
+        self._replay.reset(0.0 if math.isnan(t) else t)
         self._shadow_t = float(t)
         self._next_check = -math.inf
         self._strikes = 0
@@ -126,21 +127,23 @@ class LivenessWatch:
 
     # ------------------------------------------------------------ the fins' phase
     def _snapshot(self) -> None:
-        m = self._shadow
-        self._snapshots.append((self._shadow_t, (m.fins.copy(), m.pending.copy(), m.forcing_cache.copy())))
+        model = self._replay.model
+        self._snapshots.append((self._shadow_t, model.fins.copy(), model.pending.copy()))
 
     def _advance_shadow(self, to: float, step: float = 0.05) -> None:
-        """Run the shadow's fins to ``to`` [s], taking the commands sent up to then; a snapshot every ``step`` s."""
+        """Run the replayed fins to ``to`` [s], taking the commands sent up to then; a snapshot every ``step`` s.
+
+        The fins are the firmware's (:class:`pectoral_gym.hardware.finreplay.FinReplay`: hand-over at the next
+        turning point, rate rule, the transition's stretch), as the robot runs them.
+        """
         while self._shadow_t < to:
             target = min(to, self._shadow_t + step)
-            if self._queue and self._queue[0][0] <= target:
-                target = max(self._queue[0][0], self._shadow_t)
-            self._shadow.advance(target - self._shadow_t)
-            self._shadow_t = target
-            while self._queue and self._queue[0][0] <= self._shadow_t:
+            while self._queue and self._queue[0][0] <= target:
                 t, beats = self._queue.popleft()
-                self._shadow.command_array(beats[None])
+                self._replay.command(max(t, self._shadow_t), beats)
                 self._applied.append((t, beats))
+            self._replay.advance(target)
+            self._shadow_t = target
             self._snapshot()
 
     def sighting(self, t: float, x: float, y: float, psi: float) -> str:
@@ -198,14 +201,14 @@ class LivenessWatch:
         if len(before) < 6 or np.ptp(before[:, 0]) < 0.6 * window or len(middle) < 2 or len(end) < 2:
             return ""
         t_c = float(before[:, 0].mean())
-        snaps = [s for s in self._snapshots if s[0] <= t_c]
-        if not (snaps and self._applied and self._applied[0][0] <= t_c and self.bound.run_until >= t1):
+        known = self._snapshots and self._snapshots[0][0] <= t_c and self._applied and self._applied[0][0] <= t_c
+        if not (known and self.bound.run_until >= t1):
             return ""  # the fins did not run the whole span on commands we know
         pose_c, rates_c = _fit(before, t_c)
         c, s = math.cos(pose_c[2]), math.sin(pose_c[2])
         body = (c * rates_c[0] + s * rates_c[1], -s * rates_c[0] + c * rates_c[1], rates_c[2])
         t_m, t_e = float(middle[:, 0].mean()), float(end[:, 0].mean())
-        pred_m, pred_e = self._predict(snaps[-1], np.array([*pose_c, *body]), (t_m, t_e))
+        pred_m, pred_e = self._predict(np.array([*pose_c, *body]), t_c, (t_m, t_e))
         meas_m, meas_e = middle[:, 1:4].mean(axis=0), end[:, 1:4].mean(axis=0)
         reach = 0.5 * self.params.body_length
         m_pred = math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2])
@@ -241,20 +244,27 @@ class LivenessWatch:
         centred = poses[:, 0] - t_c
         return max(scatter, 1e-4), float(centred @ centred)
 
-    def _predict(self, snap, state: np.ndarray, times: tuple[float, ...]) -> list[np.ndarray]:
-        """Poses (3,) at ``times`` (increasing) of the averaged model from the fins' phase ``snap`` and ``state``."""
-        t_snap, (fins, pending, cache) = snap
+    def _predict(self, state: np.ndarray, t_c: float, times: tuple[float, ...]) -> list[np.ndarray]:
+        """Poses (3,) at ``times`` (increasing) of the averaged model from ``state`` at ``t_c``.
+
+        Its fins are the replayed ones, set from the snapshots (one every 0.05 s).
+        """
         model = self._model
         model.reset(state[None])
-        model.fins[:], model.pending[:], model.forcing_cache[:] = fins, pending, cache
-        sent = [(t, 0, beats) for t, beats in list(self._applied) + list(self._queue) if t_snap < t < times[-1]]
-        events = sorted(sent + [(t, 1, None) for t in times], key=lambda e: (e[0], e[1]))
-        now, out = t_snap, []
-        for t, kind, beats in events:
-            model.advance(max(t - now, 0.0))
-            now = max(t, now)
-            if kind == 0:
-                model.command_array(beats[None])
-            else:
+        snaps = [s for s in self._snapshots if s[0] <= times[-1]]
+        first = max(k for k, s in enumerate(snaps) if s[0] <= t_c)
+        now, out, pending = t_c, [], list(times)
+        for k in range(first, len(snaps)):
+            _, fins, commanded = snaps[k]
+            model.fins[:], model.pending[:] = fins, commanded
+            forcing_cache.invalidate(model.forcing_cache)  # the regular forcing of the replayed pattern, recomputed
+            until = snaps[k + 1][0] if k + 1 < len(snaps) else math.inf
+            while pending and pending[0] <= until:
+                model.advance(max(pending[0] - now, 0.0))
+                now = max(pending.pop(0), now)
                 out.append(model.state[0, :3].copy())
+            if not pending:
+                break
+            model.advance(max(until - now, 0.0))
+            now = max(until, now)
         return out

@@ -111,7 +111,7 @@ class Supervisor:
         self.frame_check = FrameCheck(safety.max_frame_lead, safety.tracking_timeout / self.speed)
         self.bound = bound or SpeedBound(geofence.params, safety.limits)
         self.bound.unknown(self.now())
-        self.liveness = LivenessWatch(geofence.params, self.bound, safety.pose_noise)
+        self.liveness = LivenessWatch(geofence.params, self.bound, safety.pose_noise, limits=safety.limits)
         self._not_live = ""  # why the camera's poses do not follow our fins (latched until the next arm)
         self.fired: dict[str, float] = {}
         self.armed = False
