@@ -342,7 +342,7 @@ def _main(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         settings["params"] = args.params
     if args.scaling is not None:
         try:
-            check_scaling(args.scaling, settings)
+            check_scaling(args.scaling, settings, robot=not args.emulate)
         except (OSError, ValueError) as err:
             parser.error(f"--scaling: {err}")
     if (problem := shipped_k_problem(args.controller, settings.get("params"), args.scaling)) is not None:

@@ -206,11 +206,12 @@ def check_frame_size(frame: Any, model: Any, calibration: str | Path | None) -> 
                          "(pectoral-camera-calibrate) or set the camera to the calibrated one")
 
 
-def check_scaling(path: str, settings: dict[str, Any]) -> None:
+def check_scaling(path: str, settings: dict[str, Any], robot: bool = True) -> None:
     """``ValueError`` (one line) unless the K file ``path`` loads, bounded, and is plausible over the env's envelope.
 
     The envelope: the action ranges of ``settings`` (``env_settings``'s), else the env's defaults
-    (:func:`pectoral_gym.model.plausible.check_k`).
+    (:func:`pectoral_gym.model.plausible.check_k`). For a real ``robot`` the file must also hold the spline an
+    identification writes; an emulated one also takes a ``--quick`` identification's file, which has none.
     """
     from pectoral_gym.model.kfunctions import ScalingFunctions
     from pectoral_gym.model.plausible import check_k
@@ -218,7 +219,7 @@ def check_scaling(path: str, settings: dict[str, Any]) -> None:
     defaults = EnvConfig()
     ranges = tuple(tuple(settings.get(key, getattr(defaults, key)))
                    for key in ("bias_range", "amplitude_range", "period_range", "ratio_range"))
-    check_k(ScalingFunctions.load(path), ranges, path)  # type: ignore[arg-type]
+    check_k(ScalingFunctions.load(path), ranges, path, spline=robot)  # type: ignore[arg-type]
 
 
 # Largest policy files read [bytes]: an SB3 zip of the MLPs trained here is under 1 MB, its VecNormalize pickle

@@ -60,6 +60,13 @@ def _scale_k(data: dict, factor: float) -> None:
         data["spline"]["coefficients"][name] = [v * factor for v in values]
 
 
+def _polynomial_only(data: dict) -> None:
+    """A K file without its spline whose polynomial alone is plausible: K = 1 (a --quick identification's kind)."""
+    data.pop("spline")
+    for name in data["functions"]:
+        data["functions"][name] = [{"coef": 1.0 if name != "K_fy" else 0.0, "powers": [0] * len(data["features"])}]
+
+
 def _policy_folder(folder: Path, marker: Path) -> str:
     run = folder / "run"
     run.mkdir()
@@ -107,6 +114,8 @@ CASES = {
     "k_1e300": lambda d: [*HAND, "--scaling", _k_file(d, lambda k: _scale_k(k, 1e300))],
     "k_negated": lambda d: [*HAND, "--scaling", _k_file(d, lambda k: _scale_k(k, -1.0))],
     "k_no_spline": lambda d: [*HAND, "--scaling", _k_file(d, lambda k: k.pop("spline"))],
+    "k_no_spline_real_robot": lambda d: ["--controller", "hand", "--port", "/dev/null", "--camera", "0",
+                                         "--scaling", _k_file(d, _polynomial_only)],
     "k_dev_zero": lambda d: [*HAND, "--scaling", _zero(d, "k.json")],
     "policy_pickle_dev_zero": lambda d: ["--policy", _policy_dev_zero(d), "--emulate", "--lockstep"],
     "policy_pickle_not_run_before_checks": lambda d: ["--policy", _policy_folder(d, d / "ran"), "--emulate",

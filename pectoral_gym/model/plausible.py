@@ -83,17 +83,17 @@ def check_params(params: FishParams, where: str = "params") -> None:
 K_BOUNDS = {"K_fx": (0.1, 10.0), "K_fy": (-3.0, 3.0), "K_m": (0.1, 10.0)}
 
 
-def k_problems(k: Any, ranges: tuple[tuple[float, float], ...], points: int = 5) -> list[str]:
+def k_problems(k: Any, ranges: tuple[tuple[float, float], ...], points: int = 5, spline: bool = True) -> list[str]:
     """Why the K ``k`` (a ``ScalingFunctions``) cannot be a robot's (empty: plausible).
 
-    ``k`` is evaluated over ``ranges`` (bias, amplitude, period, ratio) sampled on a ``points``-per-axis grid. A
-    robot's K comes from ``pectoral-scaling identify``, which always writes the spline section: a file
+    ``k`` is evaluated over ``ranges`` (bias, amplitude, period, ratio) sampled on a ``points``-per-axis grid. With
+    ``spline``, a robot's K comes from ``pectoral-scaling identify``, which always writes the spline section: a file
     without it (the bare polynomial of the paper) is not an identified robot's.
     """
     from pectoral_gym.model.kfunctions import K_NAMES
 
     out = []
-    if not k.has_spline:
+    if spline and not k.has_spline:
         out.append("no spline section (pectoral-scaling identify writes one)")
     grid = [np.linspace(lo, hi, points) for lo, hi in ranges]
     values = np.array([k.evaluate(*map(float, beat)) for beat in itertools.product(*grid)])
@@ -108,9 +108,9 @@ def k_problems(k: Any, ranges: tuple[tuple[float, float], ...], points: int = 5)
     return out
 
 
-def check_k(k: Any, ranges: tuple[tuple[float, float], ...], where: str = "K") -> None:
+def check_k(k: Any, ranges: tuple[tuple[float, float], ...], where: str = "K", spline: bool = True) -> None:
     """``ValueError`` (one line) unless the K ``k`` is plausible over ``ranges`` (:func:`k_problems`)."""
-    problems = k_problems(k, ranges)
+    problems = k_problems(k, ranges, spline=spline)
     if problems:
         raise ValueError(f"{where}: not a plausible robot's K: {'; '.join(problems)} (docs/calibration.md, "
                          "\"Plausibility bounds\")")
