@@ -9,7 +9,6 @@ from pectoral_gym.hardware.radio.firmware import ServoLimits
 from pectoral_gym.hardware.safety.geofence import SpeedBound
 from pectoral_gym.hardware.safety.liveness import LivenessWatch
 from pectoral_gym.hardware.vision.latency import afforded_latency, pipeline_latency
-from pectoral_gym.model.models import AveragedModel
 from pectoral_gym.model.params import FishParams
 
 P = FishParams()
@@ -35,13 +34,17 @@ def _watch():
 
 
 def _true_poses(duration, dt=1 / 30):
-    """The averaged model's own poses under FULL from rest at (1, 0.5, 0): a live camera of that fish."""
-    model = AveragedModel(n=1, params=P)
-    model.reset(np.array([[1.0, 0.5, 0.0, 0.0, 0.0, 0.0]]), right=FULL[0][None], left=FULL[1][None])
+    """The full model's poses under FULL sent at 0, its fins run by the firmware's rules (the emulator's way),
+    from rest at (1, 0.5, 0): a live camera of that fish."""
+    from pectoral_gym.hardware.finreplay import FinReplay
+
+    robot = FinReplay(P)
+    robot.model.state[0] = (1.0, 0.5, 0.0, 0.0, 0.0, 0.0)
+    robot.command(0.0, FULL)
     out = []
     for k in range(int(duration / dt)):
-        out.append((k * dt, *model.state[0, :3]))
-        model.advance(dt)
+        robot.advance(k * dt)
+        out.append((k * dt, *robot.model.state[0, :3]))
     return out
 
 
