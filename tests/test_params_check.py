@@ -41,10 +41,19 @@ def test_deploy_refuses_params_off_in_fin_size_before_the_first_episode(tmp_path
     robot.write_text(json.dumps(params_dict(ROBOT)))
     told.write_text(json.dumps(params_dict(ROBOT.replace(fin_span=ROBOT.fin_span * 0.7,
                                                          fin_chord=ROBOT.fin_chord * 0.7))))
+    import dataclasses
+
+    from pectoral_gym.model.kfunctions import ScalingFunctions
+    from pectoral_gym.model.params import load_params
+
+    k = ScalingFunctions.load(None)  # the shipped K labelled as the told fish's: the hand law's check passes
+    k.metadata["model_parameters"] = dataclasses.asdict(load_params(told))
+    k.save(tmp_path / "k.json")
     out = tmp_path / "out"
     with pytest.raises(SystemExit) as ended:
         deploy.main(["--controller", "hand", "--emulate", "--lockstep", "--emulate-params", str(robot),
-                     "--params", str(told), "--episodes", "1", "--no-progress", "--out", str(out)])
+                     "--params", str(told), "--scaling", str(tmp_path / "k.json"), "--episodes", "1",
+                     "--no-progress", "--out", str(out)])
     err = capsys.readouterr().err
     assert ended.value.code == 2 and "Traceback" not in err
     assert err.strip().splitlines()[-1].startswith("pectoral-deploy: error: --params does not describe this robot")
