@@ -269,6 +269,10 @@ class VirtualClock:
 
         return restore
 
+    def record_signal(self, signum: int) -> None:
+        """Take ``signum`` as if it had just arrived (a caller's handler that deferred it before this clock's)."""
+        self._signal = signum
+
     def _raise_signal(self, signum: int) -> None:
         """Stop, then end as the handler before ours would (call outside the scheduler's lock)."""
         try:

@@ -21,6 +21,7 @@ import json
 import math
 import multiprocessing
 import signal
+import threading
 import traceback
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -133,6 +134,7 @@ class _Runner:
         from pectoral_gym.hardware.vision.cameramodel import CameraModel
 
         self.job, self.controller, self.handle_signals = job, controller, handle_signals
+        self.latch: _SignalLatch | None = None  # run_lockstep's, for episodes in the calling thread
         self.model = CameraModel.default() if job.calibration is None else CameraModel.load(job.calibration)
         if controller is None and job.controller == "policy":
             from pectoral_gym.agents.training.policy import load_policy  # lazy: agents/ pulls in torch
@@ -152,8 +154,8 @@ class _Runner:
                     clock, robot, port, camera = open_rig(resources, job.seed + episode, job.conditions,
                                                           lockstep=True, params=job.params)
                     clock.limit = episode_time_limit(job)
-                    if self.handle_signals:  # Ctrl-C and SIGTERM taken between the rig's waits, until it is closed
-                        signals.callback(clock.defer_signals())
+                    if self.latch is not None:  # Ctrl-C and SIGTERM taken at the rig's waits until it is closed
+                        signals.callback(self.latch.hand_to(clock))
                     inset = job.settings.get("start_inset", tk.START_INSET)  # the policy's own, as it trained
                     check_frame_size(first_frame(camera, clock=clock), self.model, job.calibration)
                     env = HardwareFishEnv(port, camera, safety=job.safety, max_episode_steps=job.max_steps,
@@ -186,6 +188,73 @@ class _Runner:
         if not hasattr(c, "solve_times"):
             return None
         return {"solve_times": [float(t) for t in c.solve_times], "failures": int(c.failures), "late": int(c.late)}
+
+
+class _SignalLatch:
+    """Ctrl-C and SIGTERM for lockstep episodes in the calling thread: never acted on inside a rig's scheduler.
+
+    The handler records the signal; :meth:`take` acts on it between rigs, and :meth:`hand_to` passes it to a
+    rig's clock, which acts at its main thread's next wait (:meth:`VirtualClock.defer_signals`) and then calls
+    this handler back to end the run. Acting: ``KeyboardInterrupt`` for SIGINT, ``SystemExit(143)`` for SIGTERM
+    (or the handler installed before, if one was). A second signal acts at once.
+    """
+
+    def __init__(self) -> None:
+        self.pending: int | None = None
+        self._in_rig = False  # a rig's clock has the signals: a call of ours is that clock ending the run
+        self._previous: dict[int, Any] = {}
+
+    def install(self) -> Callable[[], None]:
+        """Install the handler (main thread only, else nothing); returns a function that restores the old ones."""
+        if threading.current_thread() is not threading.main_thread():
+            return lambda: None
+        self._previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+        for sig in self._previous:
+            signal.signal(sig, self._handler)
+
+        def restore() -> None:
+            for sig, old in self._previous.items():
+                if signal.getsignal(sig) == self._handler:
+                    signal.signal(sig, old)
+
+        return restore
+
+    def _handler(self, signum: int, frame: Any) -> None:
+        if self._in_rig or self.pending is not None:
+            self.pending = None
+            self._end(signum)
+        self.pending = signum
+
+    def _end(self, signum: int) -> None:
+        old = self._previous.get(signum)
+        if callable(old):
+            old(signum, None)
+        elif old != signal.SIG_IGN:
+            if signum == signal.SIGINT:
+                raise KeyboardInterrupt
+            raise SystemExit(128 + signum)
+
+    def take(self) -> None:
+        """Act on a recorded signal now (call where no rig is open)."""
+        if self.pending is not None:
+            signum, self.pending = self.pending, None
+            self._end(signum)
+
+    def hand_to(self, clock: Any) -> Callable[[], None]:
+        """Let ``clock`` (a rig's :class:`VirtualClock`) take the signals, with any recorded one; returns the undo."""
+        restore = clock.defer_signals()
+        if restore is None or not self._previous:
+            return lambda: None
+        self._in_rig = True
+        if self.pending is not None:
+            clock.record_signal(self.pending)
+            self.pending = None
+
+        def undo() -> None:
+            self._in_rig = False
+            restore()
+
+        return undo
 
 
 def merge_link(healths: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
@@ -261,8 +330,14 @@ def run_lockstep(job: LockstepJob, episodes: Sequence[int], jobs: int = 1,
     with tqdm(total=len(order), desc="episodes", disable=not progress) as bar:
         if jobs == 1:
             runner = _Runner(job, controller)
-            for episode in order:
-                collect(runner.run(episode))
+            runner.latch = _SignalLatch()
+            restore = runner.latch.install()
+            try:
+                for episode in order:
+                    runner.latch.take()  # a signal that came between two rigs ends the run here
+                    collect(runner.run(episode))
+            finally:
+                restore()
         elif order:
             _run_workers(job, order, min(jobs, len(order)), collect)
     return results

@@ -254,3 +254,27 @@ def test_fifty_episodes_with_a_third_of_the_frames_dropped_all_end(tmp_path):
     assert _in_thread(lambda: deploy.main(args), timeout=3000.0) == 0
     summary = json.loads((out / "summary.json").read_text())
     assert len(summary["episodes"]) == 50
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("signum", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 128 + signal.SIGTERM)])
+def test_a_signal_ends_a_lockstep_deploy_in_its_own_process(tmp_path, signum, code):
+    """``pectoral-deploy --lockstep`` (episodes in the deploy's process) signalled mid-episode ends at once, cleanly."""
+    import time
+
+    out = tmp_path / "run"
+    proc = subprocess.Popen([sys.executable, "-m", "pectoral_gym.hardware.deploy", "--controller", "hand",
+                             "--emulate", "--lockstep", "--episodes", "50", "--seed", "9", "--out", str(out),
+                             "--no-progress", "--nice", "0"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        steps = out / "steps.jsonl"
+        deadline = time.monotonic() + 600.0  # a cold numba cache compiles first
+        while not (steps.exists() and steps.stat().st_size > 2000):
+            assert proc.poll() is None and time.monotonic() < deadline, "the deploy ended or never stepped"
+            time.sleep(0.2)
+        proc.send_signal(signum)
+        _, stderr = proc.communicate(timeout=60.0)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        pytest.fail("the signalled lockstep deploy did not end (deadlock)")
+    assert proc.returncode == code, stderr[-2000:]
