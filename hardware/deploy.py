@@ -36,13 +36,9 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import dataclasses
-import json
-import math
 import sys
 import time
 from pathlib import Path
-from typing import TextIO
 
 import numpy as np
 
@@ -51,106 +47,32 @@ from pectoral_gym.hardware.clock import REAL_CLOCK
 from pectoral_gym.hardware.deploy_checks import (
     CONTROL_PERIOD_RANGE,
     check_frame_size,
+    check_scaling,
     env_settings,
     first_frame,
+    policy_preflight,
     raise_priority,
+    shipped_k_problem,
 )
 from pectoral_gym.hardware.deploy_cli import check_args, make_parser, rig_conditions
+from pectoral_gym.hardware.deploy_episodes import (  # re-exported: the deploy's episode loop
+    EXIT_DISPLACED,
+    displaced_reason,
+    plot_trajectories,
+    random_start,
+    run_episode,
+    run_episodes,
+    write_report,
+)
 from pectoral_gym.hardware.emurig import RigConditions, open_rig
+from pectoral_gym.hardware.params_probe import check_on_lockstep_rig, check_on_robot, probe_start
 from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handlers
+from pectoral_gym.hardware.signal_latch import SignalLatch
+from pectoral_gym.model.params import FishParams
 
-__all__ = ["build_parser", "main", "make_controller", "plot_trajectories", "random_start", "run_episode",
+__all__ = ["EXIT_DISPLACED", "build_parser", "main", "make_controller", "plot_trajectories", "random_start",
+           "run_episode",
            "run_episodes", "solver_summary"]
-
-
-def random_start(rng: np.random.Generator, inset: float = tk.START_INSET) -> tuple[float, float, float]:
-    """A start pose as the simulated goal task draws one (tank inset by ``inset`` [m], any heading)."""
-    x = inset + rng.random() * (tk.TANK_X - 2 * inset)
-    y = inset + rng.random() * (tk.TANK_Y - 2 * inset)
-    return x, y, -math.pi + 2 * math.pi * rng.random()
-
-
-def run_episode(env, controller, episode: int, log: TextIO, seed: int | None = None, robot=None) -> dict:
-    """Run episode number ``episode``; write one JSON line per step to ``log``; return the episode's summary.
-
-    The env and the controller are reset with ``seed + episode`` (``None``: unseeded). A step's ``t`` is seconds
-    since the episode's reset on the env's clock (simulated seconds in lockstep).
-    """
-    clock = getattr(env.unwrapped, "clock", REAL_CLOCK)
-    ep_seed = None if seed is None else seed + episode
-    obs, info = env.reset(seed=ep_seed)
-    controller.reset(ep_seed)
-    ret, steps, t0 = 0.0, 0, clock.monotonic()
-    record = {"episode": episode, "step": 0, "event": "reset", "pose": info["pose"], "target": info["target"]}
-    if robot is not None:
-        record["true_pose"] = list(robot.pose())
-    log.write(json.dumps(record) + "\n")
-    while True:
-        action = np.asarray(controller.act(obs), dtype=np.float32)
-        obs, reward, terminated, truncated, info = env.step(action)
-        ret += reward
-        steps += 1
-        record = {"episode": episode, "step": steps, "t": clock.monotonic() - t0,
-                  "action": action.tolist(), "command": info["command"], "pose": info["pose"],
-                  "estimate": info["estimate"], "target": env.unwrapped.target, "reward": reward,
-                  "terminated": terminated, "truncated": truncated, "safety_stop": info["safety_stop"],
-                  "distance": info["distance"], "link": info["link"], "tracking": info["tracking"]}
-        if robot is not None:
-            record["true_pose"] = list(robot.pose())
-        log.write(json.dumps(record) + "\n")
-        if terminated or truncated:
-            break
-    return {"episode": episode, "return": ret, "steps": steps, "terminated": terminated, "truncated": truncated,
-            "safety_stop": info["safety_stop"], "success": bool(info.get("is_success", False)),
-            "final_distance": info["distance"]}
-
-
-def run_episodes(env, controller, episodes: int, log_path: Path, seed: int | None = None, robot=None,
-                 progress: bool = True) -> list[dict]:
-    """Run ``episodes`` episodes on one env (:func:`run_episode`); write the steps to ``log_path``; return summaries."""
-    from tqdm import tqdm
-
-    summaries = []
-    with open(log_path, "w", encoding="utf-8") as log, tqdm(total=episodes, desc="episodes",
-                                                              disable=not progress) as bar:
-        for episode in range(episodes):
-            summaries.append(run_episode(env, controller, episode, log, seed, robot))
-            log.flush()
-            bar.update(1)
-    return summaries
-
-
-def plot_trajectories(log_path: Path, png_path: Path) -> None:
-    """Tank, measured/estimated path (and the true path when emulated) and targets of every episode."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    episodes: dict[int, list[dict]] = {}
-    for line in Path(log_path).read_text(encoding="utf-8").splitlines():
-        rec = json.loads(line)
-        episodes.setdefault(rec["episode"], []).append(rec)
-    fig, ax = plt.subplots(figsize=(9, 5))
-    ax.add_patch(plt.Rectangle((0, 0), tk.TANK_X, tk.TANK_Y, fill=False, lw=2, color="k"))
-    for k, recs in episodes.items():
-        colour = f"C{k % 10}"
-        est = np.array([r["estimate"][:2] for r in recs if "estimate" in r])
-        if len(est):
-            ax.plot(est[:, 0], est[:, 1], "-", color=colour, label=f"episode {k} estimate")
-        true = np.array([r["true_pose"][:2] for r in recs if "true_pose" in r])
-        if len(true):
-            ax.plot(true[:, 0], true[:, 1], ":", color=colour, label=f"episode {k} true")
-        start = recs[0]["pose"]
-        ax.plot(start[0], start[1], "o", color=colour)
-        targets = np.array([r["target"] for r in recs if "target" in r])
-        ax.plot(targets[:, 0], targets[:, 1], "x", color=colour, ms=8)
-    ax.set(xlim=(-0.05, tk.TANK_X + 0.05), ylim=(-0.05, tk.TANK_Y + 0.05), xlabel="X [m]", ylabel="Y [m]",
-           title="Deployment: path (o start, x target)", aspect="equal")
-    ax.legend(fontsize=7, loc="upper right")
-    fig.tight_layout()
-    fig.savefig(png_path, dpi=120)
-    plt.close(fig)
 
 
 def make_controller(name: str, config, step_budget: float, safety: SafetyConfig | None = None,
@@ -177,14 +99,8 @@ def make_controller(name: str, config, step_budget: float, safety: SafetyConfig 
 
     safety = safety or SafetyConfig()
     band = StopRule(safety.geofence_margin + MEASUREMENT_MARGIN, safety.reaction_time, safety.contact_speed)
-    if scaling is None and name in ("hand", "nmpc"):
-        from pectoral_gym.model.kfunctions import ScalingFunctions
-
-        differ = sorted(ScalingFunctions.load(None).params_mismatch(config.params))
-        if differ:
-            raise ValueError(f"--controller {name} plans with K, and the shipped K were identified for Table 1's "
-                             f"fish, whose {', '.join(differ)} differ from --params: give the robot's K with "
-                             "--scaling FILE (pectoral-scaling identify --params FILE writes it)")
+    if (problem := shipped_k_problem(name, config.params, scaling)) is not None:
+        raise ValueError(problem)
     if name == "nmpc":
         return make_baseline("nmpc", config, step_budget=step_budget, stop_band=tuple(band), spin=False,
                              scaling=scaling)
@@ -207,7 +123,8 @@ class _RunError(Exception):
     """A device or an episode failed (exit status 1); the message says what and where."""
 
 
-_RunResult = tuple[list[dict], dict, dict | None, float]  # summaries, link health, solver summary, wall time [s]
+# summaries, link health, solver summary, wall time [s], why the run ended early ("" or a DISPLACED reason)
+_RunResult = tuple[list[dict], dict, dict | None, float, str]
 
 
 def _run_log(path: Path, args: argparse.Namespace, settings: dict):
@@ -222,7 +139,9 @@ def _run_real_time(parser: argparse.ArgumentParser, args: argparse.Namespace, co
     """The episodes on one robot (real or emulated in real time), one after another on one rig and env.
 
     Returns:
-        ``(summaries, link health, solver summary or None, wall time [s])``.
+        ``(summaries, link health, solver summary or None, wall time [s], ended)``: ``ended`` is
+        ``"taken_over"`` or ``"robot_busy"`` if the robot came to serve another session (the run then ended at
+        once and sent nothing more), else ``""``.
 
     Raises:
         _RunError: A device did not answer or an episode could not go on.
@@ -261,6 +180,12 @@ def _run_real_time(parser: argparse.ArgumentParser, args: argparse.Namespace, co
             if controller is None:
                 budget = args.solve_fraction * settings["control_period"] / args.speed
                 controller = make_controller(args.controller, env.config, budget, safety, args.scaling)
+            if _probe_wanted(args):
+                _probe_note(check_on_robot(
+                    env, settings.get("params", FishParams()), (lambda rng: robot.place(*probe_start()))
+                    if args.emulate else None if args.no_prompt else (lambda rng: input(
+                        "Place the fish near the tank's centre, heading along its length, for a 12 s check of "
+                        "--params against the robot, and press Enter: ")), args.seed))
         except ValueError as err:  # the settings, found wrong by the devices or the env
             parser.error(str(err))
         except (RuntimeError, OSError) as err:  # a device that does not answer or cannot be opened
@@ -272,8 +197,25 @@ def _run_real_time(parser: argparse.ArgumentParser, args: argparse.Namespace, co
         except (RuntimeError, OSError) as err:  # e.g. no fish seen at reset, the robot not confirming a stop
             raise _RunError(f"{err} (log so far: {log_path})") from err
         wall_time = time.perf_counter() - started
+        ended = displaced_reason(env)
     solver = solver_summary(controller) if hasattr(controller, "solve_times") else None
-    return summaries, env.link.health(), solver, wall_time  # the link's health once the env closed it
+    return summaries, env.link.health(), solver, wall_time, ended  # the link's health once the env closed it
+
+
+def _probe_wanted(args: argparse.Namespace) -> bool:
+    """Whether the run checks its model against the robot first (:mod:`pectoral_gym.hardware.params_probe`).
+
+    Every run on a real robot, and every emulated one whose robot or model is not Table 1's (``--params``,
+    ``--emulate-params``; without either the emulated robot is the model by construction), but an identification
+    run (``--controller excite``), whose purpose is to find the parameters the probe would check.
+    """
+    return args.controller != "excite" and (not args.emulate or args.params is not None
+                                            or args.emulate_params is not None)
+
+
+def _probe_note(result) -> None:
+    print(f"note: --params checked against the robot: {result.excess * 1000:.1f} mm beyond the camera's noise "
+          f"over a {result.duration:.0f} s probe", file=sys.stderr)
 
 
 def _run_lockstep(parser: argparse.ArgumentParser, args: argparse.Namespace, controller, settings: dict,
@@ -303,7 +245,7 @@ def _run_lockstep(parser: argparse.ArgumentParser, args: argparse.Namespace, con
                       args.scaling, args.firmware)
     started = time.perf_counter()
     with open(log_path, "w", encoding="utf-8") as log, _run_log(log_path.with_name("run.jsonl"), args,
-                                                                  settings) as run_log:
+                                                                  settings) as run_log, SignalLatch() as latch:
         written, last = 0, None
 
         def write(result) -> None:
@@ -315,10 +257,12 @@ def _run_lockstep(parser: argparse.ArgumentParser, args: argparse.Namespace, con
                 getattr(run_log, record.pop("type"))(**record)
             run_log.flush()
             written += 1
+            latch.check()  # a signal whose exception the interpreter swallowed ends the run here
 
         try:
             results = run_lockstep(job, range(args.episodes), args.jobs, write, progress=not args.no_progress,
                                    controller=controller)
+            latch.check()  # a signal lost during the last episode's clean-up
         except EpisodeError as err:
             if err.setup:  # the settings, found wrong by the rig or the env
                 parser.error(str(err))
@@ -327,7 +271,7 @@ def _run_lockstep(parser: argparse.ArgumentParser, args: argparse.Namespace, con
             raise _RunError(f"episode {err.episode}: {err} (log so far: {log_path})") from err
     wall_time = time.perf_counter() - started
     return ([r.summary for r in results], merge_link([r.link for r in results]),
-            merge_solver([r.solver for r in results]), wall_time)
+            merge_solver([r.solver for r in results]), wall_time, "")  # a fresh rig per episode: nobody else
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -336,19 +280,54 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Command-line entry point; returns the exit status (0 done, 1 a device failed; 2 via SystemExit: bad argument).
+    """Command-line entry point; returns the exit status.
 
+    0 done, 1 a device failed, 2 via SystemExit: a bad argument, :data:`EXIT_DISPLACED` (3): the robot came to
+    serve another session (``summary.json``'s ``ended``), 130: interrupted (Ctrl-C, after the fins were stopped).
+    A run that fails before its first episode leaves no files behind (nor the ``--out`` folder it created).
     Every resource (emulated robot, radio link, camera, env) is released on every path out.
     """
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        return _main(parser, parser.parse_args(argv))
+    except KeyboardInterrupt:  # the stop handlers sent STOP first; the resources were released on the way out
+        print(f"{parser.prog}: interrupted: the fins were stopped", file=sys.stderr)
+        return 130
+
+
+def _checked_inputs(parser: argparse.ArgumentParser, args: argparse.Namespace):
+    """Every check of the arguments and their files that runs no code from them; ``parser.error`` on a fault.
+
+    Returns ``(conditions, safety, camera model)``. A policy folder is code (its pickles run when loaded): only
+    its ``config.yaml`` (YAML, safe) and its files' presence are checked here; :func:`_load_policy` comes last.
+    """
     try:
         conditions = rig_conditions(args)
     except ValueError as err:
         parser.error(f"--radio-*, --camera-*, --pose-noise-*: {err}")
     check_args(parser, args)
-    controller = None
     if args.controller == "policy":
+        try:
+            policy_preflight(args.policy)
+        except (OSError, ValueError) as err:
+            parser.error(f"cannot load policy {args.policy!r}: {err}")
+    try:
+        safety = SafetyConfig(geofence_margin=args.geofence, tracking_timeout=args.tracking_timeout)
+    except ValueError as err:
+        parser.error(f"safety settings (--geofence, --tracking-timeout): {err}")
+    from pectoral_gym.hardware.vision.cameramodel import CameraModel
+
+    try:
+        model = CameraModel.default() if args.calibration is None else CameraModel.load(args.calibration)
+    except (OSError, ValueError) as err:
+        parser.error(f"--calibration: cannot load {args.calibration}: {err}")
+    return conditions, safety, model
+
+
+def _main(parser: argparse.ArgumentParser, args: argparse.Namespace) -> int:
+    conditions, safety, model = _checked_inputs(parser, args)
+    controller = None
+    if args.controller == "policy":  # the pickles, after every other check of the inputs
         from pectoral_gym.agents.training.policy import load_policy  # lazy: agents/ pulls in torch
 
         try:
@@ -361,21 +340,19 @@ def main(argv: list[str] | None = None) -> int:
         parser.error(f"policy {args.policy!r} does not fit: {err}")
     if args.params is not None:  # the robot's own model: the supervisor's stopping distance and outline come from it
         settings["params"] = args.params
+    if args.scaling is not None:
+        try:
+            check_scaling(args.scaling, settings, robot=not args.emulate)
+        except (OSError, ValueError) as err:
+            parser.error(f"--scaling: {err}")
+    if (problem := shipped_k_problem(args.controller, settings.get("params"), args.scaling)) is not None:
+        parser.error(problem)  # before the probe: a run that cannot plan is refused without moving the robot
     period = settings["control_period"]
     if not CONTROL_PERIOD_RANGE[0] <= period <= CONTROL_PERIOD_RANGE[1]:
         parser.error(f"the policy's control period {period} s is outside [{CONTROL_PERIOD_RANGE[0]}, "
                      f"{CONTROL_PERIOD_RANGE[1]}] s")
-    try:
-        safety = SafetyConfig(geofence_margin=args.geofence, tracking_timeout=args.tracking_timeout)
-    except ValueError as err:
-        parser.error(f"safety settings (--geofence, --tracking-timeout): {err}")
-    from pectoral_gym.hardware.vision.cameramodel import CameraModel
-
-    try:
-        model = CameraModel.default() if args.calibration is None else CameraModel.load(args.calibration)
-    except (OSError, ValueError) as err:
-        parser.error(f"--calibration: cannot load {args.calibration}: {err}")
     out = Path(args.out)
+    created = [p for p in (out, *out.parents) if not p.exists()]
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
@@ -388,35 +365,42 @@ def main(argv: list[str] | None = None) -> int:
         print(f"warning: {warning}", file=sys.stderr)
     try:
         if args.lockstep:
-            summaries, link, solver, wall_time = _run_lockstep(parser, args, controller, settings, safety,
-                                                               conditions, out / "steps.jsonl")
+            if _probe_wanted(args):
+                from pectoral_gym.hardware.vision.tracker import MarkerTracker
+
+                try:
+                    _probe_note(check_on_lockstep_rig(args.seed, conditions, args.emulate_params, safety=safety,
+                                                      tracker=MarkerTracker(model), take_over=args.take_over,
+                                                      **settings))
+                except ValueError as err:
+                    parser.error(str(err))
+                except (RuntimeError, OSError) as err:
+                    raise _RunError(str(err)) from err
+            result = _run_lockstep(parser, args, controller, settings, safety, conditions, out / "steps.jsonl")
         else:
-            summaries, link, solver, wall_time = _run_real_time(parser, args, controller, settings, safety,
-                                                                conditions, model, out / "steps.jsonl")
+            result = _run_real_time(parser, args, controller, settings, safety, conditions, model,
+                                    out / "steps.jsonl")
     except _RunError as err:
+        _remove_unstarted(out, created)
         print(f"{parser.prog}: error: {err}", file=sys.stderr)
         return 1
-    report = {"controller": args.controller, "policy": None if args.policy is None else str(args.policy),
-              "settings": {k: list(v) if isinstance(v, tuple) else dataclasses.asdict(v) if k == "params" else v
-                           for k, v in settings.items()},
-              "episodes": summaries, "link": link}
-    report["wall_time"] = wall_time  # s for the episodes (the one field a lockstep rerun changes)
-    if args.emulate:
-        report["emulation"] = {"lockstep": args.lockstep, "speed": args.speed, "seed": args.seed,
-                               "firmware": args.firmware, "conditions": dataclasses.asdict(conditions),
-                               "params": None if args.emulate_params is None else dataclasses.asdict(
-                                   args.emulate_params)}
-    if solver is not None:
-        report["solver"] = solver  # its times are wall times: a rerun changes them too
-    (out / "summary.json").write_text(json.dumps(report, indent=2), encoding="utf-8")
-    plot_trajectories(out / "steps.jsonl", out / "trajectory.png")
-    for s in summaries:
-        print(f"episode {s['episode']}: return {s['return']:.3f}, {s['steps']} steps, "
-              f"stop: {s['safety_stop'] or ('success' if s['success'] else 'end')}")
-    print(f"log {out / 'steps.jsonl'}, plot {out / 'trajectory.png'}; link: sent {link['sent']}, "
-          f"acked {link['acked']}, retries {link['retries']}, crc errors {link['crc_errors']}; "
-          f"{len(summaries)} episodes in {report['wall_time']:.1f} s wall time")
-    return 0
+    except BaseException:  # a bad setting found by the devices (SystemExit 2), Ctrl-C
+        _remove_unstarted(out, created)
+        raise
+    return write_report(parser, args, out, settings, conditions, result)
+
+
+def _remove_unstarted(out: Path, created: list[Path]) -> None:
+    """Remove a failed run's files if no episode started (no step logged), and the folders made for them."""
+    steps = out / "steps.jsonl"
+    if steps.is_file() and steps.stat().st_size > 0:
+        return  # the log so far: the error message points to it
+    for name in ("steps.jsonl", "run.jsonl"):
+        with contextlib.suppress(OSError):
+            (out / name).unlink()
+    for folder in created:  # deepest first
+        with contextlib.suppress(OSError):
+            folder.rmdir()  # only if empty
 
 
 if __name__ == "__main__":

@@ -30,7 +30,8 @@ from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 from pectoral_gym.registration import ROBOT_READY
 
 __all__ = ["CONTROL_PERIOD_RANGE", "DEFAULT_NICE", "FIRST_FRAME_TIMEOUT", "MIN_TRACKING_WALL", "NICE_RANGE",
-           "SPEED_RANGE", "check_frame_size", "env_settings", "first_frame", "raise_priority", "robot_address"]
+           "SPEED_RANGE", "check_frame_size", "check_scaling", "env_settings", "first_frame", "policy_preflight",
+           "raise_priority", "robot_address", "shipped_k_problem"]
 
 # Nice values the deploy may ask for: [-20, 0] (never below the default priority). The PC's stack tracks 30 frames
 # a second and must judge each within the safety rules' reaction budget (0.15 s); at the default priority, other
@@ -203,3 +204,83 @@ def check_frame_size(frame: Any, model: Any, calibration: str | Path | None) -> 
         raise ValueError(f"the camera gives {width}x{height} px frames but {what} is for {model.width}x"
                          f"{model.height} px: calibrate at the camera's resolution "
                          "(pectoral-camera-calibrate) or set the camera to the calibrated one")
+
+
+def check_scaling(path: str, settings: dict[str, Any], robot: bool = True) -> None:
+    """``ValueError`` (one line) unless the K file ``path`` loads, bounded, and is plausible over the env's envelope.
+
+    The envelope: the action ranges of ``settings`` (``env_settings``'s), else the env's defaults
+    (:func:`pectoral_gym.model.plausible.check_k`). For a real ``robot`` the file must also hold the spline an
+    identification writes; an emulated one also takes a ``--quick`` identification's file, which has none.
+    """
+    from pectoral_gym.model.kfunctions import ScalingFunctions
+    from pectoral_gym.model.plausible import check_k
+
+    defaults = EnvConfig()
+    ranges = tuple(tuple(settings.get(key, getattr(defaults, key)))
+                   for key in ("bias_range", "amplitude_range", "period_range", "ratio_range"))
+    check_k(ScalingFunctions.load(path), ranges, path, spline=robot)  # type: ignore[arg-type]
+
+
+# Largest policy files read [bytes]: an SB3 zip of the MLPs trained here is under 1 MB, its VecNormalize pickle
+# under 10 kB, a config.yaml under 10 kB; the bounds leave 100 times that for larger networks.
+_POLICY_FILE_BYTES = {".zip": 256 << 20, ".pkl": 16 << 20, ".yaml": 1 << 20, ".yml": 1 << 20}
+
+
+def policy_preflight(policy: str) -> None:
+    """Check a ``--policy`` run folder or zip without running any of its code (nothing is unpickled).
+
+    A policy folder is code: SB3's zip holds the policy's weights as torch state dicts but also a data section
+    in which some entries are pickled, and ``vecnormalize*.pkl`` is a pickle; loading either runs whatever
+    they hold. This checks what can be checked before that: the model file is there, every file the loader may
+    read (the zip, the pickles, ``config.yaml``) is a regular file of plausible size (:data:`_POLICY_FILE_BYTES`;
+    no device, no endless file), the zip is a zip, and ``config.yaml`` is a YAML mapping (read safely).
+
+    Raises:
+        FileNotFoundError: Neither a run folder with a model nor a ``.zip``.
+        ValueError: A file that cannot be what it claims, naming it.
+    """
+    import zipfile
+
+    path = Path(policy)
+    if path.is_dir():
+        folder, models = path, [path / name for name in ("best_model.zip", "model.zip")]
+        models += sorted(path.glob("*.zip"))  # rl-baselines3-zoo: <env>.zip
+        if not any(m.is_file() for m in models):
+            raise FileNotFoundError(f"{path} has no model zip (best_model.zip, model.zip); is it a run folder?")
+    elif path.suffix == ".zip" and path.exists():
+        folder, models = path.parent, [path]
+    else:
+        raise FileNotFoundError(f"{path} is neither a run folder nor an SB3 .zip file")
+    candidates = [*models, *folder.glob("*.pkl"), *folder.glob("*/*.pkl"), folder / "config.yaml"]
+    for file in candidates:
+        if not file.exists() and not file.is_symlink():
+            continue
+        if not file.is_file():
+            raise ValueError(f"{file}: not a regular file (a device or a broken link)")
+        limit = _POLICY_FILE_BYTES.get(file.suffix.lower(), 1 << 20)
+        if file.stat().st_size > limit:
+            raise ValueError(f"{file}: {file.stat().st_size} bytes, more than {limit} (not a policy file of ours)")
+    for model in models:
+        if model.is_file() and not zipfile.is_zipfile(model):
+            raise ValueError(f"{model}: not a zip file (an SB3 model is one)")
+    from pectoral_gym.agents.training.policy import read_config  # YAML's safe loader: runs no code
+
+    read_config(folder)
+
+
+def shipped_k_problem(controller: str, params: Any, scaling: str | None) -> str | None:
+    """Why ``controller`` cannot plan with the shipped K for the robot ``params`` (``None``: it can, or needs no K).
+
+    The hand law and the NMPC plan with K; the shipped K were identified for Table 1's fish.
+    """
+    if scaling is not None or controller not in ("hand", "nmpc") or params is None:
+        return None
+    from pectoral_gym.model.kfunctions import ScalingFunctions
+
+    differ = sorted(ScalingFunctions.load(None).params_mismatch(params))
+    if not differ:
+        return None
+    return (f"--controller {controller} plans with K, and the shipped K were identified for Table 1's fish, whose "
+            f"{', '.join(differ)} differ from --params: give the robot's K with --scaling FILE (pectoral-scaling "
+            "identify --params FILE writes it)")

@@ -33,7 +33,9 @@ _EXAMPLES = """examples:
   pectoral-deploy --controller excite --emulate --lockstep --emulate-params robot_true.json \\
       --episodes 6 --max-episode-steps 60 --out id-run                                  # ... on an emulated robot
 
-exit status: 0 done; 1 a device failed (no frame, no fish seen, robot not answering); 2 a bad argument."""
+exit status: 0 done; 1 a device failed (no frame, no fish seen, robot not answering); 2 a bad argument;
+  3 the robot serves another session (another PC took it over, or it was never ours): the run ended at once
+  and sent nothing more, not even STOP (Ctrl-C still sends the operator's STOP)."""
 
 
 def make_parser(description: str) -> argparse.ArgumentParser:
@@ -47,7 +49,9 @@ def make_parser(description: str) -> argparse.ArgumentParser:
                              "run, seeded random fin patterns for the model's calibration, docs/run-log.md)")
     parser.add_argument("--policy", default=None, metavar="RUN_OR_ZIP",
                         help="pectoral_gym.agents.training.train or rl-baselines3-zoo run folder, or an SB3 .zip "
-                             "(pectoral_gym.agents.training.policy.load_policy)")
+                             "(pectoral_gym.agents.training.policy.load_policy). A policy folder is code: its zip's "
+                             "data section and vecnormalize.pkl are pickles, which run what they hold when loaded; "
+                             "deploy only folders you made or trust (they are loaded after every other check)")
     parser.add_argument("--solve-fraction", type=float, default=0.5, metavar="F",
                         help="nmpc: share of the control period a step's solves may take, in (0, 1] "
                              "(default %(default)s)")
@@ -98,8 +102,10 @@ def make_parser(description: str) -> argparse.ArgumentParser:
                         help="the robot's model parameters (a FishParams file, e.g. pectoral-scaling calibrate's "
                              "robot.json): the geofence's stopping distance and fish outline, the PC's fin replay "
                              "use them (default: Table 1's; a robot that coasts further or is larger than Table 1's "
-                             "fish needs its own). The hand law and the NMPC plan with K: give them the robot's "
-                             "with --scaling")
+                             "fish needs its own). Checked: every field within physical bounds, then, before the "
+                             "first episode, a 12 s open-loop probe of the robot seen by the camera against the "
+                             "model under these parameters (refused if they miss it; not with --controller excite). "
+                             "The hand law and the NMPC plan with K: give them the robot's with --scaling")
     parser.add_argument("--scaling", default=None, metavar="JSON",
                         help="--controller hand|nmpc: the K file they plan with, identified for the robot's --params "
                              "(pectoral-scaling identify --params robot.json writes it: k/scaling_coefficients.json; "
@@ -193,13 +199,27 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
 
 
 def fish_params(path: str):
-    """``--emulate-params``: the :class:`pectoral_gym.model.params.FishParams` of a file (argparse's type)."""
+    """``--params``, ``--emulate-params``: a plausible robot's ``FishParams`` from a file.
+
+    argparse's type: the file is read bounded (:mod:`pectoral_gym.inputfile`) and its parameters must pass the
+    plausibility bounds (:func:`pectoral_gym.model.plausible.check_params`): both describe a robot.
+    """
     from pectoral_gym.model.params import load_params
+    from pectoral_gym.model.plausible import check_params
 
     try:
-        return load_params(path)
+        params = load_params(path)
+        check_params(params, path)
     except (OSError, ValueError) as err:
         raise argparse.ArgumentTypeError(f"cannot load {path!r}: {err}") from None
+    from pectoral_gym.hardware.vision.tracker import TrackerConfig
+
+    tracker = TrackerConfig()
+    span = tracker.front_offset - tracker.back_offset + 2 * tracker.marker_radius
+    if params.body_length < span:
+        raise argparse.ArgumentTypeError(f"{path}: body_length {params.body_length:.3f} m cannot carry the tracker's "
+                                         f"markers, {span:.3f} m from end to end (hardware/vision/scene.py)")
+    return params
 
 
 def rig_conditions(args: argparse.Namespace) -> RigConditions:

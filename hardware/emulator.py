@@ -42,9 +42,13 @@ from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishPara
 from pectoral_gym.model.spec import FULL_REFERENCE, FullSpec
 from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
 
-__all__ = ["EmulatedRobot", "ROBOT_ADDRESS", "build_parser", "main"]
+__all__ = ["EmulatedRobot", "RECEIVED_KEPT", "ROBOT_ADDRESS", "build_parser", "main"]
 
 _POLL = 0.002  # poll period of the I/O loop [clock s]
+# EmulatedRobot.received keeps at least the newest RECEIVED_KEPT messages and at most twice as many: older ones
+# are dropped in one block, so a long run's memory stays bounded (about 20 messages per emulated second with the
+# default link: over 8 emulated minutes kept) while the list keeps its indexing for tests.
+RECEIVED_KEPT = 10_000
 
 
 class EmulatedRobot:
@@ -95,7 +99,7 @@ class EmulatedRobot:
         # emulated clock from 0
         self.rules = make_firmware(firmware_impl, firmware, new_boot_id(self._rng), variant)
         self.reboots = 0
-        self.received: list[pr.Message] = []  # every valid message, in arrival order (for tests and logs)
+        self.received: list[pr.Message] = []  # the newest valid messages (RECEIVED_KEPT), in arrival order
         self.lost_messages = 0
         # With a list here, every physics chunk appends (t, state (6,), fin rates (2,), peak rates of the
         # half-strokes in progress (2,), running): "stopped within" and servo checks on the emulated clock.
@@ -299,6 +303,8 @@ class EmulatedRobot:
         with self._lock:
             frames, messages = self.rules.receive(data, self.now(), self.model, self._keep, self.trace)
             self.received += messages
+            if len(self.received) > 2 * RECEIVED_KEPT:
+                del self.received[:-RECEIVED_KEPT]
         for frame in frames:
             self._write(frame)
 

@@ -18,6 +18,7 @@ from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.envs.tasks.table import TaskState
 from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 from pectoral_gym.hardware.radio.link import RadioLink
+from pectoral_gym.hardware.radio.linkclock import renewal_lease
 from pectoral_gym.hardware.realtime import settle_garbage
 from pectoral_gym.hardware.run_recorder import RunRecorder
 from pectoral_gym.hardware.safety.rules import SafetyConfig, check_action, install_stop_handlers
@@ -185,7 +186,10 @@ class HardwareFishEnv(gym.Env):
         except BaseException:
             self._release()
             raise
-        self._restore_signals = install_stop_handlers(self.stop) if handle_signals else (lambda: None)
+        # Lockstep: the signal is taken where the main thread next waits on the clock, never inside its scheduler.
+        defer = getattr(self.clock, "defer_signals", None)
+        stops = install_stop_handlers if defer is None else defer
+        self._restore_signals = stops(self.stop) if handle_signals else (lambda: None)
         atexit.register(self.close)
 
     def _build(self, port, camera, calibration, tracker, observer, observer_epsilon, take_over) -> None:
@@ -207,6 +211,7 @@ class HardwareFishEnv(gym.Env):
         self._observing = False
         self._next_tick = 0.0
         self._lease_end = -math.inf  # experiment time the robot's lease of the last command ends
+        self._sent = -math.inf  # experiment time the last command, or its renewal, was sent
 
     def _release(self) -> None:
         """Release the robot stack, if it was opened (a failed :func:`open_stack` releases its own parts)."""
@@ -221,6 +226,13 @@ class HardwareFishEnv(gym.Env):
     def _sleep(self, duration: float) -> None:
         if duration > 0:
             self.clock.sleep(duration / self.speed)
+
+    def _renewal(self, t: float) -> float | None:
+        """The lease of a renewal of the step's command due at experiment time ``t`` (``linkclock.renewal_lease``)."""
+        rtt, horizon = getattr(self.link, "rtt", lambda: None)(), getattr(self.link, "deadline_horizon", None)
+        if rtt is None or horizon is None:  # a stand-in link, or no round trip measured yet
+            return None
+        return renewal_lease(t, self._sent, self._lease_end, horizon, rtt * self.speed)
 
     @property
     def run_log(self):
@@ -264,6 +276,8 @@ class HardwareFishEnv(gym.Env):
             RuntimeError: The operator's stop is latched (:meth:`stop`; :meth:`rearm` clears it), also when it
                 comes during the reset; the robot did not confirm it stopped within ``stop_timeout`` (the
                 hook is then not called); no fish was seen within ``reset_timeout``; the env is closed.
+            pectoral_gym.hardware.radio.link.DisplacedError: The robot serves another session (``taken_over``,
+                ``robot_busy``): nothing is sent, not even the reset's STOP; the run must end.
         """
         super().reset(seed=seed)
         if self._closed:
@@ -287,6 +301,7 @@ class HardwareFishEnv(gym.Env):
         # Only frames captured after the hook returned: a camera clock may lead by up to max_frame_lead.
         placed = self.now() + self.safety.max_frame_lead * self.speed
         self.stack.wait_for_fish(placed, self.reset_timeout, self.frame_period / self.speed)
+        sup.check_latency()  # measured on the frames of this wait; a latency the tank cannot afford: fins stay stopped
         sup.drain()
         t = self.watch.last_seen
         x, y, psi = sup.pose
@@ -348,7 +363,7 @@ class HardwareFishEnv(gym.Env):
                 self.fin_replay.stop(self._lease_end)
             self.recorder.record("stop", self._lease_end)
         if sup.send(command, lease):
-            self._lease_end = now + lease
+            self._lease_end, self._sent = now + lease, now
             self.recorder.record("command", now, command)
             if self.fin_replay is not None:
                 self.fin_replay.command(now, command)
@@ -360,7 +375,9 @@ class HardwareFishEnv(gym.Env):
             if remaining <= 0:
                 break
             if self._lease_end - t < remaining + self.safety.step_slack - 1e-3 and sup.send(command, lease):
-                self._lease_end = t + lease  # a long control period: renew while step() runs
+                self._lease_end, self._sent = t + lease, t  # a long control period: renew while step() runs
+            elif (renewal := self._renewal(t)) and sup.send(command, renewal):
+                self._sent = t  # a slow radio: the same fins with a deadline from now, the lease's end unchanged
             self._sleep(min(self.frame_period, remaining))
             self._observe()
         self._observe()
@@ -390,7 +407,7 @@ class HardwareFishEnv(gym.Env):
                     estimate=self._state.tolist(), overrun=overrun, link=self.link.health(),
                     tracking={"ok": sup.track_ok, "lost_for": self.watch.lost_for(end), "reason": self.watch.reason,
                               "confidence": sup.confidence, "frames": sup.frames, "lost_frames": sup.lost_frames,
-                              "rejected": dict(sup.frame_check.rejected)})
+                              "rejected": dict(sup.frame_check.rejected), "latency": sup.latency})
         return task.obs[0].copy(), task.reward(0), terminated, truncated, info
 
     def _observe_fins(self, t: float | None = None) -> None:

@@ -21,6 +21,7 @@ import json
 import math
 import multiprocessing
 import signal
+import threading
 import traceback
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -35,12 +36,27 @@ from pectoral_gym.hardware.emurig import RigConditions, open_rig
 from pectoral_gym.hardware.radio.linkstatus import LinkStats
 from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handlers
 
-__all__ = ["EpisodeError", "EpisodeResult", "LockstepJob", "merge_link", "merge_solver", "run_lockstep",
-           "shift_records"]
+__all__ = ["EpisodeError", "EpisodeResult", "LockstepJob", "episode_time_limit", "merge_link", "merge_solver",
+           "run_lockstep", "shift_records"]
 
 RUN_LOG_GAP = 1.0  # s between one episode's last run-log record and the next episode's start in a merged run log
 
 _JOIN_TIMEOUT = 5.0  # wall s a terminated worker gets to end before it is killed
+# Wall seconds the parent waits for any worker's next result: far above an episode's (seconds to a minute, plus a
+# cold numba compile of up to ~100 s), far below "for ever".
+EPISODE_WALL_TIMEOUT = 1800.0
+_RESET_ALLOWANCE = 60.0  # simulated s an episode's resets, stop confirmations and camera checks may take at most
+
+
+def episode_time_limit(job: LockstepJob) -> float:
+    """Simulated seconds past which an episode's rig counts as stuck (``LockstepError``: a run that cannot end).
+
+    Twice the episode's steps at its control period, plus :data:`_RESET_ALLOWANCE`: a step that overruns its
+    period by as much again, every reset wait at its time-out, and still far below what a loop that never ends
+    runs to. The run then ends with one line naming the waiting threads, instead of hanging.
+    """
+    period = float(job.settings.get("control_period", 0.5))
+    return 2.0 * job.max_steps * period + _RESET_ALLOWANCE
 
 
 @dataclass(frozen=True)
@@ -120,6 +136,7 @@ class _Runner:
         from pectoral_gym.hardware.vision.cameramodel import CameraModel
 
         self.job, self.controller, self.handle_signals = job, controller, handle_signals
+        self.latch: _SignalLatch | None = None  # run_lockstep's, for episodes in the calling thread
         self.model = CameraModel.default() if job.calibration is None else CameraModel.load(job.calibration)
         if controller is None and job.controller == "policy":
             from pectoral_gym.agents.training.policy import load_policy  # lazy: agents/ pulls in torch
@@ -134,10 +151,13 @@ class _Runner:
 
         job, log, records = self.job, io.StringIO(), io.StringIO()
         try:
-            with contextlib.ExitStack() as resources:  # released last in, first out, on every path
+            with contextlib.ExitStack() as signals, contextlib.ExitStack() as resources:  # last in, first out
                 try:
                     clock, robot, port, camera = open_rig(resources, job.seed + episode, job.conditions,
                                                           lockstep=True, params=job.params, firmware=job.firmware)
+                    clock.limit = episode_time_limit(job)
+                    if self.latch is not None:  # Ctrl-C and SIGTERM taken at the rig's waits until it is closed
+                        signals.callback(self.latch.hand_to(clock))
                     inset = job.settings.get("start_inset", tk.START_INSET)  # the policy's own, as it trained
                     check_frame_size(first_frame(camera, clock=clock), self.model, job.calibration)
                     env = HardwareFishEnv(port, camera, safety=job.safety, max_episode_steps=job.max_steps,
@@ -170,6 +190,73 @@ class _Runner:
         if not hasattr(c, "solve_times"):
             return None
         return {"solve_times": [float(t) for t in c.solve_times], "failures": int(c.failures), "late": int(c.late)}
+
+
+class _SignalLatch:
+    """Ctrl-C and SIGTERM for lockstep episodes in the calling thread: never acted on inside a rig's scheduler.
+
+    The handler records the signal; :meth:`take` acts on it between rigs, and :meth:`hand_to` passes it to a
+    rig's clock, which acts at its main thread's next wait (:meth:`VirtualClock.defer_signals`) and then calls
+    this handler back to end the run. Acting: ``KeyboardInterrupt`` for SIGINT, ``SystemExit(143)`` for SIGTERM
+    (or the handler installed before, if one was). A second signal acts at once.
+    """
+
+    def __init__(self) -> None:
+        self.pending: int | None = None
+        self._in_rig = False  # a rig's clock has the signals: a call of ours is that clock ending the run
+        self._previous: dict[int, Any] = {}
+
+    def install(self) -> Callable[[], None]:
+        """Install the handler (main thread only, else nothing); returns a function that restores the old ones."""
+        if threading.current_thread() is not threading.main_thread():
+            return lambda: None
+        self._previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+        for sig in self._previous:
+            signal.signal(sig, self._handler)
+
+        def restore() -> None:
+            for sig, old in self._previous.items():
+                if signal.getsignal(sig) == self._handler:
+                    signal.signal(sig, old)
+
+        return restore
+
+    def _handler(self, signum: int, frame: Any) -> None:
+        if self._in_rig or self.pending is not None:
+            self.pending = None
+            self._end(signum)
+        self.pending = signum
+
+    def _end(self, signum: int) -> None:
+        old = self._previous.get(signum)
+        if callable(old):
+            old(signum, None)
+        elif old != signal.SIG_IGN:
+            if signum == signal.SIGINT:
+                raise KeyboardInterrupt
+            raise SystemExit(128 + signum)
+
+    def take(self) -> None:
+        """Act on a recorded signal now (call where no rig is open)."""
+        if self.pending is not None:
+            signum, self.pending = self.pending, None
+            self._end(signum)
+
+    def hand_to(self, clock: Any) -> Callable[[], None]:
+        """Let ``clock`` (a rig's :class:`VirtualClock`) take the signals, with any recorded one; returns the undo."""
+        restore = clock.defer_signals()
+        if restore is None or not self._previous:
+            return lambda: None
+        self._in_rig = True
+        if self.pending is not None:
+            clock.record_signal(self.pending)
+            self.pending = None
+
+        def undo() -> None:
+            self._in_rig = False
+            restore()
+
+        return undo
 
 
 def merge_link(healths: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
@@ -245,8 +332,14 @@ def run_lockstep(job: LockstepJob, episodes: Sequence[int], jobs: int = 1,
     with tqdm(total=len(order), desc="episodes", disable=not progress) as bar:
         if jobs == 1:
             runner = _Runner(job, controller)
-            for episode in order:
-                collect(runner.run(episode))
+            runner.latch = _SignalLatch()
+            restore = runner.latch.install()
+            try:
+                for episode in order:
+                    runner.latch.take()  # a signal that came between two rigs ends the run here
+                    collect(runner.run(episode))
+            finally:
+                restore()
         elif order:
             _run_workers(job, order, min(jobs, len(order)), collect)
     return results
@@ -270,7 +363,12 @@ def _run_workers(job: LockstepJob, order: list[int], jobs: int, collect: Callabl
             busy[conn] = queue.pop()
             conn.send(busy[conn])
         while busy:
-            for conn in wait(list(busy)):  # a pipe is ready on a message, or at EOF when its worker died
+            ready = wait(list(busy), timeout=EPISODE_WALL_TIMEOUT)  # a message, or EOF when its worker died
+            if not ready:  # every clock wait ends or fails in simulated time: a worker stuck outside the clock
+                episode = min(busy.values())
+                raise EpisodeError(episode, f"no episode ended within {EPISODE_WALL_TIMEOUT:g} s of wall time "
+                                            f"(episodes {sorted(busy.values())} running): a worker is stuck")
+            for conn in ready:
                 episode = busy[conn]
                 try:
                     kind, payload = conn.recv()

@@ -196,22 +196,49 @@ def read_run_log(path: str | os.PathLike | TextIO) -> RunLog:
     """
     if isinstance(path, (str, os.PathLike)):
         name = os.fspath(path)
-        with Path(path).open() as stream:
-            return _read(stream, name)
+        with Path(path).open(encoding="utf-8") as stream:
+            try:
+                return _read(stream, name)
+            except UnicodeDecodeError as err:
+                raise RunLogError(name, 0, f"not UTF-8 text ({err.reason} at byte {err.start})") from None
     return _read(path, "<stream>")
+
+
+# A run log's bounds: a record is under 1 kB (a latch report, a command with its two patterns); a log of 100
+# hours at 30 camera poses a second holds about 1 GB. Beyond either it is not a run log (or a device, /dev/zero).
+MAX_RECORD_CHARS = 1 << 16
+MAX_LOG_CHARS = 4 << 30
+
+
+def _lines(stream: TextIO, name: str):
+    """``(number, line)`` of ``stream``, each at most :data:`MAX_RECORD_CHARS`, all at most :data:`MAX_LOG_CHARS`."""
+    total, lineno = 0, 0
+    while True:
+        line = stream.readline(MAX_RECORD_CHARS + 1)
+        if not line:
+            return
+        lineno += 1
+        total += len(line)
+        if len(line) > MAX_RECORD_CHARS:
+            raise RunLogError(name, lineno, f"a record longer than {MAX_RECORD_CHARS} characters (not a run log)")
+        if total > MAX_LOG_CHARS:
+            raise RunLogError(name, lineno, f"more than {MAX_LOG_CHARS} characters (not a run log)")
+        yield lineno, line
 
 
 def _read(stream: TextIO, name: str) -> RunLog:
     header: dict[str, Any] | None = None
     builder, other = _Builder(), []
     lineno = 0
-    for lineno, line in enumerate(stream, start=1):
+    for lineno, line in _lines(stream, name):
         if not line.strip():
             continue
         try:
             rec = json.loads(line, parse_constant=_reject_constant)
         except ValueError as error:
             raise RunLogError(name, lineno, f"not valid JSON: {error}") from None
+        except RecursionError:
+            raise RunLogError(name, lineno, "not valid JSON: nested deeper than Python's recursion limit") from None
         try:
             kind = check_record(rec)
             if header is None and kind != "header":

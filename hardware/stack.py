@@ -16,12 +16,21 @@ from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 from pectoral_gym.hardware.finreplay import FinReplay
 from pectoral_gym.hardware.radio.firmware import FirmwareConfig
-from pectoral_gym.hardware.radio.link import RadioLink
+from pectoral_gym.hardware.radio.link import DisplacedError, RadioLink
 from pectoral_gym.hardware.safety.geofence import Geofence
 from pectoral_gym.hardware.safety.rules import CommandFilter, SafetyConfig
 from pectoral_gym.hardware.safety.supervisor import Supervisor
 
-__all__ = ["SIMULATION_ONLY", "RobotStack", "env_config", "open_stack"]
+__all__ = ["SIMULATION_ONLY", "RobotStack", "check_not_displaced", "env_config", "open_stack"]
+
+
+def check_not_displaced(link: Any) -> None:
+    """``DisplacedError`` if ``link`` knows the robot serves another session (a link without the notion: never)."""
+    if getattr(link, "displaced", False):
+        reason = link.control_lost
+        raise DisplacedError(reason, "another session took the robot over (taken_over): this run stopped sending"
+                        if reason == "taken_over" else "the robot serves another live session (robot_busy): "
+                        "this run sends nothing; pass --take-over only if nobody relies on that session")
 
 #: ``EnvConfig`` option groups that simulate what the robot stack really does: the robot env refuses them, saying why.
 SIMULATION_ONLY = {
@@ -81,10 +90,13 @@ class RobotStack:
         """Send STOP until the robot confirms its fins are still, at most ``timeout`` s (clock seconds).
 
         Raises:
+            DisplacedError: The robot serves another session (:attr:`RadioLink.displaced`): no STOP is sent, the
+                takeover halted our fins and a STOP of ours could only halt the new controller's.
             RuntimeError: No confirmation in time.
         """
         deadline = self.clock.monotonic() + timeout
         while True:
+            check_not_displaced(self.link)
             remaining = deadline - self.clock.monotonic()
             if remaining <= 0:
                 raise RuntimeError(f"the robot did not confirm it stopped within {timeout:.1f} s "
@@ -95,6 +107,7 @@ class RobotStack:
             # restart the wait before a slow radio's answer (one round trip or more) could arrive.
             if self.link.stop(wait=remaining):
                 return
+            check_not_displaced(self.link)
 
     def wait_for_fish(self, after: float, timeout: float, poll: float) -> None:
         """Wait for sightings in frames captured at or after ``after`` [experiment s] that give a velocity.

@@ -54,9 +54,11 @@ def test_emulate_params_gives_the_emulated_fish_other_parameters(tmp_path):
     table1 = FishParams()
     heavy = table1.replace(drag_coef=table1.drag_coef * 1.5, fin_force_coef=table1.fin_force_coef * 0.7)
     save_params(heavy, tmp_path / "robot.json")
-    _, nominal_steps, _ = _deploy(tmp_path / "nominal", episodes=1)
-    _, heavy_steps, summary = _deploy(tmp_path / "heavy", "--emulate-params", str(tmp_path / "robot.json"),
-                                      episodes=1)
+    # the identification run's controller: the same seeded commands on both fish (a deploy that plans with a model
+    # first checks it against the robot: the hand law would need --params and its K for the heavy fish)
+    _, nominal_steps, _ = _deploy(tmp_path / "nominal", "--controller", "excite", episodes=1)
+    _, heavy_steps, summary = _deploy(tmp_path / "heavy", "--controller", "excite", "--emulate-params",
+                                      str(tmp_path / "robot.json"), episodes=1)
     assert summary["emulation"]["params"]["drag_coef"] == pytest.approx(heavy.drag_coef)
 
     def travelled(steps):
@@ -113,8 +115,9 @@ def test_params_give_the_supervisor_the_robots_own_stopping_distance(tmp_path, c
     PPO("MlpPolicy", env, n_steps=32, batch_size=32, n_epochs=1, seed=0, device="cpu").learn(32).save(
         tmp_path / "ppo.zip")
     env.close()
-    _, _, summary = _deploy(tmp_path / "run", "--params", str(tmp_path / "robot.json"), "--controller",
-                            "policy", "--policy", str(tmp_path / "ppo.zip"), episodes=1, steps=4)
+    _, _, summary = _deploy(tmp_path / "run", "--params", str(tmp_path / "robot.json"), "--emulate-params",
+                            str(tmp_path / "robot.json"), "--controller", "policy", "--policy",
+                            str(tmp_path / "ppo.zip"), episodes=1, steps=4)
     assert summary["settings"]["params"]["drag_coef"] == pytest.approx(slippery.drag_coef)
     with pytest.raises(SystemExit) as exit_:
         deploy.main(["--controller", "hand", "--emulate", "--lockstep", "--params", str(tmp_path / "robot.json"),

@@ -93,7 +93,8 @@ def test_second_pc_is_refused_visibly_and_its_stop_still_halts():
             assert fw.session == a.session and fw.running and a.control_lost == ""
             assert b.served == a.session and fw.ignored["refused"] > 0
             assert b.set_fins(BEATS * 0.9, LEASE) == -1 and b.stats.suppressed == 1  # refused locally too
-            assert b.stop(wait=1.0)  # a stop never needs authority ...
+            assert not b.stop(wait=0.2) and fw.running  # the refused PC's own stop: not sent (another is served)
+            assert b.stop(wait=1.0, operator=True)  # the operator's: a stop never needs authority ...
             assert fw.state == pr.RobotState.STOPPED and fw.session == a.session  # ... and takes no control
             assert a.wait_ack(a.set_fins(BEATS, LEASE), 1.0) and _wait(lambda: fw.running)
         finally:
@@ -117,7 +118,8 @@ def test_take_over_needs_claim_and_the_old_controller_learns_at_once():
             assert _wait(lambda: b.served == b.session, 1.0) and b.control_lost == ""
             assert a.set_fins(BEATS, LEASE) == -1  # nothing sent: A is no longer in control
             assert b.wait_ack(b.set_fins(BEATS, LEASE), 1.0) and _wait(lambda: fw.running)
-            assert a.stop(wait=1.0)  # v2 dropped this STOP ("retired") and the fins kept running
+            assert not a.stop(wait=0.2) and fw.running  # the displaced PC's own stop: not sent, b's fins run on
+            assert a.stop(wait=1.0, operator=True)  # the operator's: v2 dropped it ("retired"), the fins ran on
             assert fw.state == pr.RobotState.STOPPED and fw.session == b.session
         finally:
             a.close()

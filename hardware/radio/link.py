@@ -11,7 +11,8 @@ clock (:class:`pectoral_gym.hardware.radio.linkclock.RobotClock`), so no copy ru
 
 Control (protocol version 3): every STATUS names the session it answers and the session the robot
 serves. :attr:`RadioLink.control_lost` latches why this PC is not (or no longer) the robot's controller:
-``"taken_over"``, ``"robot_busy"`` or ``"robot_rebooted"`` (cleared by :meth:`RadioLink.resync`).
+``"taken_over"``, ``"robot_busy"`` or ``"robot_rebooted"`` (cleared by :meth:`RadioLink.resync`). Under the first
+two (:attr:`RadioLink.displaced`) the link falls silent: only the operator's own stop is still sent.
 :meth:`RadioLink.emergency_stop` takes no lock (for signal handlers). ``close()`` sends STOP and is
 idempotent.
 """
@@ -32,7 +33,18 @@ from pectoral_gym.hardware.radio import xbee as xb
 from pectoral_gym.hardware.radio.linkclock import CLOCK_TOLERANCE, RobotClock, RttEstimator
 from pectoral_gym.hardware.radio.linkstatus import LinkStats, StatusReceiver
 
-__all__ = ["RadioLink", "LinkStats", "DEADLINE_HORIZON"]
+__all__ = ["RadioLink", "LinkStats", "DEADLINE_HORIZON", "DISPLACED", "DisplacedError"]
+
+# control_lost reasons under which another session is served: this PC must not send (RadioLink.displaced).
+DISPLACED = ("taken_over", "robot_busy")
+
+
+class DisplacedError(RuntimeError):
+    """The robot serves another session (``reason``: ``"taken_over"`` or ``"robot_busy"``): this run must end."""
+
+    def __init__(self, reason: str, message: str):
+        super().__init__(message)
+        self.reason = reason
 
 # Every command's deadline: this long after set_fins() [robot s], on a lower bound of the robot's clock, so no
 # copy runs later than that after the call, on any radio. The lease (from the robot's receipt) ends it
@@ -213,16 +225,22 @@ class RadioLink(StatusReceiver):
             self._commanded = True
             return self._send_tracked(pr.MsgType.SET_FINS, fins)
 
-    def stop(self, wait: float = 0.0) -> bool:
+    def stop(self, wait: float = 0.0, operator: bool = False) -> bool:
         """Send STOP (retried like a command); with ``wait`` > 0 block up to ``wait`` s for the robot's word.
 
         Returns True only once a STATUS addressed to this session reports the robot not RUNNING after
         this STOP (always False with ``wait = 0``). A STOP needs no authority: it halts the fins whoever
-        the robot serves.
+        the robot serves. So once this PC knows another session is served (:attr:`displaced`) it sends
+        none, unless ``operator`` (the operator's own stop, as :meth:`emergency_stop`): the takeover
+        already halted our fins (``docs/protocol.md`` §5), and any further STOP could only halt the new
+        controller's. Returns False then.
         """
         with self._lock:
             self.command = None
             self.lease_end = -float("inf")
+            if self.displaced and not operator:
+                self.stats.suppressed += 1
+                return False
         if self._closed:
             return False
         seq = self._send_tracked(pr.MsgType.STOP, None)
@@ -252,7 +270,7 @@ class RadioLink(StatusReceiver):
 
     def _keepalive_message(self) -> pr.MsgType | None:
         """What the keep-alive sends now when no command runs (call with the lock held)."""
-        if self.control_lost in ("taken_over", "robot_busy"):
+        if self.displaced:
             return None  # silent: never hold the robot for nobody, never keep another PC out
         if self.take_over and not self._served and not self.control_lost:
             return pr.MsgType.CLAIM
@@ -339,12 +357,24 @@ class RadioLink(StatusReceiver):
         return out
 
     @property
+    def displaced(self) -> bool:
+        """Whether the robot is known to serve another session (``control_lost`` ``taken_over`` or ``robot_busy``).
+
+        A displaced link sends nothing of its own accord (no command, keep-alive, retry or STOP): only the
+        operator's stop (:meth:`emergency_stop`, ``stop(operator=True)``) still goes out.
+        """
+        return self.control_lost in DISPLACED
+
+    @property
     def closed(self) -> bool:
         """Whether :meth:`close` was called."""
         return self._closed
 
     def close(self, stop_wait: float = 0.2) -> None:
-        """Send STOP (waiting up to ``stop_wait`` s for its ack), stop the threads, close the port. Idempotent."""
+        """Send STOP (waiting up to ``stop_wait`` s for its ack), stop the threads, close the port. Idempotent.
+
+        No STOP when :attr:`displaced` (:meth:`stop`).
+        """
         if self._closed:
             return
         try:

@@ -19,12 +19,48 @@ from __future__ import annotations
 import math
 from collections import deque
 
-__all__ = ["RttEstimator", "RobotClock", "CLOCK_TOLERANCE"]
+__all__ = ["RttEstimator", "RobotClock", "CLOCK_TOLERANCE", "RENEWAL_INTERVAL", "renewal_lease"]
 
 # Largest relative rate error of the robot's clock against the PC's: a dsPIC on its internal FRC oscillator
 # is specified to +-2 % over temperature (a crystal: +-50 ppm). Costs at most 2 % of (lease + sample age) of
 # run time, ~20 ms at the default 0.8 s lease.
 CLOCK_TOLERANCE = 0.02
+
+
+# Renewals of a step's command while step() runs, when the deadline would halt the fins before the step's lease
+# ends (docs/protocol.md, "Renewal"): at most one per this [s], as often as the keep-alive's copies.
+RENEWAL_INTERVAL = 0.1
+# What the robot's deadline may fall short of ``horizon - round trip`` after the call besides the return latency:
+# the rate tolerance over the horizon and the sample's age (2 % of ~1.5 s), the firmware's 10 ms tick, the ms floor.
+_DEADLINE_SHORTFALL = 0.05
+
+
+def renewal_lease(now: float, sent: float, lease_end: float, horizon: float, rtt: float | None,
+                  interval: float = RENEWAL_INTERVAL) -> float | None:
+    """The lease [s] of the step's command sent anew at ``now`` to outlast its deadline, or ``None`` if none is due.
+
+    A command's deadline (``horizon`` after its ``set_fins()`` on a lower bound of the robot's clock) halts the
+    fins as early as ``horizon - rtt`` after the call: the bound runs behind the robot's clock by the return
+    latency, at most the round trip. When that comes before the step's lease ends (``lease_end``), the same
+    fins are sent again by a new ``set_fins()``, with the deadline counted from now and the lease that is left
+    (``lease_end - now``, rounded down to the wire's ms): the lease ends where the step's did, and no copy of
+    any call runs more than ``horizon`` after it. Only while ``step()`` runs: a PC that stops calling it still
+    stops the fins by the step's lease.
+
+    Args:
+        now: The time [s] (experiment time, as the other times).
+        sent: When the step's command, or its last renewal, was sent [s].
+        lease_end: When the step's lease ends [s] (its ``set_fins()`` time plus the lease).
+        horizon: The deadline's horizon [s] (``RadioLink.deadline_horizon``).
+        rtt: The measured round trip [s] (``None``: not measured, no deadline is sent either).
+        interval: Least time between renewals [s].
+    """
+    if rtt is None or now - sent < interval:
+        return None
+    if sent + horizon - rtt - _DEADLINE_SHORTFALL >= lease_end:
+        return None  # the deadline does not halt the fins before the lease would
+    lease = math.floor((lease_end - now) * 1000.0) / 1000.0
+    return lease if lease >= interval else None
 
 
 class RttEstimator:

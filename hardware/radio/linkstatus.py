@@ -89,6 +89,8 @@ class StatusReceiver:
             self.control_lost = reason
         self.command = None
         self.lease_end = -float("inf")
+        if reason != "robot_rebooted":  # another session is served: no retry of ours may reach its fins
+            self._pending = None
 
     def _receive(self, data: bytes) -> None:
         messages = self.decoder.feed(data)

@@ -25,9 +25,11 @@ import numpy as np
 
 from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 from pectoral_gym.hardware.safety.geofence import Geofence, SpeedBound
+from pectoral_gym.hardware.safety.liveness import LivenessWatch
 from pectoral_gym.hardware.safety.rules import SafetyConfig, TrackingWatch
 from pectoral_gym.hardware.vision.framecheck import FrameCheck
 from pectoral_gym.hardware.vision.frames import FrameGrabber
+from pectoral_gym.hardware.vision.latency import CameraLatencyError, afforded_latency, pipeline_latency
 
 __all__ = ["Supervisor", "PRIORITY", "CONTROL_LOST"]
 
@@ -109,6 +111,8 @@ class Supervisor:
         self.frame_check = FrameCheck(safety.max_frame_lead, safety.tracking_timeout / self.speed)
         self.bound = bound or SpeedBound(geofence.params, safety.limits)
         self.bound.unknown(self.now())
+        self.liveness = LivenessWatch(geofence.params, self.bound, safety.pose_noise, limits=safety.limits)
+        self._not_live = ""  # why the camera's poses do not follow our fins (latched until the next arm)
         self.fired: dict[str, float] = {}
         self.armed = False
         self.stop_requested = False  # set by a signal handler (no lock there); latched until rearm()
@@ -118,6 +122,8 @@ class Supervisor:
         self.confidence = 0.0
         self.track_ok = False
         self.frames = self.lost_frames = 0
+        self.afforded_latency = afforded_latency(safety.tracking_timeout, safety.reaction_time)
+        self._last_read = -math.inf  # experiment time the last frame was read
         self._box = None
         self._since = -math.inf
         self._reads = self._reads_at_sighting = 0  # frames read; frames read up to the last sighting
@@ -167,6 +173,8 @@ class Supervisor:
             self._recent.extend(recent)
             self._since = since
             self._estimate()  # from the poses since the reset only
+            self.liveness.reset(self.now())  # armed after a confirmed stop: the fins are still
+            self._not_live = ""
             self.fired.clear()
             self.armed = True
 
@@ -213,6 +221,7 @@ class Supervisor:
             # The fins may run until the lease ends, plus the reaction time (radio latency, firmware tick).
             self.bound.running(now, now + lease + self.safety.reaction_time)
             self.link.set_fins(beats, lease)
+            self.liveness.command(now, beats)
             return True
 
     def trip(self, reason: str) -> None:
@@ -259,6 +268,7 @@ class Supervisor:
         frame = self.camera.read()
         if frame is not None:
             self._reads += 1
+            self._last_read = self.now()
             try:
                 self._frame(frame)
             except Exception as error:  # noqa: BLE001 - whichever thread met it, a broken tracker stops the fish
@@ -289,6 +299,8 @@ class Supervisor:
         self._box = getattr(result, "box", None)
         self.pose = (float(result.x), float(result.y), float(result.psi))
         self._measurements.append((t, *self.pose))
+        if self.armed and t >= self._since and not self._not_live:
+            self._not_live = self.liveness.sighting(t, *self.pose)
         if t >= self._since:
             self._recent.append((t, self.pose[0], self.pose[1]))
         self._estimate()
@@ -304,10 +316,47 @@ class Supervisor:
         seen = self.watch.last_seen
         age = now - seen
         bound = self.bound.peak(seen, now + self.geofence.reaction_time)
-        unseen = max(0.0, age - self.geofence.reaction_time)  # unseen beyond the reaction budget
+        # Unseen beyond the reaction budget and the camera's measured latency: a frame that arrives late but
+        # regularly is a sighting of an older time (its age already lengthens the stopping distance, speed x age).
+        unseen = max(0.0, age - self.geofence.reaction_time - self.latency_budget)
         gain = self.bound.accel * unseen if blind and self.bound.run_until >= seen else 0.0
         spread = tuple(_Z * s for s in self.spread)
         return self.geofence.breached(*self.pose, *self.velocity, age=age, spread=spread, bound=bound, gain=gain)
+
+    def _unseen_reason(self, now: float, seen: float) -> str:
+        """What the blind rule saw: no frames, frames that arrive too late, or frames without the fish."""
+        budget = f"the reaction time {self.geofence.reaction_time:.2f} s plus the measured camera latency " \
+                 f"{self.latency_budget:.2f} s"
+        if now - self._last_read > self.geofence.reaction_time:
+            return "no frames from the camera"
+        if self._reads == self._reads_at_sighting:
+            return f"camera frames arrive {now - seen:.2f} s after their capture, more than {budget}: the fastest " \
+                   "motion since could reach the stopping band"
+        return f"fish unseen for {now - seen:.2f} s (more than {budget}): the fastest motion since could reach " \
+               "the stopping band"
+
+    # ------------------------------------------------------------ camera latency
+    @property
+    def latency(self) -> float:
+        """The camera pipeline's measured latency [experiment s] (:func:`pipeline_latency`); ``nan`` before frames."""
+        return pipeline_latency(tuple(getattr(self.camera, "ages", ()))) * self.speed
+
+    @property
+    def latency_budget(self) -> float:
+        """The latency the blind rule credits [s]: the measured one, at most :attr:`afforded_latency` (0 unmeasured)."""
+        latency = self.latency
+        return min(latency, self.afforded_latency) if math.isfinite(latency) else 0.0
+
+    def check_latency(self) -> float:
+        """The measured latency [s]; raises :class:`CameraLatencyError` if the tank cannot afford it."""
+        latency = self.latency
+        if math.isfinite(latency) and latency > self.afforded_latency:
+            raise CameraLatencyError(
+                f"the camera's frames reach this PC {latency:.3f} s after capture; the tank affords at most "
+                f"{self.afforded_latency:.3f} s (tracking timeout {self.safety.tracking_timeout:.2f} s minus the "
+                f"reaction time {self.safety.reaction_time:.2f} s); the fins stay stopped: use a faster camera "
+                "pipeline (docs/guide/safety.md, \"Camera latency\")")
+        return latency
 
     def _rules(self) -> list[str]:
         """Every reason that holds now, highest priority first (:data:`PRIORITY`)."""
@@ -321,13 +370,14 @@ class Supervisor:
             out.append("link_lost")
         now = self.now()
         seen = self.watch.last_seen
-        if seen is not None and math.isfinite(seen) and self._geofence(now, blind=False):
+        if self._not_live:  # the camera's poses do not follow our fins: the fish is not seen
+            self.watch.reason = self._not_live
+            out.append("tracking_lost")
+        elif seen is not None and math.isfinite(seen) and self._geofence(now, blind=False):
             out.append("geofence")
         elif seen is not None and math.isfinite(seen) and self._geofence(now, blind=True):
             # Unseen for so long that the fastest motion the fins allow could reach the stopping band.
-            late = "no frames from the camera" if self._reads == self._reads_at_sighting else \
-                f"unseen for {now - seen:.2f} s: the fastest motion since could reach the stopping band"
-            self.watch.reason = self.watch.reason or self.camera.lost_reason or late
+            self.watch.reason = self.watch.reason or self.camera.lost_reason or self._unseen_reason(now, seen)
             out.append("tracking_lost")
         if self.watch.expired(now) and "tracking_lost" not in out:
             if not self.watch.reason:

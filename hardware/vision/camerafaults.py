@@ -6,7 +6,9 @@ an attribute that can be changed while frames flow (a test lets the camera run l
 * ``drop``: each frame is lost with this probability (seeded).
 * ``freeze``: ``"repeat"`` (the last live image again and again), ``"cycle"`` (the last ``cycle`` live
   images in turn: a driver handing out its ring of buffers), ``"overlay"`` (the last live image with a
-  running clock drawn in its top-left corner, as an IP camera stamps its frames), or ``None`` (live).
+  running clock drawn in its top-left corner, as an IP camera stamps its frames), ``"noisy"`` (the last live
+  image with fresh Gaussian noise of ``noise`` grey levels added to every pixel: an analog camera frozen behind
+  a capture card, whose noise is added downstream of the frozen image), or ``None`` (live).
   A frozen frame carries the stamp of the source frame it replaces (fresh, increasing, at the source's
   pace), so only its pixels give it away.
 * ``clock_offset``: added to every stamp [s] (a camera stamping on a clock ahead or behind).
@@ -31,7 +33,7 @@ from pectoral_gym.hardware.vision.frames import Frame, FrameSource
 
 __all__ = ["FREEZE_MODES", "FaultyCamera"]
 
-FREEZE_MODES = (None, "repeat", "cycle", "overlay")
+FREEZE_MODES = (None, "repeat", "cycle", "overlay", "noisy")
 
 
 class FaultyCamera:
@@ -42,6 +44,7 @@ class FaultyCamera:
         drop: Probability of losing each frame, in [0, 1].
         freeze: One of :data:`FREEZE_MODES`.
         cycle: Number of buffers a ``"cycle"`` freeze goes round (the last ``cycle`` live images), >= 1.
+        noise: Standard deviation of the fresh noise of a ``"noisy"`` freeze [grey levels] (seeded by ``seed``).
         clock_offset: Added to every stamp [s].
         latency: Extra delay from the source's delivery to ``read()`` handing the frame out [s], >= 0.
         block: Time each ``read()`` blocks before reading [s], >= 0 (``math.inf``: until ``close()``).
@@ -54,12 +57,13 @@ class FaultyCamera:
 
     def __init__(self, source: FrameSource, drop: float = 0.0, freeze: str | None = None, cycle: int = 4,
                  clock_offset: float = 0.0, latency: float = 0.0, block: float = 0.0, seed: int | None = None,
-                 clock: Clock = REAL_CLOCK):
+                 clock: Clock = REAL_CLOCK, noise: float = 2.0):
         if int(cycle) != cycle or cycle < 1:
             raise ValueError(f"cycle must be an integer >= 1, got {cycle!r}")
         self.source = source
         self.drop, self.freeze, self.clock_offset, self.latency, self.block = drop, freeze, clock_offset, latency, block
         self._rng = np.random.default_rng(seed)
+        self.noise = float(noise)
         self._live: collections.deque[np.ndarray] = collections.deque(maxlen=int(cycle))
         self._frozen: list[np.ndarray] = []
         self._turn = 0
@@ -114,6 +118,9 @@ class FaultyCamera:
                 self._turn += 1
             else:
                 image = self._frozen[-1]
+            if self.freeze == "noisy":
+                noisy = image + self._rng.normal(0.0, self.noise, image.shape)
+                image = np.clip(np.rint(noisy), 0, 255).astype(np.uint8)
             if self.freeze == "overlay":
                 image = image.copy()
                 clock = time.strftime("%H:%M:%S") + f".{int(frame.timestamp * 1000) % 1000:03d}"

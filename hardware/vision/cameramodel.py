@@ -150,10 +150,12 @@ class CameraModel:
         Raises:
             ValueError: The file is not a calibration (missing or malformed keys).
         """
+        from pectoral_gym.inputfile import SMALL_FILE_BYTES, load_json
+
         try:
-            data = json.loads(Path(path).read_text())
+            data = load_json(path, SMALL_FILE_BYTES)  # bounded: a calibration is under 1 kB
             return cls(int(data["width"]), int(data["height"]), np.asarray(data["homography"], dtype=float))
-        except (KeyError, TypeError, json.JSONDecodeError) as error:
+        except (KeyError, TypeError, IndexError, OverflowError, ValueError) as error:
             raise ValueError(
                 f"{path}: not a camera calibration (need JSON keys homography 3x3, width, height): {error}"
             ) from error

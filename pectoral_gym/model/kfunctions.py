@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from pectoral_gym.inputfile import K_FILE_BYTES, load_json
 from pectoral_gym.model.kfile import (
     SPLINE_AXES,
     checked_spline,
@@ -165,6 +166,8 @@ class ScalingFunctions:
         Raises:
             ValueError: With the file and the offending entry when malformed.
         """
+        if not isinstance(data, dict):
+            raise ValueError(f"{source}: expected a JSON object (a K file), got {type(data).__name__}")
         if data.get("format") not in FORMATS:
             raise ValueError(f"{source}: 'format' must be one of {list(FORMATS)}, got {data.get('format')!r}")
         features = tuple(data.get("features", ()))
@@ -177,6 +180,8 @@ class ScalingFunctions:
         functions = data.get("functions")
         if not isinstance(functions, dict) or set(functions) != set(K_NAMES):
             raise ValueError(f"{source}: 'functions' must have exactly the keys {list(K_NAMES)}")
+        if not all(isinstance(functions[name], list) for name in K_NAMES):
+            raise ValueError(f"{source}: each of 'functions' {list(K_NAMES)} must be a list of terms")
         n_terms = max(1, max(len(functions[name]) for name in K_NAMES))
         powers = np.zeros((3, n_terms, len(FEATURES)))
         coefs = np.zeros((3, n_terms))
@@ -221,11 +226,9 @@ class ScalingFunctions:
         """Read a coefficients file (the shipped default if ``path`` is ``None``)."""
         path = Path(path) if path is not None else default_scaling_path()
         try:
-            data = json.loads(path.read_text())
+            data = load_json(path, K_FILE_BYTES)
         except FileNotFoundError:
             raise FileNotFoundError(f"scaling coefficients file not found: {path}") from None
-        except json.JSONDecodeError as err:
-            raise ValueError(f"{path}: not valid JSON ({err})") from None
         return cls.from_dict(data, str(path))
 
     def to_dict(self) -> dict[str, Any]:

@@ -21,6 +21,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from pectoral_gym.inputfile import SMALL_FILE_BYTES, load_json, read_text
 from pectoral_gym.model.tank import (  # re-exported: the tank's one home is pectoral_gym.model.tank
     TANK_LENGTH,
     TANK_WIDTH,
@@ -284,11 +285,12 @@ def load_params(path: str | os.PathLike) -> FishParams:
 
     Raises:
         FileNotFoundError: If the file does not exist.
-        ValueError: If the file cannot be parsed or its content is not valid parameters.
+        ValueError: If the file is larger than :data:`pectoral_gym.inputfile.SMALL_FILE_BYTES`, cannot be parsed,
+            or its content is not valid parameters.
     """
     path = Path(path)
-    text = path.read_text()
     if path.suffix.lower() in (".yaml", ".yml"):
+        text = read_text(path, SMALL_FILE_BYTES)
         try:
             import yaml
         except ImportError as error:  # pragma: no cover - pyyaml is in the rl extra
@@ -296,12 +298,11 @@ def load_params(path: str | os.PathLike) -> FishParams:
         try:
             data = yaml.safe_load(text)
         except yaml.YAMLError as error:
-            raise ValueError(f"{path}: not valid YAML: {error}") from None
+            raise ValueError(f"{path}: not valid YAML: {' '.join(str(error).split())}") from None
+        except RecursionError:
+            raise ValueError(f"{path}: YAML nested too deep (not a parameters file)") from None
     else:
-        try:
-            data = json.loads(text)
-        except json.JSONDecodeError as error:
-            raise ValueError(f"{path}: not valid JSON: {error}") from None
+        data = load_json(path, SMALL_FILE_BYTES)
     return params_from_dict(data if data is not None else {}, source=str(path))
 
 

@@ -1,0 +1,270 @@
+"""Whether the camera shows *our* fish, live: the poses it reports against what our fins can and must do.
+
+Pixel tests (:class:`pectoral_gym.hardware.vision.framecheck.FrameCheck`) can always be outrun: a source that
+replays more frames than they remember, or a frozen image under fresh sensor noise. Physics cannot. The PC
+knows every command it sent, hence what the fins did, and the fish must follow them. :class:`LivenessWatch`
+checks three consequences on the sightings (each a stop with a reason saying what was seen):
+
+* **jump**: two consecutive sightings further apart than the fastest the fish can move
+  (:class:`pectoral_gym.hardware.safety.geofence.SpeedBound`) plus the pose noise allowance: a replayed ring of
+  frames going round, a cut to another recording;
+* **too fast**: the camera's fish moving (least-squares speed less two standard errors) faster than the physical
+  bound allows ours: fins still and the fish coasted to rest, while the camera shows a fish that swims;
+* **motion**: a shadow averaged model (:class:`pectoral_gym.model.models.AveragedModel`) runs the commands sent,
+  so the fins' phase at any past instant is known; the averaged model, started from the pose and velocity of the
+  window before the last ``window`` s, predicts the fish's motion in that window. *Frozen*: it predicts at least
+  ``min_motion`` (displacement plus half a body length times the heading change, less three standard errors)
+  and the camera shows less than ``ratio`` of it, over ``window`` or ``long_window``, however the pixels are
+  dressed up. *Innovation*: the end position misses the prediction by more than ``innovation`` plus three
+  standard errors of the measurement, twice in a row: a recording, another fish.
+
+``docs/guide/safety.md``, "Liveness from physics", gives the figures behind the bounds.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+
+import numpy as np
+
+from pectoral_gym.hardware.finreplay import FinReplay
+from pectoral_gym.hardware.radio.firmware import FirmwareConfig, ServoLimits
+from pectoral_gym.hardware.safety.geofence import SpeedBound
+from pectoral_gym.model import forcing_cache
+from pectoral_gym.model.params import FishParams
+
+__all__ = ["LivenessWatch"]
+
+_NOISE_SIGMAS = 9.0  # a jump allowance of 9 pose-noise sigmas: P(|2-D noise step| > 9 sigma) = exp(-81/4) ~ 2e-9
+_END_SPAN = 0.1  # poses this long at the window's end are averaged for its pose [s]
+
+
+def _fit(poses: np.ndarray, at: float) -> tuple[np.ndarray, np.ndarray]:
+    """Least-squares line through ``(t, X, Y, psi)`` rows: ``(X, Y, psi)`` at ``at`` and the rates."""
+    t = poses[:, 0] - at
+    if len(poses) < 2 or np.ptp(t) <= 0:
+        return poses[:, 1:4].mean(axis=0), np.zeros(3)
+    design = np.stack([np.ones_like(t), t], axis=1)
+    coef, *_ = np.linalg.lstsq(design, poses[:, 1:4], rcond=None)
+    return coef[0], coef[1]
+
+
+class LivenessWatch:
+    """Checks the camera's poses against the fins' commands (module docstring); :meth:`sighting` gives the reason.
+
+    A shadow averaged model runs the commands sent from the arm on, so the fins' phase at any past instant is
+    known; a prediction starts the averaged model from the fins' phase of the window's start and the fish's
+    measured pose and velocity there.
+
+    Args:
+        params: The fish's parameters (the averaged model's and the speed bound's).
+        bound: The physical speed bound, fed every command sent (the supervisor's).
+        pose_noise: Standard deviation of a tracked position [m] (the jump allowance is 9 of them).
+        window: Span of the motion and innovation checks [s].
+        long_window: A second, longer span of the motion check [s]: fins that beat gently move the fish slowly,
+            and a longer span makes their motion large enough to judge.
+        ratio: The camera must show at least this share of the predicted motion.
+        min_motion: Predicted motions below this are not judged [m].
+        innovation: The model's own error allowed between the predicted and the measured end position [m]; three
+            standard errors of the measurement (from the poses' scatter) are added.
+
+    Attributes:
+        last_prediction: ``(M_pred, M_meas, innovation)`` of the last motion check [m] (``nan`` when none ran).
+        predictions: The recent checks, ``(t, M_pred, M_meas, innovation, allowed)`` (the newest 4096, for studies).
+    """
+
+    def __init__(self, params: FishParams, bound: SpeedBound, pose_noise: float, window: float = 0.8,
+                 long_window: float = 2.4, ratio: float = 0.1, min_motion: float = 0.03, innovation: float = 0.04,
+                 limits: ServoLimits | None = None):
+        from pectoral_gym.model.models import AveragedModel
+
+        self.params, self.bound, self.pose_noise = params, bound, float(pose_noise)
+        self.window, self.ratio, self.min_motion = float(window), float(ratio), float(min_motion)
+        self.innovation, self.long_window = float(innovation), float(long_window)
+        self._strikes = 0
+        self._replay = FinReplay(params, FirmwareConfig(limits=limits or ServoLimits()))
+        self._model = AveragedModel(n=1, params=params)
+        self._queue: collections.deque[tuple[float, np.ndarray]] = collections.deque()  # sent, not yet in the shadow
+        self._applied: collections.deque[tuple[float, np.ndarray]] = collections.deque(maxlen=64)
+        self._snapshots: collections.deque[tuple[float, np.ndarray, np.ndarray]] = collections.deque(maxlen=128)
+        self._poses: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=256)
+        self._shadow_t = math.nan
+        self._warm_up()
+        self.last_prediction = (math.nan, math.nan, math.nan)
+        self.predictions: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=4096)
+        self._next_check = -math.inf
+
+    def _warm_up(self) -> None:
+        """Compile or load the models' kernels now, as they will be called, not inside a supervisor poll."""
+        self.reset(0.0)
+        self.command(0.0, np.array([[math.pi / 2, 0.5, 1.0, 1.0]] * 2))
+        self._advance_shadow(0.4)
+        self._predict(np.array([1.0, 0.5, 0.0, 0.01, 0.0, 0.0]), 0.05, (0.2, 0.4))
+        self.reset()
+
+    def reset(self, t: float = math.nan) -> None:
+        """Start over at ``t`` [s] with the fins still (an arm after a confirmed stop); forget poses and commands."""
+        self._queue.clear()
+        self._applied.clear()
+        self._snapshots.clear()
+        self._poses.clear()
+        self._replay.reset(0.0 if math.isnan(t) else t)
+        self._shadow_t = float(t)
+        self._next_check = -math.inf
+        self._strikes = 0
+        if math.isfinite(self._shadow_t):
+            self._snapshot()
+
+    def command(self, t: float, beats: np.ndarray) -> None:
+        """A command ``(2, 4)`` sent at ``t`` [s]."""
+        last = self._queue[-1][1] if self._queue else self._applied[-1][1] if self._applied else None
+        if last is not None and np.array_equal(last, beats):
+            return  # a lease renewal of the same command: the fins go on as they were
+        if not math.isfinite(self._shadow_t):
+            self.reset(t)
+        self._queue.append((float(t), np.array(beats, dtype=float).reshape(2, 4)))
+
+    # ------------------------------------------------------------ the fins' phase
+    def _snapshot(self) -> None:
+        model = self._replay.model
+        self._snapshots.append((self._shadow_t, model.fins.copy(), model.pending.copy()))
+
+    def _advance_shadow(self, to: float, step: float = 0.05) -> None:
+        """Run the replayed fins to ``to`` [s], taking the commands sent up to then; a snapshot every ``step`` s.
+
+        The fins are the firmware's (:class:`pectoral_gym.hardware.finreplay.FinReplay`: hand-over at the next
+        turning point, rate rule, the transition's stretch), as the robot runs them.
+        """
+        while self._shadow_t < to:
+            target = min(to, self._shadow_t + step)
+            while self._queue and self._queue[0][0] <= target:
+                t, beats = self._queue.popleft()
+                self._replay.command(max(t, self._shadow_t), beats)
+                self._applied.append((t, beats))
+            self._replay.advance(target)
+            self._shadow_t = target
+            self._snapshot()
+
+    def sighting(self, t: float, x: float, y: float, psi: float) -> str:
+        """A tracked pose captured at ``t`` [s]; returns why the camera is not live, or ``""``."""
+        reason = ""
+        if self._poses:
+            t0, x0, y0, psi0 = self._poses[-1]
+            psi = psi0 + math.remainder(psi - psi0, math.tau)  # unwrapped against the last sighting
+            dt = t - t0
+            if dt > 0:
+                step = math.hypot(x - x0, y - y0)
+                allowed = self.bound.peak(t0, t) * dt + _NOISE_SIGMAS * self.pose_noise
+                if step > allowed:
+                    reason = (f"camera not live: the fish jumped {step * 1000:.0f} mm in {dt:.3f} s, more than our "
+                              f"fish can move ({allowed * 1000:.0f} mm with the pose noise)")
+        self._poses.append((float(t), float(x), float(y), float(psi)))
+        if math.isfinite(self._shadow_t):
+            self._advance_shadow(t)
+        if not reason and t >= self._next_check:
+            self._next_check = t + 0.1  # the model check at 10 per second is plenty for a window of 0.8 s
+            reason = self._too_fast(t) or self._motion(t, self.window, True) or \
+                self._motion(t, self.long_window, False)
+        return reason
+
+    # ------------------------------------------------------------ the checks
+    def _recent(self, t0: float, t1: float) -> np.ndarray:
+        return np.array([p for p in self._poses if t0 <= p[0] <= t1]).reshape(-1, 4)
+
+    def _too_fast(self, t: float) -> str:
+        poses = self._recent(t - 0.5, t)
+        if len(poses) < 6 or np.ptp(poses[:, 0]) < 0.3:
+            return ""
+        _, rates = _fit(poses, t)
+        centred = poses[:, 0] - poses[:, 0].mean()
+        error = 2.0 * max(self.pose_noise, 1e-4) / math.sqrt(float(centred @ centred))
+        speed = math.hypot(rates[0], rates[1]) - math.sqrt(2.0) * error
+        allowed = self.bound.peak(t - 0.5, t)
+        if speed > allowed:
+            return (f"camera not live: it shows a fish moving at {speed:.2f} m/s, and ours cannot exceed "
+                    f"{allowed:.2f} m/s with the fins it was sent")
+        return ""
+
+    def _motion(self, t1: float, window: float, innovation_check: bool) -> str:
+        """The averaged model's motion over the last ``window`` against the camera's; the innovation too if asked.
+
+        The model starts at the centre of the window before (``[t1 - 2 window, t1 - window]``), from the
+        least-squares line through its poses: there the line's position and slope are the pose and velocity
+        at that instant (exactly so for a constant acceleration) with the smallest errors, ``sigma / sqrt(n)``
+        and ``sigma / sqrt(sum (t - t_c)^2)``, and uncorrelated. The motion compared is the one inside the
+        last window, between the mean poses of its first and last 0.1 s.
+        """
+        before = self._recent(t1 - 2.0 * window, t1 - window)
+        middle = self._recent(t1 - window - 0.5 * _END_SPAN, t1 - window + 0.5 * _END_SPAN)
+        end = self._recent(t1 - _END_SPAN, t1)
+        if len(before) < 6 or np.ptp(before[:, 0]) < 0.6 * window or len(middle) < 2 or len(end) < 2:
+            return ""
+        t_c = float(before[:, 0].mean())
+        known = self._snapshots and self._snapshots[0][0] <= t_c and self._applied and self._applied[0][0] <= t_c
+        if not (known and self.bound.run_until >= t1):
+            return ""  # the fins did not run the whole span on commands we know
+        pose_c, rates_c = _fit(before, t_c)
+        c, s = math.cos(pose_c[2]), math.sin(pose_c[2])
+        body = (c * rates_c[0] + s * rates_c[1], -s * rates_c[0] + c * rates_c[1], rates_c[2])
+        t_m, t_e = float(middle[:, 0].mean()), float(end[:, 0].mean())
+        pred_m, pred_e = self._predict(np.array([*pose_c, *body]), t_c, (t_m, t_e))
+        meas_m, meas_e = middle[:, 1:4].mean(axis=0), end[:, 1:4].mean(axis=0)
+        reach = 0.5 * self.params.body_length
+        m_pred = math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2])
+        m_meas = math.hypot(*(meas_e[:2] - meas_m[:2])) + reach * abs(meas_e[2] - meas_m[2])
+        innovation = math.hypot(*(meas_e[:2] - pred_e[:2]))
+        scatter, sxx = self._scatter(before, t_c)
+        # Standard errors [m]: of the predicted motion inside the window (the start's slope error over it), and of
+        # the end position (the start's position and slope, and the end's mean).
+        motion_error = scatter * (t_e - t_m) / math.sqrt(sxx)
+        end_error = scatter * math.sqrt(1.0 / len(before) + (t_e - t_c) ** 2 / sxx + 1.0 / len(end))
+        allowed = self.innovation + 3.0 * end_error
+        if innovation_check:
+            self.last_prediction = (m_pred, m_meas, innovation)
+            self.predictions.append((t1, m_pred, m_meas, innovation, allowed))
+        if m_pred - 3.0 * motion_error >= self.min_motion and m_meas < self.ratio * m_pred:
+            return (f"camera frozen: the fish has moved {m_meas * 1000:.0f} mm in {window:.1f} s while its "
+                    f"fins beat for {m_pred * 1000:.0f} mm (the averaged model; at least "
+                    f"{self.ratio * m_pred * 1000:.0f} mm expected)")
+        if not innovation_check:
+            return ""
+        self._strikes = self._strikes + 1 if innovation > allowed else 0
+        if self._strikes >= 2:  # twice in a row (0.1 s apart): one odd window is not enough
+            return (f"camera not live: the fish it shows ended {innovation * 1000:.0f} mm from where the fins sent "
+                    f"over the last {t_e - t_c:.1f} s put ours (the averaged model; at most {allowed * 1000:.0f} mm "
+                    "allowed)")
+        return ""
+
+    def _scatter(self, poses: np.ndarray, t_c: float) -> tuple[float, float]:
+        """The positions' scatter about their line [m] (at least the assumed pose noise) and ``sum (t - t_c)^2``."""
+        pose_c, rates_c = _fit(poses, t_c)
+        residual = poses[:, 1:3] - (pose_c[:2] + np.outer(poses[:, 0] - t_c, rates_c[:2]))
+        scatter = math.sqrt(float((residual ** 2).sum()) / max(2 * (len(poses) - 2), 1))
+        centred = poses[:, 0] - t_c
+        return max(scatter, 1e-4), float(centred @ centred)
+
+    def _predict(self, state: np.ndarray, t_c: float, times: tuple[float, ...]) -> list[np.ndarray]:
+        """Poses (3,) at ``times`` (increasing) of the averaged model from ``state`` at ``t_c``.
+
+        Its fins are the replayed ones, set from the snapshots (one every 0.05 s).
+        """
+        model = self._model
+        model.reset(state[None])
+        snaps = [s for s in self._snapshots if s[0] <= times[-1]]
+        first = max(k for k, s in enumerate(snaps) if s[0] <= t_c)
+        now, out, pending = t_c, [], list(times)
+        for k in range(first, len(snaps)):
+            _, fins, commanded = snaps[k]
+            model.fins[:], model.pending[:] = fins, commanded
+            forcing_cache.invalidate(model.forcing_cache)  # the regular forcing of the replayed pattern, recomputed
+            until = snaps[k + 1][0] if k + 1 < len(snaps) else math.inf
+            while pending and pending[0] <= until:
+                model.advance(max(pending[0] - now, 0.0))
+                now = max(pending.pop(0), now)
+                out.append(model.state[0, :3].copy())
+            if not pending:
+                break
+            model.advance(max(until - now, 0.0))
+            now = max(until, now)
+        return out

@@ -1,0 +1,143 @@
+"""Camera latency measured and afforded; liveness of the camera judged by the fins' physics (synthetic poses)."""
+
+import math
+
+import numpy as np
+import pytest
+
+from pectoral_gym.hardware.radio.firmware import ServoLimits
+from pectoral_gym.hardware.safety.geofence import SpeedBound
+from pectoral_gym.hardware.safety.liveness import LivenessWatch
+from pectoral_gym.hardware.vision.latency import afforded_latency, pipeline_latency
+from pectoral_gym.model.params import FishParams
+
+P = FishParams()
+FULL = np.array([[math.pi / 2, math.radians(60), 0.6, 3.0]] * 2)  # both fins beating hard, straight ahead
+
+
+def test_pipeline_latency_is_the_smallest_recent_age():
+    assert pipeline_latency([0.25, 0.2, 0.233, math.nan]) == pytest.approx(0.2)
+    assert pipeline_latency([0.3, -0.01]) == 0.0  # a clock slightly ahead counts as no latency
+    assert math.isnan(pipeline_latency([]))
+    assert pipeline_latency([0.0] + [0.3] * 60) == pytest.approx(0.3)  # only the newest 60
+
+
+def test_afforded_latency_leaves_the_reaction_budget_before_the_tracking_timeout():
+    assert afforded_latency(0.5, 0.15) == pytest.approx(0.35)
+    assert afforded_latency(0.1, 0.15) == 0.0
+
+
+def _watch():
+    bound = SpeedBound(P, ServoLimits())
+    bound.reset(0.0)
+    return LivenessWatch(P, bound, pose_noise=0.005), bound
+
+
+def _true_poses(duration, dt=1 / 30):
+    """The full model's poses under FULL sent at 0, its fins run by the firmware's rules (the emulator's way),
+    from rest at (1, 0.5, 0): a live camera of that fish."""
+    from pectoral_gym.hardware.finreplay import FinReplay
+
+    robot = FinReplay(P)
+    robot.model.state[0] = (1.0, 0.5, 0.0, 0.0, 0.0, 0.0)
+    robot.command(0.0, FULL)
+    out = []
+    for k in range(int(duration / dt)):
+        robot.advance(k * dt)
+        out.append((k * dt, *robot.model.state[0, :3]))
+    return out
+
+
+def test_frozen_pose_under_beating_fins_stops_with_the_reason():
+    watch, bound = _watch()
+    watch.command(0.0, FULL)
+    bound.running(0.0, 100.0)
+    reasons = []
+    live = _true_poses(6.0)
+    for t, x, y, psi in live[:90]:  # 3 s live
+        reasons.append(watch.sighting(t, x, y, psi))
+    assert not any(reasons)
+    frozen = live[89]
+    stopped = None
+    for k in range(90, 180):  # then the same pose, with fresh noise
+        t = k / 30
+        rng = np.random.default_rng(k)
+        reason = watch.sighting(t, frozen[1] + 1e-3 * rng.standard_normal(), frozen[2] + 1e-3 * rng.standard_normal(),
+                                frozen[3])
+        if reason:
+            stopped = t
+            break
+    assert stopped is not None and stopped - 3.0 <= 1.0, watch.last_prediction
+    assert reason.startswith(("camera frozen", "camera not live"))
+
+
+def test_jump_faster_than_the_fish_can_move_stops():
+    watch, bound = _watch()
+    watch.command(0.0, FULL)
+    bound.running(0.0, 100.0)
+    assert watch.sighting(0.0, 1.0, 0.5, 0.0) == ""
+    assert watch.sighting(1 / 30, 1.001, 0.5, 0.0) == ""
+    assert "jumped" in watch.sighting(2 / 30, 1.2, 0.5, 0.0)  # 0.2 m in 33 ms: 6 m/s
+
+
+def test_moving_fish_while_ours_is_at_rest_stops():
+    watch, bound = _watch()  # fins still since the reset at 0: the bound stays 0
+    reason = ""
+    for k in range(30):
+        reason = reason or watch.sighting(k / 30, 1.0 + 0.1 * k / 30, 0.5, 0.0)  # 0.1 m/s
+    assert "jumped" in reason or "cannot exceed" in reason
+
+
+# ---------------------------------------------------------------- lockstep: the whole stack on the emulated robot
+class _Rowing:
+    """A scripted controller: both fins rowing hard, straight ahead (the policy's interface)."""
+
+    action = np.array([0.0, 1.0, -0.5, 0.0] * 2, dtype=np.float32)  # 90 deg bias, 30 deg amplitude, 0.875 s, ratio 3
+
+    def reset(self, seed=None):
+        pass
+
+    def act(self, obs):
+        return self.action
+
+
+def _study(fault, seed, **kwargs):
+    from pectoral_gym.hardware.safety.liveness_study import _record, run_episode
+
+    settings = {"task": "track", "max_episode_steps": 16}
+    recording = _record(_Rowing(), settings, seed + 10000, duration=8.0) if fault == "recording" else None
+    return run_episode(_Rowing(), settings, seed, fault, 6, recording=recording, **kwargs)
+
+
+@pytest.mark.parametrize("fault", ["noisy", "cycle60"])
+def test_frozen_camera_under_rowing_fins_stops_within_a_second_inside_the_tank(fault):
+    row = _study(fault, seed=21)
+    assert row["stop"] == "tracking_lost", row
+    assert row["reason"].startswith(("camera frozen", "camera not live")), row
+    assert row["delay"] <= 1.0, row
+    assert row["min_clearance"] > 0.0, row  # the true outline never crossed a wall
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("fault", ["repeat", "cycle31", "cycle300", "recording", "other-fish"])
+def test_every_kind_of_dead_camera_stops_inside_the_tank(fault):
+    row = _study(fault, seed=22)
+    assert row["stop"] in ("tracking_lost", "geofence"), row  # another fish may swim at a wall before it is found out
+    assert row["delay"] <= 2.5, row
+    assert row["min_clearance"] > 0.0, row
+
+
+def test_live_camera_is_not_stopped():
+    row = _study("none", seed=23)
+    assert row["stop"] != "tracking_lost" and row["steps"] >= 10, row  # ended by the task, the steps or the wall
+
+
+def test_camera_latency_is_measured_credited_and_refused_above_what_the_tank_affords():
+    from pectoral_gym.hardware.emurig import RigConditions
+    from pectoral_gym.hardware.vision.latency import CameraLatencyError
+
+    row = _study("none", seed=24, conditions=RigConditions(camera_latency=0.25))
+    assert row["stop"] != "tracking_lost" and row["steps"] >= 10, row  # before: tracking_lost at step 1
+    assert 0.25 <= row["latency"] < 0.25 + 2 / 30  # capture to arrival, within the grabber's polling
+    with pytest.raises(CameraLatencyError, match=r"0\.4\d\d s after capture; the tank affords at most 0\.350 s"):
+        _study("none", seed=25, conditions=RigConditions(camera_latency=0.4))
