@@ -26,6 +26,7 @@ from emulator_helpers import wait_for as _wait
 
 from pectoral_gym.hardware.emulator import EmulatedRobot
 from pectoral_gym.hardware.env import HardwareFishEnv
+from pectoral_gym.hardware.finreplay import apply_firmware
 from pectoral_gym.hardware.radio import protocol as pr
 from pectoral_gym.hardware.radio import xbee as xb
 from pectoral_gym.hardware.radio.firmware import ServoLimits, clip_beats, peak_rates
@@ -248,7 +249,7 @@ def _drive_emulator(commands, dwell):
         msg = pr.Message(pr.MsgType.SET_FINS, k, 1, fins=tuple(np.ravel(beats)), command=k, lease=1.0)
         with robot._lock:
             robot.firmware.receive(msg, t)
-            robot._apply_firmware()
+            apply_firmware(robot.firmware, robot.model)
         t += dwell[k - 1]
         robot._advance(t)
     robot.stop()

@@ -18,6 +18,7 @@ from emulator_helpers import wait_for as _wait
 
 from pectoral_gym.hardware.emulator import EmulatedRobot
 from pectoral_gym.hardware.env import HardwareFishEnv
+from pectoral_gym.hardware.finreplay import apply_firmware
 from pectoral_gym.hardware.radio import protocol as pr
 from pectoral_gym.hardware.radio.firmware import ServoLimits
 from pectoral_gym.hardware.safety.geofence import Geofence, SpeedBound
@@ -217,7 +218,7 @@ def _drive(commands, dwell, lease=1.0):
         msg = pr.Message(pr.MsgType.SET_FINS, k, 1, fins=tuple(np.ravel(beats)), command=k, lease=lease)
         with robot._lock:
             robot.firmware.receive(msg, t)
-            robot._apply_firmware()
+            apply_firmware(robot.firmware, robot.model)
         times.append(t)
         t += dwell[k - 1]
         robot._advance(t)
