@@ -18,6 +18,10 @@ checks three consequences on the sightings (each a stop with a reason saying wha
   dressed up. *Innovation*: the end position misses the prediction by more than ``innovation`` plus three
   standard errors of the measurement, twice in a row: a recording, another fish.
 
+The robot takes a command somewhere between its send and the STATUS that acknowledges it (the radio's forward
+delay): the fins are replayed twice, taking every command at either end, and each window is judged against the
+prediction more favourable to liveness (the smaller predicted motion, the smaller miss).
+
 ``docs/guide/safety.md``, "Liveness from physics", gives the figures behind the bounds.
 """
 
