@@ -19,8 +19,9 @@ checks three consequences on the sightings (each a stop with a reason saying wha
   standard errors of the measurement, twice in a row: a recording, another fish.
 
 The robot takes a command somewhere between its send and the STATUS that acknowledges it (the radio's forward
-delay): the fins are replayed twice, taking every command at either end, and each window is judged against the
-prediction more favourable to liveness (the smaller predicted motion, the smaller miss).
+delay): the fins are replayed three times, taking every command at its send, half way and at its acknowledgement,
+and each window is judged against the prediction most favourable to liveness (the smaller predicted motion, the
+smaller miss).
 
 ``docs/guide/safety.md``, "Liveness from physics", gives the figures behind the bounds.
 """
@@ -90,8 +91,10 @@ class LivenessWatch:
         self._strikes = 0
         config = FirmwareConfig(limits=limits or ServoLimits())
         # The robot takes a command between its send and the STATUS that acknowledges it: the fins replayed with
-        # each command at either end bracket what the robot's fins did.
-        self._early, self._late = _Shadow(params, config, False), _Shadow(params, config, True)
+        # each command at the send, half way and at the acknowledgement (the forward delay, if the return one
+        # equals it) sample what the robot's fins did.
+        self._early = _Shadow(params, config, 0.0)
+        self._later = [_Shadow(params, config, 0.5), _Shadow(params, config, 1.0)]
         self._model = AveragedModel(n=1, params=params)
         self._last_beats: np.ndarray | None = None
         self._first_command = math.inf  # send time of the first command since the reset [s]
@@ -111,8 +114,8 @@ class LivenessWatch:
 
     def reset(self, t: float = math.nan) -> None:
         """Start over at ``t`` [s] with the fins still (an arm after a confirmed stop); forget poses and commands."""
-        self._early.reset(t)
-        self._late.reset(t)
+        for shadow in (self._early, *self._later):
+            shadow.reset(t)
         self._last_beats = None
         self._first_command = math.inf
         self._poses.clear()
@@ -132,12 +135,12 @@ class LivenessWatch:
             self.reset(t)
         self._last_beats = np.array(beats, dtype=float).reshape(2, 4)
         self._first_command = min(self._first_command, float(t))
-        for shadow in (self._early, self._late):
+        for shadow in (self._early, *self._later):
             shadow.queue.append((float(t), self._last_beats, acknowledged))
 
     def _advance_shadows(self, to: float) -> None:
-        self._early.advance(to)
-        self._late.advance(to)
+        for shadow in (self._early, *self._later):
+            shadow.advance(to)
 
     def sighting(self, t: float, x: float, y: float, psi: float) -> str:
         """A tracked pose captured at ``t`` [s]; returns why the camera is not live, or ``""``."""
@@ -205,10 +208,10 @@ class LivenessWatch:
         meas_m, meas_e = middle[:, 1:4].mean(axis=0), end[:, 1:4].mean(axis=0)
         reach = 0.5 * self.params.body_length
         m_meas = math.hypot(*(meas_e[:2] - meas_m[:2])) + reach * abs(meas_e[2] - meas_m[2])
-        # The prediction most favourable to liveness, of the fins taking each command at its send and at its
-        # acknowledgement: the smaller predicted motion, the smaller miss.
+        # The prediction most favourable to liveness, of the fins taking each command at its send, half way and at
+        # its acknowledgement: the smaller predicted motion, the smaller miss.
         m_pred = innovation = math.inf
-        shadows = [self._early] + ([self._late] if self._late.differs(self._early, t_c) else [])
+        shadows = [self._early] + [s for s in self._later if s.differs(self._early, t_c)]
         for shadow in shadows:
             pred_m, pred_e = self._predict(shadow.snapshots, np.array([*pose_c, *body]), t_c, (t_m, t_e))
             m_pred = min(m_pred, math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2]))
@@ -271,16 +274,17 @@ class LivenessWatch:
 
 
 class _Shadow:
-    """Replayed fins that take each command at its send time, or (``late``) at its acknowledgement.
+    """Replayed fins that take each command ``share`` of the way from its send time to its acknowledgement.
 
     The fins are the firmware's (:class:`pectoral_gym.hardware.finreplay.FinReplay`: hand-over at the next
     turning point, rate rule, the transition's stretch), as the robot runs them; a snapshot of them every
-    0.05 s. A late shadow holds a command back until its acknowledgement is known and passed: one not yet
-    acknowledged when the fins are run to ``t`` is acknowledged after ``t`` (the poses come after their capture).
+    0.05 s. A shadow with ``share`` > 0 holds a command back until its acknowledgement is known (one not yet
+    acknowledged when the fins are run to ``t`` is acknowledged after ``t``: the poses come after their capture),
+    and then takes it at its share of the way or at once, whichever is later: always inside the interval.
     """
 
-    def __init__(self, params: FishParams, config: FirmwareConfig, late: bool):
-        self.late = late
+    def __init__(self, params: FishParams, config: FirmwareConfig, share: float):
+        self.share = share
         self.replay = FinReplay(params, config)
         self.queue: collections.deque[tuple[float, np.ndarray, Callable[[], float | None] | None]] = \
             collections.deque()  # sent, not yet taken
@@ -302,10 +306,10 @@ class _Shadow:
 
     def _start(self, sent: float, acknowledged: Callable[[], float | None] | None) -> float | None:
         """When this shadow takes a command sent at ``sent`` [s] (``None``: not known yet)."""
-        if not self.late or acknowledged is None:
+        if self.share == 0.0 or acknowledged is None:
             return sent
         ack = acknowledged()
-        return None if ack is None else max(ack, sent)
+        return None if ack is None else sent + self.share * max(ack - sent, 0.0)
 
     def advance(self, to: float, step: float = 0.05) -> None:
         """Run the fins to ``to`` [s], taking the commands due by then; a snapshot every ``step`` s."""
