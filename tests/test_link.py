@@ -82,6 +82,31 @@ def test_loss_duplicates_reordering_and_corruption_are_counted():
         server.close()
 
 
+def test_acknowledged_at_is_the_arrival_of_the_first_status_answering_the_message_or_a_later_one():
+    server = socket.create_server(("127.0.0.1", 0))
+    port = server.getsockname()[1]
+    link = RadioLink(f"socket://127.0.0.1:{port}", keepalive_period=60.0, session=SESSION)
+    conn, _ = server.accept()
+    try:
+        seq = link.set_fins(BEATS)
+        assert link.acknowledged_at(seq) is None
+        conn.sendall(_status(1, ack=(seq - 1) & 0xFFFF))
+        assert _wait(lambda: link.stats.received == 1)
+        assert link.acknowledged_at(seq) is None  # an answer to an older message says nothing of this one
+        before = time.monotonic()
+        conn.sendall(_status(2, ack=(seq + 1) & 0xFFFF))  # a later message (a keep-alive copy) answered
+        assert _wait(lambda: link.stats.received == 2)
+        first = link.acknowledged_at(seq)
+        assert first is not None and before <= first <= time.monotonic()
+        conn.sendall(_status(3, ack=seq))  # its own answer, later still: the first one stands
+        assert _wait(lambda: link.stats.received == 3)
+        assert link.acknowledged_at(seq) == first
+    finally:
+        link.close(stop_wait=0.01)
+        conn.close()
+        server.close()
+
+
 def test_acked_command_and_close_sends_stop_idempotently():
     with EmulatedRobot(speed=1.0) as robot:
         link = RadioLink(robot.url, keepalive_period=0.05, ack_timeout=0.05)

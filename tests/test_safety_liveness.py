@@ -88,6 +88,43 @@ def test_moving_fish_while_ours_is_at_rest_stops():
     assert "jumped" in reason or "cannot exceed" in reason
 
 
+def _late_still(ack):
+    """A fish rowing under FULL (sent and taken at 0) whose robot takes STILL, sent at 3 s, only at 3.6 s (a slow
+    radio); the watch is told the command's acknowledgement at ``ack`` (``None``: not told). The misses
+    ``(t, innovation)`` of the checks after 3 s, and the stop reasons."""
+    from pectoral_gym.hardware.finreplay import FinReplay
+
+    still = np.array([[math.pi / 2, 0.0, 0.6, 3.0]] * 2)
+    robot = FinReplay(P)
+    robot.model.state[0] = (1.0, 0.5, 0.0, 0.0, 0.0, 0.0)
+    robot.command(0.0, FULL)
+    watch, bound = _watch()
+    watch.command(0.0, FULL)
+    bound.running(0.0, 100.0)
+    reasons, now = [], [0.0]  # the PC's clock: the acknowledgement is known once it has arrived
+    for k in range(180):
+        t = now[0] = k / 30
+        if k == 90:
+            watch.command(3.0, still, None if ack is None else lambda: ack if now[0] >= ack else None)
+        if k == 108:
+            robot.command(3.6, still)
+        robot.advance(t)
+        reasons.append(watch.sighting(t, *robot.model.state[0, :3]))
+    return [(p[0], p[3]) for p in watch.predictions if p[0] > 3.0], [r for r in reasons if r]
+
+
+def test_a_command_taken_late_is_judged_from_its_acknowledgement_too():
+    told, told_reasons = _late_still(3.6)
+    untold, _ = _late_still(None)
+    assert _late_still(3.0)[0] == untold  # acknowledged as it was sent: the command started then
+    assert not told_reasons
+    # Windows starting after the robot took it (3.6 s): the fins replayed from the send time miss the fish by
+    # what the fins did in the delay; from the acknowledgement, by the model's own error only.
+    after = [k for k, (t, _) in enumerate(untold) if 4.85 <= t <= 5.25]
+    assert max(told[k][1] for k in after) + 0.015 < max(untold[k][1] for k in after)
+    assert all(a[1] <= b[1] + 1e-12 for a, b in zip(told, untold, strict=True))
+
+
 # ---------------------------------------------------------------- lockstep: the whole stack on the emulated robot
 class _Rowing:
     """A scripted controller: both fins rowing hard, straight ahead (the policy's interface)."""
@@ -125,6 +162,33 @@ def test_every_kind_of_dead_camera_stops_inside_the_tank(fault):
     assert row["stop"] in ("tracking_lost", "geofence"), row  # another fish may swim at a wall before it is found out
     assert row["delay"] <= 2.5, row
     assert row["min_clearance"] > 0.0, row
+
+
+class _Zigzag:
+    """A scripted controller that turns left and right in turn: a new command every control step."""
+
+    actions = (np.array([0.0, 1.0, -0.5, 0.0, 0.0, -0.6, -0.5, 0.0], dtype=np.float32),
+               np.array([0.0, -0.6, -0.5, 0.0, 0.0, 1.0, -0.5, 0.0], dtype=np.float32))
+
+    def reset(self, seed=None):
+        self.steps = 0
+
+    def act(self, obs):
+        self.steps += 1
+        return self.actions[self.steps % 2]
+
+
+def test_frozen_camera_on_a_slow_radio_stops_within_a_second():
+    from pectoral_gym.hardware.emurig import RigConditions
+    from pectoral_gym.hardware.safety.liveness_study import run_episode
+
+    controller = _Zigzag()
+    controller.reset()
+    row = run_episode(controller, {"task": "track", "max_episode_steps": 16}, 21, "noisy", 8,
+                      conditions=RigConditions(radio_latency=0.3, radio_loss=0.3))
+    assert row["stop"] == "tracking_lost", row
+    assert row["reason"].startswith(("camera frozen", "camera not live")), row
+    assert row["delay"] <= 1.0, row
 
 
 def test_live_camera_is_not_stopped():

@@ -132,6 +132,8 @@ class RadioLink(StatusReceiver):
         self._seq = 0
         self._pending: tuple[int, bytes, float, int, pr.MsgType] | None = None  # seq, frame, deadline, tries, type
         self._acked: set[int] = set()
+        # (clock.monotonic(), ack_seq) of every STATUS to us, in arrival order: when a command was surely received
+        self.ack_log: deque[tuple[float, int]] = deque(maxlen=512)
         self._lock = threading.RLock()
         self._write_lock = threading.Lock()
         self._acked_event = clock.condition(self._lock)

@@ -67,8 +67,8 @@ class StatusReceiver:
     ``tracker``, ``stats``, ``session``, ``boot``, ``served``, ``robot_clock``, ``rtt_estimator``,
     ``last_status``/``last_status_time``, ``command``, ``lease_end``, ``control_lost``, ``take_over`` and its
     private bookkeeping (``_lock``, ``_acked_event``, ``_stop``, ``_pending``, ``_sent_at``, ``_acked``, ``_quiet``,
-    ``_served``, ``_commanded``, ``_old_boots``); for the latch reports ``latch_tracker``, ``latch_reports`` and
-    ``lease_scale``.
+    ``_served``, ``_commanded``, ``_old_boots``, ``ack_log``); for the latch reports ``latch_tracker``,
+    ``latch_reports`` and ``lease_scale``.
     """
 
     def _read_loop(self) -> None:
@@ -181,9 +181,23 @@ class StatusReceiver:
                 self._quiet = ack
             if self.command is None:
                 self._commanded = False
+        self.ack_log.append((now, ack))
         self._acked.add(ack)
         if len(self._acked) > 1024:
             self._acked = {ack}
+
+    def acknowledged_at(self, seq: int) -> float | None:
+        """``clock.monotonic()`` of the first STATUS to us answering message ``seq`` or a later one, or ``None``.
+
+        By then the robot had received ``seq`` or something newer (a keep-alive copy of the same command, or a
+        command that replaced it): the latest instant the robot can have taken the command ``seq`` carries.
+        ``None`` while no such STATUS has arrived (or it is older than the last 512).
+        """
+        with self._lock:
+            for t, ack in self.ack_log:
+                if ack == seq or pr.serial_newer(ack, seq):
+                    return t
+        return None
 
     @staticmethod
     def _satisfies(status: pr.Status, pending: tuple) -> bool:

@@ -18,6 +18,11 @@ checks three consequences on the sightings (each a stop with a reason saying wha
   dressed up. *Innovation*: the end position misses the prediction by more than ``innovation`` plus three
   standard errors of the measurement, twice in a row: a recording, another fish.
 
+The robot takes a command somewhere between its send and the STATUS that acknowledges it (the radio's forward
+delay): the fins are replayed three times, taking every command at its send, half way and at its acknowledgement,
+and each window is judged against the prediction most favourable to liveness (the smaller predicted motion, the
+smaller miss).
+
 ``docs/guide/safety.md``, "Liveness from physics", gives the figures behind the bounds.
 """
 
@@ -25,6 +30,7 @@ from __future__ import annotations
 
 import collections
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -83,13 +89,16 @@ class LivenessWatch:
         self.window, self.ratio, self.min_motion = float(window), float(ratio), float(min_motion)
         self.innovation, self.long_window = float(innovation), float(long_window)
         self._strikes = 0
-        self._replay = FinReplay(params, FirmwareConfig(limits=limits or ServoLimits()))
+        config = FirmwareConfig(limits=limits or ServoLimits())
+        # The robot takes a command between its send and the STATUS that acknowledges it: the fins replayed with
+        # each command at the send, half way and at the acknowledgement (the forward delay, if the return one
+        # equals it) sample what the robot's fins did.
+        self._early = _Shadow(params, config, 0.0)
+        self._later = [_Shadow(params, config, 0.5), _Shadow(params, config, 1.0)]
         self._model = AveragedModel(n=1, params=params)
-        self._queue: collections.deque[tuple[float, np.ndarray]] = collections.deque()  # sent, not yet in the shadow
-        self._applied: collections.deque[tuple[float, np.ndarray]] = collections.deque(maxlen=64)
-        self._snapshots: collections.deque[tuple[float, np.ndarray, np.ndarray]] = collections.deque(maxlen=128)
+        self._last_beats: np.ndarray | None = None
+        self._first_command = math.inf  # send time of the first command since the reset [s]
         self._poses: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=256)
-        self._shadow_t = math.nan
         self._warm_up()
         self.last_prediction = (math.nan, math.nan, math.nan)
         self.predictions: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=4096)
@@ -99,52 +108,39 @@ class LivenessWatch:
         """Compile or load the models' kernels now, as they will be called, not inside a supervisor poll."""
         self.reset(0.0)
         self.command(0.0, np.array([[math.pi / 2, 0.5, 1.0, 1.0]] * 2))
-        self._advance_shadow(0.4)
-        self._predict(np.array([1.0, 0.5, 0.0, 0.01, 0.0, 0.0]), 0.05, (0.2, 0.4))
+        self._advance_shadows(0.4)
+        self._predict(self._early.snapshots, np.array([1.0, 0.5, 0.0, 0.01, 0.0, 0.0]), 0.05, (0.2, 0.4))
         self.reset()
 
     def reset(self, t: float = math.nan) -> None:
         """Start over at ``t`` [s] with the fins still (an arm after a confirmed stop); forget poses and commands."""
-        self._queue.clear()
-        self._applied.clear()
-        self._snapshots.clear()
+        for shadow in (self._early, *self._later):
+            shadow.reset(t)
+        self._last_beats = None
+        self._first_command = math.inf
         self._poses.clear()
-        self._replay.reset(0.0 if math.isnan(t) else t)
-        self._shadow_t = float(t)
         self._next_check = -math.inf
         self._strikes = 0
-        if math.isfinite(self._shadow_t):
-            self._snapshot()
 
-    def command(self, t: float, beats: np.ndarray) -> None:
-        """A command ``(2, 4)`` sent at ``t`` [s]."""
-        last = self._queue[-1][1] if self._queue else self._applied[-1][1] if self._applied else None
-        if last is not None and np.array_equal(last, beats):
-            return  # a lease renewal of the same command: the fins go on as they were
-        if not math.isfinite(self._shadow_t):
-            self.reset(t)
-        self._queue.append((float(t), np.array(beats, dtype=float).reshape(2, 4)))
+    def command(self, t: float, beats: np.ndarray, acknowledged: Callable[[], float | None] | None = None) -> None:
+        """A command ``(2, 4)`` sent at ``t`` [s].
 
-    # ------------------------------------------------------------ the fins' phase
-    def _snapshot(self) -> None:
-        model = self._replay.model
-        self._snapshots.append((self._shadow_t, model.fins.copy(), model.pending.copy()))
-
-    def _advance_shadow(self, to: float, step: float = 0.05) -> None:
-        """Run the replayed fins to ``to`` [s], taking the commands sent up to then; a snapshot every ``step`` s.
-
-        The fins are the firmware's (:class:`pectoral_gym.hardware.finreplay.FinReplay`: hand-over at the next
-        turning point, rate rule, the transition's stretch), as the robot runs them.
+        ``acknowledged`` gives the arrival time [s] of the first STATUS acknowledging it (or a later message),
+        ``None`` until there is one: the robot took the command between ``t`` and then. Without it the command
+        is taken as started at ``t``.
         """
-        while self._shadow_t < to:
-            target = min(to, self._shadow_t + step)
-            while self._queue and self._queue[0][0] <= target:
-                t, beats = self._queue.popleft()
-                self._replay.command(max(t, self._shadow_t), beats)
-                self._applied.append((t, beats))
-            self._replay.advance(target)
-            self._shadow_t = target
-            self._snapshot()
+        if self._last_beats is not None and np.array_equal(self._last_beats, beats):
+            return  # a lease renewal of the same command: the fins go on as they were
+        if not math.isfinite(self._early.t):
+            self.reset(t)
+        self._last_beats = np.array(beats, dtype=float).reshape(2, 4)
+        self._first_command = min(self._first_command, float(t))
+        for shadow in (self._early, *self._later):
+            shadow.queue.append((float(t), self._last_beats, acknowledged))
+
+    def _advance_shadows(self, to: float) -> None:
+        for shadow in (self._early, *self._later):
+            shadow.advance(to)
 
     def sighting(self, t: float, x: float, y: float, psi: float) -> str:
         """A tracked pose captured at ``t`` [s]; returns why the camera is not live, or ``""``."""
@@ -160,8 +156,8 @@ class LivenessWatch:
                     reason = (f"camera not live: the fish jumped {step * 1000:.0f} mm in {dt:.3f} s, more than our "
                               f"fish can move ({allowed * 1000:.0f} mm with the pose noise)")
         self._poses.append((float(t), float(x), float(y), float(psi)))
-        if math.isfinite(self._shadow_t):
-            self._advance_shadow(t)
+        if math.isfinite(self._early.t):
+            self._advance_shadows(t)
         if not reason and t >= self._next_check:
             self._next_check = t + 0.1  # the model check at 10 per second is plenty for a window of 0.8 s
             reason = self._too_fast(t) or self._motion(t, self.window, True) or \
@@ -201,19 +197,25 @@ class LivenessWatch:
         if len(before) < 6 or np.ptp(before[:, 0]) < 0.6 * window or len(middle) < 2 or len(end) < 2:
             return ""
         t_c = float(before[:, 0].mean())
-        known = self._snapshots and self._snapshots[0][0] <= t_c and self._applied and self._applied[0][0] <= t_c
+        snapshots = self._early.snapshots
+        known = snapshots and snapshots[0][0] <= t_c and self._first_command <= t_c
         if not (known and self.bound.run_until >= t1):
             return ""  # the fins did not run the whole span on commands we know
         pose_c, rates_c = _fit(before, t_c)
         c, s = math.cos(pose_c[2]), math.sin(pose_c[2])
         body = (c * rates_c[0] + s * rates_c[1], -s * rates_c[0] + c * rates_c[1], rates_c[2])
         t_m, t_e = float(middle[:, 0].mean()), float(end[:, 0].mean())
-        pred_m, pred_e = self._predict(np.array([*pose_c, *body]), t_c, (t_m, t_e))
         meas_m, meas_e = middle[:, 1:4].mean(axis=0), end[:, 1:4].mean(axis=0)
         reach = 0.5 * self.params.body_length
-        m_pred = math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2])
         m_meas = math.hypot(*(meas_e[:2] - meas_m[:2])) + reach * abs(meas_e[2] - meas_m[2])
-        innovation = math.hypot(*(meas_e[:2] - pred_e[:2]))
+        # The prediction most favourable to liveness, of the fins taking each command at its send, half way and at
+        # its acknowledgement: the smaller predicted motion, the smaller miss.
+        m_pred = innovation = math.inf
+        shadows = [self._early] + [s for s in self._later if s.differs(self._early, t_c)]
+        for shadow in shadows:
+            pred_m, pred_e = self._predict(shadow.snapshots, np.array([*pose_c, *body]), t_c, (t_m, t_e))
+            m_pred = min(m_pred, math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2]))
+            innovation = min(innovation, math.hypot(*(meas_e[:2] - pred_e[:2])))
         scatter, sxx = self._scatter(before, t_c)
         # Standard errors [m]: of the predicted motion inside the window (the start's slope error over it), and of
         # the end position (the start's position and slope, and the end's mean).
@@ -244,14 +246,15 @@ class LivenessWatch:
         centred = poses[:, 0] - t_c
         return max(scatter, 1e-4), float(centred @ centred)
 
-    def _predict(self, state: np.ndarray, t_c: float, times: tuple[float, ...]) -> list[np.ndarray]:
+    def _predict(self, snapshots: collections.deque, state: np.ndarray, t_c: float,
+                 times: tuple[float, ...]) -> list[np.ndarray]:
         """Poses (3,) at ``times`` (increasing) of the averaged model from ``state`` at ``t_c``.
 
-        Its fins are the replayed ones, set from the snapshots (one every 0.05 s).
+        Its fins are the replayed ones, set from ``snapshots`` (a shadow's, one every 0.05 s).
         """
         model = self._model
         model.reset(state[None])
-        snaps = [s for s in self._snapshots if s[0] <= times[-1]]
+        snaps = [s for s in snapshots if s[0] <= times[-1]]
         first = max(k for k, s in enumerate(snaps) if s[0] <= t_c)
         now, out, pending = t_c, [], list(times)
         for k in range(first, len(snaps)):
@@ -268,3 +271,67 @@ class LivenessWatch:
             model.advance(max(until - now, 0.0))
             now = max(until, now)
         return out
+
+
+class _Shadow:
+    """Replayed fins that take each command ``share`` of the way from its send time to its acknowledgement.
+
+    The fins are the firmware's (:class:`pectoral_gym.hardware.finreplay.FinReplay`: hand-over at the next
+    turning point, rate rule, the transition's stretch), as the robot runs them; a snapshot of them every
+    0.05 s. A shadow with ``share`` > 0 holds a command back until its acknowledgement is known (one not yet
+    acknowledged when the fins are run to ``t`` is acknowledged after ``t``: the poses come after their capture),
+    and then takes it at its share of the way or at once, whichever is later: always inside the interval.
+    """
+
+    def __init__(self, params: FishParams, config: FirmwareConfig, share: float):
+        self.share = share
+        self.replay = FinReplay(params, config)
+        self.queue: collections.deque[tuple[float, np.ndarray, Callable[[], float | None] | None]] = \
+            collections.deque()  # sent, not yet taken
+        self.snapshots: collections.deque[tuple[float, np.ndarray, np.ndarray]] = collections.deque(maxlen=128)
+        self.t = math.nan
+
+    def reset(self, t: float) -> None:
+        """Fins still at ``t`` [s] (``nan``: not started); no commands."""
+        self.queue.clear()
+        self.snapshots.clear()
+        self.replay.reset(0.0 if math.isnan(t) else t)
+        self.t = float(t)
+        if math.isfinite(self.t):
+            self._snapshot()
+
+    def _snapshot(self) -> None:
+        model = self.replay.model
+        self.snapshots.append((self.t, model.fins.copy(), model.pending.copy()))
+
+    def _start(self, sent: float, acknowledged: Callable[[], float | None] | None) -> float | None:
+        """When this shadow takes a command sent at ``sent`` [s] (``None``: not known yet)."""
+        if self.share == 0.0 or acknowledged is None:
+            return sent
+        ack = acknowledged()
+        return None if ack is None else sent + self.share * max(ack - sent, 0.0)
+
+    def advance(self, to: float, step: float = 0.05) -> None:
+        """Run the fins to ``to`` [s], taking the commands due by then; a snapshot every ``step`` s."""
+        while self.t < to:
+            target = min(to, self.t + step)
+            while self.queue:
+                start = self._start(self.queue[0][0], self.queue[0][2])
+                if start is None or start > target:
+                    break
+                _, beats, _ = self.queue.popleft()
+                self.replay.command(max(start, self.t), beats)
+            self.replay.advance(target)
+            self.t = target
+            self._snapshot()
+
+    def differs(self, other: _Shadow, since: float) -> bool:
+        """Whether ``other``'s snapshots from ``since`` [s] (less one step) on differ from this one's."""
+        mine = {s[0]: s for s in self.snapshots}
+        for t, fins, pending in other.snapshots:
+            if t < since - 0.05:
+                continue
+            own = mine.get(t)
+            if own is None or not (np.array_equal(own[1], fins) and np.array_equal(own[2], pending)):
+                return True
+        return False

@@ -20,6 +20,7 @@ from __future__ import annotations
 import collections
 import math
 import threading
+from collections.abc import Callable
 
 import numpy as np
 
@@ -220,9 +221,23 @@ class Supervisor:
             now = self.now()
             # The fins may run until the lease ends, plus the reaction time (radio latency, firmware tick).
             self.bound.running(now, now + lease + self.safety.reaction_time)
-            self.link.set_fins(beats, lease)
-            self.liveness.command(now, beats)
+            seq = self.link.set_fins(beats, lease)
+            self.liveness.command(now, beats, self._acknowledgement(seq))
             return True
+
+    def _acknowledgement(self, seq) -> Callable[[], float | None] | None:
+        """When the STATUS acknowledging message ``seq`` (or a later one) arrived [experiment s], ``None`` before.
+
+        ``None`` for a link that does not tell (the command is then taken as started when sent).
+        """
+        acknowledged_at = getattr(self.link, "acknowledged_at", None)
+        if acknowledged_at is None or not isinstance(seq, int) or seq < 0:
+            return None
+
+        def arrival() -> float | None:
+            t = acknowledged_at(seq)
+            return None if t is None else self._stamp(t)
+        return arrival
 
     def trip(self, reason: str) -> None:
         """Latch ``reason`` (every one is kept; :attr:`reason` reports by priority) and send STOP."""
