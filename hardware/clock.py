@@ -44,6 +44,8 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol
 
+from pectoral_gym.hardware.signal_latch import end_as
+
 if TYPE_CHECKING:
     from pectoral_gym.hardware.clockwaits import _Condition, _Event, _Thread
 
@@ -279,13 +281,7 @@ class VirtualClock:
             for stop in reversed(self._signal_stops):
                 stop()
         finally:
-            old = self._signal_previous.get(signum)
-            if callable(old):
-                old(signum, None)
-            elif old != signal.SIG_IGN:
-                if signum == signal.SIGINT:
-                    raise KeyboardInterrupt
-                raise SystemExit(128 + signum)
+            end_as(signum, self._signal_previous.get(signum))
 
     def _checkpoint(self) -> None:
         """Where a thread may leave the lockstep: the run's failure, or a deferred signal in the main thread."""

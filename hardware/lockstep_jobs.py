@@ -35,6 +35,7 @@ from pectoral_gym.hardware.deploy_checks import check_frame_size, first_frame
 from pectoral_gym.hardware.emurig import RigConditions, open_rig
 from pectoral_gym.hardware.radio.linkstatus import LinkStats
 from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handlers
+from pectoral_gym.hardware.signal_latch import end_as
 
 __all__ = ["EpisodeError", "EpisodeResult", "LockstepJob", "episode_time_limit", "merge_link", "merge_solver",
            "run_lockstep", "shift_records"]
@@ -228,13 +229,7 @@ class _SignalLatch:
         self.pending = signum
 
     def _end(self, signum: int) -> None:
-        old = self._previous.get(signum)
-        if callable(old):
-            old(signum, None)
-        elif old != signal.SIG_IGN:
-            if signum == signal.SIGINT:
-                raise KeyboardInterrupt
-            raise SystemExit(128 + signum)
+        end_as(signum, self._previous.get(signum))
 
     def take(self) -> None:
         """Act on a recorded signal now (call where no rig is open)."""

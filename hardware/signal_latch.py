@@ -6,7 +6,21 @@ import signal
 import sys
 import threading
 
-__all__ = ["SignalLatch"]
+__all__ = ["SignalLatch", "end_as"]
+
+
+def end_as(signum: int, previous=signal.SIG_DFL) -> None:
+    """End as the handler ``previous`` (the one before ours) would for ``signum``.
+
+    A function is called; ``SIG_IGN`` does nothing; anything else raises what Python's default does:
+    ``KeyboardInterrupt`` for SIGINT, ``SystemExit(128 + signum)`` otherwise (the shell's exit status).
+    """
+    if callable(previous):
+        previous(signum, None)
+    elif previous != signal.SIG_IGN:
+        if signum == signal.SIGINT:
+            raise KeyboardInterrupt
+        raise SystemExit(128 + signum)
 
 
 class SignalLatch:
@@ -47,9 +61,7 @@ class SignalLatch:
 
     @staticmethod
     def _raise(signum: int) -> None:
-        if signum == signal.SIGINT:
-            raise KeyboardInterrupt
-        raise SystemExit(128 + signum)
+        end_as(signum)
 
     def check(self) -> None:
         """Raise the latched signal's exception (none latched: nothing)."""
