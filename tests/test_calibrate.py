@@ -125,7 +125,7 @@ def test_overlay_draws_the_calibrated_outline(tmp_path):
     (["--corners", "1,2", "300,2", "300,200", "1,200", "--size", "0x0"], "width and height"),
 ])
 def test_cli_bad_arguments_are_one_line_errors_with_status_2(tmp_path, capsys, args, message):
-    """Issue 30: a bad argument or an unwritable file is an argparse error naming it, never a traceback."""
+    """A bad argument or an unwritable file is an argparse error naming it, never a traceback."""
     args = [a.replace("{tmp}", str(tmp_path)) for a in args]
     if "--out" not in args:
         args += ["--out", str(tmp_path / "cal.json")]

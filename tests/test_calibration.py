@@ -1,4 +1,4 @@
-"""Calibration from run logs (issue 27): the fins' replay, recovery of known parameters, frame drops, the CLI."""
+"""Calibration from run logs: the fins' replay, recovery of known parameters, frame drops, the CLI."""
 
 import json
 import math

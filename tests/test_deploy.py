@@ -133,7 +133,7 @@ def test_deploy_controller_and_policy_arguments_must_agree(tmp_path):
         main(["--emulate", "--out", str(tmp_path)])  # --controller policy needs --policy
 
 
-# ---------------------------------------------------------------- issue 30: arguments, policy fit, resources
+# ---------------------------------------------------------------- arguments, policy fit, resources
 @pytest.fixture(autouse=True)
 def _keep_the_test_process_priority(monkeypatch):
     """The deploy raises its own priority; here that would be the test worker's (its effect: a test of its own)."""

@@ -1,4 +1,4 @@
-"""Gymnasium conventions of the fish envs (issue 14): reset info, spec round trip, autoreset modes, pickling."""
+"""Gymnasium conventions of the fish envs: reset info, spec round trip, autoreset modes, pickling."""
 
 import copy
 import math

@@ -110,7 +110,7 @@ def test_tracking_lost_stops_and_says_why(rig, monkeypatch):
     assert info["tracking"]["reason"] != "" and not info["tracking"]["ok"]
     assert all(t <= hidden for t, *_ in updates)  # the observer never got a made-up pose
     # The fins beat (15 deg): the geofence's worst-case motion of an unseen fish stops it before the 1.5 s
-    # timeout (issue 30, finding 9), never within the reaction budget of one missing frame.
+    # timeout (safety review, finding 9), never within the reaction budget of one missing frame.
     assert info["tracking"]["lost_for"] > SafetyConfig().reaction_time
     assert env.link.command is None
 

@@ -1,5 +1,5 @@
-"""Issue 13, reproduced against the emulated robot and shown fixed: the fish stops whenever the controller
-is not in control.
+"""The first safety review, reproduced against the emulated robot and shown fixed: the fish stops whenever the
+controller is not in control.
 
 Times are measured on the emulator's own clock (its trace, one entry per 10 ms physics chunk) where the
 rule is the robot's (leases); rules of the PC's supervisor thread get generous bounds. Long runs
@@ -203,7 +203,7 @@ def test_replays_and_other_sessions_never_keep_or_restart_motion():
             assert fw.tripped_at - fw.last_valid <= 0.5 + 0.011
             a.sendall(_set(2, 0xA, command=2))  # the PC commands again ...
             assert _wait(lambda: fw.running)
-            # ... another live session speaks up: refused (issue 30, finding 2), the fins keep their controller
+            # ... another live session speaks up: refused (safety review, finding 2), the fins keep their controller
             b.sendall(_frame(pr.Message(pr.MsgType.HEARTBEAT, 1, 0xB)))
             assert _wait(lambda: fw.ignored["refused"] >= 1)
             assert fw.running and fw.session == 0xA
@@ -351,7 +351,7 @@ def _inside(points):
 
 
 def _wall_rule_stopped(info):
-    """The wall rule stopped the fish: the geofence, or (issue 30, finding 9) the same rule applied while the fish
+    """The wall rule stopped the fish: the geofence, or (safety review, finding 9) the same rule applied while the fish
     was unseen for longer than the reaction time on a loaded machine (the fastest speed gain since the last pose
     could reach the stopping band), reported as tracking_lost well before the 3 s tracking timeout."""
     if info["safety_stop"] == "geofence":

@@ -1,4 +1,4 @@
-"""Issue 30, radio side, reproduced against the emulated robot through a lossy radio proxy and shown fixed.
+"""Safety review, radio side, reproduced against the emulated robot through a lossy radio proxy and shown fixed.
 
 Findings 2 (a second controller takes over silently), 4 (a reboot locks the PC out), 5 (the lease bound
 fails when the first copies are lost), 10 (bursty loss ends episodes) and the fixed ACK timeout. Robot-side

@@ -1,4 +1,4 @@
-"""Issue 30, PC safety side: each finding reproduced against the emulated robot (or the rules alone) and shown fixed.
+"""Safety review, PC side: each finding reproduced against the emulated robot (or the rules alone) and shown fixed.
 
 Findings: 3 (an e-stop during reset is lost), 6 (the reset hook runs while the fins beat), 7 (pose noise at rest
 trips the geofence), 8 (a camera clock ahead makes reset take a stale start), 9 (the tracking timeout is

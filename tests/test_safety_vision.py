@@ -1,4 +1,4 @@
-"""Issue 30, vision side: frozen cameras that are not bit-identical, a camera pipeline that never blocks its
+"""Safety review, vision side: frozen cameras that are not bit-identical, a camera pipeline that never blocks its
 reader, degraded cameras (pectoral_gym.hardware.vision.camerafaults), wrong-size calibrations.
 
 Unit tests run on rendered frames with stamps chosen by the test; the end-to-end tests drive the emulated

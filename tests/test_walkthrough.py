@@ -59,7 +59,7 @@ def test_parsing_joins_continuations_and_adds_quick_only_where_documented():
 def test_the_readme_walk_through_runs_as_written(tmp_path):
     commands = walkthrough_commands((ROOT / "docs" / "calibration.md").read_text())
     text = "\n".join(commands)
-    # What the walk-through must show (issues 14 and 27): an identification run logged, the model calibrated from
+    # What the walk-through must show: an identification run logged, the model calibrated from
     # the log, K identified for it, training on the full model with params=, evaluation on the full model, the
     # policy deployed on the (emulated) robot, the hand law beside it planning with the robot's K.
     assert "fin_span" in commands[0]

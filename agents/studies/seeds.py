@@ -66,7 +66,7 @@ TRAIN_ENVS = ("PectoralFish-Averaged-v0", "PectoralFish-Full-v0", "PectoralFish-
 def versioned(env_id: str, train_env: str) -> str:
     """``env_id`` in ``train_env``'s version: a policy is evaluated on the envs it trained for."""
     return env_id.rsplit("-", 1)[0] + "-" + train_env.rsplit("-", 1)[1]
-TARGETS = {"full": 0.95, "full+rand": 0.90, "gap": 0.03}  # issue 16: success >= (gap averaged - full <=)
+TARGETS = {"full": 0.95, "full+rand": 0.90, "gap": 0.03}  # success >= (gap: averaged - full <=)
 REPORTED = ("success", "time_to_goal", "final_distance", "fin_work", "return", "wall")
 QUICK = {"n_timesteps": 2048, "n_envs": 8, "n_steps": 64, "batch_size": 128, "n_epochs": 1, "eval_freq": 1024,
          "eval_episodes": 4}

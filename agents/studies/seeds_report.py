@@ -84,7 +84,7 @@ def to_markdown(report: dict[str, Any]) -> str:
                                                 f"{a['ci_high']:.{digits}f}]")
         lines.append(f"| {name} | {centre} | {_num(a['mean'], digits)} | {_num(a['min'], digits)} | "
                      f"{_num(a['median'], digits)} | {_num(a['max'], digits)} |")
-    lines += ["", "## Targets (issue 16)", "", "| figure | target | seeds meeting it |", "|---|---|---|"]
+    lines += ["", "## Targets", "", "| figure | target | seeds meeting it |", "|---|---|---|"]
     for name, t in summary["targets"].items():
         met = ", ".join(str(seed) for seed in t["seeds_met"]) or "none"
         lines.append(f"| {name} | {t['target']} | {len(t['seeds_met'])} of {t['n']} ({met}) |")

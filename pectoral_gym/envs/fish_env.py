@@ -212,7 +212,7 @@ class PectoralFishEnv(gym.Env):
       ``PectoralFish-Averaged-v1`` adds ``transitions=True`` (the shipped PPO recipe's training model),
       ``PectoralFish-Full-v1`` runs the fast integration (``integration="fast"``). Every other default is
       v0's.
-    * v0: Initial version. Issue 14 (same id, same dynamics): ``reset()`` returns the step's
+    * v0: Initial version. Later, with the same id and dynamics: ``reset()`` returns the step's
       ``info`` keys, ``info`` values are numpy scalars, finite observation bounds,
       ``params`` as a dict or file, ``scaling`` as a file, ``render_fps = 1 / control_period``.
       Stays as it was; Gymnasium notes on ``make`` that v1 exists.

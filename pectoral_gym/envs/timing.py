@@ -43,8 +43,8 @@ LAG, SPAN = 0, 1
 class TimingConfig:
     """The control loop's timing of ``EnvConfig.timing`` (seconds; the module docstring says how it is applied).
 
-    The defaults span the emulated robot's clean radio (no delay, ``pectoral-deploy --emulate``) to issue 29's
-    degraded one (100 ms one way, 10 % of frames lost and sent again).
+    The defaults span the emulated robot's clean radio (no delay, ``pectoral-deploy --emulate``) to the
+    degraded one of the robot stack's tolerance targets (100 ms one way, 10 % of frames lost and sent again).
 
     Attributes:
         command_latency: ``(low, high)`` range of an episode's command delay level [s] (a number ``v`` means

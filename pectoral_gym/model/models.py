@@ -313,8 +313,8 @@ class AveragedModel(FishModel):
             half-stroke, and on a recovery stroke after a power stroke of another pattern
             the impulse offset that power stroke left (``docs/model.md`` section 3.7).
             Zero at periodic steady state, so K and the steady-state figures are
-            unchanged. Default on; ``False`` gives the model before issue 12 (the cycle
-            averages alone). Measured in ``docs/validation/fidelity/``.
+            unchanged. Default on; ``False`` gives the cycle averages alone
+            (the model of ``PectoralFish-Averaged-v0``). Measured in ``docs/validation/fidelity/``.
         ripple_offsets: Keep the model's state at the beat mean of the full model's: when a fin
             starts a pattern (from rest, after a reset, at a change) or parks, spread over that
             half-stroke the change of its beat's mean impulse offset

@@ -205,7 +205,7 @@ FULL_FAST = FullSpec(integration="fast")
 AVERAGED = AveragedSpec()
 #: The averaged model as the registered ``PectoralFish-Averaged-v0`` runs it: the cycle averages alone.
 AVERAGED_ENV = AveragedSpec(transitions=False, ripple_offsets=False)
-#: The averaged model of ``PectoralFish-Averaged-v1`` (the PPO recipe's until 2026-12-04): with transitional strokes.
+#: The averaged model of ``PectoralFish-Averaged-v1`` (the PPO recipe's before ``-v2``): with transitional strokes.
 #: ``PectoralFish-Averaged-v2``, which the recipe trains on now, runs :data:`AVERAGED` (both corrections).
 AVERAGED_PPO = AveragedSpec(transitions=True, ripple_offsets=False)
 #: The paper's plain model: eq. (25) with the Taylor forcing of eqs. 26-28, the shipped K and eq. (20)'s

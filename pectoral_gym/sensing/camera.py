@@ -26,7 +26,7 @@ __all__ = ["CLEAN_CAMERA", "DEGRADED_CAMERA", "LEVELS", "N_LEVELS", "SensingConf
 #: tracker's clean-frame pose noise, 0.3 mm and 0.2 deg rms (``docs/hardware-vision.md``, "High-gain observer"),
 #: no frame lost, no latency, 30 frames/s.
 CLEAN_CAMERA = {"position_noise": 0.3e-3, "heading_noise": math.radians(0.2), "frame_drop": 0.0, "latency": 0.0}
-#: The degraded camera of issue 29's targets (``--camera-drop 0.1 --pose-noise-mm 5 --pose-noise-deg 2``).
+#: The degraded camera of the robot stack's targets (``--camera-drop 0.1 --pose-noise-mm 5 --pose-noise-deg 2``).
 DEGRADED_CAMERA = {"position_noise": 5e-3, "heading_noise": math.radians(2.0), "frame_drop": 0.1}
 #: Per-episode levels drawn by :meth:`SensingConfig.draw`, in this order (the last is the first frame's phase).
 LEVELS = ("position_noise", "heading_noise", "frame_drop", "latency", "phase")

@@ -1,4 +1,4 @@
-"""Issue 27's figures on emulated robots with a known truth: ``python -m pectoral_gym.scaling.calibration.benchmark``.
+"""Calibration figures on emulated robots of known truth: ``python -m pectoral_gym.scaling.calibration.benchmark``.
 
 For each seed: a robot with the uncertain fields drawn +-30 % around Table 1
 (:func:`~pectoral_gym.scaling.calibration.synth.perturbed_params`), ``--minutes`` of identification logs, and

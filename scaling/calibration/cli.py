@@ -1,4 +1,4 @@
-"""``pectoral-scaling calibrate``: the model's uncertain parameters from run logs (issue 27)."""
+"""``pectoral-scaling calibrate``: the model's uncertain parameters from run logs."""
 
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ def add_parser(sub) -> None:
 
     defaults = CalibrationSettings()
     p = sub.add_parser(
-        "calibrate", help="fit the uncertain FishParams fields from run logs (issue 27)",
+        "calibrate", help="fit the uncertain FishParams fields from run logs",
         description="Fit the physically uncertain FishParams fields (added masses and inertia, drag, lift, moment "
         "and fin force coefficients) from recorded runs: the full model under the logged commands, its fins "
         "replayed by the firmware's rules, compared with the camera's poses over short windows (windowed "

@@ -1,7 +1,8 @@
 """The held-out check: the calibrated full model run open loop over logged episodes it was not fitted on.
 
 Each held-out episode is simulated from its starting state under its logged commands, with the fins
-replayed by the firmware's rules, for ``horizon`` s (40 s in issue 27); the error is the distance between
+replayed by the firmware's rules, for ``horizon`` s (40 s in the held-out
+target of docs/calibration.md); the error is the distance between
 the simulated and the observed end positions, as a percentage of the observed path length. The path is
 measured on the poses averaged over 0.5 s bins, so camera noise does not lengthen it.
 

@@ -25,7 +25,7 @@ from pectoral_gym.model.params import FishParams
 __all__ = ["COEFFICIENT", "COMBINATIONS", "STRUCTURAL", "UNCERTAIN_FIELDS", "Direction", "Identifiability", "analyse",
            "combinations"]
 
-#: The FishParams fields a ruler cannot measure (issue 27): what the calibration fits by default.
+#: The FishParams fields a ruler cannot measure: what the calibration fits by default.
 UNCERTAIN_FIELDS = ("added_mass_x", "added_mass_y", "added_inertia", "drag_coef", "lift_coef", "moment_coef",
                     "fin_force_coef")
 #: The packed coefficient each uncertain field enters, eq. (20) and eqs. (11), (13).

@@ -1,4 +1,4 @@
-"""Fidelity benchmark of the averaged model against the full model (issue 12; ``pectoral-scaling fidelity``).
+"""Fidelity benchmark of the averaged model against the full model (``pectoral-scaling fidelity``).
 
 Where the averaged model is used (agents train on it, the NMPCs plan with it),
 fin patterns change and the two fins beat differently. This benchmark measures
@@ -70,7 +70,7 @@ DECOMPOSITION = {"one_fin_from_rest": (1, False), "one_fin_on_pattern": (1, True
                  "two_fins_from_rest": (2, False), "two_fins_on_pattern": (2, True)}
 #: name: what the left fin does in the split of each scenario (the right fin keeps its schedule)
 FIN_SPLITS = {"one_fin": "at rest", "mirrored": "the right fin's pattern, mirrored"}
-TARGETS = {  # issue 12: (median, p90) of the position error; steady state (median, worst)
+TARGETS = {  # docs/scaling.md's targets: (median, p90) of the position error; steady state (median, worst)
     "constant": (0.02, 0.05), "every_4s": (0.03, 0.08), "every_0.5s": (0.05, 0.12),
     "steady": (0.01, 0.05), "single_fin_worst": 0.01, "table4_worst": 0.01,
 }
@@ -315,8 +315,7 @@ def add_parser(sub) -> None:
     """The ``fidelity`` subcommand of ``pectoral-scaling``."""
     from pectoral_gym.tools.cli_common import examples
 
-    p = sub.add_parser("fidelity", help="a model preset vs the full model with two fins and changing commands "
-                       "(issue 12)",
+    p = sub.add_parser("fidelity", help="a model preset vs the full model with two fins and changing commands",
                        description="Fidelity benchmark: open-loop runs with constant and changing two-fin patterns, "
                        "their decomposition (one fin / two, from rest / on the pattern), each scenario split by "
                        "fins (left fin at rest; mirrored fins), two-fin steady states, the "

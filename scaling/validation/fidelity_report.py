@@ -88,7 +88,7 @@ def write_markdown(results: dict[str, Any], path: Path) -> Path:
         f"Open loop: {first['n']} fish from rest, {first['duration_s']:g} s, two-fin patterns uniform in the envs' "
         "default action ranges. Position error = end-position distance / max(full-model path, 0.25 m); heading "
         "error = end heading difference.", "",
-        "## Targets (issue 12)", "", "| check | measured | target | met |", "|---|---|---|---|",
+        "## Targets", "", "| check | measured | target | met |", "|---|---|---|---|",
         *(f"| {t['check']} | {_pct(t['measured'], 2)} | <= {_pct(t['target'], 0)} | {'yes' if t['met'] else 'no'} |"
           for t in results["targets"]),
         "", "## Open-loop scenarios", "",

@@ -1,4 +1,4 @@
-"""Validation of the averaged model against the full model (issue 3; ``python -m pectoral_gym.scaling validate``).
+"""Validation of the averaged model against the full model (``python -m pectoral_gym.scaling validate``).
 
 The averaged model with given scaling functions K is compared with the full
 blade-element model on fin patterns the identification never saw:

@@ -1,4 +1,4 @@
-"""How often a degraded radio or camera ends an episode on the emulated robot (issue 30's tolerance targets).
+"""How often a degraded radio or camera ends an episode on the emulated robot (the robot stack's tolerance targets).
 
 Runs the hand baseline through the whole robot stack (``HardwareFishEnv``: radio link, firmware rules,
 camera, tracker, observer, safety supervisor) against the emulated robot under each condition, and

@@ -14,7 +14,7 @@ each phase of the cycle, and the searched cycle's turn and fin work::
     PYTHONPATH=. python docs/validation/nmpc/spin_cycle.py                      # ~15 s: the shipped cycle
     PYTHONPATH=. python docs/validation/nmpc/spin_cycle.py --no-servo-limits --population 2000 --iterations 25
 
-Output of 2026-12-02, defaults: the shipped cycle (``SPIN_CYCLE`` holds it rounded to 0.1 deg), servo
+Output with the defaults: the shipped cycle (``SPIN_CYCLE`` holds it rounded to 0.1 deg), servo
 excess 0; full model 89-93 deg in 6 s from rest within 0.06-0.12 m, 92-100 deg from swimming at
 0.11 m/s (displacement up to 0.28 m, mostly the glide); the averaged model about 10 % more; fin work
 0.16 J. The second command finds the faster cycle of docs/notes/2026-12-01-nmpc-rounds.md ("Goal, fifth round"): full

@@ -1,4 +1,4 @@
-"""Step cost of this checkout against another one (e.g. a worktree of e912fb1), measured in one run.
+"""Step cost of this checkout against another one (e.g. a worktree of an earlier release), measured in one run.
 
 One long-lived worker process per checkout (its root first on ``PYTHONPATH``) builds the envs and
 warms them up (numba compiles or loads its cache); the parent then asks the two workers in

@@ -1,0 +1,133 @@
+"""No lab notebook in the product: issue numbers, commit hashes, lab dates and load averages stay out of the code,
+the command-line help, the docstrings and the user docs.
+
+A user has no issue tracker to look "issue 27" up in, no checkout of the commit a figure names, and no use for the
+day it was measured: the text says what a rule or a figure means and which command reproduces it. History belongs
+in ``CHANGELOG.md`` (by version) and in the dated research notes of ``docs/notes/``.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: What is scanned: source, docs and configuration (each path relative to the checkout).
+SUFFIXES = {".py", ".md", ".yml", ".yaml"}
+#: Folders never scanned: the dated research notes, and what is not the project's own text.
+SKIPPED_DIRS = {"docs/notes", "site", "build", "dist", "node_modules", "__pycache__"}
+#: Files that may carry history: the changelog names versions and dates; the dated studies of docs/validation are
+#: research notes kept beside their scripts (``docs/notes/index.md`` says so); this file holds the scanner's examples.
+SKIPPED_FILES = {"CHANGELOG.md", "docs/changelog.md", "docs/validation/fidelity/README.md",
+                 "docs/validation/speed/README.md", "docs/validation/step_path/README.md",
+                 "tests/test_no_lab_notebook.py"}
+#: Still to clean, in the round that edits ``hardware/`` (the list only shrinks; see ``test_allow_list_is_live``).
+ALLOWED_FOR_NOW = {
+    "hardware/env.py",
+    "hardware/deploy_checks.py",
+}
+#: Entries of the yaw "waveform" experiment, which leaves the core (with its reports and its section of
+#: docs/model.md) in the same round: ``(path or folder/, entry)``; the list only shrinks.
+WAVEFORM_FOR_NOW = {
+    ("docs/model.md", "2026-12-01"),
+    ("docs/model.md", "checkout of 9fbdbe0"),
+    ("docs/model.md", "issue 26"),
+    ("docs/validation/fidelity/waveform/", "issue 12"),
+}
+
+
+def _allowed(rel: str, hit: str) -> bool:
+    return rel in ALLOWED_FOR_NOW or any((rel == path or path.endswith("/") and rel.startswith(path)) and hit == entry
+                                         for path, entry in WAVEFORM_FOR_NOW)
+
+ISSUE = re.compile(r"\bissues? #?\d+", re.IGNORECASE)
+DATE = re.compile(r"\b20\d\d-\d\d-\d\d\b")
+#: A research note's file name is a link, not a lab date.
+NOTE_NAME = re.compile(r"notes/20\d\d-\d\d-\d\d-[\w.-]+\.md")
+_HEX = r"[0-9a-f]{7,40}"
+#: A commit: 7-40 lower-case hex characters (as git prints them), in backticks or after a word that names a revision.
+COMMIT = re.compile(rf"`({_HEX})`|\b(?i:commits?|main|checkout of|worktree of|tag|against|at)\s+\(?({_HEX})\b")
+LOAD = re.compile(r"\bload average", re.IGNORECASE)
+
+
+def _is_hash(token: str) -> bool:
+    """A hex word with both digits and letters (a bare number or word is not a hash)."""
+    return any(c.isdigit() for c in token) and any(c.isalpha() for c in token)
+
+
+def notebook_entries(text: str) -> list[str]:
+    """Every issue number, commit hash, ISO date and load average in ``text``, as the matched strings."""
+    found = [m.group(0) for m in ISSUE.finditer(text)]
+    found += [m.group(0) for m in DATE.finditer(NOTE_NAME.sub("notes/NOTE.md", text))]
+    found += [m.group(0) for m in COMMIT.finditer(text) if _is_hash(m.group(1) or m.group(2))]
+    found += [m.group(0) for m in LOAD.finditer(text)]
+    return found
+
+
+def scanned_files() -> list[Path]:
+    """The project's own text files (hidden folders, such as ``.venv`` and ``.git``, skipped)."""
+    files = []
+    for path in ROOT.rglob("*"):
+        rel = path.relative_to(ROOT)
+        if path.suffix not in SUFFIXES or not path.is_file():
+            continue
+        parts = rel.parts
+        if any(p.startswith(".") or p.endswith(".egg-info") for p in parts[:-1]):
+            continue
+        if any(rel.as_posix().startswith(d + "/") or d in parts[:-1] for d in SKIPPED_DIRS):
+            continue
+        if rel.as_posix() in SKIPPED_FILES:
+            continue
+        files.append(path)
+    return sorted(files)
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("fit from run logs (issue 27)", ["issue 27"]),
+    ("see Issues #4 and 5", ["Issues #4"]),
+    ("measured 2026-12-04 late", ["2026-12-04"]),
+    ("the [note](notes/2026-12-04-rate-rule.md)", []),
+    ("with the code of main 9cedcb7", ["main 9cedcb7"]),
+    ("a checkout of `81e1d0d`", ["`81e1d0d`"]),
+    ("a load average of 3-5", ["load average"]),
+    # not history: numbers, colours, digests, words
+    ("seed 1234567, colour `#1f77b4`, 0.2.0, `decaff`, `1234567`, `deadbeef`", []),
+    ("the broadcast address `000000000000FFFF`, at 100 Hz", []),
+    ("CleanRL's [issue tracker](https://github.com/vwxyzjn/cleanrl/issues/499)", []),
+])
+def test_the_scanner_finds_history_and_only_history(text: str, expected: list[str]) -> None:
+    assert notebook_entries(text) == expected
+
+
+def test_no_lab_notebook_in_code_and_docs() -> None:
+    offenders = []
+    for path in scanned_files():
+        rel = path.relative_to(ROOT).as_posix()
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            offenders += [f"{rel}:{number}: {hit!r}" for hit in notebook_entries(line) if not _allowed(rel, hit)]
+    assert not offenders, "history in code or docs (say what it means, or move it to a research note):\n" + \
+        "\n".join(offenders)
+
+
+def test_no_lab_notebook_in_help() -> None:
+    pytest.importorskip("stable_baselines3")  # the agents' commands import it to build their parsers
+    from pectoral_gym.tools.cli_reference import reference_markdown
+
+    hits = [f"{number}: {hit!r}" for number, line in enumerate(reference_markdown().splitlines(), 1)
+            for hit in notebook_entries(line)]
+    assert not hits, "history in the --help of a command (lines of the generated reference):\n" + "\n".join(hits)
+
+
+def test_allow_list_is_live() -> None:
+    """Each allowed file exists and still needs its place on the list (a cleaned file comes off it)."""
+    for rel in sorted(ALLOWED_FOR_NOW):
+        path = ROOT / rel
+        assert path.is_file(), f"{rel} is gone: take it off ALLOWED_FOR_NOW"
+        assert notebook_entries(path.read_text(encoding="utf-8")), f"{rel} is clean: take it off ALLOWED_FOR_NOW"
+    for where, entry in sorted(WAVEFORM_FOR_NOW):
+        paths = sorted((ROOT / where).glob("*.md")) if where.endswith("/") else [ROOT / where]
+        found = any(entry in notebook_entries(p.read_text(encoding="utf-8")) for p in paths if p.is_file())
+        assert found, f"{where} no longer has {entry!r}: take it off WAVEFORM_FOR_NOW"
