@@ -18,7 +18,7 @@ from pectoral_gym.model.kfunctions import K_NAMES, default_scaling_path
 from pectoral_gym.scaling.calibration import cli as calibration_cli
 from pectoral_gym.scaling.identification.grids import GRIDS, GridError, load_grid
 from pectoral_gym.scaling.validation import fidelity, validate, yaw_balance
-from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name, subcommands
+from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name, subcommands
 
 __all__ = ["build_parser", "main"]
 
@@ -68,7 +68,7 @@ def _identify_parser(sub) -> None:
     p.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
     p.add_argument("--seed", type=int, default=0, help="seed of the CV folds (default 0)")
     p.add_argument("--jobs", type=int, default=0, help="NMPC worker processes (default 0: all cores)")
-    deprecated_alias(p, "--quiet", p.add_argument("--no-progress", action="store_true", help="no progress bars"))
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.add_argument("--quick", action="store_true",
                    help="smoke run in seconds (tests, CI, trying the command): overrides --grid with the 12-pattern "
                         f"'quick' grid and sets {_QUICK_TEXT}; the file records metadata['quick'] (K not meant for "

@@ -180,6 +180,22 @@ def test_bench_against_a_folder_without_the_package_is_a_usage_error(tmp_path, c
     assert "holds no pectoral_gym package" in capsys.readouterr().err
 
 
+def test_bench_against_an_old_checkout_runs_its_bench(tmp_path):
+    """A checkout from before 0.2.0 knows the subcommand as ``bench`` only: the comparison runs that."""
+    from pectoral_gym.tools import bench_compare
+    package = tmp_path / "pectoral_gym"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "__main__.py").write_text(
+        "import argparse, json\n"
+        "parser = argparse.ArgumentParser()\n"
+        "parser.add_argument('command', choices=['bench'])\n"
+        "parser.add_argument('--json', action='store_true')\n"
+        "parser.parse_args()\n"
+        "print(json.dumps({'single_env': {'A': 7.0}}))\n")
+    assert bench_compare._run(tmp_path.resolve(), []) == {"single_env": {"A": 7.0}}
+
+
 @pytest.mark.skipif(shutil.which("pectoral-fish") is None, reason="console script not installed")
 def test_console_script_steady_json():
     proc = subprocess.run(["pectoral-fish", "steady", "--right", PATTERN, "--json"],

@@ -187,7 +187,7 @@ def _seeds(text: str) -> list[int]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``python -m pectoral_gym.agents.controllers.band_study``."""
-    from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
+    from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
 
     parser = argparse.ArgumentParser(
         prog=prog_name(None, "pectoral_gym.agents.controllers.band_study"), description=__doc__.split("\n\n")[0],
@@ -202,9 +202,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--substeps", type=int, default=5, help="band checks per control period")
     parser.add_argument("--kwargs", default="{}", help="controller keyword arguments (JSON)")
     parser.add_argument("--out", default=None, help="JSON file for the records and the summary")
-    summary_only = parser.add_argument("--summary-only", action="store_true",
-                                       help="print the summary only, not a line per episode")
-    deprecated_alias(parser, "--quiet", summary_only)
+    parser.add_argument("--summary-only", action="store_true", help="print the summary only, not a line per episode")
     return parser
 
 

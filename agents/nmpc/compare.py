@@ -99,7 +99,7 @@ def _seeds(text: str) -> list[int]:
 
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``python -m pectoral_gym.agents.nmpc.compare``."""
-    from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
+    from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
 
     parser = argparse.ArgumentParser(
         prog=prog_name(None, "pectoral_gym.agents.nmpc.compare"), description=__doc__.split("\n\n")[0],
@@ -112,8 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--seeds", default="100-119", help="'A-B' or 'a,b,c' (default %(default)s)")
     parser.add_argument("--env", default="full", choices=list(_ENVS))
     parser.add_argument("--task", default="goal", choices=("goal", "track"))
-    deprecated_alias(parser, "--max-steps", parser.add_argument(
-        "--max-episode-steps", dest="max_steps", type=int, default=240, metavar="N", help="steps per episode"))
+    parser.add_argument("--max-episode-steps", dest="max_steps", type=int, default=240, metavar="N",
+                        help="steps per episode")
     parser.add_argument("--failed", action="store_true", help="list the unsuccessful episodes of each variant")
     return parser
 

@@ -40,7 +40,7 @@ import numpy as np
 
 from pectoral_gym.agents.studies.benchmark_report import plot_report, to_markdown, write_outputs
 from pectoral_gym.agents.studies.deployment import ROBOT_CONDITIONS, ROBOT_CONTROLLERS, robot_cells
-from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
+from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
 
 __all__ = ["ALL_ENVS", "ENVS", "PRESETS", "VERSIONS", "BenchmarkSettings", "build_parser", "env_id", "main",
            "plot_report", "run_benchmark", "to_markdown", "write_outputs"]
@@ -321,18 +321,14 @@ def build_parser() -> argparse.ArgumentParser:
     size.add_argument("--full", action="store_const", const="full", dest="preset",
                       help="the real table: 100 episodes per cell (NMPC: 100 goal, 10 track)")
     parser.add_argument("--policy", nargs="+", default=[], metavar="RUN", help="trained policies (run folder or .zip)")
-    controllers = parser.add_argument("--controller", nargs="*", dest="controllers", default=list(BASELINE_NAMES),
-                                      choices=BASELINE_NAMES, metavar="NAME",
-                                      help=f"baseline controllers to include: {', '.join(BASELINE_NAMES)}")
-    deprecated_alias(parser, "--controllers", controllers)
-    envs = parser.add_argument("--env", nargs="+", dest="envs", default=list(ALL_ENVS), choices=list(ALL_ENVS),
-                               metavar="SETTING", help=f"model settings, one or more of {', '.join(ALL_ENVS)} "
-                               "(robot, robot+degraded: the robot stack on the emulated robot)")
-    deprecated_alias(parser, "--envs", envs)
-    version = parser.add_argument("--env-version", dest="version", choices=VERSIONS, default=VERSIONS[0],
-                                  help="registered env version of the simulated columns (v0: the tables measured "
-                                       "before v1)")
-    deprecated_alias(parser, "--version", version)
+    parser.add_argument("--controller", nargs="*", dest="controllers", default=list(BASELINE_NAMES),
+                        choices=BASELINE_NAMES, metavar="NAME",
+                        help=f"baseline controllers to include: {', '.join(BASELINE_NAMES)}")
+    parser.add_argument("--env", nargs="+", dest="envs", default=list(ALL_ENVS), choices=list(ALL_ENVS),
+                        metavar="SETTING", help=f"model settings, one or more of {', '.join(ALL_ENVS)} "
+                        "(robot, robot+degraded: the robot stack on the emulated robot)")
+    parser.add_argument("--env-version", dest="version", choices=VERSIONS, default=VERSIONS[0],
+                        help="registered env version of the simulated columns (v0: the tables measured before v1)")
     parser.add_argument("--tasks", nargs="+", default=list(TASKS), choices=TASKS, help="tasks")
     parser.add_argument("--episodes", type=int, help="override: episodes per cell (random, hand, policies)")
     parser.add_argument("--nmpc-episodes", type=int, nargs=2, metavar=("GOAL", "TRACK"),

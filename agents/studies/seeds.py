@@ -49,7 +49,7 @@ import numpy as np
 
 from pectoral_gym.agents.studies.seeds_report import plot_seeds, to_markdown
 from pectoral_gym.agents.studies.seeds_stats import aggregate, iqm
-from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
+from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
 
 __all__ = ["SETTINGS", "TARGETS", "aggregate", "build_parser", "iqm", "main", "run_seed", "run_seeds",
            "summarize_seeds", "train_seeds", "versioned"]
@@ -319,10 +319,8 @@ def build_parser() -> argparse.ArgumentParser:
                         help="seeds trained at once, each in its own process (1 torch thread each; default: 2, or "
                              "the number of CPUs if fewer)")
     parser.add_argument("--out", default="seeds_out", metavar="DIR", help="output folder")
-    env = parser.add_argument("--env", dest="train_env", choices=TRAIN_ENVS, default=TRAIN_ENV, metavar="ID",
-                              help=f"env trained on, one of {', '.join(TRAIN_ENVS)} (default: %(default)s, "
-                                   "as the demo)")
-    deprecated_alias(parser, "--train-env", env)
+    parser.add_argument("--env", dest="train_env", choices=TRAIN_ENVS, default=TRAIN_ENV, metavar="ID",
+                        help=f"env trained on, one of {', '.join(TRAIN_ENVS)} (default: %(default)s, as the demo)")
     parser.add_argument("--timesteps", type=float, metavar="N",
                         help="training steps (default: agents/hyperparams/ppo.yml)")
     parser.add_argument("--episodes", type=int, help="evaluation episodes per setting and seed (default 100, quick 4)")

@@ -54,7 +54,7 @@ from pectoral_gym.agents.studies.sweep_space import (
     trial_config,
 )
 from pectoral_gym.agents.training.config import parse_overrides
-from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
+from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
 
 __all__ = ["DEFAULT_SPACE", "build_parser", "main", "run_sweep", "tune_space", "warm_up"]
 
@@ -289,8 +289,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="hyperparameters of every trial (as pectoral_gym.agents.training.train; "
                              "the space's keys go over them)")
     parser.add_argument("--hyperparams-file", metavar="YAML", help="hyperparameter file (default: agents/hyperparams)")
-    deprecated_alias(parser, "--n-timesteps", parser.add_argument("--timesteps", type=float, metavar="N",
-                                                                  help="steps per trial (default: the file's)"))
+    parser.add_argument("--timesteps", type=float, metavar="N", help="steps per trial (default: the file's)")
     parser.add_argument("--eval-freq", type=float, help="steps in all between evaluations (default: the file's)")
     parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation (default: the file's)")
     parser.add_argument("--final-env", metavar="ID", help="evaluate each trial's best model on this env at the end "
@@ -310,8 +309,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--num-cpus", type=int, help="CPUs of the local Ray (default: all)")
     parser.add_argument("--cpus-per-trial", type=int, default=1, help="CPUs (torch and numba threads) per trial")
     parser.add_argument("--max-concurrent", type=int, default=0, help="trials at once (0: as the CPUs allow)")
-    deprecated_alias(parser, "--storage-path", parser.add_argument(
-        "--out", default="runs/sweeps", metavar="DIR", help="parent folder of the sweep folder (Tune's storage path)"))
+    parser.add_argument("--out", default="runs/sweeps", metavar="DIR",
+                        help="parent folder of the sweep folder (Tune's storage path)")
     parser.add_argument("--name", help="sweep folder name (default: <algo>_sweep_<stamp>)")
     parser.add_argument("--numba-cache-dir", help="numba cache of every worker, e.g. on a cluster's shared disk "
                                                   "(default: $NUMBA_CACHE_DIR, else numba's own: __pycache__ "

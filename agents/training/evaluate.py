@@ -37,7 +37,7 @@ from pectoral_gym.agents.training.results import EvaluationResult, format_table,
 from pectoral_gym.envs.layout import ACTION_SIZE
 from pectoral_gym.envs.observation import OBS_POSITION, OBS_SIZE, decode
 from pectoral_gym.model.spec import ENV_OPTIONS
-from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
+from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
 
 __all__ = [
     "DEFAULT_RANDOMIZATION",
@@ -269,9 +269,8 @@ def build_parser() -> argparse.ArgumentParser:
     who = parser.add_mutually_exclusive_group(required=True)
     who.add_argument("--policy", metavar="RUN|ZIP",
                      help="run folder of pectoral-train or an SB3 .zip")
-    controller = who.add_argument("--controller", metavar="NAME",
-                                  help="baseline controller: random, hand, nmpc or excite (identification runs)")
-    deprecated_alias(who, "--baseline", controller)
+    who.add_argument("--controller", metavar="NAME",
+                     help="baseline controller: random, hand, nmpc or excite (identification runs)")
     parser.add_argument("--env", default="PectoralFish-Full-v2", help="environment id")
     parser.add_argument("--task", choices=("goal", "track"), help="task (default: the run's task, else goal)")
     parser.add_argument("--randomize", nargs="?", const="default", metavar="JSON",

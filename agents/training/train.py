@@ -51,7 +51,7 @@ from pectoral_gym.agents.training.config import (
 from pectoral_gym.agents.training.run_files import keep_run_files
 from pectoral_gym.agents.training.zoo_format import algo_class
 from pectoral_gym.model.threads import pin_torch_threads
-from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
+from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
 
 __all__ = ["EVAL_SEED_OFFSET", "QUICK", "build_parser", "main", "make_run_dir", "train"]
 
@@ -287,14 +287,11 @@ def build_parser() -> argparse.ArgumentParser:
                         help="override hyperparameters (YAML values; nested keys with dots)")
     parser.add_argument("--env-kwargs", default="{}", metavar="JSON", help="environment arguments (JSON object)")
     parser.add_argument("--hyperparams-file", metavar="YAML", help="hyperparameter file (default: agents/hyperparams)")
-    timesteps = parser.add_argument("--timesteps", type=float, metavar="N",
-                                    help="training steps, a shortcut for --hyperparams n_timesteps=N "
-                                         "(default: the file's)")
-    deprecated_alias(parser, "--n-timesteps", timesteps)
+    parser.add_argument("--timesteps", type=float, metavar="N",
+                        help="training steps, a shortcut for --hyperparams n_timesteps=N (default: the file's)")
     parser.add_argument("--eval-freq", type=float, help="steps in all between evaluations, 0: none (default: file)")
     parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation (default: from the file)")
-    out = parser.add_argument("--out", default="runs", metavar="DIR", help="parent folder of the run folders")
-    deprecated_alias(parser, "--log-dir", out)
+    parser.add_argument("--out", default="runs", metavar="DIR", help="parent folder of the run folders")
     parser.add_argument("--run-name", help="run folder name (default: <algo>_<task>_seed<seed>_<stamp>)")
     parser.add_argument("--torch-threads", type=int, default=1, help="torch CPU threads")
     parser.add_argument("--device", default="cpu", help="torch device")

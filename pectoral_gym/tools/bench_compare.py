@@ -2,7 +2,7 @@
 
 A speed claim needs a reference measured in the same run: this machine is shared
 and its load changes by the minute. :func:`compare` runs ``python -m pectoral_gym
-bench --json`` (``bench``: the subcommand's old name, which older checkouts know too) alternately in this
+step-rate --json`` (``bench`` in a checkout too old to know that name) alternately in this
 checkout and in ``other`` (e.g. today's
 ``main`` in a worktree: ``git worktree add ../main-ref main``), ``rounds`` times
 each, and keeps each rate's best, so a burst of load slows both alike::
@@ -34,8 +34,11 @@ def checkout_root() -> Path:
 
 def _run(root: Path, bench_args: Sequence[str]) -> dict[str, Any]:
     env = dict(os.environ, PYTHONPATH=str(root) + os.pathsep + os.environ.get("PYTHONPATH", ""))
-    done = subprocess.run([sys.executable, "-m", "pectoral_gym", "bench", "--json", *bench_args], cwd=root, env=env,
-                          capture_output=True, text=True, check=False)
+    for name in ("step-rate", "bench"):  # checkouts before 0.2.0 know the subcommand as bench only
+        done = subprocess.run([sys.executable, "-m", "pectoral_gym", name, "--json", *bench_args], cwd=root, env=env,
+                              capture_output=True, text=True, check=False)
+        if not (done.returncode == 2 and "invalid choice" in done.stderr):
+            break
     lines = done.stdout.strip().splitlines()
     if not lines:
         raise RuntimeError(f"bench in {root} printed nothing (exit {done.returncode}): {done.stderr.strip()[-500:]}")

@@ -300,20 +300,17 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("patterns", help="illustrative swimming patterns, full vs averaged model",
                        description="Forward swim, right-fin turn and left-fin turn with both models "
                                    "from rest. Writes demo.png and demo.csv, prints a table of steady states. "
-                                   "(Was `pectoral-fish demo`, a deprecated name until 0.3.0; not the trained-policy "
-                                   "demo, which is pectoral-demo.)",
+                                   "(Not the trained-policy demo, which is pectoral-demo.)",
                        epilog=examples("pectoral-fish patterns", "pectoral-fish patterns --out patterns_out"))
     p.add_argument("--out", default="out", metavar="DIR", help="output directory (default: %(default)s)")
     p.set_defaults(handler=_cmd_demo, parser=p)
-    sub.add_deprecated("demo", "patterns")
 
     p = sub.add_parser("step-rate", help="step rates of the fish envs against CartPole-v1",
                        description="Single-env step rates through gymnasium.make (averaged, full, CartPole-v1) and "
                                    "native vector-env rates (averaged @ 4096, full @ 1024 envs, averaged with the PPO "
                                    "file's settings), new random actions every step, best of --repeats (round robin) "
                                    "after a warm-up, compared with the project's targets. --against DIR: side by side "
-                                   "with another checkout. (Was `pectoral-fish bench`, a deprecated name until 0.3.0; "
-                                   "the controllers' results table is pectoral-benchmark.)",
+                                   "with another checkout. (The controllers' results table is pectoral-benchmark.)",
                        epilog=examples("pectoral-fish step-rate", "pectoral-fish step-rate --quick --json",
                                        "pectoral-fish step-rate --against ../main --rounds 3"))
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -331,7 +328,6 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--rounds", type=int, metavar="N", default=3,
                    help="with --against: alternating runs per checkout, best kept (default: %(default)s)")
     p.set_defaults(handler=_cmd_bench, parser=p)
-    sub.add_deprecated("bench", "step-rate")
     return parser
 
 

@@ -27,7 +27,7 @@ and paths.png (measured against simulated paths). docs/calibration.md explains t
 def add_parser(sub) -> None:
     """The ``calibrate`` subcommand of ``pectoral-scaling``."""
     from pectoral_gym.scaling.calibration.fit import CalibrationSettings
-    from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias
+    from pectoral_gym.tools.cli_common import HelpFormatter
 
     defaults = CalibrationSettings()
     p = sub.add_parser(
@@ -55,7 +55,7 @@ def add_parser(sub) -> None:
     p.add_argument("--prior-sigma", type=float, default=defaults.prior_sigma,
                    help=f"prior standard deviation of each log-parameter (default {defaults.prior_sigma})")
     p.add_argument("--horizon", type=float, default=40.0, help="open-loop span of the held-out check [s] (default 40)")
-    deprecated_alias(p, "--no-plot", p.add_argument("--no-plots", action="store_true", help="no paths.png"))
+    p.add_argument("--no-plots", action="store_true", help="no paths.png")
 
 
 def _named_fields(path: Path) -> set[str]:

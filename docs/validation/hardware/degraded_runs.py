@@ -47,7 +47,6 @@ from pectoral_gym.hardware.env import HardwareFishEnv
 from pectoral_gym.hardware.radio.radioproxy import RadioProxy
 from pectoral_gym.hardware.vision.camera import open_source
 from pectoral_gym.hardware.vision.camerafaults import FaultyCamera
-from pectoral_gym.tools.cli_common import deprecated_alias
 
 CONDITIONS = ("clean", "bursty", "drops", "load")
 
@@ -174,8 +173,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, default=None, help="write the results as JSON here")
     parser.add_argument("--nice", type=int, default=DEFAULT_NICE,
                         help="the PC stack's nice value, as pectoral_gym.hardware.deploy sets it (default %(default)s)")
-    deprecated_alias(parser, "--quiet", parser.add_argument("--no-progress", action="store_true",
-                                                            help="no progress bars"))
+    parser.add_argument("--no-progress", action="store_true", help="no progress bars")
     args = parser.parse_args(argv)
     warning = raise_priority(args.nice)  # before any thread starts, as the deploy does
     if warning:

@@ -28,7 +28,6 @@ import pectoral_gym  # noqa: F401 - registers the ids
 from pectoral_gym.agents.baselines import make_baseline
 from pectoral_gym.agents.training.policy import load_policy
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FinBeat
-from pectoral_gym.tools.cli_common import deprecated_alias
 
 
 def starts(n: int, distance: float, seed: int) -> list[tuple[float, float, float, float, float]]:
@@ -51,9 +50,8 @@ def main() -> None:
     parser.add_argument("--distance", type=float, default=0.3, help="goal distance [m] (default %(default)s)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the starts (default %(default)s)")
     parser.add_argument("--settings", default="{}", help="JSON: NMPCSettings overrides (default %(default)s)")
-    controller = parser.add_argument("--controller", default="nmpc", choices=("nmpc", "hand"),
-                                     help="baseline controller (default %(default)s)")
-    deprecated_alias(parser, "--baseline", controller)
+    parser.add_argument("--controller", default="nmpc", choices=("nmpc", "hand"),
+                        help="baseline controller (default %(default)s)")
     parser.add_argument("--policy", help="a trained policy's run folder instead (the demo's: fin observation on)")
     args = parser.parse_args()
     # the shipped PPO file trains with the fins' stroke phase in the observation
