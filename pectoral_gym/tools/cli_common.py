@@ -219,5 +219,6 @@ MODULE_COMMANDS: dict[str, Command] = {c.name: c for c in (
     Command("python -m pectoral_gym.agents.controllers.band_study", "pectoral_gym.agents.controllers.band_study"),
     Command("python -m pectoral_gym.agents.studies.stack_gap", "pectoral_gym.agents.studies.stack_gap"),
     Command("python -m pectoral_gym.agents.studies.open_loop_gap", "pectoral_gym.agents.studies.open_loop_gap"),
+    Command("python -m pectoral_gym.tools.layout", "pectoral_gym.tools.layout"),
 )}
 
