@@ -8,6 +8,7 @@ in ``CHANGELOG.md`` (by version) and in the dated research notes of ``docs/notes
 
 from __future__ import annotations
 
+import os
 import re
 from pathlib import Path
 
@@ -43,14 +44,14 @@ def _allowed(rel: str, hit: str) -> bool:
     return rel in ALLOWED_FOR_NOW or any((rel == path or path.endswith("/") and rel.startswith(path)) and hit == entry
                                          for path, entry in WAVEFORM_FOR_NOW)
 
-ISSUE = re.compile(r"\bissues? #?\d+", re.IGNORECASE)
+ISSUE = re.compile(r"\bissues?\s+#?\d+", re.IGNORECASE)
 DATE = re.compile(r"\b20\d\d-\d\d-\d\d\b")
 #: A research note's file name is a link, not a lab date.
 NOTE_NAME = re.compile(r"notes/20\d\d-\d\d-\d\d-[\w.-]+\.md")
 _HEX = r"[0-9a-f]{7,40}"
 #: A commit: 7-40 lower-case hex characters (as git prints them), in backticks or after a word that names a revision.
 COMMIT = re.compile(rf"`({_HEX})`|\b(?i:commits?|main|checkout of|worktree of|tag|against|at)\s+\(?({_HEX})\b")
-LOAD = re.compile(r"\bload average", re.IGNORECASE)
+LOAD = re.compile(r"\bload\s+average", re.IGNORECASE)
 
 
 def _is_hash(token: str) -> bool:
@@ -58,30 +59,30 @@ def _is_hash(token: str) -> bool:
     return any(c.isdigit() for c in token) and any(c.isalpha() for c in token)
 
 
+def notebook_matches(text: str) -> list[tuple[int, str]]:
+    """Every issue number, commit hash, ISO date and load average in ``text``: ``(offset, matched string)``."""
+    undated = NOTE_NAME.sub(lambda m: "x" * len(m.group(0)), text)  # same offsets, no note names
+    found = [(m.start(), m.group(0)) for m in ISSUE.finditer(text)]
+    found += [(m.start(), m.group(0)) for m in DATE.finditer(undated)]
+    found += [(m.start(), m.group(0)) for m in COMMIT.finditer(text) if _is_hash(m.group(1) or m.group(2))]
+    found += [(m.start(), m.group(0)) for m in LOAD.finditer(text)]
+    return sorted(found)
+
+
 def notebook_entries(text: str) -> list[str]:
-    """Every issue number, commit hash, ISO date and load average in ``text``, as the matched strings."""
-    found = [m.group(0) for m in ISSUE.finditer(text)]
-    found += [m.group(0) for m in DATE.finditer(NOTE_NAME.sub("notes/NOTE.md", text))]
-    found += [m.group(0) for m in COMMIT.finditer(text) if _is_hash(m.group(1) or m.group(2))]
-    found += [m.group(0) for m in LOAD.finditer(text)]
-    return found
+    """The matched strings of :func:`notebook_matches`, in the order they occur."""
+    return [hit for _, hit in notebook_matches(text)]
 
 
 def scanned_files() -> list[Path]:
-    """The project's own text files (hidden folders, such as ``.venv`` and ``.git``, skipped)."""
+    """The project's own text files (hidden folders, such as ``.venv`` and ``.git``, not entered)."""
     files = []
-    for path in ROOT.rglob("*"):
-        rel = path.relative_to(ROOT)
-        if path.suffix not in SUFFIXES or not path.is_file():
-            continue
-        parts = rel.parts
-        if any(p.startswith(".") or p.endswith(".egg-info") for p in parts[:-1]):
-            continue
-        if any(rel.as_posix().startswith(d + "/") or d in parts[:-1] for d in SKIPPED_DIRS):
-            continue
-        if rel.as_posix() in SKIPPED_FILES:
-            continue
-        files.append(path)
+    for folder, dirs, names in os.walk(ROOT):
+        rel_folder = Path(folder).relative_to(ROOT)
+        dirs[:] = [d for d in dirs if not d.startswith(".") and not d.endswith(".egg-info")
+                   and d not in SKIPPED_DIRS and (rel_folder / d).as_posix() not in SKIPPED_DIRS]
+        files += [Path(folder) / name for name in names if Path(name).suffix in SUFFIXES
+                  and (rel_folder / name).as_posix() not in SKIPPED_FILES]
     return sorted(files)
 
 
@@ -93,6 +94,7 @@ def scanned_files() -> list[Path]:
     ("with the code of main 9cedcb7", ["main 9cedcb7"]),
     ("a checkout of `81e1d0d`", ["`81e1d0d`"]),
     ("a load average of 3-5", ["load average"]),
+    ("to issue\n    29's degraded one", ["issue\n    29"]),
     # not history: numbers, colours, digests, words
     ("seed 1234567, colour `#1f77b4`, 0.2.0, `decaff`, `1234567`, `deadbeef`", []),
     ("the broadcast address `000000000000FFFF`, at 100 Hz", []),
@@ -106,8 +108,9 @@ def test_no_lab_notebook_in_code_and_docs() -> None:
     offenders = []
     for path in scanned_files():
         rel = path.relative_to(ROOT).as_posix()
-        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
-            offenders += [f"{rel}:{number}: {hit!r}" for hit in notebook_entries(line) if not _allowed(rel, hit)]
+        text = path.read_text(encoding="utf-8")
+        offenders += [f"{rel}:{text.count(chr(10), 0, offset) + 1}: {hit!r}" for offset, hit in notebook_matches(text)
+                      if not _allowed(rel, hit)]
     assert not offenders, "history in code or docs (say what it means, or move it to a research note):\n" + \
         "\n".join(offenders)
 
@@ -116,8 +119,8 @@ def test_no_lab_notebook_in_help() -> None:
     pytest.importorskip("stable_baselines3")  # the agents' commands import it to build their parsers
     from pectoral_gym.tools.cli_reference import reference_markdown
 
-    hits = [f"{number}: {hit!r}" for number, line in enumerate(reference_markdown().splitlines(), 1)
-            for hit in notebook_entries(line)]
+    text = reference_markdown()
+    hits = [f"{text.count(chr(10), 0, offset) + 1}: {hit!r}" for offset, hit in notebook_matches(text)]
     assert not hits, "history in the --help of a command (lines of the generated reference):\n" + "\n".join(hits)
 
 

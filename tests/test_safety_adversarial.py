@@ -80,7 +80,7 @@ def test_pause_outside_step_stops_within_the_lease(pause):
         assert stopped - received <= pr.DEFAULT_LEASE + 0.011  # exact on the emulated clock
         assert stopped - t_call <= 1.0
         nose = max(s[0] + 0.5 * P.body_length * math.cos(s[2]) for _, s, *_ in robot.trace)
-        assert nose < TANK_LENGTH  # issue: 1.85 -> 3.45 m through the wall line at 2.30 m
+        assert nose < TANK_LENGTH  # before the fix: 1.85 -> 3.45 m through the wall line at 2.30 m
 
 
 def test_exception_out_of_step_stops_the_fins():
@@ -274,7 +274,7 @@ def test_peak_fin_rate_over_random_command_sequences_stays_within_the_limit():
 
 
 def test_alternating_bias_policy_stays_within_the_limit():
-    # Issue: bias 45/135 deg alternating each step reached 41.1 rad/s on the transitional strokes.
+    # Before the fix: bias 45/135 deg alternating each step reached 41.1 rad/s on the transitional strokes.
     lo, hi = [math.radians(45), math.radians(30), 0.5, 5.0], [math.radians(135), math.radians(30), 0.5, 5.0]
     robot = _drive_emulator([np.array([lo, lo]) if k % 2 else np.array([hi, hi]) for k in range(40)], [0.5] * 40)
     assert max(p.max() for _, _, _, p, _ in robot.trace) <= ServoLimits().max_speed + 1e-9

@@ -199,7 +199,7 @@ def _one_step_then_silence(robot, proxy, link, pass_after, deadline=True):
 
 
 def test_a_late_first_copy_never_runs_past_the_lease():
-    # The case: 300 ms latency, the first copies lost, a late keep-alive copy starts the command, the
+    # The case found: 300 ms latency, the first copies lost, a late keep-alive copy starts the command, the
     # later copies feed the watchdog, the PC's STOP is lost. v2 ran it for a full lease from that late
     # receipt: 1.25 s after the step here.
     with EmulatedRobot(speed=SPEED) as robot, RadioProxy(robot.url, latency=0.3, speed=SPEED) as proxy:

@@ -39,8 +39,8 @@ __all__ = ["DEGRADED", "NOMINAL", "ROBOT_CONDITIONS", "ROBOT_CONTROLLERS", "cond
            "robot_cells", "run_robot_stack"]
 
 NOMINAL = RigConditions()
-#: The issue's degraded target conditions: radio 10 % loss each way and 100 ms one-way latency, camera 10 %
-#: frame drops, camera pose noise 5 mm / 2 deg (standard deviations).
+#: The degraded conditions of the robot stack's targets: radio 10 % loss each way and 100 ms one-way latency, camera
+#: 10 % frame drops, camera pose noise 5 mm / 2 deg (standard deviations).
 DEGRADED = RigConditions(radio_latency=0.1, radio_loss=0.1, camera_drop=0.1, pose_noise=(0.005, math.radians(2.0)))
 #: Benchmark column label -> conditions of the emulated radio and camera.
 ROBOT_CONDITIONS = {"robot": NOMINAL, "robot+degraded": DEGRADED}

@@ -12,7 +12,7 @@ times each run to 0.95 success on the full model on a third set of episodes.
 
 Across seeds, per setting: the interquartile mean (``scipy.stats.trim_mean(x, 0.25)``, the mean of the
 middle half of the seeds, as in rliable) with a percentile-bootstrap interval over seeds
-(``scipy.stats.bootstrap``), the mean, min, median, max, and how many seeds meet the issue's targets
+(``scipy.stats.bootstrap``), the mean, min, median, max, and how many seeds meet the targets
 (full >= 0.95, full+rand >= 0.90, averaged minus full <= 0.03). With a handful of seeds the bootstrap
 interval is coarse: it can only take values that subsets of these seeds give. The statistics are
 :mod:`pectoral_gym.agents.studies.seeds_stats` (``iqm`` and ``aggregate``, re-exported here).

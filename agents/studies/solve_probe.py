@@ -32,7 +32,7 @@ __all__ = ["FULL_ID", "PROBE_SEED", "REPORT_SEED", "SOLVED", "SolveProbe", "chec
 
 FULL_ID = "PectoralFish-Full-v2"  # the full model in the demo's training version (seeds.TRAIN_ENV)
 PROBE_SEED = 20_000  # probe episode k is reset with PROBE_SEED + k
-SOLVED = 0.95  # the issue's target: success on the full model
+SOLVED = 0.95  # the target: success on the full model
 
 
 def check_held_out(train_seeds: list[int], n_envs: int, eval_episodes: int, probe_episodes: int,

@@ -39,8 +39,8 @@ class SensingConfig:
     """The simulated camera and observer of ``EnvConfig.sensing`` (SI units; ranges drawn per episode).
 
     Each range is ``(low, high)`` (a number ``v`` means ``(v, v)``); every reset draws each level uniformly
-    from its range. The defaults span the emulated robot's camera from clean (:data:`CLEAN_CAMERA`) to issue
-    29's degraded one (:data:`DEGRADED_CAMERA`), with a capture-to-delivery latency up to 0.1 s.
+    from its range. The defaults span the emulated robot's camera from clean (:data:`CLEAN_CAMERA`) to the
+    degraded one of the robot stack's targets (:data:`DEGRADED_CAMERA`), with a capture-to-delivery latency up to 0.1 s.
 
     Attributes:
         frame_rate: Camera frames per second [1/s] (the robot env's ``frame_period`` is its inverse).

@@ -50,7 +50,7 @@ class Camera:
     drop: float = 0.0
 
 
-#: The issue's degraded camera: 5 mm, 2 deg, 10 % of the frames lost.
+#: The degraded camera of the calibration's targets: 5 mm, 2 deg, 10 % of the frames lost.
 DEGRADED = Camera(position_noise=0.005, heading_noise=math.radians(2.0), drop=0.1)
 
 
