@@ -223,7 +223,7 @@ class PectoralFishEnv(gym.Env):
     def __init__(self, *, render_mode: str | None = None, **kwargs: Any):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
-        self.config = EnvConfig(**kwargs)  # the defaults and checks of every setting live there
+        self.config = EnvConfig.recommended(**kwargs)  # the latest version's settings, then the arguments
         # One frame per control period, so a recorded video plays in real time.
         self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.config.control_period}
         self.render_mode = render_mode
