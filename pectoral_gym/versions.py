@@ -36,7 +36,7 @@ from pectoral_gym.model.spec import (
 from pectoral_gym.model.tank import ROBOT_STOP_RULE, StopRule
 
 __all__ = ["ENV_VERSIONS", "LATEST", "LATEST_AVERAGED", "LATEST_FULL", "MEASUREMENT_MARGIN", "ROBOT", "SIMULATION",
-           "EnvVersion", "RobotReadiness", "latest_settings"]
+           "SIMULATION_IDS", "EnvVersion", "RobotReadiness", "latest_settings"]
 
 #: Clearance [m] the robot-ready envs' band keeps on top of the robot's rule: the robot's supervisor judges the band
 #: on a least-squares speed from camera poses plus 2 standard errors (>= 2 x 5 mm / 1.58 s = 6.3 mm/s over its 1 s
@@ -121,7 +121,7 @@ ENV_VERSIONS: MappingProxyType[str, EnvVersion] = MappingProxyType({
     "PectoralFish-Full-v2": EnvVersion(_FULL_V1.model, _FULL_V1.robot, same_as="PectoralFish-Full-v1"),
     "PectoralFish-Averaged-v2": EnvVersion(AVERAGED, ROBOT),
 })
-for _env_id, _version in ENV_VERSIONS.items():
+for _env_id, _version in ENV_VERSIONS.items():  # the relations the names state hold
     if _version.same_as is not None and ENV_VERSIONS[_version.same_as].settings() != _version.settings():
         raise AssertionError(f"{_env_id} is declared the same as {_version.same_as} but its settings differ")
 
@@ -130,6 +130,11 @@ LATEST: MappingProxyType[str, str] = MappingProxyType({"full": "PectoralFish-Ful
                                                        "averaged": "PectoralFish-Averaged-v2"})
 LATEST_FULL = LATEST["full"]
 LATEST_AVERAGED = LATEST["averaged"]
+#: model -> its simulation-only id (:data:`SIMULATION`: no stopping band ends an episode, no servo limit): for the
+#: studies that check the band themselves and for the measurements recorded on it (the env throughput, the NMPC's
+#: development rounds), never a tool's default for training or evaluation.
+SIMULATION_IDS: MappingProxyType[str, str] = MappingProxyType({"full": "PectoralFish-Full-v0",
+                                                               "averaged": "PectoralFish-Averaged-v0"})
 
 
 def latest_settings(model: str) -> dict[str, Any]:
@@ -141,3 +146,8 @@ def latest_settings(model: str) -> dict[str, Any]:
     if model not in LATEST:
         raise ValueError(f"model must be one of {tuple(LATEST)}, got {model!r}")
     return ENV_VERSIONS[LATEST[model]].settings()
+for _model, _env_id in {**LATEST, **SIMULATION_IDS}.items():
+    if ENV_VERSIONS[_env_id].model.model != _model:
+        raise AssertionError(f"{_env_id} is not a {_model} model id")
+if any(ENV_VERSIONS[_env_id].robot != SIMULATION for _env_id in SIMULATION_IDS.values()):
+    raise AssertionError("a simulation-only id is robot-ready")

@@ -50,17 +50,16 @@ import numpy as np
 from pectoral_gym.agents.studies.seeds_report import plot_seeds, to_markdown
 from pectoral_gym.agents.studies.seeds_stats import aggregate, iqm
 from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, examples, prog_name
+from pectoral_gym.versions import ENV_VERSIONS, LATEST_AVERAGED, LATEST_FULL
 
 __all__ = ["SETTINGS", "TARGETS", "aggregate", "build_parser", "iqm", "main", "run_seed", "run_seeds",
            "summarize_seeds", "train_seeds", "versioned"]
 
-TRAIN_ENV = "PectoralFish-Averaged-v2"
-# label -> (env id, randomised) of the v2 envs; as pectoral_gym.agents.studies.benchmark.ENVS. versioned() gives
+TRAIN_ENV = LATEST_AVERAGED
+# label -> (env id, randomised) of the latest envs; as pectoral_gym.agents.studies.benchmark.ENVS. versioned() gives
 # another version's.
-SETTINGS = {"averaged": ("PectoralFish-Averaged-v2", False), "full": ("PectoralFish-Full-v2", False),
-            "full+rand": ("PectoralFish-Full-v2", True)}
-TRAIN_ENVS = ("PectoralFish-Averaged-v0", "PectoralFish-Full-v0", "PectoralFish-Averaged-v1",
-              "PectoralFish-Full-v1", "PectoralFish-Averaged-v2", "PectoralFish-Full-v2")
+SETTINGS = {"averaged": (LATEST_AVERAGED, False), "full": (LATEST_FULL, False), "full+rand": (LATEST_FULL, True)}
+TRAIN_ENVS = tuple(sorted(ENV_VERSIONS, key=lambda env_id: (env_id.rsplit("-", 1)[1], env_id)))
 
 
 def versioned(env_id: str, train_env: str) -> str:
