@@ -26,6 +26,7 @@ from pectoral_gym.model.spec import (
     AVERAGED,
     AVERAGED_ENV,
     AVERAGED_PPO,
+    ENV_DEFAULTS,
     FULL_FAST,
     FULL_REFERENCE,
     AveragedSpec,
@@ -103,8 +104,12 @@ class EnvVersion:
             raise ValueError(f"{self.model!r} is not a model an env runs (its options resolve to another spec)")
 
     def settings(self) -> dict[str, Any]:
-        """Every :class:`~pectoral_gym.envs.config.EnvConfig` argument a version sets (the rest are its defaults)."""
-        return {"model": self.model.model, **env_options(self.model), **self.robot.settings()}
+        """Every :class:`~pectoral_gym.envs.config.EnvConfig` argument a version sets (the rest are its defaults).
+
+        Both models' options (the other model's at their defaults), so that the arguments alone name the version,
+        whatever defaults they are applied on (:meth:`~pectoral_gym.envs.config.EnvConfig.recommended`).
+        """
+        return {"model": self.model.model, **ENV_DEFAULTS, **env_options(self.model), **self.robot.settings()}
 
 
 _FULL_V1 = EnvVersion(FULL_FAST, ROBOT)
