@@ -71,6 +71,13 @@ def test_env_classes_without_a_version_are_the_latest_ids():
         PectoralFishEnv(model="blade")
 
 
+def test_each_version_is_the_spec_its_env_options_resolve_to():
+    from pectoral_gym.model.spec import env_options, env_spec
+
+    for version in ENV_VERSIONS.values():
+        assert env_spec(version.model.model, **env_options(version.model)) == version.model
+
+
 def test_a_version_takes_only_a_model_an_env_runs():
     with pytest.raises(ValueError, match="not a model an env runs"):
         EnvVersion(AVERAGED_PAPER, ROBOT)  # the Taylor forcing is no env option
