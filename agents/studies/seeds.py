@@ -312,7 +312,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=examples("pectoral-seeds --quick --seeds 0 1 --out seeds_quick",
                         "pectoral-seeds --seeds 100 101 102 103 --jobs 2 --out tune_base",
                         "pectoral-seeds --seeds 0 1 --timesteps 2e5 --episodes 50 --hyperparams ent_coef=0.01",
-                        "pectoral-seeds --env PectoralFish-Full-v2 --timesteps 1.6e6"))
+                        f"pectoral-seeds --env {LATEST_FULL} --timesteps 1.6e6"))
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4], help="training seeds")
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
                         help="seeds trained at once, each in its own process (1 torch thread each; default: 2, or "
