@@ -9,6 +9,7 @@ import pytest
 import pectoral_gym  # noqa: F401  (registers the ids)
 from pectoral_gym import FishParams
 from pectoral_gym.envs import PectoralFishVectorEnv
+from pectoral_gym.registration import registered_settings
 
 INFO_KEYS = {"reward_progress", "reward_goal", "reward_wall", "reward_energy", "reward_time", "distance",
              "is_success"}
@@ -34,7 +35,8 @@ def test_torchrl_wraps_the_native_vector_env(mode):
     from torchrl.envs import GymWrapper
     from torchrl.envs.utils import check_env_specs
 
-    venv = PectoralFishVectorEnv(3, model="averaged", autoreset_mode=mode, max_episode_steps=4)
+    venv = PectoralFishVectorEnv(3, **registered_settings("PectoralFish-Averaged-v0",
+                                                          dict(autoreset_mode=mode, max_episode_steps=4)))
     env = GymWrapper(venv)
     assert tuple(env.batch_size) == (3,)
     check_env_specs(env)

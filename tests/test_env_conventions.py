@@ -13,6 +13,7 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 import pectoral_gym  # noqa: F401  (registers the ids)
 from pectoral_gym import FishParams
 from pectoral_gym.envs import PectoralFishEnv, PectoralFishVectorEnv
+from pectoral_gym.registration import registered_settings
 
 IDS = ("PectoralFish-Averaged-v0", "PectoralFish-Full-v0")
 TASKS = ("goal", "track")
@@ -42,7 +43,7 @@ def test_reset_info_has_the_step_keys_zero_terms_and_the_real_distance(env_id, t
 
 @pytest.mark.parametrize("task", TASKS)
 def test_vector_reset_info_has_the_step_keys(task):
-    venv = PectoralFishVectorEnv(3, model="averaged", task=task)
+    venv = PectoralFishVectorEnv(3, **registered_settings("PectoralFish-Averaged-v0", dict(task=task)))
     obs, info = venv.reset(seed=0)
     _, _, _, _, step_info = venv.step(np.zeros((3, 8)))
     assert set(info) == set(step_info)
@@ -90,7 +91,8 @@ def test_render_fps_is_the_control_rate():
 
 
 def test_observation_bounds_scale_with_the_settings_and_hold_on_extreme_rollouts():
-    env = PectoralFishEnv(model="full", control_period=1.0, ref_speed=0.05, task="track")
+    env = PectoralFishEnv(**registered_settings("PectoralFish-Full-v0",
+                                                dict(control_period=1.0, ref_speed=0.05, task="track")))
     low, high = env.observation_space.low, env.observation_space.high
     assert low[0] == -2.0 and high[0] == pytest.approx(2.30 + 2.0)  # margin 2 m/s x 1 s
     assert high[9] == pytest.approx(0.0505)
@@ -148,7 +150,8 @@ def test_autoreset_modes_equal_sync_vector_env(mode, task):
 
 def test_disabled_autoreset_equals_sync_vector_env_and_refuses_to_step_a_finished_env():
     n, kwargs = 2, {"max_episode_steps": 3}
-    ours = PectoralFishVectorEnv(n, model="averaged", autoreset_mode="Disabled", **kwargs)
+    ours = PectoralFishVectorEnv(n, **registered_settings("PectoralFish-Averaged-v0",
+                                                          dict(autoreset_mode="Disabled", **kwargs)))
     sync = _sync(AutoresetMode.DISABLED, n, **kwargs)
     assert ours.metadata["autoreset_mode"] is AutoresetMode.DISABLED
     np.testing.assert_array_equal(ours.reset(seed=0)[0], sync.reset(seed=0)[0])

@@ -10,10 +10,10 @@ from gymnasium.utils.env_checker import check_env
 
 import pectoral_gym  # noqa: F401  (registers the ids)
 from pectoral_gym import FishParams
-from pectoral_gym.envs import PectoralFishEnv
+from pectoral_gym.envs import EnvConfig, PectoralFishEnv
 from pectoral_gym.model.params import TANK_LENGTH as TANK_X
 from pectoral_gym.model.params import TANK_WIDTH as TANK_Y
-from pectoral_gym.registration import ENV_IDS
+from pectoral_gym.registration import ENV_IDS, registered_settings
 
 IDS = ["PectoralFish-Averaged-v0", "PectoralFish-Full-v0"]
 ALL_IDS = sorted(ENV_IDS)
@@ -73,7 +73,8 @@ def test_registry_and_spaces():
     for env_id, model in zip(IDS, ["averaged", "full"], strict=True):
         spec = gym.spec(env_id)
         assert spec.max_episode_steps == 240
-        assert spec.kwargs == {"model": model}
+        # The id states every setting of its version; those of v0 are EnvConfig's own defaults.
+        assert spec.kwargs["model"] == model and EnvConfig(**spec.kwargs) == EnvConfig(model=model)
         assert spec.vector_entry_point == "pectoral_gym.envs.vector:PectoralFishVectorEnv"
         env = gym.make(env_id)
         assert env.action_space == gym.spaces.Box(-1, 1, (8,), np.float32)
@@ -205,7 +206,7 @@ def test_actions_are_clipped_and_reported_in_the_observation():
 
 
 def test_action_maps_linearly_to_the_ranges():
-    env = PectoralFishEnv(model="averaged")
+    env = PectoralFishEnv(**registered_settings("PectoralFish-Averaged-v0"))
     env.reset(seed=0)
     env.step(np.array([-1, 1, 0, 0.5, 1, -1, 1, -1], np.float32))
     right, left = env.fin_patterns
@@ -241,11 +242,11 @@ def test_invalid_settings_raise(kwargs):
 
 def test_unknown_randomize_field_lists_the_valid_names():
     with pytest.raises(ValueError, match="body_mass"):
-        PectoralFishEnv(model="averaged", randomize={"fin_sapn": 0.1})
+        PectoralFishEnv(**registered_settings("PectoralFish-Averaged-v0", dict(randomize={"fin_sapn": 0.1})))
 
 
 def test_averaged_scaling_none_is_accepted():
-    env = PectoralFishEnv(model="averaged", scaling="none")
+    env = PectoralFishEnv(**registered_settings("PectoralFish-Averaged-v0", dict(scaling="none")))
     env.reset(seed=0)
     env.step(env.action_space.sample())
 
@@ -276,7 +277,7 @@ def test_goal_reached_terminates_with_success():
 
 @pytest.mark.parametrize("state", [[1.0, 0.5, 0.0], [1.0, 0.5, 0.0, 0.1, 0.0, np.nan]])
 def test_set_fish_state_refuses_bad_states(state):
-    env = PectoralFishEnv(model="averaged")
+    env = PectoralFishEnv(**registered_settings("PectoralFish-Averaged-v0"))
     env.reset(seed=0)
     before = env.fish_state
     with pytest.raises(ValueError, match="6 finite numbers"):
@@ -285,7 +286,7 @@ def test_set_fish_state_refuses_bad_states(state):
 
 
 def test_goal_task_start_and_goal_geometry():
-    env = PectoralFishEnv(model="averaged")
+    env = PectoralFishEnv(**registered_settings("PectoralFish-Averaged-v0"))
     for seed in range(40):
         obs, _ = env.reset(seed=seed)
         x, y = obs[0], obs[1]
@@ -300,7 +301,7 @@ def test_goal_task_start_and_goal_geometry():
 
 
 def test_track_task_reference_moves_at_ref_speed():
-    env = PectoralFishEnv(model="averaged", task="track", ref_speed=0.05)
+    env = PectoralFishEnv(**registered_settings("PectoralFish-Averaged-v0", dict(task="track", ref_speed=0.05)))
     for seed in range(20):
         obs, _ = env.reset(seed=seed)
         assert math.hypot(obs[7], obs[8]) <= 0.1 + 1e-6
@@ -335,7 +336,7 @@ def test_truncation_after_max_episode_steps():
 
 def test_domain_randomisation_per_episode_and_reproducible():
     widths = {"drag_coef": 0.3, "body_length": 0.2, "fin_span": 0.1}
-    env = PectoralFishEnv(model="averaged", randomize=widths)
+    env = PectoralFishEnv(**registered_settings("PectoralFish-Averaged-v0", dict(randomize=widths)))
     base = FishParams()
     env.reset(seed=11)
     p1 = env.fish_params
@@ -350,21 +351,21 @@ def test_domain_randomisation_per_episode_and_reproducible():
     assert env.fish_constants.body_length == p2.body_length
     env.reset(seed=11)
     assert env.fish_params == p1
-    plain = PectoralFishEnv(model="averaged")
+    plain = PectoralFishEnv(**registered_settings("PectoralFish-Averaged-v0"))
     plain.reset(seed=11)
     assert plain.fish_params == base
 
 
 def test_custom_params_are_used():
     params = FishParams(body_length=0.3)
-    env = PectoralFishEnv(model="full", params=params)
+    env = PectoralFishEnv(**registered_settings("PectoralFish-Full-v0", dict(params=params)))
     env.reset(seed=0)
     assert env.fish_params is params
     assert env.fish_constants.body_length == 0.3
 
 
 def test_render_without_mode_warns():
-    env = PectoralFishEnv(model="averaged")
+    env = PectoralFishEnv(**registered_settings("PectoralFish-Averaged-v0"))
     env.reset(seed=0)
     with pytest.warns(UserWarning, match="render_mode"):
         assert env.render() is None

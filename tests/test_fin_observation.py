@@ -17,6 +17,7 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 import pectoral_gym  # noqa: F401  (registers the ids)
 from pectoral_gym.envs import PectoralFishEnv, PectoralFishVectorEnv
 from pectoral_gym.envs.observation import FIN_OBS_SIZE, OBS_FINS, OBS_SIZE, decode
+from pectoral_gym.registration import registered_settings
 
 IDS = ("PectoralFish-Averaged-v0", "PectoralFish-Full-v0")
 BIAS, AMPLITUDE, PERIOD, RATIO = math.radians(80.0), math.radians(20.0), 1.0, 3.0  # d1 = 0.25 s, d2 = 0.75 s
@@ -103,8 +104,8 @@ def test_checkers_pass_with_the_fin_block(env_id):
 
 
 def test_vector_env_fin_block_matches_the_single_env():
-    vec = PectoralFishVectorEnv(num_envs=3, model="averaged", observe_fins=True)
-    single = PectoralFishEnv(model="averaged", observe_fins=True)
+    vec = PectoralFishVectorEnv(num_envs=3, **registered_settings("PectoralFish-Averaged-v0", dict(observe_fins=True)))
+    single = PectoralFishEnv(**registered_settings("PectoralFish-Averaged-v0", dict(observe_fins=True)))
     vec_obs, _ = vec.reset(seed=[7, 8, 9])
     obs, _ = single.reset(seed=8)
     action = np.full(8, 0.3, dtype=np.float32)

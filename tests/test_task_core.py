@@ -34,6 +34,7 @@ from pectoral_gym.envs.vector import PectoralFishVectorEnv
 from pectoral_gym.hardware.emulator import EmulatedRobot
 from pectoral_gym.hardware.env import HardwareFishEnv
 from pectoral_gym.hardware.safety.rules import SafetyConfig
+from pectoral_gym.registration import registered_settings
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 
@@ -200,7 +201,7 @@ def test_a_registered_task_is_a_task_of_the_simulated_envs(hold):
     drawn.reset(seed=2)
     assert drawn.render().shape[2] == 3  # a target without a reference ellipse is drawn as a goal
     drawn.close()
-    venv = PectoralFishVectorEnv(3, model="averaged", task="hold")
+    venv = PectoralFishVectorEnv(3, **registered_settings("PectoralFish-Averaged-v0", dict(task="hold")))
     _, vinfo = venv.reset(seed=2)
     assert list(vinfo) == [k for key in HOLD_KEYS for k in (key, "_" + key)]
     _, rewards, _, _, vinfo = venv.step(np.zeros((3, 8)))

@@ -8,6 +8,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv, VecCheckNan, VecMonito
 import pectoral_gym  # noqa: F401 - registers the ids
 from pectoral_gym.agents.training.vec_adapter import FishVecEnv, make_fish_vec_env
 from pectoral_gym.envs import PectoralFishVectorEnv
+from pectoral_gym.registration import registered_settings
 
 ENV = "PectoralFish-Averaged-v0"
 
@@ -49,9 +50,9 @@ def test_same_as_dummy_vec_env_of_single_envs(task):
 
 def test_terminal_observation_is_the_last_observation_of_the_episode():
     n, seed = 4, 0
-    native = PectoralFishVectorEnv(num_envs=n, model="averaged", max_episode_steps=6)
-    ours = FishVecEnv(PectoralFishVectorEnv(num_envs=n, model="averaged", max_episode_steps=6,
-                                             autoreset_mode="SameStep"))
+    v0 = registered_settings("PectoralFish-Averaged-v0")
+    native = PectoralFishVectorEnv(num_envs=n, max_episode_steps=6, **v0)
+    ours = FishVecEnv(PectoralFishVectorEnv(num_envs=n, max_episode_steps=6, autoreset_mode="SameStep", **v0))
     native.reset(seed=seed)
     ours.seed(seed)
     ours.reset()

@@ -7,6 +7,7 @@ from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 import pectoral_gym  # noqa: F401  (registers the ids)
 from pectoral_gym.envs import PectoralFishVectorEnv
+from pectoral_gym.registration import registered_settings
 
 IDS = {"averaged": "PectoralFish-Averaged-v0", "full": "PectoralFish-Full-v0"}
 # goal_radius 0.45 m makes successes (terminations) frequent; max_episode_steps 12 adds truncations.
@@ -21,7 +22,8 @@ def actions_for(num_envs, steps, seed=0):
 @pytest.mark.parametrize(("task", "kwargs"), CASES)
 def test_vector_env_equals_single_envs_step_for_step(model, task, kwargs):
     n, steps, seed, horizon = 3, 40, 5, 12
-    venv = PectoralFishVectorEnv(n, model=model, task=task, max_episode_steps=horizon, **kwargs)
+    venv = PectoralFishVectorEnv(n, **registered_settings(IDS[model], dict(task=task, max_episode_steps=horizon,
+                                                                          **kwargs)))
     envs = [gym.make(IDS[model], task=task, max_episode_steps=horizon, **kwargs) for _ in range(n)]
     vobs, _ = venv.reset(seed=seed)
     done = [False] * n
@@ -80,7 +82,7 @@ def test_vector_env_equals_sync_vector_env(task):
 def test_parallel_path_equals_single_envs():
     """64 envs and more run the threaded kernels; they must give the same numbers."""
     n, seed = 70, 9
-    venv = PectoralFishVectorEnv(n, model="averaged", max_episode_steps=6)
+    venv = PectoralFishVectorEnv(n, **registered_settings("PectoralFish-Averaged-v0", dict(max_episode_steps=6)))
     vobs, _ = venv.reset(seed=seed)
     actions = actions_for(n, 8)
     for i in (0, 41, 69):
@@ -129,7 +131,7 @@ def test_vector_spaces_dtypes_and_metadata():
 
 
 def test_vector_accessors_match_the_single_envs():
-    venv = PectoralFishVectorEnv(2, model="averaged")
+    venv = PectoralFishVectorEnv(2, **registered_settings("PectoralFish-Averaged-v0"))
     assert venv.observation_structure == gym.make("PectoralFish-Averaged-v0").unwrapped.observation_structure
     venv.reset(seed=4)
     actions = np.array([[-1, 1, 0, 0.5, 1, -1, 1, -1], [0, 0, 0, 0, 0, 0, 0, 0]], np.float32)
@@ -143,7 +145,7 @@ def test_vector_accessors_match_the_single_envs():
 
 
 def test_vector_reset_seeds_and_mask():
-    venv = PectoralFishVectorEnv(3, model="averaged")
+    venv = PectoralFishVectorEnv(3, **registered_settings("PectoralFish-Averaged-v0"))
     a, _ = venv.reset(seed=[10, 11, 12])
     b, _ = venv.reset(seed=10)
     np.testing.assert_array_equal(a, b)
@@ -157,7 +159,7 @@ def test_vector_reset_seeds_and_mask():
 
 
 def test_vector_action_checks():
-    venv = PectoralFishVectorEnv(3, model="averaged")
+    venv = PectoralFishVectorEnv(3, **registered_settings("PectoralFish-Averaged-v0"))
     venv.reset(seed=0)
     actions = np.zeros((3, 8), np.float32)
     actions[2, 0] = np.nan

@@ -42,6 +42,7 @@ from pectoral_gym.envs.observation import (
 )
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.model.tank import ROBOT_STOP_RULE
+from pectoral_gym.versions import SIMULATION_IDS
 
 __all__ = ["ROBOT_BAND", "EpisodeRecord", "goal_in_inset", "run_episode", "summarize"]
 
@@ -98,7 +99,7 @@ def _aim_observation(obs: np.ndarray, state: np.ndarray, goal: tuple[float, floa
     obs[OBS_TARGET_X], obs[OBS_TARGET_Y] = c * ex + s * ey, -s * ex + c * ey
 
 
-def run_episode(make_controller: Callable[[EnvConfig], object] | None, seed: int, env_id: str = "PectoralFish-Full-v0",
+def run_episode(make_controller: Callable[[EnvConfig], object] | None, seed: int, env_id: str = SIMULATION_IDS["full"],
                 substeps: int = 5, goal_inset: float | None = None, band: tuple[float, float, float] = ROBOT_BAND,
                 max_steps: int = 240, env_kwargs: dict | None = None, controller=None,
                 start: tuple[float, float, float] | None = None,
@@ -108,7 +109,8 @@ def run_episode(make_controller: Callable[[EnvConfig], object] | None, seed: int
     Args:
         make_controller: ``config -> controller`` (called with the env's own config, control period included).
         seed: Reset seed (the env's start and goal; the controller is reset with it).
-        env_id: Registered env id.
+        env_id: Registered env id; the default is simulation-only (no band of its own ends the episode, so the
+            study sees every entry into ``band``).
         substeps: Band checks per control period.
         goal_inset: Redraw the goal this far from the walls [m] (:func:`goal_in_inset`); ``None``: the env's.
         band: ``(margin [m], reaction time [s], contact speed [m/s])`` of the band.
@@ -196,7 +198,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "python -m pectoral_gym.agents.controllers.band_study --controller nmpc --seeds 0,1 "
                         "--summary-only --out band.json"))
     parser.add_argument("--controller", default="hand", help="a baseline name (make_baseline)")
-    parser.add_argument("--env", default="PectoralFish-Full-v0")
+    parser.add_argument("--env", default=SIMULATION_IDS["full"],
+                        help="env id: one whose own band does not end the episode (default: %(default)s)")
     parser.add_argument("--seeds", default="0-39", help="'a-b' or 'a,b,c'")
     parser.add_argument("--goal-inset", type=float, default=None, help="redraw goals this far from the walls [m]")
     parser.add_argument("--substeps", type=int, default=5, help="band checks per control period")

@@ -21,10 +21,13 @@ from typing import Any
 
 import numpy as np
 
+from pectoral_gym.versions import SIMULATION_IDS
+
 __all__ = ["compare", "main"]
 
-_ENVS = {"averaged": ("PectoralFish-Averaged-v0", False), "full": ("PectoralFish-Full-v0", False),
-         "full+rand": ("PectoralFish-Full-v0", True)}
+# The simulation-only ids, on which the NMPC's development rounds (docs/notes) were measured and reproduce.
+_ENVS = {"averaged": (SIMULATION_IDS["averaged"], False), "full": (SIMULATION_IDS["full"], False),
+         "full+rand": (SIMULATION_IDS["full"], True)}
 
 
 def compare(variants: dict[str, dict[str, Any]], seeds: list[int], env: str = "full", task: str = "goal",

@@ -41,13 +41,15 @@ import numpy as np
 from pectoral_gym.agents.studies.benchmark_report import plot_report, to_markdown, write_outputs
 from pectoral_gym.agents.studies.deployment import ROBOT_CONDITIONS, ROBOT_CONTROLLERS, robot_cells
 from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
+from pectoral_gym.versions import ENV_VERSIONS, LATEST_AVERAGED, LATEST_FULL
 
 __all__ = ["ALL_ENVS", "ENVS", "PRESETS", "VERSIONS", "BenchmarkSettings", "build_parser", "env_id", "main",
            "plot_report", "run_benchmark", "to_markdown", "write_outputs"]
 
-VERSIONS = ("v2", "v1", "v0")  # the registered env versions a benchmark can run on; v2 (the default) is recommended
-AVERAGED_ID = "PectoralFish-Averaged-v2"
-FULL_ID = "PectoralFish-Full-v2"
+# the registered env versions a benchmark can run on, newest first; the latest (the default) is recommended
+VERSIONS = tuple(sorted({env_id.rsplit("-", 1)[1] for env_id in ENV_VERSIONS}, key=lambda v: -int(v[1:])))
+AVERAGED_ID = LATEST_AVERAGED
+FULL_ID = LATEST_FULL
 # label -> (env id, randomised), in the default version (env_id() gives another version's)
 ENVS = {"averaged": (AVERAGED_ID, False), "full": (FULL_ID, False), "full+rand": (FULL_ID, True)}
 # the simulated settings, then the robot stack's columns (deployment.ROBOT_CONDITIONS)
@@ -57,7 +59,7 @@ BASELINE_NAMES = ("random", "hand", "nmpc")
 
 
 def env_id(label: str, version: str = VERSIONS[0]) -> str:
-    """The env id of a simulated column label of :data:`ENVS` in ``version`` (``"v1"`` or ``"v0"``)."""
+    """The env id of a simulated column label of :data:`ENVS` in ``version`` (one of :data:`VERSIONS`)."""
     if version not in VERSIONS:
         raise ValueError(f"unknown env version {version!r}; choose from {VERSIONS}")
     return ENVS[label][0].rsplit("-", 1)[0] + "-" + version

@@ -50,17 +50,16 @@ import numpy as np
 from pectoral_gym.agents.studies.seeds_report import plot_seeds, to_markdown
 from pectoral_gym.agents.studies.seeds_stats import aggregate, iqm
 from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
+from pectoral_gym.versions import ENV_VERSIONS, LATEST_AVERAGED, LATEST_FULL
 
 __all__ = ["SETTINGS", "TARGETS", "aggregate", "build_parser", "iqm", "main", "run_seed", "run_seeds",
            "summarize_seeds", "train_seeds", "versioned"]
 
-TRAIN_ENV = "PectoralFish-Averaged-v2"
-# label -> (env id, randomised) of the v2 envs; as pectoral_gym.agents.studies.benchmark.ENVS. versioned() gives
+TRAIN_ENV = LATEST_AVERAGED
+# label -> (env id, randomised) of the latest envs; as pectoral_gym.agents.studies.benchmark.ENVS. versioned() gives
 # another version's.
-SETTINGS = {"averaged": ("PectoralFish-Averaged-v2", False), "full": ("PectoralFish-Full-v2", False),
-            "full+rand": ("PectoralFish-Full-v2", True)}
-TRAIN_ENVS = ("PectoralFish-Averaged-v0", "PectoralFish-Full-v0", "PectoralFish-Averaged-v1",
-              "PectoralFish-Full-v1", "PectoralFish-Averaged-v2", "PectoralFish-Full-v2")
+SETTINGS = {"averaged": (LATEST_AVERAGED, False), "full": (LATEST_FULL, False), "full+rand": (LATEST_FULL, True)}
+TRAIN_ENVS = tuple(sorted(ENV_VERSIONS, key=lambda env_id: (env_id.rsplit("-", 1)[1], env_id)))
 
 
 def versioned(env_id: str, train_env: str) -> str:
@@ -313,7 +312,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=examples("pectoral-seeds --quick --seeds 0 1 --out seeds_quick",
                         "pectoral-seeds --seeds 100 101 102 103 --jobs 2 --out tune_base",
                         "pectoral-seeds --seeds 0 1 --timesteps 2e5 --episodes 50 --hyperparams ent_coef=0.01",
-                        "pectoral-seeds --env PectoralFish-Full-v2 --timesteps 1.6e6"))
+                        f"pectoral-seeds --env {LATEST_FULL} --timesteps 1.6e6"))
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4], help="training seeds")
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
                         help="seeds trained at once, each in its own process (1 torch thread each; default: 2, or "

@@ -2,7 +2,7 @@
 
 A :class:`SolveProbe` is passed to :func:`pectoral_gym.agents.training.train.train` as ``probe``: after every
 ``every``-th periodic evaluation it evaluates the current policy (deterministic, with its observation statistics at
-that moment) on ``PectoralFish-Full-v2`` (:data:`FULL_ID`) for ``episodes`` seeded episodes. The first probe at or above
+that moment) on the latest full id (:data:`FULL_ID`) for ``episodes`` seeded episodes. The first probe at or above
 ``threshold`` marks the run solved at that evaluation's ``elapsed_s`` (training wall time, the probes'
 own time left out) and ``timesteps``; that policy is then evaluated once more on ``confirm_episodes``
 other episodes, because the first of several noisy probes to cross a threshold overestimates the
@@ -27,10 +27,11 @@ from typing import Any
 
 from pectoral_gym.agents.training.demo import EVAL_SEED as REPORT_SEED
 from pectoral_gym.agents.training.train import EVAL_SEED_OFFSET
+from pectoral_gym.versions import LATEST_FULL
 
 __all__ = ["FULL_ID", "PROBE_SEED", "REPORT_SEED", "SOLVED", "SolveProbe", "check_held_out"]
 
-FULL_ID = "PectoralFish-Full-v2"  # the full model in the demo's training version (seeds.TRAIN_ENV)
+FULL_ID = LATEST_FULL  # the full model in the demo's training version (seeds.TRAIN_ENV)
 PROBE_SEED = 20_000  # probe episode k is reset with PROBE_SEED + k
 SOLVED = 0.95  # the target: success on the full model
 

@@ -29,10 +29,12 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
+from pectoral_gym.versions import LATEST_FULL
+
 __all__ = ["DEFAULT_ENV", "DeployedEpisode", "ReplayedEpisode", "build_parser", "log_records", "main", "read_deploy",
            "replay", "report"]
 
-DEFAULT_ENV = "PectoralFish-Full-v2"  # the full model the emulated robot runs, in the recipe's version
+DEFAULT_ENV = LATEST_FULL  # the full model the emulated robot runs, in the recipe's version
 
 
 @dataclass(frozen=True)

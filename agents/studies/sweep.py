@@ -55,6 +55,7 @@ from pectoral_gym.agents.studies.sweep_space import (
 )
 from pectoral_gym.agents.training.config import parse_overrides
 from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
+from pectoral_gym.versions import LATEST_AVERAGED, LATEST_FULL
 
 __all__ = ["DEFAULT_SPACE", "build_parser", "main", "run_sweep", "tune_space", "warm_up"]
 
@@ -274,9 +275,9 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=HelpFormatter,
         epilog=examples("pectoral-sweep --grid seed=0,1,2 ent_coef=0,0.005 --timesteps 2e5",
                         "pectoral-sweep --param-space sweep.yml --num-samples 4 --scheduler asha --metric success",
-                        "pectoral-sweep --grid seed=0,1 --timesteps 1e5 --final-env PectoralFish-Full-v2 --out sweeps",
+                        f"pectoral-sweep --grid seed=0,1 --timesteps 1e5 --final-env {LATEST_FULL} --out sweeps",
                         "pectoral-sweep --address auto --grid seed=0,1,2,3 randomize_scale=0,1"))
-    parser.add_argument("--env", default="PectoralFish-Averaged-v2", help="environment id")
+    parser.add_argument("--env", default=LATEST_AVERAGED, help="environment id")
     parser.add_argument("--algo", default="ppo", help="algorithm: ppo, sac, td3, a2c, ddpg")
     parser.add_argument("--param-space", metavar="FILE",
                         help="parameter space, YAML or JSON (see pectoral_gym.agents.studies.sweep_space)")
@@ -293,7 +294,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--eval-freq", type=float, help="steps in all between evaluations (default: the file's)")
     parser.add_argument("--eval-episodes", type=int, help="episodes per evaluation (default: the file's)")
     parser.add_argument("--final-env", metavar="ID", help="evaluate each trial's best model on this env at the end "
-                                                          "(PectoralFish-Full-v2: train averaged, test full)")
+                                                          f"({LATEST_FULL}: train averaged, test full)")
     parser.add_argument("--final-episodes", type=int, default=100, help="episodes of the final evaluation")
     parser.add_argument("--final-seed", type=int, default=FINAL_SEED,
                         help="final evaluation's episode k uses seed + k (the same for every trial; apart from the "

@@ -27,11 +27,12 @@ from pathlib import Path
 from typing import Any
 
 from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
+from pectoral_gym.versions import LATEST_AVERAGED, LATEST_FULL
 
 __all__ = ["build_parser", "main", "run_demo"]
 
-TRAIN_ENV = "PectoralFish-Averaged-v2"
-EVAL_ENVS = ("PectoralFish-Averaged-v2", "PectoralFish-Full-v2")
+TRAIN_ENV = LATEST_AVERAGED
+EVAL_ENVS = (LATEST_AVERAGED, LATEST_FULL)
 EVAL_SEED = 10_000  # evaluation episodes k use seed EVAL_SEED + k (training uses seed + env index)
 QUICK = {"n_timesteps": 1024, "n_envs": 8, "n_steps": 64, "batch_size": 128, "n_epochs": 1, "eval_freq": 0}
 ROBOT_EPISODES = 20  # robot-stack episodes (lockstep emulation) by default; 2 of at most 40 steps with --quick
@@ -135,9 +136,9 @@ def _report(summary: dict[str, Any], table: str, config: dict[str, Any]) -> str:
         "(transitional ones too); `return` sum of "
         "rewards. Definitions in `agents/training/metrics.py`; per-env JSON next to this report.",
         "",
-        "Going further: `pectoral-train --env PectoralFish-Averaged-v2 --algo ppo "
+        f"Going further: `pectoral-train --env {LATEST_AVERAGED} --algo ppo "
         "--task goal --timesteps 2e6`, then `pectoral-evaluate --policy runs/... "
-        "--env PectoralFish-Full-v2 --randomize`; `pectoral-benchmark` for every "
+        f"--env {LATEST_FULL} --randomize`; `pectoral-benchmark` for every "
         "controller; see `docs/agents.md`.",
         "",
         f"Hyperparameters: `{json.dumps(config['algo_kwargs'])}`, n_envs {config['n_envs']}, "

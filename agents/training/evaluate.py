@@ -38,6 +38,7 @@ from pectoral_gym.envs.layout import ACTION_SIZE
 from pectoral_gym.envs.observation import OBS_POSITION, OBS_SIZE, decode
 from pectoral_gym.model.spec import ENV_OPTIONS
 from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
+from pectoral_gym.versions import LATEST_FULL
 
 __all__ = [
     "DEFAULT_RANDOMIZATION",
@@ -262,16 +263,16 @@ def build_parser() -> argparse.ArgumentParser:
         description=__doc__.split("\n\n")[0] + " Episode k is reset with --seed + k: the same starts and "
         "targets for every controller. Writes metrics.json and trajectories.png into --out.",
         formatter_class=HelpFormatter,
-        epilog=examples("pectoral-evaluate --policy demo_out/run --env PectoralFish-Full-v2 --episodes 100 --seed 0",
-                        "pectoral-evaluate --policy demo_out/run --env PectoralFish-Full-v2 --randomize",
-                        "pectoral-evaluate --controller hand --env PectoralFish-Full-v2 --task goal --episodes 100",
+        epilog=examples(f"pectoral-evaluate --policy demo_out/run --env {LATEST_FULL} --episodes 100 --seed 0",
+                        f"pectoral-evaluate --policy demo_out/run --env {LATEST_FULL} --randomize",
+                        f"pectoral-evaluate --controller hand --env {LATEST_FULL} --task goal --episodes 100",
                         "pectoral-evaluate --controller nmpc --quick"))
     who = parser.add_mutually_exclusive_group(required=True)
     who.add_argument("--policy", metavar="RUN|ZIP",
                      help="run folder of pectoral-train or an SB3 .zip")
     who.add_argument("--controller", metavar="NAME",
                      help="baseline controller: random, hand, nmpc or excite (identification runs)")
-    parser.add_argument("--env", default="PectoralFish-Full-v2", help="environment id")
+    parser.add_argument("--env", default=LATEST_FULL, help="environment id")
     parser.add_argument("--task", choices=("goal", "track"), help="task (default: the run's task, else goal)")
     parser.add_argument("--randomize", nargs="?", const="default", metavar="JSON",
                         help="per-episode parameter randomisation: alone for the default preset "

@@ -52,6 +52,7 @@ from pectoral_gym.agents.training.run_files import keep_run_files
 from pectoral_gym.agents.training.zoo_format import algo_class
 from pectoral_gym.model.threads import pin_torch_threads
 from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
+from pectoral_gym.versions import LATEST_AVERAGED
 
 __all__ = ["EVAL_SEED_OFFSET", "QUICK", "build_parser", "main", "make_run_dir", "train"]
 
@@ -274,12 +275,12 @@ def build_parser() -> argparse.ArgumentParser:
         description=__doc__.split("\n\n")[0] + " Writes a run folder (model, best model, normalisation "
         "statistics, resolved config, command) under --out.",
         formatter_class=HelpFormatter,
-        epilog=examples("pectoral-train --env PectoralFish-Averaged-v2 --algo ppo --task goal --seed 0",
+        epilog=examples(f"pectoral-train --env {LATEST_AVERAGED} --algo ppo --task goal --seed 0",
                         "pectoral-train --quick --out runs_smoke",
                         "pectoral-train --algo sac --timesteps 5e4 --hyperparams learning_rate=3e-4 "
                         "--env-kwargs '{\"task\": \"track\"}'",
                         "pectoral-train --env-kwargs '{\"params\": \"robot.json\"}' --out runs --run-name robot"))
-    parser.add_argument("--env", default="PectoralFish-Averaged-v2", help="environment id")
+    parser.add_argument("--env", default=LATEST_AVERAGED, help="environment id")
     parser.add_argument("--algo", default="ppo", help="algorithm: ppo, sac, td3, a2c, ddpg")
     parser.add_argument("--task", choices=("goal", "track"), help="task (default: from the hyperparameters, else goal)")
     parser.add_argument("--seed", type=int, default=0, help="seed of everything (same seed, same run)")

@@ -164,7 +164,7 @@ def make_fish_vec_env(env_id: str, n_envs: int, env_kwargs: dict[str, Any] | Non
     """A :class:`FishVecEnv` of ``n_envs`` fish of a registered id; env ``i`` gets seed ``seed + i`` at the first reset.
 
     Args:
-        env_id: ``PectoralFish-Averaged-v0`` or ``PectoralFish-Full-v0``.
+        env_id: A registered fish env id (:data:`pectoral_gym.versions.ENV_VERSIONS`).
         n_envs: Number of environments.
         env_kwargs: Environment arguments (``task``, ``randomize``, reward weights, ``params`` as a dict, ...).
         seed: Seed of the first reset (``None``: from entropy).

@@ -26,9 +26,10 @@ from pectoral_gym.envs.timing import TimingConfig
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.params import FishParams, as_params
 from pectoral_gym.model.servo import servo_period
-from pectoral_gym.model.spec import ENV_OPTIONS, MODELS, AveragedSpec, FullSpec, env_spec
-from pectoral_gym.model.tank import ROBOT_STOP_RULE, TANK_WIDTH, StopRule
+from pectoral_gym.model.spec import ENV_DEFAULTS, ENV_OPTIONS, MODELS, AveragedSpec, FullSpec, env_spec
+from pectoral_gym.model.tank import TANK_WIDTH, StopRule
 from pectoral_gym.sensing.camera import SensingConfig
+from pectoral_gym.versions import SIMULATION, RobotReadiness, latest_settings
 
 __all__ = ["EnvConfig", "MODELS", "TASKS", "env_signature"]
 
@@ -145,12 +146,13 @@ class EnvConfig:
     ratio_range: tuple[float, float] = (1.0, 5.0)
     params: FishParams | Mapping[str, float] | str | os.PathLike | None = None
     randomize: Mapping[str, float] | None = field(default=None, hash=False)
-    scaling: str | os.PathLike = "identified"
-    check_scaling_params: bool = True
-    transitions: bool = False
-    ripple_offsets: bool = False
-    integration: str = "reference"
-    observe_fins: bool = False
+    # The model's and the robot readiness's defaults are written in their own homes (the v0 ids' settings).
+    scaling: str | os.PathLike = ENV_DEFAULTS["scaling"]
+    check_scaling_params: bool = ENV_DEFAULTS["check_scaling_params"]
+    transitions: bool = ENV_DEFAULTS["transitions"]
+    ripple_offsets: bool = ENV_DEFAULTS["ripple_offsets"]
+    integration: str = ENV_DEFAULTS["integration"]
+    observe_fins: bool = SIMULATION.observe_fins
     progress_weight: float = 10.0
     goal_bonus: float = 10.0
     wall_penalty: float = 10.0
@@ -160,10 +162,10 @@ class EnvConfig:
     goal_radius: float = 0.08
     ref_speed: float = 0.03
     start_inset: float = tk.START_INSET
-    goal_inset: float = tk.GOAL_INSET
-    stop_band: bool = False
-    stop_rule: StopRule = ROBOT_STOP_RULE
-    servo_limit: float | None = None
+    goal_inset: float = SIMULATION.goal_inset
+    stop_band: bool = SIMULATION.stop_band
+    stop_rule: StopRule = SIMULATION.stop_rule
+    servo_limit: float | None = SIMULATION.servo_limit
     sensing: SensingConfig | Mapping[str, Any] | bool | None = None
     timing: TimingConfig | Mapping[str, Any] | bool | None = None
 
@@ -251,6 +253,25 @@ class EnvConfig:
         :class:`~pectoral_gym.envs.core.EnvCore` builds its model from this and nothing else.
         """
         return self._spec
+
+    @classmethod
+    def recommended(cls, **settings: Any) -> EnvConfig:
+        """The settings of the latest id of ``settings["model"]`` (default ``"full"``) with ``settings`` on top.
+
+        What the env classes build when constructed directly (not through an id): a version's settings
+        (:data:`pectoral_gym.versions.LATEST`), not this class's own defaults, which are the v0 ids'.
+
+        Raises:
+            ValueError: For an unknown model or an invalid setting.
+        """
+        model = settings.get("model", cls.model)
+        if model not in MODELS:
+            raise ValueError(f"model must be one of {MODELS}, got {model!r}")
+        return cls(**{**latest_settings(model), **settings})
+
+    def robot_readiness(self) -> RobotReadiness:
+        """The settings that prepare a policy for the robot stack (:class:`pectoral_gym.versions.RobotReadiness`)."""
+        return RobotReadiness(self.observe_fins, self.stop_band, self.stop_rule, self.servo_limit, self.goal_inset)
 
     def scaling_functions(self) -> ScalingFunctions | None:
         """The averaged model's scaling functions (``None`` for K = 1 or the full model), checked against ``params``.

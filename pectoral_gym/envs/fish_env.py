@@ -1,4 +1,4 @@
-"""The single-fish Gymnasium environment ``PectoralFish-{Full,Averaged}-v0``."""
+"""The single-fish Gymnasium environment ``PectoralFish-{Full,Averaged}-v*`` (:mod:`pectoral_gym.versions`)."""
 
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ from pectoral_gym.envs.layout import (
 from pectoral_gym.envs.observation import OBS_X, OBS_Y, observation_bounds, observation_structure
 from pectoral_gym.envs.tasks.episode_start import pin_start
 from pectoral_gym.model.params import FishParams
+from pectoral_gym.versions import LATEST_AVERAGED
 
 __all__ = ["PectoralFishEnv"]
 
@@ -37,8 +38,8 @@ class PectoralFishEnv(gym.Env):
     the beat pattern of each fin, ``(bias, amplitude, period, ratio)`` of
     eq. (21); a fin switches to a new pattern at the next turning point of its
     stroke (the parameter-change rule of :mod:`pectoral_gym.model.strokes`). Two
-    models drive the same environment: ``PectoralFish-Full-v0`` integrates the
-    blade-element model through every fin beat, ``PectoralFish-Averaged-v0``
+    models drive the same environment: ``PectoralFish-Full-v*`` integrates the
+    blade-element model through every fin beat, ``PectoralFish-Averaged-v*``
     the cycle-averaged model with identified scaling functions (and, beyond
     the paper, its yaw damping averaged over the in-beat yaw oscillation,
     ``docs/model.md`` section 3.6). Spaces, tasks and rewards are identical;
@@ -139,7 +140,8 @@ class PectoralFishEnv(gym.Env):
 
     ## Arguments
 
-    ``gym.make("PectoralFish-Averaged-v0", task="track", randomize={"drag_coef": 0.2})``
+    ``gym.make(LATEST_AVERAGED, task="track", randomize={"drag_coef": 0.2})`` (``from pectoral_gym.versions
+    import LATEST_AVERAGED``, the recommended averaged id)
 
     | Argument          | Default          | Unit | Description |
     |-------------------|------------------|------|-------------|
@@ -177,7 +179,11 @@ class PectoralFishEnv(gym.Env):
 
     All arguments are keywords. The defaults are those of
     :class:`~pectoral_gym.envs.core.EnvConfig` (the one place they are
-    written; this table is checked against it). Ranges must be finite with
+    written; this table is checked against it), the v0 ids' settings; an id sets
+    its version's (:data:`pectoral_gym.versions.ENV_VERSIONS`), and the class
+    constructed without an id (``PectoralFishEnv(model="averaged")``) starts from
+    the latest id's of that model (:data:`pectoral_gym.versions.LATEST`;
+    ``model`` defaults to ``"full"``), with the arguments on top. Ranges must be finite with
     ``low <= high``; invalid settings raise ``ValueError``.
 
     ``sensing`` (``True``, ``{}`` for the defaults, or a dict of
@@ -198,14 +204,18 @@ class PectoralFishEnv(gym.Env):
 
     ## Version History
 
-    * Unversioned addition (no id changes its episodes): ``reset(options={"start": ..., "goal": ...})``.
+    * Unversioned additions (no id changes its episodes): ``reset(options={"start": ..., "goal": ...})``;
+      the class constructed without an id (``PectoralFishEnv(model=...)``, ``PectoralFishVectorEnv``) builds the
+      latest id of its model (:data:`pectoral_gym.versions.LATEST`; it built ``EnvConfig``'s defaults, v0's,
+      while the model classes and specs default to the latest averaged model); the ids' settings live in one
+      table, :data:`pectoral_gym.versions.ENV_VERSIONS`.
     * v2: ``PectoralFish-Averaged-v2`` adds ``ripple_offsets=True``: the averaged model with both of its
       corrections, the model's own defaults (the beat-mean ripple offset, ``docs/model.md`` 3.8, on top of v1's
       transitional half-strokes); the PPO recipe trained on it reaches more goals on the full model for every
       training seed (``docs/notes/2026-12-04-ripple-offsets-training.md``). ``PectoralFish-Full-v2`` is
       ``PectoralFish-Full-v1`` (the full model did not change; it moves with the averaged id so the two ids of a
-      version go together). Every other setting is v1's.
-    * v1: Prepares a policy for the robot stack (``pectoral_gym.registration.ROBOT_READY``):
+      version go together; its table entry is v1's, marked ``same_as``). Every other setting is v1's.
+    * v1: Prepares a policy for the robot stack (:data:`pectoral_gym.versions.ROBOT`):
       ``observe_fins=True``, ``stop_band=True`` (the robot's geofence ends the episode, with
       ``info["cost"]``; ``stop_rule`` the robot's with 5 cm more margin, ``(0.10, 0.15, 0.03)``),
       ``servo_limit`` = the robot's 13 rad/s, ``goal_inset=0.3`` (goals the band leaves reachable);
@@ -223,7 +233,7 @@ class PectoralFishEnv(gym.Env):
     def __init__(self, *, render_mode: str | None = None, **kwargs: Any):
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} or None, got {render_mode!r}")
-        self.config = EnvConfig(**kwargs)  # the defaults and checks of every setting live there
+        self.config = EnvConfig.recommended(**kwargs)  # the latest version's settings, then the arguments
         # One frame per control period, so a recorded video plays in real time.
         self.metadata = {**type(self).metadata, "render_fps": 1.0 / self.config.control_period}
         self.render_mode = render_mode
@@ -352,7 +362,7 @@ class PectoralFishEnv(gym.Env):
         if self.render_mode is None:
             gym.logger.warn(
                 "You are calling render method without specifying any render mode. You can specify the "
-                'render_mode at initialization, e.g. gym.make("PectoralFish-Averaged-v0", render_mode="rgb_array")'
+                f'render_mode at initialization, e.g. gym.make("{LATEST_AVERAGED}", render_mode="rgb_array")'
             )
             return None
         if self._renderer is None:

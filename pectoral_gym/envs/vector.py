@@ -80,7 +80,7 @@ class PectoralFishVectorEnv(VectorEnv):
         self.num_envs = int(num_envs)
         self.max_episode_steps = int(max_episode_steps)
         self.render_mode = None
-        self.config = EnvConfig(**kwargs)
+        self.config = EnvConfig.recommended(**kwargs)  # the latest version's settings, then the arguments
         self.core = EnvCore(self.num_envs, self.config)
         self.single_action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, self.num_envs)

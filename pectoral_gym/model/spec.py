@@ -20,6 +20,7 @@ dicts (:meth:`FullSpec.to_dict`, :func:`spec_from_dict`), which run folders reco
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -32,9 +33,9 @@ from pectoral_gym.model.models import FULL_INTEGRATION, AveragedModel, FullModel
 from pectoral_gym.model.params import FishParams
 
 __all__ = [
-    "AVERAGED", "AVERAGED_ENV", "AVERAGED_PAPER", "AVERAGED_PPO", "ENV_OPTIONS", "FORCINGS", "FULL_FAST",
-    "FULL_REFERENCE", "MODELS", "PRESETS", "SCALINGS", "AveragedSpec", "FullSpec", "ModelSpec", "env_spec",
-    "make_model", "spec_from_dict",
+    "AVERAGED", "AVERAGED_ENV", "AVERAGED_PAPER", "AVERAGED_PPO", "ENV_DEFAULTS", "ENV_OPTIONS", "FORCINGS",
+    "FULL_FAST", "FULL_REFERENCE", "MODELS", "PRESETS", "SCALINGS", "AveragedSpec", "FullSpec", "ModelSpec",
+    "env_options", "env_spec", "make_model", "spec_from_dict",
 ]
 
 MODELS = ("full", "averaged")
@@ -43,6 +44,10 @@ FORCINGS = ("exact", "taylor")
 #: The env settings (:class:`pectoral_gym.envs.core.EnvConfig` field names) of each model's spec.
 ENV_OPTIONS = {"full": ("integration",),
                "averaged": ("scaling", "check_scaling_params", "transitions", "ripple_offsets")}
+# The averaged model's configuration is written once, as AveragedModel's keyword defaults; AveragedSpec's
+# defaults are read from there, and every preset below (and each env version) is AveragedSpec() with changes.
+_AVERAGED_MODEL = {name: p.default for name, p in inspect.signature(AveragedModel).parameters.items()
+                   if p.default is not inspect.Parameter.empty}
 
 
 def _check_bool(name: str, value: Any) -> bool:
@@ -140,13 +145,13 @@ class AveragedSpec(ModelSpec):
     """
 
     model: ClassVar[str] = "averaged"
-    scaling: str = "identified"
+    scaling: str = _AVERAGED_MODEL["scaling"]
     check_params: bool = True
     yaw_damping: str = "sinusoid"
-    forcing: str = "exact"
-    transitions: bool = True
-    ripple_offsets: bool = True
-    dt_max: float = 0.25
+    forcing: str = _AVERAGED_MODEL["forcing"]
+    transitions: bool = _AVERAGED_MODEL["transitions"]
+    ripple_offsets: bool = _AVERAGED_MODEL["ripple_offsets"]
+    dt_max: float = _AVERAGED_MODEL["dt_max"]
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -203,14 +208,15 @@ FULL_FAST = FullSpec(integration="fast")
 #: The averaged model with both corrections and the shipped K (the spec class's defaults; the
 #: fidelity benchmark's candidate, the model of ``pectoral-fish simulate|steady``).
 AVERAGED = AveragedSpec()
-#: The averaged model as the registered ``PectoralFish-Averaged-v0`` runs it: the cycle averages alone.
-AVERAGED_ENV = AveragedSpec(transitions=False, ripple_offsets=False)
-#: The averaged model of ``PectoralFish-Averaged-v1`` (the PPO recipe's before ``-v2``): with transitional strokes.
-#: ``PectoralFish-Averaged-v2``, which the recipe trains on now, runs :data:`AVERAGED` (both corrections).
-AVERAGED_PPO = AveragedSpec(transitions=True, ripple_offsets=False)
+#: The averaged model as the registered ``PectoralFish-Averaged-v0`` runs it (the envs' default): the cycle
+#: averages alone, without either correction.
+AVERAGED_ENV = AVERAGED.replace(transitions=False, ripple_offsets=False)
+#: The averaged model of ``PectoralFish-Averaged-v1``: with transitional strokes, without the ripple offsets.
+#: ``PectoralFish-Averaged-v2``, which the PPO recipe trains on, runs :data:`AVERAGED` (both corrections).
+AVERAGED_PPO = AVERAGED.replace(ripple_offsets=False)
 #: The paper's plain model: eq. (25) with the Taylor forcing of eqs. 26-28, the shipped K and eq. (20)'s
 #: yaw damping, without the corrections of docs/model.md 3.6-3.8.
-AVERAGED_PAPER = AveragedSpec(yaw_damping="none", forcing="taylor", transitions=False, ripple_offsets=False)
+AVERAGED_PAPER = AVERAGED_ENV.replace(yaw_damping="none", forcing="taylor")
 PRESETS = {"full-reference": FULL_REFERENCE, "full-fast": FULL_FAST, "averaged": AVERAGED,
            "averaged-env": AVERAGED_ENV, "averaged-ppo": AVERAGED_PPO, "averaged-paper": AVERAGED_PAPER}
 _CLASSES = {"full": FullSpec, "averaged": AveragedSpec}
@@ -256,8 +262,7 @@ def env_spec(model: str, **options: Any) -> FullSpec | AveragedSpec:
     """
     if model not in MODELS:
         raise ValueError(f"model must be one of {MODELS}, got {model!r}")
-    defaults = {"integration": "reference", "scaling": "identified", "check_scaling_params": True,
-                "transitions": False, "ripple_offsets": False}
+    defaults = ENV_DEFAULTS
     unknown = sorted(set(options) - set(defaults))
     if unknown:
         raise ValueError(f"unknown model options {unknown}; valid: {sorted(defaults)}")
@@ -272,6 +277,23 @@ def env_spec(model: str, **options: Any) -> FullSpec | AveragedSpec:
     return AVERAGED_ENV.replace(scaling=scaling, check_params=values["check_scaling_params"],
                                 yaw_damping=_held_damping(scaling),
                                 transitions=values["transitions"], ripple_offsets=values["ripple_offsets"])
+
+
+def env_options(spec: FullSpec | AveragedSpec) -> dict[str, Any]:
+    """The env settings (:data:`ENV_OPTIONS` of the spec's model) that name ``spec``: :func:`env_spec`'s inverse.
+
+    Only for a spec an env can run (:func:`env_spec` of the result gives ``spec`` back); the averaged model's
+    other fields (yaw damping, forcing, step) follow from these.
+    """
+    options = {"integration": spec.integration} if isinstance(spec, FullSpec) else {
+        "scaling": spec.scaling, "check_scaling_params": spec.check_params, "transitions": spec.transitions,
+        "ripple_offsets": spec.ripple_offsets}
+    return options
+
+
+#: The env settings' defaults (:class:`~pectoral_gym.envs.config.EnvConfig`'s): those of :data:`FULL_REFERENCE` and
+#: :data:`AVERAGED_ENV`, the v0 ids' models.
+ENV_DEFAULTS: dict[str, Any] = {**env_options(FULL_REFERENCE), **env_options(AVERAGED_ENV)}
 
 
 def _held_damping(scaling: str) -> str:

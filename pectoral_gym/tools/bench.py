@@ -36,14 +36,17 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
+from pectoral_gym.versions import SIMULATION_IDS
+
 __all__ = [
     "AVERAGED_ID", "CARTPOLE_ID", "FAST_SETTINGS", "FULL_ID", "SINGLE_ENVS", "TARGETS", "TRAINING_SETTINGS",
     "VECTOR_ENVS",
     "run_benchmark", "single_env_timer", "vector_env_timer",
 ]
 
-AVERAGED_ID = "PectoralFish-Averaged-v0"
-FULL_ID = "PectoralFish-Full-v0"
+# The simulation-only ids: the recorded throughput figures (docs/validation/speed) were measured on them.
+AVERAGED_ID = SIMULATION_IDS["averaged"]
+FULL_ID = SIMULATION_IDS["full"]
 CARTPOLE_ID = "CartPole-v1"
 SINGLE_ENVS = (AVERAGED_ID, FULL_ID, CARTPOLE_ID)
 VECTOR_ENVS = {AVERAGED_ID: 4096, FULL_ID: 1024}  # env id -> num_envs

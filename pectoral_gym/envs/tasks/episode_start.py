@@ -37,7 +37,7 @@ from pectoral_gym.envs.tasks.reference_ellipse import set_reference
 from pectoral_gym.model.jit import njit
 from pectoral_gym.model.tank import TANK_LENGTH, TANK_WIDTH
 
-__all__ = ["GOAL_CANDIDATES", "GOAL_INSET", "GOAL_MAX_BLOCKS", "GOAL_MAX_DISTANCE", "GOAL_MIN_DISTANCE",
+__all__ = ["GOAL_CANDIDATES", "GOAL_MAX_BLOCKS", "GOAL_MAX_DISTANCE", "GOAL_MIN_DISTANCE",
            "START_INSET", "TANK_X", "TANK_Y", "TRACK_A_RANGE", "TRACK_B_RANGE", "TRACK_HEADING_NOISE",
            "TRACK_START_RADIUS", "draw_episode", "pin_start", "start_states"]
 
@@ -45,7 +45,6 @@ __all__ = ["GOAL_CANDIDATES", "GOAL_INSET", "GOAL_MAX_BLOCKS", "GOAL_MAX_DISTANC
 TANK_X = TANK_LENGTH  # tank length along X [m], one source: pectoral_gym.model.tank
 TANK_Y = TANK_WIDTH  # tank width along Y [m]
 START_INSET = 0.3  # goal task: start this far from the walls [m] (EnvConfig.start_inset's default)
-GOAL_INSET = 0.2  # goal task: goal this far from the walls [m] (EnvConfig.goal_inset's default)
 GOAL_MIN_DISTANCE = 0.3  # goal task: least start-goal distance [m]
 GOAL_MAX_DISTANCE = 1.0  # goal task: largest start-goal distance [m]
 GOAL_CANDIDATES = 16  # goal candidates drawn per rejection-sampling block

@@ -89,7 +89,6 @@ from pectoral_gym.envs.observation import (  # noqa: F401 - OBS_SIZE re-exported
 )
 from pectoral_gym.envs.tasks.episode_start import (  # noqa: F401 - re-exported: tk.draw_episode, tk.START_INSET, ...
     GOAL_CANDIDATES,
-    GOAL_INSET,
     GOAL_MAX_BLOCKS,
     GOAL_MAX_DISTANCE,
     GOAL_MIN_DISTANCE,
