@@ -23,6 +23,7 @@ from pectoral_gym.hardware.clock import REAL_CLOCK
 from pectoral_gym.hardware.deploy_checks import check_frame_size, first_frame
 from pectoral_gym.hardware.deploy_controllers import make_controller, solver_summary
 from pectoral_gym.hardware.deploy_episodes import displaced_reason, random_start, run_episodes
+from pectoral_gym.hardware.deploy_request import DeployRequest
 from pectoral_gym.hardware.emurig import open_rig
 from pectoral_gym.hardware.params_probe import check_on_lockstep_rig, check_on_robot, probe_start
 from pectoral_gym.hardware.safety.rules import install_stop_handlers
@@ -51,14 +52,14 @@ def _open(sink: Sink | TextIO) -> contextlib.AbstractContextManager[TextIO]:
     return open(sink, "w", encoding="utf-8") if isinstance(sink, Path) else contextlib.nullcontext(sink)
 
 
-def _run_log(sink: Sink | TextIO, request: Any, settings: dict):
+def _run_log(sink: Sink | TextIO, request: DeployRequest, settings: dict):
     """The run's :class:`pectoral_gym.hardware.runlog.RunLogWriter` (header written) into ``sink``."""
     from pectoral_gym.hardware.runlog import RunLogWriter
 
     return RunLogWriter(sink, "robot" if request.rig == "robot" else "emulator", settings["control_period"])
 
 
-def probe_wanted(request: Any, name: str) -> bool:
+def probe_wanted(request: DeployRequest, name: str) -> bool:
     """Whether the run checks its model against the robot first (:mod:`pectoral_gym.hardware.params_probe`).
 
     Every run on a real robot, and every emulated one whose robot or model is not Table 1's (``params``,
@@ -74,7 +75,7 @@ def _probe_note(result) -> str:
             f"over a {result.duration:.0f} s probe")
 
 
-def probe_lockstep(request: Any, settings: dict, model: Any, notify: Callable[[str], None]) -> None:
+def probe_lockstep(request: DeployRequest, settings: dict, model: Any, notify: Callable[[str], None]) -> None:
     """The model's check on a lockstep rig of its own (``ValueError`` if it misses, :class:`DeployError`)."""
     from pectoral_gym.hardware.vision.tracker import MarkerTracker
 
@@ -86,7 +87,7 @@ def probe_lockstep(request: Any, settings: dict, model: Any, notify: Callable[[s
         raise DeployError(str(err)) from err
 
 
-def run_real_time(request: Any, name: str, controller: Any, settings: dict, model: Any, log: Sink,
+def run_real_time(request: DeployRequest, name: str, controller: Any, settings: dict, model: Any, log: Sink,
                   run_log: Sink, notify: Callable[[str], None]) -> RunResult:
     """The episodes on one robot (real or emulated in real time), one after another on one rig and env.
 
@@ -148,7 +149,7 @@ def run_real_time(request: Any, name: str, controller: Any, settings: dict, mode
     return summaries, env.link.health(), solver, wall_time, ended  # the link's health once the env closed it
 
 
-def run_lockstep_episodes(request: Any, name: str, controller: Any, settings: dict, log: Sink,
+def run_lockstep_episodes(request: DeployRequest, name: str, controller: Any, settings: dict, log: Sink,
                           run_log: Sink) -> RunResult:
     """The episodes in lockstep, each on a fresh rig (:mod:`pectoral_gym.hardware.lockstep_jobs`), in ``jobs``.
 
