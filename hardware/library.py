@@ -43,6 +43,7 @@ from pectoral_gym.hardware.deploy_runs import DeployError
 
 __all__ = ["CONTROLLERS", "RIGS", "DeployError", "DeployRequest", "Deployment", "run_deployment", "summary_report"]
 
+
 @dataclass
 class Deployment:
     """A deployment's results, in memory.
