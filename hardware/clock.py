@@ -42,12 +42,11 @@ import signal
 import threading
 import time
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
+from pectoral_gym.hardware.clocktask import LockstepError, Task
+from pectoral_gym.hardware.clockwaits import _Condition, _Event, _Thread
 from pectoral_gym.hardware.signal_latch import end_as
-
-if TYPE_CHECKING:
-    from pectoral_gym.hardware.clockwaits import _Condition, _Event, _Thread
 
 __all__ = ["Clock", "REAL_CLOCK", "RealClock", "VirtualClock", "LockstepError", "TICK", "STALL_LIMIT"]
 
@@ -110,30 +109,9 @@ class RealClock:
 REAL_CLOCK = RealClock()
 
 
-class LockstepError(RuntimeError):
-    """A lockstep run cannot progress: every thread waits with no time-out, the time stands still or passed a limit.
-
-    Raised in every thread of the :class:`VirtualClock` at its next wait.
-    """
-
-
 def _ticks(seconds: float) -> int:
     """A wait of ``seconds`` > 0 in ticks: the nearest, and at least one (so that the time moves)."""
     return max(1, round(seconds * _PER_SECOND))
-
-
-class _Task:
-    """A thread taking part in the lockstep (its baton, state and wake-up bookkeeping)."""
-
-    __slots__ = ("name", "cond", "token", "notified", "blocked", "done")
-
-    def __init__(self, name: str, mutex: threading.Lock):
-        self.name = name
-        self.cond = threading.Condition(mutex)
-        self.token = 0  # bumped at every block and wake-up: stale timer entries are skipped
-        self.notified = False
-        self.blocked = False
-        self.done = False
 
 
 class VirtualClock:
@@ -161,10 +139,10 @@ class VirtualClock:
         self._mutex = threading.Lock()
         self._now = round(float(start) * _PER_SECOND)  # ticks
         self._limit = None if limit is None else round(float(limit) * _PER_SECOND)
-        self._ready: collections.deque[_Task] = collections.deque()
-        self._timers: list[tuple[int, int, _Task, int]] = []  # (deadline [ticks], order, task, task token)
+        self._ready: collections.deque[Task] = collections.deque()
+        self._timers: list[tuple[int, int, Task, int]] = []  # (deadline [ticks], order, task, task token)
         self._order = itertools.count()
-        self._tasks: dict[int, _Task] = {}  # thread ident -> task
+        self._tasks: dict[int, Task] = {}  # thread ident -> task
         self.switches = 0
         self._stalled = 0  # baton passes and zero-length waits since the time last moved
         self.failure: LockstepError | None = None
@@ -173,9 +151,9 @@ class VirtualClock:
         self._signal_depth = 0  # defer_signals() calls not undone yet
         self._signal_handler: Any = None
         self._signal_previous: dict[int, Any] = {}
-        me = _Task(threading.current_thread().name, self._mutex)
+        me = Task(threading.current_thread().name, self._mutex)
         self._tasks[threading.get_ident()] = me
-        self._running: _Task | None = me
+        self._running: Task | None = me
 
     # ------------------------------------------------------------ the Clock protocol
     def monotonic(self) -> float:
@@ -194,20 +172,14 @@ class VirtualClock:
 
     def event(self) -> _Event:
         """A new :class:`threading.Event` look-alike on this clock."""
-        from pectoral_gym.hardware.clockwaits import _Event
-
         return _Event(self)
 
     def condition(self, lock: Any = None) -> _Condition:
         """A new :class:`threading.Condition` look-alike on this clock."""
-        from pectoral_gym.hardware.clockwaits import _Condition
-
         return _Condition(self, lock)
 
     def thread(self, target: Callable[..., Any], name: str, args: tuple = (), daemon: bool = True) -> _Thread:
         """A new :class:`threading.Thread` that runs in lockstep from its start."""
-        from pectoral_gym.hardware.clockwaits import _Thread
-
         return _Thread(self, target, name, args, daemon)
 
     @property
@@ -304,14 +276,14 @@ class VirtualClock:
                 self._fail(f"the simulated time stands still at {self.monotonic():.9f} s: {STALL_LIMIT} waits of "
                            f"length zero (a thread polling without waiting)")
 
-    def _current(self) -> _Task:
+    def _current(self) -> Task:
         task = self._tasks.get(threading.get_ident())
         if task is None:  # a thread that joins at its first wait
-            task = _Task(threading.current_thread().name, self._mutex)
+            task = Task(threading.current_thread().name, self._mutex)
             self._tasks[threading.get_ident()] = task
         return task
 
-    def _wake(self, task: _Task) -> None:
+    def _wake(self, task: Task) -> None:
         """Make a blocked ``task`` runnable (it was notified); it runs after those woken before it."""
         if task.blocked:
             task.blocked, task.notified = False, True
@@ -327,7 +299,7 @@ class VirtualClock:
             task.cond.notify_all()
         raise self.failure
 
-    def _suspend(self, task: _Task, deadline: int | None) -> bool:
+    def _suspend(self, task: Task, deadline: int | None) -> bool:
         """Block ``task`` until woken or ``deadline`` [ticks]; returns whether it was woken (not timed out)."""
         if self.failure is not None:
             raise self.failure
@@ -374,7 +346,7 @@ class VirtualClock:
         self._running = task
         task.cond.notify()
 
-    def _enter(self, task: _Task) -> None:
+    def _enter(self, task: Task) -> None:
         """A new thread's first act: wait for the baton."""
         with self._mutex:
             self._tasks[threading.get_ident()] = task

@@ -8,12 +8,9 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-from pectoral_gym.hardware.clock import LockstepError, _Task
-
-if TYPE_CHECKING:
-    from pectoral_gym.hardware.clock import VirtualClock
+from pectoral_gym.hardware.clocktask import LockstepError, Scheduler, Task
 
 __all__: list[str] = []  # made by VirtualClock only
 
@@ -21,10 +18,10 @@ __all__: list[str] = []  # made by VirtualClock only
 class _Event:
     """``threading.Event`` on a :class:`VirtualClock`."""
 
-    def __init__(self, clock: VirtualClock):
+    def __init__(self, clock: Scheduler):
         self._clock = clock
         self._flag = False
-        self._waiters: list[_Task] = []
+        self._waiters: list[Task] = []
 
     def is_set(self) -> bool:
         return self._flag
@@ -64,11 +61,11 @@ class _Event:
 class _Condition:
     """``threading.Condition`` on a :class:`VirtualClock` (``wait`` releases the lock as the original does)."""
 
-    def __init__(self, clock: VirtualClock, lock: Any = None):
+    def __init__(self, clock: Scheduler, lock: Any = None):
         self._clock = clock
         self._lock = threading.RLock() if lock is None else lock
         self.acquire, self.release = self._lock.acquire, self._lock.release
-        self._waiters: list[_Task] = []
+        self._waiters: list[Task] = []
 
     def __enter__(self) -> bool:
         return self._lock.__enter__()
@@ -142,10 +139,10 @@ class _Condition:
 class _Thread(threading.Thread):
     """``threading.Thread`` in lockstep: runnable from :meth:`start`, ``join`` counts simulated time."""
 
-    def __init__(self, clock: VirtualClock, target: Callable[..., Any], name: str, args: tuple, daemon: bool):
+    def __init__(self, clock: Scheduler, target: Callable[..., Any], name: str, args: tuple, daemon: bool):
         super().__init__(name=name, daemon=daemon)
         self._clock, self._job, self._job_args = clock, target, args
-        self._task = _Task(name, clock._mutex)
+        self._task = Task(name, clock._mutex)
         self._finished = _Event(clock)
 
     def start(self) -> None:

@@ -1,4 +1,4 @@
-"""The episodes of ``pectoral-deploy`` on one env: their steps log, their summaries, the trajectory plot.
+"""The episodes of a deployment on one env: their steps log, their summaries, the trajectory plot.
 
 A run ends early, at once, when the robot serves another session (``RadioLink.displaced``, in
 :mod:`pectoral_gym.hardware.radio.link`: another PC took it over, or it was never ours): :func:`run_episodes` runs
@@ -7,11 +7,9 @@ no further episode, and the link sends nothing more (``docs/hardware.md``, "Take
 
 from __future__ import annotations
 
-import argparse
-import dataclasses
+import contextlib
 import json
 import math
-import sys
 from pathlib import Path
 from typing import TextIO
 
@@ -21,8 +19,7 @@ from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.hardware.clock import REAL_CLOCK
 from pectoral_gym.hardware.radio.link import DisplacedError
 
-__all__ = ["EXIT_DISPLACED", "displaced_reason", "plot_trajectories", "random_start", "run_episode", "run_episodes",
-           "write_report"]
+__all__ = ["displaced_reason", "plot_trajectories", "random_start", "run_episode", "run_episodes"]
 
 
 def displaced_reason(env) -> str:
@@ -73,9 +70,11 @@ def run_episode(env, controller, episode: int, log: TextIO, seed: int | None = N
             "final_distance": info["distance"]}
 
 
-def run_episodes(env, controller, episodes: int, log_path: Path, seed: int | None = None, robot=None,
+def run_episodes(env, controller, episodes: int, log_path: Path | TextIO, seed: int | None = None, robot=None,
                  progress: bool = True) -> list[dict]:
     """Run ``episodes`` episodes on one env (:func:`run_episode`); write the steps to ``log_path``; return summaries.
+
+    ``log_path``: a file (created or overwritten) or an open text stream (written, left open).
 
     Stops early, with the episodes so far, once the robot serves another session (:func:`displaced_reason`):
     after an episode that ended so, or at a reset that found it so (:class:`DisplacedError`; that episode has no
@@ -84,8 +83,8 @@ def run_episodes(env, controller, episodes: int, log_path: Path, seed: int | Non
     from tqdm import tqdm
 
     summaries = []
-    with open(log_path, "w", encoding="utf-8") as log, tqdm(total=episodes, desc="episodes",
-                                                              disable=not progress) as bar:
+    stream = contextlib.nullcontext(log_path) if hasattr(log_path, "write") else open(log_path, "w", encoding="utf-8")
+    with stream as log, tqdm(total=episodes, desc="episodes", disable=not progress) as bar:
         for episode in range(episodes):
             try:
                 summaries.append(run_episode(env, controller, episode, log, seed, robot))
@@ -130,45 +129,3 @@ def plot_trajectories(log_path: Path, png_path: Path) -> None:
     fig.tight_layout()
     fig.savefig(png_path, dpi=120)
     plt.close(fig)
-
-
-_DISPLACED_TEXT = {"taken_over": "another session took the robot over (taken_over)",
-                   "robot_busy": "the robot serves another live session (robot_busy; --take-over takes it over)"}
-
-#: Exit status of a run displaced by another session (``taken_over``, ``robot_busy``): it ended at once.
-EXIT_DISPLACED = 3
-
-
-def write_report(parser: argparse.ArgumentParser, args: argparse.Namespace, out: Path, settings: dict,
-                 conditions, result: tuple) -> int:
-    """Write ``summary.json`` and ``trajectory.png``, print the episodes; returns the exit status.
-
-    ``result``: ``(summaries, link health, solver summary or None, wall time [s], ended)``; 0, or
-    :data:`EXIT_DISPLACED` when ``ended`` names another session served (said on the terminal too).
-    """
-    summaries, link, solver, wall_time, ended = result
-    report = {"controller": args.controller, "policy": None if args.policy is None else str(args.policy),
-              "settings": {k: list(v) if isinstance(v, tuple) else dataclasses.asdict(v) if k == "params" else v
-                           for k, v in settings.items()},
-              "episodes": summaries, "link": link, "ended": ended or "done"}
-    report["wall_time"] = wall_time  # s for the episodes (the one field a lockstep rerun changes)
-    if args.emulate:
-        report["emulation"] = {"lockstep": args.lockstep, "speed": args.speed, "seed": args.seed,
-                               "firmware": args.firmware, "conditions": dataclasses.asdict(conditions),
-                               "params": None if args.emulate_params is None else dataclasses.asdict(
-                                   args.emulate_params)}
-    if solver is not None:
-        report["solver"] = solver  # its times are wall times: a rerun changes them too
-    (out / "summary.json").write_text(json.dumps(report, indent=2), encoding="utf-8")
-    plot_trajectories(out / "steps.jsonl", out / "trajectory.png")
-    for s in summaries:
-        print(f"episode {s['episode']}: return {s['return']:.3f}, {s['steps']} steps, "
-              f"stop: {s['safety_stop'] or ('success' if s['success'] else 'end')}")
-    print(f"log {out / 'steps.jsonl'}, plot {out / 'trajectory.png'}; link: sent {link['sent']}, "
-          f"acked {link['acked']}, retries {link['retries']}, crc errors {link['crc_errors']}; "
-          f"{len(summaries)} episodes in {report['wall_time']:.1f} s wall time")
-    if ended:
-        print(f"{parser.prog}: {_DISPLACED_TEXT[ended]}: this run ended after {len(summaries)} of {args.episodes} "
-              "episodes and sends nothing more (summary.json: ended)", file=sys.stderr)
-        return EXIT_DISPLACED
-    return 0

@@ -9,33 +9,34 @@ results for any number of worker processes. The controller is built once per pro
 
 Workers are started with the ``spawn`` method (numba's and the clock's threads in the parent make ``fork``
 unsafe); each takes the next episode index from the parent when it is free, and sends back the episode's
-lines of ``steps.jsonl`` and its summary; the parent hands them on in episode order.
+lines of ``steps.jsonl`` and its summary; the parent hands them on in episode order. One episode on its rig:
+:mod:`pectoral_gym.hardware.lockstep_episode`.
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
-import io
 import json
-import math
 import multiprocessing
 import signal
-import threading
 import traceback
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from types import SimpleNamespace
 from typing import Any
 
-from pectoral_gym.envs.tasks import kernels as tk
-from pectoral_gym.hardware.deploy import make_controller, random_start, run_episode, solver_summary
-from pectoral_gym.hardware.deploy_checks import check_frame_size, first_frame
-from pectoral_gym.hardware.emurig import RigConditions, open_rig
+from pectoral_gym.hardware.deploy_controllers import solver_summary
+from pectoral_gym.hardware.lockstep_episode import (  # re-exported: a job and its episodes
+    EpisodeError,
+    EpisodeResult,
+    EpisodeRunner,
+    EpisodeSignalLatch,
+    LockstepJob,
+    episode_time_limit,
+)
 from pectoral_gym.hardware.radio.linkstatus import LinkStats
-from pectoral_gym.hardware.safety.rules import SafetyConfig, install_stop_handlers
-from pectoral_gym.hardware.signal_latch import end_as
+from pectoral_gym.hardware.safety.rules import install_stop_handlers
 
 __all__ = ["EpisodeError", "EpisodeResult", "LockstepJob", "episode_time_limit", "merge_link", "merge_solver",
            "run_lockstep", "shift_records"]
@@ -46,212 +47,6 @@ _JOIN_TIMEOUT = 5.0  # wall s a terminated worker gets to end before it is kille
 # Wall seconds the parent waits for any worker's next result: far above an episode's (seconds to a minute, plus a
 # cold numba compile of up to ~100 s), far below "for ever".
 EPISODE_WALL_TIMEOUT = 1800.0
-_RESET_ALLOWANCE = 60.0  # simulated s an episode's resets, stop confirmations and camera checks may take at most
-
-
-def episode_time_limit(job: LockstepJob) -> float:
-    """Simulated seconds past which an episode's rig counts as stuck (``LockstepError``: a run that cannot end).
-
-    Twice the episode's steps at its control period, plus :data:`_RESET_ALLOWANCE`: a step that overruns its
-    period by as much again, every reset wait at its time-out, and still far below what a loop that never ends
-    runs to. The run then ends with one line naming the waiting threads, instead of hanging.
-    """
-    period = float(job.settings.get("control_period", 0.5))
-    return 2.0 * job.max_steps * period + _RESET_ALLOWANCE
-
-
-@dataclass(frozen=True)
-class LockstepJob:
-    """Everything a process needs to run any episode of a lockstep deployment (picklable).
-
-    Attributes:
-        controller: ``"policy"``, ``"nmpc"`` or ``"hand"``.
-        policy: Run folder or ``.zip`` of the policy (``controller="policy"`` only).
-        seed: The run's seed: episode ``k`` is seeded with ``seed + k``.
-        conditions: The emulated radio's and camera's conditions.
-        settings: ``HardwareFishEnv`` keyword arguments (``task``, ``control_period`` [s], ...).
-        safety: The safety supervisor's settings.
-        max_steps: Steps per episode, >= 1.
-        calibration: Camera calibration file, or ``None`` for the emulator's camera model.
-        take_over: Take control of a robot another session drives (``HardwareFishEnv``'s ``take_over``).
-        params: The emulated fish's :class:`pectoral_gym.model.params.FishParams` (``None``: Table 1's).
-        scaling: The K file the hand law and the NMPC plan with (``None``: the shipped K).
-        firmware: The emulated robot's rules (``pectoral_gym.hardware.emulated_firmware.FIRMWARES``).
-    """
-
-    controller: str = "hand"
-    policy: str | None = None
-    seed: int = 0
-    conditions: RigConditions = RigConditions()
-    settings: Mapping[str, Any] = field(default_factory=lambda: {"task": "goal", "control_period": 0.5})
-    safety: SafetyConfig = SafetyConfig()
-    max_steps: int = 240
-    calibration: str | None = None
-    take_over: bool = False
-    params: Any = None
-    scaling: str | None = None
-    firmware: str = "python"
-
-
-@dataclass
-class EpisodeResult:
-    """One episode's output.
-
-    Attributes:
-        episode: Its index.
-        log: Its lines of ``steps.jsonl``.
-        summary: :func:`pectoral_gym.hardware.deploy.run_episode`'s summary.
-        link: The link's :meth:`~pectoral_gym.hardware.radio.link.RadioLink.health` once the rig is closed.
-        solver: The controller's solve times [s], failed and late steps in this episode, or ``None`` for a
-            controller that does not solve (``{"solve_times", "failures", "late"}``).
-        run_log: Its records of the run log (:mod:`pectoral_gym.hardware.runlog`, no header), on its rig's clock
-            (from 0).
-    """
-
-    episode: int
-    log: str
-    summary: dict[str, Any]
-    link: dict[str, Any]
-    solver: dict[str, Any] | None = None
-    run_log: str = ""
-
-
-class EpisodeError(RuntimeError):
-    """An episode failed.
-
-    Attributes:
-        episode: Its index.
-        setup: The failure is the settings', found by the rig or the env (``ValueError``): a bad argument.
-        log: The episode's lines of ``steps.jsonl`` up to the failure.
-    """
-
-    def __init__(self, episode: int, message: str, setup: bool = False, log: str = ""):
-        super().__init__(message)
-        self.episode, self.setup, self.log = episode, setup, log
-
-
-class _Runner:
-    """Runs episodes of ``job``, each on a fresh rig, with one controller (``controller``, or built at first use)."""
-
-    def __init__(self, job: LockstepJob, controller: Any = None, handle_signals: bool = True):
-        from pectoral_gym.hardware.vision.cameramodel import CameraModel
-
-        self.job, self.controller, self.handle_signals = job, controller, handle_signals
-        self.latch: _SignalLatch | None = None  # run_lockstep's, for episodes in the calling thread
-        self.model = CameraModel.default() if job.calibration is None else CameraModel.load(job.calibration)
-        if controller is None and job.controller == "policy":
-            from pectoral_gym.agents.training.policy import load_policy  # lazy: agents/ pulls in torch
-
-            self.controller = load_policy(job.policy)
-
-    def run(self, episode: int) -> EpisodeResult:
-        """Episode ``episode`` on a rig opened with ``job.seed + episode``, closed before this returns."""
-        from pectoral_gym.hardware.env import HardwareFishEnv
-        from pectoral_gym.hardware.runlog import RunLogWriter
-        from pectoral_gym.hardware.vision.tracker import MarkerTracker
-
-        job, log, records = self.job, io.StringIO(), io.StringIO()
-        try:
-            with contextlib.ExitStack() as signals, contextlib.ExitStack() as resources:  # last in, first out
-                try:
-                    clock, robot, port, camera = open_rig(resources, job.seed + episode, job.conditions,
-                                                          lockstep=True, params=job.params, firmware=job.firmware)
-                    clock.limit = episode_time_limit(job)
-                    if self.latch is not None:  # Ctrl-C and SIGTERM taken at the rig's waits until it is closed
-                        signals.callback(self.latch.hand_to(clock))
-                    inset = job.settings.get("start_inset", tk.START_INSET)  # the policy's own, as it trained
-                    check_frame_size(first_frame(camera, clock=clock), self.model, job.calibration)
-                    env = HardwareFishEnv(port, camera, safety=job.safety, max_episode_steps=job.max_steps,
-                                          reset_hook=lambda rng: robot.place(*random_start(rng, inset)),
-                                          tracker=MarkerTracker(self.model), take_over=job.take_over, clock=clock,
-                                          handle_signals=self.handle_signals, **job.settings)
-                    resources.callback(env.close)
-                    env.run_log = RunLogWriter(records, "emulator", env.config.control_period)
-                    if self.controller is None:  # a step's computing costs no simulated time: no budget applies
-                        self.controller = make_controller(job.controller, env.config, math.inf, job.safety,
-                                                          job.scaling)
-                except ValueError as err:  # the settings, found wrong by the rig or the env
-                    raise EpisodeError(episode, str(err), setup=True) from err
-                stats = self._solver_stats()
-                summary = run_episode(env, self.controller, episode, log, job.seed, robot)
-        except (RuntimeError, OSError) as err:  # a device's failure (no fish seen, no stop confirmed, ...)
-            if isinstance(err, EpisodeError):
-                raise
-            raise EpisodeError(episode, str(err), log=log.getvalue()) from err
-        solver = None
-        if stats is not None:  # this episode's share of the controller's running totals
-            now = self._solver_stats()
-            solver = {"solve_times": now["solve_times"][len(stats["solve_times"]):],
-                      "failures": now["failures"] - stats["failures"], "late": now["late"] - stats["late"]}
-        run_log = records.getvalue().split("\n", 1)[1]  # the records; the deploy writes one header for the run
-        return EpisodeResult(episode, log.getvalue(), summary, env.link.health(), solver, run_log)
-
-    def _solver_stats(self) -> dict[str, Any] | None:
-        c = self.controller
-        if not hasattr(c, "solve_times"):
-            return None
-        return {"solve_times": [float(t) for t in c.solve_times], "failures": int(c.failures), "late": int(c.late)}
-
-
-class _SignalLatch:
-    """Ctrl-C and SIGTERM for lockstep episodes in the calling thread: never acted on inside a rig's scheduler.
-
-    The handler records the signal; :meth:`take` acts on it between rigs, and :meth:`hand_to` passes it to a
-    rig's clock, which acts at its main thread's next wait (:meth:`VirtualClock.defer_signals`) and then calls
-    this handler back to end the run. Acting: ``KeyboardInterrupt`` for SIGINT, ``SystemExit(143)`` for SIGTERM
-    (or the handler installed before, if one was). A second signal acts at once.
-    """
-
-    def __init__(self) -> None:
-        self.pending: int | None = None
-        self._in_rig = False  # a rig's clock has the signals: a call of ours is that clock ending the run
-        self._previous: dict[int, Any] = {}
-
-    def install(self) -> Callable[[], None]:
-        """Install the handler (main thread only, else nothing); returns a function that restores the old ones."""
-        if threading.current_thread() is not threading.main_thread():
-            return lambda: None
-        self._previous = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
-        for sig in self._previous:
-            signal.signal(sig, self._handler)
-
-        def restore() -> None:
-            for sig, old in self._previous.items():
-                if signal.getsignal(sig) == self._handler:
-                    signal.signal(sig, old)
-
-        return restore
-
-    def _handler(self, signum: int, frame: Any) -> None:
-        if self._in_rig or self.pending is not None:
-            self.pending = None
-            self._end(signum)
-        self.pending = signum
-
-    def _end(self, signum: int) -> None:
-        end_as(signum, self._previous.get(signum))
-
-    def take(self) -> None:
-        """Act on a recorded signal now (call where no rig is open)."""
-        if self.pending is not None:
-            signum, self.pending = self.pending, None
-            self._end(signum)
-
-    def hand_to(self, clock: Any) -> Callable[[], None]:
-        """Let ``clock`` (a rig's :class:`VirtualClock`) take the signals, with any recorded one; returns the undo."""
-        restore = clock.defer_signals()
-        if restore is None or not self._previous:
-            return lambda: None
-        self._in_rig = True
-        if self.pending is not None:
-            clock.record_signal(self.pending)
-            self.pending = None
-
-        def undo() -> None:
-            self._in_rig = False
-            restore()
-
-        return undo
 
 
 def merge_link(healths: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
@@ -282,7 +77,10 @@ def shift_records(text: str, episode: int, after: float | None) -> tuple[list[di
 
 
 def merge_solver(solvers: Sequence[Mapping[str, Any] | None]) -> dict[str, Any] | None:
-    """:func:`pectoral_gym.hardware.deploy.solver_summary` over the episodes' solver figures (``None``: no solver)."""
+    """:func:`~pectoral_gym.hardware.deploy_controllers.solver_summary` over the episodes' solver figures.
+
+    ``None`` where no episode has a solver.
+    """
     parts = [s for s in solvers if s is not None]
     if not parts:
         return None
@@ -326,8 +124,8 @@ def run_lockstep(job: LockstepJob, episodes: Sequence[int], jobs: int = 1,
 
     with tqdm(total=len(order), desc="episodes", disable=not progress) as bar:
         if jobs == 1:
-            runner = _Runner(job, controller)
-            runner.latch = _SignalLatch()
+            runner = EpisodeRunner(job, controller)
+            runner.latch = EpisodeSignalLatch()
             restore = runner.latch.install()
             try:
                 for episode in order:
@@ -398,7 +196,7 @@ def _worker(conn: Connection, job: LockstepJob) -> None:
     """A worker process: run the episodes the parent sends (``None``: stop), reply with each result or the error."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group: the parent ends us
     try:
-        runner = _Runner(job, handle_signals=False)
+        runner = EpisodeRunner(job, handle_signals=False)
     except BaseException as err:  # noqa: BLE001 - reported to the parent, which names it
         with contextlib.suppress(OSError):
             conn.send(("error", (_describe(err), isinstance(err, ValueError), "")))

@@ -17,7 +17,7 @@ from pectoral_gym.agents.studies.benchmark import (
     to_markdown,
     write_outputs,
 )
-from pectoral_gym.agents.studies.deployment import (
+from pectoral_gym.hardware.studies.deployment import (
     DEGRADED,
     ROBOT_CONDITIONS,
     conditions_argv,
@@ -186,22 +186,22 @@ def test_robot_cells_come_from_the_deploy_summary(tmp_path):
 
 
 def _fake_deploy(calls, episodes, poses):
-    """A stand-in for ``hardware.deploy.main`` that writes the given summary and step log and records its argv."""
-    def deploy(argv):
-        calls.append(argv)
-        out = Path(argv[argv.index("--out") + 1])
-        (out / "summary.json").write_text(json.dumps({
-            "settings": {"task": "goal", "control_period": 0.5}, "episodes": episodes, "wall_time": 2.0,
-            "emulation": {"conditions": {"radio_loss": 0.1}}}))
+    """A stand-in for ``hardware.library.run_deployment`` that returns the given episodes and step records."""
+    from pectoral_gym.hardware.library import Deployment
+
+    def deploy(request, notify=None):
+        calls.append(request)
+        summary = {"settings": {"task": "goal", "control_period": 0.5}, "episodes": episodes, "wall_time": 2.0,
+                   "emulation": {"conditions": {"radio_loss": 0.1}}}
         lines = [{"episode": k, "step": i, "true_pose": pose, "target": [1.0, 0.5]}
                  for k, path in enumerate(poses) for i, pose in enumerate(path)]
-        (out / "steps.jsonl").write_text("".join(json.dumps(line) + "\n" for line in lines))
-        return 0
+        return Deployment(episodes, lines, [], {"sent": 0, "acked": 0, "retries": 0, "crc_errors": 0}, None, 2.0,
+                          "", summary["settings"], summary)
     return deploy
 
 
 def test_robot_cell_counts_stops_contacts_and_time_to_goal(tmp_path, monkeypatch):
-    import pectoral_gym.hardware.deploy
+    from pectoral_gym.hardware.studies import deployment
 
     episodes = [{"episode": 0, "return": 1.0, "steps": 20, "safety_stop": "", "success": True, "final_distance": 0.05},
                 {"episode": 1, "return": -1.0, "steps": 4, "safety_stop": "geofence", "success": False,
@@ -211,10 +211,13 @@ def test_robot_cell_counts_stops_contacts_and_time_to_goal(tmp_path, monkeypatch
     inside = [1.0, 0.5, 0.0]
     poses = [[inside, inside], [inside, [0.02, 0.5, 0.0]], [inside, [1.0, 0.5, 0.0]]]  # episode 1: nose past X = 0
     calls = []
-    monkeypatch.setattr(pectoral_gym.hardware.deploy, "main", _fake_deploy(calls, episodes, poses))
+    monkeypatch.setattr(deployment, "run_deployment", _fake_deploy(calls, episodes, poses))
     run = run_robot_stack(tmp_path / "d", 3, seed=7, controller="hand", conditions=DEGRADED, max_steps=20,
                           capture=True)
-    argv = calls[0]
+    request = calls[0]
+    assert request.conditions == DEGRADED and request.rig == "lockstep" and request.max_episode_steps == 20
+    assert request.controller == "hand" and request.policy is None and (request.episodes, request.seed) == (3, 7)
+    argv = run["command"].split()
     for flag, value in (("--radio-loss", 0.1), ("--radio-latency", 0.1), ("--camera-drop", 0.1),
                         ("--pose-noise-mm", 5.0), ("--pose-noise-deg", 2.0)):
         assert float(argv[argv.index(flag) + 1]) == pytest.approx(value)
@@ -226,8 +229,9 @@ def test_robot_cell_counts_stops_contacts_and_time_to_goal(tmp_path, monkeypatch
     assert m["time_to_goal"]["mean"] == pytest.approx(10.0) and m["time_to_goal"]["n"] == 1  # 20 steps x 0.5 s
     assert m["min_clearance"]["n"] == 3 and cell["robot"]["wall_ms_per_step"] == pytest.approx(2e3 / 27)
     assert cell["robot"]["conditions"] == {"radio_loss": 0.1}
-    # a refused argument (argparse exits) is an error of the cell, not of the whole process
-    monkeypatch.setattr(pectoral_gym.hardware.deploy, "main", lambda argv: (_ for _ in ()).throw(SystemExit(2)))
+    # a refused setting (the deploy's exit status 2) is an error of the cell, not of the whole process
+    monkeypatch.setattr(deployment, "run_deployment",
+                        lambda request, notify=None: (_ for _ in ()).throw(ValueError("refused")))
     with pytest.raises(RuntimeError, match="status 2"):
         run_robot_stack(tmp_path / "e", 1, seed=0, controller="hand")
     assert conditions_argv(ROBOT_CONDITIONS["robot"]) == []
@@ -237,7 +241,7 @@ def test_a_policy_gets_robot_cells_on_its_own_task_only(tmp_path, monkeypatch):
     import types
 
     import pectoral_gym.agents.training.policy
-    from pectoral_gym.agents.studies import deployment
+    from pectoral_gym.hardware.studies import deployment
 
     monkeypatch.setattr(pectoral_gym.agents.training.policy, "load_policy",
                         lambda path: types.SimpleNamespace(trained={"task": "track"}))

@@ -24,7 +24,7 @@ def test_quick_demo_writes_report_json_and_plot(tmp_path, capsys):
     robot = results["robot_stack"]
     assert robot["episodes"] == 2 and 0.0 <= robot["success"]["mean"] <= 1.0
     assert (out / "robot" / "steps.jsonl").is_file() and "emulated robot" in report
-    # through agents/studies/deployment.run_robot_stack, with the same figures and command as before it moved there
+    # through the robot stack (hardware/studies/deployment.run_robot_stack), with the same figures and command
     assert set(robot) == {"episodes", "seed", "success", "safety_stops", "wall_time_s", "command"}
     assert robot["command"].startswith("python -m pectoral_gym.hardware.deploy --policy ")
     assert f"over 2 seeded episodes (seed {robot['seed']})" in report

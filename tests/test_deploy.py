@@ -138,7 +138,7 @@ def test_deploy_controller_and_policy_arguments_must_agree(tmp_path):
 def _keep_the_test_process_priority(monkeypatch):
     """The deploy raises its own priority; here that would be the test worker's (its effect: a test of its own)."""
     asked = []
-    monkeypatch.setattr("pectoral_gym.hardware.deploy.raise_priority", lambda nice: asked.append(nice) or "")
+    monkeypatch.setattr("pectoral_gym.hardware.library.raise_priority", lambda nice: asked.append(nice) or "")
     return asked
 
 

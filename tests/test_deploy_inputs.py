@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from pectoral_gym.hardware import deploy
+from pectoral_gym.hardware import deploy, deploy_runs
 from pectoral_gym.model.kfunctions import default_scaling_path
 from pectoral_gym.model.params import FishParams, params_dict
 
@@ -166,7 +166,7 @@ def test_ctrl_c_is_one_line_and_exit_130(tmp_path, capsys, monkeypatch):
     def interrupted(*args, **kwargs):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(deploy, "_run_real_time", interrupted)
+    monkeypatch.setattr(deploy_runs, "run_real_time", interrupted)
     code = deploy.main(["--controller", "hand", "--emulate", "--no-progress", "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err
     assert code == 130 and "Traceback" not in err and err.strip().endswith("interrupted: the fins were stopped")
@@ -176,12 +176,12 @@ def test_ctrl_c_is_one_line_and_exit_130(tmp_path, capsys, monkeypatch):
 def test_failed_start_leaves_no_files(tmp_path, capsys, monkeypatch):
     out = tmp_path / "a" / "out"
 
-    def fails_at_first_reset(parser, args, controller, settings, safety, conditions, model, log_path):
+    def fails_at_first_reset(request, name, controller, settings, model, log_path, run_log, notify):
         log_path.with_name("run.jsonl").write_text('{"type": "header"}\n')  # what the start had written
         log_path.write_text("")
-        raise deploy._RunError("no fish seen for 5.0 s at reset")
+        raise deploy_runs.DeployError("no fish seen for 5.0 s at reset")
 
-    monkeypatch.setattr(deploy, "_run_real_time", fails_at_first_reset)
+    monkeypatch.setattr(deploy_runs, "run_real_time", fails_at_first_reset)
     assert deploy.main(["--controller", "hand", "--emulate", "--no-progress", "--out", str(out)]) == 1
     assert not (tmp_path / "a").exists() and "no fish seen" in capsys.readouterr().err
 
@@ -190,12 +190,12 @@ def test_displaced_run_exit_3_and_summary_says_so(tmp_path, capsys, monkeypatch)
     summary = {"episode": 0, "return": 0.0, "steps": 1, "terminated": False, "truncated": True,
                "safety_stop": "taken_over", "success": False, "final_distance": 0.5}
 
-    def displaced(parser, args, controller, settings, safety, conditions, model, log_path):
+    def displaced(request, name, controller, settings, model, log_path, run_log, notify):
         log_path.write_text(json.dumps({"episode": 0, "step": 0, "event": "reset", "pose": [1, 0.5, 0],
                                         "target": [1.5, 0.5]}) + "\n")
         return [summary], {"sent": 1, "acked": 1, "retries": 0, "crc_errors": 0}, None, 0.1, "taken_over"
 
-    monkeypatch.setattr(deploy, "_run_real_time", displaced)
+    monkeypatch.setattr(deploy_runs, "run_real_time", displaced)
     code = deploy.main(["--controller", "hand", "--emulate", "--episodes", "5", "--no-progress",
                         "--out", str(tmp_path)])
     assert code == deploy.EXIT_DISPLACED == 3

@@ -54,7 +54,7 @@ def test_garbage_made_before_the_call_is_collected():
 
 
 def test_reset_settles_the_collector_while_the_fins_are_stopped(monkeypatch):
-    from pectoral_gym.hardware import env as hardware_env
+    from pectoral_gym.hardware import env_reset
     from pectoral_gym.hardware.emulator import EmulatedRobot
     from pectoral_gym.hardware.env import HardwareFishEnv
     from pectoral_gym.hardware.safety.rules import SafetyConfig
@@ -65,7 +65,7 @@ def test_reset_settles_the_collector_while_the_fins_are_stopped(monkeypatch):
         calls.append((env.supervisor.armed, robot.firmware.state.name))
         return 0.0
 
-    monkeypatch.setattr(hardware_env, "settle_garbage", settle)
+    monkeypatch.setattr(env_reset, "settle_garbage", settle)
     with EmulatedRobot(speed=2.0, seed=0, start_pose=(1.15, 0.575, 0.3)) as robot, \
             HardwareFishEnv(robot.url, robot.camera(seed=1), speed=2.0,
                             safety=SafetyConfig(tracking_timeout=1.5, link_timeout=2.0)) as env:

@@ -9,10 +9,10 @@ controller). Also measured: env step rates (:func:`pectoral_gym.tools.bench.run_
 steps per second of a short Stable-Baselines3 PPO ``learn()`` on the averaged vector env, and the
 time to solve: per training seed, the wall time until the demo's PPO first reaches 0.95 success on
 the full model on held-out episodes (:mod:`pectoral_gym.agents.studies.solve_time`; ``--full`` runs seeds 0-4).
-Two more columns run the robot stack on the emulated robot in lockstep simulated time
-(:func:`pectoral_gym.agents.studies.deployment.run_robot_stack`): ``robot`` (ideal radio and camera) and
-``robot+degraded`` (:data:`pectoral_gym.agents.studies.deployment.DEGRADED`), for the baselines the deploy can drive
-and the trained policies on their own task.
+Two more columns run the robot stack on the emulated robot in lockstep simulated time (the installed robot stack,
+:mod:`pectoral_gym.agents.studies.robot_stack`: ``pectoral_gym.hardware.studies.deployment``): ``robot`` (ideal radio
+and camera) and ``robot+degraded`` (its ``DEGRADED`` conditions), for the baselines the deploy can drive and the
+trained policies on their own task.
 
 CLI (``pectoral-benchmark``, also ``python -m pectoral_gym.agents.studies.benchmark``)::
 
@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from pectoral_gym.agents.studies.benchmark_report import plot_report, to_markdown, write_outputs
-from pectoral_gym.agents.studies.deployment import ROBOT_CONDITIONS, ROBOT_CONTROLLERS, robot_cells
+from pectoral_gym.agents.studies.robot_stack import ROBOT_COLUMNS, RobotStackNotFoundError, robot_stack
 from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
 from pectoral_gym.versions import ENV_VERSIONS, LATEST_AVERAGED, LATEST_FULL
 
@@ -52,8 +52,8 @@ AVERAGED_ID = LATEST_AVERAGED
 FULL_ID = LATEST_FULL
 # label -> (env id, randomised), in the default version (env_id() gives another version's)
 ENVS = {"averaged": (AVERAGED_ID, False), "full": (FULL_ID, False), "full+rand": (FULL_ID, True)}
-# the simulated settings, then the robot stack's columns (deployment.ROBOT_CONDITIONS)
-ALL_ENVS = (*ENVS, *ROBOT_CONDITIONS)
+# the simulated settings, then the robot stack's columns
+ALL_ENVS = (*ENVS, *ROBOT_COLUMNS)
 TASKS = ("goal", "track")
 BASELINE_NAMES = ("random", "hand", "nmpc")
 
@@ -214,7 +214,7 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
         "environment"}``;
         a cell holds ``controller, env, env_id, task, n_episodes, metrics`` (mean and CI per metric) and,
         for NMPC, ``solver`` (solve-time statistics); a robot-stack cell also ``robot``
-        (:func:`pectoral_gym.agents.studies.deployment.robot_cell`).
+        (the robot stack's ``robot_cell``, :mod:`pectoral_gym.hardware.studies.deployment`).
 
     Raises:
         ValueError: For an unknown controller, env label or task.
@@ -237,10 +237,12 @@ def run_benchmark(settings: BenchmarkSettings, controllers: tuple[str, ...] = BA
     built: dict[tuple[str, str], Any] = {}
     for task in tasks:
         for label in envs:
-            if label in ROBOT_CONDITIONS:
-                cells += robot_cells(label, task, controllers, {name: (loaded[name], paths[name]) for name in loaded},
-                                     settings.robot_episodes.get(task, 0), settings.seed, Path(robot_out), say, errors,
-                                     max_steps=settings.robot_max_steps or settings.max_episode_steps)
+            if label in ROBOT_COLUMNS:
+                policy_paths = {name: (loaded[name], paths[name]) for name in loaded}
+                cells += robot_stack().robot_cells(label, task, controllers, policy_paths,
+                                                   settings.robot_episodes.get(task, 0), settings.seed,
+                                                   Path(robot_out), say, errors,
+                                                   max_steps=settings.robot_max_steps or settings.max_episode_steps)
                 continue
             cell_env, randomised = env_id(label, settings.version), ENVS[label][1]
             env_kwargs: dict[str, Any] = {"task": task}
@@ -387,8 +389,12 @@ def main(argv: list[str] | None = None) -> int:
         parser.error("--solve-episodes and --solve-jobs must be >= 1, --solve-seeds distinct")
     from tqdm.auto import tqdm
 
-    robot = [e for e in args.envs if e in ROBOT_CONDITIONS]
-    robot_rows = len([c for c in args.controllers if c in ROBOT_CONTROLLERS]) + len(args.policy)  # at most
+    robot = [e for e in args.envs if e in ROBOT_COLUMNS]
+    try:
+        driven = robot_stack().ROBOT_CONTROLLERS if robot else ()
+    except RobotStackNotFoundError as error:
+        parser.error(f"--env {' '.join(robot)}: {error}")
+    robot_rows = len([c for c in args.controllers if c in driven]) + len(args.policy)  # at most
     n_cells = len(args.tasks) * ((len(args.envs) - len(robot)) * (len(args.controllers) + len(args.policy))
                                  + len(robot) * robot_rows)
     n_items = n_cells + (0 if args.no_throughput else 2) + (1 if settings.solve_seeds else 0)

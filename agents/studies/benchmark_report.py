@@ -86,7 +86,7 @@ def to_markdown(report: dict[str, Any]) -> str:
 
 
 def _robot_lines(cells: list[dict[str, Any]]) -> list[str]:
-    """The robot-stack table (:func:`pectoral_gym.agents.studies.deployment.robot_cell`), or nothing."""
+    """The robot-stack table (cells of ``pectoral_gym.hardware.studies.deployment.robot_cell``), or nothing."""
     if not cells:
         return []
     lines = ["## Robot stack", "",

@@ -26,6 +26,7 @@ import time
 from pathlib import Path
 from typing import Any
 
+from pectoral_gym.agents.studies.robot_stack import RobotStackNotFoundError
 from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
 from pectoral_gym.versions import LATEST_AVERAGED, LATEST_FULL
 
@@ -36,7 +37,7 @@ EVAL_ENVS = (LATEST_AVERAGED, LATEST_FULL)
 EVAL_SEED = 10_000  # evaluation episodes k use seed EVAL_SEED + k (training uses seed + env index)
 QUICK = {"n_timesteps": 1024, "n_envs": 8, "n_steps": 64, "batch_size": 128, "n_epochs": 1, "eval_freq": 0}
 ROBOT_EPISODES = 20  # robot-stack episodes (lockstep emulation) by default; 2 of at most 40 steps with --quick
-# the robot-stack figures results.json keeps (deployment.run_robot_stack returns more)
+# the robot-stack figures results.json keeps (the robot stack's run_robot_stack returns more)
 ROBOT_SUMMARY = ("episodes", "seed", "success", "safety_stops", "wall_time_s", "command")
 ROBOT_JOBS = min(2, os.cpu_count() or 1)  # robot-stack episodes at once (worker processes; same results for any)
 
@@ -65,6 +66,12 @@ def run_demo(out: str | Path, quick: bool = False, seed: int = 0, timesteps: int
     run_dir = out / "run"
     if run_dir.exists():
         raise FileExistsError(f"{run_dir} exists; choose another --out or remove it")
+    robot_episodes = (2 if quick else ROBOT_EPISODES) if robot_episodes is None else int(robot_episodes)
+    stack = None
+    if robot_episodes:  # found before the training, which it would otherwise follow with an error
+        from pectoral_gym.agents.studies.robot_stack import robot_stack
+
+        stack = robot_stack()
     start = time.perf_counter()
     train(config, run_dir, progress=progress,
           command=" ".join(["python", "-m", "pectoral_gym.agents.training.demo", *sys.argv[1:]]))
@@ -79,13 +86,10 @@ def run_demo(out: str | Path, quick: bool = False, seed: int = 0, timesteps: int
         write_json(result, out / f"eval_{env_id}.json")
         results.append(result)
     plot_trajectories(results, out / "trajectories.png", max_episodes=12)
-    robot_episodes = (2 if quick else ROBOT_EPISODES) if robot_episodes is None else int(robot_episodes)
     robot = None
-    if robot_episodes:
-        from pectoral_gym.agents.studies.deployment import run_robot_stack
-
-        run = run_robot_stack(out / "robot", robot_episodes, EVAL_SEED, policy=run_dir,
-                              max_steps=40 if quick else None, progress=progress, jobs=robot_jobs)
+    if stack is not None:
+        run = stack.run_robot_stack(out / "robot", robot_episodes, EVAL_SEED, policy=run_dir,
+                                    max_steps=40 if quick else None, progress=progress, jobs=robot_jobs)
         robot = {key: run[key] for key in ROBOT_SUMMARY}
     total = time.perf_counter() - start
     summary = {
@@ -192,7 +196,7 @@ def main(argv: list[str] | None = None) -> int:
         summary = run_demo(args.out, quick=args.quick, seed=args.seed, timesteps=args.timesteps,
                            episodes=args.episodes, task=args.task, progress=not args.no_progress,
                            robot_episodes=args.robot_episodes, robot_jobs=args.jobs)
-    except (FileExistsError, ValueError) as error:
+    except (FileExistsError, ValueError, RobotStackNotFoundError) as error:
         print(f"error: {error}", file=sys.stderr)
         return 2
     print(Path(args.out, "report.md").read_text())

@@ -1,18 +1,21 @@
 """A controller on the emulated robot through the whole robot stack, in lockstep: one run, its summary and metrics.
 
-:func:`run_robot_stack` calls ``python -m pectoral_gym.hardware.deploy --emulate --lockstep`` in this process (radio
-link and firmware rules, rendered camera, tracker, observer, safety supervisor; the emulated robot runs the
-full model with nominal parameters), reads its ``summary.json`` and ``steps.jsonl`` and returns a summary.
-The demo (:mod:`pectoral_gym.agents.training.demo`) and the benchmark's robot columns
-(:mod:`pectoral_gym.agents.studies.benchmark`) both use it. The same seed gives the same run (lockstep);
-only the wall time differs.
+:func:`run_robot_stack` runs :func:`pectoral_gym.hardware.library.run_deployment` on the emulated robot in
+lockstep, in this process (radio link and firmware rules, rendered camera, tracker, observer, safety supervisor;
+the emulated robot runs the full model with nominal parameters), the run that ``python -m
+pectoral_gym.hardware.deploy --emulate --lockstep`` makes, and summarises its episodes from memory. The demo
+(:mod:`pectoral_gym.agents.training.demo`) and the benchmark's robot columns
+(:mod:`pectoral_gym.agents.studies.benchmark`) reach this module as the ``emulated`` robot stack
+(:mod:`pectoral_gym.agents.studies.robot_stack`, the entry point group ``pectoral_gym.robot_stacks``): agents/
+imports nothing from hardware/. The same seed gives the same run (lockstep); only the wall time differs.
 
 What the logs can tell (per episode):
 
-* from ``summary.json``: success, the safety stop's reason (``pectoral_gym.hardware.safety.supervisor.PRIORITY``;
-  empty for none), steps, return, final distance (from the measured pose), the NMPC's solve times;
-* from ``steps.jsonl``, whose ``true_pose`` is the emulated robot's centre-of-mass pose after the reset and
-  after each step: the path and the tracking error of the true pose, and wall contacts. The log holds
+* from the summary (``summary.json``): success, the safety stop's reason
+  (``pectoral_gym.hardware.safety.supervisor.PRIORITY``; empty for none), steps, return, final distance (from the
+  measured pose), the NMPC's solve times;
+* from the step records (``steps.jsonl``), whose ``true_pose`` is the emulated robot's centre-of-mass pose after
+  the reset and after each step: the path and the tracking error of the true pose, and wall contacts. The log holds
   no fin angles, so a contact is the geofence's outline (:func:`pectoral_gym.model.tank.clearance`: body
   capsule, and a disc of the fin span around each fin pivot, which holds the fin tip wherever it points)
   across a wall line at a logged pose: an upper bound for the fins, and a touch between two steps
@@ -23,9 +26,9 @@ Fin work is not logged by the deploy, so it is not reported.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import math
+import sys
 from collections import Counter
 from collections.abc import Callable
 from pathlib import Path
@@ -33,7 +36,10 @@ from typing import Any
 
 import numpy as np
 
+from pectoral_gym.agents.studies.robot_stack import ROBOT_COLUMNS
+from pectoral_gym.hardware.deploy import report_lines
 from pectoral_gym.hardware.emurig import RigConditions
+from pectoral_gym.hardware.library import DeployError, DeployRequest, run_deployment
 
 __all__ = ["DEGRADED", "NOMINAL", "ROBOT_CONDITIONS", "ROBOT_CONTROLLERS", "conditions_argv", "robot_cell",
            "robot_cells", "run_robot_stack"]
@@ -42,8 +48,9 @@ NOMINAL = RigConditions()
 #: The degraded conditions of the robot stack's targets: radio 10 % loss each way and 100 ms one-way latency, camera
 #: 10 % frame drops, camera pose noise 5 mm / 2 deg (standard deviations).
 DEGRADED = RigConditions(radio_latency=0.1, radio_loss=0.1, camera_drop=0.1, pose_noise=(0.005, math.radians(2.0)))
-#: Benchmark column label -> conditions of the emulated radio and camera.
-ROBOT_CONDITIONS = {"robot": NOMINAL, "robot+degraded": DEGRADED}
+#: Benchmark column label (:data:`pectoral_gym.agents.studies.robot_stack.ROBOT_COLUMNS`) -> conditions of the
+#: emulated radio and camera.
+ROBOT_CONDITIONS = dict(zip(ROBOT_COLUMNS, (NOMINAL, DEGRADED), strict=True))
 #: Baselines the deploy can drive (``--controller``); trained policies run through ``--policy``.
 ROBOT_CONTROLLERS = ("hand", "nmpc")
 
@@ -64,7 +71,7 @@ def run_robot_stack(out: str | Path, episodes: int, seed: int, controller: str =
     """Run the deploy on the emulated robot in lockstep and summarise it.
 
     Args:
-        out: The deploy's output folder (``summary.json``, ``steps.jsonl``, ``trajectory.png``).
+        out: The deploy's output folder (``summary.json``, ``steps.jsonl``, ``run.jsonl``, ``trajectory.png``).
         episodes: Episodes, >= 1; episode ``k`` is seeded with ``seed + k``.
         seed: Seed of the starts, targets and every emulated condition.
         controller: ``"policy"`` (needs ``policy``), ``"hand"`` or ``"nmpc"``.
@@ -73,7 +80,7 @@ def run_robot_stack(out: str | Path, episodes: int, seed: int, controller: str =
         max_steps: Steps per episode (``None``: the deploy's default, 240 = 2 min).
         task: ``"goal"`` or ``"track"`` (``None``: the policy's own, else ``goal``).
         progress: Show the deploy's progress bar.
-        capture: Write the deploy's printed lines to ``<out>/deploy.txt`` instead of the terminal.
+        capture: Write the deploy's closing lines to ``<out>/deploy.txt`` instead of the terminal.
         jobs: Episodes run at once, each worker process with its own rig (the deploy's ``--jobs``; the results are
             the same for any number). The calling program's top-level code must sit under
             ``if __name__ == "__main__":``, as the workers are spawned.
@@ -82,13 +89,14 @@ def run_robot_stack(out: str | Path, episodes: int, seed: int, controller: str =
         ``{"episodes", "seed", "task", "control_period" [s], "conditions", "success" (mean and 95 % CI),
         "safety_stops" (reason -> episodes), "wall_contacts" (episodes), "wall_time_s", "solver" (NMPC only,
         else ``None``), "link", "command", "out", "per_episode"}``; ``per_episode`` holds one dict per
-        episode (:func:`robot_cell` turns them into metrics).
+        episode (:func:`robot_cell` turns them into metrics). ``command`` is the ``pectoral-deploy`` command line
+        of the same run.
 
     Raises:
-        RuntimeError: If the deploy refuses its arguments or does not finish (its status and folder named).
+        RuntimeError: If the deploy refuses its settings or does not finish (the deploy's exit status, the
+            reason and the folder named).
     """
     from pectoral_gym.agents.training.metrics import summarize
-    from pectoral_gym.hardware.deploy import main as deploy
 
     out = Path(out)
     # no --controller for a policy: the deploy's default, and the demo's command as it always read
@@ -101,19 +109,22 @@ def run_robot_stack(out: str | Path, episodes: int, seed: int, controller: str =
             *([] if task is None else ["--task", task]), *conditions_argv(conditions)]
     command = "python -m pectoral_gym.hardware.deploy " + " ".join(argv)
     out.mkdir(parents=True, exist_ok=True)
-    with contextlib.ExitStack() as stack:
-        if capture:
-            text = stack.enter_context(open(out / "deploy.txt", "w", encoding="utf-8"))
-            stack.enter_context(contextlib.redirect_stdout(text))
-        try:
-            status = deploy(argv)
-        except SystemExit as exit_:  # argparse's error(): a bad argument, or a policy that does not fit
-            status = exit_.code
-    if status != 0:
-        raise RuntimeError(f"the robot-stack run ({command}) ended with status {status}; see {out}")
-    summary = json.loads((out / "summary.json").read_text())
+    try:
+        request = DeployRequest(controller=controller, policy=policy, episodes=episodes, seed=seed, task=task,
+                                rig="lockstep", conditions=conditions, jobs=jobs, out=out, progress=progress,
+                                **({} if max_steps is None else {"max_episode_steps": max_steps}))
+        run = run_deployment(request, notify=lambda line: print(line, file=sys.stderr))  # as the deploy's
+    except (ValueError, DeployError) as err:  # the deploy's exit status 2 (a setting) or 1 (a device, an episode)
+        status = 2 if isinstance(err, ValueError) else 1
+        raise RuntimeError(f"the robot-stack run ({command}) ended with status {status}: {err}; see {out}") from err
+    lines = report_lines(request, run)
+    if capture:
+        (out / "deploy.txt").write_text("".join(line + "\n" for line in lines), encoding="utf-8")
+    else:
+        print("\n".join(lines))
+    summary = json.loads(json.dumps(run.summary))  # as summary.json holds it (lists for tuples)
     runs = summary["episodes"]
-    per_episode = _episode_records(summary, out / "steps.jsonl")
+    per_episode = _episode_records(summary, run.steps)
     return {"episodes": len(runs), "seed": seed, "task": summary["settings"]["task"],
             "control_period": summary["settings"]["control_period"],
             "conditions": summary.get("emulation", {}).get("conditions"),
@@ -124,16 +135,15 @@ def run_robot_stack(out: str | Path, episodes: int, seed: int, controller: str =
             "command": command, "out": str(out), "per_episode": per_episode}
 
 
-def _episode_records(summary: dict[str, Any], log_path: Path) -> list[dict[str, Any]]:
-    """The summary's episodes, each with its true path, tracking error and wall clearance from the step log."""
+def _episode_records(summary: dict[str, Any], steps: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The summary's episodes, each with its true path, tracking error and wall clearance from the step records."""
     from pectoral_gym.model import tank
     from pectoral_gym.model.params import FishParams
 
     outline = tank.Outline.from_params(FishParams())  # the emulated robot's (nominal parameters)
     poses: dict[int, list[list[float]]] = {}
     errors: dict[int, list[float]] = {}
-    for line in log_path.read_text(encoding="utf-8").splitlines():
-        rec = json.loads(line)
+    for rec in steps:
         if "true_pose" not in rec:
             continue
         poses.setdefault(rec["episode"], []).append(rec["true_pose"])
