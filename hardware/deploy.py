@@ -128,8 +128,8 @@ _RunResult = tuple[list[dict], dict, dict | None, float, str]
 
 
 def _run_log(path: Path, args: argparse.Namespace, settings: dict):
-    """The run's :class:`pectoral_gym.hardware.runlog.RunLogWriter` (header written) at ``path``."""
-    from pectoral_gym.hardware.runlog import RunLogWriter
+    """The run's :class:`pectoral_gym.runlog.RunLogWriter` (header written) at ``path``."""
+    from pectoral_gym.runlog import RunLogWriter
 
     return RunLogWriter(path, "emulator" if args.emulate else "robot", settings["control_period"])
 

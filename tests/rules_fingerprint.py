@@ -26,18 +26,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from firmware_streams import ReferenceRobot, generate  # noqa: E402
 
 from pectoral_gym.agents.controllers.firmware_path import FirmwarePath  # noqa: E402
-from pectoral_gym.hardware.finreplay import FinReplay  # noqa: E402
-from pectoral_gym.hardware.radio.firmware import (  # noqa: E402
-    FirmwareConfig,
-    ServoLimits,
-    clip_beats,
-    peak_rates,
-    rate_limit,
-    slew_at_latch,
-    stretch_transition,
-)
-from pectoral_gym.hardware.runlog import read_run_log  # noqa: E402
+from pectoral_gym.model.finreplay import FinReplay  # noqa: E402
+from pectoral_gym.model.finrules import FirmwareConfig, rate_limit, slew_at_latch, stretch_transition  # noqa: E402
 from pectoral_gym.model.models import FullModel  # noqa: E402
+from pectoral_gym.model.servo import ServoLimits, clip_beats, peak_rates  # noqa: E402
+from pectoral_gym.runlog import read_run_log  # noqa: E402
 from pectoral_gym.scaling.calibration.replay import replay_fins  # noqa: E402
 from pectoral_gym.scaling.calibration.synth import write_synthetic_log  # noqa: E402
 
