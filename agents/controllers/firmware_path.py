@@ -1,10 +1,10 @@
 """The robot firmware's command path for a batch of model fish: what the robot's fins latch, and when.
 
-On the robot a command does not reach the fins as sent (:mod:`pectoral_gym.hardware.radio.firmware`): the
-firmware clips it to the servo limits (``clip_beats``) and hands it to the fins, which latch it at their next
-stroke turning point, rate-limited there (``slew_at_latch``: a moving fin's pattern changes by at most
-``max_rate`` times the half-stroke that ends; bias and amplitude 180 deg/s) and with the transitional
-half-stroke bounded by the servos' peak rate (``stretch_transition``;
+On the robot a command does not reach the fins as sent (the fin rules, :mod:`pectoral_gym.model.finrules`): the
+firmware clips it to the servo limits (``clip_beats``, :mod:`pectoral_gym.model.servo`) and hands it to the fins,
+which latch it at their next stroke turning point, rate-limited there (``slew_at_latch``: a moving fin's pattern
+changes by at most ``max_rate`` times the half-stroke that ends; bias and amplitude 180 deg/s) and with the
+transitional half-stroke bounded by the servos' peak rate (``stretch_transition``;
 :func:`pectoral_gym.model.finrules.advance_with_firmware`). The backup shield's on-the-spot spin
 (:data:`pectoral_gym.agents.controllers.turning.SPIN_CYCLE`) changes the biases by up to 37 deg every control
 period and its turn is made of transitional strokes (docs/model.md 3.7), which these rules stretch; the

@@ -1,6 +1,6 @@
 """The logged fins, replayed once, and the body of many candidate fish driven by them.
 
-The fins move by the firmware's rules alone (:mod:`pectoral_gym.hardware.radio.firmware`, the
+The fins move by the firmware's rules alone (:mod:`pectoral_gym.model.finrules`, the
 parameter-change rule of ``docs/model.md`` section 5): their motion does not depend on the body's
 parameters. :func:`replay_fins` therefore runs the one implementation of those rules,
 :class:`pectoral_gym.model.finreplay.FinReplay` (which ticks the firmware with
