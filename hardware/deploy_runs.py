@@ -53,8 +53,8 @@ def _open(sink: Sink | TextIO) -> contextlib.AbstractContextManager[TextIO]:
 
 
 def _run_log(sink: Sink | TextIO, request: DeployRequest, settings: dict):
-    """The run's :class:`pectoral_gym.hardware.runlog.RunLogWriter` (header written) into ``sink``."""
-    from pectoral_gym.hardware.runlog import RunLogWriter
+    """The run's :class:`pectoral_gym.runlog.RunLogWriter` (header written) into ``sink``."""
+    from pectoral_gym.runlog import RunLogWriter
 
     return RunLogWriter(sink, "robot" if request.rig == "robot" else "emulator", settings["control_period"])
 

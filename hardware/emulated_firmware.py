@@ -4,7 +4,7 @@
 
 * :class:`PythonFirmware` (the default, and the specification): the reference state machine
   :class:`pectoral_gym.hardware.radio.firmware.Firmware`, which hands its setpoint to the model's own fins
-  (:func:`pectoral_gym.hardware.finreplay.apply_firmware`), ticked before every :data:`CHUNK` of the model;
+  (:func:`pectoral_gym.model.finrules.apply_firmware`), ticked before every :data:`CHUNK` of the model;
 * :class:`CFirmwareAdapter`: the robot's C firmware core through its binding
   (:class:`pectoral_gym.hardware.radio.cfirmware.CFirmware`), fed what the robot's XBee would deliver and ticked
   every 10 ms of emulated time; the model's fins follow the C fins' latches and halts.
@@ -24,11 +24,11 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from pectoral_gym.hardware.finreplay import CHUNK, apply_firmware, force_latch, latched, stroke_kinds
 from pectoral_gym.hardware.radio import protocol as pr
 from pectoral_gym.hardware.radio import xbee as xb
-from pectoral_gym.hardware.radio.firmware import MS_GUARD, Firmware, FirmwareConfig
+from pectoral_gym.hardware.radio.firmware import MS_GUARD, Firmware
 from pectoral_gym.model import strokes
+from pectoral_gym.model.finrules import CHUNK, FirmwareConfig, apply_firmware, force_latch, latched, stroke_kinds
 from pectoral_gym.model.models import FishModel
 from pectoral_gym.model.params import FinBeat
 
@@ -179,7 +179,7 @@ class CFirmwareAdapter:
     (a bad checksum, another frame type) never reach the core. The core's clock is the emulated time in whole ms;
     it is ticked at every multiple of 10 ms. After each call the model runs to each latch or halt the core
     reports, at its time, and applies it: a latch starts the reported half-stroke
-    (:func:`pectoral_gym.hardware.finreplay.force_latch`), a halt rests both fins at the core's angles. The
+    (:func:`pectoral_gym.model.finrules.force_latch`), a halt rests both fins at the core's angles. The
     model thus lags the core by less than a tick between its calls.
 
     Args:

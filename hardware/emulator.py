@@ -34,10 +34,11 @@ import numpy as np
 
 from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 from pectoral_gym.hardware.emulated_firmware import FIRMWARES, ROBOT_ADDRESS, make_firmware
-from pectoral_gym.hardware.finreplay import CHUNK as _CHUNK
 from pectoral_gym.hardware.radio import protocol as pr
-from pectoral_gym.hardware.radio.firmware import FirmwareConfig, new_boot_id
+from pectoral_gym.hardware.radio.firmware import new_boot_id
 from pectoral_gym.hardware.realtime import settle_garbage
+from pectoral_gym.model.finrules import CHUNK as _CHUNK
+from pectoral_gym.model.finrules import FirmwareConfig
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FinBeat, FishParams
 from pectoral_gym.model.spec import FULL_REFERENCE, FullSpec
 from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name

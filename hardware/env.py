@@ -134,7 +134,7 @@ class HardwareFishEnv(EpisodeStart, gym.Env):
     | ``take_over``       | ``False``      |      | take the robot from another live session (``RadioLink``) |
     | ``stop_timeout``    | 2.0            | s    | wall time ``reset`` waits for the robot to confirm STOP |
     | ``clock``           | ``REAL_CLOCK`` |      | the stack's clock (``pectoral_gym.hardware.clock``) |
-    | ``run_log``         | ``None``       |      | ``hardware.runlog.RunLogWriter``: starts, commands, stops, poses |
+    | ``run_log``         | ``None``       |      | the run log (``pectoral_gym.runlog.RunLogWriter``) |
 
     ## Version History
 
@@ -236,7 +236,7 @@ class HardwareFishEnv(EpisodeStart, gym.Env):
 
     @property
     def run_log(self):
-        """The :class:`pectoral_gym.hardware.runlog.RunLogWriter` the env writes to, or ``None`` (settable)."""
+        """The :class:`pectoral_gym.runlog.RunLogWriter` the env writes to, or ``None`` (settable)."""
         return self.recorder.writer
 
     @run_log.setter

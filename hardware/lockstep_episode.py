@@ -86,7 +86,7 @@ class EpisodeResult:
         link: The link's :meth:`~pectoral_gym.hardware.radio.link.RadioLink.health` once the rig is closed.
         solver: The controller's solve times [s], failed and late steps in this episode, or ``None`` for a
             controller that does not solve (``{"solve_times", "failures", "late"}``).
-        run_log: Its records of the run log (:mod:`pectoral_gym.hardware.runlog`, no header), on its rig's clock
+        run_log: Its records of the run log (:mod:`pectoral_gym.runlog`, no header), on its rig's clock
             (from 0).
     """
 
@@ -129,8 +129,8 @@ class EpisodeRunner:
     def run(self, episode: int) -> EpisodeResult:
         """Episode ``episode`` on a rig opened with ``job.seed + episode``, closed before this returns."""
         from pectoral_gym.hardware.env import HardwareFishEnv
-        from pectoral_gym.hardware.runlog import RunLogWriter
         from pectoral_gym.hardware.vision.tracker import MarkerTracker
+        from pectoral_gym.runlog import RunLogWriter
 
         job, log, records = self.job, io.StringIO(), io.StringIO()
         try:

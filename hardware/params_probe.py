@@ -126,7 +126,7 @@ class ProbeResult:
 
 
 def judge_probe(log, params: FishParams) -> ProbeResult:
-    """Compare the probe's run log ``log`` (a :class:`pectoral_gym.hardware.runlog.RunLog`) with ``params``' model."""
+    """Compare the probe's run log ``log`` (a :class:`pectoral_gym.runlog.RunLog`) with ``params``' model."""
     from scipy.optimize import least_squares
 
     from pectoral_gym.scaling.calibration.fit import CalibrationSettings, _Problem
@@ -160,7 +160,7 @@ def run_probe(env, params: FishParams, seed: int | None = None) -> ProbeResult:
     env's run log and its episode numbering are as before afterwards.
     """
     from pectoral_gym.hardware.run_recorder import RunRecorder
-    from pectoral_gym.hardware.runlog import RunLogWriter, read_run_log
+    from pectoral_gym.runlog import RunLogWriter, read_run_log
 
     env = env.unwrapped
     buffer = io.StringIO()

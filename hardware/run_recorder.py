@@ -1,6 +1,6 @@
 """What :class:`pectoral_gym.hardware.env.HardwareFishEnv` writes to its run log, and in which order.
 
-The records themselves are :class:`pectoral_gym.hardware.runlog.RunLogWriter`'s (``docs/run-log.md``); this
+The records themselves are :class:`pectoral_gym.runlog.RunLogWriter`'s (``docs/run-log.md``); this
 keeps the env's bookkeeping around them: episodes numbered from the first reset, a ``stop`` only while the fins
 run, and the robot's latch reports kept to the episode they belong to and to the log's time order.
 """
@@ -19,7 +19,7 @@ class RunRecorder:
     """The env's side of its run log; every method is a no-op while ``writer`` is ``None``.
 
     Args:
-        writer: A :class:`pectoral_gym.hardware.runlog.RunLogWriter`, or ``None`` (settable any time).
+        writer: A :class:`pectoral_gym.runlog.RunLogWriter`, or ``None`` (settable any time).
     """
 
     def __init__(self, writer: Any = None):

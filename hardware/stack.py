@@ -14,12 +14,12 @@ from typing import Any
 
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
-from pectoral_gym.hardware.finreplay import FinReplay
-from pectoral_gym.hardware.radio.firmware import FirmwareConfig
 from pectoral_gym.hardware.radio.link import DisplacedError, RadioLink
 from pectoral_gym.hardware.safety.geofence import Geofence
 from pectoral_gym.hardware.safety.rules import CommandFilter, SafetyConfig
 from pectoral_gym.hardware.safety.supervisor import Supervisor
+from pectoral_gym.model.finreplay import FinReplay
+from pectoral_gym.model.finrules import FirmwareConfig
 
 __all__ = ["SIMULATION_ONLY", "RobotStack", "check_not_displaced", "env_config", "open_stack"]
 

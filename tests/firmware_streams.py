@@ -17,12 +17,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pectoral_gym.hardware.finreplay import apply_firmware, latched, stroke_kinds
 from pectoral_gym.hardware.radio import protocol as pr
 from pectoral_gym.hardware.radio import xbee as xb
 from pectoral_gym.hardware.radio.cfirmware import CFirmware
-from pectoral_gym.hardware.radio.firmware import Firmware, FirmwareConfig
+from pectoral_gym.hardware.radio.firmware import Firmware
 from pectoral_gym.model import strokes
+from pectoral_gym.model.finrules import FirmwareConfig, apply_firmware, latched, stroke_kinds
 from pectoral_gym.model.spec import FULL_FAST
 
 IGNORED = ("duplicate", "stale", "retired", "refused", "copy", "bad_lease", "late", "boot", "foreign_stop")

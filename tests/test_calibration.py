@@ -8,9 +8,9 @@ import sys
 import numpy as np
 import pytest
 
-from pectoral_gym.hardware.runlog import read_run_log
 from pectoral_gym.model.params import FishParams, load_params
 from pectoral_gym.model.spec import FULL_REFERENCE
+from pectoral_gym.runlog import read_run_log
 from pectoral_gym.scaling.calibration.fit import CalibrationSettings, calibrate
 from pectoral_gym.scaling.calibration.identifiability import _ratio_why
 from pectoral_gym.scaling.calibration.replay import replay_fins, simulate
@@ -87,7 +87,7 @@ def test_common_scale_reported_unidentifiable(tmp_path):
 
 
 def test_model_library_does_not_import_matplotlib():
-    code = ("import sys; import pectoral_gym.scaling.calibration.fit, pectoral_gym.hardware.runlog; "
+    code = ("import sys; import pectoral_gym.scaling.calibration.fit, pectoral_gym.runlog; "
             "print('matplotlib' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"

@@ -8,8 +8,8 @@ import threading
 import numpy as np
 import pytest
 
-from pectoral_gym.hardware.runlog import read_run_log
 from pectoral_gym.model.params import FishParams, save_params
+from pectoral_gym.runlog import read_run_log
 
 
 def _deploy(out, *extra, episodes=2, seed=5, steps=12):

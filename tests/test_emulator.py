@@ -10,15 +10,10 @@ import pytest
 from pectoral_gym.hardware.emulator import ROBOT_ADDRESS, EmulatedRobot, main
 from pectoral_gym.hardware.radio import protocol as pr
 from pectoral_gym.hardware.radio import xbee as xb
-from pectoral_gym.hardware.radio.firmware import (
-    Firmware,
-    FirmwareConfig,
-    ServoLimits,
-    clip_beats,
-    peak_rates,
-    slew_at_latch,
-)
+from pectoral_gym.hardware.radio.firmware import Firmware
 from pectoral_gym.hardware.radio.link import RadioLink
+from pectoral_gym.model.finrules import FirmwareConfig, slew_at_latch
+from pectoral_gym.model.servo import ServoLimits, clip_beats, peak_rates
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 

@@ -9,12 +9,13 @@ import pytest
 from pectoral_gym.envs.observation import FIN_OBS_SIZE, OBS_FINS, OBS_SIZE, decode
 from pectoral_gym.hardware.emulator import EmulatedRobot
 from pectoral_gym.hardware.env import HardwareFishEnv
-from pectoral_gym.hardware.finreplay import CHUNK, FinReplay
-from pectoral_gym.hardware.radio.firmware import FirmwareConfig, ServoLimits
 from pectoral_gym.hardware.safety.rules import SafetyConfig
 from pectoral_gym.model import strokes
+from pectoral_gym.model.finreplay import FinReplay
+from pectoral_gym.model.finrules import CHUNK, FirmwareConfig
 from pectoral_gym.model.models import FullModel
 from pectoral_gym.model.params import FinBeat
+from pectoral_gym.model.servo import ServoLimits
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 

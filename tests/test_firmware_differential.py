@@ -90,7 +90,8 @@ from pectoral_gym.hardware.radio.cfirmware import (  # noqa: E402
     config_arrays,
     library_defaults,
 )
-from pectoral_gym.hardware.radio.firmware import FirmwareConfig, ServoLimits  # noqa: E402
+from pectoral_gym.model.finrules import FirmwareConfig  # noqa: E402
+from pectoral_gym.model.servo import ServoLimits  # noqa: E402
 
 pytestmark = pytest.mark.skipif(shutil.which("make") is None or shutil.which("cc") is None,
                                 reason="needs make and a C compiler")

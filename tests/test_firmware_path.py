@@ -1,6 +1,6 @@
 """The robot firmware's command path in the backup shield (pectoral_gym.agents.controllers.firmware_path).
 
-The reference is the firmware's own code: :class:`pectoral_gym.hardware.finreplay.FinReplay` runs the full model
+The reference is the firmware's own code: :class:`pectoral_gym.model.finreplay.FinReplay` runs the full model
 under :class:`pectoral_gym.hardware.radio.firmware.Firmware` (messages, ticks, ``clip_beats``, ``rate_limit``,
 ``stretch_transition``), as the emulated robot does.
 """
@@ -16,9 +16,10 @@ from pectoral_gym.agents.controllers.firmware_path import FirmwarePath
 from pectoral_gym.agents.controllers.turning import SPIN_CYCLE
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.hardware.deploy import make_controller
-from pectoral_gym.hardware.finreplay import FinReplay
-from pectoral_gym.hardware.radio.firmware import ServoLimits, clip_beats, stretch_transition
 from pectoral_gym.hardware.safety.rules import SafetyConfig
+from pectoral_gym.model.finreplay import FinReplay
+from pectoral_gym.model.finrules import stretch_transition
+from pectoral_gym.model.servo import ServoLimits, clip_beats
 from pectoral_gym.model.spec import FULL_REFERENCE
 from pectoral_gym.model.tank import ROBOT_STOP_RULE
 from pectoral_gym.registration import registered_settings

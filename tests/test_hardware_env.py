@@ -11,13 +11,13 @@ from gymnasium.utils.env_checker import check_env
 from pectoral_gym.hardware.emulator import EmulatedRobot
 from pectoral_gym.hardware.env import HardwareFishEnv
 from pectoral_gym.hardware.radio import protocol as pr
-from pectoral_gym.hardware.radio.firmware import ServoLimits
 from pectoral_gym.hardware.safety.geofence import Geofence, in_geofence
 from pectoral_gym.hardware.safety.rules import CommandFilter, SafetyConfig, TrackingWatch, install_stop_handlers
 from pectoral_gym.hardware.vision.scene import SceneConditions
 from pectoral_gym.model import tank
 from pectoral_gym.model.models import FullModel
 from pectoral_gym.model.params import FishParams, body_coefficients
+from pectoral_gym.model.servo import ServoLimits
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 

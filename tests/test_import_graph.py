@@ -19,23 +19,8 @@ CORE = "pectoral_gym"
 OUTER = ("pectoral_gym.agents", "pectoral_gym.scaling", "pectoral_gym.hardware")
 HARDWARE = "pectoral_gym.hardware"
 
-# agents/scaling -> hardware imports that the move of the fin rules and the run-log format into the core removes;
-# each entry is (importing module, imported module). Clear this list once that move is merged.
-PENDING_HARDWARE_IMPORTS: frozenset[tuple[str, str]] = frozenset({
-    ("pectoral_gym.agents.controllers.firmware_path", "pectoral_gym.hardware.finreplay"),
-    ("pectoral_gym.agents.controllers.firmware_path", "pectoral_gym.hardware.radio.firmware"),
-    ("pectoral_gym.scaling.calibration.benchmark", "pectoral_gym.hardware.runlog"),
-    ("pectoral_gym.scaling.calibration.cli", "pectoral_gym.hardware.runlog"),
-    ("pectoral_gym.scaling.calibration.fit", "pectoral_gym.hardware.runlog"),
-    ("pectoral_gym.scaling.calibration.heldout", "pectoral_gym.hardware.runlog"),
-    ("pectoral_gym.scaling.calibration.replay", "pectoral_gym.hardware.finreplay"),
-    ("pectoral_gym.scaling.calibration.replay", "pectoral_gym.hardware.radio.firmware"),
-    ("pectoral_gym.scaling.calibration.replay", "pectoral_gym.hardware.runlog"),
-    ("pectoral_gym.scaling.calibration.synth", "pectoral_gym.hardware.finreplay"),
-    ("pectoral_gym.scaling.calibration.synth", "pectoral_gym.hardware.radio.firmware"),
-    ("pectoral_gym.scaling.calibration.synth", "pectoral_gym.hardware.runlog"),
-    ("pectoral_gym.scaling.calibration.windows", "pectoral_gym.hardware.runlog"),
-})
+# agents/scaling -> hardware imports still allowed: none (the fin rules and the run-log format live in the core).
+PENDING_HARDWARE_IMPORTS: frozenset[tuple[str, str]] = frozenset()
 
 
 def package_dirs() -> dict[str, Path]:

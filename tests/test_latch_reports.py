@@ -10,15 +10,15 @@ import pytest
 
 from pectoral_gym.agents.controllers.turning import SPIN_CYCLE
 from pectoral_gym.hardware.emulator import EmulatedRobot
-from pectoral_gym.hardware.finreplay import CHUNK
 from pectoral_gym.hardware.radio import protocol as pr
 from pectoral_gym.hardware.radio import xbee as xb
-from pectoral_gym.hardware.radio.firmware import Firmware, FirmwareConfig
+from pectoral_gym.hardware.radio.firmware import Firmware
 from pectoral_gym.hardware.radio.link import RadioLink
-from pectoral_gym.hardware.runlog import RunLogError, RunLogWriter, dumps_example, read_run_log
 from pectoral_gym.model import strokes
+from pectoral_gym.model.finrules import CHUNK, FirmwareConfig
 from pectoral_gym.model.params import FinBeat, FishParams
 from pectoral_gym.model.spec import FULL_REFERENCE
+from pectoral_gym.runlog import RunLogError, RunLogWriter, dumps_example, read_run_log
 from pectoral_gym.scaling.calibration.replay import replay_fins, simulate
 
 LATCH = pr.Latch(uptime_ms=123456, boot=0xCAFE01, fin=1, power=False, turn=1.9,

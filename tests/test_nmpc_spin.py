@@ -14,9 +14,9 @@ from pectoral_gym.agents.baselines import make_baseline
 from pectoral_gym.agents.nmpc.problem import pack_decision, to_z
 from pectoral_gym.agents.nmpc.spin import SPIN_CYCLE, SpinTurns, mirror
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.hardware.radio.firmware import ServoLimits
 from pectoral_gym.hardware.safety.rules import CommandFilter
 from pectoral_gym.model.models import AveragedModel, FullModel
+from pectoral_gym.model.servo import ServoLimits
 
 CONFIG = EnvConfig(model="full", task="goal")
 

@@ -8,11 +8,10 @@ import pytest
 
 import pectoral_gym  # noqa: F401  (registers the ids)
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.hardware.radio.firmware import ServoLimits, clip_beats
 from pectoral_gym.hardware.safety.geofence import Geofence
 from pectoral_gym.model import tank
 from pectoral_gym.model.params import FishParams, body_coefficients
-from pectoral_gym.model.servo import ROBOT_MAX_FIN_RATE, servo_period
+from pectoral_gym.model.servo import ROBOT_MAX_FIN_RATE, ServoLimits, clip_beats, servo_period
 from pectoral_gym.registration import ENV_SETTINGS, ROBOT_READY, registered_settings
 
 PARAMS = FishParams()

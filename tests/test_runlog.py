@@ -7,8 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from pectoral_gym.hardware.radio.firmware import FirmwareConfig, ServoLimits
-from pectoral_gym.hardware.runlog import (
+from pectoral_gym.model.finrules import FirmwareConfig
+from pectoral_gym.model.servo import ServoLimits
+from pectoral_gym.runlog import (
     RunLogError,
     RunLogWriter,
     dumps_example,

@@ -26,15 +26,15 @@ from emulator_helpers import wait_for as _wait
 
 from pectoral_gym.hardware.emulator import EmulatedRobot
 from pectoral_gym.hardware.env import HardwareFishEnv
-from pectoral_gym.hardware.finreplay import apply_firmware
 from pectoral_gym.hardware.radio import protocol as pr
 from pectoral_gym.hardware.radio import xbee as xb
-from pectoral_gym.hardware.radio.firmware import ServoLimits, clip_beats, peak_rates
 from pectoral_gym.hardware.radio.link import RadioLink
 from pectoral_gym.hardware.safety.rules import CommandFilter, SafetyConfig, check_action
 from pectoral_gym.hardware.vision.frames import Frame
 from pectoral_gym.model.dynamics import stroke_kinematics
+from pectoral_gym.model.finrules import apply_firmware
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
+from pectoral_gym.model.servo import ServoLimits, clip_beats, peak_rates
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 

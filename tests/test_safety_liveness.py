@@ -5,11 +5,11 @@ import math
 import numpy as np
 import pytest
 
-from pectoral_gym.hardware.radio.firmware import ServoLimits
 from pectoral_gym.hardware.safety.geofence import SpeedBound
 from pectoral_gym.hardware.safety.liveness import LivenessWatch
 from pectoral_gym.hardware.vision.latency import afforded_latency, pipeline_latency
 from pectoral_gym.model.params import FishParams
+from pectoral_gym.model.servo import ServoLimits
 
 P = FishParams()
 FULL = np.array([[math.pi / 2, math.radians(60), 0.6, 3.0]] * 2)  # both fins beating hard, straight ahead
@@ -36,7 +36,7 @@ def _watch():
 def _true_poses(duration, dt=1 / 30):
     """The full model's poses under FULL sent at 0, its fins run by the firmware's rules (the emulator's way),
     from rest at (1, 0.5, 0): a live camera of that fish."""
-    from pectoral_gym.hardware.finreplay import FinReplay
+    from pectoral_gym.model.finreplay import FinReplay
 
     robot = FinReplay(P)
     robot.model.state[0] = (1.0, 0.5, 0.0, 0.0, 0.0, 0.0)
@@ -92,7 +92,7 @@ def _late_still(ack):
     """A fish rowing under FULL (sent and taken at 0) whose robot takes STILL, sent at 3 s, only at 3.6 s (a slow
     radio); the watch is told the command's acknowledgement at ``ack`` (``None``: not told). The misses
     ``(t, innovation)`` of the checks after 3 s, and the stop reasons."""
-    from pectoral_gym.hardware.finreplay import FinReplay
+    from pectoral_gym.model.finreplay import FinReplay
 
     still = np.array([[math.pi / 2, 0.0, 0.6, 3.0]] * 2)
     robot = FinReplay(P)

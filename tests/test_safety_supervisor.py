@@ -18,14 +18,14 @@ from emulator_helpers import wait_for as _wait
 
 from pectoral_gym.hardware.emulator import EmulatedRobot
 from pectoral_gym.hardware.env import HardwareFishEnv
-from pectoral_gym.hardware.finreplay import apply_firmware
 from pectoral_gym.hardware.radio import protocol as pr
-from pectoral_gym.hardware.radio.firmware import ServoLimits
 from pectoral_gym.hardware.safety.geofence import Geofence, SpeedBound
 from pectoral_gym.hardware.safety.rules import SafetyConfig
 from pectoral_gym.hardware.safety.supervisor import PRIORITY, Supervisor, ls_velocity
 from pectoral_gym.hardware.vision.frames import Frame
+from pectoral_gym.model.finrules import apply_firmware
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
+from pectoral_gym.model.servo import ServoLimits
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")
 

@@ -1,4 +1,4 @@
-"""What the default servo limits let through (pectoral_gym.hardware.radio.firmware.ServoLimits, clip_beats), by hand."""
+"""What the default servo limits let through (pectoral_gym.model.servo.ServoLimits, clip_beats), by hand."""
 
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from pectoral_gym.hardware.radio.firmware import ServoLimits, clip_beats, peak_rates
+from pectoral_gym.model.servo import ServoLimits, clip_beats, peak_rates
 
 
 def test_fastest_default_stroke_is_slowed_to_the_servo_speed():

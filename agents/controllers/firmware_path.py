@@ -1,11 +1,11 @@
 """The robot firmware's command path for a batch of model fish: what the robot's fins latch, and when.
 
-On the robot a command does not reach the fins as sent (:mod:`pectoral_gym.hardware.radio.firmware`): the
-firmware clips it to the servo limits (``clip_beats``) and hands it to the fins, which latch it at their next
-stroke turning point, rate-limited there (``slew_at_latch``: a moving fin's pattern changes by at most
-``max_rate`` times the half-stroke that ends; bias and amplitude 180 deg/s) and with the transitional
-half-stroke bounded by the servos' peak rate (``stretch_transition``;
-:func:`pectoral_gym.hardware.finreplay.advance_with_firmware`). The backup shield's on-the-spot spin
+On the robot a command does not reach the fins as sent (the fin rules, :mod:`pectoral_gym.model.finrules`): the
+firmware clips it to the servo limits (``clip_beats``, :mod:`pectoral_gym.model.servo`) and hands it to the fins,
+which latch it at their next stroke turning point, rate-limited there (``slew_at_latch``: a moving fin's pattern
+changes by at most ``max_rate`` times the half-stroke that ends; bias and amplitude 180 deg/s) and with the
+transitional half-stroke bounded by the servos' peak rate (``stretch_transition``;
+:func:`pectoral_gym.model.finrules.advance_with_firmware`). The backup shield's on-the-spot spin
 (:data:`pectoral_gym.agents.controllers.turning.SPIN_CYCLE`) changes the biases by up to 37 deg every control
 period and its turn is made of transitional strokes (docs/model.md 3.7), which these rules stretch; the
 planning model through the same rules drifts as the full model does (``tests/test_firmware_path.py``).
@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from pectoral_gym.hardware.finreplay import CHUNK, next_latch
-from pectoral_gym.hardware.radio.firmware import ServoLimits, clip_beats, rest_beats
+from pectoral_gym.model.finrules import CHUNK, next_latch
 from pectoral_gym.model.models import FishModel
+from pectoral_gym.model.servo import ServoLimits, clip_beats, rest_beats
 
 __all__ = ["FirmwarePath"]
 
@@ -74,7 +74,7 @@ class FirmwarePath:
     def advance(self, model: FishModel, duration: float) -> np.ndarray:
         """Advance ``model`` (``n`` fish) by ``duration`` [s] under the firmware's rules; returns its state.
 
-        Ticks as :func:`pectoral_gym.hardware.finreplay.advance_with_firmware` does (hand over, then advance one
+        Ticks as :func:`pectoral_gym.model.finrules.advance_with_firmware` does (hand over, then advance one
         tick) while anything is on its way, then the rest in one step.
         """
         left = float(duration)

@@ -8,7 +8,7 @@ sequence the sweeps' surge impulses cancel and their yaw impulses add. :data:`SP
 sequence of four control periods at the NMPC's fixed period (0.5 s) and ratio (5), found by a
 cross-entropy search on the averaged model from rest (``docs/validation/nmpc/spin_cycle.py``, which
 also checks it on the full model), among the cycles the robot's servos execute as commanded (the
-rules of :mod:`pectoral_gym.hardware.radio.firmware`: every stroke, transitional ones included, within the servos' peak
+rules of :mod:`pectoral_gym.model.finrules`: every stroke, transitional ones included, within the servos' peak
 rate, each parameter within its rate limit): on the averaged model 103 deg in 6 s with the centre of
 mass within 0.08 m of its start, on the full model 89-93 deg within 0.06-0.12 m from each phase. The
 turning circle needs 0.5 m of room for a half turn. Without the servo rules the search finds a cycle

@@ -19,7 +19,7 @@ import numpy as np
 from pectoral_gym.hardware.conformance.judge import MOVING, TICK, Broken, beats, claim, expect, expect_state
 from pectoral_gym.hardware.conformance.probe import Probe, Session
 from pectoral_gym.hardware.radio import protocol as pr
-from pectoral_gym.hardware.radio.firmware import ServoLimits
+from pectoral_gym.model.servo import ServoLimits
 
 __all__ = ["clipping", "rate_at_latch", "turning_points"]
 

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pectoral_gym.hardware.radio.firmware import FirmwareConfig
+from pectoral_gym.model.finrules import FirmwareConfig
 
 __all__ = ["VARIANTS", "FIRMWARE_DIR", "CFirmware", "FinStroke", "FinEvent", "build", "library_path", "config_arrays",
            "library_defaults"]
@@ -171,7 +171,7 @@ class CFirmware:
     send :meth:`take_tx` (Transmit Request ``0x10`` frames: STATUS replies to the asker's ``src64``, LATCH
     reports to the served session's last address). After each call, :meth:`take_events` lists what the fins did
     since the last read, in time order: every latch (still fins' included, flagged ``still``) and every halt. A
-    physics model follows the C fins by applying each latch with ``finreplay.force_latch(model, fin, t,
+    physics model follows the C fins by applying each latch with ``finrules.force_latch(model, fin, t,
     pattern, turn, power)`` at ``t = (ms + frac_ms) / 1000`` on its clock, and holding the fins at ``angles``
     from a halt on; :meth:`fins` gives the half-strokes in progress to check against.
 

@@ -24,17 +24,19 @@ Rules:
 * **Watchdog**: no new, valid message of the current session for ``watchdog_timeout`` (default 0.5 s) ->
   state ``WATCHDOG``, fins halt. Duplicates, stale, foreign and retired messages never feed it.
 * **Boot id**: random, nonzero, new at every power-up; reported in every STATUS with the uptime.
-* **Clipping** to :class:`ServoLimits`: stroke ``bias +- amplitude`` inside the servo's angle range,
-  period and ratio inside theirs, and the *peak* fin rate of both half-strokes at most ``max_speed``
-  (the period is lengthened, :func:`clip_beats`); the transitional half-stroke from the fin's next
-  turning point is bounded the same way (:func:`stretch_transition`, applied where the fin latches).
+* **Clipping** to :class:`~pectoral_gym.model.servo.ServoLimits`: stroke ``bias +- amplitude`` inside the servo's
+  angle range, period and ratio inside theirs, and the *peak* fin rate of both half-strokes at most ``max_speed``
+  (the period is lengthened, :func:`~pectoral_gym.model.servo.clip_beats`); the transitional half-stroke from the
+  fin's next turning point is bounded the same way (:func:`~pectoral_gym.model.finrules.stretch_transition`,
+  applied where the fin latches). The fin rules are :mod:`pectoral_gym.model.finrules`' (the core's, which the
+  emulator, the PC's replay, the backup shield and the calibration run too); this module is their state machine.
 * **Rate limiting, per latch**: the pattern a moving fin latches at a turning point differs from the one it
-  ran by at most ``max_rate`` per parameter times that half-stroke's duration (:func:`slew_at_latch`); a
-  still fin latches the command, its first half-stroke from rest bounded by ``max_speed`` (above). The fins
-  only ever run latched patterns, so a moving fin's pattern changes at most ``max_rate`` per second, as a
-  per-tick slew of the setpoint bounds it; but what a turning point latches does not depend on the
-  milliseconds between a command's arrival and the firmware's tick, so the PC's replay knows it
-  (``docs/hardware.md``, "The firmware's rate rule").
+  ran by at most ``max_rate`` per parameter times that half-stroke's duration
+  (:func:`~pectoral_gym.model.finrules.slew_at_latch`); a still fin latches the command, its first half-stroke
+  from rest bounded by ``max_speed`` (above). The fins only ever run latched patterns, so a moving fin's pattern
+  changes at most ``max_rate`` per second, as a per-tick slew of the setpoint bounds it; but what a turning point
+  latches does not depend on the milliseconds between a command's arrival and the firmware's tick, so the PC's
+  replay knows it (``docs/hardware.md``, "The firmware's rate rule").
 * **Sequence numbers**: new -> act and acknowledge; duplicate -> acknowledge only (a retry whose first
   copy arrived); stale -> ignore. All counted.
 * **The robot's clock**: the rules' times (uptime, lease end, deadline, watchdog) are whole milliseconds, as on the
@@ -54,7 +56,6 @@ from __future__ import annotations
 
 import math
 import secrets
-from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -69,10 +70,9 @@ from pectoral_gym.hardware.radio.protocol import (
     Verdict,
     serial_newer,
 )
-from pectoral_gym.model.servo import ROBOT_MAX_FIN_RATE, servo_period
+from pectoral_gym.model.finrules import FinState, FirmwareConfig
 
-__all__ = ["MS_GUARD", "ServoLimits", "FirmwareConfig", "Firmware", "clip_beats", "rate_limit", "rest_beats",
-           "peak_rates", "slew_at_latch", "stretch_transition", "new_boot_id"]
+__all__ = ["MS_GUARD", "Firmware", "new_boot_id"]
 
 _RETIRED = 16  # sessions remembered as retired (a restarted PC gets a fresh random 32-bit session)
 #: A time within this many ms below a whole millisecond counts as that millisecond (1 us: above float64's rounding
@@ -86,174 +86,11 @@ def new_boot_id(rng=None) -> int:
     return boot or 1
 
 
-def _default_rate() -> tuple[float, float, float, float]:
-    return (math.radians(180.0), math.radians(180.0), 4.0, 10.0)
-
-
-@dataclass(frozen=True)
-class ServoLimits:
-    """What the fin servos can do; commands are clipped to these (PC side and robot side alike).
-
-    The defaults admit the simulated environments' default action ranges except their fastest strokes:
-    a power stroke peaks at ``pi A (zeta + 1) / T_p`` (eq. 21), above ``max_speed`` for large amplitudes
-    at short periods and high ratios, e.g. 19.7 rad/s for (90 deg, 30 deg, 0.5 s, 5), which
-    :func:`clip_beats` slows to a 0.76 s period.
-
-    Attributes:
-        angle_min: Smallest fin angle [rad] (stroke ``bias - amplitude``).
-        angle_max: Largest fin angle [rad] (stroke ``bias + amplitude``).
-        period_min: Shortest fin-beat period [s].
-        period_max: Longest fin-beat period [s].
-        ratio_min: Smallest power/recovery speed ratio [-].
-        ratio_max: Largest ratio [-].
-        max_speed: Fastest fin angular rate [rad/s]: the peak ``|g'|`` of every half-stroke, eq. (21).
-        max_rate: Largest change per second of (bias [rad/s], amplitude [rad/s], period [s/s], ratio [1/s]).
-    """
-
-    angle_min: float = math.radians(10.0)
-    angle_max: float = math.radians(170.0)
-    period_min: float = 0.4
-    period_max: float = 4.0
-    ratio_min: float = 0.5
-    ratio_max: float = 6.0
-    max_speed: float = ROBOT_MAX_FIN_RATE
-    max_rate: tuple[float, float, float, float] = field(default_factory=_default_rate)
-
-    def __post_init__(self) -> None:
-        values = (self.angle_min, self.angle_max, self.period_min, self.period_max, self.ratio_min,
-                  self.ratio_max, self.max_speed, *self.max_rate)
-        if len(self.max_rate) != 4 or not all(math.isfinite(v) for v in values):
-            raise ValueError("ServoLimits: all limits must be finite and max_rate must have 4 entries")
-        if not 0 <= self.angle_min < self.angle_max <= math.pi:
-            raise ValueError(f"ServoLimits: need 0 <= angle_min < angle_max <= pi, got {self.angle_min}, "
-                             f"{self.angle_max}")
-        if not 0 < self.period_min <= self.period_max or not 0 < self.ratio_min <= self.ratio_max:
-            raise ValueError("ServoLimits: need 0 < period_min <= period_max and 0 < ratio_min <= ratio_max")
-        if self.max_speed <= 0 or min(self.max_rate) <= 0:
-            raise ValueError("ServoLimits: max_speed and max_rate must be > 0")
-        # The slowest stroke must be slow enough for the widest swing (stretching always succeeds).
-        span = self.angle_max - self.angle_min
-        worst = math.pi * span * (self.ratio_min + 1.0) / (2.0 * self.period_max * self.ratio_min)
-        worst = max(worst, math.pi * span * (self.ratio_max + 1.0) / (2.0 * self.period_max))
-        if worst > self.max_speed:
-            raise ValueError(f"ServoLimits: a full swing at period_max peaks at {worst:.2f} rad/s > max_speed; "
-                             "raise period_max or narrow the angle or ratio range")
-
-
-def rest_beats(angles: np.ndarray | None = None) -> np.ndarray:
-    """``(2, 4)`` fins held still at ``angles`` (default 90 deg): amplitude 0, period 1 s, ratio 1."""
-    angles = np.full(2, math.pi / 2) if angles is None else np.asarray(angles, dtype=float)
-    return np.stack([np.array([a, 0.0, 1.0, 1.0]) for a in angles])
-
-
-def clip_beats(beats: np.ndarray, limits: ServoLimits) -> tuple[np.ndarray, bool]:
-    """Clip ``(2, 4)`` fin patterns to ``limits``; returns ``(clipped, changed)``. Input must be finite.
-
-    A batch ``(..., 2, 4)`` is clipped pattern by pattern (``changed``: any of them), as the backup shield's
-    rollouts do (:mod:`pectoral_gym.agents.controllers.firmware_path`); 8 values are read as ``(2, 4)``.
-    """
-    b = _patterns(beats)
-    out = b.copy()
-    half_range = 0.5 * (limits.angle_max - limits.angle_min)
-    out[..., 1] = np.clip(out[..., 1], 0.0, half_range)
-    out[..., 0] = np.clip(out[..., 0], limits.angle_min + out[..., 1], limits.angle_max - out[..., 1])
-    out[..., 2] = np.clip(out[..., 2], limits.period_min, limits.period_max)
-    out[..., 3] = np.clip(out[..., 3], limits.ratio_min, limits.ratio_max)
-    # Peak rate of the faster half-stroke, eq. (21): pi A (zeta + 1) / (T_p min(1, zeta)); slow the period.
-    out[..., 2] = servo_period(out[..., 1], out[..., 2], out[..., 3], limits.max_speed)  # <= period_max (ServoLimits)
-    return out, bool(np.any(np.abs(out - b) > 1e-12))
-
-
-def _patterns(beats: np.ndarray) -> np.ndarray:
-    """A float copy of ``beats`` as ``(..., 2, 4)`` patterns (8 values as one ``(2, 4)``)."""
-    b = np.array(beats, dtype=float)
-    return b if b.shape[-2:] == (2, 4) else b.reshape(2, 4)
-
-
-def peak_rates(beats: np.ndarray) -> np.ndarray:
-    """``(2, 2)`` peak ``|g'|`` [rad/s] of the power and recovery half-strokes of ``(2, 4)`` patterns.
-
-    Each half of eq. (21) is a half-cosine: swing ``2 A`` in ``T_p / (zeta + 1)`` (power) or
-    ``zeta T_p / (zeta + 1)`` (recovery); the peak of ``half * pi / d * sin`` is ``pi * swing / (2 d)``.
-    """
-    b = np.asarray(beats, dtype=float).reshape(2, 4)
-    a, period, ratio = b[:, 1], b[:, 2], b[:, 3]
-    power = math.pi * a * (ratio + 1.0) / period
-    return np.stack([power, power / ratio], axis=1)
-
-
-def stretch_transition(beats: np.ndarray, turn: np.ndarray, next_power: np.ndarray,
-                       limits: ServoLimits) -> np.ndarray:
-    """Lengthen the period of ``(2, 4)`` patterns so the transitional half-stroke stays within ``max_speed``.
-
-    A fin latches a new pattern at a turning point ``turn`` [rad] and then swings to ``bias + A`` in
-    ``T_p / (zeta + 1)`` (``next_power``) or to ``bias - A`` in ``zeta T_p / (zeta + 1)``
-    (``docs/model.md``, "Changing fin parameters"); its peak rate is ``pi |to - turn| / (2 d)``
-    (:func:`pectoral_gym.model.dynamics.stroke_kinematics`). Input: patterns already clipped by :func:`clip_beats`;
-    a batch ``(..., 2, 4)`` with ``turn`` and ``next_power`` ``(..., 2)`` is stretched pattern by pattern.
-    """
-    out = _patterns(beats)
-    turn, power = np.asarray(turn, dtype=float), np.asarray(next_power, dtype=bool)
-    to = np.where(power, out[..., 0] + out[..., 1], out[..., 0] - out[..., 1])
-    share = np.where(power, 1.0, out[..., 3]) / (out[..., 3] + 1.0)  # d = share * T_p
-    need = math.pi * np.abs(to - turn) / (2.0 * limits.max_speed * share)
-    out[..., 2] = np.minimum(np.maximum(out[..., 2], need), limits.period_max)
-    return out
-
-
-def slew_at_latch(beats: np.ndarray, latched: np.ndarray, duration: np.ndarray, still: np.ndarray,
-                  limits: ServoLimits) -> np.ndarray:
-    """The patterns fins latch at their next turning point for the command ``beats`` (the firmware's rate rule).
-
-    A moving fin latches ``beats`` moved from the pattern it runs, ``latched``, by at most ``max_rate`` times
-    ``duration`` [s], the half-stroke that the turning point ends; a ``still`` fin latches ``beats``. The result
-    is clipped (:func:`clip_beats`: a pattern part-way may need a longer period for ``max_speed``).
-
-    Args:
-        beats: ``(..., 2, 4)`` commanded patterns, clipped by :func:`clip_beats`.
-        latched: ``(..., 2, 4)`` the patterns the fins run (bias, amplitude, period, ratio).
-        duration: ``(..., 2)`` duration of each fin's half-stroke in progress [s].
-        still: ``(..., 2)`` whether each fin is at rest (its half-stroke ends where it starts).
-        limits: The servo limits (``max_rate``).
-    """
-    b = _patterns(beats)
-    step = np.asarray(limits.max_rate, dtype=float) * np.maximum(np.asarray(duration, dtype=float), 0.0)[..., None]
-    ran = np.asarray(latched, dtype=float)
-    # Within reach the command itself, bit for bit: ran + (b - ran) may differ from b in the last bit, and a fin
-    # whose half-stroke then ends 1e-16 rad from where it starts counts as moving and misses its latch at once.
-    moved = np.where(np.abs(b - ran) <= step, b, ran + np.clip(b - ran, -step, step))
-    return clip_beats(np.where(np.asarray(still, dtype=bool)[..., None], b, moved), limits)[0]
-
-
-def rate_limit(current: np.ndarray, target: np.ndarray, dt: float, limits: ServoLimits) -> np.ndarray:
-    """Move ``current`` towards ``target`` by at most ``max_rate * dt`` per parameter (both ``(2, 4)``)."""
-    step = np.asarray(limits.max_rate, dtype=float) * max(float(dt), 0.0)
-    return np.asarray(current, float) + np.clip(np.asarray(target, float) - current, -step, step)
-
-
-@dataclass(frozen=True)
-class FirmwareConfig:
-    """Settings of the robot-side rules.
-
-    Attributes:
-        watchdog_timeout: Halt the fins after this long without a new valid message [s]; at most 1 s.
-        max_lease: Longest lease the robot grants a command, whatever the message asks [s]; at most 1 s.
-        limits: Servo limits for clipping and rate limiting.
-    """
-
-    watchdog_timeout: float = 0.5
-    max_lease: float = 1.0
-    limits: ServoLimits = field(default_factory=ServoLimits)
-
-    def __post_init__(self) -> None:
-        if not 0 < self.watchdog_timeout <= 1.0:
-            raise ValueError(f"watchdog_timeout must be in (0, 1] s, got {self.watchdog_timeout!r}")
-        if not 0 < self.max_lease <= 1.0:
-            raise ValueError(f"max_lease must be in (0, 1] s, got {self.max_lease!r}")
-
-
-class Firmware:
+class Firmware(FinState):
     """The robot's rules, driven by :meth:`receive` (messages) and :meth:`tick` (time).
+
+    The session, lease, watchdog and sequence rules are this class's; the fins' side (the command clipped, the
+    setpoint, the halt, the hand-over bookkeeping) is :class:`~pectoral_gym.model.finrules.FinState`'s.
 
     Args:
         config: The rules' settings.
@@ -264,13 +101,14 @@ class Firmware:
         state: A :class:`RobotState`.
         command: ``(2, 4)`` the last accepted SET_FINS, clipped to the servo limits.
         setpoint: ``(2, 4)`` the pattern the fins should run (valid while running): the command, or rest where
-            halted fins hold still; what a turning point latches of it is :func:`slew_at_latch`'s.
+            halted fins hold still; what a turning point latches of it is
+            :func:`~pectoral_gym.model.finrules.next_latch`'s.
         halt: Set when the fins must stop at once; the caller clears it after halting them.
         tracker: Sequence bookkeeping of the current session's messages.
         session: The session served (``None`` before the first message).
         command_id: Identity of the last command run (``None`` before the first).
         handed: ``(2, 4)`` the pattern last handed to the fins and ``handed_id`` the command it came from
-            (``None``: nothing handed since power-up or a halt; ``finreplay.apply_firmware``).
+            (``None``: nothing handed since power-up or a halt; :func:`~pectoral_gym.model.finrules.apply_firmware`).
         lease_end: Time the running command's lease ends [s].
         ignored: Messages not acted on: ``duplicate``, ``stale``, ``retired`` (from a retired session),
             ``refused`` (another session while the served one is live), ``copy``, ``bad_lease``, ``late``
@@ -280,23 +118,16 @@ class Firmware:
     """
 
     def __init__(self, config: FirmwareConfig | None = None, boot: int | None = None, power_up: float = 0.0):
-        self.config = config or FirmwareConfig()
+        super().__init__(config)
         self.boot = new_boot_id() if boot is None else int(boot) & 0xFFFFFFFF
         if self.boot == 0:
             raise ValueError("boot id must be nonzero (0 means 'no deadline' in a SET_FINS)")
         self.power_up = float(power_up)
         self.state = RobotState.IDLE
-        self.command = rest_beats()
-        self.setpoint = rest_beats()
-        self.halt = False
-        self.clipped = False
         self.tracker = SequenceTracker()
         self.crc_errors = 0
         self.session: int | None = None
         self.retired: list[int] = []
-        self.command_id: int | None = None
-        self.handed: np.ndarray | None = None
-        self.handed_id: int | None = None
         self.lease_end = -math.inf
         self.ignored = dict.fromkeys(("duplicate", "stale", "retired", "refused", "copy", "bad_lease", "late", "boot",
                                       "foreign_stop"), 0)
@@ -419,8 +250,7 @@ class Firmware:
                 self.tripped_at = now
             return
         self.lease_end = end
-        fins = np.asarray(msg.fins, dtype=float).reshape(2, 4)
-        self.command, self.clipped = clip_beats(fins, self.config.limits)
+        self.accept(np.asarray(msg.fins, dtype=float))
         if not self.running:
             self.setpoint = self.setpoint.copy()
             self.state = RobotState.RUNNING
@@ -445,7 +275,4 @@ class Firmware:
                 and now_ms - self._clock_ms(self.last_valid) > 1000.0 * self.config.watchdog_timeout):
             self._stop(RobotState.WATCHDOG)
             self.tripped_at = now
-        if self.running:
-            self.setpoint = self.command.copy()  # rate-limited where the fins latch it (slew_at_latch)
-        elif fin_angles is not None:
-            self.setpoint = rest_beats(fin_angles)
+        self.update_setpoint(fin_angles)

@@ -24,6 +24,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 from pectoral_gym.hardware.radio.xbee import ESCAPE, MAX_FRAME_DATA, START, ProtocolError, checksum, rf_data
+from pectoral_gym.model.finrules import FIN_WIRE_SCALE, fin_words
 
 __all__ = [
     "PROTOCOL_VERSION", "MAX_LEASE", "DEFAULT_LEASE", "state_name",
@@ -45,7 +46,7 @@ _STATUS = struct.Struct(">HBBBHHHIII")
 # the pattern latched: bias [mrad], amplitude [mrad], period [ms], ratio [1/1000]
 _LATCH = struct.Struct(">IIBBH4H")
 _CRC = struct.Struct(">H")
-_FIN_SCALE = (1000.0, 1000.0, 1000.0, 1000.0)  # SI value * scale = wire integer
+_FIN_SCALE = FIN_WIRE_SCALE  # SI value * scale = wire integer (the robot's resolution of a pattern: the core's)
 
 
 class MsgType(enum.IntEnum):
@@ -109,7 +110,7 @@ class Latch:
     """Body of a LATCH message: fin ``fin`` started a half-stroke of pattern ``beat`` at robot uptime ``uptime_ms``.
 
     ``beat`` is ``(bias, amplitude, period, ratio)`` [rad, rad, s, -] as the fin runs it (the rate-limited
-    setpoint with the transitional stretch, ``firmware.stretch_transition``), quantised like SET_FINS;
+    setpoint with the transitional stretch, ``finrules.stretch_transition``), quantised like SET_FINS;
     ``turn`` [rad] the fin angle at the turning point (where the half-stroke starts); ``power`` whether it
     is a power stroke (to ``bias + amplitude``) or a recovery (to ``bias - amplitude``). With these the
     half-stroke is known whole: the PC needs no earlier report to replay it (a lost report costs nothing
@@ -170,18 +171,7 @@ def crc16(data: bytes) -> int:
 
 # ---------------------------------------------------------------- messages
 def _fins_to_wire(fins: Sequence[float]) -> bytes:
-    values = [float(v) for v in fins]
-    if len(values) != 8:
-        raise ValueError(f"SET_FINS needs 8 values (right fin then left fin), got {len(values)}")
-    words = []
-    for i, v in enumerate(values):
-        if not math.isfinite(v):
-            raise ValueError(f"SET_FINS value {i} is not finite: {v!r}")
-        w = round(v * _FIN_SCALE[i % 4])
-        if not 0 <= w <= 0xFFFF:
-            raise ValueError(f"SET_FINS value {i} = {v!r} does not fit the wire format (0..65.535 in SI units)")
-        words.append(w)
-    return _FINS.pack(*words)
+    return _FINS.pack(*fin_words(fins))
 
 
 def _latch_to_wire(latch: Latch | None) -> bytes:

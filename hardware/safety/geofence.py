@@ -18,9 +18,9 @@ from typing import NamedTuple
 
 import numpy as np
 
-from pectoral_gym.hardware.radio.firmware import ServoLimits
 from pectoral_gym.model import tank
 from pectoral_gym.model.params import FishParams, body_coefficients
+from pectoral_gym.model.servo import ServoLimits
 
 __all__ = ["Geofence", "SpeedBound", "in_geofence"]
 

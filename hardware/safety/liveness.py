@@ -34,11 +34,12 @@ from collections.abc import Callable
 
 import numpy as np
 
-from pectoral_gym.hardware.finreplay import FinReplay
-from pectoral_gym.hardware.radio.firmware import FirmwareConfig, ServoLimits
 from pectoral_gym.hardware.safety.geofence import SpeedBound
 from pectoral_gym.model import forcing_cache
+from pectoral_gym.model.finreplay import FinReplay
+from pectoral_gym.model.finrules import FirmwareConfig
 from pectoral_gym.model.params import FishParams
+from pectoral_gym.model.servo import ServoLimits
 
 __all__ = ["LivenessWatch"]
 
@@ -276,7 +277,7 @@ class LivenessWatch:
 class _Shadow:
     """Replayed fins that take each command ``share`` of the way from its send time to its acknowledgement.
 
-    The fins are the firmware's (:class:`pectoral_gym.hardware.finreplay.FinReplay`: hand-over at the next
+    The fins are the firmware's (:class:`pectoral_gym.model.finreplay.FinReplay`: hand-over at the next
     turning point, rate rule, the transition's stretch), as the robot runs them; a snapshot of them every
     0.05 s. A shadow with ``share`` > 0 holds a command back until its acknowledgement is known (one not yet
     acknowledged when the fins are run to ``t`` is acknowledged after ``t``: the poses come after their capture),

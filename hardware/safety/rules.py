@@ -23,9 +23,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from pectoral_gym.hardware.radio.firmware import ServoLimits, clip_beats, rate_limit, stretch_transition
 from pectoral_gym.hardware.radio.protocol import DEFAULT_LEASE, MAX_LEASE
 from pectoral_gym.model import tank
+from pectoral_gym.model.finrules import rate_limit, stretch_transition
+from pectoral_gym.model.servo import ServoLimits, clip_beats
 
 #: The longest tracking timeout a :class:`SafetyConfig` accepts [s].
 MAX_TRACKING_TIMEOUT = 5.0
@@ -105,9 +106,9 @@ def check_action(action, size: int = 8) -> np.ndarray:
 class CommandFilter:
     """Clip fin commands ``(2, 4)`` to the servo limits and rate-limit them between successive calls.
 
-    Mirrors the firmware: the peak rate of every half-stroke (:func:`pectoral_gym.hardware.radio.firmware.clip_beats`)
+    Mirrors the firmware: the peak rate of every half-stroke (:func:`pectoral_gym.model.servo.clip_beats`)
     and of the transitional half-stroke into the new pattern from either turning point of the previous command
-    (:func:`pectoral_gym.hardware.radio.firmware.stretch_transition`) stays within ``limits.max_speed``.
+    (:func:`pectoral_gym.model.finrules.stretch_transition`) stays within ``limits.max_speed``.
 
     Args:
         limits: Servo limits.

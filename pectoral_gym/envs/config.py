@@ -101,7 +101,7 @@ class EnvConfig:
         observe_fins: Append each fin's half-stroke in progress to the observation (angle now, the next
             turning point, power or recovery, time left; :mod:`pectoral_gym.envs.observation`): the
             stroke phase on which a new command's effect depends. Off by default (the 19-entry
-            observation); the robot env replays the fins on the PC (``pectoral_gym.hardware.finreplay``).
+            observation); the robot env replays the fins on the PC (``pectoral_gym.model.finreplay``).
         progress_weight: Goal task: reward per metre of approach [1/m].
         goal_bonus: Goal task: reward for reaching the goal.
         wall_penalty: Penalty when the nose or tail leaves the tank.

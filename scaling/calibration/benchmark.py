@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pectoral_gym.hardware.runlog import read_run_log
+from pectoral_gym.runlog import read_run_log
 from pectoral_gym.scaling.calibration.fit import CalibrationSettings, calibrate
 from pectoral_gym.scaling.calibration.heldout import held_out
 from pectoral_gym.scaling.calibration.report import report_dict

@@ -69,8 +69,8 @@ def _named_fields(path: Path) -> set[str]:
 
 def main(args: argparse.Namespace) -> int:
     """Run ``calibrate`` with parsed ``args``; 0 on success, 2 for bad input."""
-    from pectoral_gym.hardware.runlog import RunLogError, read_run_log
     from pectoral_gym.model.params import PARAMS_FIELDS, load_params, params_dict, save_params
+    from pectoral_gym.runlog import RunLogError, read_run_log
     from pectoral_gym.scaling.calibration.fit import CalibrationSettings, calibrate, prior_params
     from pectoral_gym.scaling.calibration.heldout import held_out
     from pectoral_gym.scaling.calibration.report import markdown, plot_paths, report_dict

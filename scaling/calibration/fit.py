@@ -27,9 +27,9 @@ import numpy as np
 from scipy import sparse
 from scipy.optimize import least_squares
 
-from pectoral_gym.hardware.runlog import RunLog
 from pectoral_gym.model.params import FishParams
 from pectoral_gym.model.spec import FULL_FAST, FullSpec
+from pectoral_gym.runlog import RunLog
 from pectoral_gym.scaling.calibration.identifiability import UNCERTAIN_FIELDS, Identifiability, analyse
 from pectoral_gym.scaling.calibration.replay import replay_fins, simulate
 from pectoral_gym.scaling.calibration.windows import LogWindows, split_windows
@@ -207,7 +207,7 @@ def calibrate(logs: Sequence[RunLog], prior: FishParams | None = None,
     """Fit ``settings.fields`` of the robot that wrote ``logs`` (module docstring).
 
     Args:
-        logs: Run logs (:func:`pectoral_gym.hardware.runlog.read_run_log`).
+        logs: Run logs (:func:`pectoral_gym.runlog.read_run_log`).
         prior: The prior and the values of every field not fitted (default: Table 1 with the logs' ``known_params``).
         settings: Window, prior width, loss, ...
 

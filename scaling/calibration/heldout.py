@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pectoral_gym.hardware.runlog import RunLog
 from pectoral_gym.model.params import FishParams
 from pectoral_gym.model.spec import FULL_FAST, FullSpec
+from pectoral_gym.runlog import RunLog
 from pectoral_gym.scaling.calibration.replay import simulate
 from pectoral_gym.scaling.calibration.windows import split_windows
 

@@ -1,11 +1,11 @@
 """The logged fins, replayed once, and the body of many candidate fish driven by them.
 
-The fins move by the firmware's rules alone (:mod:`pectoral_gym.hardware.radio.firmware`, the
+The fins move by the firmware's rules alone (:mod:`pectoral_gym.model.finrules`, the
 parameter-change rule of ``docs/model.md`` section 5): their motion does not depend on the body's
 parameters. :func:`replay_fins` therefore runs the one implementation of those rules,
-:class:`pectoral_gym.hardware.finreplay.FinReplay` (which ticks the firmware with
-:func:`~pectoral_gym.hardware.finreplay.advance_with_firmware` and hands its decisions to the fins with
-:func:`~pectoral_gym.hardware.finreplay.apply_firmware`), once per log, and records what the firmware
+:class:`pectoral_gym.model.finreplay.FinReplay` (which ticks the firmware with
+:func:`~pectoral_gym.model.finrules.advance_with_firmware` and hands its decisions to the fins with
+:func:`~pectoral_gym.model.finrules.apply_firmware`), once per log, and records what the firmware
 handed to the fins and when (a :class:`FinTrack`). :func:`simulate` then drives a batched full model
 of any number of candidate fish with those same hand-overs, so every candidate sees exactly the fins the
 firmware rules produce, and re-initialises the bodies at the start of each shooting window.
@@ -24,12 +24,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pectoral_gym.hardware.finreplay import FinReplay, force_latch
-from pectoral_gym.hardware.radio.firmware import FirmwareConfig
-from pectoral_gym.hardware.runlog import RunLog
+from pectoral_gym.model.finreplay import FinReplay
+from pectoral_gym.model.finrules import FirmwareConfig, force_latch
 from pectoral_gym.model.models import FullModel
 from pectoral_gym.model.params import FinBeat, FishParams
 from pectoral_gym.model.spec import FULL_FAST, FullSpec
+from pectoral_gym.runlog import RunLog
 
 __all__ = ["FinTrack", "replay_fins", "simulate"]
 
@@ -37,7 +37,7 @@ _COMMAND, _HALT, _LATCH = 0, 1, 2
 
 
 class _RecordingModel(FullModel):
-    """A one-fish model that records the firmware's hand-overs (``finreplay.apply_firmware``).
+    """A one-fish model that records the firmware's hand-overs (``finrules.apply_firmware``).
 
     ``apply_firmware`` commands the setpoint with ``command_array`` and halts the fins with
     ``reset(..., index=...)``; both are recorded with the model time, then run as usual.
@@ -67,7 +67,7 @@ class FinTrack:
     Attributes:
         times: ``(e,)`` times of the hand-overs [s, the log's clock].
         kinds: ``(e,)`` 0: a setpoint commanded (``command_array``), 1: the fins halted where they were,
-            2: a reported latch (:func:`~pectoral_gym.hardware.finreplay.force_latch`).
+            2: a reported latch (:func:`~pectoral_gym.model.finrules.force_latch`).
         values: ``(e, 2, 4)`` the setpoint (right fin first); for a halt the fins' angles in ``[:, 0, 0]``
             and ``[:, 1, 0]`` [rad]; for a latch the pattern in ``[0]`` and ``[fin, turn, power, 0]`` in ``[1]``.
         t0: The replay's start [s]; the fins are at rest at 90 deg then (power-up).

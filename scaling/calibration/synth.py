@@ -2,8 +2,8 @@
 
 The fish is simulated as the emulator simulates it (``hardware/emulator.py``): the full model at its
 reference steps, its fins run by the firmware's rules through
-:class:`pectoral_gym.hardware.finreplay.FinReplay` (:func:`~pectoral_gym.hardware.finreplay.apply_firmware` and
-:func:`~pectoral_gym.hardware.finreplay.advance_with_firmware`, the emulator's own two functions). The
+:class:`pectoral_gym.model.finreplay.FinReplay` (:func:`~pectoral_gym.model.finrules.apply_firmware` and
+:func:`~pectoral_gym.model.finrules.advance_with_firmware`, the emulator's own two functions). The
 commands are an identification sequence: seeded random fin patterns from the envs' action space
 (:meth:`pectoral_gym.envs.config.EnvConfig.decode`, within the servo envelope), each held 2-6 s, some with
 both fins still so the fish coasts. A camera at 30 fps stamps each frame with its capture time, adds
@@ -21,12 +21,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from pectoral_gym.envs.config import EnvConfig
-from pectoral_gym.hardware.finreplay import CHUNK, FinReplay
-from pectoral_gym.hardware.radio.firmware import FirmwareConfig
-from pectoral_gym.hardware.runlog import RunLogWriter
+from pectoral_gym.model.finreplay import FinReplay
+from pectoral_gym.model.finrules import CHUNK, FirmwareConfig
 from pectoral_gym.model.params import FinBeat, FishParams
 from pectoral_gym.model.servo import ROBOT_MAX_FIN_RATE
 from pectoral_gym.model.tank import TANK_LENGTH, TANK_WIDTH, Outline, clearance
+from pectoral_gym.runlog import RunLogWriter
 from pectoral_gym.scaling.calibration.identifiability import UNCERTAIN_FIELDS
 
 __all__ = ["UNCERTAIN_FIELDS", "Camera", "identification_beats", "perturbed_params", "write_synthetic_log"]
@@ -108,7 +108,8 @@ def write_synthetic_log(path: str | os.PathLike, params: FishParams, seed: int, 
         tick_aligned: Stamp frames and commands on the firmware's 10 ms tick grid (frames 3-4 ticks apart), so
             the PC's replay ticks where the emulated robot ticked. ``False``: the emulated robot ticks between
             frames at other instants than the replay, and a latch can fall a tick apart, as on a real robot
-            (``hardware/finreplay.py``); the fit then meets that mismatch as model error (docs/calibration.md).
+            (:mod:`pectoral_gym.model.finreplay`); the fit then meets that mismatch as model error
+            (docs/calibration.md).
 
     Returns:
         ``{"episodes": count, "duration": logged robot time [s]}``.

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pectoral_gym.hardware.runlog import Episode, RunLog
+from pectoral_gym.runlog import Episode, RunLog
 from pectoral_gym.scaling.calibration.replay import FinTrack, replay_fins
 
 __all__ = ["LogWindows", "initial_state", "noise_levels", "split_windows"]

@@ -31,8 +31,9 @@ import math
 import numpy as np
 
 from pectoral_gym.agents.nmpc.spin import SPIN_CYCLE
-from pectoral_gym.hardware.radio.firmware import ServoLimits, clip_beats, stretch_transition
+from pectoral_gym.model.finrules import stretch_transition
 from pectoral_gym.model.models import AveragedModel, FullModel
+from pectoral_gym.model.servo import ServoLimits, clip_beats
 
 STEPS, DT, CYCLE = 12, 0.5, 4
 LOW = np.array([math.radians(45), 0.0, 0.5, 5.0])  # bias, amplitude, period, ratio of one fin

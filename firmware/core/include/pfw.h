@@ -1,9 +1,10 @@
 /*
  * pfw.h - the robot's rules (docs/protocol.md section 5) as a portable C99 core.
  *
- * The specification is the Python reference hardware/radio/firmware.py (Firmware, clip_beats, slew_at_latch,
- * stretch_transition) with the fins of pectoral_gym/model/strokes.py and stepping.advance_one, driven as
- * hardware/finreplay.py (apply_firmware, _hand_over) and the emulator do; tests/test_firmware_differential.py
+ * The specification is the Python reference hardware/radio/firmware.py (Firmware) with the fin rules of
+ * pectoral_gym/model/servo.py (clip_beats) and finrules.py (slew_at_latch, stretch_transition), the fins of
+ * pectoral_gym/model/strokes.py and stepping.advance_one, driven as finrules.py (apply_firmware, _hand_over)
+ * and the emulator do; tests/test_firmware_differential.py
  * checks the two agree. All state lives in one caller-allocated pfw_fw; no dynamic memory; every call is bounded.
  *
  * Time: the caller's clock is a u32 millisecond count (wrapping); absolute times are kept as integer ms, and only

@@ -1,5 +1,5 @@
 /* The fins: eq. 21 half-strokes latched at exact turning points (strokes.py, stepping.advance_one) and the
- * hand-over of finreplay.apply_firmware / _hand_over / next_latch. */
+ * hand-over of finrules.apply_firmware / _hand_over / next_latch. */
 #include <math.h>
 #include <string.h>
 

@@ -4,7 +4,7 @@ A run log is JSON Lines. Each line is one record with a ``"type"``:
 
 * ``header`` (first line, once): ``format`` (``"pectoral-run-log"``), ``version`` (2; 1 is read too), ``source``
   (``"robot"``, ``"emulator"``, ...), ``control_period`` [s], ``firmware`` (the
-  :class:`~pectoral_gym.hardware.radio.firmware.FirmwareConfig` the fins ran under, :func:`firmware_dict`),
+  :class:`~pectoral_gym.model.finrules.FirmwareConfig` the fins ran under, :func:`firmware_dict`),
   optional ``known_params`` (:class:`~pectoral_gym.model.params.FishParams` fields the user measured).
 * ``episode``: ``episode`` (int), ``t`` [s]: a new segment starts (the fish may have been placed by hand).
 * ``command``: ``t`` [s, PC clock, when sent], ``beats`` ``[[bias, amplitude, period, ratio] right, [...] left]``
@@ -17,7 +17,7 @@ A run log is JSON Lines. Each line is one record with a ``"type"``:
   angle there, ``power`` (a power stroke starts), ``uptime_ms`` (the robot's clock), optional ``boot``.
 * ``ack``, ``estimate``, ``safety``: ``t`` [s] and free fields; kept, not needed by the calibration.
 
-The records' checks are :mod:`pectoral_gym.hardware.runlog_schema`'s (re-exported here).
+The records' checks are :mod:`pectoral_gym.runlog_schema`'s (re-exported here).
 :class:`RunLogWriter` writes it (one method per record type, each record checked before it is written);
 :func:`read_run_log` reads and checks a file and raises :class:`RunLogError` naming the file, the line and
 what is wrong with the first bad record.
@@ -36,8 +36,8 @@ from typing import Any, TextIO
 
 import numpy as np
 
-from pectoral_gym.hardware.radio.firmware import FirmwareConfig
-from pectoral_gym.hardware.runlog_schema import (
+from pectoral_gym.model.finrules import FirmwareConfig
+from pectoral_gym.runlog_schema import (
     FORMAT,
     RECORD_TYPES,
     VERSION,

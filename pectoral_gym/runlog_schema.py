@@ -1,6 +1,6 @@
 """The records of a run log and their checks (``docs/run-log.md``): one record at a time, not its place in the file.
 
-:func:`check_record` checks a record's fields and values and returns its type; :mod:`pectoral_gym.hardware.runlog`
+:func:`check_record` checks a record's fields and values and returns its type; :mod:`pectoral_gym.runlog`
 reads and writes whole logs with it (the order of records, episodes, the header's place).
 """
 
@@ -13,8 +13,9 @@ from typing import Any
 
 import numpy as np
 
-from pectoral_gym.hardware.radio.firmware import FirmwareConfig, ServoLimits
+from pectoral_gym.model.finrules import FirmwareConfig
 from pectoral_gym.model.params import PARAMS_FIELDS
+from pectoral_gym.model.servo import ServoLimits
 
 __all__ = ["FORMAT", "VERSION", "VERSIONS", "RECORD_TYPES", "RunLogError", "check_record", "firmware_dict",
            "firmware_from_dict"]
@@ -34,7 +35,7 @@ RECORD_TYPES: dict[str, tuple[str, ...]] = {
     "estimate": ("t",),
     "safety": ("t",),
 }
-_WIRE_MAX = 65.535  # largest SI value a SET_FINS field carries (hardware/radio/protocol.py, _FIN_SCALE)
+_WIRE_MAX = 65.535  # largest SI value a SET_FINS field carries (pectoral_gym.model.finrules.FIN_WIRE_SCALE)
 
 
 class RunLogError(ValueError):

@@ -1,0 +1,138 @@
+"""The robot's fins replayed on the PC: the stroke phase a fin-observing policy needs, which the robot does not report.
+
+The robot's STATUS message carries no fin angles, but its fins move by known rules
+(:mod:`pectoral_gym.model.finrules`: the command as quantised on the wire, clipped to the servo limits, latched at
+the next turning point with the rate rule and the transitional stretch, halts). :class:`FinReplay` runs those
+rules on the PC, fed the commands the PC sends at the times it sends them, so the robot env
+(``pectoral_gym.hardware.env.HardwareFishEnv``) can give the observation's fin block (``observe_fins=True``,
+:mod:`pectoral_gym.envs.observation`) and the calibration can replay a run log. The emulator drives its own fins
+with the same two functions, :func:`~pectoral_gym.model.finrules.apply_firmware` and
+:func:`~pectoral_gym.model.finrules.advance_with_firmware`, under the robot's full state machine.
+
+What the replay cannot see: the radio latency (the robot latches a command a few milliseconds after
+the PC sent it) and the firmware's tick (10 ms); a latch may therefore fall one tick apart, and
+after a safety stop the fins are taken as halted when the PC learns of it. The fins' angles at
+power-up are taken as 90 deg (the firmware's rest). A robot that reports its latches (LATCH messages,
+``docs/protocol.md``) removes the first: :meth:`FinReplay.latch` starts the reported half-stroke where and
+when the robot says it started (:func:`~pectoral_gym.model.finrules.force_latch`), and the rules infer only what
+lies between reports (a lost report, a robot that does not send them). The calibration's replay of a run log uses
+it; the live env's fin block does not (it keeps the commands' timing, as the simulated envs a policy trains in:
+``docs/hardware.md``).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pectoral_gym.model.finrules import (
+    FinState,
+    FirmwareConfig,
+    advance_with_firmware,
+    apply_firmware,
+    force_latch,
+    wire_beats,
+)
+from pectoral_gym.model.params import FishParams
+from pectoral_gym.model.spec import FULL_REFERENCE
+
+__all__ = ["FinReplay"]
+
+
+class _ReplayedFirmware(FinState):
+    """The firmware as the PC's replay runs it: every command runs until the next one or a stop.
+
+    No lease, watchdog or session: the PC's keep-alives and lease renewals keep the robot running, and when a
+    lease or the watchdog stops the robot the PC's supervisor stops the episode, which the replay hears as a stop.
+    """
+
+    def __init__(self, config: FirmwareConfig | None = None):
+        super().__init__(config)
+        self._running = False
+
+    @property
+    def running(self) -> bool:
+        """Whether the fins are beating (a command arrived since power-up or the last stop)."""
+        return self._running
+
+    def tick(self, now: float, fin_angles: np.ndarray | None = None) -> None:
+        """The setpoint at ``now`` [s] (no lease or watchdog runs out in the replay)."""
+        self.update_setpoint(fin_angles)
+
+    def run(self, beats: np.ndarray, command_id: int) -> None:
+        """A new command ``beats`` ``(2, 4)`` (as received) with identity ``command_id``: the fins run it."""
+        self.command_id = command_id
+        self.accept(beats)
+        self._running = True
+
+    def stop(self) -> None:
+        """A stop: running fins halt where they are."""
+        if self._running:
+            self.halt = True
+        self._running = False
+
+
+class FinReplay:
+    """The robot's fins, replayed from the commands the PC sends.
+
+    Times are the PC's experiment clock [robot s] (``HardwareFishEnv.now()``).
+
+    Args:
+        params: Model parameters (only the fin kinematics matter).
+        firmware: The robot's firmware settings (servo limits).
+    """
+
+    def __init__(self, params: FishParams | None = None, firmware: FirmwareConfig | None = None):
+        self.firmware_config = firmware
+        self.model = FULL_REFERENCE.build(1, params)  # the fins' kinematics: the integration preset does not matter
+        self.reset(0.0)
+
+    def reset(self, t: float) -> None:
+        """Fins at rest at 90 deg at time ``t`` (power-up, or a new replay)."""
+        self.firmware = _ReplayedFirmware(self.firmware_config)
+        self.model.reset()
+        self.model.time = float(t)
+        self._command = 0
+
+    def command(self, t: float, beats: np.ndarray) -> None:
+        """The PC sent a new command ``beats`` ``(2, 4)`` at time ``t``; the robot runs it as quantised on the wire.
+
+        The replay keeps it running until :meth:`stop` or the next command: the PC's keep-alives and
+        lease renewals keep the robot running, and when a lease or the watchdog stops the robot the
+        PC's supervisor stops the episode, which calls :meth:`stop`.
+
+        Raises:
+            ValueError: If a value does not fit the wire format (:func:`~pectoral_gym.model.finrules.fin_words`).
+        """
+        self.advance(t)
+        received = wire_beats(beats)
+        self._command = (self._command + 1) & 0xFFFF  # the wire's command identity
+        self.firmware.run(received, self._command)
+
+    def stop(self, t: float) -> None:
+        """The fins were stopped at time ``t`` (STOP, a safety trip): they halt where they are."""
+        self.advance(t)
+        self.firmware.stop()
+        apply_firmware(self.firmware, self.model)  # the halt, now
+
+    def latch(self, t: float, fin: int, beat: np.ndarray, turn: float, power: bool) -> bool:
+        """The robot reported that fin ``fin`` latched ``beat`` at angle ``turn`` at time ``t`` (a LATCH).
+
+        The replay runs to ``t`` and starts that half-stroke (:func:`~pectoral_gym.model.finrules.force_latch`); a
+        report that comes after the replay passed ``t`` starts it as far in as the replay is. What the firmware
+        commands next is inferred as before. Ignored while the replayed fins are halted (a report from just before
+        the robot heard a stop, mapped after it: the fins are still now). Returns whether the report was applied.
+        """
+        self.advance(t)
+        if not self.firmware.running:
+            return False
+        force_latch(self.model, fin, t, beat, turn, power)
+        return True
+
+    def advance(self, t: float) -> None:
+        """Run the fins to time ``t`` (earlier times are ignored)."""
+        advance_with_firmware(self.firmware, self.model, float(t))
+
+    @property
+    def fins(self) -> np.ndarray:
+        """``(1, 2, strokes.FIN_FIELDS)`` the replayed half-strokes in progress (:mod:`pectoral_gym.model.strokes`)."""
+        return self.model.fins
