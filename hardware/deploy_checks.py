@@ -78,8 +78,8 @@ SPEED_RANGE = (0.1, 5.0)
 CONTROL_PERIOD_RANGE = (0.1, 2.0)
 
 # The tracking timeout in wall seconds (timeout / speed) must hold 3 frames of a 30 fps camera, so one dropped
-# or late frame does not end the episode as tracking_lost. The upper bound is physical (finding 9 of issue 30:
-# the time to reach a wall from the last seen pose), checked by pectoral_gym.hardware.safety.rules.SafetyConfig.
+# or late frame does not end the episode as tracking_lost. The upper bound is physical (the time to reach a
+# wall from the last seen pose), checked by pectoral_gym.hardware.safety.rules.SafetyConfig.
 MIN_TRACKING_WALL = 0.1
 
 FIRST_FRAME_TIMEOUT = 5.0  # wall seconds to wait for the camera's first frame (as the env's reset_timeout)
