@@ -33,8 +33,10 @@ class HardwareFishEnv(EpisodeStart, gym.Env):
 
     ## Description
 
-    The same tasks, spaces and rewards as ``PectoralFish-{Full,Averaged}-v0``
-    (:class:`~pectoral_gym.envs.fish_env.PectoralFishEnv`), computed by the same task core
+    The same tasks, spaces and rewards as the simulated envs
+    (:class:`~pectoral_gym.envs.fish_env.PectoralFishEnv`), on the settings of the simulation-only full-model id
+    (:data:`pectoral_gym.versions.SIMULATION_IDS`, ``EnvConfig``'s defaults) where ``**kwargs`` set no other
+    (``observe_fins=True``: the robot-ready ids' observation), computed by the same task core
     (:class:`pectoral_gym.envs.tasks.table.TaskState`, the task table's row for ``task``) on the
     *estimated* state: for the same states and commands both give the same observations, rewards and
     ``info`` (``tests/test_task_core.py``). An overhead camera frame is tracked
