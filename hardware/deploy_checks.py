@@ -27,11 +27,11 @@ from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.layout import ACTION_SIZE
 from pectoral_gym.envs.observation import OBS_SIZE, observation_size
 from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
-from pectoral_gym.registration import ROBOT_READY
+from pectoral_gym.versions import ENV_VERSIONS, ROBOT, SIMULATION_IDS
 
 __all__ = ["CONTROL_PERIOD_RANGE", "DEFAULT_NICE", "FIRST_FRAME_TIMEOUT", "MIN_TRACKING_WALL", "NICE_RANGE",
-           "SPEED_RANGE", "check_frame_size", "check_scaling", "env_settings", "first_frame", "policy_preflight",
-           "raise_priority", "robot_address", "shipped_k_problem"]
+           "ROBOT_ENV_BASE", "SPEED_RANGE", "check_frame_size", "check_scaling", "env_settings", "first_frame",
+           "policy_preflight", "raise_priority", "robot_address", "shipped_k_problem"]
 
 # Nice values the deploy may ask for: [-20, 0] (never below the default priority). The PC's stack tracks 30 frames
 # a second and must judge each within the safety rules' reaction budget (0.15 s); at the default priority, other
@@ -78,9 +78,14 @@ SPEED_RANGE = (0.1, 5.0)
 CONTROL_PERIOD_RANGE = (0.1, 2.0)
 
 # The tracking timeout in wall seconds (timeout / speed) must hold 3 frames of a 30 fps camera, so one dropped
-# or late frame does not end the episode as tracking_lost. The upper bound is physical (finding 9 of issue 30:
-# the time to reach a wall from the last seen pose), checked by pectoral_gym.hardware.safety.rules.SafetyConfig.
+# or late frame does not end the episode as tracking_lost. The upper bound is physical (the time to reach a
+# wall from the last seen pose), checked by pectoral_gym.hardware.safety.rules.SafetyConfig.
 MIN_TRACKING_WALL = 0.1
+
+#: The id whose settings a robot env starts from: ``HardwareFishEnv`` builds a full-model ``EnvConfig`` with only
+#: its own arguments set, on the defaults, which are this simulation-only id's (a setting absent from a policy's
+#: run folder or from the deploy's arguments is this id's).
+ROBOT_ENV_BASE = SIMULATION_IDS["full"]
 
 FIRST_FRAME_TIMEOUT = 5.0  # wall seconds to wait for the camera's first frame (as the env's reset_timeout)
 
@@ -105,6 +110,11 @@ def _same(a: Any, b: Any) -> bool:
     return a == b
 
 
+def _robot_env_defaults() -> EnvConfig:
+    """The settings of :data:`ROBOT_ENV_BASE`: what a robot env runs with where nothing sets otherwise."""
+    return EnvConfig(**ENV_VERSIONS[ROBOT_ENV_BASE].settings())
+
+
 def env_settings(controller: Any, task: str | None, control_period: float | None) -> tuple[dict[str, Any], list[str]]:
     """The env settings to run ``controller`` with, checked against what it was trained on.
 
@@ -113,7 +123,7 @@ def env_settings(controller: Any, task: str | None, control_period: float | None
     folder records them (``trained``), the task and the control period default to the policy's own and an
     explicit other value is refused; the action ranges and the track reference speed are the policy's. A
     controller without ``trained`` runs any task; the hand and NMPC baselines (``controller`` ``None``) get the
-    starts and goals of the v1 envs (:data:`pectoral_gym.registration.ROBOT_READY`). A policy trained through
+    goals of the robot-ready envs (:data:`pectoral_gym.versions.ROBOT`). A policy trained through
     the simulated camera (``sensing``) or with the simulated control-loop timing (``timing``) gets a note, never
     the setting: ``HardwareFishEnv`` refuses both.
 
@@ -129,7 +139,7 @@ def env_settings(controller: Any, task: str | None, control_period: float | None
     Raises:
         ValueError: On a mismatch, naming the setting, both values and where the policy's comes from.
     """
-    defaults = EnvConfig()
+    defaults = _robot_env_defaults()
     trained = dict(getattr(controller, "trained", None) or {})
     notes: list[str] = []
     kwargs: dict[str, Any] = {}
@@ -172,10 +182,8 @@ def env_settings(controller: Any, task: str | None, control_period: float | None
     if trained.get("timing") is not None:  # never passed on: the robot's loop and radio have their own timing
         notes.append(f"the policy trained with simulated command delays (timing, {source}); on the robot the radio "
                      "and the control loop bring their own, so timing is not applied")
-    if controller is None:  # a baseline: the starts and goals of the v1 envs, which the stopping band leaves reachable
-        for key in ("start_inset", "goal_inset"):
-            if not _same(ROBOT_READY.get(key, getattr(defaults, key)), getattr(defaults, key)):
-                kwargs[key] = ROBOT_READY[key]
+    if controller is None and not _same(ROBOT.goal_inset, defaults.goal_inset):
+        kwargs["goal_inset"] = ROBOT.goal_inset  # a baseline: the robot-ready envs' goals, the band leaves reachable
     return kwargs, notes
 
 
@@ -216,7 +224,7 @@ def check_scaling(path: str, settings: dict[str, Any], robot: bool = True) -> No
     from pectoral_gym.model.kfunctions import ScalingFunctions
     from pectoral_gym.model.plausible import check_k
 
-    defaults = EnvConfig()
+    defaults = _robot_env_defaults()
     ranges = tuple(tuple(settings.get(key, getattr(defaults, key)))
                    for key in ("bias_range", "amplitude_range", "period_range", "ratio_range"))
     check_k(ScalingFunctions.load(path), ranges, path, spline=robot)  # type: ignore[arg-type]

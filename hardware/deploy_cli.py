@@ -15,7 +15,7 @@ from pectoral_gym.hardware.deploy_checks import (
 )
 from pectoral_gym.hardware.emulated_firmware import FIRMWARES
 from pectoral_gym.hardware.emurig import RigConditions
-from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, prog_name
+from pectoral_gym.tools.cli_common import HelpFormatter, prog_name
 
 __all__ = ["check_args", "make_parser", "rig_conditions"]
 
@@ -86,9 +86,8 @@ def make_parser(description: str) -> argparse.ArgumentParser:
     parser.add_argument("--control-period", type=float, default=None, metavar="S",
                         help=f"seconds between actions, in [{lo_period}, {hi_period}] (default: the policy's own "
                              "from its run folder, else 0.5); a policy is refused at another period")
-    deprecated_alias(parser, "--max-steps", parser.add_argument(
-        "--max-episode-steps", dest="max_steps", type=int, default=240, metavar="N",
-        help="steps per episode, >= 1 (default %(default)s)"))
+    parser.add_argument("--max-episode-steps", dest="max_steps", type=int, default=240, metavar="N",
+                        help="steps per episode, >= 1 (default %(default)s)")
     parser.add_argument("--speed", type=float, default=1.0,
                         help=f"emulated clock speed-up, in [{lo_speed}, {hi_speed}] (--emulate only; "
                              "default %(default)s)")
@@ -137,8 +136,7 @@ def make_parser(description: str) -> argparse.ArgumentParser:
                              "are tracked in time under CPU load (needs root or a 'nice' limit in "
                              "/etc/security/limits.conf; else a warning; 0: leave it as it is; not with --lockstep, "
                              "where simulated time makes it irrelevant) (default %(default)s)")
-    deprecated_alias(parser, "--quiet", parser.add_argument("--no-progress", action="store_true",
-                                                            help="no progress bar"))
+    parser.add_argument("--no-progress", action="store_true", help="no progress bar")
     return parser
 
 

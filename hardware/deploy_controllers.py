@@ -22,8 +22,9 @@ def make_controller(name: str, config, step_budget: float, safety: SafetyConfig 
     robot's own where ``config.params`` are not Table 1's; ``None``: the shipped K.
 
     Both keep out of the stopping band of the env's geofence (``safety``, default
-    :class:`pectoral_gym.hardware.safety.rules.SafetyConfig`) widened by
-    :data:`pectoral_gym.registration.MEASUREMENT_MARGIN`, the band the v1 envs train and evaluate them with: the
+    :class:`pectoral_gym.hardware.safety.rules.SafetyConfig`) widened as the robot-ready envs widen the robot's
+    (:func:`pectoral_gym.versions.with_measurement_margin`; :data:`pectoral_gym.versions.ROBOT`'s ``stop_rule`` for
+    the default ``safety``), the band they train and evaluate them with: the
     NMPC plans with it (``pectoral_gym.agents.controllers.stop_band``) and both filter their commands through
     the backup shield (``pectoral_gym.agents.controllers.band_shield``) with it, predicting through the firmware's
     command path; the NMPC's shield there also keeps a backup's side and wants
@@ -34,10 +35,10 @@ def make_controller(name: str, config, step_budget: float, safety: SafetyConfig 
     """
     from pectoral_gym.agents.baselines import make_baseline
     from pectoral_gym.model.tank import StopRule
-    from pectoral_gym.registration import MEASUREMENT_MARGIN
+    from pectoral_gym.versions import with_measurement_margin
 
     safety = safety or SafetyConfig()
-    band = StopRule(safety.geofence_margin + MEASUREMENT_MARGIN, safety.reaction_time, safety.contact_speed)
+    band = with_measurement_margin(StopRule(safety.geofence_margin, safety.reaction_time, safety.contact_speed))
     if (problem := shipped_k_problem(name, config.params, scaling)) is not None:
         raise ValueError(problem)
     if name == "nmpc":

@@ -33,8 +33,10 @@ class HardwareFishEnv(EpisodeStart, gym.Env):
 
     ## Description
 
-    The same tasks, spaces and rewards as ``PectoralFish-{Full,Averaged}-v0``
-    (:class:`~pectoral_gym.envs.fish_env.PectoralFishEnv`), computed by the same task core
+    The same tasks, spaces and rewards as the simulated envs
+    (:class:`~pectoral_gym.envs.fish_env.PectoralFishEnv`), on the settings of the simulation-only full-model id
+    (:data:`pectoral_gym.versions.SIMULATION_IDS`, ``EnvConfig``'s defaults) where ``**kwargs`` set no other
+    (``observe_fins=True``: the robot-ready ids' observation), computed by the same task core
     (:class:`pectoral_gym.envs.tasks.table.TaskState`, the task table's row for ``task``) on the
     *estimated* state: for the same states and commands both give the same observations, rewards and
     ``info`` (``tests/test_task_core.py``). An overhead camera frame is tracked
@@ -138,14 +140,14 @@ class HardwareFishEnv(EpisodeStart, gym.Env):
 
     ## Version History
 
-    * v0: Initial version. Issue 13: leased commands (protocol v2), safety supervisor thread, frame
-      checks, peak-rate servo clipping (the fastest simulated pattern runs at a longer period), STOP at
-      exit and on signals. Issue 14: the task core of the simulated envs (``TaskState``), any task of
-      the task table; the energy term prices the command sent (before: the action's pattern). Issue 30:
-      latched operator stop (:meth:`rearm`), reset waits for a confirmed stop, frames after the hook only,
-      noise-robust and physically bounded geofence speed, ``step()`` raises with no episode armed. Issue 29:
-      ``clock`` (lockstep emulation in simulated time; the wall clock by default, unchanged). Issue 27: ``run_log``
-      (what the model's calibration needs, ``docs/run-log.md``; on the env's experiment clock; settable any time).
+    * v0: Initial version: leased commands (protocol v2), a safety supervisor thread, frame checks,
+      peak-rate servo clipping (the fastest simulated pattern runs at a longer period), STOP at exit and on
+      signals; the task core of the simulated envs (``TaskState``), any task of the task table, the energy
+      term pricing the command sent; a latched operator stop (:meth:`rearm`), reset waiting for a confirmed
+      stop, frames after the hook only, a noise-robust and physically bounded geofence speed, ``step()``
+      raising with no episode armed; ``clock`` (lockstep emulation in simulated time; the wall clock by
+      default); ``run_log`` (what the model's calibration needs, ``docs/run-log.md``; on the env's experiment
+      clock; settable any time).
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 2}

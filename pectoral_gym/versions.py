@@ -37,7 +37,7 @@ from pectoral_gym.model.spec import (
 from pectoral_gym.model.tank import ROBOT_STOP_RULE, StopRule
 
 __all__ = ["ENV_VERSIONS", "LATEST", "LATEST_AVERAGED", "LATEST_FULL", "MEASUREMENT_MARGIN", "ROBOT", "SIMULATION",
-           "SIMULATION_IDS", "EnvVersion", "RobotReadiness", "latest_settings"]
+           "SIMULATION_IDS", "EnvVersion", "RobotReadiness", "latest_settings", "with_measurement_margin"]
 
 #: Clearance [m] the robot-ready envs' band keeps on top of the robot's rule: the robot's supervisor judges the band
 #: on a least-squares speed from camera poses plus 2 standard errors (>= 2 x 5 mm / 1.58 s = 6.3 mm/s over its 1 s
@@ -46,6 +46,15 @@ __all__ = ["ENV_VERSIONS", "LATEST", "LATEST_AVERAGED", "LATEST_FULL", "MEASUREM
 #: and the envs check the band after each control period, the robot every frame (``docs/guide/envs.md``,
 #: "Versions").
 MEASUREMENT_MARGIN = 0.05
+
+
+def with_measurement_margin(rule: StopRule) -> StopRule:
+    """``rule`` with :data:`MEASUREMENT_MARGIN` added to its margin.
+
+    The band the robot-ready envs keep for a robot whose supervisor judges ``rule``: the one place the margin is
+    added (:data:`ROBOT`'s band, and the robot stack's controllers' band around the deploy's geofence).
+    """
+    return rule._replace(margin=rule.margin + MEASUREMENT_MARGIN)
 
 
 @dataclass(frozen=True)
@@ -79,7 +88,7 @@ SIMULATION = RobotReadiness(observe_fins=False, stop_band=False, stop_rule=ROBOT
 #: The robot-ready envs (v1 on): the fins observed, the robot's band with :data:`MEASUREMENT_MARGIN` more margin,
 #: the robot's servo rate, goals 0.3 m from the walls (ones the band leaves reachable).
 ROBOT = RobotReadiness(observe_fins=True, stop_band=True,
-                       stop_rule=ROBOT_STOP_RULE._replace(margin=ROBOT_STOP_RULE.margin + MEASUREMENT_MARGIN),
+                       stop_rule=with_measurement_margin(ROBOT_STOP_RULE),
                        servo_limit=ROBOT_MAX_FIN_RATE, goal_inset=0.3)
 
 

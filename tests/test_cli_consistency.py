@@ -1,4 +1,4 @@
-"""Every console script: help with examples, the prog the user typed, one spelling per concept, deprecated aliases."""
+"""Every console script: help with examples, the prog the user typed, one spelling per concept, old spellings gone."""
 
 from __future__ import annotations
 
@@ -10,23 +10,15 @@ from pathlib import Path
 import pytest
 
 from pectoral_gym.tools import cli_reference
-from pectoral_gym.tools.cli_common import COMMANDS, DEPRECATED_SCRIPTS, MODULE_COMMANDS, REMOVED_IN, prog_name
-from pectoral_gym.tools.cli_reference import deprecated_spellings, iter_parsers, reference_markdown
+from pectoral_gym.tools.cli_common import COMMANDS, MODULE_COMMANDS, prog_name
+from pectoral_gym.tools.cli_reference import iter_parsers, reference_markdown
 
 ROOT = Path(__file__).resolve().parents[1]
 ALL_COMMANDS = {**COMMANDS, **MODULE_COMMANDS}
 
-# Old spellings no parser may show in its help (each is a deprecated alias of the canonical one, or gone).
+# Old spellings no parser may show in its help (all gone: see REMOVED).
 RETIRED = {"--log-dir", "--n-timesteps", "--quiet", "--baseline", "--envs", "--controllers", "--train-env",
            "--storage-path", "--output", "-o", "--no-plot", "--max-steps"}
-
-# (command, arguments every parse needs, the old spelling's arguments, the canonical arguments)
-ALIASES = [
-    ("pectoral-deploy", [], ["--max-steps", "5"], ["--max-episode-steps", "5"]),
-    ("pectoral-deploy", [], ["--quiet"], ["--no-progress"]),
-    ("pectoral-camera-calibrate", ["--from-emulator"], ["--output", "c.json"], ["--out", "c.json"]),
-    ("pectoral-camera-calibrate", ["--from-emulator"], ["-o", "c.json"], ["--out", "c.json"]),
-]
 
 # Spellings deprecated in 0.2.0 and gone since: (command, arguments every parse needs, the old spelling's
 # arguments). Not here: pectoral-scaling calibrate's --no-plot, which argparse takes as an abbreviation of
@@ -46,7 +38,13 @@ REMOVED = [
     ("pectoral-seeds", [], ["--train-env", "PectoralFish-Full-v1"]),
     ("python -m pectoral_gym.agents.nmpc.compare", ["--variants", "{}"], ["--max-steps", "9"]),
     ("python -m pectoral_gym.agents.controllers.band_study", [], ["--quiet"]),
+    ("pectoral-deploy", [], ["--max-steps", "5"]),
+    ("pectoral-deploy", [], ["--quiet"]),
+    ("pectoral-camera-calibrate", ["--from-emulator"], ["--output", "c.json"]),
+    ("pectoral-camera-calibrate", ["--from-emulator"], ["-o", "c.json"]),
 ]
+# Console-script names deprecated in 0.2.0 and gone since.
+REMOVED_SCRIPTS = {"pectoral-calibrate"}
 
 
 def _all_parsers():
@@ -64,8 +62,8 @@ def test_the_registry_is_the_console_scripts_of_pyproject():
     tomllib = pytest.importorskip("tomllib")  # Python 3.11+
     scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
     expected = {name: command.entry_point for name, command in COMMANDS.items()}
-    expected.update({old: entry for old, (_, entry) in DEPRECATED_SCRIPTS.items()})
     assert scripts == expected
+    assert not REMOVED_SCRIPTS & set(scripts)
 
 
 @pytest.mark.parametrize("name", sorted(ALL_COMMANDS))
@@ -96,42 +94,12 @@ def test_bad_arguments_exit_2_with_a_one_line_reason(name, parsers, capsys):
     assert err[-1].startswith(f"{name}: error: "), err
 
 
-@pytest.mark.parametrize(("name", "base", "old", "new"), ALIASES, ids=lambda v: " ".join(v) if isinstance(v, list)
-                         else v)
-def test_a_deprecated_spelling_parses_as_the_new_one_and_says_so(name, base, old, new, parsers, capsys):
-    parser = parsers[name]
-    canonical = parser.parse_args([*base, *new])
-    assert capsys.readouterr().err == ""
-    deprecated = parser.parse_args([*base, *old])
-    lines = capsys.readouterr().err.splitlines()
-    assert vars(deprecated) == vars(canonical)
-    assert len(lines) == 1 and lines[0].endswith(
-        f": {old[0]} is deprecated, use {new[0]} (the old spelling goes in {REMOVED_IN})"), lines
-    assert lines[0].startswith(name)
-
-
 @pytest.mark.parametrize(("name", "base", "old"), REMOVED, ids=lambda v: " ".join(v) if isinstance(v, list) else v)
 def test_a_removed_spelling_is_a_usage_error(name, base, old, parsers, capsys):
     with pytest.raises(SystemExit) as done:
         parsers[name].parse_args([*base, *old])
     assert done.value.code == 2
     assert old[0] in capsys.readouterr().err
-
-
-def test_every_deprecated_spelling_is_tested(parsers):
-    found = {(prog.split()[0] if not prog.startswith("python") else " ".join(prog.split()[:3]), old)
-             for parser in parsers.values() for prog, old, _ in deprecated_spellings(parser)}
-    tested = {(name, old[0]) for name, _, old, _ in ALIASES}
-    assert found == tested
-
-
-def test_the_old_script_name_warns_and_runs(monkeypatch, capsys, tmp_path):
-    from pectoral_gym.hardware.vision import calibrate
-
-    monkeypatch.setattr(calibrate, "main", lambda argv=None: 0)
-    assert calibrate.deprecated_main([]) == 0
-    assert capsys.readouterr().err == (f"pectoral-calibrate: pectoral-calibrate is deprecated, use "
-                                       f"pectoral-camera-calibrate (the old spelling goes in {REMOVED_IN})\n")
 
 
 def test_prog_is_what_the_user_typed(monkeypatch):
@@ -144,8 +112,9 @@ def test_prog_is_what_the_user_typed(monkeypatch):
     as_script = types.ModuleType("__main__")
     as_script.__spec__ = None  # a console script's wrapper
     monkeypatch.setitem(sys.modules, "__main__", as_script)
-    monkeypatch.setattr(sys, "argv", ["/venv/bin/pectoral-calibrate", "--help"])
-    assert prog_name("pectoral-camera-calibrate", "pectoral_gym.hardware.vision.calibrate") == "pectoral-calibrate"
+    monkeypatch.setattr(sys, "argv", ["/venv/bin/pectoral-calibrate", "--help"])  # a stale wrapper of the old name
+    calibrate = "pectoral-camera-calibrate"
+    assert prog_name(calibrate, "pectoral_gym.hardware.vision.calibrate") == calibrate
     monkeypatch.setattr(sys, "argv", ["/venv/bin/pytest"])
     assert prog_name("pectoral-train", "pectoral_gym.agents.training.train") == "pectoral-train"
     monkeypatch.setattr(sys, "argv", ["/venv/bin/pectoral-demo"])  # the demo runs the deploy in its process

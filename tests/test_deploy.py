@@ -392,6 +392,34 @@ def test_policy_settings_default_to_its_own_and_a_mismatch_is_refused():
     assert env_settings(None, None, None) == ({"task": "goal", "control_period": 0.5, "goal_inset": 0.3}, [])
 
 
+def test_the_robot_env_starts_from_the_version_the_deploy_names():
+    """What a robot env builds with no argument set is the id the deploy's checks compare a policy with."""
+    from pectoral_gym.hardware.deploy_checks import ROBOT_ENV_BASE
+    from pectoral_gym.hardware.stack import env_config
+    from pectoral_gym.versions import ENV_VERSIONS
+
+    named = EnvConfig(**{**ENV_VERSIONS[ROBOT_ENV_BASE].settings(), "task": "track", "control_period": 0.7})
+    assert env_config("track", 0.7, {}) == named
+    assert ROBOT_ENV_BASE == "PectoralFish-Full-v0"
+
+
+def test_the_deploys_controllers_keep_the_geofence_widened_by_5_cm():
+    from pectoral_gym.agents.baselines import make_baseline
+    from pectoral_gym.hardware.deploy_controllers import make_controller
+    from pectoral_gym.model.tank import StopRule
+    from pectoral_gym.versions import ROBOT
+
+    def shield_band(rule):  # the hand law's shield around ``rule`` (its own reserve on top)
+        return make_baseline("hand", config, shield={"band": rule}).shield.band
+
+    config = EnvConfig(model="full")
+    assert ROBOT.stop_rule == pytest.approx((0.10, 0.15, 0.03))  # the robot's 5 cm rule + 5 cm
+    hand = make_controller("hand", config, step_budget=1.0)  # the default geofence: the robot-ready envs' band
+    assert hand.shield.band == shield_band(StopRule(0.10, 0.15, 0.03))
+    wide = make_controller("hand", config, step_budget=1.0, safety=SafetyConfig(geofence_margin=0.2))
+    assert wide.shield.band == shield_band(StopRule(0.25, 0.15, 0.03))
+
+
 def test_a_goal_policy_is_refused_under_track_and_bad_statistics_are_named(policy_zip, tmp_path, capsys):
     import pickle
     import shutil

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from pectoral_gym.tools.cli_common import COMMANDS, DEPRECATED_SCRIPTS, MODULE_COMMANDS, Command
+from pectoral_gym.tools.cli_common import COMMANDS, MODULE_COMMANDS, Command
 
 ROOT = Path(__file__).resolve().parents[1]
 # README and every current page (the dated research notes quote commands as they were then, so they are left out)
@@ -89,8 +89,7 @@ def as_doc_command(source: str, tokens: list[str]) -> DocCommand | None:
     text = shlex.join(tokens)
     program = Path(tokens[0]).name
     if program.startswith("pectoral-"):
-        name = DEPRECATED_SCRIPTS.get(program, (program,))[0]
-        return DocCommand(source, text, COMMANDS.get(name), tuple(tokens[1:]))
+        return DocCommand(source, text, COMMANDS.get(program), tuple(tokens[1:]))
     if PYTHON.match(tokens[0]) and tokens[1:2] == ["-m"] and len(tokens) > 2 and (
             tokens[2] == "pectoral_gym" or tokens[2].startswith("pectoral_gym.")):
         return DocCommand(source, text, MODULES.get(tokens[2]), tuple(tokens[3:]))
@@ -153,26 +152,4 @@ def test_every_quoted_command_parses(doc, capsys):
                 reason = capsys.readouterr().err.strip().splitlines()[-1:]
                 failures.append(f"{quoted.source}: `{quoted.text}` does not parse: {' '.join(reason)}")
         capsys.readouterr()
-    assert not failures, "\n".join(failures)
-
-
-@pytest.mark.parametrize("doc", DOCS)
-def test_no_quoted_command_uses_a_deprecated_spelling(doc, capsys):
-    path = ROOT / doc
-    if not path.exists():
-        pytest.skip(f"{doc} does not exist yet")
-    failures = []
-    for quoted in doc_commands(path):
-        program = Path(quoted.text.split()[0]).name
-        if program in DEPRECATED_SCRIPTS:
-            failures.append(f"{quoted.source}: `{quoted.text}`: use {DEPRECATED_SCRIPTS[program][0]}")
-        if quoted.command is None:
-            continue
-        capsys.readouterr()
-        try:
-            _parser(quoted.command).parse_args(list(quoted.args))
-        except SystemExit:
-            pass  # test_every_quoted_command_parses reports it
-        notices = [line for line in capsys.readouterr().err.splitlines() if "is deprecated, use" in line]
-        failures += [f"{quoted.source}: `{quoted.text}`: {notice}" for notice in notices]
     assert not failures, "\n".join(failures)

@@ -25,11 +25,6 @@ SKIPPED_DIRS = {"docs/notes", "site", "build", "dist", "node_modules", "__pycach
 SKIPPED_FILES = {"CHANGELOG.md", "docs/changelog.md", "docs/validation/fidelity/README.md",
                  "docs/validation/speed/README.md", "docs/validation/step_path/README.md",
                  "tests/test_no_lab_notebook.py"}
-#: Still to clean, in the round that edits ``hardware/`` (the list only shrinks; see ``test_allow_list_is_live``).
-ALLOWED_FOR_NOW = {
-    "hardware/env.py",
-    "hardware/deploy_checks.py",
-}
 #: Entries of the yaw "waveform" experiment, which leaves the core (with its reports and its section of
 #: docs/model.md) in the same round: ``(path or folder/, entry)``; the list only shrinks.
 WAVEFORM_FOR_NOW = {
@@ -41,8 +36,8 @@ WAVEFORM_FOR_NOW = {
 
 
 def _allowed(rel: str, hit: str) -> bool:
-    return rel in ALLOWED_FOR_NOW or any((rel == path or path.endswith("/") and rel.startswith(path)) and hit == entry
-                                         for path, entry in WAVEFORM_FOR_NOW)
+    return any((rel == path or path.endswith("/") and rel.startswith(path)) and hit == entry
+               for path, entry in WAVEFORM_FOR_NOW)
 
 ISSUE = re.compile(r"\bissues?\s+#?\d+", re.IGNORECASE)
 DATE = re.compile(r"\b20\d\d-\d\d-\d\d\b")
@@ -125,11 +120,7 @@ def test_no_lab_notebook_in_help() -> None:
 
 
 def test_allow_list_is_live() -> None:
-    """Each allowed file exists and still needs its place on the list (a cleaned file comes off it)."""
-    for rel in sorted(ALLOWED_FOR_NOW):
-        path = ROOT / rel
-        assert path.is_file(), f"{rel} is gone: take it off ALLOWED_FOR_NOW"
-        assert notebook_entries(path.read_text(encoding="utf-8")), f"{rel} is clean: take it off ALLOWED_FOR_NOW"
+    """Each allowed entry is still there (a cleaned file comes off the list)."""
     for where, entry in sorted(WAVEFORM_FOR_NOW):
         paths = sorted((ROOT / where).glob("*.md")) if where.endswith("/") else [ROOT / where]
         found = any(entry in notebook_entries(p.read_text(encoding="utf-8")) for p in paths if p.is_file())

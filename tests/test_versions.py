@@ -86,7 +86,7 @@ def test_a_version_takes_only_a_model_an_env_runs():
 def test_the_tools_default_to_the_latest_ids():
     """Every tool that trains or evaluates defaults to LATEST; the studies pinned to v0 say so by name."""
     from pectoral_gym.agents.controllers import band_study
-    from pectoral_gym.agents.studies import benchmark, seeds, solve_probe, stack_gap, sweep
+    from pectoral_gym.agents.studies import benchmark_settings, seeds, solve_probe, stack_gap, sweep
     from pectoral_gym.agents.training import demo, evaluate, train
     from pectoral_gym.tools import bench
     from pectoral_gym.versions import SIMULATION_IDS
@@ -95,8 +95,9 @@ def test_the_tools_default_to_the_latest_ids():
     assert evaluate.build_parser().get_default("env") == LATEST_FULL
     assert seeds.build_parser().get_default("train_env") == demo.TRAIN_ENV == seeds.TRAIN_ENV == LATEST_AVERAGED
     assert demo.EVAL_ENVS == (LATEST_AVERAGED, LATEST_FULL)
-    assert (benchmark.AVERAGED_ID, benchmark.FULL_ID) == (LATEST_AVERAGED, LATEST_FULL)
-    assert benchmark.env_id("full") == LATEST_FULL and benchmark.VERSIONS[0] == LATEST_FULL.rsplit("-", 1)[1]
+    assert (benchmark_settings.AVERAGED_ID, benchmark_settings.FULL_ID) == (LATEST_AVERAGED, LATEST_FULL)
+    assert benchmark_settings.env_id("full") == LATEST_FULL
+    assert benchmark_settings.VERSIONS[0] == LATEST_FULL.rsplit("-", 1)[1]
     assert solve_probe.FULL_ID == stack_gap.DEFAULT_ENV == LATEST_FULL
     assert set(seeds.TRAIN_ENVS) == set(ENV_VERSIONS)
     assert band_study.build_parser().get_default("env") == SIMULATION_IDS["full"]

@@ -50,7 +50,6 @@ from pectoral_gym.agents.nmpc.problem import (
     FinInputs,
     NMPCProblem,
     identified_bias_range,
-    pack_decision,
     to_u,
     to_z,
 )
@@ -269,28 +268,6 @@ class NMPCController(PlanPricing, HandOver):
                 guesses.append(then)
         return guesses
 
-    def _rollout_cost(self, state: np.ndarray, p: np.ndarray, u: np.ndarray,
-                      deep: bool = True) -> tuple[float, np.ndarray]:
-        """Cost of the model's rollout under the inputs ``u (4, horizon)`` (clipped, blocked), and those ``z``.
-
-        A rollout that enters the goal costs its distance and wall terms up to there (:meth:`_reach_cost`).
-        Else, beyond the horizon: with ``deep`` and :attr:`NMPCSettings.togo_steps`, the hand law's continuation
-        (:meth:`_continuation`), else the turn-then-straight cost-to-go (:meth:`_togo`).
-        """
-        problem = self.problem
-        z = problem.blocked(np.clip(to_z(u), self.z_low[:, None], self.z_high[:, None]))
-        x = np.asarray(problem.rollout(state, z[:, problem.block_of], to_z(self._u_prev), self.gains))
-        cost = float(problem.cost(np.nan_to_num(pack_decision(z, x)), p)) if np.all(np.isfinite(x)) else math.inf
-        reach = self._reach_cost(x) if math.isfinite(cost) else None
-        if reach is not None:  # the plan enters the goal: nothing beyond that interval counts
-            cost = reach
-        elif math.isfinite(cost):
-            if deep and self.settings.togo_steps > 0 and not self.track:
-                cost += self._continuation(x[:, -1], z[:, -1])
-            elif self.w_togo > 0:  # beyond the horizon: the turn still to make
-                cost += self.w_togo * self._togo(x[:, -1])
-        return (cost if math.isfinite(cost) else math.inf), np.nan_to_num(pack_decision(z, x))
-
     def _solve(self, state: np.ndarray, p: np.ndarray, u_guess: np.ndarray,
                duals: tuple[np.ndarray, np.ndarray] | None = None, guess_cost: float | None = None):
         """One solve from ``u_guess`` ``(4, horizon)`` (and multipliers ``duals``; ``guess_cost``: its cost if known).
@@ -371,37 +348,6 @@ class NMPCController(PlanPricing, HandOver):
         self._plan_spins = best is spin
         self._plan_age = 0
         return self.plan[0].copy()
-
-    def _spin_plan(self, state: np.ndarray, ref: np.ndarray, p: np.ndarray) -> tuple[float, np.ndarray, None] | None:
-        """The cheapest spin candidate as ``(cost, plan (horizon, 4), None)``, or ``None``.
-
-        The candidates are :mod:`pectoral_gym.agents.nmpc.spin`'s turns.
-
-        Priced as the NLP's candidates are: the objective's state terms on the rollout plus its input terms,
-        or the reach cost; the shallow ranking adds the turn-then-straight cost-to-go, the cheapest one is
-        priced again with the hand law's continuation (:attr:`NMPCSettings.togo_steps`).
-        """
-        spin, problem, s = self.spin, self.problem, self.settings
-        u, x, work = spin.rollouts(state, ref)
-        # the fin work of the strokes swept (a spin's is mostly in its transitional strokes), as the NLP's
-        # energy term prices it for regular beats
-        inputs = problem.energy_weight * work + spin.input_cost(u, self._u_prev, problem.input_width, s.w_change)
-        costs = np.full(len(x), math.inf)
-        within = np.full(len(x), math.nan)  # the objective's terms within the horizon, of rollouts that miss the goal
-        for i in np.flatnonzero(np.all(np.isfinite(x), axis=(1, 2))):
-            reach = self._reach_cost(x[i])
-            if reach is not None:
-                costs[i] = reach
-            else:
-                within[i] = float(problem.state_cost(x[i], p)) + inputs[i]
-                costs[i] = within[i] + self.w_togo * self._togo(x[i][:, -1])
-        i = int(np.argmin(costs))
-        if not math.isfinite(costs[i]):
-            return None
-        cost = costs[i]
-        if not math.isnan(within[i]) and s.togo_steps > 0 and not self.track:
-            cost = within[i] + self._continuation(x[i][:, -1], to_z(u[i][-1]))
-        return float(cost), u[i].copy(), None
 
     def _shifted_duals(self, age: int) -> tuple[np.ndarray, np.ndarray] | None:
         """The last good solve's multipliers, the state constraints' shifted by ``age`` intervals."""

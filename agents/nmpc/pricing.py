@@ -1,9 +1,13 @@
-"""How the NMPC prices a plan: the hand law as base policy, the turning geometry beyond the horizon, goal reach.
+"""How the NMPC prices a plan: its rollout, the hand law as base policy, the turns beyond the horizon, goal reach.
 
 :class:`PlanPricing` is a mixin of :class:`pectoral_gym.agents.nmpc.controller.NMPCController` (it uses the controller's
-``problem``, ``settings``, ``hand``, ``gains``, bounds and ``_target_end``). Everything here runs on
+``problem``, ``settings``, ``hand``, ``spin``, ``gains``, bounds and ``_target_end``). Everything here runs on
 the planning model (the averaged model with the identified K), never on the full model:
 
+* :meth:`PlanPricing._rollout_cost`: a candidate's cost, the NLP's objective on the model's rollout plus what lies
+  beyond the horizon (the screening ranks the candidates by it; a solve is kept only if it costs no more);
+* :meth:`PlanPricing._spin_plan`: the cheapest on-the-spot turn (:mod:`pectoral_gym.agents.nmpc.spin`), priced the
+  same way;
 * :meth:`PlanPricing._hand_loop`: the hand law (:class:`pectoral_gym.agents.baselines.HandController`) in closed
   loop on the model, the screening's hand candidate and the continuation beyond the horizon;
 * :meth:`PlanPricing._continuation` and :meth:`PlanPricing._togo`: the cost beyond the horizon;
@@ -20,7 +24,7 @@ import numpy as np
 
 from pectoral_gym.agents.controllers.stop_band import band_violation
 from pectoral_gym.agents.controllers.turning import circle_room, turn_paths
-from pectoral_gym.agents.nmpc.problem import FinInputs, to_z
+from pectoral_gym.agents.nmpc.problem import FinInputs, pack_decision, to_z
 from pectoral_gym.envs.observation import Observation
 from pectoral_gym.model.symbolic import STATE_PSI, STATE_VELOCITY
 from pectoral_gym.model.tank import wall_shortfall
@@ -29,7 +33,7 @@ __all__ = ["PlanPricing"]
 
 
 class PlanPricing:
-    """Mixin of the NMPC controller: the hand law on the model, costs past the horizon.
+    """Mixin of the NMPC controller: a plan's cost on the model, the hand law there, costs past the horizon, spins.
 
     The controller is :class:`pectoral_gym.agents.nmpc.controller.NMPCController`.
     """
@@ -144,3 +148,56 @@ class PlanPricing:
         k = int(inside[0])
         walls = sum(self._wall_violation(x[:, j + 1], s.wall_margin) for j in range(k + 1))
         return float(s.w_distance * d[: k + 1].sum() + s.w_wall * walls)
+
+    def _rollout_cost(self, state: np.ndarray, p: np.ndarray, u: np.ndarray,
+                      deep: bool = True) -> tuple[float, np.ndarray]:
+        """Cost of the model's rollout under the inputs ``u (4, horizon)`` (clipped, blocked), and those ``z``.
+
+        A rollout that enters the goal costs its distance and wall terms up to there (:meth:`_reach_cost`).
+        Else, beyond the horizon: with ``deep`` and :attr:`NMPCSettings.togo_steps`, the hand law's continuation
+        (:meth:`_continuation`), else the turn-then-straight cost-to-go (:meth:`_togo`).
+        """
+        problem = self.problem
+        z = problem.blocked(np.clip(to_z(u), self.z_low[:, None], self.z_high[:, None]))
+        x = np.asarray(problem.rollout(state, z[:, problem.block_of], to_z(self._u_prev), self.gains))
+        cost = float(problem.cost(np.nan_to_num(pack_decision(z, x)), p)) if np.all(np.isfinite(x)) else math.inf
+        reach = self._reach_cost(x) if math.isfinite(cost) else None
+        if reach is not None:  # the plan enters the goal: nothing beyond that interval counts
+            cost = reach
+        elif math.isfinite(cost):
+            if deep and self.settings.togo_steps > 0 and not self.track:
+                cost += self._continuation(x[:, -1], z[:, -1])
+            elif self.w_togo > 0:  # beyond the horizon: the turn still to make
+                cost += self.w_togo * self._togo(x[:, -1])
+        return (cost if math.isfinite(cost) else math.inf), np.nan_to_num(pack_decision(z, x))
+
+    def _spin_plan(self, state: np.ndarray, ref: np.ndarray, p: np.ndarray) -> tuple[float, np.ndarray, None] | None:
+        """The cheapest spin candidate as ``(cost, plan (horizon, 4), None)``, or ``None``.
+
+        The candidates are :mod:`pectoral_gym.agents.nmpc.spin`'s turns.
+
+        Priced as the NLP's candidates are: the objective's state terms on the rollout plus its input terms,
+        or the reach cost; the shallow ranking adds the turn-then-straight cost-to-go, the cheapest one is
+        priced again with the hand law's continuation (:attr:`NMPCSettings.togo_steps`).
+        """
+        spin, problem, s = self.spin, self.problem, self.settings
+        u, x, work = spin.rollouts(state, ref)
+        # the fin work of the strokes swept (a spin's is mostly in its transitional strokes), as the NLP's
+        # energy term prices it for regular beats
+        inputs = problem.energy_weight * work + spin.input_cost(u, self._u_prev, problem.input_width, s.w_change)
+        costs = np.full(len(x), math.inf)
+        within = np.full(len(x), math.nan)  # the objective's terms within the horizon, of rollouts that miss the goal
+        for i in np.flatnonzero(np.all(np.isfinite(x), axis=(1, 2))):
+            reach = self._reach_cost(x[i])
+            if reach is not None:
+                costs[i] = reach
+            else:
+                within[i] = float(problem.state_cost(x[i], p)) + inputs[i]
+                costs[i] = within[i] + self.w_togo * self._togo(x[i][:, -1])
+        i = int(np.argmin(costs))
+        if not math.isfinite(costs[i]):
+            return None
+        cost = costs[i]
+        if not math.isnan(within[i]) and s.togo_steps > 0 and not self.track:
+            cost = within[i] + self._continuation(x[i][:, -1], to_z(u[i][-1]))
+        return float(cost), u[i].copy(), None

@@ -56,8 +56,8 @@ __all__ = ["SETTINGS", "TARGETS", "aggregate", "build_parser", "iqm", "main", "r
            "summarize_seeds", "train_seeds", "versioned"]
 
 TRAIN_ENV = LATEST_AVERAGED
-# label -> (env id, randomised) of the latest envs; as pectoral_gym.agents.studies.benchmark.ENVS. versioned() gives
-# another version's.
+# label -> (env id, randomised) of the latest envs; as pectoral_gym.agents.studies.benchmark_settings.ENVS.
+# versioned() gives another version's.
 SETTINGS = {"averaged": (LATEST_AVERAGED, False), "full": (LATEST_FULL, False), "full+rand": (LATEST_FULL, True)}
 TRAIN_ENVS = tuple(sorted(ENV_VERSIONS, key=lambda env_id: (env_id.rsplit("-", 1)[1], env_id)))
 

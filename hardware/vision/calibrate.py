@@ -28,10 +28,9 @@ from pectoral_gym.hardware.vision.cameramodel import CameraModel, fit_homography
 from pectoral_gym.hardware.vision.scene import render_frame
 from pectoral_gym.hardware.vision.tracker import draw_overlay
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
-from pectoral_gym.tools.cli_common import HelpFormatter, deprecated_alias, prog_name, warn_deprecated
+from pectoral_gym.tools.cli_common import HelpFormatter, prog_name
 
-__all__ = ["build_parser", "deprecated_main", "detect_dots", "fit_homography", "main", "reprojection_errors",
-           "tank_corners"]
+__all__ = ["build_parser", "detect_dots", "fit_homography", "main", "reprojection_errors", "tank_corners"]
 
 
 def tank_corners() -> np.ndarray:
@@ -134,10 +133,8 @@ def build_parser() -> argparse.ArgumentParser:
                              "(default: none)")
     parser.add_argument("--frame", type=Path, metavar="FRAME",
                         help="background frame of --overlay with --corners/--points (default: white)")
-    out = parser.add_argument("--out", type=Path, default=Path("calibration.json"), metavar="FILE",
-                              help="calibration file to write (default calibration.json)")
-    deprecated_alias(parser, "--output", out)
-    deprecated_alias(parser, "-o", out)
+    parser.add_argument("--out", type=Path, default=Path("calibration.json"), metavar="FILE",
+                        help="calibration file to write (default calibration.json)")
     return parser
 
 
@@ -222,12 +219,6 @@ def main(argv: list[str] | None = None) -> int:
         print("note: 4 points fit exactly; the reprojection error cannot reveal a mistake. Use more points.",
               file=sys.stderr)
     return 0
-
-
-def deprecated_main(argv: list[str] | None = None) -> int:
-    """``pectoral-calibrate``: the old name of ``pectoral-camera-calibrate`` (until 0.3.0); says so, then runs it."""
-    warn_deprecated("pectoral-calibrate", "pectoral-calibrate", "pectoral-camera-calibrate")
-    return main(argv)
 
 
 if __name__ == "__main__":

@@ -1,10 +1,9 @@
-"""What every pectoral-gym command line shares: its ``prog``, its help layout, deprecated spellings, the registry.
+"""What every pectoral-gym command line shares: its ``prog``, its help layout, the registry.
 
 - :func:`prog_name`: the program name that matches what the user typed (``pectoral-train``, or
   ``python -m pectoral_gym.agents.training.train`` when run with ``-m``).
 - :class:`HelpFormatter`: descriptions and example epilogs kept as written, defaults shown.
-- :func:`deprecated_alias` and :func:`subcommands`: an old flag or subcommand name that still works for one
-  release, hidden from ``--help``, with one line on stderr saying what replaces it.
+- :func:`subcommands`: subcommand parsers that use :class:`HelpFormatter`.
 - :data:`COMMANDS`: every console script, its module and parser, so tests and the docs reach every parser
   without running a tool.
 
@@ -16,16 +15,12 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import os
 import sys
 import textwrap
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 
-__all__ = ["COMMANDS", "DEPRECATED_SCRIPTS", "MODULE_COMMANDS", "REMOVED_IN", "Command", "DeprecatedAlias",
-           "HelpFormatter", "deprecated_alias", "examples", "prog_name", "subcommands", "warn_deprecated"]
-
-REMOVED_IN = "0.3.0"  # the release in which the deprecated spellings go
+__all__ = ["COMMANDS", "MODULE_COMMANDS", "Command", "HelpFormatter", "examples", "prog_name", "subcommands"]
 
 
 def prog_name(script: str | None, *modules: str) -> str:
@@ -38,23 +33,14 @@ def prog_name(script: str | None, *modules: str) -> str:
 
     Returns:
         ``python -m <module>`` when ``__main__`` is one of ``modules`` (or there is no console script), else
-        ``script``, or the deprecated name of it the user typed (:data:`DEPRECATED_SCRIPTS`). Another program
-        that calls this command's ``main`` (``pectoral-demo`` runs ``pectoral-deploy``) does not lend it its name.
+        ``script``. Another program that calls this command's ``main`` (``pectoral-demo`` runs
+        ``pectoral-deploy``) does not lend it its name.
     """
     spec = getattr(sys.modules.get("__main__"), "__spec__", None)
     running = spec.name.removesuffix(".__main__") if spec is not None else None
     if running is not None and running in modules:
         return f"python -m {running}"
-    if script is None:
-        return f"python -m {modules[0]}"
-    typed = os.path.basename(sys.argv[0]) if sys.argv and sys.argv[0] else ""
-    old_names = {old for old, (new, _) in DEPRECATED_SCRIPTS.items() if new == script}
-    return typed if typed in old_names and running is None else script  # else: not this command's own script
-
-
-def warn_deprecated(prog: str, old: str, new: str) -> None:
-    """Print the one-line deprecation notice of ``old`` (a flag, subcommand or script name) to stderr."""
-    print(f"{prog}: {old} is deprecated, use {new} (the old spelling goes in {REMOVED_IN})", file=sys.stderr)
+    return f"python -m {modules[0]}" if script is None else script
 
 
 class HelpFormatter(argparse.HelpFormatter):
@@ -90,83 +76,17 @@ def examples(*lines: str, note: str = "") -> str:
     return f"{text}\n\n{note}" if note else text
 
 
-class DeprecatedAlias(argparse.Action):
-    """An old spelling of an option: parses as the canonical option, says once on stderr what replaces it.
-
-    Made by :func:`deprecated_alias`; hidden from ``--help`` and from the usage line.
-    """
-
-    def __init__(self, option_strings: Sequence[str], dest: str, canonical: argparse.Action, **kwargs) -> None:
-        super().__init__(option_strings, dest=canonical.dest, nargs=canonical.nargs, const=canonical.const,
-                         default=argparse.SUPPRESS, type=canonical.type, choices=canonical.choices,
-                         help=argparse.SUPPRESS, metavar=canonical.metavar)
-        self.canonical = canonical
-
-    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values,
-                 option_string: str | None = None) -> None:
-        """Say what replaces the old spelling, then act as the canonical option."""
-        new = self.canonical.option_strings[-1] if self.canonical.option_strings else self.canonical.dest
-        warn_deprecated(parser.prog, option_string or self.option_strings[0], new)
-        self.canonical(parser, namespace, values, new)
-
-
-def deprecated_alias(container, old: str, canonical: argparse.Action) -> argparse.Action:
-    """Declare ``old`` (e.g. ``--n-timesteps``) an alias of the option ``canonical`` for one release.
-
-    Args:
-        container: The parser, argument group or mutually exclusive group ``canonical`` belongs to (an alias of
-            a member of a required group must be in that group to satisfy it).
-        old: The old option string.
-        canonical: The action ``add_argument`` returned for the canonical spelling.
-
-    Returns:
-        The alias's action (a :class:`DeprecatedAlias`).
-    """
-    return container.add_argument(old, action=DeprecatedAlias, canonical=canonical)
-
-
-class _Choices(dict):
-    """Subcommand name -> parser; iterating skips the deprecated names (so no message lists them), ``in`` does not."""
-
-    def __init__(self, *args, **kwargs) -> None:
-        super().__init__(*args, **kwargs)
-        self.hidden: set[str] = set()
-
-    def __iter__(self):
-        return (name for name in super().__iter__() if name not in self.hidden)
-
-
 class _Subcommands(argparse._SubParsersAction):  # argparse's only way to dispatch subcommands
-    """Subparsers that also accept deprecated names (hidden, with a notice); ``dest`` gets the new name."""
-
-    def __init__(self, *args, **kwargs) -> None:
-        super().__init__(*args, **kwargs)
-        self._name_parser_map = self.choices = _Choices(self._name_parser_map)
-        self.deprecated: dict[str, str] = {}
-
-    def add_deprecated(self, old: str, new: str) -> None:
-        """Let ``old`` run the subcommand ``new`` for one release; neither ``--help`` nor an error lists it."""
-        self.choices[old] = self.choices[new]
-        self.choices.hidden.add(old)
-        self.deprecated[old] = new
+    """Subparsers whose parsers default to :class:`HelpFormatter`."""
 
     def add_parser(self, name: str, **kwargs) -> argparse.ArgumentParser:
         """``add_parser`` with :class:`HelpFormatter` as the default formatter."""
         kwargs.setdefault("formatter_class", HelpFormatter)
         return super().add_parser(name, **kwargs)
 
-    def __call__(self, parser, namespace, values, option_string=None) -> None:
-        if values and values[0] in self.deprecated:
-            warn_deprecated(parser.prog, values[0], self.deprecated[values[0]])
-            values = [self.deprecated[values[0]], *values[1:]]
-        super().__call__(parser, namespace, values, option_string)
-
 
 def subcommands(parser: argparse.ArgumentParser, **kwargs) -> _Subcommands:
-    """``parser.add_subparsers(**kwargs)`` whose result also has ``add_deprecated(old, new)``.
-
-    Subcommand parsers default to :class:`HelpFormatter`.
-    """
+    """``parser.add_subparsers(**kwargs)`` whose subcommand parsers default to :class:`HelpFormatter`."""
     return parser.add_subparsers(action=_Subcommands, **kwargs)
 
 
@@ -205,11 +125,6 @@ COMMANDS: dict[str, Command] = {c.name: c for c in (
     Command("pectoral-camera-calibrate", "pectoral_gym.hardware.vision.calibrate"),
 )}
 """Every console script of the distribution (``[project.scripts]``), by name."""
-
-DEPRECATED_SCRIPTS: dict[str, tuple[str, str]] = {
-    "pectoral-calibrate": ("pectoral-camera-calibrate", "pectoral_gym.hardware.vision.calibrate:deprecated_main"),
-}
-"""Old console-script names kept for one release: old name -> (new name, entry point of a wrapper that warns)."""
 
 # The modules with a command line of their own that are no console script (research and benchmark tools).
 MODULE_COMMANDS: dict[str, Command] = {c.name: c for c in (

@@ -13,19 +13,9 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from pectoral_gym.tools.cli_common import (
-    COMMANDS,
-    DEPRECATED_SCRIPTS,
-    REMOVED_IN,
-    DeprecatedAlias,
-    HelpFormatter,
-    _Subcommands,
-    examples,
-    prog_name,
-)
+from pectoral_gym.tools.cli_common import COMMANDS, HelpFormatter, examples, prog_name
 
-__all__ = ["DEFAULT_PATH", "WIDTH", "deprecated_spellings", "fixed_width", "iter_parsers", "reference_markdown",
-           "main", "write_reference"]
+__all__ = ["DEFAULT_PATH", "WIDTH", "fixed_width", "iter_parsers", "main", "reference_markdown", "write_reference"]
 
 DEFAULT_PATH = "docs/reference/cli.md"
 WIDTH = 100  # columns of the generated help (argparse reads $COLUMNS)
@@ -50,7 +40,7 @@ def _subcommand_action(parser: argparse.ArgumentParser) -> argparse._SubParsersA
 
 
 def iter_parsers(parser: argparse.ArgumentParser) -> Iterator[argparse.ArgumentParser]:
-    """``parser`` and, depth first, the parser of each subcommand ``--help`` lists (deprecated names skipped)."""
+    """``parser`` and, depth first, the parser of each subcommand ``--help`` lists."""
     yield parser
     action = _subcommand_action(parser)
     if action is None:
@@ -59,20 +49,8 @@ def iter_parsers(parser: argparse.ArgumentParser) -> Iterator[argparse.ArgumentP
         yield from iter_parsers(action.choices[choice.dest])
 
 
-def deprecated_spellings(parser: argparse.ArgumentParser) -> Iterator[tuple[str, str, str]]:
-    """``(prog, old, new)`` of every deprecated option and subcommand name of ``parser`` and its subcommands."""
-    for each in iter_parsers(parser):
-        for action in each._actions:
-            if isinstance(action, DeprecatedAlias):
-                for old in action.option_strings:
-                    yield each.prog, old, action.canonical.option_strings[-1]
-            elif isinstance(action, _Subcommands):
-                for old, new in action.deprecated.items():
-                    yield each.prog, old, new
-
-
 def reference_markdown() -> str:
-    """The whole reference page: a table of deprecated spellings, then every command's ``--help``."""
+    """The whole reference page: a table of the commands, then every command's ``--help``."""
     lines = [
         "# Command line",
         "",
@@ -85,20 +63,9 @@ def reference_markdown() -> str:
         "| command | module |",
         "|---|---|",
         *(f"| [`{name}`](#{name}) | `{command.module}` |" for name, command in COMMANDS.items()),
-        "",
-        f"## Deprecated spellings (accepted until {REMOVED_IN})",
-        "",
-        "The old spellings still work: each prints one line on stderr naming its replacement.",
-        "",
-        "| command | deprecated | use |",
-        "|---|---|---|",
     ]
     with fixed_width():
         parsers = {name: command.build_parser() for name, command in COMMANDS.items()}
-        for old, (new, _) in DEPRECATED_SCRIPTS.items():
-            lines.append(f"| (console script) | `{old}` | `{new}` |")
-        for parser in parsers.values():
-            lines.extend(f"| `{prog}` | `{old}` | `{new}` |" for prog, old, new in deprecated_spellings(parser))
         for name, parser in parsers.items():
             for level, each in enumerate(iter_parsers(parser)):
                 heading = "##" if level == 0 else "###"
