@@ -30,19 +30,6 @@ ALLOWED_FOR_NOW = {
     "hardware/env.py",
     "hardware/deploy_checks.py",
 }
-#: Entries of the yaw "waveform" experiment, which leaves the core (with its reports and its section of
-#: docs/model.md) in the same round: ``(path or folder/, entry)``; the list only shrinks.
-WAVEFORM_FOR_NOW = {
-    ("docs/model.md", "2026-12-01"),
-    ("docs/model.md", "checkout of 9fbdbe0"),
-    ("docs/model.md", "issue 26"),
-    ("docs/validation/fidelity/waveform/", "issue 12"),
-}
-
-
-def _allowed(rel: str, hit: str) -> bool:
-    return rel in ALLOWED_FOR_NOW or any((rel == path or path.endswith("/") and rel.startswith(path)) and hit == entry
-                                         for path, entry in WAVEFORM_FOR_NOW)
 
 ISSUE = re.compile(r"\bissues?\s+#?\d+", re.IGNORECASE)
 DATE = re.compile(r"\b20\d\d-\d\d-\d\d\b")
@@ -110,7 +97,7 @@ def test_no_lab_notebook_in_code_and_docs() -> None:
         rel = path.relative_to(ROOT).as_posix()
         text = path.read_text(encoding="utf-8")
         offenders += [f"{rel}:{text.count(chr(10), 0, offset) + 1}: {hit!r}" for offset, hit in notebook_matches(text)
-                      if not _allowed(rel, hit)]
+                      if rel not in ALLOWED_FOR_NOW]
     assert not offenders, "history in code or docs (say what it means, or move it to a research note):\n" + \
         "\n".join(offenders)
 
@@ -130,7 +117,3 @@ def test_allow_list_is_live() -> None:
         path = ROOT / rel
         assert path.is_file(), f"{rel} is gone: take it off ALLOWED_FOR_NOW"
         assert notebook_entries(path.read_text(encoding="utf-8")), f"{rel} is clean: take it off ALLOWED_FOR_NOW"
-    for where, entry in sorted(WAVEFORM_FOR_NOW):
-        paths = sorted((ROOT / where).glob("*.md")) if where.endswith("/") else [ROOT / where]
-        found = any(entry in notebook_entries(p.read_text(encoding="utf-8")) for p in paths if p.is_file())
-        assert found, f"{where} no longer has {entry!r}: take it off WAVEFORM_FOR_NOW"

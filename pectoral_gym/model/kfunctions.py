@@ -26,11 +26,11 @@ import numpy as np
 from pectoral_gym.inputfile import K_FILE_BYTES, load_json
 from pectoral_gym.model.kfile import (
     SPLINE_AXES,
+    WAVEFORM_TAG,
     checked_spline,
     padded,
     spline_dict,
     spline_section,
-    wave_channels,
 )
 from pectoral_gym.model.ktables import (
     MAX_HARMONICS,
@@ -200,10 +200,12 @@ class ScalingFunctions:
                 coefs[i, j] = c
         knots, table = cls._spline_from_dict(data.get("spline"), source)
         osc_knots, osc_table = cls._oscillation_from_dict(data.get("yaw_oscillation"), source)
-        wave_knots, wave_table = spline_section(data.get("yaw_waveform"), source, "yaw_waveform", wave_channels)
+        if "yaw_waveform" in data:
+            raise ValueError(f"{source}: its 'yaw_waveform' section is for the yaw-waveform damping, an experiment "
+                             f"that left the package (kept at the git tag {WAVEFORM_TAG}); remove the section to "
+                             "use the file's yaw_oscillation")
         try:
-            return cls(powers, coefs, dict(data.get("metadata", {})), knots, table, sway, osc_knots, osc_table,
-                       wave_knots, wave_table)
+            return cls(powers, coefs, dict(data.get("metadata", {})), knots, table, sway, osc_knots, osc_table)
         except ValueError as err:
             raise ValueError(f"{source}: {err}") from None
 
