@@ -59,12 +59,9 @@ def _identify_parser(sub) -> None:
                    help="off-grid patterns on which polynomial and spline forms compete (default 60; 0: polynomial)")
     p.add_argument("--turn-target", type=float, default=0.02,
                    help="worst held-out turning radius / period error a form must reach (default 0.02)")
-    p.add_argument("--yaw-damping", choices=("waveform", "oscillation", "paper"), default="oscillation",
-                   help="averaged model's yaw damping: its mean over the in-beat yaw waveform (harmonics), over "
-                        "a sinusoid of the same mean absolute value (default; both beyond the paper, need a "
-                        "tensor grid), or the paper's c4 w|w|")
-    p.add_argument("--harmonics", type=int, default=8,
-                   help="yaw-waveform harmonics kept with --yaw-damping waveform (1-8, default 8)")
+    p.add_argument("--yaw-damping", choices=("oscillation", "paper"), default="oscillation",
+                   help="averaged model's yaw damping: its mean over a sinusoidal in-beat yaw oscillation "
+                        "(default; beyond the paper, needs a tensor grid), or the paper's c4 w|w|")
     p.add_argument("--folds", type=int, default=5, help="cross-validation folds (default 5)")
     p.add_argument("--seed", type=int, default=0, help="seed of the CV folds (default 0)")
     p.add_argument("--jobs", type=int, default=0, help="NMPC worker processes (default 0: all cores)")
@@ -118,8 +115,7 @@ def _run_identify(args: argparse.Namespace, parser: argparse.ArgumentParser) -> 
     print(f"grid {grid.name!r}: {len(grid)} right-fin patterns")
     start = time.perf_counter()
     result = identify(grid, params, settings, args.max_degree, args.folds, args.seed, args.jobs, not args.no_progress,
-                      args.fit_target, args.holdout, args.turn_target, args.yaw_damping,
-                      args.harmonics)
+                      args.fit_target, args.holdout, args.turn_target, args.yaw_damping)
     total = time.perf_counter() - start
     args.out.mkdir(parents=True, exist_ok=True)
     coefficients = args.out / "scaling_coefficients.json"

@@ -31,9 +31,8 @@ from pectoral_gym.model.spec import (
 ROBOT = FishParams(fin_span=0.07)
 
 
-def _k_file(tmp_path, params: FishParams, waveform: bool = False):
-    source = ScalingFunctions.load(
-        "pectoral_gym/data/scaling_coefficients_waveform.json" if waveform else None)
+def _k_file(tmp_path, params: FishParams):
+    source = ScalingFunctions.load()
     path = tmp_path / "k.json"
     meta = {**source.metadata, "model_parameters": dataclasses.asdict(params)}
     dataclasses.replace(source, metadata=meta).save(path)
@@ -102,15 +101,29 @@ def test_fin_map_and_nmpc_plan_with_the_envs_k_and_check_it(tmp_path):
 
 
 def test_the_yaw_damping_is_the_specs_choice_not_the_files(tmp_path):
-    waveform = _k_file(tmp_path, FishParams(), waveform=True)
-    assert EnvConfig(model="averaged", scaling=str(waveform)).model_spec().yaw_damping == "waveform"  # as before
-    sinusoid = AVERAGED.replace(scaling=str(waveform), yaw_damping="sinusoid").build(1).scaling
-    assert sinusoid.harmonics == 0 and sinusoid.has_oscillation
-    with pytest.raises(ValueError, match="no yaw_waveform section"):
-        AVERAGED.replace(yaw_damping="waveform").build(1)
+    shipped = _k_file(tmp_path, FishParams())
+    assert EnvConfig(model="averaged", scaling=str(shipped)).model_spec().yaw_damping == "sinusoid"
+    assert AVERAGED.replace(scaling=str(shipped)).build(1).scaling.has_oscillation
+    plain = AVERAGED.replace(scaling=str(shipped), yaw_damping="none").build(1).scaling
+    assert not plain.has_oscillation and plain.has_spline  # the section dropped, K kept
+    no_section = tmp_path / "no_oscillation.json"
+    plain.save(no_section)
+    with pytest.raises(ValueError, match="no yaw_oscillation section"):
+        AVERAGED.replace(scaling=str(no_section)).build(1)
     with pytest.raises(ValueError, match="use yaw_damping='none'"):
         AveragedSpec(scaling="none")
     assert env_spec("averaged", scaling="none").yaw_damping == "none"
+
+
+def test_the_removed_waveform_damping_is_refused_naming_its_tag(tmp_path):
+    with pytest.raises(ValueError, match="experiment/waveform"):
+        AveragedSpec(yaw_damping="waveform")
+    data = ScalingFunctions.load().to_dict()
+    data["yaw_waveform"] = {"degree": 3, "harmonics": 1, "cos": [[0.0]], "sin": [[0.0]]}
+    path = tmp_path / "waveform.json"
+    path.write_text(json.dumps(data))
+    with pytest.raises(ValueError, match="experiment/waveform"):
+        ScalingFunctions.load(path)
 
 
 @pytest.mark.parametrize("kwargs,match", [

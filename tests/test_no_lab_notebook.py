@@ -25,20 +25,6 @@ SKIPPED_DIRS = {"docs/notes", "site", "build", "dist", "node_modules", "__pycach
 SKIPPED_FILES = {"CHANGELOG.md", "docs/changelog.md", "docs/validation/fidelity/README.md",
                  "docs/validation/speed/README.md", "docs/validation/step_path/README.md",
                  "tests/test_no_lab_notebook.py"}
-#: Entries of the yaw "waveform" experiment, which leaves the core (with its reports and its section of
-#: docs/model.md) in the same round: ``(path or folder/, entry)``; the list only shrinks.
-WAVEFORM_FOR_NOW = {
-    ("docs/model.md", "2026-12-01"),
-    ("docs/model.md", "checkout of 9fbdbe0"),
-    ("docs/model.md", "issue 26"),
-    ("docs/validation/fidelity/waveform/", "issue 12"),
-}
-
-
-def _allowed(rel: str, hit: str) -> bool:
-    return any((rel == path or path.endswith("/") and rel.startswith(path)) and hit == entry
-               for path, entry in WAVEFORM_FOR_NOW)
-
 ISSUE = re.compile(r"\bissues?\s+#?\d+", re.IGNORECASE)
 DATE = re.compile(r"\b20\d\d-\d\d-\d\d\b")
 #: A research note's file name is a link, not a lab date.
@@ -104,8 +90,7 @@ def test_no_lab_notebook_in_code_and_docs() -> None:
     for path in scanned_files():
         rel = path.relative_to(ROOT).as_posix()
         text = path.read_text(encoding="utf-8")
-        offenders += [f"{rel}:{text.count(chr(10), 0, offset) + 1}: {hit!r}" for offset, hit in notebook_matches(text)
-                      if not _allowed(rel, hit)]
+        offenders += [f"{rel}:{text.count(chr(10), 0, offset) + 1}: {hit!r}" for offset, hit in notebook_matches(text)]
     assert not offenders, "history in code or docs (say what it means, or move it to a research note):\n" + \
         "\n".join(offenders)
 
@@ -117,11 +102,3 @@ def test_no_lab_notebook_in_help() -> None:
     text = reference_markdown()
     hits = [f"{text.count(chr(10), 0, offset) + 1}: {hit!r}" for offset, hit in notebook_matches(text)]
     assert not hits, "history in the --help of a command (lines of the generated reference):\n" + "\n".join(hits)
-
-
-def test_allow_list_is_live() -> None:
-    """Each allowed entry is still there (a cleaned file comes off the list)."""
-    for where, entry in sorted(WAVEFORM_FOR_NOW):
-        paths = sorted((ROOT / where).glob("*.md")) if where.endswith("/") else [ROOT / where]
-        found = any(entry in notebook_entries(p.read_text(encoding="utf-8")) for p in paths if p.is_file())
-        assert found, f"{where} no longer has {entry!r}: take it off WAVEFORM_FOR_NOW"

@@ -95,7 +95,7 @@ def test_the_wheel_installs_one_top_level_package_with_its_data(wheel):
         for path in (ROOT / folder).rglob("*.py"):
             if "__pycache__" not in path.parts:
                 assert "/".join([*package.split("."), *path.relative_to(ROOT / folder).parts]) in names, path
-    for data in ("pectoral_gym/data/scaling_coefficients.json", "pectoral_gym/data/scaling_coefficients_waveform.json",
+    for data in ("pectoral_gym/data/scaling_coefficients.json",
                  "pectoral_gym/py.typed", "pectoral_gym/agents/hyperparams/ppo.yml",
                  "pectoral_gym/agents/hyperparams/sac.yml"):
         assert data in names

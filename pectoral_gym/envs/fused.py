@@ -163,7 +163,7 @@ def step_body(a, skip, s):
     state, fins, cache, pending = borrow(a.state), borrow(a.fins), borrow(a.cache), borrow(a.pending)
     integral, coef, packed = borrow(a.integral), borrow(a.coef), a.tables
     tables = (borrow(packed[0]), borrow(packed[1]), borrow(packed[2]), borrow(packed[3]), packed[4],
-              borrow(packed[5]), borrow(packed[6]), borrow(packed[7]), borrow(packed[8]), borrow(packed[9]))
+              borrow(packed[5]), borrow(packed[6]), borrow(packed[7]))
     duration, dt_max, min_substeps, averaged, mode, corrections = s
     bad = tk.first_non_finite(actions, skip)
     if bad >= 0:

@@ -41,17 +41,10 @@ import math
 
 import numpy as np
 
-from pectoral_gym.model.dynamics import body_accel, body_accel_waveform, oscillating_square_mean
+from pectoral_gym.model.dynamics import body_accel, oscillating_square_mean
 from pectoral_gym.model.jit import njit
 from pectoral_gym.model.kfunctions import UNIT_K
-from pectoral_gym.model.ktables import (
-    QUADRATURE,
-    RATE_ITERATIONS,
-    KTables,
-    quadrature_window,
-    scaling_values,
-    yaw_oscillation_phasor,
-)
+from pectoral_gym.model.ktables import KTables, scaling_values, yaw_oscillation_phasor
 from pectoral_gym.model.params import Coef, FinBeat, FishParams, coefficient_vector
 
 __all__ = [
@@ -60,10 +53,6 @@ __all__ = [
     "bessel_j1",
     "averaged_fin_forcing",
     "averaged_body_accel",
-    "add_harmonic",
-    "waveform_samples",
-    "combined_waveform",
-    "equivalent_amplitude",
     "mean_fin_power",
     "oscillating_square_mean",
     "yaw_oscillation_phasor",
@@ -84,101 +73,9 @@ TAYLOR = 1
 def averaged_body_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, oscillation=0.0):
     """Eqs. (19)-(20) with the averaged model's yaw damping (``docs/model.md`` 3.6), for Python callers.
 
-    ``oscillation``: a float, the sinusoid amplitude [rad/s] (0: eq. 20,
-    :func:`pectoral_gym.model.dynamics.body_accel`), or a 1-D array of yaw-waveform samples
-    (:func:`waveform_samples`; :func:`pectoral_gym.model.dynamics.body_accel_waveform`).
+    ``oscillation``: the sinusoid amplitude [rad/s] (0: eq. 20); :func:`pectoral_gym.model.dynamics.body_accel`.
     """
-    if np.ndim(oscillation) == 1:
-        samples = np.ascontiguousarray(oscillation, dtype=np.float64)
-        return body_accel_waveform(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, samples)
     return body_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, float(oscillation))
-
-
-@njit(inline="always")
-def add_harmonic(out, n, zr, zi, k, cycles):
-    """Add ``Re z e^{2 pi i k cycles j / n}`` to ``out[j]``, ``j < n``, ``z = zr + i zi`` (turned by rotation).
-
-    The one rule that samples a yaw-rate waveform ``Re sum_k c_k e^{i k theta}`` at evenly spaced
-    phases: :func:`waveform_samples` and the compiled model's
-    :func:`pectoral_gym.model.forcing_cache.window_samples` both add their harmonics with it.
-    """
-    step = 2.0 * math.pi * k * cycles / n
-    cs, sn = math.cos(step), math.sin(step)
-    for j in range(n):
-        out[j] += zr
-        zr, zi = zr * cs - zi * sn, zr * sn + zi * cs
-
-
-@njit
-def _sample_rows(out, re, im):
-    for r in range(out.shape[0]):
-        for k in range(re.shape[1]):
-            add_harmonic(out[r], out.shape[1], re[r, k], im[r, k], k + 1, 1.0)
-
-
-def waveform_samples(harmonics: np.ndarray, phase: float = 0.0) -> np.ndarray:
-    """Yaw-rate oscillation ``Re sum_k c_k exp(i k (phase + 2 pi j / QUADRATURE))`` at the quadrature's phases.
-
-    Args:
-        harmonics: ``(..., H)`` complex ``c_k`` [rad/s], ``k = 1..H``
-            (:meth:`pectoral_gym.model.kfunctions.ScalingFunctions.yaw_waveform`).
-        phase: Beat phase [rad] of the first sample.
-
-    Returns:
-        ``(..., QUADRATURE)`` samples [rad/s], the ones the compiled model uses for a fin at that phase
-        (:func:`add_harmonic`).
-    """
-    harmonics = np.asarray(harmonics, dtype=np.complex128)
-    k = np.arange(1, harmonics.shape[-1] + 1)
-    rows = (harmonics * np.exp(1j * k * phase)).reshape(-1, harmonics.shape[-1])
-    out = np.zeros((rows.shape[0], QUADRATURE))
-    _sample_rows(out, np.ascontiguousarray(rows.real), np.ascontiguousarray(rows.imag))
-    return out.reshape((*harmonics.shape[:-1], QUADRATURE))
-
-
-def combined_waveform(harmonics: np.ndarray, mean_abs: np.ndarray | None, periods: np.ndarray, omega: float,
-                      c4: float, iterations: int = RATE_ITERATIONS) -> np.ndarray:
-    """Samples of the fins' combined yaw waveform over the damping's window, rate-corrected (``docs/model.md`` 3.6).
-
-    The numpy form of :func:`pectoral_gym.model.forcing_cache.yaw_waveform`, for analysis
-    (``pectoral_gym.scaling.validation.yaw_balance``) and tests.
-
-    Args:
-        harmonics: ``(fins, H)`` complex ``c_k`` [rad/s] of each fin at its beat phase at the
-            window's start (``c_k e^{i k theta_f}``, the left fin's signed as its mirror image).
-        mean_abs: ``(fins,)`` reference mean ``|omega|`` [rad/s] per fin, or ``None``: no rate correction.
-        periods: ``(fins,)`` fin periods [s].
-        omega: Mean yaw rate [rad/s].
-        c4: Yaw damping coefficient (eq. 20).
-        iterations: Relaxed fixed-point steps.
-    """
-    harmonics = np.atleast_2d(np.asarray(harmonics, dtype=np.complex128))
-    freqs = 2.0 * np.pi / np.asarray(periods, dtype=np.float64)
-    n, *cycles = quadrature_window(freqs[0], freqs[1] if len(freqs) == 2 else 0.0)
-    k = np.arange(1, harmonics.shape[1] + 1)
-    cyc = np.array(cycles[:len(freqs)], dtype=np.float64)
-    turn = np.exp(2j * np.pi * np.einsum("f,k,j->fkj", cyc, k, np.arange(n)) / n)  # e^{2 pi i k cycles_f j / n}
-
-    def samples_of(h):
-        return np.real(np.einsum("fk,fkj->j", h, turn))
-
-    samples = samples_of(harmonics)
-    if mean_abs is None:
-        return samples
-    freq = 1j * np.outer(freqs, k)  # (fins, H): i k Omega_f
-    drive = harmonics * (2.0 * c4 * np.asarray(mean_abs, dtype=np.float64)[:, None] + freq)
-    lam = 2.0 * c4 * np.mean(np.abs(omega + samples))
-    for it in range(iterations):
-        samples = samples_of(drive / (lam + freq))
-        if it + 1 < iterations:
-            lam = 0.5 * (lam + 2.0 * c4 * np.mean(np.abs(omega + samples)))
-    return samples
-
-
-def equivalent_amplitude(samples: np.ndarray) -> np.ndarray:
-    """``(pi / 2) mean|samples|`` over the last axis: the sinusoid amplitude with the same mean absolute value."""
-    return 0.5 * np.pi * np.mean(np.abs(np.asarray(samples, dtype=np.float64)), axis=-1)
-
 
 
 @njit

@@ -33,8 +33,6 @@ __all__ = [
     "rate_bound",
     "rate_constants",
     "oscillating_square_mean",
-    "waveform_square_mean",
-    "body_accel_waveform",
 ]
 
 
@@ -131,23 +129,6 @@ def oscillating_square_mean(mean: float, amplitude: float) -> float:
 
 
 @njit
-def waveform_square_mean(mean: float, samples) -> float:
-    """Mean of ``x|x|`` over ``x = mean + samples[j]``: the quadrature of the waveform damping (``docs/model.md`` 3.6).
-
-    ``samples`` holds the yaw-rate oscillation at equally spaced beat phases
-    (:func:`pectoral_gym.model.forcing_cache.yaw_waveform`); an empty array gives ``mean |mean|``.
-    """
-    n = samples.shape[0]
-    if n == 0:
-        return mean * abs(mean)
-    total = 0.0
-    for j in range(n):
-        x = mean + samples[j]
-        total += x * abs(x)
-    return total / n
-
-
-@njit
 def _undamped_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2):
     """Eq. (19) with ``f_1, f_2`` of eq. (20), and the Munk and fin terms of ``f_3`` (without its yaw damping)."""
     speed = math.sqrt(vx * vx + vy * vy)
@@ -158,16 +139,6 @@ def _undamped_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2):
     dvx = (m2 * vy * omega - c1 * vx * speed + c2 * vy * speed * alpha + fx) / m1  # eqs. (19)-(20), f1
     dvy = (-m1 * vx * omega - c1 * vy * speed - c2 * vx * speed * alpha + fy) / m2  # f2 (erratum 3)
     return dvx, dvy, (m1 - m2) / j3 * vx * vy, tau / j3  # f3 = munk - c4 damping + moment
-
-
-@njit
-def body_accel_waveform(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2, c4, samples):
-    """:func:`body_accel` with the yaw damping averaged over a sampled in-beat waveform (``docs/model.md`` 3.6).
-
-    ``c4 omega|omega|`` becomes ``c4 waveform_square_mean(omega, samples)``.
-    """
-    dvx, dvy, munk, moment = _undamped_accel(vx, vy, omega, fx, fy, tau, m1, m2, j3, c1, c2)
-    return dvx, dvy, munk - c4 * waveform_square_mean(omega, samples) + moment
 
 
 @njit

@@ -24,17 +24,14 @@ field              index  unit    meaning
 ``PREV_AMPLITUDE`` 11     rad     ``docs/model.md`` section 3.7): bias, amplitude, period, ratio;
 ``PREV_PERIOD``    12     s       zero after :func:`clear`
 ``PREV_RATIO``     13     -
-``WAVE``           14-29  rad/s   ``Re, Im`` of the yaw-waveform harmonics ``c_1 .. c_8`` (``docs/model.md``
-                                  3.6), signed by side; zero beyond the file's harmonics
-``REF_ABS``        30     rad/s   mean ``|omega|`` of the pattern's reference run (0: none)
-``TR_FX``          31     N       the half-stroke in progress's transitional forcing (``transitions``,
-``TR_FY``          32     N       ``docs/model.md`` section 3.7; ``stroke_corrections._transition``),
-``TR_TAU``         33     N m     signed by side; set when the fin latches, zero after :func:`clear`
-``OFF_FX``         34     N s     the beat-mean ripple offset delivered so far (``ripple_offsets``,
-``OFF_FY``         35     N s     ``docs/model.md`` 3.8: ``M`` of the fin's latched pattern,
-``OFF_TAU``        36     N m s   :func:`pectoral_gym.model.averaging.ripple_offset`), signed by side; zero
+``TR_FX``          14     N       the half-stroke in progress's transitional forcing (``transitions``,
+``TR_FY``          15     N       ``docs/model.md`` section 3.7; ``stroke_corrections._transition``),
+``TR_TAU``         16     N m     signed by side; set when the fin latches, zero after :func:`clear`
+``OFF_FX``         17     N s     the beat-mean ripple offset delivered so far (``ripple_offsets``,
+``OFF_FY``         18     N s     ``docs/model.md`` 3.8: ``M`` of the fin's latched pattern,
+``OFF_TAU``        19     N m s   :func:`pectoral_gym.model.averaging.ripple_offset`), signed by side; zero
                                   after :func:`clear`
-``OSC_EXCESS``     37     -       the half-stroke in progress's yaw-oscillation gain minus one
+``OSC_EXCESS``     20     -       the half-stroke in progress's yaw-oscillation gain minus one
                                   (``transitions``, ``docs/model.md`` 3.9,
                                   :func:`pectoral_gym.model.ripple.transitional_oscillation_gain`);
                                   set when the fin latches, zero on regular half-strokes
@@ -51,27 +48,17 @@ import math
 
 import numpy as np
 
-from pectoral_gym.model.averaging import add_harmonic, scaled_forcing
+from pectoral_gym.model.averaging import scaled_forcing
 from pectoral_gym.model.jit import njit
-from pectoral_gym.model.ktables import (
-    MAX_HARMONICS,
-    MAX_SAMPLES,
-    QUADRATURE,
-    RATE_ITERATIONS,
-    pattern_values,
-    quadrature_window,
-    waveform_harmonics_into,
-)
+from pectoral_gym.model.ktables import pattern_values
 from pectoral_gym.model.strokes import ANGLE_FROM, ANGLE_TO, ELAPSED, PERIOD, POWER, RATIO, SIDE
 
 __all__ = [
     "CACHE_FIELDS", "KEY_BIAS", "KEY_AMPLITUDE", "KEY_PERIOD", "KEY_RATIO",
     "AVG_FX", "AVG_FY", "AVG_TAU", "OSC_COS", "OSC_SIN", "CACHED",
-    "PREV_BIAS", "PREV_AMPLITUDE", "PREV_PERIOD", "PREV_RATIO", "WAVE", "REF_ABS", "TR_FX", "TR_FY", "TR_TAU",
+    "PREV_BIAS", "PREV_AMPLITUDE", "PREV_PERIOD", "PREV_RATIO", "TR_FX", "TR_FY", "TR_TAU",
     "OFF_FX", "OFF_FY", "OFF_TAU", "OSC_EXCESS",
-    "QUADRATURE", "WORKSPACE",
-    "RATE_ITERATIONS",
-    "clear", "invalidate", "refresh", "window_samples", "yaw_oscillation", "yaw_waveform",
+    "clear", "invalidate", "refresh", "yaw_oscillation",
 ]
 
 KEY_BIAS, KEY_AMPLITUDE, KEY_PERIOD, KEY_RATIO = 0, 1, 2, 3
@@ -79,15 +66,10 @@ AVG_FX, AVG_FY, AVG_TAU = 4, 5, 6
 OSC_COS, OSC_SIN = 7, 8
 CACHED = 9
 PREV_BIAS, PREV_AMPLITUDE, PREV_PERIOD, PREV_RATIO = 10, 11, 12, 13
-WAVE = 14
-REF_ABS = WAVE + 2 * MAX_HARMONICS
-TR_FX, TR_FY, TR_TAU = REF_ABS + 1, REF_ABS + 2, REF_ABS + 3
+TR_FX, TR_FY, TR_TAU = 14, 15, 16
 OFF_FX, OFF_FY, OFF_TAU = TR_TAU + 1, TR_TAU + 2, TR_TAU + 3
 OSC_EXCESS = OFF_TAU + 1
 CACHE_FIELDS = OSC_EXCESS + 1
-
-_FIN = MAX_SAMPLES  # per fin: Re, Im of its harmonics at the segment's phase, then its drive
-WORKSPACE = _FIN + 8 * MAX_HARMONICS
 
 
 def invalidate(cache: np.ndarray, index: np.ndarray | slice | None = None) -> None:
@@ -120,8 +102,6 @@ def refresh(cache, i, f, bias, amplitude, period, ratio, coef, mode, tables):
     cache[i, f, AVG_TAU] = tau
     cache[i, f, OSC_COS] = SIDE[f] * pc  # the left fin's yaw oscillation is the mirror image
     cache[i, f, OSC_SIN] = SIDE[f] * ps
-    if tables.wave_table.shape[1] > 0:  # read only with a yaw_waveform section (stepping.advance_one)
-        waveform_harmonics_into(bias, amplitude, period, ratio, tables, SIDE[f], cache[i, f], WAVE)
     cache[i, f, CACHED] = 1.0
 
 
@@ -160,105 +140,3 @@ def _beat_phase(fins, i, f, offset):
     if fins[i, f, POWER] < 0.5:
         t += period / (fins[i, f, RATIO] + 1.0)  # recovery follows the power stroke
     return 2.0 * math.pi * t / period
-
-
-@njit
-def window_samples(work, harmonics, n, cycles0, cycles1):
-    """The samples ``work[:n]`` of both fins' waveforms over a window; returns ``(pi/2) mean|.|``.
-
-    Fin ``f``'s harmonics ``R_{f,k}`` (``work[_FIN + 4 MAX_HARMONICS f + 2 k]``, ``+1``) turn by
-    ``2 pi k cycles_f / n`` per sample: sample ``j`` is ``Re sum_f sum_k R_{f,k} e^{2 pi i k cycles_f j / n}``
-    (a fin that does not beat has zero harmonics). The returned amplitude is that of the
-    sinusoid with the same mean absolute value, the stiffness measure of the step rule
-    (:func:`pectoral_gym.model.dynamics.linearised_rate`).
-    """
-    for j in range(n):
-        work[j] = 0.0
-    for f in range(2):
-        cycles = cycles0 if f == 0 else cycles1
-        base = _FIN + 4 * MAX_HARMONICS * f
-        for k in range(harmonics):
-            zr, zi = work[base + 2 * k], work[base + 2 * k + 1]
-            if zr == 0.0 and zi == 0.0:
-                continue
-            add_harmonic(work, n, zr, zi, k + 1, cycles)
-    total = 0.0
-    for j in range(n):
-        total += abs(work[j])
-    return 0.5 * math.pi * total / n
-
-
-@njit
-def _mean_abs(work, n, omega):
-    total = 0.0
-    for j in range(n):
-        total += abs(omega + work[j])
-    return total / n
-
-
-@njit
-def yaw_waveform(fins, cache, i, offset, idle0, idle1, harmonics, rate, omega, c4, work):
-    """Both fins' yaw-rate oscillation over one averaging window, ``offset`` s into the segment.
-
-    Each fin's waveform ``G Re sum_k c_k e^{i k theta}`` (``WAVE`` fields, ``G`` the gain of its
-    half-stroke in progress, ``OSC_EXCESS``) starts at its beat phase ``theta_f`` (``docs/model.md``
-    3.6). One fin, equal periods, or periods without a common period of at most ``COMMON_BEATS``
-    beats of the slower fin: ``QUADRATURE`` samples
-    of one beat, both fins keeping their present relative phase (each fin's own waveform is
-    covered exactly once). Commensurate periods: the common period, ``QUADRATURE`` samples per
-    beat of the faster fin, each fin at its own rate (the exact time average). With ``rate``
-    (the file has the reference runs' mean ``|omega|``), harmonic ``k`` of fin ``f`` is the
-    response of the linearised yaw damping to the drive ``c_k (lambda_f + i k Omega_f)`` the fin
-    exerted in its reference run, ``c_k (lambda_f + i k Omega_f) / (lambda + i k Omega_f)``,
-    ``lambda_f = 2 c4 |omega|_ref``, ``lambda = 2 c4 mean|omega + o|`` of the combined waveform
-    ``o`` at the yaw rate ``omega`` (``RATE_ITERATIONS`` relaxed fixed-point steps from the
-    plain sum). Writes the samples into ``work[:n]`` (a ``WORKSPACE`` array) and returns
-    ``(n, equivalent amplitude)`` (:func:`window_samples`).
-    """
-    for c in range(_FIN, WORKSPACE):
-        work[c] = 0.0
-    freq0 = freq1 = 0.0
-    for f in range(2):
-        if (idle0 if f == 0 else idle1) or fins[i, f, ANGLE_FROM] == fins[i, f, ANGLE_TO]:
-            continue
-        theta = _beat_phase(fins, i, f, offset)
-        freq = 2.0 * math.pi / fins[i, f, PERIOD]
-        lam = 2.0 * c4 * cache[i, f, REF_ABS]
-        if f == 0:
-            freq0 = freq
-        else:
-            freq1 = freq
-        base = _FIN + 4 * MAX_HARMONICS * f
-        c1, s1 = math.cos(theta), math.sin(theta)
-        gain = 1.0 + cache[i, f, OSC_EXCESS]  # a transitional half-stroke's (docs/model.md 3.9)
-        c, s = gain * c1, gain * s1
-        for k in range(harmonics):  # e^{i k theta} by rotation
-            a, b = cache[i, f, WAVE + 2 * k], cache[i, f, WAVE + 2 * k + 1]
-            ar, br = a * c - b * s, a * s + b * c
-            work[base + 2 * k], work[base + 2 * k + 1] = ar, br
-            kw = (k + 1) * freq
-            work[base + 2 * MAX_HARMONICS + 2 * k] = ar * lam - br * kw  # drive c_k (lambda_f + i k Omega_f)
-            work[base + 2 * MAX_HARMONICS + 2 * k + 1] = br * lam + ar * kw
-            c, s = c * c1 - s * s1, s * c1 + c * s1
-    n, cycles0, cycles1 = quadrature_window(freq0, freq1)
-    amplitude = window_samples(work, harmonics, n, cycles0, cycles1)
-    if not rate:
-        return n, amplitude
-    lam = 2.0 * c4 * _mean_abs(work, n, omega)
-    for it in range(RATE_ITERATIONS):
-        for f in range(2):
-            freq = freq0 if f == 0 else freq1
-            if freq == 0.0:
-                continue
-            base = _FIN + 4 * MAX_HARMONICS * f
-            for k in range(harmonics):
-                kw = (k + 1) * freq
-                dr = work[base + 2 * MAX_HARMONICS + 2 * k]
-                di = work[base + 2 * MAX_HARMONICS + 2 * k + 1]
-                den = lam * lam + kw * kw
-                work[base + 2 * k] = (dr * lam + di * kw) / den  # drive / (lambda + i k Omega_f)
-                work[base + 2 * k + 1] = (di * lam - dr * kw) / den
-        amplitude = window_samples(work, harmonics, n, cycles0, cycles1)
-        if it + 1 < RATE_ITERATIONS:
-            lam = 0.5 * (lam + 2.0 * c4 * _mean_abs(work, n, omega))
-    return n, amplitude

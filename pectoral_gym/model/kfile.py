@@ -63,11 +63,9 @@ stroke. ``A T_p`` is exactly period-free (the full model is invariant under
 phasor shrinks linearly to zero at zero amplitude. Without the section the averaged model uses the
 paper's damping ``c4 omega|omega|``.
 
-The optional ``yaw_waveform`` section (``"harmonics": H``, ``"cos"`` and ``"sin"``: ``H`` coefficient
-lists each, same spline form) holds the first ``H`` Fourier harmonics ``T_p c_k`` [rad] of that
-oscillation, ``omega~(t) = Re sum_k c_k exp(i k 2 pi t / T_p)``, and optionally ``"mean_abs"``, one
-list: ``T_p`` times the reference run's mean ``|omega|`` [rad], for the waveform's yaw-rate correction;
-when present it replaces the sinusoid in the damping (``docs/model.md`` 3.6).
+A ``yaw_waveform`` section (the in-beat waveform's Fourier harmonics) belongs to an experiment that left
+the package (``docs/model.md`` 3.6; its code is kept at the git tag :data:`WAVEFORM_TAG`): a file that has
+one is refused, so that no file silently runs with another damping than it was identified for.
 
 Format 1 and 2 files (format 1: polynomial only, ``sway`` implicitly
 ``"paper"``; five or six features) load unchanged. ``save`` always writes
@@ -80,11 +78,13 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["SPLINE_AXES", "SPLINE_DEGREE", "check_knots", "checked_spline", "padded", "spline_dict",
-           "spline_section", "wave_channels"]
+__all__ = ["SPLINE_AXES", "SPLINE_DEGREE", "WAVEFORM_TAG", "check_knots", "checked_spline", "padded",
+           "spline_dict", "spline_section"]
 
 SPLINE_AXES = ("bias", "amplitude", "inv_ratio")
 SPLINE_DEGREE = 3
+#: The git tag that keeps the yaw-waveform experiment (its damping, coefficients file and reports).
+WAVEFORM_TAG = "experiment/waveform"
 
 
 def padded(knots: tuple[np.ndarray, ...], table: np.ndarray | None, channels: int) -> tuple[np.ndarray, np.ndarray]:
@@ -142,16 +142,6 @@ def spline_section(
     except (KeyError, TypeError, ValueError) as err:
         raise ValueError(f"{source}: malformed {key}: {err}") from None
     return knots, table
-
-
-def wave_channels(section: dict) -> list:
-    """The yaw-waveform section's coefficient lists, interleaved ``cos_1, sin_1, cos_2, ...``."""
-    h = int(section["harmonics"])
-    if not (len(section["cos"]) == len(section["sin"]) == h):
-        raise ValueError(f"'harmonics' is {h} but there are {len(section['cos'])} cos and "
-                         f"{len(section['sin'])} sin lists")
-    channels = [values for pair in zip(section["cos"], section["sin"], strict=True) for values in pair]
-    return channels + ([section["mean_abs"]] if "mean_abs" in section else [])
 
 
 def check_knots(knots: np.ndarray, n: int, where: str) -> None:

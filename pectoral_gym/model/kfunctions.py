@@ -26,21 +26,19 @@ import numpy as np
 from pectoral_gym.inputfile import K_FILE_BYTES, load_json
 from pectoral_gym.model.kfile import (
     SPLINE_AXES,
+    WAVEFORM_TAG,
     checked_spline,
     padded,
     spline_dict,
     spline_section,
-    wave_channels,
 )
 from pectoral_gym.model.ktables import (
-    MAX_HARMONICS,
     KTables,
     bspline_basis,
     interleave,
     oscillation_phasor,
     scaling_values,
     spline_values,
-    waveform_harmonics_into,
 )
 
 __all__ = [
@@ -76,9 +74,6 @@ class ScalingFunctions:
         oscillation_knots: Three knot vectors of the yaw-oscillation splines, or ``()`` for none.
         oscillation_table: ``(2, n_bias, n_amplitude, n_inv_ratio)`` coefficients of the
             phasor components ``A T_p cos(phi)``, ``A T_p sin(phi)`` [rad], or ``None``.
-        waveform_knots: Three knot vectors of the yaw-waveform splines, or ``()`` for none.
-        waveform_table: ``(2 H, n_bias, n_amplitude, n_inv_ratio)`` coefficients of ``Re, Im`` of the
-            harmonics ``T_p c_k`` [rad], ``k = 1..H <= MAX_HARMONICS`` (interleaved), or ``None``.
     """
 
     powers: np.ndarray
@@ -89,8 +84,6 @@ class ScalingFunctions:
     sway: str = "paper"
     oscillation_knots: tuple[np.ndarray, ...] = ()
     oscillation_table: np.ndarray | None = None
-    waveform_knots: tuple[np.ndarray, ...] = ()
-    waveform_table: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         # The compiled kernels index powers[k, j, :len(FEATURES)] without bounds checks.
@@ -108,13 +101,6 @@ class ScalingFunctions:
         knots, table = checked_spline(self.oscillation_knots, self.oscillation_table, 2, "yaw-oscillation spline")
         object.__setattr__(self, "oscillation_knots", knots)
         object.__setattr__(self, "oscillation_table", table)
-        channels = np.shape(self.waveform_table)[0] if self.waveform_table is not None else 2
-        if not 2 <= channels <= 2 * MAX_HARMONICS + 1:
-            raise ValueError(f"the yaw waveform needs 1 to {MAX_HARMONICS} harmonics (2 channels each, and "
-                             f"optionally the mean |omega|), got {channels} channels")
-        knots, table = checked_spline(self.waveform_knots, self.waveform_table, channels, "yaw-waveform spline")
-        object.__setattr__(self, "waveform_knots", knots)
-        object.__setattr__(self, "waveform_table", table)
 
     @classmethod
     def unit(cls) -> ScalingFunctions:
@@ -131,16 +117,6 @@ class ScalingFunctions:
         """True when the yaw-oscillation splines are present (oscillation-averaged yaw damping)."""
         return self.oscillation_table is not None
 
-    @property
-    def harmonics(self) -> int:
-        """Number of yaw-waveform harmonics (0: no ``yaw_waveform`` section)."""
-        return 0 if self.waveform_table is None else self.waveform_table.shape[0] // 2
-
-    @property
-    def has_rate_correction(self) -> bool:
-        """True when the yaw waveform carries the reference runs' mean ``|omega|`` (docs/model.md 3.6)."""
-        return self.waveform_table is not None and self.waveform_table.shape[0] % 2 == 1
-
     def kernel_arrays(self) -> KTables:
         """The tables packed for the compiled kernels (:class:`pectoral_gym.model.ktables.KTables`).
 
@@ -153,10 +129,9 @@ class ScalingFunctions:
     def _tables(self) -> KTables:
         knots, table = padded(self.knots, self.table, 3)
         osc_knots, osc_table = padded(self.oscillation_knots, self.oscillation_table, 2)
-        wave_knots, wave_table = padded(self.waveform_knots, self.waveform_table, 2)
         return KTables(np.ascontiguousarray(self.powers, dtype=np.float64),
                        np.ascontiguousarray(self.coefs, dtype=np.float64),
-                       knots, table, self.sway == "base", osc_knots, osc_table, wave_knots, wave_table,
+                       knots, table, self.sway == "base", osc_knots, osc_table,
                        interleave(knots, table, osc_knots, osc_table))
 
     @classmethod
@@ -200,10 +175,12 @@ class ScalingFunctions:
                 coefs[i, j] = c
         knots, table = cls._spline_from_dict(data.get("spline"), source)
         osc_knots, osc_table = cls._oscillation_from_dict(data.get("yaw_oscillation"), source)
-        wave_knots, wave_table = spline_section(data.get("yaw_waveform"), source, "yaw_waveform", wave_channels)
+        if "yaw_waveform" in data:
+            raise ValueError(f"{source}: its 'yaw_waveform' section is for the yaw-waveform damping, an experiment "
+                             f"that left the package (kept at the git tag {WAVEFORM_TAG}); remove the section to "
+                             "use the file's yaw_oscillation")
         try:
-            return cls(powers, coefs, dict(data.get("metadata", {})), knots, table, sway, osc_knots, osc_table,
-                       wave_knots, wave_table)
+            return cls(powers, coefs, dict(data.get("metadata", {})), knots, table, sway, osc_knots, osc_table)
         except ValueError as err:
             raise ValueError(f"{source}: {err}") from None
 
@@ -254,13 +231,6 @@ class ScalingFunctions:
         if self.oscillation_table is not None:
             out["yaw_oscillation"] = spline_dict(self.oscillation_knots, {
                 "cos": self.oscillation_table[0].ravel().tolist(), "sin": self.oscillation_table[1].ravel().tolist()})
-        if self.waveform_table is not None:
-            h = self.harmonics
-            section = {"harmonics": h, "cos": [c.ravel().tolist() for c in self.waveform_table[0:2 * h:2]],
-                       "sin": [c.ravel().tolist() for c in self.waveform_table[1:2 * h:2]]}
-            if self.has_rate_correction:
-                section["mean_abs"] = self.waveform_table[2 * h].ravel().tolist()
-            out["yaw_waveform"] = spline_dict(self.waveform_knots, section)
         out["metadata"] = self.metadata
         return out
 
@@ -335,25 +305,6 @@ class ScalingFunctions:
         pc, ps = oscillation_phasor(float(bias), float(amplitude), 1.0 / ratio, tables.osc_knots, tables.osc_table)
         return float(np.hypot(pc, ps) / period), float(np.arctan2(ps, pc))
 
-    def yaw_waveform(self, bias: float, amplitude: float, period: float, ratio: float) -> np.ndarray:
-        """Complex harmonics ``c_k`` [rad/s], ``k = 1..H``, of the right fin's yaw-rate waveform (module docstring).
-
-        Empty without a ``yaw_waveform`` section.
-        """
-        out = self._waveform_data(bias, amplitude, period, ratio)
-        h = self.harmonics
-        return out[0:2 * h:2] + 1j * out[1:2 * h:2]
-
-    def yaw_mean_abs(self, bias: float, amplitude: float, period: float, ratio: float) -> float:
-        """Mean ``|omega|`` [rad/s] of the fin's reference run (the waveform's rate correction); 0 without it."""
-        return float(self._waveform_data(bias, amplitude, period, ratio)[2 * MAX_HARMONICS])
-
-    def _waveform_data(self, bias: float, amplitude: float, period: float, ratio: float) -> np.ndarray:
-        out = np.zeros(2 * MAX_HARMONICS + 1)
-        waveform_harmonics_into(float(bias), float(amplitude), float(period), float(ratio), self.kernel_arrays(),
-                                1.0, out, 0)
-        return out
-
     def paper_k_fy(self, bias: float, amplitude: float, period: float, ratio: float) -> float:
         """The paper's ``K_fy`` (multiplying ``f_hy_avg``); infinite at ``cos(bias) = 0`` in ``"base"`` files."""
         k_fy = self.evaluate(bias, amplitude, period, ratio)[1]
@@ -365,8 +316,7 @@ class ScalingFunctions:
     @property
     def is_unit(self) -> bool:
         """True when every K is identically 1 (in the paper's sense: plain averaging)."""
-        return bool(self.table is None and self.oscillation_table is None and self.waveform_table is None
-                    and self.sway == "paper"
+        return bool(self.table is None and self.oscillation_table is None and self.sway == "paper"
                     and np.all(self.powers[self.coefs != 0] == 0) and np.allclose(self.coefs.sum(axis=1), 1.0))
 
 

@@ -1,10 +1,10 @@
 """Loading scaling functions K for the averaged model: the one K loader and the yaw-damping section it keeps.
 
-A coefficients file (:mod:`pectoral_gym.model.kfunctions`) may hold two yaw-damping sections
-(``docs/model.md`` 3.6); a model uses one of them, named by its ``yaw_damping`` (:data:`YAW_DAMPINGS`),
-and the others are dropped. :func:`load_scaling` reads a file for a model of given parameters (with the
-check that the file was identified for them), :func:`select_yaw_damping` keeps one section of K in
-memory and :func:`held_yaw_damping` names the richest one K holds. The model specs
+A coefficients file (:mod:`pectoral_gym.model.kfunctions`) may hold a yaw-damping section
+(``docs/model.md`` 3.6); a model uses it or not, as its ``yaw_damping`` names (:data:`YAW_DAMPINGS`),
+and an unused section is dropped. :func:`load_scaling` reads a file for a model of given parameters (with the
+check that the file was identified for them), :func:`select_yaw_damping` keeps the section a model needs in
+memory and :func:`held_yaw_damping` names the richest damping K holds. The model specs
 (:mod:`pectoral_gym.model.spec`) and :class:`~pectoral_gym.model.models.AveragedModel` load K here.
 """
 
@@ -14,15 +14,25 @@ import dataclasses
 import os
 from typing import Any
 
+from pectoral_gym.model.kfile import WAVEFORM_TAG
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.params import FishParams
 
-__all__ = ["YAW_DAMPINGS", "held_yaw_damping", "load_scaling", "select_yaw_damping"]
+__all__ = ["YAW_DAMPINGS", "check_yaw_damping", "held_yaw_damping", "load_scaling", "select_yaw_damping"]
 
 #: The averaged model's yaw damping (docs/model.md 3.6) and the coefficients-file section it needs:
 #: ``"none"`` eq. (20)'s damping alone, ``"sinusoid"`` oscillation-averaged with the ``yaw_oscillation``
-#: section's sinusoid, ``"waveform"`` with the ``yaw_waveform`` section's harmonics.
-YAW_DAMPINGS = {"none": None, "sinusoid": "yaw_oscillation", "waveform": "yaw_waveform"}
+#: section's sinusoid.
+YAW_DAMPINGS = {"none": None, "sinusoid": "yaw_oscillation"}
+
+
+def check_yaw_damping(yaw_damping: str) -> None:
+    """Raise ``ValueError`` unless ``yaw_damping`` is one of :data:`YAW_DAMPINGS` (the one check of the name)."""
+    if yaw_damping == "waveform":
+        raise ValueError(f"yaw_damping='waveform' was an experiment that left the package (kept at the git tag "
+                         f"{WAVEFORM_TAG}); use one of {tuple(YAW_DAMPINGS)}")
+    if yaw_damping not in YAW_DAMPINGS:
+        raise ValueError(f"yaw_damping must be one of {tuple(YAW_DAMPINGS)}, got {yaw_damping!r}")
 
 
 def load_scaling(scaling: str | os.PathLike = "identified", params: FishParams | None = None, check: bool = True,
@@ -51,9 +61,8 @@ def select_yaw_damping(k: ScalingFunctions, yaw_damping: str, where: str = "the 
     Raises:
         ValueError: If ``k`` lacks that section (``where`` names it in the message).
     """
-    if yaw_damping not in YAW_DAMPINGS:
-        raise ValueError(f"yaw_damping must be one of {tuple(YAW_DAMPINGS)}, got {yaw_damping!r}")
-    has = {"sinusoid": k.has_oscillation, "waveform": k.harmonics > 0}
+    check_yaw_damping(yaw_damping)
+    has = {"sinusoid": k.has_oscillation}
     if yaw_damping != "none" and not has[yaw_damping]:
         raise ValueError(f"{where} has no {YAW_DAMPINGS[yaw_damping]} section, which yaw_damping="
                          f"{yaw_damping!r} needs; pick yaw_damping from what it holds ("
@@ -61,8 +70,6 @@ def select_yaw_damping(k: ScalingFunctions, yaw_damping: str, where: str = "the 
     drop: dict[str, Any] = {}
     if yaw_damping != "sinusoid" and k.has_oscillation:
         drop.update(oscillation_knots=(), oscillation_table=None)
-    if yaw_damping != "waveform" and k.harmonics > 0:
-        drop.update(waveform_knots=(), waveform_table=None)
     return dataclasses.replace(k, **drop) if drop else k
 
 
@@ -70,4 +77,4 @@ def held_yaw_damping(k: ScalingFunctions | None) -> str:
     """The richest yaw damping scaling functions hold (``"none"`` for ``None``, K = 1)."""
     if k is None:
         return "none"
-    return "waveform" if k.harmonics > 0 else "sinusoid" if k.has_oscillation else "none"
+    return "sinusoid" if k.has_oscillation else "none"

@@ -19,21 +19,8 @@ import numpy as np
 
 from pectoral_gym.model.jit import njit
 
-__all__ = ["COMMON_BEATS", "MAX_HARMONICS", "MAX_SAMPLES", "QUADRATURE", "RATE_ITERATIONS", "quadrature_window",
-           "KTables", "as_tables", "bspline_basis", "interleave",
-           "oscillation_phasor", "pattern_values", "scaling_values", "spline_values", "waveform_harmonics_into",
-           "yaw_oscillation_phasor"]
-
-MAX_HARMONICS = 8  # most yaw-waveform harmonics a coefficients file may hold (forcing_cache has room for them)
-#: Beat phases of the waveform damping's quadrature (docs/model.md 3.6): the mean of ``x|x|`` over
-#: ``QUADRATURE`` equally spaced phases of the beat.
-QUADRATURE = 32
-#: Longest common period, in beats of the slower fin, over which two fins with commensurate periods
-#: are averaged together (docs/model.md 3.6); the faster fin beats at most 4 times as often in it.
-COMMON_BEATS = 4
-MAX_SAMPLES = QUADRATURE * COMMON_BEATS * 4
-#: Relaxed fixed-point iterations of the yaw waveform's yaw-rate correction (docs/model.md 3.6).
-RATE_ITERATIONS = 3
+__all__ = ["KTables", "as_tables", "bspline_basis", "interleave",
+           "oscillation_phasor", "pattern_values", "scaling_values", "spline_values", "yaw_oscillation_phasor"]
 
 
 class KTables(NamedTuple):
@@ -51,10 +38,6 @@ class KTables(NamedTuple):
     ``base_sway``  bool                 True: ``K_fy`` multiplies ``base``; False: ``f_hy_avg`` (paper)
     ``osc_knots``  ``(3, longest)``     knots of the yaw-oscillation splines (same axes)
     ``osc_table``  ``(2, nb, na, nr)``  phasor ``A T_p (cos phi, sin phi)`` [rad]; ``(2, 0, 0, 0)``: none
-    ``wave_knots`` ``(3, longest)``     knots of the yaw-waveform splines (same axes)
-    ``wave_table`` ``(2H(+1), nb, ...)`` harmonics ``T_p c_k`` [rad] of the yaw-rate waveform, ``k = 1..H``,
-                                        channels ``Re c_1, Im c_1, Re c_2, ...``, then optionally ``T_p``
-                                        times the reference's mean ``|omega|`` [rad]; ``(2, 0, 0, 0)``: none
     ``shared``     ``(nb, na, nr, 5)``  when ``osc_table`` has ``table``'s knots and shape (the shipped
                                         file): both tables interleaved, ``K_fx, K_fy, K_m, cos, sin`` last,
                                         for :func:`pattern_values`; ``(0, 0, 0, 5)``: not shared
@@ -70,8 +53,6 @@ class KTables(NamedTuple):
     base_sway: bool
     osc_knots: np.ndarray
     osc_table: np.ndarray
-    wave_knots: np.ndarray
-    wave_table: np.ndarray
     shared: np.ndarray
 
 
@@ -83,8 +64,7 @@ def as_tables(packed) -> KTables:
     more than a plain tuple), so the per-step entry points take
     ``tuple(tables)`` and name the fields again here.
     """
-    return KTables(packed[0], packed[1], packed[2], packed[3], packed[4], packed[5], packed[6], packed[7], packed[8],
-                   packed[9])
+    return KTables(packed[0], packed[1], packed[2], packed[3], packed[4], packed[5], packed[6], packed[7])
 
 
 @njit
@@ -156,7 +136,7 @@ def spline_values(bias: float, amplitude: float, inv_ratio: float, knots, table)
 
 @njit(inline="always")
 def _taper(amplitude: float, knots) -> float:
-    """Below the lowest amplitude node (``knots[1, 3]``) the phasor and waveform splines shrink linearly to zero."""
+    """Below the lowest amplitude node (``knots[1, 3]``) the phasor splines shrink linearly to zero."""
     lowest = knots[1, 3]
     return amplitude / lowest if amplitude < lowest and lowest > 0.0 else 1.0
 
@@ -177,68 +157,6 @@ def oscillation_phasor(bias: float, amplitude: float, inv_ratio: float, knots, t
         pc *= taper
         ps *= taper
     return pc, ps
-
-
-@njit
-def waveform_harmonics_into(bias: float, amplitude: float, period: float, ratio: float, tables: KTables, side: float,
-                            out, offset: int) -> int:
-    """Write the fin's yaw-waveform data [rad/s] into ``out[offset:]``; return the number of harmonics ``H``.
-
-    ``out[offset + 2 (k - 1)]``, ``out[offset + 2 (k - 1) + 1]``: ``side`` times ``Re, Im`` of
-    harmonic ``c_k``, ``k = 1..H`` (``H`` = the file's harmonics, 0 without a ``yaw_waveform``
-    section), zero up to :data:`MAX_HARMONICS`; ``out[offset + 2 MAX_HARMONICS]``: the mean
-    ``|omega|`` of the reference run (0 when the file has none). Each is its spline (over bias,
-    amplitude, 1/ratio, clamped) divided by the period; below the lowest amplitude node they
-    shrink linearly to zero, as :func:`oscillation_phasor`. No allocation.
-    """
-    table, knots = tables.wave_table, tables.wave_knots
-    channels = table.shape[0] if table.shape[1] > 0 else 0
-    for c in range(2 * MAX_HARMONICS + 1):
-        out[offset + c] = 0.0
-    if channels == 0 or amplitude <= 0.0:
-        return channels // 2
-    scale = 1.0 / period
-    taper = _taper(amplitude, knots)
-    if taper != 1.0:
-        scale *= taper
-    s0, a0, a1, a2, a3 = bspline_basis(knots[0], table.shape[1], bias)
-    s1, c0, c1, c2, c3 = bspline_basis(knots[1], table.shape[2], amplitude)
-    s2, d0, d1, d2, d3 = bspline_basis(knots[2], table.shape[3], 1.0 / ratio)
-    b0, b1, b2 = (a0, a1, a2, a3), (c0, c1, c2, c3), (d0, d1, d2, d3)
-    h = channels // 2
-    for a in range(4):
-        for b in range(4):
-            w = b0[a] * b1[b] * scale
-            for c in range(4):
-                wc = w * b2[c]
-                i, j, k = s0 - 3 + a, s1 - 3 + b, s2 - 3 + c
-                for ch in range(2 * h):
-                    out[offset + ch] += side * wc * table[ch, i, j, k]
-                if channels > 2 * h:  # the reference run's mean |omega| (rate correction, docs/model.md 3.6)
-                    out[offset + 2 * MAX_HARMONICS] += wc * table[2 * h, i, j, k]
-    return h
-
-
-@njit
-def quadrature_window(freq0: float, freq1: float):
-    """``(samples, cycles of fin 0, cycles of fin 1)`` of the waveform damping's window (``docs/model.md`` 3.6).
-
-    ``freq``: beat frequencies [rad/s], 0 for a fin that does not beat. One fin, equal
-    periods, or no common period within ``COMMON_BEATS`` beats of the slower fin:
-    ``QUADRATURE`` samples and one cycle each (the present relative phase). Else the common
-    period, ``QUADRATURE`` samples per beat of the faster fin.
-    """
-    if freq0 == 0.0 or freq1 == 0.0 or freq0 == freq1:
-        return QUADRATURE, 1, 1
-    slow, fast = min(freq0, freq1), max(freq0, freq1)
-    for beats in range(1, COMMON_BEATS + 1):
-        n = beats * fast / slow
-        whole = round(n)
-        if abs(n - whole) <= 1e-9 * n and QUADRATURE * whole <= MAX_SAMPLES:
-            if freq0 < freq1:
-                return QUADRATURE * whole, beats, whole
-            return QUADRATURE * whole, whole, beats
-    return QUADRATURE, 1, 1
 
 
 @njit

@@ -28,7 +28,13 @@ from dataclasses import dataclass
 from typing import Any, ClassVar
 
 from pectoral_gym.model.kfunctions import ScalingFunctions
-from pectoral_gym.model.kloading import YAW_DAMPINGS, held_yaw_damping, load_scaling, select_yaw_damping
+from pectoral_gym.model.kloading import (
+    YAW_DAMPINGS,
+    check_yaw_damping,
+    held_yaw_damping,
+    load_scaling,
+    select_yaw_damping,
+)
 from pectoral_gym.model.models import FULL_INTEGRATION, AveragedModel, FullModel
 from pectoral_gym.model.params import FishParams
 
@@ -131,8 +137,7 @@ class AveragedSpec(ModelSpec):
             (K = 1) or the path of a coefficients file (``python -m pectoral_gym.scaling identify``).
         check_params: Refuse a coefficients file that records other model parameters than the
             ``params`` it is built for (K identified for another robot); ``False`` is the explicit opt-out.
-        yaw_damping: ``"sinusoid"`` (the other presets'), ``"none"`` (eq. 20 alone: :data:`AVERAGED_PAPER`, K = 1)
-            or ``"waveform"`` (an experiment of docs/model.md 3.6 that no preset, env or controller uses)
+        yaw_damping: ``"sinusoid"`` (the other presets') or ``"none"`` (eq. 20 alone: :data:`AVERAGED_PAPER`, K = 1)
             (:data:`~pectoral_gym.model.kloading.YAW_DAMPINGS`): the spec picks it, never the file: the
             file must hold the section it needs, and sections it does not use are dropped. K = 1 has
             none: ``scaling="none"`` needs ``"none"``.
@@ -163,8 +168,7 @@ class AveragedSpec(ModelSpec):
             raise ValueError(f"scaling: no coefficients file at {self.scaling!r} (or use 'identified' or 'none')")
         if self.forcing not in FORCINGS:
             raise ValueError(f"forcing must be one of {FORCINGS}, got {self.forcing!r}")
-        if self.yaw_damping not in YAW_DAMPINGS:
-            raise ValueError(f"yaw_damping must be one of {tuple(YAW_DAMPINGS)}, got {self.yaw_damping!r}")
+        check_yaw_damping(self.yaw_damping)
         if self.scaling == "none" and self.yaw_damping != "none":
             raise ValueError(f"yaw_damping={self.yaw_damping!r} needs a coefficients file's "
                              f"{YAW_DAMPINGS[self.yaw_damping]} section; K = 1 (scaling='none') has none: "

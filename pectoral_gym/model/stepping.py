@@ -35,7 +35,6 @@ from pectoral_gym.model.dynamics import (
     Forcing,
     RateConstants,
     body_accel,
-    body_accel_waveform,
     rate_bound,
     rate_constants,
 )
@@ -74,42 +73,38 @@ def _rotate(c0, s0, delta):
 
 
 @njit
-def _accel(u, v, w, f: Forcing, b: BodyCoefficients, osc, wave):
-    if wave is None:  # resolved when compiling: the None specialisation is the code without the waveform
-        return body_accel(u, v, w, f.fx, f.fy, f.tau, b.m1, b.m2, b.J3, b.c1, b.c2, b.c4, osc)
-    return body_accel_waveform(u, v, w, f.fx, f.fy, f.tau, b.m1, b.m2, b.J3, b.c1, b.c2, b.c4, wave)
+def _accel(u, v, w, f: Forcing, b: BodyCoefficients, osc):
+    return body_accel(u, v, w, f.fx, f.fy, f.tau, b.m1, b.m2, b.J3, b.c1, b.c2, b.c4, osc)
 
 
 @njit
-def _rk4(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: BodyCoefficients, osc, wave):
+def _rk4(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: BodyCoefficients, osc):
     """One RK4 step of eq. (19) for fish ``i``; forcing given at t, t+h/2, t+h.
 
     ``osc`` [rad/s]: the yaw oscillation of the averaged model's damping
-    (:func:`pectoral_gym.model.dynamics.body_accel`); 0 for the full model. ``wave``: ``None``, or
-    the sampled yaw waveform of the waveform damping (``docs/model.md`` 3.6), which then
-    replaces ``osc`` (a compile-time choice: ``None`` is its own specialisation).
+    (:func:`pectoral_gym.model.dynamics.body_accel`); 0 for the full model.
     """
     x0, y0, p0 = state[i, State.X], state[i, State.Y], state[i, State.PSI]
     u0, v0, w0 = state[i, State.VX], state[i, State.VY], state[i, State.OMEGA]
     c0, s0 = math.cos(p0), math.sin(p0)
     # stage 1
     k1x, k1y, k1p = u0 * c0 - v0 * s0, u0 * s0 + v0 * c0, w0
-    k1u, k1v, k1w = _accel(u0, v0, w0, f0, body, osc, wave)
+    k1u, k1v, k1w = _accel(u0, v0, w0, f0, body, osc)
     # stage 2
     u2, v2, w2 = u0 + 0.5 * h * k1u, v0 + 0.5 * h * k1v, w0 + 0.5 * h * k1w
     c, s = _rotate(c0, s0, 0.5 * h * k1p)
     k2x, k2y, k2p = u2 * c - v2 * s, u2 * s + v2 * c, w2
-    k2u, k2v, k2w = _accel(u2, v2, w2, fm, body, osc, wave)
+    k2u, k2v, k2w = _accel(u2, v2, w2, fm, body, osc)
     # stage 3
     u3, v3, w3 = u0 + 0.5 * h * k2u, v0 + 0.5 * h * k2v, w0 + 0.5 * h * k2w
     c, s = _rotate(c0, s0, 0.5 * h * k2p)
     k3x, k3y, k3p = u3 * c - v3 * s, u3 * s + v3 * c, w3
-    k3u, k3v, k3w = _accel(u3, v3, w3, fm, body, osc, wave)
+    k3u, k3v, k3w = _accel(u3, v3, w3, fm, body, osc)
     # stage 4
     u4, v4, w4 = u0 + h * k3u, v0 + h * k3v, w0 + h * k3w
     c, s = _rotate(c0, s0, h * k3p)
     k4x, k4y, k4p = u4 * c - v4 * s, u4 * s + v4 * c, w4
-    k4u, k4v, k4w = _accel(u4, v4, w4, f1, body, osc, wave)
+    k4u, k4v, k4w = _accel(u4, v4, w4, f1, body, osc)
     h6 = h / 6.0
     state[i, State.X] = x0 + h6 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
     state[i, State.Y] = y0 + h6 * (k1y + 2.0 * k2y + 2.0 * k3y + k4y)
@@ -171,23 +166,8 @@ def _full_stable_step(state, fins, i, idle0, idle1, body, rates, drag_constant, 
     return _stable_step(state, i, rates, driven_omega, driven_speed, 0.0, h_max)
 
 
-@njit
-def _waveform_segment(state, integral, fins, cache, i, seg, idle0, idle1, harmonics, rate_correction, body, rates,
-                      forcing, dt_max):
-    """Averaged model, waveform damping (``docs/model.md`` 3.6): RK4 substeps over one segment of ``seg`` s.
-
-    The combined yaw waveform is sampled once, at the segment's middle
-    (:func:`pectoral_gym.model.forcing_cache.yaw_waveform`), into a workspace of its own, so the
-    default model (no ``yaw_waveform`` section) allocates nothing.
-    """
-    work = np.empty(fc.WORKSPACE)
-    n_wave, osc = fc.yaw_waveform(fins, cache, i, 0.5 * seg, idle0, idle1, harmonics, rate_correction,
-                                  state[i, State.OMEGA], body.c4, work)
-    _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, work[:n_wave], dt_max)
-
-
 @njit(inline="always")
-def _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, wave, dt_max):
+def _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, dt_max):
     """Integrate fish ``i`` over a segment of constant forcing.
 
     Equal RK4 substeps to the segment's end, re-sized as the state's stiffness changes (:func:`_stable_step`).
@@ -197,7 +177,7 @@ def _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc
     while t_seg > _EPS:
         h_ok = _stable_step(state, i, rates, driven_omega, driven_speed, osc, dt_max)
         h = t_seg / max(1, int(math.ceil(t_seg / h_ok - 1e-9)))
-        _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc, wave)
+        _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc)
         t_seg -= h
 
 
@@ -212,8 +192,6 @@ def advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max
     inertia_constant = coef[i, Coef.FIN_INERTIA_CONSTANT]
     fin_offset = coef[i, Coef.FIN_OFFSET]
     rates = rate_constants(body.m1, body.m2, body.J3, body.c1, body.c2, body.c4)
-    harmonics = tables.wave_table.shape[0] // 2 if averaged and tables.wave_table.shape[1] > 0 else 0
-    rate_correction = tables.wave_table.shape[0] % 2 == 1
     t_left = duration
     while t_left > _EPS:
         # A fin at rest that stays at rest never ends a segment: its stroke clock must
@@ -235,12 +213,8 @@ def advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max
                 for f in range(2):
                     fx, fy, tau = fx + cache[i, f, fc.TR_FX], fy + cache[i, f, fc.TR_FY], tau + cache[i, f, fc.TR_TAU]
             forcing = Forcing(fx, fy, tau)
-            if harmonics > 0:
-                _waveform_segment(state, integral, fins, cache, i, seg, idle0, idle1, harmonics, rate_correction,
-                                  body, rates, forcing, dt_max)
-            else:
-                osc = fc.yaw_oscillation(fins, cache, i, 0.5 * seg, idle0, idle1)
-                _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, None, dt_max)
+            osc = fc.yaw_oscillation(fins, cache, i, 0.5 * seg, idle0, idle1)
+            _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, dt_max)
         else:
             h_max = dt_max
             if not idle0:
@@ -260,7 +234,7 @@ def advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max
                 fm = Forcing(*st.phase_forcing(p0, p1, drag_constant, inertia_constant, fin_offset))
                 p0, p1 = st.advance_phase(p0), st.advance_phase(p1)
                 f1 = Forcing(*st.phase_forcing(p0, p1, drag_constant, inertia_constant, fin_offset))
-                _rk4(state, integral, i, h, f0, fm, f1, body, 0.0, None)
+                _rk4(state, integral, i, h, f0, fm, f1, body, 0.0)
                 f0 = f1
         if not idle0:  # the strokes actually swept, for the fin work (both models)
             fins[i, 0, st.SWEPT] += st.swept_cube(fins, i, 0, seg)

@@ -24,17 +24,14 @@ except ImportError as err:  # pragma: no cover - exercised only without the nmpc
         "pectoral_gym.model.symbolic needs CasADi: pip install 'pectoral-gym[nmpc]' (or pip install casadi)"
     ) from err
 
-import numpy as np
 
 from pectoral_gym.model.kfunctions import ScalingFunctions
-from pectoral_gym.model.ktables import QUADRATURE, RATE_ITERATIONS
 from pectoral_gym.model.params import FishParams, body_coefficients
 
 __all__ = [
     "OSCILLATION_FLOOR", "STATE_SIZE", "STATE_POSITION", "STATE_PSI", "STATE_VELOCITY",
     "bessel_j1_sx", "bspline_basis_sx", "scaling_sx", "averaged_forcing_sx", "oscillating_square_mean_sx",
-    "yaw_oscillation_sx", "combined_yaw_oscillation_sx", "yaw_waveform_sx", "combined_yaw_waveform_sx",
-    "waveform_square_mean_sx", "body_accel_sx", "body_rhs_sx", "averaged_rhs_sx",
+    "yaw_oscillation_sx", "combined_yaw_oscillation_sx", "body_accel_sx", "body_rhs_sx", "averaged_rhs_sx",
     "mean_fin_power_sx", "rk4_sx", "named_symbols",
 ]
 
@@ -161,79 +158,6 @@ def combined_yaw_oscillation_sx(right, left, scaling: ScalingFunctions | None):
     return ca.sqrt(ca.sumsqr(phasor) + OSCILLATION_FLOOR**2)
 
 
-def yaw_waveform_sx(beat, scaling: ScalingFunctions):
-    """``(Re c_k, Im c_k, |omega|_ref)`` [rad/s] of the right fin's yaw waveform: two ``(H,)`` vectors and a scalar.
-
-    As :meth:`pectoral_gym.model.kfunctions.ScalingFunctions.yaw_waveform` and ``yaw_mean_abs``
-    (0 without the rate correction), including the linear shrink below the lowest amplitude node.
-    """
-    bias, amplitude, period, ratio = beat[0], beat[1], beat[2], beat[3]
-    values = _tensor_spline_sx((bias, amplitude, 1.0 / ratio), scaling.waveform_knots, scaling.waveform_table)
-    lowest = float(scaling.waveform_knots[1][3])
-    shrink = ca.fmin(ca.fmax(amplitude, 0.0), lowest) / lowest if lowest > 0.0 else 1.0
-    scale = shrink / period
-    h = scaling.harmonics
-    mean_abs = values[2 * h] * scale if scaling.has_rate_correction else 0.0
-    return ca.vertcat(*values[0:2 * h:2]) * scale, ca.vertcat(*values[1:2 * h:2]) * scale, mean_abs
-
-
-def combined_yaw_waveform_sx(right, left, scaling: ScalingFunctions | None, omega=None,
-                             params: FishParams | None = None, smoothing: float = 0.0):
-    """The yaw-waveform samples (``QUADRATURE``,) of two fins beating in phase; ``None`` without waveform data.
-
-    The left fin's waveform is the mirror image, so the harmonics subtract (as
-    :func:`pectoral_gym.model.forcing_cache.yaw_waveform` with equal beat phases, the first sample
-    at phase 0). With the file's rate correction the yaw rate ``omega`` and ``params`` are
-    needed: the same relaxed fixed-point steps as the compiled model (``smoothing`` > 0
-    replaces ``|x|`` by ``sqrt(x^2 + smoothing^2)`` in them).
-    """
-    if scaling is None or scaling.harmonics == 0:
-        return None
-    k = np.arange(1, scaling.harmonics + 1)
-    theta = 2.0 * np.pi * np.outer(np.arange(QUADRATURE), k) / QUADRATURE  # (QUADRATURE, H)
-    cos, sin = ca.DM(np.cos(theta)), ca.DM(np.sin(theta))
-    fins = [(yaw_waveform_sx(right, scaling), 1.0, right[2]), (yaw_waveform_sx(left, scaling), -1.0, left[2])]
-    re = sum(side * w[0] for w, side, _ in fins)
-    im = sum(side * w[1] for w, side, _ in fins)
-    samples = ca.mtimes(cos, re) - ca.mtimes(sin, im)
-    if not scaling.has_rate_correction:
-        return samples
-    if omega is None or params is None:
-        raise ValueError("the yaw waveform's rate correction needs the yaw rate and the parameters")
-    c4 = body_coefficients(params).c4
-
-    def mean_abs(x):
-        return ca.sum1(ca.sqrt(x * x + smoothing**2) if smoothing > 0.0 else ca.fabs(x)) / QUADRATURE
-
-    drives = []
-    for (a, b, ref), side, period in fins:
-        kw = ca.DM(k) * (2.0 * np.pi) / period
-        lam_f = 2.0 * c4 * ref
-        drives.append((side * (a * lam_f - b * kw), side * (b * lam_f + a * kw), kw))  # c_k (lambda_f + i k Omega_f)
-    lam = 2.0 * c4 * mean_abs(omega + samples)
-    for it in range(RATE_ITERATIONS):
-        re, im = 0.0, 0.0
-        for dr, di, kw in drives:
-            den = lam * lam + kw * kw
-            re = re + (dr * lam + di * kw) / den
-            im = im + (di * lam - dr * kw) / den
-        samples = ca.mtimes(cos, re) - ca.mtimes(sin, im)
-        if it + 1 < RATE_ITERATIONS:
-            lam = 0.5 * (lam + 2.0 * c4 * mean_abs(omega + samples))
-    return samples
-
-
-def waveform_square_mean_sx(mean, samples, smoothing: float = 0.0):
-    """Mean of ``x|x|`` over ``x = mean + samples[j]``, as :func:`pectoral_gym.model.dynamics.waveform_square_mean`.
-
-    ``smoothing`` > 0 [rad/s] replaces ``|x|`` by ``sqrt(x^2 + smoothing^2)`` (smooth second derivatives).
-    """
-    n = samples.shape[0]
-    x = mean + samples
-    absolute = ca.sqrt(x * x + smoothing * smoothing) if smoothing > 0.0 else ca.fabs(x)
-    return ca.sum1(x * absolute) / n
-
-
 def oscillating_square_mean_sx(mean, amplitude):
     """Cycle mean of ``x|x|`` for ``x = mean + amplitude sin(theta)``.
 
@@ -268,7 +192,7 @@ def averaged_forcing_sx(beat, side: float, params: FishParams, scaling: ScalingF
     return ca.vertcat(k[0] * fx, side * sway, side * k[2] * tau)
 
 
-def body_accel_sx(v, forcing, params: FishParams, smoothing: float = 0.0, yaw_oscillation=None, yaw_waveform=None):
+def body_accel_sx(v, forcing, params: FishParams, smoothing: float = 0.0, yaw_oscillation=None):
     """Body-frame accelerations ``d(vx, vy, omega)/dt`` of eqs. (19)-(20).
 
     Args:
@@ -284,9 +208,6 @@ def body_accel_sx(v, forcing, params: FishParams, smoothing: float = 0.0, yaw_os
             ``c4 omega|omega|``; else the amplitude [rad/s] of the in-beat yaw
             oscillation (> 0), and the damping is its cycle mean
             (:func:`oscillating_square_mean_sx`).
-        yaw_waveform: ``None`` (default), or the sampled in-beat yaw waveform
-            (:func:`combined_yaw_waveform_sx`); the damping is then its mean
-            (:func:`waveform_square_mean_sx`), which replaces ``yaw_oscillation``.
     """
     vx, vy, omega = v[0], v[1], v[2]
     m1, m2, j3, c1, c2, c4 = body_coefficients(params)
@@ -301,23 +222,21 @@ def body_accel_sx(v, forcing, params: FishParams, smoothing: float = 0.0, yaw_os
         yaw_damping = c4 * omega * ca.fabs(omega)
     if yaw_oscillation is not None:
         yaw_damping = c4 * oscillating_square_mean_sx(omega, yaw_oscillation)
-    if yaw_waveform is not None:
-        yaw_damping = c4 * waveform_square_mean_sx(omega, yaw_waveform, smoothing)
     dvx = (m2 * vy * omega - c1 * vx * speed + c2 * vy * speed * alpha + forcing[0]) / m1  # eqs. (19)-(20), f1
     dvy = (-m1 * vx * omega - c1 * vy * speed - c2 * vx * speed * alpha + forcing[1]) / m2  # f2
     dom = (m1 - m2) / j3 * vx * vy - yaw_damping + forcing[2] / j3  # f3
     return ca.vertcat(dvx, dvy, dom)
 
 
-def body_rhs_sx(state, forcing, params: FishParams, smoothing: float = 0.0, yaw_oscillation=None, yaw_waveform=None):
+def body_rhs_sx(state, forcing, params: FishParams, smoothing: float = 0.0, yaw_oscillation=None):
     """Time derivative of ``state = (X, Y, psi, vx, vy, omega)`` under the fin forcing ``(f_x, f_y, tau)``.
 
     The tank-frame kinematics of eq. (19) and the body accelerations of
-    :func:`body_accel_sx` (whose ``smoothing``, ``yaw_oscillation`` and ``yaw_waveform`` these are).
+    :func:`body_accel_sx` (whose ``smoothing`` and ``yaw_oscillation`` these are).
     """
     psi = state[STATE_PSI]
     vx, vy, omega = (state[i] for i in range(STATE_VELOCITY.start, STATE_VELOCITY.stop))
-    accel = body_accel_sx([vx, vy, omega], forcing, params, smoothing, yaw_oscillation, yaw_waveform)
+    accel = body_accel_sx([vx, vy, omega], forcing, params, smoothing, yaw_oscillation)
     x_dot = vx * ca.cos(psi) - vy * ca.sin(psi)  # eq. (19), kinematics
     y_dot = vx * ca.sin(psi) + vy * ca.cos(psi)
     return ca.vertcat(x_dot, y_dot, omega, accel)
@@ -329,9 +248,7 @@ def averaged_rhs_sx(state, beats, params: FishParams, scaling: ScalingFunctions 
     With yaw-oscillation data in ``scaling`` the yaw damping is
     oscillation-averaged, with the two fins' oscillations added as phasors of
     fins beating in phase (as fins with equal periods started together do;
-    :func:`pectoral_gym.model.forcing_cache.yaw_oscillation` tracks the actual phases). With
-    yaw-waveform data the damping is the waveform damping of two fins in phase
-    (:func:`combined_yaw_waveform_sx`).
+    :func:`pectoral_gym.model.forcing_cache.yaw_oscillation` tracks the actual phases).
 
     Args:
         state: Pose in the tank frame and body-frame velocities.
@@ -343,9 +260,8 @@ def averaged_rhs_sx(state, beats, params: FishParams, scaling: ScalingFunctions 
     right = averaged_forcing_sx([beats[i] for i in range(4)], 1.0, params, scaling)
     left = averaged_forcing_sx([beats[i] for i in range(4, 8)], -1.0, params, scaling)
     fins = [beats[i] for i in range(4)], [beats[i] for i in range(4, 8)]
-    waveform = combined_yaw_waveform_sx(*fins, scaling, state[5], params, smoothing)
-    oscillation = combined_yaw_oscillation_sx(*fins, scaling) if waveform is None else None
-    return body_rhs_sx(state, right + left, params, smoothing, oscillation, waveform)
+    oscillation = combined_yaw_oscillation_sx(*fins, scaling)
+    return body_rhs_sx(state, right + left, params, smoothing, oscillation)
 
 
 def mean_fin_power_sx(amplitude, period, ratio, params: FishParams):

@@ -30,9 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from pectoral_gym.model.averaging import waveform_samples
 from pectoral_gym.model.kfunctions import FEATURES, FORMAT, K_NAMES, ScalingFunctions
-from pectoral_gym.model.ktables import MAX_HARMONICS, QUADRATURE
 from pectoral_gym.model.params import FishParams
 from pectoral_gym.scaling.identification.grids import Grid, draw_off_grid
 from pectoral_gym.scaling.identification.nmpc import (
@@ -49,14 +47,13 @@ from pectoral_gym.scaling.identification.regression import (
     SplineFit,
     fit_oscillation,
     fit_spline,
-    fit_waveform,
     select_model,
 )
 from pectoral_gym.scaling.identification.response import predicted_turning, sensitivity_weights
 
 __all__ = ["IdentificationResult", "holdout_patterns", "identify"]
 
-YAW_DAMPING = ("waveform", "oscillation", "paper")
+YAW_DAMPING = ("oscillation", "paper")
 SWAY = "base"  # K_fy multiplies the fin's force magnitude, not f_hy_avg = base cos(bias) (model.kfunctions)
 ORACLE_RTOL = 1e-3  # NMPC solutions must equal the algebraic steady-state solution to this relative tolerance
 MIN_TURN_RATE = 0.02  # rad/s: held-out patterns turning slower get no radius / period error (huge, meaningless radii)
@@ -208,7 +205,6 @@ def identify(
     holdout: int = 60,
     turn_target: float = 0.02,
     yaw_damping: str = "oscillation",
-    harmonics: int = MAX_HARMONICS,
 ) -> IdentificationResult:
     """Run the whole pipeline on ``grid`` (module docstring).
 
@@ -229,18 +225,13 @@ def identify(
         yaw_damping: ``"oscillation"`` (default): identify K for the averaged model with the
             oscillation-averaged yaw damping, whose yaw-oscillation splines are fitted from the
             reference runs and shipped in the file (needs a tensor grid); ``"paper"``: the paper's
-            damping ``c4 omega|omega|``; ``"waveform"``: the waveform damping of ``docs/model.md``
-            3.6, whose ``harmonics`` yaw-waveform harmonics are fitted and shipped as well (the
-            sinusoid's splines too, for files read by older code).
-        harmonics: Yaw-waveform harmonics kept with ``"waveform"`` (1 to ``MAX_HARMONICS``).
+            damping ``c4 omega|omega|``.
 
     Raises:
         ValueError: For an unknown ``yaw_damping``, or ``"oscillation"`` on a grid that is not a tensor grid.
     """
     if yaw_damping not in YAW_DAMPING:
         raise ValueError(f"yaw_damping must be one of {YAW_DAMPING}, got {yaw_damping!r}")
-    if not 1 <= harmonics <= MAX_HARMONICS:
-        raise ValueError(f"harmonics must be in [1, {MAX_HARMONICS}], got {harmonics}")
     params = params or FishParams()
     settings = settings or IdentificationNmpcSettings()
     timings: dict[str, float] = {}
@@ -251,8 +242,7 @@ def identify(
     timings["reference_runs"] = time.perf_counter() - t0
 
     osc_knots, osc_table, oscillation, held_oscillation = (), None, None, None
-    wave_knots, wave_table = (), None
-    if yaw_damping in ("oscillation", "waveform"):
+    if yaw_damping == "oscillation":
         try:
             osc_knots, osc_table = fit_oscillation(grid.patterns, ref.yaw_oscillation, ref.yaw_phase, ref.converged)
         except ValueError as err:
@@ -264,15 +254,6 @@ def identify(
         oscillation = np.array([oscillator.yaw_oscillation(*p)[0] for p in grid.patterns])
         if held is not None:
             held_oscillation = np.array([oscillator.yaw_oscillation(*p)[0] for p in held.patterns])
-    if yaw_damping == "waveform":
-        # the rate correction's reference: mean |omega| over the quadrature of the kept harmonics
-        mean_abs = np.mean(np.abs(ref.velocities[:, 2:3] + waveform_samples(ref.yaw_harmonics[:, :harmonics])), axis=1)
-        wave_knots, wave_table = fit_waveform(grid.patterns, ref.yaw_harmonics, harmonics, ref.converged, mean_abs)
-        # the averaged model will use the splines' waveform (one fin: the phase does not matter)
-        oscillator = dataclasses.replace(oscillator, waveform_knots=wave_knots, waveform_table=wave_table)
-        oscillation = waveform_samples(np.array([oscillator.yaw_waveform(*p) for p in grid.patterns]))
-        if held is not None:
-            held_oscillation = waveform_samples(np.array([oscillator.yaw_waveform(*p) for p in held.patterns]))
 
     t0 = time.perf_counter()
     forcing = unscaled_forcing(grid.patterns, params, sway=SWAY)
@@ -349,9 +330,6 @@ def identify(
                   "patterns between cross-validated polynomials and tensor-product cubic splines",
         "sway": f"{SWAY}: K_fy multiplies the fin's averaged force magnitude (the paper's K_fy cos(bias))",
         "yaw_damping": {
-            "waveform": f"waveform: the mean of c4 omega|omega| over the in-beat yaw waveform, {harmonics} harmonics "
-                        f"T_p c_k interpolated from the reference runs, {QUADRATURE}-point quadrature over the beat "
-                        "(docs/model.md 3.6, beyond the paper)",
             "oscillation": "oscillation: the mean of c4 omega|omega| over the in-beat yaw oscillation (beyond the "
                            "paper); its phasor A T_p (cos phi, sin phi) interpolated from the reference runs",
             "paper": "paper: c4 omega|omega| (eq. 20)"}[yaw_damping],
@@ -395,6 +373,6 @@ def identify(
                                                  ref.yaw_phase]).round(10).tolist()],
         },
     }
-    scaling = ScalingFunctions(powers, coefs, meta, knots, table, SWAY, osc_knots, osc_table, wave_knots, wave_table)
+    scaling = ScalingFunctions(powers, coefs, meta, knots, table, SWAY, osc_knots, osc_table)
     return IdentificationResult(grid, ref, forcing, k_nmpc, k_oracle, usable, flags, fits, candidates, scaling,
                                 timings, splines if "spline" in forms else {}, chosen, comparison)

@@ -15,8 +15,7 @@ forcing vector it is given differs).
 With the oscillation-averaged yaw damping (``pectoral_gym.model.averaging``, beyond
 the paper) ``f3`` uses ``c4 A^2 q(omega / A)`` instead of ``c4 omega|omega|``, with
 the pattern's yaw-oscillation amplitude ``A`` measured in its reference run;
-``A = 0`` gives the paper's ``f3``. With the waveform damping (``docs/model.md`` 3.6) the
-parameter is the pattern's sampled yaw waveform and ``f3`` uses the mean of ``c4 x|x|`` over it.
+``A = 0`` gives the paper's ``f3``.
 
 The NMPC drives the tracking error ``e = v - v_ref`` (eq. 33) to zero by
 minimising ``sum_k e_k' Q e_k ts + e_N' Q_T e_N`` (eqs. 34-35) over a horizon
@@ -40,7 +39,7 @@ from typing import Any, NamedTuple
 import casadi as ca
 import numpy as np
 
-from pectoral_gym.model.averaging import EXACT, averaged_body_accel, averaged_fin_forcing, equivalent_amplitude
+from pectoral_gym.model.averaging import EXACT, averaged_body_accel, averaged_fin_forcing
 from pectoral_gym.model.dynamics import linearised_rate
 from pectoral_gym.model.kfunctions import UNIT_K, ScalingFunctions
 from pectoral_gym.model.params import FishParams, body_coefficients, coefficient_vector
@@ -58,7 +57,7 @@ class _Parameters(NamedTuple):
     v0: Any  # (3,) initial (vx, vy, omega)
     v_ref: Any  # (3,) reference (vx, vy, omega), eq. (33)
     forcing: Any  # (3,) unscaled averaged forcing of the pattern
-    oscillation: Any  # (1,) yaw-oscillation amplitude [rad/s], or (QUADRATURE,) yaw-waveform samples [rad/s]
+    oscillation: Any  # (1,) yaw-oscillation amplitude [rad/s]
 
 
 @dataclass(frozen=True)
@@ -164,8 +163,6 @@ def auto_substeps(
     """
     velocities = np.asarray(velocities, dtype=np.float64).reshape(-1, 3)
     amplitude = np.zeros(len(velocities)) if oscillation is None else np.asarray(oscillation, dtype=np.float64)
-    if amplitude.ndim == 2:  # yaw-waveform samples: the sinusoid with their mean absolute value (step rule)
-        amplitude = equivalent_amplitude(amplitude)
     b = body_coefficients(params)
     rates = [linearised_rate(math.hypot(vx, vy), abs(w), float(a), b.m1, b.m2, b.J3, b.c1, b.c2, b.c4)
              for (vx, vy, w), a in zip(velocities, amplitude, strict=True)]
@@ -180,8 +177,7 @@ class ScalingNmpc:
         settings: NMPC settings.
         velocities: Reference velocities of all patterns to be solved (to pick the RK4 substeps).
         oscillation: Their yaw-oscillation amplitudes [rad/s] ``(n,)`` (oscillation-averaged yaw
-            damping), their yaw-waveform samples ``(n, QUADRATURE)`` (waveform damping), or ``None``
-            for the paper's damping.
+            damping), or ``None`` for the paper's damping.
     """
 
     def __init__(self, params: FishParams, settings: IdentificationNmpcSettings, velocities: np.ndarray,
@@ -194,15 +190,11 @@ class ScalingNmpc:
         v = ca.SX.sym("v", 3)
         u = ca.SX.sym("u", 3)
         forcing = ca.SX.sym("forcing", 3)
-        waveform = oscillation is not None and np.ndim(oscillation) == 2
-        width = np.shape(oscillation)[1] if waveform else 1
-        self._sizes = _Parameters(v0=3, v_ref=3, forcing=3, oscillation=width)
-        amplitude = ca.SX.sym("A", width)
+        self._sizes = _Parameters(v0=3, v_ref=3, forcing=3, oscillation=1)
+        amplitude = ca.SX.sym("A", 1)
 
         def rhs(state, inputs):
             k, f, a = inputs  # eqs. (30)-(32): the scaling values multiply the forcing
-            if waveform:
-                return body_accel_sx(state, k * f, params, yaw_waveform=a)
             return body_accel_sx(state, k * f, params, yaw_oscillation=ca.fmax(a, OSCILLATION_FLOOR))
 
         end = rk4_sx(rhs, v, (u, forcing, amplitude), settings.sampling / self.substeps, self.substeps)
@@ -237,8 +229,7 @@ class ScalingNmpc:
             v_ref: ``(3,)`` reference ``(vx, vy, omega)`` from the full model.
             forcing: ``(3,)`` unscaled averaged forcing of the pattern.
             guess: Initial guess of ``K`` (3,) (e.g. the previous pattern's solution); ones if ``None``.
-            oscillation: The pattern's yaw-oscillation amplitude [rad/s] (0 for the paper's damping),
-                or its yaw-waveform samples when the problem was built with them.
+            oscillation: The pattern's yaw-oscillation amplitude [rad/s] (0 for the paper's damping).
 
         A solver failure is returned as ``success=False`` (never raised).
         """

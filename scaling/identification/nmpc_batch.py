@@ -50,8 +50,7 @@ def solve_nmpc_batch(
     """One NMPC per pattern, over ``jobs`` processes (0: all cores; 1: in this process).
 
     ``oscillation``: per-pattern yaw-oscillation amplitudes [rad/s] ``(n,)`` for the
-    oscillation-averaged yaw damping, or yaw-waveform samples ``(n, QUADRATURE)`` for the
-    waveform damping (``pectoral_gym.model.averaging.waveform_samples``); ``None`` for the paper's damping.
+    oscillation-averaged yaw damping; ``None`` for the paper's damping.
     """
     n = len(velocities)
     jobs = jobs or os.cpu_count() or 1

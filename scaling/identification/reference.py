@@ -22,7 +22,7 @@ from pectoral_gym.model.models import FullModel
 from pectoral_gym.model.params import FinBeat, FishParams
 from pectoral_gym.model.steady import steady_state_batch
 
-__all__ = ["WAVEFORM_HARMONICS", "ReferenceRuns", "reference_runs", "velocities_from_turning", "yaw_waveform_harmonics"]
+__all__ = ["ReferenceRuns", "reference_runs", "velocities_from_turning"]
 
 
 @dataclass(frozen=True)
@@ -41,9 +41,6 @@ class ReferenceRuns:
             absolute value as the steady in-beat yaw-rate oscillation ``omega - mean(omega)``.
         yaw_phase: ``(n,)`` phase ``phi`` [rad] of its fundamental, ``cos(2 pi t / T_p + phi)``
             with ``t`` from the start of the power stroke.
-        yaw_harmonics: ``(n, WAVEFORM_HARMONICS)`` complex Fourier coefficients ``c_k`` [rad/s] of
-            that oscillation, ``omega - mean(omega) ~ Re sum_k c_k exp(i k 2 pi t / T_p)``, ``k = 1..``
-            (:func:`yaw_waveform_harmonics`); ``None`` for runs made without them.
     """
 
     patterns: np.ndarray
@@ -55,7 +52,6 @@ class ReferenceRuns:
     sim_time: np.ndarray
     yaw_oscillation: np.ndarray
     yaw_phase: np.ndarray
-    yaw_harmonics: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.patterns)
@@ -100,35 +96,6 @@ def yaw_oscillation_statistics(omega: np.ndarray) -> tuple[np.ndarray, np.ndarra
     return 0.5 * np.pi * np.abs(wiggle).mean(axis=1), np.angle(fundamental)
 
 
-WAVEFORM_HARMONICS = 12  # recorded per pattern; the coefficients file keeps the first few (docs/model.md 3.6)
-
-
-def yaw_waveform_harmonics(omega: np.ndarray, harmonics: int = WAVEFORM_HARMONICS) -> np.ndarray:
-    """Complex Fourier coefficients of the yaw-rate oscillation from samples over one fin period.
-
-    Args:
-        omega: ``(n, samples)`` yaw rates at ``t_j = (j + 1) T_p / samples`` after the start
-            of a power stroke.
-        harmonics: Number of harmonics ``k = 1..harmonics`` (at most ``samples // 2 - 1``).
-
-    Returns:
-        ``(n, harmonics)`` complex ``c_k = (2 / samples) sum_j omega~_j exp(-i k theta_j)``,
-        ``theta_j = 2 pi t_j / T_p``, so ``omega~(t) ~ Re sum_k c_k exp(i k theta)``; ``c_1`` has
-        the phase ``phi`` of :func:`yaw_oscillation_statistics`.
-
-    Raises:
-        ValueError: If ``harmonics`` is out of range for the number of samples.
-    """
-    omega = np.asarray(omega, dtype=np.float64)
-    samples = omega.shape[1]
-    if not 1 <= harmonics <= samples // 2 - 1:
-        raise ValueError(f"harmonics must be in [1, {samples // 2 - 1}] for {samples} samples, got {harmonics}")
-    wiggle = omega - omega.mean(axis=1, keepdims=True)
-    theta = 2.0 * np.pi * np.arange(1, samples + 1) / samples
-    k = np.arange(1, harmonics + 1)
-    return (2.0 / samples) * wiggle @ np.exp(-1j * np.outer(theta, k))
-
-
 def reference_runs(
     patterns: np.ndarray,
     params: FishParams | None = None,
@@ -158,7 +125,6 @@ def reference_runs(
     sim_time = np.zeros(n)
     oscillation = np.zeros(n)
     phase = np.zeros(n)
-    harmonics = np.zeros((n, WAVEFORM_HARMONICS), dtype=np.complex128)
     periods = np.unique(patterns[:, 2])
     bar = tqdm(total=n, desc="reference runs (full model)", unit="pattern", disable=not progress)
     for period in periods:
@@ -174,7 +140,6 @@ def reference_runs(
             model.advance(float(period) / OSCILLATION_SAMPLES)
             omega[:, k] = model.state[:, 5]
         oscillation[index], phase[index] = yaw_oscillation_statistics(omega)
-        harmonics[index] = yaw_waveform_harmonics(omega)
         for i, s in zip(index, states, strict=True):
             converged[i] = s.converged
             sim_time[i] = s.time
@@ -188,5 +153,4 @@ def reference_runs(
                 velocities[i] = (s.vx, s.vy, s.omega)
         bar.update(len(index))
     bar.close()
-    return ReferenceRuns(patterns, velocities, radius, turn_period, drift, converged, sim_time, oscillation, phase,
-                         harmonics)
+    return ReferenceRuns(patterns, velocities, radius, turn_period, drift, converged, sim_time, oscillation, phase)

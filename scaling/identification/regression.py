@@ -30,7 +30,6 @@ __all__ = [
     "Fit",
     "SplineFit",
     "fit_oscillation",
-    "fit_waveform",
     "fit_spline",
     "spline_nodes",
     "FEATURE_SETS",
@@ -346,39 +345,6 @@ def fit_oscillation(
     patterns = np.asarray(patterns, dtype=np.float64)
     scaled = np.asarray(amplitude, dtype=np.float64) * patterns[:, 2]
     return _period_free_splines(patterns, [scaled * np.cos(phase), scaled * np.sin(phase)], usable)
-
-
-def fit_waveform(
-    patterns: np.ndarray, harmonics: np.ndarray, count: int, usable: np.ndarray | None = None,
-    mean_abs: np.ndarray | None = None,
-) -> tuple[tuple[np.ndarray, ...], np.ndarray]:
-    """Splines of the first ``count`` yaw-waveform harmonics ``T_p c_k`` over (bias, amplitude, 1/ratio).
-
-    As :func:`fit_oscillation`, for each of ``Re, Im`` of ``T_p c_k``, ``k = 1..count``
-    (period-free for the same reason).
-
-    Args:
-        patterns: ``(n, 4)`` grid patterns (a tensor grid).
-        harmonics: ``(n, >= count)`` complex ``c_k`` [rad/s]
-            (``pectoral_gym.scaling.identification.reference.yaw_waveform_harmonics``).
-        count: Harmonics to keep.
-        usable: ``(n,)`` mask (default: finite values).
-        mean_abs: ``(n,)`` mean ``|omega|`` [rad/s] of the reference runs (the waveform's rate
-            correction), or ``None``.
-
-    Returns:
-        ``(waveform_knots, waveform_table)`` for :class:`pectoral_gym.model.kfunctions.ScalingFunctions`,
-        the table ``(2 count (+1), n0, n1, n2)`` with channels ``Re c_1, Im c_1, Re c_2, ...``
-        (then ``T_p`` times ``mean_abs``).
-    """
-    patterns = np.asarray(patterns, dtype=np.float64)
-    scaled = np.asarray(harmonics, dtype=np.complex128)[:, :count] * patterns[:, 2:3]
-    if scaled.shape[1] != count:
-        raise ValueError(f"{count} harmonics requested, the runs have {scaled.shape[1]}")
-    parts = [part for k in range(count) for part in (scaled[:, k].real, scaled[:, k].imag)]
-    if mean_abs is not None:
-        parts.append(np.asarray(mean_abs, dtype=np.float64) * patterns[:, 2])
-    return _period_free_splines(patterns, parts, usable)
 
 
 def _period_free_splines(patterns: np.ndarray, parts: list[np.ndarray], usable: np.ndarray | None):

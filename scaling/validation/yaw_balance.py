@@ -11,9 +11,8 @@ term [rad/s^2]   full model (mean over the window)              averaged model (
 ``moment``       ``mean(tau) / J3`` (exact: K = 1 averages)     ``(K_m(R) taubar_R + K_m(L) taubar_L) / J3``
 ``munk``         ``(m1 - m2) / J3 mean(vx vy)``                 ``(m1 - m2) / J3 mean(vx) mean(vy)``
 ``damping``      ``c4 mean(omega |omega|)``                     ``c4 q(mean omega, A)``, ``A`` from the
-                                                                phasors, or the waveform damping with
-                                                                the file's harmonics (relative phase
-                                                                averaged when the periods differ)
+                                                                phasors (relative phase averaged when
+                                                                the periods differ)
 ===============  =============================================  ==========================================
 
 At a periodic steady state the full model's terms balance (``moment + munk - damping = 0``, the
@@ -37,10 +36,9 @@ from pathlib import Path
 
 import numpy as np
 
-from pectoral_gym.model.averaging import EXACT, averaged_fin_forcing, combined_waveform
-from pectoral_gym.model.dynamics import oscillating_square_mean, waveform_square_mean
+from pectoral_gym.model.averaging import EXACT, averaged_fin_forcing
+from pectoral_gym.model.dynamics import oscillating_square_mean
 from pectoral_gym.model.kfunctions import ScalingFunctions, default_scaling_path
-from pectoral_gym.model.ktables import QUADRATURE, quadrature_window
 from pectoral_gym.model.models import FullModel
 from pectoral_gym.model.params import FishParams, body_coefficients, coefficient_vector
 
@@ -71,21 +69,6 @@ def _model_damping(omega: float, right: np.ndarray, left: np.ndarray, scaling: S
         shifts = np.linspace(0.0, 2.0 * np.pi, _PHASES, endpoint=False)
     else:  # one fin, or equal periods started together: a fixed relative phase of 0
         shifts = np.zeros(1)
-    if scaling.harmonics > 0:
-        fins = [(beat, side) for beat, side in ((right, 1.0), (left, -1.0)) if beat[1] > 0]
-        if len(fins) == 2 and quadrature_window(2 * np.pi / right[2], 2 * np.pi / left[2])[0] > QUADRATURE:
-            shifts = np.zeros(1)  # commensurate periods started together: a fixed phase relation
-        waves = np.array([side * scaling.yaw_waveform(*beat) for beat, side in fins])
-        mean_abs = np.array([scaling.yaw_mean_abs(*beat) for beat, _ in fins]) if scaling.has_rate_correction else None
-        k = np.arange(1, scaling.harmonics + 1)
-        damping = []
-        for shift in shifts:  # the left fin's beat phase relative to the right one's
-            rotated = waves.copy()
-            if len(fins) == 2:
-                rotated[1] *= np.exp(1j * k * shift)
-            samples = combined_waveform(rotated, mean_abs, np.array([beat[2] for beat, _ in fins]), omega, c4)
-            damping.append(waveform_square_mean(omega, samples))
-        return c4 * float(np.mean(damping))
     phasors = []
     for beat, side in ((right, 1.0), (left, -1.0)):
         amplitude, phase = scaling.yaw_oscillation(*beat) if beat[1] > 0 else (0.0, 0.0)

@@ -36,7 +36,7 @@ from pectoral_gym.scaling.validation.fidelity import DURATION, SEED_SETS, draw_p
 N, DT = 512, 0.01
 START, WINDOW, AFTER = 10.0, 10.0, 3.0  # record [START, START + WINDOW); measure 3 s after the switch
 params, scaling = FishParams(), ScalingFunctions.load()
-if "--coefficients" in sys.argv[1:]:  # another coefficients file, e.g. the opt-in waveform one
+if "--coefficients" in sys.argv[1:]:  # another coefficients file (e.g. one identified for another robot)
     scaling = ScalingFunctions.load(sys.argv[sys.argv.index("--coefficients") + 1])
 if "--linear-world" in sys.argv[1:]:  # with linear_damping.patch: no Munk moment (m1 = m2), K = 1
     params, scaling = params.replace(added_mass_y=params.added_mass_x), ScalingFunctions.unit()
