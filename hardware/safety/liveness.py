@@ -10,13 +10,14 @@ checks three consequences on the sightings (each a stop with a reason saying wha
   frames going round, a cut to another recording;
 * **too fast**: the camera's fish moving (least-squares speed less two standard errors) faster than the physical
   bound allows ours: fins still and the fish coasted to rest, while the camera shows a fish that swims;
-* **motion**: a shadow averaged model (:class:`pectoral_gym.model.models.AveragedModel`) runs the commands sent,
-  so the fins' phase at any past instant is known; the averaged model, started from the pose and velocity of the
-  window before the last ``window`` s, predicts the fish's motion in that window. *Frozen*: it predicts at least
-  ``min_motion`` (displacement plus half a body length times the heading change, less three standard errors)
-  and the camera shows less than ``ratio`` of it, over ``window`` or ``long_window``, however the pixels are
-  dressed up. *Innovation*: the end position misses the prediction by more than ``innovation`` plus three
-  standard errors of the measurement, twice in a row: a recording, another fish.
+* **motion**: the fins are replayed from the commands sent, so their phase at any past instant is known; the
+  blade-element model (:class:`pectoral_gym.model.models.FullModel`) driven by them, started in the state that
+  fits the poses of the window before the last ``window`` s, predicts the fish's motion in that window.
+  *Frozen*: it predicts at least ``min_motion`` (displacement plus half a body length times the heading
+  change, less three standard errors) and the camera shows less than ``ratio`` of it, over ``window`` or
+  ``long_window``, however the pixels are dressed up. *Innovation*: the end position misses the prediction by
+  more than ``innovation`` plus three standard errors of the measurement, twice in a row: a recording, another
+  fish.
 
 The robot takes a command somewhere between its send and the STATUS that acknowledges it (the radio's forward
 delay): the fins are replayed three times, taking every command at its send, half way and at its acknowledgement,
@@ -39,6 +40,7 @@ from pectoral_gym.hardware.radio.firmware import FirmwareConfig, ServoLimits
 from pectoral_gym.hardware.safety.geofence import SpeedBound
 from pectoral_gym.model import forcing_cache
 from pectoral_gym.model.params import FishParams
+from pectoral_gym.model.spec import FULL_REFERENCE
 
 __all__ = ["LivenessWatch"]
 
@@ -59,12 +61,12 @@ def _fit(poses: np.ndarray, at: float) -> tuple[np.ndarray, np.ndarray]:
 class LivenessWatch:
     """Checks the camera's poses against the fins' commands (module docstring); :meth:`sighting` gives the reason.
 
-    A shadow averaged model runs the commands sent from the arm on, so the fins' phase at any past instant is
-    known; a prediction starts the averaged model from the fins' phase of the window's start and the fish's
+    The fins are replayed from the commands sent from the arm on, so their phase at any past instant is
+    known; a prediction starts the blade-element model from the fins' phase of the window's start and the fish's
     measured pose and velocity there.
 
     Args:
-        params: The fish's parameters (the averaged model's and the speed bound's).
+        params: The fish's parameters (the model's and the speed bound's).
         bound: The physical speed bound, fed every command sent (the supervisor's).
         pose_noise: Standard deviation of a tracked position [m] (the jump allowance is 9 of them).
         window: Span of the motion and innovation checks [s].
@@ -83,8 +85,6 @@ class LivenessWatch:
     def __init__(self, params: FishParams, bound: SpeedBound, pose_noise: float, window: float = 0.8,
                  long_window: float = 2.4, ratio: float = 0.1, min_motion: float = 0.03, innovation: float = 0.04,
                  limits: ServoLimits | None = None):
-        from pectoral_gym.model.models import AveragedModel
-
         self.params, self.bound, self.pose_noise = params, bound, float(pose_noise)
         self.window, self.ratio, self.min_motion = float(window), float(ratio), float(min_motion)
         self.innovation, self.long_window = float(innovation), float(long_window)
@@ -95,7 +95,7 @@ class LivenessWatch:
         # equals it) sample what the robot's fins did.
         self._early = _Shadow(params, config, 0.0)
         self._later = [_Shadow(params, config, 0.5), _Shadow(params, config, 1.0)]
-        self._model = AveragedModel(n=1, params=params)
+        self._model = FULL_REFERENCE.build(1, params)
         self._last_beats: np.ndarray | None = None
         self._first_command = math.inf  # send time of the first command since the reset [s]
         self._poses: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=256)
@@ -183,37 +183,36 @@ class LivenessWatch:
         return ""
 
     def _motion(self, t1: float, window: float, innovation_check: bool) -> str:
-        """The averaged model's motion over the last ``window`` against the camera's; the innovation too if asked.
+        """The fish model's motion over the last ``window`` against the camera's; the innovation too if asked.
 
-        The model starts at the centre of the window before (``[t1 - 2 window, t1 - window]``), from the
-        least-squares line through its poses: there the line's position and slope are the pose and velocity
-        at that instant (exactly so for a constant acceleration) with the smallest errors, ``sigma / sqrt(n)``
-        and ``sigma / sqrt(sum (t - t_c)^2)``, and uncorrelated. The motion compared is the one inside the
-        last window, between the mean poses of its first and last 0.1 s.
+        The model starts at the start of the window before (``[t1 - 2 window, t1 - window]``) in the state whose
+        path through the replayed fins fits that window's poses (:meth:`_predict_fitted`). The standard errors
+        are taken as those of the least-squares line through the same poses at their centre ``t_c``,
+        ``sigma / sqrt(n)`` and ``sigma / sqrt(sum (t - t_c)^2)`` (a fit of a pose and a velocity to the same
+        poses, the path's shape given). The motion compared is the one inside the last window, between the mean
+        poses of its first and last 0.1 s.
         """
         before = self._recent(t1 - 2.0 * window, t1 - window)
         middle = self._recent(t1 - window - 0.5 * _END_SPAN, t1 - window + 0.5 * _END_SPAN)
         end = self._recent(t1 - _END_SPAN, t1)
         if len(before) < 6 or np.ptp(before[:, 0]) < 0.6 * window or len(middle) < 2 or len(end) < 2:
             return ""
-        t_c = float(before[:, 0].mean())
+        t_c, t_s = float(before[:, 0].mean()), float(before[0, 0])
         snapshots = self._early.snapshots
-        known = snapshots and snapshots[0][0] <= t_c and self._first_command <= t_c
+        known = snapshots and snapshots[0][0] <= t_s and self._first_command <= t_s
         if not (known and self.bound.run_until >= t1):
             return ""  # the fins did not run the whole span on commands we know
-        pose_c, rates_c = _fit(before, t_c)
-        c, s = math.cos(pose_c[2]), math.sin(pose_c[2])
-        body = (c * rates_c[0] + s * rates_c[1], -s * rates_c[0] + c * rates_c[1], rates_c[2])
         t_m, t_e = float(middle[:, 0].mean()), float(end[:, 0].mean())
         meas_m, meas_e = middle[:, 1:4].mean(axis=0), end[:, 1:4].mean(axis=0)
         reach = 0.5 * self.params.body_length
         m_meas = math.hypot(*(meas_e[:2] - meas_m[:2])) + reach * abs(meas_e[2] - meas_m[2])
         # The prediction most favourable to liveness, of the fins taking each command at its send, half way and at
-        # its acknowledgement: the smaller predicted motion, the smaller miss.
+        # its acknowledgement: the smaller predicted motion, the smaller miss. Each replay's start state is fitted
+        # to the window before through its own fins.
         m_pred = innovation = math.inf
-        shadows = [self._early] + [s for s in self._later if s.differs(self._early, t_c)]
+        shadows = [self._early] + [s for s in self._later if s.differs(self._early, t_s)]
         for shadow in shadows:
-            pred_m, pred_e = self._predict(shadow.snapshots, np.array([*pose_c, *body]), t_c, (t_m, t_e))
+            pred_m, pred_e = self._predict_fitted(shadow.snapshots, before, reach, (t_m, t_e))
             m_pred = min(m_pred, math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2]))
             innovation = min(innovation, math.hypot(*(meas_e[:2] - pred_e[:2])))
         scatter, sxx = self._scatter(before, t_c)
@@ -227,14 +226,14 @@ class LivenessWatch:
             self.predictions.append((t1, m_pred, m_meas, innovation, allowed))
         if m_pred - 3.0 * motion_error >= self.min_motion and m_meas < self.ratio * m_pred:
             return (f"camera frozen: the fish has moved {m_meas * 1000:.0f} mm in {window:.1f} s while its "
-                    f"fins beat for {m_pred * 1000:.0f} mm (the averaged model; at least "
+                    f"fins beat for {m_pred * 1000:.0f} mm (the fish model; at least "
                     f"{self.ratio * m_pred * 1000:.0f} mm expected)")
         if not innovation_check:
             return ""
         self._strikes = self._strikes + 1 if innovation > allowed else 0
         if self._strikes >= 2:  # twice in a row (0.1 s apart): one odd window is not enough
             return (f"camera not live: the fish it shows ended {innovation * 1000:.0f} mm from where the fins sent "
-                    f"over the last {t_e - t_c:.1f} s put ours (the averaged model; at most {allowed * 1000:.0f} mm "
+                    f"over the last {t_e - t_c:.1f} s put ours (the fish model; at most {allowed * 1000:.0f} mm "
                     "allowed)")
         return ""
 
@@ -246,9 +245,42 @@ class LivenessWatch:
         centred = poses[:, 0] - t_c
         return max(scatter, 1e-4), float(centred @ centred)
 
+    def _predict_fitted(self, snapshots: collections.deque, before: np.ndarray, reach: float,
+                        times: tuple[float, ...]) -> list[np.ndarray]:
+        """Poses (3,) at ``times`` of the fish model started at the first pose of ``before`` in the state that fits it.
+
+        The state ``(X, Y, psi, u, v, r)`` at ``t_s`` (``before``'s first row) is the least-squares fit of the model's
+        path, driven by the replayed fins of ``snapshots``, to ``before``'s poses (positions, and headings times
+        ``reach``): two Gauss-Newton steps from the line through them. A line's slope is the window's mean
+        velocity; the fish's own velocity surges with every stroke, and the path the fins drive is what the
+        fins' forces give from the instantaneous one. The position and heading derivatives are exact (the dynamics
+        do not depend on where the fish is or where it points: a shift moves the path, a turn rotates it about the
+        start); the velocity ones are finite differences.
+        """
+        t_s, fit_times = float(before[0, 0]), tuple(float(t) for t in before[:, 0])
+        pose, rates = _fit(before, t_s)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        state = np.array([*pose, c * rates[0] + s * rates[1], -s * rates[0] + c * rates[1], rates[2]])
+        target = before[:, 1:4] * np.array([1.0, 1.0, reach])
+        for _ in range(2):
+            base = np.array(self._predict(snapshots, state, t_s, fit_times)) * np.array([1.0, 1.0, reach])
+            jac = np.zeros((len(before), 3, 6))
+            jac[:, 0, 0] = jac[:, 1, 1] = 1.0
+            jac[:, 0, 2], jac[:, 1, 2], jac[:, 2, 2] = -(base[:, 1] - state[1]), base[:, 0] - state[0], reach
+            for j, h in ((3, 0.005), (4, 0.005), (5, 0.02)):  # [m/s, m/s, rad/s]: a fraction of the speeds met
+                moved = state.copy()
+                moved[j] += h
+                path = np.array(self._predict(snapshots, moved, t_s, fit_times)) * np.array([1.0, 1.0, reach])
+                jac[:, :, j] = (path - base) / h
+            step, *_ = np.linalg.lstsq(jac.reshape(-1, 6), (target - base).reshape(-1), rcond=None)
+            if not np.all(np.isfinite(step)):
+                break
+            state = state + step
+        return self._predict(snapshots, state, t_s, times)
+
     def _predict(self, snapshots: collections.deque, state: np.ndarray, t_c: float,
                  times: tuple[float, ...]) -> list[np.ndarray]:
-        """Poses (3,) at ``times`` (increasing) of the averaged model from ``state`` at ``t_c``.
+        """Poses (3,) at ``times`` (increasing) of the blade-element model from ``state`` at ``t_c``.
 
         Its fins are the replayed ones, set from ``snapshots`` (a shadow's, one every 0.05 s).
         """
