@@ -173,7 +173,7 @@ def test_camera_lies_stop_the_fish_with_the_reason(mode, reason):
             if truncated:
                 break
         assert truncated and info["safety_stop"] == "tracking_lost"
-        assert info["tracking"]["reason"] == reason
+        assert info["tracking"]["reason"].startswith(reason)  # a dead camera says for how long, with counts
         stopped = _stopped_at(robot, t_bad)
         assert stopped is not None and stopped - t_bad <= 1.0  # timeout 0.5 s + polling + radio
 
