@@ -128,7 +128,10 @@ class CommandedGain:
         self._still = max(self._still, float(t)) if math.isfinite(self._still) else float(t)
 
     def command(self, t: float, beats: np.ndarray, acknowledged: Callable[[], float | None] | None = None) -> None:
-        """A command ``(2, 4)`` sent at ``t`` [s]; ``acknowledged()``: when the robot had it [s] (``None``: not yet)."""
+        """A command ``(2, 4)`` sent at ``t`` [s]; ``acknowledged()``: when the robot had it [s] (``None``: not yet).
+
+        Without ``acknowledged`` (a link that does not tell) the command counts as taken when sent.
+        """
         if not math.isfinite(self._still):
             return  # never reset: accel() gives the full gain
         clipped = clip_beats(beats, self.limits)[0]
@@ -158,7 +161,7 @@ class CommandedGain:
         if not since:
             return 0.0
         first = since[0]
-        ack = first[2]() if first[2] is not None else None
+        ack = first[2]() if first[2] is not None else first[0]  # a link that does not tell: taken when sent
         arrival = now if ack is None else max(ack, first[0])
         if arrival + _longest_half_stroke(first[1], first[1], self.limits) >= t0:
             return self.full  # the first command after a stop is latched whole, from wherever the fin stopped
