@@ -18,7 +18,7 @@ be running in the span (``docs/guide/safety.md``, "The blind rule and the comman
   above ``max_speed`` (the firmware stretches the period);
 * what the PC does not know gets the fastest gain: a fin that was still (after an arm, a stop, a lease's end,
   a possible watchdog halt) latches the next command whole from wherever it stopped, so until that command's
-  first half-stroke is over only ``max_speed`` bounds it.
+  first half-stroke (a power stroke) is over only ``max_speed`` bounds it.
 
 One fin's force is at most ``k w^2 + I_p sqrt((pi w / d_min)^2 + w^4)`` for a peak rate ``w``
 (:func:`fin_force_bound`, ``SpeedBound``'s with ``max_speed`` replaced by ``w``), and the fish's speed grows at
@@ -78,14 +78,15 @@ def box_rate(patterns: np.ndarray, limits: ServoLimits) -> np.ndarray:
     return np.minimum(np.maximum(steady, transition), limits.max_speed)
 
 
-def _longest_half_stroke(lo: np.ndarray, hi: np.ndarray, limits: ServoLimits) -> float:
-    """The longest half-stroke [s] of a pattern in the box ``lo, hi`` ``(2, 4)`` or of a stretched transition.
+def _first_power_stroke(beats: np.ndarray, limits: ServoLimits) -> float:
+    """The longest a still fin's first half-stroke of ``beats`` ``(2, 4)`` lasts [s].
 
-    A transition stretched to ``max_speed`` lasts at most ``pi (angle range) / (2 max_speed)``.
+    A fin that is not moving latches a command at once and starts with a power stroke
+    (:func:`pectoral_gym.model.strokes.command_fins`): ``T_p / (zeta + 1)``, or longer if stretched to
+    ``max_speed``, then at most ``pi (angle range) / (2 max_speed)``.
     """
-    share = np.maximum(hi[:, 3] / (hi[:, 3] + 1.0), 1.0 / (lo[:, 3] + 1.0))
     stretched = math.pi * (limits.angle_max - limits.angle_min) / (2.0 * limits.max_speed)
-    return max(float((hi[:, 2] * share).max()), stretched)
+    return max(float((beats[:, 2] / (beats[:, 3] + 1.0)).max()), stretched)
 
 
 class CommandedGain:
@@ -163,7 +164,7 @@ class CommandedGain:
         first = since[0]
         ack = first[2]() if first[2] is not None else first[0]  # a link that does not tell: taken when sent
         arrival = now if ack is None else max(ack, first[0])
-        if arrival + _longest_half_stroke(first[1], first[1], self.limits) >= t0:
+        if arrival + _first_power_stroke(first[1], self.limits) >= t0:
             return self.full  # the first command after a stop is latched whole, from wherever the fin stopped
         self._run(now)
         start = t0 - round_trip - 0.05
