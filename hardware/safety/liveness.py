@@ -10,14 +10,14 @@ checks three consequences on the sightings (each a stop with a reason saying wha
   frames going round, a cut to another recording;
 * **too fast**: the camera's fish moving (least-squares speed less two standard errors) faster than the physical
   bound allows ours: fins still and the fish coasted to rest, while the camera shows a fish that swims;
-* **motion**: the fins are replayed from the commands sent, so their phase at any past instant is known; the
-  blade-element model (:class:`pectoral_gym.model.models.FullModel`) driven by them, started in the state that
-  fits the poses of the window before the last ``window`` s, predicts the fish's motion in that window.
-  *Frozen*: it predicts at least ``min_motion`` (displacement plus half a body length times the heading
-  change, less three standard errors) and the camera shows less than ``ratio`` of it, over ``window`` or
-  ``long_window``, however the pixels are dressed up. *Innovation*: the end position misses the prediction by
-  more than ``innovation`` plus three standard errors of the measurement, twice in a row: a recording, another
-  fish.
+* **motion**: the fins are replayed from the commands sent, so their phase at any past instant is known.
+  *Frozen*: the averaged model (:class:`pectoral_gym.model.models.AveragedModel`) driven by them, started from
+  the pose and mean velocity of the window before the last ``window`` s, predicts at least ``min_motion``
+  (displacement plus half a body length times the heading change, less three standard errors) and the camera
+  shows less than ``ratio`` of it, over ``window`` or ``long_window``, however the pixels are dressed up.
+  *Innovation*: the blade-element model (:class:`pectoral_gym.model.models.FullModel`) driven by them, started
+  in the state whose path fits the poses of the window before, misses the end position by more than
+  ``innovation`` plus three standard errors of the measurement, twice in a row: a recording, another fish.
 
 The robot takes a command somewhere between its send and the STATUS that acknowledges it (the radio's forward
 delay): the fins are replayed three times, taking every command at its send, half way and at its acknowledgement,
@@ -39,6 +39,7 @@ from pectoral_gym.hardware.finreplay import FinReplay
 from pectoral_gym.hardware.radio.firmware import FirmwareConfig, ServoLimits
 from pectoral_gym.hardware.safety.geofence import SpeedBound
 from pectoral_gym.model import forcing_cache
+from pectoral_gym.model.models import AveragedModel, FishModel
 from pectoral_gym.model.params import FishParams
 from pectoral_gym.model.spec import FULL_REFERENCE
 
@@ -62,7 +63,7 @@ class LivenessWatch:
     """Checks the camera's poses against the fins' commands (module docstring); :meth:`sighting` gives the reason.
 
     The fins are replayed from the commands sent from the arm on, so their phase at any past instant is
-    known; a prediction starts the blade-element model from the fins' phase of the window's start and the fish's
+    known; a prediction starts a fish model from the fins' phase of the window's start and the fish's
     measured pose and velocity there.
 
     Args:
@@ -96,6 +97,7 @@ class LivenessWatch:
         self._early = _Shadow(params, config, 0.0)
         self._later = [_Shadow(params, config, 0.5), _Shadow(params, config, 1.0)]
         self._model = FULL_REFERENCE.build(1, params)
+        self._averaged = AveragedModel(n=1, params=params)
         self._last_beats: np.ndarray | None = None
         self._first_command = math.inf  # send time of the first command since the reset [s]
         self._poses: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=256)
@@ -109,7 +111,8 @@ class LivenessWatch:
         self.reset(0.0)
         self.command(0.0, np.array([[math.pi / 2, 0.5, 1.0, 1.0]] * 2))
         self._advance_shadows(0.4)
-        self._predict(self._early.snapshots, np.array([1.0, 0.5, 0.0, 0.01, 0.0, 0.0]), 0.05, (0.2, 0.4))
+        for model in (self._model, self._averaged):
+            self._predict(self._early.snapshots, np.array([1.0, 0.5, 0.0, 0.01, 0.0, 0.0]), 0.05, (0.2, 0.4), model)
         self.reset()
 
     def reset(self, t: float = math.nan) -> None:
@@ -183,14 +186,15 @@ class LivenessWatch:
         return ""
 
     def _motion(self, t1: float, window: float, innovation_check: bool) -> str:
-        """The fish model's motion over the last ``window`` against the camera's; the innovation too if asked.
+        """The fish models' motion over the last ``window`` against the camera's; the innovation too if asked.
 
-        The model starts at the start of the window before (``[t1 - 2 window, t1 - window]``) in the state whose
-        path through the replayed fins fits that window's poses (:meth:`_predict_fitted`). The standard errors
-        are taken as those of the least-squares line through the same poses at their centre ``t_c``,
-        ``sigma / sqrt(n)`` and ``sigma / sqrt(sum (t - t_c)^2)`` (a fit of a pose and a velocity to the same
-        poses, the path's shape given). The motion compared is the one inside the last window, between the mean
-        poses of its first and last 0.1 s.
+        The motion: the averaged model starts at the centre ``t_c`` of the window before (``[t1 - 2 window,
+        t1 - window]``) from the least-squares line through its poses (there the line's position and slope are the
+        pose and mean velocity with the smallest errors, ``sigma / sqrt(n)`` and ``sigma / sqrt(sum (t - t_c)^2)``,
+        uncorrelated), compared inside the last window, between the mean poses of its first and last 0.1 s. The
+        end position: the blade-element model from the state whose path through the replayed fins fits the
+        window before (:meth:`_predict_fitted`), its standard error taken as the line's (a pose and a velocity
+        fitted to the same poses, the path's shape given).
         """
         before = self._recent(t1 - 2.0 * window, t1 - window)
         middle = self._recent(t1 - window - 0.5 * _END_SPAN, t1 - window + 0.5 * _END_SPAN)
@@ -207,14 +211,21 @@ class LivenessWatch:
         reach = 0.5 * self.params.body_length
         m_meas = math.hypot(*(meas_e[:2] - meas_m[:2])) + reach * abs(meas_e[2] - meas_m[2])
         # The prediction most favourable to liveness, of the fins taking each command at its send, half way and at
-        # its acknowledgement: the smaller predicted motion, the smaller miss. Each replay's start state is fitted
-        # to the window before through its own fins.
+        # its acknowledgement: the smaller predicted motion, the smaller miss. The motion: the averaged model from
+        # the line's pose and mean velocity at t_c (a start fitted through the fins would let a frozen window
+        # before explain itself by a fish that swims backwards against its thrust). The end position: the
+        # blade-element model from the state fitted through each replay's fins, whose path also had to match
+        # the window before (a frozen one included).
+        pose_c, rates_c = _fit(before, t_c)
+        c, s = math.cos(pose_c[2]), math.sin(pose_c[2])
+        line_state = np.array([*pose_c, c * rates_c[0] + s * rates_c[1], -s * rates_c[0] + c * rates_c[1], rates_c[2]])
         m_pred = innovation = math.inf
         shadows = [self._early] + [s for s in self._later if s.differs(self._early, t_s)]
         for shadow in shadows:
-            pred_m, pred_e = self._predict_fitted(shadow.snapshots, before, reach, (t_m, t_e))
+            pred_m, pred_e = self._predict(shadow.snapshots, line_state, t_c, (t_m, t_e), self._averaged)
             m_pred = min(m_pred, math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2]))
-            innovation = min(innovation, math.hypot(*(meas_e[:2] - pred_e[:2])))
+            fitted_e = self._predict_fitted(shadow.snapshots, before, reach, (t_e,))[0]
+            innovation = min(innovation, math.hypot(*(meas_e[:2] - fitted_e[:2])))
         scatter, sxx = self._scatter(before, t_c)
         # Standard errors [m]: of the predicted motion inside the window (the start's slope error over it), and of
         # the end position (the start's position and slope, and the end's mean).
@@ -279,12 +290,12 @@ class LivenessWatch:
         return self._predict(snapshots, state, t_s, times)
 
     def _predict(self, snapshots: collections.deque, state: np.ndarray, t_c: float,
-                 times: tuple[float, ...]) -> list[np.ndarray]:
-        """Poses (3,) at ``times`` (increasing) of the blade-element model from ``state`` at ``t_c``.
+                 times: tuple[float, ...], model: FishModel | None = None) -> list[np.ndarray]:
+        """Poses (3,) at ``times`` (increasing) of ``model`` (default: the blade-element one) from ``state`` at ``t_c``.
 
         Its fins are the replayed ones, set from ``snapshots`` (a shadow's, one every 0.05 s).
         """
-        model = self._model
+        model = self._model if model is None else model
         model.reset(state[None])
         snaps = [s for s in snapshots if s[0] <= times[-1]]
         first = max(k for k, s in enumerate(snaps) if s[0] <= t_c)
