@@ -203,9 +203,10 @@ class LivenessWatch:
             return ""
         t_c, t_s = float(before[:, 0].mean()), float(before[0, 0])
         snapshots = self._early.snapshots
-        known = snapshots and snapshots[0][0] <= t_s and self._first_command <= t_s
+        known = snapshots and snapshots[0][0] <= t_c and self._first_command <= t_c
         if not (known and self.bound.run_until >= t1):
             return ""  # the fins did not run the whole span on commands we know
+        fitted = snapshots[0][0] <= t_s and self._first_command <= t_s  # known from the window's start too
         t_m, t_e = float(middle[:, 0].mean()), float(end[:, 0].mean())
         meas_m, meas_e = middle[:, 1:4].mean(axis=0), end[:, 1:4].mean(axis=0)
         reach = 0.5 * self.params.body_length
@@ -220,19 +221,22 @@ class LivenessWatch:
         c, s = math.cos(pose_c[2]), math.sin(pose_c[2])
         line_state = np.array([*pose_c, c * rates_c[0] + s * rates_c[1], -s * rates_c[0] + c * rates_c[1], rates_c[2]])
         m_pred = innovation = math.inf
-        shadows = [self._early] + [s for s in self._later if s.differs(self._early, t_s)]
+        shadows = [self._early] + [s for s in self._later if s.differs(self._early, t_s if fitted else t_c)]
         for shadow in shadows:
             pred_m, pred_e = self._predict(shadow.snapshots, line_state, t_c, (t_m, t_e), self._averaged)
             m_pred = min(m_pred, math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2]))
-            fitted_e = self._predict_fitted(shadow.snapshots, before, reach, (t_e,))[0]
-            innovation = min(innovation, math.hypot(*(meas_e[:2] - fitted_e[:2])))
+            if fitted and innovation_check:
+                fitted_e = self._predict_fitted(shadow.snapshots, before, reach, (t_e,))[0]
+                innovation = min(innovation, math.hypot(*(meas_e[:2] - fitted_e[:2])))
+        if not fitted:
+            innovation = math.nan  # not judged (the fins are not known from the window's start)
         scatter, sxx = self._scatter(before, t_c)
         # Standard errors [m]: of the predicted motion inside the window (the start's slope error over it), and of
         # the end position (the start's position and slope, and the end's mean).
         motion_error = scatter * (t_e - t_m) / math.sqrt(sxx)
         end_error = scatter * math.sqrt(1.0 / len(before) + (t_e - t_c) ** 2 / sxx + 1.0 / len(end))
         allowed = self.innovation + 3.0 * end_error
-        if innovation_check:
+        if innovation_check and fitted:
             self.last_prediction = (m_pred, m_meas, innovation)
             self.predictions.append((t1, m_pred, m_meas, innovation, allowed))
         if m_pred - 3.0 * motion_error >= self.min_motion and m_meas < self.ratio * m_pred:
@@ -240,6 +244,8 @@ class LivenessWatch:
                     f"fins beat for {m_pred * 1000:.0f} mm (the fish model; at least "
                     f"{self.ratio * m_pred * 1000:.0f} mm expected)")
         if not innovation_check:
+            return ""
+        if math.isnan(innovation):
             return ""
         self._strikes = self._strikes + 1 if innovation > allowed else 0
         if self._strikes >= 2:  # twice in a row (0.1 s apart): one odd window is not enough
@@ -331,7 +337,7 @@ class _Shadow:
         self.replay = FinReplay(params, config)
         self.queue: collections.deque[tuple[float, np.ndarray, Callable[[], float | None] | None]] = \
             collections.deque()  # sent, not yet taken
-        self.snapshots: collections.deque[tuple[float, np.ndarray, np.ndarray]] = collections.deque(maxlen=128)
+        self.snapshots: collections.deque[tuple[float, np.ndarray, np.ndarray]] = collections.deque(maxlen=512)
         self.t = math.nan
 
     def reset(self, t: float) -> None:
