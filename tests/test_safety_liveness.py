@@ -243,3 +243,38 @@ def test_a_live_fish_whose_commands_change_ends_where_the_fins_put_it():
     misses = [p[3] for p in watch.predictions]
     assert len(misses) > 20
     assert max(misses) < 0.012, max(misses)
+
+
+def test_the_half_way_replay_takes_a_command_half_way_although_its_acknowledgement_comes_later():
+    """A command sent at 1.0 s and acknowledged at 1.9 s (the STATUS known only from then on): the half-way replay
+    takes it at 1.45 s, as a replay fed it then does (latched at the turning point at 1.8 s), not when the
+    acknowledgement becomes known (latched at the next one)."""
+    from pectoral_gym.hardware.finreplay import FinReplay
+    from pectoral_gym.hardware.radio.firmware import FirmwareConfig
+    from pectoral_gym.hardware.safety.liveness import _Shadow
+
+    gentle = np.array([[math.pi / 2, math.radians(20), 1.2, 1.0]] * 2)
+    now = [0.0]
+    shadow = _Shadow(P, FirmwareConfig(), 0.5)
+    shadow.reset(0.0)
+    shadow.queue.append((0.0, gentle, None))  # running from the start
+    shadow.queue.append((1.0, FULL, lambda: 1.9 if now[0] >= 1.9 else None))
+    for k in range(1, 67):  # sightings every 1/30 s to 2.2 s
+        now[0] = k / 30
+        shadow.advance(now[0])
+        if now[0] < 1.9:  # not yet acknowledged: for good only to its earliest take, then provisional
+            assert shadow.t <= max(1.0 + 0.5 * (now[0] - 1.0), 1.0) + 1e-9
+            assert shadow.view(now[0])[-1][0] == pytest.approx(now[0])
+    reference = FinReplay(P, FirmwareConfig())
+    reference.reset(0.0)
+    reference.command(0.0, gentle)
+    reference.command(1.45, FULL)
+    reference.advance(2.2)
+    late = FinReplay(P, FirmwareConfig())
+    late.reset(0.0)
+    late.command(0.0, gentle)
+    late.command(1.9, FULL)
+    late.advance(2.2)
+    assert shadow.t == pytest.approx(2.2)
+    assert np.allclose(shadow.replay.model.fins, reference.model.fins)
+    assert not np.allclose(late.model.fins, reference.model.fins)  # the take time matters here

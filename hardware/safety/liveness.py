@@ -30,6 +30,7 @@ smaller miss).
 from __future__ import annotations
 
 import collections
+import copy
 import math
 from collections.abc import Callable
 
@@ -221,12 +222,14 @@ class LivenessWatch:
         c, s = math.cos(pose_c[2]), math.sin(pose_c[2])
         line_state = np.array([*pose_c, c * rates_c[0] + s * rates_c[1], -s * rates_c[0] + c * rates_c[1], rates_c[2]])
         m_pred = innovation = math.inf
-        shadows = [self._early] + [s for s in self._later if s.differs(self._early, t_s if fitted else t_c)]
-        for shadow in shadows:
-            pred_m, pred_e = self._predict(shadow.snapshots, line_state, t_c, (t_m, t_e), self._averaged)
+        early = list(snapshots)
+        views = [early] + [v for v in (s.view(self._early.t) for s in self._later)
+                           if _Shadow.differs(early, v, t_s if fitted else t_c)]
+        for view in views:
+            pred_m, pred_e = self._predict(view, line_state, t_c, (t_m, t_e), self._averaged)
             m_pred = min(m_pred, math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2]))
             if fitted and innovation_check:
-                fitted_e = self._predict_fitted(shadow.snapshots, before, reach, (t_e,))[0]
+                fitted_e = self._predict_fitted(view, before, reach, (t_e,))[0]
                 innovation = min(innovation, math.hypot(*(meas_e[:2] - fitted_e[:2])))
         if not fitted:
             innovation = math.nan  # not judged (the fins are not known from the window's start)
@@ -262,7 +265,7 @@ class LivenessWatch:
         centred = poses[:, 0] - t_c
         return max(scatter, 1e-4), float(centred @ centred)
 
-    def _predict_fitted(self, snapshots: collections.deque, before: np.ndarray, reach: float,
+    def _predict_fitted(self, snapshots: collections.deque | list, before: np.ndarray, reach: float,
                         times: tuple[float, ...]) -> list[np.ndarray]:
         """Poses (3,) at ``times`` of the fish model started at the first pose of ``before`` in the state that fits it.
 
@@ -295,7 +298,7 @@ class LivenessWatch:
             state = state + step
         return self._predict(snapshots, state, t_s, times)
 
-    def _predict(self, snapshots: collections.deque, state: np.ndarray, t_c: float,
+    def _predict(self, snapshots: collections.deque | list, state: np.ndarray, t_c: float,
                  times: tuple[float, ...], model: FishModel | None = None) -> list[np.ndarray]:
         """Poses (3,) at ``times`` (increasing) of ``model`` (default: the blade-element one) from ``state`` at ``t_c``.
 
@@ -327,9 +330,12 @@ class _Shadow:
 
     The fins are the firmware's (:class:`pectoral_gym.hardware.finreplay.FinReplay`: hand-over at the next
     turning point, rate rule, the transition's stretch), as the robot runs them; a snapshot of them every
-    0.05 s. A shadow with ``share`` > 0 holds a command back until its acknowledgement is known (one not yet
-    acknowledged when the fins are run to ``t`` is acknowledged after ``t``: the poses come after their capture),
-    and then takes it at its share of the way or at once, whichever is later: always inside the interval.
+    0.05 s. A command whose acknowledgement is not known yet was acknowledged after the newest sighting ``t``
+    (the poses come after their capture), so a shadow with ``share`` > 0 takes it no earlier than
+    ``sent + share (t - sent)``: the replay is run for good (:attr:`snapshots`) only that far, never past a
+    take it does not know, and :meth:`view` adds a provisional stretch to ``t`` with every such command taken at
+    that earliest instant. (Taking it when its acknowledgement becomes known would take it at the
+    acknowledgement whatever the share.)
     """
 
     def __init__(self, params: FishParams, config: FirmwareConfig, share: float):
@@ -349,38 +355,74 @@ class _Shadow:
         if math.isfinite(self.t):
             self._snapshot()
 
-    def _snapshot(self) -> None:
+    def _snapshot(self, into: collections.deque | list | None = None) -> None:
         model = self.replay.model
-        self.snapshots.append((self.t, model.fins.copy(), model.pending.copy()))
+        (self.snapshots if into is None else into).append((self.t, model.fins.copy(), model.pending.copy()))
 
-    def _start(self, sent: float, acknowledged: Callable[[], float | None] | None) -> float | None:
-        """When this shadow takes a command sent at ``sent`` [s] (``None``: not known yet)."""
+    def _start(self, sent: float, acknowledged: Callable[[], float | None] | None,
+               newest: float) -> tuple[float, bool]:
+        """When this shadow takes a command sent at ``sent`` [s], and whether that is known.
+
+        Not known: its earliest, the acknowledgement coming after ``newest`` [s].
+        """
         if self.share == 0.0 or acknowledged is None:
-            return sent
+            return sent, True
         ack = acknowledged()
-        return None if ack is None else sent + self.share * max(ack - sent, 0.0)
+        if ack is None:
+            return sent + self.share * max(newest - sent, 0.0), False
+        return sent + self.share * max(ack - sent, 0.0), True
 
-    def advance(self, to: float, step: float = 0.05) -> None:
-        """Run the fins to ``to`` [s], taking the commands due by then; a snapshot every ``step`` s."""
+    def _run(self, to: float, step: float, provisional: list | None) -> None:
+        """Run the fins to ``to``; for good (stopping before a take not known), or ``provisional``ly."""
+        queue = self.queue if provisional is None else collections.deque(self.queue)
         while self.t < to:
             target = min(to, self.t + step)
-            while self.queue:
-                start = self._start(self.queue[0][0], self.queue[0][2])
-                if start is None or start > target:
+            while queue:
+                start, known = self._start(queue[0][0], queue[0][2], to)
+                if start > target:
                     break
-                _, beats, _ = self.queue.popleft()
+                if not known and provisional is None:
+                    target = start  # run for good only up to the take not known yet
+                    break
+                _, beats, _ = queue.popleft()
                 self.replay.command(max(start, self.t), beats)
+            if target <= self.t:
+                return
             self.replay.advance(target)
             self.t = target
-            self._snapshot()
+            self._snapshot(provisional)
 
-    def differs(self, other: _Shadow, since: float) -> bool:
-        """Whether ``other``'s snapshots from ``since`` [s] (less one step) on differ from this one's."""
-        mine = {s[0]: s for s in self.snapshots}
-        for t, fins, pending in other.snapshots:
+    def advance(self, to: float, step: float = 0.05) -> None:
+        """Run the fins for good towards ``to`` [s], taking the commands due by then; a snapshot every ``step`` s."""
+        self._run(to, step, None)
+
+    def view(self, to: float, step: float = 0.05) -> list[tuple[float, np.ndarray, np.ndarray]]:
+        """The snapshots to ``to`` [s]: those for good, then a provisional stretch.
+
+        In it the commands not yet acknowledged are taken at their earliest; the replay is put back as it was.
+        """
+        if self.t >= to:
+            return list(self.snapshots)
+        replay, model = self.replay, self.replay.model
+        saved = (copy.deepcopy(replay.firmware), model.fins.copy(), model.pending.copy(), model.state.copy(),
+                 model.integral.copy(), model.forcing_cache.copy(), model.time, replay._seq, replay._command, self.t)
+        tail: list[tuple[float, np.ndarray, np.ndarray]] = []
+        try:
+            self._run(to, step, tail)
+        finally:
+            replay.firmware = saved[0]
+            model.fins[:], model.pending[:], model.state[:], model.integral[:], model.forcing_cache[:] = saved[1:6]
+            model.time, replay._seq, replay._command, self.t = saved[6:]
+        return list(self.snapshots) + tail
+
+    @staticmethod
+    def differs(mine: list, other: list, since: float) -> bool:
+        """Whether the snapshots ``other`` from ``since`` [s] (less one step) on differ from ``mine``."""
+        own = {s[0]: s for s in mine}
+        for t, fins, pending in other:
             if t < since - 0.05:
                 continue
-            own = mine.get(t)
-            if own is None or not (np.array_equal(own[1], fins) and np.array_equal(own[2], pending)):
+            match = own.get(t)
+            if match is None or not (np.array_equal(match[1], fins) and np.array_equal(match[2], pending)):
                 return True
         return False
