@@ -244,7 +244,7 @@ class LivenessWatch:
             self.predictions.append((t1, m_pred, m_meas, innovation, allowed))
         if m_pred - 3.0 * motion_error >= self.min_motion and m_meas < self.ratio * m_pred:
             return (f"camera frozen: the fish has moved {m_meas * 1000:.0f} mm in {window:.1f} s while its "
-                    f"fins beat for {m_pred * 1000:.0f} mm (the fish model; at least "
+                    f"fins beat for {m_pred * 1000:.0f} mm (the averaged model; at least "
                     f"{self.ratio * m_pred * 1000:.0f} mm expected)")
         if not innovation_check:
             return ""
@@ -253,8 +253,8 @@ class LivenessWatch:
         self._strikes = self._strikes + 1 if innovation > allowed else 0
         if self._strikes >= 2:  # twice in a row (0.1 s apart): one odd window is not enough
             return (f"camera not live: the fish it shows ended {innovation * 1000:.0f} mm from where the fins sent "
-                    f"over the last {t_e - t_c:.1f} s put ours (the fish model; at most {allowed * 1000:.0f} mm "
-                    "allowed)")
+                    f"over the last {t_e - t_c:.1f} s put ours (the blade-element model; at most "
+                    f"{allowed * 1000:.0f} mm allowed)")
         return ""
 
     def _scatter(self, poses: np.ndarray, t_c: float) -> tuple[float, float]:
