@@ -125,6 +125,8 @@ class LivenessWatch:
         self._poses.clear()
         self._next_check = -math.inf
         self._strikes = 0
+        self._views: tuple[tuple[float, int], list] = ((math.nan, -1), [])
+        self._commands = 0  # commands taken in since the reset
 
     def command(self, t: float, beats: np.ndarray, acknowledged: Callable[[], float | None] | None = None) -> None:
         """A command ``(2, 4)`` sent at ``t`` [s].
@@ -138,6 +140,7 @@ class LivenessWatch:
         if not math.isfinite(self._early.t):
             self.reset(t)
         self._last_beats = np.array(beats, dtype=float).reshape(2, 4)
+        self._commands += 1
         self._first_command = min(self._first_command, float(t))
         for shadow in (self._early, *self._later):
             shadow.queue.append((float(t), self._last_beats, acknowledged))
@@ -222,9 +225,11 @@ class LivenessWatch:
         c, s = math.cos(pose_c[2]), math.sin(pose_c[2])
         line_state = np.array([*pose_c, c * rates_c[0] + s * rates_c[1], -s * rates_c[0] + c * rates_c[1], rates_c[2]])
         m_pred = innovation = math.inf
+        key = (self._early.t, self._commands)
+        if self._views[0] != key:  # the delayed replays' views, once per sighting and commands for both windows
+            self._views = (key, [s.view(self._early.t) for s in self._later])
         early = list(snapshots)
-        views = [early] + [v for v in (s.view(self._early.t) for s in self._later)
-                           if _Shadow.differs(early, v, t_s if fitted else t_c)]
+        views = [early] + [v for v in self._views[1] if _Shadow.differs(early, v, t_s if fitted else t_c)]
         for view in views:
             pred_m, pred_e = self._predict(view, line_state, t_c, (t_m, t_e), self._averaged)
             m_pred = min(m_pred, math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2]))
