@@ -11,6 +11,7 @@ import json
 import math
 import os
 import random
+import re
 import signal
 import socket
 import subprocess
@@ -173,7 +174,9 @@ def test_camera_lies_stop_the_fish_with_the_reason(mode, reason):
             if truncated:
                 break
         assert truncated and info["safety_stop"] == "tracking_lost"
-        assert info["tracking"]["reason"] == reason
+        # A dead camera says for how long: the blind rule's "no frames from the camera for ..." (with counts) or,
+        # with fins too gentle for it, the tracking timeout's with the frame grabber's "no frame from the camera ...".
+        assert re.match(reason.replace("no frames", "no frames?"), info["tracking"]["reason"])
         stopped = _stopped_at(robot, t_bad)
         assert stopped is not None and stopped - t_bad <= 1.0  # timeout 0.5 s + polling + radio
 

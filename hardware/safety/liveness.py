@@ -10,13 +10,14 @@ checks three consequences on the sightings (each a stop with a reason saying wha
   frames going round, a cut to another recording;
 * **too fast**: the camera's fish moving (least-squares speed less two standard errors) faster than the physical
   bound allows ours: fins still and the fish coasted to rest, while the camera shows a fish that swims;
-* **motion**: a shadow averaged model (:class:`pectoral_gym.model.models.AveragedModel`) runs the commands sent,
-  so the fins' phase at any past instant is known; the averaged model, started from the pose and velocity of the
-  window before the last ``window`` s, predicts the fish's motion in that window. *Frozen*: it predicts at least
-  ``min_motion`` (displacement plus half a body length times the heading change, less three standard errors)
-  and the camera shows less than ``ratio`` of it, over ``window`` or ``long_window``, however the pixels are
-  dressed up. *Innovation*: the end position misses the prediction by more than ``innovation`` plus three
-  standard errors of the measurement, twice in a row: a recording, another fish.
+* **motion**: the fins are replayed from the commands sent, so their phase at any past instant is known.
+  *Frozen*: the averaged model (:class:`pectoral_gym.model.models.AveragedModel`) driven by them, started from
+  the pose and mean velocity of the window before the last ``window`` s, predicts at least ``min_motion``
+  (displacement plus half a body length times the heading change, less three standard errors) and the camera
+  shows less than ``ratio`` of it, over ``window`` or ``long_window``, however the pixels are dressed up.
+  *Innovation*: the blade-element model (:class:`pectoral_gym.model.models.FullModel`) driven by them, started
+  in the state whose path fits the poses of the window before, misses the end position by more than
+  ``innovation`` plus three standard errors of the measurement, twice in a row: a recording, another fish.
 
 The robot takes a command somewhere between its send and the STATUS that acknowledges it (the radio's forward
 delay): the fins are replayed three times, taking every command at its send, half way and at its acknowledgement,
@@ -29,6 +30,7 @@ smaller miss).
 from __future__ import annotations
 
 import collections
+import copy
 import math
 from collections.abc import Callable
 
@@ -38,8 +40,10 @@ from pectoral_gym.hardware.safety.geofence import SpeedBound
 from pectoral_gym.model import forcing_cache
 from pectoral_gym.model.finreplay import FinReplay
 from pectoral_gym.model.finrules import FirmwareConfig
+from pectoral_gym.model.models import AveragedModel, FishModel
 from pectoral_gym.model.params import FishParams
 from pectoral_gym.model.servo import ServoLimits
+from pectoral_gym.model.spec import FULL_REFERENCE
 
 __all__ = ["LivenessWatch"]
 
@@ -60,12 +64,12 @@ def _fit(poses: np.ndarray, at: float) -> tuple[np.ndarray, np.ndarray]:
 class LivenessWatch:
     """Checks the camera's poses against the fins' commands (module docstring); :meth:`sighting` gives the reason.
 
-    A shadow averaged model runs the commands sent from the arm on, so the fins' phase at any past instant is
-    known; a prediction starts the averaged model from the fins' phase of the window's start and the fish's
+    The fins are replayed from the commands sent from the arm on, so their phase at any past instant is
+    known; a prediction starts a fish model from the fins' phase of the window's start and the fish's
     measured pose and velocity there.
 
     Args:
-        params: The fish's parameters (the averaged model's and the speed bound's).
+        params: The fish's parameters (the model's and the speed bound's).
         bound: The physical speed bound, fed every command sent (the supervisor's).
         pose_noise: Standard deviation of a tracked position [m] (the jump allowance is 9 of them).
         window: Span of the motion and innovation checks [s].
@@ -84,8 +88,6 @@ class LivenessWatch:
     def __init__(self, params: FishParams, bound: SpeedBound, pose_noise: float, window: float = 0.8,
                  long_window: float = 2.4, ratio: float = 0.1, min_motion: float = 0.03, innovation: float = 0.04,
                  limits: ServoLimits | None = None):
-        from pectoral_gym.model.models import AveragedModel
-
         self.params, self.bound, self.pose_noise = params, bound, float(pose_noise)
         self.window, self.ratio, self.min_motion = float(window), float(ratio), float(min_motion)
         self.innovation, self.long_window = float(innovation), float(long_window)
@@ -96,7 +98,8 @@ class LivenessWatch:
         # equals it) sample what the robot's fins did.
         self._early = _Shadow(params, config, 0.0)
         self._later = [_Shadow(params, config, 0.5), _Shadow(params, config, 1.0)]
-        self._model = AveragedModel(n=1, params=params)
+        self._model = FULL_REFERENCE.build(1, params)
+        self._averaged = AveragedModel(n=1, params=params)
         self._last_beats: np.ndarray | None = None
         self._first_command = math.inf  # send time of the first command since the reset [s]
         self._poses: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=256)
@@ -110,7 +113,8 @@ class LivenessWatch:
         self.reset(0.0)
         self.command(0.0, np.array([[math.pi / 2, 0.5, 1.0, 1.0]] * 2))
         self._advance_shadows(0.4)
-        self._predict(self._early.snapshots, np.array([1.0, 0.5, 0.0, 0.01, 0.0, 0.0]), 0.05, (0.2, 0.4))
+        for model in (self._model, self._averaged):
+            self._predict(self._early.snapshots, np.array([1.0, 0.5, 0.0, 0.01, 0.0, 0.0]), 0.05, (0.2, 0.4), model)
         self.reset()
 
     def reset(self, t: float = math.nan) -> None:
@@ -122,6 +126,8 @@ class LivenessWatch:
         self._poses.clear()
         self._next_check = -math.inf
         self._strikes = 0
+        self._views: tuple[tuple[float, int], list] = ((math.nan, -1), [])
+        self._commands = 0  # commands taken in since the reset
 
     def command(self, t: float, beats: np.ndarray, acknowledged: Callable[[], float | None] | None = None) -> None:
         """A command ``(2, 4)`` sent at ``t`` [s].
@@ -135,6 +141,7 @@ class LivenessWatch:
         if not math.isfinite(self._early.t):
             self.reset(t)
         self._last_beats = np.array(beats, dtype=float).reshape(2, 4)
+        self._commands += 1
         self._first_command = min(self._first_command, float(t))
         for shadow in (self._early, *self._later):
             shadow.queue.append((float(t), self._last_beats, acknowledged))
@@ -184,46 +191,61 @@ class LivenessWatch:
         return ""
 
     def _motion(self, t1: float, window: float, innovation_check: bool) -> str:
-        """The averaged model's motion over the last ``window`` against the camera's; the innovation too if asked.
+        """The fish models' motion over the last ``window`` against the camera's; the innovation too if asked.
 
-        The model starts at the centre of the window before (``[t1 - 2 window, t1 - window]``), from the
-        least-squares line through its poses: there the line's position and slope are the pose and velocity
-        at that instant (exactly so for a constant acceleration) with the smallest errors, ``sigma / sqrt(n)``
-        and ``sigma / sqrt(sum (t - t_c)^2)``, and uncorrelated. The motion compared is the one inside the
-        last window, between the mean poses of its first and last 0.1 s.
+        The motion: the averaged model starts at the centre ``t_c`` of the window before (``[t1 - 2 window,
+        t1 - window]``) from the least-squares line through its poses (there the line's position and slope are the
+        pose and mean velocity with the smallest errors, ``sigma / sqrt(n)`` and ``sigma / sqrt(sum (t - t_c)^2)``,
+        uncorrelated), compared inside the last window, between the mean poses of its first and last 0.1 s. The
+        end position: the blade-element model from the state whose path through the replayed fins fits the
+        window before (:meth:`_predict_fitted`), its standard error taken as the line's (a pose and a velocity
+        fitted to the same poses, the path's shape given).
         """
         before = self._recent(t1 - 2.0 * window, t1 - window)
         middle = self._recent(t1 - window - 0.5 * _END_SPAN, t1 - window + 0.5 * _END_SPAN)
         end = self._recent(t1 - _END_SPAN, t1)
         if len(before) < 6 or np.ptp(before[:, 0]) < 0.6 * window or len(middle) < 2 or len(end) < 2:
             return ""
-        t_c = float(before[:, 0].mean())
+        t_c, t_s = float(before[:, 0].mean()), float(before[0, 0])
         snapshots = self._early.snapshots
         known = snapshots and snapshots[0][0] <= t_c and self._first_command <= t_c
         if not (known and self.bound.run_until >= t1):
             return ""  # the fins did not run the whole span on commands we know
-        pose_c, rates_c = _fit(before, t_c)
-        c, s = math.cos(pose_c[2]), math.sin(pose_c[2])
-        body = (c * rates_c[0] + s * rates_c[1], -s * rates_c[0] + c * rates_c[1], rates_c[2])
+        fitted = snapshots[0][0] <= t_s and self._first_command <= t_s  # known from the window's start too
         t_m, t_e = float(middle[:, 0].mean()), float(end[:, 0].mean())
         meas_m, meas_e = middle[:, 1:4].mean(axis=0), end[:, 1:4].mean(axis=0)
         reach = 0.5 * self.params.body_length
         m_meas = math.hypot(*(meas_e[:2] - meas_m[:2])) + reach * abs(meas_e[2] - meas_m[2])
         # The prediction most favourable to liveness, of the fins taking each command at its send, half way and at
-        # its acknowledgement: the smaller predicted motion, the smaller miss.
+        # its acknowledgement: the smaller predicted motion, the smaller miss. The motion: the averaged model from
+        # the line's pose and mean velocity at t_c (a start fitted through the fins would let a frozen window
+        # before explain itself by a fish that swims backwards against its thrust). The end position: the
+        # blade-element model from the state fitted through each replay's fins, whose path also had to match
+        # the window before (a frozen one included).
+        pose_c, rates_c = _fit(before, t_c)
+        c, s = math.cos(pose_c[2]), math.sin(pose_c[2])
+        line_state = np.array([*pose_c, c * rates_c[0] + s * rates_c[1], -s * rates_c[0] + c * rates_c[1], rates_c[2]])
         m_pred = innovation = math.inf
-        shadows = [self._early] + [s for s in self._later if s.differs(self._early, t_c)]
-        for shadow in shadows:
-            pred_m, pred_e = self._predict(shadow.snapshots, np.array([*pose_c, *body]), t_c, (t_m, t_e))
+        key = (self._early.t, self._commands)
+        if self._views[0] != key:  # the delayed replays' views, once per sighting and commands for both windows
+            self._views = (key, [s.view(self._early.t) for s in self._later])
+        early = list(snapshots)
+        views = [early] + [v for v in self._views[1] if _Shadow.differs(early, v, t_s if fitted else t_c)]
+        for view in views:
+            pred_m, pred_e = self._predict(view, line_state, t_c, (t_m, t_e), self._averaged)
             m_pred = min(m_pred, math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2]))
-            innovation = min(innovation, math.hypot(*(meas_e[:2] - pred_e[:2])))
+            if fitted and innovation_check:
+                fitted_e = self._predict_fitted(view, before, reach, (t_e,))[0]
+                innovation = min(innovation, math.hypot(*(meas_e[:2] - fitted_e[:2])))
+        if not fitted:
+            innovation = math.nan  # not judged (the fins are not known from the window's start)
         scatter, sxx = self._scatter(before, t_c)
         # Standard errors [m]: of the predicted motion inside the window (the start's slope error over it), and of
         # the end position (the start's position and slope, and the end's mean).
         motion_error = scatter * (t_e - t_m) / math.sqrt(sxx)
         end_error = scatter * math.sqrt(1.0 / len(before) + (t_e - t_c) ** 2 / sxx + 1.0 / len(end))
         allowed = self.innovation + 3.0 * end_error
-        if innovation_check:
+        if innovation_check and fitted:
             self.last_prediction = (m_pred, m_meas, innovation)
             self.predictions.append((t1, m_pred, m_meas, innovation, allowed))
         if m_pred - 3.0 * motion_error >= self.min_motion and m_meas < self.ratio * m_pred:
@@ -232,11 +254,13 @@ class LivenessWatch:
                     f"{self.ratio * m_pred * 1000:.0f} mm expected)")
         if not innovation_check:
             return ""
+        if math.isnan(innovation):
+            return ""
         self._strikes = self._strikes + 1 if innovation > allowed else 0
         if self._strikes >= 2:  # twice in a row (0.1 s apart): one odd window is not enough
             return (f"camera not live: the fish it shows ended {innovation * 1000:.0f} mm from where the fins sent "
-                    f"over the last {t_e - t_c:.1f} s put ours (the averaged model; at most {allowed * 1000:.0f} mm "
-                    "allowed)")
+                    f"over the last {t_e - t_c:.1f} s put ours (the blade-element model; at most "
+                    f"{allowed * 1000:.0f} mm allowed)")
         return ""
 
     def _scatter(self, poses: np.ndarray, t_c: float) -> tuple[float, float]:
@@ -247,13 +271,46 @@ class LivenessWatch:
         centred = poses[:, 0] - t_c
         return max(scatter, 1e-4), float(centred @ centred)
 
-    def _predict(self, snapshots: collections.deque, state: np.ndarray, t_c: float,
-                 times: tuple[float, ...]) -> list[np.ndarray]:
-        """Poses (3,) at ``times`` (increasing) of the averaged model from ``state`` at ``t_c``.
+    def _predict_fitted(self, snapshots: collections.deque | list, before: np.ndarray, reach: float,
+                        times: tuple[float, ...]) -> list[np.ndarray]:
+        """Poses (3,) at ``times`` of the fish model started at the first pose of ``before`` in the state that fits it.
+
+        The state ``(X, Y, psi, u, v, r)`` at ``t_s`` (``before``'s first row) is the least-squares fit of the model's
+        path, driven by the replayed fins of ``snapshots``, to ``before``'s poses (positions, and headings times
+        ``reach``): two Gauss-Newton steps from the line through them. A line's slope is the window's mean
+        velocity; the fish's own velocity surges with every stroke, and the path the fins drive is what the
+        fins' forces give from the instantaneous one. The position and heading derivatives are exact (the dynamics
+        do not depend on where the fish is or where it points: a shift moves the path, a turn rotates it about the
+        start); the velocity ones are finite differences.
+        """
+        t_s, fit_times = float(before[0, 0]), tuple(float(t) for t in before[:, 0])
+        pose, rates = _fit(before, t_s)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
+        state = np.array([*pose, c * rates[0] + s * rates[1], -s * rates[0] + c * rates[1], rates[2]])
+        target = before[:, 1:4] * np.array([1.0, 1.0, reach])
+        for _ in range(2):
+            base = np.array(self._predict(snapshots, state, t_s, fit_times)) * np.array([1.0, 1.0, reach])
+            jac = np.zeros((len(before), 3, 6))
+            jac[:, 0, 0] = jac[:, 1, 1] = 1.0
+            jac[:, 0, 2], jac[:, 1, 2], jac[:, 2, 2] = -(base[:, 1] - state[1]), base[:, 0] - state[0], reach
+            for j, h in ((3, 0.005), (4, 0.005), (5, 0.02)):  # [m/s, m/s, rad/s]: a fraction of the speeds met
+                moved = state.copy()
+                moved[j] += h
+                path = np.array(self._predict(snapshots, moved, t_s, fit_times)) * np.array([1.0, 1.0, reach])
+                jac[:, :, j] = (path - base) / h
+            step, *_ = np.linalg.lstsq(jac.reshape(-1, 6), (target - base).reshape(-1), rcond=None)
+            if not np.all(np.isfinite(step)):
+                break
+            state = state + step
+        return self._predict(snapshots, state, t_s, times)
+
+    def _predict(self, snapshots: collections.deque | list, state: np.ndarray, t_c: float,
+                 times: tuple[float, ...], model: FishModel | None = None) -> list[np.ndarray]:
+        """Poses (3,) at ``times`` (increasing) of ``model`` (default: the blade-element one) from ``state`` at ``t_c``.
 
         Its fins are the replayed ones, set from ``snapshots`` (a shadow's, one every 0.05 s).
         """
-        model = self._model
+        model = self._model if model is None else model
         model.reset(state[None])
         snaps = [s for s in snapshots if s[0] <= times[-1]]
         first = max(k for k, s in enumerate(snaps) if s[0] <= t_c)
@@ -279,9 +336,12 @@ class _Shadow:
 
     The fins are the firmware's (:class:`pectoral_gym.model.finreplay.FinReplay`: hand-over at the next
     turning point, rate rule, the transition's stretch), as the robot runs them; a snapshot of them every
-    0.05 s. A shadow with ``share`` > 0 holds a command back until its acknowledgement is known (one not yet
-    acknowledged when the fins are run to ``t`` is acknowledged after ``t``: the poses come after their capture),
-    and then takes it at its share of the way or at once, whichever is later: always inside the interval.
+    0.05 s. A command whose acknowledgement is not known yet was acknowledged after the newest sighting ``t``
+    (the poses come after their capture), so a shadow with ``share`` > 0 takes it no earlier than
+    ``sent + share (t - sent)``: the replay is run for good (:attr:`snapshots`) only that far, never past a
+    take it does not know, and :meth:`view` adds a provisional stretch to ``t`` with every such command taken at
+    that earliest instant. (Taking it when its acknowledgement becomes known would take it at the
+    acknowledgement whatever the share.)
     """
 
     def __init__(self, params: FishParams, config: FirmwareConfig, share: float):
@@ -289,7 +349,7 @@ class _Shadow:
         self.replay = FinReplay(params, config)
         self.queue: collections.deque[tuple[float, np.ndarray, Callable[[], float | None] | None]] = \
             collections.deque()  # sent, not yet taken
-        self.snapshots: collections.deque[tuple[float, np.ndarray, np.ndarray]] = collections.deque(maxlen=128)
+        self.snapshots: collections.deque[tuple[float, np.ndarray, np.ndarray]] = collections.deque(maxlen=512)
         self.t = math.nan
 
     def reset(self, t: float) -> None:
@@ -301,38 +361,74 @@ class _Shadow:
         if math.isfinite(self.t):
             self._snapshot()
 
-    def _snapshot(self) -> None:
+    def _snapshot(self, into: collections.deque | list | None = None) -> None:
         model = self.replay.model
-        self.snapshots.append((self.t, model.fins.copy(), model.pending.copy()))
+        (self.snapshots if into is None else into).append((self.t, model.fins.copy(), model.pending.copy()))
 
-    def _start(self, sent: float, acknowledged: Callable[[], float | None] | None) -> float | None:
-        """When this shadow takes a command sent at ``sent`` [s] (``None``: not known yet)."""
+    def _start(self, sent: float, acknowledged: Callable[[], float | None] | None,
+               newest: float) -> tuple[float, bool]:
+        """When this shadow takes a command sent at ``sent`` [s], and whether that is known.
+
+        Not known: its earliest, the acknowledgement coming after ``newest`` [s].
+        """
         if self.share == 0.0 or acknowledged is None:
-            return sent
+            return sent, True
         ack = acknowledged()
-        return None if ack is None else sent + self.share * max(ack - sent, 0.0)
+        if ack is None:
+            return sent + self.share * max(newest - sent, 0.0), False
+        return sent + self.share * max(ack - sent, 0.0), True
 
-    def advance(self, to: float, step: float = 0.05) -> None:
-        """Run the fins to ``to`` [s], taking the commands due by then; a snapshot every ``step`` s."""
+    def _run(self, to: float, step: float, provisional: list | None) -> None:
+        """Run the fins to ``to``; for good (stopping before a take not known), or ``provisional``ly."""
+        queue = self.queue if provisional is None else collections.deque(self.queue)
         while self.t < to:
             target = min(to, self.t + step)
-            while self.queue:
-                start = self._start(self.queue[0][0], self.queue[0][2])
-                if start is None or start > target:
+            while queue:
+                start, known = self._start(queue[0][0], queue[0][2], to)
+                if start > target:
                     break
-                _, beats, _ = self.queue.popleft()
+                if not known and provisional is None:
+                    target = start  # run for good only up to the take not known yet
+                    break
+                _, beats, _ = queue.popleft()
                 self.replay.command(max(start, self.t), beats)
+            if target <= self.t:
+                return
             self.replay.advance(target)
             self.t = target
-            self._snapshot()
+            self._snapshot(provisional)
 
-    def differs(self, other: _Shadow, since: float) -> bool:
-        """Whether ``other``'s snapshots from ``since`` [s] (less one step) on differ from this one's."""
-        mine = {s[0]: s for s in self.snapshots}
-        for t, fins, pending in other.snapshots:
+    def advance(self, to: float, step: float = 0.05) -> None:
+        """Run the fins for good towards ``to`` [s], taking the commands due by then; a snapshot every ``step`` s."""
+        self._run(to, step, None)
+
+    def view(self, to: float, step: float = 0.05) -> list[tuple[float, np.ndarray, np.ndarray]]:
+        """The snapshots to ``to`` [s]: those for good, then a provisional stretch.
+
+        In it the commands not yet acknowledged are taken at their earliest; the replay is put back as it was.
+        """
+        if self.t >= to:
+            return list(self.snapshots)
+        replay, model = self.replay, self.replay.model
+        saved = (copy.deepcopy(replay.firmware), model.fins.copy(), model.pending.copy(), model.state.copy(),
+                 model.integral.copy(), model.forcing_cache.copy(), model.time, replay._seq, replay._command, self.t)
+        tail: list[tuple[float, np.ndarray, np.ndarray]] = []
+        try:
+            self._run(to, step, tail)
+        finally:
+            replay.firmware = saved[0]
+            model.fins[:], model.pending[:], model.state[:], model.integral[:], model.forcing_cache[:] = saved[1:6]
+            model.time, replay._seq, replay._command, self.t = saved[6:]
+        return list(self.snapshots) + tail
+
+    @staticmethod
+    def differs(mine: list, other: list, since: float) -> bool:
+        """Whether the snapshots ``other`` from ``since`` [s] (less one step) on differ from ``mine``."""
+        own = {s[0]: s for s in mine}
+        for t, fins, pending in other:
             if t < since - 0.05:
                 continue
-            own = mine.get(t)
-            if own is None or not (np.array_equal(own[1], fins) and np.array_equal(own[2], pending)):
+            match = own.get(t)
+            if match is None or not (np.array_equal(match[1], fins) and np.array_equal(match[2], pending)):
                 return True
         return False

@@ -63,8 +63,11 @@ def _aligned(recording, start_pose, t_switch: float) -> Callable[[float], tuple[
 
 
 def run_episode(policy, settings: dict, seed: int, fault: str, fault_after: int, conditions=None, recording=None,
-                sink: list | None = None, limit: float = math.inf) -> dict:
-    """One lockstep episode with the camera fault ``fault`` from step ``fault_after`` on; returns its summary."""
+                sink: list | None = None, limit: float = math.inf, min_motion: float | None = None) -> dict:
+    """One lockstep episode with the camera fault ``fault`` from step ``fault_after`` on; returns its summary.
+
+    ``min_motion`` [m], if given, replaces the liveness check's (``LivenessWatch.min_motion``): a what-if.
+    """
     from pectoral_gym.envs.tasks import kernels as tk
     from pectoral_gym.hardware.deploy import random_start
     from pectoral_gym.hardware.emurig import RigConditions, open_rig
@@ -96,6 +99,8 @@ def run_episode(policy, settings: dict, seed: int, fault: str, fault_after: int,
         env = HardwareFishEnv(port, faulty, reset_hook=lambda rng: robot.place(*random_start(rng, inset)),
                               clock=clock, handle_signals=False, safety=safety, **settings)
         resources.callback(env.close)
+        if min_motion is not None:
+            env.supervisor.liveness.min_motion = float(min_motion)
         obs, info = env.reset(seed=seed)
         policy.reset(seed)
         recording_on[0] = True
@@ -177,7 +182,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--pose-noise-deg", type=float, default=0.0)
     parser.add_argument("--camera-drop", type=float, default=0.0)
     parser.add_argument("--camera-latency", type=float, default=0.0)
+    parser.add_argument("--min-motion-mm", type=float, default=None,
+                        help="the liveness check's least judged motion [mm] instead of its own (a what-if)")
     args = parser.parse_args(argv)
+    if args.min_motion_mm is not None and not (math.isfinite(args.min_motion_mm) and args.min_motion_mm > 0):
+        parser.error(f"--min-motion-mm must be a number of millimetres > 0, got {args.min_motion_mm}")
+    min_motion = None if args.min_motion_mm is None else args.min_motion_mm / 1000.0
     from pectoral_gym.agents.training.policy import load_policy
     from pectoral_gym.hardware.deploy import env_settings
     from pectoral_gym.hardware.emurig import RigConditions
@@ -189,7 +199,8 @@ def main(argv: list[str] | None = None) -> int:
     recording = _record(policy, settings, args.seed + 10000) if args.fault == "recording" else None
     rows = []
     for k in range(args.episodes):
-        row = run_episode(policy, settings, args.seed + k, args.fault, args.fault_after, conditions, recording)
+        row = run_episode(policy, settings, args.seed + k, args.fault, args.fault_after, conditions, recording,
+                          min_motion=min_motion)
         rows.append(row)
         print(json.dumps(row), flush=True)
     delays = [r["delay"] for r in rows if math.isfinite(r["delay"])]

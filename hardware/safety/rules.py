@@ -7,6 +7,7 @@
   :class:`~pectoral_gym.hardware.safety.geofence.SpeedBound` (in :mod:`pectoral_gym.hardware.safety.geofence`):
   the fish too close to a wall to stop in time -> stop, end the episode.
 * :class:`TrackingWatch`: tracking lost for longer than ``timeout`` -> stop, end the episode.
+* :func:`effective_reaction_time`: the geofence's reaction time on a radio that delays the STOP.
 * :func:`install_stop_handlers`: Ctrl-C and SIGTERM send stop before the program ends.
 
 :class:`pectoral_gym.hardware.safety.supervisor.Supervisor` applies these rules in its own thread, also between steps;
@@ -32,7 +33,7 @@ from pectoral_gym.model.servo import ServoLimits, clip_beats
 MAX_TRACKING_TIMEOUT = 5.0
 
 __all__ = ["MAX_TRACKING_TIMEOUT", "SafetyConfig", "check_action", "CommandFilter", "TrackingWatch",
-           "install_stop_handlers"]
+           "effective_reaction_time", "install_stop_handlers"]
 
 
 @dataclass(frozen=True)
@@ -171,6 +172,38 @@ class TrackingWatch:
     def expired(self, now: float) -> bool:
         """Whether the fish has been lost for longer than ``timeout``."""
         return self.lost_for(now) > self.timeout
+
+
+def effective_reaction_time(reaction_time: float, round_trip: float | None) -> float:
+    """The time from a pose to the fins halting [s] on a radio whose measured round trip is ``round_trip`` [s].
+
+    ``reaction_time`` (``SafetyConfig.reaction_time``, the rule's ``t_r``) budgets a prompt radio: frame age,
+    polling, a few milliseconds of air time. A STOP decided now reaches the robot one forward delay ``f`` later,
+    and the fins run until then; the PC cannot measure ``f`` alone (``docs/protocol.md`` section 5: a radio slow
+    one way and one slow both ways give it identical times), but the return delay is not negative, so
+    ``f <= RTT``. Hence ``reaction_time + round_trip``, the bound the geofence's stopping distance needs
+    (``docs/guide/safety.md``, "The radio's delay and the geofence").
+
+    It covers the STOP's first copy. A lost copy is sent again (the link's retry, and its keep-alive repeats STOP
+    every 0.1 s until the robot reports still), each adding that period with the loss's probability; the robot
+    halts by itself at its lease's end in any case (``docs/protocol.md`` section 5).
+
+    Args:
+        reaction_time: The prompt radio's reaction time [s], >= 0.
+        round_trip: The link's measured round trip [s] (its smoothed estimate), >= 0; ``None`` before the first
+            sample gives ``reaction_time`` alone: until the first command's STATUS returns, the fins have run for
+            less than one round trip from rest, and the speed bound (``SpeedBound``) holds the fish's speed to
+            what that short run can give.
+    """
+    reaction = float(reaction_time)
+    if not (math.isfinite(reaction) and reaction >= 0):
+        raise ValueError(f"reaction_time must be a finite number of seconds >= 0, got {reaction_time!r}")
+    if round_trip is None:
+        return reaction
+    rtt = float(round_trip)
+    if not (math.isfinite(rtt) and rtt >= 0):
+        raise ValueError(f"round_trip must be a finite number of seconds >= 0 or None, got {round_trip!r}")
+    return reaction + rtt
 
 
 def install_stop_handlers(stop: Callable[[], object]) -> Callable[[], None]:

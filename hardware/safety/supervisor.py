@@ -22,52 +22,28 @@ import math
 import threading
 from collections.abc import Callable
 
-import numpy as np
-
 from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
+from pectoral_gym.hardware.safety.blind import CommandedGain, ls_velocity, unseen_reason
 from pectoral_gym.hardware.safety.geofence import Geofence, SpeedBound
 from pectoral_gym.hardware.safety.liveness import LivenessWatch
-from pectoral_gym.hardware.safety.rules import SafetyConfig, TrackingWatch
+from pectoral_gym.hardware.safety.rules import SafetyConfig, TrackingWatch, effective_reaction_time
 from pectoral_gym.hardware.vision.framecheck import FrameCheck
 from pectoral_gym.hardware.vision.frames import FrameGrabber
-from pectoral_gym.hardware.vision.latency import CameraLatencyError, afforded_latency, pipeline_latency
+from pectoral_gym.hardware.vision.latency import afforded_latency, check_latency, pipeline_latency
+from pectoral_gym.model.finrules import FirmwareConfig
 
-__all__ = ["Supervisor", "PRIORITY", "CONTROL_LOST"]
+__all__ = ["Supervisor", "PRIORITY", "CONTROL_LOST", "ls_velocity"]
 
 # Stop reasons, highest priority first; a RadioLink.control_lost reason ranks as "control_lost".
 PRIORITY = ("stop", "control_lost", "link_lost", "geofence", "tracking_lost", "episode_end")
 CONTROL_LOST = ("taken_over", "robot_busy", "robot_rebooted")
 _VELOCITY_WINDOW = 1.0  # poses up to this old [experiment s] give the least-squares velocity
-_MIN_POSES, _MIN_SPAN = 3, 0.1  # fewer poses, or a shorter span [s]: no estimate (the physical bound is used)
 _Z = 2.0  # standard errors added to the velocity towards each wall
 
 
 def _rank(reason: str) -> int:
     key = "control_lost" if reason in CONTROL_LOST else reason
     return PRIORITY.index(key) if key in PRIORITY else PRIORITY.index("control_lost")
-
-
-def ls_velocity(poses, noise: float) -> tuple[tuple[float, float], tuple[float, float]] | None:
-    """Least-squares velocity ``(vX, vY)`` [m/s] of ``(t, X, Y)`` poses and its standard errors, or ``None``.
-
-    ``None`` with fewer than 3 poses or a span under 0.1 s. The standard error is the pose scatter over
-    ``sqrt(sum (t - mean t)^2)``; the scatter is the residuals' (with at least 4 poses) but at least
-    ``noise`` [m], the tracker's assumed position noise.
-    """
-    if len(poses) < _MIN_POSES:
-        return None
-    arr = np.asarray(poses, dtype=float)
-    t = arr[:, 0] - arr[:, 0].mean()
-    sxx = float(t @ t)
-    if arr[-1, 0] - arr[0, 0] < _MIN_SPAN or sxx <= 0:
-        return None
-    xy = arr[:, 1:3] - arr[:, 1:3].mean(axis=0)
-    slope = (t @ xy) / sxx
-    resid = xy - np.outer(t, slope)
-    scatter = np.sqrt((resid ** 2).sum(axis=0) / (len(arr) - 2)) if len(arr) > 3 else np.zeros(2)
-    scatter = np.maximum(scatter, noise)
-    err = scatter / math.sqrt(sxx)
-    return (float(slope[0]), float(slope[1])), (float(err[0]), float(err[1]))
 
 
 class Supervisor:
@@ -112,6 +88,8 @@ class Supervisor:
         self.frame_check = FrameCheck(safety.max_frame_lead, safety.tracking_timeout / self.speed)
         self.bound = bound or SpeedBound(geofence.params, safety.limits)
         self.bound.unknown(self.now())
+        self.gain = CommandedGain(geofence.params, safety.limits)  # the blind rule's speed gain
+        self._watchdog = FirmwareConfig(limits=safety.limits).watchdog_timeout
         self.liveness = LivenessWatch(geofence.params, self.bound, safety.pose_noise, limits=safety.limits)
         self._not_live = ""  # why the camera's poses do not follow our fins (latched until the next arm)
         self.fired: dict[str, float] = {}
@@ -128,6 +106,7 @@ class Supervisor:
         self._box = None
         self._since = -math.inf
         self._reads = self._reads_at_sighting = 0  # frames read; frames read up to the last sighting
+        self._read_times: collections.deque[float] = collections.deque(maxlen=256)  # experiment s of recent reads
         self._recent: collections.deque[tuple[float, float, float]] = collections.deque(maxlen=128)
         self._measurements: list[tuple[float, float, float, float]] = []
         self._lock = threading.RLock()
@@ -175,6 +154,7 @@ class Supervisor:
             self._since = since
             self._estimate()  # from the poses since the reset only
             self.liveness.reset(self.now())  # armed after a confirmed stop: the fins are still
+            self.gain.reset(self.now())
             self._not_live = ""
             self.fired.clear()
             self.armed = True
@@ -205,7 +185,7 @@ class Supervisor:
             self.fired.pop("stop", None)
 
     # ------------------------------------------------------------ commands
-    def send(self, beats: np.ndarray, lease: float) -> bool:
+    def send(self, beats, lease: float) -> bool:
         """Send a fin command with a new lease unless a rule has tripped (checked now); returns whether it was sent."""
         with self._lock:
             if not self.armed:
@@ -219,11 +199,26 @@ class Supervisor:
             if self.fired or self.stop_requested:
                 return False
             now = self.now()
-            # The fins may run until the lease ends, plus the reaction time (radio latency, firmware tick).
-            self.bound.running(now, now + lease + self.safety.reaction_time)
+            if now > self.bound.run_until:  # the last lease may have ended: a command in flight then starts whole
+                self.gain.still(self.bound.run_until - self._round_trip())
+            # The fins may run until the lease ends, plus the reaction time (firmware tick) and the radio's delay.
+            self.bound.running(now, now + lease + self.safety.reaction_time + self._radio_delay())
             seq = self.link.set_fins(beats, lease)
-            self.liveness.command(now, beats, self._acknowledgement(seq))
+            acknowledged = self._acknowledgement(seq)
+            self.liveness.command(now, beats, acknowledged)
+            self.gain.command(now, beats, acknowledged)
             return True
+
+    def _round_trip(self) -> float:
+        """The link's smoothed round trip [experiment s], 0 before one is measured."""
+        rtt = getattr(self.link, "rtt", None)
+        value = rtt() if callable(rtt) else None
+        return float(value) * self.speed if value is not None and math.isfinite(value) else 0.0
+
+    def _radio_delay(self) -> float:
+        """What the radio adds to the reaction time [s] (:func:`effective_reaction_time`)."""
+        reaction = self.geofence.reaction_time
+        return effective_reaction_time(reaction, self._round_trip()) - reaction
 
     def _acknowledgement(self, seq) -> Callable[[], float | None] | None:
         """When the STATUS acknowledging message ``seq`` (or a later one) arrived [experiment s], ``None`` before.
@@ -246,6 +241,7 @@ class Supervisor:
                 return
             self.fired.setdefault(reason, self.now())
             self.link.stop()
+            self.gain.still(self.now())
 
     def drain(self) -> list[tuple[float, float, float, float]]:
         """Good measurements ``(t, X, Y, psi)`` since the last call, oldest first (for the observer)."""
@@ -284,6 +280,7 @@ class Supervisor:
         if frame is not None:
             self._reads += 1
             self._last_read = self.now()
+            self._read_times.append(self._last_read)
             try:
                 self._frame(frame)
             except Exception as error:  # noqa: BLE001 - whichever thread met it, a broken tracker stops the fish
@@ -330,25 +327,28 @@ class Supervisor:
         """The wall rule on the last pose; ``blind``: also the fastest speed gain the fins allow while unseen."""
         seen = self.watch.last_seen
         age = now - seen
-        bound = self.bound.peak(seen, now + self.geofence.reaction_time)
+        # A STOP reaches the robot a forward delay (at most the round trip) after it is sent: the fins run on.
+        radio = self._radio_delay()
+        bound = self.bound.peak(seen, now + self.geofence.reaction_time + radio)
         # Unseen beyond the reaction budget and the camera's measured latency: a frame that arrives late but
         # regularly is a sighting of an older time (its age already lengthens the stopping distance, speed x age).
         unseen = max(0.0, age - self.geofence.reaction_time - self.latency_budget)
-        gain = self.bound.accel * unseen if blind and self.bound.run_until >= seen else 0.0
+        gain = 0.0
+        if blind and unseen > 0 and self.bound.run_until >= seen:  # the most the commanded fins add while unseen
+            end = now + self.geofence.reaction_time + radio
+            gain = min(self.gain.accel(seen, now, end, self._round_trip()), self.bound.accel) * unseen
         spread = tuple(_Z * s for s in self.spread)
-        return self.geofence.breached(*self.pose, *self.velocity, age=age, spread=spread, bound=bound, gain=gain)
+        # ``age`` feeds only ``react = reaction_time + age``: adding the radio's delay is the longer reaction time.
+        return self.geofence.breached(*self.pose, *self.velocity, age=age + radio, spread=spread, bound=bound,
+                                      gain=gain)
 
     def _unseen_reason(self, now: float, seen: float) -> str:
-        """What the blind rule saw: no frames, frames that arrive too late, or frames without the fish."""
+        """What the blind rule saw: no frames (with counts), frames that arrive too late, or frames without the fish."""
         budget = f"the reaction time {self.geofence.reaction_time:.2f} s plus the measured camera latency " \
                  f"{self.latency_budget:.2f} s"
-        if now - self._last_read > self.geofence.reaction_time:
-            return "no frames from the camera"
-        if self._reads == self._reads_at_sighting:
-            return f"camera frames arrive {now - seen:.2f} s after their capture, more than {budget}: the fastest " \
-                   "motion since could reach the stopping band"
-        return f"fish unseen for {now - seen:.2f} s (more than {budget}): the fastest motion since could reach " \
-               "the stopping band"
+        recent = sum(1 for t in self._read_times if t >= now - 1.0)
+        return unseen_reason(now, seen, self._last_read, self._reads > self._reads_at_sighting, recent,
+                             self.poll_period, self.geofence.reaction_time, budget)
 
     # ------------------------------------------------------------ camera latency
     @property
@@ -364,14 +364,7 @@ class Supervisor:
 
     def check_latency(self) -> float:
         """The measured latency [s]; raises :class:`CameraLatencyError` if the tank cannot afford it."""
-        latency = self.latency
-        if math.isfinite(latency) and latency > self.afforded_latency:
-            raise CameraLatencyError(
-                f"the camera's frames reach this PC {latency:.3f} s after capture; the tank affords at most "
-                f"{self.afforded_latency:.3f} s (tracking timeout {self.safety.tracking_timeout:.2f} s minus the "
-                f"reaction time {self.safety.reaction_time:.2f} s); the fins stay stopped: use a faster camera "
-                "pipeline (docs/guide/safety.md, \"Camera latency\")")
-        return latency
+        return check_latency(self.latency, self.safety.tracking_timeout, self.safety.reaction_time)
 
     def _rules(self) -> list[str]:
         """Every reason that holds now, highest priority first (:data:`PRIORITY`)."""
@@ -381,9 +374,15 @@ class Supervisor:
         lost = getattr(self.link, "control_lost", "")
         if lost:
             out.append(str(lost))
-        if self.link.status_age() * self.speed > self.safety.link_timeout:
+        status_age = self.link.status_age() * self.speed
+        if status_age > self.safety.link_timeout:
             out.append("link_lost")
         now = self.now()
+        round_trip = self._round_trip()
+        # A robot that heard nothing for its watchdog stops its fins; the PC then hears no STATUS for the watchdog
+        # less the return delay's spread (at most a round trip; at least half the watchdog is assumed).
+        if status_age > max(self._watchdog - round_trip, 0.5 * self._watchdog):
+            self.gain.still(now - status_age - round_trip)
         seen = self.watch.last_seen
         if self._not_live:  # the camera's poses do not follow our fins: the fish is not seen
             self.watch.reason = self._not_live

@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable
 
-__all__ = ["CameraLatencyError", "LATENCY_WINDOW", "afforded_latency", "pipeline_latency"]
+__all__ = ["CameraLatencyError", "LATENCY_WINDOW", "afforded_latency", "check_latency", "pipeline_latency"]
 
 #: Recent frame ages the latency is measured over (2 s at 30 frames/s).
 LATENCY_WINDOW = 60
@@ -42,3 +42,15 @@ def pipeline_latency(ages: Iterable[float], window: int = LATENCY_WINDOW) -> flo
 def afforded_latency(tracking_timeout: float, reaction_time: float) -> float:
     """The longest camera latency [s] the tracking timeout leaves room for: ``tracking_timeout - reaction_time``."""
     return max(float(tracking_timeout) - float(reaction_time), 0.0)
+
+
+def check_latency(latency: float, tracking_timeout: float, reaction_time: float) -> float:
+    """``latency`` [s] if the tank affords it (or it is not measured, ``nan``); else :class:`CameraLatencyError`."""
+    afforded = afforded_latency(tracking_timeout, reaction_time)
+    if math.isfinite(latency) and latency > afforded:
+        raise CameraLatencyError(
+            f"the camera's frames reach this PC {latency:.3f} s after capture; the tank affords at most "
+            f"{afforded:.3f} s (tracking timeout {tracking_timeout:.2f} s minus the reaction time "
+            f"{reaction_time:.2f} s); the fins stay stopped: use a faster camera pipeline "
+            "(docs/guide/safety.md, \"Camera latency\")")
+    return latency

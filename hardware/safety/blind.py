@@ -1,0 +1,223 @@
+"""The blind rule's speed gain: how fast the fish can speed up while unseen, from the fins the PC commanded.
+
+While the camera shows nothing new, the geofence adds to the measured speed the most the fish can have gained
+since its last pose (:class:`pectoral_gym.hardware.safety.supervisor.Supervisor`'s blind rule). The fastest gain
+the servos allow (``SpeedBound.accel``, 2.8 m/s^2: both fins at 13 rad/s) assumes nothing about the fins; the
+PC knows what it told them, the firmware's rules (``docs/protocol.md`` §5) say what the fins run from that, and
+the liveness check (:mod:`pectoral_gym.hardware.safety.liveness`) stops a robot whose fish does not follow them.
+:class:`CommandedGain` gives ``SpeedBound``'s impulse bound with the fins' peak rate taken from what they can
+be running in the span (``docs/guide/safety.md``, "The blind rule and the commanded fins"):
+
+* the fins replayed from the commands (:class:`pectoral_gym.model.finreplay.FinReplay`) give the patterns
+  latched; the robot takes each command between its send and its acknowledgement, so its latched patterns lie
+  in the box (componentwise hull) of the replay's over the span widened by a round trip and of the commands
+  sent since (the rate rule moves a latched pattern towards the command, never past it; the clip only
+  lengthens a period, a slower fin);
+* a half-stroke of a pattern in that box, steady or transitional (from a turning point of one pattern in the
+  box to one of another, with the new one's duration), has a peak rate of at most :func:`box_rate`, and never
+  above ``max_speed`` (the firmware stretches the period);
+* what the PC does not know gets the fastest gain: a fin that was still (after an arm, a stop, a lease's end,
+  a possible watchdog halt) latches the next command whole from wherever it stopped, so until that command's
+  first half-stroke (a power stroke) is over only ``max_speed`` bounds it.
+
+One fin's force is at most ``k w^2 + I_p sqrt((pi w / d_min)^2 + w^4)`` for a peak rate ``w``
+(:func:`fin_force_bound`, ``SpeedBound``'s with ``max_speed`` replaced by ``w``), and the fish's speed grows at
+most at the two fins' sum over ``min(m1, m2)``.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from pectoral_gym.model import strokes
+from pectoral_gym.model.finreplay import FinReplay
+from pectoral_gym.model.finrules import FirmwareConfig
+from pectoral_gym.model.params import FishParams, body_coefficients
+from pectoral_gym.model.servo import ServoLimits, clip_beats
+
+__all__ = ["CommandedGain", "box_rate", "fin_force_bound", "ls_velocity", "shortest_half_stroke",
+           "unseen_reason"]
+
+_MIN_POSES, _MIN_SPAN = 3, 0.1  # fewer poses, or a shorter span [s]: no velocity estimate (the physical bound rules)
+
+def shortest_half_stroke(limits: ServoLimits) -> float:
+    """The shortest half-stroke the firmware runs [s]: ``period_min`` times the smaller share at the ratio limits."""
+    return limits.period_min * min(limits.ratio_min / (limits.ratio_min + 1.0), 1.0 / (limits.ratio_max + 1.0))
+
+
+def fin_force_bound(params: FishParams, limits: ServoLimits, rate: float) -> float:
+    """The largest force [N] one fin exerts on the body while its peak rate is ``rate`` [rad/s] (eqs. 13-17).
+
+    ``|F_n| = k g'^2`` plus the fin's inertia ``I_p sqrt(g''^2 + g'^4)``, with ``|g''| <= pi |g'|_peak / d`` for a
+    half-cosine stroke of duration ``d`` at least :func:`shortest_half_stroke`.
+    """
+    w = float(rate)
+    d_min = shortest_half_stroke(limits)
+    return params.fin_drag_constant * w * w + params.fin_inertia_constant * math.hypot(w * w, math.pi * w / d_min)
+
+
+def box_rate(patterns: np.ndarray, limits: ServoLimits) -> np.ndarray:
+    """``(2,)`` the highest peak rate [rad/s] of any half-stroke of fins running patterns in the box of ``patterns``.
+
+    ``patterns`` ``(n, 2, 4)`` (clipped, ``bias, A, T_p, zeta``). A steady half-stroke swings ``2 A`` in
+    ``T_p / (zeta + 1)`` (power) or ``zeta T_p / (zeta + 1)`` (recovery): peak ``pi A (zeta + 1) / T_p`` or
+    ``pi A (1 + 1 / zeta) / T_p``. A transitional one swings from a turning point of one pattern to one of
+    another, at most ``bias_hi - bias_lo + 2 A_hi``, in the new pattern's duration. Capped at ``max_speed``.
+    """
+    p = np.asarray(patterns, dtype=float).reshape(-1, 2, 4)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    bias_span, amp, period = hi[:, 0] - lo[:, 0], hi[:, 1], lo[:, 2]
+    z_lo, z_hi = lo[:, 3], hi[:, 3]
+    steady = math.pi * amp * np.maximum(z_hi + 1.0, 1.0 + 1.0 / z_lo) / period
+    swing = bias_span + 2.0 * amp
+    power_d, recovery_d = period / (z_hi + 1.0), period * z_lo / (z_lo + 1.0)
+    transition = math.pi * swing / (2.0 * np.minimum(power_d, recovery_d))
+    return np.minimum(np.maximum(steady, transition), limits.max_speed)
+
+
+def _first_power_stroke(beats: np.ndarray, limits: ServoLimits) -> float:
+    """The longest a still fin's first half-stroke of ``beats`` ``(2, 4)`` lasts [s].
+
+    A fin that is not moving latches a command at once and starts with a power stroke
+    (:func:`pectoral_gym.model.strokes.command_fins`): ``T_p / (zeta + 1)``, or longer if stretched to
+    ``max_speed``, then at most ``pi (angle range) / (2 max_speed)``.
+    """
+    stretched = math.pi * (limits.angle_max - limits.angle_min) / (2.0 * limits.max_speed)
+    return max(float((beats[:, 2] / (beats[:, 3] + 1.0)).max()), stretched)
+
+
+class CommandedGain:
+    """The fastest speed gain [m/s^2] the commanded fins allow over a span (module docstring).
+
+    The fins are replayed from the commands at their send times (:class:`pectoral_gym.model.finreplay.FinReplay`,
+    the firmware's rules); the robot takes each command up to a round trip later, so a span ``[t0, t1]`` is judged
+    on the box of the patterns the replay latched from ``t0`` less the round trip on and of every command sent
+    since: whatever the take times, each latched pattern lies between those (the rate rule moves a pattern
+    towards the command it follows), and :func:`box_rate` covers their steady and transitional half-strokes.
+
+    Args:
+        params: Fish parameters (fin constants, masses).
+        limits: The servo limits the firmware enforces.
+
+    Attributes:
+        full: The gain with nothing known of the fins (``SpeedBound.accel``'s impulse bound) [m/s^2].
+    """
+
+    def __init__(self, params: FishParams, limits: ServoLimits):
+        self.params, self.limits = params, limits
+        coef = body_coefficients(params)
+        self.mass = min(coef.m1, coef.m2)
+        self.full = 2.0 * fin_force_bound(params, limits, limits.max_speed) / self.mass
+        self._replay = FinReplay(params, FirmwareConfig(limits=limits))
+        self._commands: collections.deque[tuple[float, np.ndarray, Callable[[], float | None] | None]] = \
+            collections.deque(maxlen=64)  # (sent, clipped beats, acknowledged-at or None), newest last
+        self._latched: collections.deque[tuple[float, np.ndarray]] = collections.deque(maxlen=256)
+        self._still = math.inf  # nothing known until the first reset
+
+    def reset(self, t: float) -> None:
+        """The fins are still at ``t`` [s] (an arm after a confirmed stop); commands before are forgotten."""
+        self._commands.clear()
+        self._latched.clear()
+        self._replay.reset(float(t))
+        self._still = float(t)
+
+    def still(self, t: float) -> None:
+        """The fins may have stopped at ``t`` [s] (a stop, a lease's end, a watchdog): the next latch is whole."""
+        self._still = max(self._still, float(t)) if math.isfinite(self._still) else float(t)
+
+    def command(self, t: float, beats: np.ndarray, acknowledged: Callable[[], float | None] | None = None) -> None:
+        """A command ``(2, 4)`` sent at ``t`` [s]; ``acknowledged()``: when the robot had it [s] (``None``: not yet).
+
+        Without ``acknowledged`` (a link that does not tell) the command counts as taken when sent.
+        """
+        if not math.isfinite(self._still):
+            return  # never reset: accel() gives the full gain
+        clipped = clip_beats(beats, self.limits)[0]
+        if self._commands and np.array_equal(self._commands[-1][1], clipped) and self._commands[-1][0] > self._still:
+            return  # a renewal of the same command: nothing new can be latched
+        self._run(t)
+        self._replay.command(t, clipped)
+        self._commands.append((float(t), clipped, acknowledged))
+
+    def _run(self, to: float, step: float = 0.05) -> None:
+        """Replay the fins to ``to`` [s], noting the latched patterns every ``step`` s (a half-stroke is longer)."""
+        t = self._replay.model.time
+        while t < to:
+            t = min(to, t + step)
+            self._replay.advance(t)
+            fins = self._replay.fins[0]
+            self._latched.append((t, fins[:, strokes.BIAS:strokes.RATIO + 1].copy()))
+
+    def accel(self, t0: float, now: float, t1: float, round_trip: float) -> float:
+        """The most the fish's speed can grow per second [m/s^2] anywhere in ``[t0, t1]`` [s], judged at ``now``.
+
+        ``round_trip`` [s]: the most a command takes to reach the robot (the link's round trip).
+        """
+        if not math.isfinite(self._still):
+            return self.full  # nothing known of the fins
+        since = [c for c in self._commands if self._still <= c[0] <= t1]
+        if not since:
+            return 0.0
+        first = since[0]
+        ack = first[2]() if first[2] is not None else first[0]  # a link that does not tell: taken when sent
+        arrival = now if ack is None else max(ack, first[0])
+        if arrival + _first_power_stroke(first[1], self.limits) >= t0:
+            return self.full  # the first command after a stop is latched whole, from wherever the fin stopped
+        self._run(now)
+        start = t0 - round_trip - 0.05
+        patterns = [p for t, p in self._latched if t >= start]
+        patterns += [c[1] for c in since if c[0] >= start]
+        older = [c for c in since if c[0] < start]
+        if older:
+            patterns.append(older[-1][1])  # the command the fins follow at the window's start
+        rates = box_rate(np.stack(patterns), self.limits)
+        return sum(fin_force_bound(self.params, self.limits, w) for w in rates) / self.mass
+
+
+def ls_velocity(poses, noise: float) -> tuple[tuple[float, float], tuple[float, float]] | None:
+    """Least-squares velocity ``(vX, vY)`` [m/s] of ``(t, X, Y)`` poses and its standard errors, or ``None``.
+
+    ``None`` with fewer than 3 poses or a span under 0.1 s. The standard error is the pose scatter over
+    ``sqrt(sum (t - mean t)^2)``; the scatter is the residuals' (with at least 4 poses) but at least
+    ``noise`` [m], the tracker's assumed position noise.
+    """
+    if len(poses) < _MIN_POSES:
+        return None
+    arr = np.asarray(poses, dtype=float)
+    t = arr[:, 0] - arr[:, 0].mean()
+    sxx = float(t @ t)
+    if arr[-1, 0] - arr[0, 0] < _MIN_SPAN or sxx <= 0:
+        return None
+    xy = arr[:, 1:3] - arr[:, 1:3].mean(axis=0)
+    slope = (t @ xy) / sxx
+    resid = xy - np.outer(t, slope)
+    scatter = np.sqrt((resid ** 2).sum(axis=0) / (len(arr) - 2)) if len(arr) > 3 else np.zeros(2)
+    scatter = np.maximum(scatter, noise)
+    err = scatter / math.sqrt(sxx)
+    return (float(slope[0]), float(slope[1])), (float(err[0]), float(err[1]))
+
+
+def unseen_reason(now: float, seen: float, last_read: float, read_since_sighting: bool, recent_reads: int,
+                  frame_period: float, reaction_time: float, budget: str) -> str:
+    """The blind rule's stop reason, saying what the camera did (times in experiment s).
+
+    ``seen``: capture time of the last pose; ``last_read``: when the newest frame arrived; ``read_since_sighting``:
+    whether frames arrived after that pose's; ``recent_reads``: frames that arrived in the last second. A gap
+    longer than the reaction time is "no frames" (a run of dropped frames or a camera that stopped: the PC
+    cannot tell which yet); a shorter one after a late frame says how late it came and how long nothing followed.
+    """
+    gap, old = now - last_read, now - seen
+    counts = f"{recent_reads} frames arrived in the last second, one every {frame_period:.3f} s expected"
+    if gap > reaction_time:
+        return f"no frames from the camera for {gap:.2f} s ({gap / frame_period:.1f} frame periods; {counts}): " \
+               f"the last pose is {old:.2f} s old, more than {budget}"
+    if not read_since_sighting:
+        return f"camera frames arrive {last_read - seen:.2f} s after their capture and none came in the {gap:.2f} s " \
+               f"since ({counts}): the last pose is {old:.2f} s old, more than {budget}; the fastest motion the " \
+               "commanded fins allow since could reach the stopping band"
+    return f"fish unseen for {old:.2f} s (more than {budget}; {counts}): the fastest motion the commanded fins " \
+           "allow since could reach the stopping band"
