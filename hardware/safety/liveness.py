@@ -30,7 +30,6 @@ smaller miss).
 from __future__ import annotations
 
 import collections
-import copy
 import math
 from collections.abc import Callable
 
@@ -409,16 +408,13 @@ class _Shadow:
         """
         if self.t >= to:
             return list(self.snapshots)
-        replay, model = self.replay, self.replay.model
-        saved = (copy.deepcopy(replay.firmware), model.fins.copy(), model.pending.copy(), model.state.copy(),
-                 model.integral.copy(), model.forcing_cache.copy(), model.time, replay._seq, replay._command, self.t)
+        saved, saved_t = self.replay.checkpoint(), self.t
         tail: list[tuple[float, np.ndarray, np.ndarray]] = []
         try:
             self._run(to, step, tail)
         finally:
-            replay.firmware = saved[0]
-            model.fins[:], model.pending[:], model.state[:], model.integral[:], model.forcing_cache[:] = saved[1:6]
-            model.time, replay._seq, replay._command, self.t = saved[6:]
+            self.replay.restore(saved)
+            self.t = saved_t
         return list(self.snapshots) + tail
 
     @staticmethod

@@ -22,6 +22,9 @@ it; the live env's fin block does not (it keeps the commands' timing, as the sim
 
 from __future__ import annotations
 
+import copy
+from typing import Any
+
 import numpy as np
 
 from pectoral_gym.model.finrules import (
@@ -92,6 +95,22 @@ class FinReplay:
         self.model.reset()
         self.model.time = float(t)
         self._command = 0
+
+    def checkpoint(self) -> tuple[Any, ...]:
+        """The replay's whole state (firmware, fins, body, clock, command identity), for :meth:`restore`.
+
+        A look-ahead (a provisional stretch run past what is known) runs from a checkpoint and restores it.
+        """
+        model = self.model
+        return (copy.deepcopy(self.firmware), model.fins.copy(), model.pending.copy(), model.state.copy(),
+                model.integral.copy(), model.forcing_cache.copy(), model.time, self._command)
+
+    def restore(self, checkpoint: tuple[Any, ...]) -> None:
+        """Put the replay back as :meth:`checkpoint` found it (the checkpoint may be restored once)."""
+        model = self.model
+        self.firmware = checkpoint[0]
+        model.fins[:], model.pending[:], model.state[:], model.integral[:], model.forcing_cache[:] = checkpoint[1:6]
+        model.time, self._command = checkpoint[6:]
 
     def command(self, t: float, beats: np.ndarray) -> None:
         """The PC sent a new command ``beats`` ``(2, 4)`` at time ``t``; the robot runs it as quantised on the wire.
