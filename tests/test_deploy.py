@@ -212,7 +212,8 @@ def _error_line(capsys) -> str:
     (["--seed", "-1"], "--seed must be >= 0"),
     (["--control-period", "0.01"], "--control-period must be in [0.1, 2.0]"),
     (["--control-period", "30"], "--control-period must be in [0.1, 2.0]"),
-    (["--geofence", "-0.1"], "--geofence must be"),
+    (["--geofence", "-0.1"], "--geofence: StopRule.margin must be a finite number >= 0"),
+    (["--geofence", "nan"], "--geofence: StopRule.margin must be a finite number >= 0"),
     (["--nice", "5"], "--nice must be in [-20, 0]"),
     (["--port", "socket://127.0.0.1:1"], "cannot be used with --emulate"),
     (["--robot-address", "0013A20012345678"], "cannot be used with --emulate"),
@@ -413,10 +414,10 @@ def test_the_deploys_controllers_keep_the_geofence_widened_by_5_cm():
         return make_baseline("hand", config, shield={"band": rule}).shield.band
 
     config = EnvConfig(model="full")
-    assert ROBOT.stop_rule == pytest.approx((0.10, 0.15, 0.03))  # the robot's 5 cm rule + 5 cm
+    assert ROBOT.stop_rule.as_tuple() == pytest.approx((0.10, 0.15, 0.03))  # the robot's 5 cm rule + 5 cm
     hand = make_controller("hand", config, step_budget=1.0)  # the default geofence: the robot-ready envs' band
     assert hand.shield.band == shield_band(StopRule(0.10, 0.15, 0.03))
-    wide = make_controller("hand", config, step_budget=1.0, safety=SafetyConfig(geofence_margin=0.2))
+    wide = make_controller("hand", config, step_budget=1.0, safety=SafetyConfig(stop_rule=StopRule(0.2, 0.15, 0.03)))
     assert wide.shield.band == shield_band(StopRule(0.25, 0.15, 0.03))
 
 

@@ -26,6 +26,7 @@ from pectoral_gym.hardware.vision.frames import Frame
 from pectoral_gym.model.finrules import apply_firmware
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
 from pectoral_gym.model.servo import ServoLimits
+from pectoral_gym.model.tank import StopRule
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")
 
@@ -180,7 +181,7 @@ def test_reset_over_a_slow_radio_waits_for_the_robots_word():
 
 def test_speed_estimate_at_rest_with_5_mm_noise_never_trips_the_geofence():
     # A fish at rest with its centre 0.30 m from the +X wall, heading at it; fins running (bound far above).
-    fence = Geofence(P, 0.05, 0.15, 0.03)
+    fence = Geofence(P, StopRule(0.05, 0.15, 0.03))
     rng = np.random.default_rng(0)
     x0 = TANK_LENGTH - 0.30
     before = after = 0
@@ -200,7 +201,7 @@ def test_speed_estimate_at_rest_with_5_mm_noise_never_trips_the_geofence():
 
 
 def test_speed_estimate_still_sees_a_fish_swimming_at_a_wall():
-    fence = Geofence(P, 0.05, 0.15, 0.03)
+    fence = Geofence(P, StopRule(0.05, 0.15, 0.03))
     t = np.arange(19) / 30
     poses = [(ti, TANK_LENGTH - 0.45 + 0.2 * ti, 0.575) for ti in t]  # 0.2 m/s towards +X, nose 0.23 m away
     (vx, vy), (sx, sy) = ls_velocity(poses, 0.005)
@@ -379,7 +380,7 @@ _FIRE = {
 @pytest.mark.parametrize(("a", "b"), list(itertools.permutations(PRIORITY[:-1], 2)))
 def test_failsafe_priority_of_every_pair(a, b):
     link = _FakeLink()
-    sup = Supervisor(link, _NoCamera(), None, Geofence(P, 0.05, 0.15, 5.0), SafetyConfig())
+    sup = Supervisor(link, _NoCamera(), None, Geofence(P, StopRule(0.05, 0.15, 5.0)), SafetyConfig())
     try:
         sup.arm()
         sup.bound.reset(sup.now())
