@@ -54,7 +54,8 @@ class Supervisor:
             ``control_lost``).
         camera: A frame source; the supervisor reads it through a :class:`FrameGrabber` it owns (and closes).
         tracker: ``track(frame) -> TrackResult``.
-        geofence: The wall rule.
+        geofence: The wall rule; its stop rule's reaction time is the one every rule here budgets (the robot
+            stack builds it from ``safety.stop_rule``).
         safety: Timeouts and limits.
         speed: Experiment seconds per wall second.
         poll_period: Rule period [experiment s].
@@ -101,7 +102,7 @@ class Supervisor:
         self.confidence = 0.0
         self.track_ok = False
         self.frames = self.lost_frames = 0
-        self.afforded_latency = afforded_latency(safety.tracking_timeout, safety.stop_rule.reaction_time)
+        self.afforded_latency = afforded_latency(safety.tracking_timeout, geofence.rule.reaction_time)
         self._last_read = -math.inf  # experiment time the last frame was read
         self._box = None
         self._since = -math.inf
@@ -202,7 +203,7 @@ class Supervisor:
             if now > self.bound.run_until:  # the last lease may have ended: a command in flight then starts whole
                 self.gain.still(self.bound.run_until - self._round_trip())
             # The fins may run until the lease ends, plus the reaction time (firmware tick) and the radio's delay.
-            self.bound.running(now, now + lease + self.safety.stop_rule.reaction_time + self._radio_delay())
+            self.bound.running(now, now + lease + self.geofence.rule.reaction_time + self._radio_delay())
             seq = self.link.set_fins(beats, lease)
             acknowledged = self._acknowledgement(seq)
             self.liveness.command(now, beats, acknowledged)
@@ -364,7 +365,7 @@ class Supervisor:
 
     def check_latency(self) -> float:
         """The measured latency [s]; raises :class:`CameraLatencyError` if the tank cannot afford it."""
-        return check_latency(self.latency, self.safety.tracking_timeout, self.safety.stop_rule.reaction_time)
+        return check_latency(self.latency, self.safety.tracking_timeout, self.geofence.rule.reaction_time)
 
     def _rules(self) -> list[str]:
         """Every reason that holds now, highest priority first (:data:`PRIORITY`)."""
