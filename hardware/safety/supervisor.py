@@ -54,8 +54,7 @@ class Supervisor:
             ``control_lost``).
         camera: A frame source; the supervisor reads it through a :class:`FrameGrabber` it owns (and closes).
         tracker: ``track(frame) -> TrackResult``.
-        geofence: The wall rule; its stop rule's reaction time is the one every rule here budgets (the robot
-            stack builds it from ``safety.stop_rule``).
+        geofence: The wall rule (from ``safety.stop_rule``); its rule's reaction time is every rule's budget.
         safety: Timeouts and limits.
         speed: Experiment seconds per wall second.
         poll_period: Rule period [experiment s].
