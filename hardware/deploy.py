@@ -39,6 +39,7 @@ and the library's errors to exit statuses.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 from pathlib import Path
 
@@ -48,6 +49,7 @@ from pectoral_gym.hardware.deploy_controllers import make_controller, solver_sum
 from pectoral_gym.hardware.deploy_episodes import plot_trajectories, random_start, run_episode, run_episodes
 from pectoral_gym.hardware.library import DeployError, Deployment, DeployRequest, run_deployment
 from pectoral_gym.hardware.safety.rules import SafetyConfig
+from pectoral_gym.model.tank import ROBOT_STOP_RULE
 
 # re-exported, where callers have long found them: the episode loop, the controllers, the env settings
 __all__ = ["EXIT_DISPLACED", "build_parser", "env_settings", "main", "make_controller", "plot_trajectories",
@@ -90,9 +92,13 @@ def request_from_args(parser: argparse.ArgumentParser, args: argparse.Namespace)
         parser.error(f"--radio-*, --camera-*, --pose-noise-*: {err}")
     check_args(parser, args)
     try:
-        safety = SafetyConfig(geofence_margin=args.geofence, tracking_timeout=args.tracking_timeout)
+        rule = dataclasses.replace(ROBOT_STOP_RULE, margin=args.geofence)  # the rule checks the margin
     except ValueError as err:
-        parser.error(f"safety settings (--geofence, --tracking-timeout): {err}")
+        parser.error(f"--geofence: {err}")
+    try:
+        safety = SafetyConfig(stop_rule=rule, tracking_timeout=args.tracking_timeout)
+    except ValueError as err:
+        parser.error(f"safety settings (--tracking-timeout): {err}")
     rig = "robot" if not args.emulate else "lockstep" if args.lockstep else "emulated"
     try:
         return DeployRequest(

@@ -84,7 +84,8 @@ MIN_TRACKING_WALL = 0.1
 
 #: The id whose settings a robot env starts from: ``HardwareFishEnv`` builds a full-model ``EnvConfig`` with only
 #: its own arguments set, on the defaults, which are this simulation-only id's (a setting absent from a policy's
-#: run folder or from the deploy's arguments is this id's).
+#: run folder or from the deploy's arguments is this id's). Not the robot-ready latest id: its band and servo limit
+#: imitate the supervisor and the firmware, which run for real on the robot (``hardware.stack.env_config``).
 ROBOT_ENV_BASE = SIMULATION_IDS["full"]
 
 FIRST_FRAME_TIMEOUT = 5.0  # wall seconds to wait for the camera's first frame (as the env's reset_timeout)

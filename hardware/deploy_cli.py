@@ -15,6 +15,7 @@ from pectoral_gym.hardware.deploy_checks import (
 )
 from pectoral_gym.hardware.emulated_firmware import FIRMWARES
 from pectoral_gym.hardware.emurig import RigConditions
+from pectoral_gym.model.tank import ROBOT_STOP_RULE
 from pectoral_gym.tools.cli_common import HelpFormatter, prog_name
 
 __all__ = ["check_args", "make_parser", "rig_conditions"]
@@ -113,8 +114,10 @@ def make_parser(description: str) -> argparse.ArgumentParser:
     parser.add_argument("--calibration", default=None, metavar="JSON",
                         help="camera calibration (pectoral-camera-calibrate), made at the "
                              "camera's resolution (default: the emulator's camera model)")
-    parser.add_argument("--geofence", type=float, default=0.05, metavar="M",
-                        help="clearance kept from the walls on top of the stopping distance [m] (default %(default)s)")
+    parser.add_argument("--geofence", type=float, default=ROBOT_STOP_RULE.margin, metavar="M",
+                        help="clearance kept from the walls on top of the stopping distance [m]: the margin of the "
+                             "robot's stop rule, whose reaction time and contact speed stay the robot's "
+                             "(default %(default)s)")
     parser.add_argument("--robot-address", type=robot_address, default=None, metavar="HEX",
                         help="64-bit address of the robot's XBee, 16 hex digits, e.g. 0013A20012345678 "
                              "(default: broadcast, which every robot on the channel obeys)")
@@ -184,8 +187,6 @@ def check_args(parser: argparse.ArgumentParser, args: argparse.Namespace) -> Non
         parser.error(f"--nice must be in [{NICE_RANGE[0]}, {NICE_RANGE[1]}], got {args.nice}")
     if not 0 < args.solve_fraction <= 1:
         parser.error(f"--solve-fraction must be in (0, 1], got {args.solve_fraction}")
-    if not (math.isfinite(args.geofence) and args.geofence >= 0):
-        parser.error(f"--geofence must be a finite number >= 0 m, got {args.geofence}")
     if not (math.isfinite(args.tracking_timeout) and args.tracking_timeout / args.speed >= MIN_TRACKING_WALL):
         parser.error(f"--tracking-timeout must be a finite number with timeout / speed >= {MIN_TRACKING_WALL} s of "
                      f"wall time (3 frames at 30 fps), got {args.tracking_timeout} at speed {args.speed}")

@@ -34,15 +34,14 @@ def make_controller(name: str, config, step_budget: float, safety: SafetyConfig 
     research notes (``docs/notes/2026-12-03-robot-stack-rounds.md``, ``docs/notes/2026-12-04-nmpc-stops-2.md``).
     """
     from pectoral_gym.agents.baselines import make_baseline
-    from pectoral_gym.model.tank import StopRule
     from pectoral_gym.versions import with_measurement_margin
 
     safety = safety or SafetyConfig()
-    band = with_measurement_margin(StopRule(safety.geofence_margin, safety.reaction_time, safety.contact_speed))
+    band = with_measurement_margin(safety.stop_rule)
     if (problem := shipped_k_problem(name, config.params, scaling)) is not None:
         raise ValueError(problem)
     if name == "nmpc":
-        return make_baseline("nmpc", config, step_budget=step_budget, stop_band=tuple(band), spin=False,
+        return make_baseline("nmpc", config, step_budget=step_budget, stop_band=band, spin=False,
                              scaling=scaling)
     if name == "hand":
         return make_baseline("hand", config, shield={"band": band}, scaling=scaling)

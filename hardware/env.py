@@ -94,7 +94,7 @@ class HardwareFishEnv(EpisodeStart, gym.Env):
     * Termination: the task's own ends (nose or tail outside the tank; ``goal`` reached), or the
       **geofence** (:class:`pectoral_gym.hardware.safety.geofence.Geofence`): some part of the fish, fin tips included,
       closer to a wall than its stopping distance at the measured speed (with its uncertainty, at most the
-      physical bound :class:`pectoral_gym.hardware.safety.geofence.SpeedBound`) plus ``safety.geofence_margin``
+      physical bound :class:`pectoral_gym.hardware.safety.geofence.SpeedBound`) plus ``safety.stop_rule.margin``
       (``info["safety_stop"] = "geofence"``).
     * Truncation: ``max_episode_steps`` steps; tracking lost for longer than ``safety.tracking_timeout``
       (``"tracking_lost"``, with the reason in ``info["tracking"]["reason"]``: the tracker's, or a

@@ -5,7 +5,7 @@ while it does: with the stack's libraries loaded (numpy, numba, OpenCV; a policy
 about 10^5 objects and 50 ms on an idle core, and 150 ms was measured with both cores busy. For that
 long no thread of the process runs: no frame is tracked, no rule is judged, no command is sent. The
 supervisor's blind rule then stops the fish once it has been unseen for longer than the reaction budget
-(``SafetyConfig.reaction_time``) near a wall, although the camera and the robot were fine. Python
+(``SafetyConfig.stop_rule.reaction_time``) near a wall, although the camera and the robot were fine. Python
 starts a full collection on its own whenever enough objects have survived the younger generations, so
 one can fall in any episode.
 

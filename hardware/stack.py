@@ -44,6 +44,20 @@ SIMULATION_ONLY = {
 def env_config(task: str, control_period: float, kwargs: dict[str, Any]) -> EnvConfig:
     """The full-model :class:`EnvConfig` of a robot env (``HardwareFishEnv``'s ``**kwargs`` on top).
 
+    It starts from ``EnvConfig``'s defaults, the simulation-only id's settings
+    (:data:`pectoral_gym.versions.SIMULATION_IDS`, ``hardware.deploy_checks.ROBOT_ENV_BASE``), not from
+    :data:`pectoral_gym.versions.LATEST`'s robot-ready ones, on purpose. Those make a *simulated* env act like the
+    robot stack: ``stop_band`` stands for the supervisor's geofence (with
+    :data:`~pectoral_gym.versions.MEASUREMENT_MARGIN` more margin, for a band judged on camera speeds) and
+    ``servo_limit`` for the firmware's rate rule. On the robot those rules run for real (the
+    :class:`~pectoral_gym.hardware.safety.supervisor.Supervisor` with ``SafetyConfig.stop_rule``, the
+    :class:`~pectoral_gym.hardware.safety.rules.CommandFilter`, the firmware); set here as well they would act
+    twice: episodes ended 5 cm before the geofence, and periods lengthened by ``decode`` before the filter and the
+    firmware stretch them, which changes what a policy's action sends. What the robot-ready ids add that the robot
+    needs comes in through ``kwargs``: ``observe_fins`` from the policy's observation size and the baselines' goal
+    inset (:func:`pectoral_gym.hardware.deploy_checks.env_settings`); the model's integration settings play no part
+    on the robot.
+
     Raises:
         ValueError: A :data:`SIMULATION_ONLY` group is set, an argument is unknown, or a setting is invalid.
     """
@@ -189,7 +203,7 @@ def open_stack(port, camera, config: EnvConfig, safety: SafetyConfig, speed: flo
             observer = HighGainObserver(epsilon=observer_epsilon)
         # observe_fins: the robot reports no fin angles, so the PC replays its fins from the commands it sends
         fin_replay = FinReplay(config.params, FirmwareConfig(limits=safety.limits)) if config.observe_fins else None
-        geofence = Geofence(config.params, safety.geofence_margin, safety.reaction_time, safety.contact_speed)
+        geofence = Geofence(config.params, safety.stop_rule)
         supervisor = Supervisor(link, camera, tracker, geofence, safety, speed, frame_period,
                                 origin=clock.monotonic() if origin is None else origin, clock=clock).start()
     except BaseException:

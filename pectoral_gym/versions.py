@@ -54,7 +54,7 @@ def with_measurement_margin(rule: StopRule) -> StopRule:
     The band the robot-ready envs keep for a robot whose supervisor judges ``rule``: the one place the margin is
     added (:data:`ROBOT`'s band, and the robot stack's controllers' band around the deploy's geofence).
     """
-    return rule._replace(margin=rule.margin + MEASUREMENT_MARGIN)
+    return dataclasses.replace(rule, margin=rule.margin + MEASUREMENT_MARGIN)
 
 
 @dataclass(frozen=True)
@@ -64,7 +64,7 @@ class RobotReadiness:
     Attributes:
         observe_fins: Observe each fin's half-stroke in progress (the stroke phase a new command's effect depends on).
         stop_band: End the episode, with a cost, inside the robot's stopping band.
-        stop_rule: The band's rule ``(margin [m], reaction time [s], contact speed [m/s])``.
+        stop_rule: The band's :class:`~pectoral_gym.model.tank.StopRule`.
         servo_limit: Fastest fin rate [rad/s] (``None``: no limit).
         goal_inset: Least distance of a goal from the walls [m].
     """

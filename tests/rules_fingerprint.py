@@ -1,11 +1,11 @@
 """A fingerprint of the robot's fin rules, to show that moving code changed no behaviour (run as a script).
 
 Hashes, section by section: seeded firmware-rule streams through the Python reference robot
-(``tests/firmware_streams.py``), the rule functions on seeded batches, :class:`FinReplay` on seeded commands,
-stops and latch reports and on a synthetic run log (written, read back, replayed by the calibration),
-:class:`FirmwarePath` predictions for a batch of fish, the first steps of seeded episodes of the registered
-ids with the servos' rate limit, and the emulator's lockstep deployment of the hand controller (40 steps over a
-lossy radio). Equal hashes before and after a refactoring mean bit-identical outputs.
+(``tests/firmware_streams.py``, ``tests/firmware_robots.py``), the rule functions on seeded batches,
+:class:`FinReplay` on seeded commands, stops and latch reports and on a synthetic run log (written, read back,
+replayed by the calibration), :class:`FirmwarePath` predictions for a batch of fish, the first steps of seeded
+episodes of the registered ids with the servos' rate limit, and the emulator's lockstep deployment of the hand
+controller (40 steps over a lossy radio). Equal hashes before and after a refactoring mean bit-identical outputs.
 
 Usage: ``python tests/rules_fingerprint.py`` (about a minute after numba's cache is warm).
 """
@@ -23,7 +23,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-from firmware_streams import ReferenceRobot, generate  # noqa: E402
+from firmware_robots import ReferenceRobot  # noqa: E402
+from firmware_streams import generate  # noqa: E402
 
 from pectoral_gym.agents.controllers.firmware_path import FirmwarePath  # noqa: E402
 from pectoral_gym.model.finreplay import FinReplay  # noqa: E402

@@ -105,8 +105,9 @@ def test_params_give_the_supervisor_the_robots_own_stopping_distance(tmp_path, c
     slippery = table1.replace(drag_coef=table1.drag_coef * 0.7)
     save_params(slippery, tmp_path / "robot.json")
     assert make_parser("deploy").parse_args(["--params", str(tmp_path / "robot.json")]).params == slippery
-    assert Geofence(slippery, 0.05, 0.3, 0.01).k == tank.coast_rate(body_coefficients(slippery))
-    assert Geofence(slippery, 0.05, 0.3, 0.01).k < Geofence(table1, 0.05, 0.3, 0.01).k
+    rule = tank.StopRule(0.05, 0.3, 0.01)
+    assert Geofence(slippery, rule).k == tank.coast_rate(body_coefficients(slippery))
+    assert Geofence(slippery, rule).k < Geofence(table1, rule).k
     # the env the supervisor is built from gets them (a policy: the baselines plan with K, identified for Table 1)
     import gymnasium as gym
     from stable_baselines3 import PPO

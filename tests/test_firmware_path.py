@@ -86,8 +86,8 @@ def test_shield_predicts_the_spin_drift_the_robot_has():
     fins = FinMap(CONFIG)
     sequence = _spin_sequence(fins, 6, 20)
     replay = FinReplay(CONFIG.params)
-    shield = BandShield(CONFIG, fins, band=tuple(ROBOT_STOP_RULE))
-    as_sent = BandShield(CONFIG, fins, band=tuple(ROBOT_STOP_RULE), firmware=False)
+    shield = BandShield(CONFIG, fins, band=ROBOT_STOP_RULE)
+    as_sent = BandShield(CONFIG, fins, band=ROBOT_STOP_RULE, firmware=False)
     assert shield.firmware and not as_sent.firmware
     starts = {}
     for k, p in enumerate(sequence):

@@ -8,11 +8,11 @@ import pytest
 
 from pectoral_gym.agents.baselines import make_baseline
 from pectoral_gym.agents.controllers.band_shield import band_speed
-from pectoral_gym.agents.controllers.band_study import ROBOT_BAND, run_episode
+from pectoral_gym.agents.controllers.band_study import run_episode
 from pectoral_gym.agents.controllers.stop_band import StopBand
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.tasks import kernels as tk
-from pectoral_gym.model.tank import TANK_WIDTH, coast_distance
+from pectoral_gym.model.tank import ROBOT_STOP_RULE, TANK_WIDTH, coast_distance
 
 
 def _hand(shield: bool):
@@ -30,12 +30,13 @@ def test_study_substeps_reproduce_the_env_episode():
 
 def test_band_speed_solves_the_band_need():
     """``band_speed`` inverts the need ``margin + v t_r + ln(max(v, v_c) / v_c) / k`` (Geofence's rule)."""
-    band = StopBand.from_params(EnvConfig().params, *ROBOT_BAND)
-    assert band_speed(band.margin, band) == 0.0  # at rest the need is the margin
+    band = StopBand.from_params(EnvConfig().params, ROBOT_STOP_RULE)
+    rule = band.rule
+    assert band_speed(rule.margin, band) == 0.0  # at rest the need is the margin
     for clearance in (0.1, 0.2, 0.3):
         v = band_speed(clearance, band)
-        coast = math.log(max(v, band.contact_speed) / band.contact_speed) / band.k
-        need = band.margin + v * band.reaction_time + coast
+        coast = math.log(max(v, rule.contact_speed) / rule.contact_speed) / band.k
+        need = rule.margin + v * rule.reaction_time + coast
         assert need == pytest.approx(clearance, abs=1e-9)
     assert band_speed(0.1, band) < band_speed(0.2, band) < band_speed(0.3, band)
 
@@ -83,8 +84,9 @@ def test_shield_speed_spread_counts_towards_every_wall():
     w = 0.02
     shield = BandShield(config, FinMap(config), extra_margin=0.0, speed_spread=w)
     band = shield.band
-    need = band.margin + w * band.reaction_time + float(coast_distance(w, band.k, band.contact_speed))
+    rule = band.rule
+    need = rule.margin + w * rule.reaction_time + float(coast_distance(w, band.k, rule.contact_speed))
     for offset, inside in ((-0.005, True), (0.005, False)):
-        x = band.half_length + band.width + need + offset  # the tail's clearance is need + offset
+        x = band.outline.half_length + band.outline.width + need + offset  # the tail's clearance is need + offset
         state = np.array([[x, 0.5 * TANK_WIDTH, 0.0, 0.0, 0.0, 0.0]])
         assert (shield._violation(state, band)[0] > 0) == inside

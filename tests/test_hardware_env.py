@@ -18,6 +18,7 @@ from pectoral_gym.model import tank
 from pectoral_gym.model.models import FullModel
 from pectoral_gym.model.params import FishParams, body_coefficients
 from pectoral_gym.model.servo import ServoLimits
+from pectoral_gym.model.tank import StopRule
 
 pytestmark = pytest.mark.usefixtures("warm_emulator_rig")  # no numba compile inside a timed loop
 
@@ -111,7 +112,7 @@ def test_tracking_lost_stops_and_says_why(rig, monkeypatch):
     assert all(t <= hidden for t, *_ in updates)  # the observer never got a made-up pose
     # The fins beat (15 deg): the geofence's worst-case motion of an unseen fish stops it before the 1.5 s
     # timeout (safety review, finding 9), never within the reaction budget of one missing frame.
-    assert info["tracking"]["lost_for"] > SafetyConfig().reaction_time
+    assert info["tracking"]["lost_for"] > SafetyConfig().stop_rule.reaction_time
     assert env.link.command is None
 
 
@@ -196,7 +197,7 @@ def test_an_ignored_sigint_still_sends_stop_and_stays_ignored(default_signal_han
 
 def test_geofence_outline_clearance_by_hand():
     p = FishParams()
-    fence = Geofence(p, margin=0.05, reaction_time=0.0, contact_speed=0.03)
+    fence = Geofence(p, StopRule(margin=0.05, reaction_time=0.0, contact_speed=0.03))
     half, cp, sp = 0.5 * p.body_length, p.fin_offset, p.fin_span
     # Heading +X at (1.0, 0.5): tail capsule end to X = 0; fin discs around (1.0, 0.5 -+ C_p) to Y = 0 and Y = W.
     assert np.allclose(fence.clearance(1.0, 0.5, 0.0),
@@ -214,7 +215,7 @@ def test_coasting_distance_closed_form_matches_the_full_model():
     # Independent check: the full model's RK4 integration of eq. (19) with the fins held still.
     p = FishParams()
     contact = 0.03
-    fence = Geofence(p, margin=0.0, reaction_time=0.0, contact_speed=contact)
+    fence = Geofence(p, StopRule(margin=0.0, reaction_time=0.0, contact_speed=contact))
     model = FullModel(1, p)
     coef = body_coefficients(p)
     k = coef.c1 / coef.m1

@@ -9,14 +9,14 @@ import numpy as np
 import pytest
 
 from pectoral_gym.agents.baselines import make_baseline
-from pectoral_gym.agents.controllers.band_study import ROBOT_BAND, run_episode
+from pectoral_gym.agents.controllers.band_study import run_episode
 from pectoral_gym.agents.controllers.stop_band import band_violation
 from pectoral_gym.agents.nmpc.problem import FinInputs
 from pectoral_gym.envs.core import EnvConfig
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.hardware.deploy import make_controller
 from pectoral_gym.hardware.safety.rules import SafetyConfig
-from pectoral_gym.model.tank import TANK_WIDTH
+from pectoral_gym.model.tank import ROBOT_STOP_RULE, TANK_WIDTH
 from pectoral_gym.registration import MEASUREMENT_MARGIN, registered_settings
 
 CONFIG = EnvConfig(model="full", task="goal")
@@ -25,7 +25,7 @@ SAFETY = SafetyConfig()
 
 def _nmpc(**kwargs):
     """The NMPC with the robot's band on the simulated full model, which latches the patterns as sent."""
-    return make_baseline("nmpc", CONFIG, step_budget=1e6, stop_band=ROBOT_BAND, shield_firmware=False, **kwargs)
+    return make_baseline("nmpc", CONFIG, step_budget=1e6, stop_band=ROBOT_STOP_RULE, shield_firmware=False, **kwargs)
 
 
 def test_shield_is_on_exactly_where_the_plan_has_a_band():
@@ -35,9 +35,9 @@ def test_shield_is_on_exactly_where_the_plan_has_a_band():
     v1 = EnvConfig(**registered_settings("PectoralFish-Full-v1"))
     nmpc = make_baseline("nmpc", v1, step_budget=1e6)
     assert nmpc.shield is not None
-    assert nmpc.shield.shield.band.margin == pytest.approx(v1.stop_rule[0] + 0.02)
+    assert nmpc.shield.shield.band.rule.margin == pytest.approx(v1.stop_rule.margin + 0.02)
     robot = make_controller("nmpc", CONFIG, step_budget=1e6, safety=SAFETY)  # deploy: the supervisor's band, widened
-    assert robot.shield.shield.band.margin == pytest.approx(SAFETY.geofence_margin + MEASUREMENT_MARGIN + 0.02)
+    assert robot.shield.shield.band.rule.margin == pytest.approx(SAFETY.stop_rule.margin + MEASUREMENT_MARGIN + 0.02)
     assert robot.spin is None and robot.shield.shield.spins  # the plan's spins off, the shield's on (deploy)
 
 
@@ -80,7 +80,7 @@ def test_facing_a_wall_at_the_start_inset_the_shielded_nmpc_keeps_out_of_the_ban
     the goal."""
     y = TANK_WIDTH - tk.START_INSET
     start, goal = (1.15, y, 0.5 * math.pi), (1.15, y - 0.5)
-    r = run_episode(lambda config: make_baseline("nmpc", config, step_budget=1e6, stop_band=ROBOT_BAND,
+    r = run_episode(lambda config: make_baseline("nmpc", config, step_budget=1e6, stop_band=ROBOT_STOP_RULE,
                                                      shield_firmware=False), 0,
                     start=start, goal=goal, max_steps=120)
     assert r.band_time is None and r.worst == 0.0
@@ -91,7 +91,7 @@ def test_facing_a_wall_at_the_start_inset_the_shielded_nmpc_keeps_out_of_the_ban
 @pytest.mark.parametrize("seed", range(6))
 def test_seeded_full_model_episodes_keep_out_of_the_band(seed):
     """Seeded full-model episodes with the robot's band: no band entry, checked every 0.1 s."""
-    r = run_episode(lambda config: make_baseline("nmpc", config, step_budget=1e6, stop_band=ROBOT_BAND,
+    r = run_episode(lambda config: make_baseline("nmpc", config, step_budget=1e6, stop_band=ROBOT_STOP_RULE,
                                                      shield_firmware=False), seed,
                     goal_inset=0.3)
     assert r.band_time is None, (seed, r)
@@ -165,7 +165,7 @@ def test_a_goal_inside_the_turning_circle_is_reached_on_the_full_model(circle_st
     start = (1.15, 0.5 * TANK_WIDTH, 0.0)
     angle = math.radians(-80.0)
     goal = (1.15 + 0.2 * math.cos(angle), 0.5 * TANK_WIDTH + 0.2 * math.sin(angle))
-    r = run_episode(lambda config: make_baseline("nmpc", config, step_budget=1e6, stop_band=ROBOT_BAND, spin=False,
+    r = run_episode(lambda config: make_baseline("nmpc", config, step_budget=1e6, stop_band=ROBOT_STOP_RULE, spin=False,
                                                  shield_firmware=False, circle_steps=circle_steps),
                     0, start=start, goal=goal, max_steps=120)
     assert r.band_time is None and not r.wall

@@ -37,7 +37,7 @@ def _clearance_need_by_hand(x, y, psi, vx, vy, rule):
 def test_band_shortfall_is_the_written_out_rule_on_random_states():
     rng = np.random.default_rng(3)
     rule = tank.ROBOT_STOP_RULE
-    geofence = Geofence(PARAMS, *rule)
+    geofence = Geofence(PARAMS, rule)
     for _ in range(300):
         x, y = rng.uniform(0, tank.TANK_LENGTH), rng.uniform(0, tank.TANK_WIDTH)
         psi, vx, vy = rng.uniform(-math.pi, math.pi), rng.normal(0, 0.1), rng.normal(0, 0.1)
@@ -143,7 +143,9 @@ def test_v2_is_v1_with_the_averaged_models_ripple_offsets():
 
 @pytest.mark.parametrize("kwargs, match", [({"goal_inset": 0.6}, "goal_inset"), ({"start_inset": -1}, "start_inset"),
                                            ({"stop_rule": (0.05, 0.1)}, "stop_rule"),
-                                           ({"stop_rule": (0.05, math.nan, 5.0)}, "stop_rule"),
+                                           ({"stop_rule": (0.05, math.nan, 5.0)}, "stop_rule: StopRule.reaction_time"),
+                                           ({"stop_rule": {"margin": 0.05}}, "stop_rule"),
+                                           ({"stop_rule": "0.05"}, "stop_rule"),
                                            ({"servo_limit": 0.0}, "servo_limit"), ({"stop_band": 1}, "stop_band")])
 def test_bad_settings_are_named(kwargs, match):
     with pytest.raises(ValueError, match=match):

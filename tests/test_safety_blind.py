@@ -18,6 +18,7 @@ from pectoral_gym.model.finreplay import FinReplay
 from pectoral_gym.model.finrules import FirmwareConfig
 from pectoral_gym.model.params import TANK_LENGTH, FishParams, body_coefficients
 from pectoral_gym.model.servo import ServoLimits, clip_beats, peak_rates
+from pectoral_gym.model.tank import StopRule
 
 P = FishParams()
 LIMITS = ServoLimits()
@@ -161,7 +162,7 @@ class _NoCamera:
 def _blind_supervisor(beats):
     """A supervisor whose fish was last seen 0.37 s ago moving at 0.1 m/s towards X = L, frames 0.2 s late."""
     camera = FrameGrabber(_NoCamera(), stale_after=100.0)  # the grabber's own silence alarm kept out of it
-    sup = Supervisor(None, camera, None, Geofence(P, 0.05, 0.15, 0.03), SafetyConfig())
+    sup = Supervisor(None, camera, None, Geofence(P, StopRule(0.05, 0.15, 0.03)), SafetyConfig())
     sup.link = _AckLink(sup.now)
     sup.arm()
     sup.camera.ages.extend([0.2] * 60)  # the measured latency: 0.2 s

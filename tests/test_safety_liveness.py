@@ -249,13 +249,13 @@ def test_the_half_way_replay_takes_a_command_half_way_although_its_acknowledgeme
     """A command sent at 1.0 s and acknowledged at 1.9 s (the STATUS known only from then on): the half-way replay
     takes it at 1.45 s, as a replay fed it then does (latched at the turning point at 1.8 s), not when the
     acknowledgement becomes known (latched at the next one)."""
-    from pectoral_gym.hardware.safety.liveness import _Shadow
+    from pectoral_gym.hardware.safety.shadow_fins import ShadowFins
     from pectoral_gym.model.finreplay import FinReplay
     from pectoral_gym.model.finrules import FirmwareConfig
 
     gentle = np.array([[math.pi / 2, math.radians(20), 1.2, 1.0]] * 2)
     now = [0.0]
-    shadow = _Shadow(P, FirmwareConfig(), 0.5)
+    shadow = ShadowFins(P, FirmwareConfig(), 0.5)
     shadow.reset(0.0)
     shadow.queue.append((0.0, gentle, None))  # running from the start
     shadow.queue.append((1.0, FULL, lambda: 1.9 if now[0] >= 1.9 else None))

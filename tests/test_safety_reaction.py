@@ -24,15 +24,14 @@ CHUNK = 0.01  # the emulator's trace resolution [s]
 
 
 def test_effective_reaction_time_by_hand():
-    assert effective_reaction_time(0.15, 0.6) == pytest.approx(0.75)  # 0.3 s each way
-    assert effective_reaction_time(0.15, 0.0) == pytest.approx(0.15)
-    assert effective_reaction_time(0.15, None) == pytest.approx(0.15)  # no round trip measured yet
-    assert SafetyConfig().reaction_time == tank.ROBOT_STOP_RULE.reaction_time  # the budget it extends
+    rule = tank.StopRule(0.05, 0.15, 0.03)
+    assert effective_reaction_time(rule, 0.6) == pytest.approx(0.75)  # 0.3 s each way
+    assert effective_reaction_time(rule, 0.0) == pytest.approx(0.15)
+    assert effective_reaction_time(rule, None) == pytest.approx(0.15)  # no round trip measured yet
+    assert SafetyConfig().stop_rule == tank.ROBOT_STOP_RULE  # the budget it extends
     for bad in (math.nan, -0.1, math.inf):
         with pytest.raises(ValueError, match="round_trip"):
-            effective_reaction_time(0.15, bad)
-    with pytest.raises(ValueError, match="reaction_time"):
-        effective_reaction_time(-1.0, 0.2)
+            effective_reaction_time(rule, bad)
 
 
 def test_a_stop_on_a_slow_radio_halts_within_the_effective_reaction_time():
@@ -68,4 +67,4 @@ def test_a_stop_on_a_slow_radio_halts_within_the_effective_reaction_time():
     assert halted_after > tank.ROBOT_STOP_RULE.reaction_time  # the prompt budget alone does not cover it
     assert halted_after <= latency + TICK + CHUNK + 1e-9  # the STOP's arrival, to the tick
     assert out["rtt"] == pytest.approx(2 * latency, abs=0.02)
-    assert halted_after <= effective_reaction_time(0.0, out["rtt"]) + TICK + CHUNK
+    assert halted_after <= effective_reaction_time(tank.StopRule(0.05, 0.0, 0.03), out["rtt"]) + TICK + CHUNK

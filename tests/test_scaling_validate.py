@@ -17,8 +17,9 @@ from pectoral_gym.model.dynamics import body_rhs
 from pectoral_gym.model.kfunctions import FEATURES, ScalingFunctions
 from pectoral_gym.model.params import FinBeat, FishParams, coefficient_vector
 from pectoral_gym.model.steady import steady_state
-from pectoral_gym.scaling.identification.grids import GRIDS
+from pectoral_gym.scaling.identification.grids import GRIDS, draw_off_grid
 from pectoral_gym.scaling.validation import comparison as sc
+from pectoral_gym.scaling.validation import pattern_sets as ps
 from pectoral_gym.scaling.validation import validate as sv
 from pectoral_gym.scaling.validation.plots import identification_points
 
@@ -97,7 +98,7 @@ def test_cli_rejects_bad_arguments(tmp_path, capsys):
 def test_unit_k_is_detected_as_bad():
     """With K = 1 the averaged model turns about twice as fast (paper-notes): Table 4 radii far off."""
     params = FishParams()
-    table = sv.table4_section(ScalingFunctions.unit(), params, count=4)
+    table = ps.table4_section(ScalingFunctions.unit(), params, count=4)
     for row in table["rows"]:
         assert abs(row["averaged"]["omega"]) > 1.5 * abs(row["full"]["omega"])
         assert row["radius_error"] > 0.2
@@ -109,7 +110,7 @@ def test_exact_k_gives_vanishing_table4_error_on_the_mirrored_fin():
     params = FishParams()
     k = exact_k(FinBeat.from_degrees(80, 22, 1.0, 4), params)  # not 90 deg: there the sway forcing vanishes
     assert 0 < k[2] < 1  # the moment must be scaled down (paper-notes)
-    table = sv.table4_section(constant_k(*k), params, count=5)
+    table = ps.table4_section(constant_k(*k), params, count=5)
     row = table["rows"][4]
     assert row["left"] == [80.0, 22.0, 1.0, 4.0] and row["right"][1] == 0
     assert row["radius_error"] < 1e-3
@@ -135,16 +136,16 @@ def test_left_and_right_fin_mirror_in_both_models():
 def test_sampling_box_from_grid_metadata_and_draws_off_grid():
     grid = GRIDS["paper"]
     scaling = constant_k(1, 1, 1, {"grid": grid.to_dict()})
-    low, high, rebuilt, _ = sv.sampling_box(scaling)
+    low, high, rebuilt, _ = ps.sampling_box(scaling)
     np.testing.assert_allclose(np.degrees(low[:2]), [50, 10])
     np.testing.assert_allclose(np.degrees(high[:2]), [90, 30])
     np.testing.assert_allclose([low[2], high[2], low[3], high[3]], [0.5, 2.0, 2.0, 5.0])
     assert rebuilt is not None and len(rebuilt) == len(grid)
-    draws = sv.draw_off_grid(np.random.default_rng(1), 50, low, high, rebuilt)
+    draws = draw_off_grid(np.random.default_rng(1), 50, low, high, rebuilt)
     assert np.all(draws >= low) and np.all(draws <= high)
     assert not any(grid.contains(d, tol=1e-6) for d in draws)
     # No grid: the environment ranges with the forcing floor (amplitude >= 5 deg, ratio >= 1.25).
-    low, high, rebuilt, _ = sv.sampling_box(ScalingFunctions.unit())
+    low, high, rebuilt, _ = ps.sampling_box(ScalingFunctions.unit())
     assert rebuilt is None
     np.testing.assert_allclose(np.degrees([low[0], high[0], low[1], high[1]]), [45, 135, 5, 30])
     np.testing.assert_allclose([low[2], high[2], low[3], high[3]], [0.5, 2.0, 1.25, 5.0])
@@ -192,6 +193,6 @@ def test_a_turn_in_the_other_direction_is_caught_although_the_radius_has_no_sign
     res = sc.steady_pair(beats, constant_k(1.0, 1.0, -1.0))
     assert res["full"]["omega"][0] > 0 > res["averaged"]["omega"][0]
     assert res["direction_flip"].tolist() == [True]
-    flips = sv._flips(res, ["p"])
+    flips = ps._flips(res, ["p"])
     assert flips == {"count": 1, "n": 1, "share": 1.0, "patterns": ["p"]}
     assert not sc.steady_pair(beats, constant_k(1.0, 1.0, 0.5))["direction_flip"][0]

@@ -17,15 +17,17 @@ from pectoral_gym.hardware.deploy import make_controller
 from pectoral_gym.hardware.safety.geofence import Geofence
 from pectoral_gym.hardware.safety.rules import SafetyConfig
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
+from pectoral_gym.model.tank import StopRule
 from pectoral_gym.registration import MEASUREMENT_MARGIN, registered_settings
 
 SAFETY = SafetyConfig()
-BAND = StopBand.from_params(FishParams(), SAFETY.geofence_margin, SAFETY.reaction_time, SAFETY.contact_speed)
+RULE = SAFETY.stop_rule
+BAND = StopBand.from_params(FishParams(), RULE)
 
 
 def test_violation_is_positive_exactly_where_the_geofence_stops_the_fish():
     # the geofence's own implementation decides; poses and velocities drawn over the tank
-    fence = Geofence(FishParams(), SAFETY.geofence_margin, SAFETY.reaction_time, SAFETY.contact_speed)
+    fence = Geofence(FishParams(), RULE)
     rng = np.random.default_rng(0)
     breached = 0
     for _ in range(2000):
@@ -43,8 +45,9 @@ def test_violation_by_hand_and_in_casadi():
     # fall short of that wall's need; nothing moves towards the other walls (need = margin there)
     d = 0.35
     y = TANK_WIDTH - d
-    need = SAFETY.geofence_margin + 0.1 * SAFETY.reaction_time + math.log(0.1 / SAFETY.contact_speed) / BAND.k
-    gaps = [d - BAND.half_length - BAND.width, d + BAND.half_length - BAND.width, d - BAND.span, d - BAND.span]
+    need = RULE.margin + 0.1 * RULE.reaction_time + math.log(0.1 / RULE.contact_speed) / BAND.k
+    half, width, span = BAND.outline
+    gaps = [d - half - width, d + half - width, d - span, d - span]
     expected = sum(max(need - g, 0.0) ** 2 for g in gaps)
     assert expected > 0
     got = band_violation(1.0, y, math.pi / 2, 0.1, 0.0, BAND, np)
@@ -56,19 +59,20 @@ def test_violation_by_hand_and_in_casadi():
 
 def test_deploy_plans_with_the_geofence_band_widened_as_v1_and_the_sim_only_where_its_band_is_on():
     config = EnvConfig(model="full", task="goal")
-    wide = StopBand.from_params(FishParams(), SAFETY.geofence_margin + MEASUREMENT_MARGIN, SAFETY.reaction_time,
-                                SAFETY.contact_speed)
+    wide = StopBand.from_params(FishParams(), StopRule(RULE.margin + MEASUREMENT_MARGIN, RULE.reaction_time,
+                                                       RULE.contact_speed))
     nmpc = make_controller("nmpc", config, step_budget=1e6, safety=SAFETY)
     assert nmpc.problem.stop_band == wide
     x = np.array([1.0, TANK_WIDTH - 0.4, math.pi / 2, 0.1, 0.0, 0.0])
     assert nmpc._wall_violation(x, 0.03) == pytest.approx(band_violation(*x[[0, 1, 2, 3, 4]], wide, np))
     hand = make_controller("hand", config, step_budget=1e6, safety=SAFETY)
-    assert hand.shield.band.margin == pytest.approx(wide.margin + 0.02)  # the shield's own extra margin on top
+    assert hand.shield.band.rule.margin == pytest.approx(wide.rule.margin + 0.02)  # the shield adds its own
     assert make_baseline("nmpc", config, step_budget=1e6).problem.stop_band is None
     v1 = EnvConfig(**registered_settings("PectoralFish-Full-v1"))
     assert make_baseline("nmpc", v1, step_budget=1e6).problem.stop_band == StopBand.from_params(
-        FishParams(), *v1.stop_rule)
-    with pytest.raises(ValueError, match="stop_band"):
+        FishParams(), v1.stop_rule)
+    assert NMPCSettings(stop_band=(0.05, 0.15, 0.03)).stop_band == StopRule(0.05, 0.15, 0.03)  # given as numbers
+    with pytest.raises(ValueError, match="stop_band: StopRule.reaction_time"):
         NMPCSettings(stop_band=(0.05, -1.0, 0.03))
-    with pytest.raises(ValueError, match="contact speed"):
+    with pytest.raises(ValueError, match="stop_band: StopRule.contact_speed"):
         NMPCSettings(stop_band=(0.05, 0.15, 0.0))

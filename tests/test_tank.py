@@ -43,8 +43,9 @@ def test_outline_clearance_and_coasting_by_hand():
 
 def test_the_stop_band_is_zero_exactly_where_the_geofence_lets_the_fish_swim_on():
     params = FishParams()
-    fence = Geofence(params, margin=0.05, reaction_time=0.15, contact_speed=0.03)
-    band = StopBand.from_params(params, 0.05, 0.15, 0.03)
+    rule = tank.StopRule(margin=0.05, reaction_time=0.15, contact_speed=0.03)
+    fence = Geofence(params, rule)
+    band = StopBand.from_params(params, rule)
     rng = np.random.default_rng(1)
     for _ in range(300):
         x, y, psi = rng.uniform(0, tank.TANK_LENGTH), rng.uniform(0, tank.TANK_WIDTH), rng.uniform(-math.pi, math.pi)
@@ -57,7 +58,7 @@ def test_the_stop_band_is_zero_exactly_where_the_geofence_lets_the_fish_swim_on(
 
 def test_numpy_and_casadi_give_the_same_band_and_wall_terms():
     params = FishParams()
-    band = StopBand.from_params(params, 0.05, 0.15, 0.03)
+    band = StopBand.from_params(params, tank.StopRule(0.05, 0.15, 0.03))
     sym = ca.SX.sym("s", 5)
     band_f = ca.Function("band", [sym], [band_violation(sym[0], sym[1], sym[2], sym[3], sym[4], band, ca)])
     wall_f = ca.Function("wall", [sym], [tank.wall_shortfall(sym[0], sym[1], ca.cos(sym[2]), ca.sin(sym[2]),
@@ -92,3 +93,41 @@ def test_distance_ahead_is_the_ray_to_the_first_wall():
     r = math.sqrt(0.5)
     assert tank.distance_ahead(1.0, 0.5, r, r) == pytest.approx(0.65 / r)
     assert tank.distance_ahead(1.0, 0.5, 0.0, 0.0) == math.inf
+
+
+def test_the_stop_rule_checks_itself_once_for_every_holder():
+    """A rule outside its bounds is refused by the rule, whoever holds it (env, supervisor, planner, shield)."""
+    import dataclasses
+
+    from pectoral_gym.agents.nmpc.settings import NMPCSettings
+    from pectoral_gym.envs.core import EnvConfig
+    from pectoral_gym.hardware.safety.rules import SafetyConfig
+
+    rule = tank.StopRule(0.05, 0.15, 0.03)
+    assert rule == tank.ROBOT_STOP_RULE and rule.as_tuple() == (0.05, 0.15, 0.03)
+    assert tank.StopRule.coerce([0.05, 0.15, 0.03]) == rule
+    assert tank.StopRule.coerce({"margin": 0.05, "reaction_time": 0.15, "contact_speed": 0.03}) == rule
+    assert tank.StopRule(0, 0, 1).margin == 0.0 and isinstance(tank.StopRule(0, 0, 1).margin, float)
+    bad = [((-0.01, 0.15, 0.03), "margin"), ((math.nan, 0.15, 0.03), "margin"), ((0.05, -0.1, 0.03), "reaction_time"),
+           ((0.05, math.inf, 0.03), "reaction_time"), ((0.05, 0.15, 0.0), "contact_speed"),
+           ((0.05, 0.15, -0.03), "contact_speed"), ((True, 0.15, 0.03), "margin"), (("0.05", 0.15, 0.03), "margin")]
+    for values, name in bad:
+        with pytest.raises(ValueError, match=f"StopRule.{name} must be a finite number"):
+            tank.StopRule(*values)
+        with pytest.raises(ValueError, match=f"stop_rule: StopRule.{name}"):
+            EnvConfig(stop_rule=values)
+        with pytest.raises(ValueError, match=f"stop_band: StopRule.{name}"):
+            NMPCSettings(stop_band=values)
+    with pytest.raises(ValueError, match="StopRule.margin"):
+        dataclasses.replace(rule, margin=-1.0)  # a changed field is checked again
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        rule.margin = 1.0  # type: ignore[misc]
+    for shape in ((0.05, 0.15), "abc", 3.0, {"margin": 0.05}):
+        with pytest.raises(ValueError, match="stop rule"):
+            tank.StopRule.coerce(shape)
+    with pytest.raises(ValueError, match="SafetyConfig.stop_rule"):
+        SafetyConfig(stop_rule=(0.05, 0.15, 0.03))  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="StopRule"):
+        Geofence(FishParams(), (0.05, 0.15, 0.03))  # type: ignore[arg-type]
+    with pytest.raises(TypeError, match="StopRule"):
+        StopBand.from_params(FishParams(), (0.05, 0.15, 0.03))  # type: ignore[arg-type]

@@ -32,6 +32,7 @@ remain after it (with one, the shield rode a single escape whose prediction was 
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -52,7 +53,7 @@ SLOWER = (1.0, 0.5)  # the law's amplitudes scaled by these (thrust ~ amplitude^
 _COAST, _TURN, _SPIN = 0, 1, 2  # the kinds of backup (BandShield.kinds)
 
 
-def through_firmware(config: EnvConfig, band: tuple[float, float, float] | None, firmware: bool | None) -> bool:
+def through_firmware(config: EnvConfig, band: StopRule | None, firmware: bool | None) -> bool:
     """Whether a shield predicts through the robot firmware's command path (``BandShield``'s ``firmware``).
 
     ``firmware`` when given; else where ``band`` is given and the env ends no episode in a band of its own (the
@@ -67,7 +68,7 @@ def band_speed(clearance: float, band: StopBand) -> float:
     The need ``margin + v t_r + ln(max(v, v_c) / v_c) / k`` grows with ``v``; solved by bisection.
     """
     def need(v: float) -> float:
-        return float(stop_need(v, band.k, StopRule(band.margin, band.reaction_time, band.contact_speed)))
+        return float(stop_need(v, band.k, band.rule))
 
     if need(0.0) >= clearance:
         return 0.0
@@ -86,9 +87,9 @@ class BandShield:
     Args:
         config: The environment settings.
         fins: The controller's fin map (period, ratio, amplitudes, planning model).
-        band: The band's :class:`~pectoral_gym.model.tank.StopRule` ``(margin [m], reaction time [s], contact speed
-            [m/s])``;
-            ``None``: the env's ``stop_rule`` where its ``stop_band`` is on (v1), else the robot's
+        band: The band's :class:`~pectoral_gym.model.tank.StopRule` (or its ``(margin, reaction_time,
+            contact_speed)``); ``None``: the env's ``stop_rule`` where its
+            ``stop_band`` is on (v1), else the robot's
             (:data:`~pectoral_gym.model.tank.ROBOT_STOP_RULE`).
         extra_margin: Clearance [m] added to the band's margin in the rollouts.
         horizon: Length of each rollout [s].
@@ -108,7 +109,7 @@ class BandShield:
             enough); more makes the shield take over while it still has several ways out.
     """
 
-    def __init__(self, config: EnvConfig, fins: FinMap, band: tuple[float, float, float] | None = None,
+    def __init__(self, config: EnvConfig, fins: FinMap, band: StopRule | None = None,
                  extra_margin: float = 0.02, horizon: float = 16.0, check: float = 0.5, turn_level: float = 0.06,
                  speed_spread: float = 0.0, spin: bool = True, firmware: bool | None = None,
                  keep_side: bool = False, reserve: int = 1):
@@ -118,10 +119,8 @@ class BandShield:
         self.keep_side, self.reserve = bool(keep_side), int(reserve)
         self.fins = fins
         firmware = through_firmware(config, band, firmware)
-        if band is None:
-            band = config.stop_rule if config.stop_band else ROBOT_STOP_RULE
-        margin, reaction, contact = band
-        self.band = StopBand.from_params(config.params, margin + extra_margin, reaction, contact)
+        band = (config.stop_rule if config.stop_band else ROBOT_STOP_RULE) if band is None else StopRule.coerce(band)
+        self.band = StopBand.from_params(config.params, dataclasses.replace(band, margin=band.margin + extra_margin))
         self.speed_spread = float(speed_spread)
         self.dt = float(config.control_period)
         self.intervals = max(1, int(round(horizon / self.dt)))

@@ -41,13 +41,10 @@ from pectoral_gym.envs.observation import (
     OBS_Y,
 )
 from pectoral_gym.envs.tasks import kernels as tk
-from pectoral_gym.model.tank import ROBOT_STOP_RULE
+from pectoral_gym.model.tank import ROBOT_STOP_RULE, StopRule
 from pectoral_gym.versions import SIMULATION_IDS
 
-__all__ = ["ROBOT_BAND", "EpisodeRecord", "goal_in_inset", "run_episode", "summarize"]
-
-# The robot's band: margin [m], reaction time [s], contact speed [m/s] (its supervisor's SafetyConfig defaults)
-ROBOT_BAND = tuple(ROBOT_STOP_RULE)
+__all__ = ["EpisodeRecord", "goal_in_inset", "run_episode", "summarize"]
 
 
 @dataclass
@@ -100,7 +97,7 @@ def _aim_observation(obs: np.ndarray, state: np.ndarray, goal: tuple[float, floa
 
 
 def run_episode(make_controller: Callable[[EnvConfig], object] | None, seed: int, env_id: str = SIMULATION_IDS["full"],
-                substeps: int = 5, goal_inset: float | None = None, band: tuple[float, float, float] = ROBOT_BAND,
+                substeps: int = 5, goal_inset: float | None = None, band: StopRule = ROBOT_STOP_RULE,
                 max_steps: int = 240, env_kwargs: dict | None = None, controller=None,
                 start: tuple[float, float, float] | None = None,
                 goal: tuple[float, float] | None = None) -> EpisodeRecord:
@@ -113,7 +110,7 @@ def run_episode(make_controller: Callable[[EnvConfig], object] | None, seed: int
             study sees every entry into ``band``).
         substeps: Band checks per control period.
         goal_inset: Redraw the goal this far from the walls [m] (:func:`goal_in_inset`); ``None``: the env's.
-        band: ``(margin [m], reaction time [s], contact speed [m/s])`` of the band.
+        band: The band's :class:`~pectoral_gym.model.tank.StopRule` (default: the robot's supervisor's).
         max_steps: Control steps before truncation (the registry's 240).
         env_kwargs: More env arguments (``task`` is ``goal``).
         controller: A controller built already for ``config`` (then ``make_controller`` is not called).
@@ -128,7 +125,7 @@ def run_episode(make_controller: Callable[[EnvConfig], object] | None, seed: int
     period = config.control_period
     env = gym.make(env_id, **{**kwargs, "control_period": period / substeps}).unwrapped
     ctrl = controller if controller is not None else make_controller(config)
-    stop_band = StopBand.from_params(config.params, *band)
+    stop_band = StopBand.from_params(config.params, band)
     obs, info = env.reset(seed=seed)
     ctrl.reset(seed)
     if start is not None:

@@ -195,7 +195,7 @@ class HandController:
         c, s = o.cos_psi, o.sin_psi
         gx, gy = o.x + reach * (c * aim_x - s * aim_y), o.y + reach * (s * aim_x + c * aim_y)
         band = self.shield.band
-        clearance = min(tank.wall_gaps(gx, gy)) - band.half_length - band.width
+        clearance = min(tank.wall_gaps(gx, gy)) - band.outline.half_length - band.outline.width
         return band_speed(clearance, band) * math.exp(min(band.k * room, 30.0))
 
     def _room(self, o, side: float) -> float:

@@ -15,7 +15,6 @@ and the pricing of rollouts (``ops=numpy``).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -27,35 +26,24 @@ __all__ = ["StopBand", "band_violation"]
 
 @dataclass(frozen=True)
 class StopBand:
-    """The geometry and rule of the stopping-distance band (``pectoral_gym.hardware.safety.geofence.Geofence``'s).
+    """The rule and geometry of the stopping-distance band (``pectoral_gym.hardware.safety.geofence.Geofence``'s).
 
     Attributes:
-        margin: Clearance kept on top of the stopping distance [m].
-        reaction_time: ``t_r`` [s].
-        contact_speed: ``v_c`` [m/s] (:class:`~pectoral_gym.model.tank.StopRule`).
-        k: ``c1 / max(m1, m2)`` [1/m].
-        half_length: Half the body length [m] (nose and tail).
-        width: ``C_p`` [m]: the capsule's radius and the fin pivots' lateral offset.
-        span: ``S_p`` [m]: the radius of the fin discs.
+        rule: The band's :class:`~pectoral_gym.model.tank.StopRule` (margin [m], ``t_r`` [s], ``v_c`` [m/s]).
+        k: ``c1 / max(m1, m2)`` [1/m] (:func:`~pectoral_gym.model.tank.coast_rate`).
+        outline: The fish's :class:`~pectoral_gym.model.tank.Outline` (half the body length, ``C_p``, ``S_p`` [m]).
     """
 
-    margin: float
-    reaction_time: float
-    contact_speed: float
+    rule: StopRule
     k: float
-    half_length: float
-    width: float
-    span: float
+    outline: Outline
 
     @classmethod
-    def from_params(cls, params: FishParams, margin: float, reaction_time: float, contact_speed: float) -> StopBand:
-        """The band of a fish with ``params`` and the supervisor's ``margin``, reaction time and contact speed."""
-        values = (margin, reaction_time, contact_speed)
-        if not (all(math.isfinite(v) and v >= 0 for v in values) and contact_speed > 0):
-            raise ValueError("stop band margin and reaction time must be finite and >= 0, the contact speed finite "
-                             f"and > 0, got {values}")
-        return cls(float(margin), float(reaction_time), float(contact_speed), coast_rate(params),
-                   *Outline.from_params(params))
+    def from_params(cls, params: FishParams, rule: StopRule) -> StopBand:
+        """The band of a fish with ``params`` under ``rule`` (the supervisor's, or the envs' ``stop_rule``)."""
+        if not isinstance(rule, StopRule):
+            raise TypeError(f"StopBand needs a pectoral_gym.model.tank.StopRule, got {rule!r}")
+        return cls(rule, coast_rate(params), Outline.from_params(params))
 
 
 def band_violation(x: Any, y: Any, psi: Any, vx: Any, vy: Any, band: StopBand, ops: Any) -> Any:
@@ -72,14 +60,12 @@ def band_violation(x: Any, y: Any, psi: Any, vx: Any, vy: Any, band: StopBand, o
     """
     c, s = ops.cos(psi), ops.sin(psi)
     vx_w, vy_w = c * vx - s * vy, s * vx + c * vy
-    rule = StopRule(band.margin, band.reaction_time, band.contact_speed)
     needs = []
     for toward in (-vx_w, vx_w, -vy_w, vy_w):  # walls X = 0, X = L, Y = 0, Y = W (tank.wall_gaps' order)
         v = ops.fmax(toward, 0.0)
-        needs.append(stop_need(v, band.k, rule, ops=ops))
+        needs.append(stop_need(v, band.k, band.rule, ops=ops))
     total = 0.0
-    outline = Outline(band.half_length, band.width, band.span)
-    for px, py, r in outline_circles(x, y, c, s, outline):  # nose, tail, right and left fin pivot
+    for px, py, r in outline_circles(x, y, c, s, band.outline):  # nose, tail, right and left fin pivot
         for need, gap in zip(needs, wall_gaps(px, py, r), strict=True):
             total = total + ops.fmax(need - gap, 0.0) ** 2
     return total

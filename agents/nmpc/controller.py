@@ -97,7 +97,7 @@ class NMPCController(PlanPricing, HandOver):
         base = settings or NMPCSettings()
         self.settings = NMPCSettings(**{**base.__dict__, **overrides}) if overrides else base
         if self.settings.stop_band is None and config.stop_band:
-            self.settings = dataclasses.replace(self.settings, stop_band=tuple(config.stop_rule))
+            self.settings = dataclasses.replace(self.settings, stop_band=config.stop_rule)
         path = scaling if isinstance(scaling, (str, Path)) else None
         self.fins = FinMap(config, planning_spec(config, path))
         self.spec = self.fins.spec  # the planning model (the spin turns' rollouts)

@@ -242,7 +242,7 @@ class NMPCProblem:
         from_l = ca.vertcat(v.bias_left, ca.sqrt(v.amplitude_left), period, zeta)
         impulse = (expected_transition_impulse_sx(from_r, beat_r, 1.0, params)
                    + expected_transition_impulse_sx(from_l, beat_l, -1.0, params))
-        if not s.transitions:
+        if not (fins.spec.transitions if s.transitions is None else s.transitions):  # None: the planning model's
             impulse = ca.DM.zeros(3)
         transition = ca.Function("transition", [u_from, u_sym], [ca.vertcat(impulse, 0.0)])
         x = ca.SX.sym("x", STATE_SIZE)
@@ -255,7 +255,7 @@ class NMPCProblem:
         energy_weight = config.energy_weight if s.energy_weight is None else s.energy_weight
         width = np.where(z_high > z_low, z_high - z_low, 1.0)
         half = 0.5 * params.body_length
-        band = StopBand.from_params(params, *s.stop_band) if s.stop_band is not None else None
+        band = StopBand.from_params(params, s.stop_band) if s.stop_band is not None else None
         turn_radius = float(s.turn_radius)
         distance_scale = s.distance_scale
         if distance_scale is None:

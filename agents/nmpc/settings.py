@@ -7,10 +7,10 @@ development runs behind its default (``docs/notes/2026-12-01-nmpc-rounds.md``).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 from pectoral_gym.agents.nmpc.reference import PREDICTIONS
+from pectoral_gym.model.tank import StopRule
 
 __all__ = ["NMPCSettings"]
 
@@ -91,10 +91,14 @@ class NMPCSettings:
             ``"difference"`` on the full model, ``"obs"`` on the averaged model.
         observer: Turn those period-mean velocities into current ones: the model's velocities at the
             end of the last period plus the offset between the measured and the model's period means.
-        transitions: Plan with the expected impulse of transitional strokes (module docstring).
-            Off by default: on seeds 100-109 (``pectoral_gym.agents.nmpc.compare``, no step budget) it reached 6 of
-            10 goals on the full model against 10 of 10 without, and 8 of 10 on the averaged env either
-            way: the optimiser leans on an impulse whose real value depends on the unobserved phase.
+        transitions: Let the NLP plan with the expected impulse of transitional strokes (module docstring).
+            ``None``: as the planning model does (``transitions`` of
+            :func:`pectoral_gym.agents.controllers.fin_map.planning_spec`: the env version's on the averaged model,
+            :data:`pectoral_gym.model.spec.AVERAGED`'s on the full model). Off by default whatever the planning model
+            (a planner's choice, not the model's; the spin candidates' rollouts keep the planning model as it is):
+            on seeds 100-109 (``pectoral_gym.agents.nmpc.compare``, no step budget) the NLP with the impulse
+            reached 6 of 10 goals on the full model against 10 of 10 without, and 8 of 10 on the averaged env
+            either way: the optimiser leans on an impulse whose real value depends on the unobserved phase.
         hand_candidate: Also screen the plan of :class:`pectoral_gym.agents.baselines.HandController` in closed loop
             on the planning model (its deadlock escape and long way round near walls). ``None``: for
             ``goal`` only (``pectoral_gym.agents.nmpc.compare --task track --seeds 100-101``: 14.7 cm with it, 8.1 cm
@@ -129,8 +133,9 @@ class NMPCSettings:
             strokes turn the fish within ~0.1 m, rolled out on the averaged model with its transitional strokes);
             a spin candidate that costs less than the solved plan is applied as it is. ``None``: for
             ``goal`` only.
-        stop_band: ``(margin [m], reaction time [s], contact speed [m/s])`` of the robot env's
-            stopping-distance band (:mod:`pectoral_gym.agents.controllers.stop_band`, the rule of
+        stop_band: The :class:`~pectoral_gym.model.tank.StopRule` (or its ``(margin, reaction_time,
+            contact_speed)``) of the robot env's stopping-distance band
+            (:mod:`pectoral_gym.agents.controllers.stop_band`, the rule of
             ``pectoral_gym.hardware.safety.geofence.Geofence``): the wall terms then keep the fish's whole outline out
             of the band instead of its nose and tail ``wall_margin`` (and ``togo_wall_margin``) from the walls. ``None``
             (the simulated envs, which have no such band): off. ``pectoral_gym.hardware.deploy`` passes its safety
@@ -191,7 +196,7 @@ class NMPCSettings:
     step_budget: float = 0.25
     velocity: str = "obs"
     observer: bool = True
-    transitions: bool = False
+    transitions: bool | None = False
     hand_candidate: bool | None = None
     w_togo: float | None = None
     togo_wall_margin: float = 0.15
@@ -200,7 +205,7 @@ class NMPCSettings:
     reach_fraction: float = 0.75
     bias_span: float | str | None = "auto"
     spin: bool | None = None
-    stop_band: tuple[float, float, float] | None = None
+    stop_band: StopRule | None = None
     shield: bool | None = None
     shield_margin: float = 0.02
     shield_spread: float = 0.0
@@ -240,12 +245,11 @@ class NMPCSettings:
             raise ValueError(f"heading_lookahead must be >= 0 s or None, got {self.heading_lookahead!r}")
         if self.solver not in _SOLVERS:
             raise ValueError(f"solver must be one of {_SOLVERS}, got {self.solver!r}")
-        if self.stop_band is not None and (len(self.stop_band) != 3 or not (all(
-                isinstance(v, float | int) and math.isfinite(v) and v >= 0 for v in self.stop_band)
-                and self.stop_band[2] > 0)):
-            raise ValueError(f"stop_band must be (margin, reaction time, contact speed), finite and >= 0, the "
-                             f"contact speed > 0, got "
-                             f"{self.stop_band!r}")
+        if self.stop_band is not None:
+            try:
+                object.__setattr__(self, "stop_band", StopRule.coerce(self.stop_band))  # the rule checks itself
+            except ValueError as err:
+                raise ValueError(f"stop_band: {err}") from None
         if not (self.shield_margin >= 0 and self.shield_spread >= 0):
             raise ValueError(f"shield_margin and shield_spread must be >= 0, got {self.shield_margin!r}, "
                              f"{self.shield_spread!r}")

@@ -23,6 +23,7 @@ from pectoral_gym.agents.controllers.fin_map import FinMap
 from pectoral_gym.agents.nmpc.handover import goal_bearing
 from pectoral_gym.agents.nmpc.problem import FinInputs
 from pectoral_gym.envs.core import EnvConfig
+from pectoral_gym.model.tank import StopRule
 
 __all__ = ["ROBOT_RESERVE", "CommandShield"]
 
@@ -35,7 +36,7 @@ class CommandShield:
     Args:
         config: The environment settings.
         fins: The controller's fin map (its period and ratio are the patterns' own).
-        band: ``(margin [m], reaction time [s], contact speed [m/s])`` of the band kept out of; ``None``:
+        band: The :class:`~pectoral_gym.model.tank.StopRule` of the band kept out of; ``None``:
             ``BandShield``'s default (the env's ``stop_rule`` where its ``stop_band`` is on, else the robot's).
         extra_margin: Clearance [m] added to the band's margin in the shield's rollouts.
         speed_spread: Speed [m/s] added towards every wall in the rollouts (``BandShield``'s).
@@ -52,11 +53,10 @@ class CommandShield:
             half-amplitude commands).
     """
 
-    def __init__(self, config: EnvConfig, fins: FinMap, band: tuple[float, float, float] | None,
+    def __init__(self, config: EnvConfig, fins: FinMap, band: StopRule | None,
                  extra_margin: float = 0.02, speed_spread: float = 0.0, spin: bool = True,
                  firmware: bool | None = None, keep_side: bool | None = None, reserve: int | None = None):
         self.fins = fins
-        band = None if band is None else tuple(band)
         robot = through_firmware(config, band, firmware)  # the robot's command path: its spins drift, so hold
         self.shield = BandShield(  # them and react earlier
             config, fins, band=band, extra_margin=extra_margin, speed_spread=speed_spread, spin=spin, firmware=robot,

@@ -2,13 +2,13 @@
 
 ``pectoral-deploy`` logs every step's action and the fish's pose (``true_pose``: the emulated robot's own; the
 camera's ``pose`` on a real robot) in ``steps.jsonl``. This study resets a simulated env (default
-``PectoralFish-Full-v2``, the model the emulated robot runs) at each episode's logged start and goal, steps it
-with the logged actions, and finds the first step at which the simulated pose is further than ``--part-mm`` or
-``--part-deg`` from the logged one. Against the emulated robot the two agree to a fraction of a millimetre until
-something in the stack moves the fins differently from the model (the firmware's rules, the radio's timing): the
-step it parts at, and the separation there, say where to look (``docs/notes/2026-12-05-still-fins.md`` found two
-firmware faults this way). Against a real robot the model's own error parts them too; calibrate first
-(``docs/calibration.md``).
+:data:`pectoral_gym.versions.LATEST_FULL`, the model the emulated robot runs) at each episode's logged start and
+goal, steps it with the logged actions, and finds the first step at which the simulated pose is further than
+``--part-mm`` or ``--part-deg`` from the logged one. Against the emulated robot the two agree to a fraction of a
+millimetre until something in the stack moves the fins differently from the model (the firmware's rules, the
+radio's timing): the step it parts at, and the separation there, say where to look
+(``docs/notes/2026-12-05-still-fins.md`` found two firmware faults this way). Against a real robot the model's own
+error parts them too; calibrate first (``docs/calibration.md``).
 
 Example::
 

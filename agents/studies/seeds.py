@@ -1,14 +1,13 @@
 """Results across training seeds: train the demo's PPO for N seeds, evaluate each, aggregate as rliable does.
 
-Each seed trains exactly as ``pectoral-demo --seed S`` (PPO on ``PectoralFish-Averaged-v2``, task ``goal``,
-``agents/hyperparams/ppo.yml``, best model chosen on the periodic evaluation's episodes, which the shipped
-file runs on the full model: ``eval_env``) and is then
-evaluated on three settings, the same held-out episodes for every seed (episode ``k`` reset with
-``--eval-seed + k``, default the demo's): the averaged model, the full model, and the full model with
-:data:`pectoral_gym.agents.training.evaluate.DEFAULT_RANDOMIZATION`, each as the train env's version
-(v1: with the robot's stopping band, servo limit and goal inset; the full model's fast integration). A
-:class:`pectoral_gym.agents.studies.solve_probe.SolveProbe` (``--probe-every``)
-times each run to 0.95 success on the full model on a third set of episodes.
+Each seed trains exactly as ``pectoral-demo --seed S`` (PPO on :data:`pectoral_gym.versions.LATEST_AVERAGED`, task
+``goal``, ``agents/hyperparams/ppo.yml``, best model chosen on the periodic evaluation's episodes, which the
+shipped file runs on the full model: ``eval_env``) and is then evaluated on three settings, the same held-out
+episodes for every seed (episode ``k`` reset with ``--eval-seed + k``, default the demo's): the averaged model, the
+full model, and the full model with :data:`pectoral_gym.agents.training.evaluate.DEFAULT_RANDOMIZATION`, each as
+the train env's version (v1: with the robot's stopping band, servo limit and goal inset; the full model's fast
+integration). A :class:`pectoral_gym.agents.studies.solve_probe.SolveProbe` (``--probe-every``) times each run to
+0.95 success on the full model on a third set of episodes.
 
 Across seeds, per setting: the interquartile mean (``scipy.stats.trim_mean(x, 0.25)``, the mean of the
 middle half of the seeds, as in rliable) with a percentile-bootstrap interval over seeds

@@ -1,13 +1,12 @@
 """What the robot stack itself costs a controller: its deploy episodes replayed in simulation from the same starts.
 
 ``pectoral-deploy`` logs each episode's start (``true_pose`` at the reset: the emulated robot's own pose; the
-camera's ``pose`` on a real robot) and goal (``target``) in ``steps.jsonl``, and its outcome in
-``summary.json``. This study drives the same controller in a simulated env (default ``PectoralFish-Full-v2``,
-the model the emulated robot runs) from those starts and goals (``reset(options=...)``) and counts the
-episodes by outcome on the robot stack and in simulation. The episodes the simulation reaches and the stack
-does not are what the stack costs (camera, observer, radio, firmware rules, safety supervisor), not the
-controller's skill at the task; each is listed with its stop and the goal's bearing off the heading at the
-start.
+camera's ``pose`` on a real robot) and goal (``target``) in ``steps.jsonl``, and its outcome in ``summary.json``.
+This study drives the same controller in a simulated env (default :data:`pectoral_gym.versions.LATEST_FULL`, the
+model the emulated robot runs) from those starts and goals (``reset(options=...)``) and counts the episodes by
+outcome on the robot stack and in simulation. The episodes the simulation reaches and the stack does not are what
+the stack costs (camera, observer, radio, firmware rules, safety supervisor), not the controller's skill at the
+task; each is listed with its stop and the goal's bearing off the heading at the start.
 
 Example::
 

@@ -39,29 +39,28 @@ class Geofence:
 
     Args:
         params: Fish geometry and body coefficients.
-        margin: Clearance on top of the stopping distance [m].
-        reaction_time: ``t_r`` [s].
-        contact_speed: ``v_c`` [m/s], > 0: after a stop the fish crosses the margin line no faster than this.
+        rule: The band's :class:`~pectoral_gym.model.tank.StopRule` (margin [m], ``t_r`` [s], ``v_c`` [m/s]; the
+            envs' ``stop_rule`` of the same name; ``SafetyConfig.stop_rule`` on the robot).
+
+    Attributes:
+        rule: The rule.
+        k: :func:`~pectoral_gym.model.tank.coast_rate` of ``params`` [1/m].
+        shape: The fish's :class:`~pectoral_gym.model.tank.Outline`.
     """
 
-    def __init__(self, params: FishParams, margin: float, reaction_time: float, contact_speed: float):
+    def __init__(self, params: FishParams, rule: tank.StopRule):
+        if not isinstance(rule, tank.StopRule):
+            raise TypeError(f"Geofence needs a pectoral_gym.model.tank.StopRule, got {rule!r}")
         self.params = params
+        self.rule = rule
         self.k = tank.coast_rate(body_coefficients(params))  # [1/m]
         self.shape = tank.Outline.from_params(params)
         self.half_length, self.width, self.span = self.shape
-        self.margin, self.reaction_time, self.contact_speed = float(margin), float(reaction_time), float(contact_speed)
-        if not self.contact_speed > 0:
-            raise ValueError(f"Geofence: contact_speed must be > 0 m/s, got {contact_speed!r}")
         self.breached(0.5 * tank.TANK_LENGTH, 0.5 * tank.TANK_WIDTH, 0.0)  # compile or load the kernel now
-
-    @property
-    def rule(self) -> tank.StopRule:
-        """The band's :class:`~pectoral_gym.model.tank.StopRule` (the envs' ``stop_rule`` of the same name)."""
-        return tank.StopRule(self.margin, self.reaction_time, self.contact_speed)
 
     def coast(self, speed: float) -> float:
         """Distance [m] a fish coasting from ``speed`` [m/s] with its fins still covers until it is down to ``v_c``."""
-        return float(tank.coast_distance(float(speed), self.k, self.contact_speed))
+        return float(tank.coast_distance(float(speed), self.k, self.rule.contact_speed))
 
     def outline(self, x: float, y: float, psi: float) -> tuple[np.ndarray, np.ndarray]:
         """Centres ``(4, 2)`` (nose, tail, right and left fin pivot) and radii ``(4,)`` of the outline [m]."""
@@ -86,10 +85,11 @@ class Geofence:
             return True
         sx, sy = (max(float(s), 0.0) for s in spread)
         toward = (-vx + sx, vx + sx, -vy + sy, vy + sy)
-        react = self.reaction_time + max(age, 0.0)
+        rule = self.rule
+        react = rule.reaction_time + max(age, 0.0)
         speeds = tuple(min(max(t, 0.0) + max(gain, 0.0), bound) for t in toward)
         c, s = math.cos(psi), math.sin(psi)
-        shortfall = tank.band_shortfall(x, y, c, s, speeds, self.shape, self.k, self.margin, react, self.contact_speed)
+        shortfall = tank.band_shortfall(x, y, c, s, speeds, self.shape, self.k, rule.margin, react, rule.contact_speed)
         return bool(shortfall > 0)
 
 

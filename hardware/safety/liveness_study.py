@@ -83,7 +83,7 @@ def run_episode(policy, settings: dict, seed: int, fault: str, fault_after: int,
         cycle = int(fault[5:]) if fault.startswith("cycle") else 4
         faulty = FaultyCamera(camera, cycle=cycle, clock=clock, seed=[seed, 7])
         safety = SafetyConfig()
-        fence = Geofence(_params(settings), safety.geofence_margin, safety.reaction_time, safety.contact_speed)
+        fence = Geofence(_params(settings), safety.stop_rule)
         clearance = [math.inf]
         recording_on = [False]  # the sink records from the episode's start on (not the placing before it)
 

@@ -42,7 +42,10 @@ class SafetyConfig:
 
     Attributes:
         limits: Servo limits (clipping and rate limiting), shared with the firmware rules.
-        geofence_margin: Clearance kept from every wall on top of the stopping distance [m].
+        stop_rule: The geofence's :class:`~pectoral_gym.model.tank.StopRule`: the clearance kept from every wall on
+            top of the stopping distance [m], the reaction time from a pose to the fins halting (frame age, polling,
+            radio) [s], and the contact speed [m/s] the fish crosses the margin line no faster than after a stop.
+            Default: the robot's, :data:`~pectoral_gym.model.tank.ROBOT_STOP_RULE`.
         tracking_timeout: Stop when the fish has not been seen for this long [s]; in
             ``(0, MAX_TRACKING_TIMEOUT]`` (while the fish is unseen the geofence also assumes the worst motion
             the fins allow).
@@ -52,28 +55,25 @@ class SafetyConfig:
         step_slack: Time allowed between the end of one ``step()`` and the start of the next (policy
             compute time, timing jitter) [s]; ``step()`` renews the lease only while it runs, to last
             this long past its own end.
-        contact_speed: After a stop the fish crosses the geofence's margin line no faster than this [m/s]
-            (:class:`~pectoral_gym.model.tank.StopRule`).
-        reaction_time: Time from a pose to the fins halting (frame age, polling, radio) [s].
         max_frame_lead: Camera timestamps further ahead of this machine's clock are rejected [s].
         pose_noise: Standard deviation of the tracked position assumed for the geofence's speed estimate [m]
             (the fit's own scatter is used when larger).
     """
 
     limits: ServoLimits = field(default_factory=ServoLimits)
-    geofence_margin: float = tank.ROBOT_STOP_RULE.margin
+    stop_rule: tank.StopRule = tank.ROBOT_STOP_RULE
     tracking_timeout: float = 0.5
     link_timeout: float = 1.0
     lease: float = DEFAULT_LEASE
     step_slack: float = 0.3
-    contact_speed: float = tank.ROBOT_STOP_RULE.contact_speed
-    reaction_time: float = tank.ROBOT_STOP_RULE.reaction_time
     max_frame_lead: float = 0.05
     pose_noise: float = 0.005
 
     def __post_init__(self) -> None:
-        for name in ("geofence_margin", "tracking_timeout", "link_timeout", "lease", "step_slack", "contact_speed",
-                     "reaction_time", "max_frame_lead", "pose_noise"):
+        if not isinstance(self.stop_rule, tank.StopRule):
+            raise ValueError(f"SafetyConfig.stop_rule must be a pectoral_gym.model.tank.StopRule, got "
+                             f"{self.stop_rule!r}")
+        for name in ("tracking_timeout", "link_timeout", "lease", "step_slack", "max_frame_lead", "pose_noise"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"SafetyConfig.{name} must be a finite number >= 0, got {value!r}")
@@ -82,8 +82,6 @@ class SafetyConfig:
         if self.tracking_timeout > MAX_TRACKING_TIMEOUT:
             raise ValueError(f"SafetyConfig.tracking_timeout = {self.tracking_timeout} s exceeds "
                              f"MAX_TRACKING_TIMEOUT = {MAX_TRACKING_TIMEOUT} s (a fish unseen that long is lost)")
-        if self.contact_speed <= 0:
-            raise ValueError(f"SafetyConfig.contact_speed must be > 0 m/s, got {self.contact_speed!r}")
         if not 0 < self.step_slack < self.lease <= MAX_LEASE:
             raise ValueError(f"SafetyConfig: need 0 < step_slack < lease <= {MAX_LEASE} s, got "
                              f"{self.step_slack}, {self.lease}")
@@ -174,14 +172,14 @@ class TrackingWatch:
         return self.lost_for(now) > self.timeout
 
 
-def effective_reaction_time(reaction_time: float, round_trip: float | None) -> float:
+def effective_reaction_time(rule: tank.StopRule, round_trip: float | None) -> float:
     """The time from a pose to the fins halting [s] on a radio whose measured round trip is ``round_trip`` [s].
 
-    ``reaction_time`` (``SafetyConfig.reaction_time``, the rule's ``t_r``) budgets a prompt radio: frame age,
+    The rule's reaction time ``t_r`` (``SafetyConfig.stop_rule``) budgets a prompt radio: frame age,
     polling, a few milliseconds of air time. A STOP decided now reaches the robot one forward delay ``f`` later,
     and the fins run until then; the PC cannot measure ``f`` alone (``docs/protocol.md`` section 5: a radio slow
     one way and one slow both ways give it identical times), but the return delay is not negative, so
-    ``f <= RTT``. Hence ``reaction_time + round_trip``, the bound the geofence's stopping distance needs
+    ``f <= RTT``. Hence ``t_r + round_trip``, the bound the geofence's stopping distance needs
     (``docs/guide/safety.md``, "The radio's delay and the geofence").
 
     It covers the STOP's first copy. A lost copy is sent again (the link's retry, and its keep-alive repeats STOP
@@ -189,15 +187,13 @@ def effective_reaction_time(reaction_time: float, round_trip: float | None) -> f
     halts by itself at its lease's end in any case (``docs/protocol.md`` section 5).
 
     Args:
-        reaction_time: The prompt radio's reaction time [s], >= 0.
+        rule: The geofence's :class:`~pectoral_gym.model.tank.StopRule` (its ``reaction_time``: the prompt radio's).
         round_trip: The link's measured round trip [s] (its smoothed estimate), >= 0; ``None`` before the first
-            sample gives ``reaction_time`` alone: until the first command's STATUS returns, the fins have run for
+            sample gives ``t_r`` alone: until the first command's STATUS returns, the fins have run for
             less than one round trip from rest, and the speed bound (``SpeedBound``) holds the fish's speed to
             what that short run can give.
     """
-    reaction = float(reaction_time)
-    if not (math.isfinite(reaction) and reaction >= 0):
-        raise ValueError(f"reaction_time must be a finite number of seconds >= 0, got {reaction_time!r}")
+    reaction = rule.reaction_time
     if round_trip is None:
         return reaction
     rtt = float(round_trip)

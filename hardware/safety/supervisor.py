@@ -54,7 +54,7 @@ class Supervisor:
             ``control_lost``).
         camera: A frame source; the supervisor reads it through a :class:`FrameGrabber` it owns (and closes).
         tracker: ``track(frame) -> TrackResult``.
-        geofence: The wall rule.
+        geofence: The wall rule (from ``safety.stop_rule``); its rule's reaction time is every rule's budget.
         safety: Timeouts and limits.
         speed: Experiment seconds per wall second.
         poll_period: Rule period [experiment s].
@@ -101,7 +101,7 @@ class Supervisor:
         self.confidence = 0.0
         self.track_ok = False
         self.frames = self.lost_frames = 0
-        self.afforded_latency = afforded_latency(safety.tracking_timeout, safety.reaction_time)
+        self.afforded_latency = afforded_latency(safety.tracking_timeout, geofence.rule.reaction_time)
         self._last_read = -math.inf  # experiment time the last frame was read
         self._box = None
         self._since = -math.inf
@@ -202,7 +202,7 @@ class Supervisor:
             if now > self.bound.run_until:  # the last lease may have ended: a command in flight then starts whole
                 self.gain.still(self.bound.run_until - self._round_trip())
             # The fins may run until the lease ends, plus the reaction time (firmware tick) and the radio's delay.
-            self.bound.running(now, now + lease + self.safety.reaction_time + self._radio_delay())
+            self.bound.running(now, now + lease + self.geofence.rule.reaction_time + self._radio_delay())
             seq = self.link.set_fins(beats, lease)
             acknowledged = self._acknowledgement(seq)
             self.liveness.command(now, beats, acknowledged)
@@ -217,8 +217,8 @@ class Supervisor:
 
     def _radio_delay(self) -> float:
         """What the radio adds to the reaction time [s] (:func:`effective_reaction_time`)."""
-        reaction = self.geofence.reaction_time
-        return effective_reaction_time(reaction, self._round_trip()) - reaction
+        rule = self.geofence.rule
+        return effective_reaction_time(rule, self._round_trip()) - rule.reaction_time
 
     def _acknowledgement(self, seq) -> Callable[[], float | None] | None:
         """When the STATUS acknowledging message ``seq`` (or a later one) arrived [experiment s], ``None`` before.
@@ -329,13 +329,13 @@ class Supervisor:
         age = now - seen
         # A STOP reaches the robot a forward delay (at most the round trip) after it is sent: the fins run on.
         radio = self._radio_delay()
-        bound = self.bound.peak(seen, now + self.geofence.reaction_time + radio)
+        bound = self.bound.peak(seen, now + self.geofence.rule.reaction_time + radio)
         # Unseen beyond the reaction budget and the camera's measured latency: a frame that arrives late but
         # regularly is a sighting of an older time (its age already lengthens the stopping distance, speed x age).
-        unseen = max(0.0, age - self.geofence.reaction_time - self.latency_budget)
+        unseen = max(0.0, age - self.geofence.rule.reaction_time - self.latency_budget)
         gain = 0.0
         if blind and unseen > 0 and self.bound.run_until >= seen:  # the most the commanded fins add while unseen
-            end = now + self.geofence.reaction_time + radio
+            end = now + self.geofence.rule.reaction_time + radio
             gain = min(self.gain.accel(seen, now, end, self._round_trip()), self.bound.accel) * unseen
         spread = tuple(_Z * s for s in self.spread)
         # ``age`` feeds only ``react = reaction_time + age``: adding the radio's delay is the longer reaction time.
@@ -344,11 +344,11 @@ class Supervisor:
 
     def _unseen_reason(self, now: float, seen: float) -> str:
         """What the blind rule saw: no frames (with counts), frames that arrive too late, or frames without the fish."""
-        budget = f"the reaction time {self.geofence.reaction_time:.2f} s plus the measured camera latency " \
+        budget = f"the reaction time {self.geofence.rule.reaction_time:.2f} s plus the measured camera latency " \
                  f"{self.latency_budget:.2f} s"
         recent = sum(1 for t in self._read_times if t >= now - 1.0)
         return unseen_reason(now, seen, self._last_read, self._reads > self._reads_at_sighting, recent,
-                             self.poll_period, self.geofence.reaction_time, budget)
+                             self.poll_period, self.geofence.rule.reaction_time, budget)
 
     # ------------------------------------------------------------ camera latency
     @property
@@ -364,7 +364,7 @@ class Supervisor:
 
     def check_latency(self) -> float:
         """The measured latency [s]; raises :class:`CameraLatencyError` if the tank cannot afford it."""
-        return check_latency(self.latency, self.safety.tracking_timeout, self.safety.reaction_time)
+        return check_latency(self.latency, self.safety.tracking_timeout, self.geofence.rule.reaction_time)
 
     def _rules(self) -> list[str]:
         """Every reason that holds now, highest priority first (:data:`PRIORITY`)."""

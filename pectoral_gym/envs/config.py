@@ -117,8 +117,8 @@ class EnvConfig:
             closer to a wall than it needs to stop: the robot's geofence, whose safety supervisor stops the
             fish there (:data:`pectoral_gym.model.tank.ROBOT_STOP_RULE`, ``docs/guide/safety.md``). Checked on the
             state after each control period.
-        stop_rule: The band's :class:`~pectoral_gym.model.tank.StopRule` ``(margin [m], reaction time [s],
-            contact speed [m/s])``.
+        stop_rule: The band's :class:`~pectoral_gym.model.tank.StopRule` (margin [m], reaction time [s], contact
+            speed [m/s]); also given as ``(margin, reaction_time, contact_speed)`` or a mapping of them.
         servo_limit: Fastest fin rate [rad/s] (``None``: no limit): a commanded pattern whose faster
             half-stroke peaks above it runs with its period lengthened, as the robot's firmware runs it
             (:func:`pectoral_gym.model.servo.servo_period`; the robot's value:
@@ -216,14 +216,9 @@ class EnvConfig:
                 raise ValueError(f"{name} must be a number in [0, {0.5 * TANK_WIDTH - 0.01:.3f}) m, got {inset!r}")
             set_(self, name, float(inset))
         try:
-            rule = StopRule(*(float(v) for v in self.stop_rule))
-        except (TypeError, ValueError):
-            raise ValueError(f"stop_rule must be (margin, reaction_time, contact_speed), got {self.stop_rule!r}") \
-                from None
-        if not (all(math.isfinite(v) and v >= 0 for v in rule) and rule.contact_speed > 0):
-            raise ValueError(f"stop_rule entries must be finite and >= 0, its contact_speed > 0, got "
-                             f"{self.stop_rule!r}")
-        set_(self, "stop_rule", rule)
+            set_(self, "stop_rule", StopRule.coerce(self.stop_rule))  # the rule checks itself
+        except ValueError as err:
+            raise ValueError(f"stop_rule: {err}") from None
         if self.servo_limit is not None:
             limit = self.servo_limit
             if not (isinstance(limit, (int, float)) and math.isfinite(limit) and limit > 0):
@@ -308,7 +303,7 @@ class EnvConfig:
         cfg[tk.C_START_INSET] = self.start_inset
         cfg[tk.C_GOAL_INSET] = self.goal_inset
         cfg[tk.C_BAND] = 1.0 if self.stop_band else 0.0
-        cfg[tk.C_BAND_MARGIN:tk.C_BAND_CONTACT + 1] = self.stop_rule
+        cfg[tk.C_BAND_MARGIN:tk.C_BAND_CONTACT + 1] = self.stop_rule.as_tuple()
         cfg[tk.C_FIN_RATE] = 0.0 if self.servo_limit is None else self.servo_limit
         return cfg
 

@@ -28,6 +28,9 @@ margin: a stopped fish crosses the margin line, if ever, no faster than ``v_c`` 
 from __future__ import annotations
 
 import math
+import numbers
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, fields
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -62,18 +65,74 @@ class Outline(NamedTuple):
         return cls(0.5 * float(params.body_length), float(params.fin_offset), float(params.fin_span))
 
 
-class StopRule(NamedTuple):
+@dataclass(frozen=True)
+class StopRule:
     """The stopping band's rule: any part of the outline must keep ``stop_need(v)`` from each wall (module docstring).
 
+    The one container of the rule's three numbers, and the one place they are checked: the envs (``EnvConfig``'s
+    ``stop_rule``), the robot's supervisor (``SafetyConfig.stop_rule``, its ``Geofence``) and the controllers'
+    band (``StopBand``, ``BandShield``, ``NMPCSettings.stop_band``) all hold one. The bounds are those under
+    which the rule is a band at all:
+
+    * every field finite: a NaN makes every comparison of the clearance against the need false, so a fish
+      would never be inside the band and never be stopped; an infinite one makes the whole tank the band;
+    * ``margin >= 0``: a negative margin lets the stopped fish's outline end past the wall line;
+    * ``reaction_time >= 0``: the fins run on for ``t_r`` after a pose; a negative time would subtract distance;
+    * ``contact_speed > 0``: quadratic drag never brings a coasting fish to rest (``v(x) = v0 exp(-k x)``), so
+      the coast distance ``ln(v / v_c) / k`` is finite only for a speed ``v_c > 0`` to coast down to.
+
+    Which values are safe enough (:data:`ROBOT_STOP_RULE`) is the safety design's choice, not this type's.
+    Change a field with ``dataclasses.replace`` (checked again).
+
     Attributes:
-        margin: Clearance kept on top of the stopping distance [m].
-        reaction_time: ``t_r`` [s]: from a pose to the fins halting (frame age, polling, radio).
+        margin: Clearance kept on top of the stopping distance [m], >= 0.
+        reaction_time: ``t_r`` [s], >= 0: from a pose to the fins halting (frame age, polling, radio).
         contact_speed: ``v_c`` [m/s], > 0: after a stop the fish crosses the margin line no faster than this.
+
+    Raises:
+        ValueError: Naming the field, for a value that is not a finite real number within its bound.
     """
 
     margin: float
     reaction_time: float
     contact_speed: float
+
+    def __post_init__(self) -> None:
+        for name, low, strict in (("margin", "0 m", False), ("reaction_time", "0 s", False),
+                                  ("contact_speed", "0 m/s", True)):
+            value = getattr(self, name)
+            number = float(value) if isinstance(value, numbers.Real) and not isinstance(value, bool) else math.nan
+            if not (math.isfinite(number) and (number > 0 if strict else number >= 0)):
+                raise ValueError(f"StopRule.{name} must be a finite number {'>' if strict else '>='} {low}, "
+                                 f"got {value!r}")
+            object.__setattr__(self, name, number)
+
+    @classmethod
+    def coerce(cls, value: Any) -> StopRule:
+        """``value`` as a :class:`StopRule`: one as it is, ``(margin, reaction_time, contact_speed)`` or a mapping.
+
+        For the settings that arrive as plain data (env keyword arguments, YAML, JSON).
+
+        Raises:
+            ValueError: For another shape, or a value the rule refuses.
+        """
+        if isinstance(value, cls):
+            return value
+        if isinstance(value, Mapping):
+            names = [f.name for f in fields(cls)]
+            if set(value) != set(names):
+                raise ValueError(f"a stop rule needs exactly the keys {names}, got {sorted(value)}")
+            return cls(**value)
+        if isinstance(value, (str, bytes)) or not isinstance(value, Iterable):
+            raise ValueError(f"a stop rule is (margin, reaction_time, contact_speed), got {value!r}")
+        values = tuple(value)
+        if len(values) != 3:
+            raise ValueError(f"a stop rule is (margin, reaction_time, contact_speed), got {value!r}")
+        return cls(*values)
+
+    def as_tuple(self) -> tuple[float, float, float]:
+        """``(margin [m], reaction_time [s], contact_speed [m/s])``: the kernels' packed form, and JSON's."""
+        return self.margin, self.reaction_time, self.contact_speed
 
 
 #: The robot's rule (its safety supervisor's defaults, ``pectoral_gym.hardware.safety.rules.SafetyConfig``), which

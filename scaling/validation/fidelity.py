@@ -19,7 +19,7 @@ it there, open loop, with the public :mod:`pectoral_gym.model.models` API:
 3. **Two-fin periodic steady states**: speed, turning radius and turn period
    (eq. 29) of random patterns with different left and right settings.
 4. **Single-fin held-out set and Table 4**, as ``python -m pectoral_gym.scaling validate``
-   computes them (:mod:`pectoral_gym.scaling.validation.validate`).
+   computes them (:mod:`pectoral_gym.scaling.validation.pattern_sets`).
 
 Two seed sets (:data:`SEED_SETS`): ``dev`` to look at while working on the model,
 ``report`` (other seeds, other two-fin periods) run only for the published figures.
@@ -54,7 +54,12 @@ from pectoral_gym.model.params import FishParams
 from pectoral_gym.model.spec import PRESETS, AveragedSpec, ModelSpec, make_model
 from pectoral_gym.scaling.identification.grids import draw_off_grid
 from pectoral_gym.scaling.validation.comparison import REST, as_run, label, steady_pair, summarize
-from pectoral_gym.scaling.validation.validate import MIN_TURN_RATE, sampling_box, single_fin_section, table4_section
+from pectoral_gym.scaling.validation.pattern_sets import (
+    MIN_TURN_RATE,
+    sampling_box,
+    single_fin_section,
+    table4_section,
+)
 
 __all__ = ["DECOMPOSITION", "DEFAULT_CANDIDATE", "DURATION", "FIN_SPLITS", "MIN_PATH", "SCENARIOS", "SEED_SETS",
            "TARGETS", "SeedSet", "draw_patterns", "fidelity", "main", "open_loop", "open_loop_errors", "split_fins"]

@@ -27,7 +27,7 @@ from pectoral_gym.model.params import FishParams
 from pectoral_gym.scaling.identification.grids import draw_off_grid
 from pectoral_gym.scaling.validation.comparison import steady_pair
 from pectoral_gym.scaling.validation.fidelity import SEED_SETS
-from pectoral_gym.scaling.validation.validate import MIN_TURN_RATE, sampling_box
+from pectoral_gym.scaling.validation.pattern_sets import MIN_TURN_RATE, sampling_box
 from pectoral_gym.scaling.validation.yaw_balance import parse_pattern, yaw_balance
 
 params, scaling = FishParams(), ScalingFunctions.load()

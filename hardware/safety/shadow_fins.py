@@ -1,0 +1,122 @@
+"""The fins as the robot ran them, replayed from the commands sent: the liveness check's view of the fins.
+
+The robot takes a command somewhere between its send and the STATUS that acknowledges it (the radio's forward
+delay). :class:`ShadowFins` replays the fins (the firmware's rules, :class:`pectoral_gym.model.finreplay.FinReplay`)
+with every command taken a given share of the way from its send to its acknowledgement, and keeps snapshots of
+them; :class:`pectoral_gym.hardware.safety.liveness.LivenessWatch` runs three (shares 0, 0.5 and 1) and drives its
+fish models with their snapshots.
+"""
+
+from __future__ import annotations
+
+import collections
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from pectoral_gym.model.finreplay import FinReplay
+from pectoral_gym.model.finrules import FirmwareConfig
+from pectoral_gym.model.params import FishParams
+
+__all__ = ["ShadowFins"]
+
+
+class ShadowFins:
+    """Replayed fins that take each command ``share`` of the way from its send time to its acknowledgement.
+
+    The fins are the firmware's (:class:`pectoral_gym.model.finreplay.FinReplay`: hand-over at the next
+    turning point, rate rule, the transition's stretch), as the robot runs them; a snapshot of them every
+    0.05 s. A command whose acknowledgement is not known yet was acknowledged after the newest sighting ``t``
+    (the poses come after their capture), so a shadow with ``share`` > 0 takes it no earlier than
+    ``sent + share (t - sent)``: the replay is run for good (:attr:`snapshots`) only that far, never past a
+    take it does not know, and :meth:`view` adds a provisional stretch to ``t`` with every such command taken at
+    that earliest instant. (Taking it when its acknowledgement becomes known would take it at the
+    acknowledgement whatever the share.)
+    """
+
+    def __init__(self, params: FishParams, config: FirmwareConfig, share: float):
+        self.share = share
+        self.replay = FinReplay(params, config)
+        self.queue: collections.deque[tuple[float, np.ndarray, Callable[[], float | None] | None]] = \
+            collections.deque()  # sent, not yet taken
+        self.snapshots: collections.deque[tuple[float, np.ndarray, np.ndarray]] = collections.deque(maxlen=512)
+        self.t = math.nan
+
+    def reset(self, t: float) -> None:
+        """Fins still at ``t`` [s] (``nan``: not started); no commands."""
+        self.queue.clear()
+        self.snapshots.clear()
+        self.replay.reset(0.0 if math.isnan(t) else t)
+        self.t = float(t)
+        if math.isfinite(self.t):
+            self._snapshot()
+
+    def _snapshot(self, into: collections.deque | list | None = None) -> None:
+        model = self.replay.model
+        (self.snapshots if into is None else into).append((self.t, model.fins.copy(), model.pending.copy()))
+
+    def _start(self, sent: float, acknowledged: Callable[[], float | None] | None,
+               newest: float) -> tuple[float, bool]:
+        """When this shadow takes a command sent at ``sent`` [s], and whether that is known.
+
+        Not known: its earliest, the acknowledgement coming after ``newest`` [s].
+        """
+        if self.share == 0.0 or acknowledged is None:
+            return sent, True
+        ack = acknowledged()
+        if ack is None:
+            return sent + self.share * max(newest - sent, 0.0), False
+        return sent + self.share * max(ack - sent, 0.0), True
+
+    def _run(self, to: float, step: float, provisional: list | None) -> None:
+        """Run the fins to ``to``; for good (stopping before a take not known), or ``provisional``ly."""
+        queue = self.queue if provisional is None else collections.deque(self.queue)
+        while self.t < to:
+            target = min(to, self.t + step)
+            while queue:
+                start, known = self._start(queue[0][0], queue[0][2], to)
+                if start > target:
+                    break
+                if not known and provisional is None:
+                    target = start  # run for good only up to the take not known yet
+                    break
+                _, beats, _ = queue.popleft()
+                self.replay.command(max(start, self.t), beats)
+            if target <= self.t:
+                return
+            self.replay.advance(target)
+            self.t = target
+            self._snapshot(provisional)
+
+    def advance(self, to: float, step: float = 0.05) -> None:
+        """Run the fins for good towards ``to`` [s], taking the commands due by then; a snapshot every ``step`` s."""
+        self._run(to, step, None)
+
+    def view(self, to: float, step: float = 0.05) -> list[tuple[float, np.ndarray, np.ndarray]]:
+        """The snapshots to ``to`` [s]: those for good, then a provisional stretch.
+
+        In it the commands not yet acknowledged are taken at their earliest; the replay is put back as it was.
+        """
+        if self.t >= to:
+            return list(self.snapshots)
+        saved, saved_t = self.replay.checkpoint(), self.t
+        tail: list[tuple[float, np.ndarray, np.ndarray]] = []
+        try:
+            self._run(to, step, tail)
+        finally:
+            self.replay.restore(saved)
+            self.t = saved_t
+        return list(self.snapshots) + tail
+
+    @staticmethod
+    def differs(mine: list, other: list, since: float) -> bool:
+        """Whether the snapshots ``other`` from ``since`` [s] (less one step) on differ from ``mine``."""
+        own = {s[0]: s for s in mine}
+        for t, fins, pending in other:
+            if t < since - 0.05:
+                continue
+            match = own.get(t)
+            if match is None or not (np.array_equal(match[1], fins) and np.array_equal(match[2], pending)):
+                return True
+        return False
