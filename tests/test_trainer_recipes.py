@@ -181,3 +181,34 @@ def test_minari_snippet_records_a_dataset(tmp_path):
                      env={**_env(), "MINARI_DATASETS_PATH": str(tmp_path / "datasets")})
     assert re.search(r"^2 episodes, \d+ steps$", out, re.M), out
     assert (tmp_path / "datasets" / "pectoral" / "full-random-v0").is_dir()
+
+
+# The distributions behind the third-party imports of CleanRL's ppo_continuous_action.py (gymnasium, numpy, torch,
+# tyro, torch.utils.tensorboard), read off its source.
+CLEANRL_NEEDS = {"gymnasium", "numpy", "torch", "tyro", "tensorboard"}
+
+
+def _requirement_names(requirements):
+    return {re.split(r"[<>=!~\[; ]", requirement, maxsplit=1)[0].lower().replace("_", "-")
+            for requirement in requirements}
+
+
+def test_cleanrl_install_line_brings_what_its_script_imports():
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    extras = project["optional-dependencies"]
+    brought = _requirement_names(project["dependencies"])
+    for line in commands(snippet("cleanrl-install")):
+        argv = shlex.split(line)
+        assert argv[:2] == ["pip", "install"], line
+        for item in argv[2:]:
+            if item == "-e":
+                continue
+            match = re.fullmatch(r"\.\[([a-z,]+)\]", item)
+            if match:
+                for extra in match.group(1).split(","):
+                    brought |= _requirement_names(r for r in extras[extra] if not r.startswith("pectoral-gym"))
+            else:
+                brought |= _requirement_names([item])
+    assert CLEANRL_NEEDS <= brought, CLEANRL_NEEDS - brought
