@@ -212,3 +212,16 @@ def test_cleanrl_install_line_brings_what_its_script_imports():
             else:
                 brought |= _requirement_names([item])
     assert CLEANRL_NEEDS <= brought, CLEANRL_NEEDS - brought
+
+
+@pytest.mark.skipif(not _has("torch", "stable_baselines3"), reason="needs the rl extra")
+def test_safe_rl_cost_snippet_reports_a_policys_cost(tmp_path):
+    from stable_baselines3 import PPO
+
+    PPO("MlpPolicy", gym.make(ENV), n_steps=64, batch_size=64, seed=0, device="cpu").save(tmp_path / "model.zip")
+    out = run_python(with_constants(snippet("safe-rl-cost"), RUN=str(tmp_path / "model.zip"), EPISODES=3), tmp_path)
+    match = re.search(r"^3 episodes: success ([\d.]+), stops in the band (\d), band cost per episode ([\d.]+) "
+                      r"\(max ([\d.]+)\)$", out, re.M)
+    assert match, out
+    stops, mean_cost, max_cost = int(match.group(2)), float(match.group(3)), float(match.group(4))
+    assert mean_cost <= max_cost and (stops == 0 or max_cost >= 1.0)  # a stop costs 1 on its last step alone
