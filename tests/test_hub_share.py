@@ -116,3 +116,22 @@ def test_command_line_writes_and_reads(run, tmp_path):
     assert json.loads(done.stdout) == {"folder": f"logs/ppo/{LATEST_AVERAGED}_1"}, done.stderr
     done = subprocess.run([*module, "read", "nowhere"], cwd=tmp_path, env=_env(), capture_output=True, text=True)
     assert done.returncode == 2 and done.stderr.startswith("error: nowhere has no args.yml"), done.stderr
+
+
+def test_page_commands_run_as_written(run, tmp_path):
+    # docs/guide/trainers.md's hub snippet on a pectoral-train run at the path it names (evaluation shortened)
+    import shlex
+    import shutil
+
+    from doc_snippets import commands, snippet
+
+    write_line, read_line, evaluate_line = commands(snippet("hub"))
+    shutil.copytree(run, tmp_path / "runs" / LATEST_AVERAGED / "ppo_seed0")
+    for line, extra in ((write_line, []), (read_line, []), (evaluate_line, ["--episodes", "2", "--out", "eval"])):
+        argv = shlex.split(line)
+        program = [sys.executable, "-m", argv[2]] if argv[0] == "python" else [
+            str(Path(sys.executable).parent / argv[0])]
+        done = subprocess.run([*program, *argv[(3 if argv[0] == "python" else 1):], *extra], cwd=tmp_path,
+                              env=_env(), capture_output=True, text=True)
+        assert done.returncode == 0, (line, done.stderr[-3000:])
+    assert json.loads((tmp_path / "eval" / "metrics.json").read_text())["n_episodes"] == 2

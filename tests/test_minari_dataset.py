@@ -83,3 +83,33 @@ def test_policy_dataset_and_bad_input(tmp_path, monkeypatch, capsys):
         assert "pectoral/ppo-test-v0" in capsys.readouterr().err
     assert main(["--controller", "hand", "--episodes", "0", "--dataset-id", "pectoral/x-v0"]) == 2
     assert "episodes must be >= 1" in capsys.readouterr().err
+
+
+def test_page_commands_run_as_written(tmp_path, monkeypatch):
+    # docs/guide/trainers.md's two commands, with one episode each (argparse keeps the last --episodes); the
+    # policy's run folder holds an untrained PPO's model.zip
+    pytest.importorskip("stable_baselines3")
+    import shlex
+
+    from doc_snippets import commands, snippet
+    from stable_baselines3 import PPO
+
+    from pectoral_gym.agents.training.dataset import main
+
+    policy_line, hand_line = commands(snippet("minari-command"))
+    run = tmp_path / "runs" / LATEST_AVERAGED / "ppo_seed0"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        PPO("MlpPolicy", gym.make(LATEST_AVERAGED), n_steps=64, batch_size=64, seed=0, device="cpu").save(
+            run / "model.zip")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "home"))
+    for line in (policy_line, hand_line):
+        argv = shlex.split(line)
+        assert argv[:3] == ["python", "-m", "pectoral_gym.agents.training.dataset"], line
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)
+            assert main([*argv[3:], "--episodes", "1"]) == 0, line
+    monkeypatch.setenv("MINARI_DATASETS_PATH", str(tmp_path / "home"))  # the second line's --datasets-path moved it
+    assert minari.load_dataset("pectoral/full-ppo-v0").storage.metadata["author"] == {"your name"}
+    assert (tmp_path / "datasets" / "pectoral" / "full-hand-v0").is_dir()  # the second line's --datasets-path
