@@ -32,7 +32,7 @@ import numpy as np
 
 from pectoral_gym.versions import LATEST_FULL
 
-__all__ = ["Recorded", "main", "record_dataset"]
+__all__ = ["Recorded", "build_parser", "main", "record_dataset"]
 
 
 @dataclass(frozen=True)
@@ -136,18 +136,23 @@ def _controller(args: argparse.Namespace, env_kwargs: dict[str, Any]) -> tuple[A
 
 
 def build_parser() -> argparse.ArgumentParser:
-    """The argument parser (module docstring)."""
-    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.training.dataset",
-                                     description=__doc__.split("\n\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    """The argument parser of ``python -m pectoral_gym.agents.training.dataset`` (module docstring)."""
+    from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
+
+    prog = prog_name(None, "pectoral_gym.agents.training.dataset")
+    parser = argparse.ArgumentParser(
+        prog=prog, description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter,
+        epilog=examples(f"{prog} --policy runs/PectoralFish-Averaged-v2/ppo_seed0 --env {LATEST_FULL} --episodes 100 "
+                        "--dataset-id pectoral/full-ppo-v0",
+                        f"{prog} --controller hand --dataset-id pectoral/full-hand-v0 --datasets-path datasets"))
     who = parser.add_mutually_exclusive_group(required=True)
     who.add_argument("--policy", metavar="RUN|ZIP", help="run folder of pectoral-train or zoo, or an SB3 .zip")
     who.add_argument("--controller", metavar="NAME", help="baseline controller: random, hand, nmpc or excite")
     parser.add_argument("--dataset-id", required=True, help="Minari dataset id, namespace/name-v<N>")
-    parser.add_argument("--env", default=LATEST_FULL, help=f"environment id (default: {LATEST_FULL})")
+    parser.add_argument("--env", default=LATEST_FULL, help="environment id")
     parser.add_argument("--env-kwargs", default="{}", metavar="JSON", help="more environment arguments")
-    parser.add_argument("--episodes", type=int, default=100, help="number of episodes (default: 100)")
-    parser.add_argument("--seed", type=int, default=0, help="episode k is reset with seed + k (default: 0)")
+    parser.add_argument("--episodes", type=int, default=100, help="number of episodes")
+    parser.add_argument("--seed", type=int, default=0, help="episode k is reset with seed + k")
     parser.add_argument("--description", help="text put before the generated description")
     parser.add_argument("--author", help="the dataset's author (Minari's metadata)")
     parser.add_argument("--author-email", help="the author's contact (Minari's metadata)")

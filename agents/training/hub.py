@@ -42,7 +42,7 @@ import yaml
 from pectoral_gym.agents.training.policy import read_config
 from pectoral_gym.agents.training.run_files import RUN_FILES
 
-__all__ = ["HUB_FILES", "hub_model_name", "main", "read_hub_folder", "write_hub_folder"]
+__all__ = ["HUB_FILES", "build_parser", "hub_model_name", "main", "read_hub_folder", "write_hub_folder"]
 
 #: The files of a repository that ``download_from_hub`` fetches, besides the model (``vec_normalize.pkl`` optional).
 HUB_FILES = ("config.yml", "args.yml", "env_kwargs.yml", "train_eval_metrics.zip", "vec_normalize.pkl")
@@ -193,18 +193,33 @@ def read_hub_folder(folder: str | Path, logs: str | Path, exp_id: int = 0) -> Pa
     return run
 
 
-def main(argv: list[str] | None = None) -> int:
-    """``write RUN OUT`` or ``read FOLDER -f LOGS [--exp-id N]``; prints the folder written."""
-    parser = argparse.ArgumentParser(prog="python -m pectoral_gym.agents.training.hub", description=__doc__.split(
-        "\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter)
-    commands = parser.add_subparsers(dest="command", required=True)
-    write = commands.add_parser("write", help="a pectoral-train run folder in rl_zoo3's Hub repository layout")
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``python -m pectoral_gym.agents.training.hub`` (``write`` and ``read``)."""
+    from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name, subcommands
+
+    prog = prog_name(None, "pectoral_gym.agents.training.hub")
+    write_example = f"{prog} write runs/PectoralFish-Averaged-v2/ppo_seed0 hub/ppo-fish"
+    read_example = f"{prog} read hub/ppo-fish -f logs"
+    parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0], formatter_class=HelpFormatter,
+                                     epilog=examples(write_example, read_example))
+    commands = subcommands(parser, dest="command", required=True)
+    write = commands.add_parser("write", help="a pectoral-train run folder in rl_zoo3's Hub repository layout",
+                                description="Write a pectoral-train run folder in rl_zoo3's Hub repository layout "
+                                "(the folder to upload as the repository).", epilog=examples(write_example))
     write.add_argument("run", help="the pectoral-train run folder")
-    write.add_argument("out", help="the folder to write (new or empty): upload it as the repository")
-    read = commands.add_parser("read", help="a Hub repository's files laid out as zoo's run folder")
+    write.add_argument("out", help="the folder to write (new or empty)")
+    read = commands.add_parser("read", help="a Hub repository's files laid out as zoo's run folder",
+                               description="Lay a Hub repository's files out as zoo's run folder, as rl_zoo3's "
+                               "download_from_hub does.", epilog=examples(read_example))
     read.add_argument("folder", help="the repository's files (e.g. from huggingface_hub.snapshot_download)")
-    read.add_argument("-f", "--folder-out", dest="logs", default="logs", help="zoo's log folder (default: logs)")
+    read.add_argument("-f", "--folder-out", dest="logs", default="logs", help="zoo's log folder")
     read.add_argument("--exp-id", type=int, default=0, help="the run's number n of <env>_<n> (0: the next free)")
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Command-line entry point; prints the folder written as JSON. Exit status 2 on bad input."""
+    parser = build_parser()
     args = parser.parse_args(argv)
     try:
         done = write_hub_folder(args.run, args.out) if args.command == "write" else read_hub_folder(
