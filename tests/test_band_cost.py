@@ -114,6 +114,36 @@ def test_safety_step_returns_the_cost_as_its_third_value():
     assert SafetyStep(BandCost(gym.make(LATEST_AVERAGED), width=0.2)).env.width == 0.2  # not wrapped twice
 
 
+def test_the_graded_cost_can_take_the_cost_key():
+    # for a library that reads info["cost"] only: the graded cost there, 1 at the band's episode end as before
+    env = BandCost(gym.make(LATEST_AVERAGED), key="cost")
+    safety = SafetyStep(env)
+    seen_graded = ended = 0
+    for step, info in _random_steps(safety_as_gym(safety), 6):
+        assert "band_cost" not in info and 0.0 <= info["cost"] <= 1.0
+        if step is not None:
+            seen_graded += 0.0 < info["cost"] < 1.0
+            ended += bool(step[2]) and info["cost"] == 1.0
+    assert seen_graded >= 5 and ended >= 1
+    with pytest.raises(ValueError, match="key must be"):
+        BandCost(gym.make(LATEST_AVERAGED), key="costs")
+
+
+def safety_as_gym(safety):
+    """A SafetyStep seen through Gymnasium's 5-tuple again (its cost is also in info)."""
+
+    class Five:
+        def reset(self, **kwargs):
+            return safety.reset(**kwargs)
+
+        def step(self, action):
+            obs, reward, cost, terminated, truncated, info = safety.step(action)
+            assert cost == info["cost"]
+            return obs, reward, terminated, truncated, info
+
+    return Five()
+
+
 def test_band_cost_refuses_an_env_without_the_band():
     with pytest.raises(ValueError, match="stop_band=True"):
         BandCost(gym.make(SIMULATION_IDS["averaged"]))

@@ -76,12 +76,15 @@ class BandCost(gym.Wrapper):
     Args:
         env: A simulated env (``gym.make`` of a registered id, or its wrappers) with ``stop_band``.
         width: :data:`BAND_COST_WIDTH` or another width [m], > 0.
+        key: The ``info`` key it goes to: ``"band_cost"``, or ``"cost"`` for a library that reads only that key
+            (the env's own 0/1 cost is then replaced; it is 1 exactly where the graded cost reaches 1 at the
+            episode's end in the band).
 
     Raises:
-        ValueError: If the env has no stopping band (the ``-v0`` ids) or ``width`` is not > 0.
+        ValueError: If the env has no stopping band (the ``-v0`` ids), ``width`` is not > 0 or ``key`` is another.
     """
 
-    def __init__(self, env: gym.Env, width: float = BAND_COST_WIDTH):
+    def __init__(self, env: gym.Env, width: float = BAND_COST_WIDTH, key: str = "band_cost"):
         super().__init__(env)
         config = getattr(env.unwrapped, "config", None)
         if config is None or not hasattr(env.unwrapped, "core"):
@@ -89,41 +92,47 @@ class BandCost(gym.Wrapper):
         if not config.stop_band:
             raise ValueError("BandCost needs an env with stop_band=True (the v1 and v2 ids); this one has no band")
         band_cost(0.0, width)  # checks the width
+        if key not in ("band_cost", "cost"):
+            raise ValueError(f"key must be 'band_cost' or 'cost', got {key!r}")
         self.width = float(width)
+        self.key = key
 
     def _add(self, info: dict[str, Any]) -> dict[str, Any]:
-        info["band_cost"] = np.float64(band_cost(env_band_shortfall(self.env), self.width))
+        info[self.key] = np.float64(band_cost(env_band_shortfall(self.env), self.width))
         return info
 
     def reset(self, **kwargs: Any):
-        """The env's ``reset``, its ``info`` with ``"band_cost"`` of the first state."""
+        """The env's ``reset``, its ``info`` with the cost of the first state."""
         obs, info = self.env.reset(**kwargs)
         return obs, self._add(info)
 
     def step(self, action):
-        """The env's ``step``, its ``info`` with ``"band_cost"`` of the state reached."""
+        """The env's ``step``, its ``info`` with the cost of the state reached."""
         obs, reward, terminated, truncated, info = self.env.step(action)
         return obs, reward, terminated, truncated, self._add(info)
 
 
 class SafetyStep(gym.Wrapper):
-    """Safety-Gymnasium's step: ``(obs, reward, cost, terminated, truncated, info)``, the cost ``band_cost``.
+    """Safety-Gymnasium's step: ``(obs, reward, cost, terminated, truncated, info)``, the cost the graded one.
 
-    ``reset`` is Gymnasium's. Wraps the env in :class:`BandCost` (``width``) unless it already is.
+    ``reset`` is Gymnasium's. Wraps the env in :class:`BandCost` (``width``) unless it already is, and reads the
+    cost from that wrapper's key.
     """
 
     def __init__(self, env: gym.Env, width: float = BAND_COST_WIDTH):
-        super().__init__(env if _has_band_cost(env) else BandCost(env, width))
+        inner = _band_cost_wrapper(env)
+        super().__init__(env if inner is not None else BandCost(env, width))
+        self._key = (inner or self.env).key
 
     def step(self, action):  # type: ignore[override]
-        """``(obs, reward, cost, terminated, truncated, info)``, ``cost = info["band_cost"]`` as a float."""
+        """``(obs, reward, cost, terminated, truncated, info)``, ``cost`` the graded cost as a float."""
         obs, reward, terminated, truncated, info = self.env.step(action)
-        return obs, reward, float(info["band_cost"]), terminated, truncated, info
+        return obs, reward, float(info[self._key]), terminated, truncated, info
 
 
-def _has_band_cost(env: gym.Env) -> bool:
+def _band_cost_wrapper(env: gym.Env) -> BandCost | None:
     while isinstance(env, gym.Wrapper):
         if isinstance(env, BandCost):
-            return True
+            return env
         env = env.env
-    return False
+    return None
