@@ -109,7 +109,8 @@ class PectoralFishEnv(gym.Env):
     ``info`` also holds ``"distance"`` (``d`` [m]), ``"is_success"`` (goal)
     and ``"tracking_error"`` (track, ``d`` [m]), and with ``stop_band`` ``"cost"``: 1.0 on a step
     that ends inside the stopping band, else 0.0 (Safety-Gymnasium's per-step cost, for constrained
-    RL). Every value is a numpy scalar
+    RL; :class:`pectoral_gym.envs.cost.BandCost` adds ``"band_cost"``, a cost that rises before the band). Every
+    value is a numpy scalar
     (``np.float64``, ``np.bool_``). ``reset()`` returns the same keys: zero
     reward terms, the real distance, ``is_success = False``.
 
