@@ -85,3 +85,29 @@ def test_rllib_snippet_trains_with_the_module_id(tmp_path):
     lines = [line for line in out.splitlines() if line.startswith("0 ")]
     assert len(lines) == 1, out[-2000:]
     assert (tmp_path / "rllib_checkpoint").is_dir()
+
+
+@pytest.mark.skipif(not _has("torchrl"), reason="torchrl not installed (clients extra)")
+def test_torchrl_reads_the_graded_band_cost():
+    # the page's pointer: GymWrapper of a BandCost-wrapped env with a reader of both keys
+    import gymnasium as gym
+    import torch
+    from torchrl.data import Unbounded
+    from torchrl.envs import GymWrapper, default_info_dict_reader
+    from torchrl.envs.utils import check_env_specs
+
+    from pectoral_gym.envs.cost import BandCost
+    from pectoral_gym.versions import LATEST_AVERAGED
+
+    env = GymWrapper(BandCost(gym.make(LATEST_AVERAGED)))
+    env.set_info_dict_reader(default_info_dict_reader(
+        ["cost", "band_cost"], spec={key: Unbounded((), dtype=torch.float64) for key in ("cost", "band_cost")}))
+    check_env_specs(env)
+    graded = 0.0
+    for seed in range(4):
+        env.set_seed(seed)
+        rollout = env.rollout(240, break_when_any_done=True)
+        cost, band_cost = rollout["next", "cost"].numpy(), rollout["next", "band_cost"].numpy()
+        assert np.all((band_cost >= 0) & (band_cost <= 1)) and np.all(band_cost[cost == 1.0] == 1.0)
+        graded += float(band_cost[cost == 0.0].sum())
+    assert graded > 0  # the cost rises before the band
