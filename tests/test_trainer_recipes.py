@@ -225,3 +225,17 @@ def test_safe_rl_cost_snippet_reports_a_policys_cost(tmp_path):
     assert match, out
     stops, mean_cost, max_cost = int(match.group(2)), float(match.group(3)), float(match.group(4))
     assert mean_cost <= max_cost and (stops == 0 or max_cost >= 1.0)  # a stop costs 1 on its last step alone
+
+
+def test_fsrl_install_line_keeps_its_own_environment():
+    lines = commands(snippet("fsrl-install"))
+    assert lines[0] == "python -m venv .venv-fsrl" and all(line.startswith(".venv-fsrl/") for line in lines[1:])
+    assert '"numpy<2"' in lines[-1] and "fast-safe-rl==0.1.0" in lines[-1]  # wandb 0.14 fails on numpy 2
+
+
+@pytest.mark.skipif(not _has("fsrl", "tianshou"), reason="FSRL not installed (a venv of its own: see the page)")
+def test_fsrl_snippet_trains(tmp_path):
+    code = with_constants(snippet("fsrl"), N_ENVS=2, EPOCHS=1, STEPS_PER_EPOCH=256, TEST_EPISODES=2)
+    out = run_python(code, tmp_path)
+    assert re.search(r"^test: return -?[\d.]+, length [\d.]+, band cost per episode [\d.]+$", out, re.M), out[-2000:]
+    assert (tmp_path / "fsrl_ppolag.pt").is_file()
