@@ -67,7 +67,7 @@ def env_band_shortfall(env: gym.Env, index: int = 0) -> float:
     outline = (0.5 * float(fish[F_LENGTH]), float(fish[F_WIDTH]), float(fish[F_SPAN]))
     rule = base.config.stop_rule  # the env's rule (margin, reaction time, contact speed)
     return float(band_shortfall(x, y, c, s, (-vx, vx, -vy, vy), outline, float(fish[F_KCOAST]),
-                                float(rule[0]), float(rule[1]), float(rule[2])))
+                                float(rule.margin), float(rule.reaction_time), float(rule.contact_speed)))
 
 
 class BandCost(gym.Wrapper):
