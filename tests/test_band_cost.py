@@ -37,7 +37,8 @@ def _placed(env, gap, speed):
 def test_placed_states_cost_by_hand(env_id):
     env = BandCost(gym.make(env_id))
     env.reset(seed=0)
-    margin, reaction, contact = env.unwrapped.config.stop_rule
+    rule = env.unwrapped.config.stop_rule
+    margin, reaction, contact = rule.margin, rule.reaction_time, rule.contact_speed
     # at rest the need is the margin alone
     _placed(env, margin + 0.05, 0.0)
     assert band_cost(env_band_shortfall(env)) == pytest.approx(0.5)
