@@ -231,6 +231,7 @@ def test_fsrl_install_line_keeps_its_own_environment():
     lines = commands(snippet("fsrl-install"))
     assert lines[0] == "python -m venv .venv-fsrl" and all(line.startswith(".venv-fsrl/") for line in lines[1:])
     assert '"numpy<2"' in lines[-1] and "fast-safe-rl==0.1.0" in lines[-1]  # wandb 0.14 fails on numpy 2
+    assert "torch==2.13.0" in lines[-1] and '"setuptools>=77,<81"' in lines[-1]  # pkg_resources, torch kept
 
 
 @pytest.mark.skipif(not _has("fsrl", "tianshou"), reason="FSRL not installed (a venv of its own: see the page)")
