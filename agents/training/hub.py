@@ -165,16 +165,19 @@ def read_hub_folder(folder: str | Path, logs: str | Path, exp_id: int = 0) -> Pa
         The run folder, for ``load_policy`` / ``pectoral-evaluate --policy`` and zoo's ``enjoy --exp-id n``.
 
     Raises:
-        FileNotFoundError: If ``folder`` lacks ``args.yml``, the model or another file ``download_from_hub`` needs.
+        FileNotFoundError: If ``folder`` has no one ``<algo>-<env>.zip`` or lacks a file ``download_from_hub`` needs.
         ValueError: If the run folder exists already.
     """
     folder, logs = Path(folder), Path(logs)
-    if not (folder / "args.yml").is_file():
-        raise FileNotFoundError(f"{folder} has no args.yml; is it an rl-baselines3-zoo Hub repository?")
-    args = yaml.safe_load((folder / "args.yml").read_text())
-    algo, env_name = str(args["algo"]), str(args["env"]).replace("/", "-")
-    model = folder / f"{hub_model_name(algo, env_name)}.zip"
-    missing = [p.name for p in (model, *(folder / f for f in HUB_FILES[:-1])) if not p.is_file()]
+    # the model's name says the algorithm and the env (<algo>-<env>.zip; zoo's algorithm names have no dash): zoo's
+    # own args.yml is a pickled-style YAML (an OrderedDict) that a safe loader does not read
+    models = sorted(p for p in folder.glob("*-*.zip") if p.name != "train_eval_metrics.zip")
+    if len(models) != 1:
+        raise FileNotFoundError(f"{folder} has {len(models)} <algo>-<env>.zip models, not one; is it an "
+                                "rl-baselines3-zoo Hub repository?")
+    model = models[0]
+    algo, env_name = model.stem.split("-", 1)
+    missing = [name for name in HUB_FILES[:-1] if not (folder / name).is_file()]
     if missing:
         raise FileNotFoundError(f"{folder} lacks {missing}")
     if exp_id == 0:
