@@ -22,6 +22,7 @@ from pectoral_gym.agents.training.zoo_format import (
     parse_python_kwargs,
     zoo_problems,
 )
+from pectoral_gym.versions import ENV_VERSIONS, LATEST, LATEST_AVERAGED, LATEST_FULL, SIMULATION_IDS
 
 ENV = "PectoralFish-Averaged-v0"
 ROOT = Path(__file__).resolve().parents[1]
@@ -34,6 +35,11 @@ def _doc_argv(line):
     assert argv[0] == "python" or argv[0].startswith("pectoral-"), line
     program = [sys.executable] if argv[0] == "python" else [str(Path(sys.executable).parent / argv[0])]
     return [*program, *(str(ROOT / a) if a.startswith("agents/hyperparams/") else a for a in argv[1:])]
+
+
+def _option(argv, name):
+    """The value after ``name`` in ``argv``."""
+    return argv[argv.index(name) + 1]
 
 
 def write(tmp_path, table, name="ppo.yml"):
@@ -192,16 +198,19 @@ def test_zoo_trains_from_the_shipped_file(tmp_path):
     # keeps the last -n, --eval-freq, --eval-episodes and --hyperparams)
     train_cmd, enjoy_cmd, evaluate_cmd = [_doc_argv(line) for line in commands(snippet("zoo"))]
     assert train_cmd[:3] == [sys.executable, "-m", "rl_zoo3.train"] and "--conf-file" in train_cmd
+    env_id = _option(train_cmd, "--env")
+    assert env_id == LATEST_AVERAGED  # the recipe trains the latest id
+    eval_id = _option(evaluate_cmd, "--env")
     command = [*train_cmd, "-n", "512", "--eval-freq", "256", "--eval-episodes", "2", "--hyperparams", "n_envs:2",
                "n_steps:64", "batch_size:64", "n_epochs:1"]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
     done = subprocess.run(command, cwd=tmp_path, env=env, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-3000:]
     assert (tmp_path / "logs").is_dir()  # the snippet's -f logs
-    run_dir = tmp_path / "logs" / "ppo" / f"{ENV}_1"
+    run_dir = tmp_path / "logs" / "ppo" / f"{env_id}_1"
     assert (run_dir / "best_model.zip").is_file()  # zoo's evaluation, from its command line
-    done = subprocess.run([sys.executable, "-c", _LOAD, ENV, str(run_dir / f"{ENV}.zip"),
-                           str(run_dir / ENV / "vecnormalize.pkl")], cwd=tmp_path, env=env, capture_output=True,
+    done = subprocess.run([sys.executable, "-c", _LOAD, env_id, str(run_dir / f"{env_id}.zip"),
+                           str(run_dir / env_id / "vecnormalize.pkl")], cwd=tmp_path, env=env, capture_output=True,
                           text=True)
     assert done.returncode == 0, done.stderr[-3000:]
     model = json.loads(done.stdout.strip().splitlines()[-1])
@@ -213,15 +222,15 @@ def test_zoo_trains_from_the_shipped_file(tmp_path):
     assert model["norm_obs"] and not model["norm_reward"] and model["clip_obs"] == 10.0
     assert model["stats_gamma"] == 0.995
     assert model["action_shape"] == [1, 8] and model["action_max"] <= 1.0
-    done = subprocess.run([sys.executable, "-c", _LOAD_POLICY, ENV, str(run_dir)], cwd=tmp_path, env=env,
+    done = subprocess.run([sys.executable, "-c", _LOAD_POLICY, env_id, str(run_dir)], cwd=tmp_path, env=env,
                           capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-3000:]
     loaded = json.loads(done.stdout.strip().splitlines()[-1])
     for case in ("dir", "final", "best"):  # the run folder (its final zip), the final zip, the best zip
         assert loaded[case]["mean"] and loaded[case]["same"] and loaded[case]["name"] == "ppo", (case, loaded)
         assert loaded[case]["differs_unnormalized"], case  # the statistics matter, so the check can fail
-    saved = yaml.unsafe_load((run_dir / ENV / "config.yml").read_text())
-    assert dict(saved)["policy_kwargs"] == load_hyperparams("ppo", ENV)["policy_kwargs"]
+    saved = yaml.unsafe_load((run_dir / env_id / "config.yml").read_text())
+    assert dict(saved)["policy_kwargs"] == load_hyperparams("ppo", env_id)["policy_kwargs"]
     done = subprocess.run([*enjoy_cmd, "-n", "50"], cwd=tmp_path, env=env, capture_output=True, text=True)
     assert done.returncode == 0, done.stderr[-3000:]
     assert "Loading running average" in done.stdout  # zoo found the statistics next to the model
@@ -229,5 +238,62 @@ def test_zoo_trains_from_the_shipped_file(tmp_path):
                           capture_output=True, text=True)
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     metrics = json.loads((tmp_path / "eval" / "metrics.json").read_text())
-    assert metrics["env_id"] == "PectoralFish-Full-v0" and metrics["n_episodes"] == 2, metrics.keys()
+    assert metrics["env_id"] == eval_id == LATEST_FULL and metrics["n_episodes"] == 2, metrics.keys()
     assert "rl_zoo3" not in sys.modules  # this process stays unpatched
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac"])
+def test_file_env_kwargs_agree_with_the_versions_table(algo):
+    # one source of truth: an id's settings are ENV_VERSIONS'; an entry's env_kwargs may pick the task, and a -v0
+    # (simulation-only) entry may take the latest version's observation and model options, nothing else
+    table = yaml.safe_load((HYPERPARAMS_DIR / f"{algo}.yml").read_text())
+    assert set(ENV_VERSIONS) <= set(table) and set(ENV_VERSIONS) <= set(table["agents.train"])
+    simulation = set(SIMULATION_IDS.values())
+    for env_id, version in ENV_VERSIONS.items():
+        settings = version.settings()
+        latest = ENV_VERSIONS[LATEST[settings["model"]]].settings()
+        env_kwargs = dict(table[env_id].get("env_kwargs", {}))
+        assert env_kwargs.pop("task", "goal") == "goal", env_id
+        for key, value in env_kwargs.items():
+            assert key in settings, (env_id, key)  # an EnvConfig setting the table names
+            if env_id in simulation:
+                assert value == latest[key], (env_id, key, value, latest[key])
+            else:
+                assert value == settings[key], (env_id, key, value, settings[key])  # no override of the id's own
+
+
+# rl_zoo3's own train, up to its callbacks: the EvalCallback it builds from the snippet's command, then no training.
+_ZOO_CALLBACKS = """
+import json, sys
+from stable_baselines3.common.callbacks import EvalCallback
+import rl_zoo3.train
+from rl_zoo3.exp_manager import ExperimentManager
+
+def report(self, model):
+    (evaluation,) = [c for c in self.callbacks if isinstance(c, EvalCallback)]
+    print(json.dumps({"n_envs": model.n_envs, "eval_freq": evaluation.eval_freq,
+                      "n_eval_episodes": evaluation.n_eval_episodes}))
+
+ExperimentManager.learn = report
+ExperimentManager.save_trained_model = lambda self, model: None
+sys.argv = ["rl_zoo3.train", *sys.argv[1:]]
+rl_zoo3.train.train()
+"""
+
+
+@pytest.mark.skipif(importlib.util.find_spec("rl_zoo3") is None, reason="rl_zoo3 not installed (dev extra)")
+def test_zoo_snippet_evaluates_as_often_as_the_file_says(tmp_path):
+    # zoo divides --eval-freq by n_envs (rl_zoo3/exp_manager.py, create_callbacks): the snippet's value must be the
+    # file's eval_freq in env steps in all, not per env
+    train_cmd = _doc_argv(commands(snippet("zoo"))[0])
+    env_id = _option(train_cmd, "--env")
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT), os.environ.get("PYTHONPATH")]))}
+    done = subprocess.run([sys.executable, "-c", _ZOO_CALLBACKS, *train_cmd[3:]], cwd=tmp_path, env=env,
+                          capture_output=True, text=True)
+    assert done.returncode == 0, done.stderr[-3000:]
+    built = json.loads(done.stdout.strip().splitlines()[-1])
+    wanted = load_project_settings("ppo", env_id)
+    assert built["n_envs"] == load_hyperparams("ppo", env_id)["n_envs"] == 32
+    period = built["eval_freq"] * built["n_envs"]  # EvalCallback counts vector steps, each n_envs env steps
+    assert wanted["eval_freq"] - built["n_envs"] < period <= wanted["eval_freq"], (period, wanted)
+    assert built["n_eval_episodes"] == wanted["eval_episodes"]

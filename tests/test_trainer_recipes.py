@@ -181,3 +181,62 @@ def test_minari_snippet_records_a_dataset(tmp_path):
                      env={**_env(), "MINARI_DATASETS_PATH": str(tmp_path / "datasets")})
     assert re.search(r"^2 episodes, \d+ steps$", out, re.M), out
     assert (tmp_path / "datasets" / "pectoral" / "full-random-v0").is_dir()
+
+
+# The distributions behind the third-party imports of CleanRL's ppo_continuous_action.py (gymnasium, numpy, torch,
+# tyro, torch.utils.tensorboard), read off its source.
+CLEANRL_NEEDS = {"gymnasium", "numpy", "torch", "tyro", "tensorboard"}
+
+
+def _requirement_names(requirements):
+    return {re.split(r"[<>=!~\[; ]", requirement, maxsplit=1)[0].lower().replace("_", "-")
+            for requirement in requirements}
+
+
+def test_cleanrl_install_line_brings_what_its_script_imports():
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    extras = project["optional-dependencies"]
+    brought = _requirement_names(project["dependencies"])
+    for line in commands(snippet("cleanrl-install")):
+        argv = shlex.split(line)
+        assert argv[:2] == ["pip", "install"], line
+        for item in argv[2:]:
+            if item == "-e":
+                continue
+            match = re.fullmatch(r"\.\[([a-z,]+)\]", item)
+            if match:
+                for extra in match.group(1).split(","):
+                    brought |= _requirement_names(r for r in extras[extra] if not r.startswith("pectoral-gym"))
+            else:
+                brought |= _requirement_names([item])
+    assert CLEANRL_NEEDS <= brought, CLEANRL_NEEDS - brought
+
+
+@pytest.mark.skipif(not _has("torch", "stable_baselines3"), reason="needs the rl extra")
+def test_safe_rl_cost_snippet_reports_a_policys_cost(tmp_path):
+    from stable_baselines3 import PPO
+
+    PPO("MlpPolicy", gym.make(ENV), n_steps=64, batch_size=64, seed=0, device="cpu").save(tmp_path / "model.zip")
+    out = run_python(with_constants(snippet("safe-rl-cost"), RUN=str(tmp_path / "model.zip"), EPISODES=3), tmp_path)
+    match = re.search(r"^3 episodes: success ([\d.]+), stops in the band (\d), band cost per episode ([\d.]+) "
+                      r"\(max ([\d.]+)\)$", out, re.M)
+    assert match, out
+    stops, mean_cost, max_cost = int(match.group(2)), float(match.group(3)), float(match.group(4))
+    assert mean_cost <= max_cost and (stops == 0 or max_cost >= 1.0)  # a stop costs 1 on its last step alone
+
+
+def test_fsrl_install_line_keeps_its_own_environment():
+    lines = commands(snippet("fsrl-install"))
+    assert lines[0] == "python -m venv .venv-fsrl" and all(line.startswith(".venv-fsrl/") for line in lines[1:])
+    assert '"numpy<2"' in lines[-1] and "fast-safe-rl==0.1.0" in lines[-1]  # wandb 0.14 fails on numpy 2
+    assert "torch==2.13.0" in lines[-1] and '"setuptools>=77,<81"' in lines[-1]  # pkg_resources, torch kept
+
+
+@pytest.mark.skipif(not _has("fsrl", "tianshou"), reason="FSRL not installed (a venv of its own: see the page)")
+def test_fsrl_snippet_trains(tmp_path):
+    code = with_constants(snippet("fsrl"), N_ENVS=2, EPOCHS=1, STEPS_PER_EPOCH=256, TEST_EPISODES=2)
+    out = run_python(code, tmp_path)
+    assert re.search(r"^test: return -?[\d.]+, length [\d.]+, band cost per episode [\d.]+$", out, re.M), out[-2000:]
+    assert (tmp_path / "fsrl_ppolag.pt").is_file()

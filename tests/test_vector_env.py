@@ -171,5 +171,5 @@ def test_vector_action_checks():
     venv.step(np.zeros((3, 8), dtype=np.int64))
     with pytest.raises(ValueError):
         PectoralFishVectorEnv(0)
-    with pytest.raises(ValueError):
-        PectoralFishVectorEnv(2, render_mode="rgb_array")
+    with pytest.raises(ValueError, match="render_mode"):
+        PectoralFishVectorEnv(2, render_mode="human")  # rgb_array only (tests/test_vector_render.py)

@@ -21,7 +21,7 @@ from pectoral_gym.envs.layout import (
 from pectoral_gym.envs.observation import OBS_X, OBS_Y, observation_bounds, observation_structure
 from pectoral_gym.envs.tasks.episode_start import pin_start
 from pectoral_gym.model.params import FishParams
-from pectoral_gym.versions import LATEST_AVERAGED
+from pectoral_gym.versions import LATEST
 
 __all__ = ["PectoralFishEnv"]
 
@@ -109,7 +109,8 @@ class PectoralFishEnv(gym.Env):
     ``info`` also holds ``"distance"`` (``d`` [m]), ``"is_success"`` (goal)
     and ``"tracking_error"`` (track, ``d`` [m]), and with ``stop_band`` ``"cost"``: 1.0 on a step
     that ends inside the stopping band, else 0.0 (Safety-Gymnasium's per-step cost, for constrained
-    RL). Every value is a numpy scalar
+    RL; :class:`pectoral_gym.envs.cost.BandCost` adds ``"band_cost"``, a cost that rises before the band). Every
+    value is a numpy scalar
     (``np.float64``, ``np.bool_``). ``reset()`` returns the same keys: zero
     reward terms, the real distance, ``is_success = False``.
 
@@ -360,9 +361,10 @@ class PectoralFishEnv(gym.Env):
     def render(self):
         """Draw the tank from above: ``rgb_array`` returns an ``(H, W, 3)`` uint8 image; ``human`` shows a window."""
         if self.render_mode is None:
+            env_id = self.spec.id if self.spec is not None else LATEST[self.config.model]  # this env's own id
             gym.logger.warn(
                 "You are calling render method without specifying any render mode. You can specify the "
-                f'render_mode at initialization, e.g. gym.make("{LATEST_AVERAGED}", render_mode="rgb_array")'
+                f'render_mode at initialization, e.g. gym.make("{env_id}", render_mode="rgb_array")'
             )
             return None
         if self._renderer is None:

@@ -6,6 +6,7 @@ import inspect
 from collections.abc import Sequence
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
@@ -14,8 +15,9 @@ from gymnasium.vector.utils import batch_space
 
 from pectoral_gym.envs.core import EnvConfig, EnvCore, env_signature
 from pectoral_gym.envs.layout import ACTION_SIZE, O_REWARD, O_TERMINATED
-from pectoral_gym.envs.observation import observation_bounds, observation_structure
+from pectoral_gym.envs.observation import OBS_X, OBS_Y, observation_bounds, observation_structure
 from pectoral_gym.registration import MAX_EPISODE_STEPS
+from pectoral_gym.versions import LATEST
 
 __all__ = ["PectoralFishVectorEnv"]
 
@@ -54,13 +56,14 @@ class PectoralFishVectorEnv(VectorEnv):
     Args:
         num_envs: Number of environments.
         max_episode_steps: Truncation after this many steps (240 as registered).
-        render_mode: Only ``None`` (render a single env instead).
+        render_mode: ``None`` or ``"rgb_array"``: :meth:`render` returns one frame per env, as Gymnasium's
+            ``SyncVectorEnv`` does (``gymnasium.wrappers.vector.HumanRendering`` shows them tiled in a window).
         autoreset_mode: ``AutoresetMode`` or its value (``"NextStep"``, ``"SameStep"``, ``"Disabled"``).
         **kwargs: The settings of :class:`~pectoral_gym.envs.fish_env.PectoralFishEnv`
             (the fields of :class:`~pectoral_gym.envs.core.EnvConfig`, ``model`` among them).
     """
 
-    metadata = {"render_modes": [], "autoreset_mode": AutoresetMode.NEXT_STEP}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 2, "autoreset_mode": AutoresetMode.NEXT_STEP}
 
     def __init__(self, num_envs: int = 1, *, max_episode_steps: int = MAX_EPISODE_STEPS,
                  render_mode: str | None = None, autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
@@ -69,18 +72,21 @@ class PectoralFishVectorEnv(VectorEnv):
             raise ValueError(f"num_envs must be >= 1, got {num_envs}")
         if max_episode_steps is None or int(max_episode_steps) < 1:
             raise ValueError(f"max_episode_steps must be an integer >= 1, got {max_episode_steps}")
-        if render_mode is not None:
-            raise ValueError("PectoralFishVectorEnv does not render; render a single PectoralFishEnv instead")
+        if render_mode is not None and render_mode not in type(self).metadata["render_modes"]:
+            raise ValueError(f"render_mode must be 'rgb_array' or None, got {render_mode!r} (for a window, wrap the "
+                             "env in gymnasium.wrappers.vector.HumanRendering)")
         try:
             self.autoreset_mode = AutoresetMode(autoreset_mode)
         except ValueError:
             raise ValueError(f"autoreset_mode must be one of {[m.value for m in AutoresetMode]}, "
                              f"got {autoreset_mode!r}") from None
-        self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode}
         self.num_envs = int(num_envs)
         self.max_episode_steps = int(max_episode_steps)
-        self.render_mode = None
+        self.render_mode = render_mode
         self.config = EnvConfig.recommended(**kwargs)  # the latest version's settings, then the arguments
+        # one frame per control period, as the single env
+        self.metadata = {**type(self).metadata, "autoreset_mode": self.autoreset_mode,
+                         "render_fps": 1.0 / self.config.control_period}
         self.core = EnvCore(self.num_envs, self.config)
         self.single_action_space = spaces.Box(-1.0, 1.0, (ACTION_SIZE,), dtype=np.float32)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
@@ -94,6 +100,9 @@ class PectoralFishVectorEnv(VectorEnv):
         self.prev_done = np.zeros(self.num_envs, dtype=np.bool_)
         self._info_fields = self.core.task_state.info_fields  # the task table's info entries (and cost), in order
         self._all = np.ones(self.num_envs, dtype=np.bool_)
+        self._renderer = None
+        #: With a render mode: each env's path [m] since its episode began, as the single env's ``trail``.
+        self.trails: list[list[tuple[float, float]]] = [[] for _ in range(self.num_envs)]
 
     def _infos(self, mask: np.ndarray) -> dict[str, Any]:
         """``info`` of the envs in ``mask`` from ``core.out`` (zero for the others, as ``SyncVectorEnv``)."""
@@ -160,6 +169,7 @@ class PectoralFishVectorEnv(VectorEnv):
         self.core.reset(index, self._rngs)
         self.steps[index] = 0
         self.prev_done[index] = False
+        self._trace(mask)
         return self.core.obs.copy(), self._infos(mask)
 
     def step(self, actions: np.ndarray):
@@ -188,6 +198,7 @@ class PectoralFishVectorEnv(VectorEnv):
         else:
             core.step(actions)
         self.steps += 1
+        started = resetting.copy() if mode is AutoresetMode.NEXT_STEP else None  # envs whose episode starts anew
         if mode is AutoresetMode.NEXT_STEP and resetting.any():
             index = np.flatnonzero(resetting)
             core.reset(index, self._rngs)
@@ -206,6 +217,7 @@ class PectoralFishVectorEnv(VectorEnv):
                     final_obs[i] = core.obs[i].copy()
                 core.reset(index, self._rngs)
                 self.steps[index] = 0
+                started = done
                 info = self._infos(self._all)
                 info.update(final_obs=final_obs, _final_obs=done.copy(), final_info=final_info,
                             _final_info=done.copy())
@@ -214,7 +226,46 @@ class PectoralFishVectorEnv(VectorEnv):
         else:
             info = self._infos(self._all)
             self.prev_done = done
+        self._trace(started)
         return core.obs.copy(), rewards, terminated, truncated, info
+
+    def _trace(self, started: np.ndarray | None) -> None:
+        """With a render mode: add each env's position to its trail, which restarts for the envs in ``started``."""
+        if self.render_mode is None:
+            return
+        obs = self.core.obs
+        for i in range(self.num_envs):
+            point = (float(obs[i, OBS_X]), float(obs[i, OBS_Y]))
+            if started is not None and started[i]:
+                self.trails[i] = [point]
+            else:
+                self.trails[i].append(point)
+
+    def render(self) -> tuple[np.ndarray, ...] | None:
+        """One ``(H, W, 3)`` uint8 top view per env (``rgb_array``), as ``SyncVectorEnv.render`` returns them.
+
+        Each frame is the single env's (:class:`~pectoral_gym.envs.fish_env.PectoralFishEnv`): the tank, the
+        target, the fish and its trail. Without a render mode: a warning and ``None``, as the single env.
+        """
+        if self.render_mode is None:
+            spec = getattr(self, "spec", None)
+            env_id = spec.id if spec is not None else LATEST[self.config.model]
+            gym.logger.warn(
+                "You are calling render method without specifying any render mode. You can specify the "
+                f'render_mode at initialization, e.g. gym.make_vec("{env_id}", render_mode="rgb_array")'
+            )
+            return None
+        if self._renderer is None:
+            from pectoral_gym.envs.rendering import FishRenderer
+
+            self._renderer = FishRenderer(self.render_mode, self.metadata["render_fps"])
+        return tuple(self._renderer.render(self.core, i, self.trails[i], self.config) for i in range(self.num_envs))
+
+    def close_extras(self, **kwargs: Any) -> None:
+        """Release the renderer (pygame's surface), if one was made."""
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
 
 
 _P = inspect.Parameter

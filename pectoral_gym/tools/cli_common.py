@@ -135,5 +135,7 @@ MODULE_COMMANDS: dict[str, Command] = {c.name: c for c in (
     Command("python -m pectoral_gym.agents.studies.stack_gap", "pectoral_gym.agents.studies.stack_gap"),
     Command("python -m pectoral_gym.agents.studies.open_loop_gap", "pectoral_gym.agents.studies.open_loop_gap"),
     Command("python -m pectoral_gym.tools.layout", "pectoral_gym.tools.layout"),
+    Command("python -m pectoral_gym.agents.training.hub", "pectoral_gym.agents.training.hub"),
+    Command("python -m pectoral_gym.agents.training.dataset", "pectoral_gym.agents.training.dataset"),
 )}
 
