@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -124,6 +124,10 @@ class Identifiability:
         combination_se: :data:`COMBINATIONS` name -> relative standard error from the logs alone.
         variance: The residual's variance ``s^2`` (1 when the noise estimate is right).
         statements: Plain sentences for the report.
+        covariance: How the standard errors were estimated: ``"window-sandwich"`` or ``"gauss-newton"``
+            (:mod:`~pectoral_gym.scaling.calibration.covariance`).
+        gauss_newton: For comparison, the Gauss-Newton standard errors (``std_error``, ``data_std_error``,
+            ``combination_se``) when the sandwich gave the reported ones; empty otherwise.
     """
 
     std_error: dict[str, float]
@@ -133,27 +137,33 @@ class Identifiability:
     combination_se: dict[str, float]
     variance: float
     statements: list[str]
+    covariance: str = "gauss-newton"
+    gauss_newton: dict[str, dict[str, float]] = field(default_factory=dict)
 
 
-def _schur(J, p: int) -> np.ndarray:
-    """``J_t' J_t - J_t' J_z (J_z' J_z)^-1 J_z' J_t``: the log-parameters' information, starting states eliminated."""
-    H = J.T @ J
-    H = H.toarray() if hasattr(H, "toarray") else np.asarray(H)
-    Htt, Htz, Hzz = H[:p, :p], H[:p, p:], H[p:, p:]
-    if Hzz.size == 0:
-        return Htt
-    return Htt - Htz @ np.linalg.lstsq(Hzz, Htz.T, rcond=None)[0]
+def _standard_errors(info: np.ndarray, prior_sigma: float, grads: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Posterior and data-alone standard errors of the log-parameters, and of the combinations of gradient ``grads``."""
+    p = len(info)
+    eigval, eigvec = np.linalg.eigh(info)
+    eigval = np.maximum(eigval, 1e-300)
+    order = np.argsort(eigval)[::-1]
+    eigval, eigvec = eigval[order], eigvec[:, order]
+    data_se = np.sqrt(np.sum(eigvec**2 / eigval, axis=1))
+    posterior = np.sqrt(np.diag(np.linalg.inv(info + np.eye(p) / prior_sigma**2)))
+    combo_se = np.sqrt(np.sum((grads @ eigvec) ** 2 / eigval, axis=1))
+    return posterior, data_se, combo_se, eigval, eigvec
 
 
-def analyse(J: np.ndarray, variance: float, p: int, fields: tuple[str, ...], prior: FishParams,
+def analyse(info: np.ndarray, variance: float, fields: tuple[str, ...], prior: FishParams,
             prior_sigma: float, identified_se: float, theta: np.ndarray,
-            params_of: Callable[[np.ndarray], FishParams]) -> Identifiability:
+            params_of: Callable[[np.ndarray], FishParams], covariance: str = "gauss-newton",
+            gauss_newton_info: np.ndarray | None = None) -> Identifiability:
     """Standard errors and identifiability of the fitted log-parameters (module docstring).
 
     Args:
-        J: ``(m, p + 6 w)`` Jacobian of the data residuals (normalised by the noise), dense or sparse.
-        variance: The residual's variance ``s^2``.
-        p: Number of log-parameters (the first columns).
+        info: ``(p, p)`` the logs' information about the log-parameters, starting states eliminated
+            (:mod:`~pectoral_gym.scaling.calibration.covariance`).
+        variance: The residual's variance ``s^2`` (reported).
         fields: Their names.
         prior: The prior parameters (for the coefficient gains of the added masses).
         prior_sigma: The prior's standard deviation of each log-parameter.
@@ -161,14 +171,19 @@ def analyse(J: np.ndarray, variance: float, p: int, fields: tuple[str, ...], pri
         theta: The fitted log-parameters.
         params_of: The parameters of log-parameters (for the :data:`COMBINATIONS`' gradients).
     """
-    info = _schur(J, p) / max(variance, 1e-12)
-    info = 0.5 * (info + info.T)
-    eigval, eigvec = np.linalg.eigh(info)
-    eigval = np.maximum(eigval, 1e-300)
-    order = np.argsort(eigval)[::-1]
-    eigval, eigvec = eigval[order], eigvec[:, order]
-    data_se = np.sqrt(np.sum(eigvec**2 / eigval, axis=1))
-    posterior = np.linalg.inv(info + np.eye(p) / prior_sigma**2)
+    p = len(fields)
+    base = {n: math.log(abs(v)) for n, v in combinations(params_of(theta)).items()}
+    grads = np.zeros((len(base), p))
+    for i in range(p):
+        moved = combinations(params_of(theta + 1e-6 * np.eye(p)[i]))
+        grads[:, i] = [(math.log(abs(moved[n])) - base[n]) / 1e-6 for n in base]
+    posterior, data_se, combo_se, eigval, eigvec = _standard_errors(info, prior_sigma, grads)
+    gauss_newton: dict[str, dict[str, float]] = {}
+    if gauss_newton_info is not None:
+        gn = _standard_errors(gauss_newton_info, prior_sigma, grads)
+        gauss_newton = {"std_error": dict(zip(fields, gn[0].tolist(), strict=True)),
+                        "data_std_error": dict(zip(fields, gn[1].tolist(), strict=True)),
+                        "combination_se": dict(zip(base, gn[2].tolist(), strict=True))}
     gains = np.array([_coefficient_gain(n, prior) for n in fields])
     directions = []
     for k in range(p):
@@ -178,12 +193,6 @@ def analyse(J: np.ndarray, variance: float, p: int, fields: tuple[str, ...], pri
         scale = bool(np.linalg.norm(coef) > 0 and abs(coef.sum()) / (np.linalg.norm(coef) * math.sqrt(p)) > 0.8)
         directions.append(Direction({n: float(w) for n, w in zip(fields, v, strict=True)}, se,
                                     se <= identified_se, scale))
-    base = {n: math.log(abs(v)) for n, v in combinations(params_of(theta)).items()}
-    grads = np.zeros((len(base), p))
-    for i in range(p):
-        moved = combinations(params_of(theta + 1e-6 * np.eye(p)[i]))
-        grads[:, i] = [(math.log(abs(moved[n])) - base[n]) / 1e-6 for n in base]
-    combo_se = np.sqrt(np.sum((grads @ eigvec) ** 2 / eigval, axis=1))
     identified = {n: bool(s <= identified_se) for n, s in zip(fields, data_se, strict=True)}
     statements = []
     for d in directions:
@@ -212,7 +221,7 @@ def analyse(J: np.ndarray, variance: float, p: int, fields: tuple[str, ...], pri
         if a in fields and b in fields:
             statements.append(f"{a} and {b} {why}: fit one of them and give the other as known.")
     return Identifiability(
-        {n: float(math.sqrt(posterior[i, i])) for i, n in enumerate(fields)},
+        {n: float(posterior[i]) for i, n in enumerate(fields)},
         {n: float(s) for n, s in zip(fields, data_se, strict=True)},
         identified, directions, {n: float(v) for n, v in zip(base, combo_se, strict=True)}, float(variance),
-        statements)
+        statements, covariance, gauss_newton)
