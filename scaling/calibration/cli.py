@@ -117,7 +117,7 @@ def main(args: argparse.Namespace) -> int:
     print(f"wrote {args.out} and {folder}/report.json, report.md{'' if args.no_plots else ', paths.png'}")
     code = 0
     if not cal.converged:
-        print(f"warning: {not_converged_text(cal.nfev)}", file=sys.stderr)
+        print(f"warning: {not_converged_text(cal.nfev, cal.remaining_step)}", file=sys.stderr)
     if held and not runs:
         longest = max((float(ep.pose_t[-1] - ep.pose_t[0]) for log in held for ep in log.episodes
                        if len(ep.pose_t) > 1), default=0.0)

@@ -10,11 +10,13 @@ Two estimates from the Jacobian ``J = [J_theta, J_z]`` of the normalised residua
   physics the model lacks): such an error lasts seconds, i.e. 30-180 consecutive frames, and ``s^2 S^-1`` is
   then too small by about the number of frames it spans.
 - :func:`window_sandwich_information`: the cluster-robust ("sandwich") covariance with each shooting window a
-  cluster, ``V = S^-1 B S^-1 G / (G - 1)``, ``B = sum_w g_w g_w'`` the outer products of each window's score
-  ``g_w = J~_w' r_w`` (``J~_w``: the window's ``J_theta`` rows with its starting state projected out), ``G`` the
-  number of windows. It makes no assumption on how residuals correlate within a window, only that windows
-  (each started from its own fitted state) are nearly independent, and equals ``s^2 S^-1`` for white residuals.
-  Returned as an information ``V^-1``, so the prior adds to it as to the Gauss-Newton one.
+  cluster, in its jackknife form: ``V = (G - 1) / G sum_w (S - S_w)^-1 g_w g_w' (S - S_w)^-1``, ``g_w = J~_w' r_w``
+  each window's score and ``S_w = J~_w' J~_w`` its information (``J~_w``: the window's ``J_theta`` rows with its
+  starting state projected out), ``G`` the number of windows; ``(S - S_w)^-1 g_w`` is, to first order, how far
+  the fit moves when window ``w`` is left out. It makes no assumption on how residuals correlate within a window,
+  only that windows (each started from its own fitted state) are nearly independent, and comes close to
+  ``s^2 S^-1`` for white residuals. Returned as an information ``V^-1``, so the prior adds to it as to the
+  Gauss-Newton one.
 """
 
 from __future__ import annotations
@@ -71,7 +73,7 @@ def window_sandwich_information(J, r: np.ndarray, p: int, clusters: np.ndarray) 
         return None
     order = np.argsort(clusters, kind="stable")
     bounds = np.searchsorted(clusters[order], labels, side="left").tolist() + [len(order)]
-    S, B = np.zeros((p, p)), np.zeros((p, p))
+    own, scores = [], []  # each window's information S_w and score g_w
     for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
         rows = order[lo:hi]
         block = J[rows]
@@ -81,11 +83,17 @@ def window_sandwich_information(J, r: np.ndarray, p: int, clusters: np.ndarray) 
         if len(cols):  # the window's own starting state, projected out (its Schur complement)
             z = starts[:, cols].toarray()
             theta = theta - z @ np.linalg.lstsq(z, theta, rcond=None)[0]
-        score = theta.T @ r[rows]
-        S += theta.T @ theta
-        B += np.outer(score, score)
+        own.append(theta.T @ theta)
+        scores.append(theta.T @ r[rows])
+    S = np.sum(own, axis=0)
     G = len(labels)
-    S_inv = np.linalg.pinv(S, hermitian=True)
-    V = S_inv @ B @ S_inv * G / (G - 1)
+    # Jackknife form (CR3): each window's score seen from the fit without it, (S - S_w)^-1 g_w. The plain form
+    # S^-1 g_w comes out too small for a combination that few windows fix (the fit has already bent towards their
+    # residuals: high leverage), as lift is by the few windows with much sideslip.
+    V = np.zeros((p, p))
+    for S_w, g_w in zip(own, scores, strict=True):
+        step = np.linalg.lstsq(S - S_w, g_w, rcond=None)[0]
+        V += np.outer(step, step)
+    V *= (G - 1) / G
     info = np.linalg.pinv(0.5 * (V + V.T), hermitian=True)
     return 0.5 * (info + info.T)

@@ -1,12 +1,11 @@
 """What the logs determine: standard errors and the parameter combinations they cannot tell apart.
 
-From the Jacobian of the normalised residuals at the optimum, ``J = [J_theta, J_z]`` (log-parameters, then
-the windows' starting states), the information about the log-parameters with the starting states
-eliminated is the Schur complement ``S = (J_theta' J_theta - J_theta' J_z (J_z' J_z)^-1 J_z' J_theta) / s^2``,
-``s^2`` the residual's variance. Its eigenvectors are the parameter combinations the logs fix, each to
-``1 / sqrt(eigenvalue)``; a combination known worse than the field's ``identified_se`` is left to the
-prior (the regularisation of :mod:`~pectoral_gym.scaling.calibration.fit`). The posterior covariance adds
-the prior's information ``I / prior_sigma^2``.
+From the logs' information about the log-parameters with the windows' starting states eliminated
+(:mod:`~pectoral_gym.scaling.calibration.covariance`: the window-clustered sandwich, robust to residuals that
+are correlated from frame to frame, or Gauss-Newton's ``S / s^2`` for independent ones). Its eigenvectors are
+the parameter combinations the logs fix, each to ``1 / sqrt(eigenvalue)``; a combination known worse than the
+field's ``identified_se`` is left to the prior (the regularisation of :mod:`~pectoral_gym.scaling.calibration.fit`).
+The posterior covariance adds the prior's information ``I / prior_sigma^2``.
 
 Some fields can never be told apart, whatever the logs, because the model sees only a product of them
 (eq. 20 and eqs. 11, 13 of the paper): :data:`STRUCTURAL` says which.
@@ -124,10 +123,11 @@ class Identifiability:
         combination_se: :data:`COMBINATIONS` name -> relative standard error from the logs alone.
         variance: The residual's variance ``s^2`` (1 when the noise estimate is right).
         statements: Plain sentences for the report.
-        covariance: How the standard errors were estimated: ``"window-sandwich"`` or ``"gauss-newton"``
-            (:mod:`~pectoral_gym.scaling.calibration.covariance`).
-        gauss_newton: For comparison, the Gauss-Newton standard errors (``std_error``, ``data_std_error``,
-            ``combination_se``) when the sandwich gave the reported ones; empty otherwise.
+        covariance: How the standard errors were estimated (:mod:`~pectoral_gym.scaling.calibration.covariance`):
+            ``"larger of window-sandwich and gauss-newton"`` (each standard error the larger of the two) or
+            ``"gauss-newton"`` (too few windows for the sandwich).
+        gauss_newton: For comparison, the Gauss-Newton standard errors alone (``std_error``, ``data_std_error``,
+            ``combination_se``) when the sandwich took part; empty otherwise.
     """
 
     std_error: dict[str, float]
@@ -156,13 +156,20 @@ def _standard_errors(info: np.ndarray, prior_sigma: float, grads: np.ndarray) ->
 
 def analyse(info: np.ndarray, variance: float, fields: tuple[str, ...], prior: FishParams,
             prior_sigma: float, identified_se: float, theta: np.ndarray,
-            params_of: Callable[[np.ndarray], FishParams], covariance: str = "gauss-newton",
-            gauss_newton_info: np.ndarray | None = None) -> Identifiability:
+            params_of: Callable[[np.ndarray], FishParams],
+            sandwich_info: np.ndarray | None = None) -> Identifiability:
     """Standard errors and identifiability of the fitted log-parameters (module docstring).
 
+    Each standard error is the larger of the Gauss-Newton one and, where given, the window sandwich's: the sandwich
+    holds when the model misses the camera by an error lasting many frames, Gauss-Newton when the residuals are
+    independent, where the sandwich's own sampling error (about ``sqrt(1 / (2 G))`` relative for ``G`` windows)
+    makes it come out too small about half the time.
+
     Args:
-        info: ``(p, p)`` the logs' information about the log-parameters, starting states eliminated
-            (:mod:`~pectoral_gym.scaling.calibration.covariance`).
+        info: ``(p, p)`` the logs' information about the log-parameters for independent residuals, starting states
+            eliminated (:func:`~pectoral_gym.scaling.calibration.covariance.gauss_newton_information`).
+        sandwich_info: The same from the window-clustered sandwich
+            (:func:`~pectoral_gym.scaling.calibration.covariance.window_sandwich_information`), or ``None``.
         variance: The residual's variance ``s^2`` (reported).
         fields: Their names.
         prior: The prior parameters (for the coefficient gains of the added masses).
@@ -179,11 +186,18 @@ def analyse(info: np.ndarray, variance: float, fields: tuple[str, ...], prior: F
         grads[:, i] = [(math.log(abs(moved[n])) - base[n]) / 1e-6 for n in base]
     posterior, data_se, combo_se, eigval, eigvec = _standard_errors(info, prior_sigma, grads)
     gauss_newton: dict[str, dict[str, float]] = {}
-    if gauss_newton_info is not None:
-        gn = _standard_errors(gauss_newton_info, prior_sigma, grads)
-        gauss_newton = {"std_error": dict(zip(fields, gn[0].tolist(), strict=True)),
-                        "data_std_error": dict(zip(fields, gn[1].tolist(), strict=True)),
-                        "combination_se": dict(zip(base, gn[2].tolist(), strict=True))}
+    covariance = "gauss-newton"
+    if sandwich_info is not None:
+        gauss_newton = {"std_error": dict(zip(fields, posterior.tolist(), strict=True)),
+                        "data_std_error": dict(zip(fields, data_se.tolist(), strict=True)),
+                        "combination_se": dict(zip(base, combo_se.tolist(), strict=True))}
+        robust = _standard_errors(sandwich_info, prior_sigma, grads)
+        posterior, data_se, combo_se = (np.maximum(a, b) for a, b in zip((posterior, data_se, combo_se), robust[:3],
+                                                                          strict=True))
+        # the directions: of the sandwich's information where its variance is the larger, else of Gauss-Newton's
+        if np.sum(1.0 / robust[3]) > np.sum(1.0 / eigval):
+            eigval, eigvec = robust[3], robust[4]
+        covariance = "larger of window-sandwich and gauss-newton"
     gains = np.array([_coefficient_gain(n, prior) for n in fields])
     directions = []
     for k in range(p):

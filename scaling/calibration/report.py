@@ -70,6 +70,7 @@ def report_dict(cal: Calibration, held_out: list[HeldOutRun] | None = None,
                                   "heading_deg": math.degrees(cal.sigma[2])},
         "prior_sigma": cal.settings.prior_sigma, "identified_se": cal.settings.identified_se,
         "nfev": cal.nfev, "wall_time_s": cal.wall_time, "optimiser": cal.message, "converged": cal.converged,
+        "remaining_step_se": cal.remaining_step,
     }
     if held_out is not None:
         out["held_out"] = _held_out_summary(held_out)
@@ -78,10 +79,11 @@ def report_dict(cal: Calibration, held_out: list[HeldOutRun] | None = None,
     return out
 
 
-def not_converged_text(nfev: int) -> str:
+def not_converged_text(nfev: int, remaining: float) -> str:
     """What a fit that stopped at its evaluation limit means, and what to do (terminal and report.md)."""
-    return (f"The fit did not converge: it stopped at its limit of {nfev} model evaluations, short of the optimum, so "
-            "the values and standard errors below are those of an unfinished fit. Run it again with more "
+    return (f"The fit did not converge: it stopped at its limit of {nfev} model evaluations, short of the optimum "
+            f"(one more Gauss-Newton step would move a field by {remaining:.1f} standard errors), so the values and "
+            "standard errors below are those of an unfinished fit. Run it again with more "
             f"evaluations (--max-evaluations {3 * nfev}); if it still stops there, try shorter windows (--window 3) "
             "or longer logs.")
 
@@ -92,7 +94,8 @@ def markdown(report: dict[str, Any]) -> str:
              f"{len(report['logs'])} log(s), {report['logged_time_s']:.0f} s of logged robot time, "
              f"{report['frames']} poses in {report['windows']} windows of ~{report['window_s']:.0f} s; "
              f"{report['nfev']} model evaluations, {report['wall_time_s']:.1f} s.", "",
-             *([f"**{not_converged_text(report['nfev'])}**", ""] if not report.get("converged", True) else []),
+             *([f"**{not_converged_text(report['nfev'], report['remaining_step_se'])}**", ""]
+               if not report.get("converged", True) else []),
              "## Fitted fields", "",
              "| field | value | prior | s.e. (logs + prior) | s.e. (logs alone) | identified |"
              + (" truth | error |" if any("truth" in f for f in report["fields"].values()) else ""),
