@@ -94,7 +94,7 @@ def markdown(report: dict[str, Any]) -> str:
              f"{len(report['logs'])} log(s), {report['logged_time_s']:.0f} s of logged robot time, "
              f"{report['frames']} poses in {report['windows']} windows of ~{report['window_s']:.0f} s; "
              f"{report['nfev']} model evaluations, {report['wall_time_s']:.1f} s.", "",
-             *([f"**{not_converged_text(report['nfev'], report['remaining_step_se'])}**", ""]
+             *([f"**{not_converged_text(report['nfev'], report.get('remaining_step_se', math.nan))}**", ""]
                if not report.get("converged", True) else []),
              "## Fitted fields", "",
              "| field | value | prior | s.e. (logs + prior) | s.e. (logs alone) | identified |"
@@ -121,7 +121,9 @@ def markdown(report: dict[str, Any]) -> str:
     lines += ["", f"Residual rms: {1000 * report['rms_residual']['x_m']:.2f} mm, "
               f"{1000 * report['rms_residual']['y_m']:.2f} mm, {report['rms_residual']['psi_deg']:.2f} deg; camera "
               f"noise estimated from the poses: {1000 * report['camera_noise_estimate']['position_m']:.2f} mm, "
-              f"{report['camera_noise_estimate']['heading_deg']:.2f} deg."]
+              f"{report['camera_noise_estimate']['heading_deg']:.2f} deg. Standard errors: "
+              f"{report.get('covariance', 'gauss-newton')} (docs/calibration.md, \"How far to trust the standard "
+              "errors\")."]
     for key, title in (("held_out", "calibrated"), ("held_out_prior", "prior (before calibration)")):
         if key in report:
             h = report[key]
