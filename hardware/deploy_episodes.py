@@ -65,8 +65,11 @@ def run_episode(env, controller, episode: int, log: TextIO, seed: int | None = N
         log.write(json.dumps(record) + "\n")
         if terminated or truncated:
             break
+    success = bool(info.get("is_success", False))
     return {"episode": episode, "return": ret, "steps": steps, "terminated": terminated, "truncated": truncated,
-            "safety_stop": info["safety_stop"], "success": bool(info.get("is_success", False)),
+            "safety_stop": info["safety_stop"], "success": success,
+            # as the simulated envs' metric (agents.training.metrics.time_to_goal): steps x control period [s]
+            "time_to_goal": steps * env.unwrapped.config.control_period if success else None,
             "final_distance": info["distance"]}
 
 

@@ -125,6 +125,8 @@ def _checked_settings(request: DeployRequest) -> tuple[Any, Any, dict, list[str]
     except ValueError as err:
         raise ValueError(f"{'policy ' + repr(request.policy) if request.policy else 'the controller'} does not "
                          f"fit: {err}") from err
+    if name == "excite":  # an identification run has no goal: no episode ends by reaching one by chance
+        settings["goal_radius"] = 0.0
     if request.params is not None:  # the robot's own model: the supervisor's stopping distance and outline
         settings["params"] = request.params
     if request.scaling is not None:

@@ -88,6 +88,7 @@ def test_an_identification_run_logs_varied_fin_patterns(tmp_path):
     # --controller excite: seeded random patterns held 2-6 s (4-12 steps), so 24 steps log several distinct ones
     log, steps, summary = _deploy(tmp_path / "id", "--controller", "excite", episodes=1, steps=24)
     assert summary["controller"] == "excite"
+    assert summary["settings"]["goal_radius"] == 0.0  # no goal to reach: no episode ends at one by chance
     beats = log.episodes[0].beats
     distinct = np.unique(beats.reshape(len(beats), -1), axis=0)
     assert len(beats) == 24 and len(distinct) >= 3

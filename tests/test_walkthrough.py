@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 
 from pectoral_gym.model.kfunctions import ScalingFunctions
+from pectoral_gym.versions import LATEST_FULL
 
 ROOT = Path(__file__).resolve().parents[1]
 QUICK = {("pectoral_gym.scaling", "identify"), ("pectoral_gym.scaling", "validate"),
@@ -66,9 +67,11 @@ def test_the_readme_walk_through_runs_as_written(tmp_path):
     assert re.search(r"python -m pectoral_gym\.hardware\.deploy --controller excite .*--out id-run", text)
     assert re.search(r"python -m pectoral_gym\.scaling calibrate --logs id-run/run\.jsonl .*--out robot\.json", text)
     assert re.search(r"python -m pectoral_gym.scaling identify .*--params robot\.json", text)
-    assert re.search(r"python -m pectoral_gym\.agents\.training\.train .*PectoralFish-Full-v1.*\"params\"", text)
-    assert re.search(r"python -m pectoral_gym\.agents\.training\.evaluate .*PectoralFish-Full-v1", text)
-    assert re.search(r"python -m pectoral_gym\.hardware\.deploy --policy runs/PectoralFish-Full-v1/robot", text)
+    # on the recommended ids (pectoral_gym.versions.LATEST), as the rest of the docs
+    assert re.search(rf"python -m pectoral_gym\.agents\.training\.train .*{LATEST_FULL}.*\"params\"", text)
+    assert re.search(rf"python -m pectoral_gym\.agents\.training\.evaluate .*{LATEST_FULL}", text)
+    assert re.search(rf"python -m pectoral_gym\.hardware\.deploy --policy runs/{LATEST_FULL}/robot", text)
+    assert "-v1" not in text and "-v0" not in text
     assert re.search(r"python -m pectoral_gym\.hardware\.deploy --controller hand .*--scaling k/", text)
     bin_dir = tmp_path / "bin"
     bin_dir.mkdir()
@@ -90,7 +93,7 @@ def test_the_readme_walk_through_runs_as_written(tmp_path):
     assert k.identified_params["drag_coef"] == calibrated["drag_coef"]
     assert k.metadata["quick"] is True
     evaluation = json.loads(next((work / "runs" / "eval").glob("*/metrics.json")).read_text())
-    assert evaluation["env_id"] == "PectoralFish-Full-v1"
+    assert evaluation["env_id"] == LATEST_FULL
     # the trained robot, on the full model: the run folder's copy of robot.json
     assert Path(evaluation["env_kwargs"]["params"]).name == "params.json"
     assert json.loads((work / evaluation["env_kwargs"]["params"]).read_text()) == calibrated

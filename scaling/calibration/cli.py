@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import sys
 from pathlib import Path
 
@@ -54,6 +55,9 @@ def add_parser(sub) -> None:
                    help=f"shooting window [s] (default {defaults.window})")
     p.add_argument("--prior-sigma", type=float, default=defaults.prior_sigma,
                    help=f"prior standard deviation of each log-parameter (default {defaults.prior_sigma})")
+    p.add_argument("--max-evaluations", type=int, default=defaults.max_nfev, metavar="N",
+                   help=f"most model evaluations of the fit (default {defaults.max_nfev}); a fit that stops there "
+                        "says so")
     p.add_argument("--horizon", type=float, default=40.0, help="open-loop span of the held-out check [s] (default 40)")
     p.add_argument("--no-plots", action="store_true", help="no paths.png")
 
@@ -73,10 +77,10 @@ def main(args: argparse.Namespace) -> int:
     from pectoral_gym.runlog import RunLogError, read_run_log
     from pectoral_gym.scaling.calibration.fit import CalibrationSettings, calibrate, prior_params
     from pectoral_gym.scaling.calibration.heldout import held_out
-    from pectoral_gym.scaling.calibration.report import markdown, plot_paths, report_dict
+    from pectoral_gym.scaling.calibration.report import markdown, not_converged_text, plot_paths, report_dict
 
-    if not (args.window > 0 and args.prior_sigma > 0 and args.horizon > 0):
-        print("error: --window, --prior-sigma and --horizon must be > 0", file=sys.stderr)
+    if not (args.window > 0 and args.prior_sigma > 0 and args.horizon > 0 and args.max_evaluations > 0):
+        print("error: --window, --prior-sigma, --horizon and --max-evaluations must be > 0", file=sys.stderr)
         return 2
     try:
         logs = [read_run_log(path) for path in args.logs]
@@ -94,7 +98,8 @@ def main(args: argparse.Namespace) -> int:
         print(f"error: {err}", file=sys.stderr)
         return 2
     np.seterr(all="ignore")
-    settings = CalibrationSettings(fields=fields, window=args.window, prior_sigma=args.prior_sigma)
+    settings = CalibrationSettings(fields=fields, window=args.window, prior_sigma=args.prior_sigma,
+                                   max_nfev=args.max_evaluations)
     print(f"fitting {', '.join(fields)} to {len(logs)} log(s), {sum(log.duration for log in logs):.0f} s")
     cal = calibrate(logs, prior, settings)
     runs = held_out(cal.params, held, args.horizon) if held else []
@@ -110,4 +115,15 @@ def main(args: argparse.Namespace) -> int:
         plot_paths(cal, runs, folder / "paths.png")
     print(markdown(report))
     print(f"wrote {args.out} and {folder}/report.json, report.md{'' if args.no_plots else ', paths.png'}")
-    return 0
+    code = 0
+    if not cal.converged:
+        print(f"warning: {not_converged_text(cal.nfev, cal.remaining_step)}", file=sys.stderr)
+    if held and not runs:
+        longest = max((float(ep.pose_t[-1] - ep.pose_t[0]) for log in held for ep in log.episodes
+                       if len(ep.pose_t) > 1), default=0.0)
+        print(f"error: nothing was checked: no held-out episode has {0.9 * args.horizon:.0f} s of poses (0.9 x "
+              f"--horizon; the longest has {longest:.0f} s). Pass a shorter --horizon (at most "
+              f"{math.floor(longest / 0.9)} s here), or log longer held-out episodes (more --max-episode-steps on "
+              "the deploy; an episode also ends at the tank's walls).", file=sys.stderr)
+        code = 2
+    return code

@@ -26,10 +26,12 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy import sparse
 from scipy.optimize import least_squares
+from scipy.sparse.linalg import lsqr
 
 from pectoral_gym.model.params import FishParams
 from pectoral_gym.model.spec import FULL_FAST, FullSpec
 from pectoral_gym.runlog import RunLog
+from pectoral_gym.scaling.calibration.covariance import gauss_newton_information, window_sandwich_information
 from pectoral_gym.scaling.calibration.identifiability import UNCERTAIN_FIELDS, Identifiability, analyse
 from pectoral_gym.scaling.calibration.replay import replay_fins, simulate
 from pectoral_gym.scaling.calibration.windows import LogWindows, split_windows
@@ -58,6 +60,9 @@ class CalibrationSettings:
         loss: The robust loss of :func:`scipy.optimize.least_squares`.
         f_scale: The loss's soft margin, in noise standard deviations.
         max_nfev: Most residual evaluations.
+        covariance: ``"window-sandwich"`` (each standard error the larger of the window sandwich's, robust to
+            residuals correlated within a window, and Gauss-Newton's) or ``"gauss-newton"`` (independent frames
+            only; :mod:`~pectoral_gym.scaling.calibration.covariance`).
     """
 
     fields: tuple[str, ...] = UNCERTAIN_FIELDS
@@ -68,7 +73,8 @@ class CalibrationSettings:
     spec: FullSpec = FULL_FAST
     loss: str = "soft_l1"
     f_scale: float = 3.0
-    max_nfev: int = 100
+    max_nfev: int = 200
+    covariance: str = "window-sandwich"
 
 
 @dataclass
@@ -86,6 +92,11 @@ class Calibration:
         nfev: Residual evaluations.
         wall_time: Seconds the fit took (the fins' replay included).
         message: The optimiser's exit message.
+        converged: Whether the optimiser met a tolerance, or stopped at ``max_nfev`` with a remaining step under
+            0.1 standard errors (``False``: short of the optimum; the estimates and their standard errors are then
+            those of an unfinished fit).
+        remaining_step: The Gauss-Newton step that remains from the last point, in standard errors (the largest
+            over the fields).
     """
 
     params: FishParams
@@ -99,6 +110,8 @@ class Calibration:
     wall_time: float
     message: str
     settings: CalibrationSettings = field(default_factory=CalibrationSettings)
+    converged: bool = True
+    remaining_step: float = 0.0
 
     @property
     def duration(self) -> float:
@@ -120,6 +133,10 @@ class _Problem:
         self.rows = 3 * sum(len(w.sample_t) for w in windows)
         self._x: np.ndarray | None = None
         self._r = self._J = None
+
+    def clusters(self) -> np.ndarray:
+        """``(rows,)`` the shooting window (numbered over all logs) of each data residual."""
+        return np.concatenate([np.repeat(self.offsets[k] + w.sample_window, 3) for k, w in enumerate(self.windows)])
 
     def params(self, theta: np.ndarray) -> FishParams:
         """The candidate of log-parameters ``theta`` (the other fields: the prior's)."""
@@ -239,16 +256,29 @@ def calibrate(logs: Sequence[RunLog], prior: FishParams | None = None,
     data = slice(0, problem.rows)
     dof = max(problem.rows - problem.size, 1)
     variance = float(np.sum(r[data] ** 2) / dof)  # the residual's scale: the noise estimate's error absorbed
-    ident = analyse(J[data], variance, problem.p, tuple(settings.fields), prior, settings.prior_sigma,
-                    settings.identified_se, result.x[:problem.p], problem.params)
+    gauss_newton = gauss_newton_information(J[data], problem.p, variance)
+    info = (window_sandwich_information(J[data], r[data], problem.p, problem.clusters())
+            if settings.covariance == "window-sandwich" else None)
+    ident = analyse(gauss_newton, variance, tuple(settings.fields), prior, settings.prior_sigma,
+                    settings.identified_se, result.x[:problem.p], problem.params, info)
+    if info is None and settings.covariance == "window-sandwich":
+        ident.statements.insert(0, f"Only {int(problem.offsets[-1])} windows for {problem.p} fields: the standard "
+                                "errors assume independent frames (Gauss-Newton) and are too small when the model "
+                                "misses the camera by a smooth error; log more time for window-robust ones.")
     if variance > 1.5:  # the model misses some windows by more than the camera's noise: say what helps
         ident.statements.insert(0, f"The residual's variance is {variance:.2f} times the camera noise's: some windows "
                                 "are misfitted (a wrong start, or model error) and the estimates may be biased by "
                                 "more than their standard errors; try shorter windows (--window 3).")
+    # Stopped at the evaluation limit: converged all the same if the Gauss-Newton step that remains from the last
+    # point (the prior's rows included) moves every field by under a tenth of its standard error; the common scale,
+    # held by the weak prior only, is often still creeping there while every ratio the logs fix has settled.
+    remaining = lsqr(J, -r, atol=1e-10, btol=1e-10)[0][:problem.p]
+    remaining_se = float(np.max(np.abs(remaining) / np.array([ident.std_error[n] for n in settings.fields])))
     for k, lw in enumerate(windows):
         lw.starts = result.x[problem.p + 6 * problem.offsets[k]:problem.p + 6 * problem.offsets[k + 1]].reshape(-1, 6)
     raw = r[data].reshape(-1, 3) * np.concatenate([np.broadcast_to(w.sigma, (len(w.sample_t), 3)) for w in windows])
     sigma = np.mean([w.sigma for w in windows], axis=0)
     return Calibration(problem.params(result.x[:problem.p]), prior, tuple(settings.fields), ident, windows,
                        np.sqrt(np.mean(raw**2, axis=0)), sigma, int(result.nfev), time.perf_counter() - start,
-                       str(result.message), settings)
+                       str(result.message), settings, converged=bool(result.status > 0 or remaining_se < 0.1),
+                       remaining_step=remaining_se)

@@ -1,12 +1,11 @@
 """What the logs determine: standard errors and the parameter combinations they cannot tell apart.
 
-From the Jacobian of the normalised residuals at the optimum, ``J = [J_theta, J_z]`` (log-parameters, then
-the windows' starting states), the information about the log-parameters with the starting states
-eliminated is the Schur complement ``S = (J_theta' J_theta - J_theta' J_z (J_z' J_z)^-1 J_z' J_theta) / s^2``,
-``s^2`` the residual's variance. Its eigenvectors are the parameter combinations the logs fix, each to
-``1 / sqrt(eigenvalue)``; a combination known worse than the field's ``identified_se`` is left to the
-prior (the regularisation of :mod:`~pectoral_gym.scaling.calibration.fit`). The posterior covariance adds
-the prior's information ``I / prior_sigma^2``.
+From the logs' information about the log-parameters with the windows' starting states eliminated
+(:mod:`~pectoral_gym.scaling.calibration.covariance`: the window-clustered sandwich, robust to residuals that
+are correlated from frame to frame, or Gauss-Newton's ``S / s^2`` for independent ones). Its eigenvectors are
+the parameter combinations the logs fix, each to ``1 / sqrt(eigenvalue)``; a combination known worse than the
+field's ``identified_se`` is left to the prior (the regularisation of :mod:`~pectoral_gym.scaling.calibration.fit`).
+The posterior covariance adds the prior's information ``I / prior_sigma^2``.
 
 Some fields can never be told apart, whatever the logs, because the model sees only a product of them
 (eq. 20 and eqs. 11, 13 of the paper): :data:`STRUCTURAL` says which.
@@ -16,14 +15,14 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from pectoral_gym.model.params import FishParams
 
 __all__ = ["COEFFICIENT", "COMBINATIONS", "STRUCTURAL", "UNCERTAIN_FIELDS", "Direction", "Identifiability", "analyse",
-           "combinations"]
+           "combinations", "common_scale"]
 
 #: The FishParams fields a ruler cannot measure: what the calibration fits by default.
 UNCERTAIN_FIELDS = ("added_mass_x", "added_mass_y", "added_inertia", "drag_coef", "lift_coef", "moment_coef",
@@ -124,6 +123,11 @@ class Identifiability:
         combination_se: :data:`COMBINATIONS` name -> relative standard error from the logs alone.
         variance: The residual's variance ``s^2`` (1 when the noise estimate is right).
         statements: Plain sentences for the report.
+        covariance: How the standard errors were estimated (:mod:`~pectoral_gym.scaling.calibration.covariance`):
+            ``"larger of window-sandwich and gauss-newton"`` (each standard error the larger of the two) or
+            ``"gauss-newton"`` (too few windows for the sandwich).
+        gauss_newton: For comparison, the Gauss-Newton standard errors alone (``std_error``, ``data_std_error``,
+            ``combination_se``) when the sandwich took part; empty otherwise.
     """
 
     std_error: dict[str, float]
@@ -133,27 +137,73 @@ class Identifiability:
     combination_se: dict[str, float]
     variance: float
     statements: list[str]
+    covariance: str = "gauss-newton"
+    gauss_newton: dict[str, dict[str, float]] = field(default_factory=dict)
 
 
-def _schur(J, p: int) -> np.ndarray:
-    """``J_t' J_t - J_t' J_z (J_z' J_z)^-1 J_z' J_t``: the log-parameters' information, starting states eliminated."""
-    H = J.T @ J
-    H = H.toarray() if hasattr(H, "toarray") else np.asarray(H)
-    Htt, Htz, Hzz = H[:p, :p], H[:p, p:], H[p:, p:]
-    if Hzz.size == 0:
-        return Htt
-    return Htt - Htz @ np.linalg.lstsq(Hzz, Htz.T, rcond=None)[0]
+#: The field that carries each coefficient of the common scale (eq. 20, eqs. 11, 13), first choice first.
+_SCALE_CARRIERS = (("added_mass_x",), ("added_mass_y",), ("added_inertia", "body_inertia"), ("drag_coef",),
+                   ("lift_coef",), ("moment_coef",), ("fin_force_coef", "fin_chord"))
 
 
-def analyse(J: np.ndarray, variance: float, p: int, fields: tuple[str, ...], prior: FishParams,
+def common_scale(fields: tuple[str, ...], params: FishParams) -> np.ndarray | None:
+    """The unit move of the log-parameters that multiplies ``m1, m2, J3, c1, c2, C_M`` and ``k`` by one factor.
+
+    ``None`` unless ``fields`` carry all seven: then the logs can fix the scale in principle.
+    """
+    move = np.zeros(len(fields))
+    for carriers in _SCALE_CARRIERS:
+        name = next((n for n in carriers if n in fields), None)
+        if name is None:
+            return None
+        move[fields.index(name)] = 1.0 / _coefficient_gain(name, params)
+    return move / np.linalg.norm(move)
+
+
+def _standard_errors(info: np.ndarray, prior_sigma: float, grads: np.ndarray,
+                     scale: np.ndarray | None) -> tuple[np.ndarray, ...]:
+    """Posterior and data-alone standard errors of the log-parameters, and of the combinations of gradient ``grads``.
+
+    ``scale``: the common scale (:func:`common_scale`), whose information from the logs is discarded for the fields
+    (eq. 19 divided through does not depend on it, so what the logs seem to say about it is model error: on
+    robot-stack logs they claimed it to a fraction of a per cent while missing it by several) and which the ratios
+    do not depend on.
+    """
+    p = len(info)
+    eigval, eigvec = np.linalg.eigh(info)
+    eigval = np.maximum(eigval, 1e-300)
+    order = np.argsort(eigval)[::-1]
+    eigval, eigvec = eigval[order], eigvec[:, order]
+    combo_se = np.sqrt(np.sum((grads @ eigvec) ** 2 / eigval, axis=1))
+    if scale is not None:
+        keep = np.eye(p) - np.outer(scale, scale)
+        info = keep @ info @ keep
+        eigval, eigvec = np.linalg.eigh(0.5 * (info + info.T))
+        eigval = np.maximum(eigval, 1e-300)
+        order = np.argsort(eigval)[::-1]
+        eigval, eigvec = eigval[order], eigvec[:, order]
+    data_se = np.sqrt(np.sum(eigvec**2 / eigval, axis=1))
+    posterior = np.sqrt(np.diag(np.linalg.inv(info + np.eye(p) / prior_sigma**2)))
+    return posterior, data_se, combo_se, eigval, eigvec
+
+
+def analyse(info: np.ndarray, variance: float, fields: tuple[str, ...], prior: FishParams,
             prior_sigma: float, identified_se: float, theta: np.ndarray,
-            params_of: Callable[[np.ndarray], FishParams]) -> Identifiability:
+            params_of: Callable[[np.ndarray], FishParams],
+            sandwich_info: np.ndarray | None = None) -> Identifiability:
     """Standard errors and identifiability of the fitted log-parameters (module docstring).
 
+    Each standard error is the larger of the Gauss-Newton one and, where given, the window sandwich's: the sandwich
+    holds when the model misses the camera by an error lasting many frames, Gauss-Newton when the residuals are
+    independent, where the sandwich's own sampling error (about ``sqrt(1 / (2 G))`` relative for ``G`` windows)
+    makes it come out too small about half the time.
+
     Args:
-        J: ``(m, p + 6 w)`` Jacobian of the data residuals (normalised by the noise), dense or sparse.
-        variance: The residual's variance ``s^2``.
-        p: Number of log-parameters (the first columns).
+        info: ``(p, p)`` the logs' information about the log-parameters for independent residuals, starting states
+            eliminated (:func:`~pectoral_gym.scaling.calibration.covariance.gauss_newton_information`).
+        sandwich_info: The same from the window-clustered sandwich
+            (:func:`~pectoral_gym.scaling.calibration.covariance.window_sandwich_information`), or ``None``.
+        variance: The residual's variance ``s^2`` (reported).
         fields: Their names.
         prior: The prior parameters (for the coefficient gains of the added masses).
         prior_sigma: The prior's standard deviation of each log-parameter.
@@ -161,14 +211,27 @@ def analyse(J: np.ndarray, variance: float, p: int, fields: tuple[str, ...], pri
         theta: The fitted log-parameters.
         params_of: The parameters of log-parameters (for the :data:`COMBINATIONS`' gradients).
     """
-    info = _schur(J, p) / max(variance, 1e-12)
-    info = 0.5 * (info + info.T)
-    eigval, eigvec = np.linalg.eigh(info)
-    eigval = np.maximum(eigval, 1e-300)
-    order = np.argsort(eigval)[::-1]
-    eigval, eigvec = eigval[order], eigvec[:, order]
-    data_se = np.sqrt(np.sum(eigvec**2 / eigval, axis=1))
-    posterior = np.linalg.inv(info + np.eye(p) / prior_sigma**2)
+    p = len(fields)
+    base = {n: math.log(abs(v)) for n, v in combinations(params_of(theta)).items()}
+    grads = np.zeros((len(base), p))
+    for i in range(p):
+        moved = combinations(params_of(theta + 1e-6 * np.eye(p)[i]))
+        grads[:, i] = [(math.log(abs(moved[n])) - base[n]) / 1e-6 for n in base]
+    scale = common_scale(fields, params_of(theta))
+    posterior, data_se, combo_se, eigval, eigvec = _standard_errors(info, prior_sigma, grads, scale)
+    gauss_newton: dict[str, dict[str, float]] = {}
+    covariance = "gauss-newton"
+    if sandwich_info is not None:
+        gauss_newton = {"std_error": dict(zip(fields, posterior.tolist(), strict=True)),
+                        "data_std_error": dict(zip(fields, data_se.tolist(), strict=True)),
+                        "combination_se": dict(zip(base, combo_se.tolist(), strict=True))}
+        robust = _standard_errors(sandwich_info, prior_sigma, grads, scale)
+        posterior, data_se, combo_se = (np.maximum(a, b) for a, b in zip((posterior, data_se, combo_se), robust[:3],
+                                                                          strict=True))
+        # the directions: of the sandwich's information where its variance is the larger, else of Gauss-Newton's
+        if np.sum(1.0 / robust[3]) > np.sum(1.0 / eigval):
+            eigval, eigvec = robust[3], robust[4]
+        covariance = "larger of window-sandwich and gauss-newton"
     gains = np.array([_coefficient_gain(n, prior) for n in fields])
     directions = []
     for k in range(p):
@@ -178,12 +241,6 @@ def analyse(J: np.ndarray, variance: float, p: int, fields: tuple[str, ...], pri
         scale = bool(np.linalg.norm(coef) > 0 and abs(coef.sum()) / (np.linalg.norm(coef) * math.sqrt(p)) > 0.8)
         directions.append(Direction({n: float(w) for n, w in zip(fields, v, strict=True)}, se,
                                     se <= identified_se, scale))
-    base = {n: math.log(abs(v)) for n, v in combinations(params_of(theta)).items()}
-    grads = np.zeros((len(base), p))
-    for i in range(p):
-        moved = combinations(params_of(theta + 1e-6 * np.eye(p)[i]))
-        grads[:, i] = [(math.log(abs(moved[n])) - base[n]) / 1e-6 for n in base]
-    combo_se = np.sqrt(np.sum((grads @ eigvec) ** 2 / eigval, axis=1))
     identified = {n: bool(s <= identified_se) for n, s in zip(fields, data_se, strict=True)}
     statements = []
     for d in directions:
@@ -212,7 +269,7 @@ def analyse(J: np.ndarray, variance: float, p: int, fields: tuple[str, ...], pri
         if a in fields and b in fields:
             statements.append(f"{a} and {b} {why}: fit one of them and give the other as known.")
     return Identifiability(
-        {n: float(math.sqrt(posterior[i, i])) for i, n in enumerate(fields)},
+        {n: float(posterior[i]) for i, n in enumerate(fields)},
         {n: float(s) for n, s in zip(fields, data_se, strict=True)},
         identified, directions, {n: float(v) for n, v in zip(base, combo_se, strict=True)}, float(variance),
-        statements)
+        statements, covariance, gauss_newton)

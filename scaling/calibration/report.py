@@ -17,7 +17,7 @@ from pectoral_gym.scaling.calibration.heldout import HeldOutRun
 from pectoral_gym.scaling.calibration.identifiability import COMBINATIONS, combinations
 from pectoral_gym.scaling.calibration.replay import simulate
 
-__all__ = ["markdown", "plot_paths", "report_dict"]
+__all__ = ["markdown", "not_converged_text", "plot_paths", "report_dict"]
 
 
 def _held_out_summary(runs: list[HeldOutRun]) -> dict[str, Any]:
@@ -63,12 +63,14 @@ def report_dict(cal: Calibration, held_out: list[HeldOutRun] | None = None,
         "fields": fields, "combinations": combos,
         "directions": [{"formula": d.formula(), "weights": d.weights, "data_std_error": d.data_se,
                         "identified": d.identified, "common_scale": d.common_scale} for d in ident.directions],
-        "statements": ident.statements, "residual_variance": ident.variance,
+        "statements": ident.statements, "residual_variance": ident.variance, "covariance": ident.covariance,
+        **({"gauss_newton": ident.gauss_newton} if ident.gauss_newton else {}),
         "rms_residual": {"x_m": float(cal.rms[0]), "y_m": float(cal.rms[1]), "psi_deg": math.degrees(cal.rms[2])},
         "camera_noise_estimate": {"position_m": float(np.mean(cal.sigma[:2])),
                                   "heading_deg": math.degrees(cal.sigma[2])},
         "prior_sigma": cal.settings.prior_sigma, "identified_se": cal.settings.identified_se,
-        "nfev": cal.nfev, "wall_time_s": cal.wall_time, "optimiser": cal.message,
+        "nfev": cal.nfev, "wall_time_s": cal.wall_time, "optimiser": cal.message, "converged": cal.converged,
+        "remaining_step_se": cal.remaining_step,
     }
     if held_out is not None:
         out["held_out"] = _held_out_summary(held_out)
@@ -77,12 +79,23 @@ def report_dict(cal: Calibration, held_out: list[HeldOutRun] | None = None,
     return out
 
 
+def not_converged_text(nfev: int, remaining: float) -> str:
+    """What a fit that stopped at its evaluation limit means, and what to do (terminal and report.md)."""
+    return (f"The fit did not converge: it stopped at its limit of {nfev} model evaluations, short of the optimum "
+            f"(one more Gauss-Newton step would move a field by {remaining:.1f} standard errors), so the values and "
+            "standard errors below are those of an unfinished fit. Run it again with more "
+            f"evaluations (--max-evaluations {3 * nfev}); if it still stops there, try shorter windows (--window 3) "
+            "or longer logs.")
+
+
 def markdown(report: dict[str, Any]) -> str:
     """``report.md``: the fitted values, standard errors, identifiability and the held-out check."""
     lines = ["# Calibration report", "",
              f"{len(report['logs'])} log(s), {report['logged_time_s']:.0f} s of logged robot time, "
              f"{report['frames']} poses in {report['windows']} windows of ~{report['window_s']:.0f} s; "
              f"{report['nfev']} model evaluations, {report['wall_time_s']:.1f} s.", "",
+             *([f"**{not_converged_text(report['nfev'], report.get('remaining_step_se', math.nan))}**", ""]
+               if not report.get("converged", True) else []),
              "## Fitted fields", "",
              "| field | value | prior | s.e. (logs + prior) | s.e. (logs alone) | identified |"
              + (" truth | error |" if any("truth" in f for f in report["fields"].values()) else ""),
@@ -108,7 +121,9 @@ def markdown(report: dict[str, Any]) -> str:
     lines += ["", f"Residual rms: {1000 * report['rms_residual']['x_m']:.2f} mm, "
               f"{1000 * report['rms_residual']['y_m']:.2f} mm, {report['rms_residual']['psi_deg']:.2f} deg; camera "
               f"noise estimated from the poses: {1000 * report['camera_noise_estimate']['position_m']:.2f} mm, "
-              f"{report['camera_noise_estimate']['heading_deg']:.2f} deg."]
+              f"{report['camera_noise_estimate']['heading_deg']:.2f} deg. Standard errors: "
+              f"{report.get('covariance', 'gauss-newton')} (docs/calibration.md, \"How far to trust the standard "
+              "errors\")."]
     for key, title in (("held_out", "calibrated"), ("held_out_prior", "prior (before calibration)")):
         if key in report:
             h = report[key]
