@@ -1,6 +1,8 @@
 """pectoral-gym: a robotic fish with two rowing pectoral fins, as models and Gymnasium environments.
 
-Importing the package registers ``PectoralFish-Full-v2`` and ``PectoralFish-Averaged-v2`` (and their ``-v1``, ``-v0``).
+Importing the package registers ``PectoralFish-Full-v2`` and ``PectoralFish-Averaged-v2`` (and their ``-v1``, ``-v0``),
+and nothing more: the model's classes exported here are imported at their first use, numba when the first
+kernel is called (:class:`pectoral_gym.model.jit.Kernel`).
 
 The repository's folders ``agents/``, ``scaling/`` and ``hardware/`` are the subpackages
 ``pectoral_gym.agents``, ``.scaling`` and ``.hardware``: an install (wheel or editable) maps them through
@@ -9,6 +11,7 @@ setuptools' ``package-dir``; a checkout that is not installed (its root on ``sys
 the package and that no install provides. Either way each module has one name.
 """
 
+import importlib
 import importlib.abc
 import importlib.util
 import os
@@ -66,13 +69,36 @@ if not any(isinstance(finder, CheckoutFinder) for finder in sys.meta_path):
     if _folders:
         sys.meta_path.append(CheckoutFinder(_folders))
 
-from pectoral_gym.model.kfunctions import ScalingFunctions  # noqa: E402 - the finder first, for the kernels' cache
-from pectoral_gym.model.models import AveragedModel, FishModel, FullModel  # noqa: E402
-from pectoral_gym.model.params import FinBeat, FishParams  # noqa: E402
-from pectoral_gym.registration import register_envs  # noqa: E402
+from pectoral_gym.registration import register_envs  # noqa: E402 - the finder first, for the kernels' cache
 
 __version__ = "0.2.0"
 
 register_envs()
+
+#: The names this package exports from its modules, imported at their first use (:func:`__getattr__`): importing
+#: the package registers the envs and loads neither the model nor numba.
+_LAZY = {
+    "AveragedModel": "pectoral_gym.model.models",
+    "FinBeat": "pectoral_gym.model.params",
+    "FishModel": "pectoral_gym.model.models",
+    "FishParams": "pectoral_gym.model.params",
+    "FullModel": "pectoral_gym.model.models",
+    "ScalingFunctions": "pectoral_gym.model.kfunctions",
+}
+
+
+def __getattr__(name: str):
+    """The model's classes of :data:`__all__`, imported at their first use."""
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted({*globals(), *_LAZY})
+
 
 __all__ = ["AveragedModel", "FinBeat", "FishModel", "FishParams", "FullModel", "ScalingFunctions", "__version__"]

@@ -68,3 +68,23 @@ def test_bad_argument_names_are_refused():
         kernel_pair(_square_one, "x, out", item_args="x, y")
     with pytest.raises(ValueError, match="identifiers"):
         kernel_pair(_square_one, "x, out[0]")
+
+
+def _halve(x):
+    return 0.5 * x
+
+
+def test_a_kernel_is_made_at_its_first_call_and_stands_for_its_dispatcher():
+    import copy
+    import pickle
+
+    from pectoral_gym.model import stepping
+    from pectoral_gym.model.jit import Kernel, njit
+
+    kernel = njit(_halve)
+    assert isinstance(kernel, Kernel) and not kernel.built and kernel.__name__ == "_halve"
+    assert kernel(3.0) == 1.5
+    assert kernel.built and len(kernel.signatures) == 1  # the dispatcher's attributes
+    assert copy.deepcopy(kernel) is kernel and copy.copy(kernel) is kernel
+    module_kernel = stepping.advance_averaged_one
+    assert pickle.loads(pickle.dumps(module_kernel)) is module_kernel  # by name, unbuilt or not

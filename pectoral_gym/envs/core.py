@@ -67,6 +67,7 @@ class EnvCore:
         self.model: FishModel = config.model_spec().build(self.n, config.params)
         self.dt = float(config.control_period)
         self._observe_fins = bool(config.observe_fins)
+        self._observe_fins_kernel = tk.observe_fins.dispatcher  # called at every step: the dispatcher itself
         self._period_max = float(config.period_range[1])
         self.cfg, self.ep, self.obs, self.out, self.beats, self.fish = ts.cfg, ts.ep, ts.obs, ts.out, ts.beats, ts.fish
         self.action_buffer = np.zeros((self.n, ACTION_SIZE))
@@ -144,7 +145,7 @@ class EnvCore:
     def _observe_fin_block(self) -> None:
         """With ``observe_fins``: the observation's fin block from the model's half-strokes."""
         if self._observe_fins:
-            tk.observe_fins(self.model.fins, self.obs, self._period_max)
+            self._observe_fins_kernel(self.model.fins, self.obs, self._period_max)
 
     def _check_actions(self, actions: np.ndarray, skip: np.ndarray | None) -> None:
         """Raise as :meth:`step` would for actions of the wrong shape or non-finite ones (before any draw)."""

@@ -11,7 +11,8 @@ then, env by env (each touches only its own rows, so the order across envs does 
 2. ``tasks.apply_keep_one``: keep the velocity integrals, map the action to fin patterns, write
    the last action and the energy term;
 3. ``strokes.command_one``: command the fish's fins (``FishModel.command_array``);
-4. ``stepping.advance_one``: advance the fish one control period (``FishModel.advance``);
+4. ``stepping.advance_one``: advance the fish one control period (``FishModel.advance``; each model's
+   builds call that model's own kernel, ``stepping.ADVANCE_ONE``);
 5. the task's ``reward_one`` unless the env is in ``skip`` (the task table's row; the built-in
    tasks share ``tasks.reward_one``), then ``tasks.observe_mean_velocity``: the observed
    velocities are the means over the control period.
@@ -115,6 +116,7 @@ class StepSettings(NamedTuple):
 #: slower envs does not hold the others up.
 CHUNK = 32
 reward_one = tk.reward_one  # the task kernel the body calls (the built-in tasks'; step_builds rebinds it)
+advance_one = stepping.advance_one  # the model's kernel the body calls (either model; the builds bind their own)
 
 
 def borrow(array: np.ndarray) -> np.ndarray:
@@ -175,35 +177,41 @@ def step_body(a, skip, s):
         tk.apply_keep_one(i, actions, skip, cfg, beats, obs, out, fish, integral, before)
         lag, span = timing[i, 0], timing[i, 1]
         if lag > 0.0:  # the command reaches the fins lag into the period (envs.timing)
-            stepping.advance_one(i, state, fins, cache, pending, integral, coef, lag, dt_max, min_substeps,
-                                 averaged, mode, corrections, tables)
+            advance_one(i, state, fins, cache, pending, integral, coef, lag, dt_max, min_substeps, averaged, mode,
+                        corrections, tables)
         command_one(i, fins, pending, beats, everyone)
-        stepping.advance_one(i, state, fins, cache, pending, integral, coef, span - lag, dt_max, min_substeps,
-                             averaged, mode, corrections, tables)
+        advance_one(i, state, fins, cache, pending, integral, coef, span - lag, dt_max, min_substeps, averaged, mode,
+                    corrections, tables)
         if not skip[i]:
             reward_one(i, state, cfg, ep, fish, obs, out)
         tk.observe_mean_velocity(i, span, obs, integral, before)
     return -1
 
 
-#: The builds of :func:`step_body` for the built-in tasks (cached on disk).
-STEP = kernel_builds(step_body, name="_step")
-_REGISTERED: dict[Any, KernelPair] = {}
+#: ``averaged`` -> the builds of :func:`step_body` for the built-in tasks on that model (cached on disk): each
+#: calls its model's own kernel (``stepping.ADVANCE_ONE``), so an env compiles no code of the other model.
+STEP = {averaged: kernel_builds(step_body, name=f"_step_{'averaged' if averaged else 'full'}",
+                                bindings={"advance_one": kernel})
+        for averaged, kernel in stepping.ADVANCE_ONE.items()}
+_REGISTERED: dict[tuple[Any, bool], KernelPair] = {}
 
 
-def step_builds(task_kernel: Callable[..., Any]) -> KernelPair:
-    """The builds of :func:`step_body` calling ``task_kernel`` as the task's ``reward_one``.
+def step_builds(task_kernel: Callable[..., Any], averaged: bool) -> KernelPair:
+    """The builds of :func:`step_body` on the ``averaged`` (else full) model, calling ``task_kernel`` as ``reward_one``.
 
     :data:`STEP` for ``tasks.reward_one``; for a task registered at run time, builds of the same
     body with its kernel bound (compiled at their first call, not cached on disk: the kernel's code
     lives in the caller's file).
     """
+    averaged = bool(averaged)
     if task_kernel is tk.reward_one:
-        return STEP
-    if task_kernel not in _REGISTERED:
-        _REGISTERED[task_kernel] = kernel_builds(step_body, name="_step_registered",
-                                                 bindings={"reward_one": task_kernel}, cache=False)
-    return _REGISTERED[task_kernel]
+        return STEP[averaged]
+    key = (task_kernel, averaged)
+    if key not in _REGISTERED:
+        _REGISTERED[key] = kernel_builds(step_body, name=f"_step_registered_{'averaged' if averaged else 'full'}",
+                                         bindings={"reward_one": task_kernel,
+                                                   "advance_one": stepping.ADVANCE_ONE[averaged]}, cache=False)
+    return _REGISTERED[key]
 
 
 def _chunked(function: Callable[..., int]) -> Callable[..., int]:
@@ -278,7 +286,7 @@ class FusedStep:
     @property
     def kernel(self) -> Callable[..., int]:
         """The build this batch runs (a numba dispatcher)."""
-        builds = step_builds(self.task_kernel)
+        builds = step_builds(self.task_kernel, self.model.averaged)
         return builds.parallel if self.parallel else builds.serial
 
     def settings(self) -> StepSettings:

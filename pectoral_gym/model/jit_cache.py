@@ -68,6 +68,12 @@ class _TreeStampLocator(_CacheLocator):
     def get_disambiguator(self) -> str:
         return self._inner.get_disambiguator()
 
+    def __getattr__(self, name: str) -> Any:
+        # The inner locator's other attributes (numba's warning that a kernel cannot be cached reads ``_py_file``).
+        if name == "_inner":
+            raise AttributeError(name)
+        return getattr(self._inner, name)
+
 
 def source_tree_digest(py_func: Callable[..., Any]) -> str:
     """SHA-256 (hex) of the source files a kernel compiles from: :func:`source_tree` of the modules it uses.
@@ -85,7 +91,7 @@ def source_tree_digest(py_func: Callable[..., Any]) -> str:
     roots = {(py_func.__module__, inspect.getfile(py_func))}
     cells = [c.cell_contents for c in (py_func.__closure__ or ()) if _filled(c)]
     for value in [*py_func.__globals__.values(), *cells]:
-        if isinstance(value, Dispatcher):
+        if _is_kernel(value):
             roots.add((value.py_func.__module__, inspect.getfile(value.py_func)))
     files: dict[str, Path | None] = {}
     for module, file in sorted(roots):
@@ -242,6 +248,18 @@ def _mapped_folders(package: str, parent_folders: tuple[Path, ...]) -> tuple[Pat
         if spec is not None:
             return tuple(Path(f) for f in spec.submodule_search_locations or ())
     return ()
+
+
+def _is_kernel(value: Any) -> bool:
+    """A numba dispatcher, or a :class:`pectoral_gym.model.jit.Kernel` (made or not).
+
+    A kernel is known by its attributes: :mod:`pectoral_gym.model.jit` imports this module.
+    """
+    if isinstance(value, Dispatcher):
+        return True
+    attributes = getattr(value, "__dict__", None)
+    return (isinstance(attributes, dict) and isinstance(attributes.get("targetoptions"), dict)
+            and callable(attributes.get("py_func")))
 
 
 def _filled(cell: Any) -> bool:

@@ -199,9 +199,17 @@ def scaling_values(bias: float, amplitude: float, period: float, ratio: float, t
 @njit(inline="always")
 def _polynomial_parts(bias: float, amplitude: float, period: float, ratio: float, tables: KTables):
     """The polynomial parts of ``(K_fx, K_fy, K_m)`` (:func:`_k_value` of each)."""
-    return (_k_value(0, bias, amplitude, period, ratio, tables.powers, tables.coefs),
-            _k_value(1, bias, amplitude, period, ratio, tables.powers, tables.coefs),
-            _k_value(2, bias, amplitude, period, ratio, tables.powers, tables.coefs))
+    # A loop, not three calls with the constants 0, 1, 2: numba would compile _k_value once per constant.
+    kx = ky = km = 0.0
+    for which in range(3):
+        value = _k_value(which, bias, amplitude, period, ratio, tables.powers, tables.coefs)
+        if which == 0:
+            kx = value
+        elif which == 1:
+            ky = value
+        else:
+            km = value
+    return kx, ky, km
 
 
 def interleave(knots: np.ndarray, table: np.ndarray, osc_knots: np.ndarray, osc_table: np.ndarray) -> np.ndarray:

@@ -38,13 +38,14 @@ from pectoral_gym.model.dynamics import (
     rate_bound,
     rate_constants,
 )
-from pectoral_gym.model.jit import PARALLEL_MIN_ITEMS, kernel_pair, njit
+from pectoral_gym.model.jit import PARALLEL_MIN_ITEMS, kernel_pair, kernel_variant, njit
 from pectoral_gym.model.ktables import KTables, as_tables
 from pectoral_gym.model.params import BodyCoefficients, Coef
 from pectoral_gym.model.stroke_corrections import start_half_stroke
 from pectoral_gym.model.strokes import DURATION, ELAPSED, idle
 
-__all__ = ["ACCURATE_STEP", "STATE_NAMES", "State", "advance"]
+__all__ = ["ACCURATE_STEP", "ADVANCE_ONE", "STATE_NAMES", "State", "advance", "advance_averaged_one",
+           "advance_full_one", "advance_one"]
 
 STATE_NAMES = ("X", "Y", "psi", "vx", "vy", "omega")
 #: Column of each state (``state[:, State.PSI]``), generated from :data:`STATE_NAMES`; the integrals
@@ -181,10 +182,17 @@ def _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc
         t_seg -= h
 
 
-@njit
-def advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode,
-                 corrections, packed_tables):
-    """Advance fish ``i`` by ``duration`` seconds, segment by segment between stroke boundaries."""
+AVERAGED = True  # the model of a build of _advance_model (kernel_variant binds it): a constant to numba
+
+
+def _advance_model(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode,
+                   corrections, packed_tables):
+    """Advance fish ``i`` of the model :data:`AVERAGED` by ``duration`` s, segment by segment between stroke boundaries.
+
+    Compiled as :func:`advance_averaged_one` and :func:`advance_full_one` (``averaged`` is not read): numba
+    prunes the branches of the other model before it inlines and types them, so neither compiles the
+    other's code.
+    """
     tables = as_tables(packed_tables)
     body = BodyCoefficients(coef[i, Coef.M1], coef[i, Coef.M2], coef[i, Coef.J3],
                             coef[i, Coef.C1], coef[i, Coef.C2], coef[i, Coef.C4])
@@ -199,13 +207,13 @@ def advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max
         idle0 = idle(fins, pending, i, 0)
         idle1 = idle(fins, pending, i, 1)
         if not idle0 and fins[i, 0, ELAPSED] >= fins[i, 0, DURATION] - _EPS:
-            start_half_stroke(fins, cache, pending, i, 0, coef, averaged, mode, tables, corrections)
+            start_half_stroke(fins, cache, pending, i, 0, coef, AVERAGED, mode, tables, corrections)
         if not idle1 and fins[i, 1, ELAPSED] >= fins[i, 1, DURATION] - _EPS:
-            start_half_stroke(fins, cache, pending, i, 1, coef, averaged, mode, tables, corrections)
+            start_half_stroke(fins, cache, pending, i, 1, coef, AVERAGED, mode, tables, corrections)
         rem0 = np.inf if idle0 else fins[i, 0, DURATION] - fins[i, 0, ELAPSED]
         rem1 = np.inf if idle1 else fins[i, 1, DURATION] - fins[i, 1, ELAPSED]
         seg = min(t_left, rem0, rem1)
-        if averaged:
+        if AVERAGED:
             fx = cache[i, 0, fc.AVG_FX] + cache[i, 1, fc.AVG_FX]
             fy = cache[i, 0, fc.AVG_FY] + cache[i, 1, fc.AVG_FY]
             tau = cache[i, 0, fc.AVG_TAU] + cache[i, 1, fc.AVG_TAU]
@@ -251,12 +259,35 @@ def advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max
         t_left -= seg
 
 
-_ADVANCE = kernel_pair(
-    advance_one,
+#: :func:`advance_one` of the averaged model (eq. 25), compiled without the full model's code.
+advance_averaged_one = kernel_variant(_advance_model, "advance_averaged_one", {"AVERAGED": True})
+#: :func:`advance_one` of the full model (eq. 19), compiled without the averaged model's code.
+advance_full_one = kernel_variant(_advance_model, "advance_full_one", {"AVERAGED": False})
+
+
+@njit
+def advance_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode,
+                corrections, packed_tables):
+    """Advance fish ``i`` by ``duration`` seconds, segment by segment between stroke boundaries.
+
+    The model is chosen at run time by ``averaged``, so both are compiled: a caller that knows its model
+    calls :data:`ADVANCE_ONE` ``[averaged]`` instead, which compiles that model's alone.
+    """
+    if averaged:
+        advance_averaged_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, True,
+                             mode, corrections, packed_tables)
+    else:
+        advance_full_one(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, False,
+                         mode, corrections, packed_tables)
+
+
+#: ``averaged`` -> the kernel that advances one fish of that model (same arguments as :func:`advance_one`).
+ADVANCE_ONE = {True: advance_averaged_one, False: advance_full_one}
+_ADVANCE = {averaged: kernel_pair(
+    kernel,
     "state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, averaged, mode, corrections, "
     "packed_tables",
-)
-_SERIAL, _PARALLEL = _ADVANCE.serial, _ADVANCE.parallel  # bound once: advance() runs at every env step
+) for averaged, kernel in ADVANCE_ONE.items()}
 
 
 def advance(
@@ -291,7 +322,8 @@ def advance(
             and :data:`~pectoral_gym.model.stroke_corrections.RIPPLE_OFFSETS` (the beat-mean ripple
             offset, 3.8); see :func:`pectoral_gym.model.stroke_corrections.corrections`.
     """
-    kernel = _PARALLEL if state.shape[0] >= PARALLEL_MIN_ITEMS else _SERIAL
+    kernels = _ADVANCE[bool(averaged)]  # the model's own kernels only
+    kernel = kernels.parallel if state.shape[0] >= PARALLEL_MIN_ITEMS else kernels.serial
     kernel(state, fins, cache, pending, integral, coef, float(duration), float(dt_max), float(min_substeps),
            bool(averaged), int(mode), int(corrections),
            tuple(tables))  # a plain tuple is faster to dispatch (ktables.as_tables)

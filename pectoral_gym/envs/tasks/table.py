@@ -83,7 +83,7 @@ from pectoral_gym.envs.layout import (
 from pectoral_gym.envs.observation import OBS_VELOCITY, observation_size
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.envs.tasks.row import InfoField, Task
-from pectoral_gym.model.jit import KernelPair, kernel_builds
+from pectoral_gym.model.jit import Kernel, KernelPair, kernel_builds
 from pectoral_gym.model.models import REST
 from pectoral_gym.model.params import FishParams
 
@@ -207,7 +207,7 @@ def register_task(name: str, *, terms: Sequence[tuple[str, int]],
         raise ValueError(f"a task name must be an identifier, got {name!r}")
     if name in TASK_TABLE:
         raise ValueError(f"task {name!r} is already registered (unregister_task first)")
-    if not isinstance(reward_one, Dispatcher):
+    if not isinstance(reward_one, (Dispatcher, Kernel)):
         raise TypeError(f"reward_one must be a numba.njit function (i, state, cfg, ep, fish, obs, out), "
                         f"got {reward_one!r}")
     if not (callable(draw) and callable(start)):
