@@ -15,7 +15,9 @@
 
 Every action is drawn afresh, so the fins change pattern at every step, as under
 a learning agent. ``pectoral-fish step-rate --against DIR`` runs the same benchmark
-in another checkout, alternating with this one (:mod:`pectoral_gym.tools.bench_compare`).
+in another checkout, alternating with this one (:mod:`pectoral_gym.tools.bench_compare`);
+:mod:`pectoral_gym.tools.peer_table` uses the same timers for the table of the fish beside
+CartPole and MuJoCo's Swimmer.
 
 Every measurement is warmed up first (numba compiles, or loads its cache, on
 the first call; that time is excluded) and the best of ``repeats`` timed runs

@@ -6,7 +6,8 @@ random actions; then its fish's states, coefficients and cached forcing are copi
 (with the step control of ``_stable_step``) runs over them, one core, ``h = 0.5 / SUBSTEPS`` s, the yaw
 oscillation taken from each fish's cache as the segment would; best of 7 over 20 substeps per fish. Prints
 ns per substep and the time of ``SUBSTEPS`` substeps for every fish of a batch, beside the env's own batch
-step (native vector env, both cores, best of 7 passes of 20 steps: wall time and the process's CPU time).
+step (native vector env, both cores, best of 7 passes of 20 steps: wall time and the process's CPU time), and
+the bytes of the per-env arrays of the model and the env core.
 """
 
 import sys
@@ -72,6 +73,9 @@ for _ in range(7):
         envs.step(a)
     env_best = min(env_best, (time.perf_counter() - t0) / len(actions))
     env_cpu = min(env_cpu, (time.process_time() - c0) / len(actions))  # both threads' CPU, whatever the load
+per_env = [a for a in (*vars(model).values(), *vars(envs.unwrapped.core).values())
+           if isinstance(a, np.ndarray) and a.shape[:1] == (n,)]
+print(f"arrays of one env (model and env core): {sum(a.nbytes for a in per_env) // n} bytes")
 print(f"RK4 substep with step control: {per_substep * 1e9:.0f} ns (one core); {substeps} per env step for "
       f"{n} fish: {per_substep * substeps * n * 1e3:.2f} ms of one core")
 print(f"env batch step @ {n}: {env_best * 1e3:.2f} ms on 2 cores ({n / env_best / 1e6:.3f} M env-steps/s), "
