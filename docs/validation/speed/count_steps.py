@@ -1,7 +1,11 @@
-"""RK4 substeps, segments, latches and forcing refreshes of the averaged model per env step, in the env.
+"""RK4 substeps, segments, latches, refreshes and corrections of the averaged model per env step, in the env.
 
-Needs a checkout with ``count_steps.patch`` applied (it counts into four extra forcing-cache fields of
-fin 0; see README.md here). ``python count_steps.py [ENV_ID] [NUM_ENVS] [STEPS]`` (defaults
+Needs a checkout with ``count_steps.patch`` applied (it counts into six extra forcing-cache fields of
+fin 0; see README.md here). Corrections: latches onto a transitional half-stroke (one that does not
+start at its pattern's turning point: ``_transition``'s mean forces and the oscillation gain's
+quadrature run), and recovery strokes after a power stroke of another pattern (the power-stroke excesses).
+
+``python count_steps.py [ENV_ID] [NUM_ENVS] [STEPS]`` (defaults
 ``PectoralFish-Averaged-v2``, 4096, 60): the native vector env with seeded random actions, new every
 step, as ``python -m pectoral_gym.tools.peer_table`` steps it; after each step the counters are summed
 and zeroed (an env that resets clears its row, so nothing is counted twice or lost but the reset's).
@@ -23,13 +27,14 @@ envs.action_space.seed(0)
 actions = [envs.action_space.sample() for _ in range(steps)]
 envs.reset(seed=0)
 cache = envs.unwrapped.core.model.forcing_cache
-fields = slice(fc.N_RK4, fc.N_REFRESH + 1)
+fields = slice(fc.N_RK4, fc.N_EXCESS + 1)
 cache[:, 0, fields] = 0.0
-total = np.zeros(4)
+total = np.zeros(6)
 for a in actions:
     envs.step(a)
     total += cache[:, 0, fields].sum(axis=0)
     cache[:, 0, fields] = 0.0
-rk4, segments, latches, refreshes = total / (n * steps)
+rk4, segments, latches, refreshes, transitional, excess = total / (n * steps)
 print(f"{env_id} @ {n} envs, per env step: RK4 steps {rk4:.2f}, segments {segments:.2f}, "
-      f"latches {latches:.2f}, forcing refreshes {refreshes:.2f}")
+      f"latches {latches:.2f}, forcing refreshes {refreshes:.2f}, transitional latches {transitional:.2f}, "
+      f"power-stroke excesses {excess:.2f}")
