@@ -15,7 +15,9 @@
 
 Every action is drawn afresh, so the fins change pattern at every step, as under
 a learning agent. ``pectoral-fish step-rate --against DIR`` runs the same benchmark
-in another checkout, alternating with this one (:mod:`pectoral_gym.tools.bench_compare`).
+in another checkout, alternating with this one (:mod:`pectoral_gym.tools.bench_compare`);
+:mod:`pectoral_gym.tools.peer_table` uses the same timers for the table of the fish beside
+CartPole and MuJoCo's Swimmer.
 
 Every measurement is warmed up first (numba compiles, or loads its cache, on
 the first call; that time is excluded) and the best of ``repeats`` timed runs
@@ -113,11 +115,13 @@ def single_env_timer(env_id: str, steps: int, seed: int = 0) -> _Timer:
 
 
 def vector_env_timer(env_id: str, num_envs: int, steps: int, seed: int = 0,
-                     env_kwargs: dict[str, Any] | None = None) -> _Timer:
-    """Warmed-up timer of ``steps`` batch steps of a native vector env.
+                     env_kwargs: dict[str, Any] | None = None, mode: str = "vector_entry_point") -> _Timer:
+    """Warmed-up timer of ``steps`` batch steps of a vector env.
 
     The env comes from ``gymnasium.make_vec(env_id, num_envs=num_envs,
-    vectorization_mode="vector_entry_point")`` and autoresets by itself.
+    vectorization_mode=mode)`` (by default the env's native vector env;
+    ``"sync"`` for a :class:`gymnasium.vector.SyncVectorEnv` of single envs)
+    and autoresets by itself.
 
     Args:
         env_id: Registered environment id with a ``vector_entry_point``.
@@ -125,13 +129,14 @@ def vector_env_timer(env_id: str, num_envs: int, steps: int, seed: int = 0,
         steps: Batch steps per timed pass.
         seed: Seeds the action space and the reset before each pass.
         env_kwargs: Passed to the env (e.g. :data:`TRAINING_SETTINGS`).
+        mode: Gymnasium's ``vectorization_mode``.
 
     Returns:
         A timer whose ``run()`` gives ``steps * num_envs / elapsed`` [env-steps/s].
     """
     import gymnasium as gym
 
-    envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode="vector_entry_point", **(env_kwargs or {}))
+    envs = gym.make_vec(env_id, num_envs=num_envs, vectorization_mode=mode, **(env_kwargs or {}))
     try:
         envs.action_space.seed(seed)
         actions = [envs.action_space.sample() for _ in range(steps)]
