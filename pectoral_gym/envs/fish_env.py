@@ -362,10 +362,9 @@ class PectoralFishEnv(gym.Env):
         """Draw the tank from above: ``rgb_array`` returns an ``(H, W, 3)`` uint8 image; ``human`` shows a window."""
         if self.render_mode is None:
             env_id = self.spec.id if self.spec is not None else LATEST[self.config.model]  # this env's own id
-            gym.logger.warn(
-                "You are calling render method without specifying any render mode. You can specify the "
-                f'render_mode at initialization, e.g. gym.make("{env_id}", render_mode="rgb_array")'
-            )
+            from pectoral_gym.envs.rendering import warn_no_render_mode
+
+            warn_no_render_mode(env_id)
             return None
         if self._renderer is None:
             from pectoral_gym.envs.rendering import FishRenderer

@@ -16,7 +16,7 @@ from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 if TYPE_CHECKING:
     from pectoral_gym.envs.core import EnvConfig, EnvCore
 
-__all__ = ["FishRenderer", "BODY_COLOR", "NOSE_COLOR", "FIN_COLOR", "SCALE"]
+__all__ = ["FishRenderer", "BODY_COLOR", "NOSE_COLOR", "FIN_COLOR", "SCALE", "warn_no_render_mode"]
 
 SCALE = 400.0  # px per metre: the 2.30 m x 1.15 m tank is 920 x 460 px
 WATER_COLOR = (214, 234, 248)
@@ -40,6 +40,16 @@ def _import_pygame():
             'pygame is not installed: run `pip install pygame` (or `pip install "gymnasium[classic-control]"`)'
         ) from e
     return pygame
+
+
+def warn_no_render_mode(env_id: str, maker: str = "gym.make") -> None:
+    """Gymnasium's warning for ``render()`` without a render mode, its example naming ``env_id`` and ``maker``."""
+    from gymnasium import logger
+
+    logger.warn(
+        "You are calling render method without specifying any render mode. You can specify the "
+        f'render_mode at initialization, e.g. {maker}("{env_id}", render_mode="rgb_array")'
+    )
 
 
 class FishRenderer:

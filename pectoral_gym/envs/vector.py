@@ -6,7 +6,6 @@ import inspect
 from collections.abc import Sequence
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from gymnasium.utils import seeding
@@ -250,10 +249,9 @@ class PectoralFishVectorEnv(VectorEnv):
         if self.render_mode is None:
             spec = getattr(self, "spec", None)
             env_id = spec.id if spec is not None else LATEST[self.config.model]
-            gym.logger.warn(
-                "You are calling render method without specifying any render mode. You can specify the "
-                f'render_mode at initialization, e.g. gym.make_vec("{env_id}", render_mode="rgb_array")'
-            )
+            from pectoral_gym.envs.rendering import warn_no_render_mode
+
+            warn_no_render_mode(env_id, "gym.make_vec")
             return None
         if self._renderer is None:
             from pectoral_gym.envs.rendering import FishRenderer
