@@ -176,28 +176,20 @@ def summarize(records: list[EpisodeRecord]) -> dict:
             "worst_shortfall": max((r.worst for r in records), default=0.0)}
 
 
-def _seeds(text: str) -> list[int]:
-    """``"0-39"`` or ``"1,2,5"`` -> seeds."""
-    if "-" in text:
-        low, high = text.split("-")
-        return list(range(int(low), int(high) + 1))
-    return [int(s) for s in text.split(",")]
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``python -m pectoral_gym.agents.controllers.band_study``."""
-    from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
+    from pectoral_gym.tools.cli_common import HelpFormatter, add_seeds_argument, examples, prog_name
 
     parser = argparse.ArgumentParser(
         prog=prog_name(None, "pectoral_gym.agents.controllers.band_study"), description=__doc__.split("\n\n")[0],
         formatter_class=HelpFormatter,
         epilog=examples("python -m pectoral_gym.agents.controllers.band_study --controller hand --seeds 0-39",
-                        "python -m pectoral_gym.agents.controllers.band_study --controller nmpc --seeds 0,1 "
+                        "python -m pectoral_gym.agents.controllers.band_study --controller nmpc --seeds 0 1 "
                         "--summary-only --out band.json"))
     parser.add_argument("--controller", default="hand", help="a baseline name (make_baseline)")
     parser.add_argument("--env", default=SIMULATION_IDS["full"],
                         help="env id: one whose own band does not end the episode (default: %(default)s)")
-    parser.add_argument("--seeds", default="0-39", help="'a-b' or 'a,b,c'")
+    add_seeds_argument(parser, list(range(40)), "episode seeds (default 0-39)")
     parser.add_argument("--goal-inset", type=float, default=None, help="redraw goals this far from the walls [m]")
     parser.add_argument("--substeps", type=int, default=5, help="band checks per control period")
     parser.add_argument("--kwargs", default="{}", help="controller keyword arguments (JSON)")
@@ -213,7 +205,7 @@ def main(argv: list[str] | None = None) -> dict:
 
     kwargs = json.loads(args.kwargs)
     records = []
-    for seed in _seeds(args.seeds):
+    for seed in args.seeds:
         r = run_episode(lambda config: make_baseline(args.controller, config, **kwargs), seed, args.env,
                         args.substeps, args.goal_inset)
         records.append(r)

@@ -92,27 +92,19 @@ def compare(variants: dict[str, dict[str, Any]], seeds: list[int], env: str = "f
     return results
 
 
-def _seeds(text: str) -> list[int]:
-    """``"100-119"`` or ``"3,5,7"`` -> seeds."""
-    if "-" in text:
-        low, high = (int(v) for v in text.split("-", 1))
-        return list(range(low, high + 1))
-    return [int(v) for v in text.split(",")]
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``python -m pectoral_gym.agents.nmpc.compare``."""
-    from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
+    from pectoral_gym.tools.cli_common import HelpFormatter, add_seeds_argument, examples, prog_name
 
     parser = argparse.ArgumentParser(
         prog=prog_name(None, "pectoral_gym.agents.nmpc.compare"), description=__doc__.split("\n\n")[0],
         formatter_class=HelpFormatter,
         epilog=examples("python -m pectoral_gym.agents.nmpc.compare --seeds 100-119 --env full "
                         "--variants '{\"sqp\": {}, \"exact\": {\"hessian\": \"exact\"}}'",
-                        "python -m pectoral_gym.agents.nmpc.compare --seeds 100,101 --task track "
+                        "python -m pectoral_gym.agents.nmpc.compare --seeds 100 101 --task track "
                         "--variants '{\"base\": {}}' --failed"))
     parser.add_argument("--variants", required=True, help="JSON: name -> NMPCSettings overrides")
-    parser.add_argument("--seeds", default="100-119", help="'A-B' or 'a,b,c' (default %(default)s)")
+    add_seeds_argument(parser, list(range(100, 120)), "episode seeds (default 100-119)")
     parser.add_argument("--env", default="full", choices=list(_ENVS))
     parser.add_argument("--task", default="goal", choices=("goal", "track"))
     parser.add_argument("--max-episode-steps", dest="max_steps", type=int, default=240, metavar="N",
@@ -124,7 +116,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     """Command-line entry point: prints one markdown row per variant."""
     args = build_parser().parse_args(argv)
-    results = compare(json.loads(args.variants), _seeds(args.seeds), args.env, args.task, args.max_steps)
+    results = compare(json.loads(args.variants), args.seeds, args.env, args.task, args.max_steps)
     print("| variant | episodes | success | time to goal [s] | mean distance [cm] | p50 [ms] | p95 [ms] | max [ms] "
           "| failures | late |")
     print("|---|---|---|---|---|---|---|---|---|---|")

@@ -48,7 +48,7 @@ import numpy as np
 
 from pectoral_gym.agents.studies.seeds_report import plot_seeds, to_markdown
 from pectoral_gym.agents.studies.seeds_stats import aggregate, iqm
-from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
+from pectoral_gym.tools.cli_common import HelpFormatter, add_seeds_argument, examples, prog_name
 from pectoral_gym.versions import ENV_VERSIONS, LATEST_AVERAGED, LATEST_FULL
 
 __all__ = ["SETTINGS", "TARGETS", "aggregate", "build_parser", "iqm", "main", "run_seed", "run_seeds",
@@ -312,7 +312,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "pectoral-seeds --seeds 100 101 102 103 --jobs 2 --out tune_base",
                         "pectoral-seeds --seeds 0 1 --timesteps 2e5 --episodes 50 --hyperparams ent_coef=0.01",
                         f"pectoral-seeds --env {LATEST_FULL} --timesteps 1.6e6"))
-    parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3, 4], help="training seeds")
+    add_seeds_argument(parser, [0, 1, 2, 3, 4], "training seeds (default 0-4)")
     parser.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1),
                         help="seeds trained at once, each in its own process (1 torch thread each; default: 2, or "
                              "the number of CPUs if fewer)")

@@ -4,6 +4,7 @@
   ``python -m pectoral_gym.agents.training.train`` when run with ``-m``).
 - :class:`HelpFormatter`: descriptions and example epilogs kept as written, defaults shown.
 - :func:`subcommands`: subcommand parsers that use :class:`HelpFormatter`.
+- :func:`add_seeds_argument`: the one spelling of ``--seeds`` (seeds and ranges ``A-B``, space-separated).
 - :data:`COMMANDS`: every console script, its module and parser, so tests and the docs reach every parser
   without running a tool.
 
@@ -19,8 +20,10 @@ import sys
 import textwrap
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
-__all__ = ["COMMANDS", "MODULE_COMMANDS", "Command", "HelpFormatter", "examples", "prog_name", "subcommands"]
+__all__ = ["COMMANDS", "MODULE_COMMANDS", "Command", "HelpFormatter", "add_seeds_argument", "examples", "prog_name",
+           "seed_range", "subcommands"]
 
 
 def prog_name(script: str | None, *modules: str) -> str:
@@ -74,6 +77,34 @@ def examples(*lines: str, note: str = "") -> str:
     """An epilog: ``examples:`` and the command lines indented, then ``note`` (for :class:`HelpFormatter`)."""
     text = "examples:\n" + "\n".join(f"  {line}" for line in lines)
     return f"{text}\n\n{note}" if note else text
+
+
+def seed_range(text: str) -> list[int]:
+    """``"7"`` -> ``[7]``, ``"301-335"`` -> ``[301, ..., 335]`` (both ends included): one ``--seeds`` token."""
+    if "," in text:
+        raise argparse.ArgumentTypeError(f"seeds are separated by spaces, not commas: {text.replace(',', ' ')!r}")
+    low, sep, high = text.partition("-")
+    try:
+        first, last = int(low), int(high if sep else low)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a seed or a range A-B: {text!r}") from None
+    if first < 0 or last < first:
+        raise argparse.ArgumentTypeError(f"a range A-B needs 0 <= A <= B: {text!r}")
+    return list(range(first, last + 1))
+
+
+class _SeedsAction(argparse.Action):
+    """Flattens the ranges of ``--seeds`` into one list, in the order given (each tool judges repeats)."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        setattr(namespace, self.dest, [seed for chunk in values for seed in chunk])
+
+
+def add_seeds_argument(parser: argparse.ArgumentParser, default: list[int], help: str) -> None:  # noqa: A002
+    """Add ``--seeds SEED [SEED ...]``, each an integer or a range ``A-B`` (both ends included), as a flat list."""
+    parser.add_argument("--seeds", type=seed_range, nargs="+", action=_SeedsAction, default=list(default),
+                        metavar="SEED", help=f"{help}: seeds, or ranges A-B (both ends included)")
 
 
 class _Subcommands(argparse._SubParsersAction):  # argparse's only way to dispatch subcommands
