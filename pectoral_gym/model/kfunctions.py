@@ -40,6 +40,7 @@ from pectoral_gym.model.ktables import (
     scaling_values,
     spline_values,
 )
+from pectoral_gym.model.params import PER_FIN_DEFAULTS
 
 __all__ = [
     "FEATURES", "FORMAT", "FORMATS", "K_NAMES", "SPLINE_AXES", "SWAY_MODES", "UNIT_K", "KTables", "ScalingFunctions",
@@ -250,7 +251,9 @@ class ScalingFunctions:
     def params_mismatch(self, params: Any, rtol: float = 1e-9) -> dict[str, tuple[float | None, float]]:
         """Fields of ``params`` (a ``FishParams``) that differ from :attr:`identified_params`: name -> (file, given).
 
-        Empty when they agree to ``rtol``, or when the file records no parameters (unit K or an old file).
+        Empty when they agree to ``rtol``, or when the file records no parameters (unit K or an old file). A file
+        that records no per-fin field (``params.PER_FIN_DEFAULTS``; written before they existed) was identified
+        for the symmetric fish, so those fields count as their defaults.
         """
         recorded = self.identified_params
         if recorded is None:
@@ -258,7 +261,7 @@ class ScalingFunctions:
         out: dict[str, tuple[float | None, float]] = {}
         for name in dataclasses.fields(params):
             given = float(getattr(params, name.name))
-            known = recorded.get(name.name)
+            known = recorded.get(name.name, PER_FIN_DEFAULTS.get(name.name))
             if known is None or not math.isclose(float(known), given, rel_tol=rtol, abs_tol=0.0):
                 out[name.name] = (None if known is None else float(known), given)
         return out
