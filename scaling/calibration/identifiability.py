@@ -21,8 +21,8 @@ import numpy as np
 
 from pectoral_gym.model.params import FishParams
 
-__all__ = ["COEFFICIENT", "COMBINATIONS", "STRUCTURAL", "UNCERTAIN_FIELDS", "Direction", "Identifiability", "analyse",
-           "combinations", "common_scale"]
+__all__ = ["ADDITIVE_FIELDS", "ASYMMETRY_FIELDS", "COEFFICIENT", "COMBINATIONS", "STRUCTURAL", "UNCERTAIN_FIELDS",
+           "Direction", "Identifiability", "analyse", "combinations", "common_scale", "field_unit"]
 
 #: The FishParams fields a ruler cannot measure: what the calibration fits by default.
 UNCERTAIN_FIELDS = ("added_mass_x", "added_mass_y", "added_inertia", "drag_coef", "lift_coef", "moment_coef",
@@ -37,12 +37,32 @@ COEFFICIENT = {
     "lift_coef": "c2 = rho wetted_area lift_coef / 2",
     "moment_coef": "c4 = moment_coef / J3",
     "fin_force_coef": "k = fin_force_coef rho fin_chord fin_span^3 / 6",
+    "fin_force_scale_left": "k_left = fin_force_scale_left k: the left fin's force over the right one's",
+    "fin_force_scale_right": "k_right = fin_force_scale_right k",
+    "fin_angle_offset_right": "the right fin's actual angle = fin_angle_offset_right + commanded",
+    "fin_angle_offset_left": "the left fin's actual angle = fin_angle_offset_left + commanded",
 }
+#: The asymmetry of a fish whose fins differ, as the calibration fits it (``--asymmetric``): the left fin's force
+#: relative to the right one's (``fin_force_coef`` carries the right fin's, so this is the ratio of the two) and
+#: each fin's servo offset. The servo scales are not fitted: over the identification patterns a scale moves the
+#: forces almost as the force factor and the offsets do (``docs/calibration.md``, "Fins that differ").
+ASYMMETRY_FIELDS = ("fin_force_scale_left", "fin_angle_offset_right", "fin_angle_offset_left")
+#: Fields fitted as ``prior + theta`` [rad] instead of ``prior x exp(theta)``: an offset may be zero or change sign,
+#: so its standard error is absolute (rad), where the others' are relative.
+ADDITIVE_FIELDS = ("fin_angle_offset_right", "fin_angle_offset_left")
+
+
+def field_unit(name: str) -> str:
+    """How a fitted field's standard error reads: ``"rad"`` (absolute, :data:`ADDITIVE_FIELDS`) or ``"relative"``."""
+    return "rad" if name in ADDITIVE_FIELDS else "relative"
+
 #: Fields the model sees only together: the logs can never separate them (one is fixed to its known value).
 STRUCTURAL = (
     ("body_inertia", "added_inertia", "enter only as J3 = body_inertia - added_inertia (eq. 20)"),
     ("wetted_area", "drag_coef", "enter only as c1 = rho wetted_area drag_coef / 2 (and lift_coef as c2) (eq. 20)"),
     ("fin_force_coef", "fin_chord", "enter only as k = fin_force_coef rho fin_chord fin_span^3 / 6 (eqs. 11, 13)"),
+    ("fin_force_scale_right", "fin_force_scale_left", "with fin_force_coef set the two fins' k only as "
+     "fin_force_coef x fin_force_scale_right and fin_force_coef x fin_force_scale_left (three fields, two forces)"),
 )
 
 
@@ -247,7 +267,8 @@ def analyse(info: np.ndarray, variance: float, fields: tuple[str, ...], prior: F
         if d.identified:
             continue
         why = ("it moves every coefficient the fitted fields enter (" +
-               ", ".join(sorted({COEFFICIENT[n].split(' =')[0] for n in fields if n in COEFFICIENT})) +
+               ", ".join(sorted({COEFFICIENT[n].split(' =')[0] for n in fields
+                                 if any(n in carriers for carriers in _SCALE_CARRIERS)})) +
                ") by the same factor: the motion depends on forces divided by masses, so the logs fix the "
                "ratios and not the common scale; only the fins' own inertia (m_p S_p / 2, eq. 15, known) breaks "
                "the tie, too weakly to see" if d.common_scale else
@@ -257,8 +278,9 @@ def analyse(info: np.ndarray, variance: float, fields: tuple[str, ...], prior: F
                           f"+-{100 * prior_sigma:.0f} % in each log) by the regularisation.")
     for n in fields:
         if not identified[n]:
-            se = 100 * min(data_se[fields.index(n)], 9.99)
-            statements.append(f"{n} ({COEFFICIENT.get(n, n)}) is not identified: +-{se:.1f} % "
+            se = min(data_se[fields.index(n)], 9.99)
+            shown = f"{math.degrees(se):.1f} deg" if n in ADDITIVE_FIELDS else f"{100 * se:.1f} %"
+            statements.append(f"{n} ({COEFFICIENT.get(n, n)}) is not identified: +-{shown} "
                               "from the logs alone; its value leans on the prior.")
     fitted = params_of(theta)
     for (name, (meaning, _)), se in zip(COMBINATIONS.items(), combo_se, strict=True):
