@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 import pytest
 
 from pectoral_gym.model.params import FishParams
@@ -47,3 +48,15 @@ def test_the_report_gives_offsets_in_rad_and_the_benchmark_scores_them(fitted):
     assert "deg |" in markdown(report)
     scores = interval_scores(report)["reported"]
     assert scores["fin_angle_offset_right"] == pytest.approx(offset["error_rad"] / offset["std_error_rad"])
+
+
+def test_a_field_off_the_common_scale_keeps_its_standard_error():
+    """Information ``[[3, 1, 0], [1, 3, 0], [0, 0, 4]]``, scale ``(1, 1, 0)/sqrt 2`` unfixed: the third field's
+    standard error is ``1/sqrt(4)`` by hand, the two that move the scale are unfixed."""
+    from pectoral_gym.scaling.calibration.identifiability import _standard_errors
+
+    info = np.array([[3.0, 1.0, 0.0], [1.0, 3.0, 0.0], [0.0, 0.0, 4.0]])
+    scale = np.array([1.0, 1.0, 0.0]) / math.sqrt(2.0)
+    data_se = _standard_errors(info, 0.3, np.zeros((0, 3)), scale)[1]
+    assert np.isinf(data_se[:2]).all()
+    assert data_se[2] == pytest.approx(0.5, rel=1e-12)

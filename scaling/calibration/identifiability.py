@@ -126,9 +126,10 @@ class Direction:
     common_scale: bool
 
     def formula(self, top: int = 4) -> str:
-        """``+0.71 log drag_coef - 0.70 log added_mass_x`` (the largest weights)."""
+        """``+0.71 log drag_coef - 0.70 log added_mass_x`` (the largest weights; an offset enters as itself, in rad)."""
         items = sorted(self.weights.items(), key=lambda kv: -abs(kv[1]))[:top]
-        return " ".join(f"{'+' if w >= 0 else '-'}{abs(w):.2f} log {n}" for n, w in items if abs(w) >= 0.05)
+        return " ".join(f"{'+' if w >= 0 else '-'}{abs(w):.2f} {'' if n in ADDITIVE_FIELDS else 'log '}{n}"
+                        for n, w in items if abs(w) >= 0.05)
 
 
 @dataclass
@@ -202,7 +203,14 @@ def _standard_errors(info: np.ndarray, prior_sigma: float, grads: np.ndarray,
         eigval = np.maximum(eigval, 1e-300)
         order = np.argsort(eigval)[::-1]
         eigval, eigvec = eigval[order], eigvec[:, order]
-    data_se = np.sqrt(np.sum(eigvec**2 / eigval, axis=1))
+    if scale is None:
+        data_se = np.sqrt(np.sum(eigvec**2 / eigval, axis=1))
+    else:
+        # The scale is exactly unfixed: a field that moves it is unfixed too; one that does not (a fin's force ratio,
+        # an offset) is fixed in the rest, whose inverse is the pseudo-inverse. (The eigen-sum above would mix the
+        # scale's near-zero eigenvalue into every field through rounding-sized eigenvector components.)
+        cov = np.linalg.pinv(0.5 * (info + info.T), rcond=1e-12, hermitian=True)
+        data_se = np.where(np.abs(scale) > 1e-9, np.inf, np.sqrt(np.maximum(np.diag(cov), 0.0)))
     posterior = np.sqrt(np.diag(np.linalg.inv(info + np.eye(p) / prior_sigma**2)))
     return posterior, data_se, combo_se, eigval, eigvec
 

@@ -90,6 +90,11 @@ def not_converged_text(nfev: int, remaining: float) -> str:
             "or longer logs.")
 
 
+def _percent(value: float) -> str:
+    """A relative standard error in per cent: one decimal, two below 1 % (a force ratio fixed to 0.05 %)."""
+    return f"{100 * value:.1f} %" if value >= 0.01 else f"{100 * value:.2f} %"
+
+
 def markdown(report: dict[str, Any]) -> str:
     """``report.md``: the fitted values, standard errors, identifiability and the held-out check."""
     lines = ["# Calibration report", "",
@@ -110,8 +115,8 @@ def markdown(report: dict[str, Any]) -> str:
             if "truth" in f:
                 row += f" {f['truth']:.5g} | {math.degrees(f['error_rad']):+.2f} deg |"
         else:
-            row = (f"| {name} | {f['value']:.5g} | {f['prior']:.5g} | {100 * f['std_error_relative']:.1f} % | "
-                   f"{100 * min(f['data_std_error_relative'], 9.99):.1f} % | {'yes' if f['identified'] else 'no'} |")
+            row = (f"| {name} | {f['value']:.5g} | {f['prior']:.5g} | {_percent(f['std_error_relative'])} | "
+                   f"{_percent(min(f['data_std_error_relative'], 9.99))} | {'yes' if f['identified'] else 'no'} |")
             if "truth" in f:
                 row += f" {f['truth']:.5g} | {100 * f['error_relative']:+.1f} % |"
         lines.append(row)
