@@ -44,8 +44,9 @@ COEFFICIENT = {
 }
 #: The asymmetry of a fish whose fins differ, as the calibration fits it (``--asymmetric``): the left fin's force
 #: relative to the right one's (``fin_force_coef`` carries the right fin's, so this is the ratio of the two) and
-#: each fin's servo offset. The servo scales are not fitted: over the identification patterns a scale moves the
-#: forces almost as the force factor and the offsets do (``docs/calibration.md``, "Fins that differ").
+#: each fin's servo offset. The servo scales are left out (name them in ``--fields`` to fit them): the logs fix
+#: them, but a scale moves the forces much as the force factor does, so fitting both widens the force ratio's
+#: standard error about tenfold (``docs/calibration.md``, "Fins that differ").
 ASYMMETRY_FIELDS = ("fin_force_scale_left", "fin_angle_offset_right", "fin_angle_offset_left")
 #: Fields fitted as ``prior + theta`` [rad] instead of ``prior x exp(theta)``: an offset may be zero or change sign,
 #: so its standard error is absolute (rad), where the others' are relative.
