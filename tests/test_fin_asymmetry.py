@@ -144,3 +144,21 @@ def test_the_k_check_ignores_the_per_fin_fields_only():
     load_scaling("identified", params=FishParams(fin_force_scale_left=0.75, fin_angle_offset_right=0.05))
     with pytest.raises(ValueError, match="fin_force_coef"):
         load_scaling("identified", params=FishParams(fin_force_coef=4.0))
+
+
+@pytest.mark.parametrize("env_id", ["PectoralFish-Averaged-v2", "PectoralFish-Full-v2"])
+def test_the_envs_take_a_fish_whose_fins_differ(env_id):
+    """``gym.make(id, params=...)`` with per-fin fields: the same seeded actions swim another path."""
+    import gymnasium as gym
+
+    def final_obs(params):
+        env = gym.make(env_id, params=params)
+        env.reset(seed=3)
+        for _ in range(10):
+            obs = env.step(np.full(env.action_space.shape, 0.3, dtype=np.float32))[0]
+        env.close()
+        return obs
+
+    symmetric = final_obs(None)
+    np.testing.assert_array_equal(symmetric, final_obs({"fin_force_scale_left": 1.0}))  # the default, exactly
+    assert np.max(np.abs(final_obs({"fin_force_scale_left": 0.75}) - symmetric)) > 1e-3
