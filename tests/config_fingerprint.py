@@ -14,6 +14,7 @@ import gymnasium as gym
 import numpy as np
 
 import pectoral_gym  # noqa: F401 - registers the ids
+from pectoral_gym.model.params import PER_FIN_DEFAULTS
 
 GOLDEN = os.path.join(os.path.dirname(os.path.abspath(__file__)), "data", "config_fingerprint.npz")
 STEPS = 30
@@ -55,14 +56,16 @@ def settings_view(config) -> dict[str, np.ndarray]:
     """What an env's settings resolve to, in terms that do not depend on how the settings are organised.
 
     The kernels' packed settings (task, ranges, rewards, insets, stopping band and rule, servo limit), the
-    model spec as a plain dict, the observation of the fins and the nominal parameters.
+    model spec as a plain dict, the observation of the fins and the nominal parameters (the per-fin fields only
+    where they differ from the symmetric fish, which every id recorded before they existed was).
     """
     spec = config.model_spec().to_dict()
     return {
         "cfg_array": config.cfg_array(),
         "model_spec": np.array(sorted(f"{key}={value!r}" for key, value in spec.items())),
         "observe_fins": np.array(bool(config.observe_fins)),
-        "params": np.array(sorted(f"{key}={value!r}" for key, value in dataclasses.asdict(config.params).items())),
+        "params": np.array(sorted(f"{key}={value!r}" for key, value in dataclasses.asdict(config.params).items()
+                                  if PER_FIN_DEFAULTS.get(key) != value)),
         "extras": np.array([repr(config.randomize), repr(config.sensing), repr(config.timing)]),
     }
 

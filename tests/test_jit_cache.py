@@ -23,12 +23,13 @@ PROBE = """
 import numpy as np
 import pectoral_gym
 from pectoral_gym.model import strokes as st
+from pectoral_gym.model.params import FishParams, coefficient_vector
 fins = np.zeros((1, 2, st.FIN_FIELDS))
 fins[0, :, st.DURATION] = 0.5
 fins[0, :, st.ANGLE_FROM] = -0.5
 fins[0, :, st.ANGLE_TO] = 0.5
 print("package", pectoral_gym.__file__)
-print("force", repr(st.fin_forcing(fins, 0, 0.1, 1.0, 1.0, 0.1)[0]))
+print("force", repr(st.fin_forcing(fins, coefficient_vector(FishParams())[None], 0, 0.1)[0]))
 """
 
 

@@ -279,7 +279,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "pectoral-train --quick --out runs_smoke",
                         "pectoral-train --algo sac --timesteps 5e4 --hyperparams learning_rate=3e-4 "
                         "--env-kwargs '{\"task\": \"track\"}'",
-                        "pectoral-train --env-kwargs '{\"params\": \"robot.json\"}' --out runs --run-name robot"))
+                        "pectoral-train --params robot.json --out runs --run-name robot"))
     parser.add_argument("--env", default=LATEST_AVERAGED, help="environment id")
     parser.add_argument("--algo", default="ppo", help="algorithm: ppo, sac, td3, a2c, ddpg")
     parser.add_argument("--task", choices=("goal", "track"), help="task (default: from the hyperparameters, else goal)")
@@ -287,6 +287,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--hyperparams", nargs="*", default=[], metavar="KEY=VALUE",
                         help="override hyperparameters (YAML values; nested keys with dots)")
     parser.add_argument("--env-kwargs", default="{}", metavar="JSON", help="environment arguments (JSON object)")
+    parser.add_argument("--params", metavar="JSON",
+                        help="the fish's parameters file (load_params; e.g. a calibrated robot.json): the same as "
+                             "--env-kwargs '{\"params\": FILE}'")
     parser.add_argument("--hyperparams-file", metavar="YAML", help="hyperparameter file (default: agents/hyperparams)")
     parser.add_argument("--timesteps", type=float, metavar="N",
                         help="training steps, a shortcut for --hyperparams n_timesteps=N (default: the file's)")
@@ -333,6 +336,10 @@ def main(argv: list[str] | None = None) -> int:
         env_kwargs = json.loads(args.env_kwargs)
         if not isinstance(env_kwargs, dict):
             raise ValueError("--env-kwargs must be a JSON object")
+        if args.params is not None:
+            if "params" in env_kwargs:
+                raise ValueError("give the parameters once: --params or \"params\" in --env-kwargs")
+            env_kwargs["params"] = args.params
         config = resolve_config(args.algo, args.env, args.seed, task=args.task, hyperparams=overrides,
                                 env_kwargs=env_kwargs, hyperparams_file=args.hyperparams_file)
         from pectoral_gym.agents.training.vec_adapter import make_fish_vec_env

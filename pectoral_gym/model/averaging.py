@@ -45,7 +45,7 @@ from pectoral_gym.model.dynamics import body_accel, oscillating_square_mean
 from pectoral_gym.model.jit import njit
 from pectoral_gym.model.kfunctions import UNIT_K
 from pectoral_gym.model.ktables import KTables, scaling_values, yaw_oscillation_phasor
-from pectoral_gym.model.params import Coef, FinBeat, FishParams, coefficient_vector
+from pectoral_gym.model.params import FIN_FORCE_SCALE, Coef, FinBeat, FishParams, coefficient_vector
 
 __all__ = [
     "EXACT",
@@ -205,15 +205,16 @@ def averaged_fin_forcing(
     """Scaled cycle-averaged force and moment of one fin on the body (eq. 25).
 
     Args:
-        bias, amplitude, period, ratio: The fin's beat pattern (rad, rad, s, -).
-        side: +1 for the right fin, -1 for the left (mirror image).
+        bias, amplitude, period, ratio: The pattern the fin actually beats (rad, rad, s, -): for a fin with a
+            servo map, the commanded pattern mapped by it (:meth:`FishParams.fin_actual_beat`).
+        side: +1 for the right fin, -1 for the left (mirror image); it picks the fin's force factor too.
         coef: Packed coefficients of one fish (``params.COEF_NAMES``).
         mode: :data:`EXACT` or :data:`TAYLOR`.
         tables: Scaling functions, :meth:`pectoral_gym.model.kfunctions.ScalingFunctions.kernel_arrays`.
 
     Returns:
         ``(K_fx f_hx_avg, K_fy f_hy_avg, K_m tau_avg)`` in N, N, N m; with
-        ``sway = "base"`` the sway term is ``K_fy base`` (``kfunctions``).
+        ``sway = "base"`` the sway term is ``K_fy base`` (``kfunctions``). Linear in the fin's ``k``.
     """
     kx, ky, km = scaling_values(bias, amplitude, period, ratio, tables)
     return scaled_forcing(bias, amplitude, period, ratio, side, coef, mode, kx, ky, km, tables.base_sway)
@@ -226,7 +227,7 @@ def scaled_forcing(bias, amplitude, period, ratio, side, coef, mode, kx, ky, km,
     ``base_sway``: :attr:`pectoral_gym.model.ktables.KTables.base_sway`. The averaged model's latch
     evaluates K together with the yaw-oscillation phasor (:func:`pectoral_gym.model.ktables.pattern_values`).
     """
-    drag_constant = coef[Coef.FIN_DRAG_CONSTANT]
+    drag_constant = coef[Coef.FIN_DRAG_CONSTANT] * coef[FIN_FORCE_SCALE[0 if side > 0.0 else 1]]  # the fin's k
     fin_offset = coef[Coef.FIN_OFFSET]
     c = drag_constant * math.pi**2 * (ratio * ratio - 1.0) / (ratio * period * period)
     a2 = amplitude * amplitude
@@ -269,7 +270,7 @@ def averaged_forcing(
     """Convenience wrapper: scaled averaged ``(f_hx, f_hy, tau)`` of one fin.
 
     Args:
-        beat: The fin's pattern.
+        beat: The fin's commanded pattern (mapped by the fin's servo map of ``params``).
         params: Model parameters (Table 1 defaults if ``None``).
         side: ``"right"`` or ``"left"``.
         mode: :data:`EXACT` (default) or :data:`TAYLOR`.
@@ -279,6 +280,7 @@ def averaged_forcing(
         raise ValueError(f"side must be 'right' or 'left', got {side!r}")
     params = params or FishParams()
     scaling = UNIT_K if scaling is None else scaling
+    beat = params.fin_actual_beat(beat, side)
     return averaged_fin_forcing(
         beat.bias, beat.amplitude, beat.period, beat.ratio,
         1.0 if side == "right" else -1.0,

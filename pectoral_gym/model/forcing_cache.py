@@ -10,11 +10,11 @@ pattern and kept, with the pattern it belongs to, until the pattern changes:
 =================  =====  ======  ==================================================================
 field              index  unit    meaning
 =================  =====  ======  ==================================================================
-``KEY_BIAS``       0      rad     pattern the row was computed for: bias ``gamma_0``
+``KEY_BIAS``       0      rad     commanded pattern the row was computed for: bias ``gamma_0``
 ``KEY_AMPLITUDE``  1      rad     amplitude ``gamma_A``
 ``KEY_PERIOD``     2      s       period ``T_p``
 ``KEY_RATIO``      3      -       ratio ``zeta``
-``AVG_FX``         4      N       ``K_fx f_hx_avg`` (eq. 25)
+``AVG_FX``         4      N       ``K_fx f_hx_avg`` (eq. 25) of the actual pattern (servo map, force factor)
 ``AVG_FY``         5      N       ``K_fy f_hy_avg`` (or ``K_fy base``), signed by side
 ``AVG_TAU``        6      N m     ``K_m tau_avg``, signed by side
 ``OSC_COS``        7      rad/s   phasor ``A cos(phi)`` of the yaw-rate oscillation, signed by side
@@ -51,7 +51,9 @@ import numpy as np
 from pectoral_gym.model.averaging import scaled_forcing
 from pectoral_gym.model.jit import njit
 from pectoral_gym.model.ktables import pattern_values
-from pectoral_gym.model.strokes import ANGLE_FROM, ANGLE_TO, ELAPSED, PERIOD, POWER, RATIO, SIDE
+from pectoral_gym.model.params import FIN_FORCE_SCALE
+from pectoral_gym.model.strokes import ANGLE_FROM, ANGLE_TO, ELAPSED, PERIOD, POWER, RATIO, SIDE, actual_angle
+from pectoral_gym.model.strokes import actual_amplitude as actual_amplitude_of
 
 __all__ = [
     "CACHE_FIELDS", "KEY_BIAS", "KEY_AMPLITUDE", "KEY_PERIOD", "KEY_RATIO",
@@ -95,13 +97,19 @@ def refresh(cache, i, f, bias, amplitude, period, ratio, coef, mode, tables):
     cache[i, f, KEY_AMPLITUDE] = amplitude
     cache[i, f, KEY_PERIOD] = period
     cache[i, f, KEY_RATIO] = ratio
-    kx, ky, km, pc, ps = pattern_values(bias, amplitude, period, ratio, tables)
-    fx, fy, tau = scaled_forcing(bias, amplitude, period, ratio, SIDE[f], coef[i], mode, kx, ky, km, tables.base_sway)
+    # K, the averages and the oscillation belong to the pattern the fin actually beats (its servo map)
+    actual_bias, actual_amplitude = actual_angle(coef, i, f, bias), actual_amplitude_of(coef, i, f, amplitude)
+    kx, ky, km, pc, ps = pattern_values(actual_bias, actual_amplitude, period, ratio, tables)
+    fx, fy, tau = scaled_forcing(actual_bias, actual_amplitude, period, ratio, SIDE[f], coef[i], mode, kx, ky, km,
+                                 tables.base_sway)
     cache[i, f, AVG_FX] = fx
     cache[i, f, AVG_FY] = fy
     cache[i, f, AVG_TAU] = tau
-    cache[i, f, OSC_COS] = SIDE[f] * pc  # the left fin's yaw oscillation is the mirror image
-    cache[i, f, OSC_SIN] = SIDE[f] * ps
+    # the left fin's yaw oscillation is the mirror image; a fin's in-beat moment, and with it the
+    # oscillation it drives, scales with its force factor (docs/model.md section 2, "Fins that differ")
+    force_scale = coef[i, FIN_FORCE_SCALE[f]]
+    cache[i, f, OSC_COS] = SIDE[f] * pc * force_scale
+    cache[i, f, OSC_SIN] = SIDE[f] * ps * force_scale
     cache[i, f, CACHED] = 1.0
 
 

@@ -40,6 +40,7 @@ from pectoral_gym.model.ktables import (
     scaling_values,
     spline_values,
 )
+from pectoral_gym.model.params import PER_FIN_DEFAULTS
 
 __all__ = [
     "FEATURES", "FORMAT", "FORMATS", "K_NAMES", "SPLINE_AXES", "SWAY_MODES", "UNIT_K", "KTables", "ScalingFunctions",
@@ -250,13 +251,19 @@ class ScalingFunctions:
     def params_mismatch(self, params: Any, rtol: float = 1e-9) -> dict[str, tuple[float | None, float]]:
         """Fields of ``params`` (a ``FishParams``) that differ from :attr:`identified_params`: name -> (file, given).
 
-        Empty when they agree to ``rtol``, or when the file records no parameters (unit K or an old file).
+        Empty when they agree to ``rtol``, or when the file records no parameters (unit K or an old file). The
+        per-fin fields (``params.PER_FIN_DEFAULTS``) are not compared: K is a function of each fin's own pattern,
+        evaluated at the pattern the fin actually beats (so a servo map needs no other K), and each fin's averaged
+        forcing is linear in its force factor; what a force factor moves K by is measured in ``docs/model.md``
+        section 2, "Fins that differ".
         """
         recorded = self.identified_params
         if recorded is None:
             return {}
         out: dict[str, tuple[float | None, float]] = {}
         for name in dataclasses.fields(params):
+            if name.name in PER_FIN_DEFAULTS:
+                continue
             given = float(getattr(params, name.name))
             known = recorded.get(name.name)
             if known is None or not math.isclose(float(known), given, rel_tol=rtol, abs_tol=0.0):

@@ -64,9 +64,14 @@ def validate_beats(beats: np.ndarray) -> None:
             )
 
 
-def _fin_power_coef(params: FishParams) -> float:
-    """``3 k S_p / 4``: the fin power of eq. (14) per ``|g'|^3`` (``docs/model.md`` 3.5)."""
-    return 0.75 * params.fin_drag_constant * params.fin_span
+def _fin_power_coef(params: FishParams) -> np.ndarray:
+    """``(2,)`` each fin's ``(3 k_f S_p / 4) a_1^3``: the fin power of eq. (14) per commanded ``|g'|^3``.
+
+    ``docs/model.md`` 3.5, with the fin's force factor in ``k_f`` and its servo scale ``a_1`` (the actual
+    rate is ``a_1`` times the commanded one).
+    """
+    return np.array([0.75 * (params.fin_drag_constant * getattr(params, f"fin_force_scale_{side}")) * params.fin_span
+                     * getattr(params, f"fin_angle_scale_{side}") ** 3 for side in ("right", "left")])
 
 
 def _as_beat_array(beat: BeatLike, n: int) -> np.ndarray:
@@ -107,7 +112,7 @@ class FishModel:
     Attributes:
         state: ``(n, 6)`` ``X, Y, psi, vx, vy, omega`` (m, m, rad, m/s, m/s, rad/s).
         integral: ``(n, 3)`` running integrals of ``vx, vy, omega`` since :meth:`reset` (m, m, rad).
-        coef: ``(n, 9)`` packed coefficients (``params.COEF_NAMES``, indices ``params.Coef``).
+        coef: ``(n, len(COEF_NAMES))`` packed coefficients (``params.COEF_NAMES``, indices ``params.Coef``).
         fins: ``(n, 2, strokes.FIN_FIELDS)`` half-strokes in progress (:mod:`pectoral_gym.model.strokes`).
         pending: ``(n, 2, 4)`` commanded patterns, latched at the next turning point.
         forcing_cache: ``(n, 2, forcing_cache.CACHE_FIELDS)`` the averaged model's per-fin forcing
@@ -137,7 +142,7 @@ class FishModel:
         self.pending = np.zeros((self.n, 2, 4))
         self.integral = np.zeros((self.n, 3))
         self.coef = np.zeros((self.n, len(COEF_NAMES)))
-        self.fin_power_coef = np.zeros(self.n)  # 3 k S_p / 4 [kg m^2 = W s^3/rad^3] of eq. (14)'s fin power
+        self.fin_power_coef = np.zeros((self.n, 2))  # per fin, 3 k S_p / 4 [W s^3/rad^3] of eq. (14)'s fin power
         self.time = 0.0
         self.min_substeps = 1
         self.mode = EXACT
@@ -159,7 +164,7 @@ class FishModel:
             if rows.shape[0] != target.size:
                 raise ValueError(f"got {rows.shape[0]} FishParams for {target.size} fish")
             self.coef[target] = rows
-            self.fin_power_coef[target] = [_fin_power_coef(p) for p in params]
+            self.fin_power_coef[target] = np.array([_fin_power_coef(p) for p in params])
         forcing_cache.invalidate(self.forcing_cache, index)  # the forcing depends on them
 
     def reset(self, state: np.ndarray | None = None, right: BeatLike = None, left: BeatLike = None,
@@ -248,10 +253,14 @@ class FishModel:
         half-stroke (``strokes.swept_cube``). The same in both models, which follow the same
         strokes; the envs' energy term prices the commanded patterns' regular beat instead.
         """
-        return self.fins[:, :, strokes.SWEPT] * self.fin_power_coef[:, None]
+        return self.fins[:, :, strokes.SWEPT] * self.fin_power_coef
 
     def fin_angles(self) -> tuple[np.ndarray, np.ndarray]:
-        """Current fin angles and rates, ``(n, 2)`` each (right fin first) [rad, rad/s]."""
+        """Current commanded fin angles and rates, ``(n, 2)`` each (right fin first) [rad, rad/s].
+
+        The angles the firmware and the servo limits see; a fin with a servo map (``FishParams.fin_angle_*``)
+        is actually at ``a_0 + a_1`` times them.
+        """
         return strokes.fin_angles(self.fins)
 
     def active_beats(self) -> np.ndarray:

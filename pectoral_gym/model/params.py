@@ -30,7 +30,7 @@ from pectoral_gym.model.tank import (  # re-exported: the tank's one home is pec
 __all__ = [
     "FishParams", "FinBeat", "COEF_NAMES", "Coef", "BodyCoefficients", "TANK_LENGTH", "TANK_WIDTH",
     "coefficient_vector", "body_coefficients", "params_from_dict", "load_params", "save_params", "as_params",
-    "params_dict", "PARAMS_FIELDS",
+    "params_dict", "PARAMS_FIELDS", "PER_FIN_DEFAULTS", "FIN_FORCE_SCALE", "FIN_ANGLE_OFFSET", "FIN_ANGLE_SCALE",
 ]
 
 
@@ -66,6 +66,16 @@ class FishParams:
         fin_force_coef: Normal-force coefficient ``lambda`` of eq. (11) [-].
         body_length: Body length [m] (used for walls and rendering).
         body_height: Body height [m] (documentation only).
+        fin_force_scale_right, fin_force_scale_left: Per-fin factor [-] on that fin's normal force of
+            eq. (11), i.e. on its drag constant ``k`` (a bent or smaller fin, a servo that cannot reach
+            the commanded speed); 1 is the paper's fin, 0 a fin without a blade. >= 0.
+        fin_angle_offset_right, fin_angle_offset_left: Per-fin servo offset ``a_0`` [rad] (an offset horn).
+        fin_angle_scale_right, fin_angle_scale_left: Per-fin servo scale ``a_1`` [-], > 0: the fin's actual
+            angle is ``a_0 + a_1 g`` for the commanded angle ``g``. The firmware's rules and the servo limits
+            act on the commanded angle; only the fin's motion in the water (the forces) sees the actual one.
+
+    The per-fin fields default to today's symmetric fish (factor 1, offset 0, scale 1); a parameters file
+    without them loads as that fish (``docs/model.md`` section 2, "Fins that differ").
     """
 
     body_mass: float = 0.795  # kg
@@ -86,6 +96,12 @@ class FishParams:
     fin_force_coef: float = 4.1464  # -
     body_length: float = 0.198  # m
     body_height: float = 0.1  # m
+    fin_force_scale_right: float = 1.0  # -
+    fin_force_scale_left: float = 1.0  # -
+    fin_angle_offset_right: float = 0.0  # rad
+    fin_angle_offset_left: float = 0.0  # rad
+    fin_angle_scale_right: float = 1.0  # -
+    fin_angle_scale_left: float = 1.0  # -
 
     def __post_init__(self) -> None:
         for field in dataclasses.fields(self):
@@ -99,9 +115,18 @@ class FishParams:
         for name in positive:
             if getattr(self, name) <= 0:
                 raise ValueError(f"FishParams.{name} must be > 0, got {getattr(self, name)!r}")
-        for name in ("drag_coef", "lift_coef", "moment_coef", "fin_mass", "fin_effective_mass"):
+        for name in ("drag_coef", "lift_coef", "moment_coef", "fin_mass", "fin_effective_mass",
+                     "fin_force_scale_right", "fin_force_scale_left"):
             if getattr(self, name) < 0:
                 raise ValueError(f"FishParams.{name} must be >= 0, got {getattr(self, name)!r}")
+        for name in ("fin_angle_scale_right", "fin_angle_scale_left"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"FishParams.{name} must be > 0 (a servo that turns the fin the commanded way), "
+                                 f"got {getattr(self, name)!r}")
+        for name in ("fin_angle_offset_right", "fin_angle_offset_left"):
+            if abs(getattr(self, name)) >= math.pi / 2:
+                raise ValueError(f"FishParams.{name} must be within +-pi/2 rad (a horn offset, not another fin "
+                                 f"position), got {getattr(self, name)!r}")
         for name, value in (("m1", self.m1), ("m2", self.m2), ("J3", self.J3)):
             if value <= 0:
                 raise ValueError(
@@ -150,17 +175,51 @@ class FishParams:
         """``m_p S_p / 2`` [kg m]: the fin's inertial reaction of eq. (15)."""
         return self.fin_effective_mass * self.fin_span / 2.0
 
+    @property
+    def symmetric_fins(self) -> bool:
+        """True when both fins are the paper's fin (every per-fin field at its default)."""
+        return all(getattr(self, name) == default for name, default in PER_FIN_DEFAULTS.items())
+
+    def fin_actual_beat(self, beat: FinBeat, side: str) -> FinBeat:
+        """The pattern fin ``side`` (``"right"``/``"left"``) actually beats for the commanded ``beat``.
+
+        ``bias -> a_0 + a_1 bias``, ``amplitude -> a_1 amplitude``; period and ratio are unchanged.
+
+        Raises:
+            ValueError: If ``side`` is not ``"right"`` or ``"left"``, or the actual stroke leaves [0, pi].
+        """
+        if side not in ("right", "left"):
+            raise ValueError(f"side must be 'right' or 'left', got {side!r}")
+        offset = getattr(self, f"fin_angle_offset_{side}")
+        scale = getattr(self, f"fin_angle_scale_{side}")
+        return FinBeat(offset + scale * beat.bias, scale * beat.amplitude, beat.period, beat.ratio)
+
     def replace(self, **changes: float) -> FishParams:
         """Return a copy with some fields changed (validated again)."""
         return dataclasses.replace(self, **changes)
 
 
-# Packed per-fish coefficients the compiled kernels read (one row per fish), in this order.
-COEF_NAMES = ("m1", "m2", "J3", "c1", "c2", "c4", "fin_drag_constant", "fin_inertia_constant", "fin_offset")
+#: The per-fin fields and the values that make both fins the paper's fin (``FishParams.symmetric_fins``).
+PER_FIN_DEFAULTS = {
+    "fin_force_scale_right": 1.0, "fin_force_scale_left": 1.0,
+    "fin_angle_offset_right": 0.0, "fin_angle_offset_left": 0.0,
+    "fin_angle_scale_right": 1.0, "fin_angle_scale_left": 1.0,
+}
+
+# Packed per-fish coefficients the compiled kernels read (one row per fish), in this order. The per-fin
+# fields follow the symmetric ones, right fin then left, so a kernel reads fin f's at ``index[f]``
+# (FIN_FORCE_SCALE, FIN_ANGLE_OFFSET, FIN_ANGLE_SCALE).
+COEF_NAMES = ("m1", "m2", "J3", "c1", "c2", "c4", "fin_drag_constant", "fin_inertia_constant", "fin_offset",
+              "fin_force_scale_right", "fin_force_scale_left", "fin_angle_offset_right", "fin_angle_offset_left",
+              "fin_angle_scale_right", "fin_angle_scale_left")
 
 #: Index of each packed coefficient, generated from :data:`COEF_NAMES` (``coef[Coef.C4]``);
 #: numba reads the members as compile-time constants.
 Coef = enum.IntEnum("Coef", {name.upper(): i for i, name in enumerate(COEF_NAMES)})
+#: Packed index of each fin's force factor, servo offset and servo scale, ``(right, left)`` (numba constants).
+FIN_FORCE_SCALE = (int(Coef.FIN_FORCE_SCALE_RIGHT), int(Coef.FIN_FORCE_SCALE_LEFT))
+FIN_ANGLE_OFFSET = (int(Coef.FIN_ANGLE_OFFSET_RIGHT), int(Coef.FIN_ANGLE_OFFSET_LEFT))
+FIN_ANGLE_SCALE = (int(Coef.FIN_ANGLE_SCALE_RIGHT), int(Coef.FIN_ANGLE_SCALE_LEFT))
 
 
 class BodyCoefficients(NamedTuple):

@@ -55,6 +55,15 @@ def _ratios(p: FishParams) -> dict[str, tuple[float, float, float, str]]:
         "fin_mass": (p.fin_mass / p.body_mass, 0.0, 0.25, "fin_mass / body_mass"),
         "fin_effective_mass": (p.fin_effective_mass / p.body_mass, 0.0, 0.25, "fin_effective_mass / body_mass"),
         "body_height": (p.body_height / p.body_length, 0.1, 1.0, "body_height / body_length"),
+        **{f"fin_force_{side}": (p.fin_force_coef * getattr(p, f"fin_force_scale_{side}") / table_lambda, 0.1, 3.0,
+                                 f"fin_force_coef x fin_force_scale_{side} against Table 1's fin_force_coef")
+           for side in ("right", "left")},
+        **{f"fin_angle_offset_{side}": (getattr(p, f"fin_angle_offset_{side}"), -0.35, 0.35,
+                                        f"fin_angle_offset_{side} [rad] (a horn set 20 deg off is a mounting error)")
+           for side in ("right", "left")},
+        **{f"fin_angle_scale_{side}": (getattr(p, f"fin_angle_scale_{side}"), 0.5, 1.5,
+                                       f"fin_angle_scale_{side} (a servo turning its fin 1.5 times the command)")
+           for side in ("right", "left")},
     }
 
 

@@ -144,14 +144,15 @@ def _stable_step(state, i, rates: RateConstants, driven_omega, driven_speed, osc
 
 
 @njit(inline="always")
-def _full_stable_step(state, fins, i, idle0, idle1, body, rates, drag_constant, inertia_constant, fin_offset, h_max):
+def _full_stable_step(state, fins, coef, i, idle0, idle1, body, rates, inertia_constant, fin_offset, h_max):
     """Full model: ``h_max``, shortened where RK4 would leave its accurate range (:func:`_stable_step`).
 
     The in-beat forcing peaks within the segment, so the rate is taken at the yaw rate and
     speed that each half-stroke's peak force and moment would drive: on ``g = mid - half
     cos(pi s / d)``, ``|g'| <= |half| pi / d`` and ``|g''| <= |half| (pi / d)^2``, so eqs. (16)-(18)
     give ``|f_hx| <= (k + m_p S_p / 2) g'_max^2 + (m_p S_p / 2) g''_max`` (and ``|tau| <= C_p`` times
-    that). It never binds at the reference steps (``dt_max`` 0.01 s); it keeps the fast
+    that), with each fin's own ``k`` and actual swing (its force factor and servo scale). It never binds at the
+    reference steps (``dt_max`` 0.01 s); it keeps the fast
     preset (:data:`pectoral_gym.model.models.FULL_INTEGRATION`) and any larger ``dt_max`` stable.
     """
     force = 0.0
@@ -159,8 +160,9 @@ def _full_stable_step(state, fins, i, idle0, idle1, body, rates, drag_constant, 
         if idle0 if f == 0 else idle1:
             continue
         rate = math.pi / max(fins[i, f, DURATION], _EPS)
-        half = 0.5 * abs(fins[i, f, st.ANGLE_TO] - fins[i, f, st.ANGLE_FROM])
+        half = st.actual_amplitude(coef, i, f, 0.5 * abs(fins[i, f, st.ANGLE_TO] - fins[i, f, st.ANGLE_FROM]))
         speed = half * rate  # peak |g'|
+        drag_constant = st.fin_drag_constant(coef, i, f)
         force += (drag_constant + inertia_constant) * speed * speed + inertia_constant * speed * rate
     driven_omega = math.sqrt(abs(fin_offset) * force / (body.c4 * body.J3))
     driven_speed = math.sqrt(force / max(body.c1, 1e-12))
@@ -196,9 +198,12 @@ def _advance_model(i, state, fins, cache, pending, integral, coef, duration, dt_
     tables = as_tables(packed_tables)
     body = BodyCoefficients(coef[i, Coef.M1], coef[i, Coef.M2], coef[i, Coef.J3],
                             coef[i, Coef.C1], coef[i, Coef.C2], coef[i, Coef.C4])
-    drag_constant = coef[i, Coef.FIN_DRAG_CONSTANT]
+    drag_right, drag_left = st.fin_drag_constant(coef, i, 0), st.fin_drag_constant(coef, i, 1)
     inertia_constant = coef[i, Coef.FIN_INERTIA_CONSTANT]
     fin_offset = coef[i, Coef.FIN_OFFSET]
+    # each fin's servo map: the forces see its actual angle (the stroke state keeps the commanded one)
+    offset0, scale0 = coef[i, st.FIN_ANGLE_OFFSET[0]], coef[i, st.FIN_ANGLE_SCALE[0]]
+    offset1, scale1 = coef[i, st.FIN_ANGLE_OFFSET[1]], coef[i, st.FIN_ANGLE_SCALE[1]]
     rates = rate_constants(body.m1, body.m2, body.J3, body.c1, body.c2, body.c4)
     t_left = duration
     while t_left > _EPS:
@@ -229,19 +234,19 @@ def _advance_model(i, state, fins, cache, pending, integral, coef, duration, dt_
                 h_max = min(h_max, fins[i, 0, DURATION] / min_substeps)
             if not idle1:
                 h_max = min(h_max, fins[i, 1, DURATION] / min_substeps)
-            h_max = _full_stable_step(state, fins, i, idle0, idle1, body, rates, drag_constant, inertia_constant,
-                                      fin_offset, h_max)
+            h_max = _full_stable_step(state, fins, coef, i, idle0, idle1, body, rates, inertia_constant, fin_offset,
+                                      h_max)
             n_sub = max(1, int(math.ceil(seg / h_max - 1e-9)))
             h = seg / n_sub
             # the forces at t, t + h/2, t + h of every substep: each fin's phase rotated by h/2 each time
-            p0 = st.stroke_phase(fins, i, 0, 0.5 * h)
-            p1 = st.stroke_phase(fins, i, 1, 0.5 * h)
-            f0 = Forcing(*st.phase_forcing(p0, p1, drag_constant, inertia_constant, fin_offset))
+            p0 = st.stroke_phase(fins, i, 0, 0.5 * h, 0.0, offset0, scale0)
+            p1 = st.stroke_phase(fins, i, 1, 0.5 * h, 0.0, offset1, scale1)
+            f0 = Forcing(*st.phase_forcing(p0, p1, drag_right, drag_left, inertia_constant, fin_offset))
             for _ in range(n_sub):
                 p0, p1 = st.advance_phase(p0), st.advance_phase(p1)
-                fm = Forcing(*st.phase_forcing(p0, p1, drag_constant, inertia_constant, fin_offset))
+                fm = Forcing(*st.phase_forcing(p0, p1, drag_right, drag_left, inertia_constant, fin_offset))
                 p0, p1 = st.advance_phase(p0), st.advance_phase(p1)
-                f1 = Forcing(*st.phase_forcing(p0, p1, drag_constant, inertia_constant, fin_offset))
+                f1 = Forcing(*st.phase_forcing(p0, p1, drag_right, drag_left, inertia_constant, fin_offset))
                 _rk4(state, integral, i, h, f0, fm, f1, body, 0.0)
                 f0 = f1
         if not idle0:  # the strokes actually swept, for the fin work (both models)

@@ -59,12 +59,10 @@ def start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables, 
         if corrections:
             dfx = dfy = dtau = 0.0
             if corrections & TRANSITIONS:
-                dfx, dfy, dtau = _transition(fins, cache, i, f, coef[i, Coef.FIN_DRAG_CONSTANT],
-                                             coef[i, Coef.FIN_OFFSET])
+                dfx, dfy, dtau = _transition(fins, cache, coef, i, f)
                 cache[i, f, fc.OSC_EXCESS] = _oscillation_gain(fins, i, f, coef) - 1.0
             if corrections & RIPPLE_OFFSETS:
-                ox, oy, ot = _ripple_offset_change(fins, cache, i, f, coef[i, Coef.FIN_DRAG_CONSTANT],
-                                                   coef[i, Coef.FIN_OFFSET])
+                ox, oy, ot = _ripple_offset_change(fins, cache, coef, i, f)
                 duration = fins[i, f, DURATION]
                 dfx, dfy, dtau = dfx + ox / duration, dfy + oy / duration, dtau + ot / duration
             cache[i, f, fc.TR_FX] = dfx
@@ -75,14 +73,16 @@ def start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables, 
 @njit(inline="always")
 def _oscillation_gain(fins, i, f, coef):
     """Yaw-oscillation gain of fin ``f``'s latched half-stroke (``docs/model.md`` 3.9; 1 on a regular one)."""
-    return transitional_oscillation_gain(fins[i, f, st.ANGLE_FROM], fins[i, f, st.ANGLE_TO], fins[i, f, DURATION],
-                                         fins[i, f, st.POWER] > 0.5, fins[i, f, BIAS], fins[i, f, AMPLITUDE],
-                                         fins[i, f, PERIOD], fins[i, f, RATIO], coef[i, Coef.FIN_DRAG_CONSTANT],
+    return transitional_oscillation_gain(st.actual_angle(coef, i, f, fins[i, f, st.ANGLE_FROM]),
+                                         st.actual_angle(coef, i, f, fins[i, f, st.ANGLE_TO]), fins[i, f, DURATION],
+                                         fins[i, f, st.POWER] > 0.5, st.actual_angle(coef, i, f, fins[i, f, BIAS]),
+                                         st.actual_amplitude(coef, i, f, fins[i, f, AMPLITUDE]),
+                                         fins[i, f, PERIOD], fins[i, f, RATIO], st.fin_drag_constant(coef, i, f),
                                          coef[i, Coef.FIN_INERTIA_CONSTANT])
 
 
 @njit(inline="always")
-def _ripple_offset_change(fins, cache, i, f, drag_constant, fin_offset):
+def _ripple_offset_change(fins, cache, coef, i, f):
     """Impulse [N s, N s, N m s] that moves fin ``f``'s delivered ripple offset to its latched pattern's.
 
     ``docs/model.md`` section 3.8: the averaged state is the beat mean of the full model's,
@@ -90,8 +90,10 @@ def _ripple_offset_change(fins, cache, i, f, drag_constant, fin_offset):
     starts a pattern, changes it or parks moves that offset from the old pattern's ``M`` to the
     new one's. Zero while the pattern is kept.
     """
-    mx, my = ripple_offset(fins[i, f, BIAS], fins[i, f, AMPLITUDE], fins[i, f, PERIOD], fins[i, f, RATIO],
-                           drag_constant)
+    mx, my = ripple_offset(st.actual_angle(coef, i, f, fins[i, f, BIAS]),
+                           st.actual_amplitude(coef, i, f, fins[i, f, AMPLITUDE]), fins[i, f, PERIOD],
+                           fins[i, f, RATIO], st.fin_drag_constant(coef, i, f))
+    fin_offset = coef[i, Coef.FIN_OFFSET]
     side = st.SIDE[f]
     mx, my, mt = mx, side * my, side * fin_offset * mx  # eq. (18), left fin mirrored
     ox, oy, ot = mx - cache[i, f, fc.OFF_FX], my - cache[i, f, fc.OFF_FY], mt - cache[i, f, fc.OFF_TAU]
@@ -102,7 +104,7 @@ def _ripple_offset_change(fins, cache, i, f, drag_constant, fin_offset):
 
 
 @njit(inline="always")
-def _transition(fins, cache, i, f, drag_constant, fin_offset):
+def _transition(fins, cache, coef, i, f):
     """Averaged model: forcing of fin ``f``'s half-stroke in progress beyond its pattern's regular one.
 
     Two parts (``docs/model.md`` section 3.7), both zero at periodic steady state:
@@ -113,7 +115,12 @@ def _transition(fins, cache, i, f, drag_constant, fin_offset):
     * on a recovery stroke after a power stroke of another pattern: the impulse offset that
       power stroke left, ``X(previous) - X(latched)`` (:func:`power_stroke_excess`), spread
       over the recovery stroke.
+
+    The fin state holds commanded angles and patterns (compared as they are); the forces are those of
+    the fin's actual motion (its servo map) with its own ``k``.
     """
+    drag_constant = st.fin_drag_constant(coef, i, f)
+    fin_offset = coef[i, Coef.FIN_OFFSET]
     duration = fins[i, f, DURATION]
     if duration <= 0.0:
         return 0.0, 0.0, 0.0
@@ -124,15 +131,18 @@ def _transition(fins, cache, i, f, drag_constant, fin_offset):
     dx = 0.0
     dy = 0.0
     if angle_from != start:
-        ax, ay = half_stroke_mean_force(angle_from, fins[i, f, st.ANGLE_TO], duration, drag_constant)
-        rx, ry = half_stroke_mean_force(start, fins[i, f, st.ANGLE_TO], duration, drag_constant)
+        angle_to = st.actual_angle(coef, i, f, fins[i, f, st.ANGLE_TO])
+        ax, ay = half_stroke_mean_force(st.actual_angle(coef, i, f, angle_from), angle_to, duration, drag_constant)
+        rx, ry = half_stroke_mean_force(st.actual_angle(coef, i, f, start), angle_to, duration, drag_constant)
         dx, dy = ax - rx, ay - ry
     if not power and (cache[i, f, fc.PREV_BIAS] != bias or cache[i, f, fc.PREV_AMPLITUDE] != amp
                       or cache[i, f, fc.PREV_PERIOD] != fins[i, f, PERIOD]
                       or cache[i, f, fc.PREV_RATIO] != fins[i, f, RATIO]):
-        px, py = power_stroke_excess(cache[i, f, fc.PREV_BIAS], cache[i, f, fc.PREV_AMPLITUDE],
+        px, py = power_stroke_excess(st.actual_angle(coef, i, f, cache[i, f, fc.PREV_BIAS]),
+                                     st.actual_amplitude(coef, i, f, cache[i, f, fc.PREV_AMPLITUDE]),
                                      cache[i, f, fc.PREV_PERIOD], cache[i, f, fc.PREV_RATIO], drag_constant)
-        qx, qy = power_stroke_excess(bias, amp, fins[i, f, PERIOD], fins[i, f, RATIO], drag_constant)
+        qx, qy = power_stroke_excess(st.actual_angle(coef, i, f, bias), st.actual_amplitude(coef, i, f, amp),
+                                     fins[i, f, PERIOD], fins[i, f, RATIO], drag_constant)
         dx += (px - qx) / duration
         dy += (py - qy) / duration
     side = st.SIDE[f]

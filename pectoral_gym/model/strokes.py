@@ -51,6 +51,7 @@ import numpy as np
 
 from pectoral_gym.model.dynamics import fin_force_right, stroke_kinematics
 from pectoral_gym.model.jit import njit
+from pectoral_gym.model.params import FIN_ANGLE_OFFSET, FIN_ANGLE_SCALE, FIN_FORCE_SCALE, Coef
 
 __all__ = [
     "FIN_FIELDS", "ELAPSED", "DURATION", "ANGLE_FROM", "ANGLE_TO", "POWER", "BIAS", "AMPLITUDE", "PERIOD", "RATIO",
@@ -58,6 +59,7 @@ __all__ = [
     "BEAT_BIAS", "BEAT_AMPLITUDE", "BEAT_PERIOD", "BEAT_RATIO", "SIDE",
     "command_fins", "fin_angles", "fin_forcing", "idle", "init_fins", "latch",
     "StrokePhase", "stroke_phase", "advance_phase", "phase_forcing", "command_one",
+    "actual_angle", "actual_amplitude", "fin_drag_constant",
 ]
 
 ELAPSED, DURATION, ANGLE_FROM, ANGLE_TO, POWER = 0, 1, 2, 3, 4
@@ -118,15 +120,39 @@ def idle(fins, pending, i, f):
 
 
 @njit
-def fin_forcing(fins, i, offset, drag_constant, inertia_constant, fin_offset):
-    """Total blade-element force [N] and moment [N m] of both fins, ``offset`` s into the segment (eqs. 9-18).
+def fin_forcing(fins, coef, i, offset):
+    """Total blade-element force [N] and moment [N m] of both fins of fish ``i``, ``offset`` s into the segment.
 
-    Direct evaluation at one instant; the full model's integrator rotates the phases instead
-    (:class:`StrokePhase`).
+    Eqs. (9)-(18) with each fin's force factor and servo map from the packed coefficients ``coef``
+    (:data:`pectoral_gym.model.params.COEF_NAMES`). Direct evaluation at one instant; the full model's
+    integrator rotates the phases instead (:class:`StrokePhase`).
     """
-    right = stroke_phase(fins, i, 0, 0.0, offset)
-    left = stroke_phase(fins, i, 1, 0.0, offset)
-    return phase_forcing(right, left, drag_constant, inertia_constant, fin_offset)
+    right = stroke_phase(fins, i, 0, 0.0, offset, coef[i, FIN_ANGLE_OFFSET[0]], coef[i, FIN_ANGLE_SCALE[0]])
+    left = stroke_phase(fins, i, 1, 0.0, offset, coef[i, FIN_ANGLE_OFFSET[1]], coef[i, FIN_ANGLE_SCALE[1]])
+    drag = coef[i, Coef.FIN_DRAG_CONSTANT]
+    return phase_forcing(right, left, drag * coef[i, FIN_FORCE_SCALE[0]], drag * coef[i, FIN_FORCE_SCALE[1]],
+                         coef[i, Coef.FIN_INERTIA_CONSTANT], coef[i, Coef.FIN_OFFSET])
+
+
+@njit(inline="always")
+def actual_angle(coef, i, f, angle):
+    """Fin ``f``'s actual angle [rad] for its commanded ``angle``: ``a_0 + a_1 angle`` (the servo map).
+
+    Exactly ``angle`` for the symmetric fish (offset 0.0, scale 1.0).
+    """
+    return coef[i, FIN_ANGLE_OFFSET[f]] + coef[i, FIN_ANGLE_SCALE[f]] * angle
+
+
+@njit(inline="always")
+def actual_amplitude(coef, i, f, amplitude):
+    """Fin ``f``'s actual amplitude (or signed half-swing) [rad] for a commanded one: ``a_1 amplitude``."""
+    return coef[i, FIN_ANGLE_SCALE[f]] * amplitude
+
+
+@njit(inline="always")
+def fin_drag_constant(coef, i, f):
+    """Fin ``f``'s drag constant ``k_f = lambda_f k`` [N s^2] (its force factor times eq. 13's ``k``)."""
+    return coef[i, Coef.FIN_DRAG_CONSTANT] * coef[i, FIN_FORCE_SCALE[f]]
 
 
 class StrokePhase(NamedTuple):
@@ -135,7 +161,8 @@ class StrokePhase(NamedTuple):
     The phase ``pi s / d`` grows by the same angle every integrator half-substep, so its cosine and
     sine follow by rotation: two trigonometric calls per fin and segment instead of two per force
     evaluation (the full model's RK4 evaluates the forces twice per substep). Rounding drifts by
-    ~1e-16 per rotation and restarts from the exact values at every segment.
+    ~1e-16 per rotation and restarts from the exact values at every segment. ``mid`` and ``half`` are the
+    fin's actual motion: the commanded half-stroke through the fin's servo map (:func:`stroke_phase`).
     """
 
     cos: float  # cos(phase) now
@@ -149,15 +176,20 @@ class StrokePhase(NamedTuple):
 
 
 @njit(inline="always")
-def stroke_phase(fins, i, f, step, offset=0.0):
-    """Fin ``f`` of fish ``i`` ``offset`` s after its elapsed time, rotating by ``step`` s per :func:`advance_phase`."""
+def stroke_phase(fins, i, f, step, offset=0.0, angle_offset=0.0, angle_scale=1.0):
+    """Fin ``f`` of fish ``i`` ``offset`` s after its elapsed time, rotating by ``step`` s per :func:`advance_phase`.
+
+    ``angle_offset`` [rad] and ``angle_scale`` [-] are the fin's servo map (its actual angle is
+    ``angle_offset + angle_scale g`` for the commanded ``g``): the phase describes the actual motion.
+    """
     angle_from, angle_to = fins[i, f, ANGLE_FROM], fins[i, f, ANGLE_TO]
     if angle_from == angle_to:
-        return StrokePhase(1.0, 0.0, 1.0, 0.0, angle_from, 0.0, 0.0, False)
+        return StrokePhase(1.0, 0.0, 1.0, 0.0, angle_offset + angle_scale * angle_from, 0.0, 0.0, False)
     rate = math.pi / fins[i, f, DURATION]
     phase = rate * (fins[i, f, ELAPSED] + offset)
     return StrokePhase(math.cos(phase), math.sin(phase), math.cos(rate * step), math.sin(rate * step),
-                       0.5 * (angle_from + angle_to), 0.5 * (angle_to - angle_from), rate, True)
+                       angle_offset + angle_scale * (0.5 * (angle_from + angle_to)),
+                       angle_scale * (0.5 * (angle_to - angle_from)), rate, True)
 
 
 @njit(inline="always")
@@ -168,8 +200,8 @@ def advance_phase(p: StrokePhase) -> StrokePhase:
 
 
 @njit(inline="always")
-def phase_forcing(right: StrokePhase, left: StrokePhase, drag_constant, inertia_constant, fin_offset):
-    """:func:`fin_forcing` from both fins' :class:`StrokePhase` (eqs. 9-18)."""
+def phase_forcing(right: StrokePhase, left: StrokePhase, drag_right, drag_left, inertia_constant, fin_offset):
+    """:func:`fin_forcing` from both fins' :class:`StrokePhase` (eqs. 9-18), each fin with its drag constant [N s^2]."""
     fx_total = 0.0
     fy_total = 0.0
     tau_total = 0.0
@@ -180,7 +212,7 @@ def phase_forcing(right: StrokePhase, left: StrokePhase, drag_constant, inertia_
         g = p.mid - p.half * p.cos
         gd = p.half * p.rate * p.sin
         gdd = p.half * p.rate * p.rate * p.cos
-        fx, fy = fin_force_right(g, gd, gdd, drag_constant, inertia_constant)
+        fx, fy = fin_force_right(g, gd, gdd, drag_right if f == 0 else drag_left, inertia_constant)
         side = SIDE[f]
         fx_total += fx
         fy_total += side * fy  # left fin mirrors y

@@ -72,11 +72,18 @@ def interval_scores(report: dict) -> dict[str, dict[str, float]]:
     if gn:
         scores["gauss_newton"] = {}
     for name, f in report["fields"].items():
+        if "error_rad" in f:  # an offset: fitted additively, its error and standard error in rad
+            scores["reported"][name] = f["error_rad"] / f["std_error_rad"]
+            if gn:
+                scores["gauss_newton"][name] = f["error_rad"] / gn["std_error"][name]
+            continue
         error = math.log1p(f["error_relative"])
         scores["reported"][name] = error / f["std_error_relative"]
         if gn:
             scores["gauss_newton"][name] = error / gn["std_error"][name]
     for name, c in report["combinations"].items():
+        if c["data_std_error_relative"] == 0.0:
+            continue  # a ratio of fields held at known values: not estimated
         error = math.log1p(c["error_relative"])
         scores["reported"][name] = error / c["data_std_error_relative"]
         if gn:

@@ -18,6 +18,7 @@ EXAMPLES = """examples:
       --out robot.json --report calibration/
   pectoral-scaling calibrate --logs run1.jsonl --fields drag_coef,moment_coef,fin_force_coef \\
       --out robot.json
+  pectoral-scaling calibrate --logs run1.jsonl --params measured.json --asymmetric --out robot.json
 
 The logs are run logs (docs/run-log.md). robot.json is a parameters file (load_params) for
 pectoral-scaling identify --params, training and deploy. The report folder gets report.json, report.md
@@ -51,6 +52,9 @@ def add_parser(sub) -> None:
     p.add_argument("--fields", default=None,
                    help="comma-separated fields to fit (default: the uncertain ones not given as known: "
                         f"{','.join(defaults.fields)})")
+    p.add_argument("--asymmetric", action="store_true",
+                   help="also fit how the fins differ: the left fin's force relative to the right one's "
+                        "(fin_force_scale_left) and each fin's servo offset (fin_angle_offset_right/left)")
     p.add_argument("--window", type=float, default=defaults.window,
                    help=f"shooting window [s] (default {defaults.window})")
     p.add_argument("--prior-sigma", type=float, default=defaults.prior_sigma,
@@ -77,6 +81,7 @@ def main(args: argparse.Namespace) -> int:
     from pectoral_gym.runlog import RunLogError, read_run_log
     from pectoral_gym.scaling.calibration.fit import CalibrationSettings, calibrate, prior_params
     from pectoral_gym.scaling.calibration.heldout import held_out
+    from pectoral_gym.scaling.calibration.identifiability import ASYMMETRY_FIELDS
     from pectoral_gym.scaling.calibration.report import markdown, not_converged_text, plot_paths, report_dict
 
     if not (args.window > 0 and args.prior_sigma > 0 and args.horizon > 0 and args.max_evaluations > 0):
@@ -91,6 +96,8 @@ def main(args: argparse.Namespace) -> int:
         prior, known_names = prior_params(logs, known)
         fields = tuple(f.strip() for f in args.fields.split(",")) if args.fields else tuple(
             f for f in CalibrationSettings().fields if f not in known_names)
+        if args.asymmetric:
+            fields += tuple(f for f in ASYMMETRY_FIELDS if f not in fields and f not in known_names)
         bad = sorted(set(fields) - set(PARAMS_FIELDS))
         if bad or not fields:
             raise ValueError(f"--fields: unknown FishParams fields {bad}" if bad else "no field left to fit")

@@ -1,7 +1,8 @@
 """The fit: the uncertain FishParams fields from run logs, by windowed shooting and robust least squares.
 
 Unknowns: the log of each fitted field relative to its prior (Table 1 or the user's value; log-parameters
-keep every field's sign and make a relative change the unit), and per window its starting state (the
+keep every field's sign and make a relative change the unit; a fin's servo offset, which may be zero, moves
+by ``theta`` rad instead: ``identifiability.ADDITIVE_FIELDS``), and per window its starting state (the
 nuisances of :mod:`~pectoral_gym.scaling.calibration.windows`). Residuals: the full model's poses minus the
 camera's at every logged frame, divided by the camera noise estimated from the poses and weighted by the
 frame's confidence; plus a weak Gaussian prior on each log-parameter (``prior_sigma``), which only holds
@@ -32,7 +33,12 @@ from pectoral_gym.model.params import FishParams
 from pectoral_gym.model.spec import FULL_FAST, FullSpec
 from pectoral_gym.runlog import RunLog
 from pectoral_gym.scaling.calibration.covariance import gauss_newton_information, window_sandwich_information
-from pectoral_gym.scaling.calibration.identifiability import UNCERTAIN_FIELDS, Identifiability, analyse
+from pectoral_gym.scaling.calibration.identifiability import (
+    ADDITIVE_FIELDS,
+    UNCERTAIN_FIELDS,
+    Identifiability,
+    analyse,
+)
 from pectoral_gym.scaling.calibration.replay import replay_fins, simulate
 from pectoral_gym.scaling.calibration.windows import LogWindows, split_windows
 
@@ -139,9 +145,9 @@ class _Problem:
         return np.concatenate([np.repeat(self.offsets[k] + w.sample_window, 3) for k, w in enumerate(self.windows)])
 
     def params(self, theta: np.ndarray) -> FishParams:
-        """The candidate of log-parameters ``theta`` (the other fields: the prior's)."""
-        return self.prior.replace(**{n: float(v * math.exp(t)) for n, v, t in zip(self.fields, self.values, theta,
-                                                                                   strict=True)})
+        """The candidate of log-parameters ``theta`` (an offset: ``prior + theta`` rad; other fields: the prior's)."""
+        return self.prior.replace(**{n: float(v + t if n in ADDITIVE_FIELDS else v * math.exp(t))
+                                     for n, v, t in zip(self.fields, self.values, theta, strict=True)})
 
     def x0(self, theta: np.ndarray | None = None) -> np.ndarray:
         theta = np.zeros(self.p) if theta is None else theta
@@ -150,7 +156,8 @@ class _Problem:
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Each field within a factor :data:`_FACTOR` of its prior, each start near its first estimate.
 
-        Without them a trial step far from the data can ask the integrator for a fish of absurd stiffness.
+        (An offset stays within ``log(_FACTOR)`` rad of its prior.) Without them a trial step far from the data can
+        ask the integrator for a fish of absurd stiffness.
         """
         x0 = self.x0()  # the log-parameters' bounds are about the prior (0)
         width = np.concatenate([np.full(self.p, math.log(_FACTOR)), np.tile(_START_RANGE, int(self.offsets[-1]))])

@@ -21,8 +21,8 @@ import numpy as np
 
 from pectoral_gym.model.params import FishParams
 
-__all__ = ["COEFFICIENT", "COMBINATIONS", "STRUCTURAL", "UNCERTAIN_FIELDS", "Direction", "Identifiability", "analyse",
-           "combinations", "common_scale"]
+__all__ = ["ADDITIVE_FIELDS", "ASYMMETRY_FIELDS", "COEFFICIENT", "COMBINATIONS", "STRUCTURAL", "UNCERTAIN_FIELDS",
+           "Direction", "Identifiability", "analyse", "combinations", "common_scale", "field_unit"]
 
 #: The FishParams fields a ruler cannot measure: what the calibration fits by default.
 UNCERTAIN_FIELDS = ("added_mass_x", "added_mass_y", "added_inertia", "drag_coef", "lift_coef", "moment_coef",
@@ -37,12 +37,33 @@ COEFFICIENT = {
     "lift_coef": "c2 = rho wetted_area lift_coef / 2",
     "moment_coef": "c4 = moment_coef / J3",
     "fin_force_coef": "k = fin_force_coef rho fin_chord fin_span^3 / 6",
+    "fin_force_scale_left": "k_left = fin_force_scale_left k: the left fin's force over the right one's",
+    "fin_force_scale_right": "k_right = fin_force_scale_right k",
+    "fin_angle_offset_right": "the right fin's actual angle = fin_angle_offset_right + commanded",
+    "fin_angle_offset_left": "the left fin's actual angle = fin_angle_offset_left + commanded",
 }
+#: The asymmetry of a fish whose fins differ, as the calibration fits it (``--asymmetric``): the left fin's force
+#: relative to the right one's (``fin_force_coef`` carries the right fin's, so this is the ratio of the two) and
+#: each fin's servo offset. The servo scales are left out (name them in ``--fields`` to fit them): the logs fix
+#: them, but a scale moves the forces much as the force factor does, so fitting both widens the force ratio's
+#: standard error about tenfold (``docs/calibration.md``, "Fins that differ").
+ASYMMETRY_FIELDS = ("fin_force_scale_left", "fin_angle_offset_right", "fin_angle_offset_left")
+#: Fields fitted as ``prior + theta`` [rad] instead of ``prior x exp(theta)``: an offset may be zero or change sign,
+#: so its standard error is absolute (rad), where the others' are relative.
+ADDITIVE_FIELDS = ("fin_angle_offset_right", "fin_angle_offset_left")
+
+
+def field_unit(name: str) -> str:
+    """How a fitted field's standard error reads: ``"rad"`` (absolute, :data:`ADDITIVE_FIELDS`) or ``"relative"``."""
+    return "rad" if name in ADDITIVE_FIELDS else "relative"
+
 #: Fields the model sees only together: the logs can never separate them (one is fixed to its known value).
 STRUCTURAL = (
     ("body_inertia", "added_inertia", "enter only as J3 = body_inertia - added_inertia (eq. 20)"),
     ("wetted_area", "drag_coef", "enter only as c1 = rho wetted_area drag_coef / 2 (and lift_coef as c2) (eq. 20)"),
     ("fin_force_coef", "fin_chord", "enter only as k = fin_force_coef rho fin_chord fin_span^3 / 6 (eqs. 11, 13)"),
+    ("fin_force_scale_right", "fin_force_scale_left", "with fin_force_coef set the two fins' k only as "
+     "fin_force_coef x fin_force_scale_right and fin_force_coef x fin_force_scale_left (three fields, two forces)"),
 )
 
 
@@ -106,9 +127,10 @@ class Direction:
     common_scale: bool
 
     def formula(self, top: int = 4) -> str:
-        """``+0.71 log drag_coef - 0.70 log added_mass_x`` (the largest weights)."""
+        """``+0.71 log drag_coef - 0.70 log added_mass_x`` (the largest weights; an offset enters as itself, in rad)."""
         items = sorted(self.weights.items(), key=lambda kv: -abs(kv[1]))[:top]
-        return " ".join(f"{'+' if w >= 0 else '-'}{abs(w):.2f} log {n}" for n, w in items if abs(w) >= 0.05)
+        return " ".join(f"{'+' if w >= 0 else '-'}{abs(w):.2f} {'' if n in ADDITIVE_FIELDS else 'log '}{n}"
+                        for n, w in items if abs(w) >= 0.05)
 
 
 @dataclass
@@ -182,7 +204,14 @@ def _standard_errors(info: np.ndarray, prior_sigma: float, grads: np.ndarray,
         eigval = np.maximum(eigval, 1e-300)
         order = np.argsort(eigval)[::-1]
         eigval, eigvec = eigval[order], eigvec[:, order]
-    data_se = np.sqrt(np.sum(eigvec**2 / eigval, axis=1))
+    if scale is None:
+        data_se = np.sqrt(np.sum(eigvec**2 / eigval, axis=1))
+    else:
+        # The scale is exactly unfixed: a field that moves it is unfixed too; one that does not (a fin's force ratio,
+        # an offset) is fixed in the rest, whose inverse is the pseudo-inverse. (The eigen-sum above would mix the
+        # scale's near-zero eigenvalue into every field through rounding-sized eigenvector components.)
+        cov = np.linalg.pinv(0.5 * (info + info.T), rcond=1e-12, hermitian=True)
+        data_se = np.where(np.abs(scale) > 1e-9, np.inf, np.sqrt(np.maximum(np.diag(cov), 0.0)))
     posterior = np.sqrt(np.diag(np.linalg.inv(info + np.eye(p) / prior_sigma**2)))
     return posterior, data_se, combo_se, eigval, eigvec
 
@@ -247,7 +276,8 @@ def analyse(info: np.ndarray, variance: float, fields: tuple[str, ...], prior: F
         if d.identified:
             continue
         why = ("it moves every coefficient the fitted fields enter (" +
-               ", ".join(sorted({COEFFICIENT[n].split(' =')[0] for n in fields if n in COEFFICIENT})) +
+               ", ".join(sorted({COEFFICIENT[n].split(' =')[0] for n in fields
+                                 if any(n in carriers for carriers in _SCALE_CARRIERS)})) +
                ") by the same factor: the motion depends on forces divided by masses, so the logs fix the "
                "ratios and not the common scale; only the fins' own inertia (m_p S_p / 2, eq. 15, known) breaks "
                "the tie, too weakly to see" if d.common_scale else
@@ -257,8 +287,9 @@ def analyse(info: np.ndarray, variance: float, fields: tuple[str, ...], prior: F
                           f"+-{100 * prior_sigma:.0f} % in each log) by the regularisation.")
     for n in fields:
         if not identified[n]:
-            se = 100 * min(data_se[fields.index(n)], 9.99)
-            statements.append(f"{n} ({COEFFICIENT.get(n, n)}) is not identified: +-{se:.1f} % "
+            se = min(data_se[fields.index(n)], 9.99)
+            shown = f"{math.degrees(se):.1f} deg" if n in ADDITIVE_FIELDS else f"{100 * se:.1f} %"
+            statements.append(f"{n} ({COEFFICIENT.get(n, n)}) is not identified: +-{shown} "
                               "from the logs alone; its value leans on the prior.")
     fitted = params_of(theta)
     for (name, (meaning, _)), se in zip(COMBINATIONS.items(), combo_se, strict=True):

@@ -14,7 +14,7 @@ import numpy as np
 from pectoral_gym.model.params import FishParams
 from pectoral_gym.scaling.calibration.fit import Calibration
 from pectoral_gym.scaling.calibration.heldout import HeldOutRun
-from pectoral_gym.scaling.calibration.identifiability import COMBINATIONS, combinations
+from pectoral_gym.scaling.calibration.identifiability import COMBINATIONS, combinations, field_unit
 from pectoral_gym.scaling.calibration.replay import simulate
 
 __all__ = ["markdown", "not_converged_text", "plot_paths", "report_dict"]
@@ -40,12 +40,14 @@ def report_dict(cal: Calibration, held_out: list[HeldOutRun] | None = None,
     ident = cal.identifiability
     fields = {}
     for name in cal.fields:
+        unit = field_unit(name)  # an offset's standard error and error are in rad, the others' relative
         entry = {"value": getattr(cal.params, name), "prior": getattr(cal.prior, name),
-                 "std_error_relative": ident.std_error[name], "data_std_error_relative": ident.data_std_error[name],
+                 f"std_error_{unit}": ident.std_error[name], f"data_std_error_{unit}": ident.data_std_error[name],
                  "identified": ident.identified[name]}
         if truth is not None:
             entry["truth"] = getattr(truth, name)
-            entry["error_relative"] = getattr(cal.params, name) / getattr(truth, name) - 1.0
+            entry[f"error_{unit}"] = (getattr(cal.params, name) - getattr(truth, name) if unit == "rad"
+                                      else getattr(cal.params, name) / getattr(truth, name) - 1.0)
         fields[name] = entry
     combos = {}
     fitted, true = combinations(cal.params), combinations(truth) if truth is not None else None
@@ -88,6 +90,11 @@ def not_converged_text(nfev: int, remaining: float) -> str:
             "or longer logs.")
 
 
+def _percent(value: float) -> str:
+    """A relative standard error in per cent: one decimal, two below 1 % (a force ratio fixed to 0.05 %)."""
+    return f"{100 * value:.1f} %" if value >= 0.01 else f"{100 * value:.2f} %"
+
+
 def markdown(report: dict[str, Any]) -> str:
     """``report.md``: the fitted values, standard errors, identifiability and the held-out check."""
     lines = ["# Calibration report", "",
@@ -101,10 +108,17 @@ def markdown(report: dict[str, Any]) -> str:
              + (" truth | error |" if any("truth" in f for f in report["fields"].values()) else ""),
              "|---|---|---|---|---|---|" + ("---|---|" if any("truth" in f for f in report["fields"].values()) else "")]
     for name, f in report["fields"].items():
-        row = (f"| {name} | {f['value']:.5g} | {f['prior']:.5g} | {100 * f['std_error_relative']:.1f} % | "
-               f"{100 * min(f['data_std_error_relative'], 9.99):.1f} % | {'yes' if f['identified'] else 'no'} |")
-        if "truth" in f:
-            row += f" {f['truth']:.5g} | {100 * f['error_relative']:+.1f} % |"
+        if "std_error_rad" in f:  # an offset: absolute, in degrees
+            row = (f"| {name} | {f['value']:.5g} | {f['prior']:.5g} | {math.degrees(f['std_error_rad']):.2f} deg | "
+                   f"{math.degrees(min(f['data_std_error_rad'], 9.99)):.2f} deg | "
+                   f"{'yes' if f['identified'] else 'no'} |")
+            if "truth" in f:
+                row += f" {f['truth']:.5g} | {math.degrees(f['error_rad']):+.2f} deg |"
+        else:
+            row = (f"| {name} | {f['value']:.5g} | {f['prior']:.5g} | {_percent(f['std_error_relative'])} | "
+                   f"{_percent(min(f['data_std_error_relative'], 9.99))} | {'yes' if f['identified'] else 'no'} |")
+            if "truth" in f:
+                row += f" {f['truth']:.5g} | {100 * f['error_relative']:+.1f} % |"
         lines.append(row)
     lines += ["", "## What the logs fix: force-to-inertia ratios", "",
               "| combination | meaning | value | s.e. (logs alone) |"
