@@ -6,7 +6,7 @@ from pectoral_gym.scaling.calibration.benchmark import build_parser
 
 
 def _seeds(*argv: str) -> list[int]:
-    return [seed for group in build_parser().parse_args(list(argv)).seeds for seed in group]
+    return build_parser().parse_args(list(argv)).seeds
 
 
 def test_seeds_and_inclusive_ranges_mix():

@@ -131,29 +131,16 @@ def summary_line(s: dict) -> str:
                    "; every fit converged") + f"; fit wall time <= {s['wall_time_max_s']:.0f} s"
 
 
-def _seed_range(text: str) -> list[int]:
-    """``"7"`` -> ``[7]``, ``"301-335"`` -> ``[301, ..., 335]`` (argparse type of ``--seeds``)."""
-    low, sep, high = text.partition("-")
-    try:
-        first, last = int(low), int(high if sep else low)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a seed or a range A-B: {text!r}") from None
-    if first < 0 or last < first:
-        raise argparse.ArgumentTypeError(f"a range A-B needs 0 <= A <= B: {text!r}")
-    return list(range(first, last + 1))
-
-
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser of ``python -m pectoral_gym.scaling.calibration.benchmark``."""
-    from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
+    from pectoral_gym.tools.cli_common import HelpFormatter, add_seeds_argument, examples, prog_name
 
     p = argparse.ArgumentParser(
         prog=prog_name(None, "pectoral_gym.scaling.calibration.benchmark"), description=__doc__,
         formatter_class=HelpFormatter,
         epilog=examples("python -m pectoral_gym.scaling.calibration.benchmark --seeds 101 102 --minutes 1",
                         "python -m pectoral_gym.scaling.calibration.benchmark --camera degraded --out cal_bench"))
-    p.add_argument("--seeds", type=_seed_range, nargs="+", default=[[101, 102, 103, 104, 105]], metavar="SEED",
-                   help="robots, one per seed: seeds, or ranges A-B (both ends included); default 101-105")
+    add_seeds_argument(p, [101, 102, 103, 104, 105], "robots, one per seed (default 101-105)")
     p.add_argument("--camera", choices=sorted(CAMERAS), default="default",
                    help="default: 1 mm, 0.5 deg, no drops; degraded: 5 mm, 2 deg, 10 %% dropped frames")
     p.add_argument("--minutes", type=float, default=3.0, help="logged robot time to fit [min] (default 3)")
@@ -176,7 +163,7 @@ def main(argv: list[str] | None = None) -> int:
     rows = []
     print(f"{'seed':>5} {'wall s':>7} {'worst field %':>14} {'worst ratio %':>14} {'held-out median %':>18} "
           f"{'(prior) %':>10} {'worst |z|':>10}")
-    for seed in [seed for group in args.seeds for seed in group]:
+    for seed in args.seeds:
         r = run_seed(seed, args.out, args.minutes, CAMERAS[args.camera], args.held_out,
                      tick_aligned=not args.unaligned)
         rows.append(r)
