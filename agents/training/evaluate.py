@@ -36,6 +36,7 @@ from pectoral_gym.agents.training.policy import BatchController, Controller
 from pectoral_gym.agents.training.results import EvaluationResult, format_table, jsonable, plot_trajectories, write_json
 from pectoral_gym.envs.layout import ACTION_SIZE
 from pectoral_gym.envs.observation import OBS_POSITION, OBS_SIZE, decode
+from pectoral_gym.model.jit import PARALLEL_MIN_ITEMS
 from pectoral_gym.model.spec import ENV_OPTIONS
 from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
 from pectoral_gym.versions import LATEST_FULL
@@ -55,7 +56,11 @@ __all__ = [
 # Relative half-widths of the per-episode parameter randomisation used by ``--randomize``.
 DEFAULT_RANDOMIZATION = {"body_mass": 0.1, "body_inertia": 0.2, "drag_coef": 0.2, "lift_coef": 0.2,
                          "moment_coef": 0.2, "fin_force_coef": 0.2}
-MAX_BATCH = 128  # vector-env slots of one evaluation
+# Vector-env slots of one evaluation: the largest batch the vector env steps without threads. An evaluation is a
+# few thousand steps, too short for the threads to pay for their wake-ups: with other jobs on the 2-core machine
+# (load average 5), 100 episodes on 100 slots (threaded) took 1.3-3.3 s against 0.17-0.19 s on 50 slots, with the
+# same results; in the demo at load 2-3.5, 0.13-1.3 s on 100 slots against 0.09-0.16 s on 63.
+MAX_BATCH = PARALLEL_MIN_ITEMS - 1
 QUICK_EPISODES = 2  # --quick: episodes of a smoke run
 # Settings of one model only (pectoral_gym.model.spec.ENV_OPTIONS, the one table): a policy trained on one
 # model keeps its other env arguments on the other.
@@ -119,7 +124,7 @@ def evaluate(controller: ControllerLike, env_id: str, n_episodes: int = 100, see
         env_kwargs: Environment arguments (``task``, ``randomize``, reward weights, ...). A policy trained
             with the fin block (an ``obs_size`` of 27, :class:`pectoral_gym.agents.training.policy.SB3Controller`) gets
             ``observe_fins=True`` unless ``env_kwargs`` sets it.
-        n_envs: Vector-env slots (default: ``min(n_episodes, 128)``, 1 for a plain controller).
+        n_envs: Vector-env slots (default: ``min(n_episodes, MAX_BATCH)``, 63, 1 for a plain controller).
         confidence: Confidence level of the bootstrap intervals.
         progress: Show a tqdm progress bar over episodes.
 
@@ -284,7 +289,8 @@ def build_parser() -> argparse.ArgumentParser:
                              "full model the shipped K, identified for Table 1's fish)")
     parser.add_argument("--episodes", type=int, default=100, help="number of episodes")
     parser.add_argument("--seed", type=int, default=0, help="episode k is reset with seed + k")
-    parser.add_argument("--n-envs", type=int, help="vector-env slots (default: up to 128)")
+    parser.add_argument("--n-envs", type=int, help="vector-env slots (default: up to 63, the most the vector env steps "
+                        "without threads)")
     parser.add_argument("--algo", help="algorithm of a bare .zip if it cannot be read from it")
     parser.add_argument("--out", metavar="DIR", help="output folder (default: runs/eval/<controller>_<env>_<task>...)")
     parser.add_argument("--plot-episodes", type=int, default=12, help="episodes drawn in the trajectory plot")

@@ -85,14 +85,14 @@ class FishVecEnv(VecEnv):
         self._actions = None
         dones = terminated | truncated
         time_limit = truncated & ~terminated
-        infos = _rows(info, self.num_envs)
+        infos = _rows(info, time_limit)
         if dones.any():  # the finished envs' own info, and their last observation
-            final = _rows(info["final_info"], self.num_envs)
-            for i in np.flatnonzero(dones):
-                infos[i] = final[i]
-                infos[i]["terminal_observation"] = info["final_obs"][i]
-        for i in range(self.num_envs):
-            infos[i]["TimeLimit.truncated"] = bool(time_limit[i])
+            finished = np.flatnonzero(dones)
+            final_obs = info["final_obs"]
+            for i, row in zip(finished, _rows(info["final_info"], time_limit, finished), strict=True):
+                row["terminal_observation"] = final_obs[i]
+                row["TimeLimit.truncated"] = row.pop("TimeLimit.truncated")  # last, as in every other row
+                infos[i] = row
         return obs, rewards.astype(np.float32), dones, infos
 
     def close(self) -> None:
@@ -133,11 +133,18 @@ class FishVecEnv(VecEnv):
         return [None] * self.num_envs
 
 
-def _rows(info: dict[str, Any], n: int) -> list[dict[str, Any]]:
-    """One dict per env of the array entries of a vector ``info`` (masks and nested entries dropped)."""
+def _rows(info: dict[str, Any], time_limit: np.ndarray, envs: np.ndarray | None = None) -> list[dict[str, Any]]:
+    """One dict per env (of ``envs``, default all) of the array entries of a vector ``info``.
+
+    Masks and nested entries are dropped; each dict ends with ``"TimeLimit.truncated"`` from ``time_limit``
+    (``(num_envs,)`` bool). Built column-wise, as lists: this runs once per step of every env (SB3 wants a dict each).
+    """
     keys = [k for k, v in info.items() if not k.startswith("_") and isinstance(v, np.ndarray) and v.dtype != object]
-    columns = [info[k].tolist() for k in keys]
-    return [dict(zip(keys, row, strict=True)) for row in zip(*columns, strict=True)] if keys else [{} for _ in range(n)]
+    keys.append("TimeLimit.truncated")
+    columns = [info[k] for k in keys[:-1]] + [time_limit]
+    if envs is not None:
+        columns = [column[envs] for column in columns]
+    return [dict(zip(keys, row, strict=True)) for row in zip(*(column.tolist() for column in columns), strict=True)]
 
 
 def env_arguments(env_kwargs: dict[str, Any] | None) -> dict[str, Any]:
