@@ -12,17 +12,21 @@ be running in the span (``docs/guide/safety.md``, "The blind rule and the comman
   latched; the robot takes each command between its send and its acknowledgement, so its latched patterns lie
   in the box (componentwise hull) of the replay's over the span widened by a round trip and of the commands
   sent since (the rate rule moves a latched pattern towards the command, never past it; the clip only
-  lengthens a period, a slower fin);
-* a half-stroke of a pattern in that box, steady or transitional (from a turning point of one pattern in the
-  box to one of another, with the new one's duration), has a peak rate of at most :func:`box_rate`, and never
-  above ``max_speed`` (the firmware stretches the period);
-* what the PC does not know gets the fastest gain: a fin that was still (after an arm, a stop, a lease's end,
-  a possible watchdog halt) latches the next command whole from wherever it stopped, so until that command's
-  first half-stroke (a power stroke) is over only ``max_speed`` bounds it.
+  lengthens a period, a slower fin), the commands as quantised on the wire;
+* a half-stroke of a pattern in that box, steady or transitional (from a turning point of the pattern run before,
+  a lower one for a power stroke and an upper one for a recovery, to one of the new pattern, in the new one's
+  duration), has a peak rate of at most :func:`box_rate`, never above ``max_speed`` (the firmware stretches the
+  period), and lasts at least :func:`box_half_stroke`; a half-stroke in progress at the span's start began up to
+  its duration earlier, from a turning point of the pattern run before it, so the box reaches back by the longest
+  half-stroke of its patterns;
+* a fin that may have been still (after an arm, a stop, a lease's end, a possible watchdog halt) latches the next
+  command whole and swings from wherever it stopped, an angle within the servo range: until that first power
+  stroke is over its peak rate is at most :func:`first_stroke`'s (the farthest end of the servo range to
+  ``bias + A`` in the power stroke's time, at most ``max_speed``), and any command sent since may be the one.
 
-One fin's force is at most ``k w^2 + I_p sqrt((pi w / d_min)^2 + w^4)`` for a peak rate ``w``
-(:func:`fin_force_bound`, ``SpeedBound``'s with ``max_speed`` replaced by ``w``), and the fish's speed grows at
-most at the two fins' sum over ``min(m1, m2)``.
+One fin's force is at most ``k w^2 + I_p sqrt((pi w / d)^2 + w^4)`` for a peak rate ``w`` and half-strokes of at
+least ``d`` (:func:`fin_force_bound`, ``SpeedBound``'s with ``max_speed`` replaced by ``w`` and the servos'
+shortest half-stroke by ``d``), and the fish's speed grows at most at the two fins' sum over ``min(m1, m2)``.
 """
 
 from __future__ import annotations
@@ -63,23 +67,28 @@ def fin_force_bound(params: FishParams, limits: ServoLimits, rate: float, shorte
     return params.fin_drag_constant * w * w + params.fin_inertia_constant * math.hypot(w * w, math.pi * w / d_min)
 
 
-def box_rate(patterns: np.ndarray, limits: ServoLimits) -> np.ndarray:
+def box_rate(patterns: np.ndarray, limits: ServoLimits, sources: np.ndarray | None = None) -> np.ndarray:
     """``(2,)`` the highest peak rate [rad/s] of any half-stroke of fins running patterns in the box of ``patterns``.
 
-    ``patterns`` ``(n, 2, 4)`` (clipped, ``bias, A, T_p, zeta``). A steady half-stroke swings ``2 A`` in
-    ``T_p / (zeta + 1)`` (power) or ``zeta T_p / (zeta + 1)`` (recovery): peak ``pi A (zeta + 1) / T_p`` or
-    ``pi A (1 + 1 / zeta) / T_p``. A transitional one swings from a turning point of one pattern to one of
-    another, at most ``bias_hi - bias_lo + 2 A_hi``, in the new pattern's duration. Capped at ``max_speed``.
+    ``patterns`` ``(n, 2, 4)`` (clipped, ``bias, A, T_p, zeta``); ``sources`` ``(m, 2, 4)``: the patterns whose
+    turning points a half-stroke may start from (default ``patterns``; a half-stroke in progress at a window's start
+    began at a turning point of an older one). A half-stroke, steady or transitional, goes from a turning point of
+    the pattern run before to one of the new pattern: a power stroke from a lower one (``bias - A``) to
+    ``bias + A`` in ``T_p / (zeta + 1)``, a recovery from an upper one to ``bias - A`` in ``zeta T_p / (zeta + 1)``
+    (the strokes alternate); its peak rate is ``pi |swing| / (2 d)`` (a half-cosine). Capped at ``max_speed``.
     """
     p = np.asarray(patterns, dtype=float).reshape(-1, 2, 4)
+    src = p if sources is None else np.concatenate([p, np.asarray(sources, dtype=float).reshape(-1, 2, 4)])
     lo, hi = p.min(axis=0), p.max(axis=0)
-    bias_span, amp, period = hi[:, 0] - lo[:, 0], hi[:, 1], lo[:, 2]
-    z_lo, z_hi = lo[:, 3], hi[:, 3]
-    steady = math.pi * amp * np.maximum(z_hi + 1.0, 1.0 + 1.0 / z_lo) / period
-    swing = bias_span + 2.0 * amp
-    power_d, recovery_d = period / (z_hi + 1.0), period * z_lo / (z_lo + 1.0)
-    transition = math.pi * swing / (2.0 * np.minimum(power_d, recovery_d))
-    return np.minimum(np.maximum(steady, transition), limits.max_speed)
+    s_lo, s_hi = src.min(axis=0), src.max(axis=0)
+    power_swing = np.maximum(hi[:, 0] + hi[:, 1] - (s_lo[:, 0] - s_hi[:, 1]),
+                             (s_hi[:, 0] - s_lo[:, 1]) - (lo[:, 0] + lo[:, 1]))
+    recovery_swing = np.maximum((s_hi[:, 0] + s_hi[:, 1]) - (lo[:, 0] - hi[:, 1]),
+                                (hi[:, 0] - lo[:, 1]) - (s_lo[:, 0] + s_lo[:, 1]))
+    power_d, recovery_d = lo[:, 2] / (hi[:, 3] + 1.0), lo[:, 2] * lo[:, 3] / (lo[:, 3] + 1.0)
+    peak = np.maximum(math.pi * np.maximum(power_swing, 0.0) / (2.0 * power_d),
+                      math.pi * np.maximum(recovery_swing, 0.0) / (2.0 * recovery_d))
+    return np.minimum(peak, limits.max_speed)
 
 
 def box_half_stroke(patterns: np.ndarray) -> np.ndarray:
@@ -226,9 +235,10 @@ class CommandedGain:
             whole = np.stack([c[1] for c in since])
             first_rate, first_d = first_stroke(whole, self.limits)
             return np.maximum(box_rate(whole, self.limits), first_rate), np.minimum(box_half_stroke(whole), first_d)
-        # A half-stroke in progress at t0 swings from a turning point of the pattern run before its latch: the box
-        # reaches back by the longest half-stroke that can be in progress (of a pattern in the box from t0 less a
-        # round trip), so that pattern is in it too.
+        # A half-stroke in progress at t0 was latched up to its duration before, from a turning point of the pattern
+        # run before it: the box reaches back by the longest half-stroke of a pattern in the box from t0 less a
+        # round trip (without it, the robot's fins ran half-strokes faster and shorter than the box allowed:
+        # tests/test_safety_blind.py).
         box = self._box(t0 - round_trip - 0.05, since)
         box = self._box(t0 - round_trip - 0.05 - float(longest_half_stroke(box).max()), since)
         return box_rate(box, self.limits), box_half_stroke(box)
