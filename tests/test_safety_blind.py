@@ -281,3 +281,27 @@ def test_a_run_of_dropped_frames_with_gentle_fins_is_not_a_stop_but_a_dead_camer
             assert sup.watch.reason.startswith("no frames from the camera")
         finally:
             sup.close()
+
+
+def test_drops_during_the_first_gentle_stroke_after_the_arm_are_not_a_stop_but_a_dead_camera_is():
+    # The all-of row's early stops: the fins were still at the arm, the first command (a gentle stroke) was latched
+    # whole, and 5 dropped frames behind 0.2 s of latency left the pose 0.37 s old during its first power stroke.
+    # The servos' fastest gain (what the rule gave every first stroke) stops the fish; the stroke's own cannot.
+    x = TANK_LENGTH - 0.36
+    sup, now = _blind_supervisor(GENTLE)
+    try:
+        sup.gain.reset(now - 0.5)  # armed 0.5 s ago, fins still; one command since, acknowledged 10 ms after its send
+        sup.gain.command(now - 0.45, GENTLE, lambda: now - 0.44)
+        sup.watch.last_seen, sup.pose = now - 0.37, (x, 0.575, 0.0)
+        sup._last_read = now - 0.17
+        sup._read_times.extend(np.linspace(now - 0.8, now - 0.17, 20))
+        sup.velocity, sup.spread = (0.02, 0.0), (0.005, 0.005)
+        unseen = 0.37 - 0.15 - 0.2
+        assert sup.geofence.breached(x, 0.575, 0.0, 0.02, 0.0, age=0.37 + sup._radio_delay(), spread=(0.01, 0.01),
+                                     gain=sup.bound.accel * unseen)  # the servo limit's gain: a stop
+        assert sup.poll() == ""
+        sup.watch.last_seen, sup._last_read = now - 0.51, now - 0.31  # a dead camera: the tracking timeout
+        assert sup.poll() == "tracking_lost"
+        assert sup.watch.reason.startswith("no frames from the camera")
+    finally:
+        sup.close()
