@@ -289,7 +289,8 @@ def unseen_reason(now: float, seen: float, last_read: float, read_since_sighting
     counts = f"{recent_reads} frames arrived in the last second, one every {frame_period:.3f} s expected"
     if gap > reaction_time:
         return f"no frames from the camera for {gap:.2f} s ({gap / frame_period:.1f} frame periods; {counts}): " \
-               f"the last pose is {old:.2f} s old, more than {budget}"
+               f"the last pose is {old:.2f} s old, more than {budget}; the fastest motion the commanded fins allow " \
+               "since could reach the stopping band"
     if not read_since_sighting:
         return f"camera frames arrive {last_read - seen:.2f} s after their capture and none came in the {gap:.2f} s " \
                f"since ({counts}): the last pose is {old:.2f} s old, more than {budget}; the fastest motion the " \
