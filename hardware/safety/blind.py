@@ -12,17 +12,21 @@ be running in the span (``docs/guide/safety.md``, "The blind rule and the comman
   latched; the robot takes each command between its send and its acknowledgement, so its latched patterns lie
   in the box (componentwise hull) of the replay's over the span widened by a round trip and of the commands
   sent since (the rate rule moves a latched pattern towards the command, never past it; the clip only
-  lengthens a period, a slower fin);
-* a half-stroke of a pattern in that box, steady or transitional (from a turning point of one pattern in the
-  box to one of another, with the new one's duration), has a peak rate of at most :func:`box_rate`, and never
-  above ``max_speed`` (the firmware stretches the period);
-* what the PC does not know gets the fastest gain: a fin that was still (after an arm, a stop, a lease's end,
-  a possible watchdog halt) latches the next command whole from wherever it stopped, so until that command's
-  first half-stroke (a power stroke) is over only ``max_speed`` bounds it.
+  lengthens a period, a slower fin), the commands as quantised on the wire;
+* a half-stroke of a pattern in that box, steady or transitional (from a turning point of the pattern run before,
+  a lower one for a power stroke and an upper one for a recovery, to one of the new pattern, in the new one's
+  duration), has a peak rate of at most :func:`box_rate`, never above ``max_speed`` (the firmware stretches the
+  period), and lasts at least :func:`box_half_stroke`; a half-stroke in progress at the span's start began up to
+  its duration earlier, from a turning point of the pattern run before it, so the box reaches back by the longest
+  half-stroke of its patterns;
+* a fin that may have been still (after an arm, a stop, a lease's end, a possible watchdog halt) latches the next
+  command whole and swings from wherever it stopped, an angle within the servo range: until that first power
+  stroke is over its peak rate is at most :func:`first_stroke`'s (the farthest end of the servo range to
+  ``bias + A`` in the power stroke's time, at most ``max_speed``), and any command sent since may be the one.
 
-One fin's force is at most ``k w^2 + I_p sqrt((pi w / d_min)^2 + w^4)`` for a peak rate ``w``
-(:func:`fin_force_bound`, ``SpeedBound``'s with ``max_speed`` replaced by ``w``), and the fish's speed grows at
-most at the two fins' sum over ``min(m1, m2)``.
+One fin's force is at most ``k w^2 + I_p sqrt((pi w / d)^2 + w^4)`` for a peak rate ``w`` and half-strokes of at
+least ``d`` (:func:`fin_force_bound`, ``SpeedBound``'s with ``max_speed`` replaced by ``w`` and the servos'
+shortest half-stroke by ``d``), and the fish's speed grows at most at the two fins' sum over ``min(m1, m2)``.
 """
 
 from __future__ import annotations
@@ -35,12 +39,12 @@ import numpy as np
 
 from pectoral_gym.model import strokes
 from pectoral_gym.model.finreplay import FinReplay
-from pectoral_gym.model.finrules import FirmwareConfig
+from pectoral_gym.model.finrules import FirmwareConfig, wire_beats
 from pectoral_gym.model.params import FishParams, body_coefficients
 from pectoral_gym.model.servo import ServoLimits, clip_beats
 
-__all__ = ["CommandedGain", "box_rate", "fin_force_bound", "ls_velocity", "shortest_half_stroke",
-           "unseen_reason"]
+__all__ = ["CommandedGain", "box_half_stroke", "box_rate", "fin_force_bound", "first_stroke", "longest_half_stroke",
+           "ls_velocity", "shortest_half_stroke", "unseen_reason"]
 
 _MIN_POSES, _MIN_SPAN = 3, 0.1  # fewer poses, or a shorter span [s]: no velocity estimate (the physical bound rules)
 
@@ -49,34 +53,77 @@ def shortest_half_stroke(limits: ServoLimits) -> float:
     return limits.period_min * min(limits.ratio_min / (limits.ratio_min + 1.0), 1.0 / (limits.ratio_max + 1.0))
 
 
-def fin_force_bound(params: FishParams, limits: ServoLimits, rate: float) -> float:
+def fin_force_bound(params: FishParams, limits: ServoLimits, rate: float, shortest: float | None = None) -> float:
     """The largest force [N] one fin exerts on the body while its peak rate is ``rate`` [rad/s] (eqs. 13-17).
 
     ``|F_n| = k g'^2`` plus the fin's inertia ``I_p sqrt(g''^2 + g'^4)``, with ``|g''| <= pi |g'|_peak / d`` for a
-    half-cosine stroke of duration ``d`` at least :func:`shortest_half_stroke`.
+    half-cosine stroke of duration ``d``: at least ``shortest`` [s] (the fins' shortest half-stroke, when known),
+    never less than :func:`shortest_half_stroke`.
     """
     w = float(rate)
     d_min = shortest_half_stroke(limits)
+    if shortest is not None:
+        d_min = max(float(shortest), d_min)
     return params.fin_drag_constant * w * w + params.fin_inertia_constant * math.hypot(w * w, math.pi * w / d_min)
 
 
-def box_rate(patterns: np.ndarray, limits: ServoLimits) -> np.ndarray:
+def box_rate(patterns: np.ndarray, limits: ServoLimits, sources: np.ndarray | None = None) -> np.ndarray:
     """``(2,)`` the highest peak rate [rad/s] of any half-stroke of fins running patterns in the box of ``patterns``.
 
-    ``patterns`` ``(n, 2, 4)`` (clipped, ``bias, A, T_p, zeta``). A steady half-stroke swings ``2 A`` in
-    ``T_p / (zeta + 1)`` (power) or ``zeta T_p / (zeta + 1)`` (recovery): peak ``pi A (zeta + 1) / T_p`` or
-    ``pi A (1 + 1 / zeta) / T_p``. A transitional one swings from a turning point of one pattern to one of
-    another, at most ``bias_hi - bias_lo + 2 A_hi``, in the new pattern's duration. Capped at ``max_speed``.
+    ``patterns`` ``(n, 2, 4)`` (clipped, ``bias, A, T_p, zeta``); ``sources`` ``(m, 2, 4)``: the patterns whose
+    turning points a half-stroke may start from (default ``patterns``; a half-stroke in progress at a window's start
+    began at a turning point of an older one). A half-stroke, steady or transitional, goes from a turning point of
+    the pattern run before to one of the new pattern: a power stroke from a lower one (``bias - A``) to
+    ``bias + A`` in ``T_p / (zeta + 1)``, a recovery from an upper one to ``bias - A`` in ``zeta T_p / (zeta + 1)``
+    (the strokes alternate); its peak rate is ``pi |swing| / (2 d)`` (a half-cosine). Capped at ``max_speed``.
+    """
+    p = np.asarray(patterns, dtype=float).reshape(-1, 2, 4)
+    src = p if sources is None else np.concatenate([p, np.asarray(sources, dtype=float).reshape(-1, 2, 4)])
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    s_lo, s_hi = src.min(axis=0), src.max(axis=0)
+    power_swing = np.maximum(hi[:, 0] + hi[:, 1] - (s_lo[:, 0] - s_hi[:, 1]),
+                             (s_hi[:, 0] - s_lo[:, 1]) - (lo[:, 0] + lo[:, 1]))
+    recovery_swing = np.maximum((s_hi[:, 0] + s_hi[:, 1]) - (lo[:, 0] - hi[:, 1]),
+                                (hi[:, 0] - lo[:, 1]) - (s_lo[:, 0] + s_lo[:, 1]))
+    power_d, recovery_d = lo[:, 2] / (hi[:, 3] + 1.0), lo[:, 2] * lo[:, 3] / (lo[:, 3] + 1.0)
+    peak = np.maximum(math.pi * np.maximum(power_swing, 0.0) / (2.0 * power_d),
+                      math.pi * np.maximum(recovery_swing, 0.0) / (2.0 * recovery_d))
+    return np.minimum(peak, limits.max_speed)
+
+
+def box_half_stroke(patterns: np.ndarray) -> np.ndarray:
+    """``(2,)`` the shortest half-stroke [s] of fins running patterns in the box of ``patterns`` ``(n, 2, 4)``.
+
+    Power ``T_p / (zeta + 1)``, recovery ``zeta T_p / (zeta + 1)``: at least ``T_lo / (zeta_hi + 1)`` and
+    ``T_lo zeta_lo / (zeta_lo + 1)``; a transitional half-stroke takes the new pattern's duration, and the firmware's
+    stretches only lengthen a period.
     """
     p = np.asarray(patterns, dtype=float).reshape(-1, 2, 4)
     lo, hi = p.min(axis=0), p.max(axis=0)
-    bias_span, amp, period = hi[:, 0] - lo[:, 0], hi[:, 1], lo[:, 2]
-    z_lo, z_hi = lo[:, 3], hi[:, 3]
-    steady = math.pi * amp * np.maximum(z_hi + 1.0, 1.0 + 1.0 / z_lo) / period
-    swing = bias_span + 2.0 * amp
-    power_d, recovery_d = period / (z_hi + 1.0), period * z_lo / (z_lo + 1.0)
-    transition = math.pi * swing / (2.0 * np.minimum(power_d, recovery_d))
-    return np.minimum(np.maximum(steady, transition), limits.max_speed)
+    return np.minimum(lo[:, 2] / (hi[:, 3] + 1.0), lo[:, 2] * lo[:, 3] / (lo[:, 3] + 1.0))
+
+
+def longest_half_stroke(patterns: np.ndarray) -> np.ndarray:
+    """``(2,)`` the longest half-stroke [s] of fins running patterns in the box of ``patterns`` ``(n, 2, 4)``."""
+    p = np.asarray(patterns, dtype=float).reshape(-1, 2, 4)
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    return np.maximum(hi[:, 2] / (lo[:, 3] + 1.0), hi[:, 2] * hi[:, 3] / (hi[:, 3] + 1.0))
+
+
+def first_stroke(commands: np.ndarray, limits: ServoLimits) -> tuple[np.ndarray, np.ndarray]:
+    """``(2,)`` peak rate [rad/s] and ``(2,)`` shortest duration [s] of a still fin's first half-stroke.
+
+    A still fin latches a command whole, at once, and swings with a power stroke from wherever it stopped (an angle
+    within the servo range) to ``bias + A`` in ``T_p / (zeta + 1)``, the period stretched if that would exceed
+    ``max_speed`` (:func:`pectoral_gym.model.finrules.stretch_transition`); a half-cosine, so its peak rate is
+    ``pi |swing| / (2 d)``. Over every command of ``commands`` ``(n, 2, 4)`` (clipped) that may be the one latched.
+    """
+    p = np.asarray(commands, dtype=float).reshape(-1, 2, 4)
+    to = p[..., 0] + p[..., 1]
+    swing = np.maximum(limits.angle_max - to, to - limits.angle_min)
+    duration = p[..., 2] / (p[..., 3] + 1.0)
+    rate = np.minimum(math.pi * swing / (2.0 * duration), limits.max_speed)
+    return rate.max(axis=0), duration.min(axis=0)
 
 
 def _first_power_stroke(beats: np.ndarray, limits: ServoLimits) -> float:
@@ -136,7 +183,9 @@ class CommandedGain:
         """
         if not math.isfinite(self._still):
             return  # never reset: accel() gives the full gain
-        clipped = clip_beats(beats, self.limits)[0]
+        # What the robot runs: the pattern as quantised on the wire (a period a few ms shorter, a peak rate that much
+        # higher), clipped again by the firmware.
+        clipped = clip_beats(wire_beats(clip_beats(beats, self.limits)[0]), self.limits)[0]
         if self._commands and np.array_equal(self._commands[-1][1], clipped) and self._commands[-1][0] > self._still:
             return  # a renewal of the same command: nothing new can be latched
         self._run(t)
@@ -157,25 +206,51 @@ class CommandedGain:
 
         ``round_trip`` [s]: the most a command takes to reach the robot (the link's round trip).
         """
-        if not math.isfinite(self._still):
+        strokes_bound = self.strokes(t0, now, t1, round_trip)
+        if strokes_bound is None:
             return self.full  # nothing known of the fins
+        rates, shortest = strokes_bound
+        return sum(fin_force_bound(self.params, self.limits, w, d) for w, d in zip(rates, shortest, strict=True)) \
+            / self.mass
+
+    def strokes(self, t0: float, now: float, t1: float, round_trip: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(2,)`` the highest peak rate [rad/s] and ``(2,)`` the shortest half-stroke [s] of the fins in ``[t0, t1]``.
+
+        ``None``: nothing known (never reset). Fins that stay still (no command since the stop) give rate 0.
+        """
+        if not math.isfinite(self._still):
+            return None
         since = [c for c in self._commands if self._still <= c[0] <= t1]
         if not since:
-            return 0.0
+            return np.zeros(2), np.full(2, math.inf)
         first = since[0]
         ack = first[2]() if first[2] is not None else first[0]  # a link that does not tell: taken when sent
         arrival = now if ack is None else max(ack, first[0])
-        if arrival + _first_power_stroke(first[1], self.limits) >= t0:
-            return self.full  # the first command after a stop is latched whole, from wherever the fin stopped
         self._run(now)
-        start = t0 - round_trip - 0.05
+        if arrival + _first_power_stroke(first[1], self.limits) >= t0:
+            # The first command after a stop is latched whole, from wherever the fin stopped: its first power stroke
+            # from any angle of the servo range (of any command sent since: a lost one's successor may be the first
+            # taken), then patterns in the box of the commands sent since (the rate rule moves each latched
+            # pattern from one in the box towards a command, so never out of it).
+            whole = np.stack([c[1] for c in since])
+            first_rate, first_d = first_stroke(whole, self.limits)
+            return np.maximum(box_rate(whole, self.limits), first_rate), np.minimum(box_half_stroke(whole), first_d)
+        # A half-stroke in progress at t0 was latched up to its duration before, from a turning point of the pattern
+        # run before it: the box reaches back by the longest half-stroke of a pattern in the box from t0 less a
+        # round trip (without it, the robot's fins ran half-strokes faster and shorter than the box allowed:
+        # tests/test_safety_blind.py).
+        box = self._box(t0 - round_trip - 0.05, since)
+        box = self._box(t0 - round_trip - 0.05 - float(longest_half_stroke(box).max()), since)
+        return box_rate(box, self.limits), box_half_stroke(box)
+
+    def _box(self, start: float, since: list) -> np.ndarray:
+        """``(n, 2, 4)``: the replay's patterns from ``start`` [s] on, the commands since, the one followed then."""
         patterns = [p for t, p in self._latched if t >= start]
         patterns += [c[1] for c in since if c[0] >= start]
         older = [c for c in since if c[0] < start]
         if older:
             patterns.append(older[-1][1])  # the command the fins follow at the window's start
-        rates = box_rate(np.stack(patterns), self.limits)
-        return sum(fin_force_bound(self.params, self.limits, w) for w in rates) / self.mass
+        return np.stack(patterns)
 
 
 def ls_velocity(poses, noise: float) -> tuple[tuple[float, float], tuple[float, float]] | None:
@@ -214,7 +289,8 @@ def unseen_reason(now: float, seen: float, last_read: float, read_since_sighting
     counts = f"{recent_reads} frames arrived in the last second, one every {frame_period:.3f} s expected"
     if gap > reaction_time:
         return f"no frames from the camera for {gap:.2f} s ({gap / frame_period:.1f} frame periods; {counts}): " \
-               f"the last pose is {old:.2f} s old, more than {budget}"
+               f"the last pose is {old:.2f} s old, more than {budget}; the fastest motion the commanded fins allow " \
+               "since could reach the stopping band"
     if not read_since_sighting:
         return f"camera frames arrive {last_read - seen:.2f} s after their capture and none came in the {gap:.2f} s " \
                f"since ({counts}): the last pose is {old:.2f} s old, more than {budget}; the fastest motion the " \
