@@ -43,8 +43,10 @@ from pectoral_gym.model.finrules import FirmwareConfig, wire_beats
 from pectoral_gym.model.params import FishParams, body_coefficients
 from pectoral_gym.model.servo import ServoLimits, clip_beats
 
-__all__ = ["CommandedGain", "box_half_stroke", "box_rate", "fin_force_bound", "first_stroke", "longest_half_stroke",
-           "ls_velocity", "shortest_half_stroke", "unseen_reason"]
+__all__ = [
+    "CommandedGain", "box_half_stroke", "box_rate", "fin_force_bound", "fin_pair_force_bound",
+    "first_stroke", "longest_half_stroke", "ls_velocity", "shortest_half_stroke", "unseen_reason",
+]
 
 _MIN_POSES, _MIN_SPAN = 3, 0.1  # fewer poses, or a shorter span [s]: no velocity estimate (the physical bound rules)
 
@@ -53,18 +55,30 @@ def shortest_half_stroke(limits: ServoLimits) -> float:
     return limits.period_min * min(limits.ratio_min / (limits.ratio_min + 1.0), 1.0 / (limits.ratio_max + 1.0))
 
 
-def fin_force_bound(params: FishParams, limits: ServoLimits, rate: float, shortest: float | None = None) -> float:
-    """The largest force [N] one fin exerts on the body while its peak rate is ``rate`` [rad/s] (eqs. 13-17).
+def fin_force_bound(params: FishParams, limits: ServoLimits, rate: float, shortest: float | None = None,
+                    fin: int | None = None) -> float:
+    """The largest force [N] one fin exerts on the body while its commanded peak rate is ``rate`` [rad/s] (eqs. 13-17).
 
-    ``|F_n| = k g'^2`` plus the fin's inertia ``I_p sqrt(g''^2 + g'^4)``, with ``|g''| <= pi |g'|_peak / d`` for a
+    ``|F_n| = s k g'^2`` plus the fin's inertia ``I_p sqrt(g''^2 + g'^4)``, with ``|g''| <= pi |g'|_peak / d`` for a
     half-cosine stroke of duration ``d``: at least ``shortest`` [s] (the fins' shortest half-stroke, when known),
-    never less than :func:`shortest_half_stroke`.
+    never less than :func:`shortest_half_stroke`. The fin's actual rate is its servo scale ``a_1`` times the
+    commanded one and ``s`` is its force factor (``FishParams``' per-fin fields; the servo offset moves the angle,
+    not the rate). ``fin``: 0 the right fin, 1 the left; ``None``: the larger of the two.
     """
-    w = float(rate)
+    if fin is None:
+        return max(fin_force_bound(params, limits, rate, shortest, side) for side in (0, 1))
+    side = ("right", "left")[fin]
+    w = float(rate) * getattr(params, f"fin_angle_scale_{side}")
     d_min = shortest_half_stroke(limits)
     if shortest is not None:
         d_min = max(float(shortest), d_min)
-    return params.fin_drag_constant * w * w + params.fin_inertia_constant * math.hypot(w * w, math.pi * w / d_min)
+    return (getattr(params, f"fin_force_scale_{side}") * params.fin_drag_constant * w * w
+            + params.fin_inertia_constant * math.hypot(w * w, math.pi * w / d_min))
+
+
+def fin_pair_force_bound(params: FishParams, limits: ServoLimits) -> float:
+    """``|f_R| + |f_L|`` at most [N]: both fins at the servos' peak rate and shortest half-stroke."""
+    return sum(fin_force_bound(params, limits, limits.max_speed, fin=fin) for fin in (0, 1))
 
 
 def box_rate(patterns: np.ndarray, limits: ServoLimits, sources: np.ndarray | None = None) -> np.ndarray:
@@ -158,7 +172,7 @@ class CommandedGain:
         self.params, self.limits = params, limits
         coef = body_coefficients(params)
         self.mass = min(coef.m1, coef.m2)
-        self.full = 2.0 * fin_force_bound(params, limits, limits.max_speed) / self.mass
+        self.full = fin_pair_force_bound(params, limits) / self.mass
         self._replay = FinReplay(params, FirmwareConfig(limits=limits))
         self._commands: collections.deque[tuple[float, np.ndarray, Callable[[], float | None] | None]] = \
             collections.deque(maxlen=64)  # (sent, clipped beats, acknowledged-at or None), newest last
@@ -210,8 +224,8 @@ class CommandedGain:
         if strokes_bound is None:
             return self.full  # nothing known of the fins
         rates, shortest = strokes_bound
-        return sum(fin_force_bound(self.params, self.limits, w, d) for w, d in zip(rates, shortest, strict=True)) \
-            / self.mass
+        return sum(fin_force_bound(self.params, self.limits, w, d, fin)
+                   for fin, (w, d) in enumerate(zip(rates, shortest, strict=True))) / self.mass
 
     def strokes(self, t0: float, now: float, t1: float, round_trip: float) -> tuple[np.ndarray, np.ndarray] | None:
         """``(2,)`` the highest peak rate [rad/s] and ``(2,)`` the shortest half-stroke [s] of the fins in ``[t0, t1]``.

@@ -18,6 +18,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from pectoral_gym.hardware.safety.blind import fin_pair_force_bound
 from pectoral_gym.model import tank
 from pectoral_gym.model.params import FishParams, body_coefficients
 from pectoral_gym.model.servo import ServoLimits
@@ -144,11 +145,9 @@ class SpeedBound:
 
     def __init__(self, params: FishParams, limits: ServoLimits):
         coef = body_coefficients(params)
-        w = limits.max_speed
-        d_min = limits.period_min * min(limits.ratio_min / (limits.ratio_min + 1.0), 1.0 / (limits.ratio_max + 1.0))
-        # One fin: |F_n| = k g'^2 (13) plus the fin's inertia m_p |a(S_p / 2)| = I_p sqrt(g''^2 + g'^4) (15),
-        # with |g''| <= pi |g'|_peak / d for a half-cosine stroke of duration d.
-        force = params.fin_drag_constant * w * w + params.fin_inertia_constant * math.hypot(w * w, math.pi * w / d_min)
+        # Each fin: |F_n| = s k g'^2 (13) plus the fin's inertia m_p |a(S_p / 2)| = I_p sqrt(g''^2 + g'^4) (15),
+        # at the servos' peak rate and shortest half-stroke, each fin with its own force factor and servo scale.
+        pair = fin_pair_force_bound(params, limits)
         m_min, m_max = min(coef.m1, coef.m2), max(coef.m1, coef.m2)
         # Impulse: p . h <= -c1 |V| (m1 vx^2 + m2 vy^2) + c2 |alpha| |m1 - m2| |vx vy| |V|, with |alpha| <= pi/2,
         # |vx vy| <= |V|^2 / 2, |p| / m_max <= |V| <= |p| / m_min.
@@ -157,12 +156,12 @@ class SpeedBound:
         if kappa_p <= 0:
             raise ValueError(f"SpeedBound: drag does not dominate lift for these parameters (c1 / max(m1, m2)^2 = "
                              f"{coef.c1 / m_max ** 2:.4g} <= {leak:.4g})")
-        self._impulse = _Riccati(2.0 * force, kappa_p, m_min)  # |f_R + f_L| <= |f_R| + |f_L|
+        self._impulse = _Riccati(pair, kappa_p, m_min)  # |f_R + f_L| <= |f_R| + |f_L|
         # Energy: G bounds sqrt(Fx^2 / m1 + Fy^2 / m2 + tau^2 / J3), tau = C_p (fx_R - fx_L); the dissipation
         # c1 |V|^3 + C_M |omega|^3 is at least kappa u^3 on the ellipse E = u^2 / 2.
         alpha = coef.c1 / m_max ** 1.5
         beta = params.moment_coef / coef.J3 ** 1.5
-        gain_e = 2.0 * force * math.sqrt(1.0 / m_min + params.fin_offset ** 2 / coef.J3)
+        gain_e = pair * math.sqrt(1.0 / m_min + params.fin_offset ** 2 / coef.J3)
         self._energy = _Riccati(gain_e, alpha * beta / math.hypot(alpha, beta), math.sqrt(m_min))
         self._bounds = (self._impulse, self._energy)
         self.top = min(b.top / b.scale for b in self._bounds)
