@@ -6,16 +6,19 @@ import sys
 import numpy as np
 import pytest
 
+from pectoral_gym.model.dynamics import linearised_rate
 from pectoral_gym.model.kfunctions import FEATURES, ScalingFunctions
 from pectoral_gym.model.models import AveragedModel
-from pectoral_gym.model.params import FishParams
+from pectoral_gym.model.params import FishParams, body_coefficients
 from pectoral_gym.model.steady import steady_state_batch
 from pectoral_gym.scaling.identification.grids import GRIDS, Grid, GridError, load_grid
 from pectoral_gym.scaling.identification.identify import holdout_patterns, identify
 from pectoral_gym.scaling.identification.nmpc import (
+    RK4_STEP_RATE,
     IdentificationNmpcSettings,
     ScalingNmpc,
     algebraic_scaling,
+    auto_substeps,
     unscaled_forcing,
 )
 from pectoral_gym.scaling.identification.reference import reference_runs, velocities_from_turning
@@ -151,6 +154,28 @@ def test_pipeline_flags_degenerate_and_failed_patterns_and_round_trips(tmp_path)
     p = grid.patterns[0]
     assert loaded.evaluate(*p) == pytest.approx(result.scaling.evaluate(*p))
     assert loaded.metadata["grid"]["size"] == len(grid)
+
+
+def test_auto_substeps_keep_rk4_stable_and_the_solution_does_not_depend_on_them(small):
+    grid, ref = small
+    b = body_coefficients(PARAMS)
+    rate = max(linearised_rate(math.hypot(vx, vy), abs(w), 0.0, b.m1, b.m2, b.J3, b.c1, b.c2, b.c4)
+               for vx, vy, w in ref.velocities)
+    substeps = auto_substeps(ref.velocities, PARAMS, FAST.sampling)
+    step = FAST.sampling / substeps
+    assert step * rate <= RK4_STEP_RATE < 2.785  # inside RK4's real stability interval
+    assert substeps == 4 or (FAST.sampling / (substeps - 1)) * rate > RK4_STEP_RATE  # the fewest that do
+    # The optimum (constant K making v_ref an equilibrium) is an equilibrium of any RK4 step: three times
+    # the substeps give the same K, and both the algebraic solution.
+    forcing = unscaled_forcing(grid.patterns, PARAMS, sway="base")
+    oracle = algebraic_scaling(ref.velocities, forcing, PARAMS)
+    fine = ScalingNmpc(PARAMS, IdentificationNmpcSettings(horizon=3.0, substeps=3 * substeps), ref.velocities)
+    coarse = ScalingNmpc(PARAMS, FAST, ref.velocities)
+    assert coarse.substeps == substeps
+    for i in range(len(grid)):
+        k_coarse, k_fine = coarse.solve(ref.velocities[i], forcing[i]).k, fine.solve(ref.velocities[i], forcing[i]).k
+        np.testing.assert_allclose(k_coarse, oracle[i], rtol=1e-9)
+        np.testing.assert_allclose(k_fine, oracle[i], rtol=1e-9)
 
 
 def test_solver_failure_is_recorded_not_raised(small):

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import os
+import threading
 from dataclasses import dataclass
 from typing import NamedTuple
 
@@ -191,11 +192,24 @@ class MarkerTracker:
         size = self.config.kernel_size
         self._kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (size, size))
         self.last_blobs: dict[str, list[Blob]] = {"red": [], "blue": []}
+        self._planes = threading.local()  # per thread: the colour planes of _candidates, reused frame after frame
 
     @classmethod
     def from_calibration(cls, path: str | os.PathLike, config: TrackerConfig | None = None) -> MarkerTracker:
         """A tracker for the camera described by a calibration JSON file."""
         return cls(CameraModel.load(path), config)
+
+    def _plane_buffers(self, height: int, width: int) -> list[np.ndarray]:
+        """Three ``(height, width)`` uint8 planes of this thread, made once per frame size.
+
+        ``cv2.split`` into planes it allocates costs several times the split itself (three fresh arrays of a
+        frame's size each frame); the planes are scratch, read only inside :meth:`_candidates`.
+        """
+        planes = getattr(self._planes, "buffers", None)
+        if planes is None or planes[0].shape != (height, width):
+            planes = [np.empty((height, width), np.uint8) for _ in range(3)]
+            self._planes.buffers = planes
+        return planes
 
     def _candidates(self, image: np.ndarray) -> tuple[int, int, int, int] | None:
         """Pixel box ``(row0, row1, col0, col1)`` outside which no pixel can pass a marker mask; ``None``: none.
@@ -209,7 +223,7 @@ class MarkerTracker:
         height, width = image.shape[:2]
         if cfg.min_saturation < _PREFILTER_MIN_SATURATION:
             return 0, height, 0, width
-        blue, green, red = cv2.split(image)
+        blue, green, red = cv2.split(image, self._plane_buffers(height, width))
         high = cv2.max(cv2.max(blue, green), red)
         spread = cv2.subtract(high, cv2.min(cv2.min(blue, green), red))
         spread = cv2.add(cv2.add(spread, spread), spread)  # saturates at 255 >= V: still a candidate, rightly
