@@ -57,9 +57,8 @@ __all__ = [
 DEFAULT_RANDOMIZATION = {"body_mass": 0.1, "body_inertia": 0.2, "drag_coef": 0.2, "lift_coef": 0.2,
                          "moment_coef": 0.2, "fin_force_coef": 0.2}
 # Vector-env slots of one evaluation: the largest batch the vector env steps without threads. An evaluation is a
-# few thousand steps, too short for the threads to pay for their wake-ups: with other jobs on the 2-core machine
-# (load average 5), 100 episodes on 100 slots (threaded) took 1.3-3.3 s against 0.17-0.19 s on 50 slots, with the
-# same results; in the demo at load 2-3.5, 0.13-1.3 s on 100 slots against 0.09-0.16 s on 63.
+# few thousand steps, too short for the threads to pay for their wake-ups, which a busy machine delays most
+# (measured: docs/notes/2026-12-07-time-to-policy.md); the results do not depend on the slot count.
 MAX_BATCH = PARALLEL_MIN_ITEMS - 1
 QUICK_EPISODES = 2  # --quick: episodes of a smoke run
 # Settings of one model only (pectoral_gym.model.spec.ENV_OPTIONS, the one table): a policy trained on one
