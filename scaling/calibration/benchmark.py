@@ -26,8 +26,15 @@ import numpy as np
 from pectoral_gym.runlog import read_run_log
 from pectoral_gym.scaling.calibration.fit import CalibrationSettings, calibrate
 from pectoral_gym.scaling.calibration.heldout import held_out
+from pectoral_gym.scaling.calibration.identifiability import ASYMMETRY_FIELDS
 from pectoral_gym.scaling.calibration.report import report_dict
-from pectoral_gym.scaling.calibration.synth import DEGRADED, Camera, perturbed_params, write_synthetic_log
+from pectoral_gym.scaling.calibration.synth import (
+    DEGRADED,
+    Camera,
+    asymmetric_params,
+    perturbed_params,
+    write_synthetic_log,
+)
 
 __all__ = ["main", "run_seed"]
 
@@ -35,19 +42,26 @@ CAMERAS = {"default": Camera(), "degraded": DEGRADED}
 
 
 def run_seed(seed: int, out: Path, minutes: float = 3.0, camera: Camera | None = None,
-             held_out_episodes: int = 5, window: float = 6.0, tick_aligned: bool = True) -> dict:
+             held_out_episodes: int = 5, window: float = 6.0, tick_aligned: bool = True,
+             asymmetric: bool = False) -> dict:
     """One emulated robot: logs, calibration, held-out check (none for ``held_out_episodes=0``).
 
     ``tick_aligned=False``: the emulated firmware ticks at other instants than the PC's replay, as on a real robot
     (:func:`~pectoral_gym.scaling.calibration.synth.write_synthetic_log`): model error lasting many frames.
+    ``asymmetric``: the robot's fins differ (:func:`~pectoral_gym.scaling.calibration.synth.asymmetric_params`) and
+    the fit takes the asymmetry too, as ``calibrate --asymmetric``.
 
     Returns the report dict with the truth, the seed and its ``coverage`` (:func:`interval_scores`).
     """
     camera = camera or Camera()
     truth = perturbed_params(seed)
+    settings = CalibrationSettings(window=window)
+    if asymmetric:
+        truth = asymmetric_params(seed, truth)
+        settings = CalibrationSettings(window=window, fields=settings.fields + ASYMMETRY_FIELDS)
     fit_path, held_path = out / f"seed{seed}_fit.jsonl", out / f"seed{seed}_heldout.jsonl"
     write_synthetic_log(fit_path, truth, seed, duration=60.0 * minutes, camera=camera, tick_aligned=tick_aligned)
-    cal = calibrate([read_run_log(fit_path)], settings=CalibrationSettings(window=window))
+    cal = calibrate([read_run_log(fit_path)], settings=settings)
     if held_out_episodes > 0:
         write_synthetic_log(held_path, truth, 10_000 + seed, duration=40.0 * held_out_episodes + 1.0,
                             camera=camera, episode_length=40.0, tank=False, tick_aligned=tick_aligned)
@@ -91,9 +105,13 @@ def interval_scores(report: dict) -> dict[str, dict[str, float]]:
     return scores
 
 
-def coverage(rows: list[dict], which: str = "reported") -> dict[str, float]:
-    """Share of the 68 % and 95 % intervals holding the truth over ``rows`` (:func:`interval_scores`), and the worst."""
-    z = np.abs([v for r in rows if which in r["coverage"] for v in r["coverage"][which].values()])
+def coverage(rows: list[dict], which: str = "reported", names: tuple[str, ...] | None = None) -> dict[str, float]:
+    """Share of the 68 % and 95 % intervals holding the truth over ``rows`` (:func:`interval_scores`), and the worst.
+
+    ``names``: only these quantities (``None``: every field and ratio).
+    """
+    z = np.abs([v for r in rows if which in r["coverage"] for name, v in r["coverage"][which].items()
+                if names is None or name in names])
     if not len(z):
         return {}
     return {"intervals": int(len(z)), "covered_68": float(np.mean(z <= 1.0)), "covered_95": float(np.mean(z <= 1.96)),
@@ -106,12 +124,15 @@ def summary(rows: list[dict]) -> dict:
     return {
         "robots": len(rows),
         "worst_coefficient_error": max(abs(f["error_relative"]) for r in rows for n, f in r["fields"].items()
-                                       if not n.startswith("added")),
+                                       if not n.startswith("added") and "error_relative" in f),
+        "worst_offset_error_deg": max((math.degrees(abs(f["error_rad"])) for r in rows for f in r["fields"].values()
+                                       if "error_rad" in f), default=None),
         "worst_ratio_error": max(abs(c["error_relative"]) for r in rows for c in r["combinations"].values()),
         "held_out_median_percent": float(np.median(held)) if held else None,
         "not_converged": [r["seed"] for r in rows if not r.get("converged", True)],
         "wall_time_max_s": max(r["wall_time_s"] for r in rows),
         "coverage": coverage(rows), "coverage_gauss_newton": coverage(rows, "gauss_newton"),
+        "coverage_asymmetry": coverage(rows, names=ASYMMETRY_FIELDS),
     }
 
 
@@ -126,6 +147,11 @@ def summary_line(s: dict) -> str:
             f"{cov['worst_z']:.1f} s.e.")
     if gn:
         line += f" (Gauss-Newton s.e.: {100 * gn['covered_68']:.0f} % and {100 * gn['covered_95']:.0f} %)"
+    asym = s.get("coverage_asymmetry")
+    if asym:
+        line += (f"; the fins' asymmetry: {100 * asym['covered_68']:.0f} % and {100 * asym['covered_95']:.0f} % of "
+                 f"{asym['intervals']}, worst {asym['worst_z']:.1f} s.e., worst offset "
+                 f"{s['worst_offset_error_deg']:.2f} deg")
     not_converged = s["not_converged"]
     return line + (f"; not converged: seeds {' '.join(map(str, not_converged))}" if not_converged else
                    "; every fit converged") + f"; fit wall time <= {s['wall_time_max_s']:.0f} s"
@@ -149,6 +175,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "(model error lasting many frames; default: on the replay's tick grid)")
     p.add_argument("--held-out", type=int, default=5, metavar="N",
                    help="held-out 40 s episodes per robot (default 5; 0: none, for coverage runs)")
+    p.add_argument("--asymmetric", action="store_true",
+                   help="robots whose fins differ (left fin's force +-30 %%, servo offsets +-0.1 rad), fitted as "
+                        "pectoral-scaling calibrate --asymmetric")
     p.add_argument("--out", type=Path, default=Path("calibration_benchmark"), metavar="DIR", help="output folder")
     return p
 
@@ -165,9 +194,10 @@ def main(argv: list[str] | None = None) -> int:
           f"{'(prior) %':>10} {'worst |z|':>10}")
     for seed in args.seeds:
         r = run_seed(seed, args.out, args.minutes, CAMERAS[args.camera], args.held_out,
-                     tick_aligned=not args.unaligned)
+                     tick_aligned=not args.unaligned, asymmetric=args.asymmetric)
         rows.append(r)
-        worst_field = max(abs(f["error_relative"]) for n, f in r["fields"].items() if not n.startswith("added"))
+        worst_field = max(abs(f["error_relative"]) for n, f in r["fields"].items()
+                          if not n.startswith("added") and "error_relative" in f)
         worst_ratio = max(abs(c["error_relative"]) for c in r["combinations"].values())
         held = [r.get(k, {}).get("median_error_percent") for k in ("held_out", "held_out_prior")]
         held_text = " ".join(f"{'-' if v is None else f'{v:.2f}':>{w}}" for v, w in zip(held, (18, 10), strict=True))

@@ -63,6 +63,20 @@ def perturbed_params(seed: int, spread: float = 0.3, base: FishParams | None = N
     return base.replace(**{name: getattr(base, name) * float(f) for name, f in zip(fields, factors, strict=True)})
 
 
+def asymmetric_params(seed: int, base: FishParams, force_spread: float = 0.3,
+                      offset_spread: float = 0.1) -> FishParams:
+    """``base`` with fins that differ, seeded.
+
+    The left fin's force factor from ``U(1 - force_spread, 1 + force_spread)`` and each fin's servo offset from
+    ``U(-offset_spread, offset_spread)`` [rad]: the fields ``calibrate --asymmetric`` fits
+    (:data:`~pectoral_gym.scaling.calibration.identifiability.ASYMMETRY_FIELDS`).
+    """
+    rng = np.random.default_rng([28, seed])
+    return base.replace(fin_force_scale_left=float(rng.uniform(1.0 - force_spread, 1.0 + force_spread)),
+                        fin_angle_offset_right=float(rng.uniform(-offset_spread, offset_spread)),
+                        fin_angle_offset_left=float(rng.uniform(-offset_spread, offset_spread)))
+
+
 def identification_beats(rng: np.random.Generator, coast: float = 0.15) -> np.ndarray:
     """One identification command ``(2, 4)``: a random pattern per fin from the envs' action space, or a coast.
 
