@@ -48,6 +48,7 @@ __all__ = ["LivenessWatch"]
 
 _NOISE_SIGMAS = 9.0  # a jump allowance of 9 pose-noise sigmas: P(|2-D noise step| > 9 sigma) = exp(-81/4) ~ 2e-9
 _END_SPAN = 0.1  # poses this long at the window's end are averaged for its pose [s]
+_VELOCITY_STEPS = ((3, 0.005), (4, 0.005), (5, 0.02))  # finite-difference steps [m/s, m/s, rad/s]: of u, v, r
 
 
 def _fit(poses: np.ndarray, at: float) -> tuple[np.ndarray, np.ndarray]:
@@ -98,6 +99,10 @@ class LivenessWatch:
         self._early = ShadowFins(params, config, 0.0)
         self._later = [ShadowFins(params, config, 0.5), ShadowFins(params, config, 1.0)]
         self._model = FULL_REFERENCE.build(1, params)
+        # The Gauss-Newton step's path and its three finite-difference paths, advanced together: each fish of a
+        # batch is integrated on its own (the same kernel, the same substeps), so each path is the one a model
+        # of one fish gives, in one kernel call per segment instead of four.
+        self._jacobian_model = FULL_REFERENCE.build(1 + len(_VELOCITY_STEPS), params)
         self._averaged = AveragedModel(n=1, params=params)
         self._last_beats: np.ndarray | None = None
         self._first_command = math.inf  # send time of the first command since the reset [s]
@@ -112,8 +117,9 @@ class LivenessWatch:
         self.reset(0.0)
         self.command(0.0, np.array([[math.pi / 2, 0.5, 1.0, 1.0]] * 2))
         self._advance_shadows(0.4)
-        for model in (self._model, self._averaged):
-            self._predict(self._early.snapshots, np.array([1.0, 0.5, 0.0, 0.01, 0.0, 0.0]), 0.05, (0.2, 0.4), model)
+        for model in (self._model, self._averaged, self._jacobian_model):
+            states = np.repeat(np.array([[1.0, 0.5, 0.0, 0.01, 0.0, 0.0]]), model.n, axis=0)
+            self._paths(self._early.snapshots, states, 0.05, (0.2, 0.4), model)
         self.reset()
 
     def reset(self, t: float = math.nan) -> None:
@@ -288,15 +294,16 @@ class LivenessWatch:
         state = np.array([*pose, c * rates[0] + s * rates[1], -s * rates[0] + c * rates[1], rates[2]])
         target = before[:, 1:4] * np.array([1.0, 1.0, reach])
         for _ in range(2):
-            base = np.array(self._predict(snapshots, state, t_s, fit_times)) * np.array([1.0, 1.0, reach])
+            states = np.repeat(state[None], 1 + len(_VELOCITY_STEPS), axis=0)
+            for row, (j, h) in enumerate(_VELOCITY_STEPS, start=1):  # a fraction of the speeds met
+                states[row, j] += h
+            paths = self._paths(snapshots, states, t_s, fit_times, self._jacobian_model) * np.array([1.0, 1.0, reach])
+            base = paths[:, 0]
             jac = np.zeros((len(before), 3, 6))
             jac[:, 0, 0] = jac[:, 1, 1] = 1.0
             jac[:, 0, 2], jac[:, 1, 2], jac[:, 2, 2] = -(base[:, 1] - state[1]), base[:, 0] - state[0], reach
-            for j, h in ((3, 0.005), (4, 0.005), (5, 0.02)):  # [m/s, m/s, rad/s]: a fraction of the speeds met
-                moved = state.copy()
-                moved[j] += h
-                path = np.array(self._predict(snapshots, moved, t_s, fit_times)) * np.array([1.0, 1.0, reach])
-                jac[:, :, j] = (path - base) / h
+            for row, (j, h) in enumerate(_VELOCITY_STEPS, start=1):
+                jac[:, :, j] = (paths[:, row] - base) / h
             step, *_ = np.linalg.lstsq(jac.reshape(-1, 6), (target - base).reshape(-1), rcond=None)
             if not np.all(np.isfinite(step)):
                 break
@@ -309,8 +316,17 @@ class LivenessWatch:
 
         Its fins are the replayed ones, set from ``snapshots`` (a shadow's, one every 0.05 s).
         """
-        model = self._model if model is None else model
-        model.reset(state[None])
+        return list(self._paths(snapshots, state[None], t_c, times, self._model if model is None else model)[:, 0])
+
+    @staticmethod
+    def _paths(snapshots: collections.deque | list, states: np.ndarray, t_c: float, times: tuple[float, ...],
+               model: FishModel) -> np.ndarray:
+        """Poses ``(len(times), n, 3)`` of ``model``'s ``n`` fish from ``states`` ``(n, 6)`` at ``t_c`` [s].
+
+        Every fish is driven by the same replayed fins (``snapshots``) and advanced in the same segments (to each
+        snapshot and each time of ``times``), so each fish's path is the one a model of that fish alone gives.
+        """
+        model.reset(states)
         snaps = [s for s in snapshots if s[0] <= times[-1]]
         first = max(k for k, s in enumerate(snaps) if s[0] <= t_c)
         now, out, pending = t_c, [], list(times)
@@ -322,9 +338,9 @@ class LivenessWatch:
             while pending and pending[0] <= until:
                 model.advance(max(pending[0] - now, 0.0))
                 now = max(pending.pop(0), now)
-                out.append(model.state[0, :3].copy())
+                out.append(model.state[:, :3].copy())
             if not pending:
                 break
             model.advance(max(until - now, 0.0))
             now = max(until, now)
-        return out
+        return np.array(out).reshape(len(out), model.n, 3)
