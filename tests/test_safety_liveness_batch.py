@@ -53,3 +53,31 @@ def test_batched_paths_are_bit_identical_to_one_fish_paths():
         alone = _one_fish_path(snapshots, states[row], 0.21, times)
         assert np.array_equal(batched[:, row], alone), row  # the same floats, not merely close
     assert np.ptp(batched[-1, :, 0]) > 0.0  # the fish differ: the batch did not repeat one path
+
+
+def test_differs_with_a_memo_gives_the_verdicts_of_a_fresh_comparison():
+    from pectoral_gym.hardware.safety.shadow_fins import ShadowFins
+    from pectoral_gym.model.finrules import FirmwareConfig
+
+    config = FirmwareConfig(limits=ServoLimits())
+    send, ack = ShadowFins(P, config, 0.0), ShadowFins(P, config, 1.0)
+    beat = np.array([[math.pi / 2, math.radians(60), 0.6, 3.0]] * 2)
+    other = np.array([[math.pi / 2, math.radians(30), 0.6, 2.0]] * 2)
+    for shadow in (send, ack):
+        shadow.reset(0.0)
+        shadow.queue.append((0.0, beat, None))
+        shadow.queue.append((2.0, other, lambda: 2.4))  # taken 0.4 s later by the acknowledging replay
+    memo: dict = {}
+    verdicts = []
+    for to in np.arange(0.5, 4.0, 0.1):
+        send.advance(to)
+        ack.advance(to)
+        mine, theirs = list(send.snapshots), ack.view(to)
+        fresh = ShadowFins.differs(mine, theirs, to - 1.0)
+        assert ShadowFins.differs(mine, theirs, to - 1.0, memo) == fresh
+        assert ShadowFins.differs(mine, theirs, to - 1.0, memo) == fresh  # a second time, all from the memo
+        verdicts.append(fresh)
+    assert not verdicts[0] and verdicts[-1]  # the same fins before the second command, different after it
+    mine = list(send.snapshots)
+    changed = [(t, fins + (t == mine[-1][0]), pending) for t, fins, pending in mine]  # new objects, one differs
+    assert ShadowFins.differs(mine, changed, mine[-3][0], memo)

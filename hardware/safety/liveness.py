@@ -132,6 +132,9 @@ class LivenessWatch:
         self._next_check = -math.inf
         self._strikes = 0
         self._views: tuple[tuple[float, int], list] = ((math.nan, -1), [])
+        # ShadowFins.differs's memos, one per delayed replay and window (each window compares its own span)
+        self._differs_memos: dict[tuple[int, bool], dict] = {(k, w): {} for k in range(len(self._later))
+                                                              for w in (True, False)}
         self._commands = 0  # commands taken in since the reset
 
     def command(self, t: float, beats: np.ndarray, acknowledged: Callable[[], float | None] | None = None) -> None:
@@ -235,7 +238,9 @@ class LivenessWatch:
         if self._views[0] != key:  # the delayed replays' views, once per sighting and commands for both windows
             self._views = (key, [s.view(self._early.t) for s in self._later])
         early = list(snapshots)
-        views = [early] + [v for v in self._views[1] if ShadowFins.differs(early, v, t_s if fitted else t_c)]
+        since = t_s if fitted else t_c
+        views = [early] + [v for k, v in enumerate(self._views[1])
+                           if ShadowFins.differs(early, v, since, self._differs_memos[k, innovation_check])]
         for view in views:
             pred_m, pred_e = self._predict(view, line_state, t_c, (t_m, t_e), self._averaged)
             m_pred = min(m_pred, math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2]))
