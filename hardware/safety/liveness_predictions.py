@@ -90,11 +90,13 @@ def batches(views: Sequence[Sequence[Snapshot]], since: float, until: float) -> 
     spans: dict[int, list] = {}
     alone: list[tuple[list[int], list]] = []
     for index, view in enumerate(views):
-        starts = [k for k, s in enumerate(view) if s[0] <= since]
-        if not starts:
+        first = len(view) - 1  # the snapshots are in time order: the last one at or before since, from the end
+        while first >= 0 and view[first][0] > since:
+            first -= 1
+        if first < 0:
             alone.append(([index], list(view)))
             continue
-        span = [s for s in list(view)[starts[-1]:] if s[0] <= until]
+        span = [s for s in list(view)[first:] if s[0] <= until]
         spans[index] = span
         groups.setdefault(tuple(s[0] for s in span), []).append(index)
     out = []
