@@ -36,28 +36,16 @@ from collections.abc import Callable
 import numpy as np
 
 from pectoral_gym.hardware.safety.geofence import SpeedBound
+from pectoral_gym.hardware.safety.liveness_predictions import Predictions, batches, fit_line, line_state
 from pectoral_gym.hardware.safety.shadow_fins import ShadowFins
-from pectoral_gym.model import forcing_cache
 from pectoral_gym.model.finrules import FirmwareConfig
-from pectoral_gym.model.models import AveragedModel, FishModel
 from pectoral_gym.model.params import FishParams
 from pectoral_gym.model.servo import ServoLimits
-from pectoral_gym.model.spec import FULL_REFERENCE
 
 __all__ = ["LivenessWatch"]
 
 _NOISE_SIGMAS = 9.0  # a jump allowance of 9 pose-noise sigmas: P(|2-D noise step| > 9 sigma) = exp(-81/4) ~ 2e-9
 _END_SPAN = 0.1  # poses this long at the window's end are averaged for its pose [s]
-
-
-def _fit(poses: np.ndarray, at: float) -> tuple[np.ndarray, np.ndarray]:
-    """Least-squares line through ``(t, X, Y, psi)`` rows: ``(X, Y, psi)`` at ``at`` and the rates."""
-    t = poses[:, 0] - at
-    if len(poses) < 2 or np.ptp(t) <= 0:
-        return poses[:, 1:4].mean(axis=0), np.zeros(3)
-    design = np.stack([np.ones_like(t), t], axis=1)
-    coef, *_ = np.linalg.lstsq(design, poses[:, 1:4], rcond=None)
-    return coef[0], coef[1]
 
 
 class LivenessWatch:
@@ -97,8 +85,7 @@ class LivenessWatch:
         # equals it) sample what the robot's fins did.
         self._early = ShadowFins(params, config, 0.0)
         self._later = [ShadowFins(params, config, 0.5), ShadowFins(params, config, 1.0)]
-        self._model = FULL_REFERENCE.build(1, params)
-        self._averaged = AveragedModel(n=1, params=params)
+        self._predictions = Predictions(params, 1 + len(self._later))
         self._last_beats: np.ndarray | None = None
         self._first_command = math.inf  # send time of the first command since the reset [s]
         self._poses: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=256)
@@ -112,8 +99,7 @@ class LivenessWatch:
         self.reset(0.0)
         self.command(0.0, np.array([[math.pi / 2, 0.5, 1.0, 1.0]] * 2))
         self._advance_shadows(0.4)
-        for model in (self._model, self._averaged):
-            self._predict(self._early.snapshots, np.array([1.0, 0.5, 0.0, 0.01, 0.0, 0.0]), 0.05, (0.2, 0.4), model)
+        self._predictions.warm_up(self._early.snapshots)
         self.reset()
 
     def reset(self, t: float = math.nan) -> None:
@@ -126,6 +112,9 @@ class LivenessWatch:
         self._next_check = -math.inf
         self._strikes = 0
         self._views: tuple[tuple[float, int], list] = ((math.nan, -1), [])
+        # ShadowFins.differs's memos, one per delayed replay and window (each window compares its own span)
+        self._differs_memos: dict[tuple[int, bool], dict] = {(k, w): {} for k in range(len(self._later))
+                                                              for w in (True, False)}
         self._commands = 0  # commands taken in since the reset
 
     def command(self, t: float, beats: np.ndarray, acknowledged: Callable[[], float | None] | None = None) -> None:
@@ -179,7 +168,7 @@ class LivenessWatch:
         poses = self._recent(t - 0.5, t)
         if len(poses) < 6 or np.ptp(poses[:, 0]) < 0.3:
             return ""
-        _, rates = _fit(poses, t)
+        _, rates = fit_line(poses, t)
         centred = poses[:, 0] - poses[:, 0].mean()
         error = 2.0 * max(self.pose_noise, 1e-4) / math.sqrt(float(centred @ centred))
         speed = math.hypot(rates[0], rates[1]) - math.sqrt(2.0) * error
@@ -197,8 +186,8 @@ class LivenessWatch:
         pose and mean velocity with the smallest errors, ``sigma / sqrt(n)`` and ``sigma / sqrt(sum (t - t_c)^2)``,
         uncorrelated), compared inside the last window, between the mean poses of its first and last 0.1 s. The
         end position: the blade-element model from the state whose path through the replayed fins fits the
-        window before (:meth:`_predict_fitted`), its standard error taken as the line's (a pose and a velocity
-        fitted to the same poses, the path's shape given).
+        window before (:meth:`~pectoral_gym.hardware.safety.liveness_predictions.Predictions.fitted`), its
+        standard error taken as the line's (a pose and a velocity fitted to the same poses, the path's shape given).
         """
         before = self._recent(t1 - 2.0 * window, t1 - window)
         middle = self._recent(t1 - window - 0.5 * _END_SPAN, t1 - window + 0.5 * _END_SPAN)
@@ -221,21 +210,28 @@ class LivenessWatch:
         # before explain itself by a fish that swims backwards against its thrust). The end position: the
         # blade-element model from the state fitted through each replay's fins, whose path also had to match
         # the window before (a frozen one included).
-        pose_c, rates_c = _fit(before, t_c)
-        c, s = math.cos(pose_c[2]), math.sin(pose_c[2])
-        line_state = np.array([*pose_c, c * rates_c[0] + s * rates_c[1], -s * rates_c[0] + c * rates_c[1], rates_c[2]])
+        start_c = line_state(before, t_c)
         m_pred = innovation = math.inf
         key = (self._early.t, self._commands)
         if self._views[0] != key:  # the delayed replays' views, once per sighting and commands for both windows
             self._views = (key, [s.view(self._early.t) for s in self._later])
         early = list(snapshots)
-        views = [early] + [v for v in self._views[1] if ShadowFins.differs(early, v, t_s if fitted else t_c)]
-        for view in views:
-            pred_m, pred_e = self._predict(view, line_state, t_c, (t_m, t_e), self._averaged)
-            m_pred = min(m_pred, math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2]))
-            if fitted and innovation_check:
-                fitted_e = self._predict_fitted(view, before, reach, (t_e,))[0]
-                innovation = min(innovation, math.hypot(*(meas_e[:2] - fitted_e[:2])))
+        since = t_s if fitted else t_c
+        views = [early] + [v for k, v in enumerate(self._views[1])
+                           if ShadowFins.differs(early, v, since, self._differs_memos[k, innovation_check])]
+        motions, misses = [math.inf] * len(views), [math.inf] * len(views)
+        for indices, stacked in batches(views, since, t_e):  # the views with snapshots at the same instants
+            pred = self._predictions.motion(stacked, len(indices), start_c, t_c, (t_m, t_e))
+            ends = self._predictions.fitted(stacked, len(indices), before, reach, (t_e,))[0] \
+                if fitted and innovation_check else None
+            for row, view in enumerate(indices):
+                pred_m, pred_e = pred[0, row], pred[1, row]
+                motions[view] = math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2])
+                if ends is not None:
+                    misses[view] = math.hypot(*(meas_e[:2] - ends[row, :2]))
+        for motion, miss in zip(motions, misses, strict=True):  # in the views' order, as min() meets them
+            m_pred = min(m_pred, motion)
+            innovation = min(innovation, miss)
         if not fitted:
             innovation = math.nan  # not judged (the fins are not known from the window's start)
         scatter, sxx = self._scatter(before, t_c)
@@ -264,67 +260,8 @@ class LivenessWatch:
 
     def _scatter(self, poses: np.ndarray, t_c: float) -> tuple[float, float]:
         """The positions' scatter about their line [m] (at least the assumed pose noise) and ``sum (t - t_c)^2``."""
-        pose_c, rates_c = _fit(poses, t_c)
+        pose_c, rates_c = fit_line(poses, t_c)
         residual = poses[:, 1:3] - (pose_c[:2] + np.outer(poses[:, 0] - t_c, rates_c[:2]))
         scatter = math.sqrt(float((residual ** 2).sum()) / max(2 * (len(poses) - 2), 1))
         centred = poses[:, 0] - t_c
         return max(scatter, 1e-4), float(centred @ centred)
-
-    def _predict_fitted(self, snapshots: collections.deque | list, before: np.ndarray, reach: float,
-                        times: tuple[float, ...]) -> list[np.ndarray]:
-        """Poses (3,) at ``times`` of the fish model started at the first pose of ``before`` in the state that fits it.
-
-        The state ``(X, Y, psi, u, v, r)`` at ``t_s`` (``before``'s first row) is the least-squares fit of the model's
-        path, driven by the replayed fins of ``snapshots``, to ``before``'s poses (positions, and headings times
-        ``reach``): two Gauss-Newton steps from the line through them. A line's slope is the window's mean
-        velocity; the fish's own velocity surges with every stroke, and the path the fins drive is what the
-        fins' forces give from the instantaneous one. The position and heading derivatives are exact (the dynamics
-        do not depend on where the fish is or where it points: a shift moves the path, a turn rotates it about the
-        start); the velocity ones are finite differences.
-        """
-        t_s, fit_times = float(before[0, 0]), tuple(float(t) for t in before[:, 0])
-        pose, rates = _fit(before, t_s)
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        state = np.array([*pose, c * rates[0] + s * rates[1], -s * rates[0] + c * rates[1], rates[2]])
-        target = before[:, 1:4] * np.array([1.0, 1.0, reach])
-        for _ in range(2):
-            base = np.array(self._predict(snapshots, state, t_s, fit_times)) * np.array([1.0, 1.0, reach])
-            jac = np.zeros((len(before), 3, 6))
-            jac[:, 0, 0] = jac[:, 1, 1] = 1.0
-            jac[:, 0, 2], jac[:, 1, 2], jac[:, 2, 2] = -(base[:, 1] - state[1]), base[:, 0] - state[0], reach
-            for j, h in ((3, 0.005), (4, 0.005), (5, 0.02)):  # [m/s, m/s, rad/s]: a fraction of the speeds met
-                moved = state.copy()
-                moved[j] += h
-                path = np.array(self._predict(snapshots, moved, t_s, fit_times)) * np.array([1.0, 1.0, reach])
-                jac[:, :, j] = (path - base) / h
-            step, *_ = np.linalg.lstsq(jac.reshape(-1, 6), (target - base).reshape(-1), rcond=None)
-            if not np.all(np.isfinite(step)):
-                break
-            state = state + step
-        return self._predict(snapshots, state, t_s, times)
-
-    def _predict(self, snapshots: collections.deque | list, state: np.ndarray, t_c: float,
-                 times: tuple[float, ...], model: FishModel | None = None) -> list[np.ndarray]:
-        """Poses (3,) at ``times`` (increasing) of ``model`` (default: the blade-element one) from ``state`` at ``t_c``.
-
-        Its fins are the replayed ones, set from ``snapshots`` (a shadow's, one every 0.05 s).
-        """
-        model = self._model if model is None else model
-        model.reset(state[None])
-        snaps = [s for s in snapshots if s[0] <= times[-1]]
-        first = max(k for k, s in enumerate(snaps) if s[0] <= t_c)
-        now, out, pending = t_c, [], list(times)
-        for k in range(first, len(snaps)):
-            _, fins, commanded = snaps[k]
-            model.fins[:], model.pending[:] = fins, commanded
-            forcing_cache.invalidate(model.forcing_cache)  # the regular forcing of the replayed pattern, recomputed
-            until = snaps[k + 1][0] if k + 1 < len(snaps) else math.inf
-            while pending and pending[0] <= until:
-                model.advance(max(pending[0] - now, 0.0))
-                now = max(pending.pop(0), now)
-                out.append(model.state[0, :3].copy())
-            if not pending:
-                break
-            model.advance(max(until - now, 0.0))
-            now = max(until, now)
-        return out

@@ -110,13 +110,35 @@ class ShadowFins:
         return list(self.snapshots) + tail
 
     @staticmethod
-    def differs(mine: list, other: list, since: float) -> bool:
-        """Whether the snapshots ``other`` from ``since`` [s] (less one step) on differ from ``mine``."""
-        own = {s[0]: s for s in mine}
-        for t, fins, pending in other:
-            if t < since - 0.05:
+    def differs(mine: list, other: list, since: float, memo: dict | None = None) -> bool:
+        """Whether the snapshots ``other`` from ``since`` [s] (less one step) on differ from ``mine``.
+
+        ``memo``, if given, keeps the verdicts of the pairs of snapshots compared, keyed by the pair's identities
+        (a snapshot is never changed once taken), and holds both so that neither identity is reused: the snapshots
+        for good recur from check to check and are compared once. It is emptied and refilled with this call's
+        pairs, so it holds no more than one call's.
+        """
+        start = since - 0.05
+        own = {s[0]: s for s in mine if s[0] >= start}  # only these are ever looked up
+        previous = {} if memo is None else dict(memo)
+        if memo is not None:
+            memo.clear()
+        for snapshot in other:
+            t, fins, pending = snapshot
+            if t < start:
                 continue
             match = own.get(t)
-            if match is None or not (np.array_equal(match[1], fins) and np.array_equal(match[2], pending)):
+            if match is None:
+                return True
+            key = (id(match), id(snapshot))
+            known = previous.get(key)
+            if known is None:  # np.array_equal on arrays of the same shapes, without its conversions
+                same = match[1].shape == fins.shape and match[2].shape == pending.shape and \
+                    bool((match[1] == fins).all()) and bool((match[2] == pending).all())
+            else:
+                same = known[2]
+            if memo is not None:
+                memo[key] = (match, snapshot, same)
+            if not same:
                 return True
         return False

@@ -1,0 +1,119 @@
+"""The liveness check's batched predictions: each fish of a batch follows the path a model of it alone gives."""
+
+import math
+
+import numpy as np
+
+from pectoral_gym.hardware.safety.geofence import SpeedBound
+from pectoral_gym.hardware.safety.liveness import LivenessWatch
+from pectoral_gym.hardware.safety.liveness_predictions import Predictions, batches, paths
+from pectoral_gym.model import forcing_cache
+from pectoral_gym.model.params import FishParams
+from pectoral_gym.model.servo import ServoLimits
+from pectoral_gym.model.spec import FULL_REFERENCE
+
+P = FishParams()
+
+
+def _one_fish_path(snapshots, state, t_c, times):
+    """The reference: a fresh one-fish blade-element model stepped through the snapshots segment by segment."""
+    model = FULL_REFERENCE.build(1, P)
+    model.reset(state[None])
+    snaps = [s for s in snapshots if s[0] <= times[-1]]
+    first = max(k for k, s in enumerate(snaps) if s[0] <= t_c)
+    now, out, pending = t_c, [], list(times)
+    for k in range(first, len(snaps)):
+        model.fins[:], model.pending[:] = snaps[k][1], snaps[k][2]
+        forcing_cache.invalidate(model.forcing_cache)
+        until = snaps[k + 1][0] if k + 1 < len(snaps) else math.inf
+        while pending and pending[0] <= until:
+            model.advance(max(pending[0] - now, 0.0))
+            now = max(pending.pop(0), now)
+            out.append(model.state[0, :3].copy())
+        if not pending:
+            break
+        model.advance(max(until - now, 0.0))
+        now = max(until, now)
+    return np.array(out)
+
+
+def test_batched_paths_are_bit_identical_to_one_fish_paths():
+    bound = SpeedBound(P, ServoLimits())
+    bound.reset(0.0)
+    watch = LivenessWatch(P, bound, pose_noise=0.005)
+    watch.command(0.0, np.array([[math.pi / 2, math.radians(60), 0.6, 3.0]] * 2))
+    watch.command(0.7, np.array([[math.pi / 2, math.radians(40), 0.8, 2.0], [math.pi / 2, math.radians(60), 0.6, 3.0]]))
+    watch._advance_shadows(1.6)
+    snapshots = list(watch._early.snapshots)
+    rng = np.random.default_rng(5)
+    states = np.array([1.0, 0.5, 0.3, 0.05, 0.0, 0.1]) + rng.normal(0.0, 0.02, size=(4, 6))
+    times = tuple(0.21 + k / 30 for k in range(36))  # between snapshots and on none of them
+    batched = paths(snapshots, states, 0.21, times, FULL_REFERENCE.build(4, P))
+    assert batched.shape == (len(times), 4, 3)
+    for row in range(4):
+        alone = _one_fish_path(snapshots, states[row], 0.21, times)
+        assert np.array_equal(batched[:, row], alone), row  # the same floats, not merely close
+    assert np.ptp(batched[-1, :, 0]) > 0.0  # the fish differ: the batch did not repeat one path
+
+
+def test_differs_with_a_memo_gives_the_verdicts_of_a_fresh_comparison():
+    from pectoral_gym.hardware.safety.shadow_fins import ShadowFins
+    from pectoral_gym.model.finrules import FirmwareConfig
+
+    config = FirmwareConfig(limits=ServoLimits())
+    send, ack = ShadowFins(P, config, 0.0), ShadowFins(P, config, 1.0)
+    beat = np.array([[math.pi / 2, math.radians(60), 0.6, 3.0]] * 2)
+    other = np.array([[math.pi / 2, math.radians(30), 0.6, 2.0]] * 2)
+    for shadow in (send, ack):
+        shadow.reset(0.0)
+        shadow.queue.append((0.0, beat, None))
+        shadow.queue.append((2.0, other, lambda: 2.4))  # taken 0.4 s later by the acknowledging replay
+    memo: dict = {}
+    verdicts = []
+    for to in np.arange(0.5, 4.0, 0.1):
+        send.advance(to)
+        ack.advance(to)
+        mine, theirs = list(send.snapshots), ack.view(to)
+        fresh = ShadowFins.differs(mine, theirs, to - 1.0)
+        assert ShadowFins.differs(mine, theirs, to - 1.0, memo) == fresh
+        assert ShadowFins.differs(mine, theirs, to - 1.0, memo) == fresh  # a second time, all from the memo
+        verdicts.append(fresh)
+    assert not verdicts[0] and verdicts[-1]  # the same fins before the second command, different after it
+    mine = list(send.snapshots)
+    changed = [(t, fins + (t == mine[-1][0]), pending) for t, fins, pending in mine]  # new objects, one differs
+    assert ShadowFins.differs(mine, changed, mine[-3][0], memo)
+
+
+def test_views_batched_by_their_instants_predict_what_each_view_alone_does():
+    from pectoral_gym.hardware.safety.shadow_fins import ShadowFins
+    from pectoral_gym.model.finrules import FirmwareConfig
+
+    config = FirmwareConfig(limits=ServoLimits())
+    shadows = [ShadowFins(P, config, share) for share in (0.0, 0.5, 1.0)]
+    beat = np.array([[math.pi / 2, math.radians(60), 0.6, 3.0]] * 2)
+    turn = np.array([[math.pi / 2, math.radians(30), 0.6, 2.0], [math.pi / 2, math.radians(60), 0.8, 2.5]])
+    for shadow in shadows:
+        shadow.reset(0.0)
+        shadow.queue.append((0.0, beat, None))
+        shadow.queue.append((0.6, turn, lambda: 0.75))
+    for t in np.arange(1 / 30, 2.0, 1 / 30):
+        for shadow in shadows:
+            shadow.advance(t)
+    views = [list(shadows[0].snapshots)] + [s.view(shadows[0].t) for s in shadows[1:]]
+    # a copy of the first view on the same instants, its fins other than the first's: a batch of two views
+    views.append([(t, fins * 0.9, pending) for t, fins, pending in views[0]])
+    groups = batches(views, 0.3, 1.9)
+    assert sorted(i for indices, _ in groups for i in indices) == [0, 1, 2, 3]
+    assert any(len(indices) > 1 for indices, _ in groups)  # the test batches something
+    rng = np.random.default_rng(3)
+    before = np.array([(t, 1.0 + 0.2 * t, 0.5 + 0.01 * t, 0.02 * t) for t in np.arange(0.3, 1.1, 1 / 30)])
+    before[:, 1:3] += rng.normal(0.0, 0.002, size=(len(before), 2))
+    start = np.array([1.0, 0.5, 0.0, 0.2, 0.0, 0.0])
+    predictions = Predictions(P, 4)
+    for indices, stacked in groups:
+        motion = predictions.motion(stacked, len(indices), start, 0.7, (1.2, 1.9))
+        fitted = predictions.fitted(stacked, len(indices), before, 0.1, (1.9,))
+        for row, index in enumerate(indices):  # each view alone, in a model of one fish, with all its snapshots
+            alone = Predictions(P, 1)
+            assert np.array_equal(motion[:, row], alone.motion(views[index], 1, start, 0.7, (1.2, 1.9))[:, 0])
+            assert np.array_equal(fitted[:, row], alone.fitted(views[index], 1, before, 0.1, (1.9,))[:, 0])
