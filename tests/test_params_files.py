@@ -147,5 +147,6 @@ def test_cli_validate_takes_params_and_reports_a_k_file_for_another_robot(tmp_pa
     assert run.returncode == 0, run.stderr[-2000:]
     report = json.loads((tmp_path / "val" / "validation.json").read_text())
     assert report["params_differ"] == ["fin_span"]  # the shipped K was identified for fin_span 0.061
+    assert report["source"] == "the shipped coefficients file"  # a report names no path of the machine it ran on
     bad = _run("-m", "pectoral_gym.scaling", "validate", "--params", "missing.json", cwd=tmp_path)
     assert bad.returncode == 2 and "missing.json" in bad.stderr

@@ -229,8 +229,9 @@ def run(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
         scaling = ScalingFunctions.load(path)
     except (OSError, ValueError) as err:
         parser.error(str(err))
+    source = "the shipped coefficients file" if not args.coefficients else str(path)  # no machine paths in reports
     results = validate(scaling, params=params, out_dir=args.out, n_single=args.n_single, n_two=args.n_two,
-                       seed=args.seed, quick=args.quick, plots=not args.no_plots, source=str(path),
+                       seed=args.seed, quick=args.quick, plots=not args.no_plots, source=source,
                        progress=not args.no_progress)
     print(rendering.summary_text(results, Path(args.out)))
     return 0
