@@ -335,7 +335,7 @@ def test_lone_transitional_strokes_on_a_live_camera_are_not_taken_for_a_frozen_o
 
 def test_a_slow_fish_rowing_by_bias_sweeps_alone_is_not_taken_for_a_frozen_camera():
     """Both fins sweeping between 0.79 and 2.2 rad at zero amplitude, a new bias every 0.5 s: the fish surges
-    back and forth and creeps (31 mm in 9 s). The blade-element model from the line's mean velocity alone predicts
+    back and forth and creeps (32 mm in 9 s). The blade-element model from the line's mean velocity alone predicts
     36 mm over a 2.4 s window where the fish shows 1 mm (the surges' velocity at the window's start is not the mean,
     and so slow a fish's quadratic drag hardly damps the difference); the averaged model predicts almost nothing
     for pure sweeps. The smaller of the two is judged: no stop."""
