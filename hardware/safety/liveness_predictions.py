@@ -3,9 +3,9 @@
 :class:`pectoral_gym.hardware.safety.liveness.LivenessWatch` predicts, for each replay of the fins (a shadow's
 snapshots, :class:`pectoral_gym.hardware.safety.shadow_fins.ShadowFins`), the motion by the averaged and the
 blade-element model from the least-squares line's start, and the blade-element model's end position from a state
-fitted to the poses. The models advance every fish on its own
-(the same compiled step, the same substeps, whatever the others do), so fish that are advanced in the same
-segments can share one model: each fish's path is then, float for float, the one a model of it alone gives.
+fitted to the poses. The models advance every fish on its own (the same compiled step, the same substeps, whatever
+the others do), so fish that are advanced in the same segments can share one model: each fish's path is then,
+float for float, the one a model of it alone gives.
 :class:`Predictions` batches what has the same segments: the fitted start's path and its finite-difference
 paths, and the replays whose snapshots fall at the same instants.
 """
