@@ -278,3 +278,88 @@ def test_the_half_way_replay_takes_a_command_half_way_although_its_acknowledgeme
     assert shadow.t == pytest.approx(2.2)
     assert np.allclose(shadow.replay.model.fins, reference.model.fins)
     assert not np.allclose(late.model.fins, reference.model.fins)  # the take time matters here
+
+
+# Bias jumps at zero (or nearly zero) amplitude, a new command every 0.5 s: each fin sweeps once to its new bias and
+# holds there, a lone transitional half-stroke per command (the demo policy's steering near its goal).
+BIAS_JUMPS = np.array([
+    [[2.28, 0.03, 1.53, 2.65], [1.02, 0.0, 1.22, 3.26]], [[1.31, 0.0, 1.36, 1.79], [2.03, 0.0, 1.8, 1.84]],
+    [[2.33, 0.0, 1.98, 2.55], [2.3, 0.0, 1.29, 2.87]], [[0.79, 0.0, 1.57, 1.19], [0.79, 0.04, 1.71, 3.56]],
+    [[1.2, 0.0, 1.86, 3.05], [2.11, 0.0, 1.83, 1.57]], [[0.79, 0.0, 1.9, 2.42], [0.79, 0.0, 1.42, 1.02]],
+    [[1.92, 0.0, 1.97, 1.45], [2.1, 0.0, 1.59, 3.68]], [[1.72, 0.0, 1.73, 1.74], [0.83, 0.07, 1.81, 1.64]],
+    [[0.79, 0.0, 1.45, 3.07], [0.79, 0.03, 1.34, 2.19]], [[1.2, 0.0, 1.72, 2.29], [1.45, 0.0, 1.89, 2.9]],
+    [[0.79, 0.0, 1.39, 1.77], [0.79, 0.0, 1.26, 1.77]], [[0.79, 0.0, 1.73, 2.37], [0.79, 0.0, 1.67, 3.52]],
+    [[0.79, 0.0, 1.36, 1.85], [0.79, 0.0, 1.45, 1.94]], [[2.32, 0.0, 1.75, 2.5], [2.01, 0.0, 1.26, 2.47]],
+    [[1.0, 0.0, 1.32, 3.89], [1.58, 0.0, 1.52, 1.89]], [[0.79, 0.0, 1.39, 3.52], [0.79, 0.0, 1.51, 3.92]]])
+
+
+def _bias_jumps(freeze_at=math.inf):
+    """BIAS_JUMPS sent every 0.5 s from 1 s and run by the firmware's rules on the blade-element model (the emulated
+    robot's way), seen at 30 frames per second, frozen (with 1 mm of fresh noise) from ``freeze_at`` [s] on.
+    Returns the first stop ``(t, reason)`` or ``None``, and the true fish's largest distance from the frozen pose."""
+    from pectoral_gym.model.finreplay import FinReplay
+
+    watch, bound = _watch()
+    bound.running(0.0, 100.0)
+    robot = FinReplay(P)
+    robot.model.state[0] = (1.0, 0.75, 0.3, 0.0, 0.0, 0.0)
+    commands = [(1.0 + 0.5 * k, beats) for k, beats in enumerate(BIAS_JUMPS)]
+    rng = np.random.default_rng(5)
+    frozen, drift = None, 0.0
+    for k in range(255):  # to 9.5 s
+        t = 1.0 + k / 30
+        while commands and commands[0][0] <= t + 1e-9:
+            sent, beats = commands.pop(0)
+            watch.command(sent, beats)
+            robot.command(sent, beats)
+        robot.advance(t)
+        pose = robot.model.state[0, :3].copy()
+        if t >= freeze_at:
+            frozen = pose if frozen is None else frozen
+            drift = max(drift, math.hypot(*(pose[:2] - frozen[:2])))
+            pose = frozen + np.array([*(1e-3 * rng.standard_normal(2)), 0.0])
+        reason = watch.sighting(t, *pose)
+        if reason:
+            return (t, reason), drift
+    return None, drift
+
+
+def test_lone_transitional_strokes_on_a_live_camera_are_not_taken_for_a_frozen_one():
+    """Bias jumps at (nearly) zero amplitude: the fish surges with each lone sweep. The averaged model, over the
+    2.4 s window ending at 8.5 s, predicted 62 mm where this fish moves 6 mm ("camera frozen", a false stop of the
+    check before). The blade-element model, the fins' forces from their angle and rate at every instant (this
+    robot), does not; a camera is now called frozen only when both models say so."""
+    stop, _ = _bias_jumps()
+    assert stop is None, stop
+
+
+def test_a_slow_fish_rowing_by_bias_sweeps_alone_is_not_taken_for_a_frozen_camera():
+    """Both fins sweeping between 0.79 and 2.2 rad at zero amplitude, a new bias every 0.5 s: the fish surges
+    back and forth and creeps (32 mm in 9 s). The blade-element model from the line's mean velocity alone predicts
+    36 mm over a 2.4 s window where the fish shows 1 mm (the surges' velocity at the window's start is not the mean,
+    and so slow a fish's quadratic drag hardly damps the difference); the averaged model predicts almost nothing
+    for pure sweeps. The smaller of the two is judged: no stop."""
+    from pectoral_gym.model.finreplay import FinReplay
+
+    watch, bound = _watch()
+    bound.running(0.0, 100.0)
+    robot = FinReplay(P)
+    robot.model.state[0] = (1.0, 0.75, 0.3, 0.0, 0.0, 0.0)
+    for k in range(270):
+        t = 1.0 + k / 30
+        if k % 15 == 0:
+            bias = 0.79 if k % 30 == 0 else 2.2
+            beats = np.array([[bias, 0.0, 1.2, 2.0]] * 2)
+            watch.command(t, beats)
+            robot.command(t, beats)
+        robot.advance(t)
+        assert watch.sighting(t, *robot.model.state[0, :3]) == "", t
+    assert 0.02 < math.hypot(robot.model.state[0, 0] - 1.0, robot.model.state[0, 1] - 0.75) < 0.05  # it crept
+
+
+def test_a_frozen_camera_during_lone_transitional_strokes_is_still_caught():
+    """The same strokes, the camera frozen at 4 s: the sweeps move the fish enough for the 0.8 s window."""
+    stop, drift = _bias_jumps(freeze_at=4.0)
+    assert stop is not None and stop[1].startswith("camera frozen"), stop
+    assert stop[0] - 4.0 <= 1.0, stop
+    assert drift < 0.05  # what the fish did meanwhile: a few centimetres

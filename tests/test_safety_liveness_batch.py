@@ -112,8 +112,11 @@ def test_views_batched_by_their_instants_predict_what_each_view_alone_does():
     predictions = Predictions(P, 4)
     for indices, stacked in groups:
         motion = predictions.motion(stacked, len(indices), start, 0.7, (1.2, 1.9))
+        blade = predictions.motion(stacked, len(indices), start, 0.7, (1.2, 1.9), blade_element=True)
         fitted = predictions.fitted(stacked, len(indices), before, 0.1, (1.9,))
         for row, index in enumerate(indices):  # each view alone, in a model of one fish, with all its snapshots
             alone = Predictions(P, 1)
             assert np.array_equal(motion[:, row], alone.motion(views[index], 1, start, 0.7, (1.2, 1.9))[:, 0])
+            assert np.array_equal(blade[:, row], alone.motion(views[index], 1, start, 0.7, (1.2, 1.9), True)[:, 0])
+            assert not np.allclose(blade[:, row], motion[:, row])  # two models indeed
             assert np.array_equal(fitted[:, row], alone.fitted(views[index], 1, before, 0.1, (1.9,))[:, 0])

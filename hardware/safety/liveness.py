@@ -11,10 +11,13 @@ checks three consequences on the sightings (each a stop with a reason saying wha
 * **too fast**: the camera's fish moving (least-squares speed less two standard errors) faster than the physical
   bound allows ours: fins still and the fish coasted to rest, while the camera shows a fish that swims;
 * **motion**: the fins are replayed from the commands sent, so their phase at any past instant is known.
-  *Frozen*: the averaged model (:class:`pectoral_gym.model.models.AveragedModel`) driven by them, started from
-  the pose and mean velocity of the window before the last ``window`` s, predicts at least ``min_motion``
-  (displacement plus half a body length times the heading change, less three standard errors) and the camera
-  shows less than ``ratio`` of it, over ``window`` or ``long_window``, however the pixels are dressed up.
+  *Frozen*: the averaged model (:class:`pectoral_gym.model.models.AveragedModel`) and the blade-element model
+  (:class:`pectoral_gym.model.models.FullModel`) driven by them, started from the pose and mean velocity of the
+  window before the last ``window`` s, both predict at least ``min_motion`` (displacement plus half a body length
+  times the heading change, less three standard errors) and the camera shows less than ``ratio`` of the smaller
+  prediction, over ``window`` or ``long_window``, however the pixels are dressed up. (Each model misses where the
+  other does not: the averaged one lone transitional half-strokes, the blade-element one a slow fish whose
+  stroke surges a mean velocity does not hold; the blade-element one runs only when the averaged one would stop.)
   *Innovation*: the blade-element model (:class:`pectoral_gym.model.models.FullModel`) driven by them, started
   in the state whose path fits the poses of the window before, misses the end position by more than
   ``innovation`` plus three standard errors of the measurement, twice in a row: a recording, another fish.
@@ -181,7 +184,7 @@ class LivenessWatch:
     def _motion(self, t1: float, window: float, innovation_check: bool) -> str:
         """The fish models' motion over the last ``window`` against the camera's; the innovation too if asked.
 
-        The motion: the averaged model starts at the centre ``t_c`` of the window before (``[t1 - 2 window,
+        The motion: each model starts at the centre ``t_c`` of the window before (``[t1 - 2 window,
         t1 - window]``) from the least-squares line through its poses (there the line's position and slope are the
         pose and mean velocity with the smallest errors, ``sigma / sqrt(n)`` and ``sigma / sqrt(sum (t - t_c)^2)``,
         uncorrelated), compared inside the last window, between the mean poses of its first and last 0.1 s. The
@@ -203,13 +206,16 @@ class LivenessWatch:
         t_m, t_e = float(middle[:, 0].mean()), float(end[:, 0].mean())
         meas_m, meas_e = middle[:, 1:4].mean(axis=0), end[:, 1:4].mean(axis=0)
         reach = 0.5 * self.params.body_length
-        m_meas = math.hypot(*(meas_e[:2] - meas_m[:2])) + reach * abs(meas_e[2] - meas_m[2])
+        m_meas = _moved(np.array([meas_m, meas_e]), reach)
         # The prediction most favourable to liveness, of the fins taking each command at its send, half way and at
-        # its acknowledgement: the smaller predicted motion, the smaller miss. The motion: the averaged model from
-        # the line's pose and mean velocity at t_c (a start fitted through the fins would let a frozen window
-        # before explain itself by a fish that swims backwards against its thrust). The end position: the
-        # blade-element model from the state fitted through each replay's fins, whose path also had to match
-        # the window before (a frozen one included).
+        # its acknowledgement: the smaller predicted motion, the smaller miss. The motion: from the line's pose and
+        # mean velocity at t_c (a start fitted through the fins would let a frozen window before explain itself by
+        # a fish that swims backwards against its thrust), by the averaged model and, where that one would call
+        # the camera frozen, by the blade-element model too: the smaller (each model misses where the other does
+        # not: the averaged one lone transitional half-strokes, the blade-element one a slow fish whose stroke
+        # surges the line's mean velocity does not hold). The end position: the blade-element model from the
+        # state fitted through each replay's fins, whose path also had to match the window before (a frozen one
+        # included).
         start_c = line_state(before, t_c)
         m_pred = innovation = math.inf
         key = (self._early.t, self._commands)
@@ -225,8 +231,7 @@ class LivenessWatch:
             ends = self._predictions.fitted(stacked, len(indices), before, reach, (t_e,))[0] \
                 if fitted and innovation_check else None
             for row, view in enumerate(indices):
-                pred_m, pred_e = pred[0, row], pred[1, row]
-                motions[view] = math.hypot(*(pred_e[:2] - pred_m[:2])) + reach * abs(pred_e[2] - pred_m[2])
+                motions[view] = _moved(pred[:, row], reach)
                 if ends is not None:
                     misses[view] = math.hypot(*(meas_e[:2] - ends[row, :2]))
         for motion, miss in zip(motions, misses, strict=True):  # in the views' order, as min() meets them
@@ -240,13 +245,21 @@ class LivenessWatch:
         motion_error = scatter * (t_e - t_m) / math.sqrt(sxx)
         end_error = scatter * math.sqrt(1.0 / len(before) + (t_e - t_c) ** 2 / sxx + 1.0 / len(end))
         allowed = self.innovation + 3.0 * end_error
+
+        def frozen(motion: float) -> bool:
+            return motion - 3.0 * motion_error >= self.min_motion and m_meas < self.ratio * motion
+
+        if frozen(m_pred):  # the blade-element model too (rarely run: on a live camera the averaged one seldom stops)
+            for indices, stacked in batches(views, since, t_e):
+                pred = self._predictions.motion(stacked, len(indices), start_c, t_c, (t_m, t_e), blade_element=True)
+                m_pred = min(m_pred, *(_moved(pred[:, row], reach) for row in range(len(indices))))
         if innovation_check and fitted:
             self.last_prediction = (m_pred, m_meas, innovation)
             self.predictions.append((t1, m_pred, m_meas, innovation, allowed))
-        if m_pred - 3.0 * motion_error >= self.min_motion and m_meas < self.ratio * m_pred:
+        if frozen(m_pred):
             return (f"camera frozen: the fish has moved {m_meas * 1000:.0f} mm in {window:.1f} s while its "
-                    f"fins beat for {m_pred * 1000:.0f} mm (the averaged model; at least "
-                    f"{self.ratio * m_pred * 1000:.0f} mm expected)")
+                    f"fins beat for {m_pred * 1000:.0f} mm (the averaged and the blade-element model, the smaller; "
+                    f"at least {self.ratio * m_pred * 1000:.0f} mm expected)")
         if not innovation_check:
             return ""
         if math.isnan(innovation):
@@ -265,3 +278,8 @@ class LivenessWatch:
         scatter = math.sqrt(float((residual ** 2).sum()) / max(2 * (len(poses) - 2), 1))
         centred = poses[:, 0] - t_c
         return max(scatter, 1e-4), float(centred @ centred)
+
+
+def _moved(path: np.ndarray, reach: float) -> float:
+    """The motion between the two poses ``(2, 3)`` of ``path``: displacement plus ``reach`` times the turn [m]."""
+    return math.hypot(*(path[1, :2] - path[0, :2])) + reach * abs(path[1, 2] - path[0, 2])

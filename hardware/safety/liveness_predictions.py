@@ -1,10 +1,11 @@
 """The liveness check's fish-model predictions over replayed fins, several replays and starts in one batch.
 
 :class:`pectoral_gym.hardware.safety.liveness.LivenessWatch` predicts, for each replay of the fins (a shadow's
-snapshots, :class:`pectoral_gym.hardware.safety.shadow_fins.ShadowFins`), the averaged model's motion and the
-blade-element model's end position from a state fitted to the poses. The models advance every fish on its own
-(the same compiled step, the same substeps, whatever the others do), so fish that are advanced in the same
-segments can share one model: each fish's path is then, float for float, the one a model of it alone gives.
+snapshots, :class:`pectoral_gym.hardware.safety.shadow_fins.ShadowFins`), the motion by the averaged and the
+blade-element model from the least-squares line's start, and the blade-element model's end position from a state
+fitted to the poses. The models advance every fish on its own (the same compiled step, the same substeps, whatever
+the others do), so fish that are advanced in the same segments can share one model: each fish's path is then,
+float for float, the one a model of it alone gives.
 :class:`Predictions` batches what has the same segments: the fitted start's path and its finite-difference
 paths, and the replays whose snapshots fall at the same instants.
 """
@@ -128,9 +129,16 @@ class Predictions:
             paths(snapshots, np.repeat(start, model.n, axis=0), 0.05, (0.2, 0.4), model)
 
     def motion(self, snapshots: Sequence[Snapshot], views: int, start: np.ndarray, t_c: float,
-               times: Sequence[float]) -> np.ndarray:
-        """The averaged model's poses ``(len(times), views, 3)`` from ``start`` ``(6,)`` at ``t_c`` [s]."""
-        return paths(snapshots, np.repeat(start[None], views, axis=0), t_c, times, self._averaged[views])
+               times: Sequence[float], blade_element: bool = False) -> np.ndarray:
+        """The averaged (or blade-element) model's poses ``(len(times), views, 3)`` from ``start`` ``(6,)`` at ``t_c``.
+
+        ``t_c`` and ``times`` in s. The blade-element model evaluates the fins' forces from their angle and rate at
+        every instant (the paper's eqs. 1-20), so a lone transitional half-stroke (a jump of the bias at zero
+        amplitude) pushes the fish by what that one sweep gives; the averaged model spreads a stroke's forcing
+        over it as a beat's.
+        """
+        model = self._full[views] if blade_element else self._averaged[views]
+        return paths(snapshots, np.repeat(start[None], views, axis=0), t_c, times, model)
 
     def fitted(self, snapshots: Sequence[Snapshot], views: int, before: np.ndarray, reach: float,
                times: Sequence[float]) -> np.ndarray:
