@@ -37,6 +37,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from pectoral_gym.hardware.safety.blind_phase import phase_strokes
 from pectoral_gym.model import strokes
 from pectoral_gym.model.finreplay import FinReplay
 from pectoral_gym.model.finrules import FirmwareConfig, wire_beats
@@ -48,6 +49,7 @@ __all__ = [
     "first_stroke", "longest_half_stroke", "ls_velocity", "shortest_half_stroke", "unseen_reason",
 ]
 
+_MAX_TREE_COMMANDS = 400  # commands since the arm the take tree follows (200 s at 0.5 s); past them, the box alone
 _MIN_POSES, _MIN_SPAN = 3, 0.1  # fewer poses, or a shorter span [s]: no velocity estimate (the physical bound rules)
 
 def shortest_half_stroke(limits: ServoLimits) -> float:
@@ -178,17 +180,26 @@ class CommandedGain:
             collections.deque(maxlen=64)  # (sent, clipped beats, acknowledged-at or None), newest last
         self._latched: collections.deque[tuple[float, np.ndarray]] = collections.deque(maxlen=256)
         self._still = math.inf  # nothing known until the first reset
+        self._armed = math.inf
+        self._since_arm: list[tuple[float, np.ndarray, Callable[[], float | None] | None]] = []  # for the take tree
+        self._memo: dict = {}  # the take tree's latches, for the commands since the arm
+        self._halt = math.inf  # the fins may have halted at or after this time since the arm [s]
 
     def reset(self, t: float) -> None:
         """The fins are still at ``t`` [s] (an arm after a confirmed stop); commands before are forgotten."""
         self._commands.clear()
         self._latched.clear()
         self._replay.reset(float(t))
-        self._still = float(t)
+        self._still = self._armed = float(t)
+        self._since_arm = []
+        self._halt = math.inf
+        self._memo = {}
 
     def still(self, t: float) -> None:
         """The fins may have stopped at ``t`` [s] (a stop, a lease's end, a watchdog): the next latch is whole."""
         self._still = max(self._still, float(t)) if math.isfinite(self._still) else float(t)
+        if float(t) > self._armed:  # (not before the first reset: the tree then claims nothing anyway)
+            self._halt = min(self._halt, float(t))  # a halt at or after the earliest holds every later one
 
     def command(self, t: float, beats: np.ndarray, acknowledged: Callable[[], float | None] | None = None) -> None:
         """A command ``(2, 4)`` sent at ``t`` [s]; ``acknowledged()``: when the robot had it [s] (``None``: not yet).
@@ -205,6 +216,8 @@ class CommandedGain:
         self._run(t)
         self._replay.command(t, clipped)
         self._commands.append((float(t), clipped, acknowledged))
+        if len(self._since_arm) <= _MAX_TREE_COMMANDS:
+            self._since_arm.append((float(t), clipped, acknowledged))
 
     def _run(self, to: float, step: float = 0.05) -> None:
         """Replay the fins to ``to`` [s], noting the latched patterns every ``step`` s (a half-stroke is longer)."""
@@ -218,20 +231,50 @@ class CommandedGain:
     def accel(self, t0: float, now: float, t1: float, round_trip: float) -> float:
         """The most the fish's speed can grow per second [m/s^2] anywhere in ``[t0, t1]`` [s], judged at ``now``.
 
-        ``round_trip`` [s]: the most a command takes to reach the robot (the link's round trip).
+        ``round_trip`` [s]: the most a command takes to reach the robot (the link's round trip). Each fin's force is
+        the least of three bounds that each hold whatever the take times: the box's peak rate with its shortest
+        half-stroke, :meth:`strokes`' (the tighter parts of the box and the take tree), and the largest force of the
+        take tree's half-strokes, each at its own rate and duration.
         """
-        strokes_bound = self.strokes(t0, now, t1, round_trip)
-        if strokes_bound is None:
+        box = self.box_strokes(t0, now, t1, round_trip)
+        if box is None:
             return self.full  # nothing known of the fins
-        rates, shortest = strokes_bound
-        return sum(fin_force_bound(self.params, self.limits, w, d, fin)
-                   for fin, (w, d) in enumerate(zip(rates, shortest, strict=True))) / self.mass
+        tree = self._tree(t0, t1)
+        total = 0.0
+        for fin in range(2):
+            force = fin_force_bound(self.params, self.limits, box[0][fin], box[1][fin], fin)
+            if tree is not None:
+                pairs = tree[fin]
+                force = min(force, max((fin_force_bound(self.params, self.limits, w, d, fin) for w, d in pairs),
+                                       default=0.0))
+            total += force
+        return total / self.mass
+
+    def _tree(self, t0: float, t1: float) -> list[np.ndarray] | None:
+        """The take tree's half-strokes in ``[t0, t1]`` (:func:`phase_strokes`), ``None`` where it claims nothing."""
+        if len(self._since_arm) > _MAX_TREE_COMMANDS:
+            return None
+        return phase_strokes(self._since_arm, t0, t1, self.limits, self._halt, self._memo)
 
     def strokes(self, t0: float, now: float, t1: float, round_trip: float) -> tuple[np.ndarray, np.ndarray] | None:
         """``(2,)`` the highest peak rate [rad/s] and ``(2,)`` the shortest half-stroke [s] of the fins in ``[t0, t1]``.
 
         ``None``: nothing known (never reset). Fins that stay still (no command since the stop) give rate 0.
+        Each part is the tighter of the box's (:meth:`box_strokes`) and the take-time tree's
+        (:func:`pectoral_gym.hardware.safety.blind_phase.phase_strokes`, when it claims one: no halt possible since
+        the arm, every command since known): both hold whatever the take times, so their tighter does too.
         """
+        box = self.box_strokes(t0, now, t1, round_trip)
+        tree = None if box is None else self._tree(t0, t1)
+        if tree is None:
+            return box
+        rates = np.array([pairs[:, 0].max(initial=0.0) for pairs in tree])
+        shortest = np.array([pairs[:, 1].min(initial=math.inf) for pairs in tree])
+        return np.minimum(box[0], rates), np.maximum(box[1], shortest)
+
+    def box_strokes(self, t0: float, now: float, t1: float,
+                    round_trip: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """:meth:`strokes` from the box of patterns alone (module docstring)."""
         if not math.isfinite(self._still):
             return None
         since = [c for c in self._commands if self._still <= c[0] <= t1]

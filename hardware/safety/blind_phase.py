@@ -1,0 +1,226 @@
+"""The robot's half-strokes over every take time the radio allows: the blind rule's bound on *when* a stroke runs.
+
+The robot takes each command somewhere between its send and the STATUS that acknowledges it (a lost command never;
+an acknowledgement covers its command or a later one), and the firmware acts on it at its next tick
+(:data:`pectoral_gym.model.finrules.CHUNK`). What a fin runs depends on the take times only through *which* command
+is the newest taken at each of its turning points (a still fin: when it takes one): the firmware's rules
+(:func:`pectoral_gym.model.finrules.next_latch`, the latch of ``pectoral_gym.model.strokes``) are exact given that
+sequence. :func:`phase_strokes` therefore follows each fin through a tree of those choices from the arm, every
+node a half-stroke known exactly (pattern, turning points, duration, kind) whose start is known to lie in an
+interval of time; at each turning point it branches on the commands that can be the newest taken somewhere in the
+interval and trims the interval to where each can. Nodes that run the same half-stroke after the same command are
+merged (the hull of their intervals: more take times, never fewer). The half-strokes that can overlap a span are
+those the span's bound holds; whatever the take times, the robot's own half-stroke is one of them
+(``docs/guide/safety.md``, "When the robot runs a stroke").
+
+Unknown at the arm: the angle the fins halted at. The first half-stroke's swing is taken from the far end of the
+servo range; if the firmware would stretch its period for some angle (the period would then be unknown), or a
+halt may have happened since the arm, or the tree grows past its budget, nothing is claimed (``None``) and the
+box of patterns rules alone.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from pectoral_gym.model import strokes
+from pectoral_gym.model.finrules import CHUNK, next_latch
+from pectoral_gym.model.servo import ServoLimits
+
+__all__ = ["phase_strokes"]
+
+_INTERVALS_PER_NODE = 4  # more start intervals for one half-stroke are merged (the hull of the closest two)
+_BUDGET = 6000  # half-strokes followed per fin and query; past it the box rules alone
+
+Command = tuple[float, np.ndarray, "Callable[[], float | None] | None"]
+
+
+def _takes(commands: Sequence[Command]) -> tuple[np.ndarray, np.ndarray]:
+    """Earliest and latest instants [s] the firmware can act on each command (send; acknowledgement plus a tick).
+
+    Not acknowledged yet: any time from its send on. A link that does not tell: when sent (as the box assumes).
+    """
+    sent = np.array([c[0] for c in commands], dtype=float)
+    late = np.empty_like(sent)
+    for k, (s, _, acknowledged) in enumerate(commands):
+        if acknowledged is None:
+            late[k] = s + CHUNK
+        else:
+            ack = acknowledged()
+            late[k] = math.inf if ack is None else max(float(ack), s) + CHUNK
+    # An acknowledgement of a later command covers the earlier ones; none is taken after a later one's latest.
+    late = np.minimum.accumulate(late[::-1])[::-1]
+    return sent, late
+
+
+def _latch(row: np.ndarray, pattern: np.ndarray) -> np.ndarray:
+    """The half-stroke a fin ``row`` (``strokes.FIN_FIELDS``) starts at its turning point with ``pattern`` (4,)."""
+    new = row.copy()
+    bias, amp, period, ratio = pattern
+    power = 1.0 - row[strokes.POWER]
+    new[strokes.ANGLE_FROM] = row[strokes.ANGLE_TO]
+    new[strokes.ANGLE_TO] = bias + amp if power > 0.5 else bias - amp
+    new[strokes.DURATION] = (period if power > 0.5 else ratio * period) / (ratio + 1.0)  # eq. (21)
+    new[strokes.ELAPSED], new[strokes.POWER] = 0.0, power
+    new[strokes.BIAS:strokes.RATIO + 1] = pattern
+    return new
+
+
+def _next_pattern(command: np.ndarray, row: np.ndarray, fin: int, limits: ServoLimits) -> np.ndarray:
+    """What fin ``fin`` in half-stroke ``row`` latches of ``command`` (2, 4) at its turning point (the firmware's)."""
+    fins = np.stack([row, row])
+    return next_latch(np.stack([command[fin], command[fin]]), fins, limits)[0]
+
+
+def _still_row(angle: float) -> np.ndarray:
+    """A fin at rest at ``angle`` [rad]: its next half-stroke is a power stroke latched whole."""
+    row = np.zeros(strokes.FIN_FIELDS)
+    row[strokes.ANGLE_FROM] = row[strokes.ANGLE_TO] = angle
+    return row
+
+
+def _first_from_rest(command: np.ndarray, fin: int, limits: ServoLimits) -> np.ndarray | None:
+    """The first half-stroke from rest at an unknown angle, its start angle ``nan``; ``None`` if it would be stretched.
+
+    The firmware stretches a transitional half-stroke's period by the swing from the rest angle; only a period the
+    stretch leaves alone for every angle of the servo range is known.
+    """
+    ends = [_next_pattern(command, _still_row(a), fin, limits) for a in (limits.angle_min, limits.angle_max)]
+    plain = _next_pattern(command, _still_row(float(ends[0][0] + ends[0][1])), fin, limits)  # no swing: no stretch
+    if not (np.array_equal(ends[0], plain) and np.array_equal(ends[1], plain)):
+        return None
+    row = _latch(_still_row(math.nan), plain)
+    row[strokes.ANGLE_FROM] = math.nan
+    return row
+
+
+def _peak(row: np.ndarray, limits: ServoLimits) -> float:
+    """The half-stroke's peak rate [rad/s] (a half-cosine); from an unknown angle, from the far end of the range."""
+    to, start, d = row[strokes.ANGLE_TO], row[strokes.ANGLE_FROM], row[strokes.DURATION]
+    swing = max(to - limits.angle_min, limits.angle_max - to) if math.isnan(start) else abs(to - start)
+    return min(math.pi * swing / (2.0 * d), limits.max_speed) if d > 0 else 0.0
+
+
+class _Nodes:
+    """Half-strokes keyed by (fin row, newest command taken), each with its start intervals."""
+
+    def __init__(self) -> None:
+        self.open: dict[tuple, tuple[np.ndarray, int, list[list[float]]]] = {}
+
+    def add(self, row: np.ndarray, taken: int, lo: float, hi: float) -> None:
+        if lo > hi:
+            return
+        key = (row[1:].tobytes(), taken)
+        entry = self.open.get(key)
+        if entry is None:
+            self.open[key] = (row, taken, [[lo, hi]])
+            return
+        spans = entry[2]
+        spans.append([lo, hi])
+        spans.sort()
+        merged = [spans[0]]
+        for s in spans[1:]:
+            if s[0] <= merged[-1][1]:
+                merged[-1][1] = max(merged[-1][1], s[1])
+            else:
+                merged.append(s)
+        while len(merged) > _INTERVALS_PER_NODE:
+            gaps = [merged[i + 1][0] - merged[i][1] for i in range(len(merged) - 1)]
+            i = int(np.argmin(gaps))
+            merged[i:i + 2] = [[merged[i][0], merged[i + 1][1]]]
+        spans[:] = merged
+
+    def pop_earliest(self) -> tuple[np.ndarray, int, list[float]] | None:
+        if not self.open:
+            return None
+        key = min(self.open, key=lambda k: self.open[k][2][0][0])
+        row, taken, spans = self.open[key]
+        span = spans.pop(0)
+        if not spans:
+            del self.open[key]
+        return row, taken, span
+
+
+def phase_strokes(commands: Sequence[Command], t0: float, t1: float, limits: ServoLimits,
+                  halt: float = math.inf, memo: dict | None = None) -> list[np.ndarray] | None:
+    """Per fin, ``(m, 2)`` the peak rate [rad/s] and duration [s] of every half-stroke that can run in ``[t0, t1]``.
+
+    A fin that cannot move in the span has none (``(0, 2)``).
+    ``commands``: every command sent since the arm (the fins at rest, at an unknown angle), oldest first, as
+    ``(sent, clipped beats (2, 4) as received, acknowledged-at)`` (:class:`pectoral_gym.hardware.safety.blind.
+    CommandedGain`'s); ``halt``: the fins may have halted (anywhere) at or after this time [s]. ``memo``:
+    the firmware's latches computed before, kept by the caller between calls with the same commands (cleared when
+    they change other than by a new one). ``None``: nothing claimed (module docstring).
+    """
+    found: list[set[tuple[float, float]]] = [set(), set()]
+    commands = [c for c in commands if c[0] <= t1]
+    if not commands:
+        return [np.zeros((0, 2)), np.zeros((0, 2))]
+    sent, late = _takes(commands)
+    n = len(commands)
+    memo = {} if memo is None else memo
+
+    def pattern(k: int, row: np.ndarray, fin: int) -> np.ndarray:
+        key = (k, fin, row.tobytes())
+        if key not in memo:
+            memo[key] = _next_pattern(commands[k][1], row, fin, limits)
+        return memo[key]
+
+    for fin in range(2):
+        nodes = _Nodes()
+        # The first command taken after the arm, or after a possible halt (a stop, a lease's end, a watchdog, at
+        # ``halt`` or any time later: a halt at ``h`` or later holds one at any later ``h``), is latched at once from
+        # rest, at its take: the robot restarts halted fins for a new command only.
+        starts = [(k, sent[k], late[k]) for k in range(n) if sent[k] <= late[0]]
+        if halt <= t1:
+            starts += [(k, max(sent[k], halt), late[k]) for k in range(n) if late[k] >= halt]
+        for k, first, last in starts:
+            key = (k, fin, b"rest")
+            if key not in memo:
+                memo[key] = _first_from_rest(commands[k][1], fin, limits)
+            row = memo[key]
+            if row is None:
+                return None
+            nodes.add(row, k, first, min(last, t1))
+        budget = _BUDGET
+        while (item := nodes.pop_earliest()) is not None:
+            row, taken, (lo, hi) = item
+            if lo > t1:
+                continue
+            budget -= 1
+            if budget < 0:
+                return None
+            d = row[strokes.DURATION]
+            swing = row[strokes.ANGLE_TO] - row[strokes.ANGLE_FROM]
+            still = swing == 0.0
+            if not still and hi + d >= t0:  # it can overlap the span
+                found[fin].add((_peak(row, limits), float(d)))
+            if still:
+                # A fin at rest takes a command whole as soon as the firmware acts on it: the newest taken when this
+                # rest began again (the rest may not be its pattern), or a later one when it is taken.
+                for k in range(taken, n):
+                    new = pattern(k, row, fin)
+                    if np.array_equal(new, row[strokes.BIAS:strokes.RATIO + 1]):
+                        continue  # the same rest again
+                    rest = row.copy()
+                    rest[strokes.POWER] = 0.0  # a still fin's next half-stroke is a power stroke
+                    start = _latch(rest, new)
+                    if k == taken:
+                        nodes.add(start, k, lo, min(hi + CHUNK, t1))
+                    else:
+                        nodes.add(start, k, max(lo, sent[k]), min(late[k], t1))
+                continue
+            turn_lo, turn_hi = lo + d, hi + d  # the turning point
+            for k in range(taken, n):
+                # Command k is the newest taken at the turning point: taken by then, no later one surely taken.
+                first = max(turn_lo, sent[k]) if k > taken else turn_lo
+                if first > turn_hi or first > t1:
+                    break  # (sent times grow with k)
+                last = min(turn_hi, late[k + 1]) if k + 1 < n else turn_hi
+                if first > last:
+                    continue
+                nodes.add(_latch(row, pattern(k, row, fin)), k, first, min(last, t1))
+    return [np.array(sorted(f), dtype=float).reshape(-1, 2) for f in found]
