@@ -27,6 +27,11 @@ be running in the span (``docs/guide/safety.md``, "The blind rule and the comman
 One fin's force is at most ``k w^2 + I_p sqrt((pi w / d)^2 + w^4)`` for a peak rate ``w`` and half-strokes of at
 least ``d`` (:func:`fin_force_bound`, ``SpeedBound``'s with ``max_speed`` replaced by ``w`` and the servos'
 shortest half-stroke by ``d``), and the fish's speed grows at most at the two fins' sum over ``min(m1, m2)``.
+
+The box assumes any of its half-strokes may run at any instant of the span. The take tree
+(:func:`pectoral_gym.hardware.safety.blind_phase.phase_strokes`) follows the robot's half-strokes over every take
+time the radio allows and bounds each fin's force per half-stroke, at its own rate and duration; the gain is the
+least of the two bounds (both hold whatever the take times).
 """
 
 from __future__ import annotations
