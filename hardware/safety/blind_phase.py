@@ -64,7 +64,7 @@ def _latch(row: np.ndarray, pattern: np.ndarray) -> np.ndarray:
     new[strokes.ANGLE_FROM] = row[strokes.ANGLE_TO]
     new[strokes.ANGLE_TO] = bias + amp if power > 0.5 else bias - amp
     new[strokes.DURATION] = (period if power > 0.5 else ratio * period) / (ratio + 1.0)  # eq. (21)
-    new[strokes.ELAPSED], new[strokes.POWER] = 0.0, power
+    new[strokes.ELAPSED], new[strokes.POWER], new[strokes.SWEPT] = 0.0, power, 0.0
     new[strokes.BIAS:strokes.RATIO + 1] = pattern
     return new
 
@@ -82,19 +82,44 @@ def _still_row(angle: float) -> np.ndarray:
     return row
 
 
-def _first_from_rest(command: np.ndarray, fin: int, limits: ServoLimits) -> np.ndarray | None:
-    """The first half-stroke from rest at an unknown angle, its start angle ``nan``; ``None`` if it would be stretched.
+def _first_from_rest(command: np.ndarray, fin: int, limits: ServoLimits) -> np.ndarray:
+    """The first half-stroke from rest at an unknown angle: its start angle ``nan``, its period the shortest.
 
-    The firmware stretches a transitional half-stroke's period by the swing from the rest angle; only a period the
-    stretch leaves alone for every angle of the servo range is known.
+    The firmware stretches the period of a transitional half-stroke by its swing from the rest angle
+    (:func:`pectoral_gym.model.finrules.stretch_transition`): from none (a rest at the stroke's end) to the most at
+    an end of the servo range, so the period lies between the two. The longest is kept in the row's
+    ``strokes.SWEPT`` field (0: never stretched), which the tree does not otherwise use.
     """
     ends = [_next_pattern(command, _still_row(a), fin, limits) for a in (limits.angle_min, limits.angle_max)]
     plain = _next_pattern(command, _still_row(float(ends[0][0] + ends[0][1])), fin, limits)  # no swing: no stretch
-    if not (np.array_equal(ends[0], plain) and np.array_equal(ends[1], plain)):
-        return None
     row = _latch(_still_row(math.nan), plain)
     row[strokes.ANGLE_FROM] = math.nan
+    longest = max(float(ends[0][2]), float(ends[1][2]))
+    row[strokes.SWEPT] = longest if longest > plain[2] else 0.0
     return row
+
+
+def _stretched(row: np.ndarray) -> np.ndarray | None:
+    """A first stroke from rest with its longest period (``None``: its period is known)."""
+    if row[strokes.SWEPT] <= 0.0:
+        return None
+    out = row.copy()
+    out[strokes.PERIOD] = row[strokes.SWEPT]
+    out[strokes.DURATION] = out[strokes.PERIOD] / (out[strokes.RATIO] + 1.0)  # a power stroke
+    out[strokes.SWEPT] = 0.0
+    return out
+
+
+def _reaches(command: np.ndarray, row: np.ndarray, limits: ServoLimits) -> bool:
+    """Whether the rate rule latches ``command`` (4,) itself at the end of half-stroke ``row`` (a moving fin).
+
+    Every parameter within ``max_rate`` times the half-stroke's duration of the command. For a first stroke whose
+    period lies between two (:func:`_first_from_rest`): if it holds at both, it holds between (``|b - T|`` is
+    convex in ``T``, the reach ``max_rate T / (zeta + 1)`` linear; the other parameters' reach grows with ``T``),
+    and the pattern latched next is then the same for every rest angle.
+    """
+    reach = np.asarray(limits.max_rate, dtype=float) * row[strokes.DURATION]
+    return bool(np.all(np.abs(np.asarray(command, dtype=float) - row[strokes.BIAS:strokes.RATIO + 1]) <= reach))
 
 
 def _peak(row: np.ndarray, limits: ServoLimits) -> float:
@@ -181,10 +206,7 @@ def phase_strokes(commands: Sequence[Command], t0: float, t1: float, limits: Ser
             key = (k, fin, b"rest")
             if key not in memo:
                 memo[key] = _first_from_rest(commands[k][1], fin, limits)
-            row = memo[key]
-            if row is None:
-                return None
-            nodes.add(row, k, first, min(last, t1))
+            nodes.add(memo[key], k, first, min(last, t1))
         budget = _BUDGET
         while (item := nodes.pop_earliest()) is not None:
             row, taken, (lo, hi) = item
@@ -194,9 +216,11 @@ def phase_strokes(commands: Sequence[Command], t0: float, t1: float, limits: Ser
             if budget < 0:
                 return None
             d = row[strokes.DURATION]
+            longest = _stretched(row)  # a first stroke from rest: its period between d's and longest's
+            d_hi = d if longest is None else longest[strokes.DURATION]
             swing = row[strokes.ANGLE_TO] - row[strokes.ANGLE_FROM]
             still = swing == 0.0
-            if not still and hi + d >= t0:  # it can overlap the span
+            if not still and hi + d_hi >= t0:  # it can overlap the span (at its far-end rate, its shortest)
                 found[fin].add((_peak(row, limits), float(d)))
             if still:
                 # A fin at rest takes a command whole as soon as the firmware acts on it: the newest taken when this
@@ -213,7 +237,7 @@ def phase_strokes(commands: Sequence[Command], t0: float, t1: float, limits: Ser
                     else:
                         nodes.add(start, k, max(lo, sent[k]), min(late[k], t1))
                 continue
-            turn_lo, turn_hi = lo + d, hi + d  # the turning point
+            turn_lo, turn_hi = lo + d, hi + d_hi  # the turning point
             for k in range(taken, n):
                 # Command k is the newest taken at the turning point: taken by then, no later one surely taken.
                 first = max(turn_lo, sent[k]) if k > taken else turn_lo
@@ -222,5 +246,9 @@ def phase_strokes(commands: Sequence[Command], t0: float, t1: float, limits: Ser
                 last = min(turn_hi, late[k + 1]) if k + 1 < n else turn_hi
                 if first > last:
                     continue
-                nodes.add(_latch(row, pattern(k, row, fin)), k, first, min(last, t1))
+                new = pattern(k, row, fin)
+                if longest is not None and not (_reaches(commands[k][1][fin], row, limits)
+                                                and _reaches(commands[k][1][fin], longest, limits)):
+                    return None  # what is latched next depends on the rest angle: nothing claimed
+                nodes.add(_latch(row, new), k, first, min(last, t1))
     return [np.array(sorted(f), dtype=float).reshape(-1, 2) for f in found]
