@@ -73,9 +73,10 @@ def _episode(seed: int, policy, rtt: float = 0.2, loss: float = 0.15, steps: int
     Each command is sent every 0.5 s and taken uniformly within the round trip after its send, or lost; its
     acknowledgement (a STATUS after the robot took it or a later one) comes a random return delay later, and
     the firmware acts on a take at its next tick. The first command is gentle (a rest angle the tree can leave
-    unknown); a halt at the arm leaves the fins at a random angle. ``halt``: the PC learns that the fins may have
-    halted after 10.3 s (a lease's end, a watchdog), and they do, at a random time up to 3 s later. Returns the gain
-    and the robot's history ``(t, force [N], [(rate, duration)] per fin)`` every 5 ms.
+    unknown); a halt at the arm leaves the fins at a random angle. ``halt``: twice the PC learns that the fins may
+    have halted after some time (a lease's end, a watchdog), before it sends its next command, and they do, at a
+    random time in between. Returns the gain and the robot's history ``(t, force [N], [(rate, duration)] per
+    fin)`` every 5 ms.
     """
     rng = np.random.default_rng(seed)
     robot = FinReplay(P, FirmwareConfig(limits=LIMITS))
@@ -100,20 +101,22 @@ def _episode(seed: int, policy, rtt: float = 0.2, loss: float = 0.15, steps: int
             pending.append((take, beats))
             acks[step] = take + float(rng.uniform(0.0, 0.5 * rtt))
         sends.append((sent, beats))
+    told = [armed + 10.3, armed + 17.05] if halt else []  # when the PC learns the fins may have halted
+    halts = []
     for step, (sent, beats) in enumerate(sends):
+        for h in told:
+            if sent - 0.5 < h <= sent:  # told before the next command is sent; the halt falls in between
+                gain.still(h)
+                halts.append(float(rng.uniform(h, sent)))
         # The PC learns of an acknowledgement of this command or a later one (a lost command's successor's).
         later = [acks[j] for j in acks if j >= step]
         ack = min(later) if later else None
         gain.command(sent, beats, lambda ack=ack: ack)
-    halted = armed + 10.3 + float(rng.uniform(0.0, 3.0)) if halt else math.inf
-    if halt:
-        gain.still(armed + 10.3)
     end = armed + 0.5 * steps + 0.6
     while t < end - 1e-9:
         t = round(t + 0.005, 9)
-        if halted <= t:
-            robot.stop(halted)
-            halted = math.inf
+        if halts and halts[0] <= t:
+            robot.stop(halts.pop(0))
         for item in [p for p in pending if p[0] <= t]:
             robot.command(item[0], item[1])
             pending.remove(item)
@@ -168,17 +171,15 @@ def test_the_robots_half_strokes_are_in_the_tree_whatever_the_take_times(seed, p
     assert tree_gain <= box_gain  # never looser than the box (the gain takes the tighter)
 
 
-@pytest.mark.parametrize(("seed", "policy", "claimed"), [(5, _drifting, 90), (11, _wild, 90), (13, _wild, 90)])
-def test_fins_that_halted_and_restarted_stay_in_the_tree(seed, policy, claimed):
-    # Wild commands after a possible halt: a restart's first stroke may be stretched by the unknown rest angle, and
-    # the tree then claims nothing (the box rules); every span it claims holds the robot's fins.
+@pytest.mark.parametrize(("seed", "policy"), [(11, _wild), (13, _wild), (14, _steering)])
+def test_fins_that_halted_and_restarted_stay_in_the_tree(seed, policy):
+    # The tree alone (the box needs its halts told in time order, which this test does not do).
     gain, history, armed = _episode(seed, policy, halt=True)
     assert any(h[2][0][0] == 0.0 for h in history if h[0] > armed + 10.3)  # the fins did halt
     bad, checked, _, _ = _violations(gain, history, armed, with_box=False)
-    assert checked >= claimed and bad == 0
-    if policy is _wild:  # the mutation: the halt not told to the tree; the restart's strokes then fall outside it
-        gain._halt, gain._memo = math.inf, {}
-        assert _violations(gain, history, armed, with_box=False)[0] > 0
+    assert checked >= 90 and bad == 0
+    gain._halts, gain._memo = [], {}  # the mutation: the halts not told; the restarts' strokes fall outside the tree
+    assert _violations(gain, history, armed, with_box=False)[0] > 0
 
 
 def test_a_narrowed_take_interval_misses_the_robots_strokes(monkeypatch):

@@ -188,7 +188,9 @@ class CommandedGain:
         self._armed = math.inf
         self._since_arm: list[tuple[float, np.ndarray, Callable[[], float | None] | None]] = []  # for the take tree
         self._memo: dict = {}  # the take tree's latches, for the commands since the arm
-        self._halt = math.inf  # the fins may have halted at or after this time since the arm [s]
+        # Possible halts since the arm: [earliest time, index of the first command sent after it was told (None: none
+        # yet)]; the supervisor tells one (still) before it sends its next command (module docstring).
+        self._halts: list[list] = []
 
     def reset(self, t: float) -> None:
         """The fins are still at ``t`` [s] (an arm after a confirmed stop); commands before are forgotten."""
@@ -197,14 +199,17 @@ class CommandedGain:
         self._replay.reset(float(t))
         self._still = self._armed = float(t)
         self._since_arm = []
-        self._halt = math.inf
+        self._halts = []
         self._memo = {}
 
     def still(self, t: float) -> None:
         """The fins may have stopped at ``t`` [s] (a stop, a lease's end, a watchdog): the next latch is whole."""
         self._still = max(self._still, float(t)) if math.isfinite(self._still) else float(t)
         if float(t) > self._armed:  # (not before the first reset: the tree then claims nothing anyway)
-            self._halt = min(self._halt, float(t))  # a halt at or after the earliest holds every later one
+            if self._halts and self._halts[-1][1] is None:
+                self._halts[-1][0] = min(self._halts[-1][0], float(t))  # told again before a command: one halt
+            else:
+                self._halts.append([float(t), None])
 
     def command(self, t: float, beats: np.ndarray, acknowledged: Callable[[], float | None] | None = None) -> None:
         """A command ``(2, 4)`` sent at ``t`` [s]; ``acknowledged()``: when the robot had it [s] (``None``: not yet).
@@ -216,13 +221,18 @@ class CommandedGain:
         # What the robot runs: the pattern as quantised on the wire (a period a few ms shorter, a peak rate that much
         # higher), clipped again by the firmware.
         clipped = clip_beats(wire_beats(clip_beats(beats, self.limits)[0]), self.limits)[0]
+        halted = bool(self._halts) and self._halts[-1][1] is None
+        if len(self._since_arm) <= _MAX_TREE_COMMANDS and (halted or not self._since_arm
+                                                           or not np.array_equal(self._since_arm[-1][1], clipped)):
+            # (a renewal restarts halted fins: the tree keeps it after a possible halt)
+            self._since_arm.append((float(t), clipped, acknowledged))
+            if halted:
+                self._halts[-1][1] = len(self._since_arm) - 1
         if self._commands and np.array_equal(self._commands[-1][1], clipped) and self._commands[-1][0] > self._still:
             return  # a renewal of the same command: nothing new can be latched
         self._run(t)
         self._replay.command(t, clipped)
         self._commands.append((float(t), clipped, acknowledged))
-        if len(self._since_arm) <= _MAX_TREE_COMMANDS:
-            self._since_arm.append((float(t), clipped, acknowledged))
 
     def _run(self, to: float, step: float = 0.05) -> None:
         """Replay the fins to ``to`` [s], noting the latched patterns every ``step`` s (a half-stroke is longer)."""
@@ -257,9 +267,9 @@ class CommandedGain:
 
     def _tree(self, t0: float, t1: float) -> list[np.ndarray] | None:
         """The take tree's half-strokes in ``[t0, t1]`` (:func:`phase_strokes`), ``None`` where it claims nothing."""
-        if len(self._since_arm) > _MAX_TREE_COMMANDS:
+        if len(self._since_arm) > _MAX_TREE_COMMANDS or len(self._halts) > _MAX_TREE_COMMANDS:
             return None
-        return phase_strokes(self._since_arm, t0, t1, self.limits, self._halt, self._memo)
+        return phase_strokes(self._since_arm, t0, t1, self.limits, [tuple(h) for h in self._halts], self._memo)
 
     def strokes(self, t0: float, now: float, t1: float, round_trip: float) -> tuple[np.ndarray, np.ndarray] | None:
         """``(2,)`` the highest peak rate [rad/s] and ``(2,)`` the shortest half-stroke [s] of the fins in ``[t0, t1]``.

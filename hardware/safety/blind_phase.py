@@ -170,13 +170,14 @@ class _Nodes:
 
 
 def phase_strokes(commands: Sequence[Command], t0: float, t1: float, limits: ServoLimits,
-                  halt: float = math.inf, memo: dict | None = None) -> list[np.ndarray] | None:
+                  halts: Sequence[tuple[float, int | None]] = (), memo: dict | None = None) -> list[np.ndarray] | None:
     """Per fin, ``(m, 2)`` the peak rate [rad/s] and duration [s] of every half-stroke that can run in ``[t0, t1]``.
 
     A fin that cannot move in the span has none (``(0, 2)``).
     ``commands``: every command sent since the arm (the fins at rest, at an unknown angle), oldest first, as
     ``(sent, clipped beats (2, 4) as received, acknowledged-at)`` (:class:`pectoral_gym.hardware.safety.blind.
-    CommandedGain`'s); ``halt``: the fins may have halted (anywhere) at or after this time [s]. ``memo``:
+    CommandedGain`'s); ``halts``: possible halts (anywhere), each at or after a time [s] and before the command of
+    an index was sent (``None``: none sent since). ``memo``:
     the firmware's latches computed before, kept by the caller between calls with the same commands (cleared when
     they change other than by a new one). ``None``: nothing claimed (module docstring).
     """
@@ -196,12 +197,14 @@ def phase_strokes(commands: Sequence[Command], t0: float, t1: float, limits: Ser
 
     for fin in range(2):
         nodes = _Nodes()
-        # The first command taken after the arm, or after a possible halt (a stop, a lease's end, a watchdog, at
-        # ``halt`` or any time later: a halt at ``h`` or later holds one at any later ``h``), is latched at once from
-        # rest, at its take: the robot restarts halted fins for a new command only.
+        # The first command taken after the arm, or after a possible halt, is latched at once from rest, at its take
+        # (the robot restarts halted fins for a new command only). A halt told at ``h`` happened at ``h`` or later
+        # but before the next command ``m`` was sent: the first command taken after it is taken by ``m``'s latest.
         starts = [(k, sent[k], late[k]) for k in range(n) if sent[k] <= late[0]]
-        if halt <= t1:
-            starts += [(k, max(sent[k], halt), late[k]) for k in range(n) if late[k] >= halt]
+        for h, m in halts:
+            if h <= t1:
+                limit = late[m] if m is not None and m < n else math.inf
+                starts += [(k, max(sent[k], h), late[k]) for k in range(n) if late[k] >= h and sent[k] <= limit]
         for k, first, last in starts:
             key = (k, fin, b"rest")
             if key not in memo:
