@@ -13,10 +13,13 @@ merged (the hull of their intervals: more take times, never fewer). The half-str
 those the span's bound holds; whatever the take times, the robot's own half-stroke is one of them
 (``docs/guide/safety.md``, "When the robot runs a stroke").
 
-Unknown at the arm: the angle the fins halted at. The first half-stroke's swing is taken from the far end of the
-servo range; if the firmware would stretch its period for some angle (the period would then be unknown), or a
-halt may have happened since the arm, or the tree grows past its budget, nothing is claimed (``None``) and the
-box of patterns rules alone.
+Unknown at the arm, and after a possible halt: the angle the fins rest at. The first half-stroke from rest is taken
+at its worst (its swing from the far end of the servo range, its shortest period; the firmware may stretch it by
+the swing), and its turning point over the whole range of periods; if what the fins latch next depends on the rest
+angle, or the tree grows past its budget, nothing is claimed (``None``) and the box of patterns rules alone. A
+possible halt (a stop, a lease's end, a watchdog) is one the supervisor tells (``CommandedGain.still``) before it
+sends its next command: the fins halted at or after the time told and restart, from rest, with the first command
+they take after it.
 """
 
 from __future__ import annotations
