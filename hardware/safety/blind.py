@@ -27,6 +27,11 @@ be running in the span (``docs/guide/safety.md``, "The blind rule and the comman
 One fin's force is at most ``k w^2 + I_p sqrt((pi w / d)^2 + w^4)`` for a peak rate ``w`` and half-strokes of at
 least ``d`` (:func:`fin_force_bound`, ``SpeedBound``'s with ``max_speed`` replaced by ``w`` and the servos'
 shortest half-stroke by ``d``), and the fish's speed grows at most at the two fins' sum over ``min(m1, m2)``.
+
+The box assumes any of its half-strokes may run at any instant of the span. The take tree
+(:func:`pectoral_gym.hardware.safety.blind_phase.phase_strokes`) follows the robot's half-strokes over every take
+time the radio allows and bounds each fin's force per half-stroke, at its own rate and duration; the gain is the
+least of the two bounds (both hold whatever the take times).
 """
 
 from __future__ import annotations
@@ -37,6 +42,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from pectoral_gym.hardware.safety.blind_phase import phase_strokes
 from pectoral_gym.model import strokes
 from pectoral_gym.model.finreplay import FinReplay
 from pectoral_gym.model.finrules import FirmwareConfig, wire_beats
@@ -48,6 +54,7 @@ __all__ = [
     "first_stroke", "longest_half_stroke", "ls_velocity", "shortest_half_stroke", "unseen_reason",
 ]
 
+_MAX_TREE_COMMANDS = 400  # commands since the arm the take tree follows (200 s at 0.5 s); past them, the box alone
 _MIN_POSES, _MIN_SPAN = 3, 0.1  # fewer poses, or a shorter span [s]: no velocity estimate (the physical bound rules)
 
 def shortest_half_stroke(limits: ServoLimits) -> float:
@@ -178,17 +185,31 @@ class CommandedGain:
             collections.deque(maxlen=64)  # (sent, clipped beats, acknowledged-at or None), newest last
         self._latched: collections.deque[tuple[float, np.ndarray]] = collections.deque(maxlen=256)
         self._still = math.inf  # nothing known until the first reset
+        self._armed = math.inf
+        self._since_arm: list[tuple[float, np.ndarray, Callable[[], float | None] | None]] = []  # for the take tree
+        self._memo: dict = {}  # the take tree's latches, for the commands since the arm
+        # Possible halts since the arm: [earliest time, index of the first command sent after it was told (None: none
+        # yet)]; the supervisor tells one (still) before it sends its next command (module docstring).
+        self._halts: list[list] = []
 
     def reset(self, t: float) -> None:
         """The fins are still at ``t`` [s] (an arm after a confirmed stop); commands before are forgotten."""
         self._commands.clear()
         self._latched.clear()
         self._replay.reset(float(t))
-        self._still = float(t)
+        self._still = self._armed = float(t)
+        self._since_arm = []
+        self._halts = []
+        self._memo = {}
 
     def still(self, t: float) -> None:
         """The fins may have stopped at ``t`` [s] (a stop, a lease's end, a watchdog): the next latch is whole."""
         self._still = max(self._still, float(t)) if math.isfinite(self._still) else float(t)
+        if float(t) > self._armed:  # (not before the first reset: the tree then claims nothing anyway)
+            if self._halts and self._halts[-1][1] is None:
+                self._halts[-1][0] = min(self._halts[-1][0], float(t))  # told again before a command: one halt
+            else:
+                self._halts.append([float(t), None])
 
     def command(self, t: float, beats: np.ndarray, acknowledged: Callable[[], float | None] | None = None) -> None:
         """A command ``(2, 4)`` sent at ``t`` [s]; ``acknowledged()``: when the robot had it [s] (``None``: not yet).
@@ -200,6 +221,13 @@ class CommandedGain:
         # What the robot runs: the pattern as quantised on the wire (a period a few ms shorter, a peak rate that much
         # higher), clipped again by the firmware.
         clipped = clip_beats(wire_beats(clip_beats(beats, self.limits)[0]), self.limits)[0]
+        halted = bool(self._halts) and self._halts[-1][1] is None
+        if len(self._since_arm) <= _MAX_TREE_COMMANDS and (halted or not self._since_arm
+                                                           or not np.array_equal(self._since_arm[-1][1], clipped)):
+            # (a renewal restarts halted fins: the tree keeps it after a possible halt)
+            self._since_arm.append((float(t), clipped, acknowledged))
+            if halted:
+                self._halts[-1][1] = len(self._since_arm) - 1
         if self._commands and np.array_equal(self._commands[-1][1], clipped) and self._commands[-1][0] > self._still:
             return  # a renewal of the same command: nothing new can be latched
         self._run(t)
@@ -218,20 +246,50 @@ class CommandedGain:
     def accel(self, t0: float, now: float, t1: float, round_trip: float) -> float:
         """The most the fish's speed can grow per second [m/s^2] anywhere in ``[t0, t1]`` [s], judged at ``now``.
 
-        ``round_trip`` [s]: the most a command takes to reach the robot (the link's round trip).
+        ``round_trip`` [s]: the most a command takes to reach the robot (the link's round trip). Each fin's force is
+        the least of three bounds that each hold whatever the take times: the box's peak rate with its shortest
+        half-stroke, :meth:`strokes`' (the tighter parts of the box and the take tree), and the largest force of the
+        take tree's half-strokes, each at its own rate and duration.
         """
-        strokes_bound = self.strokes(t0, now, t1, round_trip)
-        if strokes_bound is None:
+        box = self.box_strokes(t0, now, t1, round_trip)
+        if box is None:
             return self.full  # nothing known of the fins
-        rates, shortest = strokes_bound
-        return sum(fin_force_bound(self.params, self.limits, w, d, fin)
-                   for fin, (w, d) in enumerate(zip(rates, shortest, strict=True))) / self.mass
+        tree = self._tree(t0, t1)
+        total = 0.0
+        for fin in range(2):
+            force = fin_force_bound(self.params, self.limits, box[0][fin], box[1][fin], fin)
+            if tree is not None:
+                pairs = tree[fin]
+                force = min(force, max((fin_force_bound(self.params, self.limits, w, d, fin) for w, d in pairs),
+                                       default=0.0))
+            total += force
+        return total / self.mass
+
+    def _tree(self, t0: float, t1: float) -> list[np.ndarray] | None:
+        """The take tree's half-strokes in ``[t0, t1]`` (:func:`phase_strokes`), ``None`` where it claims nothing."""
+        if len(self._since_arm) > _MAX_TREE_COMMANDS or len(self._halts) > _MAX_TREE_COMMANDS:
+            return None
+        return phase_strokes(self._since_arm, t0, t1, self.limits, [tuple(h) for h in self._halts], self._memo)
 
     def strokes(self, t0: float, now: float, t1: float, round_trip: float) -> tuple[np.ndarray, np.ndarray] | None:
         """``(2,)`` the highest peak rate [rad/s] and ``(2,)`` the shortest half-stroke [s] of the fins in ``[t0, t1]``.
 
         ``None``: nothing known (never reset). Fins that stay still (no command since the stop) give rate 0.
+        Each part is the tighter of the box's (:meth:`box_strokes`) and the take-time tree's
+        (:func:`pectoral_gym.hardware.safety.blind_phase.phase_strokes`, when it claims one: no halt possible since
+        the arm, every command since known): both hold whatever the take times, so their tighter does too.
         """
+        box = self.box_strokes(t0, now, t1, round_trip)
+        tree = None if box is None else self._tree(t0, t1)
+        if tree is None:
+            return box
+        rates = np.array([pairs[:, 0].max(initial=0.0) for pairs in tree])
+        shortest = np.array([pairs[:, 1].min(initial=math.inf) for pairs in tree])
+        return np.minimum(box[0], rates), np.maximum(box[1], shortest)
+
+    def box_strokes(self, t0: float, now: float, t1: float,
+                    round_trip: float) -> tuple[np.ndarray, np.ndarray] | None:
+        """:meth:`strokes` from the box of patterns alone (module docstring)."""
         if not math.isfinite(self._still):
             return None
         since = [c for c in self._commands if self._still <= c[0] <= t1]
