@@ -358,7 +358,7 @@ class PectoralFishEnv(gym.Env):
             self.trail = [(float(self.core.obs[0, OBS_X]), float(self.core.obs[0, OBS_Y]))]
             if self.render_mode == "human":
                 self.render()
-        return self.core.obs[0].copy(), self._info()
+        return self._obs_row.copy(), self._info()
 
     def step(self, action):
         """Advance one control period; returns ``(observation, reward, terminated, truncated, info)``."""
