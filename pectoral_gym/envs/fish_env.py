@@ -365,7 +365,9 @@ class PectoralFishEnv(gym.Env):
         self._action_row[...] = action  # the core's own buffer: its one-call step (envs.fused)
         self._core_step(self._actions)
         o = self._out_row
-        info = self._info()
+        info = self._row_info(o)  # as _info(), inlined on this hot path
+        if self._cost:
+            info["cost"] = o[O_COST]
         if self.render_mode is not None:
             self.trail.append((float(self._obs_row[OBS_X]), float(self._obs_row[OBS_Y])))
             if self.render_mode == "human":
