@@ -8,6 +8,7 @@ full run did, so every layer walks the same seeded trajectory and does the same 
 
 * ``wrapped``: ``env.step`` through Gymnasium's wrappers (``TimeLimit``, ``OrderEnforcing``, ``PassiveEnvChecker``);
 * ``env``: ``env.unwrapped.step``;
+* ``info``: the ``core`` layer, then the step's ``info`` dict built as the env builds it;
 * ``core``: the action written into the core's buffer, then ``EnvCore.step`` (the one-call fused step, its
   binding check and the fin block of the observation);
 * ``compiled``: the action written into the buffer, then the fused step's compiled entry point alone;
@@ -30,6 +31,8 @@ import gymnasium as gym
 import numpy as np
 
 import pectoral_gym  # noqa: F401 - registers the fish ids
+from pectoral_gym.envs.core import task_info
+from pectoral_gym.envs.layout import O_COST
 from pectoral_gym.versions import LATEST
 
 
@@ -59,7 +62,8 @@ def main() -> None:
     cartpole, cart_actions, cart_ends = record("CartPole-v1")
     unwrapped = env.unwrapped
     core = unwrapped.core
-    buffer, row = core.action_buffer, core.action_buffer[0]
+    buffer, row, out = core.action_buffer, core.action_buffer[0], core.out[0]
+    task, cost = unwrapped.config.task_id, unwrapped.config.stop_band
     fused = core._step
     bound = fused._bound  # the compiled entry point and the arrays and settings it was bound with
     call, arrays, none, settings = bound.call, bound.arrays, fused.none, bound.settings
@@ -69,6 +73,13 @@ def main() -> None:
 
     def env_only(action):
         unwrapped.step(action)
+
+    def core_info(action):
+        row[...] = action
+        core.step(buffer)
+        info = task_info(out, task)
+        if cost:
+            info["cost"] = out[O_COST]
 
     def core_step(action):
         row[...] = action
@@ -103,8 +114,8 @@ def main() -> None:
             nothing(action)
         return (time.perf_counter() - start) / len(actions)
 
-    layers = {"wrapped": wrapped, "env": env_only, "core": core_step, "compiled": compiled, "copy": copy,
-              "resets": nothing}
+    layers = {"wrapped": wrapped, "env": env_only, "info": core_info, "core": core_step, "compiled": compiled,
+              "copy": copy, "resets": nothing}
     best = dict.fromkeys([*layers, "loop", "CartPole-v1"], np.inf)
     for _ in range(args.repeats):
         for name, step in layers.items():
@@ -117,7 +128,8 @@ def main() -> None:
         ("the action written into the core's float64 buffer", us["copy"] - us["resets"]),
         ("EnvCore.step's Python (fused step's binding check and model time, the fin block's call)",
          us["core"] - us["compiled"]),
-        ("the env's step (info dict, observation copy, reward and flags)", us["env"] - us["core"]),
+        ("the info dict (a new one, numpy scalars)", us["info"] - us["core"]),
+        ("the rest of the env's step (observation copy, reward and flags, attribute lookups)", us["env"] - us["info"]),
         ("Gymnasium's wrappers", us["wrapped"] - us["env"]),
         (f"resets, per step ({len(ends) / max(sum(ends), 1):.1f} steps per episode)", us["resets"] - us["loop"]),
         ("the loop (the zip, a Python call per step)", us["loop"]),
