@@ -69,6 +69,28 @@ def test_spec_json_round_trip_with_custom_params_gives_the_same_env():
     np.testing.assert_array_equal(env.step(action)[0], again.step(action)[0])
 
 
+@pytest.mark.parametrize("env_id", ("PectoralFish-Averaged-v0", "PectoralFish-Averaged-v2"))
+def test_info_is_a_new_dict_every_step_so_a_wrappers_key_stays_in_its_step(env_id):
+    # RecordEpisodeStatistics writes "episode" into the info of an episode's last step: a dict the env
+    # handed out before must not be the one it fills next.
+    env = gym.wrappers.RecordEpisodeStatistics(gym.make(env_id))
+    env.reset(seed=5)
+    env.action_space.seed(5)
+    infos = []
+    while not infos or "episode" not in infos[-1]:
+        _, _, terminated, truncated, info = env.step(env.action_space.sample())
+        infos.append(info)
+        assert ("episode" in info) == (terminated or truncated)
+    assert len(infos) > 1
+    assert len({id(info) for info in infos}) == len(infos)
+    _, reset_info = env.reset()
+    _, _, _, _, info = env.step(env.action_space.sample())
+    for fresh in (reset_info, info):
+        assert "episode" not in fresh
+        assert ("cost" in fresh) == env.unwrapped.config.stop_band  # v2's stop band: info["cost"]
+        assert list(fresh) == list(infos[0])
+
+
 @pytest.mark.parametrize("env_id", IDS)
 def test_pickle_and_deepcopy_at_any_time_also_after_render(env_id):
     pytest.importorskip("pygame")

@@ -22,6 +22,7 @@ from pectoral_gym.envs.sensed import SensedObservation
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.envs.tasks.table import TaskState, task_info
 from pectoral_gym.envs.timing import ControlTiming
+from pectoral_gym.model.jit import entry_point
 from pectoral_gym.model.models import REST, FishModel
 from pectoral_gym.model.params import FishParams
 
@@ -67,7 +68,7 @@ class EnvCore:
         self.model: FishModel = config.model_spec().build(self.n, config.params)
         self.dt = float(config.control_period)
         self._observe_fins = bool(config.observe_fins)
-        self._observe_fins_kernel = tk.observe_fins.dispatcher  # called at every step: the dispatcher itself
+        self._observe_fins_call = None  # the fin block's compiled entry point, bound at its first call
         self._period_max = float(config.period_range[1])
         self.cfg, self.ep, self.obs, self.out, self.beats, self.fish = ts.cfg, ts.ep, ts.obs, ts.out, ts.beats, ts.fish
         self.action_buffer = np.zeros((self.n, ACTION_SIZE))
@@ -88,6 +89,14 @@ class EnvCore:
             widths = np.array([config.randomize[k] for k in self._rand_names])
             self._rand_low, self._rand_high = 1.0 - widths, 1.0 + widths
             self._rand_base = np.array([float(getattr(config.params, k)) for k in self._rand_names])
+        # Neither camera nor control timing: a step is the compiled call and the fin block, nothing else.
+        self._plain = self.sensed is None and self.timing.settings is None
+
+    def __getstate__(self) -> dict:
+        """Pickle and deepcopy without the fin block's entry point (compiled code); a copy binds its own."""
+        state = self.__dict__.copy()
+        state["_observe_fins_call"] = None
+        return state
 
     def reset(self, index: np.ndarray, rngs: Sequence[np.random.Generator], pinned: np.ndarray | None = None) -> None:
         """Start new episodes for the envs in ``index``; env ``i`` draws only from ``rngs[i]``.
@@ -101,7 +110,7 @@ class EnvCore:
         """
         index = np.asarray(index, dtype=np.int64)
         draws = np.empty((index.size, 8))
-        for k, i in enumerate(index):
+        for k, i in enumerate(index.tolist()):  # Python ints: cheaper to iterate and index with
             rng = rngs[i]
             if self.config.randomize:
                 factors = rng.uniform(self._rand_low, self._rand_high)
@@ -128,6 +137,16 @@ class EnvCore:
             ValueError: If an action of an env not in ``skip`` is not finite, or ``actions`` does not
                 have shape ``(n, 8)``.
         """
+        if self._plain:  # the simulated env's usual step: the compiled call and the fin block
+            bad = self._step(actions, skip)
+            if bad >= 0:
+                self._raise_non_finite(actions, bad)
+            call = self._observe_fins_call
+            if call is not None:  # the fin block's entry point, once bound (_observe_fin_block, inlined)
+                call(self.model.fins, self.obs, self._period_max)
+            else:
+                self._observe_fin_block()
+            return
         sensed = self.sensed
         if sensed is not None:
             sensed.before_step(self.model)
@@ -145,7 +164,11 @@ class EnvCore:
     def _observe_fin_block(self) -> None:
         """With ``observe_fins``: the observation's fin block from the model's half-strokes."""
         if self._observe_fins:
-            self._observe_fins_kernel(self.model.fins, self.obs, self._period_max)
+            call = self._observe_fins_call
+            if call is None:  # its entry point: the arrays' types are fixed (updated in place, never replaced)
+                call = self._observe_fins_call = entry_point(tk.observe_fins, (self.model.fins, self.obs,
+                                                                               self._period_max))
+            call(self.model.fins, self.obs, self._period_max)
 
     def _check_actions(self, actions: np.ndarray, skip: np.ndarray | None) -> None:
         """Raise as :meth:`step` would for actions of the wrong shape or non-finite ones (before any draw)."""

@@ -9,7 +9,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from pectoral_gym.envs.core import EnvConfig, EnvCore, env_signature, task_info
+from pectoral_gym.envs.core import EnvConfig, EnvCore, env_signature
 from pectoral_gym.envs.layout import (
     ACTION_SIZE,
     O_COST,
@@ -26,6 +26,8 @@ from pectoral_gym.versions import LATEST
 __all__ = ["PectoralFishEnv"]
 
 _ZERO_INDEX = np.zeros(1, dtype=np.int64)
+#: Attributes bound by ``PectoralFishEnv._bind_rows``, left out of a pickle.
+_BOUND = ("_action_row", "_obs_row", "_out_row", "_core_step", "_actions", "_row_info")
 
 
 class PectoralFishEnv(gym.Env):
@@ -244,17 +246,24 @@ class PectoralFishEnv(gym.Env):
                                        self.config.observe_fins)
         self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self.observation_structure = observation_structure(self.config.observe_fins)
-        self._task = self.config.task_id
-        self._cost = self.config.stop_band  # info["cost"]
+        # info["cost"], by the task state's rule (TaskState.info_fields), read here once instead of every step
+        self._cost = any(f.key == "cost" for f in self.core.task_state.info_fields)
         self._renderer = None
         self.trail: list[tuple[float, float]] = []
         self._bind_rows()
 
     def _bind_rows(self) -> None:
-        """Views of the core's rows of this env, read and written at every step (rebound after unpickling)."""
-        self._action_row = self.core.action_buffer[0]
-        self._obs_row = self.core.obs[0]
-        self._out_row = self.core.out[0]
+        """Bind what every step reads once: this env's rows of the core, its step, the task's ``info`` builder.
+
+        Bound again after unpickling (to the copy's own core).
+        """
+        core = self.core
+        self._action_row = core.action_buffer[0]
+        self._obs_row = core.obs[0]
+        self._out_row = core.out[0]
+        self._core_step = core.step
+        self._actions = core.action_buffer
+        self._row_info = core.task_state.task.info  # task_info's builder for this env's task
 
     @property
     def model(self):
@@ -313,6 +322,8 @@ class PectoralFishEnv(gym.Env):
         """Pickle and deepcopy without the renderer (it holds pygame); a copy draws with its own."""
         state = self.__dict__.copy()
         state["_renderer"] = None
+        for name in _BOUND:  # rebound to the copy's own core (a registered task's info builder may not pickle)
+            del state[name]
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -321,8 +332,15 @@ class PectoralFishEnv(gym.Env):
         self._bind_rows()
 
     def _info(self) -> dict[str, Any]:
-        """The ``info`` of the last reset or step (:meth:`~pectoral_gym.envs.tasks.table.TaskState.info`)."""
-        return self.core.task_state.info(0)
+        """The ``info`` of the last reset or step (:meth:`~pectoral_gym.envs.tasks.table.TaskState.info`).
+
+        A new dict every time: wrappers add keys to it (``RecordEpisodeStatistics``).
+        """
+        o = self._out_row
+        info = self._row_info(o)
+        if self._cost:
+            info["cost"] = o[O_COST]
+        return info
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         """Start an episode (see "Starting State"); returns ``(observation, info)``, ``info`` with the step's keys.
@@ -340,19 +358,18 @@ class PectoralFishEnv(gym.Env):
             self.trail = [(float(self.core.obs[0, OBS_X]), float(self.core.obs[0, OBS_Y]))]
             if self.render_mode == "human":
                 self.render()
-        return self.core.obs[0].copy(), self._info()
+        return self._obs_row.copy(), self._info()
 
     def step(self, action):
         """Advance one control period; returns ``(observation, reward, terminated, truncated, info)``."""
         self._action_row[...] = action  # the core's own buffer: its one-call step (envs.fused)
-        core = self.core
-        core.step(core.action_buffer)
+        self._core_step(self._actions)
         o = self._out_row
-        info = task_info(o, self._task)
+        info = self._row_info(o)  # as _info(), inlined on this hot path
         if self._cost:
             info["cost"] = o[O_COST]
         if self.render_mode is not None:
-            self.trail.append((float(core.obs[0, OBS_X]), float(core.obs[0, OBS_Y])))
+            self.trail.append((float(self._obs_row[OBS_X]), float(self._obs_row[OBS_Y])))
             if self.render_mode == "human":
                 self.render()
         # o.item: the Python float of a float64 entry, as float(o[k])
