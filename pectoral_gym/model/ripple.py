@@ -27,6 +27,7 @@ import numpy as np
 
 from pectoral_gym.model.averaging import half_stroke_mean_force
 from pectoral_gym.model.dynamics import fin_force_at
+from pectoral_gym.model.fast_step import sin_cos_half_turn, sin_cos_of_angle
 from pectoral_gym.model.jit import njit
 
 __all__ = ["RIPPLE_NODES", "half_stroke_ripple_square", "transitional_oscillation_gain"]
@@ -43,23 +44,30 @@ _WEIGHT = _W * 0.5  # (pi / 2) from the change of variable, 1 / pi for the mean 
 
 @njit
 def half_stroke_ripple_square(angle_from: float, angle_to: float, duration: float, drag_constant: float,
-                              inertia_constant: float, mean_force: float) -> float:
+                              inertia_constant: float, mean_force: float, fast: bool = False) -> float:
     """Mean [N^2] of ``(f_hx - mean_force)^2`` over one half-cosine half-stroke of the right fin.
 
     ``g = mid - half cos(phi)``, ``phi = pi s / d`` (:func:`pectoral_gym.model.dynamics.stroke_kinematics`);
     ``f_hx`` is eq. (16) with the drag of eq. (13) and the inertial term of eq. (15)
     (:func:`pectoral_gym.model.dynamics.fin_force_at`), evaluated at :data:`RIPPLE_NODES` phases.
+    ``fast``: the fast step's ``sin`` and ``cos`` (:mod:`pectoral_gym.model.fast_step`).
     """
     mid = 0.5 * (angle_from + angle_to)
     half = 0.5 * (angle_to - angle_from)
     rate = math.pi / duration
-    sm, cm = math.sin(mid), math.cos(mid)
+    if fast:
+        sm, cm = sin_cos_of_angle(mid)
+    else:
+        sm, cm = math.sin(mid), math.cos(mid)
     total = 0.0
     # The nodes pair up as phi and pi - phi (same sin, opposite cos, equal weights): g = mid -+ half cos(phi)
     # share sin/cos(half cos(phi)), so a pair costs one sin/cos.
     for j in range(RIPPLE_NODES // 2):
         sp, cp = _SIN_PHASE[j], _COS_PHASE[j]
-        sh, ch = math.sin(half * cp), math.cos(half * cp)
+        if fast:  # |half cos(phi)| <= |half| <= pi/2
+            sh, ch = sin_cos_half_turn(half * cp)
+        else:
+            sh, ch = math.sin(half * cp), math.cos(half * cp)
         gd = half * rate * sp
         gdd = half * rate * rate * cp
         for sign in (1.0, -1.0):  # phi, then pi - phi
@@ -73,7 +81,7 @@ def half_stroke_ripple_square(angle_from: float, angle_to: float, duration: floa
 @njit
 def transitional_oscillation_gain(angle_from: float, angle_to: float, duration: float, power: bool, bias: float,
                                   amplitude: float, period: float, ratio: float, drag_constant: float,
-                                  inertia_constant: float) -> float:
+                                  inertia_constant: float, fast: bool = False) -> float:
     """Gain ``G`` (module docstring) of the half-stroke ``angle_from -> angle_to`` in ``duration`` s.
 
     Args:
@@ -81,6 +89,7 @@ def transitional_oscillation_gain(angle_from: float, angle_to: float, duration: 
         power: Whether it is a power stroke (it then ends at ``bias + amplitude``).
         bias, amplitude, period, ratio: The latched pattern (eq. 21).
         drag_constant, inertia_constant: ``k`` [N s^2] and ``m_p S_p / 2`` [kg m] (eqs. 13, 15).
+        fast: The fast step's ``J1``, ``sin`` and ``cos`` (:mod:`pectoral_gym.model.fast_step`).
 
     Returns:
         ``G``; 1 for the pattern's own half-stroke and for a pattern without amplitude (no phasor).
@@ -91,14 +100,14 @@ def transitional_oscillation_gain(angle_from: float, angle_to: float, duration: 
         return 1.0
     t_power = period / (ratio + 1.0)  # eq. (21)
     t_recovery = period - t_power
-    f_power, _ = half_stroke_mean_force(low, high, t_power, drag_constant)
-    f_recovery, _ = half_stroke_mean_force(high, low, t_recovery, drag_constant)
+    f_power, _ = half_stroke_mean_force(low, high, t_power, drag_constant, fast)
+    f_recovery, _ = half_stroke_mean_force(high, low, t_recovery, drag_constant, fast)
     mean = (f_power * t_power + f_recovery * t_recovery) / period
     if power:
-        regular = half_stroke_ripple_square(low, high, t_power, drag_constant, inertia_constant, mean)
+        regular = half_stroke_ripple_square(low, high, t_power, drag_constant, inertia_constant, mean, fast)
     else:
-        regular = half_stroke_ripple_square(high, low, t_recovery, drag_constant, inertia_constant, mean)
+        regular = half_stroke_ripple_square(high, low, t_recovery, drag_constant, inertia_constant, mean, fast)
     if regular <= 0.0:
         return 1.0
-    swept = half_stroke_ripple_square(angle_from, angle_to, duration, drag_constant, inertia_constant, mean)
+    swept = half_stroke_ripple_square(angle_from, angle_to, duration, drag_constant, inertia_constant, mean, fast)
     return math.sqrt(math.sqrt(swept / regular))
