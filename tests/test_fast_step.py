@@ -145,3 +145,34 @@ def test_sin_cos_within_their_bound():
     # the Taylor remainders at pi/2 that the bound covers
     assert (math.pi / 2) ** 17 / math.factorial(17) < fs.SIN_COS_ERROR
     assert (math.pi / 2) ** 18 / math.factorial(18) < fs.SIN_COS_ERROR
+
+
+def test_fast_oscillation_gain_close_to_the_default_quadrature():
+    """8 nodes and the polynomial sin/cos against the 12-node quadrature (itself within 3e-6 of exact)."""
+    from pectoral_gym.model.params import FishParams
+    from pectoral_gym.model.ripple import transitional_oscillation_gain
+
+    params = FishParams()
+    k, inertia = params.fin_drag_constant, params.fin_inertia_constant
+    rng = np.random.default_rng(3)
+    worst = 0.0
+    for _ in range(3000):
+        bias, amp = rng.uniform(math.radians(45), math.radians(135)), rng.uniform(0.01, math.radians(30))
+        period, ratio, power = rng.uniform(0.5, 2.0), rng.uniform(1.0, 5.0), bool(rng.integers(2))
+        angle_from = rng.uniform(math.radians(15), math.radians(165))
+        duration = period / (ratio + 1.0) * (1.0 if power else ratio)
+        args = (angle_from, bias + amp if power else bias - amp, duration, power, bias, amp, period, ratio, k, inertia)
+        worst = max(worst, abs(transitional_oscillation_gain(*args, True) / transitional_oscillation_gain(*args) - 1))
+    assert 0.0 < worst < 5e-4
+
+
+def test_fast_swept_cube_equals_the_closed_form():
+    from pectoral_gym.model import strokes as st
+
+    fins = np.zeros((1, 2, st.FIN_FIELDS))
+    fins[0, 0, st.ANGLE_FROM], fins[0, 0, st.ANGLE_TO], fins[0, 0, st.DURATION] = 0.6, 2.1, 0.4
+    for elapsed, seg in ((0.0, 0.4), (0.1, 0.2), (0.35, 0.3)):
+        fins[0, 0, st.ELAPSED] = elapsed
+        assert st.swept_cube(fins, 0, 0, seg, True) == pytest.approx(st.swept_cube(fins, 0, 0, seg), abs=1e-10)
+    fins[0, 0, st.ELAPSED] = 0.0  # a whole half-stroke: |half|^3 (pi/d)^2 4/3
+    assert st.swept_cube(fins, 0, 0, 0.4, True) == pytest.approx(0.75**3 * (math.pi / 0.4) ** 2 * 4 / 3, rel=1e-10)
