@@ -172,7 +172,7 @@ def odd_moment(h: float) -> float:
 #: ``ODD_MOMENT_SERIES[n] (-1)^n / (2n+1)!``: :func:`odd_moment`'s coefficients of ``h^(2n+1)``, for its short form.
 _ODD_MOMENT_POWERS = tuple(q * (-1.0) ** n / math.factorial(2 * n + 1) for n, q in enumerate(ODD_MOMENT_SERIES))
 #: Terms of :func:`short_odd_moment`: for ``|h| <= pi/2`` the first left out is below
-#: ``(pi^2/4) |h|^19 / 19! = 1.2e-13`` (``|q_n| <= int_0^pi |phi - pi/2| dphi = pi^2/4``).
+#: ``(pi^2/4) |h|^19 / 19! = 1.1e-13`` (``|q_n| <= int_0^pi |phi - pi/2| dphi = pi^2/4``), the rest far less.
 SHORT_ODD_MOMENT_TERMS = 9
 
 
