@@ -42,6 +42,7 @@ import math
 import numpy as np
 
 from pectoral_gym.model.dynamics import body_accel, oscillating_square_mean
+from pectoral_gym.model.fast_step import short_bessel_j1, sin_cos_of_angle
 from pectoral_gym.model.jit import njit
 from pectoral_gym.model.kfunctions import UNIT_K
 from pectoral_gym.model.ktables import KTables, scaling_values, yaw_oscillation_phasor
@@ -63,6 +64,7 @@ __all__ = [
     "power_stroke_excess",
     "ODD_MOMENT_SERIES",
     "odd_moment",
+    "short_odd_moment",
     "ripple_offset",
 ]
 
@@ -95,8 +97,25 @@ def bessel_j1(x: float) -> float:
     return total
 
 
+@njit(inline="always")
+def _j1(x: float, fast: bool) -> float:
+    """:func:`bessel_j1`, or with ``fast`` (the averaged model's fast step) its nine-term form within ``pi/2``."""
+    if fast and abs(x) <= 0.5 * math.pi:
+        return short_bessel_j1(x)
+    return bessel_j1(x)
+
+
+@njit(inline="always")
+def _sin_cos(angle: float, fast: bool):
+    """``sin, cos`` of a fin angle: libm's, or with ``fast`` :func:`~pectoral_gym.model.fast_step.sin_cos_of_angle`."""
+    if fast:
+        return sin_cos_of_angle(angle)
+    return math.sin(angle), math.cos(angle)
+
+
 @njit
-def half_stroke_mean_force(angle_from: float, angle_to: float, duration: float, drag_constant: float):
+def half_stroke_mean_force(angle_from: float, angle_to: float, duration: float, drag_constant: float,
+                           fast: bool = False):
     """Exact mean blade-element force of one half-cosine half-stroke of the right fin (``docs/model.md`` 3.7).
 
     The half-stroke ``g = mid - half cos(pi s / d)`` (:func:`pectoral_gym.model.dynamics.stroke_kinematics`)
@@ -106,13 +125,16 @@ def half_stroke_mean_force(angle_from: float, angle_to: float, duration: float, 
 
         mean f_hx = k pi^2 |half| J1(half) sin(mid) / d^2,   mean f_hy = (same) cos(mid)
 
+    ``fast``: the averaged model's fast step's ``J1``, ``sin`` and ``cos`` (:mod:`pectoral_gym.model.fast_step`).
+
     Returns:
         ``(f_hx, f_hy)`` [N]; the moment is ``C_p f_hx`` (eq. 18).
     """
     half = 0.5 * (angle_to - angle_from)
     mid = 0.5 * (angle_to + angle_from)
-    base = drag_constant * math.pi * math.pi * abs(half) * bessel_j1(half) / (duration * duration)
-    return base * math.sin(mid), base * math.cos(mid)
+    base = drag_constant * math.pi * math.pi * abs(half) * _j1(half, fast) / (duration * duration)
+    sin_mid, cos_mid = _sin_cos(mid, fast)
+    return base * sin_mid, base * cos_mid
 
 
 def _odd_moment_coefficients(terms: int = 14) -> tuple[float, ...]:
@@ -147,8 +169,26 @@ def odd_moment(h: float) -> float:
     return total
 
 
+#: ``ODD_MOMENT_SERIES[n] (-1)^n / (2n+1)!``: :func:`odd_moment`'s coefficients of ``h^(2n+1)``, for its short form.
+_ODD_MOMENT_POWERS = tuple(q * (-1.0) ** n / math.factorial(2 * n + 1) for n, q in enumerate(ODD_MOMENT_SERIES))
+#: Terms of :func:`short_odd_moment`: for ``|h| <= pi/2`` the first left out is below
+#: ``(pi^2/4) |h|^19 / 19! = 1.1e-13`` (``|q_n| <= int_0^pi |phi - pi/2| dphi = pi^2/4``), the rest far less.
+SHORT_ODD_MOMENT_TERMS = 9
+
+
 @njit
-def ripple_offset(bias: float, amplitude: float, period: float, ratio: float, drag_constant: float):
+def short_odd_moment(h: float) -> float:
+    """:func:`odd_moment` for ``|h| <= pi/2`` by its first nine terms, coefficients precomputed (Horner's form)."""
+    s = h * h
+    total = _ODD_MOMENT_POWERS[SHORT_ODD_MOMENT_TERMS - 1]
+    for n in range(SHORT_ODD_MOMENT_TERMS - 2, -1, -1):
+        total = total * s + _ODD_MOMENT_POWERS[n]
+    return h * total
+
+
+@njit
+def ripple_offset(bias: float, amplitude: float, period: float, ratio: float, drag_constant: float,
+                  fast: bool = False):
     """Beat-mean impulse offset [N s] of the right fin's regular beat over its cycle average (``docs/model.md`` 3.8).
 
     ``M = (1/T) int_0^T E(t) dt`` with ``E(t) = int_0^t (f - fbar) ds`` the blade-element
@@ -159,20 +199,23 @@ def ripple_offset(bias: float, amplitude: float, period: float, ratio: float, dr
         M_x = k pi^2 gA J1(gA) sin(g0) (zeta + 1/zeta) / (2 T) + 2 k gA^2 cos(g0) Q(gA) / T
         M_y = k pi^2 gA J1(gA) cos(g0) (zeta + 1/zeta) / (2 T) - 2 k gA^2 sin(g0) Q(gA) / T
 
-    with :func:`odd_moment` ``Q``. Zero for a fin at rest.
+    with :func:`odd_moment` ``Q``. Zero for a fin at rest. ``fast``: the fast step's ``J1``, ``Q``, ``sin``, ``cos``.
 
     Returns:
         ``(M_x, M_y)``; the moment's is ``C_p M_x`` (eq. 18).
     """
     if amplitude == 0.0:
         return 0.0, 0.0
-    a = drag_constant * math.pi * math.pi * amplitude * bessel_j1(amplitude) * (ratio + 1.0 / ratio) / (2.0 * period)
-    b = 2.0 * drag_constant * amplitude * amplitude * odd_moment(amplitude) / period
-    return a * math.sin(bias) + b * math.cos(bias), a * math.cos(bias) - b * math.sin(bias)
+    a = drag_constant * math.pi * math.pi * amplitude * _j1(amplitude, fast) * (ratio + 1.0 / ratio) / (2.0 * period)
+    q = short_odd_moment(amplitude) if fast and amplitude <= 0.5 * math.pi else odd_moment(amplitude)
+    b = 2.0 * drag_constant * amplitude * amplitude * q / period
+    sin_bias, cos_bias = _sin_cos(bias, fast)
+    return a * sin_bias + b * cos_bias, a * cos_bias - b * sin_bias
 
 
 @njit
-def power_stroke_excess(bias: float, amplitude: float, period: float, ratio: float, drag_constant: float):
+def power_stroke_excess(bias: float, amplitude: float, period: float, ratio: float, drag_constant: float,
+                        fast: bool = False):
     """Impulse [N s] a regular power stroke delivers beyond the cycle mean over its duration (right fin, K = 1).
 
     ``X = d1 (mean_power - mean_cycle)`` with ``d1 = T_p / (zeta + 1)`` (eq. 21); the recovery stroke
@@ -186,8 +229,8 @@ def power_stroke_excess(bias: float, amplitude: float, period: float, ratio: flo
         return 0.0, 0.0
     d1 = period / (ratio + 1.0)
     d2 = ratio * d1
-    px, py = half_stroke_mean_force(bias - amplitude, bias + amplitude, d1, drag_constant)
-    rx, ry = half_stroke_mean_force(bias + amplitude, bias - amplitude, d2, drag_constant)
+    px, py = half_stroke_mean_force(bias - amplitude, bias + amplitude, d1, drag_constant, fast)
+    rx, ry = half_stroke_mean_force(bias + amplitude, bias - amplitude, d2, drag_constant, fast)
     return d1 * px - d1 * (d1 * px + d2 * rx) / period, d1 * py - d1 * (d1 * py + d2 * ry) / period
 
 
@@ -221,20 +264,22 @@ def averaged_fin_forcing(
 
 
 @njit
-def scaled_forcing(bias, amplitude, period, ratio, side, coef, mode, kx, ky, km, base_sway):
+def scaled_forcing(bias, amplitude, period, ratio, side, coef, mode, kx, ky, km, base_sway, fast=False):
     """:func:`averaged_fin_forcing` with the scaling values ``K_fx, K_fy, K_m`` given (eq. 25).
 
     ``base_sway``: :attr:`pectoral_gym.model.ktables.KTables.base_sway`. The averaged model's latch
     evaluates K together with the yaw-oscillation phasor (:func:`pectoral_gym.model.ktables.pattern_values`).
+    ``fast``: the fast step's ``J1``, ``sin`` and ``cos`` (:mod:`pectoral_gym.model.fast_step`).
     """
     drag_constant = coef[Coef.FIN_DRAG_CONSTANT] * coef[FIN_FORCE_SCALE[0 if side > 0.0 else 1]]  # the fin's k
     fin_offset = coef[Coef.FIN_OFFSET]
     c = drag_constant * math.pi**2 * (ratio * ratio - 1.0) / (ratio * period * period)
     a2 = amplitude * amplitude
     if mode == EXACT:
-        base = c * amplitude * bessel_j1(amplitude)
-        fx = base * math.sin(bias)
-        fy = base * math.cos(bias)
+        base = c * amplitude * _j1(amplitude, fast)
+        sin_bias, cos_bias = _sin_cos(bias, fast)
+        fx = base * sin_bias
+        fy = base * cos_bias
     else:
         b2 = bias * bias
         base = c * a2 * (8.0 - a2) / 16.0  # second-order Taylor form of the exact base (as in eq. 27)

@@ -49,6 +49,7 @@ import math
 import numpy as np
 
 from pectoral_gym.model.averaging import scaled_forcing
+from pectoral_gym.model.fast_step import sin_cos_of_angle
 from pectoral_gym.model.jit import njit
 from pectoral_gym.model.ktables import pattern_values
 from pectoral_gym.model.params import FIN_FORCE_SCALE
@@ -85,10 +86,11 @@ def clear(cache: np.ndarray, index: np.ndarray | slice | None = None) -> None:
 
 
 @njit(inline="always")
-def refresh(cache, i, f, bias, amplitude, period, ratio, coef, mode, tables):
+def refresh(cache, i, f, bias, amplitude, period, ratio, coef, mode, tables, fast=False):
     """Make fin ``f`` of fish ``i``'s row hold the forcing of pattern ``(bias, amplitude, period, ratio)``.
 
     Nothing is computed when the row already holds it (the same pattern as the last half-stroke).
+    ``fast``: the averaged model's fast step (:func:`pectoral_gym.model.averaging.scaled_forcing`).
     """
     if (cache[i, f, CACHED] == 1.0 and cache[i, f, KEY_BIAS] == bias and cache[i, f, KEY_AMPLITUDE] == amplitude
             and cache[i, f, KEY_PERIOD] == period and cache[i, f, KEY_RATIO] == ratio):
@@ -101,7 +103,7 @@ def refresh(cache, i, f, bias, amplitude, period, ratio, coef, mode, tables):
     actual_bias, actual_amplitude = actual_angle(coef, i, f, bias), actual_amplitude_of(coef, i, f, amplitude)
     kx, ky, km, pc, ps = pattern_values(actual_bias, actual_amplitude, period, ratio, tables)
     fx, fy, tau = scaled_forcing(actual_bias, actual_amplitude, period, ratio, SIDE[f], coef[i], mode, kx, ky, km,
-                                 tables.base_sway)
+                                 tables.base_sway, fast)
     cache[i, f, AVG_FX] = fx
     cache[i, f, AVG_FY] = fy
     cache[i, f, AVG_TAU] = tau
@@ -114,7 +116,7 @@ def refresh(cache, i, f, bias, amplitude, period, ratio, coef, mode, tables):
 
 
 @njit(inline="always")
-def yaw_oscillation(fins, cache, i, offset, idle0, idle1):
+def yaw_oscillation(fins, cache, i, offset, idle0, idle1, fast=False):
     """Amplitude [rad/s] of the yaw-rate oscillation both fins drive, ``offset`` s into the segment.
 
     Each fin's oscillation is ``Re(G P e^{i theta})`` with its phasor ``P``, the gain ``G`` of
@@ -123,7 +125,8 @@ def yaw_oscillation(fins, cache, i, offset, idle0, idle1):
     of :mod:`pectoral_gym.model.strokes`); the two add
     as phasors. Fins beating in phase with the same pattern cancel (straight
     swimming has no yaw oscillation); fins with different periods drift
-    through all relative phases.
+    through all relative phases. ``fast``: the averaged model's fast step's ``sin, cos`` of the phase (in
+    ``[0, 2 pi]``: :func:`pectoral_gym.model.fast_step.sin_cos_of_angle` of its half, doubled).
     """
     re = 0.0
     im = 0.0
@@ -134,7 +137,11 @@ def yaw_oscillation(fins, cache, i, offset, idle0, idle1):
             continue  # no yaw-oscillation data (or no stroke): skip the trigonometry
         theta = _beat_phase(fins, i, f, offset)
         gain = 1.0 + cache[i, f, OSC_EXCESS]  # a transitional half-stroke's (docs/model.md 3.9)
-        c, s = gain * math.cos(theta), gain * math.sin(theta)
+        if fast:
+            sin_half, cos_half = sin_cos_of_angle(0.5 * theta)
+            c, s = gain * (cos_half * cos_half - sin_half * sin_half), gain * (2.0 * sin_half * cos_half)
+        else:
+            c, s = gain * math.cos(theta), gain * math.sin(theta)
         re += cache[i, f, OSC_COS] * c - cache[i, f, OSC_SIN] * s
         im += cache[i, f, OSC_COS] * s + cache[i, f, OSC_SIN] * c
     return math.sqrt(re * re + im * im)

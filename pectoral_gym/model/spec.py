@@ -147,6 +147,8 @@ class AveragedSpec(ModelSpec):
         ripple_offsets: The beat-mean ripple offset of a fin that starts, changes or parks a pattern
             (docs/model.md 3.8).
         dt_max: Largest RK4 step [s] (it also shrinks to stay inside RK4's stability limit).
+        fast_step: The fast step (:mod:`pectoral_gym.model.fast_step`): numerically different, default off.
+            Left out of :meth:`to_dict` when off, so the dicts of every spec without it are as before.
     """
 
     model: ClassVar[str] = "averaged"
@@ -157,6 +159,7 @@ class AveragedSpec(ModelSpec):
     transitions: bool = _AVERAGED_MODEL["transitions"]
     ripple_offsets: bool = _AVERAGED_MODEL["ripple_offsets"]
     dt_max: float = _AVERAGED_MODEL["dt_max"]
+    fast_step: bool = _AVERAGED_MODEL["fast_step"]
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -173,9 +176,16 @@ class AveragedSpec(ModelSpec):
             raise ValueError(f"yaw_damping={self.yaw_damping!r} needs a coefficients file's "
                              f"{YAW_DAMPINGS[self.yaw_damping]} section; K = 1 (scaling='none') has none: "
                              "use yaw_damping='none'")
-        for name in ("check_params", "transitions", "ripple_offsets"):
+        for name in ("check_params", "transitions", "ripple_offsets", "fast_step"):
             set_(self, name, _check_bool(name, getattr(self, name)))
         set_(self, "dt_max", _check_dt(self.dt_max))
+
+    def to_dict(self) -> dict[str, Any]:
+        """As :meth:`ModelSpec.to_dict`, without ``fast_step`` when it is off (its default)."""
+        data = super().to_dict()
+        if not self.fast_step:
+            del data["fast_step"]
+        return data
 
     def scaling_functions(self, params: FishParams | None = None) -> ScalingFunctions | None:
         """The K of :attr:`scaling` with :attr:`yaw_damping`'s section only (``None`` for K = 1).
@@ -202,7 +212,8 @@ class AveragedSpec(ModelSpec):
             first = params[0] if isinstance(params, Sequence) and params else params
             k = self.scaling_functions(first)
         return AveragedModel(n, params, scaling=k, forcing=self.forcing,
-                             dt_max=self.dt_max, transitions=self.transitions, ripple_offsets=self.ripple_offsets)
+                             dt_max=self.dt_max, transitions=self.transitions, ripple_offsets=self.ripple_offsets,
+                             fast_step=self.fast_step)
 
 
 #: The full model at converged steps (the spec class's defaults).

@@ -38,10 +38,11 @@ from pectoral_gym.model.dynamics import (
     rate_bound,
     rate_constants,
 )
+from pectoral_gym.model.fast_step import FAST_ACCURATE_STEP, fast_body_accel
 from pectoral_gym.model.jit import PARALLEL_MIN_ITEMS, kernel_pair, kernel_variant, njit
 from pectoral_gym.model.ktables import KTables, as_tables
 from pectoral_gym.model.params import BodyCoefficients, Coef
-from pectoral_gym.model.stroke_corrections import start_half_stroke
+from pectoral_gym.model.stroke_corrections import FAST_STEP, start_half_stroke
 from pectoral_gym.model.strokes import DURATION, ELAPSED, idle
 
 __all__ = ["ACCURATE_STEP", "ADVANCE_ONE", "STATE_NAMES", "State", "advance", "advance_averaged_one",
@@ -74,7 +75,9 @@ def _rotate(c0, s0, delta):
 
 
 @njit
-def _accel(u, v, w, f: Forcing, b: BodyCoefficients, osc):
+def _accel(u, v, w, f: Forcing, b: BodyCoefficients, osc, fast):
+    if fast:
+        return fast_body_accel(u, v, w, f, b, osc)
     return body_accel(u, v, w, f.fx, f.fy, f.tau, b.m1, b.m2, b.J3, b.c1, b.c2, b.c4, osc)
 
 
@@ -85,31 +88,43 @@ def _rk4(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: Bod
     ``osc`` [rad/s]: the yaw oscillation of the averaged model's damping
     (:func:`pectoral_gym.model.dynamics.body_accel`); 0 for the full model.
     """
+    p0 = state[i, State.PSI]
+    _rk4_from(state, integral, i, h, f0, fm, f1, body, osc, math.cos(p0), math.sin(p0), False)
+
+
+@njit(inline="always")
+def _rk4_from(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: BodyCoefficients, osc, c0, s0,
+              fast):
+    """:func:`_rk4` from the heading's ``c0, s0 = cos, sin``; returns those of the heading at the step's end.
+
+    ``fast``: the accelerations of :func:`pectoral_gym.model.fast_step.fast_body_accel` (the averaged
+    model's fast step), else :func:`pectoral_gym.model.dynamics.body_accel`.
+    """
     x0, y0, p0 = state[i, State.X], state[i, State.Y], state[i, State.PSI]
     u0, v0, w0 = state[i, State.VX], state[i, State.VY], state[i, State.OMEGA]
-    c0, s0 = math.cos(p0), math.sin(p0)
     # stage 1
     k1x, k1y, k1p = u0 * c0 - v0 * s0, u0 * s0 + v0 * c0, w0
-    k1u, k1v, k1w = _accel(u0, v0, w0, f0, body, osc)
+    k1u, k1v, k1w = _accel(u0, v0, w0, f0, body, osc, fast)
     # stage 2
     u2, v2, w2 = u0 + 0.5 * h * k1u, v0 + 0.5 * h * k1v, w0 + 0.5 * h * k1w
     c, s = _rotate(c0, s0, 0.5 * h * k1p)
     k2x, k2y, k2p = u2 * c - v2 * s, u2 * s + v2 * c, w2
-    k2u, k2v, k2w = _accel(u2, v2, w2, fm, body, osc)
+    k2u, k2v, k2w = _accel(u2, v2, w2, fm, body, osc, fast)
     # stage 3
     u3, v3, w3 = u0 + 0.5 * h * k2u, v0 + 0.5 * h * k2v, w0 + 0.5 * h * k2w
     c, s = _rotate(c0, s0, 0.5 * h * k2p)
     k3x, k3y, k3p = u3 * c - v3 * s, u3 * s + v3 * c, w3
-    k3u, k3v, k3w = _accel(u3, v3, w3, fm, body, osc)
+    k3u, k3v, k3w = _accel(u3, v3, w3, fm, body, osc, fast)
     # stage 4
     u4, v4, w4 = u0 + h * k3u, v0 + h * k3v, w0 + h * k3w
     c, s = _rotate(c0, s0, h * k3p)
     k4x, k4y, k4p = u4 * c - v4 * s, u4 * s + v4 * c, w4
-    k4u, k4v, k4w = _accel(u4, v4, w4, f1, body, osc)
+    k4u, k4v, k4w = _accel(u4, v4, w4, f1, body, osc, fast)
     h6 = h / 6.0
     state[i, State.X] = x0 + h6 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
     state[i, State.Y] = y0 + h6 * (k1y + 2.0 * k2y + 2.0 * k3y + k4y)
-    state[i, State.PSI] = p0 + h6 * (k1p + 2.0 * k2p + 2.0 * k3p + k4p)
+    turn = h6 * (k1p + 2.0 * k2p + 2.0 * k3p + k4p)
+    state[i, State.PSI] = p0 + turn
     state[i, State.VX] = u0 + h6 * (k1u + 2.0 * k2u + 2.0 * k3u + k4u)
     state[i, State.VY] = v0 + h6 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
     state[i, State.OMEGA] = w0 + h6 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w)
@@ -117,6 +132,7 @@ def _rk4(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: Bod
     integral[i, 0] += h6 * (u0 + 2.0 * u2 + 2.0 * u3 + u4)
     integral[i, 1] += h6 * (v0 + 2.0 * v2 + 2.0 * v3 + v4)
     integral[i, 2] += h6 * (w0 + 2.0 * w2 + 2.0 * w3 + w4)
+    return _rotate(c0, s0, turn)
 
 
 @njit(inline="always")
@@ -127,8 +143,8 @@ def _driven(body: BodyCoefficients, forcing: Forcing):
 
 
 @njit
-def _stable_step(state, i, rates: RateConstants, driven_omega, driven_speed, osc, dt_max):
-    """Averaged model: RK4 step, at most ``dt_max`` and ``h * rate <= ACCURATE_STEP``.
+def _stable_step(state, i, rates: RateConstants, driven_omega, driven_speed, osc, dt_max, accurate=ACCURATE_STEP):
+    """Averaged model: RK4 step, at most ``dt_max`` and ``h * rate <= accurate`` (default :data:`ACCURATE_STEP`).
 
     The rate is :func:`pectoral_gym.model.dynamics.linearised_rate` (from the fish's
     precomputed ``rates``) at the larger of the current yaw rate and speed and those
@@ -138,8 +154,8 @@ def _stable_step(state, i, rates: RateConstants, driven_omega, driven_speed, osc
     omega = max(abs(state[i, State.OMEGA]), driven_omega)
     speed = max(math.sqrt(state[i, State.VX] ** 2 + state[i, State.VY] ** 2), driven_speed)
     rate = rate_bound(speed, omega, osc, rates)
-    if rate * dt_max > ACCURATE_STEP:
-        return ACCURATE_STEP / rate
+    if rate * dt_max > accurate:
+        return accurate / rate
     return dt_max
 
 
@@ -170,17 +186,25 @@ def _full_stable_step(state, fins, coef, i, idle0, idle1, body, rates, inertia_c
 
 
 @njit(inline="always")
-def _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, dt_max):
+def _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, dt_max, fast, accurate):
     """Integrate fish ``i`` over a segment of constant forcing.
 
-    Equal RK4 substeps to the segment's end, re-sized as the state's stiffness changes (:func:`_stable_step`).
+    Equal RK4 substeps to the segment's end, re-sized as the state's stiffness changes (:func:`_stable_step`,
+    ``h * rate <= accurate``). ``fast``: the averaged model's fast step (:mod:`pectoral_gym.model.fast_step`),
+    whose heading's ``cos, sin`` are carried from substep to substep.
     """
     t_seg = seg
     driven_omega, driven_speed = _driven(body, forcing)
+    c = s = 0.0
+    if fast:
+        c, s = math.cos(state[i, State.PSI]), math.sin(state[i, State.PSI])
     while t_seg > _EPS:
-        h_ok = _stable_step(state, i, rates, driven_omega, driven_speed, osc, dt_max)
+        h_ok = _stable_step(state, i, rates, driven_omega, driven_speed, osc, dt_max, accurate)
         h = t_seg / max(1, int(math.ceil(t_seg / h_ok - 1e-9)))
-        _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc)
+        if fast:
+            c, s = _rk4_from(state, integral, i, h, forcing, forcing, forcing, body, osc, c, s, True)
+        else:
+            _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc)
         t_seg -= h
 
 
@@ -205,6 +229,8 @@ def _advance_model(i, state, fins, cache, pending, integral, coef, duration, dt_
     offset0, scale0 = coef[i, st.FIN_ANGLE_OFFSET[0]], coef[i, st.FIN_ANGLE_SCALE[0]]
     offset1, scale1 = coef[i, st.FIN_ANGLE_OFFSET[1]], coef[i, st.FIN_ANGLE_SCALE[1]]
     rates = rate_constants(body.m1, body.m2, body.J3, body.c1, body.c2, body.c4)
+    fast = AVERAGED and (corrections & FAST_STEP) != 0
+    accurate = FAST_ACCURATE_STEP if fast else ACCURATE_STEP
     t_left = duration
     while t_left > _EPS:
         # A fin at rest that stays at rest never ends a segment: its stroke clock must
@@ -226,8 +252,8 @@ def _advance_model(i, state, fins, cache, pending, integral, coef, duration, dt_
                 for f in range(2):
                     fx, fy, tau = fx + cache[i, f, fc.TR_FX], fy + cache[i, f, fc.TR_FY], tau + cache[i, f, fc.TR_TAU]
             forcing = Forcing(fx, fy, tau)
-            osc = fc.yaw_oscillation(fins, cache, i, 0.5 * seg, idle0, idle1)
-            _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, dt_max)
+            osc = fc.yaw_oscillation(fins, cache, i, 0.5 * seg, idle0, idle1, fast)
+            _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc, dt_max, fast, accurate)
         else:
             h_max = dt_max
             if not idle0:
@@ -250,9 +276,9 @@ def _advance_model(i, state, fins, cache, pending, integral, coef, duration, dt_
                 _rk4(state, integral, i, h, f0, fm, f1, body, 0.0)
                 f0 = f1
         if not idle0:  # the strokes actually swept, for the fin work (both models)
-            fins[i, 0, st.SWEPT] += st.swept_cube(fins, i, 0, seg)
+            fins[i, 0, st.SWEPT] += st.swept_cube(fins, i, 0, seg, fast)
         if not idle1:
-            fins[i, 1, st.SWEPT] += st.swept_cube(fins, i, 1, seg)
+            fins[i, 1, st.SWEPT] += st.swept_cube(fins, i, 1, seg, fast)
         if rem0 - seg <= _EPS:
             fins[i, 0, ELAPSED] = fins[i, 0, DURATION]  # exactly on the boundary
         elif not idle0:

@@ -26,16 +26,21 @@ from pectoral_gym.model.params import Coef
 from pectoral_gym.model.ripple import transitional_oscillation_gain
 from pectoral_gym.model.strokes import AMPLITUDE, BIAS, DURATION, PERIOD, RATIO, latch
 
-__all__ = ["RIPPLE_OFFSETS", "TRANSITIONS", "corrections", "start_half_stroke"]
+__all__ = ["FAST_STEP", "RIPPLE_OFFSETS", "TRANSITIONS", "corrections", "start_half_stroke"]
 
 #: Bits of the averaged model's ``corrections`` (:func:`corrections`): the transitional half-strokes
 #: (``docs/model.md`` 3.7, with their yaw-oscillation gain, 3.9) and the beat-mean ripple offset (3.8).
 TRANSITIONS, RIPPLE_OFFSETS = 1, 2
+#: A bit of the same argument that is no correction: the averaged model's fast step
+#: (:mod:`pectoral_gym.model.fast_step`), carried with the corrections so that every kernel that takes
+#: them (the model's and the envs') takes it too.
+FAST_STEP = 4
 
 
-def corrections(transitions: bool, ripple_offsets: bool) -> int:
+def corrections(transitions: bool, ripple_offsets: bool, fast_step: bool = False) -> int:
     """The ``corrections`` argument of :func:`pectoral_gym.model.stepping.advance` from the averaged model's options."""
-    return (TRANSITIONS if transitions else 0) | (RIPPLE_OFFSETS if ripple_offsets else 0)
+    return ((TRANSITIONS if transitions else 0) | (RIPPLE_OFFSETS if ripple_offsets else 0)
+            | (FAST_STEP if fast_step else 0))
 
 
 @njit(inline="always")
@@ -54,15 +59,16 @@ def start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables, 
         cache[i, f, fc.PREV_RATIO] = fins[i, f, RATIO]
     latch(fins, pending, i, f)
     if averaged:
+        fast = (corrections & FAST_STEP) != 0
         fc.refresh(cache, i, f, fins[i, f, BIAS], fins[i, f, AMPLITUDE], fins[i, f, PERIOD], fins[i, f, RATIO],
-                   coef, mode, tables)
-        if corrections:
+                   coef, mode, tables, fast)
+        if corrections & (TRANSITIONS | RIPPLE_OFFSETS):
             dfx = dfy = dtau = 0.0
             if corrections & TRANSITIONS:
-                dfx, dfy, dtau = _transition(fins, cache, coef, i, f)
-                cache[i, f, fc.OSC_EXCESS] = _oscillation_gain(fins, i, f, coef) - 1.0
+                dfx, dfy, dtau = _transition(fins, cache, coef, i, f, fast)
+                cache[i, f, fc.OSC_EXCESS] = _oscillation_gain(fins, i, f, coef, fast) - 1.0
             if corrections & RIPPLE_OFFSETS:
-                ox, oy, ot = _ripple_offset_change(fins, cache, coef, i, f)
+                ox, oy, ot = _ripple_offset_change(fins, cache, coef, i, f, fast)
                 duration = fins[i, f, DURATION]
                 dfx, dfy, dtau = dfx + ox / duration, dfy + oy / duration, dtau + ot / duration
             cache[i, f, fc.TR_FX] = dfx
@@ -71,18 +77,18 @@ def start_half_stroke(fins, cache, pending, i, f, coef, averaged, mode, tables, 
 
 
 @njit(inline="always")
-def _oscillation_gain(fins, i, f, coef):
+def _oscillation_gain(fins, i, f, coef, fast):
     """Yaw-oscillation gain of fin ``f``'s latched half-stroke (``docs/model.md`` 3.9; 1 on a regular one)."""
     return transitional_oscillation_gain(st.actual_angle(coef, i, f, fins[i, f, st.ANGLE_FROM]),
                                          st.actual_angle(coef, i, f, fins[i, f, st.ANGLE_TO]), fins[i, f, DURATION],
                                          fins[i, f, st.POWER] > 0.5, st.actual_angle(coef, i, f, fins[i, f, BIAS]),
                                          st.actual_amplitude(coef, i, f, fins[i, f, AMPLITUDE]),
                                          fins[i, f, PERIOD], fins[i, f, RATIO], st.fin_drag_constant(coef, i, f),
-                                         coef[i, Coef.FIN_INERTIA_CONSTANT])
+                                         coef[i, Coef.FIN_INERTIA_CONSTANT], fast)
 
 
 @njit(inline="always")
-def _ripple_offset_change(fins, cache, coef, i, f):
+def _ripple_offset_change(fins, cache, coef, i, f, fast):
     """Impulse [N s, N s, N m s] that moves fin ``f``'s delivered ripple offset to its latched pattern's.
 
     ``docs/model.md`` section 3.8: the averaged state is the beat mean of the full model's,
@@ -92,7 +98,7 @@ def _ripple_offset_change(fins, cache, coef, i, f):
     """
     mx, my = ripple_offset(st.actual_angle(coef, i, f, fins[i, f, BIAS]),
                            st.actual_amplitude(coef, i, f, fins[i, f, AMPLITUDE]), fins[i, f, PERIOD],
-                           fins[i, f, RATIO], st.fin_drag_constant(coef, i, f))
+                           fins[i, f, RATIO], st.fin_drag_constant(coef, i, f), fast)
     fin_offset = coef[i, Coef.FIN_OFFSET]
     side = st.SIDE[f]
     mx, my, mt = mx, side * my, side * fin_offset * mx  # eq. (18), left fin mirrored
@@ -104,7 +110,7 @@ def _ripple_offset_change(fins, cache, coef, i, f):
 
 
 @njit(inline="always")
-def _transition(fins, cache, coef, i, f):
+def _transition(fins, cache, coef, i, f, fast):
     """Averaged model: forcing of fin ``f``'s half-stroke in progress beyond its pattern's regular one.
 
     Two parts (``docs/model.md`` section 3.7), both zero at periodic steady state:
@@ -132,17 +138,18 @@ def _transition(fins, cache, coef, i, f):
     dy = 0.0
     if angle_from != start:
         angle_to = st.actual_angle(coef, i, f, fins[i, f, st.ANGLE_TO])
-        ax, ay = half_stroke_mean_force(st.actual_angle(coef, i, f, angle_from), angle_to, duration, drag_constant)
-        rx, ry = half_stroke_mean_force(st.actual_angle(coef, i, f, start), angle_to, duration, drag_constant)
+        ax, ay = half_stroke_mean_force(st.actual_angle(coef, i, f, angle_from), angle_to, duration, drag_constant,
+                                        fast)
+        rx, ry = half_stroke_mean_force(st.actual_angle(coef, i, f, start), angle_to, duration, drag_constant, fast)
         dx, dy = ax - rx, ay - ry
     if not power and (cache[i, f, fc.PREV_BIAS] != bias or cache[i, f, fc.PREV_AMPLITUDE] != amp
                       or cache[i, f, fc.PREV_PERIOD] != fins[i, f, PERIOD]
                       or cache[i, f, fc.PREV_RATIO] != fins[i, f, RATIO]):
         px, py = power_stroke_excess(st.actual_angle(coef, i, f, cache[i, f, fc.PREV_BIAS]),
                                      st.actual_amplitude(coef, i, f, cache[i, f, fc.PREV_AMPLITUDE]),
-                                     cache[i, f, fc.PREV_PERIOD], cache[i, f, fc.PREV_RATIO], drag_constant)
+                                     cache[i, f, fc.PREV_PERIOD], cache[i, f, fc.PREV_RATIO], drag_constant, fast)
         qx, qy = power_stroke_excess(st.actual_angle(coef, i, f, bias), st.actual_amplitude(coef, i, f, amp),
-                                     fins[i, f, PERIOD], fins[i, f, RATIO], drag_constant)
+                                     fins[i, f, PERIOD], fins[i, f, RATIO], drag_constant, fast)
         dx += (px - qx) / duration
         dy += (py - qy) / duration
     side = st.SIDE[f]

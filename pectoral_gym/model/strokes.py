@@ -50,6 +50,7 @@ from typing import NamedTuple
 import numpy as np
 
 from pectoral_gym.model.dynamics import fin_force_right, stroke_kinematics
+from pectoral_gym.model.fast_step import sin_cos_of_angle
 from pectoral_gym.model.jit import njit
 from pectoral_gym.model.params import FIN_ANGLE_OFFSET, FIN_ANGLE_SCALE, FIN_FORCE_SCALE, Coef
 
@@ -93,19 +94,24 @@ def latch(fins, pending, i, f):
 
 
 @njit(inline="always")
-def swept_cube(fins, i, f, seg):
+def swept_cube(fins, i, f, seg, fast=False):
     """``int |g'|^3 dt`` [rad^3/s^2] of fin ``f``'s half-stroke in progress over the next ``seg`` s.
 
     With ``g' = half (pi/d) sin(phi)``, ``phi = pi s / d``: ``|half|^3 (pi/d)^2 [G(phi)]``,
-    ``G = -cos + cos^3 / 3`` (``G(pi) - G(0) = 4/3``). Zero for a still fin.
+    ``G = -cos + cos^3 / 3`` (``G(pi) - G(0) = 4/3``). Zero for a still fin. ``fast``: the averaged model's
+    fast step's ``cos`` (:func:`pectoral_gym.model.fast_step.sin_cos_of_angle`; the phases lie in ``[0, pi]``).
     """
     duration = fins[i, f, DURATION]
     half = 0.5 * (fins[i, f, ANGLE_TO] - fins[i, f, ANGLE_FROM])
     if half == 0.0 or duration <= 0.0:
         return 0.0
     rate = math.pi / duration
-    c0 = math.cos(rate * fins[i, f, ELAPSED])
-    c1 = math.cos(rate * min(fins[i, f, ELAPSED] + seg, duration))
+    if fast:
+        c0 = sin_cos_of_angle(rate * fins[i, f, ELAPSED])[1]
+        c1 = sin_cos_of_angle(rate * min(fins[i, f, ELAPSED] + seg, duration))[1]
+    else:
+        c0 = math.cos(rate * fins[i, f, ELAPSED])
+        c1 = math.cos(rate * min(fins[i, f, ELAPSED] + seg, duration))
     return abs(half) ** 3 * rate * rate * ((c0 - c0**3 / 3.0) - (c1 - c1**3 / 3.0))
 
 
