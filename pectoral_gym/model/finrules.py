@@ -163,6 +163,8 @@ class FinState:
         command_id: Identity of the last command (``None`` before the first).
         handed: ``(2, 4)`` the pattern last handed to the fins and ``handed_id`` the command it came from
             (``None``: nothing handed since power-up or a halt; :func:`apply_firmware`).
+        latch_memo: What :func:`next_latch` read at the last tick that ran it, as bits, with the limits and the
+            ``handed`` it gave (``None``: none kept); :func:`apply_firmware` skips the rules while it holds.
     """
 
     def __init__(self, config: FirmwareConfig | None = None):
@@ -174,6 +176,7 @@ class FinState:
         self.command_id: int | None = None
         self.handed: np.ndarray | None = None
         self.handed_id: int | None = None
+        self.latch_memo: tuple | None = None
 
     @property
     def running(self) -> bool:
@@ -202,6 +205,13 @@ def apply_firmware(firmware: FinState, model: FishModel) -> None:
     A running command is handed over when it arrives or what the fins are to run changes (not again at every
     tick), latched at the next turning point, rate-limited there (:func:`slew_at_latch`); its transitional
     half-stroke from there is bounded by :func:`stretch_transition`.
+
+    :func:`next_latch` is a function of the setpoint, the limits and the fields ``DURATION`` to ``RATIO`` of the
+    half-strokes in progress alone, and those change only at a command, a turning point, a halt or a reported
+    latch, not at most ticks. A tick whose inputs are those of the last tick that ran it, bit for bit
+    (``firmware.latch_memo``), and whose fins still hold what that tick handed them, would hand nothing over:
+    it returns at once. Whatever changed an input (a tick, :func:`force_latch`, a restored checkpoint), the
+    bits differ and the rules run.
     """
     if firmware.halt:
         angles = model.fin_angles()[0][0]
@@ -212,7 +222,18 @@ def apply_firmware(firmware: FinState, model: FishModel) -> None:
         firmware.halt = False
         firmware.handed = None  # a restart hands the fins their patterns
     elif firmware.running:
-        _hand_over(firmware, model, next_latch(firmware.setpoint, model.fins[0], firmware.config.limits))
+        limits = firmware.config.limits
+        # All that next_latch reads of the fins: the fields DURATION..RATIO (adjacent), as bits.
+        inputs = (firmware.setpoint.tobytes(), model.fins[0, :, strokes.DURATION:strokes.RATIO + 1].tobytes())
+        memo = firmware.latch_memo
+        if memo is not None and memo[0] == inputs and memo[1] is limits and memo[2] is firmware.handed \
+                and firmware.command_id == firmware.handed_id:
+            return  # next_latch would give what the fins were handed: _hand_over would change nothing
+        _hand_over(firmware, model, safe := next_latch(firmware.setpoint, model.fins[0], limits))
+        handed = firmware.handed
+        # kept only where _hand_over would skip the same result again (not for a nan, which never equals itself)
+        firmware.latch_memo = (inputs, limits, handed) if handed is not None and bool((handed == safe).all()) \
+            else None
 
 
 def next_latch(beats: np.ndarray, fins: np.ndarray, limits: ServoLimits) -> np.ndarray:
