@@ -74,7 +74,7 @@ def _rotate(c0, s0, delta):
     return c0 * cd - s0 * sd, s0 * cd + c0 * sd
 
 
-@njit
+@njit(inline="always")  # (inlined: ``fast`` arrives as a literal from some callers, which would specialise it)
 def _accel(u, v, w, f: Forcing, b: BodyCoefficients, osc, fast):
     if fast:
         return fast_body_accel(u, v, w, f, b, osc)
