@@ -255,7 +255,7 @@ class HardwareFishEnv(EpisodeStart, gym.Env):
         """
         supervisor = self.supervisor
         if not supervisor.armed:  # a reset: also those still in the link (the supervisor's thread feeds no replay)
-            supervisor.latches.take(supervisor.now(), None)
+            supervisor.latches.take(None)
         for t, latch in supervisor.latches.drain():
             self.recorder.latch(t, latch)
 

@@ -30,15 +30,15 @@ class LatchReports:
         self._kept: list[tuple[float, Any]] = []
         self._lock = threading.Lock()
 
-    def take(self, now: float, liveness: Any | None) -> None:
-        """Take the link's new reports; each to ``liveness`` (if given: armed) as arrived at ``now`` [s]."""
+    def take(self, liveness: Any | None) -> None:
+        """Take the link's new reports; each to ``liveness`` if given (armed)."""
         if self._drain is None:
             return
         with self._lock:  # whole: taken from two threads, the reports stay in order
             for t_link, latch in self._drain():
                 t = self._stamp(t_link)
                 if liveness is not None:
-                    liveness.latch(t, latch.fin, latch.beat, latch.turn, latch.power, now)
+                    liveness.latch(t, latch.fin, latch.beat, latch.turn, latch.power)
                 self._kept.append((t, latch))
 
     def drain(self) -> list[tuple[float, Any]]:

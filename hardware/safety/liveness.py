@@ -98,7 +98,6 @@ class LivenessWatch:
         self.last_prediction = (math.nan, math.nan, math.nan)
         self.predictions: collections.deque[tuple[float, float, float, float]] = collections.deque(maxlen=4096)
         self._next_check = -math.inf
-        self._report_lags: collections.deque[float] = collections.deque(maxlen=64)  # kept across resets: the radio's
 
     def _warm_up(self) -> None:
         """Compile or load the models' kernels now, as they will be called, not inside a supervisor poll."""
@@ -143,21 +142,17 @@ class LivenessWatch:
         for shadow in (self._early, *self._later):
             shadow.queue.append((float(t), self._last_beats, acknowledged))
 
-    def latch(self, t: float, fin: int, beat: np.ndarray, turn: float, power: bool, arrived: float) -> bool:
+    def latch(self, t: float, fin: int, beat: np.ndarray, turn: float, power: bool) -> bool:
         """The robot reported that fin ``fin`` latched ``beat`` ``(4,)`` at angle ``turn`` [rad] at ``t`` [s].
 
-        ``arrived`` [s]: when the report reached us. Every replay starts that half-stroke at ``t``
-        (:meth:`ShadowFins.latch`): what the robot says its fins did is their truth, whatever the camera shows.
-        The replays are run for good the largest recent delay of the reports (at most 1 s) behind the newest
-        sighting, so that a report as late as those is still in time. Ignored before the first command since the
-        reset and for a latch before the reset (another episode's fins). Returns whether it was taken.
+        Every replay starts that half-stroke at ``t`` (:meth:`ShadowFins.latch`, rewinding if it is past ``t``):
+        what the robot says its fins did is their truth, whatever the camera shows. Ignored before the first
+        command since the reset and for a latch before the reset (another episode's fins). Returns whether it was
+        taken.
         """
         if not (math.isfinite(self._since) and t >= self._since and t >= self._first_command):
             return False
-        self._report_lags.append(min(max(float(arrived) - float(t), 0.0), 1.0))
-        hold = max(self._report_lags)
         for shadow in (self._early, *self._later):
-            shadow.hold = hold
             shadow.latch(t, fin, beat, turn, power)
         self._reports += 1
         return True

@@ -270,7 +270,7 @@ class Supervisor:
     def poll(self) -> str:
         """One round: newest frame, frame checks, tracker, rules; returns the first reason that holds now, or ``""``."""
         with self._lock:
-            self.latches.take(self.now(), self.liveness if self.armed else None)  # before the frame they may explain
+            self.latches.take(self.liveness if self.armed else None)  # before the frame they may explain
             self._take_frame()
             reasons = self._rules()
             for reason in reasons if self.armed else ():
