@@ -248,13 +248,16 @@ class HardwareFishEnv(EpisodeStart, gym.Env):
     def _take_latches(self) -> None:
         """The robot's latch reports (``docs/protocol.md``, LATCH): into the run log, for the calibration.
 
-        Not into the replayed fins the policy observes: those stay the fins as the commands make them from the
-        moment they are sent, the timing of the simulated envs policies train in (``docs/hardware.md``, "Policies
-        that observe the fins").
+        The supervisor's thread takes them from the link and feeds them to its liveness check's replays first
+        (:class:`pectoral_gym.hardware.safety.latch_reports.LatchReports`). Not into the replayed fins the policy
+        observes: those stay the fins as the commands make them from the moment they are sent, the timing of the
+        simulated envs policies train in (``docs/hardware.md``, "Policies that observe the fins").
         """
-        drain = getattr(self.link, "drain_latches", None)  # a link of this package; a stand-in may have none
-        for t_link, latch in drain() if drain is not None else ():
-            self.recorder.latch((t_link - self._origin) * self.speed, latch)  # the link's clock -> experiment time
+        supervisor = self.supervisor
+        if not supervisor.armed:  # a reset: also those still in the link (the supervisor's thread feeds no replay)
+            supervisor.latches.take(None)
+        for t, latch in supervisor.latches.drain():
+            self.recorder.latch(t, latch)
 
     # ------------------------------------------------------------ camera
     def _observe(self) -> None:

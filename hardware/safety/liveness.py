@@ -25,7 +25,9 @@ checks three consequences on the sightings (each a stop with a reason saying wha
 The robot takes a command somewhere between its send and the STATUS that acknowledges it (the radio's forward
 delay): the fins are replayed three times (:class:`~pectoral_gym.hardware.safety.shadow_fins.ShadowFins`), taking
 every command at its send, half way and at its acknowledgement, and each window is judged against the prediction
-most favourable to liveness (the smaller predicted motion, the smaller miss).
+most favourable to liveness (the smaller predicted motion, the smaller miss). The robot's reports of its latches
+(:meth:`LivenessWatch.latch`) go into all three: each then runs the half-strokes the robot says it ran, when it ran
+them, and infers only what lies between reports (a report lost, a robot that sends none).
 
 ``docs/guide/safety.md``, "Liveness from physics", gives the figures behind the bounds.
 """
@@ -114,11 +116,14 @@ class LivenessWatch:
         self._poses.clear()
         self._next_check = -math.inf
         self._strikes = 0
-        self._views: tuple[tuple[float, int], list] = ((math.nan, -1), [])
+        self._views: tuple[tuple[float, int, int], list] = ((math.nan, -1, -1), [])
         # ShadowFins.differs's memos, one per delayed replay and window (each window compares its own span)
         self._differs_memos: dict[tuple[int, bool], dict] = {(k, w): {} for k in range(len(self._later))
                                                               for w in (True, False)}
         self._commands = 0  # commands taken in since the reset
+        self._reports = 0  # latch reports taken in since the reset
+        self._since = t  # reports of latches before this are not of these fins
+        self._newest = -math.inf  # the newest sighting's capture time [s]
 
     def command(self, t: float, beats: np.ndarray, acknowledged: Callable[[], float | None] | None = None) -> None:
         """A command ``(2, 4)`` sent at ``t`` [s].
@@ -136,6 +141,21 @@ class LivenessWatch:
         self._first_command = min(self._first_command, float(t))
         for shadow in (self._early, *self._later):
             shadow.queue.append((float(t), self._last_beats, acknowledged))
+
+    def latch(self, t: float, fin: int, beat: np.ndarray, turn: float, power: bool) -> bool:
+        """The robot reported that fin ``fin`` latched ``beat`` ``(4,)`` at angle ``turn`` [rad] at ``t`` [s].
+
+        Every replay starts that half-stroke at ``t`` (:meth:`ShadowFins.latch`, rewinding if it is past ``t``):
+        what the robot says its fins did is their truth, whatever the camera shows. Ignored before the first
+        command since the reset and for a latch before the reset (another episode's fins). Returns whether it was
+        taken.
+        """
+        if not (math.isfinite(self._since) and t >= self._since and t >= self._first_command):
+            return False
+        for shadow in (self._early, *self._later):
+            shadow.latch(t, fin, beat, turn, power)
+        self._reports += 1
+        return True
 
     def _advance_shadows(self, to: float) -> None:
         for shadow in (self._early, *self._later):
@@ -155,6 +175,7 @@ class LivenessWatch:
                     reason = (f"camera not live: the fish jumped {step * 1000:.0f} mm in {dt:.3f} s, more than our "
                               f"fish can move ({allowed * 1000:.0f} mm with the pose noise)")
         self._poses.append((float(t), float(x), float(y), float(psi)))
+        self._newest = max(self._newest, float(t))
         if math.isfinite(self._early.t):
             self._advance_shadows(t)
         if not reason and t >= self._next_check:
@@ -218,12 +239,12 @@ class LivenessWatch:
         # included).
         start_c = line_state(before, t_c)
         m_pred = innovation = math.inf
-        key = (self._early.t, self._commands)
-        if self._views[0] != key:  # the delayed replays' views, once per sighting and commands for both windows
-            self._views = (key, [s.view(self._early.t) for s in self._later])
-        early = list(snapshots)
+        key = (self._newest, self._commands, self._reports)
+        if self._views[0] != key:  # the replays' views, once per sighting, commands and reports for both windows
+            self._views = (key, [s.view(self._newest) for s in (self._early, *self._later)])
+        early = self._views[1][0]
         since = t_s if fitted else t_c
-        views = [early] + [v for k, v in enumerate(self._views[1])
+        views = [early] + [v for k, v in enumerate(self._views[1][1:])
                            if ShadowFins.differs(early, v, since, self._differs_memos[k, innovation_check])]
         motions, misses = [math.inf] * len(views), [math.inf] * len(views)
         for indices, stacked in batches(views, since, t_e):  # the views with snapshots at the same instants

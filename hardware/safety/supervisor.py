@@ -25,6 +25,7 @@ from collections.abc import Callable
 from pectoral_gym.hardware.clock import REAL_CLOCK, Clock
 from pectoral_gym.hardware.safety.blind import CommandedGain, ls_velocity, unseen_reason
 from pectoral_gym.hardware.safety.geofence import Geofence, SpeedBound
+from pectoral_gym.hardware.safety.latch_reports import LatchReports
 from pectoral_gym.hardware.safety.liveness import LivenessWatch
 from pectoral_gym.hardware.safety.rules import SafetyConfig, TrackingWatch, effective_reaction_time
 from pectoral_gym.hardware.vision.framecheck import FrameCheck
@@ -109,6 +110,7 @@ class Supervisor:
         self._read_times: collections.deque[float] = collections.deque(maxlen=256)  # experiment s of recent reads
         self._recent: collections.deque[tuple[float, float, float]] = collections.deque(maxlen=128)
         self._measurements: list[tuple[float, float, float, float]] = []
+        self.latches = LatchReports(link, self._stamp)  # the robot's, to the liveness check, then the env's run log
         self._lock = threading.RLock()
         self._closed = clock.event()
         self._thread = clock.thread(self._run, "safety-supervisor")
@@ -268,6 +270,7 @@ class Supervisor:
     def poll(self) -> str:
         """One round: newest frame, frame checks, tracker, rules; returns the first reason that holds now, or ``""``."""
         with self._lock:
+            self.latches.take(self.liveness if self.armed else None)  # before the frame they may explain
             self._take_frame()
             reasons = self._rules()
             for reason in reasons if self.armed else ():
