@@ -1,18 +1,17 @@
 """The safety supervisor: watches the fish and the link in its own thread and stops the fins at once.
 
-The control loop (``HardwareFishEnv.step``) runs only when the program calls it; between calls (a
-slow policy, a training library between rollouts, a breakpoint, an exception) nothing in it runs. The
-supervisor does, every camera period: it takes the newest frame from a
-:class:`pectoral_gym.hardware.vision.frames.FrameGrabber` (which reads the camera in a thread of its own, so a camera
-that blocks can never hold up the rules), rejects frames that are not new sightings
-(:class:`pectoral_gym.hardware.vision.framecheck.FrameCheck`), tracks the fish, and applies the rules: the operator's
-stop, loss of control of the robot (``RadioLink.control_lost``), the link timeout, the geofence with stopping
-distance (:class:`pectoral_gym.hardware.safety.geofence.Geofence`, speeds bounded by
-:class:`pectoral_gym.hardware.safety.geofence.SpeedBound`) and the tracking timeout. Each rule that trips is latched and
-sends STOP; commands are refused (:meth:`Supervisor.send`) until the next :meth:`Supervisor.arm`, and the operator's
-stop until :meth:`Supervisor.rearm`. When several have tripped, :attr:`Supervisor.reason` is the first of
-:data:`PRIORITY` (``docs/guide/safety.md``, "Failsafe priority"). The robot's own lease
-(``docs/protocol.md``) stops the fins even if this thread and the whole PC die.
+The control loop (``HardwareFishEnv.step``) runs only when the program calls it; between calls (a slow policy, a
+training library between rollouts, a breakpoint, an exception) nothing in it runs. The supervisor does, every camera
+period: it takes the newest frame from a :class:`pectoral_gym.hardware.vision.frames.FrameGrabber` (which reads the
+camera in a thread of its own, so a camera that blocks can never hold up the rules), rejects frames that are not new
+sightings (:class:`pectoral_gym.hardware.vision.framecheck.FrameCheck`), tracks the fish, and applies the rules: the
+operator's stop, loss of control of the robot (``RadioLink.control_lost``), the link timeout, the geofence with
+stopping distance (:class:`pectoral_gym.hardware.safety.geofence.Geofence`, speeds bounded by
+:class:`pectoral_gym.hardware.safety.geofence.SpeedBound`) and the tracking timeout. Each rule that trips is latched
+and sends STOP; commands are refused (:meth:`Supervisor.send`) until the next :meth:`Supervisor.arm`, and the
+operator's stop until :meth:`Supervisor.rearm`. When several have tripped, :attr:`Supervisor.reason` is the first of
+:data:`PRIORITY` (``docs/guide/safety.md``, "Failsafe priority"). The robot's own lease (``docs/protocol.md``) stops
+the fins even if this thread and the whole PC die.
 """
 
 from __future__ import annotations
@@ -219,17 +218,13 @@ class Supervisor:
 
     def _radio_delay(self) -> float:
         """What the radio adds to the reaction time [s] (:func:`effective_reaction_time`)."""
-        rule = self.geofence.rule
-        return effective_reaction_time(rule, self._round_trip()) - rule.reaction_time
+        return effective_reaction_time(self.geofence.rule, self._round_trip()) - self.geofence.rule.reaction_time
 
     def _acknowledgement(self, seq) -> Callable[[], float | None] | None:
-        """When the STATUS acknowledging message ``seq`` (or a later one) arrived [experiment s], ``None`` before.
-
-        ``None`` for a link that does not tell (the command is then taken as started when sent).
-        """
+        """When a STATUS acknowledging ``seq`` or later arrived [experiment s]; ``None`` before (or: cannot tell)."""
         acknowledged_at = getattr(self.link, "acknowledged_at", None)
         if acknowledged_at is None or not isinstance(seq, int) or seq < 0:
-            return None
+            return None  # a link that does not tell: the command counts as started when sent
 
         def arrival() -> float | None:
             t = acknowledged_at(seq)
