@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import math
 
-from pectoral_gym.model.dynamics import Forcing
+from pectoral_gym.model.dynamics import Forcing, oscillating_square_mean
 from pectoral_gym.model.jit import njit
 from pectoral_gym.model.params import BodyCoefficients
 
@@ -111,12 +111,10 @@ def fast_asin(x: float) -> float:
 @njit(inline="always")
 def fast_oscillating_square_mean(mean: float, amplitude: float) -> float:
     """:func:`pectoral_gym.model.dynamics.oscillating_square_mean` with :func:`fast_asin` for libm's ``asin``."""
-    if amplitude <= 0.0:
-        return mean * abs(mean)
-    u = mean / amplitude
+    u = mean / amplitude if amplitude > 0.0 else 0.0
+    if amplitude <= 0.0 or abs(u) >= 1.0:  # the branches without an arcsin: the exact function's own
+        return oscillating_square_mean(mean, amplitude)
     a2 = amplitude * amplitude
-    if abs(u) >= 1.0:
-        return math.copysign(a2 * (u * u + 0.5), u)
     return a2 * (2.0 * fast_asin(u) / math.pi * (u * u + 0.5) + 3.0 / math.pi * u * math.sqrt(1.0 - u * u))
 
 
