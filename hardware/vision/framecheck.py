@@ -10,8 +10,13 @@ noise alone (photon shot noise, read noise) makes two exposures of a still scene
 region of more than a few pixels. So:
 
 * **whole image**: a bit-identical repeat of *any* of the last ``history`` images is frozen (a driver
-  cycling its last few buffers repeats an image within as many frames). The digest is SHA-256 over the
-  raw pixels (computed by the SHA instructions of current processors).
+  cycling its last few buffers repeats an image within as many frames). The digest (:func:`frame_digest`)
+  is a deterministic function of every byte, so a repeat always shares its predecessor's digest; two
+  different images share one only by a collision, which stops a live fish (a false, safe stop) and can
+  never hide a repeat. It need not resist a forger: a source that alters bytes to pass is the noisy
+  freeze, which only the physics can catch (``pectoral_gym.hardware.safety.liveness``). So it is a fast
+  keyed sum (two 64-bit multilinear hashes, see :func:`frame_digest` for their collision bound) rather
+  than a cryptographic hash.
 * **fish region** (``region``, a pixel box around the fish's last sighting, from the caller): a repeat
   of that region's content among the recent frames is frozen, even when the rest of the image changes
   (a frozen sensor under a camera's running clock overlay). "Repeat" means a mean absolute difference
@@ -28,7 +33,7 @@ region of more than a few pixels. So:
 from __future__ import annotations
 
 import collections
-import hashlib
+import functools
 import math
 
 import cv2
@@ -36,7 +41,7 @@ import numpy as np
 
 from pectoral_gym.hardware.vision.frames import Frame
 
-__all__ = ["FrameCheck", "FRAME_REASONS", "Region"]
+__all__ = ["FrameCheck", "FRAME_REASONS", "Region", "frame_digest"]
 
 FRAME_REASONS = ("bad_image", "bad_timestamp", "timestamp_backwards", "timestamp_future", "frame_too_old",
                  "frozen_frame")
@@ -44,6 +49,50 @@ FRAME_REASONS = ("bad_image", "bad_timestamp", "timestamp_backwards", "timestamp
 Region = tuple[int, int, int, int]  # (row0, row1, col0, col1) pixels, end exclusive
 
 _MIN_OVERLAP = 0.5  # two regions are compared when they share at least this much of the smaller one
+
+
+_DIGEST_SEED = 0x0D16E57  # fixes the digest's keys: the same bytes give the same digest in every process
+
+
+@functools.lru_cache(maxsize=4)
+def _digest_keys(words: int) -> tuple[np.ndarray, np.ndarray]:
+    """Two arrays of ``words`` uniform 64-bit keys, drawn once per frame size from a fixed seed."""
+    rng = np.random.default_rng(_DIGEST_SEED)
+    keys = rng.integers(0, 2**64, size=(2, words), dtype=np.uint64, endpoint=False)
+    keys.setflags(write=False)
+    return keys[0], keys[1]
+
+
+def frame_digest(image: np.ndarray) -> tuple[int, int, bytes]:
+    """A digest of every byte of ``image`` (C order): equal bytes, equal digest; different ones almost never.
+
+    Two multilinear hashes modulo 2^64 of the bytes read as little-endian 64-bit words, with keys ``k``
+    drawn once from a fixed seed: ``h1 = sum(k1[j] w[j])`` over the words from byte 0 and
+    ``h2 = sum(k2[j] w'[j])`` over the words from byte 4, plus the last 8 bytes as they are.
+
+    Collision bound (over the draw of the keys, which no camera's frames depend on): if two images of
+    the same size differ, some differing byte sits in the low half (bits 0-31) of a word of one of the
+    two word sequences, which that sequence covers (or it is among the last 8 bytes, compared as they
+    are). That word's difference ``d`` is then non-zero with its lowest set bit ``b <= 31``, and
+    ``k d`` for a uniform 64-bit ``k`` is uniform over the multiples of ``2^b``: the hash's sum hits
+    the other image's value with probability ``2^(b - 64) <= 2^-33``. Two frames of a live sensor
+    differ by noise in the lowest bit of bytes at every position (``b = 0`` in both hashes, whose keys
+    are independent): ``2^-128``.
+
+    Args:
+        image: Any array; its bytes in C order are digested (a non-contiguous one is copied first).
+
+    Returns:
+        ``(h1, h2, tail)``, hashable and comparable.
+    """
+    flat = np.ascontiguousarray(image).reshape(-1).view(np.uint8)
+    size = flat.size
+    whole, shifted = size // 8, max(size - 4, 0) // 8
+    keys, shifted_keys = _digest_keys(max(whole, 1))
+    # integer dot products wrap modulo 2^64 (numpy's integer arithmetic), bit for bit on any machine
+    h1 = int(np.dot(flat[: 8 * whole].view("<u8"), keys[:whole])) if whole else 0
+    h2 = int(np.dot(flat[4 : 4 + 8 * shifted].view("<u8"), shifted_keys[:shifted])) if shifted else 0
+    return h1, h2, flat[-8:].tobytes()
 
 
 def _region(region: Region, shape: tuple[int, ...]) -> Region | None:
@@ -87,7 +136,7 @@ class FrameCheck:
         self.min_change = float(min_change)
         self.last_timestamp: float | None = None
         self.last_change = math.nan
-        self._digests: collections.deque[bytes] = collections.deque(maxlen=int(history))
+        self._digests: collections.deque[tuple[int, int, bytes]] = collections.deque(maxlen=int(history))
         self._regions: collections.deque[tuple[Region, np.ndarray]] = collections.deque(maxlen=int(history))
         self.rejected = dict.fromkeys(FRAME_REASONS, 0)
 
@@ -134,7 +183,7 @@ class FrameCheck:
         if t < now - self.max_age:
             return "frame_too_old"
         self.last_timestamp = t  # a frozen frame still moves the clock on: its stamp was sane
-        digest = hashlib.sha256(np.ascontiguousarray(image).data).digest()
+        digest = frame_digest(image)
         frozen = digest in self._digests
         self._digests.append(digest)
         self.last_change = math.nan
