@@ -53,7 +53,7 @@ class Supervisor:
         link: A :class:`pectoral_gym.hardware.radio.link.RadioLink` (``set_fins``, ``stop``, ``status_age``,
             ``control_lost``).
         camera: A frame source; the supervisor reads it through a :class:`FrameGrabber` it owns (and closes).
-        tracker: ``track(frame) -> TrackResult``.
+        tracker: ``track(frame, near=box) -> TrackResult`` (``near``: the last sighting's box while the fish is seen).
         geofence: The wall rule (from ``safety.stop_rule``); its rule's reaction time is every rule's budget.
         safety: Timeouts and limits.
         speed: Experiment seconds per wall second.
@@ -296,7 +296,7 @@ class Supervisor:
             return
         t = self._stamp(frame.timestamp)
         self.last_frame = frame
-        result = self.tracker.track(frame)
+        result = self.tracker.track(frame, near=self._box if self.track_ok else None)  # near the last sighting first
         self.frames += 1
         self.watch.update(t, result.ok, result.reason)
         self.track_ok = bool(result.ok)

@@ -20,7 +20,7 @@ import functools
 import cv2
 import numpy as np
 
-from pectoral_gym.hardware.vision.cameramodel import CameraModel
+from pectoral_gym.hardware.vision.cameramodel import CameraModel, _apply_homography
 from pectoral_gym.hardware.vision.scene_conditions import OCCLUDER_BGR, Occluder, SceneConditions
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
 
@@ -187,7 +187,7 @@ def _render_patch(
         for du in (0, 1, 2):
             if dv != 1 or du != 1:
                 uniform &= centres[dv:dv + height, du:du + width] == inner
-    colour = palette[inner]
+    colour = np.take(palette, inner, axis=0)  # palette[inner], without fancy indexing's overhead (3x slower)
     rows, cols = np.nonzero(~uniform)
     if rows.size:
         s = _SUPERSAMPLE
@@ -195,7 +195,8 @@ def _render_patch(
         points = np.empty((rows.size, s * s, 2))  # sample (a, b) of a pixel at (u + offsets[b], v + offsets[a])
         points[..., 0] = (cols + u0)[:, None] + np.tile(offsets, s)
         points[..., 1] = (rows + v0)[:, None] + np.repeat(offsets, s)
-        labels = _labels(camera.pixel_to_tank(points.reshape(-1, 2)), pose, conditions, index)
+        # pixel_to_tank's homography without its checks (the points are finite by construction)
+        labels = _labels(_apply_homography(camera.inverse, points.reshape(-1, 2)), pose, conditions, index)
         if _whole(palette):
             # Sums of whole colours are exact in any order: counts @ palette is the samples' sum, bit for bit
             counts = np.bincount(np.arange(labels.size) // (s * s) * len(palette) + labels, minlength=rows.size

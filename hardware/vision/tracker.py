@@ -10,6 +10,9 @@ candidates is reported as lost with the reason: the tracker never guesses.
 
 The conversion, thresholds and cleanup run only on the box of the frame that can hold marker pixels (a
 necessary saturation test on every pixel, cheaper than the conversion): the blobs are the whole frame's.
+``track(frame, near=box)`` first runs that test only in a window around the last sighting's box: its pose is
+the whole frame's whenever every candidate pixel of the frame lies inside the window; it is taken only when no
+candidate reaches the window's edge and it is a pose, otherwise the whole frame is searched (see ``track``).
 """
 
 from __future__ import annotations
@@ -24,15 +27,14 @@ import cv2
 import numpy as np
 
 from pectoral_gym.hardware.vision.cameramodel import CameraModel
+from pectoral_gym.hardware.vision.fishbox import BOX_MARGIN, fish_box
 from pectoral_gym.hardware.vision.frames import Frame
-from pectoral_gym.hardware.vision.scene import BACK_MARKER_OFFSET, BODY_LENGTH, FRONT_MARKER_OFFSET, MARKER_RADIUS
-from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
+from pectoral_gym.hardware.vision.overlay import draw_overlay
+from pectoral_gym.hardware.vision.scene import BACK_MARKER_OFFSET, FRONT_MARKER_OFFSET, MARKER_RADIUS
 
-__all__ = ["Blob", "MarkerTracker", "TrackResult", "TrackerConfig", "draw_overlay", "fish_box"]
+__all__ = ["BOX_MARGIN", "Blob", "MarkerTracker", "TrackResult", "TrackerConfig", "draw_overlay", "fish_box"]
 
-BOX_MARGIN = 0.03  # m beyond the body's half length around the centre in :attr:`TrackResult.box`
-_RING_COS, _RING_SIN = np.cos(np.linspace(0.0, 2 * math.pi, 16, endpoint=False)), np.sin(
-    np.linspace(0.0, 2 * math.pi, 16, endpoint=False))  # the 16 directions of fish_box's ring
+NEAR_MARGIN = 12  # px around the last sighting's box searched first (a fish moving under ~1 m/s stays inside)
 _PREFILTER_MIN_SATURATION = 86  # lowest min_saturation for which MarkerTracker._candidates' test holds
 
 
@@ -134,37 +136,6 @@ class TrackResult(NamedTuple):
     box: tuple[int, int, int, int] | None = None
 
 
-def fish_box(camera: CameraModel, pose: tuple[float, ...], margin: float = BOX_MARGIN) -> tuple[int, int, int, int]:
-    """Pixel box around a fish at ``pose``: the image of a tank disc of radius half a body length + ``margin``.
-
-    Args:
-        camera: The camera model.
-        pose: ``(X, Y, ...)`` of the centre of mass [m]; the heading, if given, is not used (the disc
-            holds the body at any heading).
-        margin: Extra radius beyond half the body length [m], >= 0.
-
-    Returns:
-        ``(row0, row1, col0, col1)`` pixels, end exclusive, clipped to the image (may be empty, row0 ==
-        row1, when the fish is outside the view).
-
-    Raises:
-        ValueError: A non-finite position or a negative margin.
-    """
-    if not (math.isfinite(margin) and margin >= 0):
-        raise ValueError(f"margin must be a finite number >= 0 [m], got {margin!r}")
-    x, y = float(pose[0]), float(pose[1])
-    if not (math.isfinite(x) and math.isfinite(y)):
-        raise ValueError(f"pose position must be finite, got {pose!r}")
-    radius = BODY_LENGTH / 2 + margin
-    ring = np.stack([x + radius * _RING_COS, y + radius * _RING_SIN], axis=1)
-    pixels = camera.tank_to_pixel(ring)
-    col0, row0 = np.floor(pixels.min(axis=0)).astype(int) - 1
-    col1, row1 = np.ceil(pixels.max(axis=0)).astype(int) + 2
-    row0, row1 = min(max(int(row0), 0), camera.height), min(max(int(row1), 0), camera.height)
-    col0, col1 = min(max(int(col0), 0), camera.width), min(max(int(col1), 0), camera.width)
-    return row0, max(row1, row0), col0, max(col1, col0)
-
-
 def _covariance(us: np.ndarray, vs: np.ndarray) -> np.ndarray:
     """``np.cov(np.stack([us, vs]))``, its very operations without its argument handling (the same bits)."""
     samples = np.stack([us, vs])
@@ -211,8 +182,12 @@ class MarkerTracker:
             self._planes.buffers = planes
         return planes
 
-    def _candidates(self, image: np.ndarray) -> tuple[int, int, int, int] | None:
+    def _candidates(self, image: np.ndarray, window: tuple[int, int, int, int] | None = None
+                    ) -> tuple[int, int, int, int] | None | bool:
         """Pixel box ``(row0, row1, col0, col1)`` outside which no pixel can pass a marker mask; ``None``: none.
+
+        With ``window`` (a box of the frame) only its pixels are tested; ``False`` when a candidate lies on an
+        edge of the window that is not the frame's (a candidate region may reach outside: search the whole frame).
 
         A pixel passes only with saturation ``S >= min_saturation`` and value ``V = max(B, G, R) >= min_value``.
         OpenCV's 8-bit ``S`` is ``255 (V - min) / V`` rounded, so ``S >= 86`` implies ``3 (V - min) >= V``
@@ -222,18 +197,49 @@ class MarkerTracker:
         cfg = self.config
         height, width = image.shape[:2]
         if cfg.min_saturation < _PREFILTER_MIN_SATURATION:
-            return 0, height, 0, width
-        blue, green, red = cv2.split(image, self._plane_buffers(height, width))
+            return False if window else (0, height, 0, width)
+        if window is not None:
+            return self._window_candidates(image, window)
+        candidates = self._candidate_mask(image, self._plane_buffers(height, width))
+        return self._crop(cv2.boundingRect(candidates), (0, 0), height, width)
+
+    def _candidate_mask(self, image: np.ndarray, planes: list[np.ndarray] | None) -> np.ndarray:
+        """255 where a pixel of ``image`` may pass a marker mask (see :meth:`_candidates`), else 0."""
+        blue, green, red = cv2.split(image, planes) if planes is not None else cv2.split(image)
         high = cv2.max(cv2.max(blue, green), red)
         spread = cv2.subtract(high, cv2.min(cv2.min(blue, green), red))
         spread = cv2.add(cv2.add(spread, spread), spread)  # saturates at 255 >= V: still a candidate, rightly
-        candidates = cv2.compare(spread, cv2.max(high, float(cfg.min_value)), cv2.CMP_GE)
-        u, v, w, h = cv2.boundingRect(candidates)
+        return cv2.compare(spread, cv2.max(high, float(self.config.min_value)), cv2.CMP_GE)
+
+    def _window_candidates(self, image: np.ndarray, window: tuple[int, int, int, int]
+                           ) -> tuple[int, int, int, int] | None | bool:
+        height, width = image.shape[:2]
+        row0, row1, col0, col1 = window
+        u, v, w, h = cv2.boundingRect(self._candidate_mask(image[row0:row1, col0:col1], None))
+        margin = self._margin()
+        # The candidates must keep the crop's margin from every edge of the window inside the frame: then the crop
+        # lies in the window, and within the margin of its candidates the whole frame has none either (whatever
+        # lies beyond the window is farther), so the cleanup and the blobs in the crop are the whole frame's.
+        if w == 0 or (v < margin and row0 > 0) or (u < margin and col0 > 0) or (
+                row1 - row0 - v - h < margin and row1 < height) or (col1 - col0 - u - w < margin and col1 < width):
+            return False  # the fish is not in the window, or may reach beyond it
+        return self._crop((u, v, w, h), (col0, row0), height, width)
+
+    def _margin(self) -> int:
+        """Empty border around the candidates in a crop [px].
+
+        Opening and closing each reach kernel_size // 2 pixels; a border of more than twice that keeps every pixel
+        of the cleaned crop as in the whole frame (OpenCV's default border is neutral for both).
+        """
+        return 2 * self.config.kernel_size + 2
+
+    def _crop(self, rect: tuple[int, int, int, int], origin: tuple[int, int], height: int, width: int
+              ) -> tuple[int, int, int, int] | None:
+        """The box of the candidates' bounding ``rect`` (found in a window at ``origin`` = (col, row)) with margin."""
+        u, v, w, h = rect
         if w == 0:
             return None
-        # Opening and closing each reach kernel_size // 2 pixels; an empty border of more than twice that keeps
-        # every pixel of the cleaned crop as in the whole frame (OpenCV's default border is neutral for both).
-        margin = 2 * cfg.kernel_size + 2
+        u, v, margin = u + origin[0], v + origin[1], self._margin()
         return max(v - margin, 0), min(v + h + margin, height), max(u - margin, 0), min(u + w + margin, width)
 
     def _mask(self, hsv: np.ndarray, bands: tuple[tuple[int, int], ...]) -> np.ndarray:
@@ -294,11 +300,19 @@ class MarkerTracker:
         shape = (cfg.max_elongation - blob.elongation) / (cfg.max_elongation - 1)
         return size, shape
 
-    def track(self, frame: Frame) -> TrackResult:
+    def track(self, frame: Frame, near: tuple[int, int, int, int] | None = None) -> TrackResult:
         """Pose of the fish in ``frame``, or a lost result saying why.
 
         A frame whose size differs from the calibration's is lost with a reason naming both sizes (a
         homography is only valid at the resolution it was measured at).
+
+        Args:
+            frame: The frame.
+            near: The last sighting's box (:attr:`TrackResult.box`), or ``None``. The window :data:`NEAR_MARGIN`
+                pixels around it is searched first, and its pose is the result when the window's candidate
+                pixels keep a margin from its edges and make a pose: the pose the whole frame gives whenever
+                the frame has no marker-coloured pixels outside the window (a second object there is not
+                looked at). Otherwise, and without ``near``, the whole frame is searched.
 
         Raises:
             ValueError: ``frame.image`` is not an (H, W, 3) uint8 array.
@@ -310,9 +324,21 @@ class MarkerTracker:
             return _lost(timestamp, f"frame is {image.shape[1]}x{image.shape[0]} px but the calibration is for "
                                     f"{self.camera.width}x{self.camera.height} px; recalibrate or set the camera "
                                     "resolution")
+        if near is not None:
+            row0, row1, col0, col1 = (int(edge) for edge in near)
+            height, width = image.shape[:2]
+            window = (max(row0 - NEAR_MARGIN, 0), min(row1 + NEAR_MARGIN, height),
+                      max(col0 - NEAR_MARGIN, 0), min(col1 + NEAR_MARGIN, width))
+            crop = self._candidates(image, window) if window[0] < window[1] and window[2] < window[3] else False
+            result = self._track(image, timestamp, crop) if crop else None
+            if result is not None and result.ok:
+                return result
+        return self._track(image, timestamp, self._candidates(image))
+
+    def _track(self, image: np.ndarray, timestamp: float, crop: tuple[int, int, int, int] | None) -> TrackResult:
+        """The pose from the blobs inside ``crop`` (``None``: no pixel can be a marker's)."""
         cfg = self.config
         blobs: dict[str, list[Blob]] = {"red": [], "blue": []}
-        crop = self._candidates(image)
         if crop is not None:  # else no pixel of the frame can be a marker's
             row0, row1, col0, col1 = crop
             hsv = cv2.cvtColor(image[row0:row1, col0:col1], cv2.COLOR_BGR2HSV)
@@ -355,45 +381,3 @@ class MarkerTracker:
         box = fish_box(self.camera, (float(centre[0]), float(centre[1])))
         return TrackResult(True, float(centre[0]), float(centre[1]), psi, float(confidence), float(timestamp), "", box)
 
-
-def draw_overlay(
-    image: np.ndarray,
-    camera: CameraModel,
-    result: TrackResult | None = None,
-    blobs: dict[str, list[Blob]] | None = None,
-    grid: float = 0.25,
-) -> np.ndarray:
-    """A copy of ``image`` with the calibrated tank outline, a grid, the blobs and the tracked pose drawn on it.
-
-    Args:
-        image: (H, W, 3) uint8 BGR frame.
-        camera: Camera model whose homography is checked by eye (the outline must sit on the tank walls).
-        result: A tracking result: an arrow from the centre along the heading, or the reason when lost.
-        blobs: ``MarkerTracker.last_blobs``: accepted blobs circled in green, rejected ones in grey.
-        grid: Grid spacing [m] (0: no grid).
-    """
-    canvas = image.copy()
-
-    def line(points: list[tuple[float, float]], colour: tuple[int, int, int], width: int) -> None:
-        pixels = np.rint(camera.tank_to_pixel(np.array(points)) * 16).astype(np.int32)
-        cv2.polylines(canvas, [pixels], False, colour, width, cv2.LINE_AA, shift=4)
-
-    if grid > 0:
-        for x in np.arange(grid, TANK_LENGTH, grid):
-            line([(x, 0.0), (x, TANK_WIDTH)], (150, 150, 150), 1)
-        for y in np.arange(grid, TANK_WIDTH, grid):
-            line([(0.0, y), (TANK_LENGTH, y)], (150, 150, 150), 1)
-    line([(0, 0), (TANK_LENGTH, 0), (TANK_LENGTH, TANK_WIDTH), (0, TANK_WIDTH), (0, 0)], (0, 200, 255), 2)
-    for colour_blobs in (blobs or {}).values():
-        for blob in colour_blobs:
-            centre = (int(round(blob.pixel[0])), int(round(blob.pixel[1])))
-            radius = int(round(math.sqrt(blob.area / math.pi))) + 3
-            cv2.circle(canvas, centre, radius, (160, 160, 160) if blob.reason else (0, 220, 0), 1, cv2.LINE_AA)
-    if result is not None and result.ok:
-        tip = (result.x + 0.12 * math.cos(result.psi), result.y + 0.12 * math.sin(result.psi))
-        start, end = np.rint(camera.tank_to_pixel(np.array([(result.x, result.y), tip]))).astype(int)
-        cv2.arrowedLine(canvas, tuple(start.tolist()), tuple(end.tolist()), (0, 255, 255), 2, cv2.LINE_AA, 0, 0.3)
-    elif result is not None:
-        cv2.putText(canvas, f"lost: {result.reason}"[:90], (8, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (0, 0, 255), 1,
-                    cv2.LINE_AA)
-    return canvas
