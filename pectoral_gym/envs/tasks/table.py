@@ -317,7 +317,7 @@ class TaskState:
             ValueError: If the row's ``draw`` gives another shape.
         """
         draws = self.task.draw(rng, self.cfg)
-        if np.shape(draws) != (8,):
+        if (draws.shape if type(draws) is np.ndarray else np.shape(draws)) != (8,):
             raise ValueError(f"task {self.task.name!r}: draw(rng) must give 8 numbers, got shape {np.shape(draws)}")
         return draws
 
