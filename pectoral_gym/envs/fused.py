@@ -52,10 +52,10 @@ from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
-from numba.core import cgutils, types
+from numba.core import types
 from numba.experimental import structref
-from numba.extending import intrinsic, overload
 
+from pectoral_gym.envs.borrowed import borrow
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.model import stepping
 from pectoral_gym.model.jit import (
@@ -71,7 +71,7 @@ from pectoral_gym.model.strokes import command_one
 from pectoral_gym.model.threads import start_passive_threads
 
 __all__ = ["CHUNK", "STEP", "STEP_FIELDS", "FusedStep", "StepArrays", "StepSettings", "borrow", "step_body",
-           "step_builds", "step_own"]
+           "step_builds", "step_own", "own_builds"]
 
 @structref.register
 class StepArraysType(types.StructRef):
@@ -130,37 +130,6 @@ class StepSettings(NamedTuple):
 CHUNK = 32
 reward_one = tk.reward_one  # the task kernel the body calls (the built-in tasks'; step_builds rebinds it)
 advance_one = stepping.advance_one  # the model's kernel the body calls (either model; the builds bind their own)
-
-
-def borrow(array: np.ndarray) -> np.ndarray:
-    """A view of ``array`` that holds no reference to it (its meminfo is null), for use inside one call.
-
-    numba counts references to an array atomically at every call or inlined function that takes
-    it (tens per fish and step in the model's kernels), and the threads of a parallel build share
-    those counts. A borrowed view's counting is a null check. It must not outlive the call that
-    borrowed it: here the :class:`StepArrays` argument holds the arrays for the whole step.
-    In Python (``NUMBA_DISABLE_JIT``) it is ``array`` itself.
-    """
-    return array
-
-
-@intrinsic
-def _borrowed(typingctx, array):
-    if not isinstance(array, types.Array):
-        return None
-
-    def codegen(context, builder, signature, args):
-        view = context.make_array(array)(context, builder, value=args[0])
-        view.meminfo = cgutils.get_null_value(view.meminfo.type)
-        view.parent = cgutils.get_null_value(view.parent.type)
-        return view._getvalue()
-
-    return array(array), codegen
-
-
-@overload(borrow, inline="always")
-def _borrow_overload(array):
-    return lambda array: _borrowed(array)
 
 
 def step_body(a, skip, s):
