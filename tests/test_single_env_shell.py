@@ -122,3 +122,20 @@ def test_a_copy_steps_on_its_own_arrays():
         np.testing.assert_array_equal(step[0], copy.deepcopy(env).step(np.full(8, -0.4, dtype=np.float32))[0])
         clone.reset(seed=1)
         np.testing.assert_array_equal(env.unwrapped.core.obs, ours)
+
+
+@pytest.mark.parametrize("extra", [{}, {"timing": True}])
+def test_a_non_finite_action_raises_and_leaves_the_episode_as_it_was(extra):
+    import gymnasium as gym
+
+    env = gym.make("PectoralFish-Averaged-v2", **extra).unwrapped  # timing: the core's step in Python
+    env.reset(seed=2)
+    env.step(np.full(8, 0.1, dtype=np.float32))
+    obs, state, time = env.core.obs.copy(), env.fish_state, env.model.time
+    action = np.full(8, 0.1, dtype=np.float32)
+    action[6] = np.nan
+    with pytest.raises(ValueError, match=r"action must be finite, got \[.*nan.*\]$"):
+        env.step(action)
+    np.testing.assert_array_equal(env.core.obs, obs)
+    np.testing.assert_array_equal(env.fish_state, state)
+    assert env.model.time == time

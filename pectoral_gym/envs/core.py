@@ -53,8 +53,8 @@ class EnvCore:
             ``obs`` through the simulated camera and observer after every reset and step; else ``None``.
         timing: The :class:`~pectoral_gym.envs.timing.ControlTiming` that draws each step's command delay and
             period length with ``config.timing`` (without it: none, periods of ``control_period``).
-        action_buffer: ``(n, 8)`` float64 actions; ``step(core.action_buffer)`` after writing into it
-            is the single env's path (no copy; a step is one compiled call,
+        action_buffer: ``(n, 8)`` float64 actions; writing into it, then calling :meth:`buffer_step`'s
+            function is the single env's path (no copy; a step is one compiled call,
             :class:`~pectoral_gym.envs.fused.FusedStep`).
     """
 
