@@ -202,12 +202,12 @@ class FishModel:
     def _start_rows(self, right: FinBeat | None, left: FinBeat | None) -> tuple[np.ndarray, np.ndarray]:
         """One fish's fins ``(2, FIN_FIELDS)`` and pending patterns ``(2, 4)`` at the start of ``right, left``.
 
-        Made by ``strokes.init_fins`` (the one rule) for the last pair asked for and kept: an env resets
-        to the same patterns (``REST``) every episode, and copying two rows costs less than the rule's
-        assignments.
+        Made by ``strokes.init_fins`` (the one rule) for the last pair of objects asked for and kept: an env
+        resets to the same patterns (``REST``) every episode, and copying two rows costs less than the rule's
+        assignments. Kept by identity (a ``FinBeat`` is frozen): equal patterns may differ in a zero's sign.
         """
         kept = self.__dict__.get("_start")
-        if kept is None or not (kept[0] is right or kept[0] == right) or not (kept[1] is left or kept[1] == left):
+        if kept is None or kept[0] is not right or kept[1] is not left:
             fins, pending = np.zeros((1, 2, strokes.FIN_FIELDS)), np.zeros((1, 2, 4))
             strokes.init_fins(fins, pending, np.stack([_as_beat_array(right, 1), _as_beat_array(left, 1)], axis=1))
             kept = self._start = (right, left, fins[0], pending[0])
