@@ -200,7 +200,8 @@ def test_both_step_builds_can_be_kept_in_the_disk_cache():
     actions = np.zeros((64, 8), dtype=np.float32)
     small.step(actions[:2], None)
     big.step(actions, None)
-    for build in (fused.STEP[True].serial, fused.STEP[True].parallel):  # the averaged model's
+    # the averaged model's step with a mask and its one-argument step (the step and the fin block)
+    for build in (fused.STEP[True].serial, fused.STEP[True].parallel, *fused.own_builds(tk.reward_one, True)):
         assert build.overloads, build
         for result in build.overloads.values():
             assert not result.library.has_dynamic_globals, build

@@ -11,7 +11,7 @@ Nothing here imports Gymnasium.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -53,8 +53,8 @@ class EnvCore:
             ``obs`` through the simulated camera and observer after every reset and step; else ``None``.
         timing: The :class:`~pectoral_gym.envs.timing.ControlTiming` that draws each step's command delay and
             period length with ``config.timing`` (without it: none, periods of ``control_period``).
-        action_buffer: ``(n, 8)`` float64 actions; ``step(core.action_buffer)`` after writing into it
-            is the single env's path (no copy; a step is one compiled call,
+        action_buffer: ``(n, 8)`` float64 actions; writing into it, then calling :meth:`buffer_step`'s
+            function is the single env's path (no copy; a step is one compiled call,
             :class:`~pectoral_gym.envs.fused.FusedStep`).
     """
 
@@ -80,17 +80,18 @@ class EnvCore:
         # The step: one compiled call (envs.fused), serial or parallel by batch size, with the task row's
         # kernel. Holds the arrays above and the model's: they are updated in place, never replaced.
         self.timing = ControlTiming(self.n, self.dt, config.timing)
-        self._step = FusedStep(self.model, self.dt, self.action_buffer, self.cfg, self.beats, self.obs, self.out,
-                               self.fish, self.ep, self._integral_before, ts.task.reward_one, self.timing.timing)
         self.sensed = None if config.sensing is None else SensedObservation(self.model, config.sensing, self.dt,
                                                                             self.timing.longest_period)
+        # Neither camera nor control timing: a step is the compiled call, the fin block in it, nothing else.
+        self._plain = self.sensed is None and self.timing.settings is None
+        self._step = FusedStep(self.model, self.dt, self.action_buffer, self.cfg, self.beats, self.obs, self.out,
+                               self.fish, self.ep, self._integral_before, ts.task.reward_one, self.timing.timing,
+                               self._period_max if self._observe_fins and self._plain else None)
         if config.randomize:
             self._rand_names = tuple(config.randomize)
             widths = np.array([config.randomize[k] for k in self._rand_names])
             self._rand_low, self._rand_high = 1.0 - widths, 1.0 + widths
             self._rand_base = np.array([float(getattr(config.params, k)) for k in self._rand_names])
-        # Neither camera nor control timing: a step is the compiled call and the fin block, nothing else.
-        self._plain = self.sensed is None and self.timing.settings is None
 
     def __getstate__(self) -> dict:
         """Pickle and deepcopy without the fin block's entry point (compiled code); a copy binds its own."""
@@ -137,15 +138,10 @@ class EnvCore:
             ValueError: If an action of an env not in ``skip`` is not finite, or ``actions`` does not
                 have shape ``(n, 8)``.
         """
-        if self._plain:  # the simulated env's usual step: the compiled call and the fin block
+        if self._plain:  # the simulated env's usual step: the compiled call, which writes the fin block too
             bad = self._step(actions, skip)
             if bad >= 0:
                 self._raise_non_finite(actions, bad)
-            call = self._observe_fins_call
-            if call is not None:  # the fin block's entry point, once bound (_observe_fin_block, inlined)
-                call(self.model.fins, self.obs, self._period_max)
-            else:
-                self._observe_fin_block()
             return
         sensed = self.sensed
         if sensed is not None:
@@ -160,6 +156,23 @@ class EnvCore:
             sensed.step(self.none if skip is None else np.asarray(skip, dtype=np.bool_), self.model,
                         self._step.settings(), self.beats, self.ep, self.fish, self.obs, self.timing.timing)
         self._observe_fin_block()
+
+    def buffer_step(self) -> Callable[[], int]:
+        """A function that runs ``step(action_buffer)`` and returns -1, or, for a non-finite action, the env's index.
+
+        For that index nothing was written; :meth:`raise_non_finite` raises the step's error. Without camera and
+        control timing it is the fused step's own (one Python call, :meth:`FusedStep.step_buffer`), else
+        :meth:`step`, which raises itself.
+        """
+        return self._step.step_buffer if self._plain else self._step_action_buffer
+
+    def _step_action_buffer(self) -> int:
+        self.step(self.action_buffer)
+        return -1
+
+    def raise_non_finite(self, bad: int) -> None:
+        """Raise :meth:`step`'s error for env ``bad``'s non-finite action in the action buffer."""
+        self._raise_non_finite(self.action_buffer, bad)
 
     def _observe_fin_block(self) -> None:
         """With ``observe_fins``: the observation's fin block from the model's half-strokes."""

@@ -27,7 +27,7 @@ __all__ = ["PectoralFishEnv"]
 
 _ZERO_INDEX = np.zeros(1, dtype=np.int64)
 #: Attributes bound by ``PectoralFishEnv._bind_rows``, left out of a pickle.
-_BOUND = ("_action_row", "_obs_row", "_out_row", "_core_step", "_actions", "_row_info")
+_BOUND = ("_action_row", "_obs_row", "_out_row", "_buffer_step", "_row_info")
 
 
 class PectoralFishEnv(gym.Env):
@@ -261,8 +261,7 @@ class PectoralFishEnv(gym.Env):
         self._action_row = core.action_buffer[0]
         self._obs_row = core.obs[0]
         self._out_row = core.out[0]
-        self._core_step = core.step
-        self._actions = core.action_buffer
+        self._buffer_step = core.buffer_step()  # the core's step of its action buffer (envs.fused)
         self._row_info = core.task_state.task.info  # task_info's builder for this env's task
 
     @property
@@ -363,7 +362,9 @@ class PectoralFishEnv(gym.Env):
     def step(self, action):
         """Advance one control period; returns ``(observation, reward, terminated, truncated, info)``."""
         self._action_row[...] = action  # the core's own buffer: its one-call step (envs.fused)
-        self._core_step(self._actions)
+        bad = self._buffer_step()
+        if bad >= 0:
+            self.core.raise_non_finite(bad)
         o = self._out_row
         info = self._row_info(o)  # as _info(), inlined on this hot path
         if self._cost:

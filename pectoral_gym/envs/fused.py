@@ -31,9 +31,12 @@ A task registered at run time gets builds of the same body with its kernel bound
 ``reward_one`` (:func:`step_builds`).
 
 The arrays of one core are bound once into a :class:`StepArrays` (a numba structref that holds
-them, not copies), so a step passes one object, the skip mask and the model's settings, bound with the arrays
-(:class:`StepSettings`); the compiled entry point of that exact signature
-(:func:`pectoral_gym.model.jit.entry_point`) skips numba's argument typing (about 1 us for a structref).
+them, not copies) with the model's settings (:class:`StepSettings`), an all-false skip mask and
+the fin block's setting, so the usual step, :func:`step_own`, passes that one object (numba unboxes
+one argument, not three) and also writes the observation's fin block (``observe_fins``); a step
+with a skip mask runs :func:`step_body` with the mask and the settings. Each is called through its
+compiled entry point of that exact signature (:func:`pectoral_gym.model.jit.entry_point`), which
+skips numba's argument typing (about 1 us for a structref).
 Inside the body the arrays are :func:`borrow`-ed views: numba's reference counts, which every
 inlined kernel that takes an array would otherwise update atomically (shared by the threads), are
 not touched.
@@ -49,18 +52,26 @@ from typing import Any, NamedTuple
 
 import numba as nb
 import numpy as np
-from numba.core import cgutils, types
+from numba.core import types
 from numba.experimental import structref
-from numba.extending import intrinsic, overload
 
+from pectoral_gym.envs.borrowed import borrow
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.model import stepping
-from pectoral_gym.model.jit import PARALLEL_MIN_ITEMS, KernelPair, entry_point, kernel_builds, njit
+from pectoral_gym.model.jit import (
+    PARALLEL_MIN_ITEMS,
+    Kernel,
+    KernelPair,
+    entry_point,
+    kernel_builds,
+    kernel_variant,
+    njit,
+)
 from pectoral_gym.model.strokes import command_one
 from pectoral_gym.model.threads import start_passive_threads
 
 __all__ = ["CHUNK", "STEP", "STEP_FIELDS", "FusedStep", "StepArrays", "StepSettings", "borrow", "step_body",
-           "step_builds"]
+           "step_builds", "step_own", "own_builds"]
 
 @structref.register
 class StepArraysType(types.StructRef):
@@ -77,18 +88,20 @@ class StepArrays(structref.StructRefProxy):
 #: The fields of :class:`StepArrays`: the env core's arrays (``actions`` its action buffer,
 #: ``before`` its velocity integrals before the step, ``everyone`` an all-true mask, ``timing`` each
 #: env's command delay and period length), then the model's arrays and its K tables as
-#: :func:`pectoral_gym.model.stepping.advance` takes them.
+#: :func:`pectoral_gym.model.stepping.advance` takes them, then what :func:`step_own` passes on: the model's
+#: settings (a :class:`StepSettings`), an all-false skip mask (``none``) and the fin block's largest period
+#: (``fin_period`` [s]; 0: no fin block).
 STEP_FIELDS = ("actions", "cfg", "beats", "obs", "out", "fish", "ep", "before", "everyone", "timing",
-               "state", "fins", "cache", "pending", "integral", "coef", "tables")
+               "state", "fins", "cache", "pending", "integral", "coef", "tables", "settings", "none", "fin_period")
 structref.define_proxy(StepArrays, StepArraysType, list(STEP_FIELDS))
 
 
 @njit
 def new_step_arrays(actions, cfg, beats, obs, out, fish, ep, before, everyone, timing, state, fins, cache, pending,
-                    integral, coef, tables):
+                    integral, coef, tables, settings, none, fin_period):
     """A :class:`StepArrays` of these arrays; compiled and cached (``StepArrays(...)`` compiles anew per process)."""
     return StepArrays(actions, cfg, beats, obs, out, fish, ep, before, everyone, timing, state, fins, cache, pending,
-                      integral, coef, tables)
+                      integral, coef, tables, settings, none, fin_period)
 
 
 class StepSettings(NamedTuple):
@@ -117,37 +130,6 @@ class StepSettings(NamedTuple):
 CHUNK = 32
 reward_one = tk.reward_one  # the task kernel the body calls (the built-in tasks'; step_builds rebinds it)
 advance_one = stepping.advance_one  # the model's kernel the body calls (either model; the builds bind their own)
-
-
-def borrow(array: np.ndarray) -> np.ndarray:
-    """A view of ``array`` that holds no reference to it (its meminfo is null), for use inside one call.
-
-    numba counts references to an array atomically at every call or inlined function that takes
-    it (tens per fish and step in the model's kernels), and the threads of a parallel build share
-    those counts. A borrowed view's counting is a null check. It must not outlive the call that
-    borrowed it: here the :class:`StepArrays` argument holds the arrays for the whole step.
-    In Python (``NUMBA_DISABLE_JIT``) it is ``array`` itself.
-    """
-    return array
-
-
-@intrinsic
-def _borrowed(typingctx, array):
-    if not isinstance(array, types.Array):
-        return None
-
-    def codegen(context, builder, signature, args):
-        view = context.make_array(array)(context, builder, value=args[0])
-        view.meminfo = cgutils.get_null_value(view.meminfo.type)
-        view.parent = cgutils.get_null_value(view.parent.type)
-        return view._getvalue()
-
-    return array(array), codegen
-
-
-@overload(borrow, inline="always")
-def _borrow_overload(array):
-    return lambda array: _borrowed(array)
 
 
 def step_body(a, skip, s):
@@ -188,6 +170,25 @@ def step_body(a, skip, s):
     return -1
 
 
+def step_own(a):
+    """The usual step: :func:`step_body` of ``a`` with its own settings and no env skipped, then the fin block.
+
+    With ``a.fin_period > 0`` (``observe_fins``) and a step taken, the observation's fin block of every
+    env (``tasks.observe_fins``). Returns as :func:`step_body`. ``step`` is bound to the build of
+    :func:`step_body` it runs (:func:`own_builds`): a compiled call, not the body inlined, so the parallel
+    build keeps its threads.
+    """
+    bad = step(a, a.none, a.settings)
+    if bad < 0:
+        period = a.fin_period
+        if period > 0.0:
+            tk.observe_fins(borrow(a.fins), borrow(a.obs), period)
+    return bad
+
+
+step = None  # the build of step_body that step_own calls (bound in own_builds)
+
+
 #: ``averaged`` -> the builds of :func:`step_body` for the built-in tasks on that model (cached on disk): each
 #: calls its model's own kernel (``stepping.ADVANCE_ONE``), so an env compiles no code of the other model.
 STEP = {averaged: kernel_builds(step_body, name=f"_step_{'averaged' if averaged else 'full'}",
@@ -214,6 +215,27 @@ def step_builds(task_kernel: Callable[..., Any], averaged: bool) -> KernelPair:
     return _REGISTERED[key]
 
 
+_OWN: dict[tuple[Any, bool], tuple[Kernel, Kernel]] = {}
+
+
+def own_builds(task_kernel: Callable[..., Any], averaged: bool) -> tuple[Kernel, Kernel]:
+    """The serial and parallel builds of :func:`step_own`, each calling that build of :func:`step_builds`.
+
+    Cached on disk for ``tasks.reward_one``; for a task registered at run time compiled at their first call.
+    """
+    averaged = bool(averaged)
+    key = (task_kernel, averaged)
+    if key not in _OWN:
+        builds = step_builds(task_kernel, averaged)
+        cache = task_kernel is tk.reward_one
+        suffix = "averaged" if averaged else "full"
+        name = f"_own_{suffix}" if cache else f"_own_registered_{suffix}"
+        serial, parallel = (kernel_variant(step_own, f"{name}_{kind}", {"step": build}, cache=cache)
+                            for kind, build in (("serial", builds.serial), ("parallel", builds.parallel)))
+        _OWN[key] = serial, parallel
+    return _OWN[key]
+
+
 def _chunked(function: Callable[..., int]) -> Callable[..., int]:
     """``function`` run with numba's chunk size :data:`CHUNK`, then the caller's again (a per-thread setting).
 
@@ -234,6 +256,7 @@ class _Bound(NamedTuple):
     arrays: StepArrays
     kernel: Callable[..., int]  # the build (a dispatcher: any argument types; the parallel one in _chunked)
     call: Callable[..., int]  # its entry point for (arrays, a bool mask, settings), likewise
+    own: Callable[..., int]  # step_own's entry point for (arrays,), likewise
     settings: StepSettings
     revision: int  # the model's settings_revision they were bound at
 
@@ -253,6 +276,8 @@ class FusedStep:
         timing: ``(n, 2)`` each env's command delay and period length [s] (:mod:`pectoral_gym.envs.timing`),
             read at every step; ``None``: no delay, periods of ``duration``.
         task_kernel: The task's ``reward_one`` kernel (the task table's row).
+        fin_period: With it, every step also writes the observation's fin block (``observe_fins``) of every
+            env, with this largest fin-beat period [s] (``tasks.observe_fins``); ``None``: not.
 
     Attributes:
         parallel: Whether the parallel build runs (``n >= PARALLEL_MIN_ITEMS``); its first binding starts
@@ -263,7 +288,8 @@ class FusedStep:
     """
 
     def __init__(self, model, duration: float, actions: np.ndarray, cfg, beats, obs, out, fish, ep, before,
-                 task_kernel: Callable[..., Any] = tk.reward_one, timing: np.ndarray | None = None):
+                 task_kernel: Callable[..., Any] = tk.reward_one, timing: np.ndarray | None = None,
+                 fin_period: float | None = None):
         self.model = model
         self.duration = float(duration)
         self.actions = actions
@@ -276,11 +302,16 @@ class FusedStep:
         self.none = np.zeros(actions.shape[0], dtype=np.bool_)
         self.parallel = actions.shape[0] >= PARALLEL_MIN_ITEMS
         self.task_kernel = task_kernel
+        if fin_period is not None and not fin_period > 0.0:
+            raise ValueError(f"fin_period must be > 0 s or None, got {fin_period}")
+        self.fin_period = None if fin_period is None else float(fin_period)
+        self._fins_call: Callable[..., Any] | None = None  # the fin block's entry point, for a step with a mask
         self._bound: _Bound | None = None
 
     def __getstate__(self) -> dict[str, Any]:
         state = self.__dict__.copy()
         state["_bound"] = None
+        state["_fins_call"] = None
         return state
 
     @property
@@ -298,19 +329,23 @@ class FusedStep:
     def _bind(self) -> _Bound:
         m = self.model
         revision = m.settings_revision  # read first: a change while binding rebinds at the next call
-        arrays = new_step_arrays(self.actions, *self.env_arrays, self.everyone, self.timing, m.state, m.fins,
-                                 m.forcing_cache, m.pending, m.integral, m.coef, m.packed_tables)
         settings = self.settings()
+        arrays = new_step_arrays(self.actions, *self.env_arrays, self.everyone, self.timing, m.state, m.fins,
+                                 m.forcing_cache, m.pending, m.integral, m.coef, m.packed_tables, settings,
+                                 self.none, self.fin_period or 0.0)
         kernel = self.kernel
         if self.parallel:
             start_passive_threads()  # before the first parallel step: numba's threads sleep between steps
         call = entry_point(kernel, (arrays, self.none, settings))
+        own = entry_point(own_builds(self.task_kernel, m.averaged)[self.parallel], (arrays,))
         if self.parallel:
-            kernel, call = _chunked(kernel), _chunked(call)
-        return _Bound(arrays, kernel, call, settings, revision)
+            kernel, call, own = _chunked(kernel), _chunked(call), _chunked(own)
+        return _Bound(arrays, kernel, call, own, settings, revision)
 
     def __call__(self, actions: np.ndarray, skip: np.ndarray | None = None) -> int:
         """Step the envs not in ``skip`` (a bool mask); returns -1, or the first env with a non-finite action.
+
+        With ``fin_period``, a step taken also writes the fin block of every env's observation.
 
         The arrays and settings are bound once and again whenever the model's ``settings_revision``
         changes (a setting or the K tables set).
@@ -327,10 +362,31 @@ class FusedStep:
         bound = self._bound
         if bound is None or bound.revision != model.settings_revision:
             bound = self._bound = self._bind()
-        if skip is None:  # the types the entry point was compiled for
-            bad = bound.call(bound.arrays, self.none, bound.settings)
+        if skip is None:  # the one argument the entry point was compiled for; the fin block in the call
+            bad = bound.own(bound.arrays)
         else:
             bad = bound.kernel(bound.arrays, np.ascontiguousarray(skip, dtype=np.bool_), bound.settings)
+            if bad < 0 and self.fin_period is not None:
+                self._observe_fins()
         if bad < 0:
             model.time += self.duration  # as FishModel.advance
         return bad
+
+    def step_buffer(self) -> int:
+        """``self(self.actions)``: step the action buffer's actions, no env skipped (the single env's path)."""
+        model = self.model
+        bound = self._bound
+        if bound is None or bound.revision != model.settings_revision:
+            bound = self._bound = self._bind()
+        bad = bound.own(bound.arrays)
+        if bad < 0:
+            model.time += self.duration  # as FishModel.advance
+        return bad
+
+    def _observe_fins(self) -> None:
+        """The observation's fin block of every env (as :func:`step_own` writes it), through its entry point."""
+        fins, obs = self.model.fins, self.env_arrays[2]
+        call = self._fins_call
+        if call is None:  # the arrays' types are fixed (updated in place, never replaced)
+            call = self._fins_call = entry_point(tk.observe_fins, (fins, obs, self.fin_period))
+        call(fins, obs, self.fin_period)

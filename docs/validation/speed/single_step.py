@@ -9,23 +9,26 @@ full run did, so every layer walks the same seeded trajectory and does the same 
 * ``wrapped``: ``env.step`` through Gymnasium's wrappers (``TimeLimit``, ``OrderEnforcing``, ``PassiveEnvChecker``);
 * ``env``: ``env.unwrapped.step``;
 * ``info``: the ``core`` layer, then the step's ``info`` dict built as the env builds it;
-* ``core``: the action written into the core's buffer, then ``EnvCore.step`` (the one-call fused step, its
-  binding check and the fin block of the observation);
-* ``compiled``: the action written into the buffer, then the fused step's compiled entry point alone;
+* ``core``: the action written into the core's buffer, then the core's step of it as the env calls it
+  (``EnvCore.buffer_step``: the fused step's binding check, its compiled call, the model's clock);
+* ``compiled``: the action written into the buffer, then the fused step's compiled entry point alone (the
+  step and the observation's fin block, one argument);
 * ``copy``: the action written into the buffer only;
 * ``resets``: nothing but the loop and the resets;
 * ``loop``: the loop alone.
 
 The differences of neighbouring layers are what each layer adds per step; the passes go round robin over the
 layers (a burst of load hits them alike), best pass kept. CartPole-v1 runs the same loop through ``gym.make``
-in the same process, for the ratio. The layers below ``env`` read private attributes of the env core (this is
-a measurement, not an interface).
+in the same process, for the ratio. Last, one reset alone, the fish's and CartPole's (``env.reset()`` through
+the wrappers, best of ``--repeats`` runs of 2000). The layers below ``env`` read private attributes of the env
+core (this is a measurement, not an interface).
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+import timeit
 
 import gymnasium as gym
 import numpy as np
@@ -62,11 +65,11 @@ def main() -> None:
     cartpole, cart_actions, cart_ends = record("CartPole-v1")
     unwrapped = env.unwrapped
     core = unwrapped.core
-    buffer, row, out = core.action_buffer, core.action_buffer[0], core.out[0]
+    buffer_step, row, out = core.buffer_step(), core.action_buffer[0], core.out[0]
     task, cost = unwrapped.config.task_id, unwrapped.config.stop_band
     fused = core._step
-    bound = fused._bound  # the compiled entry point and the arrays and settings it was bound with
-    call, arrays, none, settings = bound.call, bound.arrays, fused.none, bound.settings
+    bound = fused._bound  # the compiled entry point and the arrays (with the settings) it was bound with
+    own, arrays = bound.own, bound.arrays
 
     def wrapped(action):
         env.step(action)
@@ -76,18 +79,18 @@ def main() -> None:
 
     def core_info(action):
         row[...] = action
-        core.step(buffer)
+        buffer_step()
         info = task_info(out, task)
         if cost:
             info["cost"] = out[O_COST]
 
     def core_step(action):
         row[...] = action
-        core.step(buffer)
+        buffer_step()
 
     def compiled(action):
         row[...] = action
-        call(arrays, none, settings)
+        own(arrays)
 
     def copy(action):
         row[...] = action
@@ -124,9 +127,10 @@ def main() -> None:
         best["CartPole-v1"] = min(best["CartPole-v1"], run(cart_step, cartpole, cart_actions, cart_ends))
     us = {k: v * 1e6 for k, v in best.items()}
     rows = [
-        ("the compiled step (fused call, its arguments' unboxing included)", us["compiled"] - us["copy"]),
+        ("the compiled step (fused call and fin block, its argument's unboxing included)",
+         us["compiled"] - us["copy"]),
         ("the action written into the core's float64 buffer", us["copy"] - us["resets"]),
-        ("EnvCore.step's Python (fused step's binding check and model time, the fin block's call)",
+        ("the core's step in Python (the fused step's binding check and the model's clock)",
          us["core"] - us["compiled"]),
         ("the info dict (a new one, numpy scalars)", us["info"] - us["core"]),
         ("the rest of the env's step (observation copy, reward and flags, attribute lookups)", us["env"] - us["info"]),
@@ -143,6 +147,10 @@ def main() -> None:
     print(f"| CartPole-v1, `gym.make`, the same loop ({cart_episode:.1f} steps per episode) | "
           f"{us['CartPole-v1']:.2f} | "
           f"{us['CartPole-v1'] / total:.0%} (rate ratio {us['CartPole-v1'] / total:.3f}x) |")
+    env.reset(seed=0)
+    reset = min(timeit.repeat(env.reset, number=2000, repeat=args.repeats)) / 2000 * 1e6
+    cart_reset = min(timeit.repeat(cartpole.reset, number=2000, repeat=args.repeats)) / 2000 * 1e6
+    print(f"\none reset, `env.reset()` through `gym.make`: {reset:.1f} us (CartPole-v1: {cart_reset:.1f} us)")
     env.close()
     cartpole.close()
 

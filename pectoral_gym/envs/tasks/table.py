@@ -83,7 +83,7 @@ from pectoral_gym.envs.layout import (
 from pectoral_gym.envs.observation import OBS_VELOCITY, observation_size
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.envs.tasks.row import InfoField, Task
-from pectoral_gym.model.jit import Kernel, KernelPair, kernel_builds
+from pectoral_gym.model.jit import Kernel, KernelPair, entry_point, kernel_builds
 from pectoral_gym.model.models import REST
 from pectoral_gym.model.params import FishParams
 
@@ -236,6 +236,18 @@ def unregister_task(name: str) -> None:
 
 
 # ---------------------------------------------------------------- the task state of n envs
+_REST_BEAT = REST.as_array()  # the rest pattern's row, made once
+_REST_BEAT.flags.writeable = False
+
+
+def _plain(array: Any, dtype: type, ndim: int) -> bool:
+    """Whether ``array`` has the numba type of a writable, aligned, C-contiguous ``ndim``-d ``dtype`` ndarray."""
+    if type(array) is not np.ndarray or array.dtype != dtype or array.ndim != ndim:
+        return False
+    flags = array.flags
+    return flags.c_contiguous and flags.writeable and flags.aligned
+
+
 class TaskSettings(Protocol):
     """What :class:`TaskState` reads of its settings (:class:`~pectoral_gym.envs.core.EnvConfig` has it all)."""
 
@@ -285,9 +297,10 @@ class TaskState:
         self.none = np.zeros(self.n, dtype=np.bool_)
 
     def __getstate__(self) -> dict[str, Any]:
-        """Pickle the row by name (its functions are looked up again from the table)."""
+        """Pickle the row by name (its functions are looked up again from the table), without compiled code."""
         state = self.__dict__.copy()
         state["task"] = self.task.name
+        state.pop("_observe_reset_call", None)
         return state
 
     def __setstate__(self, state: dict[str, Any]) -> None:
@@ -304,7 +317,7 @@ class TaskState:
             ValueError: If the row's ``draw`` gives another shape.
         """
         draws = self.task.draw(rng, self.cfg)
-        if np.shape(draws) != (8,):
+        if (draws.shape if type(draws) is np.ndarray else np.shape(draws)) != (8,):
             raise ValueError(f"task {self.task.name!r}: draw(rng) must give 8 numbers, got shape {np.shape(draws)}")
         return draws
 
@@ -316,8 +329,15 @@ class TaskState:
 
     def observe_reset(self, index: np.ndarray, state: np.ndarray) -> None:
         """Observe freshly reset envs (fish ``state`` ``(n, 6)``); ``out`` zero but the distance; rest beats."""
-        self.beats[index] = REST.as_array()
-        tk.observe_reset(index, state, self.ep, self.fish, self.obs, self.out, self.action_code)
+        self.beats[index] = _REST_BEAT
+        args = (index, state, self.ep, self.fish, self.obs, self.out, self.action_code)
+        if _plain(index, np.int64, 1) and _plain(state, np.float64, 2):  # the entry point's types
+            call = self.__dict__.get("_observe_reset_call")
+            if call is None:  # the task arrays' types are fixed (updated in place, never replaced)
+                call = self._observe_reset_call = entry_point(tk.observe_reset, args)
+            call(*args)
+        else:
+            tk.observe_reset(*args)
 
     def reset_at(self, i: int, rng: np.random.Generator, pose: Sequence[float]) -> None:
         """Start env ``i``'s episode with the fish at a measured ``pose`` ``(X, Y, psi)``, at rest (the robot).
