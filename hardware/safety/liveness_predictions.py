@@ -12,14 +12,15 @@ paths, and the replays whose snapshots fall at the same instants.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Sequence
 
 import numpy as np
 
-from pectoral_gym.model import forcing_cache
 from pectoral_gym.model.models import AveragedModel, FishModel
 from pectoral_gym.model.params import FishParams
+from pectoral_gym.model.segment_runs import run_schedule
 from pectoral_gym.model.spec import FULL_REFERENCE
 
 __all__ = ["Predictions", "fit_line"]
@@ -55,28 +56,49 @@ def paths(snapshots: Sequence[Snapshot], states: np.ndarray, t_c: float, times: 
 
     ``times`` increase. The fins are set from ``snapshots`` (one every 0.05 s, the fins of one fish, or of groups
     of ``n // rows`` consecutive fish); every fish is advanced in the same segments, to each snapshot and each
-    of ``times``.
+    of ``times``. The segments are worked out here and advanced in one compiled call
+    (:func:`pectoral_gym.model.segment_runs.run_schedule`): the same advances as one model call per segment, bit
+    for bit.
     """
-    model.reset(states)
-    snaps = [s for s in snapshots if s[0] <= times[-1]]
-    first = max(k for k, s in enumerate(snaps) if s[0] <= t_c)
-    now, out, pending = t_c, [], list(times)
+    # model.reset(states) but the fins, which the first advance sets from a snapshot, every field
+    model.state[:] = states
+    model.integral[:] = 0.0
+    model.forcing_cache[:] = 0.0
+    model.time = 0.0
+    # the snapshots are in time order: those at or before times[-1], and the last one at or before t_c
+    snapshots = snapshots if isinstance(snapshots, list) else list(snapshots)
+    snaps = snapshots[:bisect.bisect_right(snapshots, times[-1], key=_instant)]
+    first = bisect.bisect_right(snaps, t_c, key=_instant) - 1
+    if first < 0:
+        raise ValueError(f"no snapshot at or before t_c = {t_c} s")
+    now, pending = t_c, list(times)
+    loads: list[int] = []  # per advance: the snapshot (from ``first`` on) set before it, -1 for none
+    durations: list[float] = []
+    records: list[bool] = []  # per advance: whether the poses are taken after it
+    used = first
     for k in range(first, len(snaps)):
-        _, fins, commanded = snaps[k]
-        if len(fins) not in (1, model.n):
-            fins, commanded = (np.repeat(a, model.n // len(a), axis=0) for a in (fins, commanded))
-        model.fins[:], model.pending[:] = fins, commanded
-        forcing_cache.invalidate(model.forcing_cache)  # the regular forcing of the replayed pattern, recomputed
+        used, load = k, k - first
         until = snaps[k + 1][0] if k + 1 < len(snaps) else math.inf
         while pending and pending[0] <= until:
-            model.advance(max(pending[0] - now, 0.0))
+            loads.append(load)
+            durations.append(max(pending[0] - now, 0.0))
+            records.append(True)
+            load = -1
             now = max(pending.pop(0), now)
-            out.append(model.state[:, :3].copy())
         if not pending:
             break
-        model.advance(max(until - now, 0.0))
+        loads.append(load)
+        durations.append(max(until - now, 0.0))
+        records.append(False)
         now = max(until, now)
-    return np.array(out).reshape(len(out), model.n, 3)
+    span = snaps[first:used + 1]
+    return run_schedule(model, np.array([s[1] for s in span]), np.array([s[2] for s in span]),
+                        np.array(loads, dtype=np.int64), np.array(durations, dtype=float),
+                        np.array(records, dtype=bool))
+
+
+def _instant(snapshot: Snapshot) -> float:
+    return snapshot[0]
 
 
 def batches(views: Sequence[Sequence[Snapshot]], since: float, until: float) -> list[tuple[list[int], list]]:
@@ -103,6 +125,9 @@ def batches(views: Sequence[Sequence[Snapshot]], since: float, until: float) -> 
     out = []
     for indices in groups.values():
         members = [spans[i] for i in indices]
+        if len(members) == 1:  # a view alone: its own snapshots (only read)
+            out.append((indices, members[0]))
+            continue
         stacked = [(members[0][k][0], np.concatenate([m[k][1] for m in members]),
                     np.concatenate([m[k][2] for m in members])) for k in range(len(members[0]))]
         out.append((indices, stacked))

@@ -27,15 +27,17 @@ from typing import Any
 
 import numpy as np
 
+from pectoral_gym.model import strokes
 from pectoral_gym.model.finrules import (
+    CHUNK,
     FinState,
     FirmwareConfig,
-    advance_with_firmware,
     apply_firmware,
     force_latch,
     wire_beats,
 )
 from pectoral_gym.model.params import FishParams
+from pectoral_gym.model.segment_runs import run_quiet_ticks
 from pectoral_gym.model.spec import FULL_REFERENCE
 
 __all__ = ["FinReplay"]
@@ -148,8 +150,39 @@ class FinReplay:
         return True
 
     def advance(self, t: float) -> None:
-        """Run the fins to time ``t`` (earlier times are ignored)."""
-        advance_with_firmware(self.firmware, self.model, float(t))
+        """Run the fins to time ``t`` (earlier times are ignored).
+
+        The ticks of :func:`~pectoral_gym.model.finrules.advance_with_firmware`: each tick the firmware's setpoint,
+        its decision handed to the fins (:func:`~pectoral_gym.model.finrules.apply_firmware`), the model advanced
+        by :data:`~pectoral_gym.model.finrules.CHUNK`. Where a tick's decision would be skipped at the following
+        ticks too (:meth:`_rules_rest`: the command runs, and the fin rules' inputs stay as they are until a turning
+        point changes a half-stroke's pattern), those ticks' advances run in one compiled call up to that turning
+        point (:func:`~pectoral_gym.model.segment_runs.run_quiet_ticks`), bit for bit the same.
+        """
+        target, firmware, model = float(t), self.firmware, self.model
+        while model.time < target:
+            firmware.tick(model.time, model.fin_angles()[0][0])
+            apply_firmware(firmware, model)
+            if self._rules_rest():
+                run_quiet_ticks(model, target, CHUNK)
+            else:
+                model.advance(min(CHUNK, target - model.time))
+
+    def _rules_rest(self) -> bool:
+        """Whether the next ticks' rules return at once while the fins' fields ``DURATION``..``RATIO`` keep their bits.
+
+        The rules: :func:`~pectoral_gym.model.finrules.apply_firmware`.
+        It does when its memo holds now for a running command: a tick's setpoint is then the command again (the
+        same bits: nothing between ticks changes the command, the running state or the halt), and the memo's other
+        keys (the limits, the pattern handed and its command) change only where the rules run.
+        """
+        firmware, memo = self.firmware, self.firmware.latch_memo
+        if memo is None or firmware.halt or not firmware.running or firmware.command_id != firmware.handed_id:
+            return False
+        if memo[1] is not firmware.config.limits or memo[2] is not firmware.handed:
+            return False
+        return memo[0] == (firmware.setpoint.tobytes(),
+                           self.model.fins[0, :, strokes.DURATION:strokes.RATIO + 1].tobytes())
 
     @property
     def fins(self) -> np.ndarray:
