@@ -1,9 +1,12 @@
 """A replay of the fins advances the ticks whose rules would be skipped in one compiled call, bit for bit.
 
+Its checkpoints copy the firmware's state by hand: the look-aheads restored from them run as from deep copies.
+
 The reference is the firmware's own loop, :func:`pectoral_gym.model.finrules.advance_with_firmware`: every tick the
 setpoint, :func:`~pectoral_gym.model.finrules.apply_firmware` and one model call of a tick's length.
 """
 
+import copy
 import math
 
 import numpy as np
@@ -17,10 +20,14 @@ from pectoral_gym.model.spec import FULL_REFERENCE
 
 
 class _TickByTick(FinReplay):
-    """The reference: every tick from Python, as the firmware's loop runs it."""
+    """The reference: every tick from Python, as the firmware's loop runs it; checkpoints by ``copy.deepcopy``."""
 
     def advance(self, t: float) -> None:
         advance_with_firmware(self.firmware, self.model, float(t))
+
+    def checkpoint(self) -> tuple:
+        saved = super().checkpoint()
+        return (copy.deepcopy(self.firmware), *saved[1:])
 
 
 def _state(replay: FinReplay) -> bytes:
@@ -104,3 +111,23 @@ def test_quiet_ticks_end_one_tick_past_a_turning_point():
     assert model.fins[0, 0, strokes.ELAPSED] == pytest.approx(0.01, abs=1e-12)
     segment_runs.run_quiet_ticks(model, 0.8, CHUNK)  # no turning point before the target: ticks to it exactly
     assert model.time == pytest.approx(0.8, abs=1e-12)
+
+
+def test_a_checkpoint_shares_no_array_with_the_replay_and_keeps_the_memo_of_its_own_hand_over():
+    replay = FinReplay()
+    replay.command(0.0, np.array([[1.5, 0.5, 1.0, 2.0], [1.4, 0.4, 0.8, 1.5]]))
+    replay.advance(0.3)
+    firmware = replay.firmware
+    assert firmware.latch_memo is not None and firmware.latch_memo[2] is firmware.handed
+    saved = replay.checkpoint()[0]
+    deep = copy.deepcopy(firmware)
+    assert type(saved) is type(firmware) and vars(saved).keys() == vars(deep).keys()
+    for name, value in vars(deep).items():
+        mine = getattr(saved, name)
+        if isinstance(value, np.ndarray):
+            assert not np.shares_memory(mine, getattr(firmware, name)), name
+            assert mine.tobytes() == value.tobytes(), name
+        elif name != "latch_memo":
+            assert mine == value, name
+    assert saved.latch_memo[0] == deep.latch_memo[0]
+    assert saved.latch_memo[2] is saved.handed and saved.latch_memo[1] is saved.config.limits

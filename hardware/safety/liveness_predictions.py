@@ -56,45 +56,22 @@ def paths(snapshots: Sequence[Snapshot], states: np.ndarray, t_c: float, times: 
 
     ``times`` increase. The fins are set from ``snapshots`` (one every 0.05 s, the fins of one fish, or of groups
     of ``n // rows`` consecutive fish); every fish is advanced in the same segments, to each snapshot and each
-    of ``times``. The segments are worked out here and advanced in one compiled call
-    (:func:`pectoral_gym.model.segment_runs.run_schedule`): the same advances as one model call per segment, bit
-    for bit.
+    of ``times``, in one compiled call (:func:`pectoral_gym.model.segment_runs.run_schedule`): the same advances
+    as one model call per segment, bit for bit.
     """
-    # model.reset(states) but the fins, which the first advance sets from a snapshot, every field
+    # model.reset(states) but the fins, which the kernel sets from the first snapshot, every field
     model.state[:] = states
     model.integral[:] = 0.0
     model.forcing_cache[:] = 0.0
-    model.time = 0.0
-    # the snapshots are in time order: those at or before times[-1], and the last one at or before t_c
+    # the snapshots are in time order: the last one at or before t_c, to the last one at or before times[-1]
     snapshots = snapshots if isinstance(snapshots, list) else list(snapshots)
-    snaps = snapshots[:bisect.bisect_right(snapshots, times[-1], key=_instant)]
-    first = bisect.bisect_right(snaps, t_c, key=_instant) - 1
+    last = bisect.bisect_right(snapshots, times[-1], key=_instant)
+    first = bisect.bisect_right(snapshots, t_c, key=_instant, hi=last) - 1
     if first < 0:
         raise ValueError(f"no snapshot at or before t_c = {t_c} s")
-    now, pending = t_c, list(times)
-    loads: list[int] = []  # per advance: the snapshot (from ``first`` on) set before it, -1 for none
-    durations: list[float] = []
-    records: list[bool] = []  # per advance: whether the poses are taken after it
-    used = first
-    for k in range(first, len(snaps)):
-        used, load = k, k - first
-        until = snaps[k + 1][0] if k + 1 < len(snaps) else math.inf
-        while pending and pending[0] <= until:
-            loads.append(load)
-            durations.append(max(pending[0] - now, 0.0))
-            records.append(True)
-            load = -1
-            now = max(pending.pop(0), now)
-        if not pending:
-            break
-        loads.append(load)
-        durations.append(max(until - now, 0.0))
-        records.append(False)
-        now = max(until, now)
-    span = snaps[first:used + 1]
-    return run_schedule(model, np.array([s[1] for s in span]), np.array([s[2] for s in span]),
-                        np.array(loads, dtype=np.int64), np.array(durations, dtype=float),
-                        np.array(records, dtype=bool))
+    span = snapshots[first:last]
+    return run_schedule(model, np.array([s[0] for s in span]), np.array([s[1] for s in span]),
+                        np.array([s[2] for s in span]), t_c, np.array(times, dtype=float))
 
 
 def _instant(snapshot: Snapshot) -> float:

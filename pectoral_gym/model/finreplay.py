@@ -76,6 +76,22 @@ class _ReplayedFirmware(FinState):
         self._running = False
 
 
+def _copy_firmware(firmware: _ReplayedFirmware) -> _ReplayedFirmware:
+    """A copy of ``firmware`` that shares nothing it changes: what ``copy.deepcopy`` gives, at a fraction of its cost.
+
+    Its arrays are copied (the memo's ``handed`` stays the copy's own ``handed``); the rest are numbers, flags, bytes
+    and the settings (frozen), which are replaced, never changed in place.
+    """
+    clone = copy.copy(firmware)
+    for name, value in vars(firmware).items():
+        if isinstance(value, np.ndarray):
+            setattr(clone, name, value.copy())
+    memo = firmware.latch_memo
+    if memo is not None and memo[2] is firmware.handed:
+        clone.latch_memo = (memo[0], memo[1], clone.handed)
+    return clone
+
+
 class FinReplay:
     """The robot's fins, replayed from the commands the PC sends.
 
@@ -104,7 +120,7 @@ class FinReplay:
         A look-ahead (a provisional stretch run past what is known) runs from a checkpoint and restores it.
         """
         model = self.model
-        return (copy.deepcopy(self.firmware), model.fins.copy(), model.pending.copy(), model.state.copy(),
+        return (_copy_firmware(self.firmware), model.fins.copy(), model.pending.copy(), model.state.copy(),
                 model.integral.copy(), model.forcing_cache.copy(), model.time, self._command)
 
     def restore(self, checkpoint: tuple[Any, ...]) -> None:

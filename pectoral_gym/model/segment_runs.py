@@ -9,9 +9,10 @@ sequence of such advances in one call: the same per-fish kernel
 are, bit for bit, those of the advances made one by one from Python (numba compiles without fast-math: no
 operation is reordered or fused).
 
-* :func:`run_schedule`: each fish advanced by ``durations`` in turn, its fins and commanded patterns set from a
-  snapshot (and its forcing cache marked stale, :func:`pectoral_gym.model.forcing_cache.invalidate`) before the
-  advances that ``loads`` names, its pose recorded after those that ``records`` marks.
+* :func:`run_schedule`: each fish advanced from a start through snapshots of the fins to given times, its fins and
+  commanded patterns set from each snapshot (and its forcing cache marked stale,
+  :func:`pectoral_gym.model.forcing_cache.invalidate`) before the advances up to the next one, its pose recorded
+  at each time.
 * :func:`run_quiet_ticks`: fish 0 advanced tick by tick towards a time, stopping at the first tick whose fin
   fields ``DURATION`` to ``RATIO`` differ from those at the call's start by a bit (a turning point, where the
   firmware's rules may hand over something new): the caller runs the rules there.
@@ -24,7 +25,7 @@ import math
 import numpy as np
 
 from pectoral_gym.model import forcing_cache, stepping, strokes
-from pectoral_gym.model.jit import kernel_variant
+from pectoral_gym.model.jit import kernel_variant, njit
 
 __all__ = ["run_quiet_ticks", "run_schedule"]
 
@@ -32,33 +33,54 @@ AVERAGED = True  # the model of a build (kernel_variant binds it): a constant to
 ADVANCE = stepping.advance_averaged_one  # the per-fish kernel of that model (kernel_variant binds it)
 
 
-def _run_schedule(state, fins, cache, pending, integral, coef, snap_fins, snap_pending, loads, durations, records,
-                  out, dt_max, min_substeps, mode, corrections, packed_tables):
-    """Advance every fish by ``durations`` ``(J,)`` [s] in turn (see the module docstring); poses into ``out``.
+def _run_schedule(state, fins, cache, pending, integral, coef, snap_times, snap_fins, snap_pending, t_c, times, out,
+                  dt_max, min_substeps, mode, corrections, packed_tables):
+    """Advance every fish from ``t_c`` through the snapshots to each of ``times`` [s]; poses into ``out``.
 
-    ``snap_fins`` ``(K, rows, 2, FIN_FIELDS)`` and ``snap_pending`` ``(K, rows, 2, 4)``: the snapshots, each row
-    the fins of ``n // rows`` consecutive fish; ``loads`` ``(J,)``: the snapshot set before each advance (``-1``:
-    none); ``records`` ``(J,)``: whether ``(X, Y, psi)`` is recorded after it, into ``out`` ``(R, n, 3)`` in order.
+    ``snap_times`` ``(K,)`` [s], increasing, the first at or before ``t_c``; ``snap_fins`` ``(K, rows, 2,
+    FIN_FIELDS)`` and ``snap_pending`` ``(K, rows, 2, 4)``: the snapshots, each row the fins of ``n // rows``
+    consecutive fish. ``times`` ``(T,)`` increase; ``out`` ``(T, n, 3)`` gets ``(X, Y, psi)`` at each. Each fish
+    has its fins set from snapshot ``k`` (its forcing cache marked stale), then is advanced to each time up to the
+    next snapshot's and to that snapshot; the lengths are ``max(to - now, 0)``, ``now`` the later of the two, as
+    a loop in Python computes them. Returns the summed length of one fish's advances [s] (a model's clock).
     """
     n = state.shape[0]
     per = n // snap_fins.shape[1]
+    count = snap_times.shape[0]
+    clock = 0.0
     for i in range(n):
         row = i // per
-        recorded = 0
-        for j in range(durations.shape[0]):
-            k = loads[j]
-            if k >= 0:
-                fins[i, :, :] = snap_fins[k, row]
-                pending[i, :, :] = snap_pending[k, row]
-                cache[i, 0, forcing_cache.CACHED] = 0.0
-                cache[i, 1, forcing_cache.CACHED] = 0.0
-            ADVANCE(i, state, fins, cache, pending, integral, coef, durations[j], dt_max, min_substeps, AVERAGED,
-                    mode, corrections, packed_tables)
-            if records[j]:
-                out[recorded, i, 0] = state[i, 0]
-                out[recorded, i, 1] = state[i, 1]
-                out[recorded, i, 2] = state[i, 2]
-                recorded += 1
+        now, taken, clock = t_c, 0, 0.0
+        for k in range(count):
+            fins[i, :, :] = snap_fins[k, row]
+            pending[i, :, :] = snap_pending[k, row]
+            cache[i, 0, forcing_cache.CACHED] = 0.0
+            cache[i, 1, forcing_cache.CACHED] = 0.0
+            until = snap_times[k + 1] if k + 1 < count else np.inf
+            while taken < times.shape[0] and times[taken] <= until:
+                duration = _later(times[taken] - now, 0.0)
+                ADVANCE(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, AVERAGED,
+                        mode, corrections, packed_tables)
+                clock += duration
+                now = _later(times[taken], now)
+                out[taken, i, 0] = state[i, 0]
+                out[taken, i, 1] = state[i, 1]
+                out[taken, i, 2] = state[i, 2]
+                taken += 1
+            if taken == times.shape[0]:
+                break
+            duration = _later(until - now, 0.0)
+            ADVANCE(i, state, fins, cache, pending, integral, coef, duration, dt_max, min_substeps, AVERAGED, mode,
+                    corrections, packed_tables)
+            clock += duration
+            now = _later(until, now)
+    return clock
+
+
+@njit(inline="always")
+def _later(a, b):
+    """Python's ``max(a, b)`` of two floats: ``b`` only if ``b > a``."""
+    return b if b > a else a
 
 
 def _run_quiet_ticks(state, fins, cache, pending, integral, coef, time, target, chunk, dt_max, min_substeps, mode,
@@ -95,26 +117,18 @@ _QUIET_TICKS = {averaged: kernel_variant(_run_quiet_ticks, f"run_quiet_ticks_{ki
                 for averaged, kind in ((True, "averaged"), (False, "full"))}
 
 
-def run_schedule(model, snap_fins: np.ndarray, snap_pending: np.ndarray, loads: np.ndarray,
-                 durations: np.ndarray, records: np.ndarray) -> np.ndarray:
-    """Advance ``model``'s fish by the schedule (:func:`_run_schedule`); returns the recorded poses ``(R, n, 3)``.
+def run_schedule(model, snap_times: np.ndarray, snap_fins: np.ndarray, snap_pending: np.ndarray, t_c: float,
+                 times: np.ndarray) -> np.ndarray:
+    """Advance ``model``'s fish from ``t_c`` [s] through the snapshots to ``times`` (:func:`_run_schedule`).
 
-    ``model`` (a :class:`~pectoral_gym.model.models.FishModel`) ends as the advances one by one leave it, its
-    :attr:`time` too. ``snap_fins`` and ``snap_pending`` are float arrays, C-contiguous; ``loads`` ``int64``;
-    ``durations`` ``float64``, each ``>= 0``; ``records`` ``bool``.
-
-    Raises:
-        ValueError: If a duration is not ``>= 0`` (as :meth:`FishModel.advance`).
+    Returns the poses ``(len(times), n, 3)``. ``model`` (a :class:`~pectoral_gym.model.models.FishModel`) ends as
+    the advances one by one leave it, its :attr:`time` too (from 0). The arrays are ``float64``, C-contiguous.
     """
-    if not bool(np.all(durations >= 0)):
-        raise ValueError(f"durations must be >= 0 s, got {durations}")
-    out = np.empty((int(np.count_nonzero(records)), model.n, 3))
-    _SCHEDULE[bool(model.averaged)](
-        model.state, model.fins, model.forcing_cache, model.pending, model.integral, model.coef, snap_fins,
-        snap_pending, loads, durations, records, out, float(model.dt_max), float(model.min_substeps),
+    out = np.empty((len(times), model.n, 3))
+    model.time = _SCHEDULE[bool(model.averaged)](
+        model.state, model.fins, model.forcing_cache, model.pending, model.integral, model.coef, snap_times,
+        snap_fins, snap_pending, float(t_c), times, out, float(model.dt_max), float(model.min_substeps),
         int(model.mode), int(model.corrections), model.packed_tables)
-    for duration in durations.tolist():  # the clock as the advances one by one keep it
-        model.time += duration
     return out
 
 
