@@ -237,7 +237,8 @@ class LivenessWatch:
         # surges the line's mean velocity does not hold). The end position: the blade-element model from the
         # state fitted through each replay's fins, whose path also had to match the window before (a frozen one
         # included).
-        start_c = line_state(before, t_c)
+        line_c = fit_line(before, t_c)  # the start's line, and the scatter about it below
+        start_c = line_state(before, t_c, line_c)
         m_pred = innovation = math.inf
         key = (self._newest, self._commands, self._reports)
         if self._views[0] != key:  # the replays' views, once per sighting, commands and reports for both windows
@@ -260,7 +261,7 @@ class LivenessWatch:
             innovation = min(innovation, miss)
         if not fitted:
             innovation = math.nan  # not judged (the fins are not known from the window's start)
-        scatter, sxx = self._scatter(before, t_c)
+        scatter, sxx = self._scatter(before, t_c, line_c)
         # Standard errors [m]: of the predicted motion inside the window (the start's slope error over it), and of
         # the end position (the start's position and slope, and the end's mean).
         motion_error = scatter * (t_e - t_m) / math.sqrt(sxx)
@@ -292,9 +293,12 @@ class LivenessWatch:
                     f"{allowed * 1000:.0f} mm allowed)")
         return ""
 
-    def _scatter(self, poses: np.ndarray, t_c: float) -> tuple[float, float]:
-        """The positions' scatter about their line [m] (at least the assumed pose noise) and ``sum (t - t_c)^2``."""
-        pose_c, rates_c = fit_line(poses, t_c)
+    def _scatter(self, poses: np.ndarray, t_c: float, line: tuple[np.ndarray, np.ndarray]) -> tuple[float, float]:
+        """The positions' scatter about their line [m] (at least the assumed pose noise) and ``sum (t - t_c)^2``.
+
+        ``line``: ``fit_line(poses, t_c)``.
+        """
+        pose_c, rates_c = line
         residual = poses[:, 1:3] - (pose_c[:2] + np.outer(poses[:, 0] - t_c, rates_c[:2]))
         scatter = math.sqrt(float((residual ** 2).sum()) / max(2 * (len(poses) - 2), 1))
         centred = poses[:, 0] - t_c

@@ -43,9 +43,12 @@ def fit_line(poses: np.ndarray, at: float) -> tuple[np.ndarray, np.ndarray]:
     return coef[0], coef[1]
 
 
-def line_state(poses: np.ndarray, at: float) -> np.ndarray:
-    """The state ``(X, Y, psi, u, v, r)`` at ``at`` [s] of the line through ``poses`` (body-frame velocities)."""
-    pose, rates = fit_line(poses, at)
+def line_state(poses: np.ndarray, at: float, line: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """The state ``(X, Y, psi, u, v, r)`` at ``at`` [s] of the line through ``poses`` (body-frame velocities).
+
+    ``line``: ``fit_line(poses, at)`` if the caller has it already.
+    """
+    pose, rates = fit_line(poses, at) if line is None else line
     c, s = math.cos(pose[2]), math.sin(pose[2])
     return np.array([*pose, c * rates[0] + s * rates[1], -s * rates[0] + c * rates[1], rates[2]])
 
@@ -90,13 +93,12 @@ def batches(views: Sequence[Sequence[Snapshot]], since: float, until: float) -> 
     spans: dict[int, list] = {}
     alone: list[tuple[list[int], list]] = []
     for index, view in enumerate(views):
-        first = len(view) - 1  # the snapshots are in time order: the last one at or before since, from the end
-        while first >= 0 and view[first][0] > since:
-            first -= 1
+        view = view if isinstance(view, list) else list(view)
+        first = bisect.bisect_right(view, since, key=_instant) - 1  # in time order: the last one at or before since
         if first < 0:
             alone.append(([index], list(view)))
             continue
-        span = [s for s in list(view)[first:] if s[0] <= until]
+        span = view[first:bisect.bisect_right(view, until, lo=first, key=_instant)]
         spans[index] = span
         groups.setdefault(tuple(s[0] for s in span), []).append(index)
     out = []

@@ -177,7 +177,8 @@ class FinReplay:
         """
         target, firmware, model = float(t), self.firmware, self.model
         while model.time < target:
-            firmware.tick(model.time, model.fin_angles()[0][0])
+            # (the angles are read only by fins not running: the setpoint of halted fins is rest where they are)
+            firmware.tick(model.time, None if firmware.running else model.fin_angles()[0][0])
             apply_firmware(firmware, model)
             if self._rules_rest():
                 run_quiet_ticks(model, target, CHUNK)
