@@ -15,6 +15,7 @@ from __future__ import annotations
 import bisect
 import math
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
@@ -23,7 +24,7 @@ from pectoral_gym.model.params import FishParams
 from pectoral_gym.model.segment_runs import run_schedule
 from pectoral_gym.model.spec import FULL_REFERENCE
 
-__all__ = ["Predictions", "fit_line"]
+__all__ = ["Predictions", "SnapshotArrays", "batches", "fit_line", "paths", "stack"]
 
 #: Finite-difference steps of the fitted start's velocities ``(index in the state, step)`` [m/s, m/s, rad/s]: a
 #: fraction of the speeds met.
@@ -53,7 +54,15 @@ def line_state(poses: np.ndarray, at: float, line: tuple[np.ndarray, np.ndarray]
     return np.array([*pose, c * rates[0] + s * rates[1], -s * rates[0] + c * rates[1], rates[2]])
 
 
-def paths(snapshots: Sequence[Snapshot], states: np.ndarray, t_c: float, times: Sequence[float],
+class SnapshotArrays(NamedTuple):
+    """Snapshots of the fins as arrays: what :func:`paths` takes in one compiled call, stacked once for several."""
+
+    times: np.ndarray  #: ``(K,)`` [s], increasing
+    fins: np.ndarray  #: ``(K, rows, 2, FIN_FIELDS)``
+    pending: np.ndarray  #: ``(K, rows, 2, 4)``
+
+
+def paths(snapshots: Sequence[Snapshot] | SnapshotArrays, states: np.ndarray, t_c: float, times: Sequence[float],
           model: FishModel) -> np.ndarray:
     """Poses ``(len(times), n, 3)`` of ``model``'s ``n`` fish from ``states`` ``(n, 6)`` at ``t_c`` [s].
 
@@ -66,28 +75,36 @@ def paths(snapshots: Sequence[Snapshot], states: np.ndarray, t_c: float, times: 
     model.state[:] = states
     model.integral[:] = 0.0
     model.forcing_cache[:] = 0.0
+    if not isinstance(snapshots, SnapshotArrays):
+        snapshots = stack(snapshots)
     # the snapshots are in time order: the last one at or before t_c, to the last one at or before times[-1]
-    snapshots = snapshots if isinstance(snapshots, list) else list(snapshots)
-    last = bisect.bisect_right(snapshots, times[-1], key=_instant)
-    first = bisect.bisect_right(snapshots, t_c, key=_instant, hi=last) - 1
+    last = int(np.searchsorted(snapshots.times, times[-1], side="right"))
+    first = int(np.searchsorted(snapshots.times[:last], t_c, side="right")) - 1
     if first < 0:
         raise ValueError(f"no snapshot at or before t_c = {t_c} s")
-    span = snapshots[first:last]
-    return run_schedule(model, np.array([s[0] for s in span]), np.array([s[1] for s in span]),
-                        np.array([s[2] for s in span]), t_c, np.array(times, dtype=float))
+    return run_schedule(model, snapshots.times[first:last], snapshots.fins[first:last],
+                        snapshots.pending[first:last], t_c, np.array(times, dtype=float))
+
+
+def stack(snapshots: Sequence[Snapshot]) -> SnapshotArrays:
+    """``snapshots`` (in time order, all of the same rows) as arrays."""
+    return SnapshotArrays(np.array([s[0] for s in snapshots], dtype=float), np.array([s[1] for s in snapshots]),
+                          np.array([s[2] for s in snapshots]))
 
 
 def _instant(snapshot: Snapshot) -> float:
     return snapshot[0]
 
 
-def batches(views: Sequence[Sequence[Snapshot]], since: float, until: float) -> list[tuple[list[int], list]]:
+def batches(views: Sequence[Sequence[Snapshot]], since: float,
+            until: float) -> list[tuple[list[int], Sequence[Snapshot] | SnapshotArrays]]:
     """The views (replays' snapshots) grouped by the instants of their snapshots in ``[since, until]`` [s].
 
-    Each group is ``(indices into views, snapshots)``, its snapshots those of the span (from the last one at or
-    before ``since`` to the last one at or before ``until``) with the fins and pendings of its views stacked in
-    its order: for any start at or after ``since`` and times up to ``until`` they give every view the segments
-    its own snapshots give. A view with no snapshot at or before ``since`` is a group of its own, whole.
+    Each group is ``(indices into views, snapshots)``, its snapshots (:class:`SnapshotArrays`) those of the span
+    (from the last one at or before ``since`` to the last one at or before ``until``) with the fins and pendings of
+    its views stacked in its order: for any start at or after ``since`` and times up to ``until`` they give every
+    view the segments its own snapshots give. A view with no snapshot at or before ``since`` is a group of its own,
+    whole (its list).
     """
     groups: dict[tuple[float, ...], list[int]] = {}
     spans: dict[int, list] = {}
@@ -101,15 +118,16 @@ def batches(views: Sequence[Sequence[Snapshot]], since: float, until: float) -> 
         span = view[first:bisect.bisect_right(view, until, lo=first, key=_instant)]
         spans[index] = span
         groups.setdefault(tuple(s[0] for s in span), []).append(index)
-    out = []
+    out: list[tuple[list[int], Sequence[Snapshot] | SnapshotArrays]] = []
     for indices in groups.values():
         members = [spans[i] for i in indices]
-        if len(members) == 1:  # a view alone: its own snapshots (only read)
-            out.append((indices, members[0]))
-            continue
-        stacked = [(members[0][k][0], np.concatenate([m[k][1] for m in members]),
-                    np.concatenate([m[k][2] for m in members])) for k in range(len(members[0]))]
-        out.append((indices, stacked))
+        count, rows = len(members[0]), len(members) * len(members[0][0][1])
+        # per snapshot, the members' fins one after the other (a concatenation along the rows, in one array)
+        fins = np.array([[m[k][1] for m in members] for k in range(count)])
+        pending = np.array([[m[k][2] for m in members] for k in range(count)])
+        out.append((indices, SnapshotArrays(np.array([s[0] for s in members[0]], dtype=float),
+                                            fins.reshape(count, rows, *fins.shape[3:]),
+                                            pending.reshape(count, rows, *pending.shape[3:]))))
     return out + alone
 
 
@@ -126,13 +144,13 @@ class Predictions:
                       for n in (k, _PATHS_PER_START * k)}
         self._averaged = {n: AveragedModel(n=n, params=params) for n in range(1, views + 1)}
 
-    def warm_up(self, snapshots: Sequence[Snapshot]) -> None:
+    def warm_up(self, snapshots: Sequence[Snapshot] | SnapshotArrays) -> None:
         """Compile or load the models' kernels now (``snapshots``: at least 0 to 0.4 s)."""
         start = np.array([[1.0, 0.5, 0.0, 0.01, 0.0, 0.0]])
         for model in (*self._full.values(), *self._averaged.values()):
             paths(snapshots, np.repeat(start, model.n, axis=0), 0.05, (0.2, 0.4), model)
 
-    def motion(self, snapshots: Sequence[Snapshot], views: int, start: np.ndarray, t_c: float,
+    def motion(self, snapshots: Sequence[Snapshot] | SnapshotArrays, views: int, start: np.ndarray, t_c: float,
                times: Sequence[float], blade_element: bool = False) -> np.ndarray:
         """The averaged (or blade-element) model's poses ``(len(times), views, 3)`` from ``start`` ``(6,)`` at ``t_c``.
 
@@ -144,7 +162,7 @@ class Predictions:
         model = self._full[views] if blade_element else self._averaged[views]
         return paths(snapshots, np.repeat(start[None], views, axis=0), t_c, times, model)
 
-    def fitted(self, snapshots: Sequence[Snapshot], views: int, before: np.ndarray, reach: float,
+    def fitted(self, snapshots: Sequence[Snapshot] | SnapshotArrays, views: int, before: np.ndarray, reach: float,
                times: Sequence[float]) -> np.ndarray:
         """Poses ``(len(times), views, 3)`` of the blade-element model started in the state that fits ``before``.
 
