@@ -155,3 +155,39 @@ def test_views_batched_by_their_instants_predict_what_each_view_alone_does():
             assert np.array_equal(blade[:, row], alone.motion(views[index], 1, start, 0.7, (1.2, 1.9), True)[:, 0])
             assert not np.allclose(blade[:, row], motion[:, row])  # two models indeed
             assert np.array_equal(fitted[:, row], alone.fitted(views[index], 1, before, 0.1, (1.9,))[:, 0])
+
+
+def test_the_second_windows_verdict_from_the_firsts_is_a_fresh_comparisons():
+    """A view compared over one window's span, then over another's: the verdicts of fresh comparisons, always."""
+    from pectoral_gym.hardware.safety.shadow_fins import ShadowFins
+
+    bound = SpeedBound(P, ServoLimits())
+    bound.reset(0.0)
+    watch = LivenessWatch(P, bound, pose_noise=0.005)
+    watch.command(0.0, np.array([[math.pi / 2, math.radians(60), 0.6, 3.0]] * 2))
+    watch._advance_shadows(4.0)
+    mine = list(watch._early.snapshots)
+    rng = np.random.default_rng(11)
+    checked = {True: 0, False: 0}
+    for case in range(60):
+        other = [(t, fins.copy(), pending.copy()) for t, fins, pending in mine]  # equal, other objects
+        if case % 3:  # one snapshot differs (or is missing)
+            j = int(rng.integers(len(other)))
+            if case % 3 == 1:
+                other[j][1][0, 0, strokes.AMPLITUDE] += 1e-3
+            else:
+                other[j] = (other[j][0] + 0.01, *other[j][1:])
+        watch._views = ((float(case), 0, 0), [mine, other], {})
+        for _ in range(3):  # spans in any order: inside, round, overlapping the ones compared before
+            since, window = float(rng.uniform(0.0, 4.0)), bool(rng.integers(2))
+            expected = ShadowFins.differs(mine, other, since)
+            assert watch._differs(0, mine, other, since, window) == expected, (case, since)
+            checked[expected] += 1
+    assert checked[True] > 20 and checked[False] > 20  # both verdicts met
+    for j in range(5, len(mine) - 5, 7):  # a difference just before the span found the same: the next one sees it
+        other = [(t, fins.copy(), pending.copy()) for t, fins, pending in mine]
+        other[j][1][0, 0, strokes.AMPLITUDE] += 1e-3
+        for first, second in ((0.06, 0.04), (0.06, -0.9)):
+            watch._views = ((100.0 + j + first + second, 0, 0), [mine, other], {})
+            assert not watch._differs(0, mine, other, mine[j][0] + first, True)
+            assert watch._differs(0, mine, other, mine[j][0] + second, False)

@@ -116,7 +116,9 @@ class LivenessWatch:
         self._poses.clear()
         self._next_check = -math.inf
         self._strikes = 0
-        self._views: tuple[tuple[float, int, int], list] = ((math.nan, -1, -1), [])
+        # the replays' views for a sighting, commands and reports, and whether each delayed one differs from the
+        # first from an instant on: {index: (since, differs)}
+        self._views: tuple[tuple[float, int, int], list, dict] = ((math.nan, -1, -1), [], {})
         # ShadowFins.differs's memos, one per delayed replay and window (each window compares its own span)
         self._differs_memos: dict[tuple[int, bool], dict] = {(k, w): {} for k in range(len(self._later))
                                                               for w in (True, False)}
@@ -242,11 +244,11 @@ class LivenessWatch:
         m_pred = innovation = math.inf
         key = (self._newest, self._commands, self._reports)
         if self._views[0] != key:  # the replays' views, once per sighting, commands and reports for both windows
-            self._views = (key, [s.view(self._newest) for s in (self._early, *self._later)])
+            self._views = (key, [s.view(self._newest) for s in (self._early, *self._later)], {})
         early = self._views[1][0]
         since = t_s if fitted else t_c
         views = [early] + [v for k, v in enumerate(self._views[1][1:])
-                           if ShadowFins.differs(early, v, since, self._differs_memos[k, innovation_check])]
+                           if self._differs(k, early, v, since, innovation_check)]
         motions, misses = [math.inf] * len(views), [math.inf] * len(views)
         for indices, stacked in batches(views, since, t_e):  # the views with snapshots at the same instants
             pred = self._predictions.motion(stacked, len(indices), start_c, t_c, (t_m, t_e))
@@ -292,6 +294,26 @@ class LivenessWatch:
                     f"over the last {t_e - t_c:.1f} s put ours (the blade-element model; at most "
                     f"{allowed * 1000:.0f} mm allowed)")
         return ""
+
+    def _differs(self, k: int, early: list, view: list, since: float, innovation_check: bool) -> bool:
+        """Whether delayed view ``k`` differs from ``early`` from ``since`` [s] on (:meth:`ShadowFins.differs`).
+
+        The same views for the other window: a verdict on a span holds for a span inside it when it is "the same",
+        and for a span round it when it is "differs"; a span round a span found the same is compared before it only.
+        """
+        verdicts, memo = self._views[2], self._differs_memos[k, innovation_check]
+        known = verdicts.get(k)
+        if known is not None and since >= known[0] and not known[1]:
+            return False  # the same over a span holding this one
+        if known is not None and since <= known[0]:
+            if known[1]:
+                return True  # differs inside this span
+            differs = ShadowFins.differs(early, view, since, memo, until=known[0])  # the same from known[0] on
+        else:
+            differs = ShadowFins.differs(early, view, since, memo)
+        if known is None or since <= known[0]:
+            verdicts[k] = (since, differs)
+        return differs
 
     def _scatter(self, poses: np.ndarray, t_c: float, line: tuple[np.ndarray, np.ndarray]) -> tuple[float, float]:
         """The positions' scatter about their line [m] (at least the assumed pose noise) and ``sum (t - t_c)^2``.

@@ -223,13 +223,13 @@ class ShadowFins:
         return list(self.snapshots) + tail
 
     @staticmethod
-    def differs(mine: list, other: list, since: float, memo: dict | None = None) -> bool:
+    def differs(mine: list, other: list, since: float, memo: dict | None = None, until: float = math.inf) -> bool:
         """Whether the snapshots ``other`` from ``since`` [s] (less one step) on differ from ``mine`` (time-ordered).
 
         ``memo``, if given, keeps the verdicts of the pairs of snapshots compared, keyed by the pair's identities
         (a snapshot is never changed once taken), and holds both so that neither identity is reused: the snapshots
         for good recur from check to check and are compared once. It is emptied and refilled with this call's
-        pairs, so it holds no more than one call's.
+        pairs, so it holds no more than one call's. ``until`` [s]: only the snapshots before it (less one step).
         """
         start = since - 0.05
         # both in time order: only the snapshots from start on are compared, and only those are looked up
@@ -237,7 +237,8 @@ class ShadowFins:
         previous = {} if memo is None else dict(memo)
         if memo is not None:
             memo.clear()
-        for snapshot in other[bisect.bisect_left(other, start, key=_instant):]:
+        stop = len(other) if until == math.inf else bisect.bisect_left(other, until - 0.05, key=_instant)
+        for snapshot in other[bisect.bisect_left(other, start, key=_instant):stop]:
             t, fins, pending = snapshot
             match = own.get(t)
             if match is None:
