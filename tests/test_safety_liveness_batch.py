@@ -3,11 +3,13 @@
 import math
 
 import numpy as np
+import pytest
 
 from pectoral_gym.hardware.safety.geofence import SpeedBound
 from pectoral_gym.hardware.safety.liveness import LivenessWatch
 from pectoral_gym.hardware.safety.liveness_predictions import Predictions, batches, paths
-from pectoral_gym.model import forcing_cache
+from pectoral_gym.model import forcing_cache, strokes
+from pectoral_gym.model.models import AveragedModel
 from pectoral_gym.model.params import FishParams
 from pectoral_gym.model.servo import ServoLimits
 from pectoral_gym.model.spec import FULL_REFERENCE
@@ -15,9 +17,10 @@ from pectoral_gym.model.spec import FULL_REFERENCE
 P = FishParams()
 
 
-def _one_fish_path(snapshots, state, t_c, times):
-    """The reference: a fresh one-fish blade-element model stepped through the snapshots segment by segment."""
-    model = FULL_REFERENCE.build(1, P)
+def _one_fish_path(snapshots, state, t_c, times, model=None):
+    """The reference: a fresh one-fish model (blade-element unless given) stepped through the snapshots segment by
+    segment, one model call per segment (what ``paths`` did before it ran the segments in one compiled call)."""
+    model = FULL_REFERENCE.build(1, P) if model is None else model
     model.reset(state[None])
     snaps = [s for s in snapshots if s[0] <= times[-1]]
     first = max(k for k, s in enumerate(snaps) if s[0] <= t_c)
@@ -54,6 +57,38 @@ def test_batched_paths_are_bit_identical_to_one_fish_paths():
         alone = _one_fish_path(snapshots, states[row], 0.21, times)
         assert np.array_equal(batched[:, row], alone), row  # the same floats, not merely close
     assert np.ptp(batched[-1, :, 0]) > 0.0  # the fish differ: the batch did not repeat one path
+
+
+@pytest.mark.parametrize("rows", [1, 2])
+def test_averaged_paths_in_one_call_are_bit_identical_to_model_calls_segment_by_segment(rows):
+    """The averaged model (its forcing cache marked stale at every snapshot), snapshots of one fish or of groups."""
+    bound = SpeedBound(P, ServoLimits())
+    bound.reset(0.0)
+    watch = LivenessWatch(P, bound, pose_noise=0.005)
+    watch.command(0.0, np.array([[math.pi / 2, math.radians(60), 0.6, 3.0]] * 2))
+    watch.command(0.9, np.array([[math.pi / 2, math.radians(20), 0.5, 1.0], [1.2, math.radians(50), 0.7, 2.0]]))
+    watch._advance_shadows(2.5)
+    snapshots = list(watch._early.snapshots)
+    if rows == 2:  # the second group's fins: the first's with the right fin's amplitude halved
+        other = [(t, fins.copy(), pending.copy()) for t, fins, pending in snapshots]
+        for _, fins, pending in other:
+            fins[0, 0, strokes.AMPLITUDE] *= 0.5
+            pending[0, 0, 1] *= 0.5
+        snapshots = [(a[0], np.concatenate([a[1], b[1]]), np.concatenate([a[2], b[2]]))
+                     for a, b in zip(snapshots, other, strict=True)]
+    rng = np.random.default_rng(7)
+    states = np.array([1.0, 0.5, 0.3, 0.05, 0.0, 0.1]) + rng.normal(0.0, 0.02, size=(4, 6))
+    times = (0.4, 0.4, 1.37, 2.5)  # a repeated time, one between snapshots, one on the last snapshot
+    model = AveragedModel(n=4, params=P)
+    batched = paths(snapshots, states, 0.33, times, model)
+    assert batched.shape == (len(times), 4, 3)
+    for fish in range(4):
+        group = fish // (4 // rows)
+        own = [(t, fins[group:group + 1], pending[group:group + 1]) for t, fins, pending in snapshots]
+        alone = _one_fish_path(own, states[fish], 0.33, times, AveragedModel(n=1, params=P))
+        assert np.array_equal(batched[:, fish], alone), fish
+    assert model.time == pytest.approx(2.5 - 0.33, abs=1e-12)  # the clock of the advances one by one
+    assert np.ptp(batched[-1, :, 0]) > 0.0
 
 
 def test_differs_with_a_memo_gives_the_verdicts_of_a_fresh_comparison():
@@ -120,3 +155,39 @@ def test_views_batched_by_their_instants_predict_what_each_view_alone_does():
             assert np.array_equal(blade[:, row], alone.motion(views[index], 1, start, 0.7, (1.2, 1.9), True)[:, 0])
             assert not np.allclose(blade[:, row], motion[:, row])  # two models indeed
             assert np.array_equal(fitted[:, row], alone.fitted(views[index], 1, before, 0.1, (1.9,))[:, 0])
+
+
+def test_the_second_windows_verdict_from_the_firsts_is_a_fresh_comparisons():
+    """A view compared over one window's span, then over another's: the verdicts of fresh comparisons, always."""
+    from pectoral_gym.hardware.safety.shadow_fins import ShadowFins
+
+    bound = SpeedBound(P, ServoLimits())
+    bound.reset(0.0)
+    watch = LivenessWatch(P, bound, pose_noise=0.005)
+    watch.command(0.0, np.array([[math.pi / 2, math.radians(60), 0.6, 3.0]] * 2))
+    watch._advance_shadows(4.0)
+    mine = list(watch._early.snapshots)
+    rng = np.random.default_rng(11)
+    checked = {True: 0, False: 0}
+    for case in range(60):
+        other = [(t, fins.copy(), pending.copy()) for t, fins, pending in mine]  # equal, other objects
+        if case % 3:  # one snapshot differs (or is missing)
+            j = int(rng.integers(len(other)))
+            if case % 3 == 1:
+                other[j][1][0, 0, strokes.AMPLITUDE] += 1e-3
+            else:
+                other[j] = (other[j][0] + 0.01, *other[j][1:])
+        watch._views = ((float(case), 0, 0), [mine, other], {})
+        for _ in range(3):  # spans in any order: inside, round, overlapping the ones compared before
+            since, window = float(rng.uniform(0.0, 4.0)), bool(rng.integers(2))
+            expected = ShadowFins.differs(mine, other, since)
+            assert watch._differs(0, mine, other, since, window) == expected, (case, since)
+            checked[expected] += 1
+    assert checked[True] > 20 and checked[False] > 20  # both verdicts met
+    for j in range(5, len(mine) - 5, 7):  # a difference just before the span found the same: the next one sees it
+        other = [(t, fins.copy(), pending.copy()) for t, fins, pending in mine]
+        other[j][1][0, 0, strokes.AMPLITUDE] += 1e-3
+        for first, second in ((0.06, 0.04), (0.06, -0.9)):
+            watch._views = ((100.0 + j + first + second, 0, 0), [mine, other], {})
+            assert not watch._differs(0, mine, other, mine[j][0] + first, True)
+            assert watch._differs(0, mine, other, mine[j][0] + second, False)

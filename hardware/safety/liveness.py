@@ -116,7 +116,9 @@ class LivenessWatch:
         self._poses.clear()
         self._next_check = -math.inf
         self._strikes = 0
-        self._views: tuple[tuple[float, int, int], list] = ((math.nan, -1, -1), [])
+        # the replays' views for a sighting, commands and reports, and whether each delayed one differs from the
+        # first from an instant on: {index: (since, differs)}
+        self._views: tuple[tuple[float, int, int], list, dict] = ((math.nan, -1, -1), [], {})
         # ShadowFins.differs's memos, one per delayed replay and window (each window compares its own span)
         self._differs_memos: dict[tuple[int, bool], dict] = {(k, w): {} for k in range(len(self._later))
                                                               for w in (True, False)}
@@ -237,15 +239,16 @@ class LivenessWatch:
         # surges the line's mean velocity does not hold). The end position: the blade-element model from the
         # state fitted through each replay's fins, whose path also had to match the window before (a frozen one
         # included).
-        start_c = line_state(before, t_c)
+        line_c = fit_line(before, t_c)  # the start's line, and the scatter about it below
+        start_c = line_state(before, t_c, line_c)
         m_pred = innovation = math.inf
         key = (self._newest, self._commands, self._reports)
         if self._views[0] != key:  # the replays' views, once per sighting, commands and reports for both windows
-            self._views = (key, [s.view(self._newest) for s in (self._early, *self._later)])
+            self._views = (key, [s.view(self._newest) for s in (self._early, *self._later)], {})
         early = self._views[1][0]
         since = t_s if fitted else t_c
         views = [early] + [v for k, v in enumerate(self._views[1][1:])
-                           if ShadowFins.differs(early, v, since, self._differs_memos[k, innovation_check])]
+                           if self._differs(k, early, v, since, innovation_check)]
         motions, misses = [math.inf] * len(views), [math.inf] * len(views)
         for indices, stacked in batches(views, since, t_e):  # the views with snapshots at the same instants
             pred = self._predictions.motion(stacked, len(indices), start_c, t_c, (t_m, t_e))
@@ -260,7 +263,7 @@ class LivenessWatch:
             innovation = min(innovation, miss)
         if not fitted:
             innovation = math.nan  # not judged (the fins are not known from the window's start)
-        scatter, sxx = self._scatter(before, t_c)
+        scatter, sxx = self._scatter(before, t_c, line_c)
         # Standard errors [m]: of the predicted motion inside the window (the start's slope error over it), and of
         # the end position (the start's position and slope, and the end's mean).
         motion_error = scatter * (t_e - t_m) / math.sqrt(sxx)
@@ -292,9 +295,32 @@ class LivenessWatch:
                     f"{allowed * 1000:.0f} mm allowed)")
         return ""
 
-    def _scatter(self, poses: np.ndarray, t_c: float) -> tuple[float, float]:
-        """The positions' scatter about their line [m] (at least the assumed pose noise) and ``sum (t - t_c)^2``."""
-        pose_c, rates_c = fit_line(poses, t_c)
+    def _differs(self, k: int, early: list, view: list, since: float, innovation_check: bool) -> bool:
+        """Whether delayed view ``k`` differs from ``early`` from ``since`` [s] on (:meth:`ShadowFins.differs`).
+
+        The same views for the other window: a verdict on a span holds for a span inside it when it is "the same",
+        and for a span round it when it is "differs"; a span round a span found the same is compared before it only.
+        """
+        verdicts, memo = self._views[2], self._differs_memos[k, innovation_check]
+        known = verdicts.get(k)
+        if known is not None and since >= known[0] and not known[1]:
+            return False  # the same over a span holding this one
+        if known is not None and since <= known[0]:
+            if known[1]:
+                return True  # differs inside this span
+            differs = ShadowFins.differs(early, view, since, memo, until=known[0])  # the same from known[0] on
+        else:
+            differs = ShadowFins.differs(early, view, since, memo)
+        if known is None or since <= known[0]:
+            verdicts[k] = (since, differs)
+        return differs
+
+    def _scatter(self, poses: np.ndarray, t_c: float, line: tuple[np.ndarray, np.ndarray]) -> tuple[float, float]:
+        """The positions' scatter about their line [m] (at least the assumed pose noise) and ``sum (t - t_c)^2``.
+
+        ``line``: ``fit_line(poses, t_c)``.
+        """
+        pose_c, rates_c = line
         residual = poses[:, 1:3] - (pose_c[:2] + np.outer(poses[:, 0] - t_c, rates_c[:2]))
         scatter = math.sqrt(float((residual ** 2).sum()) / max(2 * (len(poses) - 2), 1))
         centred = poses[:, 0] - t_c

@@ -12,17 +12,19 @@ paths, and the replays whose snapshots fall at the same instants.
 
 from __future__ import annotations
 
+import bisect
 import math
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import numpy as np
 
-from pectoral_gym.model import forcing_cache
 from pectoral_gym.model.models import AveragedModel, FishModel
 from pectoral_gym.model.params import FishParams
+from pectoral_gym.model.segment_runs import run_schedule
 from pectoral_gym.model.spec import FULL_REFERENCE
 
-__all__ = ["Predictions", "fit_line"]
+__all__ = ["Predictions", "SnapshotArrays", "batches", "fit_line", "paths", "stack"]
 
 #: Finite-difference steps of the fitted start's velocities ``(index in the state, step)`` [m/s, m/s, rad/s]: a
 #: fraction of the speeds met.
@@ -42,70 +44,90 @@ def fit_line(poses: np.ndarray, at: float) -> tuple[np.ndarray, np.ndarray]:
     return coef[0], coef[1]
 
 
-def line_state(poses: np.ndarray, at: float) -> np.ndarray:
-    """The state ``(X, Y, psi, u, v, r)`` at ``at`` [s] of the line through ``poses`` (body-frame velocities)."""
-    pose, rates = fit_line(poses, at)
+def line_state(poses: np.ndarray, at: float, line: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    """The state ``(X, Y, psi, u, v, r)`` at ``at`` [s] of the line through ``poses`` (body-frame velocities).
+
+    ``line``: ``fit_line(poses, at)`` if the caller has it already.
+    """
+    pose, rates = fit_line(poses, at) if line is None else line
     c, s = math.cos(pose[2]), math.sin(pose[2])
     return np.array([*pose, c * rates[0] + s * rates[1], -s * rates[0] + c * rates[1], rates[2]])
 
 
-def paths(snapshots: Sequence[Snapshot], states: np.ndarray, t_c: float, times: Sequence[float],
+class SnapshotArrays(NamedTuple):
+    """Snapshots of the fins as arrays: what :func:`paths` takes in one compiled call, stacked once for several."""
+
+    times: np.ndarray  #: ``(K,)`` [s], increasing
+    fins: np.ndarray  #: ``(K, rows, 2, FIN_FIELDS)``
+    pending: np.ndarray  #: ``(K, rows, 2, 4)``
+
+
+def paths(snapshots: Sequence[Snapshot] | SnapshotArrays, states: np.ndarray, t_c: float, times: Sequence[float],
           model: FishModel) -> np.ndarray:
     """Poses ``(len(times), n, 3)`` of ``model``'s ``n`` fish from ``states`` ``(n, 6)`` at ``t_c`` [s].
 
     ``times`` increase. The fins are set from ``snapshots`` (one every 0.05 s, the fins of one fish, or of groups
     of ``n // rows`` consecutive fish); every fish is advanced in the same segments, to each snapshot and each
-    of ``times``.
+    of ``times``, in one compiled call (:func:`pectoral_gym.model.segment_runs.run_schedule`): the same advances
+    as one model call per segment, bit for bit.
     """
-    model.reset(states)
-    snaps = [s for s in snapshots if s[0] <= times[-1]]
-    first = max(k for k, s in enumerate(snaps) if s[0] <= t_c)
-    now, out, pending = t_c, [], list(times)
-    for k in range(first, len(snaps)):
-        _, fins, commanded = snaps[k]
-        if len(fins) not in (1, model.n):
-            fins, commanded = (np.repeat(a, model.n // len(a), axis=0) for a in (fins, commanded))
-        model.fins[:], model.pending[:] = fins, commanded
-        forcing_cache.invalidate(model.forcing_cache)  # the regular forcing of the replayed pattern, recomputed
-        until = snaps[k + 1][0] if k + 1 < len(snaps) else math.inf
-        while pending and pending[0] <= until:
-            model.advance(max(pending[0] - now, 0.0))
-            now = max(pending.pop(0), now)
-            out.append(model.state[:, :3].copy())
-        if not pending:
-            break
-        model.advance(max(until - now, 0.0))
-        now = max(until, now)
-    return np.array(out).reshape(len(out), model.n, 3)
+    # model.reset(states) but the fins, which the kernel sets from the first snapshot, every field
+    model.state[:] = states
+    model.integral[:] = 0.0
+    model.forcing_cache[:] = 0.0
+    if not isinstance(snapshots, SnapshotArrays):
+        snapshots = stack(snapshots)
+    # the snapshots are in time order: the last one at or before t_c, to the last one at or before times[-1]
+    last = int(np.searchsorted(snapshots.times, times[-1], side="right"))
+    first = int(np.searchsorted(snapshots.times[:last], t_c, side="right")) - 1
+    if first < 0:
+        raise ValueError(f"no snapshot at or before t_c = {t_c} s")
+    return run_schedule(model, snapshots.times[first:last], snapshots.fins[first:last],
+                        snapshots.pending[first:last], t_c, np.array(times, dtype=float))
 
 
-def batches(views: Sequence[Sequence[Snapshot]], since: float, until: float) -> list[tuple[list[int], list]]:
+def stack(snapshots: Sequence[Snapshot]) -> SnapshotArrays:
+    """``snapshots`` (in time order, all of the same rows) as arrays."""
+    return SnapshotArrays(np.array([s[0] for s in snapshots], dtype=float), np.array([s[1] for s in snapshots]),
+                          np.array([s[2] for s in snapshots]))
+
+
+def _instant(snapshot: Snapshot) -> float:
+    return snapshot[0]
+
+
+def batches(views: Sequence[Sequence[Snapshot]], since: float,
+            until: float) -> list[tuple[list[int], Sequence[Snapshot] | SnapshotArrays]]:
     """The views (replays' snapshots) grouped by the instants of their snapshots in ``[since, until]`` [s].
 
-    Each group is ``(indices into views, snapshots)``, its snapshots those of the span (from the last one at or
-    before ``since`` to the last one at or before ``until``) with the fins and pendings of its views stacked in
-    its order: for any start at or after ``since`` and times up to ``until`` they give every view the segments
-    its own snapshots give. A view with no snapshot at or before ``since`` is a group of its own, whole.
+    Each group is ``(indices into views, snapshots)``, its snapshots (:class:`SnapshotArrays`) those of the span
+    (from the last one at or before ``since`` to the last one at or before ``until``) with the fins and pendings of
+    its views stacked in its order: for any start at or after ``since`` and times up to ``until`` they give every
+    view the segments its own snapshots give. A view with no snapshot at or before ``since`` is a group of its own,
+    whole (its list).
     """
     groups: dict[tuple[float, ...], list[int]] = {}
     spans: dict[int, list] = {}
     alone: list[tuple[list[int], list]] = []
     for index, view in enumerate(views):
-        first = len(view) - 1  # the snapshots are in time order: the last one at or before since, from the end
-        while first >= 0 and view[first][0] > since:
-            first -= 1
+        view = view if isinstance(view, list) else list(view)
+        first = bisect.bisect_right(view, since, key=_instant) - 1  # in time order: the last one at or before since
         if first < 0:
             alone.append(([index], list(view)))
             continue
-        span = [s for s in list(view)[first:] if s[0] <= until]
+        span = view[first:bisect.bisect_right(view, until, lo=first, key=_instant)]
         spans[index] = span
         groups.setdefault(tuple(s[0] for s in span), []).append(index)
-    out = []
+    out: list[tuple[list[int], Sequence[Snapshot] | SnapshotArrays]] = []
     for indices in groups.values():
         members = [spans[i] for i in indices]
-        stacked = [(members[0][k][0], np.concatenate([m[k][1] for m in members]),
-                    np.concatenate([m[k][2] for m in members])) for k in range(len(members[0]))]
-        out.append((indices, stacked))
+        count, rows = len(members[0]), len(members) * len(members[0][0][1])
+        # per snapshot, the members' fins one after the other (a concatenation along the rows, in one array)
+        fins = np.array([[m[k][1] for m in members] for k in range(count)])
+        pending = np.array([[m[k][2] for m in members] for k in range(count)])
+        out.append((indices, SnapshotArrays(np.array([s[0] for s in members[0]], dtype=float),
+                                            fins.reshape(count, rows, *fins.shape[3:]),
+                                            pending.reshape(count, rows, *pending.shape[3:]))))
     return out + alone
 
 
@@ -122,13 +144,13 @@ class Predictions:
                       for n in (k, _PATHS_PER_START * k)}
         self._averaged = {n: AveragedModel(n=n, params=params) for n in range(1, views + 1)}
 
-    def warm_up(self, snapshots: Sequence[Snapshot]) -> None:
+    def warm_up(self, snapshots: Sequence[Snapshot] | SnapshotArrays) -> None:
         """Compile or load the models' kernels now (``snapshots``: at least 0 to 0.4 s)."""
         start = np.array([[1.0, 0.5, 0.0, 0.01, 0.0, 0.0]])
         for model in (*self._full.values(), *self._averaged.values()):
             paths(snapshots, np.repeat(start, model.n, axis=0), 0.05, (0.2, 0.4), model)
 
-    def motion(self, snapshots: Sequence[Snapshot], views: int, start: np.ndarray, t_c: float,
+    def motion(self, snapshots: Sequence[Snapshot] | SnapshotArrays, views: int, start: np.ndarray, t_c: float,
                times: Sequence[float], blade_element: bool = False) -> np.ndarray:
         """The averaged (or blade-element) model's poses ``(len(times), views, 3)`` from ``start`` ``(6,)`` at ``t_c``.
 
@@ -140,7 +162,7 @@ class Predictions:
         model = self._full[views] if blade_element else self._averaged[views]
         return paths(snapshots, np.repeat(start[None], views, axis=0), t_c, times, model)
 
-    def fitted(self, snapshots: Sequence[Snapshot], views: int, before: np.ndarray, reach: float,
+    def fitted(self, snapshots: Sequence[Snapshot] | SnapshotArrays, views: int, before: np.ndarray, reach: float,
                times: Sequence[float]) -> np.ndarray:
         """Poses ``(len(times), views, 3)`` of the blade-element model started in the state that fits ``before``.
 

@@ -223,23 +223,23 @@ class ShadowFins:
         return list(self.snapshots) + tail
 
     @staticmethod
-    def differs(mine: list, other: list, since: float, memo: dict | None = None) -> bool:
-        """Whether the snapshots ``other`` from ``since`` [s] (less one step) on differ from ``mine``.
+    def differs(mine: list, other: list, since: float, memo: dict | None = None, until: float = math.inf) -> bool:
+        """Whether the snapshots ``other`` from ``since`` [s] (less one step) on differ from ``mine`` (time-ordered).
 
         ``memo``, if given, keeps the verdicts of the pairs of snapshots compared, keyed by the pair's identities
         (a snapshot is never changed once taken), and holds both so that neither identity is reused: the snapshots
         for good recur from check to check and are compared once. It is emptied and refilled with this call's
-        pairs, so it holds no more than one call's.
+        pairs, so it holds no more than one call's. ``until`` [s]: only the snapshots before it (less one step).
         """
         start = since - 0.05
-        own = {s[0]: s for s in mine if s[0] >= start}  # only these are ever looked up
+        # both in time order: only the snapshots from start on are compared, and only those are looked up
+        own = {s[0]: s for s in mine[bisect.bisect_left(mine, start, key=_instant):]}
         previous = {} if memo is None else dict(memo)
         if memo is not None:
             memo.clear()
-        for snapshot in other:
+        stop = len(other) if until == math.inf else bisect.bisect_left(other, until - 0.05, key=_instant)
+        for snapshot in other[bisect.bisect_left(other, start, key=_instant):stop]:
             t, fins, pending = snapshot
-            if t < start:
-                continue
             match = own.get(t)
             if match is None:
                 return True
@@ -255,3 +255,7 @@ class ShadowFins:
             if not same:
                 return True
         return False
+
+
+def _instant(snapshot: tuple) -> float:
+    return snapshot[0]

@@ -4,12 +4,14 @@ Usage: ``python fin_replay_cost.py pectoral_gym.hardware.deploy --policy ... --e
 (``--jobs 1``: the episodes run in this process's threads), or ``python fin_replay_cost.py --tick``: the parts of one
 replay tick, each timed alone (best of 3 repeats of 20 000 calls).
 
-Adds up the CPU time of the calling thread (``time.thread_time``) inside the liveness check's shadow replays
-(``ShadowFins.advance`` and ``.view``) and inside the other fin replays (``FinReplay.advance`` and ``.command``
-called from elsewhere: the blind-spell check's), and counts the replays' ticks (``finrules.apply_firmware`` as
-``advance_with_firmware`` calls it; the emulated robot's own ticks are not counted) and the calls of the fin rules
-(``finrules.next_latch``, the robot's included). Printed at exit, with the process's CPU time from this script's
-start (imports and policy loading included) for scale.
+Adds up the CPU time of the calling thread (``time.thread_time``) inside the liveness check
+(``LivenessWatch.sighting``, ``.command`` and ``.latch``: all of it), inside its predictions (``Predictions.motion``
+and ``.fitted``) and its shadow replays (``ShadowFins.advance`` and ``.view``), and inside the other fin replays
+(``FinReplay.advance`` and ``.command`` called from elsewhere: the blind-spell check's), and counts the replays' ticks
+run from Python (``finrules.apply_firmware`` as ``advance_with_firmware`` or ``FinReplay.advance`` calls it; the
+emulated robot's own ticks are not counted; the quiet ticks a compiled call runs are not either) and the calls of the
+fin rules (``finrules.next_latch``, the robot's included). Printed at exit, with the process's CPU time from this
+script's start (imports and policy loading included) for scale.
 """
 
 from __future__ import annotations
@@ -23,27 +25,30 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-from pectoral_gym.hardware.safety import shadow_fins
+from pectoral_gym.hardware.safety import liveness, liveness_predictions, shadow_fins
 from pectoral_gym.model import finreplay, finrules
 
 seconds: collections.Counter[str] = collections.Counter()
 calls: collections.Counter[str] = collections.Counter()
-_inside = threading.local()  # a metered call inside another is the outer one's
+_inside = threading.local()  # the labels being metered in this thread: a call inside one of them is the outer one's
 
 
-def _meter(owner: Any, name: str, label: str) -> None:
+def _meter(owner: Any, name: str, label: str, outside: tuple[str, ...] = ()) -> None:
+    """Meter ``owner.name`` under ``label``, unless called inside that label or one of ``outside``."""
     function = getattr(owner, name)
 
     def metered(*args: Any, **kwargs: Any) -> Any:
-        if getattr(_inside, "active", False):
+        active = _inside.__dict__.setdefault("labels", set())
+        if label in active or not active.isdisjoint(outside):
             return function(*args, **kwargs)
-        _inside.active, start = True, time.thread_time()
+        active.add(label)
+        start = time.thread_time()
         try:
             return function(*args, **kwargs)
         finally:
             seconds[label] += time.thread_time() - start
             calls[label] += 1
-            _inside.active = False
+            active.discard(label)
 
     setattr(owner, name, metered)
 
@@ -56,6 +61,8 @@ def _count(name: str) -> None:
         return function(*args, **kwargs)
 
     setattr(finrules, name, counted)  # apply_firmware and advance_with_firmware look them up in the module
+    if hasattr(finreplay, name):
+        setattr(finreplay, name, counted)  # FinReplay.advance, where it runs the ticks itself
 
 
 def tick_parts() -> None:
@@ -75,6 +82,9 @@ def tick_parts() -> None:
              "model.advance(CHUNK)": lambda: model.advance(finrules.CHUNK)}
     for name, part in parts.items():
         print(f"{name}: {min(timeit.repeat(part, number=20_000, repeat=3)) / 20_000 * 1e6:.1f} us")
+    # whole ticks: the replay run on by 0.05 s (5 ticks, a turning point every 0.25-0.5 s), per tick
+    seconds_per_run = min(timeit.repeat(lambda: replay.advance(model.time + 0.05), number=4_000, repeat=3)) / 4_000
+    print(f"FinReplay.advance by 0.05 s, per tick: {seconds_per_run / 5 * 1e6:.1f} us")
 
 
 def main() -> None:
@@ -82,10 +92,14 @@ def main() -> None:
     if sys.argv[1:] == ["--tick"]:
         tick_parts()
         return
+    for method in ("sighting", "command", "latch"):
+        _meter(liveness.LivenessWatch, method, "liveness check")
+    for method in ("motion", "fitted"):
+        _meter(liveness_predictions.Predictions, method, "liveness predictions")
     for method in ("advance", "view"):
         _meter(shadow_fins.ShadowFins, method, "shadow replays")
     for method in ("advance", "command"):
-        _meter(finreplay.FinReplay, method, "other replays")
+        _meter(finreplay.FinReplay, method, "other replays", outside=("liveness check", "shadow replays"))
     _count("apply_firmware")
     _count("next_latch")
     start = time.process_time()
