@@ -93,7 +93,7 @@ ROBOT = RobotReadiness(observe_fins=True, stop_band=True,
 
 
 # The spec fields an env sets (EnvConfig's model options, by their spec names).
-_OPTION_FIELDS = {"integration", "scaling", "check_params", "transitions", "ripple_offsets"}
+_OPTION_FIELDS = {"integration", "scaling", "check_params", "transitions", "ripple_offsets", "fast_step"}
 
 
 @dataclass(frozen=True)
