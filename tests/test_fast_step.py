@@ -176,3 +176,14 @@ def test_fast_swept_cube_equals_the_closed_form():
         assert st.swept_cube(fins, 0, 0, seg, True) == pytest.approx(st.swept_cube(fins, 0, 0, seg), abs=1e-10)
     fins[0, 0, st.ELAPSED] = 0.0  # a whole half-stroke: |half|^3 (pi/d)^2 4/3
     assert st.swept_cube(fins, 0, 0, 0.4, True) == pytest.approx(0.75**3 * (math.pi / 0.4) ** 2 * 4 / 3, rel=1e-10)
+
+
+def test_env_config_carries_the_option_to_the_averaged_spec_only():
+    from pectoral_gym.envs.config import EnvConfig
+
+    assert EnvConfig(model="averaged").model_spec().fast_step is False
+    assert EnvConfig(model="averaged", fast_step=True).model_spec() == AVERAGED.replace(
+        transitions=False, ripple_offsets=False, fast_step=True)
+    assert EnvConfig(model="full", fast_step=True).model_spec() == EnvConfig(model="full").model_spec()
+    with pytest.raises(ValueError, match="fast_step must be True or False"):
+        EnvConfig(model="averaged", fast_step="yes")

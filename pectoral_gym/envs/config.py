@@ -90,6 +90,10 @@ class EnvConfig:
             changes or parks a pattern (:class:`~pectoral_gym.model.models.AveragedModel`, ``docs/model.md``
             3.8; on by default in the model). Off by default in the envs (``-v0``, ``-v1``); on in
             ``PectoralFish-Averaged-v2``, which the PPO recipe trains on.
+        fast_step: Averaged model only: its fast step (:mod:`pectoral_gym.model.fast_step`: the yaw damping's
+            stiffness integrated exactly, bounded-range function approximations), numerically different from the
+            default step and about 1.6x faster (``docs/model.md`` section 6). Off by default; on in
+            ``PectoralFish-Averaged-v3``.
         integration: Full model only: ``"reference"`` (converged steps) or ``"fast"`` (8 RK4 substeps
             per half-stroke, at most 0.05 s; :data:`~pectoral_gym.model.models.FULL_INTEGRATION`; its speed
             and accuracy against the reference: ``docs/model.md`` section 6).
@@ -152,6 +156,7 @@ class EnvConfig:
     transitions: bool = ENV_DEFAULTS["transitions"]
     ripple_offsets: bool = ENV_DEFAULTS["ripple_offsets"]
     integration: str = ENV_DEFAULTS["integration"]
+    fast_step: bool = ENV_DEFAULTS["fast_step"]
     observe_fins: bool = SIMULATION.observe_fins
     progress_weight: float = 10.0
     goal_bonus: float = 10.0
@@ -177,7 +182,7 @@ class EnvConfig:
             raise ValueError(f"task must be one of {tuple(TASKS)}, got {self.task!r}")
         if isinstance(self.scaling, os.PathLike):
             set_(self, "scaling", os.fspath(self.scaling))
-        for name in ("check_scaling_params", "transitions", "ripple_offsets", "observe_fins", "stop_band"):
+        for name in ("check_scaling_params", "transitions", "ripple_offsets", "fast_step", "observe_fins", "stop_band"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"{name} must be True or False, got {getattr(self, name)!r}")
         # The one check of the model options (applicability included): the spec's.

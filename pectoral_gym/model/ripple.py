@@ -121,9 +121,13 @@ def transitional_oscillation_gain(angle_from: float, angle_to: float, duration: 
         return 1.0
     t_power = period / (ratio + 1.0)  # eq. (21)
     t_recovery = period - t_power
-    f_power, _ = half_stroke_mean_force(low, high, t_power, drag_constant, fast)
-    f_recovery, _ = half_stroke_mean_force(high, low, t_recovery, drag_constant, fast)
-    mean = (f_power * t_power + f_recovery * t_recovery) / period
+    if fast:  # the two half-strokes' means share J1 and sin: k pi^2 gA J1(gA) sin(g0) (1/d1 - 1/d2) / T
+        f_power, _ = half_stroke_mean_force(low, high, t_power, drag_constant, fast)
+        mean = f_power * t_power * (1.0 - t_power / t_recovery) / period
+    else:
+        f_power, _ = half_stroke_mean_force(low, high, t_power, drag_constant, fast)
+        f_recovery, _ = half_stroke_mean_force(high, low, t_recovery, drag_constant, fast)
+        mean = (f_power * t_power + f_recovery * t_recovery) / period
     if power:
         regular = half_stroke_ripple_square(low, high, t_power, drag_constant, inertia_constant, mean, fast)
     else:

@@ -49,7 +49,7 @@ SCALINGS = ("identified", "none")  # besides the path of a coefficients file
 FORCINGS = ("exact", "taylor")
 #: The env settings (:class:`pectoral_gym.envs.core.EnvConfig` field names) of each model's spec.
 ENV_OPTIONS = {"full": ("integration",),
-               "averaged": ("scaling", "check_scaling_params", "transitions", "ripple_offsets")}
+               "averaged": ("scaling", "check_scaling_params", "transitions", "ripple_offsets", "fast_step")}
 # The averaged model's configuration is written once, as AveragedModel's keyword defaults; AveragedSpec's
 # defaults are read from there, and every preset below (and each env version) is AveragedSpec() with changes.
 _AVERAGED_MODEL = {name: p.default for name, p in inspect.signature(AveragedModel).parameters.items()
@@ -291,7 +291,8 @@ def env_spec(model: str, **options: Any) -> FullSpec | AveragedSpec:
     scaling = os.fspath(values["scaling"]) if isinstance(values["scaling"], os.PathLike) else values["scaling"]
     return AVERAGED_ENV.replace(scaling=scaling, check_params=values["check_scaling_params"],
                                 yaw_damping=_held_damping(scaling),
-                                transitions=values["transitions"], ripple_offsets=values["ripple_offsets"])
+                                transitions=values["transitions"], ripple_offsets=values["ripple_offsets"],
+                                fast_step=values["fast_step"])
 
 
 def env_options(spec: FullSpec | AveragedSpec) -> dict[str, Any]:
@@ -302,7 +303,7 @@ def env_options(spec: FullSpec | AveragedSpec) -> dict[str, Any]:
     """
     options = {"integration": spec.integration} if isinstance(spec, FullSpec) else {
         "scaling": spec.scaling, "check_scaling_params": spec.check_params, "transitions": spec.transitions,
-        "ripple_offsets": spec.ripple_offsets}
+        "ripple_offsets": spec.ripple_offsets, "fast_step": spec.fast_step}
     return options
 
 

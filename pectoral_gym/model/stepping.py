@@ -38,7 +38,8 @@ from pectoral_gym.model.dynamics import (
     rate_bound,
     rate_constants,
 )
-from pectoral_gym.model.fast_step import FAST_ACCURATE_STEP, fast_body_accel
+from pectoral_gym.model.fast_step import FAST_ACCURATE_STEP, exponential_substep
+from pectoral_gym.model.fast_step import rotate as _rotate
 from pectoral_gym.model.jit import PARALLEL_MIN_ITEMS, kernel_pair, kernel_variant, njit
 from pectoral_gym.model.ktables import KTables, as_tables
 from pectoral_gym.model.params import BodyCoefficients, Coef
@@ -57,27 +58,8 @@ _EPS = 1e-12
 ACCURATE_STEP = 1.5  # averaged model: h * rate bound; RK4 is stable to 2.78, this keeps transients accurate
 
 
-@njit
-def _rotate(c0, s0, delta):
-    """``cos, sin`` of ``psi0 + delta`` from those of ``psi0``.
-
-    RK4 stages move the heading by at most ``h |omega|``, a small angle: a
-    short series (error below 1e-12 for ``|delta| <= 0.1``) replaces three of
-    the four ``sin/cos`` pairs per step.
-    """
-    if abs(delta) > 0.1:
-        cd, sd = math.cos(delta), math.sin(delta)
-    else:
-        d2 = delta * delta
-        cd = 1.0 - d2 * (0.5 - d2 * (1.0 / 24.0 - d2 / 720.0))
-        sd = delta * (1.0 - d2 * (1.0 / 6.0 - d2 / 120.0))
-    return c0 * cd - s0 * sd, s0 * cd + c0 * sd
-
-
-@njit(inline="always")  # (inlined: ``fast`` arrives as a literal from some callers, which would specialise it)
-def _accel(u, v, w, f: Forcing, b: BodyCoefficients, osc, fast):
-    if fast:
-        return fast_body_accel(u, v, w, f, b, osc)
+@njit(inline="always")
+def _accel(u, v, w, f: Forcing, b: BodyCoefficients, osc):
     return body_accel(u, v, w, f.fx, f.fy, f.tau, b.m1, b.m2, b.J3, b.c1, b.c2, b.c4, osc)
 
 
@@ -89,37 +71,32 @@ def _rk4(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: Bod
     (:func:`pectoral_gym.model.dynamics.body_accel`); 0 for the full model.
     """
     p0 = state[i, State.PSI]
-    _rk4_from(state, integral, i, h, f0, fm, f1, body, osc, math.cos(p0), math.sin(p0), False)
+    _rk4_from(state, integral, i, h, f0, fm, f1, body, osc, math.cos(p0), math.sin(p0))
 
 
 @njit(inline="always")
-def _rk4_from(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: BodyCoefficients, osc, c0, s0,
-              fast):
-    """:func:`_rk4` from the heading's ``c0, s0 = cos, sin``; returns those of the heading at the step's end.
-
-    ``fast``: the accelerations of :func:`pectoral_gym.model.fast_step.fast_body_accel` (the averaged
-    model's fast step), else :func:`pectoral_gym.model.dynamics.body_accel`.
-    """
+def _rk4_from(state, integral, i, h, f0: Forcing, fm: Forcing, f1: Forcing, body: BodyCoefficients, osc, c0, s0):
+    """:func:`_rk4` from the heading's ``c0, s0 = cos, sin``; returns those of the heading at the step's end."""
     x0, y0, p0 = state[i, State.X], state[i, State.Y], state[i, State.PSI]
     u0, v0, w0 = state[i, State.VX], state[i, State.VY], state[i, State.OMEGA]
     # stage 1
     k1x, k1y, k1p = u0 * c0 - v0 * s0, u0 * s0 + v0 * c0, w0
-    k1u, k1v, k1w = _accel(u0, v0, w0, f0, body, osc, fast)
+    k1u, k1v, k1w = _accel(u0, v0, w0, f0, body, osc)
     # stage 2
     u2, v2, w2 = u0 + 0.5 * h * k1u, v0 + 0.5 * h * k1v, w0 + 0.5 * h * k1w
     c, s = _rotate(c0, s0, 0.5 * h * k1p)
     k2x, k2y, k2p = u2 * c - v2 * s, u2 * s + v2 * c, w2
-    k2u, k2v, k2w = _accel(u2, v2, w2, fm, body, osc, fast)
+    k2u, k2v, k2w = _accel(u2, v2, w2, fm, body, osc)
     # stage 3
     u3, v3, w3 = u0 + 0.5 * h * k2u, v0 + 0.5 * h * k2v, w0 + 0.5 * h * k2w
     c, s = _rotate(c0, s0, 0.5 * h * k2p)
     k3x, k3y, k3p = u3 * c - v3 * s, u3 * s + v3 * c, w3
-    k3u, k3v, k3w = _accel(u3, v3, w3, fm, body, osc, fast)
+    k3u, k3v, k3w = _accel(u3, v3, w3, fm, body, osc)
     # stage 4
     u4, v4, w4 = u0 + h * k3u, v0 + h * k3v, w0 + h * k3w
     c, s = _rotate(c0, s0, h * k3p)
     k4x, k4y, k4p = u4 * c - v4 * s, u4 * s + v4 * c, w4
-    k4u, k4v, k4w = _accel(u4, v4, w4, f1, body, osc, fast)
+    k4u, k4v, k4w = _accel(u4, v4, w4, f1, body, osc)
     h6 = h / 6.0
     state[i, State.X] = x0 + h6 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x)
     state[i, State.Y] = y0 + h6 * (k1y + 2.0 * k2y + 2.0 * k3y + k4y)
@@ -190,8 +167,9 @@ def _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc
     """Integrate fish ``i`` over a segment of constant forcing.
 
     Equal RK4 substeps to the segment's end, re-sized as the state's stiffness changes (:func:`_stable_step`,
-    ``h * rate <= accurate``). ``fast``: the averaged model's fast step (:mod:`pectoral_gym.model.fast_step`),
-    whose heading's ``cos, sin`` are carried from substep to substep.
+    ``h * rate <= accurate``). ``fast``: the averaged model's fast step's substeps instead
+    (:func:`pectoral_gym.model.fast_step.exponential_substep`, which sizes each itself; the heading's ``cos, sin``
+    are carried from substep to substep).
     """
     t_seg = seg
     driven_omega, driven_speed = _driven(body, forcing)
@@ -199,11 +177,12 @@ def _constant_forcing_segment(state, integral, i, seg, body, rates, forcing, osc
     if fast:
         c, s = math.cos(state[i, State.PSI]), math.sin(state[i, State.PSI])
     while t_seg > _EPS:
-        h_ok = _stable_step(state, i, rates, driven_omega, driven_speed, osc, dt_max, accurate)
-        h = t_seg / max(1, int(math.ceil(t_seg / h_ok - 1e-9)))
         if fast:
-            c, s = _rk4_from(state, integral, i, h, forcing, forcing, forcing, body, osc, c, s, True)
+            c, s, h = exponential_substep(state, integral, i, t_seg, forcing, body, rates, osc, driven_omega,
+                                          driven_speed, c, s, dt_max, accurate)
         else:
+            h_ok = _stable_step(state, i, rates, driven_omega, driven_speed, osc, dt_max, accurate)
+            h = t_seg / max(1, int(math.ceil(t_seg / h_ok - 1e-9)))
             _rk4(state, integral, i, h, forcing, forcing, forcing, body, osc)
         t_seg -= h
 
