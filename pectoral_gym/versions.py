@@ -143,9 +143,6 @@ ENV_VERSIONS: MappingProxyType[str, EnvVersion] = MappingProxyType({
     # full model did not change: its v2 is its v1, registered so that the two ids of a version go together.
     "PectoralFish-Full-v2": EnvVersion(_FULL_V1.model, _FULL_V1.robot, same_as="PectoralFish-Full-v1"),
     "PectoralFish-Averaged-v2": EnvVersion(AVERAGED, ROBOT),
-    # v3: v2's model with its fast step (numerically different, validated against the same guards; the same
-    # observations). The full model did not change: evaluate on Full-v2.
-    "PectoralFish-Averaged-v3": EnvVersion(AVERAGED.replace(fast_step=True), ROBOT),
 })
 for _env_id, _version in ENV_VERSIONS.items():  # the relations the names state hold
     if _version.same_as is not None and ENV_VERSIONS[_version.same_as].settings() != _version.settings():

@@ -212,12 +212,6 @@ class PectoralFishEnv(gym.Env):
       latest id of its model (:data:`pectoral_gym.versions.LATEST`; it built ``EnvConfig``'s defaults, v0's,
       while the model classes and specs default to the latest averaged model); the ids' settings live in one
       table, :data:`pectoral_gym.versions.ENV_VERSIONS`.
-    * v3: ``PectoralFish-Averaged-v3`` is ``PectoralFish-Averaged-v2`` with ``fast_step=True``: the averaged
-      model's fast step (:mod:`pectoral_gym.model.fast_step`; the yaw damping's stiffness integrated exactly),
-      numerically different and about 1.7x cheaper per step, validated against the same guards (the fidelity
-      report, Table 3-4, the policy's transfer to the full model:
-      ``docs/notes/2026-12-07-fast-averaged-step.md``). The same spaces and observations; evaluate on
-      ``PectoralFish-Full-v2``. Every other setting is v2's.
     * v2: ``PectoralFish-Averaged-v2`` adds ``ripple_offsets=True``: the averaged model with both of its
       corrections, the model's own defaults (the beat-mean ripple offset, ``docs/model.md`` 3.8, on top of v1's
       transitional half-strokes); the PPO recipe trained on it reaches more goals on the full model for every
