@@ -92,8 +92,8 @@ class EnvConfig:
             ``PectoralFish-Averaged-v2``, which the PPO recipe trains on.
         fast_step: Averaged model only: its fast step (:mod:`pectoral_gym.model.fast_step`: the yaw damping's
             stiffness integrated exactly, bounded-range function approximations), numerically different from the
-            default step and about 1.6x faster (``docs/model.md`` section 6). Off by default; on in
-            ``PectoralFish-Averaged-v3``.
+            default step and about 1.6x faster (``docs/model.md`` section 6). Off by default and in every registered
+            id: ``gym.make("PectoralFish-Averaged-v2", fast_step=True)``.
         integration: Full model only: ``"reference"`` (converged steps) or ``"fast"`` (8 RK4 substeps
             per half-stroke, at most 0.05 s; :data:`~pectoral_gym.model.models.FULL_INTEGRATION`; its speed
             and accuracy against the reference: ``docs/model.md`` section 6).

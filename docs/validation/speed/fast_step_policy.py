@@ -3,7 +3,7 @@
 ``python docs/validation/speed/fast_step_policy.py RUN_DIR [EPISODES]`` (default 500): the policy of a training
 run (``load_policy``), evaluated as the demo evaluates it (``agents.training.evaluate``, goal task, episode
 ``k`` seeded ``10000 + k``) on the averaged env, whose model's ``fast_step`` is set after the env is built
-(``PectoralFish-Averaged-v2`` with it on is ``PectoralFish-Averaged-v3``), and on ``PectoralFish-Full-v2`` (the
+(as ``gym.make("PectoralFish-Averaged-v2", fast_step=True)`` builds it), and on ``PectoralFish-Full-v2`` (the
 transfer, which the option does not touch).
 Prints success rates with their 95 % bootstrap intervals and the mean time to goal.
 """
