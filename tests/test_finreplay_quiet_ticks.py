@@ -7,10 +7,10 @@ setpoint, :func:`~pectoral_gym.model.finrules.apply_firmware` and one model call
 """
 
 import copy
-import math
 
 import numpy as np
 import pytest
+from test_finrules_latch_memo import _play, _script
 
 from pectoral_gym.model import finreplay, segment_runs, strokes
 from pectoral_gym.model.finreplay import FinReplay
@@ -39,43 +39,6 @@ def _state(replay: FinReplay) -> bytes:
                       firmware.setpoint.tobytes(), bytes([firmware.running, firmware.halt])])
 
 
-def _beats(rng: np.random.Generator) -> np.ndarray:
-    """Random ``(2, 4)`` commands, some outside the servo limits (clipped, stretched), some of still fins."""
-    beats = np.column_stack([rng.uniform(0.0, math.pi, 2), rng.uniform(0.0, 1.4, 2), rng.uniform(0.15, 4.5, 2),
-                             rng.uniform(0.2, 8.0, 2)])
-    beats[rng.random(2) < 0.2, 1] = 0.0  # a fin held still
-    return beats
-
-
-def _play(replay: FinReplay, seed: int, seconds: float) -> list[bytes]:
-    """Seeded commands (some repeated), stops, latch reports, look-aheads from checkpoints and advances."""
-    rng = np.random.default_rng(seed)
-    states, t, last = [], 0.0, _beats(rng)
-    while t < seconds:
-        t += float(rng.choice([0.003, 0.01, 0.037, 0.05, 0.1, 0.25, 0.5]))
-        kind = rng.random()
-        if kind < 0.2:
-            last = last if rng.random() < 0.2 else _beats(rng)
-            replay.command(t, last)
-        elif kind < 0.25:
-            replay.stop(t)
-        elif kind < 0.31:
-            beat = _beats(rng)[0]  # as a robot reports it: a pattern within the fin's range
-            beat[1] = min(beat[1], beat[0], math.pi - beat[0])
-            turn, power = float(rng.uniform(0.3, 2.8)), bool(rng.random() < 0.5)
-            replay.latch(t, int(rng.integers(2)), beat, turn, power)
-        elif kind < 0.37:  # a provisional stretch, then the replay put back (as ShadowFins.view does)
-            saved = replay.checkpoint()
-            replay.command(t, _beats(rng))
-            replay.advance(t + float(rng.uniform(0.05, 0.6)))
-            states.append(_state(replay))
-            replay.restore(saved)
-        else:
-            replay.advance(t)
-        states.append(_state(replay))
-    return states
-
-
 @pytest.mark.parametrize("seed", range(3))
 @pytest.mark.parametrize("limits", [ServoLimits(), ServoLimits(max_speed=8.0, max_rate=(0.5, 0.4, 0.6, 2.0))])
 def test_quiet_ticks_in_one_call_run_the_fins_as_tick_by_tick(seed, limits, monkeypatch):
@@ -90,8 +53,9 @@ def test_quiet_ticks_in_one_call_run_the_fins_as_tick_by_tick(seed, limits, monk
 
     monkeypatch.setattr(finreplay, "run_quiet_ticks", counted)
     config = FirmwareConfig(limits=limits)
-    reference = _play(_TickByTick(None, config), seed, 20.0)
-    fast = _play(FinReplay(None, config), seed, 20.0)
+    events = _script(seed, 20.0)  # commands, stops, latch reports, look-aheads from checkpoints, advances
+    reference = _play(_TickByTick(None, config), events, _state)
+    fast = _play(FinReplay(None, config), events, _state)
     assert len(fast) == len(reference)
     for i, (mine, theirs) in enumerate(zip(fast, reference, strict=True)):
         assert mine == theirs, f"seed {seed}: the replays part at event {i}"

@@ -74,7 +74,8 @@ def _script(seed: int, seconds: float) -> list[tuple]:
     return events
 
 
-def _play(replay: FinReplay, events: list[tuple]) -> list[bytes]:
+def _play(replay: FinReplay, events: list[tuple], state=_state) -> list[bytes]:
+    """``state(replay)`` after each event (and the look-ahead's before it is put back)."""
     states = []
     for event in events:
         kind, t = event[0], event[1]
@@ -88,11 +89,11 @@ def _play(replay: FinReplay, events: list[tuple]) -> list[bytes]:
             saved = replay.checkpoint()
             replay.command(t, event[2])
             replay.advance(event[3])
-            states.append(_state(replay))
+            states.append(state(replay))
             replay.restore(saved)
         else:
             replay.advance(t)
-        states.append(_state(replay))
+        states.append(state(replay))
     return states
 
 
