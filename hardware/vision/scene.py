@@ -98,20 +98,6 @@ def _pixel_grid(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
     return tank, inside
 
 
-@functools.lru_cache(maxsize=8)
-def _inverse_parts(camera: CameraModel) -> tuple[np.ndarray, np.ndarray]:
-    """The pixel-to-tank homography's first two columns, transposed ``(2, 3)`` and contiguous, and its third.
-
-    A contiguous copy of ``inverse[:, :2].T``, the operand of :func:`cameramodel._apply_homography`'s product:
-    the same values, so the same product (``tests/test_scene_kernels.py``), without numpy's copy of a strided one.
-    """
-    columns = np.ascontiguousarray(camera.inverse[:, :2].T)
-    offset = np.ascontiguousarray(camera.inverse[:, 2])
-    columns.setflags(write=False)
-    offset.setflags(write=False)
-    return columns, offset
-
-
 def _inside_tank(tank: np.ndarray) -> np.ndarray:
     return (tank[..., 0] >= 0) & (tank[..., 0] <= TANK_LENGTH) & (tank[..., 1] >= 0) & (tank[..., 1] <= TANK_WIDTH)
 
@@ -191,6 +177,12 @@ def _patch_boxes(
     return boxes
 
 
+@functools.lru_cache(maxsize=16)
+def _whole_palette(conditions: SceneConditions) -> bool:
+    """Whether the scene's palette is whole (:func:`_whole`), once per conditions."""
+    return _whole(_palette(conditions)[0])
+
+
 def _whole(colours: np.ndarray) -> bool:
     """Whether every channel value is a whole number in [0, 255]."""
     return bool(np.all((colours >= 0) & (colours <= 255) & (colours == np.floor(colours))))
@@ -214,11 +206,12 @@ def _render_patch(
     count = paint_centres(_pixel_grid(camera)[0], v0, u0, height, width, shapes, occluders, index, opaque, palette,
                           colour, edge)
     if count:
-        # pixel_to_tank's homography: numpy's matrix product (its bits), its sums and quotients in the kernel
-        columns, offset = _inverse_parts(camera)
-        homogeneous = sample_points(edge, count, u0, v0, _SAMPLE_OFFSETS) @ columns
-        labels = paint_samples(homogeneous, offset, _SUPERSAMPLE**2, shapes, occluders, index)
-        if _whole(palette):
+        # pixel_to_tank's homography: its matrix product in numpy, with the same operands (a contiguous copy of
+        # the strided one can take another BLAS path and round differently), its sums and quotients in the kernel
+        inverse = camera.inverse
+        homogeneous = sample_points(edge, count, u0, v0, _SAMPLE_OFFSETS) @ inverse[:, :2].T
+        labels = paint_samples(homogeneous, inverse[:, 2], _SUPERSAMPLE**2, shapes, occluders, index)
+        if _whole_palette(conditions):
             average_whole(labels, palette, edge, colour)  # sums of whole colours: exact in any order
         else:
             colour[edge[:count, 0], edge[:count, 1]] = palette[labels].mean(axis=1)
@@ -355,5 +348,7 @@ def _render_noisy(
     for box in _patch_boxes(pose, camera, conditions):
         u0, v0, u1, v1 = box
         patch = _render_patch(box, pose, camera, conditions).astype(np.float32)
-        frame[v0:v1, u0:u1] = cv2.add(patch, noise[v0:v1, u0:u1], dtype=cv2.CV_8U)
+        window = frame[v0:v1, u0:u1]
+        if cv2.add(patch, noise[v0:v1, u0:u1], dst=window, dtype=cv2.CV_8U) is not window:  # in place, or copied
+            frame[v0:v1, u0:u1] = cv2.add(patch, noise[v0:v1, u0:u1], dtype=cv2.CV_8U)
     return frame

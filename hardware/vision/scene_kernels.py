@@ -70,9 +70,10 @@ def paint_centres(grid: np.ndarray, v0: int, u0: int, height: int, width: int, s
     many rows of ``edge`` it wrote.
     """
     centres = np.empty((height + 2, width + 2), dtype=np.uint8)
+    points = grid[v0:v0 + height + 2, u0:u0 + width + 2]  # indices from 0: no negative-index wrap tests
     for r in range(height + 2):
         for c in range(width + 2):
-            centres[r, c] = _paint(grid[v0 + r, u0 + c, 0], grid[v0 + r, u0 + c, 1], shapes, occluders, index)
+            centres[r, c] = _paint(points[r, c, 0], points[r, c, 1], shapes, occluders, index)
     count = 0
     for r in range(height):
         for c in range(width):
