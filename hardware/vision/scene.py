@@ -120,8 +120,8 @@ def _palette(conditions: SceneConditions) -> tuple[np.ndarray, np.ndarray, np.nd
             distinct.append(len(index))
             same = [len(distinct) - 1]
         index.append(same[0])
-    if len(distinct) > 255:
-        raise ValueError(f"a scene of at most 255 distinct colours, got {len(distinct)}")
+    if len(distinct) > 256:  # labels are one byte
+        raise ValueError(f"a scene of at most 256 distinct colours, got {len(distinct)}")
     palette = colours[distinct]
     opaque = ~np.isnan(palette).any(axis=1)
     labels = np.array(index, dtype=np.uint8)
@@ -349,6 +349,7 @@ def _render_noisy(
         u0, v0, u1, v1 = box
         patch = _render_patch(box, pose, camera, conditions).astype(np.float32)
         window = frame[v0:v1, u0:u1]
-        if cv2.add(patch, noise[v0:v1, u0:u1], dst=window, dtype=cv2.CV_8U) is not window:  # in place, or copied
-            frame[v0:v1, u0:u1] = cv2.add(patch, noise[v0:v1, u0:u1], dtype=cv2.CV_8U)
+        added = cv2.add(patch, noise[v0:v1, u0:u1], dst=window, dtype=cv2.CV_8U)
+        if added is not window:  # OpenCV wrote into an array of its own instead of the frame's window
+            window[...] = added
     return frame
