@@ -12,12 +12,14 @@ from __future__ import annotations
 
 import functools
 import math
+import subprocess
+import sys
 
 import cv2
 import numpy as np
 import pytest
 
-from pectoral_gym.hardware.vision import scene
+from pectoral_gym.hardware.vision import scene, scene_kernels
 from pectoral_gym.hardware.vision.cameramodel import CameraModel
 from pectoral_gym.hardware.vision.scene import Occluder, SceneConditions, render_frame
 from pectoral_gym.hardware.vision.scene_kernels import paint_samples
@@ -176,6 +178,17 @@ def test_a_nan_colour_gives_the_numpy_patch():
         assert np.array_equal(ours, _reference_patch(box, (1.0, 0.5, 0.3), CAMERAS[0], conditions), equal_nan=True)
 
 
+def _unit_offset():
+    """(0, 0, 1) as the renderer passes a homography's third column: a strided read-only view (one kernel type)."""
+    matrix = np.zeros((3, 3))
+    matrix[2, 2] = 1.0
+    matrix.setflags(write=False)
+    return matrix[:, 2]
+
+
+_UNIT_OFFSET = _unit_offset()
+
+
 def test_the_painter_is_the_numpy_painter_at_points_around_every_shape():
     """Points strewn around the fish, densest at its reach (where the kernel stops testing the fish's shapes)."""
     rng = np.random.default_rng(17)
@@ -190,7 +203,7 @@ def test_the_painter_is_the_numpy_painter_at_points_around_every_shape():
         radius = np.concatenate([rng.uniform(0, 0.12, 100_000), scene._REACH * (1 + rng.uniform(-1e-6, 1e-6, 100_000))])
         tank = np.stack([pose[0] + radius * np.cos(angle), pose[1] + radius * np.sin(angle)], axis=-1)
         homogeneous = np.concatenate([tank, np.zeros((len(tank), 1))], axis=1)  # (tx + 0) / (0 + 1) is tx
-        ours = paint_samples(homogeneous, np.array([0.0, 0.0, 1.0]), 1, *scene._shapes(pose, conditions), index)
+        ours = paint_samples(homogeneous, _UNIT_OFFSET, 1, *scene._shapes(pose, conditions), index)
         ref = _reference_labels(tank, pose, conditions, index)
         assert np.array_equal(ours[:, 0], ref)
         assert len(np.unique(ref)) >= 3  # the points reach floor, body and a marker at least
@@ -206,3 +219,23 @@ def test_the_reach_holds_every_shape_of_the_fish():
         radius = scene._REACH / (1 + 1e-9) * (1 + 1e-12)
         tank = np.stack([0.5 + radius * np.cos(angle), 0.4 + radius * np.sin(angle)], axis=-1)
         assert np.all(_reference_labels(tank, (0.5, 0.4, psi), conditions, index) == index[1])
+
+
+KERNELS = ("paint_centres", "sample_points", "paint_samples", "average_whole", "copy_runs")
+
+
+def test_warm_up_alone_compiles_every_kernel():
+    """In a fresh process (numba's cache may hold them: loading them counts), ``warm_up`` and nothing else."""
+    code = ("from pectoral_gym.hardware.vision import scene, scene_kernels as k; scene.warm_up(); "
+            f"print([len(getattr(k, name).dispatcher.signatures) for name in {KERNELS!r}])")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    assert result.stdout.split("\n")[-2] == str([1] * len(KERNELS))
+
+
+def test_frames_after_warm_up_compile_nothing_more():
+    """Frames of other cameras and conditions after ``warm_up`` reuse its kernels (one signature each)."""
+    scene.warm_up()
+    for camera, pose, conditions in _cases(6, seed=23):
+        render_frame(pose, camera, np.random.default_rng(0), conditions)
+    for name in KERNELS:
+        assert len(getattr(scene_kernels, name).dispatcher.signatures) == 1, name

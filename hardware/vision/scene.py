@@ -39,6 +39,7 @@ __all__ = [
     "Occluder",
     "SceneConditions",
     "render_frame",
+    "warm_up",
 ]
 
 BODY_LENGTH = FishParams().body_length  # m, drawn ellipse length (one source: FishParams)
@@ -262,6 +263,16 @@ def render_frame(
             and not conditions.glare and conditions.blur_sigma == 0):
         return _render_noisy(pose, camera, rng, conditions)
     return _render_general(pose, camera, rng, conditions)
+
+
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the renderer's kernels now, not at a camera thread's first frame.
+
+    Renders one noisy frame of a small camera with the fish's edges in view: every kernel is called with the
+    argument types of any frame (a fresh install compiles them in about 2 s of CPU).
+    """
+    camera = CameraModel.from_corners(64, 48, [[2, 46], [62, 46], [62, 2], [2, 2]])
+    render_frame((TANK_LENGTH / 2, TANK_WIDTH / 2, 0.3), camera, np.random.default_rng(0), SceneConditions())
 
 
 def _render_general(
