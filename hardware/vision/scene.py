@@ -20,8 +20,15 @@ import functools
 import cv2
 import numpy as np
 
-from pectoral_gym.hardware.vision.cameramodel import CameraModel, _apply_homography
+from pectoral_gym.hardware.vision.cameramodel import CameraModel
 from pectoral_gym.hardware.vision.scene_conditions import OCCLUDER_BGR, Occluder, SceneConditions
+from pectoral_gym.hardware.vision.scene_kernels import (
+    average_whole,
+    copy_runs,
+    paint_centres,
+    paint_samples,
+    sample_points,
+)
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH, FishParams
 
 __all__ = [
@@ -32,6 +39,7 @@ __all__ = [
     "Occluder",
     "SceneConditions",
     "render_frame",
+    "warm_up",
 ]
 
 BODY_LENGTH = FishParams().body_length  # m, drawn ellipse length (one source: FishParams)
@@ -46,6 +54,7 @@ WALL_BGR = (70, 70, 75)  # dark tank walls / outside the swimming area
 BODY_BGR = (80, 95, 105)  # dark grey-olive body
 
 _SUPERSAMPLE = 4  # samples per pixel side for anti-aliased shapes
+_SAMPLE_OFFSETS = (np.arange(_SUPERSAMPLE) + 0.5) / _SUPERSAMPLE - 0.5  # of the samples from a pixel's centre [px]
 
 
 @functools.lru_cache(maxsize=4)
@@ -95,8 +104,12 @@ def _inside_tank(tank: np.ndarray) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=16)
-def _palette(conditions: SceneConditions) -> tuple[np.ndarray, tuple[int, ...]]:
-    """The scene's distinct colours ``(k, 3)`` and, per painting step of :func:`_labels`, its colour's index."""
+def _palette(conditions: SceneConditions) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The scene's distinct colours ``(k, 3)``, per painting step its colour's index (uint8), and which are colours.
+
+    The painting steps are :mod:`scene_kernels`'s (wall, floor, body, front marker, its strip, back marker, its
+    strip, the occluders); a palette entry with a NaN channel is no colour (``False``: never uniform).
+    """
     steps = [WALL_BGR, FLOOR_BGR, BODY_BGR, conditions.red_bgr, OCCLUDER_BGR, conditions.blue_bgr, OCCLUDER_BGR]
     steps += [occluder.bgr for occluder in conditions.occluders]
     colours = np.array(steps, dtype=float)
@@ -108,36 +121,40 @@ def _palette(conditions: SceneConditions) -> tuple[np.ndarray, tuple[int, ...]]:
             distinct.append(len(index))
             same = [len(distinct) - 1]
         index.append(same[0])
+    if len(distinct) > 256:  # labels are one byte
+        raise ValueError(f"a scene of at most 256 distinct colours, got {len(distinct)}")
     palette = colours[distinct]
-    palette.setflags(write=False)
-    return palette, tuple(index)
+    opaque = ~np.isnan(palette).any(axis=1)
+    labels = np.array(index, dtype=np.uint8)
+    for array in (palette, labels, opaque):
+        array.setflags(write=False)
+    return palette, labels, opaque
 
 
-def _labels(tank: np.ndarray, pose: tuple[float, float, float], conditions: SceneConditions,
-            index: tuple[int, ...], inside: np.ndarray | None = None) -> np.ndarray:
-    """Palette index (uint8) of the scene's colour at tank points ``(..., 2)`` (painter's algorithm, floor first).
+# Farthest a point of the fish's shapes lies from its centre (body, marker discs, strips up to 2.5 marker radii to
+# the side), with a margin of 1e-9 over the rounding of the body-frame rotation: a point farther is in none of them.
+_REACH = (1 + 1e-9) * max(
+    BODY_LENGTH / 2, BODY_WIDTH / 2,
+    *(np.hypot(abs(offset) + 1.5 * MARKER_RADIUS, 2.5 * MARKER_RADIUS) for offset in (FRONT_MARKER_OFFSET,
+                                                                                   BACK_MARKER_OFFSET)),
+)
 
-    One byte per point instead of a colour triple: the same tests in the same order as colours were painted.
+
+def _shapes(pose: tuple[float, float, float], conditions: SceneConditions) -> tuple[np.ndarray, np.ndarray]:
+    """The painter's scalars for :mod:`scene_kernels` (``SHAPE_FIELDS``) and its occluders ``(k, 3)``.
+
+    Each is computed as the numpy painter computed it (``cos``/``sin`` by numpy, squares by Python), so the
+    kernel's tests are the painter's, bit for bit.
     """
     x, y, psi = pose
-    tx, ty = tank[..., 0], tank[..., 1]
-    labels = np.full(tank.shape[:-1], index[0], dtype=np.uint8)
-    labels[_inside_tank(tank) if inside is None else inside] = index[1]
-    cos, sin = np.cos(psi), np.sin(psi)
-    dx, dy = tx - x, ty - y
-    bx, by = cos * dx + sin * dy, -sin * dx + cos * dy  # body-frame coordinates
-    labels[(bx / (BODY_LENGTH / 2)) ** 2 + (by / (BODY_WIDTH / 2)) ** 2 <= 1] = index[2]
-    for offset, step, hidden in (
-        (FRONT_MARKER_OFFSET, 3, conditions.front_occlusion),
-        (BACK_MARKER_OFFSET, 5, conditions.back_occlusion),
-    ):
-        labels[(bx - offset) ** 2 + by**2 <= MARKER_RADIUS**2] = index[step]
-        if hidden > 0:  # a dark strip over the marker from its left side
-            strip = (np.abs(bx - offset) <= 1.5 * MARKER_RADIUS) & (by >= MARKER_RADIUS * (1 - 2 * hidden))
-            labels[strip & (by <= 2.5 * MARKER_RADIUS)] = index[step + 1]
-    for step, occluder in enumerate(conditions.occluders, start=7):
-        labels[(tx - occluder.x) ** 2 + (ty - occluder.y) ** 2 <= occluder.radius**2] = index[step]
-    return labels
+    front, back = conditions.front_occlusion, conditions.back_occlusion
+    shapes = np.array([
+        x, y, np.cos(psi), np.sin(psi), BODY_LENGTH / 2, BODY_WIDTH / 2, TANK_LENGTH, TANK_WIDTH,
+        FRONT_MARKER_OFFSET, BACK_MARKER_OFFSET, MARKER_RADIUS**2, 1.5 * MARKER_RADIUS, 2.5 * MARKER_RADIUS,
+        front, MARKER_RADIUS * (1 - 2 * front), back, MARKER_RADIUS * (1 - 2 * back), _REACH**2,
+    ], dtype=float)
+    occluders = np.array([(o.x, o.y, o.radius**2) for o in conditions.occluders], dtype=float).reshape(-1, 3)
+    return shapes, occluders
 
 
 def _patch_boxes(
@@ -161,6 +178,12 @@ def _patch_boxes(
     return boxes
 
 
+@functools.lru_cache(maxsize=16)
+def _whole_palette(conditions: SceneConditions) -> bool:
+    """Whether the scene's palette is whole (:func:`_whole`), once per conditions."""
+    return _whole(_palette(conditions)[0])
+
+
 def _whole(colours: np.ndarray) -> bool:
     """Whether every channel value is a whole number in [0, 255]."""
     return bool(np.all((colours >= 0) & (colours <= 255) & (colours == np.floor(colours))))
@@ -177,33 +200,22 @@ def _render_patch(
     """
     u0, v0, u1, v1 = box
     height, width = v1 - v0, u1 - u0
-    palette, index = _palette(conditions)
-    tank, inside = _pixel_grid(camera)
-    centres = _labels(tank[v0:v1 + 2, u0:u1 + 2], pose, conditions, index, inside[v0:v1 + 2, u0:u1 + 2])
-    inner = centres[1:-1, 1:-1]
-    # The palette's colours are distinct, so equal labels are equal colours (a NaN colour equals none: not uniform)
-    uniform = np.ones((height, width), dtype=bool) if np.all(palette == palette) else ~np.isnan(palette[inner]).any(-1)
-    for dv in (0, 1, 2):
-        for du in (0, 1, 2):
-            if dv != 1 or du != 1:
-                uniform &= centres[dv:dv + height, du:du + width] == inner
-    colour = np.take(palette, inner, axis=0)  # palette[inner], without fancy indexing's overhead (3x slower)
-    rows, cols = np.nonzero(~uniform)
-    if rows.size:
-        s = _SUPERSAMPLE
-        offsets = (np.arange(s) + 0.5) / s - 0.5
-        points = np.empty((rows.size, s * s, 2))  # sample (a, b) of a pixel at (u + offsets[b], v + offsets[a])
-        points[..., 0] = (cols + u0)[:, None] + np.tile(offsets, s)
-        points[..., 1] = (rows + v0)[:, None] + np.repeat(offsets, s)
-        # pixel_to_tank's homography without its checks (the points are finite by construction)
-        labels = _labels(_apply_homography(camera.inverse, points.reshape(-1, 2)), pose, conditions, index)
-        if _whole(palette):
-            # Sums of whole colours are exact in any order: counts @ palette is the samples' sum, bit for bit
-            counts = np.bincount(np.arange(labels.size) // (s * s) * len(palette) + labels, minlength=rows.size
-                                 * len(palette)).reshape(rows.size, len(palette))
-            colour[rows, cols] = (counts.astype(float) @ palette) / (s * s)
+    palette, index, opaque = _palette(conditions)
+    shapes, occluders = _shapes(pose, conditions)
+    colour = np.empty((height, width, 3))
+    edge = np.empty((height * width, 2), dtype=np.int64)
+    count = paint_centres(_pixel_grid(camera)[0], v0, u0, height, width, shapes, occluders, index, opaque, palette,
+                          colour, edge)
+    if count:
+        # pixel_to_tank's homography: its matrix product in numpy, with the same operands (a contiguous copy of
+        # the strided one can take another BLAS path and round differently), its sums and quotients in the kernel
+        inverse = camera.inverse
+        homogeneous = sample_points(edge, count, u0, v0, _SAMPLE_OFFSETS) @ inverse[:, :2].T
+        labels = paint_samples(homogeneous, inverse[:, 2], _SUPERSAMPLE**2, shapes, occluders, index)
+        if _whole_palette(conditions):
+            average_whole(labels, palette, edge, colour)  # sums of whole colours: exact in any order
         else:
-            colour[rows, cols] = palette[labels.reshape(rows.size, s * s)].mean(axis=1)
+            colour[edge[:count, 0], edge[:count, 1]] = palette[labels].mean(axis=1)
     return colour
 
 
@@ -253,6 +265,16 @@ def render_frame(
     return _render_general(pose, camera, rng, conditions)
 
 
+def warm_up() -> None:
+    """Compile (or load from numba's cache) the renderer's kernels now, not at a camera thread's first frame.
+
+    Renders one noisy frame of a small camera with the fish's edges in view: every kernel is called with the
+    argument types of any frame (a fresh install compiles them in about 2 s of CPU).
+    """
+    camera = CameraModel.from_corners(64, 48, [[2, 46], [62, 46], [62, 2], [2, 2]])
+    render_frame((TANK_LENGTH / 2, TANK_WIDTH / 2, 0.3), camera, np.random.default_rng(0), SceneConditions())
+
+
 def _render_general(
     pose: tuple[float, float, float], camera: CameraModel, rng: np.random.Generator, conditions: SceneConditions
 ) -> np.ndarray:
@@ -288,12 +310,13 @@ def _noise_window(image: np.ndarray, rng: np.random.Generator, noise_std: float)
 
 
 @functools.lru_cache(maxsize=2)
-def _noisy_backgrounds(camera: CameraModel, noise_std: float) -> tuple[list[np.ndarray], list[list[np.ndarray]]]:
+def _noisy_backgrounds(camera: CameraModel, noise_std: float) -> tuple[np.ndarray, list[np.ndarray]]:
     """Each colour of the background plus the whole noise bank, rounded to uint8, and where that colour is.
 
-    Returns ``(masks, tables)``: ``masks[k]`` (H, W, 3) uint8 marks the pixels of the background's colour ``k``;
-    ``tables[k][p][j]`` is colour ``k``'s channel ``(j - p) % 3`` plus noise value ``j`` as a frame rounds it,
-    so a frame whose noise window starts at ``start`` reads its background from ``tables[k][start % 3]``.
+    Returns ``(runs, tables)``: ``runs`` ``(r, 3)`` are the flat frame's byte ranges ``[first, end)`` of one
+    background colour ``k`` each; ``tables[p][k, j]`` is colour ``k``'s channel ``(j - p) % 3`` plus noise value
+    ``j`` as a frame rounds it, so a frame whose noise window starts at ``start`` reads its background from
+    ``tables[start % 3]``.
     """
     background = _background(camera)
     pixels = background.reshape(-1, 3)
@@ -302,13 +325,19 @@ def _noisy_backgrounds(camera: CameraModel, noise_std: float) -> tuple[list[np.n
     codes = (pixels[:, 0].astype(np.int64) << 16) | (pixels[:, 1].astype(np.int64) << 8) | pixels[:, 2].astype(np.int64)
     _, first, inverse = np.unique(codes, return_index=True, return_inverse=True)
     colours = pixels[first]
+    inverse = inverse.reshape(-1)
+    starts = np.flatnonzero(np.diff(inverse, prepend=-1))  # the first pixel of each run of one colour
+    runs = np.stack([3 * starts, 3 * np.append(starts[1:], inverse.size), inverse[starts]], axis=1).astype(np.int64)
     scaled = _scaled_noise(background.size, noise_std)
-    masks, tables = [], []
+    tables = [np.empty((len(colours), scaled.size), dtype=np.uint8) for _ in range(3)]
     for k, colour in enumerate(colours):
-        masks.append(np.repeat((inverse.reshape(background.shape[:2]) == k)[..., None], 3, axis=2).astype(np.uint8))
         repeated = np.tile(colour, scaled.size // 3 + 2)
-        tables.append([cv2.add(repeated[-p % 3:-p % 3 + scaled.size], scaled, dtype=cv2.CV_8U) for p in range(3)])
-    return masks, tables
+        for p in range(3):
+            tables[p][k] = cv2.add(repeated[-p % 3:-p % 3 + scaled.size], scaled, dtype=cv2.CV_8U).reshape(-1)
+    runs.setflags(write=False)
+    for table in tables:
+        table.setflags(write=False)
+    return runs, tables
 
 
 def _render_noisy(
@@ -317,19 +346,21 @@ def _render_noisy(
     """:func:`render_frame` under even, nominal light without glare or blur: the same pixels in fewer passes.
 
     The background's pixels plus noise are read from tables rounded once per camera (:func:`_noisy_backgrounds`),
-    then each patch plus its noise is rounded and saturated to uint8 by OpenCV (half to even, as ``np.rint``).
+    one pass over the frame by its runs of one colour; then each patch plus its noise is rounded and saturated to
+    uint8 by OpenCV (half to even, as ``np.rint``).
     """
     background = _background(camera)
     size = background.size
     start = int(rng.integers(0, size))
-    masks, tables = _noisy_backgrounds(camera, float(conditions.noise_std))
-    window = slice(start, start + size)
-    frame = tables[0][start % 3][window].reshape(background.shape).copy()
-    for mask, table in zip(masks[1:], tables[1:], strict=True):
-        cv2.copyTo(table[start % 3][window].reshape(background.shape), mask, frame)
-    noise = _scaled_noise(size, float(conditions.noise_std))[window].reshape(background.shape)
+    runs, tables = _noisy_backgrounds(camera, float(conditions.noise_std))
+    frame = np.empty(background.shape, dtype=np.uint8)
+    copy_runs(tables[start % 3], runs, start, frame.reshape(-1))
+    noise = _scaled_noise(size, float(conditions.noise_std))[start:start + size].reshape(background.shape)
     for box in _patch_boxes(pose, camera, conditions):
         u0, v0, u1, v1 = box
         patch = _render_patch(box, pose, camera, conditions).astype(np.float32)
-        frame[v0:v1, u0:u1] = cv2.add(patch, noise[v0:v1, u0:u1], dtype=cv2.CV_8U)
+        window = frame[v0:v1, u0:u1]
+        added = cv2.add(patch, noise[v0:v1, u0:u1], dst=window, dtype=cv2.CV_8U)
+        if added is not window:  # OpenCV wrote into an array of its own instead of the frame's window
+            window[...] = added
     return frame
