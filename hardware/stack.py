@@ -77,7 +77,8 @@ class RobotStack:
     Attributes:
         link: The radio link.
         camera: The frame source (read by the supervisor's frame grabber).
-        tracker: Marker tracker (``track(frame)``).
+        tracker: Marker tracker (``track(frame, near=None)``, as
+            :class:`~pectoral_gym.hardware.vision.tracker.MarkerTracker`).
         observer: State observer (``reset``, ``update``, ``predict``).
         filter: The PC-side command filter (servo limits, rate limit).
         fin_replay: The fins replayed from the commands sent (``observe_fins``), else ``None``.

@@ -329,7 +329,7 @@ def test_a_tracker_that_raises_is_a_stop_with_the_reason():
         env.reset(seed=0)
         env.step(REST)
 
-        def broken(frame):
+        def broken(frame, near=None):
             raise ZeroDivisionError("bad blob")
 
         env.supervisor.tracker.track = broken

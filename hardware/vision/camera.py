@@ -22,7 +22,7 @@ import numpy as np
 from pectoral_gym.hardware.vision.cameramodel import CameraModel
 from pectoral_gym.hardware.vision.frames import CameraLostError, Frame, FrameSource, NewestSlot
 from pectoral_gym.hardware.vision.netcamera import FrameServer, NetworkCamera
-from pectoral_gym.hardware.vision.scene import SceneConditions, render_frame
+from pectoral_gym.hardware.vision.scene import SceneConditions, render_frame, warm_up
 
 __all__ = [
     "CameraLostError",
@@ -76,6 +76,7 @@ class EmulatedCamera:
         self._pose_rng = np.random.default_rng(None if seed is None else [int(seed), 1])
         self._last_timestamp: float | None = None
         self._closed = False
+        warm_up()  # the renderer's kernels compiled here, not at the camera thread's first frame
 
     @property
     def pose_noise(self) -> tuple[float, float]:
