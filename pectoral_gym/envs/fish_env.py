@@ -161,6 +161,7 @@ class PectoralFishEnv(gym.Env):
     | ``check_scaling_params`` | ``True`` |   | averaged only: raise if the K file is for other ``params`` |
     | ``transitions``   | ``False``        |      | averaged only: transitional-stroke forcing (docs/model.md 3.7) |
     | ``ripple_offsets``| ``False``        |      | averaged only: beat-mean ripple offset (docs/model.md 3.8)     |
+    | ``fast_step``     | ``False``        |      | averaged only: the fast step (docs/model.md section 6)         |
     | ``integration``   | ``"reference"``  |      | full only: ``"fast"``: fewer substeps (model.md 6)         |
     | ``observe_fins``  | ``False``        |      | observe each fin's half-stroke in progress (8 more entries) |
     | ``progress_weight`` | 10.0           | 1/m  | goal: reward per metre of approach |
