@@ -12,7 +12,7 @@ from pectoral_gym.hardware.vision.cameramodel import CameraModel
 from pectoral_gym.model.params import TANK_LENGTH, TANK_WIDTH
 
 if TYPE_CHECKING:
-    from pectoral_gym.hardware.vision.tracker import Blob, TrackResult
+    from pectoral_gym.hardware.vision.track_result import Blob, TrackResult
 
 __all__ = ["draw_overlay"]
 

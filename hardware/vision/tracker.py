@@ -21,7 +21,6 @@ import math
 import os
 import threading
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import cv2
 import numpy as np
@@ -31,6 +30,7 @@ from pectoral_gym.hardware.vision.fishbox import BOX_MARGIN, fish_box
 from pectoral_gym.hardware.vision.frames import Frame
 from pectoral_gym.hardware.vision.overlay import draw_overlay
 from pectoral_gym.hardware.vision.scene import BACK_MARKER_OFFSET, FRONT_MARKER_OFFSET, MARKER_RADIUS
+from pectoral_gym.hardware.vision.track_result import Blob, TrackResult
 
 __all__ = ["BOX_MARGIN", "Blob", "MarkerTracker", "TrackResult", "TrackerConfig", "draw_overlay", "fish_box"]
 
@@ -87,53 +87,6 @@ class TrackerConfig:
     def separation(self) -> float:
         """Nominal distance between the marker centres [m]."""
         return self.front_offset - self.back_offset
-
-
-class Blob(NamedTuple):
-    """A connected region of one marker colour.
-
-    Attributes:
-        pixel: Centroid (u, v) [px].
-        tank: Centroid on the tank plane (X, Y) [m].
-        area: Area [px].
-        area_ratio: Area over the expected marker area there.
-        elongation: Ratio of principal axes (>= 1).
-        reason: Why it is not a marker candidate ("" when it is).
-    """
-
-    pixel: tuple[float, float]
-    tank: tuple[float, float]
-    area: float
-    area_ratio: float
-    elongation: float
-    reason: str
-
-
-class TrackResult(NamedTuple):
-    """Outcome of tracking one frame; pose fields are NaN unless ``ok``.
-
-    Attributes:
-        ok: A pose was found.
-        x: Centre of mass X [m].
-        y: Centre of mass Y [m].
-        psi: Heading in (-pi, pi] [rad], back marker -> front marker.
-        confidence: 0..1, the smallest margin of marker size, roundness and spacing to their rejection
-            thresholds (1 nominal, 0 at a threshold); halved when a distractor of marker colour is in view.
-        timestamp: The frame's timestamp [s].
-        reason: Why not ok ("" when ok).
-        box: Pixel box ``(row0, row1, col0, col1)``, end exclusive, clipped to the image, that holds the
-            whole fish (:func:`fish_box` with :data:`BOX_MARGIN`); ``None`` unless ``ok``. The region
-            ``pectoral_gym.hardware.vision.framecheck.FrameCheck.check`` compares between frames.
-    """
-
-    ok: bool
-    x: float
-    y: float
-    psi: float
-    confidence: float
-    timestamp: float
-    reason: str
-    box: tuple[int, int, int, int] | None = None
 
 
 def _covariance(us: np.ndarray, vs: np.ndarray) -> np.ndarray:

@@ -36,11 +36,12 @@ from pectoral_gym.model.finrules import (
     force_latch,
     wire_beats,
 )
+from pectoral_gym.model.models import AveragedModel
 from pectoral_gym.model.params import FishParams
-from pectoral_gym.model.segment_runs import run_quiet_ticks
+from pectoral_gym.model.segment_runs import run_quiet_ticks, run_schedule
 from pectoral_gym.model.spec import FULL_REFERENCE
 
-__all__ = ["FinReplay"]
+__all__ = ["FinReplay", "warm_up"]
 
 
 class _ReplayedFirmware(FinState):
@@ -205,3 +206,19 @@ class FinReplay:
     def fins(self) -> np.ndarray:
         """``(1, 2, strokes.FIN_FIELDS)`` the replayed half-strokes in progress (:mod:`pectoral_gym.model.strokes`)."""
         return self.model.fins
+
+
+def warm_up() -> None:
+    """Compile (or load) the kernels the fins' replays and the liveness check's paths call, for the types they pass.
+
+    For the kernel bundle's build (:mod:`pectoral_gym.tools.kernel_bundle`), whose env steps do not reach them: a
+    replay running a command (the blade-element model's quiet ticks,
+    :func:`~pectoral_gym.model.segment_runs.run_quiet_ticks`) and one
+    :func:`~pectoral_gym.model.segment_runs.run_schedule` of each model (one fish, one snapshot).
+    """
+    replay = FinReplay()
+    replay.command(0.0, np.array([[0.0, 0.5, 1.0, 0.5], [0.0, 0.5, 1.0, 0.5]]))
+    replay.advance(1.5)
+    for model in (AveragedModel(n=1), FULL_REFERENCE.build(1, None)):
+        run_schedule(model, np.array([0.0]), model.fins[None].copy(), model.pending[None].copy(), 0.0,
+                     np.array([0.1, 0.2]))

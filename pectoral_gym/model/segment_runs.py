@@ -27,7 +27,7 @@ import numpy as np
 from pectoral_gym.model import forcing_cache, stepping, strokes
 from pectoral_gym.model.jit import kernel_variant, njit
 
-__all__ = ["run_quiet_ticks", "run_schedule", "warm_up"]
+__all__ = ["run_quiet_ticks", "run_schedule"]
 
 AVERAGED = True  # the model of a build (kernel_variant binds it): a constant to numba
 ADVANCE = stepping.advance_averaged_one  # the per-fish kernel of that model (kernel_variant binds it)
@@ -143,22 +143,3 @@ def run_quiet_ticks(model, target: float, chunk: float) -> None:
         model.state, model.fins, model.forcing_cache, model.pending, model.integral, model.coef, float(model.time),
         float(target), float(chunk), float(model.dt_max), float(model.min_substeps), int(model.mode),
         int(model.corrections), model.packed_tables)
-
-
-def warm_up() -> None:
-    """Compile (or load) the kernels the fins' replays and the liveness check call, for the types they pass.
-
-    For the kernel bundle's build (:mod:`pectoral_gym.tools.kernel_bundle`), whose first steps are an env's and do
-    not reach these kernels: a replay of the fins (:class:`~pectoral_gym.model.finreplay.FinReplay`, the quiet ticks
-    of the blade-element model) running a command, and one schedule of each model (one fish, one snapshot).
-    """
-    from pectoral_gym.model.finreplay import FinReplay  # (it imports this module)
-    from pectoral_gym.model.models import AveragedModel
-    from pectoral_gym.model.spec import FULL_REFERENCE
-
-    replay = FinReplay()
-    replay.command(0.0, np.array([[0.0, 0.5, 1.0, 0.5], [0.0, 0.5, 1.0, 0.5]]))
-    replay.advance(1.5)
-    for model in (AveragedModel(n=1), FULL_REFERENCE.build(1, None)):
-        run_schedule(model, np.array([0.0]), model.fins[None].copy(), model.pending[None].copy(), 0.0,
-                     np.array([0.1, 0.2]))

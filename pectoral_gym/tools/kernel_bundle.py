@@ -4,7 +4,7 @@
 cache and ``NUMBA_CPU_NAME=generic``, every kernel that the first :data:`STEPS` random steps (with the
 resets of ended episodes) of each registered fish env call, those of the latest ids' native vector
 envs at :data:`VECTOR_ENVS` envs (the parallel builds, the autoreset) and those of the robot stack's replays
-of the fins and liveness paths (:func:`pectoral_gym.model.segment_runs.warm_up`), and writes them into
+of the fins and liveness paths (:func:`pectoral_gym.model.finreplay.warm_up`), and writes them into
 ``pectoral_gym/data/kernels/`` (emptied first). Run it after
 an edit of the kernels' sources (a stale bundled kernel is never used: the kernel compiles instead)
 and before building a release.
@@ -72,9 +72,9 @@ for env_id in (LATEST_AVERAGED, LATEST_FULL):  # the parallel builds, and the au
     for _ in range(steps):
         envs.step(rng.uniform(-1.0, 1.0, (n, 8)).astype(np.float32))
     envs.close()
-from pectoral_gym.model import segment_runs
+from pectoral_gym.model import finreplay
 
-segment_runs.warm_up()  # the fins' replays and the liveness check's paths (the robot stack)
+finreplay.warm_up()  # the fins' replays and the liveness check's paths (the robot stack)
 saved = []
 if sys.argv[1] == "build":
     import gc
