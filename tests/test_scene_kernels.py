@@ -18,6 +18,7 @@ import sys
 import cv2
 import numpy as np
 import pytest
+from test_scene_patch import _cases as _patch_cases
 
 from pectoral_gym.hardware.vision import scene, scene_kernels
 from pectoral_gym.hardware.vision.cameramodel import CameraModel
@@ -134,21 +135,8 @@ def _reference_frame(pose, camera, rng, conditions):
     return frame
 
 
-def _cases(n, seed):
-    rng = np.random.default_rng(seed)
-    for k in range(n):
-        pose = (rng.uniform(-0.1, TANK_LENGTH + 0.1), rng.uniform(-0.1, TANK_WIDTH + 0.1), rng.uniform(-4, 4))
-        occluders = tuple(
-            Occluder(pose[0] + rng.uniform(-0.2, 0.2), pose[1] + rng.uniform(-0.2, 0.2), rng.uniform(0.005, 0.05),
-                     (RED, BLUE, scene.OCCLUDER_BGR, scene.BODY_BGR, (10.5, 20.25, 30.0))[rng.integers(5)])
-            for _ in range(rng.integers(0, 3))
-        )
-        conditions = SceneConditions(
-            noise_std=float(rng.choice([2.0, 0.0, 0.7, 40.0])),
-            front_occlusion=float(rng.choice([0.0, 0.3, 1.0])), back_occlusion=float(rng.choice([0.0, 0.6])),
-            occluders=occluders, red_bgr=(RED, (60, 40, 200.5), BLUE)[k % 3],
-        )
-        yield CAMERAS[k % 2], pose, conditions
+# the patch test's cases, with the sensor noise drawn too and the front marker fully hidden among them
+_cases = functools.partial(_patch_cases, noise_levels=[2.0, 0.0, 0.7, 40.0], front_occlusions=[0.0, 0.3, 1.0])
 
 
 def test_frames_are_the_numpy_renderers_byte_for_byte():

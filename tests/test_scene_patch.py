@@ -75,7 +75,9 @@ def _reference_patch(box, pose, camera, conditions):
     return colour
 
 
-def _cases(n, seed):
+def _cases(n, seed, noise_levels=None, front_occlusions=(0.0, 0.3)):
+    """``n`` seeded ``(camera, pose, conditions)``: poses in view, at the walls and half out, occluders of every
+    colour, marker strips, non-whole colours; the sensor noise drawn from ``noise_levels`` (None: the default)."""
     rng = np.random.default_rng(seed)
     red, blue = (40, 35, 205), (190, 90, 25)
     for k in range(n):
@@ -85,8 +87,9 @@ def _cases(n, seed):
                      (red, blue, scene.OCCLUDER_BGR, scene.BODY_BGR, (10.5, 20.25, 30.0))[rng.integers(5)])
             for _ in range(rng.integers(0, 3))
         )
+        noise = {} if noise_levels is None else {"noise_std": float(rng.choice(noise_levels))}
         conditions = SceneConditions(
-            front_occlusion=float(rng.choice([0.0, 0.3])), back_occlusion=float(rng.choice([0.0, 0.6])),
+            **noise, front_occlusion=float(rng.choice(front_occlusions)), back_occlusion=float(rng.choice([0.0, 0.6])),
             occluders=occluders, red_bgr=((40, 35, 205), (60, 40, 200.5), (190, 90, 25))[k % 3],
         )
         yield CAMERAS[k % 2], pose, conditions

@@ -363,8 +363,7 @@ class PectoralFishEnv(gym.Env):
     def step(self, action):
         """Advance one control period; returns ``(observation, reward, terminated, truncated, info)``."""
         self._action_row[...] = action  # the core's own buffer: its one-call step (envs.fused)
-        bad = self._buffer_step()
-        if bad >= 0:
+        if (bad := self._buffer_step()) >= 0:
             self.core.raise_non_finite(bad)
         o = self._out_row
         info = self._row_info(o)  # as _info(), inlined on this hot path
@@ -382,7 +381,6 @@ class PectoralFishEnv(gym.Env):
         if self.render_mode is None:
             env_id = self.spec.id if self.spec is not None else LATEST[self.config.model]  # this env's own id
             from pectoral_gym.envs.rendering import warn_no_render_mode
-
             warn_no_render_mode(env_id)
             return None
         if self._renderer is None:
