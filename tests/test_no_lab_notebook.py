@@ -31,7 +31,7 @@ DATE = re.compile(r"\b20\d\d-\d\d-\d\d\b")
 NOTE_NAME = re.compile(r"notes/20\d\d-\d\d-\d\d-[\w.-]+\.md")
 _HEX = r"[0-9a-f]{7,40}"
 #: A commit: 7-40 lower-case hex characters (as git prints them), in backticks or after a word that names a revision.
-COMMIT = re.compile(rf"`({_HEX})`|\b(?i:commits?|main|checkout of|worktree of|tag|against|at)\s+\(?({_HEX})\b")
+COMMIT = re.compile(rf"`({_HEX})`|\b(?i:commits?|main|checkout of|worktree of|code of|tag|against|at)\s+\(?({_HEX})\b")
 LOAD = re.compile(r"\bload\s+average", re.IGNORECASE)
 
 
@@ -74,6 +74,7 @@ def scanned_files() -> list[Path]:
     ("the [note](notes/2026-12-04-rate-rule.md)", []),
     ("with the code of main 9cedcb7", ["main 9cedcb7"]),
     ("a checkout of `81e1d0d`", ["`81e1d0d`"]),
+    ("with the code of a94d111 and", ["code of a94d111"]),
     ("a load average of 3-5", ["load average"]),
     ("to issue\n    29's degraded one", ["issue\n    29"]),
     # not history: numbers, colours, digests, words
