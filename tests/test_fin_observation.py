@@ -16,7 +16,7 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 import pectoral_gym  # noqa: F401  (registers the ids)
 from pectoral_gym.envs import PectoralFishEnv, PectoralFishVectorEnv
-from pectoral_gym.envs.observation import FIN_OBS_SIZE, OBS_FINS, OBS_SIZE, decode
+from pectoral_gym.envs.observation import FIN_OBS_SIZE, OBS_FINS, OBS_SIZE, decode, one_observation
 from pectoral_gym.registration import registered_settings
 
 IDS = ("PectoralFish-Averaged-v0", "PectoralFish-Full-v0")
@@ -119,3 +119,16 @@ def test_vector_env_fin_block_matches_the_single_env():
 def test_a_bad_setting_raises():
     with pytest.raises(ValueError, match="observe_fins must be True or False"):
         PectoralFishEnv(observe_fins="yes")
+
+
+@pytest.mark.parametrize("shape", [(OBS_SIZE,), (OBS_SIZE + FIN_OBS_SIZE,)])
+def test_one_observation_takes_either_size_as_float64(shape):
+    obs = np.arange(shape[0], dtype=np.float32)
+    out = one_observation(obs)
+    assert out.dtype == np.float64 and out.shape == shape and np.array_equal(out, np.arange(shape[0]))
+
+
+@pytest.mark.parametrize("shape", [(), (OBS_SIZE - 1,), (OBS_SIZE + 1,), (2, OBS_SIZE), (1, OBS_SIZE + FIN_OBS_SIZE)])
+def test_one_observation_refuses_other_shapes_with_the_sizes_it_takes(shape):
+    with pytest.raises(ValueError, match=rf"obs must have shape \({OBS_SIZE},\) or \({OBS_SIZE + FIN_OBS_SIZE},\)"):
+        one_observation(np.zeros(shape))

@@ -20,7 +20,7 @@ import numpy as np
 from pectoral_gym.agents.controllers.band_shield import BandShield
 from pectoral_gym.agents.controllers.fin_map import FinMap
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, decode
+from pectoral_gym.envs.observation import decode, one_observation
 
 __all__ = ["EXTRA_MARGIN", "HOLD", "ExcitationController"]
 
@@ -74,9 +74,7 @@ class ExcitationController:
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Action ``(8,)`` float32 for one observation (the shield reads the pose and velocities from it)."""
-        obs = np.asarray(obs, dtype=np.float64)
-        if obs.ndim != 1 or obs.shape[0] not in OBS_SIZES:
-            raise ValueError(f"obs must have shape ({OBS_SIZE},) or ({OBS_SIZES[1]},), got {obs.shape}")
+        obs = one_observation(obs)  # the fin block (observe_fins), if any, is not read
         if self._left <= 0:
             self._draw()
         self._left -= 1

@@ -24,7 +24,7 @@ from pectoral_gym.agents.controllers.band_shield import BandShield, band_speed
 from pectoral_gym.agents.controllers.fin_map import FinMap, planning_spec
 from pectoral_gym.agents.controllers.turning import circle_room, inside_turning_circle
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, Observation, decode
+from pectoral_gym.envs.observation import Observation, decode, one_observation
 from pectoral_gym.model import tank
 
 __all__ = ["HandController"]
@@ -114,9 +114,7 @@ class HandController:
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Action for one observation ``(19,)``."""
-        obs = np.asarray(obs, dtype=np.float64)
-        if obs.ndim != 1 or obs.shape[0] not in OBS_SIZES:  # the fin block (observe_fins) is not used
-            raise ValueError(f"obs must have shape ({OBS_SIZE},) or ({OBS_SIZES[1]},), got {obs.shape}")
+        obs = one_observation(obs)  # the fin block (observe_fins), if any, is not read
         o = decode(obs)
         heading = math.atan2(o.sin_psi, o.cos_psi)
         rate = 0.0 if self._heading is None else _wrap(heading - self._heading) / self.config.control_period

@@ -58,7 +58,7 @@ from pectoral_gym.agents.nmpc.settings import NMPCSettings
 from pectoral_gym.agents.nmpc.shield import CommandShield
 from pectoral_gym.agents.nmpc.spin import SpinTurns
 from pectoral_gym.envs.core import EnvConfig
-from pectoral_gym.envs.observation import OBS_SIZE, OBS_SIZES, OBS_VELOCITY, decode
+from pectoral_gym.envs.observation import OBS_VELOCITY, decode, one_observation
 from pectoral_gym.model.kfunctions import ScalingFunctions
 from pectoral_gym.model.symbolic import STATE_POSITION, STATE_PSI, STATE_SIZE, STATE_VELOCITY
 
@@ -168,9 +168,7 @@ class NMPCController(PlanPricing, HandOver):
 
     def act(self, obs: np.ndarray) -> np.ndarray:
         """Solve the NMPC problem for one observation ``(19,)``; returns the normalised action ``(8,)``."""
-        obs = np.asarray(obs, dtype=np.float64)
-        if obs.ndim != 1 or obs.shape[0] not in OBS_SIZES:  # the fin block (observe_fins) is not used
-            raise ValueError(f"obs must have shape ({OBS_SIZE},) or ({OBS_SIZES[1]},), got {obs.shape}")
+        obs = one_observation(obs)  # the fin block (observe_fins), if any, is not read
         backup_spin = False
         if not np.all(np.isfinite(obs)):
             u = self._fallback()

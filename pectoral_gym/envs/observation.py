@@ -41,7 +41,8 @@ __all__ = [
     "OBS_X", "OBS_Y", "OBS_COS_PSI", "OBS_SIN_PSI", "OBS_VX", "OBS_VY", "OBS_OMEGA",
     "OBS_TARGET_X", "OBS_TARGET_Y", "OBS_TARGET_VX", "OBS_TARGET_VY", "OBS_LAST_ACTION", "OBS_SIZE",
     "OBS_POSITION", "OBS_HEADING", "OBS_VELOCITY", "OBS_TARGET", "OBS_TARGET_VELOCITY", "OBS_ACTION",
-    "OBSERVATION_STRUCTURE", "Observation", "decode", "MAX_SPEED", "MAX_YAW_RATE", "observation_bounds",
+    "OBSERVATION_STRUCTURE", "Observation", "decode", "one_observation", "MAX_SPEED", "MAX_YAW_RATE",
+    "observation_bounds",
     "FIN_OBS_SIZE", "FIN_OBS_FIELDS", "OBS_FIN_ANGLE", "OBS_FIN_ANGLE_TO", "OBS_FIN_POWER", "OBS_FIN_TIME_LEFT",
     "OBS_FINS", "OBS_SIZES", "observation_size", "observation_structure",
 ]
@@ -154,6 +155,20 @@ class Observation(NamedTuple):
         """Target velocity in the tank frame [m/s]."""
         c, s = self.cos_psi, self.sin_psi
         return c * self.target_vx - s * self.target_vy, s * self.target_vx + c * self.target_vy
+
+
+def one_observation(obs: np.ndarray) -> np.ndarray:
+    """One env's observation as float64 ``(OBS_SIZE,)`` or, with the fin block, ``(OBS_SIZE + FIN_OBS_SIZE,)``.
+
+    What a controller acting on one observation takes in (a controller that does not read the fin block ignores it).
+
+    Raises:
+        ValueError: For another shape (a batch of observations included).
+    """
+    obs = np.asarray(obs, dtype=np.float64)
+    if obs.ndim != 1 or obs.shape[0] not in OBS_SIZES:
+        raise ValueError(f"obs must have shape ({OBS_SIZE},) or ({OBS_SIZES[1]},), got {obs.shape}")
+    return obs
 
 
 def decode(obs: np.ndarray) -> Observation:
