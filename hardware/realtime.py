@@ -9,11 +9,21 @@ supervisor's blind rule then stops the fish once it has been unseen for longer t
 starts a full collection on its own whenever enough objects have survived the younger generations, so
 one can fall in any episode.
 
-:func:`settle_garbage` runs that collection at a moment when a pause harms nothing (the fins stopped,
-the rules disarmed: :meth:`pectoral_gym.hardware.env.HardwareFishEnv.reset` calls it there) and then
-freezes what survived (``gc.freeze``): the collections that fall during the episode then walk only the
-objects made since, a few milliseconds at most. The next call unfreezes first, so cyclic garbage among
-the frozen objects is still collected, once per call, and nothing leaks.
+:func:`settle_garbage` runs a collection at a moment when a pause harms nothing (the fins stopped, the rules
+disarmed: :meth:`pectoral_gym.hardware.env.HardwareFishEnv.reset` calls it there) and then freezes what survived
+(``gc.freeze``): the collections that fall during the episode then walk only the objects made since, a few
+milliseconds at most.
+
+Most of what a call finds frozen is long-lived (the libraries' modules, functions and types, a loaded policy)
+and survives every collection: walking it again at every call (twice per lockstep episode) would cost a tenth
+of a second or more each time and find nothing. So a call collects only the objects made since the last call
+(the frozen ones are out of the collector's reach), freezes the survivors, and walks everything (unfreeze,
+collect, freeze) only once the frozen set has grown to more than ``1 + growth`` times its size after the last
+full collection. Cyclic garbage among frozen objects (an episode's rig, frozen while it ran, is garbage after
+it) waits for that walk; what it costs in memory is bounded: after every call the frozen set, garbage
+included, is at most ``1 + growth`` times the set that survived the last full collection, which held no
+cyclic garbage. The pause mid-episode is what it was (the collections then walk only what was made since
+the call), and every call pauses the process only where it is harmless, as before.
 """
 
 from __future__ import annotations
@@ -21,16 +31,37 @@ from __future__ import annotations
 import gc
 import time
 
-__all__ = ["settle_garbage"]
+__all__ = ["DEFAULT_GROWTH", "settle_garbage"]
+
+DEFAULT_GROWTH = 0.25  # the frozen set's growth (fraction of its size after a full collection) that triggers one
+
+# The collector is one per process, so is this: the frozen set's size right after the last full collection.
+_frozen_after_full = 0
 
 
-def settle_garbage() -> float:
-    """Collect all cyclic garbage now, then freeze the survivors out of later collections; returns the seconds spent.
+def settle_garbage(growth: float = DEFAULT_GROWTH) -> float:
+    """Collect the cyclic garbage made since the last call, then freeze the survivors; returns the seconds spent.
 
-    Call it only where a pause of the whole process is harmless (fins stopped, no rule armed).
+    Everything the collector tracks is walked (unfreeze, collect, freeze) instead when the frozen set would
+    otherwise exceed ``1 + growth`` times its size after the last such walk, or when nothing was frozen
+    before the call (the first call, or after someone's ``gc.unfreeze``). Call it only where a pause of the
+    whole process is harmless (fins stopped, no rule armed).
+
+    Args:
+        growth: The frozen set's allowed growth since the last full walk, as a fraction (>= 0) of its size then.
     """
+    global _frozen_after_full
+    if growth < 0.0:
+        raise ValueError(f"growth must be >= 0, got {growth}")
     start = time.perf_counter()
-    gc.unfreeze()  # what earlier calls froze is collected again, once, here
-    gc.collect()
-    gc.freeze()
+    full = gc.get_freeze_count() == 0
+    if not full:
+        gc.collect()  # the frozen objects are out of its reach: it walks only what was made since the last call
+        gc.freeze()
+        full = gc.get_freeze_count() > (1.0 + growth) * _frozen_after_full
+    if full:
+        gc.unfreeze()  # garbage among the frozen objects is collected here, with everything else
+        gc.collect()
+        gc.freeze()
+        _frozen_after_full = gc.get_freeze_count()
     return time.perf_counter() - start
