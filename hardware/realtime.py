@@ -18,12 +18,14 @@ Most of what a call finds frozen is long-lived (the libraries' modules, function
 and survives every collection: walking it again at every call (twice per lockstep episode) would cost a tenth
 of a second or more each time and find nothing. So a call collects only the objects made since the last call
 (the frozen ones are out of the collector's reach), freezes the survivors, and walks everything (unfreeze,
-collect, freeze) only once the frozen set has grown to more than ``1 + growth`` times its size after the last
-full collection. Cyclic garbage among frozen objects (an episode's rig, frozen while it ran, is garbage after
-it) waits for that walk; what it costs in memory is bounded: after every call the frozen set, garbage
-included, is at most ``1 + growth`` times the set that survived the last full collection, which held no
-cyclic garbage. The pause mid-episode is what it was (the collections then walk only what was made since
-the call), and every call pauses the process only where it is harmless, as before.
+collect, freeze) only once the frozen set may have grown to more than ``1 + growth`` times its size after the
+last full collection (it counts what each call froze; what was freed since is not taken off, so it may walk
+early, never late). Cyclic garbage among frozen objects (an episode's rig, frozen while it ran, is garbage
+after it) waits for that walk; what it costs in memory is bounded: after every call the frozen set, garbage
+included, is at most ``1 + growth`` times the set that survived the last full collection, which held no cyclic
+garbage (unless other code freezes objects too). The pause mid-episode is what it was (the collections then
+walk only what was made since the call), and every call pauses the process only where it is harmless, as
+before.
 """
 
 from __future__ import annotations
@@ -35,33 +37,36 @@ __all__ = ["DEFAULT_GROWTH", "settle_garbage"]
 
 DEFAULT_GROWTH = 0.25  # the frozen set's growth (fraction of its size after a full collection) that triggers one
 
-# The collector is one per process, so is this: the frozen set's size right after the last full collection.
+# The collector is one per process, so is this bookkeeping: the frozen set's size right after the last full
+# collection, and an upper bound of its size now (what each call froze added; what was freed since not taken off).
+# ``gc.get_freeze_count`` would tell the size itself, but it walks the whole frozen set, which is what is avoided.
 _frozen_after_full = 0
+_frozen_bound = 0
 
 
 def settle_garbage(growth: float = DEFAULT_GROWTH) -> float:
     """Collect the cyclic garbage made since the last call, then freeze the survivors; returns the seconds spent.
 
-    Everything the collector tracks is walked (unfreeze, collect, freeze) instead when the frozen set would
-    otherwise exceed ``1 + growth`` times its size after the last such walk, or when nothing was frozen
-    before the call (the first call, or after someone's ``gc.unfreeze``). Call it only where a pause of the
-    whole process is harmless (fins stopped, no rule armed).
+    Everything the collector tracks is walked (unfreeze, collect, freeze) instead when the frozen set may
+    otherwise exceed ``1 + growth`` times its size after the last such walk, and at the first call. Call it
+    only where a pause of the whole process is harmless (fins stopped, no rule armed).
 
     Args:
         growth: The frozen set's allowed growth since the last full walk, as a fraction (>= 0) of its size then.
     """
-    global _frozen_after_full
+    global _frozen_after_full, _frozen_bound
     if growth < 0.0:
         raise ValueError(f"growth must be >= 0, got {growth}")
     start = time.perf_counter()
-    full = gc.get_freeze_count() == 0
+    full = _frozen_after_full == 0
     if not full:
         gc.collect()  # the frozen objects are out of its reach: it walks only what was made since the last call
+        _frozen_bound += len(gc.get_objects())  # the survivors, about to be frozen (the frozen set is not listed)
         gc.freeze()
-        full = gc.get_freeze_count() > (1.0 + growth) * _frozen_after_full
+        full = _frozen_bound > (1.0 + growth) * _frozen_after_full
     if full:
         gc.unfreeze()  # garbage among the frozen objects is collected here, with everything else
         gc.collect()
+        _frozen_after_full = _frozen_bound = max(1, len(gc.get_objects()))
         gc.freeze()
-        _frozen_after_full = gc.get_freeze_count()
     return time.perf_counter() - start
