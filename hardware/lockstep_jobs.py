@@ -14,9 +14,13 @@ lines of ``steps.jsonl`` and its summary; the parent hands them on in episode or
 
 Each worker runs on a core of its own (:func:`worker_cores`) when there are at least as many cores as workers: a
 lockstep rig runs one thread at a time, and every baton pass between its threads wakes the next one; on one core
-that is a switch on that core, while threads free to run on any core wake each other across cores and contend for
-the interpreter lock there (a tenth of a lockstep episode's CPU time went to that). With more workers than cores,
-or where the affinity cannot be set, the workers are not pinned. Where a worker runs never changes its results.
+that is a switch on that core, while threads free to run on any core wake each other across cores, each bringing
+its data into the other core's caches (a tenth of a lockstep episode's CPU time went to that). With more workers
+than cores, or where the affinity cannot be set, the workers are not pinned. A worker's threads are also scheduled
+as batch work (Linux's ``SCHED_BATCH``, at the same nice level): a thread woken by the baton pass then does not
+preempt the thread that passed it, which still holds the interpreter lock until it waits; it runs once that one
+waits, instead of being switched in, blocking on the lock and being switched out again. Simulated time makes the
+scheduling irrelevant to the results: where and how a worker runs never changes them.
 """
 
 from __future__ import annotations
@@ -216,12 +220,16 @@ def _run_workers(job: LockstepJob, order: list[int], jobs: int, collect: Callabl
 def _worker(conn: Connection, job: LockstepJob, core: int | None = None) -> None:
     """A worker process: run the episodes the parent sends (``None``: stop), reply with each result or the error.
 
-    ``core``: the core it runs on (its threads, made after this, inherit it), or ``None``: any.
+    ``core``: the core it runs on (its threads, made after this, inherit it), or ``None``: any. It runs as batch
+    work (``SCHED_BATCH``) where the platform has it (the module docstring).
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group: the parent ends us
     if core is not None:
         with contextlib.suppress(OSError):  # a core taken away since: run anywhere, as unpinned
             os.sched_setaffinity(0, {core})
+    if hasattr(os, "SCHED_BATCH"):  # the threads made from here on inherit both settings
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
     try:
         runner = EpisodeRunner(job, handle_signals=False)
     except BaseException as err:  # noqa: BLE001 - reported to the parent, which names it
