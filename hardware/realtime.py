@@ -37,8 +37,9 @@ __all__ = ["DEFAULT_GROWTH", "settle_garbage"]
 
 # The frozen set's growth (a fraction of its size after a full collection) that triggers one. Frozen garbage holds
 # what it references too (an old rig's frames and tables): the peak resident memory of 30 lockstep episodes in one
-# process was 644 MB walking everything at every call, 656 MB at 0.05 and 685 MB at 0.25. At 0.1 such a process
-# walks everything about every sixth episode (its frozen set grows by some 7 000 objects of 450 000 per episode).
+# process was 644 MB walking everything at every call, 656 MB at 0.05 and 685 MB at 0.25 (with each rig's camera
+# holding tables of its own then). At 0.1 such a process walks everything about every sixth episode (its frozen set
+# grows by some 7 000 objects of 450 000 per episode).
 DEFAULT_GROWTH = 0.1
 
 # The collector is one per process, so is this bookkeeping: the frozen set's size right after the last full
