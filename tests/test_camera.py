@@ -166,3 +166,14 @@ def test_frame_server_arguments():
     with pytest.raises(ValueError, match="encoding"):
         FrameServer(encoding="gif")
     assert CameraModel.default().width == 640
+
+
+def test_the_default_camera_model_is_one_shared_immutable_model():
+    from pectoral_gym.hardware.vision.cameramodel import CameraModel
+
+    model = CameraModel.default()
+    assert CameraModel.default() is model  # what is cached per model (the renderer's tables) is made once
+    corners = [[22.0, 338.0], [618.0, 338.0], [604.0, 26.0], [36.0, 26.0]]
+    fresh = CameraModel.from_corners(640, 360, corners)
+    assert (model.width, model.height) == (640, 360) and np.array_equal(model.homography, fresh.homography)
+    assert not model.homography.flags.writeable and not model.inverse.flags.writeable  # nobody can change it

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import threading
 
 import numpy as np
@@ -292,3 +293,14 @@ def test_lockstep_and_condition_flags_are_checked(args, message, capsys):
         deploy.main(["--controller", "hand", "--no-progress", *args])
     assert exit_info.value.code == 2
     assert message in capsys.readouterr().err
+
+
+def test_workers_get_a_core_each_only_when_there_are_enough():
+    from pectoral_gym.hardware.lockstep_jobs import worker_cores
+
+    assert worker_cores(2, {3, 1, 7}) == [1, 3]  # the lowest cores, one per worker
+    assert worker_cores(1, {5}) == [5]
+    assert worker_cores(3, {0, 1}) == [None, None, None]  # two would share a core: none pinned
+    assert worker_cores(2, set()) == [None, None]  # cores unknown
+    mine = os.sched_getaffinity(0)  # by default: the cores this process may run on
+    assert worker_cores(2) == ([None, None] if len(mine) < 2 else sorted(mine)[:2])

@@ -140,6 +140,15 @@ def test_views_batched_by_their_instants_predict_what_each_view_alone_does():
     groups = batches(views, 0.3, 1.9)
     assert sorted(i for indices, _ in groups for i in indices) == [0, 1, 2, 3]
     assert any(len(indices) > 1 for indices, _ in groups)  # the test batches something
+    for indices, stacked in groups:  # member j's rows are its own snapshots' fins at the group's instants
+        if isinstance(stacked, list):
+            continue
+        for j, index in enumerate(indices):
+            own = {t: (fins, pending) for t, fins, pending in views[index]}
+            rows = own[stacked.times[0]][0].shape[0]
+            for k, t in enumerate(stacked.times):
+                assert np.array_equal(stacked.fins[k, j * rows:(j + 1) * rows], own[t][0])
+                assert np.array_equal(stacked.pending[k, j * rows:(j + 1) * rows], own[t][1])
     rng = np.random.default_rng(3)
     before = np.array([(t, 1.0 + 0.2 * t, 0.5 + 0.01 * t, 0.02 * t) for t in np.arange(0.3, 1.1, 1 / 30)])
     before[:, 1:3] += rng.normal(0.0, 0.002, size=(len(before), 2))

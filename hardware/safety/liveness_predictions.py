@@ -121,13 +121,12 @@ def batches(views: Sequence[Sequence[Snapshot]], since: float,
     out: list[tuple[list[int], Sequence[Snapshot] | SnapshotArrays]] = []
     for indices in groups.values():
         members = [spans[i] for i in indices]
-        count, rows = len(members[0]), len(members) * len(members[0][0][1])
-        # per snapshot, the members' fins one after the other (a concatenation along the rows, in one array)
-        fins = np.array([[m[k][1] for m in members] for k in range(count)])
-        pending = np.array([[m[k][2] for m in members] for k in range(count)])
+        # per snapshot, the members' fins one after the other: each member's stacked, joined along the rows
+        fins = [np.array([s[1] for s in m]) for m in members]
+        pending = [np.array([s[2] for s in m]) for m in members]
         out.append((indices, SnapshotArrays(np.array([s[0] for s in members[0]], dtype=float),
-                                            fins.reshape(count, rows, *fins.shape[3:]),
-                                            pending.reshape(count, rows, *pending.shape[3:]))))
+                                            fins[0] if len(fins) == 1 else np.concatenate(fins, axis=1),
+                                            pending[0] if len(pending) == 1 else np.concatenate(pending, axis=1))))
     return out + alone
 
 

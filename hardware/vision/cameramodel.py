@@ -179,7 +179,15 @@ class CameraModel:
     def default(cls) -> CameraModel:
         """A 640x360 overhead view of the whole tank, slightly tilted so that the far wall looks shorter.
 
-        Tank Y points up in the image. About 260 px/m: the fish is ~50 px long, a marker ~8 px across.
+        Tank Y points up in the image. About 260 px/m: the fish is ~50 px long, a marker ~8 px across. Every call
+        returns the same (immutable) model: what is cached per camera model (the renderer's background and noise
+        tables) is then made once per process, not once per emulated camera.
         """
-        corners = [[22.0, 338.0], [618.0, 338.0], [604.0, 26.0], [36.0, 26.0]]
-        return cls.from_corners(640, 360, corners)
+        return _default_model(cls)
+
+
+@functools.cache
+def _default_model(cls: type[CameraModel]) -> CameraModel:
+    """:meth:`CameraModel.default`'s model, made once per class."""
+    corners = [[22.0, 338.0], [618.0, 338.0], [604.0, 26.0], [36.0, 26.0]]
+    return cls.from_corners(640, 360, corners)
