@@ -23,7 +23,6 @@ from typing import Any
 
 import numpy as np
 
-from pectoral_gym.envs.borrowed import borrow
 from pectoral_gym.envs.fused import FusedStep
 from pectoral_gym.envs.tasks import kernels as tk
 from pectoral_gym.model.jit import entry_point, njit
@@ -39,11 +38,10 @@ def reset_one(a, draws, start, fins0, pending0, rest, action_code, index):
     the model's rows at the start of the rest patterns, ``rest`` ``(2, 4)`` those patterns, ``action_code``
     ``(8,)`` their normalised action.
     """
-    # borrowed views, as in the step (envs.fused): a holds the arrays for the whole call
-    cfg, ep, beats, obs, out, fish = (borrow(a.cfg), borrow(a.ep), borrow(a.beats), borrow(a.obs), borrow(a.out),
-                                      borrow(a.fish))
-    state, fins, cache, integral = borrow(a.state), borrow(a.fins), borrow(a.cache), borrow(a.integral)
-    pending = borrow(a.pending)
+    # the fields as plain arrays, read once (a reset is one call per episode: numba's reference counts on them
+    # cost nothing to speak of, so no borrowed views as in the step)
+    cfg, ep, beats, obs, out, fish = a.cfg, a.ep, a.beats, a.obs, a.out, a.fish
+    state, fins, cache, pending, integral = a.state, a.fins, a.cache, a.pending, a.integral
     tk.start_states(index, draws, cfg, ep, start)
     i = index[0]
     state[i, :] = start[0]
