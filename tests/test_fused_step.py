@@ -217,3 +217,31 @@ def test_the_parallel_step_leaves_the_callers_chunk_size_as_it_found_it():
         assert nb.get_parallel_chunksize() == 7
     finally:
         nb.set_parallel_chunksize(previous)
+
+
+@pytest.mark.parametrize(("model", "task", "observe_fins"), [("averaged", "goal", True), ("full", "track", False)])
+def test_one_env_reset_in_one_call_is_the_general_reset(model, task, observe_fins):
+    config = EnvConfig(model=model, task=task, observe_fins=observe_fins, stop_band=True,
+                       transitions=model == "averaged")
+    fast, general = EnvCore(1, config), EnvCore(1, config)
+    assert fast._reset_one is not None
+    general._reset_one = None  # the batched reset every other core runs
+    rngs = {fast: np.random.default_rng(7), general: np.random.default_rng(7)}
+    pinned = np.full((1, 8), np.nan)
+    pinned[0, :3] = (1.0, 0.5, 0.3)
+    actions = np.random.default_rng(2).uniform(-1, 1, (40, 8))
+    for episode in range(4):
+        for core in (fast, general):  # each episode after steps: a reset rewrites a used state
+            core.reset(np.zeros(1, dtype=np.int64), (rngs[core],), pinned if task == "goal" and episode == 2 else None)
+        for step in range(1 + 9 * episode):
+            if step:
+                fast.step(actions[step:step + 1])
+                general.step(actions[step:step + 1])
+            for name in ("obs", "out", "ep", "beats"):
+                np.testing.assert_array_equal(getattr(fast, name), getattr(general, name), err_msg=f"{name}, {episode}")
+            for name in ("state", "fins", "pending", "integral", "forcing_cache"):
+                np.testing.assert_array_equal(getattr(fast.model, name), getattr(general.model, name), err_msg=name)
+            assert fast.model.time == general.model.time
+    assert rngs[fast].bit_generator.state == rngs[general].bit_generator.state
+    if task == "goal":
+        assert fast.fish_state(0)[:3].tolist() != [1.0, 0.5, 0.3]  # the last episode's start was drawn, not pinned

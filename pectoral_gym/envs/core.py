@@ -17,6 +17,7 @@ import numpy as np
 
 from pectoral_gym.envs.config import MODELS, TASKS, EnvConfig, env_signature
 from pectoral_gym.envs.fused import FusedStep
+from pectoral_gym.envs.fused_reset import FusedReset
 from pectoral_gym.envs.layout import ACTION_SIZE, FishConstants, ReferenceEllipse, fish_array
 from pectoral_gym.envs.sensed import SensedObservation
 from pectoral_gym.envs.tasks import kernels as tk
@@ -87,6 +88,13 @@ class EnvCore:
         self._step = FusedStep(self.model, self.dt, self.action_buffer, self.cfg, self.beats, self.obs, self.out,
                                self.fish, self.ep, self._integral_before, ts.task.reward_one, self.timing.timing,
                                self._period_max if self._observe_fins and self._plain else None)
+        # One env, no camera, timing or randomised parameters, the built-in start: a reset after its draws is
+        # one compiled call (envs.fused_reset), on the step's arrays.
+        self._reset_one = None
+        if (self.n == 1 and self._plain and not config.randomize and ts.task.start is tk.start_states
+                and type(self.model).reset is FishModel.reset):
+            self._reset_one = FusedReset(self._step, *self.model.start_rows(REST, REST), REST.as_array(),
+                                         ts.action_code)
         if config.randomize:
             self._rand_names = tuple(config.randomize)
             widths = np.array([config.randomize[k] for k in self._rand_names])
@@ -110,6 +118,14 @@ class EnvCore:
         (``X, Y, psi, goal X, goal Y``; :func:`pin_start`); the generators draw as without it.
         """
         index = np.asarray(index, dtype=np.int64)
+        if self._reset_one is not None and index.tolist() == [0]:  # the same steps, after the draws in one call
+            draws = self.task_state.draw(rngs[0])
+            if pinned is not None:
+                draws = np.where(np.isnan(pinned[0]), draws, pinned[0])
+            self._reset_one(draws)
+            self.model.time = 0.0  # as FishModel.reset of every fish
+            self.timing.reset(index, rngs)
+            return
         draws = np.empty((index.size, 8))
         for k, i in enumerate(index.tolist()):  # Python ints: cheaper to iterate and index with
             rng = rngs[i]

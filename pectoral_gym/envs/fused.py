@@ -372,6 +372,13 @@ class FusedStep:
             model.time += self.duration  # as FishModel.advance
         return bad
 
+    def arrays(self) -> StepArrays:
+        """The bound :class:`StepArrays` (bound now if the model's settings changed since, or never bound)."""
+        bound = self._bound
+        if bound is None or bound.revision != self.model.settings_revision:
+            bound = self._bound = self._bind()
+        return bound.arrays
+
     def step_buffer(self) -> int:
         """``self(self.actions)``: step the action buffer's actions, no env skipped (the single env's path)."""
         model = self.model

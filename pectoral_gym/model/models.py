@@ -180,7 +180,7 @@ class FishModel:
         """
         idx = slice(None) if index is None else index
         if isinstance(right, FinBeat | None) and isinstance(left, FinBeat | None):  # every fish the same patterns
-            fins, pending = self._start_rows(right, left)
+            fins, pending = self.start_rows(right, left)
             self.state[idx] = 0.0 if state is None else state
             self.integral[idx] = 0.0
             self.fins[idx] = fins
@@ -199,7 +199,7 @@ class FishModel:
         if index is None:
             self.time = 0.0
 
-    def _start_rows(self, right: FinBeat | None, left: FinBeat | None) -> tuple[np.ndarray, np.ndarray]:
+    def start_rows(self, right: FinBeat | None, left: FinBeat | None) -> tuple[np.ndarray, np.ndarray]:
         """One fish's fins ``(2, FIN_FIELDS)`` and pending patterns ``(2, 4)`` at the start of ``right, left``.
 
         Made by ``strokes.init_fins`` (the one rule) for the last pair of objects asked for and kept: an env

@@ -12,6 +12,7 @@ Units: metres, seconds, radians; the tank frame has its origin at a corner.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -34,7 +35,7 @@ from pectoral_gym.envs.layout import (
     GOAL,
 )
 from pectoral_gym.envs.tasks.reference_ellipse import set_reference
-from pectoral_gym.model.jit import njit
+from pectoral_gym.model.jit import entry_point, njit
 from pectoral_gym.model.tank import TANK_LENGTH, TANK_WIDTH
 
 __all__ = ["GOAL_CANDIDATES", "GOAL_MAX_BLOCKS", "GOAL_MAX_DISTANCE", "GOAL_MIN_DISTANCE",
@@ -69,6 +70,12 @@ def _pick_goal(draws, candidates, inset):
     return False
 
 
+@functools.cache
+def _pick_goal_call():
+    """:func:`_pick_goal`'s compiled entry point for its one set of argument types (float64 C arrays, a float)."""
+    return entry_point(_pick_goal, (np.zeros(8), np.zeros(2 * GOAL_CANDIDATES), 0.0))
+
+
 def draw_episode(rng: np.random.Generator, task: int, cfg: np.ndarray) -> np.ndarray:
     """Draw one episode's random start from ``rng``; the same sequence of draws for single and vector envs.
 
@@ -90,9 +97,10 @@ def draw_episode(rng: np.random.Generator, task: int, cfg: np.ndarray) -> np.nda
         draws[0] = start_inset + u0 * (TANK_X - 2.0 * start_inset)
         draws[1] = start_inset + u1 * (TANK_Y - 2.0 * start_inset)
         draws[2] = -math.pi + 2.0 * math.pi * u2
-        candidates = u[3:]
+        candidates = u[3:]  # C-contiguous, as every rng.random array: the entry point's types
+        pick = _pick_goal_call()
         for _ in range(GOAL_MAX_BLOCKS):
-            if _pick_goal(draws, candidates, goal_inset):
+            if pick(draws, candidates, goal_inset):
                 return draws
             candidates = rng.random(2 * GOAL_CANDIDATES)
         raise RuntimeError("could not place a goal at the required distance from the start")  # pragma: no cover
