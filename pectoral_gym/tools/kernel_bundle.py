@@ -4,7 +4,8 @@
 cache and ``NUMBA_CPU_NAME=generic``, every kernel that the first :data:`STEPS` random steps (with the
 resets of ended episodes) of each registered fish env call, those of the latest ids' native vector
 envs at :data:`VECTOR_ENVS` envs (the parallel builds, the autoreset) and those of the robot stack's replays
-of the fins and liveness paths (:func:`pectoral_gym.model.finreplay.warm_up`), and writes them into
+of the fins and liveness paths (:func:`pectoral_gym.model.finreplay.warm_up`) and the task state's own observation
+(the robot env's, :meth:`pectoral_gym.envs.tasks.table.TaskState.observe`), and writes them into
 ``pectoral_gym/data/kernels/`` (emptied first). Run it after
 an edit of the kernels' sources (a stale bundled kernel is never used: the kernel compiles instead)
 and before building a release.
@@ -75,6 +76,11 @@ for env_id in (LATEST_AVERAGED, LATEST_FULL):  # the parallel builds, and the au
 from pectoral_gym.model import finreplay
 
 finreplay.warm_up()  # the fins' replays and the liveness check's paths (the robot stack)
+env = gym.make(LATEST_AVERAGED)  # the robot env observes through the task state alone (TaskState.observe)
+env.reset(seed=0)
+core = env.unwrapped.core
+core.task_state.observe(core.model.state.copy())
+env.close()
 saved = []
 if sys.argv[1] == "build":
     import gc
