@@ -21,6 +21,9 @@ def borrow(array: np.ndarray) -> np.ndarray:
     those counts. A borrowed view's counting is a null check. It must not outlive the call that
     borrowed it: there the :class:`~pectoral_gym.envs.fused.StepArrays` argument holds the arrays for the whole
     step.
+    Write through a borrowed view only inside a loop (or a call made in one), as the step does: a store made
+    through one in straight-line code, in the borrowing function or in a call it inlines there, was seen dropped
+    by the compiler (numba 0.68, ``tests/test_borrowed_views.py`` holds the loop's way).
     In Python (``NUMBA_DISABLE_JIT``) it is ``array`` itself.
     """
     return array

@@ -1,0 +1,63 @@
+"""Borrowed views (``envs.borrowed.borrow``): writes the way the fused step makes them reach the arrays.
+
+The step reads each field of its structref once as a borrowed view and writes through it only in the calls
+and loops it makes (``envs.fused.step_body``): every store inside a loop. A store made through a borrowed view in
+straight-line code (in the borrowing function, or in a callee inlined there) was seen dropped by the compiler
+(``borrow``'s docstring); these tests hold the step's way.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, types
+from numba.experimental import structref
+
+from pectoral_gym.envs.borrowed import borrow
+
+
+@structref.register
+class _HolderType(types.StructRef):
+    def preprocess_fields(self, fields):
+        return tuple((name, types.unliteral(typ)) for name, typ in fields)
+
+
+class _Holder(structref.StructRefProxy):
+    pass
+
+
+structref.define_proxy(_Holder, _HolderType, ["fins", "state"])
+
+
+@njit(cache=False)
+def _new_holder(fins, state):
+    return _Holder(fins, state)
+
+
+@njit(cache=False, inline="always")
+def _write_row(x, row, i):
+    x[i, :] = row
+
+
+@njit(cache=False)
+def _write_in_callee_in_loop(holder, row, n):
+    state = borrow(holder.state)
+    for i in range(n):
+        _write_row(state, row + i, i)
+
+
+@njit(cache=False)
+def _write_in_loop(holder, value, n):
+    fins, state = borrow(holder.fins), borrow(holder.state)
+    for i in range(n):
+        fins[i, 0, 0] = value + i
+        state[i, 1] = -(value + i)
+
+
+def test_writes_through_borrowed_views_in_callees_and_loops_reach_the_arrays():
+    fins, state = np.zeros((3, 2, 4)), np.zeros((3, 6))
+    holder = _new_holder(fins, state)
+    _write_in_callee_in_loop(holder, np.arange(6.0), 2)
+    assert np.array_equal(state[:2], [np.arange(6.0), np.arange(6.0) + 1.0]) and not state[2].any()
+    _write_in_loop(holder, 5.0, 3)
+    assert np.array_equal(fins[:, 0, 0], [5.0, 6.0, 7.0])
+    assert np.array_equal(state[:, 1], [-5.0, -6.0, -7.0])
