@@ -7,7 +7,7 @@ references atomically at every inlined call that takes an array.
 from __future__ import annotations
 
 import numpy as np
-from numba.core import cgutils, types
+from numba.core import cgutils, ir_utils, types
 from numba.extending import intrinsic, overload
 
 __all__ = ["borrow"]
@@ -21,9 +21,9 @@ def borrow(array: np.ndarray) -> np.ndarray:
     those counts. A borrowed view's counting is a null check. It must not outlive the call that
     borrowed it: there the :class:`~pectoral_gym.envs.fused.StepArrays` argument holds the arrays for the whole
     step.
-    Write through a borrowed view only inside a loop (or a call made in one), as the step does: a store made
-    through one in straight-line code, in the borrowing function or in a call it inlines there, was seen dropped
-    by the compiler (numba 0.68, ``tests/test_borrowed_views.py`` holds the loop's way).
+    A store through the view is a store into ``array``: numba's alias analysis is told so (:func:`_view_aliases`).
+    Still, pass a view on only to calls made inside a loop, as the step does: a store made in a callee inlined
+    (``inline="always"``) outside any loop was seen dropped all the same (numba 0.68).
     In Python (``NUMBA_DISABLE_JIT``) it is ``array`` itself.
     """
     return array
@@ -46,3 +46,21 @@ def _borrowed(typingctx, array):
 @overload(borrow, inline="always")
 def _borrow_overload(array):
     return lambda array: _borrowed(array)
+
+
+def _view_aliases(lhs: str, args: list, alias_map: dict[str, set[str]], arg_aliases: set[str]) -> None:
+    """For numba's alias analysis: the variable ``lhs`` assigned a borrowed view aliases the array it views.
+
+    Without it numba takes the view for a new array of its own, and its dead-code removal drops a store through
+    the view that nothing in the function reads afterwards (the array's owner does).
+    """
+    viewed = args[0].name
+    if viewed in arg_aliases:
+        arg_aliases.add(lhs)
+        return
+    alias_map.setdefault(viewed, set()).add(lhs)
+    alias_map.setdefault(lhs, set()).add(viewed)
+
+
+for _name in ("borrow", "_borrowed"):  # the call before and after the overload is inlined
+    ir_utils.alias_func_extensions[(_name, __name__)] = _view_aliases
