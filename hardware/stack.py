@@ -18,6 +18,7 @@ from pectoral_gym.hardware.radio.link import DisplacedError, RadioLink
 from pectoral_gym.hardware.safety.geofence import Geofence
 from pectoral_gym.hardware.safety.rules import CommandFilter, SafetyConfig
 from pectoral_gym.hardware.safety.supervisor import Supervisor
+from pectoral_gym.hardware.vision.track_result import check_tracker
 from pectoral_gym.model.finreplay import FinReplay
 from pectoral_gym.model.finrules import FirmwareConfig
 
@@ -172,13 +173,20 @@ def open_stack(port, camera, config: EnvConfig, safety: SafetyConfig, speed: flo
         speed: Experiment seconds per clock second (an accelerated emulator).
         frame_period: Camera polling period [experiment s].
         calibration: Calibration JSON for the default tracker (``None``: the default camera model).
-        tracker: Marker tracker (default a ``MarkerTracker`` of the camera model).
+        tracker: Anything with ``track(frame, near=None) -> TrackResult`` (default a ``MarkerTracker`` of the
+            camera model).
         observer: State observer (default a ``HighGainObserver`` with ``observer_epsilon``).
         observer_epsilon: Time constant of the default observer [s].
         take_over: Take the robot from another live session (a link opened here).
         origin: ``clock.monotonic()`` at experiment time 0 (default now).
         clock: The clock of every part.
+
+    Raises:
+        TypeError: ``tracker`` is not called as the supervisor calls it
+            (:func:`pectoral_gym.hardware.vision.track_result.check_tracker`); nothing is opened.
     """
+    if tracker is not None:
+        check_tracker(tracker)  # before anything is opened: a tracker the supervisor cannot call stops every frame
     link = cam = None
     try:
         if isinstance(port, RadioLink):

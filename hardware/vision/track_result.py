@@ -6,9 +6,10 @@ without importing each other.
 
 from __future__ import annotations
 
+import inspect
 from typing import NamedTuple
 
-__all__ = ["Blob", "TrackResult"]
+__all__ = ["Blob", "TrackResult", "check_tracker"]
 
 
 class Blob(NamedTuple):
@@ -57,3 +58,28 @@ class TrackResult(NamedTuple):
     timestamp: float
     reason: str
     box: tuple[int, int, int, int] | None = None
+
+
+def check_tracker(tracker: object) -> None:
+    """Check that ``tracker`` can be called as the supervisor calls it: ``tracker.track(frame, near=box)``.
+
+    ``near`` is the last sighting's box ``(u0, v0, u1, v1)`` [px] while the fish is seen, else ``None``; the call
+    returns a :class:`TrackResult`. A ``track`` whose signature cannot be read is judged at its first call (a
+    tracker that raises there stops the fish with the error as the reason).
+
+    Raises:
+        TypeError: ``tracker`` has no ``track`` method, or its ``track`` does not take ``(frame, near=...)``.
+    """
+    name = type(tracker).__name__
+    track = getattr(tracker, "track", None)
+    if not callable(track):
+        raise TypeError(f"a tracker needs a method track(frame, near=None) -> TrackResult; {name} has none")
+    try:
+        signature = inspect.signature(track)
+    except (TypeError, ValueError):
+        return
+    try:
+        signature.bind(None, near=None)
+    except TypeError as error:
+        raise TypeError(f"{name}.track must take track(frame, near=None) -> TrackResult (near: the last sighting's "
+                        f"box (u0, v0, u1, v1) in pixels, or None): {error}") from None
