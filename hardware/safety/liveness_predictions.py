@@ -122,12 +122,14 @@ def batches(views: Sequence[Sequence[Snapshot]], since: float,
     for indices in groups.values():
         members = [spans[i] for i in indices]
         # per snapshot, the members' fins one after the other: each member's stacked, joined along the rows
-        fins = [np.array([s[1] for s in m]) for m in members]
-        pending = [np.array([s[2] for s in m]) for m in members]
-        out.append((indices, SnapshotArrays(np.array([s[0] for s in members[0]], dtype=float),
-                                            fins[0] if len(fins) == 1 else np.concatenate(fins, axis=1),
-                                            pending[0] if len(pending) == 1 else np.concatenate(pending, axis=1))))
+        fins, pending = (_joined([np.array([s[field] for s in m]) for m in members]) for field in (1, 2))
+        out.append((indices, SnapshotArrays(np.array([s[0] for s in members[0]], dtype=float), fins, pending)))
     return out + alone
+
+
+def _joined(parts: list[np.ndarray]) -> np.ndarray:
+    """``parts`` ``(K, rows, ...)`` joined along the rows (a lone part as it is)."""
+    return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
 
 
 class Predictions:
