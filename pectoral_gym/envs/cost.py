@@ -32,8 +32,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from pectoral_gym.envs.layout import F_KCOAST, F_LENGTH, F_SPAN, F_WIDTH
-from pectoral_gym.model.tank import band_shortfall
+from pectoral_gym.envs.tasks.kernels import band_shortfall_of
 
 __all__ = ["BAND_COST_WIDTH", "BandCost", "SafetyStep", "band_cost", "env_band_shortfall"]
 
@@ -55,19 +54,12 @@ def band_cost(shortfall: float | np.ndarray, width: float = BAND_COST_WIDTH) -> 
 def env_band_shortfall(env: gym.Env, index: int = 0) -> float:
     """The band shortfall [m] of env ``index`` of a simulated env's core (``env.unwrapped.core``) in its state now.
 
-    As the env's episode end computes it (``pectoral_gym.envs.tasks.kernels.in_band``): the world-frame velocity
-    from the body velocity, the outline and coasting rate of the episode's parameters, the env's stop rule.
+    The env's episode end's own compiled function (``pectoral_gym.envs.tasks.kernels.band_shortfall_of``): the
+    world-frame velocity from the body velocity, the outline and coasting rate of the episode's parameters, the
+    env's stop rule.
     """
-    base = env.unwrapped
-    core = base.core
-    x, y, psi, u, v = (float(value) for value in core.model.state[index, :5])
-    c, s = np.cos(psi), np.sin(psi)
-    vx, vy = c * u - s * v, s * u + c * v
-    fish = core.fish[index]
-    outline = (0.5 * float(fish[F_LENGTH]), float(fish[F_WIDTH]), float(fish[F_SPAN]))
-    rule = base.config.stop_rule  # the env's rule (margin, reaction time, contact speed)
-    return float(band_shortfall(x, y, c, s, (-vx, vx, -vy, vy), outline, float(fish[F_KCOAST]),
-                                float(rule.margin), float(rule.reaction_time), float(rule.contact_speed)))
+    core = env.unwrapped.core
+    return float(band_shortfall_of(int(index), core.model.state, core.cfg, core.fish))
 
 
 class BandCost(gym.Wrapper):

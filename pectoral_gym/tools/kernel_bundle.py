@@ -4,8 +4,9 @@
 cache and ``NUMBA_CPU_NAME=generic``, every kernel that the first :data:`STEPS` random steps (with the
 resets of ended episodes) of each registered fish env call, those of the latest ids' native vector
 envs at :data:`VECTOR_ENVS` envs (the parallel builds, the autoreset) and those of the robot stack's replays
-of the fins and liveness paths (:func:`pectoral_gym.model.finreplay.warm_up`) and the task state's own observation
-(the robot env's, :meth:`pectoral_gym.envs.tasks.table.TaskState.observe`), and writes them into
+of the fins and liveness paths (:func:`pectoral_gym.model.finreplay.warm_up`), the task state's own observation
+(the robot env's, :meth:`pectoral_gym.envs.tasks.table.TaskState.observe`) and the band cost's shortfall
+(:func:`pectoral_gym.envs.cost.env_band_shortfall`), and writes them into
 ``pectoral_gym/data/kernels/`` (emptied first). Run it after
 an edit of the kernels' sources (a stale bundled kernel is never used: the kernel compiles instead)
 and before building a release.
@@ -80,6 +81,9 @@ env = gym.make(LATEST_AVERAGED)  # the robot env observes through the task state
 env.reset(seed=0)
 core = env.unwrapped.core
 core.task_state.observe(core.model.state.copy())
+from pectoral_gym.envs.cost import env_band_shortfall
+
+env_band_shortfall(env)  # the safe-RL band cost (BandCost)
 env.close()
 saved = []
 if sys.argv[1] == "build":

@@ -218,18 +218,24 @@ def reward_one(i, state, cfg, ep, fish, obs, out):
 
 
 @njit(inline="always")
-def in_band(i, state, cfg, fish):
-    """Whether any part of env ``i``'s fish is inside the stopping band (``stop_band``; :func:`tank.band_shortfall`).
+def band_shortfall_of(i, state, cfg, fish):
+    """Env ``i``'s stopping-band shortfall [m] (> 0: inside the band; :func:`tank.band_shortfall`).
 
-    The speeds towards the walls are the world-frame components of the body velocity ``state[i, 3:5]``.
+    The speeds towards the walls are the world-frame components of the body velocity ``state[i, 3:5]``; the
+    outline and coasting rate are the episode's parameters ``fish[i]``, the rule the env's ``cfg``.
     """
     x, y, psi = state[i, 0], state[i, 1], state[i, 2]
     c, s = math.cos(psi), math.sin(psi)
     vx, vy = c * state[i, 3] - s * state[i, 4], s * state[i, 3] + c * state[i, 4]
     outline = (0.5 * fish[i, F_LENGTH], fish[i, F_WIDTH], fish[i, F_SPAN])
-    shortfall = band_shortfall(x, y, c, s, (-vx, vx, -vy, vy), outline, fish[i, F_KCOAST], cfg[C_BAND_MARGIN],
-                               cfg[C_BAND_REACTION], cfg[C_BAND_CONTACT])
-    return shortfall > 0.0
+    return band_shortfall(x, y, c, s, (-vx, vx, -vy, vy), outline, fish[i, F_KCOAST], cfg[C_BAND_MARGIN],
+                          cfg[C_BAND_REACTION], cfg[C_BAND_CONTACT])
+
+
+@njit(inline="always")
+def in_band(i, state, cfg, fish):
+    """Whether any part of env ``i``'s fish is inside the stopping band (``stop_band``; :func:`band_shortfall_of`)."""
+    return band_shortfall_of(i, state, cfg, fish) > 0.0
 
 
 # ---------------------------------------------------------------- the simulated envs' step (envs.fused)
