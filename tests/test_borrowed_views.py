@@ -1,10 +1,10 @@
 """Borrowed views (``envs.borrowed.borrow``): every store through one reaches the array it views.
 
 The fused step reads each field of its structref once as a borrowed view and writes through it in the calls and
-loops it makes (``envs.fused.step_body``). A store in straight-line code that nothing in the function reads
-afterwards is what numba's dead-code removal drops unless it knows the view aliases the array (``borrow``'s
-alias extension); the loop and the inlined callee inside it are the step's ways. (A store in a callee inlined
-outside any loop is still dropped: ``borrow``'s docstring.)
+loops it makes (``envs.fused.step_body``). A store that nothing in the function reads afterwards is what numba's
+dead-code removal drops unless it knows the view aliases the array (``borrow``'s alias extension), wherever the
+store is: straight-line code, a loop, a callee inlined in either (whose parameter bound to the view is visited
+before the view's definition when ``borrow`` itself is inlined: it is not).
 """
 
 from __future__ import annotations
@@ -47,6 +47,17 @@ def _write_in_callee_in_loop(holder, row, n):
 
 
 @njit(cache=False)
+def _write_in_callee_straight(holder, row, i):
+    _write_row(borrow(holder.state), row, i)
+
+
+@njit(cache=False)
+def _write_in_callee_straight_plain(state, row, i):
+    view = borrow(state)
+    _write_row(view, row, i)
+
+
+@njit(cache=False)
 def _write_straight(holder, value, row, i):
     fins, state = borrow(holder.fins), borrow(holder.state)
     fins[i, 0, 0] = value
@@ -76,3 +87,12 @@ def test_a_store_in_straight_line_code_through_a_borrowed_view_reaches_the_array
     _write_straight(_new_holder(fins, state), 5.0, np.arange(6.0), 2)
     assert fins[2, 0, 0] == 5.0 and np.count_nonzero(fins) == 1
     assert np.array_equal(state[2], np.arange(6.0)) and not state[:2].any()
+
+
+def test_a_store_in_a_callee_inlined_in_straight_line_code_reaches_the_array():
+    fins, state = np.zeros((3, 2, 4)), np.zeros((3, 6))
+    _write_in_callee_straight(_new_holder(fins, state), np.arange(6.0), 1)
+    assert np.array_equal(state[1], np.arange(6.0)) and np.count_nonzero(state) == 5 and not fins.any()
+    plain = np.zeros((3, 6))
+    _write_in_callee_straight_plain(plain, np.arange(6.0) + 1.0, 2)
+    assert np.array_equal(plain[2], np.arange(6.0) + 1.0) and not plain[:2].any()

@@ -21,9 +21,8 @@ def borrow(array: np.ndarray) -> np.ndarray:
     those counts. A borrowed view's counting is a null check. It must not outlive the call that
     borrowed it: there the :class:`~pectoral_gym.envs.fused.StepArrays` argument holds the arrays for the whole
     step.
-    A store through the view is a store into ``array``: numba's alias analysis is told so (:func:`_view_aliases`).
-    Still, pass a view on only to calls made inside a loop, as the step does: a store made in a callee inlined
-    (``inline="always"``) outside any loop was seen dropped all the same (numba 0.68).
+    A store through the view is a store into ``array``: numba's alias analysis is told so (:func:`_view_aliases`),
+    wherever the store is made (straight-line code, a loop, a callee inlined with ``inline="always"``).
     In Python (``NUMBA_DISABLE_JIT``) it is ``array`` itself.
     """
     return array
@@ -43,7 +42,7 @@ def _borrowed(typingctx, array):
     return array(array), codegen
 
 
-@overload(borrow, inline="always")
+@overload(borrow)
 def _borrow_overload(array):
     return lambda array: _borrowed(array)
 
@@ -62,5 +61,5 @@ def _view_aliases(lhs: str, args: list, alias_map: dict[str, set[str]], arg_alia
     alias_map.setdefault(lhs, set()).add(viewed)
 
 
-for _name in ("borrow", "_borrowed"):  # the call before and after the overload is inlined
+for _name in ("borrow", "_borrowed"):  # the call, and the intrinsic in the overload's own body
     ir_utils.alias_func_extensions[(_name, __name__)] = _view_aliases
