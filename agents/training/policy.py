@@ -13,7 +13,6 @@ evaluation then runs many episodes through one call per step.
 
 from __future__ import annotations
 
-import io
 import json
 import pickle
 import re
@@ -23,6 +22,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from pectoral_gym.agents.training.acting_load import load_for_acting
 from pectoral_gym.envs.observation import OBS_SIZE
 
 __all__ = ["ALGOS", "BatchController", "Controller", "SB3Controller", "TRAINED_KEYS", "algo_of_zip", "load_policy",
@@ -283,65 +283,6 @@ def _stats_beside(zip_path: Path) -> Path | None:
     return None
 
 
-class _ActingOnly:
-    """Stands in for a loaded policy's optimizer: it keeps the saved state and cannot step.
-
-    A controller only acts. Building a torch optimizer imports ``torch._dynamo`` (most of a second of CPU, in every
-    process that loads a policy), and its state is of no use to acting; the saved state is kept, so that the model
-    saves again as it was loaded.
-    """
-
-    def __init__(self, params: Any, **settings: Any):
-        self.param_groups = [{"params": list(params), **settings}]
-        self._state: dict[str, Any] = {}
-
-    def load_state_dict(self, state: dict[str, Any], strict: bool = True) -> None:
-        self._state = state
-
-    def state_dict(self) -> dict[str, Any]:
-        return self._state
-
-    def zero_grad(self, *args: Any, **kwargs: Any) -> None:
-        raise RuntimeError("this model was loaded to act only (pectoral_gym's load_policy): load it with its "
-                           "algorithm's load() to train it")
-
-    step = zero_grad
-
-
-def _load_for_acting(algo_class: Any, raw: bytes, device: str) -> Any:
-    """``algo_class.load`` of the SB3 zip ``raw`` with its policy's optimizer left out (:class:`_ActingOnly`).
-
-    Everything else is SB3's own loading and checks (parameters matched exactly); the model's ``policy_kwargs``
-    and its policy's ``optimizer_class`` are the saved ones again afterwards. A zip whose ``policy_kwargs`` cannot
-    be read is loaded as it is.
-    """
-    import inspect
-
-    import torch as th
-    from stable_baselines3.common.policies import ActorCriticPolicy
-    from stable_baselines3.common.save_util import json_to_data
-
-    try:
-        with zipfile.ZipFile(io.BytesIO(raw)) as archive:
-            saved = json.loads(archive.read("data").decode()).get("policy_kwargs", {})
-        kwargs = json_to_data(json.dumps({"policy_kwargs": saved}))["policy_kwargs"]
-    except (KeyError, ValueError, TypeError, AttributeError, zipfile.BadZipFile):
-        kwargs = None
-    if not isinstance(kwargs, dict):
-        return algo_class.load(io.BytesIO(raw), device=device)
-    model = algo_class.load(io.BytesIO(raw), device=device,
-                            custom_objects={"policy_kwargs": {**kwargs, "optimizer_class": _ActingOnly}})
-    model.policy_kwargs = kwargs
-    policy = getattr(model, "policy", None)
-    if policy is not None and hasattr(policy, "optimizer_class"):  # what policy.save() records
-        default = inspect.signature(type(policy)).parameters.get("optimizer_class")
-        policy.optimizer_class = kwargs.get("optimizer_class", None if default is None else default.default)
-        if kwargs.get("optimizer_kwargs") is None and isinstance(policy, ActorCriticPolicy) \
-                and policy.optimizer_class is th.optim.Adam:
-            policy.optimizer_kwargs = {"eps": 1e-5}  # ActorCriticPolicy's own default for Adam
-    return model
-
-
 def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) -> SB3Controller:
     """Load a trained policy as a deterministic :class:`Controller`.
 
@@ -357,7 +298,8 @@ def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) 
         algo: Force the algorithm (``"ppo"``, ``"sac"``, ...).
 
     Returns:
-        The controller (it also has ``act_batch``).
+        The controller (it also has ``act_batch``). Its ``model`` is loaded to act: the policy's optimizer is a
+        stand-in that keeps the saved state (:func:`~pectoral_gym.agents.training.acting_load.load_for_acting`).
 
     Raises:
         FileNotFoundError: If ``path`` is neither a run folder with a model nor a ``.zip``.
@@ -411,7 +353,7 @@ def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) 
         raw = f.read()
     for candidate in candidates:
         try:
-            model = _load_for_acting(classes[candidate], raw, device)
+            model = load_for_acting(classes[candidate], raw, device)
         except Exception as error:  # noqa: BLE001 - try the next algorithm, report all failures below
             errors.append(f"{candidate}: {error}")
             continue
