@@ -23,6 +23,14 @@ def test_digest_is_the_documented_sum(shape):
     assert frame_digest(image) == _by_hand(image.tobytes())
 
 
+@pytest.mark.parametrize("size", [*range(0, 41), 1003, 1004, 1007])
+def test_digest_is_the_documented_sum_for_every_tail(size):
+    """Every length modulo 8: the shifted words end inside the whole ones, or reach into the ragged tail."""
+    data = np.random.default_rng(size).integers(0, 256, size, dtype=np.uint8)
+    data.setflags(write=False)  # a read-only frame (a camera's buffer) too
+    assert frame_digest(data) == _by_hand(data.tobytes())
+
+
 def test_every_single_bit_flip_changes_the_digest():
     image = np.random.default_rng(2).integers(0, 256, (5, 7, 3), dtype=np.uint8)  # 105 bytes: a ragged tail
     base = frame_digest(image)
