@@ -16,6 +16,23 @@ def test_crc16_ccitt_false_check_value():
     assert pr.crc16(b"") == 0xFFFF  # init value, no final xor
 
 
+def _crc16_bitwise(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE by its definition, one bit at a time."""
+    crc = 0xFFFF
+    for byte in data:
+        crc ^= byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
+    return crc
+
+
+@given(st.binary(max_size=300))
+@settings(max_examples=300, deadline=None)
+def test_crc16_is_the_bitwise_definition(data):
+    assert pr.crc16(data) == _crc16_bitwise(data)
+    assert pr.crc16(bytearray(data)) == pr.crc16(memoryview(data)) == pr.crc16(data)
+
+
 def test_digi_escaping_example():
     # Digi's API-mode-2 example: frame data 23 11; 0x11 (XON) is escaped as 7D 31; checksum 0xFF - 0x34 = 0xCB.
     raw = bytes([0x7E, 0x00, 0x02, 0x23, 0x7D, 0x31, 0xCB])

@@ -17,6 +17,7 @@ valid messages (it resynchronises on garbage and never yields a damaged message)
 
 from __future__ import annotations
 
+import binascii
 import enum
 import math
 import struct
@@ -160,13 +161,13 @@ def serial_newer(a: int, b: int, bits: int = 16) -> bool:
 
 
 def crc16(data: bytes) -> int:
-    """CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, no reflection, no final xor (check 0x29B1)."""
-    crc = 0xFFFF
-    for byte in data:
-        crc ^= byte << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
-    return crc
+    """CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, no reflection, no final xor (check 0x29B1).
+
+    ``data``: any bytes-like object. ``binascii.crc_hqx`` is this CRC (CCITT's polynomial, unreflected, no final
+    xor) from the initial value it is given, in C: a message's CRC costs a few hundred times less than a bitwise
+    loop in Python.
+    """
+    return binascii.crc_hqx(data, 0xFFFF)
 
 
 # ---------------------------------------------------------------- messages
