@@ -177,6 +177,34 @@ def test_fuzz_valid_frames_survive_garbage_and_corruption_is_never_delivered(ite
         assert pr.encode_message(msg) in sent
 
 
+class _CheckEveryByte(pr.StreamDecoder):
+    """The decoder as first written: the frame checked after every byte (the checks decide nothing in between)."""
+
+    def feed(self, data):
+        out = []
+        for byte in data:
+            self._need = 0  # every appended byte reaches _check
+            out.extend(super().feed(bytes([byte])))
+        return out
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(messages, st.binary(max_size=30)), min_size=1, max_size=6), st.data())
+def test_decoder_decides_as_when_it_checked_every_byte(items, data):
+    """Frames, garbage (delimiters and escapes included), cut frames and damaged bytes: the same out, same counts."""
+    stream = bytearray(b"".join(g + _msg_frames(m) for m, g in items))
+    for _ in range(data.draw(st.integers(0, 3))):
+        i = data.draw(st.integers(0, len(stream) - 1))
+        stream[i] ^= data.draw(st.integers(1, 255))
+    cut = data.draw(st.integers(0, len(stream)))
+    stream = bytes(stream[:cut] + b"\x7e" + stream[cut:])  # a frame cut short by a new one
+    ours, reference = pr.StreamDecoder(), _CheckEveryByte()
+    chunks = sorted(data.draw(st.lists(st.integers(0, len(stream)), max_size=5)))
+    got = [m for a, b in zip([0, *chunks], [*chunks, len(stream)], strict=True) for m in ours.feed(stream[a:b])]
+    assert got == reference.feed(stream)
+    assert ours.counters() == reference.counters()
+
+
 def test_sequence_tracker_wraps_and_classifies():
     tr = pr.SequenceTracker()
     assert tr.check(65534) == pr.Verdict.NEW

@@ -276,6 +276,7 @@ class StreamDecoder:
         self._buf = bytearray()
         self._in_frame = False
         self._escaped = False
+        self._need = 2  # the frame's bytes (after the delimiter) at which _check has something to decide
         self.frames = self.messages = self.skipped_bytes = self.framing_errors = 0
         self.truncated = self.checksum_errors = self.crc_errors = self.malformed = self.other_frames = 0
 
@@ -293,7 +294,7 @@ class StreamDecoder:
                 if self._in_frame and self._buf:
                     self.truncated += 1  # a new frame began before the previous one was complete
                 self._buf.clear()
-                self._in_frame, self._escaped = True, False
+                self._in_frame, self._escaped, self._need = True, False, 2
                 continue
             if not self._in_frame:
                 self.skipped_bytes += 1
@@ -305,7 +306,8 @@ class StreamDecoder:
                 self._escaped = True
                 continue
             self._buf.append(byte)
-            self._check(out)
+            if len(self._buf) >= self._need:  # the length field complete, or the whole frame
+                self._check(out)
         return out
 
     def _check(self, out: list[Message]) -> None:
@@ -318,6 +320,7 @@ class StreamDecoder:
             self._in_frame = False
             return
         if len(buf) < length + 3:
+            self._need = length + 3
             return
         data, cs = bytes(buf[2:-1]), buf[-1]
         self._in_frame = False
