@@ -133,6 +133,18 @@ def _region(region: Region, shape: tuple[int, ...]) -> Region | None:
     return (row0, row1, col0, col1) if row1 > row0 and col1 > col0 else None
 
 
+@functools.lru_cache(maxsize=1)
+def _warm_up() -> None:
+    """Compile (or load from numba's cache) the digest's kernel now, not inside a supervisor's first frame check.
+
+    With the argument types of any frame: a writable image and a read-only one (a camera's own buffer).
+    """
+    image = np.zeros((2, 4, 3), dtype=np.uint8)
+    frame_digest(image)
+    image.setflags(write=False)
+    frame_digest(image)
+
+
 class FrameCheck:
     """Classify frames on arrival.
 
@@ -164,6 +176,7 @@ class FrameCheck:
         self._digests: collections.deque[tuple[int, int, bytes]] = collections.deque(maxlen=int(history))
         self._regions: collections.deque[tuple[Region, np.ndarray]] = collections.deque(maxlen=int(history))
         self.rejected = dict.fromkeys(FRAME_REASONS, 0)
+        _warm_up()
 
     def reset(self) -> None:
         """Forget the last stamp (a new episode, or a camera that was re-opened).
