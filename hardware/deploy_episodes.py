@@ -101,8 +101,14 @@ def run_episodes(env, controller, episodes: int, log_path: Path | TextIO, seed: 
     return summaries
 
 
+_LEGEND_EPISODES = 10  # the most episodes the plot names in a legend (one colour each)
+
+
 def plot_trajectories(log_path: Path, png_path: Path) -> None:
-    """Tank, measured/estimated path (and the true path when emulated) and targets of every episode."""
+    """Tank, measured/estimated path (and the true path when emulated) and targets of every episode.
+
+    Up to ten episodes are named in a legend; with more, colours repeat every ten episodes and the title says so.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -126,9 +132,13 @@ def plot_trajectories(log_path: Path, png_path: Path) -> None:
         ax.plot(start[0], start[1], "o", color=colour)
         targets = np.array([r["target"] for r in recs if "target" in r])
         ax.plot(targets[:, 0], targets[:, 1], "x", color=colour, ms=8)
+    title = "Deployment: path (o start, x target)"
+    if len(episodes) > _LEGEND_EPISODES:  # a legend that long overflows the figure and takes seconds to lay out
+        title += f", {len(episodes)} episodes (colour: episode mod 10)"
     ax.set(xlim=(-0.05, tk.TANK_X + 0.05), ylim=(-0.05, tk.TANK_Y + 0.05), xlabel="X [m]", ylabel="Y [m]",
-           title="Deployment: path (o start, x target)", aspect="equal")
-    ax.legend(fontsize=7, loc="upper right")
+           title=title, aspect="equal")
+    if len(episodes) <= _LEGEND_EPISODES:
+        ax.legend(fontsize=7, loc="upper right")
     fig.tight_layout()
     fig.savefig(png_path, dpi=120)
     plt.close(fig)

@@ -317,8 +317,14 @@ class RunLogWriter:
 
     def pose(self, t: float, x: float, y: float, psi: float, confidence: float = 1.0) -> None:
         """A camera pose captured at ``t`` [s]: ``x, y`` [m], ``psi`` [rad], ``confidence`` (0..1)."""
-        self._write({"type": "pose", "t": float(t), "x": float(x), "y": float(y), "psi": float(psi),
-                     "confidence": float(confidence)})
+        t, x, y, psi, confidence = float(t), float(x), float(y), float(psi), float(confidence)
+        if t >= 0.0 and 0.0 <= confidence <= 1.0 and math.isfinite(t + x + y + psi):
+            # one line per camera frame: the bytes json.dumps gives (a finite float is its repr), checked as
+            # check_record checks a pose, without building the record
+            self._stream.write(f'{{"type": "pose", "t": {t!r}, "x": {x!r}, "y": {y!r}, "psi": {psi!r}, '
+                               f'"confidence": {confidence!r}}}\n')
+            return
+        self._write({"type": "pose", "t": t, "x": x, "y": y, "psi": psi, "confidence": confidence})  # raises
 
     def latch(self, t: float, fin: int, beat: Any, turn: float, power: bool, uptime_ms: int,
               boot: int | None = None) -> None:

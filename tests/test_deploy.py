@@ -103,6 +103,21 @@ def test_run_episodes_and_plot_on_the_emulator_fast(tmp_path):
     assert (tmp_path / "trajectory.png").stat().st_size > 10_000
 
 
+@pytest.mark.parametrize(("episodes", "legend"), [(3, True), (10, True), (11, False)])
+def test_plot_names_up_to_ten_episodes_in_a_legend(tmp_path, monkeypatch, episodes, legend):
+    from matplotlib.figure import Figure
+
+    seen = []
+    monkeypatch.setattr(Figure, "savefig", lambda fig, *a, **k: seen.append(fig.axes[0]))
+    rows = [{"episode": k, "pose": [0.5 + 0.01 * i, 0.5, 0.0], "estimate": [0.5 + 0.01 * i, 0.5, 0.0],
+             "target": [1.5, 0.6]} for k in range(episodes) for i in range(3)]
+    (tmp_path / "steps.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    plot_trajectories(tmp_path / "steps.jsonl", tmp_path / "trajectory.png")
+    (ax,) = seen
+    assert (ax.get_legend() is not None) == legend
+    assert (f"{episodes} episodes" in ax.get_title()) == (not legend)
+    assert len(ax.lines) == 3 * episodes  # every episode drawn: estimate, start, targets
+
 def _deploy(tmp_path, *extra):
     out = tmp_path / "run"
     code = main(["--emulate", "--speed", "2", "--episodes", "1", "--max-episode-steps", "4", "--out", str(out),

@@ -23,6 +23,14 @@ def test_digest_is_the_documented_sum(shape):
     assert frame_digest(image) == _by_hand(image.tobytes())
 
 
+@pytest.mark.parametrize("size", [*range(0, 41), 1003, 1004, 1007])
+def test_digest_is_the_documented_sum_for_every_tail(size):
+    """Every length modulo 8: the shifted words end inside the whole ones, or reach into the ragged tail."""
+    data = np.random.default_rng(size).integers(0, 256, size, dtype=np.uint8)
+    data.setflags(write=False)  # a read-only frame (a camera's buffer) too
+    assert frame_digest(data) == _by_hand(data.tobytes())
+
+
 def test_every_single_bit_flip_changes_the_digest():
     image = np.random.default_rng(2).integers(0, 256, (5, 7, 3), dtype=np.uint8)  # 105 bytes: a ragged tail
     base = frame_digest(image)
@@ -50,3 +58,24 @@ def test_a_repeat_among_the_last_frames_is_frozen_and_a_one_level_change_is_not(
     verdicts = [check.check(Frame(image, 1.0 + i / 30), 1.0 + i / 30)
                 for i, image in enumerate([*frames, nudged, frames[1].copy()])]
     assert verdicts == ["", "", "", "", "frozen_frame"]
+
+
+def test_the_kernel_is_ready_before_the_first_frame_check():
+    """A frame check built has its digest kernel compiled or loaded for any frame (none mid-episode, in a poll)."""
+    import subprocess
+    import sys
+
+    code = """
+import numpy as np
+from pectoral_gym.hardware.vision import framecheck
+framecheck.FrameCheck(0.05, 1.0)
+ready = len(framecheck._multilinear.signatures)
+frame = np.random.default_rng(0).integers(0, 256, (48, 64, 3), dtype=np.uint8)
+framecheck.frame_digest(frame)
+frame.setflags(write=False)
+framecheck.frame_digest(frame)
+print(ready, len(framecheck._multilinear.signatures))
+"""
+    ready, after = map(int, subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                                           check=True).stdout.split())
+    assert ready >= 1 and after == ready

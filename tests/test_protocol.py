@@ -16,6 +16,23 @@ def test_crc16_ccitt_false_check_value():
     assert pr.crc16(b"") == 0xFFFF  # init value, no final xor
 
 
+def _crc16_bitwise(data: bytes) -> int:
+    """CRC-16/CCITT-FALSE by its definition, one bit at a time."""
+    crc = 0xFFFF
+    for byte in data:
+        crc ^= byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
+    return crc
+
+
+@given(st.binary(max_size=300))
+@settings(max_examples=300, deadline=None)
+def test_crc16_is_the_bitwise_definition(data):
+    assert pr.crc16(data) == _crc16_bitwise(data)
+    assert pr.crc16(bytearray(data)) == pr.crc16(memoryview(data)) == pr.crc16(data)
+
+
 def test_digi_escaping_example():
     # Digi's API-mode-2 example: frame data 23 11; 0x11 (XON) is escaped as 7D 31; checksum 0xFF - 0x34 = 0xCB.
     raw = bytes([0x7E, 0x00, 0x02, 0x23, 0x7D, 0x31, 0xCB])
@@ -158,6 +175,34 @@ def test_fuzz_valid_frames_survive_garbage_and_corruption_is_never_delivered(ite
     sent = {pr.encode_message(m) for m, _ in items}
     for msg in pr.StreamDecoder().feed(damaged):
         assert pr.encode_message(msg) in sent
+
+
+class _CheckEveryByte(pr.StreamDecoder):
+    """The decoder as first written: the frame checked after every byte (the checks decide nothing in between)."""
+
+    def feed(self, data):
+        out = []
+        for byte in data:
+            self._need = 0  # every appended byte reaches _check
+            out.extend(super().feed(bytes([byte])))
+        return out
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.lists(st.tuples(messages, st.binary(max_size=30)), min_size=1, max_size=6), st.data())
+def test_decoder_decides_as_when_it_checked_every_byte(items, data):
+    """Frames, garbage (delimiters and escapes included), cut frames and damaged bytes: the same out, same counts."""
+    stream = bytearray(b"".join(g + _msg_frames(m) for m, g in items))
+    for _ in range(data.draw(st.integers(0, 3))):
+        i = data.draw(st.integers(0, len(stream) - 1))
+        stream[i] ^= data.draw(st.integers(1, 255))
+    cut = data.draw(st.integers(0, len(stream)))
+    stream = bytes(stream[:cut] + b"\x7e" + stream[cut:])  # a frame cut short by a new one
+    ours, reference = pr.StreamDecoder(), _CheckEveryByte()
+    chunks = sorted(data.draw(st.lists(st.integers(0, len(stream)), max_size=5)))
+    got = [m for a, b in zip([0, *chunks], [*chunks, len(stream)], strict=True) for m in ours.feed(stream[a:b])]
+    assert got == reference.feed(stream)
+    assert ours.counters() == reference.counters()
 
 
 def test_sequence_tracker_wraps_and_classifies():

@@ -121,3 +121,30 @@ def test_writer_refuses_bad_values():
         log.pose(0.0, math.nan, 0.0, 0.0)
     with pytest.raises(ValueError, match="envelope"):
         log.command(0.0, [[0.1, 0.5, 1.0, 2.0], [1.5, 0.5, 1.0, 2.0]])
+
+
+def test_pose_line_is_the_json_of_its_record():
+    """A pose line is ``json.dumps`` of the record docs/run-log.md gives, whatever the floats; bad ones raise."""
+    rng = np.random.default_rng(11)
+    values = [0.0, -0.0, 1.0, 1e-320, 1.7976931348623157e308, -1e300, 0.1, 2.0 / 3.0, 12345678.9,
+              *rng.normal(scale=1e3, size=40).tolist(), *(10.0 ** rng.uniform(-30, 30, size=20)).tolist()]
+    good = [(abs(t), x, y, psi, c) for t, x, y, psi, c in zip(values, values[3:], values[7:], values[11:],
+                                                              [0.0, 1.0, 0.5, *rng.uniform(size=60)], strict=False)]
+    assert len(good) > 40
+    stream = io.StringIO()
+    log = RunLogWriter(stream, "robot", 0.5)
+    start = len(stream.getvalue())
+    for t, x, y, psi, c in good:
+        log.pose(t, x, y, psi, c)
+    rec = [{"type": "pose", "t": t, "x": x, "y": y, "psi": psi, "confidence": c} for t, x, y, psi, c in good]
+    assert stream.getvalue()[start:] == "".join(json.dumps(r) + "\n" for r in rec)
+    for bad, match in [((-1e-9, 0.0, 0.0, 0.0, 1.0), ">= 0"), ((0.0, 1e308, 1e308, 0.0, 1.0), None),
+                       ((0.0, math.inf, 0.0, 0.0, 1.0), "finite"), ((0.0, 0.0, 0.0, -math.inf, 1.0), "finite"),
+                       ((math.nan, 0.0, 0.0, 0.0, 1.0), "finite"), ((0.0, 0.0, 0.0, 0.0, 1.5), r"\[0, 1\]"),
+                       ((0.0, 0.0, 0.0, 0.0, math.nan), "finite")]:
+        if match is None:  # large but finite: written as any pose
+            log.pose(*bad)
+            assert json.loads(stream.getvalue().splitlines()[-1])["x"] == bad[1]
+            continue
+        with pytest.raises(ValueError, match=match):
+            log.pose(*bad)

@@ -13,7 +13,6 @@ evaluation then runs many episodes through one call per step.
 
 from __future__ import annotations
 
-import io
 import json
 import pickle
 import re
@@ -23,6 +22,7 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+from pectoral_gym.agents.training.acting_load import load_for_acting
 from pectoral_gym.envs.observation import OBS_SIZE
 
 __all__ = ["ALGOS", "BatchController", "Controller", "SB3Controller", "TRAINED_KEYS", "algo_of_zip", "load_policy",
@@ -298,7 +298,8 @@ def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) 
         algo: Force the algorithm (``"ppo"``, ``"sac"``, ...).
 
     Returns:
-        The controller (it also has ``act_batch``).
+        The controller (it also has ``act_batch``). Its ``model`` is loaded to act: the policy's optimizer is a
+        stand-in that keeps the saved state (:func:`~pectoral_gym.agents.training.acting_load.load_for_acting`).
 
     Raises:
         FileNotFoundError: If ``path`` is neither a run folder with a model nor a ``.zip``.
@@ -348,10 +349,11 @@ def load_policy(path: str | Path, device: str = "cpu", algo: str | None = None) 
         raise ValueError(f"unknown algorithm {algo!r}; known: {sorted(classes)}")
     candidates = [algo] if algo else list(classes)
     errors = []
+    with open(zip_path, "rb") as f:
+        raw = f.read()
     for candidate in candidates:
         try:
-            with open(zip_path, "rb") as f:
-                model = classes[candidate].load(io.BytesIO(f.read()), device=device)
+            model = load_for_acting(classes[candidate], raw, device)
         except Exception as error:  # noqa: BLE001 - try the next algorithm, report all failures below
             errors.append(f"{candidate}: {error}")
             continue

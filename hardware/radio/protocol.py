@@ -17,6 +17,7 @@ valid messages (it resynchronises on garbage and never yields a damaged message)
 
 from __future__ import annotations
 
+import binascii
 import enum
 import math
 import struct
@@ -160,13 +161,13 @@ def serial_newer(a: int, b: int, bits: int = 16) -> bool:
 
 
 def crc16(data: bytes) -> int:
-    """CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, no reflection, no final xor (check 0x29B1)."""
-    crc = 0xFFFF
-    for byte in data:
-        crc ^= byte << 8
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1021) & 0xFFFF if crc & 0x8000 else (crc << 1) & 0xFFFF
-    return crc
+    """CRC-16/CCITT-FALSE: poly 0x1021, init 0xFFFF, no reflection, no final xor (check 0x29B1).
+
+    ``data``: any bytes-like object. ``binascii.crc_hqx`` is this CRC (CCITT's polynomial, unreflected, no final
+    xor) from the initial value it is given, in C: a message's CRC costs a few hundred times less than a bitwise
+    loop in Python.
+    """
+    return binascii.crc_hqx(data, 0xFFFF)
 
 
 # ---------------------------------------------------------------- messages
@@ -275,6 +276,7 @@ class StreamDecoder:
         self._buf = bytearray()
         self._in_frame = False
         self._escaped = False
+        self._need = 2  # the frame's bytes (after the delimiter) at which _check has something to decide
         self.frames = self.messages = self.skipped_bytes = self.framing_errors = 0
         self.truncated = self.checksum_errors = self.crc_errors = self.malformed = self.other_frames = 0
 
@@ -292,7 +294,7 @@ class StreamDecoder:
                 if self._in_frame and self._buf:
                     self.truncated += 1  # a new frame began before the previous one was complete
                 self._buf.clear()
-                self._in_frame, self._escaped = True, False
+                self._in_frame, self._escaped, self._need = True, False, 2
                 continue
             if not self._in_frame:
                 self.skipped_bytes += 1
@@ -304,7 +306,8 @@ class StreamDecoder:
                 self._escaped = True
                 continue
             self._buf.append(byte)
-            self._check(out)
+            if len(self._buf) >= self._need:  # the length field complete, or the whole frame
+                self._check(out)
         return out
 
     def _check(self, out: list[Message]) -> None:
@@ -317,6 +320,7 @@ class StreamDecoder:
             self._in_frame = False
             return
         if len(buf) < length + 3:
+            self._need = length + 3
             return
         data, cs = bytes(buf[2:-1]), buf[-1]
         self._in_frame = False

@@ -40,6 +40,7 @@ import cv2
 import numpy as np
 
 from pectoral_gym.hardware.vision.frames import Frame
+from pectoral_gym.model.jit import njit
 
 __all__ = ["FrameCheck", "FRAME_REASONS", "Region", "frame_digest"]
 
@@ -88,11 +89,35 @@ def frame_digest(image: np.ndarray) -> tuple[int, int, bytes]:
     flat = np.ascontiguousarray(image).reshape(-1).view(np.uint8)
     size = flat.size
     whole, shifted = size // 8, max(size - 4, 0) // 8
-    keys, shifted_keys = _digest_keys(max(whole, 1))
-    # integer dot products wrap modulo 2^64 (numpy's integer arithmetic), bit for bit on any machine
-    h1 = int(np.dot(flat[: 8 * whole].view("<u8"), keys[:whole])) if whole else 0
-    h2 = int(np.dot(flat[4 : 4 + 8 * shifted].view("<u8"), shifted_keys[:shifted])) if shifted else 0
+    if not whole:
+        return 0, 0, flat[-8:].tobytes()
+    keys, shifted_keys = _digest_keys(whole)
+    # the shifted words inside the whole ones in one pass over the image; a last one that reaches into the
+    # ragged tail (4 to 7 bytes past the whole words) is added here, in Python's integers modulo 2^64
+    inside = min(shifted, whole - 1)
+    h1, h2 = _multilinear(flat[: 8 * whole].view("<u8"), keys, shifted_keys, inside)
+    h1, h2 = int(h1), int(h2)
+    if shifted > inside:
+        last = int.from_bytes(flat[4 + 8 * inside : 12 + 8 * inside].tobytes(), "little")
+        h2 = (h2 + int(shifted_keys[inside]) * last) % 2**64
     return h1, h2, flat[-8:].tobytes()
+
+
+@njit
+def _multilinear(words: np.ndarray, keys: np.ndarray, shifted_keys: np.ndarray, shifted: int) -> tuple[int, int]:
+    """``sum(keys[j] words[j])`` over all words and ``sum(shifted_keys[j] w'[j])`` over ``j < shifted``, mod 2^64.
+
+    ``w'[j]`` is the little-endian word at byte ``8 j + 4``: the high half of ``words[j]`` and the low half of
+    ``words[j + 1]`` (``shifted`` < the number of words). Unsigned 64-bit products and sums wrap modulo 2^64.
+    """
+    h1 = np.uint64(0)
+    h2 = np.uint64(0)
+    for j in range(words.shape[0]):
+        h1 += keys[j] * words[j]
+    half = np.uint64(32)
+    for j in range(shifted):
+        h2 += shifted_keys[j] * ((words[j] >> half) | (words[j + 1] << half))
+    return h1, h2
 
 
 def _region(region: Region, shape: tuple[int, ...]) -> Region | None:
@@ -106,6 +131,18 @@ def _region(region: Region, shape: tuple[int, ...]) -> Region | None:
     row0, row1 = max(row0, 0), min(row1, shape[0])
     col0, col1 = max(col0, 0), min(col1, shape[1])
     return (row0, row1, col0, col1) if row1 > row0 and col1 > col0 else None
+
+
+@functools.lru_cache(maxsize=1)
+def _warm_up() -> None:
+    """Compile (or load from numba's cache) the digest's kernel now, not inside a supervisor's first frame check.
+
+    With the argument types of any frame: a writable image and a read-only one (a camera's own buffer).
+    """
+    image = np.zeros((2, 4, 3), dtype=np.uint8)
+    frame_digest(image)
+    image.setflags(write=False)
+    frame_digest(image)
 
 
 class FrameCheck:
@@ -139,6 +176,7 @@ class FrameCheck:
         self._digests: collections.deque[tuple[int, int, bytes]] = collections.deque(maxlen=int(history))
         self._regions: collections.deque[tuple[Region, np.ndarray]] = collections.deque(maxlen=int(history))
         self.rejected = dict.fromkeys(FRAME_REASONS, 0)
+        _warm_up()
 
     def reset(self) -> None:
         """Forget the last stamp (a new episode, or a camera that was re-opened).
