@@ -1,0 +1,200 @@
+"""Worker processes for lockstep episodes, which may be started before their job is known.
+
+A :class:`LockstepPool` spawns its workers at once; each can do its start-up (the imports of the rig, the camera
+model, numba's kernels loaded by a short episode of the hand law, the imports of torch and Stable-Baselines3)
+while the parent does something else, e.g. train the policy the workers will run. The start-up runs in a thread at
+the lowest priority (nice 19, Linux only), so that the parent's own work keeps its cores; the episodes run at the
+worker's own priority. A worker then takes one job (:class:`~pectoral_gym.hardware.lockstep_episode.LockstepJob`),
+and episode indices until it is told to stop: :func:`pectoral_gym.hardware.lockstep_jobs.run_lockstep` deals them
+out. Nothing a worker does before its job changes an episode's results, which depend on its seed and the job
+alone (:mod:`pectoral_gym.hardware.lockstep_jobs`).
+
+Each worker runs on a core of its own where there are enough cores, as batch work (``SCHED_BATCH``): see
+:mod:`pectoral_gym.hardware.lockstep_jobs`. A worker ignores Ctrl-C (it reaches the whole process group: the
+parent ends the workers) and ends when its pipe closes, so a parent that dies leaves no worker behind. The pool
+ends every worker on every path out of its ``with`` block; within it, SIGTERM ends the parent as
+``SystemExit(143)`` (where no handler of its own is installed), so that the block's end still runs.
+
+This module imports only the standard library at its top: a spawned worker imports it before its start-up is
+moved to the low-priority thread.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing
+import os
+import signal
+import sys
+import threading
+import traceback
+from collections.abc import Callable
+from multiprocessing.connection import Connection
+from typing import Any
+
+__all__ = ["LockstepPool", "START_UP_NICE"]
+
+START_UP_NICE = 19  # the niceness of a worker's start-up thread: the lowest priority
+_JOIN_TIMEOUT = 5.0  # wall s a terminated worker gets to end before it is killed
+
+
+class LockstepPool:
+    """``size`` spawned lockstep workers, started now, each taking one job later (a context manager).
+
+    Args:
+        size: Workers, >= 1.
+        cores: The core each is pinned to, or ``None`` for any (:func:`~pectoral_gym.hardware.lockstep_jobs.
+            worker_cores`'s list; default: not pinned).
+        warm_up: Do the start-up before the job comes (a pool started ahead of its job); ``False`` for a pool
+            whose job follows at once, where the first episode does the same work.
+        policy: Also import torch and Stable-Baselines3 in the start-up (the job will run a trained policy).
+
+    Attributes:
+        conns: The parent's end of each worker's pipe, in worker order.
+        procs: The worker processes, in the same order.
+        used: A run took the workers (a pool serves one run).
+    """
+
+    def __init__(self, size: int, cores: list[int | None] | None = None, warm_up: bool = True,
+                 policy: bool = True):
+        if size < 1:
+            raise ValueError(f"a pool needs at least one worker, got {size}")
+        cores = [None] * size if cores is None else list(cores)
+        if len(cores) != size:
+            raise ValueError(f"{len(cores)} cores given for {size} workers")
+        self.conns: list[Connection] = []
+        self.procs: list[Any] = []
+        self.used = False
+        self._restore: Callable[[], None] = lambda: None
+        ctx = multiprocessing.get_context("spawn")  # numba's and the clock's threads in the parent: no fork
+        try:
+            for rank, core in enumerate(cores):
+                conn, child = ctx.Pipe()
+                proc = ctx.Process(target=_worker, args=(child, core, warm_up, policy),
+                                   name=f"lockstep-worker-{rank}", daemon=True)
+                proc.start()
+                child.close()
+                self.conns.append(conn)
+                self.procs.append(proc)
+        except BaseException:
+            self.close()
+            raise
+
+    def __len__(self) -> int:
+        return len(self.procs)
+
+    def __enter__(self) -> LockstepPool:
+        """Make SIGTERM end this thread as ``SystemExit(143)`` until the block ends (main thread, default only)."""
+        if (threading.current_thread() is threading.main_thread()
+                and signal.getsignal(signal.SIGTERM) == signal.SIG_DFL):
+            signal.signal(signal.SIGTERM, _sigterm)
+            self._restore = _restore_sigterm
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        try:
+            self.close()
+        finally:
+            self._restore()
+            self._restore = lambda: None
+
+    def close(self, finished: bool = False) -> None:
+        """End every worker and join it (idempotent).
+
+        ``finished``: every worker was told to stop and may end by itself; otherwise (a failure, Ctrl-C, a pool
+        never used) the live ones are terminated at once.
+        """
+        for proc in self.procs:
+            if not finished and proc.is_alive():
+                proc.terminate()
+        for conn, proc in zip(self.conns, self.procs, strict=True):
+            proc.join(_JOIN_TIMEOUT)
+            if proc.is_alive():
+                proc.kill()
+                proc.join()
+            conn.close()
+
+
+def _sigterm(signum: int, frame: Any) -> None:
+    raise SystemExit(128 + signum)
+
+
+def _restore_sigterm() -> None:
+    if signal.getsignal(signal.SIGTERM) is _sigterm:  # not if someone installed their own on top since
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+def _worker(conn: Connection, core: int | None, warm_up: bool, policy: bool) -> None:
+    """A worker: start up, take the job, run the episodes the parent sends (``None``: stop), reply to each.
+
+    Replies: ``("result", EpisodeResult)`` or ``("error", (message, setup, log))``, after which it ends.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group: the parent ends us
+    if core is not None:
+        with contextlib.suppress(OSError):  # a core taken away since: run anywhere, as unpinned
+            os.sched_setaffinity(0, {core})
+    if hasattr(os, "SCHED_BATCH"):  # the threads made from here on inherit both settings
+        with contextlib.suppress(OSError):
+            os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
+    job_came = threading.Event()
+    start_up = threading.Thread(target=_start_up, args=(policy, job_came), name="lockstep-start-up", daemon=True)
+    if warm_up:
+        start_up.start()
+    with contextlib.suppress(EOFError, OSError):  # the parent is gone: nobody to report to
+        job = conn.recv()
+        job_came.set()
+        if job is None:
+            return
+        if start_up.is_alive():  # what it began (an import, a rig) is finished at low priority
+            start_up.join()
+        _serve(conn, job)
+
+
+def _serve(conn: Connection, job: Any) -> None:
+    """Run ``job``'s episodes as the parent sends their indices, until ``None``."""
+    from pectoral_gym.hardware.lockstep_episode import EpisodeError, EpisodeRunner
+
+    try:
+        runner = EpisodeRunner(job, handle_signals=False)
+    except BaseException as err:  # noqa: BLE001 - reported to the parent, which names it
+        conn.send(("error", (_describe(err), isinstance(err, ValueError), "")))
+        return
+    while (episode := conn.recv()) is not None:
+        try:
+            result = runner.run(episode)
+        except BaseException as err:  # noqa: BLE001 - reported to the parent, which names the episode
+            if isinstance(err, EpisodeError):
+                conn.send(("error", (str(err), err.setup, err.log)))
+            else:
+                conn.send(("error", (_describe(err), False, "")))
+            return
+        conn.send(("result", result))
+
+
+def _start_up(policy: bool, job_came: threading.Event) -> None:
+    """The start-up a job's first episode would pay, at the lowest priority; it stops early once the job came.
+
+    A failure here is left for the job to meet and report (it may not need what failed).
+    """
+    if sys.platform == "linux":  # there a thread's own id names it alone: only this thread is lowered
+        with contextlib.suppress(OSError):
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), START_UP_NICE)
+    with contextlib.suppress(Exception):
+        from pectoral_gym.hardware.lockstep_episode import EpisodeRunner, LockstepJob
+
+        if not job_came.is_set():  # the imports, the camera model, the rig's and the env's kernels
+            EpisodeRunner(LockstepJob(controller="hand", max_steps=2), handle_signals=False).run(0)
+        if policy and not job_came.is_set():
+            import torch
+
+            import pectoral_gym.agents.training.policy  # noqa: F401 - lazy in agents/: pulls in Stable-Baselines3
+
+            # loading a model builds its optimizer, whose first construction imports torch's compiler stack
+            torch.optim.Adam([torch.nn.Parameter(torch.zeros(1))])
+
+
+def _describe(err: BaseException) -> str:
+    """What went wrong, for the parent to print: the error and its traceback (an unexpected failure)."""
+    if isinstance(err, (RuntimeError, OSError)):  # e.g. a policy that cannot be loaded: one line
+        return str(err)
+    return f"{type(err).__name__}: {err}\n{''.join(traceback.format_exception(err)).rstrip()}"
