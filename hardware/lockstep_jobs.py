@@ -112,13 +112,15 @@ def merge_solver(solvers: Sequence[Mapping[str, Any] | None]) -> dict[str, Any] 
     return solver_summary(total)
 
 
-def start_pool(jobs: int, policy: bool = True) -> LockstepPool:
+def start_pool(jobs: int, policy: bool = True, idle: bool = True) -> LockstepPool:
     """``jobs`` lockstep workers for a later :func:`run_lockstep` with ``jobs``, started now and warming up.
 
-    They are pinned as :func:`run_lockstep` pins its own (:func:`worker_cores`); ``policy``: the job will run a
-    trained policy (its imports are part of the start-up). Use it as a context manager, which ends the workers.
+    Their episodes are pinned as :func:`run_lockstep` pins its own (:func:`worker_cores`); ``policy``: the job will
+    run a trained policy (its imports are part of the start-up); ``idle``: the start-up at the lowest priority
+    (:class:`~pectoral_gym.hardware.lockstep_pool.LockstepPool`). A worker whose start-up has not ended when the
+    run comes is replaced by a fresh one. Use it as a context manager, which ends the workers.
     """
-    return LockstepPool(jobs, worker_cores(jobs), warm_up=True, policy=policy)
+    return LockstepPool(jobs, worker_cores(jobs), warm_up=True, policy=policy, idle=idle)
 
 
 def run_lockstep(job: LockstepJob, episodes: Sequence[int], jobs: int = 1,
@@ -184,6 +186,7 @@ def _run_workers(job: LockstepJob, order: list[int], pool: LockstepPool,
     if pool.used:
         raise ValueError("this pool of lockstep workers has served a run already; start another")
     pool.used = True
+    pool.take()
     queue = list(reversed(order))  # popped from the end: the lowest index first
     busy: dict[Connection, int] = {}  # a worker's pipe -> the episode it runs
     procs = dict(zip(pool.conns, pool.procs, strict=True))

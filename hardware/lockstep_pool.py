@@ -2,15 +2,17 @@
 
 A :class:`LockstepPool` spawns its workers at once; each can do its start-up (the imports of the rig, the camera
 model, numba's kernels loaded by a short episode of the hand law, the imports of torch and Stable-Baselines3)
-while the parent does something else, e.g. train the policy the workers will run. The start-up runs in a thread at
-the lowest priority (nice 19, Linux only), so that the parent's own work keeps its cores; the episodes run at the
-worker's own priority. A worker then takes one job (:class:`~pectoral_gym.hardware.lockstep_episode.LockstepJob`),
-and episode indices until it is told to stop: :func:`pectoral_gym.hardware.lockstep_jobs.run_lockstep` deals them
-out. Nothing a worker does before its job changes an episode's results, which depend on its seed and the job
-alone (:mod:`pectoral_gym.hardware.lockstep_jobs`).
+while the parent does something else, e.g. train the policy the workers will run. The start-up runs in a thread of
+its own at the lowest priority (Linux's ``SCHED_IDLE``: it runs only on a core nothing else wants; nice 19 would
+still take a share of a core beside a parent at nice 10, scheduler weights 15 against 110), on any core, so that
+the parent's own work keeps its cores. The episodes run at the worker's own priority, on its own core. A worker
+then takes one job (:class:`~pectoral_gym.hardware.lockstep_episode.LockstepJob`), and episode indices until it is
+told to stop: :func:`pectoral_gym.hardware.lockstep_jobs.run_lockstep` deals them out. Nothing a worker does
+before its job changes an episode's results, which depend on its seed and the job alone
+(:mod:`pectoral_gym.hardware.lockstep_jobs`).
 
-Each worker runs on a core of its own where there are enough cores, as batch work (``SCHED_BATCH``): see
-:mod:`pectoral_gym.hardware.lockstep_jobs`. A worker ignores Ctrl-C (it reaches the whole process group: the
+Each worker runs its episodes on a core of its own where there are enough cores, as batch work (``SCHED_BATCH``):
+see :mod:`pectoral_gym.hardware.lockstep_jobs`. A worker ignores Ctrl-C (it reaches the whole process group: the
 parent ends the workers) and ends when its pipe closes, so a parent that dies leaves no worker behind. The pool
 ends every worker on every path out of its ``with`` block; within it, SIGTERM ends the parent as
 ``SystemExit(143)`` (where no handler of its own is installed), so that the block's end still runs.
@@ -34,7 +36,7 @@ from typing import Any
 
 __all__ = ["LockstepPool", "START_UP_NICE"]
 
-START_UP_NICE = 19  # the niceness of a worker's start-up thread: the lowest priority
+START_UP_NICE = 19  # the niceness of a worker's start-up thread where there is no SCHED_IDLE
 _JOIN_TIMEOUT = 5.0  # wall s a terminated worker gets to end before it is killed
 
 
@@ -43,11 +45,13 @@ class LockstepPool:
 
     Args:
         size: Workers, >= 1.
-        cores: The core each is pinned to, or ``None`` for any (:func:`~pectoral_gym.hardware.lockstep_jobs.
-            worker_cores`'s list; default: not pinned).
+        cores: The core each runs its episodes on, or ``None`` for any (:func:`~pectoral_gym.hardware.
+            lockstep_jobs.worker_cores`'s list; default: not pinned).
         warm_up: Do the start-up before the job comes (a pool started ahead of its job); ``False`` for a pool
             whose job follows at once, where the first episode does the same work.
         policy: Also import torch and Stable-Baselines3 in the start-up (the job will run a trained policy).
+        idle: Run the start-up at the lowest priority (Linux's ``SCHED_IDLE``, else nice
+            :data:`START_UP_NICE`); ``False``: at the worker's own.
 
     Attributes:
         conns: The parent's end of each worker's pipe, in worker order.
@@ -56,29 +60,61 @@ class LockstepPool:
     """
 
     def __init__(self, size: int, cores: list[int | None] | None = None, warm_up: bool = True,
-                 policy: bool = True):
+                 policy: bool = True, idle: bool = True):
         if size < 1:
             raise ValueError(f"a pool needs at least one worker, got {size}")
-        cores = [None] * size if cores is None else list(cores)
-        if len(cores) != size:
-            raise ValueError(f"{len(cores)} cores given for {size} workers")
+        self.cores = [None] * size if cores is None else list(cores)
+        if len(self.cores) != size:
+            raise ValueError(f"{len(self.cores)} cores given for {size} workers")
         self.conns: list[Connection] = []
         self.procs: list[Any] = []
         self.used = False
+        self._warm_up, self._policy, self._idle = warm_up, policy, idle
         self._restore: Callable[[], None] = lambda: None
-        ctx = multiprocessing.get_context("spawn")  # numba's and the clock's threads in the parent: no fork
         try:
-            for rank, core in enumerate(cores):
-                conn, child = ctx.Pipe()
-                proc = ctx.Process(target=_worker, args=(child, core, warm_up, policy),
-                                   name=f"lockstep-worker-{rank}", daemon=True)
-                proc.start()
-                child.close()
-                self.conns.append(conn)
-                self.procs.append(proc)
+            for rank in range(size):
+                self._start(rank, warm_up)
         except BaseException:
             self.close()
             raise
+
+    def _start(self, rank: int, warm_up: bool) -> None:
+        """Start worker ``rank`` (in place of the one before, if any)."""
+        ctx = multiprocessing.get_context("spawn")  # numba's and the clock's threads in the parent: no fork
+        conn, child = ctx.Pipe()
+        proc = ctx.Process(target=_worker, args=(child, self.cores[rank], warm_up, self._policy, self._idle),
+                           name=f"lockstep-worker-{rank}", daemon=True)
+        proc.start()
+        child.close()
+        if rank < len(self.procs):
+            self.conns[rank], self.procs[rank] = conn, proc
+        else:
+            self.conns.append(conn)
+            self.procs.append(proc)
+
+    def take(self) -> None:
+        """Make every worker ready to take its job at once (before the job is sent; a run calls it).
+
+        A worker whose start-up has not ended is replaced by a fresh one without it: at the lowest priority, on a
+        busy machine, the rest of its start-up could take far longer than a start at the worker's own priority,
+        and would hold up the episodes meanwhile.
+        """
+        if not self._warm_up:
+            return
+        for rank, conn in enumerate(self.conns):
+            try:
+                ready = conn.poll() and conn.recv() == ("ready", None)
+            except (EOFError, OSError):  # it died: a fresh one runs the episodes, or names their failure
+                ready = False
+            if not ready:
+                proc = self.procs[rank]
+                proc.terminate()
+                proc.join(_JOIN_TIMEOUT)
+                if proc.is_alive():
+                    proc.kill()
+                    proc.join()
+                conn.close()
+                self._start(rank, warm_up=False)
 
     def __len__(self) -> int:
         return len(self.procs)
@@ -124,29 +160,25 @@ def _restore_sigterm() -> None:
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-def _worker(conn: Connection, core: int | None, warm_up: bool, policy: bool) -> None:
+def _worker(conn: Connection, core: int | None, warm_up: bool, policy: bool, idle: bool) -> None:
     """A worker: start up, take the job, run the episodes the parent sends (``None``: stop), reply to each.
 
-    Replies: ``("result", EpisodeResult)`` or ``("error", (message, setup, log))``, after which it ends.
+    Replies: ``("ready", None)`` once the start-up ended (with ``warm_up`` only), then ``("result",
+    EpisodeResult)`` for each episode, or ``("error", (message, setup, log))``, after which it ends.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group: the parent ends us
-    if core is not None:
-        with contextlib.suppress(OSError):  # a core taken away since: run anywhere, as unpinned
-            os.sched_setaffinity(0, {core})
-    if hasattr(os, "SCHED_BATCH"):  # the threads made from here on inherit both settings
+    if hasattr(os, "SCHED_BATCH"):  # the threads made from here on inherit it (on Linux a thread's own setting)
         with contextlib.suppress(OSError):
             os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
-    job_came = threading.Event()
-    start_up = threading.Thread(target=_start_up, args=(policy, job_came), name="lockstep-start-up", daemon=True)
-    if warm_up:
-        start_up.start()
+    if warm_up:  # unpinned: on the core the parent leaves idle, where there is one
+        threading.Thread(target=_start_up, args=(conn, policy, idle), name="lockstep-start-up", daemon=True).start()
     with contextlib.suppress(EOFError, OSError):  # the parent is gone: nobody to report to
-        job = conn.recv()
-        job_came.set()
+        job = conn.recv()  # blocked without the interpreter lock: the start-up has it to itself
         if job is None:
             return
-        if start_up.is_alive():  # what it began (an import, a rig) is finished at low priority
-            start_up.join()
+        if core is not None:  # before the rig's threads start: they inherit it
+            with contextlib.suppress(OSError):  # a core taken away since: run anywhere, as unpinned
+                os.sched_setaffinity(0, {core})
         _serve(conn, job)
 
 
@@ -171,26 +203,41 @@ def _serve(conn: Connection, job: Any) -> None:
         conn.send(("result", result))
 
 
-def _start_up(policy: bool, job_came: threading.Event) -> None:
-    """The start-up a job's first episode would pay, at the lowest priority; it stops early once the job came.
+def _start_up(conn: Connection, policy: bool, idle: bool) -> None:
+    """The start-up a job's first episode would pay, at the lowest priority with ``idle``; then ``"ready"``.
 
-    A failure here is left for the job to meet and report (it may not need what failed).
+    A failure here is left for the job to meet and report (it may not need what failed). The parent sends the job
+    only after ``"ready"``, so the worker's own thread never waits for this one at its low priority.
     """
-    if sys.platform == "linux":  # there a thread's own id names it alone: only this thread is lowered
-        with contextlib.suppress(OSError):
-            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), START_UP_NICE)
-    with contextlib.suppress(Exception):
+    if idle:
+        _lower_this_thread()
+    try:
         from pectoral_gym.hardware.lockstep_episode import EpisodeRunner, LockstepJob
 
-        if not job_came.is_set():  # the imports, the camera model, the rig's and the env's kernels
-            EpisodeRunner(LockstepJob(controller="hand", max_steps=2), handle_signals=False).run(0)
-        if policy and not job_came.is_set():
+        # the imports, the camera model, the rig's and the env's kernels
+        EpisodeRunner(LockstepJob(controller="hand", max_steps=2), handle_signals=False).run(0)
+        if policy:
             import torch
 
             import pectoral_gym.agents.training.policy  # noqa: F401 - lazy in agents/: pulls in Stable-Baselines3
 
             # loading a model builds its optimizer, whose first construction imports torch's compiler stack
             torch.optim.Adam([torch.nn.Parameter(torch.zeros(1))])
+    except Exception:  # noqa: BLE001, S110 - the job meets it again, and reports it
+        pass
+    finally:
+        with contextlib.suppress(OSError):
+            conn.send(("ready", None))
+
+
+def _lower_this_thread() -> None:
+    """The calling thread (and those it makes) to the lowest priority; Linux only, where it is a thread's own."""
+    if sys.platform == "linux":
+        with contextlib.suppress(OSError):
+            if hasattr(os, "SCHED_IDLE"):
+                os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+            else:
+                os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), START_UP_NICE)
 
 
 def _describe(err: BaseException) -> str:

@@ -56,12 +56,29 @@ def _in_thread(fn):
     return out["value"]
 
 
-def test_a_pool_started_ahead_gives_the_results_of_one_process():
-    """Degraded radio and camera, 3 episodes: in this thread, and in 2 workers started (and warming up) before."""
+def _wait_ready(pool) -> None:
+    """Until every worker said its start-up ended (its first message, left for the run to read)."""
+    deadline = time.monotonic() + _LIVENESS
+    while not all(conn.poll() for conn in pool.conns):
+        assert time.monotonic() < deadline, "a worker's start-up did not end"
+        time.sleep(0.05)
+
+
+@pytest.mark.parametrize("ready", [True, False])
+def test_a_pool_started_ahead_gives_the_results_of_one_process(ready):
+    """Degraded radio and camera, 3 episodes: in this thread, and in 2 workers started before the run.
+
+    Workers whose start-up ended run the episodes; those still starting up are replaced by fresh ones.
+    """
     alone = _in_thread(lambda: run_lockstep(_JOB, range(3), progress=False))
-    with start_pool(2, policy=False) as pool:
+    with start_pool(2, policy=False, idle=False) as pool:  # idle=False: a start-up a busy machine cannot stall
+        if ready:
+            _wait_ready(pool)
+        pids = [proc.pid for proc in pool.procs]
         pooled = run_lockstep(_JOB, range(3), 2, progress=False, pool=pool)
         assert not any(proc.is_alive() for proc in pool.procs)  # the run ended its workers
+        # the start-up takes seconds of imports and a rig: just after the start, none has ended
+        assert ([proc.pid for proc in pool.procs] == pids) is ready
     assert [r.episode for r in pooled] == [0, 1, 2]
     assert [r.log for r in pooled] == [r.log for r in alone]
     assert [r.summary for r in pooled] == [r.summary for r in alone]
@@ -98,24 +115,22 @@ def test_an_error_in_the_block_ends_the_waiting_workers():
 
 
 def test_the_start_up_lowers_its_own_thread_only():
-    from pectoral_gym.hardware.lockstep_pool import START_UP_NICE, _start_up
+    from pectoral_gym.hardware.lockstep_pool import _lower_this_thread
 
-    if sys.platform != "linux":
-        pytest.skip("a thread's own priority: Linux")
-    came = threading.Event()
-    came.set()  # the job is in: only the priority and the imports of torch and SB3 remain
+    if sys.platform != "linux" or not hasattr(os, "SCHED_IDLE"):
+        pytest.skip("a thread's own scheduling policy: Linux")
     seen = {}
 
     def body():
-        _start_up(False, came)
-        seen["thread"] = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+        _lower_this_thread()
+        seen["thread"] = os.sched_getscheduler(0)  # this thread's own
 
-    before = os.getpriority(os.PRIO_PROCESS, threading.get_native_id())
+    before = os.sched_getscheduler(0)
     thread = threading.Thread(target=body)
     thread.start()
     thread.join()
-    assert seen["thread"] == START_UP_NICE != before
-    assert os.getpriority(os.PRIO_PROCESS, threading.get_native_id()) == before
+    assert seen["thread"] == os.SCHED_IDLE != before
+    assert os.sched_getscheduler(0) == before
 
 
 _PARENT = textwrap.dedent("""
