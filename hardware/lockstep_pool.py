@@ -57,6 +57,7 @@ class LockstepPool:
         conns: The parent's end of each worker's pipe, in worker order.
         procs: The worker processes, in the same order.
         used: A run took the workers (a pool serves one run).
+        replaced: Workers replaced by fresh ones when the run came, their start-up unfinished (:meth:`take`).
     """
 
     def __init__(self, size: int, cores: list[int | None] | None = None, warm_up: bool = True,
@@ -69,6 +70,7 @@ class LockstepPool:
         self.conns: list[Connection] = []
         self.procs: list[Any] = []
         self.used = False
+        self.replaced = 0
         self._warm_up, self._policy, self._idle = warm_up, policy, idle
         self._restore: Callable[[], None] = lambda: None
         try:
@@ -115,6 +117,7 @@ class LockstepPool:
                     proc.join()
                 conn.close()
                 self._start(rank, warm_up=False)
+                self.replaced += 1
 
     def __len__(self) -> int:
         return len(self.procs)

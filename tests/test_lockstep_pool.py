@@ -78,7 +78,8 @@ def test_a_pool_started_ahead_gives_the_results_of_one_process(ready):
         pooled = run_lockstep(_JOB, range(3), 2, progress=False, pool=pool)
         assert not any(proc.is_alive() for proc in pool.procs)  # the run ended its workers
         # the start-up takes seconds of imports and a rig: just after the start, none has ended
-        assert ([proc.pid for proc in pool.procs] == pids) is ready
+        assert pool.replaced == (0 if ready else 2)
+        assert [proc.pid != pid for proc, pid in zip(pool.procs, pids, strict=True)] == [not ready] * 2
     assert [r.episode for r in pooled] == [0, 1, 2]
     assert [r.log for r in pooled] == [r.log for r in alone]
     assert [r.summary for r in pooled] == [r.summary for r in alone]
