@@ -150,8 +150,11 @@ def run_real_time(request: DeployRequest, name: str, controller: Any, settings: 
 
 
 def run_lockstep_episodes(request: DeployRequest, name: str, controller: Any, settings: dict, log: Sink,
-                          run_log: Sink) -> RunResult:
+                          run_log: Sink, workers: Any = None) -> RunResult:
     """The episodes in lockstep, each on a fresh rig (:mod:`pectoral_gym.hardware.lockstep_jobs`), in ``jobs``.
+
+    ``workers``: a :class:`~pectoral_gym.hardware.lockstep_pool.LockstepPool` of ``jobs`` workers started before
+    (:func:`~pectoral_gym.hardware.lockstep_jobs.start_pool`), which run the episodes; ``None``: started here.
 
     ``log`` gets each episode's steps in episode order as soon as the episodes before it are done. The link's
     counters are summed over the episodes (:func:`pectoral_gym.hardware.lockstep_jobs.merge_link`); ``ended`` is
@@ -186,7 +189,7 @@ def run_lockstep_episodes(request: DeployRequest, name: str, controller: Any, se
 
         try:
             results = run_lockstep(job, range(request.episodes), request.jobs, write, progress=request.progress,
-                                   controller=controller)
+                                   controller=controller, pool=workers)
             latch.check()  # a signal lost during the last episode's clean-up
         except EpisodeError as err:
             if err.setup:  # the settings, found wrong by the rig or the env

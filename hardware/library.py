@@ -143,19 +143,25 @@ def _checked_settings(request: DeployRequest) -> tuple[Any, Any, dict, list[str]
     return controller, model, settings, notes
 
 
-def run_deployment(request: DeployRequest, notify: Callable[[str], None] | None = None) -> Deployment:
+def run_deployment(request: DeployRequest, notify: Callable[[str], None] | None = None,
+                   workers: Any = None) -> Deployment:
     """Run ``request``'s episodes; returns them in memory, and writes the files when it has an ``out`` folder.
 
     Args:
         request: The deployment.
         notify: Called with each note or warning line (the policy's unchecked settings, the probe of ``params``, a
             priority that could not be raised), before the episodes; ``None``: only collected in the result.
+        workers: For ``rig="lockstep"`` only: lockstep workers started before the request was known
+            (:func:`pectoral_gym.hardware.lockstep_jobs.start_pool` with ``request.jobs``), which then run its
+            episodes; the run ends them. ``None``: the run starts its own where ``request.jobs > 1``.
 
     Raises:
         ValueError: A setting is wrong (one line naming it), found by the checks, the devices or the env.
         DeployError: A device did not answer or an episode could not go on.
         KeyboardInterrupt: Ctrl-C (or SIGTERM's ``SystemExit``), after the fins were stopped.
     """
+    if workers is not None and request.rig != "lockstep":
+        raise ValueError(f"workers serve lockstep runs only, not rig={request.rig!r}")
     lines: list[str] = []
 
     def say(line: str) -> None:
@@ -184,7 +190,7 @@ def run_deployment(request: DeployRequest, notify: Callable[[str], None] | None 
         if request.rig == "lockstep":
             if deploy_runs.probe_wanted(request, name):
                 deploy_runs.probe_lockstep(request, settings, model, say)
-            result = deploy_runs.run_lockstep_episodes(request, name, controller, settings, log, run_log)
+            result = deploy_runs.run_lockstep_episodes(request, name, controller, settings, log, run_log, workers)
         else:
             result = deploy_runs.run_real_time(request, name, controller, settings, model, log, run_log, say)
     except BaseException:  # a bad setting found by the devices, a device, Ctrl-C

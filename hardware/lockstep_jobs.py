@@ -10,7 +10,8 @@ results for any number of worker processes. The controller is built once per pro
 Workers are started with the ``spawn`` method (numba's and the clock's threads in the parent make ``fork``
 unsafe); each takes the next episode index from the parent when it is free, and sends back the episode's
 lines of ``steps.jsonl`` and its summary; the parent hands them on in episode order. One episode on its rig:
-:mod:`pectoral_gym.hardware.lockstep_episode`.
+:mod:`pectoral_gym.hardware.lockstep_episode`. The workers (:mod:`pectoral_gym.hardware.lockstep_pool`) may be
+started ahead of the run (:func:`start_pool`), to do their start-up while the caller does other work.
 
 Each worker runs on a core of its own (:func:`worker_cores`) when there are at least as many cores as workers: a
 lockstep rig runs one thread at a time, and every baton pass between its threads wakes the next one; on one core
@@ -25,13 +26,9 @@ scheduling irrelevant to the results: where and how a worker runs never changes 
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import json
-import multiprocessing
 import os
-import signal
-import traceback
 from collections.abc import Callable, Mapping, Sequence
 from multiprocessing.connection import Connection, wait
 from types import SimpleNamespace
@@ -46,15 +43,16 @@ from pectoral_gym.hardware.lockstep_episode import (  # re-exported: a job and i
     LockstepJob,
     episode_time_limit,
 )
+from pectoral_gym.hardware.lockstep_pool import LockstepPool
 from pectoral_gym.hardware.radio.linkstatus import LinkStats
 from pectoral_gym.hardware.safety.rules import install_stop_handlers
 
-__all__ = ["EpisodeError", "EpisodeResult", "LockstepJob", "episode_time_limit", "merge_link", "merge_solver",
-           "run_lockstep", "shift_records", "worker_cores"]
+__all__ = ["EpisodeError", "EpisodeResult", "LockstepJob", "LockstepPool", "episode_time_limit", "merge_link",
+           "merge_solver", "run_lockstep", "shift_records", "start_pool", "worker_cores"]
 
 RUN_LOG_GAP = 1.0  # s between one episode's last run-log record and the next episode's start in a merged run log
 
-_JOIN_TIMEOUT = 5.0  # wall s a terminated worker gets to end before it is killed
+_JOIN_TIMEOUT = 5.0  # wall s a dead worker's exit code is waited for
 # Wall seconds the parent waits for any worker's next result: far above an episode's (seconds to a minute, plus a
 # cold numba compile of up to ~100 s), far below "for ever".
 EPISODE_WALL_TIMEOUT = 1800.0
@@ -114,9 +112,20 @@ def merge_solver(solvers: Sequence[Mapping[str, Any] | None]) -> dict[str, Any] 
     return solver_summary(total)
 
 
+def start_pool(jobs: int, policy: bool = True, idle: bool = True) -> LockstepPool:
+    """``jobs`` lockstep workers for a later :func:`run_lockstep` with ``jobs``, started now and warming up.
+
+    Their episodes are pinned as :func:`run_lockstep` pins its own (:func:`worker_cores`); ``policy``: the job will
+    run a trained policy (its imports are part of the start-up); ``idle``: the start-up at the lowest priority
+    (:class:`~pectoral_gym.hardware.lockstep_pool.LockstepPool`). A worker whose start-up has not ended when the
+    run comes is replaced by a fresh one. Use it as a context manager, which ends the workers.
+    """
+    return LockstepPool(jobs, worker_cores(jobs), warm_up=True, policy=policy, idle=idle)
+
+
 def run_lockstep(job: LockstepJob, episodes: Sequence[int], jobs: int = 1,
                  on_result: Callable[[EpisodeResult], None] | None = None, progress: bool = True,
-                 controller: Any = None) -> list[EpisodeResult]:
+                 controller: Any = None, pool: LockstepPool | None = None) -> list[EpisodeResult]:
     """Run the episodes ``episodes`` of ``job``, each on a fresh rig; returns their results in the order given.
 
     Args:
@@ -127,6 +136,8 @@ def run_lockstep(job: LockstepJob, episodes: Sequence[int], jobs: int = 1,
         on_result: Called with each result in the order of ``episodes``, as soon as those before it are in.
         progress: Show a progress bar over the episodes.
         controller: A controller for ``jobs=1`` (e.g. the policy the caller loaded already); else one is built.
+        pool: Workers started before (:func:`start_pool`, ``jobs`` of them), which run the episodes instead of
+            workers started here (even for ``jobs=1``); a pool serves one run and is ended by it.
 
     Raises:
         EpisodeError: An episode (or a worker) failed; every worker is ended first.
@@ -135,6 +146,8 @@ def run_lockstep(job: LockstepJob, episodes: Sequence[int], jobs: int = 1,
 
     if jobs < 1:
         raise ValueError(f"jobs must be >= 1, got {jobs}")
+    if pool is not None and len(pool) != jobs:
+        raise ValueError(f"the pool has {len(pool)} workers for a run with jobs={jobs}")
     order = list(episodes)
     done: dict[int, EpisodeResult] = {}
     results: list[EpisodeResult] = []
@@ -148,7 +161,9 @@ def run_lockstep(job: LockstepJob, episodes: Sequence[int], jobs: int = 1,
                 on_result(results[-1])
 
     with tqdm(total=len(order), desc="episodes", disable=not progress) as bar:
-        if jobs == 1:
+        if pool is not None:
+            _run_workers(job, order, pool, collect)
+        elif jobs == 1:
             runner = EpisodeRunner(job, controller)
             runner.latch = EpisodeSignalLatch()
             restore = runner.latch.install()
@@ -159,27 +174,30 @@ def run_lockstep(job: LockstepJob, episodes: Sequence[int], jobs: int = 1,
             finally:
                 restore()
         elif order:
-            _run_workers(job, order, min(jobs, len(order)), collect)
+            workers = min(jobs, len(order))
+            with LockstepPool(workers, worker_cores(workers), warm_up=False) as started:
+                _run_workers(job, order, started, collect)
     return results
 
 
-def _run_workers(job: LockstepJob, order: list[int], jobs: int, collect: Callable[[EpisodeResult], None]) -> None:
-    """Run ``order``'s episodes in ``jobs`` spawned workers; every worker is ended and joined on every path out."""
-    ctx = multiprocessing.get_context("spawn")
+def _run_workers(job: LockstepJob, order: list[int], pool: LockstepPool,
+                 collect: Callable[[EpisodeResult], None]) -> None:
+    """Run ``order``'s episodes in ``pool``'s workers (one run per pool); every worker is ended on every path out."""
+    if pool.used:
+        raise ValueError("this pool of lockstep workers has served a run already; start another")
+    pool.used = True
+    pool.take()
     queue = list(reversed(order))  # popped from the end: the lowest index first
     busy: dict[Connection, int] = {}  # a worker's pipe -> the episode it runs
-    procs: dict[Connection, Any] = {}
+    procs = dict(zip(pool.conns, pool.procs, strict=True))
     finished = False
     restore = install_stop_handlers(lambda: None)  # SIGTERM too ends in the finally below (main thread only)
     try:
-        for rank, core in enumerate(worker_cores(jobs)):
-            conn, child = ctx.Pipe()
-            proc = ctx.Process(target=_worker, args=(child, job, core), name=f"lockstep-worker-{rank}", daemon=True)
-            proc.start()
-            child.close()
-            procs[conn] = proc
-            busy[conn] = queue.pop()
-            conn.send(busy[conn])
+        for conn in pool.conns:
+            conn.send(job if queue else None)  # a worker with no episode to run ends at once
+            if queue:
+                busy[conn] = queue.pop()
+                conn.send(busy[conn])
         while busy:
             ready = wait(list(busy), timeout=EPISODE_WALL_TIMEOUT)  # a message, or EOF when its worker died
             if not ready:  # every clock wait ends or fails in simulated time: a worker stuck outside the clock
@@ -206,51 +224,4 @@ def _run_workers(job: LockstepJob, order: list[int], jobs: int, collect: Callabl
         finished = True
     finally:
         restore()
-        for proc in procs.values():
-            if not finished and proc.is_alive():  # a failure or Ctrl-C: the other workers' episodes are moot
-                proc.terminate()
-        for conn, proc in procs.items():
-            proc.join(_JOIN_TIMEOUT)
-            if proc.is_alive():
-                proc.kill()
-                proc.join()
-            conn.close()
-
-
-def _worker(conn: Connection, job: LockstepJob, core: int | None = None) -> None:
-    """A worker process: run the episodes the parent sends (``None``: stop), reply with each result or the error.
-
-    ``core``: the core it runs on (its threads, made after this, inherit it), or ``None``: any. It runs as batch
-    work (``SCHED_BATCH``) where the platform has it (the module docstring).
-    """
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole process group: the parent ends us
-    if core is not None:
-        with contextlib.suppress(OSError):  # a core taken away since: run anywhere, as unpinned
-            os.sched_setaffinity(0, {core})
-    if hasattr(os, "SCHED_BATCH"):  # the threads made from here on inherit both settings
-        with contextlib.suppress(OSError):
-            os.sched_setscheduler(0, os.SCHED_BATCH, os.sched_param(0))
-    try:
-        runner = EpisodeRunner(job, handle_signals=False)
-    except BaseException as err:  # noqa: BLE001 - reported to the parent, which names it
-        with contextlib.suppress(OSError):
-            conn.send(("error", (_describe(err), isinstance(err, ValueError), "")))
-        return
-    with contextlib.suppress(EOFError, OSError):  # the parent is gone: nobody to report to
-        while (episode := conn.recv()) is not None:
-            try:
-                result = runner.run(episode)
-            except BaseException as err:  # noqa: BLE001 - reported to the parent, which names the episode
-                if isinstance(err, EpisodeError):
-                    conn.send(("error", (str(err), err.setup, err.log)))
-                else:
-                    conn.send(("error", (_describe(err), False, "")))
-                return
-            conn.send(("result", result))
-
-
-def _describe(err: BaseException) -> str:
-    """What went wrong, for the parent to print: the error and its traceback (an unexpected failure)."""
-    if isinstance(err, (RuntimeError, OSError)):  # e.g. a policy that cannot be loaded: one line
-        return str(err)
-    return f"{type(err).__name__}: {err}\n{''.join(traceback.format_exception(err)).rstrip()}"
+        pool.close(finished)

@@ -189,8 +189,9 @@ def _fake_deploy(calls, episodes, poses):
     """A stand-in for ``hardware.library.run_deployment`` that returns the given episodes and step records."""
     from pectoral_gym.hardware.library import Deployment
 
-    def deploy(request, notify=None):
+    def deploy(request, notify=None, workers=None):
         calls.append(request)
+        assert workers is None  # the benchmark's runs start their own
         summary = {"settings": {"task": "goal", "control_period": 0.5}, "episodes": episodes, "wall_time": 2.0,
                    "emulation": {"conditions": {"radio_loss": 0.1}}}
         lines = [{"episode": k, "step": i, "true_pose": pose, "target": [1.0, 0.5]}
@@ -231,7 +232,7 @@ def test_robot_cell_counts_stops_contacts_and_time_to_goal(tmp_path, monkeypatch
     assert cell["robot"]["conditions"] == {"radio_loss": 0.1}
     # a refused setting (the deploy's exit status 2) is an error of the cell, not of the whole process
     monkeypatch.setattr(deployment, "run_deployment",
-                        lambda request, notify=None: (_ for _ in ()).throw(ValueError("refused")))
+                        lambda request, notify=None, workers=None: (_ for _ in ()).throw(ValueError("refused")))
     with pytest.raises(RuntimeError, match="status 2"):
         run_robot_stack(tmp_path / "e", 1, seed=0, controller="hand")
     assert conditions_argv(ROBOT_CONDITIONS["robot"]) == []

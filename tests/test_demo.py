@@ -2,6 +2,7 @@
 
 import json
 
+from pectoral_gym.agents.studies.robot_stack import prepared_workers
 from pectoral_gym.agents.training.demo import main
 
 
@@ -39,3 +40,28 @@ def test_demo_refuses_a_bad_jobs_count(capsys):
     with pytest.raises(SystemExit) as exit_:
         main(["--quick", "--jobs", "0"])
     assert exit_.value.code == 2 and "--jobs must be >= 1" in capsys.readouterr().err
+
+
+def test_a_failed_training_ends_the_robot_stacks_workers_started_before_it(tmp_path, monkeypatch):
+    """The robot stack's workers start with the training (``--jobs 2``); a training error ends them."""
+    import pytest
+
+    from pectoral_gym.agents.training import demo, train
+
+    pools = []
+
+    def prepared(stack, jobs):
+        context = prepared_workers(stack, jobs)
+        pools.append(context)
+        return context
+
+    def failing_train(*args, **kwargs):
+        assert pools and all(proc.is_alive() for proc in pools[0].procs)  # started, waiting for the policy
+        raise RuntimeError("training failed")
+
+    monkeypatch.setattr(demo, "prepared_workers", prepared)
+    monkeypatch.setattr(train, "train", failing_train)
+    with pytest.raises(RuntimeError, match="training failed"):
+        demo.run_demo(tmp_path / "demo", quick=True, progress=False, robot_jobs=2)
+    assert len(pools) == 1 and len(pools[0].procs) == 2
+    assert all(proc.exitcode is not None for proc in pools[0].procs)  # ended and joined

@@ -102,3 +102,22 @@ def test_agents_find_the_robot_stack_through_its_entry_point():
     assert robot_stack() is deployment and robot_stack("emulated").ROBOT_CONTROLLERS == ("hand", "nmpc")
     with pytest.raises(RobotStackNotFoundError, match="no robot stack 'tank' is installed"):
         robot_stack("tank")
+
+
+def test_a_robot_stack_without_workers_to_prepare_gets_none():
+    """The emulated stack prepares its workers ahead; a stack that cannot is still usable (``workers`` is ``None``)."""
+    import types
+
+    from pectoral_gym.agents.studies.robot_stack import PreparingRobotStack, prepared_workers
+    from pectoral_gym.hardware.studies import deployment
+
+    assert isinstance(deployment, PreparingRobotStack)
+    bare = types.SimpleNamespace(ROBOT_CONTROLLERS=(), run_robot_stack=lambda *args, **kwargs: {},
+                                 robot_cells=lambda *args, **kwargs: [])
+    with prepared_workers(bare, 2) as workers:
+        assert workers is None
+
+
+def test_workers_started_ahead_serve_lockstep_runs_only():
+    with pytest.raises(ValueError, match="workers serve lockstep runs only, not rig='emulated'"):
+        run_deployment(DeployRequest(controller="hand", rig="emulated", episodes=1), workers=object())

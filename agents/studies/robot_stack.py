@@ -10,13 +10,14 @@ group :data:`ENTRY_POINT_GROUP` of the installed distributions. This project dec
 
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Callable
 from importlib.metadata import entry_points
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any, Protocol, runtime_checkable
 
-__all__ = ["DEFAULT_STACK", "ENTRY_POINT_GROUP", "ROBOT_COLUMNS", "RobotStack", "RobotStackNotFoundError",
-           "robot_stack"]
+__all__ = ["DEFAULT_STACK", "ENTRY_POINT_GROUP", "ROBOT_COLUMNS", "PreparingRobotStack", "RobotStack",
+           "RobotStackNotFoundError", "prepared_workers", "robot_stack"]
 
 ENTRY_POINT_GROUP = "pectoral_gym.robot_stacks"
 DEFAULT_STACK = "emulated"
@@ -59,6 +60,40 @@ class RobotStack(Protocol):
         ``errors`` under ``controller/label/task`` instead of ending the benchmark.
         """
         ...
+
+
+@runtime_checkable
+class PreparingRobotStack(RobotStack, Protocol):
+    """A robot stack whose worker processes can start before their run is known (optional for a stack).
+
+    A caller with other work to do first (the demo trains the policy the run will drive) starts them with
+    :meth:`prepare_workers`, and passes the context's value to :meth:`run_robot_stack` as ``workers``.
+    """
+
+    def prepare_workers(self, jobs: int) -> contextlib.AbstractContextManager[Any]:
+        """Start ``jobs`` workers for a later ``run_robot_stack(..., jobs=jobs, workers=<this context's value>)``.
+
+        They do their start-up while the caller works, then wait for the run, which ends them; the block's end
+        ends them on every path.
+        """
+        ...
+
+    def run_robot_stack(self, out: str | Path, episodes: int, seed: int, controller: str = "policy",
+                        policy: str | Path | None = None, *, max_steps: int | None = None,
+                        task: str | None = None, progress: bool = False, capture: bool = False,
+                        jobs: int = 1, workers: Any = None) -> dict[str, Any]:
+        """:meth:`RobotStack.run_robot_stack`, its episodes run by ``workers`` (``None``: workers of its own)."""
+        ...
+
+
+def prepared_workers(stack: RobotStack, jobs: int) -> contextlib.AbstractContextManager[Any]:
+    """``stack``'s workers started now (:meth:`PreparingRobotStack.prepare_workers`); ``None`` for a stack without.
+
+    The value is ``run_robot_stack``'s ``workers`` (pass it only if it is not ``None``).
+    """
+    if isinstance(stack, PreparingRobotStack):
+        return stack.prepare_workers(jobs)
+    return contextlib.nullcontext(None)
 
 
 def robot_stack(name: str = DEFAULT_STACK) -> RobotStack:

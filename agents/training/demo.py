@@ -18,6 +18,7 @@ observer, safety supervisor) in lockstep, ``--robot-episodes`` seeded episodes
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import platform
@@ -26,7 +27,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from pectoral_gym.agents.studies.robot_stack import RobotStackNotFoundError
+from pectoral_gym.agents.studies.robot_stack import RobotStackNotFoundError, prepared_workers
 from pectoral_gym.tools.cli_common import HelpFormatter, examples, prog_name
 from pectoral_gym.versions import LATEST_AVERAGED, LATEST_FULL
 
@@ -52,9 +53,7 @@ def run_demo(out: str | Path, quick: bool = False, seed: int = 0, timesteps: int
     the same results for any number).
     """
     from pectoral_gym.agents.training.config import resolve_config
-    from pectoral_gym.agents.training.evaluate import evaluate, format_table, plot_trajectories, write_json
-    from pectoral_gym.agents.training.policy import load_policy
-    from pectoral_gym.agents.training.train import train
+    from pectoral_gym.agents.training.evaluate import format_table
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
@@ -73,6 +72,37 @@ def run_demo(out: str | Path, quick: bool = False, seed: int = 0, timesteps: int
 
         stack = robot_stack()
     start = time.perf_counter()
+    with contextlib.ExitStack() as ahead:  # the robot stack's workers, ended on every path out
+        workers = None
+        if stack is not None and robot_jobs > 1:  # their start-up on the core the training leaves idle
+            workers = ahead.enter_context(prepared_workers(stack, robot_jobs))
+        results, robot, training = _train_and_test(config, run_dir, out, episodes, progress, stack, workers,
+                                                   robot_episodes, robot_jobs, quick)
+    total = time.perf_counter() - start
+    summary = {
+        "train_env": TRAIN_ENV, "task": task, "seed": seed, "quick": quick, "run_dir": str(run_dir),
+        "timesteps": training["timesteps"], "train_time_s": training["train_time_s"],
+        "train_steps_per_s": training["steps_per_s"], "total_time_s": total,
+        "machine": {"python": platform.python_version(), "processor": platform.processor() or platform.machine()},
+        "evaluations": [r.to_dict(per_episode=False) for r in results],
+        "robot_stack": robot,
+    }
+    (out / "results.json").write_text(json.dumps(summary, indent=2) + "\n")
+    (out / "report.md").write_text(_report(summary, format_table(results), config))
+    return summary
+
+
+def _train_and_test(config: dict[str, Any], run_dir: Path, out: Path, episodes: int, progress: bool, stack: Any,
+                    workers: Any, robot_episodes: int, robot_jobs: int,
+                    quick: bool) -> tuple[list[Any], dict[str, Any] | None, dict[str, Any]]:
+    """Train, evaluate on :data:`EVAL_ENVS`, run the robot stack (``stack``, if any, with ``workers`` if any).
+
+    Returns the evaluations, the robot-stack figures (:data:`ROBOT_SUMMARY`, or ``None``) and ``training.json``.
+    """
+    from pectoral_gym.agents.training.evaluate import evaluate, plot_trajectories, write_json
+    from pectoral_gym.agents.training.policy import load_policy
+    from pectoral_gym.agents.training.train import train
+
     train(config, run_dir, progress=progress,
           command=" ".join(["python", "-m", "pectoral_gym.agents.training.demo", *sys.argv[1:]]))
     training = json.loads((run_dir / "training.json").read_text())
@@ -89,20 +119,10 @@ def run_demo(out: str | Path, quick: bool = False, seed: int = 0, timesteps: int
     robot = None
     if stack is not None:
         run = stack.run_robot_stack(out / "robot", robot_episodes, EVAL_SEED, policy=run_dir,
-                                    max_steps=40 if quick else None, progress=progress, jobs=robot_jobs)
+                                    max_steps=40 if quick else None, progress=progress, jobs=robot_jobs,
+                                    **({} if workers is None else {"workers": workers}))
         robot = {key: run[key] for key in ROBOT_SUMMARY}
-    total = time.perf_counter() - start
-    summary = {
-        "train_env": TRAIN_ENV, "task": task, "seed": seed, "quick": quick, "run_dir": str(run_dir),
-        "timesteps": training["timesteps"], "train_time_s": training["train_time_s"],
-        "train_steps_per_s": training["steps_per_s"], "total_time_s": total,
-        "machine": {"python": platform.python_version(), "processor": platform.processor() or platform.machine()},
-        "evaluations": [r.to_dict(per_episode=False) for r in results],
-        "robot_stack": robot,
-    }
-    (out / "results.json").write_text(json.dumps(summary, indent=2) + "\n")
-    (out / "report.md").write_text(_report(summary, format_table(results), config))
-    return summary
+    return results, robot, training
 
 
 def _robot_lines(robot: dict[str, Any] | None) -> list[str]:

@@ -26,6 +26,7 @@ Fin work is not logged by the deploy, so it is not reported.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import sys
@@ -41,8 +42,8 @@ from pectoral_gym.hardware.deploy import report_lines
 from pectoral_gym.hardware.emurig import RigConditions
 from pectoral_gym.hardware.library import DeployError, DeployRequest, run_deployment
 
-__all__ = ["DEGRADED", "NOMINAL", "ROBOT_CONDITIONS", "ROBOT_CONTROLLERS", "conditions_argv", "robot_cell",
-           "robot_cells", "run_robot_stack"]
+__all__ = ["DEGRADED", "NOMINAL", "ROBOT_CONDITIONS", "ROBOT_CONTROLLERS", "conditions_argv", "prepare_workers",
+           "robot_cell", "robot_cells", "run_robot_stack"]
 
 NOMINAL = RigConditions()
 #: The degraded conditions of the robot stack's targets: radio 10 % loss each way and 100 ms one-way latency, camera
@@ -64,10 +65,24 @@ def conditions_argv(conditions: RigConditions) -> list[str]:
     return [item for flag, value in flags if value for item in (flag, repr(float(value)))]
 
 
+def prepare_workers(jobs: int) -> contextlib.AbstractContextManager[Any]:
+    """``jobs`` workers for a later :func:`run_robot_stack` with ``jobs`` and a trained policy, started now.
+
+    A context manager whose value is passed on as :func:`run_robot_stack`'s ``workers``: the workers do their
+    start-up (imports, numba's kernels, torch) at the lowest priority while the caller does other work, e.g.
+    trains the policy, then wait for the run (:func:`pectoral_gym.hardware.lockstep_jobs.start_pool`). The run
+    ends them; so does the block's end, on every path (SIGTERM included). The calling program's top-level code
+    must sit under ``if __name__ == "__main__":``, as the workers are spawned.
+    """
+    from pectoral_gym.hardware.lockstep_jobs import start_pool
+
+    return start_pool(jobs, policy=True)
+
+
 def run_robot_stack(out: str | Path, episodes: int, seed: int, controller: str = "policy",
                     policy: str | Path | None = None, conditions: RigConditions = NOMINAL,
                     max_steps: int | None = None, task: str | None = None, progress: bool = False,
-                    capture: bool = False, jobs: int = 1) -> dict[str, Any]:
+                    capture: bool = False, jobs: int = 1, workers: Any = None) -> dict[str, Any]:
     """Run the deploy on the emulated robot in lockstep and summarise it.
 
     Args:
@@ -84,6 +99,8 @@ def run_robot_stack(out: str | Path, episodes: int, seed: int, controller: str =
         jobs: Episodes run at once, each worker process with its own rig (the deploy's ``--jobs``; the results are
             the same for any number). The calling program's top-level code must sit under
             ``if __name__ == "__main__":``, as the workers are spawned.
+        workers: :func:`prepare_workers`'s value for ``jobs`` workers, which then run the episodes (and are ended
+            by the run); ``None``: the run starts its own.
 
     Returns:
         ``{"episodes", "seed", "task", "control_period" [s], "conditions", "success" (mean and 95 % CI),
@@ -113,7 +130,8 @@ def run_robot_stack(out: str | Path, episodes: int, seed: int, controller: str =
         request = DeployRequest(controller=controller, policy=policy, episodes=episodes, seed=seed, task=task,
                                 rig="lockstep", conditions=conditions, jobs=jobs, out=out, progress=progress,
                                 **({} if max_steps is None else {"max_episode_steps": max_steps}))
-        run = run_deployment(request, notify=lambda line: print(line, file=sys.stderr))  # as the deploy's
+        run = run_deployment(request, notify=lambda line: print(line, file=sys.stderr),  # as the deploy's
+                             workers=workers)
     except (ValueError, DeployError) as err:  # the deploy's exit status 2 (a setting) or 1 (a device, an episode)
         status = 2 if isinstance(err, ValueError) else 1
         raise RuntimeError(f"the robot-stack run ({command}) ended with status {status}: {err}; see {out}") from err
