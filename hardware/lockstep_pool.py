@@ -220,12 +220,7 @@ def _start_up(conn: Connection, policy: bool, idle: bool) -> None:
         # the imports, the camera model, the rig's and the env's kernels
         EpisodeRunner(LockstepJob(controller="hand", max_steps=2), handle_signals=False).run(0)
         if policy:
-            import torch
-
-            import pectoral_gym.agents.training.policy  # noqa: F401 - lazy in agents/: pulls in Stable-Baselines3
-
-            # loading a model builds its optimizer, whose first construction imports torch's compiler stack
-            torch.optim.Adam([torch.nn.Parameter(torch.zeros(1))])
+            import pectoral_gym.agents.training.policy  # noqa: F401 - lazy in agents/: pulls in torch and SB3
     except Exception:  # noqa: BLE001, S110 - the job meets it again, and reports it
         pass
     finally:
