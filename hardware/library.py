@@ -153,7 +153,8 @@ def run_deployment(request: DeployRequest, notify: Callable[[str], None] | None 
             priority that could not be raised), before the episodes; ``None``: only collected in the result.
         workers: For ``rig="lockstep"`` only: lockstep workers started before the request was known
             (:func:`pectoral_gym.hardware.lockstep_jobs.start_pool` with ``request.jobs``), which then run its
-            episodes; the run ends them. ``None``: the run starts its own where ``request.jobs > 1``.
+            episodes; the run ends them. ``None``: the run starts its own where ``request.jobs > 1``, before its
+            checks, so that their start-up runs beside this process's (its imports, the policy's load).
 
     Raises:
         ValueError: A setting is wrong (one line naming it), found by the checks, the devices or the env.
@@ -162,6 +163,21 @@ def run_deployment(request: DeployRequest, notify: Callable[[str], None] | None 
     """
     if workers is not None and request.rig != "lockstep":
         raise ValueError(f"workers serve lockstep runs only, not rig={request.rig!r}")
+    if (workers is None and request.rig == "lockstep" and 1 < request.jobs <= request.episodes
+            and isinstance(request.controller, str)):
+        from pectoral_gym.hardware.lockstep_jobs import start_pool
+
+        # at the workers' own priority: the run waits for their start-up, which never waits long for a core
+        workers = start_pool(request.jobs, policy=request.controller == "policy", idle=False)
+        try:
+            return _run_deployment(request, notify, workers)
+        finally:
+            workers.close()  # a run that started has ended them already; one refused by the checks has not
+    return _run_deployment(request, notify, workers)
+
+
+def _run_deployment(request: DeployRequest, notify: Callable[[str], None] | None, workers: Any) -> Deployment:
+    """:func:`run_deployment` with its workers (a pool, or ``None``) settled."""
     lines: list[str] = []
 
     def say(line: str) -> None:

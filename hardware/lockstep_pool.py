@@ -34,9 +34,10 @@ from collections.abc import Callable
 from multiprocessing.connection import Connection
 from typing import Any
 
-__all__ = ["LockstepPool", "START_UP_NICE"]
+__all__ = ["LockstepPool", "START_UP_NICE", "START_UP_WAIT"]
 
 START_UP_NICE = 19  # the niceness of a worker's start-up thread where there is no SCHED_IDLE
+START_UP_WAIT = 300.0  # wall s a run waits for a start-up at the worker's own priority before it replaces the worker
 _JOIN_TIMEOUT = 5.0  # wall s a terminated worker gets to end before it is killed
 
 
@@ -97,15 +98,15 @@ class LockstepPool:
     def take(self) -> None:
         """Make every worker ready to take its job at once (before the job is sent; a run calls it).
 
-        A worker whose start-up has not ended is replaced by a fresh one without it: at the lowest priority, on a
-        busy machine, the rest of its start-up could take far longer than a start at the worker's own priority,
-        and would hold up the episodes meanwhile.
+        A start-up at the worker's own priority is waited for. One at the lowest priority that has not ended is
+        replaced by a fresh worker without it: on a busy machine the rest of it could take far longer than a start
+        at the worker's own priority, and would hold up the episodes meanwhile.
         """
         if not self._warm_up:
             return
         for rank, conn in enumerate(self.conns):
             try:
-                ready = conn.poll() and conn.recv() == ("ready", None)
+                ready = conn.poll(0.0 if self._idle else START_UP_WAIT) and conn.recv() == ("ready", None)
             except (EOFError, OSError):  # it died: a fresh one runs the episodes, or names their failure
                 ready = False
             if not ready:

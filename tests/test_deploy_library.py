@@ -1,6 +1,7 @@
 """The deployment as a library call: settings refused before anything runs, episodes in memory, files on request."""
 
 import json
+import multiprocessing
 import os
 
 import numpy as np
@@ -75,6 +76,21 @@ def test_episodes_in_memory_match_the_files_of_the_same_run(tmp_path, monkeypatc
     assert summary["controller"] == "hand" and summary["emulation"]["lockstep"] and summary["ended"] == "done"
     assert [e["steps"] for e in memory.episodes] == [3, 3] and memory.ended == "" and memory.solver is None
     assert memory.link["sent"] == files.link["sent"] > 0
+
+
+def test_workers_started_before_the_checks_are_ended_when_the_checks_refuse_the_run(tmp_path):
+    # with jobs > 1 the workers start before the checks (their start-up beside this process's); a refused run
+    # ends them
+    with pytest.raises(ValueError, match="--calibration: cannot load"):
+        run_deployment(DeployRequest(calibration=str(tmp_path / "missing.json"), episodes=2, jobs=2))
+    assert multiprocessing.active_children() == []
+
+
+def test_a_run_with_workers_started_before_its_checks_gives_the_records_of_one_process():
+    one = run_deployment(DeployRequest(controller="hand", episodes=2, seed=5, max_episode_steps=3))
+    two = run_deployment(DeployRequest(controller="hand", episodes=2, seed=5, max_episode_steps=3, jobs=2))
+    assert two.steps == one.steps and two.run_log == one.run_log and len(one.steps) == 2 * (1 + 3)
+    assert multiprocessing.active_children() == []
 
 
 def test_a_controller_object_runs_in_this_process():

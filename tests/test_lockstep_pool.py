@@ -64,6 +64,15 @@ def _wait_ready(pool) -> None:
         time.sleep(0.05)
 
 
+def test_a_run_waits_for_a_start_up_at_the_workers_own_priority():
+    with start_pool(2, policy=False, idle=False) as pool:
+        pids = [proc.pid for proc in pool.procs]
+        assert not any(conn.poll() for conn in pool.conns)  # just started: no start-up has ended
+        pooled = run_lockstep(LockstepJob(max_steps=2), range(2), 2, progress=False, pool=pool)
+    assert pool.replaced == 0 and [proc.pid for proc in pool.procs] == pids
+    assert [r.episode for r in pooled] == [0, 1] and all(r.summary["steps"] == 2 for r in pooled)
+
+
 @pytest.mark.parametrize("ready", [True, False])
 def test_a_pool_started_ahead_gives_the_results_of_one_process(ready):
     """Degraded radio and camera, 3 episodes: in this thread, and in 2 workers started before the run.
@@ -71,7 +80,9 @@ def test_a_pool_started_ahead_gives_the_results_of_one_process(ready):
     Workers whose start-up ended run the episodes; those still starting up are replaced by fresh ones.
     """
     alone = _in_thread(lambda: run_lockstep(_JOB, range(3), progress=False))
-    with start_pool(2, policy=False, idle=False) as pool:  # idle=False: a start-up a busy machine cannot stall
+    # ready: at the workers' own priority, a start-up a busy machine cannot stall (and that a run waits for);
+    # not ready: at the lowest, where a run replaces a start-up that has not ended
+    with start_pool(2, policy=False, idle=not ready) as pool:
         if ready:
             _wait_ready(pool)
         pids = [proc.pid for proc in pool.procs]
