@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import contextlib
 import math
-import threading
 
 import numpy as np
 import pytest
+from test_lockstep import _in_thread
 
 from pectoral_gym.hardware.emurig import RigConditions, open_rig
 from pectoral_gym.hardware.env import HardwareFishEnv
@@ -40,24 +40,6 @@ def test_renewal_lease_by_hand():
     # 0.1 s each way: 0.95 - 0.2 - 0.05 = 0.70 < 0.8: renewed too (losses delay the next command)
     assert renewal_lease(0.1, 0.0, lease, horizon, rtt=0.2) == pytest.approx(0.7)
     assert RENEWAL_INTERVAL <= 0.1
-
-
-def _in_thread(fn):
-    out: dict = {}
-
-    def body():
-        try:
-            out["value"] = fn()
-        except BaseException as err:  # noqa: BLE001 - re-raised in the test's thread
-            out["error"] = err
-
-    thread = threading.Thread(target=body, daemon=True)
-    thread.start()
-    thread.join(timeout=600.0)
-    assert not thread.is_alive(), "the lockstep scenario did not finish"
-    if "error" in out:
-        raise out["error"]
-    return out["value"]
 
 
 def _steps_on_a_slow_radio(renew: bool, steps: int = 8, loss: float = 0.0, seed: int = 3):
@@ -96,7 +78,7 @@ def _steps_on_a_slow_radio(renew: bool, steps: int = 8, loss: float = 0.0, seed:
             trace = [(t, bool(running)) for t, _, _, _, running in robot.trace]
             return calls, starts, trace, stop_time
 
-    return _in_thread(scenario)
+    return _in_thread(scenario, timeout=600.0)
 
 
 def _running_share(trace, start, end):

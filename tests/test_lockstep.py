@@ -15,8 +15,11 @@ from pectoral_gym.hardware.radio.channel import RadioChannel
 from pectoral_gym.hardware.radio.pipe import StreamPair
 
 
-def _in_thread(fn):
-    """Run ``fn`` in a plain thread (a fresh VirtualClock takes the calling thread in; pytest's must stay out)."""
+def _in_thread(fn, timeout: float = 60.0):
+    """Run ``fn`` in a plain thread (a fresh VirtualClock takes the calling thread in; pytest's must stay out).
+
+    Returns its value or raises its error; fails the test if it has not ended within ``timeout`` wall seconds.
+    """
     out: dict = {}
 
     def body():
@@ -25,9 +28,9 @@ def _in_thread(fn):
         except BaseException as err:  # noqa: BLE001 - re-raised in the test's thread
             out["error"] = err
 
-    thread = threading.Thread(target=body)
+    thread = threading.Thread(target=body, daemon=True)
     thread.start()
-    thread.join(timeout=60.0)
+    thread.join(timeout=timeout)
     assert not thread.is_alive(), "the lockstep scenario did not finish"
     if "error" in out:
         raise out["error"]

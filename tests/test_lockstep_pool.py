@@ -11,6 +11,7 @@ import threading
 import time
 
 import pytest
+from test_lockstep import _in_thread
 
 from pectoral_gym.hardware.emurig import RigConditions
 from pectoral_gym.hardware.lockstep_jobs import EpisodeError, LockstepJob, run_lockstep, start_pool
@@ -38,24 +39,6 @@ def _wait_ended(pids: list[int]) -> bool:
     return True
 
 
-def _in_thread(fn):
-    out: dict = {}
-
-    def body():
-        try:
-            out["value"] = fn()
-        except BaseException as err:  # noqa: BLE001 - re-raised in the test's thread
-            out["error"] = err
-
-    thread = threading.Thread(target=body)
-    thread.start()
-    thread.join(timeout=600.0)
-    assert not thread.is_alive(), "the lockstep run did not finish"
-    if "error" in out:
-        raise out["error"]
-    return out["value"]
-
-
 def _wait_ready(pool) -> None:
     """Until every worker said its start-up ended (its first message, left for the run to read)."""
     deadline = time.monotonic() + _LIVENESS
@@ -79,7 +62,7 @@ def test_a_pool_started_ahead_gives_the_results_of_one_process(ready):
 
     Workers whose start-up ended run the episodes; those still starting up are replaced by fresh ones.
     """
-    alone = _in_thread(lambda: run_lockstep(_JOB, range(3), progress=False))
+    alone = _in_thread(lambda: run_lockstep(_JOB, range(3), progress=False), timeout=600.0)
     # ready: at the workers' own priority, a start-up a busy machine cannot stall (and that a run waits for);
     # not ready: at the lowest, where a run replaces a start-up that has not ended
     with start_pool(2, policy=False, idle=not ready) as pool:

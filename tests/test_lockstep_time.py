@@ -10,29 +10,11 @@ import threading
 from types import SimpleNamespace
 
 import pytest
+from test_lockstep import _in_thread
 
 from pectoral_gym.hardware import clock as clock_module
 from pectoral_gym.hardware.clock import LockstepError, VirtualClock
 from pectoral_gym.hardware.env import HardwareFishEnv
-
-
-def _in_thread(fn, timeout: float = 60.0):
-    """Run ``fn`` in a plain thread (a fresh VirtualClock takes the calling thread in; pytest's must stay out)."""
-    out: dict = {}
-
-    def body():
-        try:
-            out["value"] = fn()
-        except BaseException as err:  # noqa: BLE001 - re-raised in the test's thread
-            out["error"] = err
-
-    thread = threading.Thread(target=body, daemon=True)
-    thread.start()
-    thread.join(timeout=timeout)
-    assert not thread.is_alive(), "the lockstep scenario did not finish"
-    if "error" in out:
-        raise out["error"]
-    return out["value"]
 
 
 def test_the_rounding_case_that_hung_ends_at_the_tick():
